@@ -1,0 +1,174 @@
+"""``jident``: the offline command line (no ROS needed).
+
+    jident simulate --j1 1.073 --backlash 0.005 --eta 0.025 --out case.npz --plot case.png
+    jident simulate --grid --out grid.npz
+    jident info
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+from . import __version__
+from .config import ConfigError, load_system_config
+
+
+class CliError(Exception):
+    """A user error: printed as one line, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, no usage dump
+        raise CliError(message)
+
+
+def _positive(name):
+    def parse(text):
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
+        if not math.isfinite(v) or v <= 0:
+            raise argparse.ArgumentTypeError(f"{name} must be > 0, got {text}")
+        return v
+    return parse
+
+
+def _progress(total, desc, enabled):
+    """A tqdm progress callback (k, n) on stderr, or None when disabled."""
+    if not enabled:
+        return None, (lambda: None)
+    from tqdm import tqdm
+    bar = tqdm(total=total, desc=desc, unit="sample", file=sys.stderr, leave=False)
+
+    def update(k, n):
+        bar.update(1)
+    return update, bar.close
+
+
+def cmd_simulate(args) -> int:
+    from .sim import Case, add_measurement_noise, paper_grid_cases, quantise_encoders, simulate_grid
+    cfg = load_system_config(args.config)
+    if args.grid:
+        if any(v is not None for v in (args.j1, args.backlash, args.eta)):
+            raise CliError("--grid simulates the whole K1 x K2 x eta_k grid; drop --j1/--backlash/--eta")
+        cases = paper_grid_cases(cfg)
+    else:
+        j1 = cfg.motor.nominal_inertia_kgm2 if args.j1 is None else args.j1
+        width = cfg.grid.backlash_widths_m[0] if args.backlash is None else args.backlash
+        eta = cfg.grid.pattern_consistency_pa_sn if args.eta is None else args.eta
+        cases = [Case(j1, width, eta)]
+    show = not args.quiet and (args.grid or len(cases) > 1)
+    update, close = _progress(cfg.sampling.window_length, f"simulating {len(cases)} cases", show)
+    t0 = time.perf_counter()
+    try:
+        ws = simulate_grid(cfg, cases, progress=update)
+    finally:
+        close()
+    elapsed = time.perf_counter() - t0
+    if args.snr_db is not None:
+        ws = add_measurement_noise(ws, args.snr_db, args.seed)
+    if args.encoder_counts is not None:
+        ws = quantise_encoders(ws, args.encoder_counts)
+    if args.out:
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        ws.save_npz(args.out)
+    if args.plot:
+        from .plotting import plot_case
+        plot_case(ws, 0, args.plot)
+    if not args.quiet:
+        print(f"simulated {len(cases)} case(s), {cfg.sampling.window_length} samples each "
+              f"(Ts = {ws.sample_period_s * 1e3:g} ms) in {elapsed:.2f} s")
+        if len(cases) == 1:
+            c, s = cases[0], ws.case(0)
+            gap = (s["clutch_torque"][ws.entry_index:] > 0).argmax()
+            print(f"  J1 = {c.inertia_kgm2:g} kg m^2, backlash = {c.backlash_width_m:g} m, "
+                  f"eta_k = {c.consistency_pa_sn:g} Pa s^n: slip {ws.initial_slip[0] * 100:.2f} %, "
+                  f"load {s['clutch_torque'][0]:.1f} N m, inside the zone for {gap} samples "
+                  f"({gap * ws.sample_period_s * 1e3:.1f} ms)")
+        for what, p in (("windows", args.out), ("plot", args.plot)):
+            if p:
+                print(f"  {what}: {p}")
+    return 0
+
+
+def cmd_info(args) -> int:
+    """Base values and the loaded steady state at every eta_k (docs/model.md)."""
+    import numpy as np
+    from .sim import Case, steady_state
+    from .sim.model import Model
+    from .sim.motor import breakdown_slip, steady_state_phasors
+    cfg = load_system_config(args.config)
+    m, b = cfg.motor, cfg.motor.base
+    s_bd = breakdown_slip(m)
+    print("Per-unit base values (derived from J1 nominal, T_m, pole pairs, f):")
+    print(f"  omega_b = {b.electrical_speed_rad_s:.2f} rad/s, Omega_b = {b.mechanical_speed_rad_s:.2f} rad/s "
+          f"({b.mechanical_speed_rad_s * 30 / math.pi:.0f} rpm synchronous)")
+    print(f"  S_b = J1 Omega_b^2 / T_m = {b.power_va / 1e3:.2f} kVA, M_b = {b.torque_nm:.1f} N m, "
+          f"U_b = {b.voltage_peak_v:.1f} V peak, I_b = {b.current_peak_a:.1f} A peak, Z_b = {b.impedance_ohm:.3f} ohm")
+    print(f"  w = x_s x_w - x_m^2 = {m.sigma_determinant_pu:.4f}; pull-out torque "
+          f"{steady_state_phasors(m, s_bd)['torque_pu']:.3f} p.u. at slip {s_bd * 100:.1f} %")
+    cases = [Case(m.nominal_inertia_kgm2, cfg.grid.backlash_widths_m[0], e)
+             for e in cfg.grid.consistency_indices_pa_sn]
+    y, slip = steady_state(cfg, cases, 0.0)
+    model = Model(cfg)
+    v2 = y[9]
+    eta = np.array([c.consistency_pa_sn for c in cases])
+    film = model.film_force(v2, eta)
+    r = cfg.load.wheel_radius_m
+    print("Loaded steady state before the event:")
+    print("  eta_k [Pa s^n] | slip [%] | speed [rpm] | v2 [m/s] | load [N m] | load [p.u.] | film share [%] | P_mech [kW]")
+    for i, c in enumerate(cases):
+        load = r * (cfg.load.process_force_n + film[i])
+        print(f"  {c.consistency_pa_sn:14g} | {slip[i] * 100:8.3f} | {y[4, i] * 30 / math.pi:11.1f} | "
+              f"{v2[i]:8.3f} | {load:10.2f} | {load / b.torque_nm:11.3f} | "
+              f"{100 * film[i] / (cfg.load.process_force_n + film[i]):14.1f} | {load * y[4, i] / 1e3:11.2f}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="jident", description="Identify the inertia J1 of an induction-motor drive "
+                "from its backlash-zone transient (offline tools).")
+    p.add_argument("--version", action="version", version=f"jident {__version__}")
+    sub = p.add_subparsers(dest="command", parser_class=_Parser, metavar="COMMAND")
+    s = sub.add_parser("simulate", help="simulate backlash-entry windows of the motor-load model")
+    s.add_argument("--j1", type=_positive("--j1"), help="J1 in kg m^2 (default: the nominal 1.16)")
+    s.add_argument("--backlash", type=_positive("--backlash"),
+                   help="backlash zone width at the wheel circumference, m (default: K2[0])")
+    s.add_argument("--eta", type=_positive("--eta"), help="consistency index eta_k, Pa s^n (default 0.025)")
+    s.add_argument("--grid", action="store_true", help="the paper's full grid (7 x 6 x 4 = 168 cases)")
+    s.add_argument("--snr-db", type=float, help="add white measurement noise at this SNR (dB)")
+    s.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    s.add_argument("--encoder-counts", type=int, help="quantise alpha1/alpha2 to this many counts per revolution")
+    s.add_argument("--out", help="write the windows to this .npz file")
+    s.add_argument("--plot", help="write a PNG of the five signals of the (first) case")
+    s.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    s.add_argument("--quiet", action="store_true")
+    s.set_defaults(func=cmd_simulate)
+    i = sub.add_parser("info", help="print base values and the steady state of the model")
+    i.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    i.set_defaults(func=cmd_info)
+    return p
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        if not getattr(args, "command", None):
+            parser.print_help()
+            return 2
+        return args.func(args)
+    except (CliError, ConfigError, ValueError, FileNotFoundError) as exc:
+        print(f"jident: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("jident: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

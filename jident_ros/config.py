@@ -1,0 +1,168 @@
+"""One parameter schema for the CLI, the nodes and the tests.
+
+Configuration files live in ``config/`` in the ROS 2 params-file format::
+
+    /**:
+      ros__parameters:
+        motor:
+          stator_resistance_pu: 0.059
+          ...
+
+The keys under ``ros__parameters`` are exactly the field names of the
+dataclasses in :mod:`jident_ros.sim.params` (nested per section), so a ROS node
+can declare them as dotted parameters (``motor.stator_resistance_pu``) and the
+CLI reads the same file.  Every value is validated here; a bad one raises
+:class:`ConfigError` with one line naming the field and the value.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+from pathlib import Path
+from typing import Any, Mapping
+
+from .sim.params import GridParams, LoadParams, MotorParams, SamplingParams, SystemConfig
+
+SECTIONS = {"motor": MotorParams, "load": LoadParams, "sampling": SamplingParams, "grid": GridParams}
+
+
+class ConfigError(ValueError):
+    """A configuration value is missing, unknown or out of range."""
+
+
+# field -> (predicate, description) for values that need more than "finite > 0"
+_RULES = {
+    "motor.pole_pairs": (lambda v: isinstance(v, int) and v >= 1, "an integer >= 1"),
+    "motor.bearing_friction_nms_per_rad": (lambda v: v >= 0, "a number >= 0"),
+    "load.process_force_n": (lambda v: v >= 0, "a number >= 0"),
+    "load.clutch_damping_nms_per_rad": (lambda v: v >= 0, "a number >= 0"),
+    "load.line_damping_ns_per_m": (lambda v: v >= 0, "a number >= 0"),
+    "load.flow_index": (lambda v: 0 < v <= 2, "a number in (0, 2]"),
+    "sampling.samples_before_entry": (lambda v: isinstance(v, int) and v >= 0, "an integer >= 0"),
+    "sampling.samples_from_entry": (lambda v: isinstance(v, int) and v >= 2, "an integer >= 2"),
+    "sampling.integration_substeps": (lambda v: isinstance(v, int) and v >= 1, "an integer >= 1"),
+}
+
+
+def _yaml11_number(v: Any) -> Any:
+    """PyYAML (YAML 1.1) reads ``2.0e4`` as a string; ROS's parser reads a double."""
+    if isinstance(v, str):
+        try:
+            return float(v)
+        except ValueError:
+            return v
+    return v
+
+
+def _check_number(name: str, v: Any) -> None:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise ConfigError(f"{name}: expected a finite number, got {v!r}")
+
+
+def _coerce(name: str, default: Any, v: Any) -> Any:
+    """Type-check v against the dataclass default's type and apply range rules."""
+    if isinstance(default, tuple):
+        if not isinstance(v, (list, tuple)) or not v:
+            raise ConfigError(f"{name}: expected a non-empty list of numbers, got {v!r}")
+        v = [_yaml11_number(x) for x in v]
+        for i, x in enumerate(v):
+            _check_number(f"{name}[{i}]", x)
+            if x <= 0:
+                raise ConfigError(f"{name}[{i}]: must be > 0, got {x!r}")
+        return tuple(float(x) for x in v)
+    v = _yaml11_number(v)
+    _check_number(name, v)
+    if isinstance(default, int) and not isinstance(default, bool):
+        if isinstance(v, float) and v.is_integer():
+            v = int(v)
+        if not isinstance(v, int):
+            raise ConfigError(f"{name}: expected an integer, got {v!r}")
+    else:
+        v = float(v)
+    pred, what = _RULES.get(name, (lambda x: x > 0, "a number > 0"))
+    if not pred(v):
+        raise ConfigError(f"{name}: must be {what}, got {v!r}")
+    return v
+
+
+def strip_ros_wrapper(data: Mapping) -> Mapping:
+    """Return the ``ros__parameters`` mapping of a params file (or data itself)."""
+    if isinstance(data, Mapping) and len(data) == 1:
+        (key, inner), = data.items()
+        if isinstance(inner, Mapping) and "ros__parameters" in inner:
+            return inner["ros__parameters"]
+    return data
+
+
+def system_config_from_dict(data: Mapping | None) -> SystemConfig:
+    """Build and validate a SystemConfig; missing fields take the defaults."""
+    data = strip_ros_wrapper(data or {})
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"configuration: expected a mapping of sections, got {type(data).__name__}")
+    parts = {}
+    for key in data:
+        if key not in SECTIONS and key not in _FOREIGN_SECTIONS:
+            raise ConfigError(f"{key}: unknown section (known: {', '.join(SECTIONS)})")
+    for section, cls in SECTIONS.items():
+        given = data.get(section) or {}
+        if not isinstance(given, Mapping):
+            raise ConfigError(f"{section}: expected a mapping, got {given!r}")
+        defaults = cls()
+        names = {f.name for f in dataclasses.fields(cls)}
+        for k in given:
+            if k not in names:
+                raise ConfigError(f"{section}.{k}: unknown parameter (known: {', '.join(sorted(names))})")
+        values = {k: _coerce(f"{section}.{k}", getattr(defaults, k), v) for k, v in given.items()}
+        parts[section] = dataclasses.replace(defaults, **values)
+    m = parts["motor"]
+    if m.magnetizing_reactance_pu >= min(m.stator_reactance_pu, m.rotor_reactance_pu):
+        raise ConfigError(f"motor.magnetizing_reactance_pu: must be below x_s and x_w, "
+                          f"got {m.magnetizing_reactance_pu!r}")
+    g = parts["grid"]
+    if g.pattern_consistency_pa_sn not in g.consistency_indices_pa_sn:
+        raise ConfigError(f"grid.pattern_consistency_pa_sn: must be one of "
+                          f"grid.consistency_indices_pa_sn {list(g.consistency_indices_pa_sn)}, "
+                          f"got {g.pattern_consistency_pa_sn!r}")
+    return SystemConfig(**parts)
+
+
+#: Sections other modules own in the same file (validated there).
+_FOREIGN_SECTIONS = {"method", "nodes"}
+
+
+def load_yaml(path: str | Path) -> Mapping:
+    """Read a YAML file; errors name the file."""
+    import yaml
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"config file: no such file {str(p)!r}")
+    try:
+        with open(p, encoding="utf-8") as f:
+            return yaml.safe_load(f) or {}
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"config file {str(p)!r}: not valid YAML ({exc.__class__.__name__})") from None
+
+
+def default_system_config_path() -> Path:
+    from .resources import default_config_path
+    return default_config_path("system.yaml")
+
+
+def load_system_config(path: str | Path | None = None) -> SystemConfig:
+    """Load ``config/system.yaml`` (or the given file) into a SystemConfig."""
+    return system_config_from_dict(load_yaml(path or default_system_config_path()))
+
+
+def config_to_dict(cfg: SystemConfig) -> dict:
+    """Plain nested dict (tuples as lists) of a SystemConfig."""
+    return json.loads(json.dumps(dataclasses.asdict(cfg)))
+
+
+def config_hash(obj: Any) -> str:
+    """SHA-256 of a canonical JSON form of a (dataclass) configuration."""
+    if dataclasses.is_dataclass(obj):
+        obj = dataclasses.asdict(obj)
+    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()

@@ -1,0 +1,303 @@
+"""Simulate the backlash-entry transient for many cases at once.
+
+The scenario (see docs/model.md):
+
+1. start every case in its loaded steady state, computed directly from the
+   equivalent circuit and the load balance (no start-up run), 48 samples
+   before the event;
+2. at t = 0 the line slips on the drive wheel by the backlash width K2: the
+   clutch relative angle drops by K2/r, so |alpha_1 - alpha_2| < K2/r
+   (paper eq. 1) holds from that sample on and the load moment on the motor
+   is zero while it does;
+3. the motor accelerates freely through the zone, the flanks meet again and
+   the load is taken up; 2000 samples from the entry sample are recorded.
+
+All cases are integrated together by a fixed-step RK4 on arrays of shape
+(N_STATES, n_cases).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from .model import (ALPHA1, DELTA, LINE_STRETCH, N_STATES, OMEGA1, OMEGA2, PSI_RA, PSI_RB,
+                    PSI_SA, PSI_SB, V2, CaseArrays, Model)
+from .motor import solve_slip, steady_state_phasors
+from .params import SystemConfig
+
+#: Channel order of a window, as on /drive/signals (after the time column).
+CHANNELS = ("alpha1", "alpha2", "omega2", "a1", "m_el", "omega1", "a2", "v2")
+#: The five state signals the paper analyses, in the paper's order a)-e).
+PAPER_SIGNALS = ("a1", "m_el", "omega1", "a2", "v2")
+#: SI unit of each channel.
+UNITS = {"t": "s", "alpha1": "rad", "alpha2": "rad", "omega2": "rad/s", "a1": "m/s^2",
+         "m_el": "N m", "omega1": "rad/s", "a2": "m/s^2", "v2": "m/s", "clutch_torque": "N m"}
+
+
+@dataclass(frozen=True)
+class Case:
+    """One simulated case.
+
+    Attributes
+    ----------
+    inertia_kgm2 : float
+        J_1, kg m^2 (a K_1 entry for the paper's grid).
+    backlash_width_m : float
+        Backlash zone width at the wheel circumference, m (a K_2 entry).
+    consistency_pa_sn : float
+        Lubricant consistency index eta_k, Pa s^n1.
+    """
+
+    inertia_kgm2: float
+    backlash_width_m: float
+    consistency_pa_sn: float
+
+    def __post_init__(self):
+        for name in ("inertia_kgm2", "backlash_width_m", "consistency_pa_sn"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float, np.floating, np.integer)) or not np.isfinite(v) or v <= 0:
+                raise ValueError(f"Case.{name} must be a finite number > 0, got {v!r}")
+
+
+def paper_grid_cases(config: SystemConfig, consistencies: Iterable[float] | None = None) -> list[Case]:
+    """The paper's grid: every eta_k x every J_1 class x every backlash width.
+
+    Order: eta_k outermost, then J_1 (K_1 order), then width (K_2 order).
+    """
+    g = config.grid
+    etas = g.consistency_indices_pa_sn if consistencies is None else tuple(consistencies)
+    return [Case(float(j), float(b), float(e))
+            for e in etas for j in g.inertia_classes_kgm2 for b in g.backlash_widths_m]
+
+
+@dataclass
+class WindowSet:
+    """Simulated windows of many cases.
+
+    Attributes
+    ----------
+    t : ndarray, shape (n_samples,)
+        Time relative to the backlash-entry sample, s (0 at ``entry_index``).
+    signals : dict of str -> ndarray, shape (n_cases, n_samples)
+        Channels named in ``CHANNELS`` (SI, see ``UNITS``) plus
+        ``clutch_torque`` (the load moment on the motor, N m).
+    cases : list of Case
+    entry_index : int
+        Index of the backlash-entry sample (48).
+    sample_period_s : float
+    initial_slip : ndarray, shape (n_cases,)
+        Steady-state slip before the event.
+    """
+
+    t: np.ndarray
+    signals: dict
+    cases: list
+    entry_index: int
+    sample_period_s: float
+    initial_slip: np.ndarray
+    metadata: dict = field(default_factory=dict)
+
+    def __len__(self):
+        return len(self.cases)
+
+    def case(self, i: int) -> dict:
+        """Channels of case i as a dict of 1-D arrays (plus ``t``)."""
+        out = {"t": self.t}
+        out.update({k: v[i] for k, v in self.signals.items()})
+        return out
+
+    def as_array(self, channels: Sequence[str] = CHANNELS) -> np.ndarray:
+        """Stack channels: shape (n_cases, n_samples, n_channels)."""
+        return np.stack([self.signals[c] for c in channels], axis=-1)
+
+    def save_npz(self, path) -> None:
+        """Write the windows and their cases to a NumPy .npz file."""
+        np.savez_compressed(
+            path, t=self.t, entry_index=self.entry_index, sample_period_s=self.sample_period_s,
+            initial_slip=self.initial_slip,
+            inertia_kgm2=np.array([c.inertia_kgm2 for c in self.cases]),
+            backlash_width_m=np.array([c.backlash_width_m for c in self.cases]),
+            consistency_pa_sn=np.array([c.consistency_pa_sn for c in self.cases]),
+            **{f"signal_{k}": v for k, v in self.signals.items()})
+
+    @classmethod
+    def load_npz(cls, path) -> "WindowSet":
+        with np.load(path) as z:
+            cases = [Case(float(a), float(b), float(c)) for a, b, c in
+                     zip(z["inertia_kgm2"], z["backlash_width_m"], z["consistency_pa_sn"])]
+            signals = {k[len("signal_"):]: z[k] for k in z.files if k.startswith("signal_")}
+            return cls(z["t"], signals, cases, int(z["entry_index"]), float(z["sample_period_s"]),
+                       z["initial_slip"])
+
+
+def _case_arrays(cases: Sequence[Case], config: SystemConfig):
+    j1 = np.array([c.inertia_kgm2 for c in cases], dtype=float)
+    width = np.array([c.backlash_width_m for c in cases], dtype=float)
+    eta = np.array([c.consistency_pa_sn for c in cases], dtype=float)
+    return j1, width / config.load.wheel_radius_m, eta
+
+
+def steady_state(config: SystemConfig, cases: Sequence[Case], t0: float):
+    """Loaded steady state of every case at time t0 (s), before the event.
+
+    Returns (y0 of shape (N_STATES, n_cases), slip of shape (n_cases,)).
+    The clutch is in contact on its driving flank: delta = K2/r + T_c/k_c.
+    """
+    model = Model(config)
+    ld = config.load
+    j1, theta_b, eta = _case_arrays(cases, config)
+    n = len(cases)
+
+    def load_torque(omega1):
+        v2 = ld.wheel_radius_m * omega1
+        return (ld.wheel_radius_m * (ld.process_force_n + model.film_force(v2, eta))
+                + config.motor.bearing_friction_nms_per_rad * omega1)
+
+    slip = solve_slip(config.motor, load_torque, n)
+    ph = steady_state_phasors(config.motor, slip)
+    rot = np.exp(1j * model.wb * t0)  # synchronous frame -> stator frame at t0
+    omega = (1.0 - slip) * model.base.mechanical_speed_rad_s
+    v2 = ld.wheel_radius_m * omega
+    f_line = ld.process_force_n + model.film_force(v2, eta)
+    tc = ld.wheel_radius_m * f_line
+    y = np.empty((N_STATES, n))
+    psi_s, psi_r = ph["psi_s"] * rot, ph["psi_r"] * rot
+    y[PSI_SA], y[PSI_SB] = psi_s.real, psi_s.imag
+    y[PSI_RA], y[PSI_RB] = psi_r.real, psi_r.imag
+    y[OMEGA1] = omega
+    y[ALPHA1] = omega * t0
+    y[DELTA] = theta_b + tc / ld.clutch_stiffness_nm_per_rad
+    y[OMEGA2] = omega
+    y[LINE_STRETCH] = f_line / ld.line_stiffness_n_per_m
+    y[V2] = v2
+    return y, slip
+
+
+def _rk4_window(model: Model, y: np.ndarray, case: CaseArrays, t0: float, dt: float,
+                substeps: int, n_samples: int, event_index: int, on_event, progress=None):
+    """Integrate, recording the state at every sample; returns (n_samples, N_STATES, n)."""
+    rec = np.empty((n_samples,) + y.shape)
+    k1, k2, k3, k4 = (np.empty_like(y) for _ in range(4))
+    tmp = np.empty_like(y)
+    rhs = model.rhs
+    h = dt / substeps
+    for k in range(n_samples):
+        if k == event_index:
+            on_event(y)
+        rec[k] = y
+        if progress is not None:
+            progress(k)
+        if k == n_samples - 1:
+            break
+        for j in range(substeps):
+            t = t0 + (k * substeps + j) * h
+            rhs(t, y, case, k1)
+            np.multiply(k1, 0.5 * h, out=tmp); tmp += y
+            rhs(t + 0.5 * h, tmp, case, k2)
+            np.multiply(k2, 0.5 * h, out=tmp); tmp += y
+            rhs(t + 0.5 * h, tmp, case, k3)
+            np.multiply(k3, h, out=tmp); tmp += y
+            rhs(t + h, tmp, case, k4)
+            k2 += k3; k2 *= 2.0; k2 += k1; k2 += k4
+            y += (h / 6.0) * k2
+    return rec
+
+
+def simulate_grid(config: SystemConfig, cases: Sequence[Case], *, sample_period_s: float | None = None,
+                  substeps: int | None = None, event: bool = True, progress=None) -> WindowSet:
+    """Simulate the backlash-entry window of every case (vectorised).
+
+    Parameters
+    ----------
+    config : SystemConfig
+    cases : sequence of Case
+    sample_period_s, substeps : optional overrides of ``config.sampling``.
+    event : bool
+        False runs the steady state on without the slip (for validation).
+    progress : callable(k, n) or None
+        Called after each recorded sample.
+
+    Returns
+    -------
+    WindowSet with n_samples = 48 + 2000 by default.
+    """
+    cases = list(cases)
+    if not cases:
+        raise ValueError("cases: need at least one case, got an empty list")
+    s = config.sampling
+    ts = s.sample_period_s if sample_period_s is None else float(sample_period_s)
+    sub = s.integration_substeps if substeps is None else int(substeps)
+    if not ts > 0:
+        raise ValueError(f"sample_period_s must be > 0, got {ts!r}")
+    if sub < 1:
+        raise ValueError(f"substeps must be >= 1, got {sub!r}")
+    n_pre, n_samples = s.samples_before_entry, s.window_length
+    t0 = -n_pre * ts
+    model = Model(config)
+    j1, theta_b, eta = _case_arrays(cases, config)
+    y, slip = steady_state(config, cases, t0)
+    case = CaseArrays(j1, theta_b, eta)
+
+    def on_event(state):
+        if event:
+            state[DELTA] -= theta_b  # the line slips by K2 on the wheel
+
+    prog = None if progress is None else (lambda k: progress(k, n_samples))
+    rec = _rk4_window(model, y, case, t0, ts, sub, n_samples, n_pre, on_event, prog)
+    t = (np.arange(n_samples) - n_pre) * ts
+    signals = derived_signals(model, rec, t, case)
+    return WindowSet(t, signals, cases, n_pre, ts, slip,
+                     metadata={"substeps": sub, "event": event})
+
+
+def derived_signals(model: Model, rec: np.ndarray, t: np.ndarray, case: CaseArrays) -> dict:
+    """Output channels from recorded states of shape (n_samples, N_STATES, n_cases)."""
+    y = np.moveaxis(rec, 1, 0)  # (N_STATES, n_samples, n_cases)
+    dy = model.rhs(t[:, None], y, case)
+    r = model.r
+    tc = model.clutch_torque(y[DELTA], y[OMEGA1] - y[OMEGA2], case.backlash_angle_rad)
+    sig = {
+        "alpha1": y[ALPHA1],
+        "alpha2": y[ALPHA1] - y[DELTA],
+        "omega2": y[OMEGA2],
+        "a1": r * dy[OMEGA1],
+        "m_el": model.electromagnetic_torque(y),
+        "omega1": y[OMEGA1],
+        "a2": dy[V2],
+        "v2": y[V2],
+        "clutch_torque": tc,
+    }
+    return {k: np.ascontiguousarray(v.T) for k, v in sig.items()}
+
+
+def add_measurement_noise(windows: WindowSet, snr_db: float, seed: int,
+                          channels: Sequence[str] = CHANNELS) -> WindowSet:
+    """White Gaussian noise at a given SNR per channel and case.
+
+    SNR is measured as in MATLAB's ``awgn(x, snr, 'measured')``: noise power =
+    mean(x^2) over the window / 10^(snr/10).  Same seed, same output.
+    """
+    if not np.isfinite(snr_db):
+        raise ValueError(f"snr_db must be finite, got {snr_db!r}")
+    rng = np.random.default_rng(seed)
+    sig = dict(windows.signals)
+    for c in channels:
+        x = sig[c]
+        p = np.mean(x * x, axis=1, keepdims=True) / 10.0 ** (snr_db / 10.0)
+        sig[c] = x + rng.standard_normal(x.shape) * np.sqrt(p)
+    return WindowSet(windows.t, sig, windows.cases, windows.entry_index, windows.sample_period_s,
+                     windows.initial_slip, dict(windows.metadata, snr_db=snr_db, seed=seed))
+
+
+def quantise_encoders(windows: WindowSet, counts_per_rev: int) -> WindowSet:
+    """Quantise the angle channels alpha1, alpha2 to an encoder's resolution."""
+    if int(counts_per_rev) < 1:
+        raise ValueError(f"counts_per_rev must be >= 1, got {counts_per_rev!r}")
+    q = 2.0 * np.pi / int(counts_per_rev)
+    sig = dict(windows.signals)
+    for c in ("alpha1", "alpha2"):
+        sig[c] = np.floor(sig[c] / q) * q
+    return WindowSet(windows.t, sig, windows.cases, windows.entry_index, windows.sample_period_s,
+                     windows.initial_slip, dict(windows.metadata, counts_per_rev=int(counts_per_rev)))
