@@ -43,6 +43,8 @@ _RULES = {
     "sampling.samples_before_entry": (lambda v: isinstance(v, int) and v >= 0, "an integer >= 0"),
     "sampling.samples_from_entry": (lambda v: isinstance(v, int) and v >= 2, "an integer >= 2"),
     "sampling.integration_substeps": (lambda v: isinstance(v, int) and v >= 1, "an integer >= 1"),
+    "method.p_values": (lambda v: True, ""),
+    "method.khm_tol": (lambda v: v >= 0, "a number >= 0"),
 }
 
 
@@ -166,3 +168,46 @@ def config_hash(obj: Any) -> str:
         obj = dataclasses.asdict(obj)
     text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def method_config_from_dict(data: Mapping | None):
+    """Build and validate a MethodConfig from the ``method`` section."""
+    import dataclasses as dc
+    from .method.pipeline import MethodConfig
+    data = strip_ros_wrapper(data or {})
+    sec = data.get("method", data) if isinstance(data, Mapping) else data
+    if not isinstance(sec, Mapping):
+        raise ConfigError(f"method: expected a mapping, got {sec!r}")
+    defaults = MethodConfig()
+    names = {f.name for f in dc.fields(MethodConfig)}
+    values = {}
+    for k, v in sec.items():
+        if k not in names:
+            raise ConfigError(f"method.{k}: unknown parameter (known: {', '.join(sorted(names))})")
+        d = getattr(defaults, k)
+        if k == "wavelets":
+            if not isinstance(v, Mapping):
+                raise ConfigError(f"method.wavelets: expected a mapping signal -> wavelet, got {v!r}")
+            import pywt
+            for sig, w in v.items():
+                if w not in pywt.wavelist(kind="discrete"):
+                    raise ConfigError(f"method.wavelets.{sig}: unknown discrete wavelet {w!r}")
+            values[k] = tuple((str(a), str(b)) for a, b in v.items())
+        elif isinstance(d, str):
+            if not isinstance(v, str):
+                raise ConfigError(f"method.{k}: expected a string, got {v!r}")
+            values[k] = v
+        else:
+            values[k] = _coerce(f"method.{k}", d, v)
+    try:
+        return dc.replace(defaults, **values)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+
+
+def load_method_config(path: str | Path | None = None):
+    """Load ``config/method.yaml`` (or the given file) into a MethodConfig."""
+    if path is None:
+        from .resources import default_config_path
+        path = default_config_path("method.yaml")
+    return method_config_from_dict(load_yaml(path))

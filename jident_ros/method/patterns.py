@@ -1,0 +1,244 @@
+"""Pattern library (the paper's N2 matrices) and identification of J1 (eqs. 31–35).
+
+A library holds, for every backlash width (the paper's index e), signal and p,
+the 7 x 7 matrix N2 whose row f is the sorted KHM centres S of the pattern run
+with J1 = K1[f] at eta_k = 0.025, and the factor h5 (eq. 34).  It is saved as
+one .npz file with a JSON metadata record (format version, the system and
+method configurations and their hashes); loading a library built for another
+configuration is refused with a message that names what differs.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..config import config_hash, config_to_dict
+from ..sim.params import SystemConfig
+from . import normalise as nz
+from .pipeline import SIGNALS, MethodConfig, h_vector, margin, pre_entry_reference, signal_features
+
+FORMAT_VERSION = 1
+
+
+class LibraryMismatch(ValueError):
+    """The library was built for another configuration."""
+
+
+def method_config_to_dict(cfg: MethodConfig) -> dict:
+    return json.loads(json.dumps(dataclasses.asdict(cfg)))
+
+
+@dataclass
+class PatternLibrary:
+    """N2 matrices and h5 factors.
+
+    Attributes
+    ----------
+    centres : ndarray, shape (n_p, n_widths, n_signals, n_classes, n_clusters)
+        centres[p, e, s, f] = sorted KHM centres of pattern run f (N2 row f).
+    h5 : ndarray, shape (n_p, n_widths, n_signals)
+    ranges : ndarray, shape (n_widths, n_signals, n_classes, 2)
+        (h3, k3) of each pattern run.
+    p_values, widths_m, classes_kgm2, signals : tuples indexing the axes
+    metadata : dict (format, configs, hashes, created)
+    """
+
+    centres: np.ndarray
+    h5: np.ndarray
+    ranges: np.ndarray
+    p_values: tuple
+    widths_m: tuple
+    classes_kgm2: tuple
+    signals: tuple
+    metadata: dict
+
+    # -------------------------------------------------------------- building
+    @classmethod
+    def build(cls, system: SystemConfig, method: MethodConfig, windows=None, progress=None) -> "PatternLibrary":
+        """Build from the eta_k = 0.025 runs of every J1 class and width.
+
+        ``windows`` may be a precomputed WindowSet holding exactly those runs
+        (any order); otherwise they are simulated.
+        """
+        from ..sim import Case, simulate_grid
+        g = system.grid
+        eta = g.pattern_consistency_pa_sn
+        wanted = [Case(j, w, eta) for j in g.inertia_classes_kgm2 for w in g.backlash_widths_m]
+        if windows is None:
+            windows = simulate_grid(system, wanted)
+        index = {c: i for i, c in enumerate(windows.cases)}
+        missing = [c for c in wanted if c not in index]
+        if missing:
+            raise ValueError(f"windows: missing pattern runs, e.g. {missing[0]}")
+        return cls.from_windows(windows, [index[c] for c in wanted], system, method, progress)
+
+    @classmethod
+    def from_windows(cls, windows, order: Sequence[int], system: SystemConfig, method: MethodConfig,
+                     progress=None) -> "PatternLibrary":
+        """Library from windows; ``order`` lists window indices class-major, width-minor."""
+        g = system.grid
+        ps = tuple(float(p) for p in method.p_values)
+        nw, nc, ns = len(g.backlash_widths_m), len(g.inertia_classes_kgm2), len(SIGNALS)
+        centres = np.zeros((len(ps), nw, ns, nc, method.n_clusters))
+        ranges = np.zeros((nw, ns, nc, 2))
+        range_objs = {}
+        total, done = nc * nw * ns, 0
+        for f in range(nc):
+            for e in range(nw):
+                win = windows.case(order[f * nw + e])
+                ref = pre_entry_reference(win, windows.entry_index)
+                for s, name in enumerate(SIGNALS):
+                    feat = signal_features(win[name], name, method, ps, reference=ref)
+                    for k, p in enumerate(ps):
+                        centres[k, e, s, f] = feat.centres[p]
+                    ranges[e, s, f] = (feat.ranges.h3, feat.ranges.k3)
+                    range_objs[(e, s, f)] = feat.ranges
+                    done += 1
+                    if progress:
+                        progress(done, total)
+        h5 = np.zeros((len(ps), nw, ns))
+        for k in range(len(ps)):
+            for e in range(nw):
+                for s in range(ns):
+                    h5[k, e, s] = nz.h5_factor(centres[k, e, s], [range_objs[(e, s, f)] for f in range(nc)])
+        meta = library_metadata(system, method)
+        return cls(centres, h5, ranges, ps, tuple(g.backlash_widths_m), tuple(g.inertia_classes_kgm2),
+                   SIGNALS, meta)
+
+    # ------------------------------------------------------------ persistence
+    def save(self, path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        with open(tmp, "wb") as f:
+            np.savez_compressed(f, centres=self.centres, h5=self.h5, ranges=self.ranges,
+                                p_values=np.array(self.p_values), widths_m=np.array(self.widths_m),
+                                classes_kgm2=np.array(self.classes_kgm2),
+                                signals=np.array(self.signals), metadata=np.array(json.dumps(self.metadata)))
+        tmp.replace(path)  # atomic: a reader never sees half a library
+        return path
+
+    @classmethod
+    def load(cls, path, system: SystemConfig | None = None, method: MethodConfig | None = None) -> "PatternLibrary":
+        """Load a library; with configurations given, refuse one built for others."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"pattern library: no such file {str(path)!r} (build it with `jident build-patterns`)")
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                meta = json.loads(str(z["metadata"]))
+                lib = cls(z["centres"], z["h5"], z["ranges"], tuple(float(p) for p in z["p_values"]),
+                          tuple(float(w) for w in z["widths_m"]), tuple(float(c) for c in z["classes_kgm2"]),
+                          tuple(str(s) for s in z["signals"]), meta)
+        except (KeyError, ValueError, OSError) as exc:
+            raise LibraryMismatch(f"pattern library {str(path)!r}: not a jident pattern library ({exc})") from None
+        if meta.get("format") != FORMAT_VERSION:
+            raise LibraryMismatch(f"pattern library {str(path)!r}: format {meta.get('format')!r}, "
+                                  f"this version reads format {FORMAT_VERSION}; rebuild it")
+        if system is not None and method is not None:
+            lib.check_matches(system, method, str(path))
+        return lib
+
+    def check_matches(self, system: SystemConfig, method: MethodConfig, where: str = "pattern library") -> None:
+        want = library_metadata(system, method)
+        diffs = []
+        for part in ("system", "method"):
+            if self.metadata.get(f"{part}_hash") != want[f"{part}_hash"]:
+                diffs += [f"{part}.{k}: library {a!r}, configuration {b!r}"
+                          for k, a, b in _dict_diff(self.metadata.get(part, {}), want[part])]
+        if diffs:
+            shown = "; ".join(diffs[:5]) + (f"; … {len(diffs) - 5} more" if len(diffs) > 5 else "")
+            raise LibraryMismatch(f"{where}: built for another configuration ({shown}); rebuild it "
+                                  f"with `jident build-patterns`")
+
+    # ---------------------------------------------------------- identification
+    def width_index(self, width_m: float) -> int:
+        """Index e of the library width nearest to a window's backlash width."""
+        if not np.isfinite(width_m) or width_m <= 0:
+            raise ValueError(f"backlash_width_m: must be a finite number > 0, got {width_m!r}")
+        return int(np.argmin(np.abs(np.array(self.widths_m) - width_m)))
+
+    def p_index(self, p: float) -> int:
+        for k, q in enumerate(self.p_values):
+            if q == float(p):
+                return k
+        raise ValueError(f"p: the library has p in {list(self.p_values)}, got {p!r}")
+
+
+def library_metadata(system: SystemConfig, method: MethodConfig) -> dict:
+    sysd, methd = config_to_dict(system), method_config_to_dict(method)
+    return {"format": FORMAT_VERSION, "system": sysd, "method": methd,
+            "system_hash": config_hash(sysd), "method_hash": config_hash(methd),
+            "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+
+
+def _dict_diff(a, b, prefix=""):
+    keys = sorted(set(a) | set(b)) if isinstance(a, dict) and isinstance(b, dict) else []
+    if not keys:
+        if a != b:
+            yield prefix.rstrip("."), a, b
+        return
+    for k in keys:
+        yield from _dict_diff(a.get(k) if isinstance(a, dict) else None,
+                              b.get(k) if isinstance(b, dict) else None, f"{prefix}{k}.")
+
+
+@dataclass
+class SignalAnswer:
+    """Identification from one signal: H vector, class index, J1, margin."""
+
+    signal: str
+    p: float
+    h: np.ndarray
+    class_index: int
+    inertia_kgm2: float
+    margin: float
+
+
+@dataclass
+class Identification:
+    """All five signals' answers and the fused class for one window."""
+
+    answers: dict          # signal -> SignalAnswer
+    fused_class_index: int
+    fused_inertia_kgm2: float
+    fused_margin: float
+    width_index: int
+    p: float
+
+
+def identify_window(window: dict, entry_index: int, backlash_width_m: float, library: PatternLibrary,
+                    method: MethodConfig, p: float, signals: Sequence[str] = SIGNALS) -> Identification:
+    """Identify J1 from one window (dict of 1-D arrays per signal)."""
+    e = library.width_index(backlash_width_m)
+    k = library.p_index(p)
+    ref = pre_entry_reference(window, entry_index) if "m_el" in window else None
+    answers = {}
+    for name in signals:
+        s = library.signals.index(name)
+        feat = signal_features(window[name], name, method, [p], reference=ref)
+        h = h_vector(library.centres[k, e, s], feat.centres[float(p)], library.h5[k, e, s])
+        c = int(np.argmin(h))
+        answers[name] = SignalAnswer(name, float(p), h, c, library.classes_kgm2[c], margin(h))
+    fc, fm = fuse([a.h for a in answers.values()])
+    return Identification(answers, fc, library.classes_kgm2[fc], fm, e, float(p))
+
+
+def fuse(h_vectors: Sequence[np.ndarray]) -> tuple[int, float]:
+    """Fused class: argmin of the sum of each signal's H divided by its own sum.
+
+    Each H profile is made scale-free (H / sum H) so that no signal dominates
+    by its units; returns (class index, margin of the fused profile).
+    """
+    total = np.zeros_like(np.asarray(h_vectors[0], dtype=float))
+    for h in h_vectors:
+        h = np.asarray(h, dtype=float)
+        sm = h.sum()
+        total += h / sm if sm > 0 else h
+    return int(np.argmin(total)), margin(total)

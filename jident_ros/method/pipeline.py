@@ -1,0 +1,166 @@
+"""The paper's identification method, end to end, for one or many windows.
+
+window (2048 samples per signal)
+  -> scalogram (MATLAB-classic CWT, per-signal wavelet)         scalogram.py
+  -> 343 x 436 gray image X1                                    image.py
+  -> normalised X3 on [k3, 2 k3 - h3] (eqs. 2-22)               normalise.py
+  -> 7 KHM centres S from the weighted level histogram (23-30)  khm.py
+  -> H(f) = h5 sum_i |N2(f, i) - N3(i)|, J1 = K1[argmin H]       this module (31-35)
+
+Plain numpy/scipy/PyWavelets; never imports rclpy.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import normalise as nz
+from .image import level_histogram, render_intensity
+from .khm import KHarmonicMeans
+from .scalogram import READINGS, wavelet_scalogram
+
+SIGNALS = ("a1", "m_el", "omega1", "a2", "v2")
+VARIANTS = ("paper", "load_scaled")
+
+
+@dataclass(frozen=True)
+class MethodConfig:
+    """Parameters of the identification method (config/method.yaml, section ``method``).
+
+    Attributes
+    ----------
+    wavelets : tuple of (signal, wavelet name)
+        Paper section 3: a1 sym5, m_el db6, omega1 sym5, a2 db6, v2 sym5.
+    scale_reading : str
+        Reading of "decomposition level 10": 'dyadic', 'linear' or 'swt'.
+    wavefun_precision : int
+        Iterations of the wavelet-function cascade (MATLAB's precis = 10).
+    image_rows, image_cols : int
+        Size of the intensity matrix X1 (the paper's 343 x 436).
+    n_colors : int
+        Length of the gray colormap (MATLAB's default 64).
+    n_clusters : int
+        KHM centres (7 = the number of J1 classes).
+    p_values : tuple of float
+        KHM exponents p >= 2 the pattern library is built for.
+    eq12 : str
+        'corrected' or 'literal' reading of eq. (12).
+    variant : str
+        'paper' (faithful) or 'load_scaled' (docs/method.md, section "variant").
+    khm_max_iter : int
+    khm_tol : float
+    """
+
+    wavelets: tuple = (("a1", "sym5"), ("m_el", "db6"), ("omega1", "sym5"), ("a2", "db6"), ("v2", "sym5"))
+    scale_reading: str = "dyadic"
+    wavefun_precision: int = 10
+    image_rows: int = 343
+    image_cols: int = 436
+    n_colors: int = 64
+    n_clusters: int = 7
+    p_values: tuple = (2.0, 3.0, 6.0, 9.0)
+    eq12: str = "corrected"
+    variant: str = "paper"
+    khm_max_iter: int = 3000
+    khm_tol: float = 1e-10
+
+    def __post_init__(self):
+        if self.scale_reading not in READINGS:
+            raise ValueError(f"method.scale_reading: expected one of {READINGS}, got {self.scale_reading!r}")
+        if self.eq12 not in ("corrected", "literal"):
+            raise ValueError(f"method.eq12: expected 'corrected' or 'literal', got {self.eq12!r}")
+        if self.variant not in VARIANTS:
+            raise ValueError(f"method.variant: expected one of {VARIANTS}, got {self.variant!r}")
+        names = [s for s, _ in self.wavelets]
+        if sorted(names) != sorted(SIGNALS):
+            raise ValueError(f"method.wavelets: need one wavelet for each of {SIGNALS}, got {names}")
+        for p in self.p_values:
+            if not p >= 2:
+                raise ValueError(f"method.p_values: every p must be >= 2, got {p!r}")
+
+    @property
+    def wavelet(self) -> dict:
+        return dict(self.wavelets)
+
+    def replace(self, **kw) -> "MethodConfig":
+        return dataclasses.replace(self, **kw)
+
+
+@dataclass
+class SignalFeatures:
+    """What the method keeps of one signal window.
+
+    centres : dict p -> ndarray (n_clusters,), the KHM centres S sorted ascending (N3)
+    ranges : RangeParams (h4, k4 -> h3, k3)
+    """
+
+    centres: dict
+    ranges: nz.RangeParams
+    khm_info: dict = field(default_factory=dict)
+
+
+def prepare_signal(x: np.ndarray, signal: str, reference: float | None, variant: str) -> np.ndarray:
+    """Variant hook: what enters the scalogram and the range statistics.
+
+    'paper' uses the window as recorded.  'load_scaled' divides the window's
+    deviation from its pre-entry mean by the pre-entry load reference (see
+    docs/method.md); ``reference`` is then required.
+    """
+    if variant == "paper":
+        return x
+    if reference is None or not np.isfinite(reference) or reference == 0:
+        raise ValueError(f"reference: variant {variant!r} needs a finite non-zero pre-entry reference, got {reference!r}")
+    return x / reference
+
+
+def image_levels(x: np.ndarray, signal: str, cfg: MethodConfig):
+    """Scalogram -> image -> (distinct intensity levels, pixel counts, image min, image max)."""
+    scal = wavelet_scalogram(x, cfg.wavelet[signal], reading=cfg.scale_reading,
+                             precision=cfg.wavefun_precision)
+    img = render_intensity(scal, shape=(cfg.image_rows, cfg.image_cols), n_colors=cfg.n_colors)
+    levels, counts = level_histogram(img, cfg.n_colors)
+    return levels, counts, float(img.min()), float(img.max())
+
+
+def signal_features(x, signal: str, cfg: MethodConfig, p_values=None, reference=None) -> SignalFeatures:
+    """KHM centres of one signal window for every p (the paper's N3 row)."""
+    x = nz._check_window(x, signal)
+    x = prepare_signal(x, signal, reference, cfg.variant)
+    rp = nz.range_params(x, signal, cfg.eq12)
+    levels, counts, lo, hi = image_levels(x, signal, cfg)
+    keep = counts > 0
+    values = nz.map_levels(levels[keep], lo, hi, rp)
+    centres, info = {}, {}
+    for p in (cfg.p_values if p_values is None else p_values):
+        km = KHarmonicMeans(n_clusters=cfg.n_clusters, p=float(p), init="paper",
+                            init_value=nz.initial_centre(rp), max_iter=cfg.khm_max_iter, tol=cfg.khm_tol)
+        km.fit_histogram(values, counts[keep])
+        centres[float(p)] = np.sort(km.cluster_centers_)
+        info[float(p)] = {"n_iter": km.n_iter_, "converged": bool(km.converged_),
+                          "cycle": bool(km.cycle_detected_)}
+    return SignalFeatures(centres, rp, info)
+
+
+def pre_entry_reference(window: dict, entry_index: int) -> float:
+    """Load reference of a window: mean electromagnetic torque before the entry, N m."""
+    m = np.asarray(window["m_el"], dtype=float)
+    if entry_index < 1:
+        raise ValueError(f"entry_index: need >= 1 pre-entry sample for the reference, got {entry_index}")
+    return float(np.mean(m[:entry_index]))
+
+
+def h_vector(pattern_centres: np.ndarray, tested_centres: np.ndarray, h5: float) -> np.ndarray:
+    """Eq. (33): H(f) = h5 * sum_i |N2(f, i) - N3(i)|, shape (n_classes,)."""
+    n2 = np.asarray(pattern_centres, dtype=float)
+    n3 = np.asarray(tested_centres, dtype=float)
+    return h5 * np.abs(n2 - n3[None, :]).sum(axis=1)
+
+
+def margin(h: np.ndarray) -> float:
+    """Second-smallest over smallest H (inf when the smallest is exactly 0)."""
+    s = np.sort(np.asarray(h, dtype=float))
+    if s.size < 2:
+        return float("inf")
+    return float("inf") if s[0] == 0 else float(s[1] / s[0])

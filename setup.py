@@ -1,0 +1,58 @@
+"""ament_python / setuptools build script for jident_ros.
+
+Works both with ``colcon build`` (ROS 2 workspace) and with plain
+``pip install [-e] .`` (see scripts/setup.sh).  Default configuration files stay
+in the top-level ``config/`` folder (single source of truth) and are installed
+as data_files to ``<prefix>/share/jident_ros/config``; jident_ros/resources.py
+finds them in every install mode.
+"""
+
+import os
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'jident_ros'
+
+data_files = [
+    ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+    ('share/' + package_name, ['package.xml']),
+    ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+]
+if os.path.isdir('launch'):
+    data_files.append(('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))))
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    data_files=data_files,
+    install_requires=[
+        # Never rclpy or ros-* wheels here: a ROS distribution's own rclpy must
+        # not be replaced.  A plain venv gets them from requirements-ros.txt.
+        'numpy',
+        'scipy',
+        'PyWavelets',
+        'PyYAML',
+        'matplotlib',
+        'tqdm',
+    ],
+    extras_require={
+        'test': ['pytest'],
+        'mcap': ['mcap', 'mcap-ros2-support'],
+    },
+    zip_safe=True,
+    maintainer='jident developers',
+    maintainer_email='jident@example.com',
+    description=(
+        'Identification of the moment of inertia J1 of an induction-motor drive '
+        'from the backlash-zone transient (wavelet scalograms + k-harmonic means)'
+    ),
+    license='Apache-2.0',
+    python_requires='>=3.10',
+    entry_points={
+        'console_scripts': [
+            'jident = jident_ros.cli:main',
+        ],
+    },
+)

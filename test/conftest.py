@@ -1,0 +1,82 @@
+"""Shared pytest fixtures for jident_ros.
+
+* ``repo_root``: the checkout's top folder.
+* ``ros_env``: (session) environment for ROS processes of this test run:
+  AMENT_PREFIX_PATH includes ``sys.prefix`` (where the ros-* wheels register
+  themselves in the ament index), ROS_DOMAIN_ID is unique to this run (kept
+  from the environment when scripts/test.sh already chose one) and DDS
+  discovery stays on localhost.  The same values are applied to ``os.environ``
+  for the session, so in-process ``rclpy.init()`` and subprocesses agree.
+* Tests marked ``ros`` are skipped with a reason when rclpy cannot be imported,
+  unless JIDENT_REQUIRE_ROS=1 (set by scripts/test.sh), in which case they fail:
+  the venv that scripts/setup.sh builds always has rclpy.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def repo_root() -> Path:
+    return REPO_ROOT
+
+
+def _unique_domain_id() -> str:
+    preset = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if preset:
+        return preset
+    return str(os.getpid() % 100 + 1)
+
+
+@pytest.fixture(scope="session")
+def ros_env():
+    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
+    if sys.prefix not in prefixes:
+        prefixes.insert(0, sys.prefix)
+    values = {
+        "AMENT_PREFIX_PATH": os.pathsep.join(prefixes),
+        "ROS_DOMAIN_ID": _unique_domain_id(),
+        "ROS_AUTOMATIC_DISCOVERY_RANGE": os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") or "LOCALHOST",
+        "PYTHONUNBUFFERED": "1",
+    }
+    with pytest.MonkeyPatch.context() as mp:
+        for key, value in values.items():
+            mp.setenv(key, value)
+        yield dict(os.environ)
+
+
+_RCLPY_ERROR: list[str | None] = []
+
+
+def _rclpy_import_error() -> str | None:
+    if not _RCLPY_ERROR:
+        try:
+            import rclpy  # noqa: F401
+        except Exception as exc:  # ImportError, or a broken native library
+            _RCLPY_ERROR.append(f"{type(exc).__name__}: {exc}")
+        else:
+            _RCLPY_ERROR.append(None)
+    return _RCLPY_ERROR[0]
+
+
+def pytest_runtest_setup(item):
+    if item.get_closest_marker("ros") is None:
+        return
+    error = _rclpy_import_error()
+    if error is None:
+        return
+    if os.environ.get("JIDENT_REQUIRE_ROS") == "1":
+        pytest.fail(
+            f"rclpy is not importable ({error}) but JIDENT_REQUIRE_ROS=1; "
+            "run `bash scripts/setup.sh` (installs the ros-* wheels of requirements-ros.txt) "
+            "or source a ROS 2 distribution",
+            pytrace=False,
+        )
+    pytest.skip(f"needs rclpy, which is not importable here ({error}); run `bash scripts/setup.sh`")

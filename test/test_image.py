@@ -1,0 +1,212 @@
+"""Tests of jident_ros.method.image (scalogram -> 343 x 436 intensity matrix X1)."""
+
+import struct
+import warnings
+import zlib
+
+import numpy as np
+import pytest
+
+from jident_ros.method import image as im
+
+N_PIXELS = 343 * 436  # 149,548
+
+
+@pytest.fixture(scope="module")
+def scalogram():
+    # smooth along time (blocks of 8 samples, wider than a pixel) so that every
+    # block, hence the minimum and the maximum, is under some pixel centre
+    rng = np.random.default_rng(7)
+    data = np.repeat(rng.gamma(0.5, size=(10, 256)), 8, axis=1)
+    return 100 * data / data.sum()
+
+
+def test_output_shape_range_and_levels(scalogram):
+    x1 = im.render_intensity(scalogram)
+    assert x1.shape == im.X1_SHAPE == (343, 436)
+    assert x1.dtype == np.float64
+    assert x1.min() == 0.0 and x1.max() == 1.0
+    # only the 64 grey levels of gray(64) occur
+    np.testing.assert_allclose(x1 * 63, np.rint(x1 * 63), atol=1e-12)
+
+
+def test_step_is_drawn_at_the_expected_pixel_row_and_column():
+    data = np.zeros((10, 2048))
+    data[3:, :] = 1.0  # data rows 3..9 (larger scales) are bright
+    x1 = im.render_intensity(data)
+    # data row 3 starts at 3/10 of the height: 102.9 px; pixel row 102 has its
+    # centre at 102.5 (still data row 2), pixel row 103 at 103.5 (data row 3)
+    assert np.all(x1[:103] == 0.0)
+    assert np.all(x1[103:] == 1.0)
+    flipped = im.render_intensity(data, origin="lower")
+    np.testing.assert_array_equal(flipped, x1[::-1])
+
+    data = np.zeros((10, 2048))
+    data[:, 1000:] = 5.0
+    x1 = im.render_intensity(data)
+    # sample 1000 starts at 1000/2048 * 436 = 212.9 px
+    assert np.all(x1[:, :213] == 0.0)
+    assert np.all(x1[:, 213:] == 1.0)
+
+
+def test_pixel_cell_indices_sample_pixel_centres():
+    rows, columns = im.pixel_cell_indices((10, 2048))
+    assert rows.shape == (343,) and columns.shape == (436,)
+    assert rows[0] == 0 and rows[-1] == 9 and columns[0] == 2 and columns[-1] == 2045
+    assert np.all(np.diff(rows) >= 0) and np.all(np.diff(columns) > 0)
+    # each data row covers 34 or 35 pixel rows (343 / 10)
+    assert set(np.bincount(rows)) <= {34, 35}
+    assert im.pixel_cell_indices((10, 2048))[0] is rows  # cached
+    # more pixels than cells: every cell is drawn
+    rows_small, columns_small = im.pixel_cell_indices((3, 5), shape=(6, 10))
+    np.testing.assert_array_equal(rows_small, [0, 0, 1, 1, 2, 2])
+    np.testing.assert_array_equal(columns_small, np.repeat(np.arange(5), 2))
+
+
+def test_cells_between_pixel_centres_are_not_drawn_but_set_the_limits():
+    # 2048 samples on 436 columns: like MATLAB's nearest-neighbour image
+    # drawing, most samples are skipped, but the colour limits still come from
+    # all the data (automatic CLim).
+    data = np.zeros((10, 2048))
+    data[0, 1] = 100.0  # column 1 is not under any pixel centre
+    data[0, 2] = 50.0  # column 2 is (pixel column 0)
+    x1 = im.render_intensity(data)
+    assert x1.max() == pytest.approx(32 / 63)  # fix(0.5 * 64) + 1 = 33
+
+
+def test_constant_input_does_not_divide_by_zero():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        x1 = im.render_intensity(np.full((10, 2048), 0.004883))
+    assert np.all(x1 == 0.0)
+
+
+def test_scaled_mapping_follows_matlab_formula():
+    n = 64
+    low, high = -3.0, 5.0
+    values = np.array(
+        [
+            low,
+            low + (high - low) * 0.999 / n,  # still index 1
+            low + (high - low) * 1.001 / n,  # index 2
+            low + (high - low) * 0.5,  # fix(32) + 1 = 33
+            high - (high - low) * 0.001 / n,  # index 64
+            high,  # fix(64) + 1 = 65, clamped to 64
+        ]
+    )
+    data = np.tile(values[:, None], (1, 8))
+    x1 = im.render_intensity(data, shape=(6, 8), n_colors=n)
+    expected_index = np.array([1, 1, 2, 33, 64, 64])
+    np.testing.assert_allclose(x1[:, 0], (expected_index - 1) / (n - 1))
+    assert x1.min() == 0.0 and x1.max() == 1.0
+
+
+def test_clim_clamps_values_outside_the_limits():
+    data = np.array([[-1.0, 0.0, 0.5, 1.0, 2.0]])
+    x1 = im.render_intensity(data, shape=(1, 5), n_colors=4, clim=(0.0, 1.0))
+    # indices: clamp(1), 1, fix(2)+1 = 3, clamp(5) = 4, clamp = 4
+    np.testing.assert_allclose(x1[0], np.array([0, 0, 2, 3, 3]) / 3)
+
+
+def test_batch_renders_each_scalogram_with_its_own_limits(scalogram):
+    batch = np.stack([scalogram, 2 * scalogram + 1, scalogram[::-1]])
+    x1 = im.render_intensity(batch)
+    assert x1.shape == (3, 343, 436)
+    for one, image in zip(batch, x1):
+        np.testing.assert_array_equal(image, im.render_intensity(one))
+    np.testing.assert_array_equal(x1[0], x1[1])  # affine change: same picture
+
+
+def test_histogram_counts_reproduce_the_levels(scalogram):
+    x1 = im.render_intensity(scalogram)
+    levels = im.intensity_levels(x1)
+    assert levels.dtype.kind == "i" and levels.min() == 0 and levels.max() == 63
+    np.testing.assert_allclose(levels / 63, x1, atol=1e-12)
+    level_values, counts = im.level_histogram(x1, 64)
+    assert level_values.shape == (64,) and counts.shape == (64,)
+    assert counts.sum() == N_PIXELS == 149_548
+    np.testing.assert_array_equal(counts, np.bincount(levels.ravel(), minlength=64))
+    # weighted histogram gives the same mean intensity as all pixels
+    assert np.dot(level_values, counts) / N_PIXELS == pytest.approx(x1.mean(), rel=1e-12)
+
+    _, batch_counts = im.level_histogram(np.stack([x1, 1 - x1]), 64)
+    assert batch_counts.shape == (2, 64)
+    np.testing.assert_array_equal(batch_counts[0], counts)
+    np.testing.assert_array_equal(batch_counts[1], counts[::-1])
+
+
+def _read_png(path):
+    """Minimal decoder for the PNGs write_png produces (8-bit, filter 0)."""
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    position, chunks = 8, []
+    while position < len(data):
+        (length,) = struct.unpack(">I", data[position : position + 4])
+        kind = data[position + 4 : position + 8]
+        body = data[position + 8 : position + 8 + length]
+        (crc,) = struct.unpack(">I", data[position + 8 + length : position + 12 + length])
+        assert crc == zlib.crc32(kind + body) & 0xFFFFFFFF
+        chunks.append((kind, body))
+        position += 12 + length
+    assert [kind for kind, _ in chunks] == [b"IHDR", b"IDAT", b"IEND"]
+    width, height, depth, colour_type, compression, filtering, interlace = struct.unpack(
+        ">IIBBBBB", chunks[0][1]
+    )
+    assert (depth, compression, filtering, interlace) == (8, 0, 0, 0)
+    channels = {0: 1, 2: 3}[colour_type]
+    raw = np.frombuffer(zlib.decompress(chunks[1][1]), dtype=np.uint8)
+    raw = raw.reshape(height, 1 + width * channels)
+    assert np.all(raw[:, 0] == 0)  # filter type 0 on every scanline
+    pixels = raw[:, 1:].reshape(height, width, channels)
+    return colour_type, pixels
+
+
+def test_png_round_trip_gray(tmp_path, scalogram):
+    x1 = im.render_intensity(scalogram)
+    path = im.write_png(tmp_path / "x1.png", x1)
+    assert path == tmp_path / "x1.png"
+    colour_type, pixels = _read_png(path)
+    assert colour_type == 0 and pixels.shape == (343, 436, 1)
+    np.testing.assert_array_equal(pixels[..., 0], np.rint(x1 * 255).astype(np.uint8))
+
+
+def test_png_round_trip_jet(tmp_path):
+    image = np.array([[0.0, 0.5, 1.0], [0.25, 0.75, 0.125]])
+    colour_type, pixels = _read_png(im.write_png(str(tmp_path / "jet.png"), image, colormap="jet"))
+    assert colour_type == 2 and pixels.shape == (2, 3, 3)
+    np.testing.assert_array_equal(pixels[0, 0], [0, 0, 128])  # dark blue
+    np.testing.assert_array_equal(pixels[0, 1], [128, 255, 128])  # green-ish middle
+    np.testing.assert_array_equal(pixels[0, 2], [128, 0, 0])  # dark red
+    np.testing.assert_array_equal(pixels[1, 0], [0, 128, 255])
+
+
+@pytest.mark.parametrize(
+    "call, argument",
+    [
+        (lambda: im.render_intensity(np.ones(5)), "scalogram"),
+        (lambda: im.render_intensity(np.array([[1.0, np.nan]])), "scalogram"),
+        (lambda: im.render_intensity(np.array([[1.0, -np.inf]])), "scalogram"),
+        (lambda: im.render_intensity(np.empty((0, 4))), "scalogram"),
+        (lambda: im.render_intensity([[1, 2], [3]]), "scalogram"),
+        (lambda: im.render_intensity(np.ones((2, 2)) * 1j), "scalogram"),
+        (lambda: im.render_intensity(np.ones((2, 2)), shape=(0, 5)), "shape"),
+        (lambda: im.render_intensity(np.ones((2, 2)), shape=(343,)), "shape"),
+        (lambda: im.render_intensity(np.ones((2, 2)), n_colors=1), "n_colors"),
+        (lambda: im.render_intensity(np.ones((2, 2)), n_colors=64.0), "n_colors"),
+        (lambda: im.render_intensity(np.ones((2, 2)), clim=(1.0, 1.0)), "clim"),
+        (lambda: im.render_intensity(np.ones((2, 2)), clim=(2.0, 1.0)), "clim"),
+        (lambda: im.render_intensity(np.ones((2, 2)), clim=(0.0, np.nan)), "clim"),
+        (lambda: im.render_intensity(np.ones((2, 2)), origin="left"), "origin"),
+        (lambda: im.intensity_levels(np.full((2, 2), 1.5)), "image"),
+        (lambda: im.intensity_levels(np.full((2, 2), -0.1)), "image"),
+        (lambda: im.level_histogram(np.zeros((2, 2)), n_colors=0), "n_colors"),
+        (lambda: im.write_png("x.png", np.zeros((2, 2, 2))), "image"),
+        (lambda: im.write_png("x.png", np.zeros((2, 2)), colormap="parula"), "colormap"),
+        (lambda: im.write_png(None, np.zeros((2, 2))), "path"),
+        (lambda: im.pixel_cell_indices((5,)), "data_shape"),
+    ],
+)
+def test_bad_input_raises_value_error_naming_argument(call, argument):
+    with pytest.raises(ValueError, match=f"^{argument}: ") as info:
+        call()
+    assert "\n" not in str(info.value)
