@@ -3,8 +3,8 @@
 
 Run (peers installed only in the benchmark venv, see bench/README.md)::
 
-    .venv-bench/bin/python bench/bench_simulator.py [--repeats 7] [--peer-repeats 3]
-                                                    [--quick] [--json out.json]
+    .venv-bench/bin/python bench/bench_simulator.py [--repeats 5] [--peer-repeats M]
+                                                    [--quick] [--no-peers] [--json out.json]
 
 A peer that is not installed is reported as "not installed"; ours is timed
 anyway (so ``.venv/bin/python bench/bench_simulator.py`` works too).
@@ -19,12 +19,18 @@ simulated second, and each peer is compared by the ratio
 
 * ours, grid: ``simulate_grid(cfg, paper_grid_cases(cfg))``, the paper's 168
   cases in one vectorised fixed-step RK4 run (2 RK4 steps per sample), incl.
-  the steady-state initialisation and the derived output channels.  One
-  warm-up run, then the median of ``--repeats`` (>= 5) runs.  "Grid per case"
-  is that wall time / 168.
+  the steady-state initialisation and the derived output channels.  "Grid per
+  case" is that wall time / 168.
 * ours, single case: the same call for ``Case(1.16, 0.005, 0.025)`` (J1, K2,
-  eta_k).  One warm-up, median of ``--repeats`` runs.
-* peers: one warm-up, median of ``--peer-repeats`` (>= 3) runs of one case.
+  eta_k).
+* peers: one case each (below).
+
+Every simulator gets one untimed warm-up run, then ``--repeats`` (>= 5)
+rounds; in each round every simulator runs once (round-robin, the order
+rotating), so that load changes on this shared machine hit all of them alike.
+Peers run in every round unless ``--peer-repeats`` (>= 3) asks for fewer.
+Reported: the median wall time (and median process CPU time; wall >> CPU
+means other processes took the CPU, and the script warns).
 
 The peers' scenario (closest to ours that each supports)
 --------------------------------------------------------
@@ -57,7 +63,7 @@ as ours), for the same simulated length and output period:
   above, ``PolynomialStaticLoad(a = load torque, j_load ~ 0)``, one
   ``env.step`` = 0.5 ms = one output sample, driven by an open-loop action:
   the 3-phase 50 Hz sine duty cycles (amplitude 326.6 V / 350 V), computed at
-  the middle of each step.  No visualisation, no constraint monitor (both only
+  the middle of each step.  No visualisation and no constraints (both only
   cost time); the speed reference generator and reward of the env run as
   usual.  Its motor initializer rejects a loaded flux state ("within nominal
   boundaries" check), so after ``env.reset()`` the ODE state is set to the
@@ -65,9 +71,10 @@ as ours), for the same simulated length and output period:
 
 Both peers hold a zero-order-hold (piecewise-constant over 0.5 ms) voltage,
 ours a continuous sinusoid; all three stay at the loaded steady state (the
-"omega end" column checks that).  The peers integrate 6 real states (flux
-vectors, speed, angle), ours 10 (plus clutch, wheel, line and mass), and ours
-additionally goes through a backlash impact transient.
+"omega end" column checks that; ours: median over the cases, after the
+transient).  The peers integrate the motor and a rigid shaft only (flux or
+current vectors, speed, angle); ours 10 states per case (plus clutch, wheel,
+line and mass) and goes through the backlash impact transient.
 """
 from __future__ import annotations
 
@@ -214,7 +221,7 @@ def ours_result(ws) -> dict:
 
 
 def rhs_diagnostics(cfg) -> dict:
-    """Cost of one Model.rhs call and of the RK4 glue (internal API; best effort)."""
+    """Cost of one Model.rhs call (best of 3 x 2000 calls; internal API, best effort)."""
     from jident_ros.sim.model import CaseArrays, Model
     from jident_ros.sim.simulate import _case_arrays
     model = Model(cfg)

@@ -207,3 +207,19 @@ def test_bad_case_is_rejected_with_its_name(bad):
     (name, value), = bad.items()
     with pytest.raises(ValueError, match=name):
         Case(**args)
+
+
+def test_fast_rhs_equals_the_reference_rhs():
+    """The integrator's matrix form of the model equals Model.rhs (the documented equations)."""
+    from jident_ros.sim.model import CaseArrays, Model
+    from jident_ros.sim.simulate import steady_state
+    cases = [Case(0.957, 0.0025, 0.0125), Case(1.218, 0.01, 0.05)]
+    model = Model(CFG)
+    y, _ = steady_state(CFG, cases, 0.0123)
+    rng = np.random.default_rng(0)
+    y = y * (1 + 0.01 * rng.standard_normal(y.shape))
+    y[6] = [0.03, -0.2]  # one case inside the zone, one in contact on the far flank
+    ca = CaseArrays(np.array([0.957, 1.218]), np.array([0.025, 0.1]), np.array([0.0125, 0.05]))
+    ref = model.rhs(0.0123, y, ca)
+    fast = model.fast_rhs(ca)(model.bias_table([0.0123])[0], y, np.empty_like(y))
+    np.testing.assert_allclose(fast, ref, rtol=1e-10, atol=1e-9 * np.abs(ref).max())

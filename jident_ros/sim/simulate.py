@@ -181,8 +181,10 @@ def _rk4_window(model: Model, y: np.ndarray, case: CaseArrays, t0: float, dt: fl
     rec = np.empty((n_samples,) + y.shape)
     k1, k2, k3, k4 = (np.empty_like(y) for _ in range(4))
     tmp = np.empty_like(y)
-    rhs = model.rhs
+    rhs = model.fast_rhs(case)
     h = dt / substeps
+    # supply voltage at every RK4 stage time t0 + i h/2, computed once
+    bias = model.bias_table(t0 + np.arange(2 * max(n_samples - 1, 0) * substeps + 1) * (0.5 * h))
     for k in range(n_samples):
         if k == event_index:
             on_event(y)
@@ -192,16 +194,17 @@ def _rk4_window(model: Model, y: np.ndarray, case: CaseArrays, t0: float, dt: fl
         if k == n_samples - 1:
             break
         for j in range(substeps):
-            t = t0 + (k * substeps + j) * h
-            rhs(t, y, case, k1)
+            i = 2 * (k * substeps + j)
+            rhs(bias[i], y, k1)
             np.multiply(k1, 0.5 * h, out=tmp); tmp += y
-            rhs(t + 0.5 * h, tmp, case, k2)
+            rhs(bias[i + 1], tmp, k2)
             np.multiply(k2, 0.5 * h, out=tmp); tmp += y
-            rhs(t + 0.5 * h, tmp, case, k3)
+            rhs(bias[i + 1], tmp, k3)
             np.multiply(k3, h, out=tmp); tmp += y
-            rhs(t + h, tmp, case, k4)
+            rhs(bias[i + 2], tmp, k4)
             k2 += k3; k2 *= 2.0; k2 += k1; k2 += k4
-            y += (h / 6.0) * k2
+            k2 *= h / 6.0
+            y += k2
     return rec
 
 
