@@ -18,7 +18,7 @@ import numpy as np
 
 from ..sim import SystemConfig, WindowSet, add_measurement_noise, paper_grid_cases, simulate_grid
 from .patterns import PatternLibrary, fuse
-from .pipeline import SIGNALS, MethodConfig, h_vector, margin, pre_entry_reference, signal_features
+from .pipeline import SIGNALS, MethodConfig, batch_features, h_vector, margin, pre_entry_reference
 
 #: The paper's 16 example cases (tables 1-4): signal, J1, width, eta_k, p, the paper's H vector.
 PAPER_EXAMPLES = [
@@ -86,19 +86,15 @@ class GridResult:
 
 
 def window_features(windows: WindowSet, method: MethodConfig, p_values, progress=None):
-    """centres[(p, case, signal)] -> (n_clusters,), computed once per window and signal."""
+    """centres[p, case, signal] -> (n_clusters,), all windows of a signal in one batch."""
     ps = tuple(float(p) for p in p_values)
     n = len(windows.cases)
     out = np.zeros((len(ps), n, len(SIGNALS), method.n_clusters))
-    for i in range(n):
-        win = windows.case(i)
-        ref = pre_entry_reference(win, windows.entry_index)
-        for s, name in enumerate(SIGNALS):
-            feat = signal_features(win[name], name, method, ps, reference=ref)
-            for k, p in enumerate(ps):
-                out[k, i, s] = feat.centres[p]
+    refs = np.array([pre_entry_reference(windows.case(i), windows.entry_index) for i in range(n)])
+    for s, name in enumerate(SIGNALS):
+        out[:, :, s], _, _ = batch_features(windows.signals[name], name, method, ps, refs)
         if progress:
-            progress(i + 1, n)
+            progress(s + 1, len(SIGNALS))
     return out
 
 

@@ -21,7 +21,8 @@ import numpy as np
 from ..config import config_hash, config_to_dict
 from ..sim.params import SystemConfig
 from . import normalise as nz
-from .pipeline import SIGNALS, MethodConfig, h_vector, margin, pre_entry_reference, signal_features
+from .pipeline import (SIGNALS, MethodConfig, batch_features, h_vector, margin, pre_entry_reference,
+                       signal_features)
 
 FORMAT_VERSION = 1
 
@@ -88,20 +89,18 @@ class PatternLibrary:
         centres = np.zeros((len(ps), nw, ns, nc, method.n_clusters))
         ranges = np.zeros((nw, ns, nc, 2))
         range_objs = {}
-        total, done = nc * nw * ns, 0
-        for f in range(nc):
-            for e in range(nw):
-                win = windows.case(order[f * nw + e])
-                ref = pre_entry_reference(win, windows.entry_index)
-                for s, name in enumerate(SIGNALS):
-                    feat = signal_features(win[name], name, method, ps, reference=ref)
-                    for k, p in enumerate(ps):
-                        centres[k, e, s, f] = feat.centres[p]
-                    ranges[e, s, f] = (feat.ranges.h3, feat.ranges.k3)
-                    range_objs[(e, s, f)] = feat.ranges
-                    done += 1
-                    if progress:
-                        progress(done, total)
+        refs = np.array([pre_entry_reference(windows.case(i), windows.entry_index) for i in order])
+        for s, name in enumerate(SIGNALS):
+            batch = np.stack([windows.signals[name][i] for i in order])
+            cen, rps, _ = batch_features(batch, name, method, ps, refs)
+            for f in range(nc):
+                for e in range(nw):
+                    b = f * nw + e
+                    centres[:, e, s, f] = cen[:, b]
+                    ranges[e, s, f] = (rps[b].h3, rps[b].k3)
+                    range_objs[(e, s, f)] = rps[b]
+            if progress:
+                progress(s + 1, ns)
         h5 = np.zeros((len(ps), nw, ns))
         for k in range(len(ps)):
             for e in range(nw):

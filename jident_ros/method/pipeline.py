@@ -18,7 +18,6 @@ import numpy as np
 
 from . import normalise as nz
 from .image import level_histogram, render_intensity
-from .khm import KHarmonicMeans
 from .scalogram import READINGS, wavelet_scalogram
 
 SIGNALS = ("a1", "m_el", "omega1", "a2", "v2")
@@ -64,7 +63,7 @@ class MethodConfig:
     eq12: str = "corrected"
     variant: str = "paper"
     khm_max_iter: int = 3000
-    khm_tol: float = 1e-10
+    khm_tol: float = 1e-7
 
     def __post_init__(self):
         if self.scale_reading not in READINGS:
@@ -101,46 +100,94 @@ class SignalFeatures:
     khm_info: dict = field(default_factory=dict)
 
 
-def prepare_signal(x: np.ndarray, signal: str, reference: float | None, variant: str) -> np.ndarray:
+def prepare_signal(x: np.ndarray, signal: str, reference: float | None, variant: str,
+                   entry_index: int = 48) -> np.ndarray:
     """Variant hook: what enters the scalogram and the range statistics.
 
-    'paper' uses the window as recorded.  'load_scaled' divides the window's
-    deviation from its pre-entry mean by the pre-entry load reference (see
-    docs/method.md); ``reference`` is then required.
+    'paper' uses the window as recorded.  'load_scaled' takes the window's
+    deviation from its own pre-entry mean and divides it by the pre-entry load
+    torque ``reference`` (N m), making the features per unit of load (see
+    docs/method.md, "variant").
     """
     if variant == "paper":
         return x
     if reference is None or not np.isfinite(reference) or reference == 0:
-        raise ValueError(f"reference: variant {variant!r} needs a finite non-zero pre-entry reference, got {reference!r}")
-    return x / reference
+        raise ValueError(f"reference: variant {variant!r} needs a finite non-zero pre-entry load torque, "
+                         f"got {reference!r}")
+    if not 1 <= entry_index < x.size:
+        raise ValueError(f"entry_index: must be in [1, {x.size - 1}], got {entry_index}")
+    return (x - x[:entry_index].mean()) / reference
 
 
 def image_levels(x: np.ndarray, signal: str, cfg: MethodConfig):
-    """Scalogram -> image -> (distinct intensity levels, pixel counts, image min, image max)."""
+    """Scalogram -> image -> (level values (N,), counts ([B,] N), image min ([B]), image max ([B])).
+
+    ``x`` is one window (n_samples,) or a batch (B, n_samples).
+    """
     scal = wavelet_scalogram(x, cfg.wavelet[signal], reading=cfg.scale_reading,
                              precision=cfg.wavefun_precision)
     img = render_intensity(scal, shape=(cfg.image_rows, cfg.image_cols), n_colors=cfg.n_colors)
     levels, counts = level_histogram(img, cfg.n_colors)
-    return levels, counts, float(img.min()), float(img.max())
+    return levels, counts, img.min(axis=(-2, -1)), img.max(axis=(-2, -1))
+
+
+#: Windows per chunk in the scalogram/image stage (bounds memory for the 1024-scale reading).
+_CHUNK = {"linear": 4}
+
+
+def batch_features(windows: np.ndarray, signal: str, cfg: MethodConfig, p_values=None,
+                   references=None, entry_index: int = 48):
+    """KHM centres of many windows of one signal.
+
+    Parameters
+    ----------
+    windows : ndarray, shape (B, n_samples)
+    references : ndarray (B,) or None
+        Pre-entry load references (variant 'load_scaled').
+    Returns
+    -------
+    centres : ndarray (n_p, B, n_clusters), sorted ascending (rows of N2 / N3)
+    ranges : list of RangeParams (B,)
+    info : dict p -> {'n_iter', 'converged' (B,)}
+    """
+    from .khm import khm_fit_batch
+    x = np.asarray(windows, dtype=float)
+    if x.ndim != 2:
+        raise ValueError(f"windows: expected shape (n_windows, n_samples), got {x.shape}")
+    B = x.shape[0]
+    refs = [None] * B if references is None else list(references)
+    x = np.stack([prepare_signal(nz._check_window(x[b], signal), signal, refs[b], cfg.variant, entry_index)
+                  for b in range(B)])
+    ranges = [nz.range_params(x[b], signal, cfg.eq12) for b in range(B)]
+    chunk = _CHUNK.get(cfg.scale_reading, 64)
+    counts, values = [], []
+    for a in range(0, B, chunk):
+        levels, cnt, lo, hi = image_levels(x[a:a + chunk], signal, cfg)
+        counts.append(cnt)
+        values.extend(nz.map_levels(levels, float(lo[i]), float(hi[i]), ranges[a + i])
+                      for i in range(cnt.shape[0]))
+    counts = np.concatenate(counts)
+    values = np.stack(values)
+    init = np.array([nz.initial_centre(r) for r in ranges])
+    ps = cfg.p_values if p_values is None else p_values
+    centres = np.zeros((len(ps), B, cfg.n_clusters))
+    info = {}
+    for k, p in enumerate(ps):
+        centres[k], inf = khm_fit_batch(values, counts, init, n_clusters=cfg.n_clusters, p=float(p),
+                                        max_iter=cfg.khm_max_iter, tol=cfg.khm_tol)
+        info[float(p)] = inf
+    return centres, ranges, info
 
 
 def signal_features(x, signal: str, cfg: MethodConfig, p_values=None, reference=None) -> SignalFeatures:
     """KHM centres of one signal window for every p (the paper's N3 row)."""
     x = nz._check_window(x, signal)
-    x = prepare_signal(x, signal, reference, cfg.variant)
-    rp = nz.range_params(x, signal, cfg.eq12)
-    levels, counts, lo, hi = image_levels(x, signal, cfg)
-    keep = counts > 0
-    values = nz.map_levels(levels[keep], lo, hi, rp)
-    centres, info = {}, {}
-    for p in (cfg.p_values if p_values is None else p_values):
-        km = KHarmonicMeans(n_clusters=cfg.n_clusters, p=float(p), init="paper",
-                            init_value=nz.initial_centre(rp), max_iter=cfg.khm_max_iter, tol=cfg.khm_tol)
-        km.fit_histogram(values, counts[keep])
-        centres[float(p)] = np.sort(km.cluster_centers_)
-        info[float(p)] = {"n_iter": km.n_iter_, "converged": bool(km.converged_),
-                          "cycle": bool(km.cycle_detected_)}
-    return SignalFeatures(centres, rp, info)
+    ps = [float(p) for p in (cfg.p_values if p_values is None else p_values)]
+    centres, ranges, info = batch_features(x[None, :], signal, cfg, ps,
+                                           None if reference is None else [reference])
+    return SignalFeatures({p: centres[k, 0] for k, p in enumerate(ps)}, ranges[0],
+                          {p: {"n_iter": info[p]["n_iter"], "converged": bool(info[p]["converged"][0])}
+                           for p in ps})
 
 
 def pre_entry_reference(window: dict, entry_index: int) -> float:

@@ -276,11 +276,13 @@ def derived_signals(model: Model, rec: np.ndarray, t: np.ndarray, case: CaseArra
 
 
 def add_measurement_noise(windows: WindowSet, snr_db: float, seed: int,
-                          channels: Sequence[str] = CHANNELS) -> WindowSet:
+                          channels: Sequence[str] = PAPER_SIGNALS + ("omega2",)) -> WindowSet:
     """White Gaussian noise at a given SNR per channel and case.
 
     SNR is measured as in MATLAB's ``awgn(x, snr, 'measured')``: noise power =
-    mean(x^2) over the window / 10^(snr/10).  Same seed, same output.
+    mean(x^2) over the window / 10^(snr/10).  Same seed, same output.  The
+    angles are left alone by default: an SNR relative to an ever-growing angle
+    means nothing; encoders are modelled by :func:`quantise_encoders`.
     """
     if not np.isfinite(snr_db):
         raise ValueError(f"snr_db must be finite, got {snr_db!r}")
