@@ -129,6 +129,64 @@ def cmd_info(args) -> int:
     return 0
 
 
+def _method_config(args):
+    from .config import load_method_config
+    m = load_method_config(getattr(args, "method_config", None))
+    if getattr(args, "p", None):
+        m = m.replace(p_values=tuple(args.p))
+    if getattr(args, "variant", None):
+        m = m.replace(variant=args.variant)
+    return m
+
+
+def default_library_path(system, method) -> Path:
+    """~/.cache/jident_ros/patterns-<hash>.npz (or $JIDENT_CACHE_DIR)."""
+    import os
+    from .method.patterns import library_metadata
+    meta = library_metadata(system, method)
+    base = Path(os.environ.get("JIDENT_CACHE_DIR") or Path.home() / ".cache" / "jident_ros")
+    return base / f"patterns-{meta['system_hash'][:8]}-{meta['method_hash'][:8]}.npz"
+
+
+def cmd_build_patterns(args) -> int:
+    from .method.patterns import PatternLibrary
+    system = load_system_config(args.config)
+    method = _method_config(args)
+    out = Path(args.out) if args.out else default_library_path(system, method)
+    update, close = _progress(len(method.wavelets), "pattern signals", not args.quiet)
+    t0 = time.perf_counter()
+    try:
+        lib = PatternLibrary.build(system, method, progress=update)
+    finally:
+        close()
+    lib.save(out)
+    if not args.quiet:
+        print(f"pattern library: {len(lib.classes_kgm2)} J1 classes x {len(lib.widths_m)} widths x "
+              f"{len(lib.signals)} signals x p in {list(lib.p_values)} ({method.variant}) built in "
+              f"{time.perf_counter() - t0:.1f} s -> {out}")
+    return 0
+
+
+def cmd_evaluate(args) -> int:
+    from .method.evaluate import run_evaluation
+    from .report import render_markdown, write_figures, write_results_section
+    system = load_system_config(args.config)
+    method = _method_config(args)
+    log = (lambda *a: None) if args.quiet else (lambda msg: print(msg, flush=True))
+    readings = () if args.quick else ("dyadic", "linear", "swt")
+    snr = () if args.quick else (40.0, 30.0)
+    ev = run_evaluation(system, method, snr_db=snr, seeds=(1, 2)[:len(snr)], readings=readings, log=log)
+    ev.command = "jident evaluate" + (" --quick" if args.quick else "")
+    figs = {} if args.no_figures else write_figures(ev, system, method, Path(args.results).parent / "figures")
+    md = render_markdown(ev, figs)
+    if args.results != "-":
+        write_results_section(md, args.results)
+        log(f"wrote the generated section of {args.results} ({ev.seconds:.0f} s in all)")
+    else:
+        print(md)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="jident", description="Identify the inertia J1 of an induction-motor drive "
                 "from its backlash-zone transient (offline tools).")
@@ -148,6 +206,23 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--config", help="system config YAML (default: config/system.yaml)")
     s.add_argument("--quiet", action="store_true")
     s.set_defaults(func=cmd_simulate)
+    b = sub.add_parser("build-patterns", help="build the pattern library (eta_k = 0.025 runs)")
+    b.add_argument("--out", help="library file (default: ~/.cache/jident_ros/patterns-<hash>.npz)")
+    b.add_argument("--p", type=_positive("--p"), action="append", help="KHM exponent p (repeatable; default: config)")
+    b.add_argument("--variant", choices=("paper", "load_scaled"), help="method variant (default: config)")
+    b.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    b.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
+    b.add_argument("--quiet", action="store_true")
+    b.set_defaults(func=cmd_build_patterns)
+    e = sub.add_parser("evaluate", help="evaluate the method on the full grid; regenerate docs/results.md's section")
+    e.add_argument("--results", default="docs/results.md", help="results file to update ('-' prints)")
+    e.add_argument("--quick", action="store_true", help="noise-free only, no reading comparison (smoke run)")
+    e.add_argument("--no-figures", action="store_true")
+    e.add_argument("--p", type=_positive("--p"), action="append", help="KHM exponent p (repeatable; default: config)")
+    e.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    e.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
+    e.add_argument("--quiet", action="store_true")
+    e.set_defaults(func=cmd_evaluate)
     i = sub.add_parser("info", help="print base values and the steady state of the model")
     i.add_argument("--config", help="system config YAML (default: config/system.yaml)")
     i.set_defaults(func=cmd_info)

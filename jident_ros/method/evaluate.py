@@ -92,7 +92,7 @@ def window_features(windows: WindowSet, method: MethodConfig, p_values, progress
     out = np.zeros((len(ps), n, len(SIGNALS), method.n_clusters))
     refs = np.array([pre_entry_reference(windows.case(i), windows.entry_index) for i in range(n)])
     for s, name in enumerate(SIGNALS):
-        out[:, :, s], _, _ = batch_features(windows.signals[name], name, method, ps, refs)
+        out[:, :, s], _, _ = batch_features(windows.signals[name], name, method, ps, refs, windows.entry_index)
         if progress:
             progress(s + 1, len(SIGNALS))
     return out
@@ -117,8 +117,10 @@ def evaluate_grid(system: SystemConfig, method: MethodConfig, clean: WindowSet, 
                 h[k, i, s] = h_vector(library.centres[k, e, s], feats[k, i, s], library.h5[k, e, s])
     true = np.array([classes.index(c.inertia_kgm2) for c in tested.cases])
     pmask = np.array([c.consistency_pa_sn == system.grid.pattern_consistency_pa_sn for c in tested.cases])
-    return GridResult(label, method, ps, list(tested.cases), true, h, pmask,
-                      time.perf_counter() - t0, t_lib)
+    res = GridResult(label, method, ps, list(tested.cases), true, h, pmask,
+                     time.perf_counter() - t0, t_lib)
+    res.notes["centres"] = feats
+    return res
 
 
 @dataclass
@@ -128,7 +130,9 @@ class Evaluation:
     system: SystemConfig
     seconds: float
     simulate_seconds: float
-    commands: str = "jident evaluate"
+    gap: list = field(default_factory=list)
+    best: list = field(default_factory=list)
+    command: str = "jident evaluate"
 
 
 def paper_examples(system: SystemConfig, method: MethodConfig, clean: WindowSet, result: GridResult) -> list:
@@ -146,31 +150,73 @@ def paper_examples(system: SystemConfig, method: MethodConfig, clean: WindowSet,
     return rows
 
 
+def gap_evaluation(system: SystemConfig, windows: WindowSet, label: str,
+                   channels=("alpha1", "alpha2", "a1", "m_el"), method=None) -> dict:
+    """The gap estimator (gap.py) on every window: errors, class accuracy, CI coverage."""
+    from .gap import NoGapError, estimate_inertia, nearest_class
+    classes = list(system.grid.inertia_classes_kgm2)
+    est = np.full(len(windows.cases), np.nan)
+    lo, hi = est.copy(), est.copy()
+    reasons = {}
+    for i, c in enumerate(windows.cases):
+        win = {k: windows.signals[k][i] for k in channels}
+        try:
+            g = estimate_inertia(win, windows.entry_index, c.backlash_width_m, system.load.wheel_radius_m,
+                                 windows.sample_period_s, method)
+        except NoGapError as exc:
+            reasons[i] = str(exc)
+            continue
+        est[i], (lo[i], hi[i]) = g.inertia_kgm2, g.ci95_kgm2
+    true = np.array([c.inertia_kgm2 for c in windows.cases])
+    ok = ~np.isnan(est)
+    cls = np.array([nearest_class(e, classes) if np.isfinite(e) else -1 for e in est])
+    return {"label": label, "channels": channels, "estimate": est, "true": true,
+            "rel_error": (est - true) / true, "class": cls,
+            "class_ok": cls == np.array([classes.index(t) for t in true]),
+            "covered": ok & (lo <= true) & (true <= hi), "failed": reasons}
+
+
+def best_verdict(gap: dict, paper: GridResult, p_index: int = 0) -> dict:
+    """The 'gap' variant's class: the gap estimate's nearest class, the paper method's
+    fused class where the window has no usable gap."""
+    fused = paper.fused_predicted()[p_index]
+    cls = np.where(gap["class"] >= 0, gap["class"], fused)
+    ok = cls == paper.true_class
+    return {"label": gap["label"], "class": cls, "ok": ok, "headline": float(ok[~paper.pattern_mask].mean()),
+            "all": float(ok.mean()), "fallbacks": int((gap["class"] < 0).sum())}
+
+
 def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 30.0), seeds=(1, 2),
                    readings=("dyadic", "linear", "swt"), variants=("paper", "load_scaled"), progress=None,
                    log=print) -> Evaluation:
-    """The whole evaluation: every variant noise-free and noisy, and the level-10 readings."""
+    """The whole evaluation: every variant noise-free and noisy, the gap estimator, the level-10 readings."""
     t0 = time.perf_counter()
     cases = paper_grid_cases(system)
     clean = simulate_grid(system, cases)
     t_sim = time.perf_counter() - t0
     log(f"simulated {len(cases)} cases in {t_sim:.1f} s")
-    results = []
+    datasets = [("noise-free", clean)] + [(f"SNR {snr:g} dB (seed {seed})", add_measurement_noise(clean, snr, seed))
+                                           for snr, seed in zip(snr_db, seeds)]
+    results, gaps, best = [], [], []
     examples = None
     for variant in variants:
         m = dataclasses.replace(method, variant=variant)
+        t1 = time.perf_counter()
         lib = PatternLibrary.build(system, m, windows=clean)
-        res = evaluate_grid(system, m, clean, clean, f"{variant}, noise-free", lib, progress)
-        results.append(res)
-        log(_summary(res))
-        if variant == "paper":
-            examples = paper_examples(system, m, clean, res)
-        for snr, seed in zip(snr_db, seeds):
-            noisy = add_measurement_noise(clean, snr, seed)
-            res = evaluate_grid(system, m, clean, noisy, f"{variant}, SNR {snr:g} dB (seed {seed})", lib, progress)
-            res.notes["snr_db"] = snr
+        t_lib = time.perf_counter() - t1
+        for name, data in datasets:
+            res = evaluate_grid(system, m, clean, data, f"{variant}, {name}", lib, progress)
+            res.library_seconds = t_lib
             results.append(res)
             log(_summary(res))
+            if variant == "paper" and data is clean:
+                examples = paper_examples(system, m, clean, res)
+            if variant == "paper":
+                g = gap_evaluation(system, data, name)
+                gaps.append(g)
+                best.append(best_verdict(g, res))
+                log(f"gap estimator, {name}: class accuracy {g['class_ok'].mean() * 100:.1f} %, "
+                    f"max |error| {np.nanmax(np.abs(g['rel_error'])) * 100:.2f} %")
     for reading in readings:
         if reading == method.scale_reading:
             continue
@@ -179,7 +225,7 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
         res.notes["reading"] = reading
         results.append(res)
         log(_summary(res))
-    return Evaluation(results, examples or [], system, time.perf_counter() - t0, t_sim)
+    return Evaluation(results, examples or [], system, time.perf_counter() - t0, t_sim, gaps, best)
 
 
 def _summary(res: GridResult) -> str:

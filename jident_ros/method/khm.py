@@ -534,9 +534,12 @@ def khm_fit_batch(levels, counts, init_values, n_clusters=7, p=2.0, max_iter=300
                   duplicate_spread=1.0):
     """Fit KHM to B weighted histograms at once; paper initialisation (eq. 23).
 
-    Same fixed point as :class:`KHarmonicMeans` with ``init="paper"`` (and the
+    The same iteration as :class:`KHarmonicMeans` with ``init="paper"`` (and the
     same spreading of the identical initial centres), computed for a whole
-    batch with a few array operations per iteration.  The data of each
+    batch with a few array operations per iteration.  For p = 2 it reaches the
+    class's fixed point; for p >= 3 the relaxation schedules differ and, KHM
+    having several local optima, the two may settle in different ones (both
+    deterministic; each row's result does not depend on the rest of the batch).  The data of each
     histogram are first mapped to [0, 1] (KHM is equivariant under affine maps
     of the data), so d**(-p) never overflows; distances are divided by the
     per-level minimum distance as in the class.  Updates are relaxed,
@@ -589,7 +592,7 @@ def khm_fit_batch(levels, counts, init_values, n_clusters=7, p=2.0, max_iter=300
     prev_step = np.zeros((B, K))
     warn = np.zeros(B, dtype=int)
     converged = np.zeros(B, dtype=bool)
-    tiny = 1e-300
+    tiny = 1e-150  # floor on distances: r*r stays finite, powers underflow to 0 quietly
     it = 0
     for it in range(1, max_iter + 1):
         d = np.abs(xn[:, None, :] - s[:, :, None])          # (B, K, L)
@@ -605,7 +608,7 @@ def khm_fit_batch(levels, counts, init_values, n_clusters=7, p=2.0, max_iter=300
         f = np.where(den > 0, num / np.where(den > 0, den, 1.0), s)
         step = f - s
         res = np.abs(step).max(axis=1)
-        newly = res <= tol
+        newly = (res <= tol) & ~converged
         converged |= newly
         if np.all(converged):
             s = np.where(converged[:, None], np.where(newly[:, None], f, s), s)

@@ -84,18 +84,15 @@ def sorted_prefix_stats(x) -> tuple[np.ndarray, np.ndarray]:
 def range_params(x, signal: str, eq12: str = "corrected") -> RangeParams:
     """h4 and k4 (hence h3, k3) of one window of the named signal."""
     x = _check_window(x, signal)
+    if eq12 not in ("corrected", "literal"):
+        raise ValueError(f"eq12: expected 'corrected' or 'literal', got {eq12!r}")
     if signal in FIRST_CASE:
         lo, hi = float(x.min()), float(x.max())
         return RangeParams(lo - hi, lo + hi)
     if signal in SECOND_CASE:
         me, md = sorted_prefix_stats(x)
         d = me - md
-        if eq12 == "corrected":
-            h4 = d[0] + d[1] + d[2]
-        elif eq12 == "literal":
-            h4 = d[1] + d[1] + d[2]
-        else:
-            raise ValueError(f"eq12: expected 'corrected' or 'literal', got {eq12!r}")
+        h4 = d[0] + d[1] + d[2] if eq12 == "corrected" else d[1] + d[1] + d[2]
         k4 = d[0] - d[1] - d[2] - d[3]
         return RangeParams(float(h4), float(k4))
     raise ValueError(f"signal: expected one of {FIRST_CASE + SECOND_CASE}, got {signal!r}")

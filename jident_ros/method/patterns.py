@@ -92,7 +92,7 @@ class PatternLibrary:
         refs = np.array([pre_entry_reference(windows.case(i), windows.entry_index) for i in order])
         for s, name in enumerate(SIGNALS):
             batch = np.stack([windows.signals[name][i] for i in order])
-            cen, rps, _ = batch_features(batch, name, method, ps, refs)
+            cen, rps, _ = batch_features(batch, name, method, ps, refs, windows.entry_index)
             for f in range(nc):
                 for e in range(nw):
                     b = f * nw + e
@@ -221,7 +221,7 @@ def identify_window(window: dict, entry_index: int, backlash_width_m: float, lib
     answers = {}
     for name in signals:
         s = library.signals.index(name)
-        feat = signal_features(window[name], name, method, [p], reference=ref)
+        feat = signal_features(window[name], name, method, [p], reference=ref, entry_index=entry_index)
         h = h_vector(library.centres[k, e, s], feat.centres[float(p)], library.h5[k, e, s])
         c = int(np.argmin(h))
         answers[name] = SignalAnswer(name, float(p), h, c, library.classes_kgm2[c], margin(h))

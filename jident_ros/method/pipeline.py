@@ -179,12 +179,13 @@ def batch_features(windows: np.ndarray, signal: str, cfg: MethodConfig, p_values
     return centres, ranges, info
 
 
-def signal_features(x, signal: str, cfg: MethodConfig, p_values=None, reference=None) -> SignalFeatures:
+def signal_features(x, signal: str, cfg: MethodConfig, p_values=None, reference=None,
+                    entry_index: int = 48) -> SignalFeatures:
     """KHM centres of one signal window for every p (the paper's N3 row)."""
     x = nz._check_window(x, signal)
     ps = [float(p) for p in (cfg.p_values if p_values is None else p_values)]
     centres, ranges, info = batch_features(x[None, :], signal, cfg, ps,
-                                           None if reference is None else [reference])
+                                           None if reference is None else [reference], entry_index)
     return SignalFeatures({p: centres[k, 0] for k, p in enumerate(ps)}, ranges[0],
                           {p: {"n_iter": info[p]["n_iter"], "converged": bool(info[p]["converged"][0])}
                            for p in ps})

@@ -1,0 +1,83 @@
+#!/usr/bin/env python3
+"""Benchmark of the identification method (issue "method", speed targets).
+
+    .venv/bin/python bench/bench_method.py [--repeats N] [--full-eval] [--json out.json]
+
+(a) one window, all five signals, scalogram to J1 (``identify_window`` at p = 2,
+    and the gap estimator), median of N runs after a warm-up;
+(b) building the whole pattern library (42 runs x 5 signals x 4 p), median of 3;
+(c) with --full-eval, the full evaluation (`jident evaluate` without writing files), once.
+Targets: (a) <= 20 ms, (b) <= 10 s, (c) <= 2 min on the 2-core machine.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+
+from jident_ros.config import load_method_config, load_system_config  # noqa: E402
+from jident_ros.method.gap import estimate_inertia  # noqa: E402
+from jident_ros.method.patterns import PatternLibrary, identify_window  # noqa: E402
+from jident_ros.sim import Case, paper_grid_cases, simulate_grid  # noqa: E402
+
+
+def timed(fn, repeats):
+    fn()
+    out = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        out.append(time.perf_counter() - t)
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=20)
+    ap.add_argument("--full-eval", action="store_true")
+    ap.add_argument("--json")
+    args = ap.parse_args(argv)
+    system, method = load_system_config(), load_method_config()
+    print(f"machine: {os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}, "
+          f"load average {os.getloadavg()[0]:.2f}")
+    grid = simulate_grid(system, paper_grid_cases(system))
+    lib_times = timed(lambda: PatternLibrary.build(system, method, windows=grid), 3)
+    lib = PatternLibrary.build(system, method, windows=grid)
+    case = Case(1.073, 0.005, 0.0375)
+    win = simulate_grid(system, [case])
+    w = win.case(0)
+    window_times = timed(lambda: identify_window(w, win.entry_index, case.backlash_width_m, lib, method, 2.0),
+                         args.repeats)
+    gap_times = timed(lambda: estimate_inertia(w, win.entry_index, case.backlash_width_m,
+                                               system.load.wheel_radius_m, win.sample_period_s), args.repeats)
+    res = {"window_all_signals_p2_s": statistics.median(window_times),
+           "gap_estimate_s": statistics.median(gap_times),
+           "library_build_s": statistics.median(lib_times)}
+    if args.full_eval:
+        from jident_ros.method.evaluate import run_evaluation
+        t = time.perf_counter()
+        run_evaluation(system, method, log=lambda *a: None)
+        res["full_evaluation_s"] = time.perf_counter() - t
+    print("| measurement | median | target |\n|---|---|---|")
+    print(f"| one window, five signals, scalogram → J1 (p = 2) | {res['window_all_signals_p2_s'] * 1e3:.1f} ms | ≤ 20 ms |")
+    print(f"| gap estimate of one window | {res['gap_estimate_s'] * 1e3:.2f} ms | ≤ 2 ms |")
+    print(f"| whole pattern library (42 runs × 5 signals × {len(method.p_values)} p) | {res['library_build_s']:.2f} s | ≤ 10 s |")
+    if "full_evaluation_s" in res:
+        print(f"| full evaluation (all p, noise sweep, readings) | {res['full_evaluation_s']:.0f} s | ≤ 120 s |")
+    print(f"load average at end: {os.getloadavg()[0]:.2f}")
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(res, indent=2))
+
+
+if __name__ == "__main__":
+    main()
