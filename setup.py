@@ -38,8 +38,8 @@ setup(
         'tqdm',
     ],
     extras_require={
-        'test': ['pytest'],
-        'mcap': ['mcap', 'mcap-ros2-support'],
+        'test': ['pytest', 'rosbags'],
+        'mcap': ['mcap', 'mcap-ros2-support', 'zstandard', 'lz4'],
     },
     zip_safe=True,
     maintainer='jident developers',

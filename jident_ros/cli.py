@@ -223,6 +223,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     e.add_argument("--quiet", action="store_true")
     e.set_defaults(func=cmd_evaluate)
+    sub.add_parser("salvage", help="recover every complete chunk of a truncated MCAP recording "
+                   "(jident salvage <truncated.mcap> <out_dir>)", add_help=False)
     i = sub.add_parser("info", help="print base values and the steady state of the model")
     i.add_argument("--config", help="system config YAML (default: config/system.yaml)")
     i.set_defaults(func=cmd_info)
@@ -230,6 +232,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["salvage"]:  # `jident salvage <truncated.mcap> <out_dir>`: recording.py owns its arguments
+        from .recording import salvage_main
+        return salvage_main(argv[1:])
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

@@ -74,3 +74,20 @@ def test_cli_info_runs(capsys):
 def test_cli_as_module_entry_point():
     r = subprocess.run([sys.executable, "-m", "jident_ros.cli", "--version"], capture_output=True, text=True)
     assert r.returncode == 0 and "jident" in r.stdout
+
+
+def test_cli_build_patterns_and_refusal_of_a_foreign_library(tmp_path, capsys):
+    from jident_ros.config import load_method_config
+    from jident_ros.method.patterns import LibraryMismatch, PatternLibrary
+    out = tmp_path / "lib.npz"
+    assert main(["build-patterns", "--p", "2", "--out", str(out), "--quiet"]) == 0
+    system, method = load_system_config(), load_method_config().replace(p_values=(2.0,))
+    lib = PatternLibrary.load(out, system, method)
+    assert lib.centres.shape == (1, 6, 5, 7, 7)
+    with pytest.raises(LibraryMismatch, match="method.eq12"):
+        PatternLibrary.load(out, system, method.replace(eq12="literal"))
+
+
+def test_cli_evaluate_rejects_bad_p(capsys):
+    assert main(["evaluate", "--p", "-1"]) == 2
+    assert "--p" in capsys.readouterr().err

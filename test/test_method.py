@@ -252,9 +252,11 @@ def test_bad_eq12_raises_for_first_case_signals_too(sig):
 # =================================================================== 2. khm_fit_batch
 @pytest.mark.parametrize("sig,p", [(s, 2.0) for s in SIGNALS] + [(s, 3.0) for s in SIGNALS if s != "a1"])
 def test_khm_batch_equals_class_realistic(hists, sig, p):
-    # a1 at p = 3: see test_khm_batch_equals_class_a1_p3 (xfail)
+    # the plain (unaccelerated) batch iteration is the class's iteration; SQUAREM may reach
+    # another local optimum (test_khm_batch_is_fixed_point covers the accelerated default)
     values, counts, init = hists[sig]
-    batch, info = khm_fit_batch(values, counts, init, n_clusters=7, p=p, tol=1e-12, max_iter=20000)
+    batch, info = khm_fit_batch(values, counts, init, n_clusters=7, p=p, tol=1e-12, max_iter=20000,
+                                accelerate=False)
     assert batch.shape == (len(HIST_WINDOWS), 7)
     assert info["converged"].all()
     for b in range(len(HIST_WINDOWS)):
@@ -277,7 +279,7 @@ def test_khm_batch_equals_class_synthetic(p):
     levels = np.vstack([levels, levels[0]])
     init = np.append(init, 0.9)
     init[1] = 2.4
-    batch, info = khm_fit_batch(levels, counts, init, p=p, tol=1e-12, max_iter=20000)
+    batch, info = khm_fit_batch(levels, counts, init, p=p, tol=1e-12, max_iter=20000, accelerate=False)
     assert info["converged"].all()
     for b in range(len(init)):
         km = class_fit(levels[b], counts[b], init[b], p)
@@ -296,7 +298,7 @@ def test_khm_batch_centre_on_a_level(p):
     levels, counts, v = _midpoint_case()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        batch, info = khm_fit_batch(levels, counts[None], [v], p=p, tol=1e-12, max_iter=20000)
+        batch, info = khm_fit_batch(levels, counts[None], [v], p=p, tol=1e-12, max_iter=20000, accelerate=False)
     assert info["converged"].all() and np.all(np.isfinite(batch))
     if p <= 3:
         km = class_fit(levels, counts, v, p)
@@ -329,9 +331,9 @@ def test_khm_batch_result_independent_of_batch_composition(hists, method):
         np.testing.assert_array_equal(one[0], batch[b])
 
 
-@pytest.mark.parametrize("p", [6.0, 9.0])
+@pytest.mark.parametrize("p", [2.0, 3.0, 6.0, 9.0])
 @pytest.mark.parametrize("sig", SIGNALS)
-def test_khm_batch_is_fixed_point_high_p(hists, sig, p):
+def test_khm_batch_is_fixed_point(hists, sig, p):
     values, counts, init = hists[sig]
     batch, info = khm_fit_batch(values, counts, init, p=p, tol=1e-10, max_iter=20000)
     assert info["converged"].all()

@@ -186,10 +186,24 @@ def best_verdict(gap: dict, paper: GridResult, p_index: int = 0) -> dict:
             "all": float(ok.mean()), "fallbacks": int((gap["class"] < 0).sum())}
 
 
+def _grid_task(args):
+    """One (method, tested data) evaluation; a top-level function so a process pool can run it."""
+    system, m, clean, data, label, lib, note = args
+    res = evaluate_grid(system, m, clean, data, label, lib)
+    res.notes.update(note)
+    return res
+
+
 def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 30.0), seeds=(1, 2),
                    readings=("dyadic", "linear", "swt"), variants=("paper", "load_scaled"), progress=None,
-                   log=print) -> Evaluation:
-    """The whole evaluation: every variant noise-free and noisy, the gap estimator, the level-10 readings."""
+                   log=print, jobs: int | None = None) -> Evaluation:
+    """The whole evaluation: every variant noise-free and noisy, the gap estimator, the level-10 readings.
+
+    The independent (variant, data set) evaluations run in ``jobs`` processes
+    (default: the number of CPUs); the numbers do not depend on it.
+    """
+    import os
+    from concurrent.futures import ProcessPoolExecutor
     t0 = time.perf_counter()
     cases = paper_grid_cases(system)
     clean = simulate_grid(system, cases)
@@ -197,35 +211,39 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     log(f"simulated {len(cases)} cases in {t_sim:.1f} s")
     datasets = [("noise-free", clean)] + [(f"SNR {snr:g} dB (seed {seed})", add_measurement_noise(clean, snr, seed))
                                            for snr, seed in zip(snr_db, seeds)]
-    results, gaps, best = [], [], []
-    examples = None
+    tasks = []
     for variant in variants:
         m = dataclasses.replace(method, variant=variant)
-        t1 = time.perf_counter()
         lib = PatternLibrary.build(system, m, windows=clean)
-        t_lib = time.perf_counter() - t1
         for name, data in datasets:
-            res = evaluate_grid(system, m, clean, data, f"{variant}, {name}", lib, progress)
-            res.library_seconds = t_lib
-            results.append(res)
-            log(_summary(res))
-            if variant == "paper" and data is clean:
-                examples = paper_examples(system, m, clean, res)
-            if variant == "paper":
-                g = gap_evaluation(system, data, name)
-                gaps.append(g)
-                best.append(best_verdict(g, res))
-                log(f"gap estimator, {name}: class accuracy {g['class_ok'].mean() * 100:.1f} %, "
-                    f"max |error| {np.nanmax(np.abs(g['rel_error'])) * 100:.2f} %")
+            tasks.append((system, m, clean, data, f"{variant}, {name}", lib, {"variant": variant, "data": name}))
     for reading in readings:
-        if reading == method.scale_reading:
-            continue
-        m = dataclasses.replace(method, scale_reading=reading, p_values=(2.0,), variant="paper")
-        res = evaluate_grid(system, m, clean, clean, f"paper, reading '{reading}', noise-free", None, progress)
-        res.notes["reading"] = reading
-        results.append(res)
+        if reading != method.scale_reading:
+            m = dataclasses.replace(method, scale_reading=reading, p_values=(2.0,), variant="paper")
+            tasks.append((system, m, clean, clean, f"paper, reading '{reading}', noise-free", None,
+                          {"reading": reading}))
+    jobs = jobs or os.cpu_count() or 1
+    if jobs > 1:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            results = list(pool.map(_grid_task, tasks))
+    else:
+        results = [_grid_task(t) for t in tasks]
+    for res in results:
         log(_summary(res))
-    return Evaluation(results, examples or [], system, time.perf_counter() - t0, t_sim, gaps, best)
+    gaps, best, examples = [], [], []
+    paper_results = {r.notes.get("data"): r for r in results if r.notes.get("variant") == "paper"}
+    for name, data in datasets:
+        res = paper_results.get(name)
+        if res is None:
+            continue
+        if data is clean:
+            examples = paper_examples(system, res.method, clean, res)
+        g = gap_evaluation(system, data, name)
+        gaps.append(g)
+        best.append(best_verdict(g, res))
+        log(f"gap estimator, {name}: class accuracy {g['class_ok'].mean() * 100:.1f} %, "
+            f"max |error| {np.nanmax(np.abs(g['rel_error'])) * 100:.2f} %")
+    return Evaluation(results, examples, system, time.perf_counter() - t0, t_sim, gaps, best)
 
 
 def _summary(res: GridResult) -> str:

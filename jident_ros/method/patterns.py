@@ -22,7 +22,7 @@ from ..config import config_hash, config_to_dict
 from ..sim.params import SystemConfig
 from . import normalise as nz
 from .pipeline import (SIGNALS, MethodConfig, batch_features, h_vector, margin, pre_entry_reference,
-                       signal_features)
+                       window_features)
 
 FORMAT_VERSION = 1
 
@@ -219,10 +219,10 @@ def identify_window(window: dict, entry_index: int, backlash_width_m: float, lib
     k = library.p_index(p)
     ref = pre_entry_reference(window, entry_index) if "m_el" in window else None
     answers = {}
-    for name in signals:
+    centres, _ = window_features(window, method, [p], signals, ref, entry_index)
+    for j, name in enumerate(signals):
         s = library.signals.index(name)
-        feat = signal_features(window[name], name, method, [p], reference=ref, entry_index=entry_index)
-        h = h_vector(library.centres[k, e, s], feat.centres[float(p)], library.h5[k, e, s])
+        h = h_vector(library.centres[k, e, s], centres[0, j], library.h5[k, e, s])
         c = int(np.argmin(h))
         answers[name] = SignalAnswer(name, float(p), h, c, library.classes_kgm2[c], margin(h))
     fc, fm = fuse([a.h for a in answers.values()])

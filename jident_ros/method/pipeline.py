@@ -150,12 +150,20 @@ def batch_features(windows: np.ndarray, signal: str, cfg: MethodConfig, p_values
     ranges : list of RangeParams (B,)
     info : dict p -> {'n_iter', 'converged' (B,)}
     """
-    from .khm import khm_fit_batch
     x = np.asarray(windows, dtype=float)
     if x.ndim != 2:
         raise ValueError(f"windows: expected shape (n_windows, n_samples), got {x.shape}")
     B = x.shape[0]
     refs = [None] * B if references is None else list(references)
+    values, counts, ranges = _histograms(x, signal, cfg, refs, entry_index)
+    ps = cfg.p_values if p_values is None else p_values
+    centres, info = _cluster(values, counts, ranges, cfg, ps)
+    return centres, ranges, info
+
+
+def _histograms(x, signal, cfg, refs, entry_index):
+    """Scalogram -> image -> mapped level values (B, N), pixel counts (B, N), ranges (B,)."""
+    B = x.shape[0]
     x = np.stack([prepare_signal(nz._check_window(x[b], signal), signal, refs[b], cfg.variant, entry_index)
                   for b in range(B)])
     ranges = [nz.range_params(x[b], signal, cfg.eq12) for b in range(B)]
@@ -166,17 +174,39 @@ def batch_features(windows: np.ndarray, signal: str, cfg: MethodConfig, p_values
         counts.append(cnt)
         values.extend(nz.map_levels(levels, float(lo[i]), float(hi[i]), ranges[a + i])
                       for i in range(cnt.shape[0]))
-    counts = np.concatenate(counts)
-    values = np.stack(values)
+    return np.stack(values), np.concatenate(counts), ranges
+
+
+def _cluster(values, counts, ranges, cfg, ps):
+    """Batched KHM (eqs. 23-30) for every p: centres (n_p, B, n_clusters)."""
+    from .khm import khm_fit_batch
     init = np.array([nz.initial_centre(r) for r in ranges])
-    ps = cfg.p_values if p_values is None else p_values
-    centres = np.zeros((len(ps), B, cfg.n_clusters))
+    centres = np.zeros((len(ps), values.shape[0], cfg.n_clusters))
     info = {}
     for k, p in enumerate(ps):
-        centres[k], inf = khm_fit_batch(values, counts, init, n_clusters=cfg.n_clusters, p=float(p),
-                                        max_iter=cfg.khm_max_iter, tol=cfg.khm_tol)
-        info[float(p)] = inf
-    return centres, ranges, info
+        centres[k], info[float(p)] = khm_fit_batch(values, counts, init, n_clusters=cfg.n_clusters, p=float(p),
+                                                   max_iter=cfg.khm_max_iter, tol=cfg.khm_tol)
+    return centres, info
+
+
+def window_features(window: dict, cfg: MethodConfig, p_values, signals=SIGNALS, reference=None,
+                    entry_index: int = 48):
+    """Centres of several signals of ONE window, clustered in one batch (the per-window hot path).
+
+    Returns centres of shape (n_p, n_signals, n_clusters) and the ranges per signal.
+    """
+    xs = [prepare_signal(nz._check_window(window[name], name), name, reference, cfg.variant, entry_index)
+          for name in signals]
+    rngs = [nz.range_params(x, name, cfg.eq12) for x, name in zip(xs, signals)]
+    scal = np.stack([wavelet_scalogram(x, cfg.wavelet[name], reading=cfg.scale_reading,
+                                       precision=cfg.wavefun_precision) for x, name in zip(xs, signals)])
+    # one 2-D image at a time: render_intensity's gather is much faster on 2-D input than on a batch
+    img = [render_intensity(sc, shape=(cfg.image_rows, cfg.image_cols), n_colors=cfg.n_colors) for sc in scal]
+    levels, cnts = level_histogram(np.stack(img), cfg.n_colors)
+    lo, hi = [float(i.min()) for i in img], [float(i.max()) for i in img]
+    vals = [nz.map_levels(levels, float(lo[j]), float(hi[j]), rngs[j]) for j in range(len(signals))]
+    centres, _ = _cluster(np.stack(vals), np.stack(cnts), rngs, cfg, [float(p) for p in p_values])
+    return centres, rngs
 
 
 def signal_features(x, signal: str, cfg: MethodConfig, p_values=None, reference=None,
