@@ -171,3 +171,32 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
 def nearest_class(inertia_kgm2: float, classes_kgm2) -> int:
     """Index of the J1 class nearest to a continuous estimate."""
     return int(np.argmin(np.abs(np.asarray(classes_kgm2, float) - inertia_kgm2)))
+
+
+@dataclass(frozen=True)
+class WidthEstimate:
+    """Backlash zone width at the wheel circumference, m, with its standard uncertainty."""
+
+    width_m: float
+    std_m: float
+    recontact_index: int
+
+
+def estimate_backlash_width(window: dict, gap_end: int, wheel_radius_m: float) -> WidthEstimate:
+    """Width from the relative angle at re-contact.
+
+    The flanks meet where |alpha1 - alpha2| (measured from the zone centre, the
+    reading of inequality 1) reaches K2/r, somewhere between the last gap sample
+    and the first contact sample.  Within that sample interval the relative angle
+    is nearly linear in time, and the contact instant is taken uniformly
+    distributed: width = r (|d_last| + |d_first|)/2, standard uncertainty
+    r (|d_first| - |d_last|)/sqrt(12).
+    """
+    if "alpha1" not in window or "alpha2" not in window:
+        raise NoGapError("backlash width: needs both angles alpha1 and alpha2")
+    rel = np.abs(np.asarray(window["alpha1"], float) - np.asarray(window["alpha2"], float))
+    if not 1 <= gap_end < rel.size:
+        raise NoGapError(f"backlash width: no re-contact inside the window (gap end {gap_end})")
+    a, b = rel[gap_end - 1], rel[gap_end]
+    return WidthEstimate(float(wheel_radius_m * 0.5 * (a + b)), float(wheel_radius_m * abs(b - a) / np.sqrt(12.0)),
+                         int(gap_end))
