@@ -178,7 +178,12 @@ def cmd_evaluate(args) -> int:
     ev = run_evaluation(system, method, snr_db=snr, seeds=(1, 2)[:len(snr)], readings=readings, log=log)
     ev.command = "jident evaluate" + (" --quick" if args.quick else "")
     figs = {} if args.no_figures else write_figures(ev, system, method, Path(args.results).parent / "figures")
-    md = render_markdown(ev, figs)
+    from .method.robustness import run_robustness
+    from .report_robustness import write_robustness_figures
+    rob = run_robustness(system, method, log=log, quick=args.quick)
+    rob.command = ev.command
+    rfigs = {} if args.no_figures else write_robustness_figures(rob, Path(args.results).parent / "figures")
+    md = render_markdown(ev, figs, robustness=(rob, rfigs))
     if args.results != "-":
         write_results_section(md, args.results)
         log(f"wrote the generated section of {args.results} ({ev.seconds:.0f} s in all)")

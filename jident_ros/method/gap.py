@@ -39,6 +39,10 @@ import numpy as np
 from scipy import stats
 
 
+#: Gaps shorter than this fit m_el with a straight line (fewer free parameters, less noise).
+GAP_QUADRATIC_MIN = 12
+
+
 class NoGapError(ValueError):
     """The window holds no usable backlash gap."""
 
@@ -128,7 +132,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         t = np.arange(n) * sample_period_s
         pre = mf[:start]
         m0 = float(pre.mean()) if pre.size else float(m[0])
-        T = t[:, None] if n < 12 else np.column_stack([t, t * t])
+        T = t[:, None] if n < GAP_QUADRATIC_MIN else np.column_stack([t, t * t])
         coef, *_ = np.linalg.lstsq(T, m - m0, rcond=None)
         m_hat = m0 + T @ coef
         smm = float(m_hat @ m_hat)
