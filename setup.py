@@ -53,6 +53,10 @@ setup(
     entry_points={
         'console_scripts': [
             'jident = jident_ros.cli:main',
+            'simulator = jident_ros.nodes.simulator:main',
+            'windowing = jident_ros.nodes.windowing:main',
+            'diagnostic = jident_ros.nodes.diagnostic:main',
+            'replay = jident_ros.nodes.replay:main',
         ],
     },
 )

@@ -230,6 +230,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(func=cmd_evaluate)
     sub.add_parser("salvage", help="recover every complete chunk of a truncated MCAP recording "
                    "(jident salvage <truncated.mcap> <out_dir>)", add_help=False)
+    sub.add_parser("demo", help="end-to-end demo: simulator, windowing and diagnostic nodes over DDS on a few "
+                   "cases (jident demo --help)", add_help=False)
     i = sub.add_parser("info", help="print base values and the steady state of the model")
     i.add_argument("--config", help="system config YAML (default: config/system.yaml)")
     i.set_defaults(func=cmd_info)
@@ -238,6 +240,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["demo"]:  # `jident demo [...]`: demo.py owns its arguments
+        from .demo import main as demo_main
+        return demo_main(argv[1:])
     if argv[:1] == ["salvage"]:  # `jident salvage <truncated.mcap> <out_dir>`: recording.py owns its arguments
         from .recording import salvage_main
         return salvage_main(argv[1:])

@@ -29,7 +29,8 @@ from pathlib import Path
 PACKAGE_NAME = "jident_ros"
 CONFIG_ENV_VAR = "JIDENT_CONFIG_DIR"
 
-__all__ = ["CONFIG_ENV_VAR", "PACKAGE_NAME", "config_search_dirs", "default_config_path"]
+__all__ = ["CONFIG_ENV_VAR", "PACKAGE_NAME", "config_search_dirs", "default_config_path", "find_executable",
+           "node_command"]
 
 
 def _checkout_config_dir() -> Path | None:
@@ -98,3 +99,33 @@ def default_config_path(name: str = "system.yaml") -> Path:
         + "\n".join(looked)
         + f"\nSet {CONFIG_ENV_VAR} to a folder holding {name!r}, or reinstall the package."
     )
+
+
+def find_executable(name: str) -> Path | None:
+    """``<prefix>/lib/jident_ros/<name>`` where ``<prefix>`` is the ament index prefix of jident_ros:
+    the file ``ros2 run jident_ros <name>`` runs (colcon install space, a ROS distribution, or the
+    venv that scripts/setup.sh registers in its own index).  None when the package is not indexed
+    (AMENT_PREFIX_PATH unset) or the executable is not there."""
+    try:
+        from ament_index_python.packages import get_package_prefix
+        prefix = get_package_prefix(PACKAGE_NAME)
+    except Exception:
+        return None
+    exe = Path(prefix) / "lib" / PACKAGE_NAME / name
+    return exe if exe.is_file() and os.access(exe, os.X_OK) else None
+
+
+def node_command(name: str, *, require_index: bool = False) -> list[str]:
+    """Command line that starts node executable ``name`` (simulator, windowing, diagnostic, replay):
+    the ``ros2 run`` executable when the package is indexed, else ``python -m jident_ros.nodes.<name>``
+    with this interpreter (a checkout without install).  ``require_index``: FileNotFoundError instead
+    of the fallback."""
+    exe = find_executable(name)
+    if exe is not None:
+        return [str(exe)]
+    if require_index:
+        prefixes = os.environ.get("AMENT_PREFIX_PATH", "")
+        raise FileNotFoundError(f"executable {name!r} of {PACKAGE_NAME} not found the way `ros2 run` looks "
+                                f"(<ament prefix>/lib/{PACKAGE_NAME}/{name}; AMENT_PREFIX_PATH={prefixes!r}); "
+                                f"run `bash scripts/setup.sh` or `colcon build` and source install/setup.bash")
+    return [sys.executable, "-m", f"{PACKAGE_NAME}.nodes.{name}"]

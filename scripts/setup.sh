@@ -133,7 +133,31 @@ installed_ok() {
   [[ "$where" == "$REPO/jident_ros" ]]
 }
 
+# --- register the editable install in the venv's ament index ------------------
+# So that the venv answers like a colcon install space: get_package_prefix('jident_ros')
+# is the venv and <prefix>/lib/jident_ros/<exe> are the node executables, which is where
+# `ros2 run` (and our demo and tests) look.  Symlinks into the checkout: always current.
+EXECUTABLES=(jident simulator windowing diagnostic replay)
+register_ament() {
+  local idx="$VENV/share/ament_index/resource_index/packages" share="$VENV/share/jident_ros" lib="$VENV/lib/jident_ros" e
+  mkdir -p "$idx" "$share" "$lib"
+  : >"$idx/jident_ros"
+  ln -sfn "$REPO/package.xml" "$share/package.xml"
+  ln -sfn "$REPO/config" "$share/config"
+  ln -sfn "$REPO/launch" "$share/launch"
+  for e in "${EXECUTABLES[@]}"; do
+    [[ -x "$VENV/bin/$e" ]] || die "$VENV/bin/$e is missing (setup.py console_scripts)"
+    ln -sfn "$VENV/bin/$e" "$lib/$e"
+  done
+}
+registered_ok() {
+  local e
+  [[ -f "$VENV/share/ament_index/resource_index/packages/jident_ros" ]] || return 1
+  for e in "${EXECUTABLES[@]}"; do [[ -x "$VENV/lib/jident_ros/$e" ]] || return 1; done
+}
+
 if [[ "${JIDENT_SETUP_FORCE:-0}" != 1 ]] && installed_ok; then
+  registered_ok || register_ament
   log "$VENV is up to date (stamp matches); nothing to do"
   exit 0
 fi
@@ -151,5 +175,6 @@ if ! "$VPY" -m pip install --progress-bar off --use-pep517 -e ".[test,mcap]" "${
 fi
 [[ -x "$VENV/bin/jident" ]] || die "pip succeeded but $VENV/bin/jident is missing"
 [[ -x "$VENV/bin/colcon" ]] || die "pip succeeded but $VENV/bin/colcon is missing"
+register_ament
 echo "$want_stamp" >"$STAMP"
 log "done in $((SECONDS - start)) s: $VENV ready ($("$VPY" --version 2>&1))"

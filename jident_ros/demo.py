@@ -1,0 +1,374 @@
+"""End-to-end demo: the three nodes as separate processes over DDS on a few grid cases.
+
+``jident demo`` (what ``bash scripts/demo.sh`` runs):
+
+1. loads the pattern library of the default configuration, building it first if it is missing
+   (about 5 s, cached under ~/.cache/jident_ros);
+2. starts ``diagnostic`` (recording to ``<out>/recording``), ``windowing`` and ``simulator`` as three
+   processes, found the way ``ros2 run jident_ros <exe>`` finds them (ament index prefix +
+   ``lib/jident_ros/<exe>``; ``python -m jident_ros.nodes.<exe>`` when the package is not indexed);
+   all three use the drive clock (``/clock`` from the simulator, ``use_sim_time``);
+3. listens like any user would: ``drive/case`` (the true J1 and entry time of each case),
+   ``inertia_estimate`` and ``/diagnostics``; matches each diagnosis to its case by the backlash-entry
+   time and prints true and identified J1;
+4. stops the nodes with SIGINT (as Ctrl-C would), checks that the MCAP recording was finalised, and
+   writes ``summary.png``, ``summary.json`` and ``summary.md``.
+
+Exit status 0 when every case was diagnosed (whatever the answer), 1 when a case got no answer or a
+node failed, 2 on bad arguments.  rclpy is needed (``bash scripts/setup.sh`` installs it).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+#: Default cases (J1 kg m^2, backlash width m, eta_k Pa s^n): five of the paper's seven classes, five
+#: widths, and every eta_k but the pattern runs' 0.025 -- none is a pattern run.
+DEFAULT_CASES = (
+    (1.16, 0.005, 0.0375),
+    (1.073, 0.0025, 0.05),
+    (1.218, 0.0075, 0.0125),
+    (0.957, 0.01, 0.0375),
+    (1.131, 0.00375, 0.05),
+)
+NAMESPACE = "/demo"
+STATUS_NAME = "jident: inertia"
+
+
+@dataclass
+class CaseResult:
+    """One case: what the simulator ran and what the diagnostic node answered."""
+    case_index: int
+    true_inertia_kgm2: float
+    backlash_width_m: float
+    consistency_pa_sn: float
+    entry_time_s: float
+    estimate_kgm2: float = math.nan       # value published on inertia_estimate (best continuous J1)
+    ci95_kgm2: tuple = (math.nan, math.nan)
+    identified_class_kgm2: float = math.nan
+    image_class_kgm2: float = math.nan    # the paper's image method, fused over the five signals
+    level: str = ""
+    message: str = ""
+    values: dict = field(default_factory=dict)
+
+    @property
+    def diagnosed(self) -> bool:
+        return bool(self.level) and self.level != "ERROR"
+
+    @property
+    def error_percent(self) -> float:
+        return (self.estimate_kgm2 - self.true_inertia_kgm2) / self.true_inertia_kgm2 * 100.0
+
+    @property
+    def class_correct(self) -> bool:
+        return self.identified_class_kgm2 == self.true_inertia_kgm2
+
+
+def _parse_case(text: str):
+    try:
+        j1, width, eta = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--case {text!r}: expected J1,WIDTH,ETA (kg m^2, m, Pa s^n), "
+                                         f"e.g. 1.16,0.005,0.0375") from None
+    if not all(math.isfinite(v) and v > 0 for v in (j1, width, eta)):
+        raise argparse.ArgumentTypeError(f"--case {text!r}: every value must be a positive number")
+    return j1, width, eta
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="jident demo", description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
+    p.add_argument("--case", dest="cases", type=_parse_case, action="append",
+                   help="J1,WIDTH,ETA of one case (repeatable; default: five cases across the grid)")
+    p.add_argument("--real-time-factor", type=float, default=0.0,
+                   help="drive seconds per wall second; 0 (default) = as fast as the pipeline keeps up")
+    p.add_argument("--p", type=float, default=2.0, help="KHM exponent of the image method (default 2)")
+    p.add_argument("--timeout", type=float, default=180.0, help="give up after this many seconds (default 180)")
+    return p
+
+
+# --------------------------------------------------------------------------- processes
+
+
+class NodeProcess:
+    """One node executable, its output in ``<logs>/<name>.log``."""
+
+    def __init__(self, name: str, logs: Path, ros_args: list[str], env: dict):
+        from .resources import node_command
+        self.name = name
+        self.cmd = node_command(name) + ["--ros-args", "-r", f"__ns:={NAMESPACE}", *ros_args]
+        self.log_path = logs / f"{name}.log"
+        self._log = open(self.log_path, "w")
+        self.proc = subprocess.Popen(self.cmd, stdout=self._log, stderr=subprocess.STDOUT, env=env)
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def stop(self, sig=signal.SIGINT, timeout: float = 20.0) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._log.close()
+        return self.proc.returncode
+
+    def tail(self, n: int = 15) -> str:
+        if not self._log.closed:
+            self._log.flush()
+        lines = self.log_path.read_text(errors="replace").splitlines()[-n:]
+        return "\n".join(f"    {line}" for line in lines)
+
+
+def _ensure_library(p: float) -> Path:
+    from .cli import default_library_path
+    from .config import load_method_config, load_system_config
+    from .method.patterns import LibraryMismatch, PatternLibrary
+    system, method = load_system_config(), load_method_config()
+    if p not in [float(x) for x in method.p_values]:
+        raise SystemExit(f"jident demo: error: --p {p:g} is not one of method.p_values {list(method.p_values)}")
+    path = default_library_path(system, method)
+    try:
+        PatternLibrary.load(path, system, method)
+        print(f"[demo] pattern library {path}")
+        return path
+    except (FileNotFoundError, LibraryMismatch):
+        pass
+    print(f"[demo] building the pattern library (eta_k = {system.grid.pattern_consistency_pa_sn:g} runs, "
+          f"{len(system.grid.inertia_classes_kgm2)} J1 x {len(system.grid.backlash_widths_m)} widths) ...", flush=True)
+    t0 = time.perf_counter()
+    PatternLibrary.build(system, method).save(path)
+    print(f"[demo] pattern library built in {time.perf_counter() - t0:.1f} s -> {path}")
+    return path
+
+
+# --------------------------------------------------------------------------- listening
+
+
+def _listen(cases, procs, timeout):
+    """Spin a listener until every case has a diagnosis (or a node died / timeout)."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import Float64, Float64MultiArray
+
+    from .ros_io import LEVEL_NAMES, array_from_multiarray, qos_diagnostics, qos_latched, status_level, status_values
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node("jident_demo_listener", namespace=NAMESPACE, context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    results: dict[float, CaseResult] = {}
+    statuses = []
+    estimates = []
+
+    def on_case(msg):
+        arr, names = array_from_multiarray(msg)
+        row = dict(zip(names, arr[0]))
+        r = CaseResult(int(row["case_index"]), float(row["inertia_kgm2"]), float(row["backlash_width_m"]),
+                       float(row["consistency_pa_sn"]), float(row["entry_time_s"]))
+        results[round(r.entry_time_s, 6)] = r
+
+    def on_diag(arr):
+        for s in arr.status:
+            if s.name == STATUS_NAME and s.hardware_id == f"{NAMESPACE}/drive":
+                statuses.append(s)
+
+    node.create_subscription(Float64MultiArray, "drive/case", on_case, qos_latched(100))
+    node.create_subscription(Float64, "inertia_estimate", lambda m: estimates.append(m.data), qos_latched(100))
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, qos_diagnostics())
+
+    def assign():
+        pending = []
+        for s in statuses:
+            v = status_values(s)
+            if "entry_time_s" not in v:
+                continue
+            r = results.get(round(float(v["entry_time_s"]), 6))
+            if r is None:  # its drive/case message has not arrived yet
+                pending.append(s)
+                continue
+            if r.level:
+                continue
+            r.level, r.message, r.values = LEVEL_NAMES[status_level(s)], s.message, v
+            r.estimate_kgm2 = float(v.get("inertia_estimate_kgm2", "nan"))
+            r.identified_class_kgm2 = float(v.get("identified_class_kgm2", "nan"))
+            r.image_class_kgm2 = float(v.get("fused_class_kgm2", "nan"))
+            if "gap_ci95_kgm2" in v:
+                r.ci95_kgm2 = tuple(float(x) for x in v["gap_ci95_kgm2"].split())
+            print(f"[demo] case {r.case_index + 1}: true J1 = {r.true_inertia_kgm2:.4f} kg m^2 "
+                  f"(K2 = {r.backlash_width_m * 1e3:g} mm, eta_k = {r.consistency_pa_sn:g})  ->  identified "
+                  f"{r.estimate_kgm2:.4f} kg m^2 ({r.error_percent:+.2f} %), class {r.identified_class_kgm2:g} "
+                  f"[{'right' if r.class_correct else 'WRONG'}], image method {r.image_class_kgm2:g}, "
+                  f"status {r.level}", flush=True)
+        statuses[:] = pending
+
+    deadline = time.monotonic() + timeout
+    try:
+        while time.monotonic() < deadline:
+            ex.spin_once(timeout_sec=0.05)
+            assign()
+            if len(results) == len(cases) and all(r.level for r in results.values()):
+                break
+            if not all(p.alive() for name, p in procs.items() if name != "simulator"):
+                break
+        # a little longer for the last messages
+        end = time.monotonic() + 0.5
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        assign()
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    return [results[k] for k in sorted(results)], estimates
+
+
+# --------------------------------------------------------------------------- summary
+
+
+def _write_summary(out: Path, results, meta):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    (out / "summary.json").write_text(json.dumps(
+        dict(meta, cases=[dict(asdict(r), error_percent=r.error_percent, class_correct=r.class_correct)
+                          for r in results]), indent=2, default=str))
+    lines = ["# jident demo", "", f"{meta['command']}", "",
+             "| case | true J1 kg·m² | K2 mm | η_k | identified J1 kg·m² | error % | class | image method | status |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        lines.append(f"| {r.case_index + 1} | {r.true_inertia_kgm2:g} | {r.backlash_width_m * 1e3:g} | "
+                     f"{r.consistency_pa_sn:g} | {r.estimate_kgm2:.4f} | {r.error_percent:+.2f} | "
+                     f"{r.identified_class_kgm2:g} ({'right' if r.class_correct else 'wrong'}) | "
+                     f"{r.image_class_kgm2:g} | {r.level or 'none'} |")
+    lines += ["", f"Wall time {meta['wall_s']:.1f} s; recording `{meta['recording']}` "
+              f"({meta['recorded_messages']} messages)."]
+    (out / "summary.md").write_text("\n".join(lines) + "\n")
+
+    fig, ax = plt.subplots(figsize=(8, 4.2), dpi=110)
+    x = np.arange(len(results))
+    true = np.array([r.true_inertia_kgm2 for r in results])
+    est = np.array([r.estimate_kgm2 for r in results])
+    lo = np.array([r.ci95_kgm2[0] for r in results])
+    hi = np.array([r.ci95_kgm2[1] for r in results])
+    image = np.array([r.image_class_kgm2 for r in results])
+    ax.bar(x - 0.2, true, 0.4, label="true J1", color="0.75")
+    yerr = np.vstack([np.nan_to_num(est - lo), np.nan_to_num(hi - est)])
+    ax.bar(x + 0.2, est, 0.4, yerr=yerr, capsize=3, label="inertia_estimate (gap fit, 95 % CI)", color="tab:blue")
+    ax.plot(x, image, "r_", markersize=22, mew=2, label="image method class (paper)")
+    ax.set_xticks(x, [f"case {r.case_index + 1}\nK2 {r.backlash_width_m * 1e3:g} mm\nη_k {r.consistency_pa_sn:g}"
+                      for r in results], fontsize=8)
+    finite = np.concatenate([true, est[np.isfinite(est)], image[np.isfinite(image)]])
+    ax.set_ylim(finite.min() * 0.95, finite.max() * 1.07)
+    ax.set_ylabel("J1 [kg m²]")
+    n_right = sum(r.class_correct for r in results)
+    ax.set_title(f"jident demo: three nodes over DDS, {n_right}/{len(results)} classes right, "
+                 f"max |error| {np.nanmax(np.abs([r.error_percent for r in results])):.2f} %", fontsize=10)
+    ax.legend(fontsize=8, loc="upper left", ncol=3)
+    fig.tight_layout()
+    fig.savefig(out / "summary.png")
+    plt.close(fig)
+
+
+def _count_recording(bag: Path):
+    from .recording import read_bag
+    counts = {}
+    for m in read_bag(bag):
+        counts[m.topic] = counts.get(m.topic, 0) + 1
+    return counts
+
+
+# --------------------------------------------------------------------------- main
+
+
+def run(args) -> int:
+    try:
+        import rclpy  # noqa: F401
+    except ImportError as exc:
+        print(f"jident demo: error: rclpy is not importable ({exc}); run `bash scripts/setup.sh` "
+              "or source a ROS 2 distribution", file=sys.stderr)
+        return 2
+    cases = args.cases or list(DEFAULT_CASES)
+    out = Path(args.out)
+    bag = out / "recording"
+    logs = out / "logs"
+    if bag.exists():
+        import shutil
+        shutil.rmtree(bag)
+    logs.mkdir(parents=True, exist_ok=True)
+    library = _ensure_library(args.p)
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    env.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 100 + 1))
+    os.environ.setdefault("ROS_DOMAIN_ID", env["ROS_DOMAIN_ID"])
+    sim_time = ["-p", "use_sim_time:=true"]
+    t0 = time.monotonic()
+    procs: dict[str, NodeProcess] = {}
+    try:
+        procs["diagnostic"] = NodeProcess("diagnostic", logs, [*sim_time, "-p", f"pattern_library:={library}",
+                                                              "-p", f"record_dir:={bag}", "-p", f"p:={args.p}",
+                                                              "-p", "stale_after_s:=0.0"], env)
+        procs["windowing"] = NodeProcess("windowing", logs, [*sim_time, "-p", "backlash_width_from_topic:=true"], env)
+        lists = [[c[i] for c in cases] for i in range(3)]
+        procs["simulator"] = NodeProcess("simulator", logs, [
+            "-p", "cases:=zip", "-p", f"inertias_kgm2:={lists[0]}", "-p", f"backlash_widths_m:={lists[1]}",
+            "-p", f"consistencies_pa_sn:={lists[2]}", "-p", f"real_time_factor:={args.real_time_factor}",
+            # windowing + the diagnostic node's recorder subscribe to drive/signals
+            "-p", "wait_for_subscribers:=2", "-p", "wait_timeout_s:=60.0"], env)
+        print(f"[demo] started {', '.join(f'{n} ({p.cmd[0]})' for n, p in procs.items())} in namespace "
+              f"{NAMESPACE}, ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}; {len(cases)} case(s)", flush=True)
+        results, estimates = _listen(cases, procs, args.timeout)
+    finally:
+        codes = {name: p.stop(signal.SIGINT) for name, p in reversed(procs.items())}
+    wall = time.monotonic() - t0
+    failed = [n for n, c in codes.items() if c not in (0, -signal.SIGINT)]
+    for name in failed:
+        print(f"[demo] node {name} exited with status {codes[name]}; last lines of {procs[name].log_path}:\n"
+              f"{procs[name].tail()}", file=sys.stderr)
+    try:
+        counts = _count_recording(bag)
+    except Exception as exc:
+        print(f"[demo] the recording {bag} could not be read: {type(exc).__name__}: {exc}", file=sys.stderr)
+        counts, failed = {}, failed + ["recording"]
+    meta = dict(command="jident demo " + " ".join(sys.argv[2:] if sys.argv[1:2] == ["demo"] else sys.argv[1:]),
+                wall_s=wall, recording=str(bag), recorded_messages=sum(counts.values()), recorded_topics=counts,
+                estimates_published=len(estimates), node_exit_codes=codes)
+    missing = len(cases) - sum(r.diagnosed for r in results)
+    if results:
+        _write_summary(out, results, meta)
+    n_right = sum(r.class_correct for r in results)
+    print(f"[demo] {len(results)} case(s) run, {len(results) - missing} diagnosed, {n_right} class(es) right; "
+          f"{len(estimates)} estimate(s) on {NAMESPACE}/inertia_estimate; {wall:.1f} s wall")
+    print(f"[demo] recording {bag} ({sum(counts.values())} messages: "
+          + ", ".join(f"{t} {n}" for t, n in sorted(counts.items())) + ")")
+    print(f"[demo] summary {out / 'summary.png'}, {out / 'summary.md'}; node logs in {logs}")
+    if missing or failed or len(results) < len(cases):
+        print(f"[demo] FAILED: {missing} case(s) without a diagnosis, nodes failed: {failed or 'none'}",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.real_time_factor < 0 or not math.isfinite(args.real_time_factor):
+        print(f"jident demo: error: --real-time-factor must be >= 0, got {args.real_time_factor}", file=sys.stderr)
+        return 2
+    return run(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

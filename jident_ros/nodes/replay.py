@@ -1,0 +1,180 @@
+"""replay node: republishes a recording's drive topics (and /clock) at a rate factor.
+
+    ros2 run jident_ros replay out/run1 --ros-args -p rate:=10.0
+
+Reads the bag directory (or .mcap file) with :func:`jident_ros.recording.read_bag` and republishes,
+in receive-time order, every recorded topic whose name ends with one of ``topics`` (default
+drive/signals, drive/backlash_width, drive/true_inertia, drive/case) on the corresponding *relative*
+name, so ``-r __ns:=/press3`` replays into another namespace.  The messages go out as recorded
+(CDR bytes, not re-encoded).  The pauses between messages are the recorded receive-time
+differences divided by ``rate`` (0 = as fast as possible, ``fast_sleep_s`` between messages).
+With ``publish_clock``, /clock follows the ``t`` column of each drive/signals batch (recorded
+/clock messages are not replayed), exactly as the simulator publishes it.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from . import ParameterError, checked, declare_parameters, main as run_main, require
+
+NODE_NAME = "jident_replay"
+
+#: Parameters of this node, with their defaults.
+DEFAULTS = {
+    "bag": "",                 # bag directory or .mcap file (or the first command-line argument)
+    "rate": 1.0,               # playback speed factor; 0 = as fast as possible
+    "fast_sleep_s": 0.001,     # pause between messages when rate = 0
+    "publish_clock": True,
+    "topics": ["drive/signals", "drive/backlash_width", "drive/true_inertia", "drive/case"],
+    "wait_for_subscribers": 0,  # wait until drive/signals has this many subscribers
+    "wait_timeout_s": 30.0,
+}
+
+TYPES = {
+    "std_msgs/msg/Float64MultiArray": ("std_msgs.msg", "Float64MultiArray"),
+    "std_msgs/msg/Float64": ("std_msgs.msg", "Float64"),
+}
+
+
+def validate(values: dict, argv_bag: str | None):
+    cfg = checked(values, DEFAULTS, DEFAULTS)
+    if argv_bag:
+        cfg["bag"] = argv_bag
+    require("bag", cfg["bag"], bool(cfg["bag"]), "a recording (bag directory or .mcap file; "
+            "give it as the first argument)")
+    require("bag", cfg["bag"], Path(cfg["bag"]).expanduser().exists(), "an existing bag directory or .mcap file")
+    require("rate", cfg["rate"], cfg["rate"] >= 0, "a number >= 0 (0 = as fast as possible)")
+    require("fast_sleep_s", cfg["fast_sleep_s"], 0 <= cfg["fast_sleep_s"] <= 1, "a number in [0, 1]")
+    require("topics", cfg["topics"], bool(cfg["topics"]) and all(t and not t.startswith("/") for t in cfg["topics"]),
+            "a non-empty list of relative topic names")
+    require("wait_for_subscribers", cfg["wait_for_subscribers"], cfg["wait_for_subscribers"] >= 0, "an integer >= 0")
+    require("wait_timeout_s", cfg["wait_timeout_s"], cfg["wait_timeout_s"] > 0, "a number > 0")
+    return cfg
+
+
+def _positional(args) -> str | None:
+    from rclpy.utilities import remove_ros_args
+    rest = remove_ros_args(args)[1:]
+    if len(rest) > 1:
+        raise ParameterError(f"parameter bag: expected one recording argument, got {rest!r}")
+    return rest[0] if rest else None
+
+
+def _node_class(args):
+    import importlib
+
+    import numpy as np
+    from rclpy.node import Node
+    from rclpy.serialization import deserialize_message
+    from rosgraph_msgs.msg import Clock
+    from std_msgs.msg import Float64MultiArray
+
+    from ..ros_io import LayoutError, array_from_multiarray, qos_clock, qos_latched, qos_signals
+
+    class ReplayNode(Node):
+        def __init__(self):
+            super().__init__(NODE_NAME)
+            self.cfg = validate(declare_parameters(self, DEFAULTS), _positional(args))
+            self.exit_code = 0
+            try:
+                from ..recording import read_bag
+            except ImportError as exc:
+                raise ParameterError(f"parameter bag: cannot read recordings here (jident_ros.recording: {exc})")
+            self.read_bag = read_bag
+            self.bag = str(Path(self.cfg["bag"]).expanduser())
+            self.pubs = {}
+            self.pub_clock = (self.create_publisher(Clock, "/clock", qos_clock())
+                              if self.cfg["publish_clock"] else None)
+            self._imp = importlib
+            self.get_logger().info(f"replaying {self.bag} at rate {self.cfg['rate']:g}")
+
+        def _publisher(self, rel, msg_type):
+            pub = self.pubs.get(rel)
+            if pub is None:
+                mod, cls = TYPES.get(msg_type, (None, None))
+                if mod is None:
+                    return None
+                typ = getattr(self._imp.import_module(mod), cls)
+                qos = qos_signals() if rel == "drive/signals" else qos_latched()
+                pub = self.pubs[rel] = self.create_publisher(typ, rel, qos)
+            return pub
+
+        def _match(self, topic):
+            for rel in self.cfg["topics"]:
+                if topic == "/" + rel or topic.endswith("/" + rel):
+                    return rel
+            return None
+
+        def run(self):
+            c = self.cfg
+            if c["wait_for_subscribers"] > 0:
+                pub = self._publisher("drive/signals", "std_msgs/msg/Float64MultiArray")
+                deadline = time.monotonic() + c["wait_timeout_s"]
+                while self.context.ok() and pub.get_subscription_count() < c["wait_for_subscribers"]:
+                    if time.monotonic() > deadline:
+                        self.get_logger().error("no subscriber of drive/signals; giving up")
+                        self.exit_code = 1
+                        return
+                    time.sleep(0.05)
+                time.sleep(0.2)
+            wall0 = rec0 = None
+            counts = {}
+            for topic, msg_type, log_ns, raw in self.read_bag(self.bag, raw=True):
+                if not self.context.ok():
+                    return
+                rel = self._match(topic)
+                if rel is None:
+                    continue
+                pub = self._publisher(rel, msg_type)
+                if pub is None:
+                    self.get_logger().warning(f"{topic}: type {msg_type} is not replayed", once=True)
+                    continue
+                if c["rate"] > 0:
+                    if wall0 is None:
+                        wall0, rec0 = time.monotonic(), log_ns
+                    delay = wall0 + (log_ns - rec0) / 1e9 / c["rate"] - time.monotonic()
+                    if delay > 0:
+                        time.sleep(delay)
+                elif c["fast_sleep_s"] > 0:
+                    time.sleep(c["fast_sleep_s"])
+                pub.publish(bytes(raw))
+                counts[rel] = counts.get(rel, 0) + 1
+                if rel == "drive/signals" and self.pub_clock is not None:
+                    self._clock_from(deserialize_message(bytes(raw), Float64MultiArray))
+            if self.context.ok():
+                self.get_logger().info("replayed " + ", ".join(f"{n} x {k}" for k, n in counts.items())
+                                       if counts else "nothing to replay: no matching topic")
+                from rclpy.duration import Duration
+                for pub in self.pubs.values():
+                    try:
+                        pub.wait_for_all_acked(Duration(seconds=5.0))
+                    except Exception:
+                        time.sleep(0.5)
+
+        def _clock_from(self, msg):
+            try:
+                arr, channels = array_from_multiarray(msg)
+            except LayoutError:
+                return
+            if "t" not in channels or arr.shape[0] == 0:
+                return
+            t = float(arr[-1, channels.index("t")])
+            if not np.isfinite(t) or t < 0:
+                return
+            m = Clock()
+            m.clock.sec = int(np.floor(t))
+            m.clock.nanosec = min(int(round((t - m.clock.sec) * 1e9)), 999_999_999)
+            self.pub_clock.publish(m)
+
+    return ReplayNode
+
+
+def main(args=None) -> int:
+    args = sys.argv if args is None else args
+    return run_main(lambda: _node_class(args)(), NODE_NAME, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,155 @@
+"""Conversions between numpy and the ROS messages of the node set, QoS profiles and diagnostics.
+
+rclpy and the message packages are imported inside the functions, so importing this module never
+needs ROS.  The layouts themselves are defined (and tested without ROS) in :mod:`jident_ros.windowing`.
+"""
+from __future__ import annotations
+
+import array
+import math
+from typing import Any, Iterable, Mapping, Sequence
+
+import numpy as np
+
+from .windowing import LayoutError, Window, pack, unpack
+
+#: diagnostic_msgs/DiagnosticStatus levels (the message field is a byte).
+OK, WARN, ERROR, STALE = 0, 1, 2, 3
+LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR", STALE: "STALE"}
+
+
+# --------------------------------------------------------------------------- Float64MultiArray
+
+
+def _to_msg(data: np.ndarray, dims, data_offset: int):
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+    msg = Float64MultiArray()
+    msg.layout.dim = [MultiArrayDimension(label=label, size=int(size), stride=int(stride))
+                      for label, size, stride in dims]
+    msg.layout.data_offset = int(data_offset)
+    # array.array('d') is the message's native storage: no per-element conversion
+    msg.data = array.array("d", np.ascontiguousarray(data, dtype=np.float64).tobytes())
+    return msg
+
+
+def multiarray_from_array(values: np.ndarray, channels: Sequence[str]):
+    """(n, c) samples + channel names -> std_msgs/Float64MultiArray (drive/signals layout)."""
+    return _to_msg(*pack(values, channels))
+
+
+def array_from_multiarray(msg) -> tuple[np.ndarray, tuple]:
+    """std_msgs/Float64MultiArray -> ((n, c) array, channel names).  Raises LayoutError."""
+    data = np.frombuffer(msg.data, dtype=np.float64) if len(msg.data) else np.empty(0)
+    arr, channels, _ = unpack(data, msg.layout.dim, msg.layout.data_offset)
+    return arr, channels
+
+
+def window_to_msg(window: Window):
+    """Window -> std_msgs/Float64MultiArray (drive/window layout: header in data_offset)."""
+    return _to_msg(*window.pack())
+
+
+def window_from_msg(msg) -> Window:
+    """std_msgs/Float64MultiArray (drive/window layout) -> Window.  Raises LayoutError."""
+    data = np.frombuffer(msg.data, dtype=np.float64) if len(msg.data) else np.empty(0)
+    return Window.unpack(data, msg.layout.dim, msg.layout.data_offset)
+
+
+def float64(value: float):
+    from std_msgs.msg import Float64
+    return Float64(data=float(value))
+
+
+# --------------------------------------------------------------------------- QoS
+
+
+def qos_signals(depth: int = 1000):
+    """drive/signals: reliable, volatile, keep last ``depth`` batches."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=int(depth),
+                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+
+
+def qos_latched(depth: int = 1):
+    """Reliable, transient-local, keep last ``depth``: a late subscriber gets the last messages."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=int(depth),
+                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def qos_clock():
+    """/clock publisher: keep last 1, reliable, volatile.  A reliable writer also serves the
+    best-effort readers of rclpy's/rclcpp's TimeSource."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+
+
+def qos_diagnostics():
+    """/diagnostics: reliable, volatile, keep last 100 (as diagnostic_updater's publisher)."""
+    return qos_signals(100)
+
+
+def qos_to_dict(qos) -> dict:
+    """Plain description of a QoS profile (logs, docs, bag metadata)."""
+    return {"history": qos.history.name.lower(), "depth": int(qos.depth),
+            "reliability": qos.reliability.name.lower(), "durability": qos.durability.name.lower()}
+
+
+# --------------------------------------------------------------------------- diagnostics
+
+
+def format_value(v: Any) -> str:
+    """KeyValue text: floats with repr precision, vectors space-separated."""
+    if isinstance(v, str):
+        return v
+    if isinstance(v, (bool, np.bool_)):
+        return "true" if v else "false"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        f = float(v)
+        return repr(f) if math.isfinite(f) else ("nan" if f != f else ("inf" if f > 0 else "-inf"))
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return " ".join(format_value(x) for x in (v.tolist() if isinstance(v, np.ndarray) else v))
+    return str(v)
+
+
+def make_status(name: str, level: int, message: str, hardware_id: str = "",
+                values: Mapping[str, Any] | Iterable[tuple] = ()):
+    """diagnostic_msgs/DiagnosticStatus; ``values`` become KeyValue pairs (see format_value)."""
+    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+    st = DiagnosticStatus()
+    st.level = bytes([int(level)])
+    st.name = str(name)
+    st.message = str(message)
+    st.hardware_id = str(hardware_id)
+    items = values.items() if isinstance(values, Mapping) else values
+    st.values = [KeyValue(key=str(k), value=format_value(v)) for k, v in items]
+    return st
+
+
+def make_diagnostic_array(stamp, statuses: Sequence):
+    """diagnostic_msgs/DiagnosticArray with ``stamp`` (builtin_interfaces/Time) and the statuses."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    arr = DiagnosticArray()
+    arr.header.stamp = stamp
+    arr.status = list(statuses)
+    return arr
+
+
+def status_level(status) -> int:
+    """Level of a DiagnosticStatus as an int (the field is a 1-byte bytes object in rclpy)."""
+    lv = status.level
+    return lv[0] if isinstance(lv, (bytes, bytearray)) else int(lv)
+
+
+def status_values(status) -> dict:
+    """KeyValues of a DiagnosticStatus as a dict."""
+    return {kv.key: kv.value for kv in status.values}
+
+
+__all__ = ["OK", "WARN", "ERROR", "STALE", "LEVEL_NAMES", "LayoutError", "multiarray_from_array",
+           "array_from_multiarray", "window_to_msg", "window_from_msg", "float64", "qos_signals",
+           "qos_latched", "qos_clock", "qos_diagnostics", "qos_to_dict", "format_value", "make_status",
+           "make_diagnostic_array", "status_level", "status_values"]

@@ -1,0 +1,535 @@
+"""Streaming backlash-entry detector and the Float64MultiArray layouts (pure numpy, never imports rclpy).
+
+The windowing node feeds batches of samples (2-D arrays, one row per sample, columns named) into a
+:class:`BacklashDetector`.  It keeps the last 48 samples, watches paper inequality (1)
+
+    |alpha1 - alpha2| < K2 / r
+
+and, when it becomes true after a sample on which it was false (the backlash-zone entry), captures the
+48 samples before plus the entry sample and the 1999 after it: a :class:`Window` of 48 + 2000 = 2048
+samples with the entry sample at index 48, exactly the simulator's window.
+
+Bad input never raises.  Each problem is returned as a ``drop`` :class:`Event` with a reason from
+:data:`REASONS`, counted in :attr:`BacklashDetector.counts`; the window in progress (if any) is
+dropped, the history is cleared (continuity is lost), and the detector goes on with the next batch.
+The one exception is an empty batch: it carries no sample, so nothing is lost; it is reported and
+counted, and the window in progress is kept (the stamp checks of the next batch still guard continuity).
+
+Layout of a batch / window as ``std_msgs/Float64MultiArray`` (see docs/interfaces.md)::
+
+    layout.dim[0]: label "sample",                      size n, stride n * c
+    layout.dim[1]: label "t,alpha1,alpha2,...",         size c, stride c
+    layout.data_offset: number of header values in front of the samples (0 for drive/signals)
+    data: header values, then the n x c samples, row-major (sample-major)
+
+:func:`pack` and :func:`unpack` convert between numpy and this layout using plain tuples
+``(label, size, stride)`` for the dims, so this module stays independent of rclpy
+(:mod:`jident_ros.ros_io` moves them into and out of the ROS message).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from .sim.simulate import CHANNELS
+
+#: Label of dim[0] (rows = samples).
+SAMPLE_LABEL = "sample"
+#: Channel names a batch may carry ("t" = drive clock, s).
+KNOWN_CHANNELS = ("t",) + tuple(CHANNELS) + ("clutch_torque",)
+#: Channels without which inequality (1) cannot be evaluated.
+REQUIRED_CHANNELS = ("t", "alpha1", "alpha2")
+#: Default channel set of a window: the drive clock then every simulator channel.
+DEFAULT_CHANNELS = ("t",) + tuple(CHANNELS)
+
+#: Why a batch or a window was dropped.
+REASONS = {
+    "layout": "the message layout is not the documented 2-D sample x channel layout",
+    "empty": "a batch without samples (reported only: nothing lost, the window in progress is kept)",
+    "nonfinite": "NaN or Inf in a used channel",
+    "unknown_channel": "a channel name that is not part of the contract",
+    "missing_channel": "a channel the detector was configured to capture is absent",
+    "out_of_order": "the drive clock t went backwards",
+    "repeated_stamp": "the same t twice",
+    "gap": "t advanced by more than gap_tolerance x the sample period (samples lost)",
+    "irregular_stamp": "t advanced by less than half the sample period",
+    "short_history": "a backlash entry with fewer than samples_before_entry samples of history",
+}
+
+#: Window header (data_offset values in front of the samples of drive/window), in this order.
+WINDOW_HEADER = ("format", "entry_index", "entry_time_s", "backlash_width_m", "wheel_radius_m",
+                 "sample_period_s", "window_id")
+WINDOW_FORMAT = 1.0
+
+
+class LayoutError(ValueError):
+    """A message does not follow the documented layout (reason ``layout``)."""
+
+
+# --------------------------------------------------------------------------- layout
+
+
+def channel_label(channels: Sequence[str]) -> str:
+    """dim[1] label: channel names joined by commas."""
+    return ",".join(channels)
+
+
+def parse_channel_label(label: str) -> tuple:
+    """Channel names of a dim[1] label; raises LayoutError on empty or repeated names."""
+    names = tuple(s.strip() for s in str(label).split(","))
+    if not label or any(not s for s in names):
+        raise LayoutError(f"dim[1].label {label!r}: expected comma-separated channel names")
+    if len(set(names)) != len(names):
+        dup = sorted({s for s in names if names.count(s) > 1})
+        raise LayoutError(f"dim[1].label {label!r}: repeated channel {dup[0]!r}")
+    return names
+
+
+def pack(array: np.ndarray, channels: Sequence[str], header: Sequence[float] = ()):
+    """numpy (n, c) + channel names -> (flat float64 data, dims, data_offset).
+
+    dims is a list of (label, size, stride) for dim[0] (samples) and dim[1] (channels).
+    """
+    a = np.asarray(array, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != len(channels):
+        raise ValueError(f"array: expected shape (n, {len(channels)}), got {a.shape}")
+    n, c = a.shape
+    head = np.asarray(header, dtype=np.float64).ravel()
+    data = np.concatenate([head, a.ravel()]) if head.size else np.ascontiguousarray(a).ravel()
+    dims = [(SAMPLE_LABEL, n, n * c), (channel_label(channels), c, c)]
+    return data, dims, int(head.size)
+
+
+def unpack(data, dims: Sequence, data_offset: int = 0):
+    """(flat data, dims, data_offset) -> (array (n, c) view, channel names, header array).
+
+    ``dims`` holds (label, size, stride) tuples or objects with those attributes (a ROS
+    MultiArrayDimension).  Raises :class:`LayoutError` with what is wrong.
+    """
+    dims = [_dim_tuple(d) for d in dims]
+    if len(dims) != 2:
+        raise LayoutError(f"layout.dim: expected 2 dimensions (sample, channel), got {len(dims)}")
+    (l0, n, s0), (l1, c, s1) = dims
+    if l0 != SAMPLE_LABEL:
+        raise LayoutError(f"dim[0].label: expected {SAMPLE_LABEL!r}, got {l0!r}")
+    channels = parse_channel_label(l1)
+    if c != len(channels):
+        raise LayoutError(f"dim[1].size {c} does not match the {len(channels)} channels named in its label")
+    if c < 1:
+        raise LayoutError("dim[1].size: need at least one channel")
+    if s1 != c or s0 != n * c:
+        raise LayoutError(f"strides ({s0}, {s1}): expected ({n * c}, {c}) for a row-major {n} x {c} array")
+    off = int(data_offset)
+    flat = np.asarray(data, dtype=np.float64)
+    if flat.ndim != 1:
+        flat = flat.ravel()
+    if off < 0 or flat.size != off + n * c:
+        raise LayoutError(f"data: {flat.size} values, expected data_offset {off} + {n} x {c} = {off + n * c}")
+    return flat[off:].reshape(n, c), channels, flat[:off]
+
+
+def _dim_tuple(d):
+    if isinstance(d, (tuple, list)):
+        label, size, stride = d
+    else:
+        label, size, stride = d.label, d.size, d.stride
+    try:
+        return str(label), int(size), int(stride)
+    except (TypeError, ValueError):
+        raise LayoutError(f"layout.dim: size/stride must be integers, got {size!r}/{stride!r}") from None
+
+
+# --------------------------------------------------------------------------- window
+
+
+@dataclass
+class Window:
+    """A captured window: samples_before + samples_from rows, the entry at ``entry_index``.
+
+    Attributes
+    ----------
+    data : ndarray (n, c)          samples, columns ``channels`` (SI units)
+    channels : tuple of str        column names, "t" first
+    entry_index : int              row of the entry sample (48)
+    entry_time_s : float           t of the entry sample (drive clock)
+    backlash_width_m : float       K2 used by the detector for this window
+    wheel_radius_m : float         r used in inequality (1)
+    sample_period_s : float
+    window_id : int                running number of captured windows (from 1)
+    """
+
+    data: np.ndarray
+    channels: tuple
+    entry_index: int
+    entry_time_s: float
+    backlash_width_m: float
+    wheel_radius_m: float
+    sample_period_s: float
+    window_id: int = 0
+
+    def __len__(self):
+        return self.data.shape[0]
+
+    def column(self, name: str) -> np.ndarray:
+        return self.data[:, self.channels.index(name)]
+
+    def as_dict(self) -> dict:
+        """Channels as a dict of 1-D arrays (the form identify_window/estimate_inertia take)."""
+        return {name: np.ascontiguousarray(self.data[:, i]) for i, name in enumerate(self.channels)}
+
+    def header(self) -> np.ndarray:
+        return np.array([WINDOW_FORMAT, self.entry_index, self.entry_time_s, self.backlash_width_m,
+                         self.wheel_radius_m, self.sample_period_s, self.window_id], dtype=np.float64)
+
+    def pack(self):
+        """(flat data, dims, data_offset) of the drive/window layout."""
+        return pack(self.data, self.channels, self.header())
+
+    @classmethod
+    def unpack(cls, data, dims, data_offset) -> "Window":
+        arr, channels, head = unpack(data, dims, data_offset)
+        if head.size != len(WINDOW_HEADER):
+            raise LayoutError(f"data_offset: a window carries {len(WINDOW_HEADER)} header values "
+                              f"{WINDOW_HEADER}, got {head.size}")
+        if head[0] != WINDOW_FORMAT:
+            raise LayoutError(f"window header format {head[0]!r}: this version reads {WINDOW_FORMAT}")
+        if not np.all(np.isfinite(head)):
+            raise LayoutError(f"window header: non-finite value in {head.tolist()}")
+        entry = int(head[1])
+        if entry != head[1] or not 0 <= entry < arr.shape[0]:
+            raise LayoutError(f"window header entry_index {head[1]!r}: not a row of the {arr.shape[0]}-sample window")
+        return cls(arr.copy(), channels, entry, float(head[2]), float(head[3]), float(head[4]), float(head[5]),
+                   int(head[6]))
+
+
+@dataclass
+class Event:
+    """What a batch produced: a captured window or a dropped one.
+
+    kind : "window" | "drop"
+    reason : one of REASONS (drops only)
+    detail : one line for humans
+    window : the Window (kind "window")
+    window_dropped : True when a window in progress was lost
+    """
+
+    kind: str
+    reason: str = ""
+    detail: str = ""
+    window: Window | None = None
+    window_dropped: bool = False
+
+
+# --------------------------------------------------------------------------- detector
+
+
+@dataclass
+class _Capture:
+    parts: list | None  # None: the transient is skipped, not captured
+    count: int
+    entry_time_s: float
+    backlash_width_m: float
+
+
+class BacklashDetector:
+    """Streaming detector of the backlash-zone entry (paper inequality 1) and window capture.
+
+    Parameters
+    ----------
+    backlash_width_m : float       K2 (> 0)
+    wheel_radius_m : float         r (> 0)
+    sample_period_s : float        T_s (> 0)
+    channels : names to capture, must include "t", "alpha1", "alpha2" (window column order)
+    samples_before_entry : int     history kept and put in front of the entry (48)
+    samples_from_entry : int       samples from the entry sample on (2000)
+    gap_tolerance : float          a step of t above gap_tolerance x T_s is a gap (1.5)
+
+    :meth:`push` takes one batch (array (n, k) and its k channel names, in any order, any subset
+    of :data:`KNOWN_CHANNELS` that holds ``channels``) and returns the list of events it caused.
+    The result does not depend on how a stream is cut into batches.
+    """
+
+    def __init__(self, backlash_width_m: float, wheel_radius_m: float, sample_period_s: float,
+                 channels: Sequence[str] = DEFAULT_CHANNELS, samples_before_entry: int = 48,
+                 samples_from_entry: int = 2000, gap_tolerance: float = 1.5):
+        for name, v in (("wheel_radius_m", wheel_radius_m), ("sample_period_s", sample_period_s),
+                        ("gap_tolerance", gap_tolerance)):
+            if not _positive(v):
+                raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
+        if not gap_tolerance > 1.0:
+            raise ValueError(f"gap_tolerance: must be > 1, got {gap_tolerance!r}")
+        channels = tuple(channels)
+        for c in channels:
+            if c not in KNOWN_CHANNELS:
+                raise ValueError(f"channels: unknown channel {c!r} (known: {', '.join(KNOWN_CHANNELS)})")
+        if len(set(channels)) != len(channels):
+            raise ValueError(f"channels: repeated name in {list(channels)}")
+        missing = [c for c in REQUIRED_CHANNELS if c not in channels]
+        if missing:
+            raise ValueError(f"channels: need {missing[0]!r} (inequality 1 uses t, alpha1, alpha2), got {list(channels)}")
+        if int(samples_before_entry) != samples_before_entry or samples_before_entry < 1:
+            raise ValueError(f"samples_before_entry: must be an integer >= 1, got {samples_before_entry!r}")
+        if int(samples_from_entry) != samples_from_entry or samples_from_entry < 2:
+            raise ValueError(f"samples_from_entry: must be an integer >= 2, got {samples_from_entry!r}")
+        # output order: "t" first, then the others as given
+        self.channels = ("t",) + tuple(c for c in channels if c != "t")
+        self.wheel_radius_m = float(wheel_radius_m)
+        self.sample_period_s = float(sample_period_s)
+        self.samples_before_entry = int(samples_before_entry)
+        self.samples_from_entry = int(samples_from_entry)
+        self.gap_tolerance = float(gap_tolerance)
+        self._i_t = 0
+        self._i_a1 = self.channels.index("alpha1")
+        self._i_a2 = self.channels.index("alpha2")
+        self.backlash_width_m = 0.0
+        self.set_backlash_width(backlash_width_m)
+        self.counts = {r: 0 for r in REASONS}
+        self.windows_captured = 0
+        self.samples_seen = 0
+        self.batches_seen = 0
+        self.last_event: Event | None = None
+        self.reset()
+
+    # ------------------------------------------------------------- state
+    @property
+    def window_length(self) -> int:
+        return self.samples_before_entry + self.samples_from_entry
+
+    @property
+    def threshold_rad(self) -> float:
+        """K2 / r, the right-hand side of inequality (1)."""
+        return self.backlash_width_m / self.wheel_radius_m
+
+    @property
+    def capturing(self) -> bool:
+        """True while a window is being captured."""
+        return self._capture is not None and self._capture.parts is not None
+
+    @property
+    def dropped_total(self) -> int:
+        return sum(v for k, v in self.counts.items() if k != "empty")
+
+    def reset(self) -> None:
+        """Forget the history and the window in progress (continuity lost)."""
+        self._tail = np.empty((0, len(self.channels)))
+        self._last_t: float | None = None
+        self._prev_inside: bool | None = None
+        self._capture: _Capture | None = None
+
+    def set_backlash_width(self, backlash_width_m: float) -> None:
+        """Change K2.  A window in progress keeps the width it started with; the next entry must
+        again be preceded by a sample outside the new zone (a change alone is not an entry)."""
+        if not _positive(backlash_width_m):
+            raise ValueError(f"backlash_width_m: must be a finite number > 0, got {backlash_width_m!r}")
+        self.backlash_width_m = float(backlash_width_m)
+        if getattr(self, "_tail", None) is not None and self._tail.shape[0]:
+            self._prev_inside = bool(self._inside(self._tail[-1:])[0])
+
+    # ------------------------------------------------------------- input
+    def push_flat(self, data, dims, data_offset: int = 0) -> list:
+        """Batch in the Float64MultiArray layout (see :func:`unpack`); a layout error is a drop."""
+        try:
+            arr, channels, _ = unpack(data, dims, data_offset)
+        except LayoutError as exc:
+            return [self.reject("layout", str(exc))]
+        return self.push(arr, channels)
+
+    def reject(self, reason: str, detail: str = "") -> Event:
+        """Record a problem found outside the detector (e.g. a message that cannot be read)."""
+        if reason not in REASONS:
+            raise ValueError(f"reason: expected one of {sorted(REASONS)}, got {reason!r}")
+        lost = self.capturing and reason != "empty"
+        if reason != "empty":
+            self.reset()
+        self.counts[reason] += 1
+        ev = Event("drop", reason, detail or REASONS[reason], window_dropped=lost)
+        self.last_event = ev
+        return ev
+
+    def push(self, array, channels: Sequence[str]) -> list:
+        """Consume one batch; returns the events (captured windows, drops) in stream order."""
+        self.batches_seen += 1
+        try:
+            x, problem = self._validate(array, channels)
+        except Exception as exc:  # never raise on bad data
+            x, problem = None, ("layout", f"unreadable batch: {type(exc).__name__}: {exc}")
+        if problem is not None:
+            return [self.reject(*problem)]
+        self.samples_seen += x.shape[0]
+        return self._consume(x)
+
+    def _validate(self, array, channels):
+        channels = tuple(str(c) for c in channels)
+        a = np.asarray(array)
+        if a.ndim != 2:
+            return None, ("layout", f"batch: expected a 2-D array (sample, channel), got shape {a.shape}")
+        if a.shape[1] != len(channels):
+            return None, ("layout", f"batch: {a.shape[1]} columns but {len(channels)} channel names")
+        if len(set(channels)) != len(channels):
+            return None, ("layout", f"batch: repeated channel name in {list(channels)}")
+        if not np.issubdtype(a.dtype, np.number) or np.issubdtype(a.dtype, np.complexfloating):
+            return None, ("layout", f"batch: expected real numbers, got dtype {a.dtype}")
+        if a.shape[0] == 0:
+            return None, ("empty", "batch with 0 samples")
+        unknown = [c for c in channels if c not in KNOWN_CHANNELS]
+        if unknown:
+            return None, ("unknown_channel", f"unknown channel {unknown[0]!r} (known: {', '.join(KNOWN_CHANNELS)})")
+        missing = [c for c in self.channels if c not in channels]
+        if missing:
+            return None, ("missing_channel", f"channel {missing[0]!r} missing (batch has {','.join(channels)})")
+        cols = [channels.index(c) for c in self.channels]
+        x = np.asarray(a[:, cols], dtype=np.float64)
+        bad = ~np.isfinite(x)
+        if bad.any():
+            r, c = np.argwhere(bad)[0]
+            return None, ("nonfinite", f"{x[r, c]!r} in channel {self.channels[c]!r} at sample {r} of the batch")
+        t = x[:, self._i_t]
+        prev = self._last_t
+        tt = t if prev is None else np.concatenate([[prev], t])
+        if tt.size > 1:
+            dt = np.diff(tt)
+            ts = self.sample_period_s
+            checks = (("out_of_order", dt < 0), ("repeated_stamp", dt == 0),
+                      ("gap", dt > self.gap_tolerance * ts), ("irregular_stamp", (dt > 0) & (dt < 0.5 * ts)))
+            first = None
+            for reason, mask in checks:
+                if mask.any():
+                    k = int(np.argmax(mask))
+                    if first is None or k < first[1]:
+                        first = (reason, k)
+            if first is not None:
+                reason, k = first
+                where = "between batches" if (prev is not None and k == 0) else "inside the batch"
+                return None, (reason, f"t {tt[k]!r} -> {tt[k + 1]!r} s (step {dt[k]:.6g} s, "
+                                      f"T_s {ts:.6g} s) {where}")
+        return x, None
+
+    # ------------------------------------------------------------- detection
+    def _inside(self, x: np.ndarray) -> np.ndarray:
+        return np.abs(x[:, self._i_a1] - x[:, self._i_a2]) < self.threshold_rad
+
+    def _consume(self, x: np.ndarray) -> list:
+        events = []
+        n = x.shape[0]
+        tail = self._tail
+        i = 0
+        while i < n:
+            if self._capture is not None:
+                cap = self._capture
+                take = min(self.window_length - cap.count, n - i)
+                if cap.parts is not None:
+                    cap.parts.append(x[i:i + take])
+                cap.count += take
+                i += take
+                self._prev_inside = bool(self._inside(x[i - 1:i])[0])
+                if cap.count == self.window_length:
+                    if cap.parts is None:  # skipped transient (short history)
+                        self._capture = None
+                    else:
+                        events.append(self._finish(cap))
+                continue
+            inside = self._inside(x[i:])
+            before = np.empty_like(inside)
+            before[1:] = inside[:-1]
+            before[0] = True if self._prev_inside is None else self._prev_inside
+            entries = np.flatnonzero(inside & ~before)
+            if entries.size == 0:
+                self._prev_inside = bool(inside[-1])
+                break
+            k = i + int(entries[0])
+            hist = np.concatenate([tail, x[:k]])[-self.samples_before_entry:]
+            if hist.shape[0] < self.samples_before_entry:
+                ev = Event("drop", "short_history",
+                           f"entry at t = {float(x[k, self._i_t])!r} s with {hist.shape[0]} of "
+                           f"{self.samples_before_entry} history samples")
+                self.counts["short_history"] += 1
+                self.last_event = ev
+                events.append(ev)
+                # the transient of this entry is not captured; it still owns its samples, so that
+                # a bounce back into the zone is not taken for a new entry
+                self._capture = _Capture(None, self.samples_before_entry, float(x[k, self._i_t]),
+                                         self.backlash_width_m)
+            else:
+                self._capture = _Capture([hist], hist.shape[0], float(x[k, self._i_t]), self.backlash_width_m)
+            i = k
+        self._tail = np.concatenate([tail, x])[-self.samples_before_entry:]
+        self._last_t = float(x[-1, self._i_t])
+        return events
+
+    def _finish(self, cap: _Capture) -> Event:
+        self._capture = None
+        self.windows_captured += 1
+        data = np.concatenate(cap.parts)
+        w = Window(data, self.channels, self.samples_before_entry, cap.entry_time_s, cap.backlash_width_m,
+                   self.wheel_radius_m, self.sample_period_s, self.windows_captured)
+        ev = Event("window", detail=f"window {w.window_id}: entry at t = {cap.entry_time_s:.6f} s", window=w)
+        self.last_event = ev
+        return ev
+
+
+def _positive(v) -> bool:
+    try:
+        return not isinstance(v, bool) and math.isfinite(float(v)) and float(v) > 0
+    except (TypeError, ValueError):
+        return False
+
+
+def stream_batches(array: np.ndarray, batch_size: int) -> Iterable[np.ndarray]:
+    """Cut an (n, c) stream into consecutive batches (the last one may be shorter)."""
+    if int(batch_size) < 1:
+        raise ValueError(f"batch_size: must be >= 1, got {batch_size!r}")
+    for s in range(0, array.shape[0], int(batch_size)):
+        yield array[s:s + int(batch_size)]
+
+
+def embed_windows(windows, gap_samples: int = 400, start_time_s: float = 1.0,
+                  channels: Sequence[str] = DEFAULT_CHANNELS):
+    """The continuous sample stream a drive would publish for simulated windows, back to back.
+
+    Each case is preceded by ``gap_samples`` steady-state samples (its first sample held, the angles
+    advanced at their steady speeds backwards in time, so |alpha1 - alpha2| stays outside the zone);
+    the drive clock ``t`` runs on without a break: row g has t = start_time_s + g * T_s.
+
+    Parameters
+    ----------
+    windows : jident_ros.sim.WindowSet
+    gap_samples : int >= 0
+    start_time_s : float, t of the first row
+    channels : column names ("t" plus window channels)
+
+    Returns
+    -------
+    stream : ndarray (n_cases * (gap_samples + n_window), len(channels))
+    entry_rows : list of int, the row of each case's entry sample
+    """
+    gap = int(gap_samples)
+    if gap < 0:
+        raise ValueError(f"gap_samples: must be >= 0, got {gap_samples!r}")
+    ts = float(windows.sample_period_s)
+    nw = len(windows.t)
+    per = gap + nw
+    out = np.empty((len(windows) * per, len(channels)))
+    back = (np.arange(gap) - gap) * ts  # -gap*Ts ... -Ts relative to the case's first sample
+    entry_rows = []
+    for i in range(len(windows)):
+        rows = slice(i * per, (i + 1) * per)
+        block = out[rows]
+        for j, c in enumerate(channels):
+            if c == "t":
+                continue
+            x = windows.signals[c][i]
+            col = block[:, j]
+            col[gap:] = x
+            if c == "alpha1":
+                col[:gap] = x[0] + windows.signals["omega1"][i][0] * back
+            elif c == "alpha2":
+                col[:gap] = x[0] + windows.signals["omega2"][i][0] * back
+            else:
+                col[:gap] = x[0]
+        entry_rows.append(i * per + gap + int(windows.entry_index))
+    if "t" in channels:
+        out[:, list(channels).index("t")] = start_time_s + np.arange(out.shape[0]) * ts
+    return out, entry_rows

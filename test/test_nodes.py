@@ -1,0 +1,458 @@
+"""The ROS 2 nodes: simulator -> windowing -> diagnostic over DDS, replay, bad parameters, bad input.
+
+Nodes run as separate processes (``python -m jident_ros.nodes.<x> --ros-args ...``) in the test run's
+own ROS_DOMAIN_ID (conftest ``ros_env``), each test in its own namespace; the test talks to them
+through an in-process rclpy node on its own Context.  The pattern library is built once per
+session (about 4 s).  Timeouts are generous (process start-up is 1-3 s on a loaded 2-core machine).
+"""
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+NODES = ("simulator", "windowing", "diagnostic", "replay")
+TIMEOUT = 60.0  # per wait; a healthy run needs a few seconds
+
+
+# --------------------------------------------------------------------------- without ROS
+
+
+def test_nodes_yaml_matches_the_node_defaults():
+    """config/nodes.yaml lists every parameter of every node with the node's built-in default."""
+    import importlib
+    doc = yaml.safe_load((REPO / "config" / "nodes.yaml").read_text())
+    for name in NODES:
+        mod = importlib.import_module(f"jident_ros.nodes.{name}")
+        section = doc[f"/**/{mod.NODE_NAME}"]["ros__parameters"]
+        assert section == mod.DEFAULTS, name
+
+
+def test_interfaces_doc_names_every_parameter():
+    import importlib
+    doc = (REPO / "docs" / "interfaces.md").read_text()
+    for name in NODES:
+        mod = importlib.import_module(f"jident_ros.nodes.{name}")
+        for p in mod.DEFAULTS:
+            assert f"`{p}`" in doc, f"{name}: {p}"
+
+
+def test_launch_file_compiles():
+    import py_compile
+    py_compile.compile(str(REPO / "launch" / "jident.launch.py"), doraise=True)
+
+
+def test_importing_the_nodes_needs_no_rclpy():
+    code = ("import sys, jident_ros.nodes.simulator, jident_ros.nodes.windowing, jident_ros.nodes.diagnostic, "
+            "jident_ros.nodes.replay, jident_ros.ros_io, jident_ros.windowing; "
+            "assert 'rclpy' not in sys.modules, 'rclpy imported'")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       env=dict(os.environ, PYTHONPATH=str(REPO)))
+    assert r.returncode == 0, r.stderr
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+class Proc:
+    """A node process with its output in a file."""
+
+    def __init__(self, env, tmp: Path, node: str, *ros_args: str, args: tuple = ()):
+        self.name = node
+        self.log = tmp / f"{node}-{os.getpid()}-{time.monotonic_ns()}.log"
+        self.out = open(self.log, "w")
+        # found as `ros2 run jident_ros <node>` finds it: ament index prefix + lib/jident_ros/<node>
+        from jident_ros.resources import node_command
+        cmd = node_command(node, require_index=os.environ.get("JIDENT_REQUIRE_ROS") == "1")
+        self.p = subprocess.Popen([*cmd, *args, "--ros-args", *ros_args],
+                                  env=env, cwd=tmp, stdout=self.out, stderr=subprocess.STDOUT)
+
+    def text(self) -> str:
+        if not self.out.closed:
+            self.out.flush()
+        return self.log.read_text()
+
+    def alive(self) -> bool:
+        return self.p.poll() is None
+
+    def stop(self, sig=signal.SIGTERM, timeout=20.0) -> int:
+        if self.p.poll() is None:
+            self.p.send_signal(sig)
+            try:
+                self.p.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.p.kill()
+                self.p.wait()
+        self.out.close()
+        return self.p.returncode
+
+    def wait(self, timeout=TIMEOUT) -> int:
+        self.p.wait(timeout)
+        return self.p.returncode
+
+
+def logs(*procs) -> str:
+    return "\n".join(f"--- {p.name} (rc {p.p.poll()}) ---\n{p.text()[-3000:]}" for p in procs)
+
+
+class Inbox(list):
+    """Messages received on one subscription (``.sub``: the subscription)."""
+
+    sub = None
+
+    def matched(self) -> bool:
+        return self.sub.get_publisher_count() >= 1
+
+
+class Ros:
+    """In-process test node on its own Context."""
+
+    def __init__(self, name="jident_test"):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx)
+        self.node = rclpy.create_node(name, context=self.ctx)
+        self.ex = SingleThreadedExecutor(context=self.ctx)
+        self.ex.add_node(self.node)
+
+    def collect(self, msg_type, topic, qos) -> "Inbox":
+        box = Inbox()
+        box.sub = self.node.create_subscription(msg_type, topic, box.append, qos)
+        return box
+
+    def spin_until(self, pred, timeout=TIMEOUT) -> bool:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if pred():
+                return True
+            self.ex.spin_once(timeout_sec=0.05)
+        return pred()
+
+    def close(self):
+        import rclpy
+        self.ex.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)
+
+
+def statuses(arrays, name, hardware_id):
+    return [s for a in arrays for s in a.status if s.name == name and s.hardware_id == hardware_id]
+
+
+@pytest.fixture(scope="session")
+def node_env(ros_env):
+    env = dict(ros_env)
+    env["PYTHONPATH"] = os.pathsep.join([str(REPO)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+    return env
+
+
+@pytest.fixture(scope="session")
+def library(tmp_path_factory):
+    """Pattern library of the default configuration, built once (about 4 s)."""
+    from jident_ros.config import load_method_config, load_system_config
+    from jident_ros.method.patterns import PatternLibrary
+    path = tmp_path_factory.mktemp("patterns") / "patterns.npz"
+    PatternLibrary.build(load_system_config(), load_method_config()).save(path)
+    return path
+
+
+@pytest.fixture
+def ros(ros_env):
+    r = Ros()
+    yield r
+    r.close()
+
+
+@pytest.fixture
+def procs():
+    started = []
+    yield started
+    for p in started:
+        p.stop()
+
+
+# --------------------------------------------------------------------------- the pipeline
+
+
+@pytest.fixture(scope="module")
+def pipeline(ros_env, node_env, library, tmp_path_factory):
+    """simulator -> windowing -> diagnostic (recording) on two cases, in namespace /e2e.
+
+    Returns a dict with the estimates, statuses, cases, timings and the recording."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from std_msgs.msg import Float64, Float64MultiArray
+
+    from jident_ros.ros_io import qos_diagnostics, qos_latched, qos_signals
+    tmp = tmp_path_factory.mktemp("e2e")
+    bag = tmp / "bag"
+    ns = ["-r", "__ns:=/e2e"]
+    ros = Ros("jident_test_e2e")
+    est = ros.collect(Float64, "/e2e/inertia_estimate", qos_latched(10))
+    diags = ros.collect(DiagnosticArray, "/diagnostics", qos_diagnostics())
+    cases = ros.collect(Float64MultiArray, "/e2e/drive/case", qos_latched(10))
+    signals = ros.collect(Float64MultiArray, "/e2e/drive/signals", qos_signals())
+    started = []
+    try:
+        diag = Proc(node_env, tmp, "diagnostic", *ns, "-p", f"pattern_library:={library}",
+                    "-p", f"record_dir:={bag}", "-p", "use_sim_time:=true", "-p", "stale_after_s:=0.0")
+        win = Proc(node_env, tmp, "windowing", *ns, "-p", "backlash_width_m:=0.005", "-p", "use_sim_time:=true")
+        started += [diag, win]
+        # this test hears the diagnostic node from its first estimate on
+        assert ros.spin_until(est.matched), logs(diag)
+        t0 = time.monotonic()
+        # 3 subscribers of drive/signals: the windowing node, the diagnostic node's recorder and this test
+        sim = Proc(node_env, tmp, "simulator", *ns, "-p", "cases:=zip", "-p", "inertias_kgm2:=[1.16, 1.073]",
+                   "-p", "backlash_widths_m:=[0.005]", "-p", "consistencies_pa_sn:=[0.0375]",
+                   "-p", "real_time_factor:=0.0", "-p", "wait_for_subscribers:=3", "-p", "wait_timeout_s:=60.0")
+        started.append(sim)
+        ok = ros.spin_until(lambda: len(est) >= 2 or not (diag.alive() and win.alive()), 2 * TIMEOUT)
+        elapsed = time.monotonic() - t0
+        assert ok and len(est) >= 2, logs(sim, win, diag)
+        assert sim.wait() == 0, logs(sim)
+        ros.spin_until(lambda: len(statuses(diags, "jident: inertia", "/e2e/drive")) >= 2, 10)
+        assert diag.alive() and win.alive(), logs(win, diag)
+        rc_diag = diag.stop(signal.SIGTERM)
+        rc_win = win.stop(signal.SIGINT)
+        ros.spin_until(lambda: len(cases) >= 2, 10)
+        return dict(estimates=[m.data for m in est], diags=list(diags), cases=list(cases), elapsed=elapsed,
+                    n_signals=len(signals),
+                    bag=bag, rc=(rc_diag, rc_win), logs=logs(sim, win, diag))
+    finally:
+        for p in started:
+            p.stop()
+        ros.close()
+
+
+@pytest.mark.ros
+def test_pipeline_publishes_the_true_inertia(pipeline):
+    """Two grid cases (eta_k = 0.0375, off the pattern runs) -> /inertia_estimate within 1 % of J1."""
+    est = pipeline["estimates"]
+    assert len(est) == 2, pipeline["logs"]
+    for got, true in zip(est, (1.16, 1.073)):
+        assert abs(got - true) / true < 0.01, (got, true)
+    # time from starting the simulator process to the second estimate (2 cases, 2 x 1.2 s of drive time)
+    assert pipeline["elapsed"] < 60.0
+    print(f"two estimates {est} within {pipeline['elapsed']:.1f} s of starting the simulator")
+    assert pipeline["rc"] == (0, 0), pipeline["logs"]
+
+
+@pytest.mark.ros
+def test_pipeline_diagnostics(pipeline):
+    from jident_ros.ros_io import OK, WARN, status_level, status_values
+    sts = statuses(pipeline["diags"], "jident: inertia", "/e2e/drive")
+    assert [status_level(s) for s in sts] == [OK, WARN], [s.message for s in sts]
+    for s, true in zip(sts, (1.16, 1.073)):
+        v = status_values(s)
+        assert float(v["identified_class_kgm2"]) == true and v["estimate_source"] == "gap"
+        lo, hi = map(float, v["gap_ci95_kgm2"].split())
+        assert lo < float(v["gap_j1_kgm2"]) < hi
+        for key in ("backlash_width_m", "p", "entry_time_s", "fused_class_kgm2", "fused_margin",
+                    "j1.a1", "h.a1", "margin.v2", "h.m_el", "estimate_latency_ms"):
+            assert key in v, key
+        assert len(v["h.a1"].split()) == 7
+        assert float(v["backlash_width_m"]) == 0.005 and float(v["p"]) == 2.0
+    # use_sim_time: the statuses are stamped with the drive clock (simulation starts at t = 1 s)
+    arrays = [a for a in pipeline["diags"] if any(s.hardware_id == "/e2e/drive" for s in a.status)]
+    stamps = [a.header.stamp.sec + 1e-9 * a.header.stamp.nanosec for a in arrays]
+    assert all(1.0 < t < 10.0 for t in stamps), stamps
+    # the windows' entry times are the simulator's
+    entries = [float(status_values(s)["entry_time_s"]) for s in sts]
+    published = [m.data[-1] for m in pipeline["cases"]]
+    assert entries == pytest.approx(published, abs=1e-9)
+    print("window -> inertia_estimate inside the diagnostic node [ms]:",
+          [status_values(s)["estimate_latency_ms"] for s in sts])
+
+
+@pytest.mark.ros
+def test_pipeline_recording_holds_every_message(pipeline):
+    recording = pytest.importorskip("jident_ros.recording")
+    counts = {}
+    for m in recording.read_bag(pipeline["bag"]):
+        counts[m.topic] = counts.get(m.topic, 0) + 1
+    per_case = 400 + 2048
+    batches = 2 * math.ceil(per_case / 50)
+    assert pipeline["n_signals"] == batches  # nothing lost on the way to this test either
+    assert counts.get("/e2e/drive/signals") == batches, counts
+    assert counts.get("/e2e/drive/window") == 2 and counts.get("/e2e/inertia_estimate") == 2, counts
+    assert counts.get("/diagnostics", 0) >= 2 and counts.get("/e2e/drive/case") == 2, counts
+
+
+@pytest.mark.ros
+def test_replay_gives_the_same_estimates(pipeline, node_env, library, ros, procs, tmp_path):
+    pytest.importorskip("jident_ros.recording")
+    from std_msgs.msg import Float64
+
+    from jident_ros.ros_io import qos_latched
+    est = ros.collect(Float64, "/rep/inertia_estimate", qos_latched(10))
+    ns = ["-r", "__ns:=/rep"]
+    procs.append(Proc(node_env, tmp_path, "diagnostic", *ns, "-p", f"pattern_library:={library}"))
+    procs.append(Proc(node_env, tmp_path, "windowing", *ns))
+    assert ros.spin_until(est.matched), logs(*procs)
+    rep = Proc(node_env, tmp_path, "replay", *ns, "-p", "rate:=0.0", "-p", "wait_for_subscribers:=1",
+               args=(str(pipeline["bag"]),))
+    procs.append(rep)
+    assert ros.spin_until(lambda: len(est) >= 2), logs(*procs)
+    assert rep.wait() == 0, logs(rep)
+    assert [m.data for m in est] == pipeline["estimates"]  # same samples, same numbers
+
+
+# --------------------------------------------------------------------------- bad parameters
+
+
+@pytest.mark.ros
+def test_bad_parameters_stop_the_node_with_one_line(node_env, tmp_path):
+    cases = [
+        ("windowing", ["-p", "backlash_width_m:=-1.0"], "backlash_width_m", "-1.0"),
+        ("windowing", ["-p", "load.wheel_radius_m:=0.0"], "load.wheel_radius_m", "0.0"),
+        ("windowing", ["-p", "backlash_widht_m:=0.005"], "backlash_widht_m", "0.005"),
+        ("windowing", ["-p", "channels:=[alpha1, torque]"], "channels", "torque"),
+        ("simulator", ["-p", "real_time_factor:=-2.0"], "real_time_factor", "-2.0"),
+        ("simulator", ["-p", "cases:=everything"], "cases", "everything"),
+        ("simulator", ["-p", "batch_size:=fifty"], "batch_size", "fifty"),
+        ("diagnostic", ["-p", "p:=4.0"], "p", "4.0"),
+        ("diagnostic", ["-p", "method.wavelets.a1:=nowave"], "method.wavelets.a1", "nowave"),
+        ("replay", ["-p", "rate:=1.0"], "bag", "''"),
+    ]
+    running = [(Proc(node_env, tmp_path, node, *args), name, value) for node, args, name, value in cases]
+    for proc, name, value in running:
+        rc = proc.wait(TIMEOUT)
+        out = proc.text().strip().splitlines()
+        assert rc == 2, logs(proc)
+        assert len(out) == 1, out
+        assert f"parameter {name}:" in out[0] and value in out[0], out[0]
+
+
+# --------------------------------------------------------------------------- bad input
+
+
+def _good_stream(n_cases=1):
+    from jident_ros.config import load_system_config
+    from jident_ros.sim import Case, simulate_grid
+    from jident_ros.windowing import embed_windows
+    w = simulate_grid(load_system_config(), [Case(1.16, 0.005, 0.025)][:n_cases])
+    return w, embed_windows(w, 600, start_time_s=1.0)
+
+
+def _msg(arr, channels, dims=None, offset=0):
+    from std_msgs.msg import MultiArrayDimension
+
+    from jident_ros.ros_io import multiarray_from_array
+    m = multiarray_from_array(arr, channels)
+    if dims is not None:
+        m.layout.dim = [MultiArrayDimension(label=a, size=b, stride=c) for a, b, c in dims]
+        m.layout.data_offset = offset
+    return m
+
+
+@pytest.mark.ros
+def test_bad_messages_are_reported_and_the_windowing_node_keeps_running(node_env, ros, procs, tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from std_msgs.msg import Float64MultiArray
+
+    from jident_ros.ros_io import WARN, qos_diagnostics, qos_latched, qos_signals, status_level, status_values, window_from_msg
+    from jident_ros.windowing import DEFAULT_CHANNELS
+    sim, (stream, rows) = _good_stream()
+    diags = ros.collect(DiagnosticArray, "/diagnostics", qos_diagnostics())
+    windows = ros.collect(Float64MultiArray, "/bad/drive/window", qos_latched(10))
+    pub = ros.node.create_publisher(Float64MultiArray, "/bad/drive/signals", qos_signals())
+    win = Proc(node_env, tmp_path, "windowing", "-r", "__ns:=/bad", "-p", "diagnostics_period_s:=0.0")
+    procs.append(win)
+    # the node's subscription matched ours, and its /diagnostics publisher is known to us
+    assert ros.spin_until(lambda: pub.get_subscription_count() >= 1 and
+                          ros.node.count_publishers("/diagnostics") >= 1), logs(win)
+    ros.spin_until(lambda: False, 0.5)
+    ch = list(DEFAULT_CHANNELS)
+    b = stream[:50].copy()
+    t = lambda k: stream[k:k + 50].copy()  # noqa: E731
+    nan = t(50); nan[7, ch.index("m_el")] = np.nan  # noqa: E702
+    inf = t(100); inf[3, ch.index("alpha2")] = np.inf  # noqa: E702
+    ooo = t(150); ooo[10, 0] = ooo[9, 0] - 1e-4  # noqa: E702
+    rep = t(200); rep[10, 0] = rep[9, 0]  # noqa: E702
+    k = ch.index("m_el")
+    bad = [
+        ("layout", _msg(b, ch, dims=[("sample", 50, 450)])),
+        ("layout", _msg(b, ch, dims=[("sample", 50, 450), ("t,alpha1", 2, 2)])),
+        ("nonfinite", _msg(nan, ch)),
+        ("nonfinite", _msg(inf, ch)),
+        ("empty", _msg(np.empty((0, 9)), ch)),
+        ("out_of_order", _msg(ooo, ch)),
+        ("repeated_stamp", _msg(rep, ch)),
+        (None, _msg(t(250), ch)), ("gap", _msg(t(310), ch)),  # 10 samples missing between the two
+        ("missing_channel", _msg(np.delete(t(400), k, axis=1), ch[:k] + ch[k + 1:])),
+        ("unknown_channel", _msg(np.column_stack([t(450), np.zeros(50)]), ch + ["foo"])),
+    ]
+    for _, m in bad:
+        pub.publish(m)
+    want = [r for r, _ in bad if r]
+    reported = lambda: [status_values(s).get("reason") for s in statuses(diags, "jident: windowing", "/bad/drive")]  # noqa: E731
+    assert ros.spin_until(lambda: len(reported()) >= len(want)), (reported(), logs(win))
+    assert reported() == want
+    sts = statuses(diags, "jident: windowing", "/bad/drive")
+    assert all(status_level(s) == WARN for s in sts)
+    assert status_values(sts[-1])["dropped.layout"] == "2"
+    assert win.alive(), logs(win)
+    # the node goes on: a good stream gives its window
+    for s in range(0, len(stream), 50):
+        pub.publish(_msg(stream[s:s + 50], ch))
+    assert ros.spin_until(lambda: len(windows) >= 1), logs(win)
+    w = window_from_msg(windows[0])
+    np.testing.assert_array_equal(w.column("m_el"), sim.signals["m_el"][0])
+    assert w.entry_time_s == stream[rows[0], 0] and w.window_id == 1
+    assert win.alive()
+    assert win.stop(signal.SIGTERM, timeout=10.0) == 0, logs(win)  # clean exit on SIGTERM
+
+
+@pytest.mark.ros
+def test_diagnostic_with_a_bad_or_missing_library_reports_error_and_keeps_running(node_env, library, ros, procs,
+                                                                                   tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from std_msgs.msg import Float64, Float64MultiArray
+
+    from jident_ros.method.patterns import PatternLibrary
+    from jident_ros.ros_io import (ERROR, STALE, qos_diagnostics, qos_latched, status_level, status_values,
+                                   window_to_msg)
+    from jident_ros.windowing import BacklashDetector, DEFAULT_CHANNELS
+    lib = PatternLibrary.load(library)
+    lib.metadata = dict(lib.metadata, system=dict(lib.metadata["system"], load=dict(
+        lib.metadata["system"]["load"], wheel_radius_m=0.2)), system_hash="0" * 64)
+    other = lib.save(tmp_path / "other.npz")
+    diags = ros.collect(DiagnosticArray, "/diagnostics", qos_diagnostics())
+    est = ros.collect(Float64, "/mis/inertia_estimate", qos_latched(10))
+    pub = ros.node.create_publisher(Float64MultiArray, "/mis/drive/window", qos_latched(10))
+    mis = Proc(node_env, tmp_path, "diagnostic", "-r", "__ns:=/mis", "-p", f"pattern_library:={other}")
+    gone = Proc(node_env, tmp_path, "diagnostic", "-r", "__ns:=/gone", "-p", f"pattern_library:={tmp_path / 'no.npz'}",
+                "-p", "build_if_missing:=false", "-p", "stale_after_s:=1.0")
+    procs += [mis, gone]
+    name = "jident: inertia"
+    levels = lambda ns: {status_level(s) for s in statuses(diags, name, ns)}  # noqa: E731
+    # the library error is repeated once a second, so a status published before we matched is no loss
+    assert ros.spin_until(lambda: ERROR in levels("/mis/drive") and {ERROR, STALE} <= levels("/gone/drive")), \
+        logs(mis, gone)
+    first = statuses(diags, name, "/mis/drive")[0]
+    assert status_level(first) == ERROR and "wheel_radius_m" in first.message
+    g0 = [s for s in statuses(diags, name, "/gone/drive") if status_level(s) == ERROR][0]
+    assert "missing" in g0.message and "no.npz" in g0.message
+    assert sum("wheel_radius_m" in line for line in mis.text().splitlines()) == 1  # one log line
+    # a window still gets its gap estimate, flagged ERROR because the library is unusable
+    sim, (stream, rows) = _good_stream()
+    det = BacklashDetector(0.005, 0.1, 5e-4)
+    (ev,) = det.push(stream, DEFAULT_CHANNELS)
+    assert ros.spin_until(lambda: pub.get_subscription_count() >= 1)
+    pub.publish(window_to_msg(ev.window))
+    assert ros.spin_until(lambda: est), logs(mis)
+    assert ros.spin_until(lambda: any("estimate_source" in status_values(s)
+                                      for s in statuses(diags, name, "/mis/drive"))), logs(mis)
+    (s,) = [s for s in statuses(diags, name, "/mis/drive") if "estimate_source" in status_values(s)]
+    assert status_level(s) == ERROR and abs(est[0].data - 1.16) < 0.01
+    assert status_values(s)["estimate_source"] == "gap"
+    assert mis.alive() and gone.alive(), logs(mis, gone)
