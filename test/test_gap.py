@@ -125,3 +125,35 @@ def test_verdict_prefers_the_gap_and_flags_between_classes():
     v = fuse_verdict(classes, {"a1": _answer("a1", 3, 2.0)}, None, None, "no gap")
     assert v.source == "image" and v.inertia_kgm2 == 1.073 and v.reason == "no gap"
     assert nearest_class(1.0, classes) == 4
+
+
+def test_steady_state_window_is_refused_not_fitted():
+    """A window without a free acceleration (steady state taken for an entry, e.g. a wrong K2) gives
+    NoGapError, never a wild J1 (seen once: 5293 kg m^2 from a spurious window)."""
+    from jident_ros.config import load_system_config
+    from jident_ros.sim import Case, simulate_grid
+    system = load_system_config()
+    w = simulate_grid(system, [Case(1.16, 0.005, 0.0375)])
+    data = {k: v[0] for k, v in w.signals.items()}
+    r = system.load.wheel_radius_m
+    # |alpha1 - alpha2| = 0.058 rad in steady state: with K2 = 0.01 m (threshold 0.1 rad) the whole
+    # window is "inside", and there is no re-contact
+    with pytest.raises(NoGapError, match="no re-contact"):
+        estimate_inertia(data, 10, 0.01, r, w.sample_period_s)
+    # without angles the steady state has no acceleration to fit
+    steady = {k: data[k][:40].copy() for k in ("a1", "m_el")}
+    steady["a1"] = np.abs(steady["a1"]) + 1e-3
+    with pytest.raises(NoGapError, match="no re-contact"):
+        estimate_inertia(steady, 5, 0.005, r, w.sample_period_s)
+
+
+def test_fit_drowned_in_noise_is_refused():
+    """Accelerometer noise far above the gap's acceleration (about 17 m/s^2): the standard error exceeds
+    MAX_RELATIVE_STD_ERROR of J1 and the window is refused with the reason; moderate noise passes."""
+    from jident_ros.method.gap import MAX_RELATIVE_STD_ERROR
+    w, e, width = single_mass_window(1.16, seed=3, acc_noise=2.0)
+    g = estimate_inertia(w, e, width, R, TS)
+    assert g.std_error_kgm2 < MAX_RELATIVE_STD_ERROR * g.inertia_kgm2
+    w, e, width = single_mass_window(1.16, seed=3, acc_noise=200.0)
+    with pytest.raises(NoGapError, match="undetermined"):
+        estimate_inertia(w, e, width, R, TS)

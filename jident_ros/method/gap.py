@@ -43,6 +43,11 @@ from scipy import stats
 GAP_QUADRATIC_MIN = 12
 
 
+#: A gap fit whose standard error exceeds this fraction of J1 is refused (NoGapError): such a
+#: window carries no free acceleration (e.g. a steady state mistaken for an entry).
+MAX_RELATIVE_STD_ERROR = 0.25
+
+
 class NoGapError(ValueError):
     """The window holds no usable backlash gap."""
 
@@ -88,7 +93,11 @@ def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_
         if not inside[0]:
             raise NoGapError(f"no backlash gap: |alpha1 - alpha2| = {rel[entry_index]:.4g} rad at the entry sample "
                              f"is not below K2/r = {backlash_width_m / wheel_radius_m:.4g} rad")
-        end = entry_index + (int(np.argmin(inside)) if not inside.all() else inside.size)
+        if inside.all():
+            raise NoGapError(f"no re-contact: |alpha1 - alpha2| stays below K2/r = "
+                             f"{backlash_width_m / wheel_radius_m:.4g} rad to the end of the window (a wrong K2, "
+                             f"or not a backlash entry)")
+        end = entry_index + int(np.argmin(inside))
         how = "angles"
     else:
         if "a1" in window:
@@ -102,7 +111,10 @@ def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_
         if not a0 > 0:
             raise NoGapError(f"no backlash gap: the drive does not accelerate at the entry sample (a1 = {a0:.4g})")
         below = acc[entry_index:] < drop * a0
-        end = entry_index + (int(np.argmax(below)) if below.any() else below.size)
+        if not below.any():
+            raise NoGapError(f"no re-contact: the acceleration never drops below {drop:g} x its entry value "
+                             f"to the end of the window (not a backlash entry?)")
+        end = entry_index + int(np.argmax(below))
         end -= 1  # the flanks meet between samples: the last sample before the drop may already carry load
         how = "signature"
     if end - entry_index < min_samples:
@@ -168,6 +180,9 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         raise ValueError(f"method: expected 'acceleration' or 'speed', got {method!r}")
     if not np.isfinite(j) or j <= 0:
         raise NoGapError(f"gap fit gave a non-physical J1 = {j!r}")
+    if not se <= MAX_RELATIVE_STD_ERROR * j:
+        raise NoGapError(f"gap fit undetermined: J1 = {j:.4g} kg m^2 with standard error {se:.3g} kg m^2 "
+                         f"(> {MAX_RELATIVE_STD_ERROR:.0%}); the window shows no free acceleration of the motor")
     half = float(stats.t.ppf(0.975, max(dof, 1))) * se
     return GapEstimate(j, se, (j - half, j + half), float(np.sqrt(np.mean(res ** 2))), start, end, method, how)
 
