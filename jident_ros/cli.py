@@ -2,6 +2,7 @@
 
     jident simulate --j1 1.073 --backlash 0.005 --eta 0.025 --out case.npz --plot case.png
     jident simulate --grid --out grid.npz
+    jident diagnose out/run1 --json out/run1.json
     jident info
 """
 from __future__ import annotations
@@ -192,6 +193,36 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
+def cmd_diagnose(args) -> int:
+    """Diagnose every backlash entry of a recording as the windowing + diagnostic nodes do (offline.py)."""
+    from .config import load_method_config
+    from .offline import TABLE_HEADER, diagnose_recording, format_window_line, summary_line, write_json
+    system = load_system_config(args.config)
+    method = load_method_config(args.method_config)
+    log = (lambda text: None) if args.quiet else (lambda text: print(f"jident diagnose: {text}", file=sys.stderr,
+                                                                     flush=True))
+    header_printed = False
+
+    def show(window):
+        nonlocal header_printed
+        if not header_printed:
+            print(TABLE_HEADER)
+            header_printed = True
+        print(format_window_line(window), flush=True)
+
+    result = diagnose_recording(args.recording, system=system, method=method, p=args.p, library_path=args.library,
+                                gap_method=args.gap_method, image_method=not args.no_image,
+                                backlash_width_m=args.backlash_width_m, signals_topic=args.topic, log=log,
+                                on_window=show)
+    if args.json:
+        write_json(result, args.json)
+    print(summary_line(result) + (f"; JSON: {args.json}" if args.json else ""))
+    if not result.windows:
+        print(f"jident diagnose: no backlash entry found in {result.signals_topic}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="jident", description="Identify the inertia J1 of an induction-motor drive "
                 "from its backlash-zone transient (offline tools).")
@@ -228,6 +259,22 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     e.add_argument("--quiet", action="store_true")
     e.set_defaults(func=cmd_evaluate)
+    g = sub.add_parser("diagnose", help="diagnose every backlash entry of a recording (drive/signals) as the "
+                       "windowing and diagnostic nodes do, without ROS")
+    g.add_argument("recording", help="bag directory or .mcap file (e.g. a diagnostic node's record_dir)")
+    g.add_argument("--p", type=_positive("--p"), default=2.0, help="KHM exponent p, one of method.p_values (default 2)")
+    g.add_argument("--library", help="pattern library .npz (default: build-patterns' default path; built when missing)")
+    g.add_argument("--gap-method", choices=("auto", "acceleration", "speed", "off"), default="auto",
+                   help="gap estimator (default auto: acceleration fit when a1 is recorded, else speed)")
+    g.add_argument("--no-image", action="store_true", help="skip the paper's image method (gap estimate only)")
+    g.add_argument("--backlash-width-m", type=_positive("--backlash-width-m"),
+                   help="K2 of inequality (1), m (default: the recording's drive/backlash_width, else 0.005)")
+    g.add_argument("--topic", help="the drive/signals topic (default: the recording's one topic ending in drive/signals)")
+    g.add_argument("--json", metavar="OUT", help="also write every window's diagnosis to this JSON file")
+    g.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    g.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
+    g.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    g.set_defaults(func=cmd_diagnose)
     sub.add_parser("salvage", help="recover every complete chunk of a truncated MCAP recording "
                    "(jident salvage <truncated.mcap> <out_dir>)", add_help=False)
     sub.add_parser("demo", help="end-to-end demo: simulator, windowing and diagnostic nodes over DDS on a few "

@@ -248,19 +248,32 @@ def test_pipeline_publishes_the_true_inertia(pipeline):
 
 @pytest.mark.ros
 def test_pipeline_diagnostics(pipeline):
-    from jident_ros.ros_io import OK, WARN, status_level, status_values
+    from jident_ros.ros_io import WARN, status_level, status_values
     sts = statuses(pipeline["diags"], "jident: inertia", "/e2e/drive")
-    assert [status_level(s) for s in sts] == [OK, WARN], [s.message for s in sts]
+    # the fused verdict (jident_ros.diagnosis): both windows are WARN. The first is the nominal class by
+    # the gap, but at eta_k = 0.0375 (off the pattern runs) the image method's margin-weighted vote picks
+    # another class: a disagreement is a WARN. The second deviates (1.073).
+    assert [status_level(s) for s in sts] == [WARN, WARN], [s.message for s in sts]
+    assert "nominal class 1.16" in sts[0].message and "image method disagrees" in sts[0].message, sts[0].message
+    assert "deviates from the nominal" in sts[1].message, sts[1].message
+    assert status_values(sts[0])["verdict_agree"] == "false"
     for s, true in zip(sts, (1.16, 1.073)):
         v = status_values(s)
         assert float(v["identified_class_kgm2"]) == true and v["estimate_source"] == "gap"
         lo, hi = map(float, v["gap_ci95_kgm2"].split())
         assert lo < float(v["gap_j1_kgm2"]) < hi
         for key in ("backlash_width_m", "p", "entry_time_s", "fused_class_kgm2", "fused_margin",
-                    "j1.a1", "h.a1", "margin.v2", "h.m_el", "estimate_latency_ms"):
+                    "j1.a1", "h.a1", "margin.v2", "h.m_el", "estimate_latency_ms", "image_vote_class_kgm2"):
             assert key in v, key
         assert len(v["h.a1"].split()) == 7
         assert float(v["backlash_width_m"]) == 0.005 and float(v["p"]) == 2.0
+        # the verdict: the gap's class, not between classes; the image vote agrees or not
+        assert float(v["verdict_class_kgm2"]) == true and v["verdict_between_classes"] == "false"
+        assert v["verdict_agree"] in ("true", "false")
+        assert (v["verdict_agree"] == "true") == (float(v["image_vote_class_kgm2"]) == true)
+        # K2 from the relative angle at re-contact, within a sample's travel of the detector's 0.005 m
+        width, width_std = float(v["backlash_width_estimate_m"]), float(v["backlash_width_estimate_std_m"])
+        assert 0 < width_std < 0.0005 and abs(width - 0.005) < 0.0005, (width, width_std)
     # use_sim_time: the statuses are stamped with the drive clock (simulation starts at t = 1 s)
     arrays = [a for a in pipeline["diags"] if any(s.hardware_id == "/e2e/drive" for s in a.status)]
     stamps = [a.header.stamp.sec + 1e-9 * a.header.stamp.nanosec for a in arrays]
@@ -304,6 +317,22 @@ def test_replay_gives_the_same_estimates(pipeline, node_env, library, ros, procs
     assert ros.spin_until(lambda: len(est) >= 2), logs(*procs)
     assert rep.wait() == 0, logs(rep)
     assert [m.data for m in est] == pipeline["estimates"]  # same samples, same numbers
+
+
+@pytest.mark.ros
+def test_offline_diagnosis_gives_the_same_estimates(pipeline, library):
+    """`jident diagnose` on the pipeline's recording: the windowing node's detector and the diagnostic
+    node's diagnose_window, without ROS -> the live estimates exactly (live == replay == offline)."""
+    pytest.importorskip("jident_ros.recording")
+    from jident_ros.offline import diagnose_recording
+    from jident_ros.ros_io import status_level
+    result = diagnose_recording(pipeline["bag"], library_path=library)
+    assert result.signals_topic == "/e2e/drive/signals" and not result.dropped
+    assert result.estimates == pipeline["estimates"]  # same samples, same code, same numbers
+    live = statuses(pipeline["diags"], "jident: inertia", "/e2e/drive")
+    assert [w.diagnosis.message for w in result.windows] == [s.message for s in live]
+    assert [w.diagnosis.level for w in result.windows] == [status_level(s) for s in live]
+    assert [w.true_inertia_kgm2 for w in result.windows] == [1.16, 1.073]
 
 
 # --------------------------------------------------------------------------- bad parameters

@@ -1,16 +1,19 @@
 """diagnostic node: identifies J1 from every window on ``drive/window``.
 
-For each window:
+A thin ROS adapter over :func:`jident_ros.diagnosis.diagnose_window` (the same per-window diagnosis
+``jident diagnose`` runs offline on a recording).  For each window:
 
 1. the gap estimate (:func:`jident_ros.method.gap.estimate_inertia`: J1 by least squares over the
    samples inside the backlash zone) -- when there is one it is published at once on
    ``inertia_estimate`` (std_msgs/Float64, kg m^2, transient local): the best continuous J1;
 2. the paper's image method (:func:`jident_ros.method.patterns.identify_window`, KHM exponent ``p``)
-   against the pattern library; when the window has no usable gap its fused class J1 is what goes
+   against the pattern library; when the window has no usable gap, the fused verdict's class J1
+   (the margin-weighted vote of the five signals, :mod:`jident_ros.method.fusion`) is what goes
    out on ``inertia_estimate``;
-3. one DiagnosticStatus "jident: inertia" on ``/diagnostics`` (REP 107): OK when the identified
-   class is the nominal J1, WARN when it deviates, ERROR when the window could not be diagnosed or
-   the pattern library is unusable; a STALE status when no window arrived for ``stale_after_s``.
+3. one DiagnosticStatus "jident: inertia" on ``/diagnostics`` (REP 107): OK when the verdict's
+   class is the nominal J1; WARN when it deviates, lies between classes, or the image method's vote
+   disagrees with the gap; ERROR when the window could not be diagnosed or the pattern library is
+   unusable; a STALE status when no window arrived for ``stale_after_s``.
 
 With ``record_dir`` set, the windows (and with ``record_signals`` the drive's signals), the estimates
 and the statuses are logged to an MCAP recording (jident_ros.recording.BagWriter) closed on shutdown.
@@ -71,11 +74,9 @@ def _node_class():
     from rclpy.node import Node
     from std_msgs.msg import Float64, Float64MultiArray
 
-    from ..method.gap import NoGapError, estimate_inertia, nearest_class
-    from ..method.patterns import LibraryMismatch, PatternLibrary, identify_window
-    from ..method.pipeline import SIGNALS
-    from ..ros_io import (ERROR, LEVEL_NAMES, OK, STALE, WARN, LayoutError, make_status, qos_latched,
-                          qos_signals, window_from_msg)
+    from ..diagnosis import diagnose_window
+    from ..ros_io import (ERROR, LEVEL_NAMES, STALE, LayoutError, make_status, qos_latched, qos_signals,
+                          window_from_msg)
 
     class DiagnosticNode(Node):
         def __init__(self):
@@ -84,7 +85,6 @@ def _node_class():
             self.cfg, self.system, self.method = validate(declare_parameters(self, defaults))
             c = self.cfg
             self.hardware_id = drive_hardware_id(self, c["hardware_id"])
-            self.classes = tuple(self.system.grid.inertia_classes_kgm2)
             self.nominal = float(self.system.motor.nominal_inertia_kgm2)
             self.diag = DiagnosticsPublisher(self)
             self.pub_estimate = self.create_publisher(Float64, "inertia_estimate", qos_latched())
@@ -97,8 +97,6 @@ def _node_class():
             self.library, self.library_error = None, None
             if c["image_method"]:
                 self._load_library()
-            if self.library is not None:
-                self.classes = tuple(self.library.classes_kgm2)
             self.sub_window = self.create_subscription(Float64MultiArray, "drive/window", self.on_window,
                                                        qos_latched(c["window_queue_depth"]))
             if self.bag is not None and c["record_signals"]:
@@ -131,41 +129,14 @@ def _node_class():
 
         # ----------------------------------------------------------------- library
         def _load_library(self):
+            from ..diagnosis import load_pattern_library
             c = self.cfg
-            self.library_path = path = library_path(c, self.system, self.method)
+            self.library_path = library_path(c, self.system, self.method)
             log = self.get_logger()
-            try:
-                self.library = PatternLibrary.load(path, self.system, self.method)
-                log.info(f"pattern library {path}")
-                return
-            except FileNotFoundError as exc:
-                if not c["build_if_missing"]:
-                    self.library_error = f"pattern library missing: {exc}"
-                    log.error(self.library_error)
-                    return
-            except LibraryMismatch as exc:
-                self.library_error = f"pattern library unusable: {exc}"
+            self.library, self.library_error = load_pattern_library(
+                self.library_path, self.system, self.method, c["build_if_missing"], log=log.info, warn=log.warning)
+            if self.library_error:
                 log.error(self.library_error)
-                return
-            log.info(f"pattern library {path} not found: building it ({len(self.classes)} J1 classes x "
-                     f"{len(self.system.grid.backlash_widths_m)} widths, a few seconds)")
-            t0 = time.perf_counter()
-
-            def progress(k, n):
-                log.info(f"building pattern library: signal {k}/{n} done ({time.perf_counter() - t0:.1f} s)")
-
-            try:
-                lib = PatternLibrary.build(self.system, self.method, progress=progress)
-            except Exception as exc:
-                self.library_error = f"pattern library could not be built: {type(exc).__name__}: {exc}"
-                log.error(self.library_error)
-                return
-            try:
-                lib.save(path)
-                log.info(f"pattern library built in {time.perf_counter() - t0:.1f} s, saved to {path}")
-            except OSError as exc:
-                log.warning(f"pattern library built but not saved to {path}: {exc}")
-            self.library = lib
 
         def _publish_library_error(self):
             try:
@@ -270,78 +241,19 @@ def _node_class():
                 self.get_logger().error(text)
                 self._publish_status(make_status(STATUS_NAME, ERROR, text, self.hardware_id))
                 return
-            data = win.as_dict()
-            vals = [("window_id", win.window_id), ("entry_time_s", win.entry_time_s),
-                    ("backlash_width_m", win.backlash_width_m), ("p", c["p"])]
-            problems = []
-            # 1. the gap: fast, published first
-            gap = None
-            if c["gap_method"] != "off":
-                try:
-                    gap = estimate_inertia(data, win.entry_index, win.backlash_width_m, win.wheel_radius_m,
-                                           win.sample_period_s,
-                                           method=None if c["gap_method"] == "auto" else c["gap_method"],
-                                           bearing_friction_nms_per_rad=self.system.motor.bearing_friction_nms_per_rad)
-                except NoGapError as exc:
-                    problems.append(f"gap: {exc}")
-                if gap is not None:
-                    self._publish_estimate(gap.inertia_kgm2)
-                    latency = (time.perf_counter() - t_recv) * 1e3
-                    vals += [("gap_j1_kgm2", gap.inertia_kgm2), ("gap_ci95_kgm2", list(gap.ci95_kgm2)),
-                             ("gap_std_error_kgm2", gap.std_error_kgm2), ("gap_samples", gap.n_samples),
-                             ("gap_fit", gap.method), ("gap_interval", gap.interval),
-                             ("gap_residual_rms", gap.residual_rms)]
-            # 2. the image method
-            idn = None
-            if c["image_method"]:
-                if self.library is None:
-                    problems.append(self.library_error or "no pattern library")
-                else:
-                    signals = [s for s in SIGNALS if s in data]
-                    if not signals:
-                        problems.append(f"image method: the window has none of {', '.join(SIGNALS)}")
-                    else:
-                        try:
-                            idn = identify_window(data, win.entry_index, win.backlash_width_m, self.library,
-                                                  self.method, c["p"], signals=signals)
-                        except Exception as exc:
-                            problems.append(f"image method: {type(exc).__name__}: {exc}")
-            if idn is not None:
-                vals += [("fused_class_kgm2", idn.fused_inertia_kgm2), ("fused_margin", idn.fused_margin),
-                         ("library_width_m", self.library.widths_m[idn.width_index])]
-                for s, a in idn.answers.items():
-                    vals += [(f"j1.{s}", a.inertia_kgm2), (f"h.{s}", a.h), (f"margin.{s}", a.margin)]
-            # 3. the answer
-            if gap is not None:
-                j1, source = gap.inertia_kgm2, "gap"
-                cls = self.classes[nearest_class(j1, self.classes)]
-            elif idn is not None:
-                j1, source, cls = idn.fused_inertia_kgm2, "image", idn.fused_inertia_kgm2
-                self._publish_estimate(j1)
-                latency = (time.perf_counter() - t_recv) * 1e3
+            # the gap estimate goes out on inertia_estimate (on_estimate) before the image method runs
+            d = diagnose_window(win.as_dict(), win.entry_index, win.backlash_width_m, win.wheel_radius_m,
+                                win.sample_period_s, library=self.library, system=self.system, method=self.method,
+                                p=c["p"], gap_method=c["gap_method"], image_method=c["image_method"],
+                                nominal_kgm2=self.nominal, library_error=self.library_error or "",
+                                window_id=win.window_id, entry_time_s=win.entry_time_s,
+                                on_estimate=self._publish_estimate, started_at=t_recv)
+            if d.diagnosed:
+                self.get_logger().info(f"window {win.window_id} (entry t = {win.entry_time_s:.4f} s): {d.message} "
+                                       f"[{LEVEL_NAMES[d.level]}]")
             else:
-                text = "window could not be diagnosed: " + "; ".join(problems)
-                self.get_logger().error(text)
-                self._publish_status(make_status(STATUS_NAME, ERROR, text, self.hardware_id, vals))
-                return
-            deviation = (cls - self.nominal) / self.nominal * 100.0
-            if self.library_error and c["image_method"]:
-                level = ERROR
-                text = f"J1 = {j1:.5g} kg m^2 (from the gap only): {self.library_error}"
-            elif cls == self.nominal:
-                level, text = OK, f"J1 = {j1:.5g} kg m^2: nominal class {cls:g}"
-            else:
-                level = WARN
-                text = f"J1 = {j1:.5g} kg m^2: class {cls:g} deviates from the nominal {self.nominal:g} by {deviation:+.1f} %"
-            vals = [("identified_class_kgm2", cls), ("inertia_estimate_kgm2", j1), ("estimate_source", source),
-                    ("nominal_kgm2", self.nominal), ("deviation_percent", deviation)] + vals
-            vals += [("estimate_latency_ms", latency),
-                     ("processing_ms", (time.perf_counter() - t_recv) * 1e3)]
-            if problems:
-                vals.append(("problems", "; ".join(problems)))
-            self.get_logger().info(f"window {win.window_id} (entry t = {win.entry_time_s:.4f} s): {text} "
-                                   f"[{LEVEL_NAMES[level]}]")
-            self._publish_status(make_status(STATUS_NAME, level, text, self.hardware_id, vals))
+                self.get_logger().error(d.message)
+            self._publish_status(make_status(STATUS_NAME, d.level, d.message, self.hardware_id, d.values))
 
         # ----------------------------------------------------------------- stale
         def on_timer(self):
