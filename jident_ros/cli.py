@@ -150,20 +150,42 @@ def default_library_path(system, method) -> Path:
 
 
 def cmd_build_patterns(args) -> int:
+    """Build the pattern library from simulations (default) or from calibration recordings with known J1."""
     from .method.patterns import PatternLibrary
+    if not args.from_recordings and (args.label or args.backlash_width_m is not None):
+        raise CliError("--label and --backlash-width-m need --from-recordings")
     system = load_system_config(args.config)
     method = _method_config(args)
     out = Path(args.out) if args.out else default_library_path(system, method)
-    update, close = _progress(len(method.wavelets), "pattern signals", not args.quiet)
     t0 = time.perf_counter()
-    try:
-        lib = PatternLibrary.build(system, method, progress=update)
-    finally:
-        close()
+    if args.from_recordings:
+        from .method.calibration import library_from_labelled_windows, parse_labels, pattern_grid, read_recordings
+        labels = parse_labels(args.label or [], args.from_recordings)
+        log = (lambda text: None) if args.quiet else (
+            lambda text: print(f"jident build-patterns: {text}", file=sys.stderr, flush=True))
+        windows, recordings = read_recordings(args.from_recordings, system, labels=labels,
+                                              backlash_width_m=args.backlash_width_m, log=log)
+        classes, widths, _, _ = pattern_grid(windows)   # checked before the features are computed
+        log(f"{len(windows)} windows -> J1 classes {', '.join(f'{c:g}' for c in classes)} kg m^2 x "
+            f"widths {', '.join(f'{w:g}' for w in widths)} m")
+        update, close = _progress(len(method.wavelets), "pattern signals", not args.quiet)
+        try:
+            lib = library_from_labelled_windows(windows, system, method, progress=update, recordings=recordings)
+        finally:
+            close()
+        n_windows = sum(map(sum, lib.metadata["pattern_window_counts"]))
+        source = f"from {n_windows} windows of {len(args.from_recordings)} recording(s)"
+    else:
+        update, close = _progress(len(method.wavelets), "pattern signals", not args.quiet)
+        try:
+            lib = PatternLibrary.build(system, method, progress=update)
+        finally:
+            close()
+        source = "from simulations"
     lib.save(out)
     if not args.quiet:
         print(f"pattern library: {len(lib.classes_kgm2)} J1 classes x {len(lib.widths_m)} widths x "
-              f"{len(lib.signals)} signals x p in {list(lib.p_values)} ({method.variant}) built in "
+              f"{len(lib.signals)} signals x p in {list(lib.p_values)} ({method.variant}) built {source} in "
               f"{time.perf_counter() - t0:.1f} s -> {out}")
     return 0
 
@@ -242,7 +264,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--config", help="system config YAML (default: config/system.yaml)")
     s.add_argument("--quiet", action="store_true")
     s.set_defaults(func=cmd_simulate)
-    b = sub.add_parser("build-patterns", help="build the pattern library (eta_k = 0.025 runs)")
+    b = sub.add_parser("build-patterns", help="build the pattern library (simulated eta_k = 0.025 runs, or "
+                       "calibration recordings with known J1: --from-recordings)")
+    b.add_argument("--from-recordings", nargs="+", metavar="REC",
+                   help="build from these calibration recordings (bag directories or .mcap files; "
+                   "docs/recording.md, 'Calibration recordings') instead of simulations")
+    b.add_argument("--label", action="append", metavar="REC=J1",
+                   help="J1 in kg m^2 of every window of recording REC (repeatable; default: the recording's "
+                   "drive/case or drive/true_inertia messages)")
+    b.add_argument("--backlash-width-m", type=_positive("--backlash-width-m"),
+                   help="K2 of the recordings, m (default: their drive/backlash_width messages)")
     b.add_argument("--out", help="library file (default: ~/.cache/jident_ros/patterns-<hash>.npz)")
     b.add_argument("--p", type=_positive("--p"), action="append", help="KHM exponent p (repeatable; default: config)")
     b.add_argument("--variant", choices=("paper", "load_scaled"), help="method variant (default: config)")
