@@ -30,11 +30,8 @@ from .diagnosis import GAP_METHODS, WindowDiagnosis, diagnose_window, load_patte
 from .ros_io import ERROR, LEVEL_NAMES
 from .windowing import REQUIRED_CHANNELS, BacklashDetector, LayoutError, pack, unpack
 
-SIGNALS_TOPIC = "drive/signals"
-WIDTH_TOPIC = "drive/backlash_width"
-TRUE_INERTIA_TOPIC = "drive/true_inertia"
-CASE_TOPIC = "drive/case"
-DRIVE_TOPICS = (SIGNALS_TOPIC, WIDTH_TOPIC, TRUE_INERTIA_TOPIC, CASE_TOPIC)
+from .windowing import (CASE_TOPIC, DRIVE_TOPICS, SIGNALS_TOPIC, TRUE_INERTIA_TOPIC, WIDTH_TOPIC,
+                        topic_matches as _matches)
 
 
 class OfflineError(ValueError):
@@ -135,10 +132,6 @@ def _json_value(v: Any) -> Any:
     if isinstance(v, (float, np.floating)):
         return float(v) if math.isfinite(float(v)) else None
     return v
-
-
-def _matches(topic: str, relative: str) -> bool:
-    return topic == relative or topic == "/" + relative or topic.endswith("/" + relative)
 
 
 def _read_drive_messages(path) -> tuple[list, list]:

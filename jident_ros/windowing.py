@@ -36,6 +36,19 @@ import numpy as np
 
 from .sim.simulate import CHANNELS
 
+#: Relative names of the drive's topics (docs/interfaces.md), as recordings hold them under any namespace.
+SIGNALS_TOPIC = "drive/signals"
+WIDTH_TOPIC = "drive/backlash_width"
+TRUE_INERTIA_TOPIC = "drive/true_inertia"
+CASE_TOPIC = "drive/case"
+DRIVE_TOPICS = (SIGNALS_TOPIC, WIDTH_TOPIC, TRUE_INERTIA_TOPIC, CASE_TOPIC)
+
+
+def topic_matches(topic: str, relative: str) -> bool:
+    """True when a recorded (absolute) topic name is ``relative`` in some namespace
+    (``/press3/drive/signals`` matches ``drive/signals``)."""
+    return topic == relative or topic == "/" + relative or topic.endswith("/" + relative)
+
 #: Label of dim[0] (rows = samples).
 SAMPLE_LABEL = "sample"
 #: Channel names a batch may carry ("t" = drive clock, s).

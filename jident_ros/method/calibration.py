@@ -44,11 +44,8 @@ from . import normalise as nz
 from .patterns import PatternLibrary, library_metadata
 from .pipeline import SIGNALS, MethodConfig, batch_features, pre_entry_reference
 
-SIGNALS_TOPIC = "drive/signals"
-WIDTH_TOPIC = "drive/backlash_width"
-TRUE_INERTIA_TOPIC = "drive/true_inertia"
-CASE_TOPIC = "drive/case"
-DRIVE_TOPICS = (SIGNALS_TOPIC, WIDTH_TOPIC, TRUE_INERTIA_TOPIC, CASE_TOPIC)
+from ..windowing import (CASE_TOPIC, DRIVE_TOPICS, SIGNALS_TOPIC, TRUE_INERTIA_TOPIC, WIDTH_TOPIC,
+                         topic_matches as _matches)
 #: Significant digits to which J1 labels and widths are compared when grouping windows.
 LABEL_DIGITS = 12
 
@@ -92,10 +89,6 @@ class LabelledWindow:
 def _key(x: float) -> float:
     """A label rounded to LABEL_DIGITS significant digits (so 1.073 typed and 1.073 recorded group together)."""
     return float(f"{float(x):.{LABEL_DIGITS}g}")
-
-
-def _matches(topic: str, relative: str) -> bool:
-    return topic == relative or topic == "/" + relative or topic.endswith("/" + relative)
 
 
 def _positive_number(v) -> bool:
