@@ -27,10 +27,9 @@ from typing import Any, Callable, Optional, Sequence
 import numpy as np
 
 from .diagnosis import GAP_METHODS, WindowDiagnosis, diagnose_window, load_pattern_library
+from .recorded import DriveReplay, read_drive_messages
 from .ros_io import ERROR, LEVEL_NAMES
-from .windowing import REQUIRED_CHANNELS, BacklashDetector, LayoutError, pack, unpack
-
-from .windowing import (CASE_TOPIC, DRIVE_TOPICS, SIGNALS_TOPIC, TRUE_INERTIA_TOPIC, WIDTH_TOPIC,
+from .windowing import (DRIVE_TOPICS, REQUIRED_CHANNELS, SIGNALS_TOPIC, WIDTH_TOPIC, BacklashDetector, pack,
                         topic_matches as _matches)
 
 
@@ -134,22 +133,6 @@ def _json_value(v: Any) -> Any:
     return v
 
 
-def _read_drive_messages(path) -> tuple[list, list]:
-    """(drive-topic messages as (topic, type, raw CDR), every topic name) of a recording."""
-    from .recording import RecordingError, read_bag
-    kept, seen = [], set()
-    try:
-        for topic, msg_type, _, raw in read_bag(path, raw=True):
-            seen.add(topic)
-            if any(_matches(topic, rel) for rel in DRIVE_TOPICS):
-                kept.append((topic, msg_type, raw))
-    except RecordingError as exc:
-        raise OfflineError(f"recording {exc}") from None
-    except OSError as exc:
-        raise OfflineError(f"recording {path}: {exc.strerror or exc}") from None
-    return kept, sorted(seen)
-
-
 def _float_data(msg, topic: str) -> float:
     v = float(msg.data)
     if not math.isfinite(v) or v <= 0:
@@ -196,7 +179,7 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
         raise OfflineError(f"p: must be one of method.p_values {[float(q) for q in method.p_values]}, got {p!r}")
     if backlash_width_m is not None and not (math.isfinite(backlash_width_m) and backlash_width_m > 0):
         raise OfflineError(f"backlash_width_m: must be a finite number > 0, got {backlash_width_m!r}")
-    messages, all_topics = _read_drive_messages(path)
+    messages, all_topics = read_drive_messages(path, OfflineError)
     found = sorted({t for t, _, _ in messages if _matches(t, SIGNALS_TOPIC)})
     if signals_topic is not None:
         if signals_topic not in found:
@@ -242,80 +225,33 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
         if result.library_error:
             log(f"{result.library_error}; windows are diagnosed from the gap only (level ERROR)")
 
-    sampling = system.sampling
-    ts = float(sampling.sample_period_s)
-    detector = None
-    cases = []           # (entry_time_s, true J1) from drive/case
-    truth = []           # (t of the first sample after the message, true J1) from drive/true_inertia
-    pending_truth = None
+    ts = float(system.sampling.sample_period_s)
 
-    def true_inertia(entry_t):
-        for t_case, j in cases:
-            if abs(t_case - entry_t) <= 0.5 * ts:
-                return j
-        best = None
-        for t_from, j in truth:
-            if t_from <= entry_t + 0.5 * ts:
-                best = j
-        return best
+    def first_layout_error(topic_name, reason):
+        raise OfflineError(f"{topic_name}: the first message is not in the drive/signals layout ({reason})")
 
-    for topic_name, msg_type, raw in messages:
-        if topic_name == names[WIDTH_TOPIC]:
-            if follow_width:
-                w = _float_data(decode(topic_name, msg_type, raw), topic_name)
-                if detector is not None and w != detector.backlash_width_m:
-                    detector.set_backlash_width(w)
-                width = w
-            continue
-        if topic_name == names[TRUE_INERTIA_TOPIC]:
-            pending_truth = float(decode(topic_name, msg_type, raw).data)
-            continue
-        if topic_name == names[CASE_TOPIC]:
-            msg = decode(topic_name, msg_type, raw)
-            try:
-                rows, cols, _ = unpack(msg.data, msg.layout.dim, msg.layout.data_offset)
-            except LayoutError as exc:
-                log(f"{topic_name}: message skipped: {exc}")
-                continue
-            if "inertia_kgm2" in cols and "entry_time_s" in cols:
-                for row in rows:
-                    cases.append((float(row[cols.index("entry_time_s")]), float(row[cols.index("inertia_kgm2")])))
-            continue
-        msg = decode(topic_name, msg_type, raw)
+    def make_detector(batch_channels, topic_name, k2):
+        return _make_detector(system, k2, channels, batch_channels, gap_tolerance, WINDOWING_DEFAULTS, topic_name)
+
+    replay = DriveReplay(names, width, follow_width, decode=decode, read_width=_float_data,
+                         read_truth=lambda msg, topic_name: float(msg.data), make_detector=make_detector,
+                         first_layout_error=first_layout_error, log=log)
+    for win in replay.windows(messages):
         try:
-            arr, batch_channels, _ = unpack(msg.data, msg.layout.dim, msg.layout.data_offset)
-        except LayoutError as exc:
-            arr, batch_channels, layout_error = None, None, str(exc)
-        if detector is None:
-            if arr is None:
-                raise OfflineError(f"{topic_name}: the first message is not in the drive/signals layout ({layout_error})")
-            detector = _make_detector(system, width, channels, batch_channels, gap_tolerance, WINDOWING_DEFAULTS,
-                                      topic_name)
-        if arr is None:
-            events = [detector.reject("layout", layout_error)]
-        else:
-            if pending_truth is not None and arr.shape[0] and "t" in batch_channels:
-                truth.append((float(arr[0, batch_channels.index("t")]), pending_truth))
-                pending_truth = None
-            events = detector.push(arr, batch_channels)
-        for ev in events:
-            if ev.kind != "window":
-                continue
-            win = ev.window
-            try:
-                d = diagnose_window(win.as_dict(), win.entry_index, win.backlash_width_m, win.wheel_radius_m,
-                                    win.sample_period_s, library=library, system=system, method=method, p=float(p),
-                                    gap_method=gap_method, image_method=image_method,
-                                    library_error=result.library_error or "", window_id=win.window_id,
-                                    entry_time_s=win.entry_time_s)
-            except Exception as exc:  # as the node: report the window, go on
-                d = WindowDiagnosis(ERROR, f"window could not be diagnosed: internal error "
-                                           f"{type(exc).__name__}: {exc}", [])
-            ow = OfflineWindow(win.window_id, win.entry_time_s, win.backlash_width_m,
-                               true_inertia(win.entry_time_s), d)
-            result.windows.append(ow)
-            if on_window is not None:
-                on_window(ow)
+            d = diagnose_window(win.as_dict(), win.entry_index, win.backlash_width_m, win.wheel_radius_m,
+                                win.sample_period_s, library=library, system=system, method=method, p=float(p),
+                                gap_method=gap_method, image_method=image_method,
+                                library_error=result.library_error or "", window_id=win.window_id,
+                                entry_time_s=win.entry_time_s)
+        except Exception as exc:  # as the node: report the window, go on
+            d = WindowDiagnosis(ERROR, f"window could not be diagnosed: internal error "
+                                       f"{type(exc).__name__}: {exc}", [])
+        ow = OfflineWindow(win.window_id, win.entry_time_s, win.backlash_width_m,
+                           replay.true_inertia(win.entry_time_s, ts)[0], d)
+        result.windows.append(ow)
+        if on_window is not None:
+            on_window(ow)
+    detector = replay.detector
     if detector is None:
         raise OfflineError(f"recording {path}: topic {topic} holds no message")
     result.samples, result.batches = detector.samples_seen, detector.batches_seen

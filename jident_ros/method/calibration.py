@@ -44,7 +44,7 @@ from . import normalise as nz
 from .patterns import PatternLibrary, library_metadata
 from .pipeline import SIGNALS, MethodConfig, batch_features, pre_entry_reference
 
-from ..windowing import (CASE_TOPIC, DRIVE_TOPICS, SIGNALS_TOPIC, TRUE_INERTIA_TOPIC, WIDTH_TOPIC,
+from ..windowing import (DRIVE_TOPICS, SIGNALS_TOPIC, TRUE_INERTIA_TOPIC, WIDTH_TOPIC,
                          topic_matches as _matches)
 #: Significant digits to which J1 labels and widths are compared when grouping windows.
 LABEL_DIGITS = 12
@@ -165,8 +165,9 @@ def read_calibration_windows(path, system, *, inertia_kgm2: Optional[float] = No
     the file and the value: missing or unreadable recording, no ``drive/signals``, channels missing, no
     K2, no backlash entry, a window without a J1 label.
     """
-    from ..recording import RecordingError, deserialize, read_bag
-    from ..windowing import BacklashDetector, LayoutError, unpack
+    from ..recording import RecordingError, deserialize
+    from ..recorded import DriveReplay, read_drive_messages
+    from ..windowing import BacklashDetector
     from ..nodes.windowing import DEFAULTS as WINDOWING_DEFAULTS
     name = str(path)
     if inertia_kgm2 is not None and not _positive_number(inertia_kgm2):
@@ -176,20 +177,11 @@ def read_calibration_windows(path, system, *, inertia_kgm2: Optional[float] = No
         raise CalibrationError(f"backlash_width_m: must be a finite number > 0, got {backlash_width_m!r}")
     if not Path(path).exists():
         raise CalibrationError(f"recording {name}: no such file or directory")
-    messages, topics = [], set()
-    try:
-        for topic, msg_type, _, raw in read_bag(path, raw=True):
-            topics.add(topic)
-            if any(_matches(topic, rel) for rel in DRIVE_TOPICS):
-                messages.append((topic, msg_type, raw))
-    except RecordingError as exc:
-        raise CalibrationError(f"recording {exc}") from None
-    except OSError as exc:
-        raise CalibrationError(f"recording {name}: {exc.strerror or exc}") from None
+    messages, topics = read_drive_messages(path, CalibrationError)
     found = sorted({t for t, _, _ in messages if _matches(t, SIGNALS_TOPIC)})
     if not found:
         raise CalibrationError(f"recording {name}: no drive/signals topic "
-                               f"(topics: {', '.join(sorted(topics)) or 'none'})")
+                               f"(topics: {', '.join(topics) or 'none'})")
     if len(found) > 1:
         raise CalibrationError(f"recording {name}: several drive/signals topics ({', '.join(found)}); "
                                f"record one drive per calibration recording")
@@ -221,73 +213,39 @@ def read_calibration_windows(path, system, *, inertia_kgm2: Optional[float] = No
 
     sampling = system.sampling
     ts = float(sampling.sample_period_s)
-    detector = None
-    cases: list = []      # (entry_time_s, J1) rows of drive/case
-    truth: list = []      # (t of the first sample after the message, J1) from drive/true_inertia
-    pending_truth = None
+
+    def first_layout_error(topic, reason):
+        raise CalibrationError(f"recording {name}: the first {topic} message is not in the "
+                               f"drive/signals layout ({reason})")
+
+    def make_detector(channels, topic, k2):
+        missing = [c for c in ("t", "alpha1", "alpha2") + SIGNALS if c not in channels]
+        if missing:
+            raise CalibrationError(f"recording {name}: {topic} lacks channel {missing[0]!r} (it carries "
+                                   f"{','.join(channels)}; inequality 1 needs t, alpha1, alpha2 and the "
+                                   f"patterns need {','.join(SIGNALS)})")
+        wanted = [c for c in WINDOWING_DEFAULTS["channels"] if c in channels]
+        return BacklashDetector(k2, system.load.wheel_radius_m, ts, channels=("t",) + tuple(wanted),
+                                samples_before_entry=sampling.samples_before_entry,
+                                samples_from_entry=sampling.samples_from_entry,
+                                gap_tolerance=WINDOWING_DEFAULTS["gap_tolerance"])
+
+    replay = DriveReplay(names, width, follow_width, decode=decode, read_width=positive_data,
+                         read_truth=positive_data, make_detector=make_detector,
+                         first_layout_error=first_layout_error, log=lambda text: log(f"{name}: {text}"))
     windows: list = []
-    widths_used = [width]
     unlabelled = None
-    for topic, msg_type, raw in messages:
-        if topic == names[WIDTH_TOPIC]:
-            if follow_width:
-                w = positive_data(decode(topic, msg_type, raw), topic)
-                if detector is not None and w != detector.backlash_width_m:
-                    detector.set_backlash_width(w)
-                width = w
-                if w not in widths_used:
-                    widths_used.append(w)
-            continue
-        if topic == names[TRUE_INERTIA_TOPIC]:
-            pending_truth = positive_data(decode(topic, msg_type, raw), topic)
-            continue
-        if topic == names[CASE_TOPIC]:
-            msg = decode(topic, msg_type, raw)
-            try:
-                rows, cols, _ = unpack(msg.data, msg.layout.dim, msg.layout.data_offset)
-            except LayoutError as exc:
-                log(f"{name}: {topic} message skipped: {exc}")
-                continue
-            if "inertia_kgm2" in cols and "entry_time_s" in cols:
-                for row in rows:
-                    cases.append((float(row[cols.index("entry_time_s")]), float(row[cols.index("inertia_kgm2")])))
-            continue
-        msg = decode(topic, msg_type, raw)
-        try:
-            arr, channels, _ = unpack(msg.data, msg.layout.dim, msg.layout.data_offset)
-        except LayoutError as exc:
-            arr, channels, layout_error = None, None, str(exc)
-        if detector is None:
-            if arr is None:
-                raise CalibrationError(f"recording {name}: the first {topic} message is not in the "
-                                       f"drive/signals layout ({layout_error})")
-            missing = [c for c in ("t", "alpha1", "alpha2") + SIGNALS if c not in channels]
-            if missing:
-                raise CalibrationError(f"recording {name}: {topic} lacks channel {missing[0]!r} (it carries "
-                                       f"{','.join(channels)}; inequality 1 needs t, alpha1, alpha2 and the "
-                                       f"patterns need {','.join(SIGNALS)})")
-            wanted = [c for c in WINDOWING_DEFAULTS["channels"] if c in channels]
-            detector = BacklashDetector(width, system.load.wheel_radius_m, ts, channels=("t",) + tuple(wanted),
-                                        samples_before_entry=sampling.samples_before_entry,
-                                        samples_from_entry=sampling.samples_from_entry,
-                                        gap_tolerance=WINDOWING_DEFAULTS["gap_tolerance"])
-        if arr is None:
-            events = [detector.reject("layout", layout_error)]
+    for win in replay.windows(messages):
+        if inertia_kgm2 is not None:
+            j1, source = float(inertia_kgm2), "label"
         else:
-            if pending_truth is not None and arr.shape[0] and "t" in channels:
-                truth.append((float(arr[0, channels.index("t")]), pending_truth))
-                pending_truth = None
-            events = detector.push(arr, channels)
-        for ev in events:
-            if ev.kind != "window":
-                continue
-            win = ev.window
-            j1, source = _label(win.entry_time_s, inertia_kgm2, cases, truth, ts, names)
-            if j1 is None:
-                unlabelled = unlabelled or win
-                continue
-            windows.append(LabelledWindow(win.as_dict(), win.entry_index, j1, win.backlash_width_m, name,
-                                          win.entry_time_s, source))
+            j1, source = replay.true_inertia(win.entry_time_s, ts)
+        if j1 is None:
+            unlabelled = unlabelled or win
+            continue
+        windows.append(LabelledWindow(win.as_dict(), win.entry_index, j1, win.backlash_width_m, name,
+                                      win.entry_time_s, source))
+    detector, widths_used = replay.detector, replay.widths_used
     if detector is None:
         raise CalibrationError(f"recording {name}: topic {found[0]} holds no message")
     drops = ", ".join(f"{r} {n}" for r, n in detector.counts.items() if n)
@@ -302,20 +260,6 @@ def read_calibration_windows(path, system, *, inertia_kgm2: Optional[float] = No
                                f"({detector.samples_seen} samples, K2 = {', '.join(f'{w:g}' for w in widths_used)} m"
                                + (f"; windowing drops: {drops})" if drops else ")"))
     return windows
-
-
-def _label(entry_t, given, cases, truth, ts, names):
-    """(J1 in kg m^2, its source) of a window entering the zone at ``entry_t`` s, or (None, "")."""
-    if given is not None:
-        return float(given), "label"
-    for t_case, j in cases:
-        if abs(t_case - entry_t) <= 0.5 * ts:
-            return j, names[CASE_TOPIC]
-    best = None
-    for t_from, j in truth:
-        if t_from <= entry_t + 0.5 * ts:
-            best = j
-    return (best, names[TRUE_INERTIA_TOPIC]) if best is not None else (None, "")
 
 
 # --------------------------------------------------------------------------- building

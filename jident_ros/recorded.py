@@ -1,0 +1,128 @@
+"""A drive recording -> its backlash-entry windows, cut the way the windowing node cuts them.
+
+Shared by ``jident diagnose`` (:mod:`jident_ros.offline`) and ``jident build-patterns
+--from-recordings`` (:mod:`jident_ros.method.calibration`): both read the drive topics of a recording
+(docs/interfaces.md), feed ``drive/signals`` batch after batch through the windowing node's own
+:class:`~jident_ros.windowing.BacklashDetector`, follow ``drive/backlash_width`` when asked, and
+look up each window's true J1 in ``drive/case`` / ``drive/true_inertia``.  The callers keep their
+own error types and messages (passed in as callables).
+
+Plain numpy; never imports rclpy.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, Iterator, Optional
+
+from .windowing import (CASE_TOPIC, DRIVE_TOPICS, TRUE_INERTIA_TOPIC, WIDTH_TOPIC, LayoutError, Window,
+                        topic_matches, unpack)
+
+
+def read_drive_messages(path, error: type) -> tuple[list, list]:
+    """(the drive-topic messages of a recording as (topic, type, raw CDR) in receive order, every topic
+    name).  An unreadable recording raises ``error`` with one line naming it."""
+    from .recording import RecordingError, read_bag
+    kept, seen = [], set()
+    try:
+        for topic, msg_type, _, raw in read_bag(path, raw=True):
+            seen.add(topic)
+            if any(topic_matches(topic, rel) for rel in DRIVE_TOPICS):
+                kept.append((topic, msg_type, raw))
+    except RecordingError as exc:
+        raise error(f"recording {exc}") from None
+    except OSError as exc:
+        raise error(f"recording {path}: {exc.strerror or exc}") from None
+    return kept, sorted(seen)
+
+
+class DriveReplay:
+    """Replays one drive's recorded topics through a backlash detector.
+
+    Parameters
+    ----------
+    names : {relative drive topic: its recorded name}, e.g. ``{"drive/signals": "/press3/drive/signals", ...}``
+    width : K2 to start with, m
+    follow_width : apply every ``drive/backlash_width`` message to the detector (as the windowing node
+        with ``backlash_width_from_topic``)
+    decode : (topic, type, raw) -> message
+    read_width, read_truth : (message, topic) -> float; may raise the caller's error
+    make_detector : (channels of the first batch, topic, K2) -> BacklashDetector; may raise
+    first_layout_error : (topic, reason) -> raises: the first batch is not in the drive/signals layout
+    log : gets one-line notes (a drive/case message that could not be read)
+
+    After :meth:`windows`: ``detector`` (None when drive/signals held no message), ``widths_used`` (m).
+    """
+
+    def __init__(self, names: dict, width: float, follow_width: bool, *, decode: Callable,
+                 read_width: Callable, read_truth: Callable, make_detector: Callable,
+                 first_layout_error: Callable, log: Callable[[str], Any] = lambda text: None):
+        self.names = names
+        self.width = float(width)
+        self.follow_width = follow_width
+        self.decode, self.read_width, self.read_truth = decode, read_width, read_truth
+        self.make_detector, self.first_layout_error, self.log = make_detector, first_layout_error, log
+        self.detector = None
+        self.widths_used = [self.width]
+        self.cases: list = []   # (entry_time_s, J1) rows of drive/case
+        self.truth: list = []   # (t of the first sample after the message, J1) from drive/true_inertia
+
+    def windows(self, messages) -> Iterator[Window]:
+        """Every window the detector captures from ``messages`` ((topic, type, raw) in receive order)."""
+        names = self.names
+        pending_truth = None
+        for topic, msg_type, raw in messages:
+            if topic == names[WIDTH_TOPIC]:
+                if self.follow_width:
+                    w = self.read_width(self.decode(topic, msg_type, raw), topic)
+                    if self.detector is not None and w != self.detector.backlash_width_m:
+                        self.detector.set_backlash_width(w)
+                    self.width = w
+                    if w not in self.widths_used:
+                        self.widths_used.append(w)
+                continue
+            if topic == names[TRUE_INERTIA_TOPIC]:
+                pending_truth = self.read_truth(self.decode(topic, msg_type, raw), topic)
+                continue
+            if topic == names[CASE_TOPIC]:
+                msg = self.decode(topic, msg_type, raw)
+                try:
+                    rows, cols, _ = unpack(msg.data, msg.layout.dim, msg.layout.data_offset)
+                except LayoutError as exc:
+                    self.log(f"{topic}: message skipped: {exc}")
+                    continue
+                if "inertia_kgm2" in cols and "entry_time_s" in cols:
+                    for row in rows:
+                        self.cases.append((float(row[cols.index("entry_time_s")]),
+                                           float(row[cols.index("inertia_kgm2")])))
+                continue
+            msg = self.decode(topic, msg_type, raw)
+            try:
+                arr, channels, _ = unpack(msg.data, msg.layout.dim, msg.layout.data_offset)
+            except LayoutError as exc:
+                arr, channels, layout_error = None, None, str(exc)
+            if self.detector is None:
+                if arr is None:
+                    self.first_layout_error(topic, layout_error)
+                self.detector = self.make_detector(channels, topic, self.width)
+            if arr is None:
+                events = [self.detector.reject("layout", layout_error)]
+            else:
+                if pending_truth is not None and arr.shape[0] and "t" in channels:
+                    self.truth.append((float(arr[0, channels.index("t")]), pending_truth))
+                    pending_truth = None
+                events = self.detector.push(arr, channels)
+            for ev in events:
+                if ev.kind == "window":
+                    yield ev.window
+
+    def true_inertia(self, entry_time_s: float, sample_period_s: float) -> tuple[Optional[float], str]:
+        """(J1 in kg m^2, the topic it came from) of the window entering the zone at ``entry_time_s``:
+        the drive/case row with that entry time (within T_s/2), else the last drive/true_inertia
+        received before it; (None, "") when the recording has neither."""
+        for t_case, j in self.cases:
+            if abs(t_case - entry_time_s) <= 0.5 * sample_period_s:
+                return j, self.names[CASE_TOPIC]
+        best = None
+        for t_from, j in self.truth:
+            if t_from <= entry_time_s + 0.5 * sample_period_s:
+                best = j
+        return (best, self.names[TRUE_INERTIA_TOPIC]) if best is not None else (None, "")
