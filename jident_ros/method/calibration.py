@@ -40,8 +40,7 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
-from . import normalise as nz
-from .patterns import PatternLibrary, library_metadata
+from .patterns import PatternLibrary, h5_table, library_metadata
 from .pipeline import SIGNALS, MethodConfig, batch_features, pre_entry_reference
 
 from ..windowing import (DRIVE_TOPICS, SIGNALS_TOPIC, TRUE_INERTIA_TOPIC, WIDTH_TOPIC,
@@ -326,12 +325,7 @@ def library_from_labelled_windows(windows: Sequence[LabelledWindow], system, met
             ranges[e, s, f] = h3k3[members].mean(axis=0)
         if progress:
             progress(s + 1, ns)
-    h5 = np.zeros((len(ps), nw, ns))
-    for k in range(len(ps)):
-        for e in range(nw):
-            for s in range(ns):
-                rps = [nz.RangeParams(float(ranges[e, s, f, 0]), float(ranges[e, s, f, 1])) for f in range(nc)]
-                h5[k, e, s] = nz.h5_factor(centres[k, e, s], rps)
+    h5 = h5_table(centres, ranges)
     if recordings is None:
         recordings = _recording_summary(windows)
     meta = library_metadata(system, method)

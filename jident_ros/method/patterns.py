@@ -88,7 +88,6 @@ class PatternLibrary:
         nw, nc, ns = len(g.backlash_widths_m), len(g.inertia_classes_kgm2), len(SIGNALS)
         centres = np.zeros((len(ps), nw, ns, nc, method.n_clusters))
         ranges = np.zeros((nw, ns, nc, 2))
-        range_objs = {}
         refs = np.array([pre_entry_reference(windows.case(i), windows.entry_index) for i in order])
         for s, name in enumerate(SIGNALS):
             batch = np.stack([windows.signals[name][i] for i in order])
@@ -98,14 +97,9 @@ class PatternLibrary:
                     b = f * nw + e
                     centres[:, e, s, f] = cen[:, b]
                     ranges[e, s, f] = (rps[b].h3, rps[b].k3)
-                    range_objs[(e, s, f)] = rps[b]
             if progress:
                 progress(s + 1, ns)
-        h5 = np.zeros((len(ps), nw, ns))
-        for k in range(len(ps)):
-            for e in range(nw):
-                for s in range(ns):
-                    h5[k, e, s] = nz.h5_factor(centres[k, e, s], [range_objs[(e, s, f)] for f in range(nc)])
+        h5 = h5_table(centres, ranges)
         meta = library_metadata(system, method)
         return cls(centres, h5, ranges, ps, tuple(g.backlash_widths_m), tuple(g.inertia_classes_kgm2),
                    SIGNALS, meta)
@@ -168,6 +162,19 @@ class PatternLibrary:
             if q == float(p):
                 return k
         raise ValueError(f"p: the library has p in {list(self.p_values)}, got {p!r}")
+
+
+def h5_table(centres: np.ndarray, ranges: np.ndarray) -> np.ndarray:
+    """Eq. (34) for every pattern set: ``centres`` (n_p, n_widths, n_signals, n_classes, 7) and
+    ``ranges`` (n_widths, n_signals, n_classes, 2) holding (h3, k3) -> h5, shape (n_p, n_widths, n_signals)."""
+    n_p, nw, ns, nc = centres.shape[:4]
+    h5 = np.zeros((n_p, nw, ns))
+    for e in range(nw):
+        for s in range(ns):
+            rps = [nz.RangeParams(float(ranges[e, s, f, 0]), float(ranges[e, s, f, 1])) for f in range(nc)]
+            for k in range(n_p):
+                h5[k, e, s] = nz.h5_factor(centres[k, e, s], rps)
+    return h5
 
 
 def library_metadata(system: SystemConfig, method: MethodConfig) -> dict:
