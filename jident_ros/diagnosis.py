@@ -30,7 +30,7 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-from .method.fusion import Verdict, fuse_verdict
+from .method.fusion import BETWEEN_Z, Verdict, fuse_verdict
 from .method.gap import (GapEstimate, NoGapError, WidthEstimate, estimate_backlash_width, estimate_inertia,
                          nearest_class)
 from .method.patterns import Identification, LibraryMismatch, PatternLibrary, identify_window
@@ -38,7 +38,7 @@ from .method.pipeline import SIGNALS
 from .ros_io import ERROR, LEVEL_NAMES, OK, WARN
 
 #: Gap estimators: ``auto`` (acceleration fit when a1 is there, else speed), ``acceleration``, ``speed``, ``off``.
-GAP_METHODS = ("auto", "acceleration", "speed", "off")
+GAP_METHODS = ("auto", "acceleration", "anchored", "speed", "off")
 
 
 @dataclass
@@ -159,15 +159,17 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
             vals += [("gap_j1_kgm2", gap.inertia_kgm2), ("gap_ci95_kgm2", list(gap.ci95_kgm2)),
                      ("gap_std_error_kgm2", gap.std_error_kgm2), ("gap_samples", gap.n_samples),
                      ("gap_fit", gap.method), ("gap_interval", gap.interval),
-                     ("gap_residual_rms", gap.residual_rms)]
+                     ("gap_residual_rms", gap.residual_rms), ("gap_model_error_kgm2", gap.model_error_kgm2)]
             if "alpha1" in window_data and "alpha2" in window_data:
                 try:
-                    width = estimate_backlash_width(window_data, gap.gap_end, wheel_radius_m)
+                    width = estimate_backlash_width(window_data, gap.gap_end, wheel_radius_m, sample_period_s,
+                                                    gap.inertia_kgm2)
                 except NoGapError as exc:
                     problems.append(f"backlash width estimate: {exc}")
             if width is not None:
                 vals += [("backlash_width_estimate_m", width.width_m),
-                         ("backlash_width_estimate_std_m", width.std_m)]
+                         ("backlash_width_estimate_std_m", width.std_m),
+                         ("backlash_width_estimate_method", width.method)]
     else:
         gap_reason = "gap method off"
     # 2. the image method
@@ -207,9 +209,9 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
         level = ERROR
         text = f"J1 = {j1:.5g} kg m^2 (from the gap only): {library_error or 'no pattern library'}"
     elif verdict.between_classes:
-        lo, hi = gap.ci95_kgm2
         level = WARN
-        text = (f"J1 = {j1:.5g} kg m^2: between classes (its 95 % interval {lo:.5g} .. {hi:.5g} holds none), "
+        text = (f"J1 = {j1:.5g} ± {gap.std_error_kgm2:.2g} kg m^2: between classes (none within "
+                f"{BETWEEN_Z:g} standard errors), "
                 f"{(j1 - nominal) / nominal * 100.0:+.1f} % from the nominal {nominal:g}")
     elif cls == nominal:
         level, text = OK, f"J1 = {j1:.5g} kg m^2: nominal class {cls:g}"

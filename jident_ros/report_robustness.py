@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .method.fusion import BETWEEN_Z
 from .method.robustness import CHANNEL_SETS, PRIMARY, RobustnessResult, Sweep
 
 
@@ -242,9 +243,8 @@ def _findings(rob: RobustnessResult) -> list[str]:
             "vote cannot overrule it. Neighbouring J1 classes are 2.5 % apart, so an error above ≈ 1.25 % picks the "
             f"neighbour; the gap estimator's 95th-percentile error is {_num(g['p95'])} %, its median 95 % CI half-width "
             f"{_num(g['ci_half'])} %"
-            + (". The interval is then usually wider than the spacing of the classes, so 'between classes' is flagged "
-               f"in only {_pct(a.get('between'))} of these on-class windows although the nearest class is uncertain."
-               if g["ci_half"] > 0.0125 else "."))
+            + (f". 'Between classes' needs no class within {BETWEEN_Z:g} standard errors of the estimate; it is "
+               f"flagged in {_pct(a.get('between'))} of these on-class windows."))
     if rob.attribution:
         snr = rob.attribution[0].snr_db
         parts = {c: _pool([s for s in rob.attribution if s.noised == c]) for c in dict.fromkeys(s.noised for s in rob.attribution)}
@@ -261,7 +261,7 @@ def _findings(rob: RobustnessResult) -> list[str]:
     noisy = [s for s in rob.grid + rob.grid_extra if s.snr_db is not None]
     if noisy:
         st = _pool(noisy)
-        lines.append(f"* The gap estimator's 95 % interval is conservative: it covers J1 in {_pct(st['coverage'])} of "
+        lines.append(f"* The gap estimator's 95 % interval covers J1 in {_pct(st['coverage'])} of "
                      f"{st['n']} noisy grid windows (nominal 95 %).")
     if rob.quantisation:
         e0 = rob.grid[0].gap[PRIMARY]["gap_end"]
@@ -298,12 +298,19 @@ def _findings(rob: RobustnessResult) -> list[str]:
             s = offw[0]
             errs.update({x: float(np.nanmax(np.abs(s.width["rel_error"][s.true_width == x])))
                          for x in sorted(set(s.true_width))})
-        lines.append("* The width estimate is resolved to one sample: it takes the midpoint of the relative angle "
-                     "between the last gap sample and the first contact sample, so its error can reach half the "
-                     "relative-angle step of one sample divided by K2/r and tends to be largest for narrow zones. "
-                     "Max |error| by "
-                     "width, noise-free: " + ", ".join(f"{x:g} m {v * 100:.2f} %" for x, v in sorted(errs.items()))
-                     + ".")
+        how = clean.width["method"]
+        n_contact = int(np.sum(how == "contact"))
+        lines.append(f"* Noise-free, the width comes from the contact-torque fit in {n_contact} of {how.size} grid "
+                     "windows (the rest: the midpoint of the sample bracket around re-contact, whose error can reach "
+                     "half the relative-angle step of one sample). Max |error| by width, noise-free: "
+                     + ", ".join(f"{x:g} m {v * 100:.2f} %" for x, v in sorted(errs.items())) + ".")
+        noisy_w = [s for s in rob.grid if s.snr_db is not None and s.width is not None]
+        if noisy_w:
+            lines.append("* With noise on a1 and m_el the contact fit's uncertainty grows and the bracket answer takes "
+                         "over: contact-fit share " + ", ".join(
+                             f"{_snr_name(s)} {np.mean(s.width['method'] == 'contact') * 100:.0f} % "
+                             f"(max |error| {np.nanmax(np.abs(s.width['rel_error'])) * 100:.2f} %)" for s in noisy_w)
+                         + ".")
     return lines
 
 
@@ -339,7 +346,7 @@ def render_robustness(rob: RobustnessResult, figures: dict | None = None) -> str
         lines += ["#### (b) J1 off the seven classes", "",
                   f"Each J1 at every grid width and η_k ({n} windows per value and data set). The classes are "
                   + ", ".join(f"{c:g}" for c in sorted(rob.classes_kgm2)) + " kg m². 'between classes': the gap "
-                  "estimate is farther from its nearest class than its CI half-width and the CI holds no class.", ""]
+                  f"estimate is farther than {BETWEEN_Z:g} of its standard errors from every class.", ""]
         lines += _offgrid_j1(rob) + [""]
     if rob.offgrid_width:
         lines += ["#### (c) Backlash widths off the six", "",
@@ -390,7 +397,7 @@ def write_robustness_figures(rob: RobustnessResult, outdir: str | Path = "docs/f
     xs = [inf_x if s.snr_db is None else s.snr_db for s in rob.grid]
     extra = _by_snr(rob.grid_extra)
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.6), constrained_layout=True)
-    colours = {"angles": "C0", "no_angles": "C1", "speed": "C2"}
+    colours = {"angles": "C0", "no_angles": "C1", "speed": "C2", "anchored": "C3"}
     for key in CHANNEL_SETS:
         if key not in rob.grid[0].gap:
             continue

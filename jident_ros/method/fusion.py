@@ -6,8 +6,10 @@
 * gap: the continuous J1 with its 95 % interval (:mod:`gap`) and its nearest class.
 * verdict: the best continuous J1 is the gap estimate when there is one (it is
   physics, not pattern matching: docs/method.md), else the voted class's J1.
-  ``between_classes`` is set when the gap J1 is farther from its nearest class
-  than its interval's half-width and the interval contains no class;
+  ``between_classes`` is set when no class lies within ``between_z`` standard
+  errors of the gap J1 (default 3: a flag is an alarm, and at 1.96 standard errors
+  one on-class window in twenty would raise it; with a 95 % interval that already
+  holds no class, a 3-σ band is the stricter test; docs/method.md "Fusion");
   ``agree`` tells whether the image vote and the gap's nearest class coincide.
 Plain numpy; never imports rclpy.
 """
@@ -19,6 +21,9 @@ from typing import Optional
 import numpy as np
 
 from .gap import GapEstimate, nearest_class
+
+#: Standard errors within which a class must lie for the gap J1 to be "on" it.
+BETWEEN_Z = 3.0
 
 
 @dataclass(frozen=True)
@@ -51,16 +56,16 @@ def image_vote(answers: dict, fused_class_index: Optional[int] = None) -> Option
 
 
 def fuse_verdict(classes_kgm2, answers: dict | None = None, fused_class_index: Optional[int] = None,
-                 gap: Optional[GapEstimate] = None, gap_reason: str = "") -> Verdict:
+                 gap: Optional[GapEstimate] = None, gap_reason: str = "", between_z: float = BETWEEN_Z) -> Verdict:
     """Combine the image answers and the gap estimate of one window."""
     classes = np.asarray(classes_kgm2, dtype=float)
     img = image_vote(answers or {}, fused_class_index)
     if gap is not None:
         k = nearest_class(gap.inertia_kgm2, classes)
-        lo, hi = gap.ci95_kgm2
-        half = 0.5 * (hi - lo)
-        inside = np.any((classes >= lo) & (classes <= hi))
-        between = (abs(gap.inertia_kgm2 - classes[k]) > half) and not inside
+        se = gap.std_error_kgm2
+        if not np.isfinite(se):   # an estimate carried without its standard error: from the 95 % interval
+            se = 0.5 * (gap.ci95_kgm2[1] - gap.ci95_kgm2[0]) / 1.96
+        between = bool(abs(gap.inertia_kgm2 - classes[k]) > between_z * se)
         agree = None if img is None else bool(img == k)
         return Verdict(gap.inertia_kgm2, "gap", None if between else k, None if between else float(classes[k]),
                        bool(between), img, gap, agree, "")

@@ -20,16 +20,28 @@ Gap interval
 
 Fits
 ----
-* ``"acceleration"`` (a1 and m_el measured): m_el is smooth through the gap and
-  constant before it, so it is first estimated as m0 + b t + c t^2 (m0 = the
-  pre-entry mean, b and c fitted over the gap); then a1_k = (r/J1) m_hat_k is fitted
-  through the origin.  Anchoring on the 48 pre-entry samples keeps torque noise
-  out of the ratio.
+* ``"acceleration"`` (a1 and m_el measured; the default): one weighted least-squares
+  fit of both channels together.  Before the entry the drive is in steady state, so
+  m_el = m0 there; through the gap m_el is smooth and, because its slope is continuous
+  at the entry (the fluxes and ω1 are), it starts with zero slope:
+  m_el(t) = m0 + c2 τ^2 + c3 τ^3 (τ = time since the entry over the gap length), and
+  a1(t) = (r/J1) m_el(t).  The pre-entry m_el samples, the gap m_el samples and the gap
+  a1 samples are fitted together for (r/J1, m0, c2, c3), each channel weighted by its
+  noise variance measured on the 48 pre-entry samples (a1 = 0 there).  The a1 samples,
+  whose noise is small relative to their gap value, fix the torque's shape; the m_el
+  samples before and inside the gap fix its level — so the level is no longer
+  anchored on the 48 pre-entry samples alone (docs/method.md, "Gap estimator").
+  Uncertainty: covariance of the Gauss-Newton solution with each channel's residual
+  variance (robust to a wrong noise ratio), plus, in quadrature, the change of J1 when
+  the torque model gets a linear term too (the model-form error).
+* ``"anchored"`` (the estimator of the first release, kept for comparison): m0 = the
+  pre-entry mean, m_el ≈ m0 + b t + c t^2 fitted over the gap, then a1 = (r/J1) m_hat
+  through the origin.
 * ``"speed"`` (ω1 and m_el measured, no accelerometer): integral form, no
   differentiation: ∫_{t0}^{tk} m_el dt = J1 (ω1_k − ω1_0) + c, with c absorbing the
   noise of ω1 at the first gap sample.
-Both report J1, its standard error from the residuals, a 95 % confidence interval
-(Student t) and the residual RMS.
+All report J1, its standard error, a 95 % confidence interval (Student t) and the
+residual RMS.
 """
 from __future__ import annotations
 
@@ -39,8 +51,16 @@ import numpy as np
 from scipy import stats
 
 
-#: Gaps shorter than this fit m_el with a straight line (fewer free parameters, less noise).
+#: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
 GAP_QUADRATIC_MIN = 12
+
+#: 'acceleration' fit: gaps of at least this many samples model the gap torque as
+#: m0 + c2 τ^2 + c3 τ^3, shorter ones as m0 + c2 τ^2.
+GAP_CUBIC_MIN = 8
+
+#: 'acceleration' fit: Gauss-Newton stops when J1 changes by less than this fraction.
+GN_TOL = 1e-12
+GN_MAX_ITER = 30
 
 
 #: A gap fit whose standard error exceeds this fraction of J1 is refused (NoGapError): such a
@@ -61,7 +81,10 @@ class GapEstimate:
     inertia_kgm2 : float            J1 estimate, kg m^2
     std_error_kgm2 : float          standard error, kg m^2
     ci95_kgm2 : (float, float)      95 % confidence interval, kg m^2
-    residual_rms : float            RMS of the fit residual (N m for 'acceleration', N m s for 'speed')
+    residual_rms : float            RMS of the fit residual: of a1 expressed as torque, (a1 - (r/J1) m_hat) J1/r,
+                                    in N m for 'acceleration' and 'anchored'; N m s for 'speed'
+    model_error_kgm2 : float        'acceleration' only: |J1 with a linear torque term - J1|, included in
+                                    std_error_kgm2 (0 for the other fits)
     gap_start, gap_end : int        sample indices, end exclusive
     method : str                    'acceleration' or 'speed'
     interval : str                  'angles' or 'signature'
@@ -75,6 +98,7 @@ class GapEstimate:
     gap_end: int
     method: str
     interval: str
+    model_error_kgm2: float = 0.0
 
     @property
     def n_samples(self) -> int:
@@ -135,7 +159,25 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     if method is None:
         method = "acceleration" if "a1" in window else "speed"
     n = end - start
+    model_error = 0.0
     if method == "acceleration":
+        if "a1" not in window:
+            raise NoGapError("method 'acceleration' needs a1 (use 'speed' with omega1)")
+        friction = None
+        if bearing_friction_nms_per_rad and "omega1" in window:
+            friction = bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)[start:end]
+        fit = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction)
+        kappa = fit["kappa"]
+        if not kappa > 0:
+            raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa!r}")
+        j = wheel_radius_m / kappa
+        alt = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction,
+                         linear_term=True)
+        model_error = abs(wheel_radius_m / alt["kappa"] - j) if alt["kappa"] > 0 else np.inf
+        se = float(np.hypot(wheel_radius_m / kappa ** 2 * fit["kappa_se"], model_error))
+        res = fit["a1_residual"] / kappa
+        dof = fit["dof"]
+    elif method == "anchored":
         # m_el is smooth through the gap (the fluxes are continuous) and constant before
         # the entry (steady state): anchor it with the pre-entry mean and a quadratic in
         # time over the gap, then fit a1 = (r/J1) m_el_hat through the origin.
@@ -152,7 +194,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         if not kappa > 0:
             raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa!r}")
         j = wheel_radius_m / kappa
-        res = a - kappa * m_hat
+        res = (a - kappa * m_hat) / kappa
         dof = n - 1
         var_k = (res @ res) / dof / smm if dof > 0 else np.inf
         # uncertainty of m_hat: pre-entry mean and the quadratic's coefficients
@@ -177,14 +219,84 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         cov = (res @ res) / dof * np.linalg.inv(A.T @ A) if dof > 0 else np.full((2, 2), np.inf)
         se = float(np.sqrt(cov[0, 0]))
     else:
-        raise ValueError(f"method: expected 'acceleration' or 'speed', got {method!r}")
+        raise ValueError(f"method: expected 'acceleration', 'anchored' or 'speed', got {method!r}")
     if not np.isfinite(j) or j <= 0:
         raise NoGapError(f"gap fit gave a non-physical J1 = {j!r}")
     if not se <= MAX_RELATIVE_STD_ERROR * j:
         raise NoGapError(f"gap fit undetermined: J1 = {j:.4g} kg m^2 with standard error {se:.3g} kg m^2 "
                          f"(> {MAX_RELATIVE_STD_ERROR:.0%}); the window shows no free acceleration of the motor")
     half = float(stats.t.ppf(0.975, max(dof, 1))) * se
-    return GapEstimate(j, se, (j - half, j + half), float(np.sqrt(np.mean(res ** 2))), start, end, method, how)
+    return GapEstimate(j, se, (j - half, j + half), float(np.sqrt(np.mean(res ** 2))), start, end, method, how,
+                       float(model_error))
+
+
+def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=None,
+               linear_term: bool = False) -> dict:
+    """Weighted joint least squares of m_el (pre-entry and gap) and a1 (gap); see the module docstring.
+
+    Parameters: kappa = r/J1 and beta = (m0, c_1.., c_q) of m_hat(τ) = m0 + Σ c_i τ^p_i,
+    τ = (k - start)/n over the n gap samples, powers (2, 3) ((2,) for gaps shorter than
+    GAP_CUBIC_MIN), with a linear term added when ``linear_term``.  Model:
+    m_el[k] = m0 (k < start), m_el[k] = m_hat (gap), a1[k] = kappa (m_hat - friction[k]) (gap).
+    Returns kappa, its standard error (sandwich covariance with per-channel residual
+    variances), the a1 residual over the gap and the degrees of freedom.
+    """
+    n = end - start
+    pre = m_el[:start]
+    mg, ag = m_el[start:end], a1[start:end]
+    fr = np.zeros(n) if friction is None else np.asarray(friction, float)
+    tau = np.arange(n) / n
+    powers = (2, 3) if n >= GAP_CUBIC_MIN else (2,)
+    if linear_term:
+        powers = (1,) + powers
+    G = np.column_stack([np.ones(n)] + [tau ** q for q in powers])
+    p = G.shape[1]
+    # noise levels: pre-entry steady state (m_el = m0, a1 = 0); fall back on the gap's
+    # own m_el-only fit when there are too few pre-entry samples.  Floors keep noise-free
+    # windows finite (then both channels weigh by their size).
+    if pre.size >= 5:
+        sm = float(np.std(pre, ddof=1))
+        sa = float(np.std(a1[:start], ddof=1))
+    else:
+        cm, *_ = np.linalg.lstsq(G, mg, rcond=None)
+        sm = float(np.sqrt(np.sum((mg - G @ cm) ** 2) / max(n - p, 1)))
+        sa = sm * float(np.abs(ag).mean() / max(np.abs(mg).mean(), 1e-300))
+    sm = max(sm, 1e-9 * float(np.abs(mg).max()), 1e-300)
+    sa = max(sa, 1e-9 * float(np.abs(ag).max()), 1e-300)
+    # start: m_el alone (pre-entry rows pin m0), then kappa through the origin
+    na = pre.size
+    A = np.zeros((na + n, p))
+    A[:na, 0] = 1.0
+    A[na:] = G
+    beta, *_ = np.linalg.lstsq(A, np.concatenate([pre, mg]), rcond=None)
+    m_hat = G @ beta - fr
+    kappa = float(ag @ m_hat) / float(m_hat @ m_hat)
+    # Gauss-Newton on theta = (kappa, beta); rows whitened by the channel's noise level
+    J = np.zeros((na + 2 * n, p + 1))
+    J[:na, 1] = 1.0 / sm
+    J[na:na + n, 1:] = G / sm
+    for _ in range(GN_MAX_ITER):
+        m_hat = G @ beta
+        res = np.concatenate([(pre - beta[0]) / sm, (mg - m_hat) / sm, (ag - kappa * (m_hat - fr)) / sa])
+        J[na + n:, 0] = (m_hat - fr) / sa
+        J[na + n:, 1:] = kappa * G / sa
+        step, *_ = np.linalg.lstsq(J, res, rcond=None)
+        kappa += float(step[0])
+        beta = beta + step[1:]
+        if abs(step[0]) <= GN_TOL * abs(kappa):
+            break
+    m_hat = G @ beta
+    r_m = np.concatenate([pre - beta[0], mg - m_hat]) / sm
+    r_a = (ag - kappa * (m_hat - fr)) / sa
+    J[na + n:, 0] = (m_hat - fr) / sa
+    J[na + n:, 1:] = kappa * G / sa
+    Jm, Ja = J[:na + n], J[na + n:]
+    F_inv = np.linalg.pinv(J.T @ J)
+    s2m = float(r_m @ r_m) / max(na + n - p, 1)
+    s2a = float(r_a @ r_a) / max(n - 1, 1)
+    cov = F_inv @ (s2m * (Jm.T @ Jm) + s2a * (Ja.T @ Ja)) @ F_inv
+    return {"kappa": float(kappa), "kappa_se": float(np.sqrt(max(cov[0, 0], 0.0))), "beta": beta,
+            "a1_residual": r_a * sa, "dof": max(na - 1, 1) if na >= 5 else max(na + 2 * n - p - 1, 1)}
 
 
 def nearest_class(inertia_kgm2: float, classes_kgm2) -> int:
@@ -192,24 +304,47 @@ def nearest_class(inertia_kgm2: float, classes_kgm2) -> int:
     return int(np.argmin(np.abs(np.asarray(classes_kgm2, float) - inertia_kgm2)))
 
 
+#: Contact-torque width fit: samples after the first contact sample that it uses, and the
+#: factor by which its standard error must beat the sample bracket's to be preferred.
+CONTACT_FIT_SAMPLES = 6
+CONTACT_FIT_PREFERENCE = 3.0
+#: Relative floor of the contact fit's standard error (its model is a linear spring-damper).
+CONTACT_FIT_REL_FLOOR = 1e-3
+
+
 @dataclass(frozen=True)
 class WidthEstimate:
-    """Backlash zone width at the wheel circumference, m, with its standard uncertainty."""
+    """Backlash zone width at the wheel circumference, m, with its standard uncertainty.
+
+    method: 'contact' (the clutch-torque fit after re-contact) or 'bracket' (the midpoint of
+    the relative angles of the last gap sample and the first contact sample)."""
 
     width_m: float
     std_m: float
     recontact_index: int
+    method: str = "bracket"
 
 
-def estimate_backlash_width(window: dict, gap_end: int, wheel_radius_m: float) -> WidthEstimate:
+def estimate_backlash_width(window: dict, gap_end: int, wheel_radius_m: float, sample_period_s: float | None = None,
+                            inertia_kgm2: float | None = None) -> WidthEstimate:
     """Width from the relative angle at re-contact.
 
     The flanks meet where |alpha1 - alpha2| (measured from the zone centre, the
     reading of inequality 1) reaches K2/r, somewhere between the last gap sample
-    and the first contact sample.  Within that sample interval the relative angle
-    is nearly linear in time, and the contact instant is taken uniformly
-    distributed: width = r (|d_last| + |d_first|)/2, standard uncertainty
-    r (|d_first| - |d_last|)/sqrt(12).
+    and the first contact sample.
+
+    * 'bracket': the contact instant taken uniformly distributed in that sample
+      interval: width = r (|d_last| + |d_first|)/2, standard uncertainty
+      r (|d_first| - |d_last|)/sqrt(12).  Needs only the angles.
+    * 'contact' (with a1, m_el, the sample period and the gap's J1): after re-contact
+      the clutch torque on the motor side is T_c = J1 ((r/J1) m_el - a1)/r ∝ (r/J1) m_el - a1,
+      and a clutch in contact is a spring-damper, T_c = k_c (d - K2/r) + c_c d', with d the
+      relative angle and d' its rate (central differences).  Regressing (r/J1) m_el - a1
+      on (d, d', 1) over CONTACT_FIT_SAMPLES samples from the second contact sample on
+      (the first may hold the impact's transition) gives K2/r = -intercept/slope without
+      knowing k_c or c_c.  Used when it falls inside the bracket and its standard error
+      (delta method, floored at CONTACT_FIT_REL_FLOOR) is CONTACT_FIT_PREFERENCE times
+      smaller than the bracket's; else the bracket answer (docs/method.md, "Backlash width").
     """
     if "alpha1" not in window or "alpha2" not in window:
         raise NoGapError("backlash width: needs both angles alpha1 and alpha2")
@@ -217,5 +352,22 @@ def estimate_backlash_width(window: dict, gap_end: int, wheel_radius_m: float) -
     if not 1 <= gap_end < rel.size:
         raise NoGapError(f"backlash width: no re-contact inside the window (gap end {gap_end})")
     a, b = rel[gap_end - 1], rel[gap_end]
-    return WidthEstimate(float(wheel_radius_m * 0.5 * (a + b)), float(wheel_radius_m * abs(b - a) / np.sqrt(12.0)),
-                         int(gap_end))
+    mid, s_mid = 0.5 * (a + b), abs(b - a) / np.sqrt(12.0)
+    post = np.arange(gap_end + 1, gap_end + 1 + CONTACT_FIT_SAMPLES)
+    if ("a1" in window and "m_el" in window and sample_period_s and inertia_kgm2 and inertia_kgm2 > 0
+            and post[-1] + 1 < rel.size):
+        kappa = wheel_radius_m / inertia_kgm2
+        drop = kappa * np.asarray(window["m_el"], float)[post] - np.asarray(window["a1"], float)[post]
+        rate = (rel[post + 1] - rel[post - 1]) / (2.0 * sample_period_s)
+        A = np.column_stack([rel[post], rate, np.ones(post.size)])
+        coef, *_ = np.linalg.lstsq(A, drop, rcond=None)
+        if coef[0] > 0:
+            theta = -coef[2] / coef[0]
+            res = drop - A @ coef
+            cov = float(res @ res) / (post.size - 3) * np.linalg.pinv(A.T @ A)
+            grad = np.array([coef[2] / coef[0] ** 2, 0.0, -1.0 / coef[0]])
+            s_fit = float(np.hypot(np.sqrt(max(grad @ cov @ grad, 0.0)), CONTACT_FIT_REL_FLOOR * theta))
+            if min(a, b) <= theta <= max(a, b) and CONTACT_FIT_PREFERENCE * s_fit < s_mid:
+                return WidthEstimate(float(wheel_radius_m * theta), float(wheel_radius_m * s_fit), int(gap_end),
+                                     "contact")
+    return WidthEstimate(float(wheel_radius_m * mid), float(wheel_radius_m * s_mid), int(gap_end), "bracket")

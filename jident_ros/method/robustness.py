@@ -37,6 +37,7 @@ from .patterns import PatternLibrary, identify_window
 CHANNEL_SETS = {
     "angles": (("alpha1", "alpha2", "a1", "m_el"), "acceleration", "α1+α2+a1+m_el"),
     "no_angles": (("a1", "m_el"), "acceleration", "a1+m_el (no angles)"),
+    "anchored": (("alpha1", "alpha2", "a1", "m_el"), "anchored", "α1+α2+a1+m_el, first-release fit (pre-entry anchor)"),
     "speed": (("omega1", "m_el"), "speed", "ω1+m_el (speed fit)"),
 }
 #: The channel set whose estimate feeds the fused verdict and the width estimate.
@@ -203,7 +204,7 @@ def gap_on_windows(system: SystemConfig, windows: WindowSet, keys: Sequence[str]
     out = {}
     for key in keys:
         chans, meth, _ = CHANNEL_SETS[key]
-        est, lo, hi = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+        est, lo, hi, se = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
         n_gap, end = np.zeros(n, int), np.full(n, -1)
         failed = {}
         for i, c in enumerate(windows.cases):
@@ -214,29 +215,35 @@ def gap_on_windows(system: SystemConfig, windows: WindowSet, keys: Sequence[str]
             except NoGapError as exc:
                 failed[i] = str(exc)
                 continue
-            est[i], (lo[i], hi[i]) = g.inertia_kgm2, g.ci95_kgm2
+            est[i], (lo[i], hi[i]), se[i] = g.inertia_kgm2, g.ci95_kgm2, g.std_error_kgm2
             n_gap[i], end[i] = g.n_samples, g.gap_end
-        out[key] = {"estimate": est, "lo": lo, "hi": hi, "rel_error": (est - true) / true,
+        out[key] = {"estimate": est, "lo": lo, "hi": hi, "se": se, "rel_error": (est - true) / true,
                     "covered": np.isfinite(est) & (lo <= true) & (true <= hi), "n_gap": n_gap, "gap_end": end,
                     "failed": failed}
     return out
 
 
-def width_on_windows(system: SystemConfig, windows: WindowSet, gap_end: np.ndarray) -> dict:
-    """Backlash width from the relative angle at re-contact (needs the angles-based gap end)."""
+def width_on_windows(system: SystemConfig, windows: WindowSet, gap_end: np.ndarray, inertia=None) -> dict:
+    """Backlash width at re-contact (needs the angles-based gap end; with the gap's J1 in ``inertia``
+    and a1, m_el in the windows, the contact-torque fit of :func:`gap.estimate_backlash_width`)."""
     r = system.load.wheel_radius_m
     n = len(windows.cases)
-    est = np.full(n, np.nan)
+    est, std = np.full(n, np.nan), np.full(n, np.nan)
+    how = np.full(n, "", dtype=object)
+    chans = [k for k in ("alpha1", "alpha2", "a1", "m_el") if k in windows.signals]
     for i in range(n):
         if gap_end[i] < 0:
             continue
-        win = {k: windows.signals[k][i] for k in ("alpha1", "alpha2")}
+        win = {k: windows.signals[k][i] for k in chans}
+        j1 = None if inertia is None or not np.isfinite(inertia[i]) else float(inertia[i])
         try:
-            est[i] = estimate_backlash_width(win, int(gap_end[i]), r).width_m
+            w = estimate_backlash_width(win, int(gap_end[i]), r, windows.sample_period_s, j1)
         except NoGapError:
-            pass
+            continue
+        est[i], std[i], how[i] = w.width_m, w.std_m, w.method
     true = np.array([c.backlash_width_m for c in windows.cases])
-    return {"estimate": est, "rel_error": (est - true) / true}
+    return {"estimate": est, "std": std, "method": how, "rel_error": (est - true) / true,
+            "covered": np.isfinite(est) & (np.abs(est - true) <= 1.96 * std)}
 
 
 def image_and_verdict(system: SystemConfig, windows: WindowSet, gap: dict, library: PatternLibrary,
@@ -260,8 +267,8 @@ def image_and_verdict(system: SystemConfig, windows: WindowSet, gap: dict, libra
             used[i] = library.widths_m[ident.width_index]
         ge = None
         if np.isfinite(g["estimate"][i]):
-            ge = GapEstimate(float(g["estimate"][i]), np.nan, (float(g["lo"][i]), float(g["hi"][i])), np.nan,
-                             windows.entry_index, int(g["gap_end"][i]), CHANNEL_SETS[PRIMARY][1], "angles")
+            ge = GapEstimate(float(g["estimate"][i]), float(g["se"][i]), (float(g["lo"][i]), float(g["hi"][i])),
+                             np.nan, windows.entry_index, int(g["gap_end"][i]), CHANNEL_SETS[PRIMARY][1], "angles")
         if ge is None and answers is None:
             v_src.append("none")
             continue
@@ -289,7 +296,7 @@ def gap_only_verdict(system: SystemConfig, gap: dict) -> dict:
         if not np.isfinite(g["estimate"][i]):
             src.append("none")
             continue
-        ge = GapEstimate(float(g["estimate"][i]), np.nan, (float(g["lo"][i]), float(g["hi"][i])), np.nan,
+        ge = GapEstimate(float(g["estimate"][i]), float(g["se"][i]), (float(g["lo"][i]), float(g["hi"][i])), np.nan,
                          0, int(g["gap_end"][i]), CHANNEL_SETS[PRIMARY][1], "angles")
         v = fuse_verdict(classes, None, None, ge)
         cls[i] = -1 if v.class_index is None else v.class_index
@@ -310,7 +317,7 @@ def evaluate_windows(system: SystemConfig, windows: WindowSet, label: str, kind:
     sw = Sweep(label, kind, list(windows.cases), snr_db, seed, windows.sample_period_s, counts_per_rev)
     sw.gap = gap_on_windows(system, windows, keys)
     if PRIMARY in sw.gap:
-        sw.width = width_on_windows(system, windows, sw.gap[PRIMARY]["gap_end"])
+        sw.width = width_on_windows(system, windows, sw.gap[PRIMARY]["gap_end"], sw.gap[PRIMARY]["estimate"])
     if library is None and gap_verdict and PRIMARY in sw.gap:
         sw.verdict = gap_only_verdict(system, sw.gap)
     if library is not None:

@@ -25,6 +25,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from ..diagnosis import GAP_METHODS
 from . import (DiagnosticsPublisher, checked, declare_parameters, drive_hardware_id, main as run_main,
                method_config, method_defaults, require, system_config, system_defaults)
 
@@ -37,7 +38,7 @@ DEFAULTS = {
     "build_if_missing": True,     # build (and save) the library when the file does not exist
     "p": 2.0,                     # KHM exponent, one of method.p_values
     "image_method": True,         # run the paper's image method on every window
-    "gap_method": "auto",         # auto | acceleration | speed | off
+    "gap_method": "auto",         # auto | acceleration | anchored | speed | off
     "hardware_id": "",            # default: the resolved drive namespace, e.g. /drive
     "stale_after_s": 5.0,         # STALE status after this long without a window; 0 = never
     "record_dir": "",             # MCAP recording (bag directory); "" = no recording
@@ -53,8 +54,8 @@ def validate(values: dict):
     method = method_config(values)
     require("p", cfg["p"], cfg["p"] in [float(p) for p in method.p_values],
             f"one of method.p_values {list(method.p_values)}")
-    require("gap_method", cfg["gap_method"], cfg["gap_method"] in ("auto", "acceleration", "speed", "off"),
-            "one of auto, acceleration, speed, off")
+    require("gap_method", cfg["gap_method"], cfg["gap_method"] in GAP_METHODS,
+            "one of " + ", ".join(GAP_METHODS))
     require("stale_after_s", cfg["stale_after_s"], cfg["stale_after_s"] >= 0, "a number >= 0 (0 = never)")
     for n in ("window_queue_depth", "signals_queue_depth"):
         require(n, cfg[n], cfg[n] >= 1, "an integer >= 1")
