@@ -46,6 +46,7 @@ residual RMS.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy import stats
@@ -59,7 +60,7 @@ GAP_QUADRATIC_MIN = 12
 GAP_CUBIC_MIN = 8
 
 #: 'acceleration' fit: Gauss-Newton stops when J1 changes by less than this fraction.
-GN_TOL = 1e-12
+GN_TOL = 1e-9
 GN_MAX_ITER = 30
 
 
@@ -172,7 +173,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
             raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa!r}")
         j = wheel_radius_m / kappa
         alt = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction,
-                         linear_term=True)
+                         linear_term=True, warm=fit)
         model_error = abs(wheel_radius_m / alt["kappa"] - j) if alt["kappa"] > 0 else np.inf
         se = float(np.hypot(wheel_radius_m / kappa ** 2 * fit["kappa_se"], model_error))
         res = fit["a1_residual"] / kappa
@@ -225,13 +226,13 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     if not se <= MAX_RELATIVE_STD_ERROR * j:
         raise NoGapError(f"gap fit undetermined: J1 = {j:.4g} kg m^2 with standard error {se:.3g} kg m^2 "
                          f"(> {MAX_RELATIVE_STD_ERROR:.0%}); the window shows no free acceleration of the motor")
-    half = float(stats.t.ppf(0.975, max(dof, 1))) * se
+    half = _t975(max(int(dof), 1)) * se
     return GapEstimate(j, se, (j - half, j + half), float(np.sqrt(np.mean(res ** 2))), start, end, method, how,
                        float(model_error))
 
 
 def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=None,
-               linear_term: bool = False) -> dict:
+               linear_term: bool = False, warm: dict | None = None) -> dict:
     """Weighted joint least squares of m_el (pre-entry and gap) and a1 (gap); see the module docstring.
 
     Parameters: kappa = r/J1 and beta = (m0, c_1.., c_q) of m_hat(τ) = m0 + Σ c_i τ^p_i,
@@ -239,7 +240,9 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     GAP_CUBIC_MIN), with a linear term added when ``linear_term``.  Model:
     m_el[k] = m0 (k < start), m_el[k] = m_hat (gap), a1[k] = kappa (m_hat - friction[k]) (gap).
     Returns kappa, its standard error (sandwich covariance with per-channel residual
-    variances), the a1 residual over the gap and the degrees of freedom.
+    variances), the a1 residual over the gap, the degrees of freedom and the noise levels.
+    ``warm``: the result of the fit without the linear term, to start from (and reuse its
+    noise levels).
     """
     n = end - start
     pre = m_el[:start]
@@ -254,7 +257,9 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     # noise levels: pre-entry steady state (m_el = m0, a1 = 0); fall back on the gap's
     # own m_el-only fit when there are too few pre-entry samples.  Floors keep noise-free
     # windows finite (then both channels weigh by their size).
-    if pre.size >= 5:
+    if warm is not None:
+        sm, sa = warm["noise"]
+    elif pre.size >= 5:
         sm = float(np.std(pre, ddof=1))
         sa = float(np.std(a1[:start], ddof=1))
     else:
@@ -263,40 +268,68 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
         sa = sm * float(np.abs(ag).mean() / max(np.abs(mg).mean(), 1e-300))
     sm = max(sm, 1e-9 * float(np.abs(mg).max()), 1e-300)
     sa = max(sa, 1e-9 * float(np.abs(ag).max()), 1e-300)
-    # start: m_el alone (pre-entry rows pin m0), then kappa through the origin
+    # Gauss-Newton on theta = (kappa, beta) in normal-equation form: every block reduces to
+    # p x p sums (the pre-entry block to its count and sum), so an iteration costs no
+    # n-length work.  Whitened model: pre m_el = m0, gap m_el = G beta (weight 1/sm^2);
+    # gap a1 = kappa (G beta - fr) (weight 1/sa^2).
     na = pre.size
-    A = np.zeros((na + n, p))
-    A[:na, 0] = 1.0
-    A[na:] = G
-    beta, *_ = np.linalg.lstsq(A, np.concatenate([pre, mg]), rcond=None)
-    m_hat = G @ beta - fr
-    kappa = float(ag @ m_hat) / float(m_hat @ m_hat)
-    # Gauss-Newton on theta = (kappa, beta); rows whitened by the channel's noise level
-    J = np.zeros((na + 2 * n, p + 1))
-    J[:na, 1] = 1.0 / sm
-    J[na:na + n, 1:] = G / sm
+    wm, wa = 1.0 / sm ** 2, 1.0 / sa ** 2
+    e1 = np.zeros(p)
+    e1[0] = 1.0
+    GG, Gm, Ga, Gf = G.T @ G, G.T @ mg, G.T @ ag, G.T @ fr
+    fa, ff = float(fr @ ag), float(fr @ fr)
+    s_pre = float(pre.sum())
+    Nm = wm * (na * np.outer(e1, e1) + GG)            # m_el blocks: J_m^T J_m for beta (kappa column is 0)
+    if warm is not None and linear_term:               # the linear coefficient starts at 0
+        beta = np.insert(warm["beta"], 1, 0.0)
+        kappa = warm["kappa"]
+    else:  # start: m_el alone (the pre-entry rows pin m0), then kappa through the origin
+        beta = np.linalg.solve(Nm, wm * (s_pre * e1 + Gm))
+        Gu = GG @ beta - Gf                             # G^T u, u = G beta - fr = m_hat - friction
+        uu = float(beta @ GG @ beta - 2.0 * beta @ Gf + ff)
+        kappa = float(beta @ Ga - fa) / uu
+    N = np.zeros((p + 1, p + 1))
     for _ in range(GN_MAX_ITER):
-        m_hat = G @ beta
-        res = np.concatenate([(pre - beta[0]) / sm, (mg - m_hat) / sm, (ag - kappa * (m_hat - fr)) / sa])
-        J[na + n:, 0] = (m_hat - fr) / sa
-        J[na + n:, 1:] = kappa * G / sa
-        step, *_ = np.linalg.lstsq(J, res, rcond=None)
+        Gu = GG @ beta - Gf
+        uu = float(beta @ Gu - beta @ Gf + ff)
+        ua = float(beta @ Ga - fa)
+        N[0, 0] = wa * uu
+        N[0, 1:] = N[1:, 0] = wa * kappa * Gu
+        N[1:, 1:] = Nm + wa * kappa * kappa * GG
+        g = np.empty(p + 1)
+        g[0] = wa * (ua - kappa * uu)
+        g[1:] = wm * (s_pre * e1 - na * beta[0] * e1 + Gm - GG @ beta) + wa * kappa * (Ga - kappa * Gu)
+        step = np.linalg.solve(N, g)
         kappa += float(step[0])
         beta = beta + step[1:]
         if abs(step[0]) <= GN_TOL * abs(kappa):
             break
+    # residuals and the sandwich covariance at the solution
     m_hat = G @ beta
-    r_m = np.concatenate([pre - beta[0], mg - m_hat]) / sm
-    r_a = (ag - kappa * (m_hat - fr)) / sa
-    J[na + n:, 0] = (m_hat - fr) / sa
-    J[na + n:, 1:] = kappa * G / sa
-    Jm, Ja = J[:na + n], J[na + n:]
-    F_inv = np.linalg.pinv(J.T @ J)
-    s2m = float(r_m @ r_m) / max(na + n - p, 1)
-    s2a = float(r_a @ r_a) / max(n - 1, 1)
-    cov = F_inv @ (s2m * (Jm.T @ Jm) + s2a * (Ja.T @ Ja)) @ F_inv
+    r_a = ag - kappa * (m_hat - fr)
+    ss_m = float(np.sum((pre - beta[0]) ** 2) + np.sum((mg - m_hat) ** 2)) * wm
+    ss_a = float(r_a @ r_a) * wa
+    Gu = GG @ beta - Gf
+    uu = float(beta @ Gu - beta @ Gf + ff)
+    Fa = np.empty((p + 1, p + 1))                       # J_a^T J_a
+    Fa[0, 0] = wa * uu
+    Fa[0, 1:] = Fa[1:, 0] = wa * kappa * Gu
+    Fa[1:, 1:] = wa * kappa * kappa * GG
+    Fm = np.zeros((p + 1, p + 1))
+    Fm[1:, 1:] = Nm
+    F_inv = np.linalg.inv(Fa + Fm)
+    s2m = ss_m / max(na + n - p, 1)
+    s2a = ss_a / max(n - 1, 1)
+    cov = F_inv @ (s2m * Fm + s2a * Fa) @ F_inv
     return {"kappa": float(kappa), "kappa_se": float(np.sqrt(max(cov[0, 0], 0.0))), "beta": beta,
-            "a1_residual": r_a * sa, "dof": max(na - 1, 1) if na >= 5 else max(na + 2 * n - p - 1, 1)}
+            "a1_residual": r_a, "dof": max(na - 1, 1) if na >= 5 else max(na + 2 * n - p - 1, 1),
+            "noise": (sm, sa)}
+
+
+@lru_cache(maxsize=256)
+def _t975(dof: int) -> float:
+    """Student t 97.5 % quantile (cached: scipy's ppf costs ~0.3 ms a call)."""
+    return float(stats.t.ppf(0.975, dof))
 
 
 def nearest_class(inertia_kgm2: float, classes_kgm2) -> int:
