@@ -210,3 +210,64 @@ def test_bad_input_raises_value_error_naming_argument(call, argument):
     with pytest.raises(ValueError, match=f"^{argument}: ") as info:
         call()
     assert "\n" not in str(info.value)
+
+
+# ---------------------------------------------------- histogram without the image
+@pytest.mark.parametrize("data_shape,shape", [((10, 2048), (343, 436)), ((1024, 2048), (343, 436)),
+                                              ((3, 5), (6, 10)), ((7, 9), (4, 3))])
+@pytest.mark.parametrize("origin", ["upper", "lower"])
+def test_drawn_cells_count_the_pixels_of_every_cell(data_shape, shape, origin):
+    rows, row_pixels, columns, column_pixels = im.drawn_cells(data_shape, shape, origin)
+    pixel_rows, pixel_columns = im.pixel_cell_indices(data_shape, shape, origin)
+    np.testing.assert_array_equal(rows, np.unique(pixel_rows))
+    np.testing.assert_array_equal(columns, np.unique(pixel_columns))
+    np.testing.assert_array_equal(row_pixels, np.bincount(pixel_rows)[rows])
+    np.testing.assert_array_equal(column_pixels, np.bincount(pixel_columns)[columns])
+    assert row_pixels.sum() == shape[0] and column_pixels.sum() == shape[1]
+    assert np.all(row_pixels > 0) and np.all(column_pixels > 0)
+    assert im.drawn_cells(data_shape, shape, origin)[0] is rows  # cached
+    with pytest.raises(ValueError):
+        rows[0] = 1
+
+
+def _rendered_histogram(data, **kwargs):
+    x1 = im.render_intensity(data, **kwargs)
+    levels, counts = im.level_histogram(x1, kwargs.get("n_colors", im.DEFAULT_N_COLORS))
+    return levels, counts, x1.min(axis=(-2, -1)), x1.max(axis=(-2, -1))
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"origin": "lower"}, {"clim": (0.05, 0.5)}, {"n_colors": 7},
+                                    {"shape": (20, 30)}, {"shape": (400, 3000)}])
+def test_render_level_histogram_equals_histogram_of_rendered_image(scalogram, kwargs):
+    batch = np.stack([scalogram, 3 * scalogram[::-1] + 0.1, scalogram ** 2])
+    for data in (scalogram, batch):
+        expected = _rendered_histogram(data, **kwargs)
+        got = im.render_level_histogram(data, **kwargs)
+        for e, g in zip(expected, got):
+            assert g.shape == e.shape
+            np.testing.assert_array_equal(g, e)
+        assert got[1].dtype == np.int64
+        shape = kwargs.get("shape", im.X1_SHAPE)
+        assert np.all(got[1].sum(axis=-1) == shape[0] * shape[1])
+
+
+def test_render_level_histogram_of_random_and_constant_data():
+    rng = np.random.default_rng(3)
+    data = rng.gamma(0.3, size=(4, 1024, 2048))  # the linear reading's shape
+    data[1] = 0.25                               # constant: every pixel at level 0
+    for e, g in zip(_rendered_histogram(data), im.render_level_histogram(data)):
+        np.testing.assert_array_equal(g, e)
+    _, counts, lo, hi = im.render_level_histogram(data[1])
+    assert counts[0] == 343 * 436 and lo == hi == 0.0
+
+
+def test_level_histogram_from_cells_weights_cells_by_their_pixels():
+    # 2 x 3 drawn cells, rows shown by 1 and 2 pixel rows, columns by 1, 1, 3 pixel columns
+    cells = np.array([[0.0, 1.0, 2.0], [3.0, 4.0, 8.0]])
+    levels, counts, lo, hi = im.level_histogram_from_cells(cells, 0.0, 8.0, [1, 2], [1, 1, 3], n_colors=4)
+    # level = clip(fix(v / 8 * 4), 0, 3): 0, 0, 1 / 1, 2, 3
+    np.testing.assert_array_equal(counts, [1 + 1, 3 + 2, 2, 2 * 3])
+    np.testing.assert_array_equal(levels, np.arange(4) / 3)
+    assert lo == 0.0 and hi == 1.0
+    _, counts, lo, hi = im.level_histogram_from_cells(cells[None] + 1.0, [1.0], [9.0], [1, 2], [1, 1, 3], 4)
+    assert counts.shape == (1, 4) and lo.shape == hi.shape == (1,)

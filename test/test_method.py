@@ -17,6 +17,7 @@ import yaml
 from jident_ros.config import (ConfigError, load_method_config, load_system_config,
                                method_config_from_dict)
 from jident_ros.method import normalise as nz
+from jident_ros.method import khm as khm_module
 from jident_ros.method import pipeline as pl
 from jident_ros.method.khm import ConvergenceWarning, KHarmonicMeans, khm_fit_batch
 from jident_ros.method.patterns import (LibraryMismatch, PatternLibrary, identify_window)
@@ -378,6 +379,97 @@ def test_khm_batch_bad_input_raises():
         khm_fit_batch(bad, counts, init)
 
 
+def squarem_reference(xn, c, s, p, lam, tol, max_iter):
+    """The SQUAREM loop before converged rows were compacted out: every row is updated every
+    cycle and converged rows are frozen with np.where (kept here as the reference)."""
+    B = s.shape[0]
+    converged = np.zeros(B, dtype=bool)
+    lam_ = lam[:, None]
+    evals = 0
+
+    def g(x):
+        return x + lam_ * (khm_module._khm_update(xn, c, x, p) - x)
+
+    while evals < max_iter:
+        s1 = g(s)
+        res0 = np.abs(s1 - s).max(axis=1) / lam
+        evals += 1
+        done = res0 <= tol
+        converged |= done
+        if np.all(converged):
+            s = np.where(done[:, None], s1, s)
+            break
+        s2 = g(s1)
+        evals += 1
+        r = s1 - s
+        v = s2 - 2.0 * s1 + s
+        nr = np.sqrt((r * r).sum(axis=1))
+        nv = np.sqrt((v * v).sum(axis=1))
+        a = np.where(nv > 0, -nr / np.where(nv > 0, nv, 1.0), -1.0)
+        a = np.minimum(a, -1.0)[:, None]
+        ext = s - 2.0 * a * r + a * a * v
+        new = g(ext)
+        evals += 1
+        res_new = np.abs(new - ext).max(axis=1) / lam
+        bad = ~np.all(np.isfinite(new), axis=1) | (res_new > res0)
+        new = np.where(bad[:, None], s2, new)
+        s = np.where(converged[:, None], s, new)
+    return s, evals, converged
+
+
+@pytest.mark.parametrize("budget", ["enough", "half"])
+@pytest.mark.parametrize("p", [2.0, 3.0, 6.0, 9.0])
+def test_khm_batch_compacting_converged_rows_changes_nothing(hists, monkeypatch, p, budget):
+    # all 40 histograms in one batch: rows converge at very different iterations; with half
+    # the budget some stop unconverged (converged rows then return their s_c, not g(s_c))
+    values = np.concatenate([hists[s][0] for s in SIGNALS])
+    counts = np.concatenate([hists[s][1] for s in SIGNALS])
+    init = np.concatenate([hists[s][2] for s in SIGNALS])
+    max_iter = 3000
+    if budget == "half":
+        alone = [khm_fit_batch(values[b], counts[b:b + 1], init[b:b + 1], p=p, tol=1e-7)[1]["n_iter"]
+                 for b in range(len(init))]
+        max_iter = int(np.median(alone))
+    got, info = khm_fit_batch(values, counts, init, p=p, tol=1e-7, max_iter=max_iter)
+    monkeypatch.setattr(khm_module, "_squarem", squarem_reference)
+    want, want_info = khm_fit_batch(values, counts, init, p=p, tol=1e-7, max_iter=max_iter)
+    np.testing.assert_array_equal(got, want)
+    assert info["n_iter"] == want_info["n_iter"]
+    np.testing.assert_array_equal(info["converged"], want_info["converged"])
+    if budget == "half":
+        assert 0 < info["converged"].sum() < len(init)
+
+
+@pytest.mark.parametrize("p", [2.0, 3.0, 9.0])
+def test_khm_update_equals_eqs_26_27_30(hists, p):
+    rng = np.random.default_rng(11)
+    for sig in SIGNALS:
+        values, counts, _ = hists[sig]
+        lo = values.min(axis=1, keepdims=True)
+        xn = (values - lo) / (values.max(axis=1, keepdims=True) - lo)
+        c = counts / counts.sum(axis=1, keepdims=True)
+        s = np.sort(rng.uniform(-0.3, 1.3, (xn.shape[0], 7)), axis=1)
+        got = khm_module._khm_update(xn, c, s, p)
+        assert got.shape == s.shape
+        for b in range(xn.shape[0]):
+            keep = c[b] > 0
+            np.testing.assert_allclose(got[b], khm_update(xn[b][keep], c[b][keep], s[b], p), rtol=1e-12, atol=0)
+
+
+def test_khm_batch_of_five_signals_equals_each_signal_alone(hists, method):
+    # the per-window hot path clusters the five signals of one window in one batch
+    for b in range(len(HIST_WINDOWS)):
+        values = np.stack([hists[s][0][b] for s in SIGNALS])
+        counts = np.stack([hists[s][1][b] for s in SIGNALS])
+        init = np.array([hists[s][2][b] for s in SIGNALS])
+        for p in (2.0, 6.0):
+            batch, _ = khm_fit_batch(values, counts, init, p=p, tol=method.khm_tol, max_iter=method.khm_max_iter)
+            for j in range(len(SIGNALS)):
+                one, _ = khm_fit_batch(values[j], counts[j:j + 1], init[j:j + 1], p=p, tol=method.khm_tol,
+                                       max_iter=method.khm_max_iter)
+                np.testing.assert_array_equal(one[0], batch[j])
+
+
 # =================================================================== 3. pipeline
 @pytest.mark.parametrize("field,value", [("scale_reading", "octave"), ("eq12", "printed"),
                                          ("variant", "scaled"), ("p_values", (2.0, 1.5))])
@@ -449,6 +541,36 @@ def test_identical_windows_give_zero_h_for_their_class(windows, method):
             assert h[f] == 0.0
             assert np.argmin(h) == f and h[np.arange(3) != f].min() > 0
             assert pl.margin(h) == float("inf")
+
+
+@pytest.mark.parametrize("reading", ["dyadic", "linear", "swt"])
+def test_image_levels_equal_the_rendered_image(windows, method, reading):
+    from jident_ros.method.image import level_histogram, render_intensity
+    from jident_ros.method.scalogram import wavelet_scalogram
+    cfg = method.replace(scale_reading=reading)
+    x = windows.signals["omega1"][[3, 43]]
+    levels, counts, lo, hi = pl.image_levels(x, "omega1", cfg)
+    img = render_intensity(wavelet_scalogram(x, "sym5", reading), shape=(cfg.image_rows, cfg.image_cols),
+                           n_colors=cfg.n_colors)
+    want_levels, want_counts = level_histogram(img, cfg.n_colors)
+    np.testing.assert_array_equal(levels, want_levels)
+    np.testing.assert_array_equal(counts, want_counts)
+    np.testing.assert_array_equal(lo, img.min(axis=(-2, -1)))
+    np.testing.assert_array_equal(hi, img.max(axis=(-2, -1)))
+
+
+def test_window_features_equal_batch_features(windows, method):
+    ps = (2.0, 9.0)
+    for i in (5, 42):
+        win = windows.case(i)
+        ref = pl.pre_entry_reference(win, windows.entry_index)
+        for cfg in (method, method.replace(variant="load_scaled")):
+            centres, ranges = pl.window_features(win, cfg, ps, SIGNALS, ref, windows.entry_index)
+            assert centres.shape == (len(ps), len(SIGNALS), cfg.n_clusters)
+            for j, sig in enumerate(SIGNALS):
+                cen, rps, _ = pl.batch_features(win[sig][None], sig, cfg, ps, [ref], windows.entry_index)
+                np.testing.assert_array_equal(centres[:, j], cen[:, 0])
+                assert ranges[j] == rps[0]
 
 
 def test_prepare_signal_variants():
@@ -548,6 +670,41 @@ def test_identify_window_load_scaled_uses_entry_index(library, windows):
     e, s = library.width_index(0.01), SIGNALS.index("a1")
     want = pl.h_vector(library.centres[0, e, s], cen[0, 0], library.h5[0, e, s])
     np.testing.assert_allclose(idn.answers["a1"].h, want, rtol=1e-6)
+
+
+def test_library_from_features_equals_from_windows(library, windows, system, method):
+    from jident_ros.method.evaluate import _pattern_order
+    ps = method.p_values
+    n = len(windows.cases)
+    refs = np.array([pl.pre_entry_reference(windows.case(i), windows.entry_index) for i in range(n)])
+    centres = np.zeros((len(ps), n, len(SIGNALS), method.n_clusters))
+    ranges = np.zeros((n, len(SIGNALS), 2))
+    for s, sig in enumerate(SIGNALS):           # all 45 windows at once, the pattern runs among them
+        centres[:, :, s], rps, _ = pl.batch_features(windows.signals[sig], sig, method, ps, refs, windows.entry_index)
+        ranges[:, s] = [(r.h3, r.k3) for r in rps]
+    order = _pattern_order(system, windows)
+    assert order == list(range(42))
+    lib = PatternLibrary.from_features(centres, ranges, order, system, method)
+    for name in ("centres", "h5", "ranges"):
+        np.testing.assert_array_equal(getattr(lib, name), getattr(library, name))
+    assert lib.p_values == library.p_values and lib.widths_m == library.widths_m
+    with pytest.raises(ValueError, match="order"):
+        PatternLibrary.from_features(centres, ranges, order[:5], system, method)
+
+
+def test_evaluation_feature_tasks_equal_evaluate_grid(library, windows, system, method):
+    from jident_ros.method.evaluate import _feature_task, evaluate_grid, grid_result
+    n = len(windows.cases)
+    refs = np.array([pl.pre_entry_reference(windows.case(i), windows.entry_index) for i in range(n)])
+    parts = [_feature_task((windows.signals[sig], sig, method, refs, windows.entry_index)) for sig in SIGNALS]
+    feats = np.stack([centres for centres, _, _ in parts], axis=2)
+    assert feats.shape == (len(method.p_values), n, len(SIGNALS), method.n_clusters)
+    res = grid_result(system, method, library, windows, feats, "tasks", 1.0)
+    want = evaluate_grid(system, method, windows, windows, "grid", library)
+    np.testing.assert_array_equal(res.h, want.h)
+    np.testing.assert_array_equal(res.notes["centres"], want.notes["centres"])
+    np.testing.assert_array_equal(res.true_class, want.true_class)
+    np.testing.assert_array_equal(res.pattern_mask, want.pattern_mask)
 
 
 def test_library_save_load_round_trip(library, system, method, tmp_path):

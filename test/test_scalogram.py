@@ -222,3 +222,48 @@ def test_bad_input_raises_value_error_naming_argument(transform, kwargs, argumen
 def test_scalogram_bad_input(coefs):
     with pytest.raises(ValueError, match="^coefs: "):
         sc.scalogram(coefs)
+
+
+# ------------------------------------------------- cells of the scalogram for the image
+@pytest.mark.parametrize("reading", sc.READINGS)
+def test_wavelet_coefficients_are_what_wavelet_scalogram_squares(signals, reading):
+    coefs = sc.wavelet_coefficients(signals[:2], "db6", reading)
+    np.testing.assert_array_equal(sc.scalogram(coefs), sc.wavelet_scalogram(signals[:2], "db6", reading))
+
+
+@pytest.mark.parametrize("batch", [False, True])
+def test_percentage_energy_cells_equal_the_scalogram_bit_for_bit(signals, batch):
+    coefs = sc.cwt_classic(signals if batch else signals[0], sc.scales_for_reading("dyadic"), "sym5")
+    full = sc.scalogram(coefs)
+    rows, columns = np.array([0, 3, 9]), np.array([2, 7, 100, 2045])
+    for overwrite in (False, True):
+        work = coefs.copy()
+        cells, smallest, largest = sc.percentage_energy_cells(work, rows, columns, overwrite=overwrite)
+        np.testing.assert_array_equal(cells, full[..., rows[:, None], columns[None, :]])
+        np.testing.assert_array_equal(smallest, full.min(axis=(-2, -1)))
+        np.testing.assert_array_equal(largest, full.max(axis=(-2, -1)))
+        if overwrite:
+            np.testing.assert_array_equal(work, coefs * coefs)  # squared in place
+        else:
+            np.testing.assert_array_equal(work, coefs)
+    # complex coefficients: |C|^2
+    z = coefs + 1j * coefs[..., ::-1]
+    cells, smallest, largest = sc.percentage_energy_cells(z, rows, columns)
+    np.testing.assert_array_equal(cells, sc.scalogram(z)[..., rows[:, None], columns[None, :]])
+
+
+@pytest.mark.parametrize("coefs", [np.ones(5), np.zeros((2, 3)), np.full((2, 3), np.nan), np.empty((0, 3)),
+                                   np.array([[1.0, np.inf]])])
+def test_percentage_energy_cells_bad_input(coefs):
+    with pytest.raises(ValueError, match="^coefs: "):
+        sc.percentage_energy_cells(coefs, [0], [0])
+
+
+def test_kept_starts_match_the_gather_index():
+    bank = sc.wavelet_filter_bank("sym5", sc.scales_for_reading("linear"), n_samples=N_SAMPLES)
+    for group in bank.groups:
+        starts = np.array(group.kept_starts)
+        expected = (np.arange(group.rows.size)[:, None] * group.fft_length + starts[:, None]
+                    + np.arange(N_SAMPLES)).reshape(-1)
+        np.testing.assert_array_equal(expected, group.gather_index)
+        np.testing.assert_array_equal(starts, bank.filter_lengths[group.rows] // 2)

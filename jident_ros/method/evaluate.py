@@ -105,9 +105,19 @@ def evaluate_grid(system: SystemConfig, method: MethodConfig, clean: WindowSet, 
     if library is None:
         library = PatternLibrary.build(system, method, windows=clean)
     t_lib = time.perf_counter() - t0
+    feats = window_features(tested, method, library.p_values, progress)
+    return grid_result(system, method, library, tested, feats, label, time.perf_counter() - t0, t_lib)
+
+
+def grid_result(system: SystemConfig, method: MethodConfig, library: PatternLibrary, tested: WindowSet,
+                feats: np.ndarray, label: str, seconds: float = 0.0, library_seconds: float = 0.0) -> GridResult:
+    """GridResult of tested windows whose features are known.
+
+    ``feats`` has shape (n_p, n_cases, n_signals, n_clusters) (p in ``library.p_values``
+    order); H (eq. 33) of each case is taken against the library's width nearest to the case's.
+    """
     ps = library.p_values
     classes = list(system.grid.inertia_classes_kgm2)
-    feats = window_features(tested, method, ps, progress)
     n = len(tested.cases)
     h = np.zeros((len(ps), n, len(SIGNALS), len(classes)))
     for i, c in enumerate(tested.cases):
@@ -117,8 +127,7 @@ def evaluate_grid(system: SystemConfig, method: MethodConfig, clean: WindowSet, 
                 h[k, i, s] = h_vector(library.centres[k, e, s], feats[k, i, s], library.h5[k, e, s])
     true = np.array([classes.index(c.inertia_kgm2) for c in tested.cases])
     pmask = np.array([c.consistency_pa_sn == system.grid.pattern_consistency_pa_sn for c in tested.cases])
-    res = GridResult(label, method, ps, list(tested.cases), true, h, pmask,
-                     time.perf_counter() - t0, t_lib)
+    res = GridResult(label, method, ps, list(tested.cases), true, h, pmask, seconds, library_seconds)
     res.notes["centres"] = feats
     return res
 
@@ -186,12 +195,26 @@ def best_verdict(gap: dict, paper: GridResult, p_index: int = 0) -> dict:
             "all": float(ok.mean()), "fallbacks": int((gap["class"] < 0).sum())}
 
 
-def _grid_task(args):
-    """One (method, tested data) evaluation; a top-level function so a process pool can run it."""
-    system, m, clean, data, label, lib, note = args
-    res = evaluate_grid(system, m, clean, data, label, lib)
-    res.notes.update(note)
-    return res
+def _feature_task(args):
+    """Features of one signal of one data set under one method configuration.
+
+    A top-level function so that a process pool can run it.  ``args`` =
+    (windows (n, n_samples), signal name, MethodConfig, references (n,), entry index).
+    Returns centres (n_p, n, n_clusters), ranges (n, 2) as (h3, k3), and the seconds taken.
+    """
+    x, name, m, refs, entry = args
+    t = time.perf_counter()
+    centres, ranges, _ = batch_features(x, name, m, m.p_values, refs, entry)
+    return centres, np.array([(r.h3, r.k3) for r in ranges]), time.perf_counter() - t
+
+
+def _pattern_order(system: SystemConfig, windows: WindowSet) -> list:
+    """Indices of the pattern runs (eta_k = 0.025) in ``windows``, class-major, width-minor."""
+    from ..sim import Case
+    g = system.grid
+    index = {c: i for i, c in enumerate(windows.cases)}
+    return [index[Case(j, w, g.pattern_consistency_pa_sn)] for j in g.inertia_classes_kgm2
+            for w in g.backlash_widths_m]
 
 
 def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 30.0), seeds=(1, 2),
@@ -199,8 +222,13 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
                    log=print, jobs: int | None = None) -> Evaluation:
     """The whole evaluation: every variant noise-free and noisy, the gap estimator, the level-10 readings.
 
-    The independent (variant, data set) evaluations run in ``jobs`` processes
-    (default: the number of CPUs); the numbers do not depend on it.
+    The work is split into one task per (method configuration, data set, signal):
+    batch_features of the 168 windows of that signal, run in ``jobs`` processes
+    (default: the number of CPUs), the slowest tasks (linear reading) first.  Each
+    configuration's pattern library is assembled from its noise-free features (the
+    pattern runs are windows of the noise-free grid), so no window is transformed
+    twice.  The numbers do not depend on ``jobs`` or on the task order.  A result's
+    ``seconds`` is the worker time of its tasks.
     """
     import os
     from concurrent.futures import ProcessPoolExecutor
@@ -211,23 +239,48 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     log(f"simulated {len(cases)} cases in {t_sim:.1f} s")
     datasets = [("noise-free", clean)] + [(f"SNR {snr:g} dB (seed {seed})", add_measurement_noise(clean, snr, seed))
                                            for snr, seed in zip(snr_db, seeds)]
-    tasks = []
+    # (method, [(result label, data name, windows, notes)]) in the order of the results;
+    # every configuration's first data set is the noise-free grid
+    configs = []
     for variant in variants:
         m = dataclasses.replace(method, variant=variant)
-        lib = PatternLibrary.build(system, m, windows=clean)
-        for name, data in datasets:
-            tasks.append((system, m, clean, data, f"{variant}, {name}", lib, {"variant": variant, "data": name}))
+        configs.append((m, [(f"{variant}, {name}", name, data, {"variant": variant, "data": name})
+                            for name, data in datasets]))
     for reading in readings:
         if reading != method.scale_reading:
             m = dataclasses.replace(method, scale_reading=reading, p_values=(2.0,), variant="paper")
-            tasks.append((system, m, clean, clean, f"paper, reading '{reading}', noise-free", None,
-                          {"reading": reading}))
+            configs.append((m, [(f"paper, reading '{reading}', noise-free", "noise-free", clean,
+                                 {"reading": reading})]))
+    tasks, keys = [], []
+    for c, (m, runs) in enumerate(configs):
+        for d, (_, _, data, _) in enumerate(runs):
+            refs = np.array([pre_entry_reference(data.case(i), data.entry_index) for i in range(len(data.cases))])
+            for s, name in enumerate(SIGNALS):
+                tasks.append((data.signals[name], name, m, refs, data.entry_index))
+                keys.append((c, d, s))
+    cost = {"linear": 0, "swt": 2}  # slowest first (the 1024-scale reading), for load balance
+    order = sorted(range(len(tasks)), key=lambda t: (cost.get(tasks[t][2].scale_reading, 1), t))
     jobs = jobs or os.cpu_count() or 1
     if jobs > 1:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            results = list(pool.map(_grid_task, tasks))
+            done = list(pool.map(_feature_task, [tasks[t] for t in order]))
     else:
-        results = [_grid_task(t) for t in tasks]
+        done = [_feature_task(tasks[t]) for t in order]
+    outputs = dict(zip([keys[t] for t in order], done))
+
+    results = []
+    pattern = _pattern_order(system, clean)
+    for c, (m, runs) in enumerate(configs):
+        library = None
+        for d, (label, _, data, note) in enumerate(runs):
+            parts = [outputs[(c, d, s)] for s in range(len(SIGNALS))]
+            feats = np.stack([centres for centres, _, _ in parts], axis=2)   # (n_p, n_cases, n_signals, K)
+            if library is None:   # runs[0] is the noise-free grid, which holds the pattern runs
+                ranges = np.stack([r for _, r, _ in parts], axis=1)         # (n_cases, n_signals, 2)
+                library = PatternLibrary.from_features(feats, ranges, pattern, system, m)
+            res = grid_result(system, m, library, data, feats, label, sum(t for _, _, t in parts))
+            res.notes.update(note)
+            results.append(res)
     for res in results:
         log(_summary(res))
     gaps, best, examples = [], [], []

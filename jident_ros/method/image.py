@@ -16,6 +16,11 @@ This module reproduces that picture deterministically:
 * :func:`intensity_levels` and :func:`level_histogram` give the N discrete
   grey levels and their pixel counts, so a clusterer can work on at most N
   weighted values instead of 149,548 pixels.
+* :func:`render_level_histogram` gives the same histogram (and the image's
+  extreme intensities) straight from the scalogram, without materialising
+  the image: every pixel shows one data cell, so the histogram is a count of
+  the drawn cells' levels weighted by how many pixels show each cell
+  (:func:`drawn_cells`, :func:`level_histogram_from_cells`).
 * :func:`write_png` writes an 8-bit PNG (grey, or an analytic ``'jet'``
   colour map like the paper's Fig. 2) using only ``zlib`` and ``struct``.
 
@@ -37,9 +42,12 @@ __all__ = [
     "DEFAULT_N_COLORS",
     "COLORMAPS",
     "pixel_cell_indices",
+    "drawn_cells",
     "render_intensity",
     "intensity_levels",
     "level_histogram",
+    "level_histogram_from_cells",
+    "render_level_histogram",
     "write_png",
 ]
 
@@ -175,6 +183,51 @@ def pixel_cell_indices(data_shape, shape=X1_SHAPE, origin: str = "upper"):
     return _cell_indices_cached(n_rows, n_columns, height, width, _check_origin(origin))
 
 
+@functools.lru_cache(maxsize=64)
+def _drawn_cells_cached(n_rows: int, n_columns: int, height: int, width: int, origin: str):
+    rows, columns = _cell_indices_cached(n_rows, n_columns, height, width, origin)
+    row_pixels = np.bincount(rows, minlength=n_rows)
+    column_pixels = np.bincount(columns, minlength=n_columns)
+    drawn_rows = np.flatnonzero(row_pixels)
+    drawn_columns = np.flatnonzero(column_pixels)
+    out = (drawn_rows, row_pixels[drawn_rows], drawn_columns, column_pixels[drawn_columns])
+    for array in out:
+        array.setflags(write=False)
+    return out
+
+
+def drawn_cells(data_shape, shape=X1_SHAPE, origin: str = "upper"):
+    """The data cells that appear in the image, and how many pixels show each.
+
+    Pixel (a, b) shows cell ``(row_index[a], column_index[b])`` of
+    :func:`pixel_cell_indices`, so the cell (r, q) covers
+    ``row_pixels(r) * column_pixels(q)`` pixels; cells between pixel centres
+    are not drawn.
+
+    Parameters
+    ----------
+    data_shape, shape, origin
+        As in :func:`pixel_cell_indices`.
+
+    Returns
+    -------
+    rows : ndarray of int, shape (n_drawn_rows,)
+        Data rows drawn, ascending (all 10 of a dyadic scalogram; 343 of the
+        1024 rows of the linear reading).
+    row_pixels : ndarray of int, shape (n_drawn_rows,)
+        Pixel rows showing each of them (sums to ``shape[0]``).
+    columns : ndarray of int, shape (n_drawn_columns,)
+        Data columns drawn, ascending (436 of 2048 samples).
+    column_pixels : ndarray of int, shape (n_drawn_columns,)
+        Pixel columns showing each of them (sums to ``shape[1]``).
+        All four arrays are cached and read-only.
+    """
+    rows, _ = pixel_cell_indices(data_shape, shape, origin)  # validates the arguments
+    n_rows, n_columns = (int(v) for v in tuple(data_shape)[-2:])
+    height, width = _check_shape(shape)
+    return _drawn_cells_cached(n_rows, n_columns, height, width, origin)
+
+
 def render_intensity(
     scalogram,
     shape=X1_SHAPE,
@@ -235,13 +288,22 @@ def render_intensity(
         cmin, cmax = limits[0], limits[1]
     rows, columns = _cell_indices_cached(data.shape[-2], data.shape[-1], height, width, origin)
     sampled = data[..., rows[:, None], columns[None, :]]
+    return _colour_levels(sampled, cmin, cmax, n_colors) / (n_colors - 1)
+
+
+def _colour_levels(values, cmin, cmax, n_colors: int) -> np.ndarray:
+    """MATLAB 'scaled' CDataMapping: colour index - 1 (float, 0..N-1) of every value.
+
+    ``values`` (..., n, m); ``cmin``, ``cmax`` broadcast against it (e.g.
+    shape (..., 1, 1)). ``cmax == cmin`` gives level 0.
+    """
     span = np.asarray(cmax - cmin)
     flat = span == 0
-    scaled = (sampled - cmin) / np.where(flat, 1.0, span) * n_colors
+    scaled = (values - cmin) / np.where(flat, 1.0, span) * n_colors
     level = np.clip(np.trunc(scaled), 0, n_colors - 1)  # index - 1
     if flat.any():
         level = np.where(flat, 0.0, level)
-    return level / (n_colors - 1)
+    return level
 
 
 def intensity_levels(image, n_colors: int = DEFAULT_N_COLORS) -> np.ndarray:
@@ -293,6 +355,108 @@ def level_histogram(image, n_colors: int = DEFAULT_N_COLORS):
     counts = counts.astype(np.int64).reshape(batch_shape + (n_colors,))
     level_values = np.arange(n_colors) / (n_colors - 1)
     return level_values, counts
+
+
+def level_histogram_from_cells(cells, cmin, cmax, row_pixels, column_pixels,
+                               n_colors: int = DEFAULT_N_COLORS):
+    """Level histogram of a rendered image, computed from its drawn cells only.
+
+    Equals ``level_histogram(render_intensity(...))`` without the image: the
+    cells are mapped to colour levels exactly as :func:`render_intensity`
+    maps them, and each cell counts for the number of pixels showing it.
+
+    Parameters
+    ----------
+    cells : ndarray, shape (..., n_drawn_rows, n_drawn_columns)
+        Data values of the drawn cells (see :func:`drawn_cells`).
+    cmin, cmax : float or ndarray, shape (...)
+        Colour limits of each image (for automatic limits: the minimum and
+        maximum over *all* data cells, drawn or not).
+    row_pixels : ndarray of int, shape (n_drawn_rows,)
+    column_pixels : ndarray of int, shape (n_drawn_columns,)
+        Pixels showing each drawn row / column (from :func:`drawn_cells`).
+    n_colors : int, optional
+        Colour-map length N (default 64).
+
+    Returns
+    -------
+    level_values : ndarray of float64, shape (N,)
+        ``arange(N) / (N - 1)``.
+    counts : ndarray of int64, shape (..., N)
+        Pixels at each level; sums to ``sum(row_pixels) * sum(column_pixels)``.
+    image_min, image_max : ndarray of float64, shape (...)
+        Smallest and largest intensity in the image (``X1.min()``, ``X1.max()``).
+
+    Notes
+    -----
+    No validation: a fast path for callers that hold the drawn cells. Cost:
+    one level mapping and one weighted bincount over the drawn cells (4,360
+    for a dyadic scalogram instead of 149,548 pixels).
+    """
+    cells = np.asarray(cells, dtype=np.float64)
+    n_colors = int(n_colors)
+    batch_shape = cells.shape[:-2]
+    cmin = np.broadcast_to(np.asarray(cmin, dtype=np.float64), batch_shape)[..., None, None]
+    cmax = np.broadcast_to(np.asarray(cmax, dtype=np.float64), batch_shape)[..., None, None]
+    level = _colour_levels(cells, cmin, cmax, n_colors)
+    per_image = level.reshape(-1, cells.shape[-2] * cells.shape[-1]).astype(np.intp)
+    n_images = per_image.shape[0]
+    pixels = np.multiply.outer(np.asarray(row_pixels, dtype=np.float64),
+                               np.asarray(column_pixels, dtype=np.float64)).ravel()
+    offsets = (np.arange(n_images) * n_colors)[:, None]
+    counts = np.bincount((per_image + offsets).ravel(), weights=np.tile(pixels, n_images),
+                         minlength=n_images * n_colors)
+    counts = counts.astype(np.int64).reshape(batch_shape + (n_colors,))
+    level_values = np.arange(n_colors) / (n_colors - 1)
+    # every drawn cell covers at least one pixel: the extreme levels are the first and
+    # last non-empty bins (cheaper than min/max over the cells)
+    occupied = counts.reshape(n_images, n_colors) > 0
+    lowest = np.argmax(occupied, axis=1)
+    highest = n_colors - 1 - np.argmax(occupied[:, ::-1], axis=1)
+    image_min = lowest.reshape(batch_shape) / (n_colors - 1)
+    image_max = highest.reshape(batch_shape) / (n_colors - 1)
+    return level_values, counts, image_min, image_max
+
+
+def render_level_histogram(
+    scalogram,
+    shape=X1_SHAPE,
+    n_colors: int = DEFAULT_N_COLORS,
+    clim=None,
+    origin: str = "upper",
+):
+    """Level histogram and extreme intensities of :func:`render_intensity`'s image, without rendering it.
+
+    Parameters
+    ----------
+    scalogram, shape, n_colors, clim, origin
+        As in :func:`render_intensity`; ``scalogram`` has shape
+        (..., n_scales, n_samples).
+
+    Returns
+    -------
+    level_values : ndarray of float64, shape (N,)
+    counts : ndarray of int64, shape (..., N)
+        Identical to ``level_histogram(render_intensity(...), N)``.
+    image_min, image_max : ndarray of float64, shape (...)
+        Identical to ``X1.min(axis=(-2, -1))`` and ``X1.max(axis=(-2, -1))``.
+    """
+    data = _real_array("scalogram", scalogram, min_ndim=2)
+    _check_shape(shape)
+    n_colors = _int_at_least("n_colors", n_colors, 2)
+    origin = _check_origin(origin)
+    if clim is None:
+        cmin = data.min(axis=(-2, -1))
+        cmax = data.max(axis=(-2, -1))
+    else:
+        limits = _real_array("clim", clim, min_ndim=1)
+        if limits.shape != (2,) or not limits[0] < limits[1]:
+            raise ValueError(f"clim: expected (cmin, cmax) with cmin < cmax, got {_short(clim)}")
+        cmin = np.full(data.shape[:-2], limits[0])
+        cmax = np.full(data.shape[:-2], limits[1])
+    rows, row_pixels, columns, column_pixels = drawn_cells(data.shape, shape, origin)
+    cells = np.take(np.take(data, columns, axis=-1), rows, axis=-2)   # C-contiguous (..., rows, columns)
+    return level_histogram_from_cells(cells, cmin, cmax, row_pixels, column_pixels, n_colors)
 
 
 # --------------------------------------------------------------------------

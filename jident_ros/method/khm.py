@@ -536,7 +536,11 @@ def khm_fit_batch(levels, counts, init_values, n_clusters=7, p=2.0, max_iter=300
 
     The same iteration as :class:`KHarmonicMeans` with ``init="paper"`` (and the
     same spreading of the identical initial centres), computed for a whole
-    batch with a few array operations per iteration.  For p = 2 it reaches the
+    batch with a few array operations per iteration; with ``accelerate=True``
+    histograms that have converged leave the batch, so a batch costs about what its slowest
+    histogram costs in Python overhead plus the arithmetic of the rows still
+    iterating (batching many histograms, e.g. five signals or 168 windows, is
+    much cheaper than fitting them one by one).  For p = 2 it reaches the
     class's fixed point; for p >= 3 the relaxation schedules differ and, KHM
     having several local optima, the two may settle in different ones (both
     deterministic; each row's result does not depend on the rest of the batch).  The data of each
@@ -632,23 +636,76 @@ def khm_fit_batch(levels, counts, init_values, n_clusters=7, p=2.0, max_iter=300
     return centres, {"n_iter": it, "converged": converged, "damping": lam}
 
 
-def _khm_update(xn, c, s, p, tiny=1e-150):
-    """Eq. (30) with eqs. (26)-(27) for a batch: F(s), shape (B, K)."""
-    d = np.abs(xn[:, None, :] - s[:, :, None])
+def _khm_update(xn, c, s, p, levels1=None, tiny=1e-150):
+    """Eq. (30) with eqs. (26)-(27) for a batch of B histograms: F(s).
+
+    Parameters
+    ----------
+    xn : ndarray, shape (B, L)
+        Level values (normalised to [0, 1] by :func:`khm_fit_batch`).
+    c : ndarray, shape (B, L)
+        Level weights (pixel counts / total).
+    s : ndarray, shape (B, K)
+        Current centres.
+    p : float
+        KHM exponent, >= 2.
+    levels1 : ndarray, shape (B, L, 2), optional
+        ``stack((xn, ones), axis=2)`` (used for p = 2), precomputed by callers
+        that update the same histograms many times.
+
+    Returns
+    -------
+    ndarray, shape (B, K)
+        Updated centres; a cluster whose total weight underflows to zero keeps
+        its centre.
+
+    Notes
+    -----
+    Distances are floored, ``d_il = max(|x_l - s_i|, tiny)``, and divided by
+    the per-level minimum ``dmin_l``: with ``r = d / dmin >= 1``,
+    ``M(i|x_l) W(x_l) c_l`` is proportional to
+    ``q_il = r_il^(-p-2) c_l dmin_l^(p-2) / (sum_i r_il^(-p))^2`` (common
+    factors cancel in eq. 30), and ``s_i = sum_l q_il x_l / sum_l q_il``.
+
+    * p = 2 (the default, the per-window hot path) needs squares only:
+      ``t = 1 / r^2 = dmin^2 / d^2`` from the squared distances (floored at
+      ``tiny^2``), ``q = t^2 c / (sum_i t)^2``, and the two sums over the
+      levels are one batched matrix product of q (B, K, L) with
+      ``[x, 1]`` (B, L, 2).  This rounds differently from the textbook
+      evaluation below (~1e-16 relative per update).
+    * p > 2 keeps the textbook evaluation with pow() (the results of the
+      accelerated fit are very sensitive to rounding for p = 6, 9, so it is
+      not rearranged).
+    """
+    if p == 2.0:
+        if levels1 is None:
+            levels1 = np.stack((xn, np.ones_like(xn)), axis=2)
+        d = xn[:, None, :] - s[:, :, None]              # (B, K, L)
+        np.multiply(d, d, out=d)                         # d^2
+        np.maximum(d, tiny * tiny, out=d)
+        dmin = np.minimum.reduce(d, axis=1)              # (B, L)
+        t = np.divide(dmin[:, None, :], d, out=d)        # r^-2, in (0, 1]
+        bsum = np.add.reduce(t, axis=1)                  # (B, L), >= 1
+        q = t * t
+        q *= (c / (bsum * bsum))[:, None, :]
+        nd = np.matmul(q, levels1)                       # (B, K, 2): numerator, denominator
+        num, den = nd[..., 0], nd[..., 1]
+        if den.all():   # den is a sum of non-negative terms: zero only if they all underflow
+            return num / den
+        return np.divide(num, den, out=s.copy(), where=den > 0)
+    # p > 2: the textbook evaluation (pow()), in place where an input is no longer needed
+    d = xn[:, None, :] - s[:, :, None]                  # (B, K, L)
+    np.abs(d, out=d)
     np.maximum(d, tiny, out=d)
-    dmin = d.min(axis=1, keepdims=True)
-    r = d / dmin
+    dmin = d.min(axis=1, keepdims=True)                  # (B, 1, L)
+    r = np.divide(d, dmin, out=d)
     r2 = r * r
-    if p == 2.0:  # the default: no pow() calls
-        rp = 1.0 / r2
-        bsum = rp.sum(axis=1, keepdims=True)
-        w = c[:, None, :] / (bsum * bsum)
-    else:
-        rp = r ** (-p)
-        bsum = rp.sum(axis=1, keepdims=True)
-        w = (c[:, None, :] * dmin ** (p - 2.0)) / (bsum * bsum)
-    q = rp / r2 * w
-    num = (q * xn[:, None, :]).sum(axis=2)
+    rp = np.power(r, -p)
+    bsum = rp.sum(axis=1, keepdims=True)
+    w = (c[:, None, :] * dmin ** (p - 2.0)) / (bsum * bsum)
+    q = np.divide(rp, r2, out=rp)
+    q *= w
+    num = np.multiply(q, xn[:, None, :], out=r2).sum(axis=2)
     den = q.sum(axis=2)
     return np.where(den > 0, num / np.where(den > 0, den, 1.0), s)
 
@@ -660,38 +717,81 @@ def _squarem(xn, c, s, p, lam, tol, max_iter):
     v = s2 - 2 s1 + s, step length a = -|r|/|v| (at most -1), s' = s - 2 a r + a^2 v,
     then a stabilising s <- g(s').  A cycle whose extrapolation increases the
     residual falls back to s2.  Same fixed points as the plain iteration.
-    Returns (s, number of F evaluations, converged).
+
+    Rows are independent: a row converges at the first iterate ``s_c`` whose
+    residual ``|g(s_c) - s_c| / lam`` is at most ``tol``; it then leaves the
+    batch (the remaining rows are compacted, so converged rows cost nothing)
+    and its result is ``g(s_c)``.  If ``max_iter`` evaluations run out first,
+    converged rows return ``s_c`` and the others their last iterate.
+
+    Parameters
+    ----------
+    xn, c : ndarray, shape (B, L)
+    s : ndarray, shape (B, K), initial centres
+    p : float
+    lam : ndarray, shape (B,), relaxation factors in (0, 1]
+    tol : float
+    max_iter : int, budget of F evaluations
+
+    Returns
+    -------
+    (s (B, K), number of F evaluations, converged (B,) bool)
     """
     B = s.shape[0]
     converged = np.zeros(B, dtype=bool)
-    lam_ = lam[:, None]
+    at_conv = s.copy()       # s_c of every converged row
+    after_conv = s.copy()    # g(s_c)
+    active = np.arange(B)    # rows still iterating; xa, ca, la, levels1 and s hold only these
+    xa, ca, la = xn, c, lam
+    la2 = la[:, None]
+    levels1 = np.stack((xn, np.ones_like(xn)), axis=2) if p == 2.0 else None
+    unit = bool(np.all(lam == 1.0))   # g(s) = s + (F(s) - s): skip multiplying by 1
     evals = 0
 
     def g(x):
-        return x + lam_ * (_khm_update(xn, c, x, p) - x)
+        step = _khm_update(xa, ca, x, p, levels1) - x
+        return x + (step if unit else la2 * step)   # lam = 1: x + 1 * step == x + step
 
     while evals < max_iter:
         s1 = g(s)
-        res0 = np.abs(s1 - s).max(axis=1) / lam
+        r = s1 - s
+        res0 = np.maximum.reduce(np.abs(r), axis=1)
+        if not unit:
+            res0 /= la
         evals += 1
         done = res0 <= tol
-        converged |= done
-        if np.all(converged):
-            s = np.where(done[:, None], s1, s)
-            break
+        if done.any():
+            rows = active[done]
+            converged[rows] = True
+            at_conv[rows], after_conv[rows] = s[done], s1[done]
+            keep = ~done
+            if not keep.any():
+                return after_conv, evals, converged
+            active = active[keep]
+            xa, ca, la = xa[keep], ca[keep], la[keep]
+            levels1 = None if levels1 is None else levels1[keep]
+            la2 = la[:, None]
+            s, s1, r, res0 = s[keep], s1[keep], r[keep], res0[keep]
         s2 = g(s1)
         evals += 1
-        r = s1 - s
         v = s2 - 2.0 * s1 + s
-        nr = np.sqrt((r * r).sum(axis=1))
-        nv = np.sqrt((v * v).sum(axis=1))
-        a = np.where(nv > 0, -nr / np.where(nv > 0, nv, 1.0), -1.0)
-        a = np.minimum(a, -1.0)[:, None]
+        nr = np.sqrt(np.add.reduce(r * r, axis=1))
+        nv = np.sqrt(np.add.reduce(v * v, axis=1))
+        if (nv > 0).all():
+            a = np.minimum(-nr / nv, -1.0)
+        else:
+            a = np.minimum(np.where(nv > 0, -nr / np.where(nv > 0, nv, 1.0), -1.0), -1.0)
+        a = a[:, None]
         ext = s - 2.0 * a * r + a * a * v
         new = g(ext)
         evals += 1
-        res_new = np.abs(g(new) - new).max(axis=1) if False else np.abs(new - ext).max(axis=1) / lam
-        bad = ~np.all(np.isfinite(new), axis=1) | (res_new > res0)
-        new = np.where(bad[:, None], s2, new)
-        s = np.where(converged[:, None], s, new)
-    return s, evals, converged
+        res_new = np.maximum.reduce(np.abs(new - ext), axis=1)
+        if not unit:
+            res_new /= la
+        # bad: the extrapolation increased the residual or is not finite (a NaN/Inf in
+        # new makes res_new NaN/Inf, so "not <=" catches both in one comparison)
+        bad = ~(res_new <= res0)
+        s = np.where(bad[:, None], s2, new) if bad.any() else new
+    out = at_conv.copy()     # max_iter reached: converged rows keep s_c
+    out[active] = s
+    return out, evals, converged

@@ -83,25 +83,53 @@ class PatternLibrary:
     def from_windows(cls, windows, order: Sequence[int], system: SystemConfig, method: MethodConfig,
                      progress=None) -> "PatternLibrary":
         """Library from windows; ``order`` lists window indices class-major, width-minor."""
-        g = system.grid
         ps = tuple(float(p) for p in method.p_values)
-        nw, nc, ns = len(g.backlash_widths_m), len(g.inertia_classes_kgm2), len(SIGNALS)
-        centres = np.zeros((len(ps), nw, ns, nc, method.n_clusters))
-        ranges = np.zeros((nw, ns, nc, 2))
+        centres = np.zeros((len(ps), len(order), len(SIGNALS), method.n_clusters))
+        ranges = np.zeros((len(order), len(SIGNALS), 2))
         refs = np.array([pre_entry_reference(windows.case(i), windows.entry_index) for i in order])
         for s, name in enumerate(SIGNALS):
             batch = np.stack([windows.signals[name][i] for i in order])
-            cen, rps, _ = batch_features(batch, name, method, ps, refs, windows.entry_index)
-            for f in range(nc):
-                for e in range(nw):
-                    b = f * nw + e
-                    centres[:, e, s, f] = cen[:, b]
-                    ranges[e, s, f] = (rps[b].h3, rps[b].k3)
+            centres[:, :, s], rps, _ = batch_features(batch, name, method, ps, refs, windows.entry_index)
+            ranges[:, s] = [(r.h3, r.k3) for r in rps]
             if progress:
-                progress(s + 1, ns)
-        h5 = h5_table(centres, ranges)
+                progress(s + 1, len(SIGNALS))
+        return cls.from_features(centres, ranges, range(len(order)), system, method)
+
+    @classmethod
+    def from_features(cls, centres: np.ndarray, ranges: np.ndarray, order: Sequence[int], system: SystemConfig,
+                      method: MethodConfig) -> "PatternLibrary":
+        """Library from features already computed for a set of windows (e.g. a whole evaluation grid).
+
+        Parameters
+        ----------
+        centres : ndarray, shape (n_p, n_windows, n_signals, n_clusters)
+            Sorted KHM centres of every window (signals in SIGNALS order, p in
+            ``method.p_values`` order), as :func:`pipeline.batch_features` gives them.
+        ranges : ndarray, shape (n_windows, n_signals, 2)
+            (h3, k3) of every window and signal.
+        order : sequence of int
+            Window indices of the pattern runs, class-major, width-minor.
+
+        Equal to :meth:`from_windows` on the same windows (each window's features
+        do not depend on the other windows of its batch).
+        """
+        g = system.grid
+        ps = tuple(float(p) for p in method.p_values)
+        nw, nc = len(g.backlash_widths_m), len(g.inertia_classes_kgm2)
+        order = np.asarray(list(order), dtype=int)
+        if order.shape != (nw * nc,):
+            raise ValueError(f"order: expected {nw * nc} pattern windows (class-major, width-minor), got {order.size}")
+        centres, ranges = np.asarray(centres, dtype=float), np.asarray(ranges, dtype=float)
+        if centres.shape[0] != len(ps) or centres.shape[2:] != (len(SIGNALS), method.n_clusters):
+            raise ValueError(f"centres: expected shape ({len(ps)}, n_windows, {len(SIGNALS)}, {method.n_clusters}), "
+                             f"got {centres.shape}")
+        # window order[f * nw + e] -> [..., e, s, f]: (n_p, nc, nw, ns, K) -> (n_p, nw, ns, nc, K)
+        lib_centres = centres[:, order].reshape(len(ps), nc, nw, len(SIGNALS), -1).transpose(0, 2, 3, 1, 4)
+        lib_ranges = ranges[order].reshape(nc, nw, len(SIGNALS), 2).transpose(1, 2, 0, 3)
+        lib_centres, lib_ranges = np.ascontiguousarray(lib_centres), np.ascontiguousarray(lib_ranges)
+        h5 = h5_table(lib_centres, lib_ranges)
         meta = library_metadata(system, method)
-        return cls(centres, h5, ranges, ps, tuple(g.backlash_widths_m), tuple(g.inertia_classes_kgm2),
+        return cls(lib_centres, h5, lib_ranges, ps, tuple(g.backlash_widths_m), tuple(g.inertia_classes_kgm2),
                    SIGNALS, meta)
 
     # ------------------------------------------------------------ persistence

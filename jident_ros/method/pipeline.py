@@ -2,7 +2,7 @@
 
 window (2048 samples per signal)
   -> scalogram (MATLAB-classic CWT, per-signal wavelet)         scalogram.py
-  -> 343 x 436 gray image X1                                    image.py
+  -> 343 x 436 gray image X1 (only its level histogram is formed) image.py
   -> normalised X3 on [k3, 2 k3 - h3] (eqs. 2-22)               normalise.py
   -> 7 KHM centres S from the weighted level histogram (23-30)  khm.py
   -> H(f) = h5 sum_i |N2(f, i) - N3(i)|, J1 = K1[argmin H]       this module (31-35)
@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import normalise as nz
-from .image import level_histogram, render_intensity
-from .scalogram import READINGS, wavelet_scalogram
+from .image import drawn_cells, level_histogram_from_cells
+from .scalogram import READINGS, percentage_energy_cells, wavelet_coefficients
 
 SIGNALS = ("a1", "m_el", "omega1", "a2", "v2")
 VARIANTS = ("paper", "load_scaled")
@@ -122,13 +122,26 @@ def prepare_signal(x: np.ndarray, signal: str, reference: float | None, variant:
 def image_levels(x: np.ndarray, signal: str, cfg: MethodConfig):
     """Scalogram -> image -> (level values (N,), counts ([B,] N), image min ([B]), image max ([B])).
 
-    ``x`` is one window (n_samples,) or a batch (B, n_samples).
+    ``x`` is one window (n_samples,) or a batch (B, n_samples).  The numbers are
+    those of ``level_histogram(render_intensity(wavelet_scalogram(x)))`` and the
+    image's min/max, computed from the drawn scalogram cells only.
     """
-    scal = wavelet_scalogram(x, cfg.wavelet[signal], reading=cfg.scale_reading,
-                             precision=cfg.wavefun_precision)
-    img = render_intensity(scal, shape=(cfg.image_rows, cfg.image_cols), n_colors=cfg.n_colors)
-    levels, counts = level_histogram(img, cfg.n_colors)
-    return levels, counts, img.min(axis=(-2, -1)), img.max(axis=(-2, -1))
+    coefs = wavelet_coefficients(x, cfg.wavelet[signal], reading=cfg.scale_reading,
+                                 precision=cfg.wavefun_precision)
+    return coefficient_levels(coefs, cfg)
+
+
+def coefficient_levels(coefs: np.ndarray, cfg: MethodConfig):
+    """Wavelet coefficients ([B,] n_scales, n_samples) -> the image's level histogram.
+
+    Returns level values (N,), pixel counts ([B,] N) (int64), image min ([B]) and
+    image max ([B]), equal to rendering the scalogram into the cfg.image_rows x
+    cfg.image_cols image X1 and histogramming it; ``coefs`` is overwritten
+    (squared in place).
+    """
+    rows, row_pixels, columns, column_pixels = drawn_cells(coefs.shape, (cfg.image_rows, cfg.image_cols))
+    cells, cmin, cmax = percentage_energy_cells(coefs, rows, columns, overwrite=True)
+    return level_histogram_from_cells(cells, cmin, cmax, row_pixels, column_pixels, cfg.n_colors)
 
 
 #: Windows per chunk in the scalogram/image stage (bounds memory for the 1024-scale reading).
@@ -198,14 +211,19 @@ def window_features(window: dict, cfg: MethodConfig, p_values, signals=SIGNALS, 
     xs = [prepare_signal(nz._check_window(window[name], name), name, reference, cfg.variant, entry_index)
           for name in signals]
     rngs = [nz.range_params(x, name, cfg.eq12) for x, name in zip(xs, signals)]
-    scal = np.stack([wavelet_scalogram(x, cfg.wavelet[name], reading=cfg.scale_reading,
-                                       precision=cfg.wavefun_precision) for x, name in zip(xs, signals)])
-    # one 2-D image at a time: render_intensity's gather is much faster on 2-D input than on a batch
-    img = [render_intensity(sc, shape=(cfg.image_rows, cfg.image_cols), n_colors=cfg.n_colors) for sc in scal]
-    levels, cnts = level_histogram(np.stack(img), cfg.n_colors)
-    lo, hi = [float(i.min()) for i in img], [float(i.max()) for i in img]
-    vals = [nz.map_levels(levels, float(lo[j]), float(hi[j]), rngs[j]) for j in range(len(signals))]
-    centres, _ = _cluster(np.stack(vals), np.stack(cnts), rngs, cfg, [float(p) for p in p_values])
+    n = len(signals)
+    cnts = np.zeros((n, cfg.n_colors), dtype=np.int64)
+    lo, hi = np.zeros(n), np.zeros(n)
+    # one transform per wavelet (sym5: a1, omega1, v2; db6: m_el, a2), all its signals at once
+    by_wavelet = {}
+    for j, name in enumerate(signals):
+        by_wavelet.setdefault(cfg.wavelet[name], []).append(j)
+    for wavelet, idx in by_wavelet.items():
+        coefs = wavelet_coefficients(np.stack([xs[j] for j in idx]), wavelet, reading=cfg.scale_reading,
+                                     precision=cfg.wavefun_precision)
+        levels, cnts[idx], lo[idx], hi[idx] = coefficient_levels(coefs, cfg)
+    vals = [nz.map_levels(levels, float(lo[j]), float(hi[j]), rngs[j]) for j in range(n)]
+    centres, _ = _cluster(np.stack(vals), cnts, rngs, cfg, [float(p) for p in p_values])
     return centres, rngs
 
 

@@ -67,9 +67,11 @@ __all__ = [
     "cwt_classic",
     "cwt_classic_direct",
     "scalogram",
+    "percentage_energy_cells",
     "scales_for_reading",
     "swt_details",
     "swt_scalogram",
+    "wavelet_coefficients",
     "wavelet_scalogram",
 ]
 
@@ -266,6 +268,14 @@ class FftGroup:
     fft_length: int
     spectra: np.ndarray
     gather_index: np.ndarray
+
+    @functools.cached_property
+    def kept_starts(self) -> list:
+        """First kept sample of each scale's inverse FFT row (``wkeep1``'s start), list of int (n_group,)."""
+        n_rows = self.rows.size
+        n_samples = self.gather_index.size // n_rows
+        first = self.gather_index[::n_samples] - np.arange(n_rows) * self.fft_length
+        return [int(v) for v in first]
 
 
 @dataclass(frozen=True, eq=False)
@@ -471,15 +481,26 @@ def cwt_classic(signal, scales, wavelet: str, precision: int = DEFAULT_PRECISION
         chunk = max(1, _CHUNK_BYTES // (n_rows * n_freq * 16))
         spectrum = scipy.fft.rfft(batch, n=group.fft_length, axis=-1)  # (n_signals, n_freq)
         product = np.empty((min(chunk, n_signals), n_rows, n_freq), dtype=np.complex128)
-        kept = np.empty((min(chunk, n_signals), n_rows * n_samples))
+        # rows of a group are normally consecutive output rows (groups are runs of scales
+        # sorted by filter length): copy each scale's kept block straight into the output
+        first_row = int(group.rows[0])
+        consecutive = np.array_equal(group.rows, np.arange(first_row, first_row + n_rows))
+        starts = group.kept_starts
+        kept = None if consecutive else np.empty((min(chunk, n_signals), n_rows * n_samples))
         for first in range(0, n_signals, chunk):
             stop = min(first + chunk, n_signals)
             size = stop - first
             np.multiply(spectrum[first:stop, None, :], group.spectra[None], out=product[:size])
-            full = scipy.fft.irfft(product[:size], n=group.fft_length, axis=-1)
-            np.take(full.reshape(size, -1), group.gather_index, axis=1, out=kept[:size])
+            full = scipy.fft.irfft(product[:size], n=group.fft_length, axis=-1)  # (size, n_rows, fft_length)
+            if consecutive:
+                for i in range(size):
+                    target = out[first + i, first_row:first_row + n_rows]
+                    for row, start in enumerate(starts):
+                        target[row] = full[i, row, start:start + n_samples]
+            else:
+                np.take(full.reshape(size, -1), group.gather_index, axis=1, out=kept[:size])
+                out[first:stop, group.rows] = kept[:size].reshape(size, n_rows, n_samples)
             del full
-            out[first:stop, group.rows] = kept[:size].reshape(size, n_rows, n_samples)
     return out[0] if array.ndim == 1 else out
 
 
@@ -557,6 +578,62 @@ def scalogram(coefs) -> np.ndarray:
     if np.any(total == 0):
         raise ValueError("coefs: all coefficients are zero, percentage energy is undefined")
     return 100.0 * energy / total
+
+
+def percentage_energy_cells(coefs, rows, columns, overwrite: bool = False):
+    """Some cells of the scalogram ``100 |C|**2 / sum |C|**2`` and its extremes, without forming it.
+
+    What an image of the scalogram needs (see
+    :func:`jident_ros.method.image.drawn_cells`): the values of the drawn
+    cells and the automatic colour limits, i.e. the minimum and maximum over
+    *all* cells. Equal, bit for bit, to indexing and reducing
+    :func:`scalogram`'s result (the percentage map is monotone, so its
+    extremes are the images of the energy's extremes), with four passes over
+    the coefficients instead of about ten.
+
+    Parameters
+    ----------
+    coefs : ndarray, shape (..., n_scales, n_samples)
+        Wavelet coefficients C(a, b), real or complex, finite.
+    rows : array of int, shape (n_rows,)
+    columns : array of int, shape (n_columns,)
+        Scale rows and sample columns wanted.
+    overwrite : bool, optional
+        Allow squaring a float64 C-contiguous ``coefs`` in place (saves one
+        array of the size of ``coefs``; its content is then the energy).
+
+    Returns
+    -------
+    cells : ndarray of float64, shape (..., n_rows, n_columns)
+        ``scalogram(coefs)[..., rows[:, None], columns[None, :]]``.
+    smallest, largest : ndarray of float64, shape (...)
+        ``scalogram(coefs).min(axis=(-2, -1))`` and ``.max(axis=(-2, -1))``.
+
+    Raises
+    ------
+    ValueError
+        Fewer than 2 dimensions, non-finite coefficients or an all-zero scalogram.
+    """
+    array = np.asarray(coefs)
+    if array.ndim < 2 or array.size == 0 or array.dtype.kind not in "biufc":
+        scalogram(array)  # raises the matching ValueError
+    if array.dtype.kind == "c":
+        energy = np.abs(array.astype(np.complex128, copy=False)) ** 2
+    elif overwrite and array.dtype == np.float64 and array.flags.c_contiguous and array.flags.writeable:
+        energy = np.multiply(array, array, out=array)
+    else:
+        array = array.astype(np.float64, copy=False)
+        energy = array * array
+    total = energy.sum(axis=(-2, -1))
+    if not (np.all(np.isfinite(total)) and np.all(total > 0)):
+        scalogram(coefs if not overwrite else energy)  # names the problem
+        raise ValueError("coefs: the energy overflows float64")
+    smallest = 100.0 * energy.min(axis=(-2, -1)) / total
+    largest = 100.0 * energy.max(axis=(-2, -1)) / total
+    # two takes (columns, then rows): C-contiguous cells, much faster than one fancy index
+    picked = np.take(np.take(energy, columns, axis=-1), rows, axis=-2)
+    cells = 100.0 * picked / total[..., None, None]
+    return cells, smallest, largest
 
 
 # --------------------------------------------------------------------------
@@ -660,7 +737,30 @@ def wavelet_scalogram(
         Percentage energy per coefficient (the paper's scalogram, input of
         the image X1); rows ordered from the smallest scale.
     """
+    return scalogram(wavelet_coefficients(signal, wavelet, reading, precision))
+
+
+def wavelet_coefficients(
+    signal,
+    wavelet: str,
+    reading: str = "dyadic",
+    precision: int = DEFAULT_PRECISION,
+) -> np.ndarray:
+    """The coefficients whose percentage energy :func:`wavelet_scalogram` returns.
+
+    Parameters
+    ----------
+    signal, wavelet, reading, precision
+        As in :func:`wavelet_scalogram`.
+
+    Returns
+    -------
+    ndarray of float64, shape ([n_signals,] n_scales, n_samples)
+        :func:`cwt_classic` at :func:`scales_for_reading`'s scales, or the
+        :func:`swt_details` bands for ``'swt'``; a new array (the caller may
+        overwrite it, e.g. ``percentage_energy_cells(..., overwrite=True)``).
+    """
     if reading == "swt":
-        return swt_scalogram(signal, wavelet, level=10)
+        return swt_details(signal, wavelet, level=10)
     scales = scales_for_reading(reading)
-    return scalogram(cwt_classic(signal, scales, wavelet, precision))
+    return cwt_classic(signal, scales, wavelet, precision)
