@@ -799,3 +799,30 @@ def test_load_method_config_file(tmp_path):
         load_method_config(p)
     p.write_text("/**:\n  ros__parameters:\n    method:\n      variant: load_scaled\n")
     assert load_method_config(p) == MethodConfig(variant="load_scaled")
+
+
+def test_equal_load_grid_equalises_the_load_and_keeps_the_pattern_runs(windows, system):
+    """The ablation of docs/method.md: every eta_k group at the pattern group's steady load."""
+    from jident_ros.method.evaluate import equal_load_grid
+    g = system.grid
+    # two pattern runs (they fix the line speed) and the EXTRA_CASES, at eta_k 0.0375 and 0.0125
+    sub = [0, 41, 42, 43, 44]
+    clean = dataclasses.replace(windows, signals={k: v[sub] for k, v in windows.signals.items()},
+                                cases=[windows.cases[i] for i in sub], initial_slip=windows.initial_slip[sub])
+    eq = equal_load_grid(system, clean)
+    assert eq.cases == clean.cases
+    pre = slice(0, clean.entry_index)
+    load_pattern = clean.signals["m_el"][0, pre].mean()
+    forces = eq.metadata["equal_load_process_force_n"]
+    assert forces[g.pattern_consistency_pa_sn] == system.load.process_force_n
+    assert forces[0.0125] > system.load.process_force_n > forces[0.0375]
+    for i, c in enumerate(eq.cases):
+        # steady-state load torque equal to the pattern group's (it differs by ~15 % per group in clean)
+        assert eq.signals["m_el"][i, pre].mean() == pytest.approx(load_pattern, rel=1e-4)
+        if c.consistency_pa_sn == g.pattern_consistency_pa_sn:
+            np.testing.assert_array_equal(eq.signals["a1"][i], clean.signals["a1"][i])
+        else:
+            assert abs(clean.signals["m_el"][i, pre].mean() / load_pattern - 1) > 0.1
+    with pytest.raises(ValueError, match="no pattern run"):
+        equal_load_grid(system, dataclasses.replace(clean, signals={k: v[2:] for k, v in clean.signals.items()},
+                                                    cases=clean.cases[2:], initial_slip=clean.initial_slip[2:]))

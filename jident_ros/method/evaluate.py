@@ -142,6 +142,7 @@ class Evaluation:
     gap: list = field(default_factory=list)
     best: list = field(default_factory=list)
     command: str = "jident evaluate"
+    ablation_examples: list = field(default_factory=list)   # paper examples on equal_load_grid
 
 
 def paper_examples(system: SystemConfig, method: MethodConfig, clean: WindowSet, result: GridResult) -> list:
@@ -195,6 +196,42 @@ def best_verdict(gap: dict, paper: GridResult, p_index: int = 0) -> dict:
             "all": float(ok.mean()), "fallbacks": int((gap["class"] < 0).sum())}
 
 
+def equal_load_grid(system: SystemConfig, clean: WindowSet) -> WindowSet:
+    """The cases of ``clean`` re-simulated with every eta_k group at the pattern group's load (an ablation).
+
+    Not a model change: a diagnostic experiment for docs/method.md ("How well it works").  For each
+    eta_k group the process force F_p is set so that F_p + F_film(v_2, eta_k) equals the pattern
+    group's F_p + F_film(v_2, 0.025) at the pattern group's steady line speed v_2 (the mean pre-entry
+    v_2 of the pattern runs in ``clean``).  The steady-state load torque, slip and speed are then the
+    same in every group (to ~1e-5); what eta_k still changes is the film's damping of the line-mass
+    motion (dF_film/dv_2 = n_1 F_film / v_2).  Returns a WindowSet in ``clean``'s case order.
+    """
+    from ..sim.model import Model
+    g = system.grid
+    pattern = [i for i, c in enumerate(clean.cases) if c.consistency_pa_sn == g.pattern_consistency_pa_sn]
+    if not pattern:
+        raise ValueError(f"equal_load_grid: clean holds no pattern run (eta_k = {g.pattern_consistency_pa_sn})")
+    v2 = float(np.mean(clean.signals["v2"][pattern, :clean.entry_index]))
+    model = Model(system)
+    load = system.load.process_force_n + float(model.film_force(v2, g.pattern_consistency_pa_sn))
+    parts = {}
+    for eta in sorted({c.consistency_pa_sn for c in clean.cases}):
+        force = load - float(model.film_force(v2, eta))
+        group = [i for i, c in enumerate(clean.cases) if c.consistency_pa_sn == eta]
+        sysx = dataclasses.replace(system, load=dataclasses.replace(system.load, process_force_n=force))
+        parts[eta] = (group, simulate_grid(sysx, [clean.cases[i] for i in group],
+                                           sample_period_s=clean.sample_period_s), force)
+    signals = {k: np.empty_like(v) for k, v in clean.signals.items()}
+    slip = np.empty_like(clean.initial_slip)
+    for group, ws, _ in parts.values():
+        for k in signals:
+            signals[k][group] = ws.signals[k]
+        slip[group] = ws.initial_slip
+    forces = {eta: force for eta, (_, _, force) in parts.items()}
+    return WindowSet(clean.t, signals, list(clean.cases), clean.entry_index, clean.sample_period_s, slip,
+                     dict(clean.metadata, equal_load_process_force_n=forces, pattern_line_speed_m_s=v2))
+
+
 def _feature_task(args):
     """Features of one signal of one data set under one method configuration.
 
@@ -219,7 +256,7 @@ def _pattern_order(system: SystemConfig, windows: WindowSet) -> list:
 
 def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 30.0), seeds=(1, 2),
                    readings=("dyadic", "linear", "swt"), variants=("paper", "load_scaled"), progress=None,
-                   log=print, jobs: int | None = None) -> Evaluation:
+                   log=print, jobs: int | None = None, ablation: bool = True) -> Evaluation:
     """The whole evaluation: every variant noise-free and noisy, the gap estimator, the level-10 readings.
 
     The work is split into one task per (method configuration, data set, signal):
@@ -228,7 +265,9 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     configuration's pattern library is assembled from its noise-free features (the
     pattern runs are windows of the noise-free grid), so no window is transformed
     twice.  The numbers do not depend on ``jobs`` or on the task order.  A result's
-    ``seconds`` is the worker time of its tasks.
+    ``seconds`` is the worker time of its tasks.  With ``ablation`` the paper-faithful
+    mode also runs on :func:`equal_load_grid` (every eta_k group at the pattern load),
+    against the same library; its paper examples go to ``Evaluation.ablation_examples``.
     """
     import os
     from concurrent.futures import ProcessPoolExecutor
@@ -246,6 +285,13 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
         m = dataclasses.replace(method, variant=variant)
         configs.append((m, [(f"{variant}, {name}", name, data, {"variant": variant, "data": name})
                             for name, data in datasets]))
+        if ablation and variant == "paper":
+            t1 = time.perf_counter()
+            equal = equal_load_grid(system, clean)
+            log(f"equal-load ablation grid simulated in {time.perf_counter() - t1:.1f} s")
+            configs[-1][1].append(("paper, equal-load ablation, noise-free", "equal-load ablation", equal,
+                                   {"ablation": "equal load", "data": "equal-load ablation",
+                                    "process_force_n": equal.metadata["equal_load_process_force_n"]}))
     for reading in readings:
         if reading != method.scale_reading:
             m = dataclasses.replace(method, scale_reading=reading, p_values=(2.0,), variant="paper")
@@ -283,7 +329,10 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
             results.append(res)
     for res in results:
         log(_summary(res))
-    gaps, best, examples = [], [], []
+    gaps, best, examples, ablation_examples = [], [], [], []
+    for res in results:
+        if res.notes.get("ablation"):
+            ablation_examples = paper_examples(system, res.method, clean, res)
     paper_results = {r.notes.get("data"): r for r in results if r.notes.get("variant") == "paper"}
     for name, data in datasets:
         res = paper_results.get(name)
@@ -296,7 +345,8 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
         best.append(best_verdict(g, res))
         log(f"gap estimator, {name}: class accuracy {g['class_ok'].mean() * 100:.1f} %, "
             f"max |error| {np.nanmax(np.abs(g['rel_error'])) * 100:.2f} %")
-    return Evaluation(results, examples, system, time.perf_counter() - t0, t_sim, gaps, best)
+    return Evaluation(results, examples, system, time.perf_counter() - t0, t_sim, gaps, best,
+                      ablation_examples=ablation_examples)
 
 
 def _summary(res: GridResult) -> str:
