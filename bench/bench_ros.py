@@ -9,7 +9,7 @@ processes (the ``ros2 run`` executables of the ament index, else ``python -m jid
 in a namespace of their own (``/bench_<k>``); windowing and diagnostic run with ``use_sim_time``
 (the simulator publishes ``/clock``).  The simulator runs ``--cases`` grid cases (``cases:=zip``: the
 seven J1 classes in turn, K2 = 0.005 m, eta_k = 0.0375 Pa s^n -- off the pattern runs), ``--repeat``
-passes over them, at ``real_time_factor`` = the level (0 = as fast as the pipeline keeps up).  The
+passes over them, at ``real_time_factor`` = the level (0 = unpaced: ``fast_sleep_s`` per batch).  The
 pattern library is built once beforehand (or taken from the CLI's cache) and passed to the node.
 
 The bench's own rclpy node (in this process, its own Context) receives ``drive/signals``,
