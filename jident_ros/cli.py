@@ -16,6 +16,9 @@ from pathlib import Path
 from . import __version__
 from .config import ConfigError, load_system_config
 
+#: diagnosis.GAP_METHODS, spelled out so that `jident --help` does not import the method (test_config_cli)
+CLI_GAP_METHODS = ("auto", "acceleration", "anchored", "angle", "speed", "off")
+
 
 class CliError(Exception):
     """A user error: printed as one line, exit status 2."""
@@ -299,8 +302,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("recording", help="bag directory or .mcap file (e.g. a diagnostic node's record_dir)")
     g.add_argument("--p", type=_positive("--p"), default=2.0, help="KHM exponent p, one of method.p_values (default 2)")
     g.add_argument("--library", help="pattern library .npz (default: build-patterns' default path; built when missing)")
-    g.add_argument("--gap-method", choices=("auto", "acceleration", "speed", "off"), default="auto",
-                   help="gap estimator (default auto: acceleration fit when a1 is recorded, else speed)")
+    g.add_argument("--gap-method", choices=CLI_GAP_METHODS, default="auto",
+                   help="gap estimator (default auto: acceleration fit when a1 is recorded, else the angle fit "
+                        "when alpha1 is, else speed)")
     g.add_argument("--no-image", action="store_true", help="skip the paper's image method (gap estimate only)")
     g.add_argument("--backlash-width-m", type=_positive("--backlash-width-m"),
                    help="K2 of inequality (1), m (default: the recording's drive/backlash_width, else 0.005)")

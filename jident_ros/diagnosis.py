@@ -38,7 +38,7 @@ from .method.pipeline import SIGNALS
 from .ros_io import ERROR, LEVEL_NAMES, OK, WARN
 
 #: Gap estimators: ``auto`` (acceleration fit when a1 is there, else speed), ``acceleration``, ``speed``, ``off``.
-GAP_METHODS = ("auto", "acceleration", "anchored", "speed", "off")
+GAP_METHODS = ("auto", "acceleration", "anchored", "angle", "speed", "off")
 
 
 @dataclass

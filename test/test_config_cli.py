@@ -91,3 +91,9 @@ def test_cli_build_patterns_and_refusal_of_a_foreign_library(tmp_path, capsys):
 def test_cli_evaluate_rejects_bad_p(capsys):
     assert main(["evaluate", "--p", "-1"]) == 2
     assert "--p" in capsys.readouterr().err
+
+
+def test_cli_gap_methods_are_the_diagnosis_gap_methods():
+    from jident_ros.cli import CLI_GAP_METHODS
+    from jident_ros.diagnosis import GAP_METHODS
+    assert CLI_GAP_METHODS == GAP_METHODS

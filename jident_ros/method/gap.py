@@ -15,8 +15,9 @@ Gap interval
   the flank impact makes a1 drop sharply while m_el cannot (the flux is
   continuous), so the gap ends where a1 falls below ``drop`` (default 0.6) times
   a1 at the entry sample; the sample just before that drop is left out too (the
-  impact happens between samples).  ω1-only drives use the same test on the smoothed
-  derivative of ω1.
+  impact happens between samples).  Drives without a1 use the same test on the
+  smoothed second derivative of α1 (a motor encoder) or, failing that, on the
+  smoothed derivative of ω1 (Savitzky-Golay, 7 samples, quadratic).
 
 Fits
 ----
@@ -37,6 +38,14 @@ Fits
 * ``"anchored"`` (the estimator of the first release, kept for comparison): m0 = the
   pre-entry mean, m_el ≈ m0 + b t + c t^2 fitted over the gap, then a1 = (r/J1) m_hat
   through the origin.
+* ``"angle"`` (α1 and m_el measured: a motor encoder and the drive's torque, no
+  accelerometer): double-integral form, no differentiation.  Before the entry the
+  motor turns at a constant speed, inside the gap J1 dω1/dt = m_el, so over the
+  pre-entry and gap samples α1(t) = α0 + ω0 t + Z(t)/J1 with Z the double integral of
+  m_el from the entry (0 before it; quadratic rule).  Ordinary least squares for
+  (α0, ω0, 1/J1), plus the integration error in quadrature.  An encoder's quantisation
+  error on a steadily turning shaft is a deterministic sawtooth, not white noise: below
+  ~2^18 counts/rev the interval is too narrow (docs/method.md).
 * ``"speed"`` (ω1 and m_el measured, no accelerometer): integral form, no
   differentiation: ∫_{t0}^{tk} m_el dt = J1 (ω1_k − ω1_0) + c, with c absorbing the
   noise of ω1 at the first gap sample.
@@ -83,11 +92,12 @@ class GapEstimate:
     std_error_kgm2 : float          standard error, kg m^2
     ci95_kgm2 : (float, float)      95 % confidence interval, kg m^2
     residual_rms : float            RMS of the fit residual: of a1 expressed as torque, (a1 - (r/J1) m_hat) J1/r,
-                                    in N m for 'acceleration' and 'anchored'; N m s for 'speed'
-    model_error_kgm2 : float        'acceleration' only: |J1 with a linear torque term - J1|, included in
-                                    std_error_kgm2 (0 for the other fits)
+                                    in N m for 'acceleration' and 'anchored'; N m s for 'speed'; rad of α1
+                                    for 'angle'
+    model_error_kgm2 : float        'acceleration': |J1 with a linear torque term - J1|; 'angle': |J1 with the
+                                    trapezoid rule - J1|; included in std_error_kgm2 (0 for the other fits)
     gap_start, gap_end : int        sample indices, end exclusive
-    method : str                    'acceleration' or 'speed'
+    method : str                    'acceleration', 'anchored', 'angle' or 'speed'
     interval : str                  'angles' or 'signature'
     """
 
@@ -127,11 +137,14 @@ def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_
     else:
         if "a1" in window:
             acc = np.asarray(window["a1"], float)
-        elif "omega1" in window:
+        elif "alpha1" in window or "omega1" in window:
             from scipy.signal import savgol_filter
-            acc = savgol_filter(np.asarray(window["omega1"], float), 7, 2, deriv=1)
+            if "alpha1" in window:   # a motor encoder: acceleration per sample^2
+                acc = savgol_filter(np.asarray(window["alpha1"], float), 7, 2, deriv=2)
+            else:
+                acc = savgol_filter(np.asarray(window["omega1"], float), 7, 2, deriv=1)
         else:
-            raise NoGapError("no gap signal: the window needs alpha1+alpha2, a1 or omega1")
+            raise NoGapError("no gap signal: the window needs alpha1+alpha2, a1, alpha1 or omega1")
         a0 = acc[entry_index]
         if not a0 > 0:
             raise NoGapError(f"no backlash gap: the drive does not accelerate at the entry sample (a1 = {a0:.4g})")
@@ -158,7 +171,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     if bearing_friction_nms_per_rad and "omega1" in window:
         m = m - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)[start:end]
     if method is None:
-        method = "acceleration" if "a1" in window else "speed"
+        method = "acceleration" if "a1" in window else "angle" if "alpha1" in window else "speed"
     n = end - start
     model_error = 0.0
     if method == "acceleration":
@@ -206,6 +219,14 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         var_mhat = var_m0 + np.einsum("ij,jk,ik->i", T, cov, T)
         rel_m = float(np.sqrt(np.mean(var_mhat))) / float(np.mean(m_hat))
         se = float(np.sqrt(var_k * (wheel_radius_m / kappa ** 2) ** 2 + (j * rel_m) ** 2))
+    elif method == "angle":
+        if "alpha1" not in window:
+            raise NoGapError("method 'angle' needs alpha1 (use 'speed' with omega1)")
+        # m_el noise from the pre-entry steady state (m_el constant there)
+        pre = np.asarray(window["m_el"], float)[:start]
+        noise = float(np.std(pre, ddof=1)) if pre.size >= 5 else 0.0
+        j, se, res, dof, model_error = _angle_fit(np.asarray(window["alpha1"], float), m, start, end,
+                                                  sample_period_s, noise)
     elif method == "speed":
         if "omega1" not in window:
             raise NoGapError("method 'speed' needs omega1")
@@ -220,7 +241,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         cov = (res @ res) / dof * np.linalg.inv(A.T @ A) if dof > 0 else np.full((2, 2), np.inf)
         se = float(np.sqrt(cov[0, 0]))
     else:
-        raise ValueError(f"method: expected 'acceleration', 'anchored' or 'speed', got {method!r}")
+        raise ValueError(f"method: expected 'acceleration', 'anchored', 'angle' or 'speed', got {method!r}")
     if not np.isfinite(j) or j <= 0:
         raise NoGapError(f"gap fit gave a non-physical J1 = {j!r}")
     if not se <= MAX_RELATIVE_STD_ERROR * j:
@@ -324,6 +345,69 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     return {"kappa": float(kappa), "kappa_se": float(np.sqrt(max(cov[0, 0], 0.0))), "beta": beta,
             "a1_residual": r_a, "dof": max(na - 1, 1) if na >= 5 else max(na + 2 * n - p - 1, 1),
             "noise": (sm, sa)}
+
+
+def _cumulative_integral(f: np.ndarray, h: float, quadratic: bool = True) -> np.ndarray:
+    """Running integral of uniformly sampled f (along axis 0) from its first sample (0 there), same shape.
+
+    ``quadratic``: each interval integrates the parabola through it and its neighbour,
+    h/12 (5 f_i + 8 f_i+1 − f_i+2) (the last one leans back: h/12 (−f_i-1 + 8 f_i + 5 f_i+1)),
+    as scipy's ``cumulative_simpson`` (not used: it needs scipy >= 1.12, older than some ROS
+    distributions ship).  Else the trapezoid rule.
+    """
+    f = np.asarray(f, float)
+    if not quadratic or f.shape[0] < 3:
+        parts = 0.5 * (f[1:] + f[:-1]) * h
+    else:
+        parts = np.empty((f.shape[0] - 1,) + f.shape[1:])
+        parts[:-1] = (5.0 * f[:-2] + 8.0 * f[1:-1] - f[2:]) * (h / 12.0)
+        parts[-1] = (-f[-3] + 8.0 * f[-2] + 5.0 * f[-1]) * (h / 12.0)
+    return np.concatenate([np.zeros((1,) + f.shape[1:]), np.cumsum(parts, axis=0)])
+
+
+def _angle_fit(alpha1: np.ndarray, m_gap: np.ndarray, start: int, end: int, sample_period_s: float,
+               torque_noise: float = 0.0):
+    """(J1, standard error, residual [rad], dof, model error) of the 'angle' fit (module docstring).
+
+    ``m_gap``: m_el over the gap samples [start, end) (bearing friction already taken
+    off); the pre-entry samples [0, start) enter with Z = 0.  Centred on the entry sample
+    so that the least squares see radians of the transient, not the whole angle.  Z is
+    integrated with the quadratic rule; the change of J1 with the trapezoid rule instead
+    is the model error (the integration error, which dominates noise-free windows).
+    Standard error of 1/J1, in quadrature: the OLS one (noise on α1), the first-order
+    effect of white m_el noise of standard deviation ``torque_noise`` [N m] carried into Z
+    by the double integral (an error in the regressor, which the α1 residual does not
+    show), and the model error.
+    """
+    n = end
+    t = (np.arange(n) - start) * sample_period_s
+    y = alpha1[:end] - alpha1[start]
+
+    def solve(quadratic):
+        speed = _cumulative_integral(m_gap, sample_period_s, quadratic)
+        z = _cumulative_integral(speed, sample_period_s, quadratic)
+        A = np.column_stack([np.ones(n), t, np.concatenate([np.zeros(start), z])])
+        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        return A, coef
+
+    A, coef = solve(True)
+    res = y - A @ coef
+    dof = n - 3
+    kappa = float(coef[2])     # 1/J1
+    if not kappa > 0 or dof < 1:
+        raise NoGapError(f"gap fit gave a non-physical 1/J1 = {kappa!r} from alpha1")
+    var_kappa = float(res @ res) / dof * float(np.linalg.pinv(A.T @ A)[2, 2])
+    if torque_noise > 0:
+        # Z = D m over the gap (D: the double integral as a matrix); noise e on m moves the
+        # coefficients by -kappa A^+ (0 before the entry, D e in the gap) to first order
+        double = _cumulative_integral(_cumulative_integral(np.eye(end - start), sample_period_s),
+                                      sample_period_s)
+        row = np.linalg.pinv(A)[2, start:] @ double
+        var_kappa += (kappa * torque_noise) ** 2 * float(row @ row)
+    kappa_trap = float(solve(False)[1][2])
+    model_error = abs(1.0 / kappa_trap - 1.0 / kappa) if kappa_trap > 0 else np.inf
+    se = float(np.hypot(np.sqrt(max(var_kappa, 0.0)) / kappa ** 2, model_error))
+    return 1.0 / kappa, se, res, dof, model_error
 
 
 @lru_cache(maxsize=256)

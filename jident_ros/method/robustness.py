@@ -10,8 +10,8 @@ Sweeps (:func:`run_robustness`):
     and eta_k, noise-free and at 30 dB;
 (c) off-grid backlash widths {0.003, 0.0045, 0.006, 0.0085} m at the grid's J1 and
     eta_k, noise-free and at 30 dB (the image method uses the nearest library width);
-(d) encoder quantisation of alpha1/alpha2 (2^12, 2^14, 2^16 counts per revolution):
-    gap interval, J1 and width estimate;
+(d) encoder quantisation of alpha1/alpha2 (2^12 ... 2^20 counts per revolution):
+    gap interval, J1 and width estimate, and the motor-encoder-only 'angle' fit;
 (e) other sample periods (0.25 ms, 1 ms): the gap estimator only (the pattern
     library is built for 0.5 ms).
 
@@ -39,6 +39,7 @@ CHANNEL_SETS = {
     "no_angles": (("a1", "m_el"), "acceleration", "a1+m_el (no angles)"),
     "anchored": (("alpha1", "alpha2", "a1", "m_el"), "anchored", "α1+α2+a1+m_el, first-release fit (pre-entry anchor)"),
     "speed": (("omega1", "m_el"), "speed", "ω1+m_el (speed fit)"),
+    "angle": (("alpha1", "m_el"), "angle", "α1+m_el (motor encoder only)"),
 }
 #: The channel set whose estimate feeds the fused verdict and the width estimate.
 PRIMARY = "angles"
@@ -48,7 +49,9 @@ SNR_LEVELS_DB = (60.0, 40.0, 30.0, 20.0)
 OFFGRID_J1 = (("1.16 × 0.99", 1.16 * 0.99), ("1.16 × 1.01", 1.16 * 1.01), ("1.16 × 0.88", 1.16 * 0.88),
               ("1.10", 1.10), ("1.00", 1.00))
 OFFGRID_WIDTHS_M = (0.003, 0.0045, 0.006, 0.0085)
-ENCODER_COUNTS = (2 ** 12, 2 ** 14, 2 ** 16)
+ENCODER_COUNTS = (2 ** 12, 2 ** 14, 2 ** 16, 2 ** 18, 2 ** 20)
+#: Channel sets run on the quantised windows: the primary one and the motor-encoder-only one.
+ENCODER_KEYS = (PRIMARY, "angle")
 SAMPLE_PERIODS_S = (0.25e-3, 1e-3)
 #: Noise level of the noisy off-grid sweeps and of the second target.
 TARGET_SNR_DB = 30.0
@@ -451,7 +454,7 @@ def run_robustness(system: SystemConfig, method, library: PatternLibrary | None 
     # (d) encoder quantisation ---------------------------------------------------------------
     t0 = time.perf_counter()
     quant = [evaluate_windows(system, quantise_encoders(clean, int(n)), f"{int(n)} counts/rev", "quantisation",
-                              keys=(PRIMARY,), counts_per_rev=int(n)) for n in encoder_counts]
+                              keys=ENCODER_KEYS, counts_per_rev=int(n)) for n in encoder_counts]
     timings["encoder quantisation"] = time.perf_counter() - t0
 
     # (e) sample periods: the gap estimator only ----------------------------------------------
