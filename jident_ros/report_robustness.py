@@ -296,7 +296,7 @@ def _findings(rob: RobustnessResult) -> list[str]:
                 return (f"{q.counts_per_rev} counts/rev: median {_num(a['median'])} %, max {_num(a['max'])} %, "
                         f"CI covers {_pct(a['coverage'])}" + (f", {a['failed']} without a gap" if a["failed"] else ""))
             lines.append("* A drive with only a motor encoder and its torque (α1+m_el, fit `angle`: α1 against the "
-                         "double integral of m_el, no differentiation; the gap end from the smoothed second "
+                         "double integral of the fitted m_el, no differentiation; the gap end from the smoothed second "
                          "derivative of α1): " + "; ".join(angle_part(q) for q in enc) + ". The interval is "
                          "too narrow for coarse encoders: the quantisation error of a steadily turning shaft is a "
                          "deterministic sawtooth, not the white noise the least-squares standard error assumes; "

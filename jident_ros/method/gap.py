@@ -42,10 +42,12 @@ Fits
   accelerometer): double-integral form, no differentiation.  Before the entry the
   motor turns at a constant speed, inside the gap J1 dω1/dt = m_el, so over the
   pre-entry and gap samples α1(t) = α0 + ω0 t + Z(t)/J1 with Z the double integral of
-  m_el from the entry (0 before it; quadratic rule).  Ordinary least squares for
-  (α0, ω0, 1/J1), plus the integration error in quadrature.  An encoder's quantisation
-  error on a steadily turning shaft is a deterministic sawtooth, not white noise: below
-  ~2^18 counts/rev the interval is too narrow (docs/method.md).
+  m_el from the entry (0 before it).  m_el is first fitted with the joint fit's torque
+  model (m0, then m0 + c2 τ² + c3 τ³ in the gap), Z is its exact double integral, and
+  ordinary least squares give (α0, ω0, 1/J1); the torque fit's covariance and the
+  model error go into the uncertainty.  An encoder's quantisation error on a steadily
+  turning shaft is a deterministic sawtooth, not white noise: below ~2^18 counts/rev
+  the interval is too narrow (docs/method.md).
 * ``"speed"`` (ω1 and m_el measured, no accelerometer): integral form, no
   differentiation: ∫_{t0}^{tk} m_el dt = J1 (ω1_k − ω1_0) + c, with c absorbing the
   noise of ω1 at the first gap sample.
@@ -94,8 +96,8 @@ class GapEstimate:
     residual_rms : float            RMS of the fit residual: of a1 expressed as torque, (a1 - (r/J1) m_hat) J1/r,
                                     in N m for 'acceleration' and 'anchored'; N m s for 'speed'; rad of α1
                                     for 'angle'
-    model_error_kgm2 : float        'acceleration': |J1 with a linear torque term - J1|; 'angle': |J1 with the
-                                    trapezoid rule - J1|; included in std_error_kgm2 (0 for the other fits)
+    model_error_kgm2 : float        'acceleration': |J1 with a linear torque term - J1|; 'angle': the same for
+                                    its torque model; included in std_error_kgm2 (0 for the other fits)
     gap_start, gap_end : int        sample indices, end exclusive
     method : str                    'acceleration', 'anchored', 'angle' or 'speed'
     interval : str                  'angles' or 'signature'
@@ -222,11 +224,11 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     elif method == "angle":
         if "alpha1" not in window:
             raise NoGapError("method 'angle' needs alpha1 (use 'speed' with omega1)")
-        # m_el noise from the pre-entry steady state (m_el constant there)
-        pre = np.asarray(window["m_el"], float)[:start]
-        noise = float(np.std(pre, ddof=1)) if pre.size >= 5 else 0.0
-        j, se, res, dof, model_error = _angle_fit(np.asarray(window["alpha1"], float), m, start, end,
-                                                  sample_period_s, noise)
+        torque = np.asarray(window["m_el"], float)[:end]
+        if bearing_friction_nms_per_rad and "omega1" in window:
+            torque = torque - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)[:end]
+        j, se, res, dof, model_error = _angle_fit(np.asarray(window["alpha1"], float), torque, start, end,
+                                                  sample_period_s)
     elif method == "speed":
         if "omega1" not in window:
             raise NoGapError("method 'speed' needs omega1")
@@ -347,67 +349,62 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
             "noise": (sm, sa)}
 
 
-def _cumulative_integral(f: np.ndarray, h: float, quadratic: bool = True) -> np.ndarray:
-    """Running integral of uniformly sampled f (along axis 0) from its first sample (0 there), same shape.
-
-    ``quadratic``: each interval integrates the parabola through it and its neighbour,
-    h/12 (5 f_i + 8 f_i+1 − f_i+2) (the last one leans back: h/12 (−f_i-1 + 8 f_i + 5 f_i+1)),
-    as scipy's ``cumulative_simpson`` (not used: it needs scipy >= 1.12, older than some ROS
-    distributions ship).  Else the trapezoid rule.
-    """
-    f = np.asarray(f, float)
-    if not quadratic or f.shape[0] < 3:
-        parts = 0.5 * (f[1:] + f[:-1]) * h
-    else:
-        parts = np.empty((f.shape[0] - 1,) + f.shape[1:])
-        parts[:-1] = (5.0 * f[:-2] + 8.0 * f[1:-1] - f[2:]) * (h / 12.0)
-        parts[-1] = (-f[-3] + 8.0 * f[-2] + 5.0 * f[-1]) * (h / 12.0)
-    return np.concatenate([np.zeros((1,) + f.shape[1:]), np.cumsum(parts, axis=0)])
-
-
-def _angle_fit(alpha1: np.ndarray, m_gap: np.ndarray, start: int, end: int, sample_period_s: float,
-               torque_noise: float = 0.0):
+def _angle_fit(alpha1: np.ndarray, m_el: np.ndarray, start: int, end: int, sample_period_s: float,
+               linear_term: bool = False):
     """(J1, standard error, residual [rad], dof, model error) of the 'angle' fit (module docstring).
 
-    ``m_gap``: m_el over the gap samples [start, end) (bearing friction already taken
-    off); the pre-entry samples [0, start) enter with Z = 0.  Centred on the entry sample
-    so that the least squares see radians of the transient, not the whole angle.  Z is
-    integrated with the quadratic rule; the change of J1 with the trapezoid rule instead
-    is the model error (the integration error, which dominates noise-free windows).
-    Standard error of 1/J1, in quadrature: the OLS one (noise on α1), the first-order
-    effect of white m_el noise of standard deviation ``torque_noise`` [N m] carried into Z
-    by the double integral (an error in the regressor, which the α1 residual does not
-    show), and the model error.
+    ``m_el``: the torque over [0, end) (bearing friction already taken off).  Two linear
+    least-squares steps:
+
+    1. the torque model of the joint fit, m0 before the entry and m0 + c2 τ² + c3 τ³ in
+       the gap (τ = time since the entry over the gap length; no c3 below GAP_CUBIC_MIN
+       samples; a c1 τ term too with ``linear_term``), fitted to the pre-entry and gap
+       m_el samples: the level m0 comes from all of them, and the noise of single
+       samples does not reach the double integral;
+    2. α1 against (1, t, Z) over the same samples, Z(t) the double integral of the
+       fitted torque from the entry (exact for the polynomial, 0 before the entry),
+       centred on the entry sample.
+
+    Standard error of 1/J1: the least-squares one of step 2 (noise on α1) and the effect
+    of the torque coefficients' covariance through Z, in quadrature; then the model error
+    (|J1 with the linear torque term − J1|) in quadrature, as for the joint fit.
     """
-    n = end
-    t = (np.arange(n) - start) * sample_period_s
+    ng = end - start
+    duration = ng * sample_period_s
+    tg = np.arange(ng) * sample_period_s
+    powers = (2, 3) if ng >= GAP_CUBIC_MIN else (2,)
+    if linear_term:
+        powers = (1,) + powers
+    G = np.zeros((end, 1 + len(powers)))      # torque model rows: [1, τ^p ...] (τ = 0 before the entry)
+    H = np.zeros((end, 1 + len(powers)))      # their double integrals from the entry
+    G[:, 0] = 1.0
+    H[start:, 0] = tg ** 2 / 2.0
+    for k, q in enumerate(powers, start=1):
+        G[start:, k] = (tg / duration) ** q
+        H[start:, k] = tg ** (q + 2) / ((q + 1) * (q + 2) * duration ** q)
+    beta, *_ = np.linalg.lstsq(G, m_el[:end], rcond=None)
+    r_m = m_el[:end] - G @ beta
+    dof_m = end - G.shape[1]
+    cov_beta = float(r_m @ r_m) / max(dof_m, 1) * np.linalg.pinv(G.T @ G)
+    A = np.column_stack([np.ones(end), (np.arange(end) - start) * sample_period_s, H @ beta])
     y = alpha1[:end] - alpha1[start]
-
-    def solve(quadratic):
-        speed = _cumulative_integral(m_gap, sample_period_s, quadratic)
-        z = _cumulative_integral(speed, sample_period_s, quadratic)
-        A = np.column_stack([np.ones(n), t, np.concatenate([np.zeros(start), z])])
-        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-        return A, coef
-
-    A, coef = solve(True)
+    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
     res = y - A @ coef
-    dof = n - 3
+    dof = end - 3
     kappa = float(coef[2])     # 1/J1
     if not kappa > 0 or dof < 1:
         raise NoGapError(f"gap fit gave a non-physical 1/J1 = {kappa!r} from alpha1")
-    var_kappa = float(res @ res) / dof * float(np.linalg.pinv(A.T @ A)[2, 2])
-    if torque_noise > 0:
-        # Z = D m over the gap (D: the double integral as a matrix); noise e on m moves the
-        # coefficients by -kappa A^+ (0 before the entry, D e in the gap) to first order
-        double = _cumulative_integral(_cumulative_integral(np.eye(end - start), sample_period_s),
-                                      sample_period_s)
-        row = np.linalg.pinv(A)[2, start:] @ double
-        var_kappa += (kappa * torque_noise) ** 2 * float(row @ row)
-    kappa_trap = float(solve(False)[1][2])
-    model_error = abs(1.0 / kappa_trap - 1.0 / kappa) if kappa_trap > 0 else np.inf
+    row = np.linalg.pinv(A)[2]
+    zrow = row @ H
+    var_kappa = float(res @ res) / dof * float(row @ row) + kappa ** 2 * float(zrow @ cov_beta @ zrow)
+    j = 1.0 / kappa
+    model_error = 0.0
+    if not linear_term:
+        j_lin = _angle_fit(alpha1, m_el, start, end, sample_period_s, linear_term=True)[0] \
+            if ng >= 4 else j
+        model_error = abs(j_lin - j)
     se = float(np.hypot(np.sqrt(max(var_kappa, 0.0)) / kappa ** 2, model_error))
-    return 1.0 / kappa, se, res, dof, model_error
+    return j, se, res, max(dof_m - 3, 1), model_error
 
 
 @lru_cache(maxsize=256)
