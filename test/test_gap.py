@@ -271,3 +271,17 @@ def test_angle_fit_needs_alpha1():
     w, e = motor_encoder_window(1.16)
     with pytest.raises(NoGapError, match="needs alpha1"):
         estimate_inertia({"m_el": w["m_el"], "omega1": np.gradient(w["alpha1"], TS)}, e, 0.005, R, TS, "angle")
+
+
+def test_angle_fit_on_simulated_windows_is_within_three_standard_errors():
+    """Noise-free simulated windows without a1: the angle fit is within 0.1 % and within 3 standard errors,
+    so an on-class window is not flagged 'between classes' (fusion.BETWEEN_Z = 3)."""
+    cases = [Case(j, w, eta) for j, w, eta in ((1.073, 0.0075, 0.0125), (0.957, 0.0025, 0.05),
+                                              (1.218, 0.01, 0.0375), (1.16, 0.005, 0.025))]
+    sim = simulate_grid(CFG, cases)
+    for i, c in enumerate(cases):
+        w = {k: sim.case(i)[k] for k in ("alpha1", "alpha2", "m_el")}
+        g = estimate_inertia(w, sim.entry_index, c.backlash_width_m, R, sim.sample_period_s)
+        assert g.method == "angle" and g.interval == "angles"
+        assert abs(g.inertia_kgm2 / c.inertia_kgm2 - 1) < 1e-3, c
+        assert abs(g.inertia_kgm2 - c.inertia_kgm2) <= 3 * g.std_error_kgm2, c

@@ -75,6 +75,11 @@ GN_TOL = 1e-9
 GN_MAX_ITER = 30
 
 
+#: 'angle' fit: relative floor of the standard error.  The torque model's own error (noise-free,
+#: grid: up to 0.03 % of J1) is not always seen by the model-error term; without the floor a
+#: noise-free window could be flagged 'between classes' at 4e-5 off its class.
+ANGLE_REL_SE_FLOOR = 2e-4
+
 #: A gap fit whose standard error exceeds this fraction of J1 is refused (NoGapError): such a
 #: window carries no free acceleration (e.g. a steady state mistaken for an entry).
 MAX_RELATIVE_STD_ERROR = 0.25
@@ -367,7 +372,8 @@ def _angle_fit(alpha1: np.ndarray, m_el: np.ndarray, start: int, end: int, sampl
 
     Standard error of 1/J1: the least-squares one of step 2 (noise on α1) and the effect
     of the torque coefficients' covariance through Z, in quadrature; then the model error
-    (|J1 with the linear torque term − J1|) in quadrature, as for the joint fit.
+    (|J1 with the linear torque term − J1|) in quadrature, as for the joint fit; at least
+    ANGLE_REL_SE_FLOOR · J1.
     """
     ng = end - start
     duration = ng * sample_period_s
@@ -404,7 +410,7 @@ def _angle_fit(alpha1: np.ndarray, m_el: np.ndarray, start: int, end: int, sampl
             if ng >= 4 else j
         model_error = abs(j_lin - j)
     se = float(np.hypot(np.sqrt(max(var_kappa, 0.0)) / kappa ** 2, model_error))
-    return j, se, res, max(dof_m - 3, 1), model_error
+    return j, max(se, ANGLE_REL_SE_FLOOR * j), res, max(dof_m - 3, 1), model_error
 
 
 @lru_cache(maxsize=256)
