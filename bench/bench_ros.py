@@ -9,7 +9,7 @@ processes (the ``ros2 run`` executables of the ament index, else ``python -m jid
 in a namespace of their own (``/bench_<k>``); windowing and diagnostic run with ``use_sim_time``
 (the simulator publishes ``/clock``).  The simulator runs ``--cases`` grid cases (``cases:=zip``: the
 seven J1 classes in turn, K2 = 0.005 m, eta_k = 0.0375 Pa s^n -- off the pattern runs), ``--repeat``
-passes over them, at ``real_time_factor`` = the level (0 = unpaced: ``fast_sleep_s`` per batch).  The
+passes over them, at ``real_time_factor`` = the level (0 = ``fast_sleep_s`` per batch with back-pressure from the windowing node's ``drive/progress``).  The
 pattern library is built once beforehand (or taken from the CLI's cache) and passed to the node.
 
 The bench's own rclpy node (in this process, its own Context) receives ``drive/signals``,
@@ -366,7 +366,8 @@ def run_level(k: int, rtf: float, args, env, library: Path, logroot: Path) -> di
             "-p", f"backlash_widths_m:=[{WIDTH_M}]", "-p", f"consistencies_pa_sn:=[{ETA}]",
             "-p", f"real_time_factor:={float(rtf)}", "-p", f"repeat:={args.repeat}",
             "-p", f"gap_samples:={GAP_SAMPLES}", "-p", f"batch_size:={BATCH}", "-p", f"start_time_s:={SIM_START_S}",
-            "-p", "wait_for_subscribers:=2", "-p", "wait_timeout_s:=120.0", "-p", "exit_when_done:=false")
+            "-p", "wait_for_subscribers:=2", "-p", "wait_timeout_s:=120.0", "-p", "exit_when_done:=false",
+            "-p", f"fast_sleep_s:={args.fast_sleep}", "-p", f"max_lead_s:={args.max_lead}")
         sim = procs["simulator"]
         cpu0 = {}
 
@@ -600,6 +601,10 @@ def main(argv=None) -> int:
                          "SingleThreadedExecutor")
     ap.add_argument("--no-sim-time", dest="sim_time", action="store_false",
                     help="run windowing and diagnostic without use_sim_time (no /clock subscription; profiling)")
+    ap.add_argument("--fast-sleep", type=float, default=0.001,
+                    help="simulator fast_sleep_s at rtf 0 (default 0.001; 0: only back-pressure paces the stream)")
+    ap.add_argument("--max-lead", type=float, default=2.0,
+                    help="simulator max_lead_s at rtf 0, drive s ahead of drive/progress (default 2; 0 = off)")
     ap.add_argument("--out", help="write the results as JSON here")
     ap.add_argument("--logs", help="folder for the node logs (default: a temporary folder)")
     ap.add_argument("--quick", action="store_true", help="smoke run: 7 cases, rtf 10 and 0 (not a result)")

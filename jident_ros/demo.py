@@ -89,8 +89,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--case", dest="cases", type=_parse_case, action="append",
                    help="J1,WIDTH,ETA of one case (repeatable; default: five cases across the grid)")
     p.add_argument("--real-time-factor", type=float, default=0.0,
-                   help="drive seconds per wall second; 0 (default) = unpaced, a fast_sleep_s pause per batch "
-                        "(no back-pressure from the readers; 11-15x on the 2-core test machine)")
+                   help="drive seconds per wall second; 0 (default) = as fast as the windowing node reads "
+                        "(fast_sleep_s per batch, back-pressure from drive/progress)")
     p.add_argument("--p", type=float, default=2.0, help="KHM exponent of the image method (default 2)")
     p.add_argument("--timeout", type=float, default=180.0, help="give up after this many seconds (default 180)")
     return p

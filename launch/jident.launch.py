@@ -24,7 +24,7 @@ ARGUMENTS = {
     "config_dir": ("", "folder with system.yaml, method.yaml, nodes.yaml (default: the package's share/config)"),
     "simulator": ("true", "start the simulator (false: wait for a real drive or a replay)"),
     "use_sim_time": ("true", "windowing and diagnostic follow /clock (the simulator's drive clock)"),
-    "real_time_factor": ("1.0", "simulator speed: drive seconds per wall second; 0 = as fast as possible"),
+    "real_time_factor": ("1.0", "simulator speed: drive seconds per wall second; 0 = as fast as the windowing node reads"),
     "cases": ("", "simulator: product | zip | grid (default: nodes.yaml)"),
     "backlash_width_m": ("", "windowing: K2 in m (default: nodes.yaml; the simulator's width is followed)"),
     "pattern_library": ("", "diagnostic: pattern library .npz (default: the CLI's cache path, built if missing)"),

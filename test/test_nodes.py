@@ -247,6 +247,13 @@ def test_pipeline_publishes_the_true_inertia(pipeline):
 
 
 @pytest.mark.ros
+def test_pipeline_back_pressure_from_the_windowing_node(pipeline):
+    """At real_time_factor 0 the windowing node's drive/progress paces the simulator (it never had to give up)."""
+    # (two cases are 2.45 drive seconds: past max_lead_s = 2 s the simulator needs the windowing node's progress)
+    assert "back-pressure off" not in pipeline["logs"], pipeline["logs"]
+
+
+@pytest.mark.ros
 def test_pipeline_diagnostics(pipeline):
     from jident_ros.ros_io import WARN, status_level, status_values
     sts = statuses(pipeline["diags"], "jident: inertia", "/e2e/drive")
@@ -485,3 +492,45 @@ def test_diagnostic_with_a_bad_or_missing_library_reports_error_and_keeps_runnin
     assert status_level(s) == ERROR and abs(est[0].data - 1.16) < 0.01
     assert status_values(s)["estimate_source"] == "gap"
     assert mis.alive() and gone.alive(), logs(mis, gone)
+
+
+@pytest.mark.ros
+def test_simulator_back_pressure_waits_for_drive_progress(node_env, ros, procs, tmp_path):
+    """real_time_factor 0: the simulator runs at most max_lead_s drive seconds ahead of drive/progress, goes on
+    when progress comes, and without any progress gives up waiting after progress_timeout_s (warning)."""
+    from std_msgs.msg import Float64, Float64MultiArray
+
+    from jident_ros.ros_io import array_from_multiarray, qos_signals
+    signals = ros.collect(Float64MultiArray, "/bp/drive/signals", qos_signals())
+    progress = ros.node.create_publisher(Float64, "/bp/drive/progress", qos_signals(10))
+    last_t = lambda: max((array_from_multiarray(m)[0][-1, 0] for m in signals), default=-1.0)  # noqa: E731
+    common = ["-p", "cases:=zip", "-p", "inertias_kgm2:=[1.16]", "-p", "real_time_factor:=0.0",
+              "-p", "wait_for_subscribers:=1", "-p", "publish_clock:=false", "-p", "start_time_s:=1.0"]
+    sim = Proc(node_env, tmp_path, "simulator", "-r", "__ns:=/bp", *common,
+               "-p", "max_lead_s:=0.5", "-p", "progress_timeout_s:=30.0")
+    procs.append(sim)
+    assert ros.spin_until(lambda: len(signals) >= 5, TIMEOUT), logs(sim)
+    ros.spin_until(lambda: False, 1.5)              # no progress: the stream must stop at 1.0 + 0.5 s
+    held = last_t()
+    assert 1.4 < held <= 1.5 + 0.025 + 1e-9, (held, logs(sim))
+    assert sim.alive()
+    n_expected = math.ceil((400 + 2048 + 0) / 50)   # gap_samples + one window, 50-sample batches
+    # progress as a windowing node would report it: the stream goes on to the end
+    end = time.monotonic() + TIMEOUT
+    while time.monotonic() < end and sim.alive():
+        progress.publish(Float64(data=float(last_t())))
+        ros.ex.spin_once(timeout_sec=0.02)
+    assert sim.wait() == 0, logs(sim)
+    ros.spin_until(lambda: len(signals) >= n_expected, 10)
+    assert len(signals) == n_expected, (len(signals), logs(sim))
+    assert "back-pressure" in sim.text() and "waited" in sim.text(), logs(sim)
+
+    # nobody reports progress: after progress_timeout_s the simulator streams on (and says so)
+    signals.clear()
+    sim2 = Proc(node_env, tmp_path, "simulator", "-r", "__ns:=/bp", *common,
+                "-p", "max_lead_s:=0.2", "-p", "progress_timeout_s:=0.5")
+    procs.append(sim2)
+    assert ros.spin_until(lambda: not sim2.alive(), TIMEOUT), logs(sim2)
+    assert sim2.wait() == 0, logs(sim2)
+    ros.spin_until(lambda: len(signals) >= n_expected, 10)
+    assert len(signals) == n_expected and "back-pressure off" in sim2.text(), logs(sim2)

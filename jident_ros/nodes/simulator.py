@@ -39,6 +39,9 @@ DEFAULTS = {
     "batch_size": 50,                       # samples per drive/signals message
     "real_time_factor": 1.0,                # drive seconds per wall second; 0 = as fast as possible
     "fast_sleep_s": 0.001,                  # pause per batch when real_time_factor = 0
+    "max_lead_s": 2.0,                      # real_time_factor 0: at most this many drive seconds ahead of
+                                            # the windowing node's drive/progress; 0 = no back-pressure
+    "progress_timeout_s": 2.0,              # no drive/progress for this long while waiting: back-pressure off
     "start_time_s": 1.0,                    # drive clock of the first sample
     "repeat": 1,                            # passes through the case list; 0 = forever
     "publish_clock": True,
@@ -78,6 +81,8 @@ def validate(values: dict):
     require("real_time_factor", cfg["real_time_factor"], cfg["real_time_factor"] >= 0,
             "a number >= 0 (0 = as fast as possible)")
     require("fast_sleep_s", cfg["fast_sleep_s"], 0 <= cfg["fast_sleep_s"] <= 1, "a number in [0, 1]")
+    require("max_lead_s", cfg["max_lead_s"], cfg["max_lead_s"] >= 0, "a number >= 0 (0 = no back-pressure)")
+    require("progress_timeout_s", cfg["progress_timeout_s"], cfg["progress_timeout_s"] > 0, "a number > 0")
     require("start_time_s", cfg["start_time_s"], cfg["start_time_s"] >= 0, "a number >= 0")
     require("repeat", cfg["repeat"], cfg["repeat"] >= 0, "an integer >= 0 (0 = forever)")
     require("wait_for_subscribers", cfg["wait_for_subscribers"], cfg["wait_for_subscribers"] >= 0,
@@ -124,6 +129,48 @@ def _node_class():
                 f"{c['batch_size']}-sample batches at real-time factor {c['real_time_factor']:g} "
                 f"on {self.resolve_topic_name('drive/signals')}")
             self._multiarray = multiarray_from_array
+            # back-pressure at real_time_factor 0: the windowing node reports the drive time it has read
+            self.progress_t = c["start_time_s"]   # drive time read by the windowing node (nothing yet)
+            self.progress_wall = None
+            self.waited_s = 0.0
+            self.backpressure = c["real_time_factor"] == 0 and c["max_lead_s"] > 0
+            if self.backpressure:
+                self.sub_progress = self.create_subscription(Float64, "drive/progress", self._on_progress,
+                                                             qos_signals(10))
+
+        def _on_progress(self, msg):
+            t = float(msg.data)
+            if np.isfinite(t) and t > self.progress_t:
+                self.progress_t = t
+                self.progress_wall = time.monotonic()
+
+        def _await_progress(self, executor, t_last: float) -> None:
+            """Back-pressure: wait until the windowing node has read up to t_last - max_lead_s.
+
+            Without any drive/progress (no windowing node, an older one, or one that died) for
+            progress_timeout_s while waiting, back-pressure is switched off with a warning and the
+            stream goes on at fast_sleep_s per batch: the simulator never stalls for good.
+            """
+            c = self.cfg
+            target = t_last - c["max_lead_s"]
+            if self.progress_t >= target:
+                return
+            t0 = time.monotonic()
+            while self.context.ok() and self.progress_t < target:
+                try:
+                    executor.spin_once(timeout_sec=0.01)
+                except Exception:   # the context went down (Ctrl-C, SIGTERM) during the wait
+                    return
+                now = time.monotonic()
+                last = self.progress_wall if self.progress_wall is not None else t0
+                if now - max(last, t0) > c["progress_timeout_s"]:
+                    self.get_logger().warning(
+                        f"no drive/progress from a windowing node for {c['progress_timeout_s']:g} s "
+                        f"(read up to t = {self.progress_t:.4f} s, simulated t = {t_last:.4f} s): "
+                        "back-pressure off, pacing by fast_sleep_s only")
+                    self.backpressure = False
+                    break
+            self.waited_s += time.monotonic() - t0
 
         # ----------------------------------------------------------------- main loop
         def run(self):
@@ -131,6 +178,26 @@ def _node_class():
             if not self._wait_for_subscribers():
                 return
             n_rows = self.stream.shape[0]
+            executor = None
+            if self.backpressure:
+                from rclpy.executors import SingleThreadedExecutor
+                executor = SingleThreadedExecutor(context=self.context)
+                executor.add_node(self)
+            try:
+                self._stream(n_rows, executor)
+            finally:
+                if executor is not None:
+                    executor.remove_node(self)
+                    executor.shutdown(timeout_sec=1.0)
+            if not self.context.ok():
+                return
+            self._drain()
+            if not c["exit_when_done"]:
+                from . import spin
+                spin(self)
+
+        def _stream(self, n_rows: int, executor) -> None:
+            c = self.cfg
             wall0 = time.monotonic()
             passes = 0
             sample0 = 0  # running sample number of the drive clock
@@ -155,8 +222,11 @@ def _node_class():
                             delay = wall0 + (t_last - c["start_time_s"]) / c["real_time_factor"] - time.monotonic()
                             if delay > 0:
                                 time.sleep(delay)
-                        elif c["fast_sleep_s"] > 0:
-                            time.sleep(c["fast_sleep_s"])
+                        else:
+                            if c["fast_sleep_s"] > 0:
+                                time.sleep(c["fast_sleep_s"])
+                            if self.backpressure:
+                                self._await_progress(executor, t_last)
                         if not self.context.ok():
                             return
                         self.pub_signals.publish(self._multiarray(batch, self.stream_channels))
@@ -164,11 +234,8 @@ def _node_class():
                             self._publish_clock(t_last)
                 sample0 += n_rows
                 passes += 1
-            self.get_logger().info(f"done: {passes} pass(es) over {len(self.cases)} case(s)")
-            self._drain()
-            if not c["exit_when_done"]:
-                from . import spin
-                spin(self)
+            waited = f"; waited {self.waited_s:.2f} s for the windowing node (back-pressure)" if self.waited_s else ""
+            self.get_logger().info(f"done: {passes} pass(es) over {len(self.cases)} case(s){waited}")
 
         stream_channels = DEFAULT_CHANNELS
 

@@ -28,6 +28,7 @@ DEFAULTS = {
     "window_queue_depth": 50,
     "hardware_id": "",                    # default: the resolved drive namespace, e.g. /drive
     "diagnostics_period_s": 1.0,          # summary status period; 0 = only on events
+    "progress_every_batches": 10,         # publish drive/progress (drive time read) every this many batches; 0 = off
 }
 
 
@@ -46,6 +47,8 @@ def validate(values: dict):
     for n in ("signals_queue_depth", "window_queue_depth"):
         require(n, cfg[n], cfg[n] >= 1, "an integer >= 1")
     require("diagnostics_period_s", cfg["diagnostics_period_s"], cfg["diagnostics_period_s"] >= 0, "a number >= 0")
+    require("progress_every_batches", cfg["progress_every_batches"], cfg["progress_every_batches"] >= 0,
+            "an integer >= 0 (0 = off)")
     system = system_config(values)
     return cfg, system
 
@@ -74,6 +77,10 @@ def _node_class():
                                                     qos_latched(c["window_queue_depth"]))
             self.sub = self.create_subscription(Float64MultiArray, "drive/signals", self.on_signals,
                                                 qos_signals(c["signals_queue_depth"]))
+            # the simulator's back-pressure at real_time_factor 0 (and anyone's progress bar)
+            self.pub_progress = (self.create_publisher(Float64, "drive/progress", qos_signals(10))
+                                 if c["progress_every_batches"] > 0 else None)
+            self.batches_since_progress = 0
             if c["backlash_width_from_topic"]:
                 self.sub_width = self.create_subscription(Float64, "drive/backlash_width", self.on_width,
                                                           qos_latched())
@@ -96,6 +103,7 @@ def _node_class():
                     events = [self.detector.reject("layout", str(exc))]
                 else:
                     events = self.detector.push(arr, channels)
+                    self._progress(arr, channels)
                 for ev in events:
                     if ev.kind == "window":
                         self.pub_window.publish(window_to_msg(ev.window))
@@ -103,6 +111,15 @@ def _node_class():
                         self._report_drop(ev)
             except Exception as exc:  # never die on input: report, reset, go on
                 self._report_error("drive/signals callback", exc)
+
+        def _progress(self, arr, channels):
+            """drive/progress: the drive time of the last sample read, every progress_every_batches batches."""
+            if self.pub_progress is None or not len(arr) or "t" not in channels:
+                return
+            self.batches_since_progress += 1
+            if self.batches_since_progress >= self.cfg["progress_every_batches"]:
+                self.batches_since_progress = 0
+                self.pub_progress.publish(Float64(data=float(arr[-1, channels.index("t")])))
 
         def on_width(self, msg):
             try:
