@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import sys
+import time
 from typing import Any, Callable, Mapping
 
 #: Sections of the shared configuration files (config/system.yaml, config/method.yaml).
@@ -210,6 +211,68 @@ def _diagnostic_array_type():
 
 def context_ok(node) -> bool:
     return node.context.ok()
+
+
+class ProgressGate:
+    """Back-pressure for a node that streams ``drive/signals`` as fast as it can (simulator and replay
+    at rate 0): it publishes a batch ending at drive time t only when the windowing node has reported,
+    on ``drive/progress``, that it has read up to t - ``max_lead_s``.
+
+    The first batch's time is the baseline (nothing read yet).  With no progress message for
+    ``timeout_s`` while waiting (no windowing node, or one without progress), the gate opens for good
+    and says so once in the log: the stream never stalls for ever.  Call :meth:`close` when done (the
+    gate spins the node on an executor of its own while it waits).
+    """
+
+    def __init__(self, node, max_lead_s: float, timeout_s: float):
+        from rclpy.executors import SingleThreadedExecutor
+        from std_msgs.msg import Float64
+
+        from ..ros_io import qos_signals
+        self.node, self.max_lead_s, self.timeout_s = node, float(max_lead_s), float(timeout_s)
+        self.progress_t = None          # drive time read by the windowing node
+        self.progress_wall = None       # monotonic time of the last progress message
+        self.waited_s = 0.0
+        self.active = True
+        self.sub = node.create_subscription(Float64, "drive/progress", self._on_progress, qos_signals(10))
+        self.executor = SingleThreadedExecutor(context=node.context)
+        self.executor.add_node(node)
+
+    def _on_progress(self, msg):
+        t = float(msg.data)
+        if math.isfinite(t) and (self.progress_t is None or t > self.progress_t):
+            self.progress_t = t
+            self.progress_wall = time.monotonic()
+
+    def wait(self, t_last: float) -> None:
+        """Block until the windowing node has read up to ``t_last - max_lead_s`` (or the gate opened)."""
+        if not self.active:
+            return
+        if self.progress_t is None:
+            self.progress_t = t_last       # baseline: the stream starts here
+        target = t_last - self.max_lead_s
+        if self.progress_t >= target:
+            return
+        t0 = time.monotonic()
+        while self.node.context.ok() and self.progress_t < target:
+            try:
+                self.executor.spin_once(timeout_sec=0.01)
+            except Exception:   # the context went down (Ctrl-C, SIGTERM) during the wait
+                return
+            last = t0 if self.progress_wall is None else max(self.progress_wall, t0)
+            if time.monotonic() - last > self.timeout_s:
+                self.node.get_logger().warning(
+                    f"no drive/progress from a windowing node for {self.timeout_s:g} s (read up to t = "
+                    f"{self.progress_t:.4f} s, streamed to t = {t_last:.4f} s): back-pressure off, pacing by "
+                    "fast_sleep_s only")
+                self.active = False
+                break
+        self.waited_s += time.monotonic() - t0
+
+    def close(self) -> None:
+        self.executor.remove_node(self.node)
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_subscription(self.sub)
 
 
 def spin(node, period_s: float = 0.25) -> None:

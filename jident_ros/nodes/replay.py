@@ -7,7 +7,8 @@ in receive-time order, every recorded topic whose name ends with one of ``topics
 drive/signals, drive/backlash_width, drive/true_inertia, drive/case) on the corresponding *relative*
 name, so ``-r __ns:=/press3`` replays into another namespace.  The messages go out as recorded
 (CDR bytes, not re-encoded).  The pauses between messages are the recorded receive-time
-differences divided by ``rate`` (0 = as fast as possible, ``fast_sleep_s`` between messages).
+differences divided by ``rate`` (0 = as fast as the windowing node reads: ``fast_sleep_s`` between
+messages and at most ``max_lead_s`` drive seconds ahead of its ``drive/progress``, see ProgressGate).
 With ``publish_clock``, /clock follows the ``t`` column of each drive/signals batch (recorded
 /clock messages are not replayed), exactly as the simulator publishes it.
 """
@@ -17,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import ParameterError, checked, declare_parameters, main as run_main, require
+from . import ParameterError, ProgressGate, checked, declare_parameters, main as run_main, require
 
 NODE_NAME = "jident_replay"
 
@@ -26,6 +27,8 @@ DEFAULTS = {
     "bag": "",                 # bag directory or .mcap file (or the first command-line argument)
     "rate": 1.0,               # playback speed factor; 0 = as fast as possible
     "fast_sleep_s": 0.001,     # pause between messages when rate = 0
+    "max_lead_s": 2.0,         # rate 0: at most this many drive seconds ahead of drive/progress; 0 = off
+    "progress_timeout_s": 2.0,  # no drive/progress for this long while waiting: back-pressure off
     "publish_clock": True,
     "topics": ["drive/signals", "drive/backlash_width", "drive/true_inertia", "drive/case"],
     "wait_for_subscribers": 0,  # wait until drive/signals has this many subscribers
@@ -47,6 +50,8 @@ def validate(values: dict, argv_bag: str | None):
     require("bag", cfg["bag"], Path(cfg["bag"]).expanduser().exists(), "an existing bag directory or .mcap file")
     require("rate", cfg["rate"], cfg["rate"] >= 0, "a number >= 0 (0 = as fast as possible)")
     require("fast_sleep_s", cfg["fast_sleep_s"], 0 <= cfg["fast_sleep_s"] <= 1, "a number in [0, 1]")
+    require("max_lead_s", cfg["max_lead_s"], cfg["max_lead_s"] >= 0, "a number >= 0 (0 = no back-pressure)")
+    require("progress_timeout_s", cfg["progress_timeout_s"], cfg["progress_timeout_s"] > 0, "a number > 0")
     require("topics", cfg["topics"], bool(cfg["topics"]) and all(t and not t.startswith("/") for t in cfg["topics"]),
             "a non-empty list of relative topic names")
     require("wait_for_subscribers", cfg["wait_for_subscribers"], cfg["wait_for_subscribers"] >= 0, "an integer >= 0")
@@ -119,6 +124,16 @@ def _node_class(args):
                         return
                     time.sleep(0.05)
                 time.sleep(0.2)
+            gate = (ProgressGate(self, c["max_lead_s"], c["progress_timeout_s"])
+                    if c["rate"] == 0 and c["max_lead_s"] > 0 else None)
+            try:
+                self._replay(gate)
+            finally:
+                if gate is not None:
+                    gate.close()
+
+        def _replay(self, gate):
+            c = self.cfg
             wall0 = rec0 = None
             counts = {}
             for topic, msg_type, log_ns, raw in self.read_bag(self.bag, raw=True):
@@ -139,10 +154,15 @@ def _node_class(args):
                         time.sleep(delay)
                 elif c["fast_sleep_s"] > 0:
                     time.sleep(c["fast_sleep_s"])
+                t_last = None
+                if rel == "drive/signals" and (gate is not None or self.pub_clock is not None):
+                    t_last = self._last_t(deserialize_message(bytes(raw), Float64MultiArray))
+                if gate is not None and t_last is not None:
+                    gate.wait(t_last)
                 pub.publish(bytes(raw))
                 counts[rel] = counts.get(rel, 0) + 1
-                if rel == "drive/signals" and self.pub_clock is not None:
-                    self._clock_from(deserialize_message(bytes(raw), Float64MultiArray))
+                if t_last is not None and self.pub_clock is not None:
+                    self._publish_clock(t_last)
             if self.context.ok():
                 self.get_logger().info("replayed " + ", ".join(f"{n} x {k}" for k, n in counts.items())
                                        if counts else "nothing to replay: no matching topic")
@@ -153,16 +173,19 @@ def _node_class(args):
                     except Exception:
                         time.sleep(0.5)
 
-        def _clock_from(self, msg):
+        @staticmethod
+        def _last_t(msg):
+            """Drive time of a drive/signals batch's last sample, or None (bad layout, no t)."""
             try:
                 arr, channels = array_from_multiarray(msg)
             except LayoutError:
-                return
+                return None
             if "t" not in channels or arr.shape[0] == 0:
-                return
+                return None
             t = float(arr[-1, channels.index("t")])
-            if not np.isfinite(t) or t < 0:
-                return
+            return t if np.isfinite(t) and t >= 0 else None
+
+        def _publish_clock(self, t: float):
             m = Clock()
             m.clock.sec = int(np.floor(t))
             m.clock.nanosec = min(int(round((t - m.clock.sec) * 1e9)), 999_999_999)

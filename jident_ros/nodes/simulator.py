@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from . import (checked, declare_parameters, main as run_main, require, system_config,
+from . import (ProgressGate, checked, declare_parameters, main as run_main, require, system_config,
                system_defaults)
 
 NODE_NAME = "jident_simulator"
@@ -129,48 +129,8 @@ def _node_class():
                 f"{c['batch_size']}-sample batches at real-time factor {c['real_time_factor']:g} "
                 f"on {self.resolve_topic_name('drive/signals')}")
             self._multiarray = multiarray_from_array
-            # back-pressure at real_time_factor 0: the windowing node reports the drive time it has read
-            self.progress_t = c["start_time_s"]   # drive time read by the windowing node (nothing yet)
-            self.progress_wall = None
-            self.waited_s = 0.0
+            # back-pressure at real_time_factor 0 (ProgressGate, opened in run())
             self.backpressure = c["real_time_factor"] == 0 and c["max_lead_s"] > 0
-            if self.backpressure:
-                self.sub_progress = self.create_subscription(Float64, "drive/progress", self._on_progress,
-                                                             qos_signals(10))
-
-        def _on_progress(self, msg):
-            t = float(msg.data)
-            if np.isfinite(t) and t > self.progress_t:
-                self.progress_t = t
-                self.progress_wall = time.monotonic()
-
-        def _await_progress(self, executor, t_last: float) -> None:
-            """Back-pressure: wait until the windowing node has read up to t_last - max_lead_s.
-
-            Without any drive/progress (no windowing node, an older one, or one that died) for
-            progress_timeout_s while waiting, back-pressure is switched off with a warning and the
-            stream goes on at fast_sleep_s per batch: the simulator never stalls for good.
-            """
-            c = self.cfg
-            target = t_last - c["max_lead_s"]
-            if self.progress_t >= target:
-                return
-            t0 = time.monotonic()
-            while self.context.ok() and self.progress_t < target:
-                try:
-                    executor.spin_once(timeout_sec=0.01)
-                except Exception:   # the context went down (Ctrl-C, SIGTERM) during the wait
-                    return
-                now = time.monotonic()
-                last = self.progress_wall if self.progress_wall is not None else t0
-                if now - max(last, t0) > c["progress_timeout_s"]:
-                    self.get_logger().warning(
-                        f"no drive/progress from a windowing node for {c['progress_timeout_s']:g} s "
-                        f"(read up to t = {self.progress_t:.4f} s, simulated t = {t_last:.4f} s): "
-                        "back-pressure off, pacing by fast_sleep_s only")
-                    self.backpressure = False
-                    break
-            self.waited_s += time.monotonic() - t0
 
         # ----------------------------------------------------------------- main loop
         def run(self):
@@ -178,17 +138,12 @@ def _node_class():
             if not self._wait_for_subscribers():
                 return
             n_rows = self.stream.shape[0]
-            executor = None
-            if self.backpressure:
-                from rclpy.executors import SingleThreadedExecutor
-                executor = SingleThreadedExecutor(context=self.context)
-                executor.add_node(self)
+            gate = ProgressGate(self, c["max_lead_s"], c["progress_timeout_s"]) if self.backpressure else None
             try:
-                self._stream(n_rows, executor)
+                self._stream(n_rows, gate)
             finally:
-                if executor is not None:
-                    executor.remove_node(self)
-                    executor.shutdown(timeout_sec=1.0)
+                if gate is not None:
+                    gate.close()
             if not self.context.ok():
                 return
             self._drain()
@@ -196,7 +151,7 @@ def _node_class():
                 from . import spin
                 spin(self)
 
-        def _stream(self, n_rows: int, executor) -> None:
+        def _stream(self, n_rows: int, gate) -> None:
             c = self.cfg
             wall0 = time.monotonic()
             passes = 0
@@ -225,8 +180,8 @@ def _node_class():
                         else:
                             if c["fast_sleep_s"] > 0:
                                 time.sleep(c["fast_sleep_s"])
-                            if self.backpressure:
-                                self._await_progress(executor, t_last)
+                            if gate is not None:
+                                gate.wait(t_last)
                         if not self.context.ok():
                             return
                         self.pub_signals.publish(self._multiarray(batch, self.stream_channels))
@@ -234,7 +189,8 @@ def _node_class():
                             self._publish_clock(t_last)
                 sample0 += n_rows
                 passes += 1
-            waited = f"; waited {self.waited_s:.2f} s for the windowing node (back-pressure)" if self.waited_s else ""
+            waited = (f"; waited {gate.waited_s:.2f} s for the windowing node (back-pressure)"
+                      if gate is not None and gate.waited_s else "")
             self.get_logger().info(f"done: {passes} pass(es) over {len(self.cases)} case(s){waited}")
 
         stream_channels = DEFAULT_CHANNELS
