@@ -172,11 +172,13 @@ def _quantisation(rob: RobustnessResult, wheel_radius_m: float | None) -> list[s
     ref = rob.grid[0]
     out = ["| encoder | quantum [mrad] | quantum ÷ smallest K2/r | gap end moved (cases, max shift) | "
            "J1 median / max \\|error\\| | width median / max \\|error\\| | "
-           f"{CHANNEL_SETS['angle'][2]}: J1 median / max \\|error\\|, CI covers, no gap found |",
-           "|---|---|---|---|---|---|---|"]
+           + " | ".join(f"{CHANNEL_SETS[k][2]}: J1 median / max \\|error\\|, CI covers, no gap found"
+                        for k in ANGLE_KEYS) + " |",
+           "|---|---|---|---|---|---|" + "---|" * len(ANGLE_KEYS)]
     g, w = ref.gap_summary(), ref.width_summary()
     out.append(f"| unquantised | 0 | 0 | – | {_num(g['median'])} % / {_num(g['max'])} % | "
-               f"{_num(w['median'], 2)} % / {_num(w['max'], 2)} % | {_angle_cell(ref)} |")
+               f"{_num(w['median'], 2)} % / {_num(w['max'], 2)} % | " + " | ".join(_angle_cell(ref, k) for k in ANGLE_KEYS)
+               + " |")
     theta_min = min(rob.widths_m) / wheel_radius_m if wheel_radius_m else np.nan
     e0 = ref.gap[PRIMARY]["gap_end"]
     for s in rob.quantisation:
@@ -188,14 +190,19 @@ def _quantisation(rob: RobustnessResult, wheel_radius_m: float | None) -> list[s
         exp = int(round(np.log2(s.counts_per_rev)))
         out.append(f"| 2^{exp} = {s.counts_per_rev} counts/rev | {q * 1e3:.3f} | {q / theta_min:.3f} | "
                    f"{int(moved.sum())} of {len(e)}, {shift} sample(s) | {_num(g['median'])} % / {_num(g['max'])} % | "
-                   f"{_num(w['median'], 2)} % / {_num(w['max'], 2)} % | {_angle_cell(s)} |")
+                   f"{_num(w['median'], 2)} % / {_num(w['max'], 2)} % | "
+                   + " | ".join(_angle_cell(s, k) for k in ANGLE_KEYS) + " |")
     return out
 
 
-def _angle_cell(s) -> str:
-    if "angle" not in s.gap:
+#: Channel sets of the angle fit shown in the encoder table.
+ANGLE_KEYS = ("angle_eq1", "angle")
+
+
+def _angle_cell(s, key: str) -> str:
+    if key not in s.gap:
         return "–"
-    a = s.gap_summary("angle")
+    a = s.gap_summary(key)
     if a["failed"] == a["n"]:
         return f"– (no gap found in all {a['n']})"
     return (f"{_num(a['median'])} % / {_num(a['max'])} %, {_pct(a['coverage'])}, {a['failed']}")
@@ -287,21 +294,23 @@ def _findings(rob: RobustnessResult) -> list[str]:
         lines.append("* Encoder quantisation moves the end of the gap interval by at most one sample. A gap end one "
                      "sample late puts a sample with flank contact into the fit and biases J1; one sample early only "
                      "drops a sample. " + "; ".join(parts) + ".")
-        enc = [q for q in rob.quantisation if "angle" in q.gap]
+        enc = [q for q in rob.quantisation if "angle" in q.gap and "angle_eq1" in q.gap]
         if enc:
-            def angle_part(q):
-                a = q.gap_summary("angle")
+            def angle_part(q, key):
+                a = q.gap_summary(key)
                 if a["failed"] == a["n"]:
                     return f"{q.counts_per_rev} counts/rev: no gap found"
                 return (f"{q.counts_per_rev} counts/rev: median {_num(a['median'])} %, max {_num(a['max'])} %, "
                         f"CI covers {_pct(a['coverage'])}" + (f", {a['failed']} without a gap" if a["failed"] else ""))
-            lines.append("* A drive with only a motor encoder and its torque (α1+m_el, fit `angle`: α1 against the "
-                         "double integral of the fitted m_el, no differentiation; the gap end from the smoothed second "
-                         "derivative of α1): " + "; ".join(angle_part(q) for q in enc) + ". The interval is "
-                         "too narrow for coarse encoders: the quantisation error of a steadily turning shaft is a "
-                         "deterministic sawtooth, not the white noise the least-squares standard error assumes; "
-                         "below about 2^16 counts/rev the quantised angle's second derivative hides the gap and the "
-                         "window is refused.")
+            lines.append("* Without an accelerometer (fit `angle`: α1 against the double integral of the fitted m_el, "
+                         "no differentiation), with the gap from inequality (1) (α1+α2+m_el, what the node sees): "
+                         + "; ".join(angle_part(q, "angle_eq1") for q in enc) + ". With a motor encoder only (α1+m_el, "
+                         "the gap end from the smoothed second derivative of α1): "
+                         + "; ".join(angle_part(q, "angle") for q in enc) + ". The interval is not reliable for every "
+                         "encoder: the quantisation error of a steadily turning shaft is a deterministic sawtooth, not "
+                         "the white noise the least-squares standard error assumes, and how it averages out depends "
+                         "on the resolution; below about 2^16 counts/rev the quantised angle's second derivative hides "
+                         "the gap and a motor-encoder-only window is refused.")
     sp = [s for s in rob.grid if s.snr_db is not None]
     if sp and "speed" in sp[0].gap:
         rms = rob.notes.get("omega1_rms_rad_s", (np.nan, np.nan))
@@ -423,7 +432,7 @@ def write_robustness_figures(rob: RobustnessResult, outdir: str | Path = "docs/f
     xs = [inf_x if s.snr_db is None else s.snr_db for s in rob.grid]
     extra = _by_snr(rob.grid_extra)
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.6), constrained_layout=True)
-    colours = {"angles": "C0", "no_angles": "C1", "speed": "C2", "anchored": "C3", "angle": "C4"}
+    colours = {"angles": "C0", "no_angles": "C1", "speed": "C2", "anchored": "C3", "angle": "C4", "angle_eq1": "C5"}
     for key in CHANNEL_SETS:
         if key not in rob.grid[0].gap:
             continue

@@ -39,6 +39,7 @@ CHANNEL_SETS = {
     "no_angles": (("a1", "m_el"), "acceleration", "a1+m_el (no angles)"),
     "anchored": (("alpha1", "alpha2", "a1", "m_el"), "anchored", "α1+α2+a1+m_el, first-release fit (pre-entry anchor)"),
     "speed": (("omega1", "m_el"), "speed", "ω1+m_el (speed fit)"),
+    "angle_eq1": (("alpha1", "alpha2", "m_el"), "angle", "α1+α2+m_el (no accelerometer)"),
     "angle": (("alpha1", "m_el"), "angle", "α1+m_el (motor encoder only)"),
 }
 #: The channel set whose estimate feeds the fused verdict and the width estimate.
@@ -50,8 +51,8 @@ OFFGRID_J1 = (("1.16 × 0.99", 1.16 * 0.99), ("1.16 × 1.01", 1.16 * 1.01), ("1.
               ("1.10", 1.10), ("1.00", 1.00))
 OFFGRID_WIDTHS_M = (0.003, 0.0045, 0.006, 0.0085)
 ENCODER_COUNTS = (2 ** 12, 2 ** 14, 2 ** 16, 2 ** 18, 2 ** 20)
-#: Channel sets run on the quantised windows: the primary one and the motor-encoder-only one.
-ENCODER_KEYS = (PRIMARY, "angle")
+#: Channel sets run on the quantised windows: the primary one and the two without an accelerometer.
+ENCODER_KEYS = (PRIMARY, "angle_eq1", "angle")
 SAMPLE_PERIODS_S = (0.25e-3, 1e-3)
 #: Noise level of the noisy off-grid sweeps and of the second target.
 TARGET_SNR_DB = 30.0
