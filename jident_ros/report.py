@@ -67,7 +67,6 @@ def _ablation_lines(ev: Evaluation, classes) -> list[str]:
     if abl is None or base is None:
         return []
     a, b = abl.accuracy(), base.accuracy()
-    ps = ", ".join(f"{p:g}" for p in abl.p_values)
     out = ["### Ablation: the η_k groups at equal load (paper-faithful mode, noise-free)", "",
            "Not a model change, a test of the explanation in docs/method.md: the same 168 cases re-simulated with "
            "the process force of each η_k group set so that its steady-state load equals the pattern group's "

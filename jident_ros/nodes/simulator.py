@@ -10,8 +10,9 @@ Publishes (topic names relative, see docs/interfaces.md):
   consistency_pa_sn,entry_time_s``, transient local) before each case's first sample.
 
 Every case is preceded by ``gap_samples`` steady-state samples; the drive clock runs on without a
-break.  ``real_time_factor`` paces the drive clock against the wall clock (0 = as fast as possible,
-with a ``fast_sleep_s`` pause per batch for flow control).
+break.  ``real_time_factor`` paces the drive clock against the wall clock (0 = as fast as the windowing
+node reads: a ``fast_sleep_s`` pause per batch and at most ``max_lead_s`` drive seconds ahead of its
+``drive/progress``, :class:`jident_ros.nodes.ProgressGate`).
 
     ros2 run jident_ros simulator --ros-args -p inertias_kgm2:="[1.16, 1.073]" -p real_time_factor:=0.0
 """
@@ -129,8 +130,6 @@ def _node_class():
                 f"{c['batch_size']}-sample batches at real-time factor {c['real_time_factor']:g} "
                 f"on {self.resolve_topic_name('drive/signals')}")
             self._multiarray = multiarray_from_array
-            # back-pressure at real_time_factor 0 (ProgressGate, opened in run())
-            self.backpressure = c["real_time_factor"] == 0 and c["max_lead_s"] > 0
 
         # ----------------------------------------------------------------- main loop
         def run(self):
@@ -138,7 +137,9 @@ def _node_class():
             if not self._wait_for_subscribers():
                 return
             n_rows = self.stream.shape[0]
-            gate = ProgressGate(self, c["max_lead_s"], c["progress_timeout_s"]) if self.backpressure else None
+            # back-pressure from the windowing node at real_time_factor 0
+            gate = (ProgressGate(self, c["max_lead_s"], c["progress_timeout_s"])
+                    if c["real_time_factor"] == 0 and c["max_lead_s"] > 0 else None)
             try:
                 self._stream(n_rows, gate)
             finally:
