@@ -3,7 +3,7 @@
 Nodes run as separate processes (``python -m jident_ros.nodes.<x> --ros-args ...``) in the test run's
 own ROS_DOMAIN_ID (conftest ``ros_env``), each test in its own namespace; the test talks to them
 through an in-process rclpy node on its own Context.  The pattern library is built once per
-session (about 4 s).  Timeouts are generous (process start-up is 1-3 s on a loaded 2-core machine).
+session (1-2 s).  Timeouts are generous (process start-up is 1-3 s on a loaded 2-core machine).
 """
 from __future__ import annotations
 
@@ -158,7 +158,7 @@ def node_env(ros_env):
 
 @pytest.fixture(scope="session")
 def library(tmp_path_factory):
-    """Pattern library of the default configuration, built once (about 4 s)."""
+    """Pattern library of the default configuration, built once (1-2 s)."""
     from jident_ros.config import load_method_config, load_system_config
     from jident_ros.method.patterns import PatternLibrary
     path = tmp_path_factory.mktemp("patterns") / "patterns.npz"
