@@ -83,7 +83,7 @@ def _ablation_lines(ev: Evaluation, classes) -> list[str]:
     right = "; ".join(f"{r['signal']} J1 {r['j1']:g} K2 {r['width']:g} η_k {r['eta']:g} p {r['p']}: "
                       f"{classes[r['ours_class']]:g}{'' if r['ours_class'] == r['true'] else ' (wrong)'}"
                       for r in ev.ablation_examples)
-    out += ["", f"The paper's 16 example cases at equal load: **{n_abl} of {len(ev.ablation_examples)}** right "
+    out += ["", f"The paper's example cases at equal load: **{n_abl} of {len(ev.ablation_examples)}** right "
             f"(default grid: {n_base}); per case: {right}.", "",
             "Sensitivity at equal load (as in the table above):", "",
             "| signal | J1 effect (per class step) | η_k effect (per group step) | ratio |", "|---|---|---|---|"]
@@ -103,11 +103,12 @@ def _summary_lines(ev: Evaluation) -> list[str]:
     if pc:
         n_ok = sum(row["ours_class"] == row["true"] for row in ev.examples)
         out.append(f"* paper-faithful, noise-free: fused answer right in {_pct(pc[0])}–{_pct(pc[1])} of the cases "
-                   f"depending on p (one signal alone: {_pct(pc[2])}–{_pct(pc[3])}); the paper's own 16 example "
-                   f"cases: {n_ok} of {len(ev.examples)} right. The paper's 100 % is not reproduced on this model: "
+                   f"depending on p (one signal alone: {_pct(pc[2])}–{_pct(pc[3])}); the paper's own example "
+                   f"cases (tables 1–4): {n_ok} of {len(ev.examples)} right. The paper's 100 % is not reproduced on this model: "
                    "the η_k groups move the features more than the J1 classes do (sensitivity table below)"
                    + (f"; with every η_k group at the same load (ablation below) "
-                      f"{sum(r['ours_class'] == r['true'] for r in ev.ablation_examples)} of 16 are right."
+                      f"{sum(r['ours_class'] == r['true'] for r in ev.ablation_examples)} of "
+                      f"{len(ev.ablation_examples)} are right."
                       if ev.ablation_examples else "."))
     ls = rng("load_scaled, noise-free")
     if ls:

@@ -146,11 +146,15 @@ class Evaluation:
 
 
 def paper_examples(system: SystemConfig, method: MethodConfig, clean: WindowSet, result: GridResult) -> list:
-    """Our H vectors for the paper's 16 example cases beside the paper's."""
+    """Our H vectors for the paper's 16 example cases beside the paper's.
+
+    Examples at a p that ``result`` was not evaluated at (``jident evaluate --p ...``) are left out."""
     rows = []
     index = {(c.inertia_kgm2, c.backlash_width_m, c.consistency_pa_sn): i for i, c in enumerate(clean.cases)}
     classes = list(system.grid.inertia_classes_kgm2)
     for sig, j1, w, eta, p, paper_h in PAPER_EXAMPLES:
+        if float(p) not in result.p_values:
+            continue
         i = index[(j1, w, eta)]
         k = result.p_values.index(float(p))
         ours = result.h[k, i, SIGNALS.index(sig)]
