@@ -44,6 +44,24 @@ def array_from_multiarray(msg) -> tuple[np.ndarray, tuple]:
     return arr, channels
 
 
+def last_sample_time(arr: np.ndarray, channels) -> float | None:
+    """Drive time t of a batch's last sample (an ``array_from_multiarray`` result), or None when the
+    batch is empty, has no t column, or its t is not a finite time >= 0."""
+    if "t" not in channels or arr.shape[0] == 0:
+        return None
+    t = float(arr[-1, list(channels).index("t")])
+    return t if np.isfinite(t) and t >= 0 else None
+
+
+def clock_msg(t: float):
+    """rosgraph_msgs/Clock at drive time t, s (the simulator's and the replay's /clock)."""
+    from rosgraph_msgs.msg import Clock
+    msg = Clock()
+    msg.clock.sec = int(np.floor(t))
+    msg.clock.nanosec = min(int(round((t - msg.clock.sec) * 1e9)), 999_999_999)
+    return msg
+
+
 def window_to_msg(window: Window):
     """Window -> std_msgs/Float64MultiArray (drive/window layout: header in data_offset)."""
     return _to_msg(*window.pack())
@@ -150,6 +168,6 @@ def status_values(status) -> dict:
 
 
 __all__ = ["OK", "WARN", "ERROR", "STALE", "LEVEL_NAMES", "LayoutError", "multiarray_from_array",
-           "array_from_multiarray", "window_to_msg", "window_from_msg", "float64", "qos_signals",
+           "array_from_multiarray", "last_sample_time", "clock_msg", "window_to_msg", "window_from_msg", "float64", "qos_signals",
            "qos_latched", "qos_clock", "qos_diagnostics", "qos_to_dict", "format_value", "make_status",
            "make_diagnostic_array", "status_level", "status_values"]

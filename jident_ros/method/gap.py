@@ -259,6 +259,13 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
                        float(model_error))
 
 
+def _torque_powers(n_gap: int, linear_term: bool = False) -> tuple:
+    """Powers of τ in the gap torque model m0 + Σ c_p τ^p shared by the 'acceleration' and 'angle' fits:
+    (2, 3), (2,) for gaps shorter than GAP_CUBIC_MIN samples, with 1 in front when ``linear_term``."""
+    powers = (2, 3) if n_gap >= GAP_CUBIC_MIN else (2,)
+    return (1,) + powers if linear_term else powers
+
+
 def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=None,
                linear_term: bool = False, warm: dict | None = None) -> dict:
     """Weighted joint least squares of m_el (pre-entry and gap) and a1 (gap); see the module docstring.
@@ -277,9 +284,7 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     mg, ag = m_el[start:end], a1[start:end]
     fr = np.zeros(n) if friction is None else np.asarray(friction, float)
     tau = np.arange(n) / n
-    powers = (2, 3) if n >= GAP_CUBIC_MIN else (2,)
-    if linear_term:
-        powers = (1,) + powers
+    powers = _torque_powers(n, linear_term)
     G = np.column_stack([np.ones(n)] + [tau ** q for q in powers])
     p = G.shape[1]
     # noise levels: pre-entry steady state (m_el = m0, a1 = 0); fall back on the gap's
@@ -378,9 +383,7 @@ def _angle_fit(alpha1: np.ndarray, m_el: np.ndarray, start: int, end: int, sampl
     ng = end - start
     duration = ng * sample_period_s
     tg = np.arange(ng) * sample_period_s
-    powers = (2, 3) if ng >= GAP_CUBIC_MIN else (2,)
-    if linear_term:
-        powers = (1,) + powers
+    powers = _torque_powers(ng, linear_term)
     G = np.zeros((end, 1 + len(powers)))      # torque model rows: [1, τ^p ...] (τ = 0 before the entry)
     H = np.zeros((end, 1 + len(powers)))      # their double integrals from the entry
     G[:, 0] = 1.0

@@ -70,13 +70,13 @@ def _positional(args) -> str | None:
 def _node_class(args):
     import importlib
 
-    import numpy as np
     from rclpy.node import Node
     from rclpy.serialization import deserialize_message
     from rosgraph_msgs.msg import Clock
     from std_msgs.msg import Float64MultiArray
 
-    from ..ros_io import LayoutError, array_from_multiarray, qos_clock, qos_latched, qos_signals
+    from ..ros_io import (LayoutError, array_from_multiarray, clock_msg, last_sample_time, qos_clock, qos_latched,
+                          qos_signals)
 
     class ReplayNode(Node):
         def __init__(self):
@@ -177,19 +177,12 @@ def _node_class(args):
         def _last_t(msg):
             """Drive time of a drive/signals batch's last sample, or None (bad layout, no t)."""
             try:
-                arr, channels = array_from_multiarray(msg)
+                return last_sample_time(*array_from_multiarray(msg))
             except LayoutError:
                 return None
-            if "t" not in channels or arr.shape[0] == 0:
-                return None
-            t = float(arr[-1, channels.index("t")])
-            return t if np.isfinite(t) and t >= 0 else None
 
         def _publish_clock(self, t: float):
-            m = Clock()
-            m.clock.sec = int(np.floor(t))
-            m.clock.nanosec = min(int(round((t - m.clock.sec) * 1e9)), 999_999_999)
-            self.pub_clock.publish(m)
+            self.pub_clock.publish(clock_msg(t))
 
     return ReplayNode
 

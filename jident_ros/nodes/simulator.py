@@ -101,7 +101,7 @@ def _node_class():
     from rosgraph_msgs.msg import Clock
     from std_msgs.msg import Float64, Float64MultiArray
 
-    from ..ros_io import multiarray_from_array, qos_clock, qos_latched, qos_signals
+    from ..ros_io import clock_msg, multiarray_from_array, qos_clock, qos_latched, qos_signals
     from ..sim import simulate_grid
     from ..windowing import DEFAULT_CHANNELS, embed_windows
 
@@ -223,11 +223,7 @@ def _node_class():
                                    f"Pa s^n (entry at t = {entry_t:.4f} s)")
 
         def _publish_clock(self, t: float):
-            msg = Clock()
-            sec = int(np.floor(t))
-            msg.clock.sec = sec
-            msg.clock.nanosec = min(int(round((t - sec) * 1e9)), 999_999_999)
-            self.pub_clock.publish(msg)
+            self.pub_clock.publish(clock_msg(t))
 
         def _drain(self):
             """Give reliable readers the last batches before the node goes away."""

@@ -57,8 +57,8 @@ def _node_class():
     from rclpy.node import Node
     from std_msgs.msg import Float64, Float64MultiArray
 
-    from ..ros_io import (ERROR, OK, WARN, LayoutError, array_from_multiarray, make_status, qos_latched,
-                          qos_signals, window_to_msg)
+    from ..ros_io import (ERROR, OK, WARN, LayoutError, array_from_multiarray, last_sample_time, make_status,
+                          qos_latched, qos_signals, window_to_msg)
     from ..windowing import REASONS, BacklashDetector
 
     class WindowingNode(Node):
@@ -114,12 +114,14 @@ def _node_class():
 
         def _progress(self, arr, channels):
             """drive/progress: the drive time of the last sample read, every progress_every_batches batches."""
-            if self.pub_progress is None or not len(arr) or "t" not in channels:
+            if self.pub_progress is None:
                 return
             self.batches_since_progress += 1
             if self.batches_since_progress >= self.cfg["progress_every_batches"]:
-                self.batches_since_progress = 0
-                self.pub_progress.publish(Float64(data=float(arr[-1, channels.index("t")])))
+                t = last_sample_time(arr, channels)
+                if t is not None:
+                    self.batches_since_progress = 0
+                    self.pub_progress.publish(Float64(data=t))
 
         def on_width(self, msg):
             try:
