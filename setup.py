@@ -52,7 +52,7 @@ setup(
     python_requires='>=3.10',
     entry_points={
         'console_scripts': [
-            'jident = jident_ros.cli:main',
+            'jident = jident_ros.cli.main:main',
             'simulator = jident_ros.nodes.simulator:main',
             'windowing = jident_ros.nodes.windowing:main',
             'diagnostic = jident_ros.nodes.diagnostic:main',

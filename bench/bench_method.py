@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from jident_ros.config import load_method_config, load_system_config  # noqa: E402
-from jident_ros.method.gap import estimate_inertia  # noqa: E402
+from jident_ros.identify.gap import estimate_inertia  # noqa: E402
 from jident_ros.method.patterns import PatternLibrary, identify_window  # noqa: E402
 from jident_ros.sim import Case, paper_grid_cases, simulate_grid  # noqa: E402
 
@@ -66,7 +66,7 @@ def main(argv=None):
     angle_times = timed(lambda: estimate_inertia(no_a1, win.entry_index, case.backlash_width_m,
                                                  system.load.wheel_radius_m, win.sample_period_s, "angle"),
                         args.repeats)
-    from jident_ros.diagnosis import diagnose_window
+    from jident_ros.identify.diagnosis import diagnose_window
     # what the diagnostic node adds per window besides the image method: gap fit + width + verdict + status values
     stage_times = timed(lambda: diagnose_window(w, win.entry_index, case.backlash_width_m,
                                                 system.load.wheel_radius_m, win.sample_period_s, library=lib,
@@ -78,7 +78,7 @@ def main(argv=None):
            "gap_stage_s": statistics.median(stage_times),
            "library_build_s": statistics.median(lib_times)}
     if args.full_eval:
-        from jident_ros.method.evaluate import run_evaluation
+        from jident_ros.evaluation.evaluate import run_evaluation
         t = time.perf_counter()
         run_evaluation(system, method, log=lambda *a: None)
         res["full_evaluation_s"] = time.perf_counter() - t

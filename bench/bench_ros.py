@@ -9,7 +9,8 @@ processes (the ``ros2 run`` executables of the ament index, else ``python -m jid
 in a namespace of their own (``/bench_<k>``); windowing and diagnostic run with ``use_sim_time``
 (the simulator publishes ``/clock``).  The simulator runs ``--cases`` grid cases (``cases:=zip``: the
 seven J1 classes in turn, K2 = 0.005 m, eta_k = 0.0375 Pa s^n -- off the pattern runs), ``--repeat``
-passes over them, at ``real_time_factor`` = the level (0 = ``fast_sleep_s`` per batch with back-pressure from the windowing node's ``drive/progress``).  The
+passes over them, at ``real_time_factor`` = the level (0 = ``fast_sleep_s`` per batch with back-pressure from the
+windowing node's ``drive/progress``).  The
 pattern library is built once beforehand (or taken from the CLI's cache) and passed to the node.
 
 The bench's own rclpy node (in this process, its own Context) receives ``drive/signals``,
@@ -96,8 +97,9 @@ def machine() -> dict:
                 break
     except OSError:
         pass
-    import rclpy  # noqa: F401
     from importlib.metadata import version
+
+    import rclpy  # noqa: F401
     vers = {}
     for dist in ("rclpy", "ros-rmw-fastrtps-cpp", "ros-fastdds", "numpy", "scipy"):
         try:
@@ -117,7 +119,7 @@ def pattern_library(path: str | None) -> tuple[Path, float]:
     if path:
         p = Path(path)
     else:
-        from jident_ros.cli import default_library_path
+        from jident_ros.identify.library import default_library_path
         p = Path(default_library_path(system, method))
     if p.is_file():
         return p, 0.0
@@ -199,7 +201,7 @@ class Listener:
         from rclpy.executors import SingleThreadedExecutor
         from std_msgs.msg import Float64, Float64MultiArray
 
-        from jident_ros.ros_io import qos_diagnostics, qos_latched, qos_signals
+        from jident_ros.nodes.ros_io import qos_diagnostics, qos_latched, qos_signals
         self.ns, self.ts, self.total = ns, ts, total_samples
         self.hw = f"{ns}/drive"
         self.ctx = rclpy.Context()
@@ -266,7 +268,7 @@ class Listener:
     def on_diagnostics(self, msg):
         recv = time.monotonic()
         self.last_recv = recv
-        from jident_ros.ros_io import status_level, status_values
+        from jident_ros.nodes.ros_io import status_level, status_values
         for s in msg.status:
             if s.hardware_id != self.hw:
                 continue

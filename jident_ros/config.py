@@ -17,13 +17,19 @@ CLI reads the same file.  Every value is validated here; a bad one raises
 from __future__ import annotations
 
 import dataclasses
+import dataclasses as dc
 import hashlib
 import json
 import math
 from pathlib import Path
 from typing import Any, Mapping
 
-from .sim.params import GridParams, LoadParams, MotorParams, SamplingParams, SystemConfig
+import pywt
+import yaml
+
+from jident_ros.method.pipeline import MethodConfig
+from jident_ros.resources import default_config_path
+from jident_ros.sim.params import GridParams, LoadParams, MotorParams, SamplingParams, SystemConfig
 
 SECTIONS = {"motor": MotorParams, "load": LoadParams, "sampling": SamplingParams, "grid": GridParams}
 
@@ -136,7 +142,6 @@ _FOREIGN_SECTIONS = {"method", "nodes"}
 
 def load_yaml(path: str | Path) -> Mapping:
     """Read a YAML file; errors name the file."""
-    import yaml
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"config file: no such file {str(p)!r}")
@@ -148,7 +153,6 @@ def load_yaml(path: str | Path) -> Mapping:
 
 
 def default_system_config_path() -> Path:
-    from .resources import default_config_path
     return default_config_path("system.yaml")
 
 
@@ -172,8 +176,6 @@ def config_hash(obj: Any) -> str:
 
 def method_config_from_dict(data: Mapping | None):
     """Build and validate a MethodConfig from the ``method`` section."""
-    import dataclasses as dc
-    from .method.pipeline import MethodConfig
     data = strip_ros_wrapper(data or {})
     sec = data.get("method", data) if isinstance(data, Mapping) else data
     if not isinstance(sec, Mapping):
@@ -188,7 +190,6 @@ def method_config_from_dict(data: Mapping | None):
         if k == "wavelets":
             if not isinstance(v, Mapping):
                 raise ConfigError(f"method.wavelets: expected a mapping signal -> wavelet, got {v!r}")
-            import pywt
             for sig, w in v.items():
                 if w not in pywt.wavelist(kind="discrete"):
                     raise ConfigError(f"method.wavelets.{sig}: unknown discrete wavelet {w!r}")
@@ -208,6 +209,5 @@ def method_config_from_dict(data: Mapping | None):
 def load_method_config(path: str | Path | None = None):
     """Load ``config/method.yaml`` (or the given file) into a MethodConfig."""
     if path is None:
-        from .resources import default_config_path
         path = default_config_path("method.yaml")
     return method_config_from_dict(load_yaml(path))

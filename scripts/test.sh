@@ -18,6 +18,13 @@ export PYTHONUNBUFFERED=1
 # setup.sh installed rclpy (or a ROS distribution is sourced): ros-marked tests must run, not skip.
 export JIDENT_REQUIRE_ROS="${JIDENT_REQUIRE_ROS:-1}"
 
+# Lint first (ruff.toml: pyflakes, pycodestyle, import order, pep257 as ament_flake8/ament_pep257): a lint
+# error fails the run like a test.  JIDENT_LINT=0 skips it (e.g. while editing).
+if [[ "${JIDENT_LINT:-1}" != 0 ]]; then
+  echo "[test] .venv/bin/ruff check ."
+  .venv/bin/ruff check . || { echo "[test] FAILED: lint (ruff check .)" >&2; exit 1; }
+fi
+
 echo "[test] AMENT_PREFIX_PATH=$AMENT_PREFIX_PATH ROS_DOMAIN_ID=$ROS_DOMAIN_ID"
 echo "[test] .venv/bin/python -m pytest $*"
 rc=0

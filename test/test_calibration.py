@@ -10,17 +10,24 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jident_ros.cli import main
+from jident_ros.bag.recording import BagWriter
+from jident_ros.cli.main import main
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.method import normalise as nz
-from jident_ros.method.calibration import (CalibrationError, LabelledWindow, build_library_from_recordings,
-                                           library_from_labelled_windows, parse_labels, pattern_window_counts,
-                                           read_calibration_windows)
+from jident_ros.method.calibration import (
+    CalibrationError,
+    LabelledWindow,
+    build_library_from_recordings,
+    library_from_labelled_windows,
+    parse_labels,
+    pattern_window_counts,
+    read_calibration_windows,
+)
 from jident_ros.method.patterns import LibraryMismatch, PatternLibrary, identify_window
 from jident_ros.method.pipeline import SIGNALS, batch_features
-from jident_ros.recording import BagWriter
 from jident_ros.sim import Case, simulate_grid
-from jident_ros.windowing import DEFAULT_CHANNELS, embed_windows, pack
+from jident_ros.stream.detector import embed_windows
+from jident_ros.stream.layout import DEFAULT_CHANNELS, pack
 
 NS = "/drive/"
 F64 = "std_msgs/msg/Float64"

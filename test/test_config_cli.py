@@ -5,7 +5,7 @@ import sys
 import numpy as np
 import pytest
 
-from jident_ros.cli import main
+from jident_ros.cli.main import main
 from jident_ros.config import ConfigError, load_system_config, system_config_from_dict
 
 
@@ -94,8 +94,8 @@ def test_cli_evaluate_rejects_bad_p(capsys):
 
 
 def test_cli_gap_methods_are_the_diagnosis_gap_methods():
-    from jident_ros.cli import CLI_GAP_METHODS
-    from jident_ros.diagnosis import GAP_METHODS
+    from jident_ros.cli.main import CLI_GAP_METHODS
+    from jident_ros.identify.diagnosis import GAP_METHODS
     assert CLI_GAP_METHODS == GAP_METHODS
 
 

@@ -3,9 +3,15 @@ import numpy as np
 import pytest
 
 from jident_ros.config import load_system_config
-from jident_ros.method.fusion import fuse_verdict, image_vote
-from jident_ros.method.gap import (GapEstimate, NoGapError, estimate_backlash_width, estimate_inertia,
-                                   gap_interval, nearest_class)
+from jident_ros.identify.fusion import fuse_verdict, image_vote
+from jident_ros.identify.gap import (
+    GapEstimate,
+    NoGapError,
+    estimate_backlash_width,
+    estimate_inertia,
+    gap_interval,
+    nearest_class,
+)
 from jident_ros.method.patterns import SignalAnswer
 from jident_ros.sim import Case, simulate_grid
 
@@ -197,7 +203,7 @@ def test_steady_state_window_is_refused_not_fitted():
 def test_fit_drowned_in_noise_is_refused():
     """Accelerometer noise far above the gap's acceleration (about 17 m/s^2): the standard error exceeds
     MAX_RELATIVE_STD_ERROR of J1 and the window is refused with the reason; moderate noise passes."""
-    from jident_ros.method.gap import MAX_RELATIVE_STD_ERROR
+    from jident_ros.identify.gap import MAX_RELATIVE_STD_ERROR
     w, e, width = single_mass_window(1.16, seed=3, acc_noise=2.0)
     g = estimate_inertia(w, e, width, R, TS)
     assert g.std_error_kgm2 < MAX_RELATIVE_STD_ERROR * g.inertia_kgm2

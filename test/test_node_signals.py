@@ -10,11 +10,9 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
-
 from test_nodes import Proc, Ros, library, logs, node_env  # noqa: F401  (fixtures)
 
 TS = 5e-4
@@ -23,7 +21,7 @@ TS = 5e-4
 def _run_until_mid_stream(node_env, library, tmp_path, ns, sig):
     from std_msgs.msg import Float64MultiArray
 
-    from jident_ros.ros_io import array_from_multiarray, qos_signals
+    from jident_ros.nodes.ros_io import array_from_multiarray, qos_signals
     bag = tmp_path / "bag"
     ros = Ros(f"jident_test_{ns}")
     got = ros.collect(Float64MultiArray, f"/{ns}/drive/signals", qos_signals())
@@ -63,7 +61,7 @@ def _check_prefix(batches, reference):
 def test_sigterm_mid_run_finalises_the_recording(node_env, library, tmp_path):
     from rosbags.highlevel import AnyReader
 
-    from jident_ros.recording import read_bag
+    from jident_ros.bag.recording import read_bag
     bag, rc, received, log = _run_until_mid_stream(node_env, library, tmp_path, "sigterm", signal.SIGTERM)
     assert rc == 0, log
     assert (bag / "metadata.yaml").is_file(), log
@@ -80,7 +78,7 @@ def test_sigterm_mid_run_finalises_the_recording(node_env, library, tmp_path):
 
 @pytest.mark.ros
 def test_sigkill_mid_run_then_salvage_recovers_the_complete_chunks(node_env, library, tmp_path):
-    from jident_ros.recording import RecordingError, read_bag
+    from jident_ros.bag.recording import RecordingError, read_bag
     bag, rc, received, log = _run_until_mid_stream(node_env, library, tmp_path, "sigkill", signal.SIGKILL)
     assert rc == -signal.SIGKILL
     mcap = next(bag.glob("*.mcap"))

@@ -53,7 +53,7 @@ def test_launch_file_compiles():
 
 def test_importing_the_nodes_needs_no_rclpy():
     code = ("import sys, jident_ros.nodes.simulator, jident_ros.nodes.windowing, jident_ros.nodes.diagnostic, "
-            "jident_ros.nodes.replay, jident_ros.ros_io, jident_ros.windowing; "
+            "jident_ros.nodes.replay, jident_ros.nodes.ros_io, jident_ros.stream.detector; "
             "assert 'rclpy' not in sys.modules, 'rclpy imported'")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
                        env=dict(os.environ, PYTHONPATH=str(REPO)))
@@ -192,7 +192,7 @@ def pipeline(ros_env, node_env, library, tmp_path_factory):
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import Float64, Float64MultiArray
 
-    from jident_ros.ros_io import qos_diagnostics, qos_latched, qos_signals
+    from jident_ros.nodes.ros_io import qos_diagnostics, qos_latched, qos_signals
     tmp = tmp_path_factory.mktemp("e2e")
     bag = tmp / "bag"
     ns = ["-r", "__ns:=/e2e"]
@@ -255,9 +255,10 @@ def test_pipeline_back_pressure_from_the_windowing_node(pipeline):
 
 @pytest.mark.ros
 def test_pipeline_diagnostics(pipeline):
-    from jident_ros.ros_io import WARN, status_level, status_values
+    from jident_ros.identify.levels import WARN
+    from jident_ros.nodes.ros_io import status_level, status_values
     sts = statuses(pipeline["diags"], "jident: inertia", "/e2e/drive")
-    # the fused verdict (jident_ros.diagnosis): both windows are WARN. The first is the nominal class by
+    # the fused verdict (jident_ros.identify.diagnosis): both windows are WARN. The first is the nominal class by
     # the gap, but at eta_k = 0.0375 (off the pattern runs) the image method's margin-weighted vote picks
     # another class: a disagreement is a WARN. The second deviates (1.073).
     assert [status_level(s) for s in sts] == [WARN, WARN], [s.message for s in sts]
@@ -295,7 +296,7 @@ def test_pipeline_diagnostics(pipeline):
 
 @pytest.mark.ros
 def test_pipeline_recording_holds_every_message(pipeline):
-    recording = pytest.importorskip("jident_ros.recording")
+    recording = pytest.importorskip("jident_ros.bag.recording")
     counts = {}
     for m in recording.read_bag(pipeline["bag"]):
         counts[m.topic] = counts.get(m.topic, 0) + 1
@@ -309,10 +310,10 @@ def test_pipeline_recording_holds_every_message(pipeline):
 
 @pytest.mark.ros
 def test_replay_gives_the_same_estimates(pipeline, node_env, library, ros, procs, tmp_path):
-    pytest.importorskip("jident_ros.recording")
+    pytest.importorskip("jident_ros.bag.recording")
     from std_msgs.msg import Float64
 
-    from jident_ros.ros_io import qos_latched
+    from jident_ros.nodes.ros_io import qos_latched
     est = ros.collect(Float64, "/rep/inertia_estimate", qos_latched(10))
     ns = ["-r", "__ns:=/rep"]
     procs.append(Proc(node_env, tmp_path, "diagnostic", *ns, "-p", f"pattern_library:={library}"))
@@ -331,9 +332,9 @@ def test_replay_gives_the_same_estimates(pipeline, node_env, library, ros, procs
 def test_offline_diagnosis_gives_the_same_estimates(pipeline, library):
     """`jident diagnose` on the pipeline's recording: the windowing node's detector and the diagnostic
     node's diagnose_window, without ROS -> the live estimates exactly (live == replay == offline)."""
-    pytest.importorskip("jident_ros.recording")
-    from jident_ros.offline import diagnose_recording
-    from jident_ros.ros_io import status_level
+    pytest.importorskip("jident_ros.bag.recording")
+    from jident_ros.cli.offline import diagnose_recording
+    from jident_ros.nodes.ros_io import status_level
     result = diagnose_recording(pipeline["bag"], library_path=library)
     assert result.signals_topic == "/e2e/drive/signals" and not result.dropped
     assert result.estimates == pipeline["estimates"]  # same samples, same code, same numbers
@@ -375,7 +376,7 @@ def test_bad_parameters_stop_the_node_with_one_line(node_env, tmp_path):
 def _good_stream(n_cases=1):
     from jident_ros.config import load_system_config
     from jident_ros.sim import Case, simulate_grid
-    from jident_ros.windowing import embed_windows
+    from jident_ros.stream.detector import embed_windows
     w = simulate_grid(load_system_config(), [Case(1.16, 0.005, 0.025)][:n_cases])
     return w, embed_windows(w, 600, start_time_s=1.0)
 
@@ -383,7 +384,7 @@ def _good_stream(n_cases=1):
 def _msg(arr, channels, dims=None, offset=0):
     from std_msgs.msg import MultiArrayDimension
 
-    from jident_ros.ros_io import multiarray_from_array
+    from jident_ros.nodes.ros_io import multiarray_from_array
     m = multiarray_from_array(arr, channels)
     if dims is not None:
         m.layout.dim = [MultiArrayDimension(label=a, size=b, stride=c) for a, b, c in dims]
@@ -396,8 +397,16 @@ def test_bad_messages_are_reported_and_the_windowing_node_keeps_running(node_env
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import Float64MultiArray
 
-    from jident_ros.ros_io import WARN, qos_diagnostics, qos_latched, qos_signals, status_level, status_values, window_from_msg
-    from jident_ros.windowing import DEFAULT_CHANNELS
+    from jident_ros.identify.levels import WARN
+    from jident_ros.nodes.ros_io import (
+        qos_diagnostics,
+        qos_latched,
+        qos_signals,
+        status_level,
+        status_values,
+        window_from_msg,
+    )
+    from jident_ros.stream.layout import DEFAULT_CHANNELS
     sim, (stream, rows) = _good_stream()
     diags = ros.collect(DiagnosticArray, "/diagnostics", qos_diagnostics())
     windows = ros.collect(Float64MultiArray, "/bad/drive/window", qos_latched(10))
@@ -455,10 +464,11 @@ def test_diagnostic_with_a_bad_or_missing_library_reports_error_and_keeps_runnin
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import Float64, Float64MultiArray
 
+    from jident_ros.identify.levels import ERROR, STALE
     from jident_ros.method.patterns import PatternLibrary
-    from jident_ros.ros_io import (ERROR, STALE, qos_diagnostics, qos_latched, status_level, status_values,
-                                   window_to_msg)
-    from jident_ros.windowing import BacklashDetector, DEFAULT_CHANNELS
+    from jident_ros.nodes.ros_io import qos_diagnostics, qos_latched, status_level, status_values, window_to_msg
+    from jident_ros.stream.detector import BacklashDetector
+    from jident_ros.stream.layout import DEFAULT_CHANNELS
     lib = PatternLibrary.load(library)
     lib.metadata = dict(lib.metadata, system=dict(lib.metadata["system"], load=dict(
         lib.metadata["system"]["load"], wheel_radius_m=0.2)), system_hash="0" * 64)
@@ -501,7 +511,7 @@ def test_simulator_back_pressure_waits_for_drive_progress(node_env, ros, procs, 
     when progress comes, and without any progress gives up waiting after progress_timeout_s (warning)."""
     from std_msgs.msg import Float64, Float64MultiArray
 
-    from jident_ros.ros_io import array_from_multiarray, qos_signals
+    from jident_ros.nodes.ros_io import array_from_multiarray, qos_signals
     signals = ros.collect(Float64MultiArray, "/bp/drive/signals", qos_signals())
     progress = ros.node.create_publisher(Float64, "/bp/drive/progress", qos_signals(10))
     last_t = lambda: max((array_from_multiarray(m)[0][-1, 0] for m in signals), default=-1.0)  # noqa: E731

@@ -56,11 +56,12 @@ def windows(configs):
 def write_recording(bag_dir: Path, system, inertias=TRUE_J1, eta=0.0375, namespace="/t", batch=50, gap=400,
                     start_time_s=1.0):
     """Simulate the cases and write them as the diagnostic node records the simulator's topics."""
+    from jident_ros.bag.recording import BagWriter
+    from jident_ros.cli.offline import multiarray_message
     from jident_ros.nodes.simulator import CASE_LABEL
-    from jident_ros.offline import multiarray_message
-    from jident_ros.recording import BagWriter
     from jident_ros.sim import Case, simulate_grid
-    from jident_ros.windowing import DEFAULT_CHANNELS, embed_windows
+    from jident_ros.stream.detector import embed_windows
+    from jident_ros.stream.layout import DEFAULT_CHANNELS
     cases = [Case(j, 0.005, eta) for j in inertias]
     ws = simulate_grid(system, cases)
     stream, entry_rows = embed_windows(ws, gap, start_time_s, DEFAULT_CHANNELS)
@@ -89,7 +90,7 @@ def recording(configs, tmp_path_factory):
 
 
 def _diagnose(windows, i, configs, library, **kw):
-    from jident_ros.diagnosis import diagnose_window
+    from jident_ros.identify.diagnosis import diagnose_window
     system, method = configs
     data = kw.pop("data", None) or windows.case(i)
     return diagnose_window(data, windows.entry_index, windows.cases[i].backlash_width_m,
@@ -101,7 +102,7 @@ def _diagnose(windows, i, configs, library, **kw):
 
 
 def test_nominal_window_is_ok(windows, configs, library):
-    from jident_ros.ros_io import OK
+    from jident_ros.identify.levels import OK
     d = _diagnose(windows, 0, configs, library)
     v = d.value_dict()
     assert d.level == OK, d.message
@@ -117,7 +118,7 @@ def test_nominal_window_is_ok(windows, configs, library):
 
 
 def test_other_class_is_warn(windows, configs, library):
-    from jident_ros.ros_io import WARN
+    from jident_ros.identify.levels import WARN
     d = _diagnose(windows, 1, configs, library)
     assert d.level == WARN and "class 1.073 deviates from the nominal 1.16 by -7.5 %" in d.message, d.message
     assert d.value_dict()["deviation_percent"] == pytest.approx(-7.5, abs=0.05)
@@ -125,19 +126,19 @@ def test_other_class_is_warn(windows, configs, library):
 
 def test_image_method_disagreeing_with_the_gap_is_warn(windows, configs, library):
     """Nominal J1 at eta_k = 0.0375 (off the pattern runs): the gap gives 1.16, the image vote another class."""
-    from jident_ros.ros_io import WARN
+    from jident_ros.identify.levels import WARN
     d = _diagnose(windows, 2, configs, library)
     v = d.value_dict()
     assert d.class_kgm2 == 1.16 and v["verdict_agree"] is False and v["image_vote_class_kgm2"] != 1.16
     assert d.level == WARN and "nominal class 1.16; the image method disagrees" in d.message, d.message
     # without the image method nothing disagrees
-    from jident_ros.ros_io import OK
+    from jident_ros.identify.levels import OK
     g = _diagnose(windows, 2, configs, None, image_method=False)
     assert g.level == OK and g.value_dict()["verdict_agree"] == "unknown" and g.inertia_kgm2 == d.inertia_kgm2
 
 
 def test_between_classes_is_warn(windows, configs, library):
-    from jident_ros.ros_io import WARN
+    from jident_ros.identify.levels import WARN
     d = _diagnose(windows, 3, configs, library)
     v = d.value_dict()
     assert v["verdict_between_classes"] is True and math.isnan(v["verdict_class_kgm2"]), d.message
@@ -145,7 +146,7 @@ def test_between_classes_is_warn(windows, configs, library):
 
 
 def test_no_gap_and_no_library_is_error(windows, configs):
-    from jident_ros.ros_io import ERROR
+    from jident_ros.identify.levels import ERROR
     data = {k: v for k, v in windows.case(0).items() if k != "m_el"}  # the gap fit needs m_el
     d = _diagnose(windows, 0, configs, None, data=data, library_error="pattern library missing: no.npz")
     assert d.level == ERROR and not d.diagnosed and d.inertia_kgm2 is None
@@ -162,7 +163,7 @@ def test_no_gap_falls_back_to_the_image_vote(windows, configs, library):
 
 
 def test_the_gap_estimate_is_reported_before_the_image_method_runs(windows, configs, library, monkeypatch):
-    import jident_ros.diagnosis as diagnosis
+    import jident_ros.identify.diagnosis as diagnosis
     published, seen_by_image = [], []
     real = diagnosis.identify_window
 
@@ -183,7 +184,7 @@ def test_bad_arguments_name_the_field(windows, configs, library):
 
 
 def test_diagnosis_and_offline_need_no_rclpy():
-    code = ("import sys, jident_ros.diagnosis, jident_ros.offline, jident_ros.nodes.diagnostic; "
+    code = ("import sys, jident_ros.identify.diagnosis, jident_ros.cli.offline, jident_ros.nodes.diagnostic; "
             "assert 'rclpy' not in sys.modules, 'rclpy imported'")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
                        env=dict(os.environ, PYTHONPATH=str(REPO)))
@@ -194,7 +195,7 @@ def test_diagnosis_and_offline_need_no_rclpy():
 
 
 def test_diagnose_recording_finds_the_true_inertia(recording, configs, library):
-    from jident_ros.offline import diagnose_recording
+    from jident_ros.cli.offline import diagnose_recording
     result = diagnose_recording(recording, library=library)
     assert result.signals_topic == "/t/drive/signals" and result.backlash_width_source == "/t/drive/backlash_width"
     assert len(result.windows) == 2 and not result.dropped
@@ -203,7 +204,7 @@ def test_diagnose_recording_finds_the_true_inertia(recording, configs, library):
         assert abs(w.inertia_kgm2 - true) / true < 0.01, (w.inertia_kgm2, true)
         assert w.diagnosis.class_kgm2 == true and w.diagnosis.source == "gap"
     # the same numbers as diagnose_window on the simulator's windows (the detector's window is the simulator's)
-    from jident_ros.diagnosis import diagnose_window
+    from jident_ros.identify.diagnosis import diagnose_window
     from jident_ros.sim import Case, simulate_grid
     ws = simulate_grid(configs[0], [Case(j, 0.005, 0.0375) for j in TRUE_J1])
     direct = [diagnose_window(ws.case(i), ws.entry_index, 0.005, configs[0].load.wheel_radius_m, ws.sample_period_s,
@@ -213,7 +214,7 @@ def test_diagnose_recording_finds_the_true_inertia(recording, configs, library):
 
 
 def test_jident_diagnose_command(recording, library_file, tmp_path, capsys):
-    from jident_ros.cli import main
+    from jident_ros.cli.main import main
     out = tmp_path / "out" / "diag.json"
     assert main(["diagnose", str(recording), "--library", str(library_file), "--json", str(out), "--quiet"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
@@ -253,7 +254,7 @@ def test_jident_diagnose_subprocess(recording, library_file, tmp_path):
 
 
 def _one_line_error(capsys, argv) -> str:
-    from jident_ros.cli import main
+    from jident_ros.cli.main import main
     assert main(argv) == 2
     cap = capsys.readouterr()
     lines = cap.err.strip().splitlines()
@@ -262,7 +263,7 @@ def _one_line_error(capsys, argv) -> str:
 
 
 def test_recording_without_signals_is_one_line_error(tmp_path, capsys):
-    from jident_ros.recording import BagWriter
+    from jident_ros.bag.recording import BagWriter
     with BagWriter(tmp_path / "nosig") as bag:
         bag.add_topic("/t/drive/true_inertia", "std_msgs/msg/Float64")
         bag.write("/t/drive/true_inertia", {"data": 1.16}, 1_000_000_000)

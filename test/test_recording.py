@@ -1,4 +1,4 @@
-"""MCAP recording (jident_ros.recording): rosbag2 compatibility, crash behaviour, salvage.
+"""MCAP recording (jident_ros.bag.recording): rosbag2 compatibility, crash behaviour, salvage.
 
 Independent checks: the ``rosbags`` library (its own MCAP reader, .msg parser, CDR
 codec and RIHS01 hash; AnyReader refuses a bag whose type hashes do not match the
@@ -7,7 +7,6 @@ type-description JSON files installed with the ROS 2 interface packages, and rcl
 """
 from __future__ import annotations
 
-import io
 import json
 import os
 import signal
@@ -21,7 +20,7 @@ import numpy as np
 import pytest
 import yaml
 
-from jident_ros import recording as R
+from jident_ros.bag import recording as R
 
 REPO = Path(__file__).resolve().parents[1]
 CHANNELS = "t,alpha1,alpha2,omega2,a1,m_el,omega1,a2,v2"
@@ -69,7 +68,7 @@ def run_child(tmp_path: Path, body: str) -> subprocess.Popen:
         import sys, time
         sys.path.insert(0, {str(REPO)!r})
         import numpy as np
-        from jident_ros.recording import BagWriter, install_signal_handlers
+        from jident_ros.bag.recording import BagWriter, install_signal_handlers
         def data(i):
             return {{"layout": {{"dim": [{{"label": "sample", "size": 2, "stride": 18}},
                                        {{"label": {CHANNELS!r}, "size": 9, "stride": 9}}]}},
@@ -94,7 +93,7 @@ def wait_for(proc: subprocess.Popen, word: str, timeout: float = 20.0) -> str:
 
 # ---------------------------------------------------------------- definitions, hash, CDR
 def test_module_does_not_import_rclpy():
-    code = ("import sys, jident_ros.recording as r; "
+    code = ("import sys, jident_ros.bag.recording as r; "
             "r.serialize('std_msgs/msg/Float64', {'data': 1.0}); "
             "print('rclpy' in sys.modules, 'mcap_ros2' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True,
@@ -114,7 +113,7 @@ def test_shipped_definitions_are_the_installed_ones_and_hashes_match():
 
 
 def test_type_hash_agrees_with_rosbags():
-    from rosbags.typesys import get_typestore, get_types_from_msg, Stores
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
     for name in R.MSG_FILES:
         store = get_typestore(Stores.EMPTY)
         store.register(get_types_from_msg(R.message_definition(name), name))
@@ -152,7 +151,7 @@ def _samples():
 
 def test_cdr_bytes_equal_rosbags_and_mcap_ros2():
     from mcap_ros2._dynamic import serialize_dynamic
-    from rosbags.typesys import get_typestore, get_types_from_msg, Stores
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
     for name, msg in _samples():
         ours = R.serialize(name, msg)
         store = get_typestore(Stores.EMPTY)
@@ -167,8 +166,8 @@ def test_cdr_bytes_equal_rosbags_and_mcap_ros2():
 @pytest.mark.ros
 def test_cdr_interoperates_with_rclpy():
     # rclpy leaves CDR padding bytes uninitialised, so compare decoded values, both ways
-    from rclpy.serialization import deserialize_message, serialize_message
     from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.serialization import deserialize_message, serialize_message
     from rosgraph_msgs.msg import Clock
     from std_msgs.msg import Float64, Float64MultiArray
     classes = {SIGNALS: Float64MultiArray, "std_msgs/msg/Float64": Float64,

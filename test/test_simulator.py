@@ -4,8 +4,15 @@ import pytest
 from scipy.optimize import brentq
 
 from jident_ros.config import load_system_config
-from jident_ros.sim import (PAPER_SIGNALS, Case, SystemConfig, add_measurement_noise, paper_grid_cases,
-                            quantise_encoders, simulate_grid)
+from jident_ros.sim import (
+    PAPER_SIGNALS,
+    Case,
+    SystemConfig,
+    add_measurement_noise,
+    paper_grid_cases,
+    quantise_encoders,
+    simulate_grid,
+)
 from jident_ros.sim.motor import breakdown_slip, equivalent_circuit_torque_pu, steady_state_phasors
 
 CFG = load_system_config()

@@ -9,8 +9,8 @@ import pytest
 
 from jident_ros.config import load_system_config
 from jident_ros.sim import CHANNELS, Case, simulate_grid
-from jident_ros.windowing import (DEFAULT_CHANNELS, REASONS, WINDOW_HEADER, BacklashDetector, LayoutError, Window,
-                                  embed_windows, pack, stream_batches, unpack)
+from jident_ros.stream.detector import REASONS, BacklashDetector, embed_windows, stream_batches
+from jident_ros.stream.layout import DEFAULT_CHANNELS, WINDOW_HEADER, LayoutError, Window, pack, unpack
 
 GAP = 300
 CASES = [Case(1.16, 0.005, 0.025), Case(1.073, 0.005, 0.0375), Case(1.218, 0.01, 0.0125)]

@@ -3,7 +3,7 @@
 A user with a real drive records calibration runs with known J1 (e.g. with added masses) instead of
 relying on our simulator.  From each recording (MCAP bag directory or .mcap file, see
 docs/recording.md) the ``drive/signals`` batches are fed, in receive-time order, through the windowing
-node's detector (:class:`jident_ros.windowing.BacklashDetector`, paper inequality 1, 48 + 2000
+node's detector (:class:`jident_ros.stream.detector.BacklashDetector`, paper inequality 1, 48 + 2000
 samples): the windows are exactly those the windowing node would publish.
 
 Labels of a window:
@@ -40,11 +40,15 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
-from .patterns import PatternLibrary, h5_table, library_metadata
-from .pipeline import SIGNALS, MethodConfig, batch_features, pre_entry_reference
+from jident_ros.bag.recorded import DriveReplay, read_drive_messages
+from jident_ros.bag.recording import RecordingError, deserialize
+from jident_ros.method.patterns import PatternLibrary, h5_table, library_metadata
+from jident_ros.method.pipeline import SIGNALS, MethodConfig, batch_features, pre_entry_reference
+from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
+from jident_ros.stream.detector import BacklashDetector
+from jident_ros.stream.layout import DRIVE_TOPICS, SIGNALS_TOPIC, TRUE_INERTIA_TOPIC, WIDTH_TOPIC
+from jident_ros.stream.layout import topic_matches as _matches
 
-from ..windowing import (DRIVE_TOPICS, SIGNALS_TOPIC, TRUE_INERTIA_TOPIC, WIDTH_TOPIC,
-                         topic_matches as _matches)
 #: Significant digits to which J1 labels and widths are compared when grouping windows.
 LABEL_DIGITS = 12
 
@@ -164,10 +168,6 @@ def read_calibration_windows(path, system, *, inertia_kgm2: Optional[float] = No
     the file and the value: missing or unreadable recording, no ``drive/signals``, channels missing, no
     K2, no backlash entry, a window without a J1 label.
     """
-    from ..recording import RecordingError, deserialize
-    from ..recorded import DriveReplay, read_drive_messages
-    from ..windowing import BacklashDetector
-    from ..nodes.windowing import DEFAULTS as WINDOWING_DEFAULTS
     name = str(path)
     if inertia_kgm2 is not None and not _positive_number(inertia_kgm2):
         raise CalibrationError(f"recording {name}: J1 label must be a finite number > 0 in kg m^2, "

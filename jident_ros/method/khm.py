@@ -559,6 +559,7 @@ def khm_fit_batch(levels, counts, init_values, n_clusters=7, p=2.0, max_iter=300
         Non-negative weights (pixel counts).
     init_values : array, shape (B,)
         The paper's common initial centre 1 - k3 of each histogram.
+
     Returns
     -------
     centres : ndarray (B, n_clusters), sorted ascending

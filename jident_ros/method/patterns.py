@@ -18,11 +18,19 @@ from typing import Sequence
 
 import numpy as np
 
-from ..config import config_hash, config_to_dict
-from ..sim.params import SystemConfig
-from . import normalise as nz
-from .pipeline import (SIGNALS, MethodConfig, batch_features, h_vector, margin, pre_entry_reference,
-                       window_features)
+from jident_ros.config import config_hash, config_to_dict
+from jident_ros.method import normalise as nz
+from jident_ros.method.pipeline import (
+    SIGNALS,
+    MethodConfig,
+    batch_features,
+    h_vector,
+    margin,
+    pre_entry_reference,
+    window_features,
+)
+from jident_ros.sim import Case, simulate_grid
+from jident_ros.sim.params import SystemConfig
 
 FORMAT_VERSION = 1
 
@@ -67,7 +75,6 @@ class PatternLibrary:
         ``windows`` may be a precomputed WindowSet holding exactly those runs
         (any order); otherwise they are simulated.
         """
-        from ..sim import Case, simulate_grid
         g = system.grid
         eta = g.pattern_consistency_pa_sn
         wanted = [Case(j, w, eta) for j in g.inertia_classes_kgm2 for w in g.backlash_widths_m]

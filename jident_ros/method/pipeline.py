@@ -16,9 +16,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import normalise as nz
-from .image import drawn_cells, level_histogram_from_cells
-from .scalogram import READINGS, percentage_energy_cells, wavelet_coefficients
+from jident_ros.method import normalise as nz
+from jident_ros.method.image import drawn_cells, level_histogram_from_cells
+from jident_ros.method.khm import khm_fit_batch
+from jident_ros.method.scalogram import READINGS, percentage_energy_cells, wavelet_coefficients
 
 SIGNALS = ("a1", "m_el", "omega1", "a2", "v2")
 VARIANTS = ("paper", "load_scaled")
@@ -157,6 +158,7 @@ def batch_features(windows: np.ndarray, signal: str, cfg: MethodConfig, p_values
     windows : ndarray, shape (B, n_samples)
     references : ndarray (B,) or None
         Pre-entry load references (variant 'load_scaled').
+
     Returns
     -------
     centres : ndarray (n_p, B, n_clusters), sorted ascending (rows of N2 / N3)
@@ -192,7 +194,6 @@ def _histograms(x, signal, cfg, refs, entry_index):
 
 def _cluster(values, counts, ranges, cfg, ps):
     """Batched KHM (eqs. 23-30) for every p: centres (n_p, B, n_clusters)."""
-    from .khm import khm_fit_batch
     init = np.array([nz.initial_centre(r) for r in ranges])
     centres = np.zeros((len(ps), values.shape[0], cfg.n_clusters))
     info = {}

@@ -1,14 +1,14 @@
 """diagnostic node: identifies J1 from every window on ``drive/window``.
 
-A thin ROS adapter over :func:`jident_ros.diagnosis.diagnose_window` (the same per-window diagnosis
+A thin ROS adapter over :func:`jident_ros.identify.diagnosis.diagnose_window` (the same per-window diagnosis
 ``jident diagnose`` runs offline on a recording).  For each window:
 
-1. the gap estimate (:func:`jident_ros.method.gap.estimate_inertia`: J1 by least squares over the
+1. the gap estimate (:func:`jident_ros.identify.gap.estimate_inertia`: J1 by least squares over the
    samples inside the backlash zone) -- when there is one it is published at once on
    ``inertia_estimate`` (std_msgs/Float64, kg m^2, transient local): the best continuous J1;
 2. the paper's image method (:func:`jident_ros.method.patterns.identify_window`, KHM exponent ``p``)
    against the pattern library; when the window has no usable gap, the fused verdict's class J1
-   (the margin-weighted vote of the five signals, :mod:`jident_ros.method.fusion`) is what goes
+   (the margin-weighted vote of the five signals, :mod:`jident_ros.identify.fusion`) is what goes
    out on ``inertia_estimate``;
 3. one DiagnosticStatus "jident: inertia" on ``/diagnostics`` (REP 107): OK when the verdict's
    class is the nominal J1; WARN when it deviates, lies between classes, or the image method's vote
@@ -16,7 +16,7 @@ A thin ROS adapter over :func:`jident_ros.diagnosis.diagnose_window` (the same p
    unusable; a STALE status when no window arrived for ``stale_after_s``.
 
 With ``record_dir`` set, the windows (and with ``record_signals`` the drive's signals), the estimates
-and the statuses are logged to an MCAP recording (jident_ros.recording.BagWriter) closed on shutdown.
+and the statuses are logged to an MCAP recording (jident_ros.bag.recording.BagWriter) closed on shutdown.
 
     ros2 run jident_ros diagnostic --ros-args -p record_dir:=out/run1
 """
@@ -25,27 +25,27 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from ..diagnosis import GAP_METHODS
-from . import (DiagnosticsPublisher, checked, declare_parameters, drive_hardware_id, main as run_main,
-               method_config, method_defaults, require, system_config, system_defaults)
+from jident_ros.identify.diagnosis import GAP_METHODS, diagnose_window
+from jident_ros.identify.levels import ERROR, LEVEL_NAMES, STALE
+from jident_ros.identify.library import default_library_path, load_pattern_library
+from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id
+from jident_ros.nodes.params import (
+    checked,
+    declare_parameters,
+    method_config,
+    method_defaults,
+    require,
+    system_config,
+    system_defaults,
+)
+from jident_ros.nodes.ros_io import LayoutError, make_status, qos_latched, qos_signals, window_from_msg
+from jident_ros.nodes.runtime import main as run_main
+from jident_ros.parameters import DIAGNOSTIC
 
 NODE_NAME = "jident_diagnostic"
 STATUS_NAME = "jident: inertia"
 
-#: Parameters of this node (besides config/system.yaml and config/method.yaml), with their defaults.
-DEFAULTS = {
-    "pattern_library": "",        # .npz; "" = the CLI's default path (~/.cache/jident_ros/patterns-<hash>.npz)
-    "build_if_missing": True,     # build (and save) the library when the file does not exist
-    "p": 2.0,                     # KHM exponent, one of method.p_values
-    "image_method": True,         # run the paper's image method on every window
-    "gap_method": "auto",         # auto | acceleration | anchored | angle | speed | off
-    "hardware_id": "",            # default: the resolved drive namespace, e.g. /drive
-    "stale_after_s": 5.0,         # STALE status after this long without a window; 0 = never
-    "record_dir": "",             # MCAP recording (bag directory); "" = no recording
-    "record_signals": True,       # also record drive/signals (+ drive/backlash_width, true_inertia, case)
-    "window_queue_depth": 50,
-    "signals_queue_depth": 1000,
-}
+DEFAULTS = DIAGNOSTIC
 
 
 def validate(values: dict):
@@ -67,7 +67,6 @@ def validate(values: dict):
 def library_path(cfg, system, method) -> Path:
     if cfg["pattern_library"]:
         return Path(cfg["pattern_library"]).expanduser()
-    from ..cli import default_library_path
     return default_library_path(system, method)
 
 
@@ -75,9 +74,6 @@ def _node_class():
     from rclpy.node import Node
     from std_msgs.msg import Float64, Float64MultiArray
 
-    from ..diagnosis import diagnose_window
-    from ..ros_io import (ERROR, LEVEL_NAMES, STALE, LayoutError, make_status, qos_latched, qos_signals,
-                          window_from_msg)
 
     class DiagnosticNode(Node):
         def __init__(self):
@@ -130,7 +126,6 @@ def _node_class():
 
         # ----------------------------------------------------------------- library
         def _load_library(self):
-            from ..diagnosis import load_pattern_library
             c = self.cfg
             self.library_path = library_path(c, self.system, self.method)
             log = self.get_logger()
@@ -153,10 +148,10 @@ def _node_class():
             if not rd:
                 return
             try:
-                from ..recording import BagWriter
+                from jident_ros.bag.recording import BagWriter
             except ImportError as exc:
                 self.get_logger().warning(f"record_dir is set but MCAP logging is unavailable "
-                                          f"(jident_ros.recording: {exc}); logging disabled")
+                                          f"(jident_ros.bag.recording: {exc}); logging disabled")
                 return
             try:
                 self.bag = BagWriter(str(Path(rd).expanduser()))

@@ -2,7 +2,7 @@
 
     ros2 run jident_ros replay out/run1 --ros-args -p rate:=10.0
 
-Reads the bag directory (or .mcap file) with :func:`jident_ros.recording.read_bag` and republishes,
+Reads the bag directory (or .mcap file) with :func:`jident_ros.bag.recording.read_bag` and republishes,
 in receive-time order, every recorded topic whose name ends with one of ``topics`` (default
 drive/signals, drive/backlash_width, drive/true_inertia, drive/case) on the corresponding *relative*
 name, so ``-r __ns:=/press3`` replays into another namespace.  The messages go out as recorded
@@ -14,26 +14,28 @@ With ``publish_clock``, /clock follows the ``t`` column of each drive/signals ba
 """
 from __future__ import annotations
 
+import importlib
 import sys
 import time
 from pathlib import Path
 
-from . import ParameterError, ProgressGate, checked, declare_parameters, main as run_main, require
+from jident_ros.nodes.params import ParameterError, checked, declare_parameters, require
+from jident_ros.nodes.ros_io import (
+    LayoutError,
+    array_from_multiarray,
+    clock_msg,
+    last_sample_time,
+    qos_clock,
+    qos_latched,
+    qos_signals,
+)
+from jident_ros.nodes.runtime import ProgressGate
+from jident_ros.nodes.runtime import main as run_main
+from jident_ros.parameters import REPLAY
 
 NODE_NAME = "jident_replay"
 
-#: Parameters of this node, with their defaults.
-DEFAULTS = {
-    "bag": "",                 # bag directory or .mcap file (or the first command-line argument)
-    "rate": 1.0,               # playback speed factor; 0 = as fast as possible
-    "fast_sleep_s": 0.001,     # pause between messages when rate = 0
-    "max_lead_s": 2.0,         # rate 0: at most this many drive seconds ahead of drive/progress; 0 = off
-    "progress_timeout_s": 2.0,  # no drive/progress for this long while waiting: back-pressure off
-    "publish_clock": True,
-    "topics": ["drive/signals", "drive/backlash_width", "drive/true_inertia", "drive/case"],
-    "wait_for_subscribers": 0,  # wait until drive/signals has this many subscribers
-    "wait_timeout_s": 30.0,
-}
+DEFAULTS = REPLAY
 
 TYPES = {
     "std_msgs/msg/Float64MultiArray": ("std_msgs.msg", "Float64MultiArray"),
@@ -68,15 +70,12 @@ def _positional(args) -> str | None:
 
 
 def _node_class(args):
-    import importlib
 
     from rclpy.node import Node
     from rclpy.serialization import deserialize_message
     from rosgraph_msgs.msg import Clock
     from std_msgs.msg import Float64MultiArray
 
-    from ..ros_io import (LayoutError, array_from_multiarray, clock_msg, last_sample_time, qos_clock, qos_latched,
-                          qos_signals)
 
     class ReplayNode(Node):
         def __init__(self):
@@ -84,9 +83,9 @@ def _node_class(args):
             self.cfg = validate(declare_parameters(self, DEFAULTS), _positional(args))
             self.exit_code = 0
             try:
-                from ..recording import read_bag
+                from jident_ros.bag.recording import read_bag
             except ImportError as exc:
-                raise ParameterError(f"parameter bag: cannot read recordings here (jident_ros.recording: {exc})")
+                raise ParameterError(f"parameter bag: cannot read recordings here (jident_ros.bag.recording: {exc})")
             self.read_bag = read_bag
             self.bag = str(Path(self.cfg["bag"]).expanduser())
             self.pubs = {}

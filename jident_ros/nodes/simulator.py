@@ -22,40 +22,25 @@ import time
 
 import numpy as np
 
-from . import (ProgressGate, checked, declare_parameters, main as run_main, require, system_config,
-               system_defaults)
+from jident_ros.nodes.params import checked, declare_parameters, require, system_config, system_defaults
+from jident_ros.nodes.ros_io import clock_msg, multiarray_from_array, qos_clock, qos_latched, qos_signals
+from jident_ros.nodes.runtime import ProgressGate, spin
+from jident_ros.nodes.runtime import main as run_main
+from jident_ros.parameters import SIMULATOR
+from jident_ros.sim import Case, paper_grid_cases, simulate_grid
+from jident_ros.stream.detector import embed_windows
+from jident_ros.stream.layout import DEFAULT_CHANNELS
 
 NODE_NAME = "jident_simulator"
 #: Wall-clock pause after announcing a case whose backlash width differs from the previous one, s.
 CASE_SETTLE_S = 0.05
 CASE_LABEL = "case_index,inertia_kgm2,backlash_width_m,consistency_pa_sn,entry_time_s"
 
-#: Parameters of this node (besides the model sections of config/system.yaml), with their defaults.
-DEFAULTS = {
-    "cases": "product",                     # product | zip | grid
-    "inertias_kgm2": [1.16, 1.073, 1.218],  # J1 of the cases
-    "backlash_widths_m": [0.005],           # K2
-    "consistencies_pa_sn": [0.025],         # eta_k
-    "gap_samples": 400,                     # steady-state samples before each case
-    "batch_size": 50,                       # samples per drive/signals message
-    "real_time_factor": 1.0,                # drive seconds per wall second; 0 = as fast as possible
-    "fast_sleep_s": 0.001,                  # pause per batch when real_time_factor = 0
-    "max_lead_s": 2.0,                      # real_time_factor 0: at most this many drive seconds ahead of
-                                            # the windowing node's drive/progress; 0 = no back-pressure
-    "progress_timeout_s": 2.0,              # no drive/progress for this long while waiting: back-pressure off
-    "start_time_s": 1.0,                    # drive clock of the first sample
-    "repeat": 1,                            # passes through the case list; 0 = forever
-    "publish_clock": True,
-    "wait_for_subscribers": 0,              # wait until drive/signals has this many subscribers
-    "wait_timeout_s": 30.0,
-    "exit_when_done": True,                 # exit after the last case (else stay up, idle)
-    "signals_queue_depth": 1000,
-}
+DEFAULTS = SIMULATOR
 
 
 def build_cases(cfg: dict, system) -> list:
     """The Case list of the ``cases`` mode (ParameterError on a bad combination)."""
-    from ..sim import Case, paper_grid_cases
     mode = cfg["cases"]
     j, w, e = cfg["inertias_kgm2"], cfg["backlash_widths_m"], cfg["consistencies_pa_sn"]
     if mode == "grid":
@@ -101,9 +86,6 @@ def _node_class():
     from rosgraph_msgs.msg import Clock
     from std_msgs.msg import Float64, Float64MultiArray
 
-    from ..ros_io import clock_msg, multiarray_from_array, qos_clock, qos_latched, qos_signals
-    from ..sim import simulate_grid
-    from ..windowing import DEFAULT_CHANNELS, embed_windows
 
     class SimulatorNode(Node):
         def __init__(self):
@@ -149,7 +131,6 @@ def _node_class():
                 return
             self._drain()
             if not c["exit_when_done"]:
-                from . import spin
                 spin(self)
 
         def _stream(self, n_rows: int, gate) -> None:

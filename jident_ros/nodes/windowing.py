@@ -1,6 +1,6 @@
 """windowing node: detects the backlash-zone entry in ``drive/signals`` and publishes ``drive/window``.
 
-Runs :class:`jident_ros.windowing.BacklashDetector` (paper inequality 1, |alpha1 - alpha2| < K2/r)
+Runs :class:`jident_ros.stream.detector.BacklashDetector` (paper inequality 1, |alpha1 - alpha2| < K2/r)
 on every batch.  A captured window (48 + 2000 samples) goes out on ``drive/window``; a dropped one
 is reported on ``/diagnostics`` with its reason (WARN), and a summary goes out every
 ``diagnostics_period_s``.  Bad input never stops the node: every callback is guarded, a failure is
@@ -12,28 +12,30 @@ from __future__ import annotations
 
 import math
 
-from . import (DiagnosticsPublisher, checked, declare_parameters, drive_hardware_id, main as run_main,
-               require, system_config, system_defaults)
+from jident_ros.identify.levels import ERROR, OK, WARN
+from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id
+from jident_ros.nodes.params import checked, declare_parameters, require, system_config, system_defaults
+from jident_ros.nodes.ros_io import (
+    LayoutError,
+    array_from_multiarray,
+    last_sample_time,
+    make_status,
+    qos_latched,
+    qos_signals,
+    window_to_msg,
+)
+from jident_ros.nodes.runtime import main as run_main
+from jident_ros.parameters import WINDOWING
+from jident_ros.stream.detector import REASONS, BacklashDetector
+from jident_ros.stream.layout import KNOWN_CHANNELS
 
 NODE_NAME = "jident_windowing"
 STATUS_NAME = "jident: windowing"
 
-#: Parameters of this node (besides the model sections of config/system.yaml), with their defaults.
-DEFAULTS = {
-    "backlash_width_m": 0.005,            # K2 of inequality (1)
-    "backlash_width_from_topic": False,   # follow drive/backlash_width (simulator, replay) when published
-    "channels": ["alpha1", "alpha2", "omega2", "a1", "m_el", "omega1", "a2", "v2"],  # captured besides t
-    "gap_tolerance": 1.5,                 # a step of t above this many sample periods is a gap
-    "signals_queue_depth": 1000,
-    "window_queue_depth": 50,
-    "hardware_id": "",                    # default: the resolved drive namespace, e.g. /drive
-    "diagnostics_period_s": 1.0,          # summary status period; 0 = only on events
-    "progress_every_batches": 10,         # publish drive/progress (drive time read) every this many batches; 0 = off
-}
+DEFAULTS = WINDOWING
 
 
 def validate(values: dict):
-    from ..windowing import KNOWN_CHANNELS
     cfg = checked(values, DEFAULTS, DEFAULTS)
     w = cfg["backlash_width_m"]
     require("backlash_width_m", w, w > 0, "a finite number > 0")
@@ -57,9 +59,6 @@ def _node_class():
     from rclpy.node import Node
     from std_msgs.msg import Float64, Float64MultiArray
 
-    from ..ros_io import (ERROR, OK, WARN, LayoutError, array_from_multiarray, last_sample_time, make_status,
-                          qos_latched, qos_signals, window_to_msg)
-    from ..windowing import REASONS, BacklashDetector
 
     class WindowingNode(Node):
         def __init__(self):

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .params import SystemConfig
+from jident_ros.sim.params import SystemConfig
 
 PSI_SA, PSI_SB, PSI_RA, PSI_RB, OMEGA1, ALPHA1, DELTA, OMEGA2, LINE_STRETCH, V2 = range(10)
 N_STATES = 10

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .params import MotorParams
+from jident_ros.sim.params import MotorParams
 
 
 def stator_impedance_pu(motor: MotorParams, slip):
@@ -74,6 +74,7 @@ def solve_slip(motor: MotorParams, load_torque_nm, n_cases: int):
         array of mechanical speeds of shape (n_cases,).
     n_cases : int
         Number of cases solved at once.
+
     Returns
     -------
     slip : ndarray

@@ -9,6 +9,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 
 @dataclass(frozen=True)
 class MotorParams:
@@ -152,7 +154,6 @@ class LoadParams:
         F = A * eta_k * (|v|/h)**n1 * sign(v), regularised as
         A * eta_k / h**n1 * v * (v**2 + v_eps**2)**((n1 - 1)/2).
         """
-        import numpy as np
         v = np.asarray(speed_m_s, dtype=float)
         eps2 = self.film_regularisation_speed_m_s ** 2
         n1 = self.flow_index

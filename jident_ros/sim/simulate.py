@@ -22,10 +22,23 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from .model import (ALPHA1, DELTA, LINE_STRETCH, N_STATES, OMEGA1, OMEGA2, PSI_RA, PSI_RB,
-                    PSI_SA, PSI_SB, V2, CaseArrays, Model)
-from .motor import solve_slip, steady_state_phasors
-from .params import SystemConfig
+from jident_ros.sim.model import (
+    ALPHA1,
+    DELTA,
+    LINE_STRETCH,
+    N_STATES,
+    OMEGA1,
+    OMEGA2,
+    PSI_RA,
+    PSI_RB,
+    PSI_SA,
+    PSI_SB,
+    V2,
+    CaseArrays,
+    Model,
+)
+from jident_ros.sim.motor import solve_slip, steady_state_phasors
+from jident_ros.sim.params import SystemConfig
 
 #: Channel order of a window, as on /drive/signals (after the time column).
 CHANNELS = ("alpha1", "alpha2", "omega2", "a1", "m_el", "omega1", "a2", "v2")
@@ -196,13 +209,19 @@ def _rk4_window(model: Model, y: np.ndarray, case: CaseArrays, t0: float, dt: fl
         for j in range(substeps):
             i = 2 * (k * substeps + j)
             rhs(bias[i], y, k1)
-            np.multiply(k1, 0.5 * h, out=tmp); tmp += y
+            np.multiply(k1, 0.5 * h, out=tmp)
+            tmp += y
             rhs(bias[i + 1], tmp, k2)
-            np.multiply(k2, 0.5 * h, out=tmp); tmp += y
+            np.multiply(k2, 0.5 * h, out=tmp)
+            tmp += y
             rhs(bias[i + 1], tmp, k3)
-            np.multiply(k3, h, out=tmp); tmp += y
+            np.multiply(k3, h, out=tmp)
+            tmp += y
             rhs(bias[i + 2], tmp, k4)
-            k2 += k3; k2 *= 2.0; k2 += k1; k2 += k4
+            k2 += k3
+            k2 *= 2.0
+            k2 += k1
+            k2 += k4
             k2 *= h / 6.0
             y += k2
     return rec

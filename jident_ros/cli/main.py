@@ -1,9 +1,9 @@
 """``jident``: the offline command line (no ROS needed).
 
-    jident simulate --j1 1.073 --backlash 0.005 --eta 0.025 --out case.npz --plot case.png
-    jident simulate --grid --out grid.npz
-    jident diagnose out/run1 --json out/run1.json
-    jident info
+jident simulate --j1 1.073 --backlash 0.005 --eta 0.025 --out case.npz --plot case.png
+jident simulate --grid --out grid.npz
+jident diagnose out/run1 --json out/run1.json
+jident info
 """
 from __future__ import annotations
 
@@ -13,8 +13,24 @@ import sys
 import time
 from pathlib import Path
 
-from . import __version__
-from .config import ConfigError, load_system_config
+import numpy as np
+
+from jident_ros import __version__
+from jident_ros.bag.recording import salvage_main
+from jident_ros.cli.demo import main as demo_main
+from jident_ros.cli.offline import TABLE_HEADER, diagnose_recording, format_window_line, summary_line, write_json
+from jident_ros.config import ConfigError, load_method_config, load_system_config
+from jident_ros.evaluation.evaluate import run_evaluation
+from jident_ros.evaluation.plotting import plot_case
+from jident_ros.evaluation.report import render_markdown, write_figures, write_results_section
+from jident_ros.evaluation.report_robustness import write_robustness_figures
+from jident_ros.evaluation.robustness import run_robustness
+from jident_ros.identify.library import default_library_path
+from jident_ros.method.calibration import library_from_labelled_windows, parse_labels, pattern_grid, read_recordings
+from jident_ros.method.patterns import PatternLibrary
+from jident_ros.sim import Case, add_measurement_noise, paper_grid_cases, quantise_encoders, simulate_grid, steady_state
+from jident_ros.sim.model import Model
+from jident_ros.sim.motor import breakdown_slip, steady_state_phasors
 
 #: diagnosis.GAP_METHODS, spelled out so that `jident --help` does not import the method (test_config_cli)
 CLI_GAP_METHODS = ("auto", "acceleration", "anchored", "angle", "speed", "off")
@@ -54,7 +70,6 @@ def _progress(total, desc, enabled):
 
 
 def cmd_simulate(args) -> int:
-    from .sim import Case, add_measurement_noise, paper_grid_cases, quantise_encoders, simulate_grid
     cfg = load_system_config(args.config)
     if args.grid:
         if any(v is not None for v in (args.j1, args.backlash, args.eta)):
@@ -81,7 +96,6 @@ def cmd_simulate(args) -> int:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         ws.save_npz(args.out)
     if args.plot:
-        from .plotting import plot_case
         plot_case(ws, 0, args.plot)
     if not args.quiet:
         print(f"simulated {len(cases)} case(s), {cfg.sampling.window_length} samples each "
@@ -101,10 +115,6 @@ def cmd_simulate(args) -> int:
 
 def cmd_info(args) -> int:
     """Base values and the loaded steady state at every eta_k (docs/model.md)."""
-    import numpy as np
-    from .sim import Case, steady_state
-    from .sim.model import Model
-    from .sim.motor import breakdown_slip, steady_state_phasors
     cfg = load_system_config(args.config)
     m, b = cfg.motor, cfg.motor.base
     s_bd = breakdown_slip(m)
@@ -134,7 +144,6 @@ def cmd_info(args) -> int:
 
 
 def _method_config(args):
-    from .config import load_method_config
     m = load_method_config(getattr(args, "method_config", None))
     if getattr(args, "p", None):
         m = m.replace(p_values=tuple(args.p))
@@ -143,18 +152,8 @@ def _method_config(args):
     return m
 
 
-def default_library_path(system, method) -> Path:
-    """~/.cache/jident_ros/patterns-<hash>.npz (or $JIDENT_CACHE_DIR)."""
-    import os
-    from .method.patterns import library_metadata
-    meta = library_metadata(system, method)
-    base = Path(os.environ.get("JIDENT_CACHE_DIR") or Path.home() / ".cache" / "jident_ros")
-    return base / f"patterns-{meta['system_hash'][:8]}-{meta['method_hash'][:8]}.npz"
-
-
 def cmd_build_patterns(args) -> int:
     """Build the pattern library from simulations (default) or from calibration recordings with known J1."""
-    from .method.patterns import PatternLibrary
     if not args.from_recordings and (args.label or args.backlash_width_m is not None):
         raise CliError("--label and --backlash-width-m need --from-recordings")
     system = load_system_config(args.config)
@@ -162,7 +161,6 @@ def cmd_build_patterns(args) -> int:
     out = Path(args.out) if args.out else default_library_path(system, method)
     t0 = time.perf_counter()
     if args.from_recordings:
-        from .method.calibration import library_from_labelled_windows, parse_labels, pattern_grid, read_recordings
         labels = parse_labels(args.label or [], args.from_recordings)
         log = (lambda text: None) if args.quiet else (
             lambda text: print(f"jident build-patterns: {text}", file=sys.stderr, flush=True))
@@ -194,9 +192,6 @@ def cmd_build_patterns(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
-    import time
-    from .method.evaluate import run_evaluation
-    from .report import render_markdown, write_figures, write_results_section
     t_start = time.perf_counter()
     system = load_system_config(args.config)
     method = _method_config(args)
@@ -206,8 +201,6 @@ def cmd_evaluate(args) -> int:
     ev = run_evaluation(system, method, snr_db=snr, seeds=(1, 2)[:len(snr)], readings=readings, log=log)
     ev.command = "jident evaluate" + (" --quick" if args.quick else "")
     figs = {} if args.no_figures else write_figures(ev, system, method, Path(args.results).parent / "figures")
-    from .method.robustness import run_robustness
-    from .report_robustness import write_robustness_figures
     rob = run_robustness(system, method, log=log, quick=args.quick)
     rob.command = ev.command
     rfigs = {} if args.no_figures else write_robustness_figures(rob, Path(args.results).parent / "figures")
@@ -224,8 +217,6 @@ def cmd_evaluate(args) -> int:
 
 def cmd_diagnose(args) -> int:
     """Diagnose every backlash entry of a recording as the windowing + diagnostic nodes do (offline.py)."""
-    from .config import load_method_config
-    from .offline import TABLE_HEADER, diagnose_recording, format_window_line, summary_line, write_json
     system = load_system_config(args.config)
     method = load_method_config(args.method_config)
     log = (lambda text: None) if args.quiet else (lambda text: print(f"jident diagnose: {text}", file=sys.stderr,
@@ -327,10 +318,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["demo"]:  # `jident demo [...]`: demo.py owns its arguments
-        from .demo import main as demo_main
         return demo_main(argv[1:])
     if argv[:1] == ["salvage"]:  # `jident salvage <truncated.mcap> <out_dir>`: recording.py owns its arguments
-        from .recording import salvage_main
         return salvage_main(argv[1:])
     parser = build_parser()
     try:

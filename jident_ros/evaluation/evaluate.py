@@ -11,14 +11,18 @@ Everything published in docs/results.md's method section comes from
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..sim import SystemConfig, WindowSet, add_measurement_noise, paper_grid_cases, simulate_grid
-from .patterns import PatternLibrary, fuse
-from .pipeline import SIGNALS, MethodConfig, batch_features, h_vector, margin, pre_entry_reference
+from jident_ros.identify.gap import NoGapError, estimate_inertia, nearest_class
+from jident_ros.method.patterns import PatternLibrary, fuse
+from jident_ros.method.pipeline import SIGNALS, MethodConfig, batch_features, h_vector, margin, pre_entry_reference
+from jident_ros.sim import Case, SystemConfig, WindowSet, add_measurement_noise, paper_grid_cases, simulate_grid
+from jident_ros.sim.model import Model
 
 #: The paper's 16 example cases (tables 1-4): signal, J1, width, eta_k, p, the paper's H vector.
 PAPER_EXAMPLES = [
@@ -167,7 +171,6 @@ def paper_examples(system: SystemConfig, method: MethodConfig, clean: WindowSet,
 def gap_evaluation(system: SystemConfig, windows: WindowSet, label: str,
                    channels=("alpha1", "alpha2", "a1", "m_el"), method=None) -> dict:
     """The gap estimator (gap.py) on every window: errors, class accuracy, CI coverage."""
-    from .gap import NoGapError, estimate_inertia, nearest_class
     classes = list(system.grid.inertia_classes_kgm2)
     est = np.full(len(windows.cases), np.nan)
     lo, hi = est.copy(), est.copy()
@@ -210,7 +213,6 @@ def equal_load_grid(system: SystemConfig, clean: WindowSet) -> WindowSet:
     same in every group (to ~1e-5); what eta_k still changes is the film's damping of the line-mass
     motion (dF_film/dv_2 = n_1 F_film / v_2).  Returns a WindowSet in ``clean``'s case order.
     """
-    from ..sim.model import Model
     g = system.grid
     pattern = [i for i, c in enumerate(clean.cases) if c.consistency_pa_sn == g.pattern_consistency_pa_sn]
     if not pattern:
@@ -251,7 +253,6 @@ def _feature_task(args):
 
 def _pattern_order(system: SystemConfig, windows: WindowSet) -> list:
     """Indices of the pattern runs (eta_k = 0.025) in ``windows``, class-major, width-minor."""
-    from ..sim import Case
     g = system.grid
     index = {c: i for i, c in enumerate(windows.cases)}
     return [index[Case(j, w, g.pattern_consistency_pa_sn)] for j in g.inertia_classes_kgm2
@@ -273,8 +274,6 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     mode also runs on :func:`equal_load_grid` (every eta_k group at the pattern load),
     against the same library; its paper examples go to ``Evaluation.ablation_examples``.
     """
-    import os
-    from concurrent.futures import ProcessPoolExecutor
     t0 = time.perf_counter()
     cases = paper_grid_cases(system)
     clean = simulate_grid(system, cases)

@@ -23,12 +23,23 @@ import argparse
 import json
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+
+import numpy as np
+
+from jident_ros.bag.recording import read_bag
+from jident_ros.config import load_method_config, load_system_config
+from jident_ros.identify.levels import LEVEL_NAMES
+from jident_ros.identify.library import default_library_path
+from jident_ros.method.patterns import LibraryMismatch, PatternLibrary
+from jident_ros.nodes.ros_io import array_from_multiarray, qos_diagnostics, qos_latched, status_level, status_values
+from jident_ros.resources import node_command
 
 #: Default cases (J1 kg m^2, backlash width m, eta_k Pa s^n): five of the paper's seven classes, five
 #: widths, and every eta_k but the pattern runs' 0.025 -- none is a pattern run.
@@ -46,6 +57,7 @@ STATUS_NAME = "jident: inertia"
 @dataclass
 class CaseResult:
     """One case: what the simulator ran and what the diagnostic node answered."""
+
     case_index: int
     true_inertia_kgm2: float
     backlash_width_m: float
@@ -103,7 +115,6 @@ class NodeProcess:
     """One node executable, its output in ``<logs>/<name>.log``."""
 
     def __init__(self, name: str, logs: Path, ros_args: list[str], env: dict):
-        from .resources import node_command
         self.name = name
         self.cmd = node_command(name) + ["--ros-args", "-r", f"__ns:={NAMESPACE}", *ros_args]
         self.log_path = logs / f"{name}.log"
@@ -132,9 +143,6 @@ class NodeProcess:
 
 
 def _ensure_library(p: float) -> Path:
-    from .cli import default_library_path
-    from .config import load_method_config, load_system_config
-    from .method.patterns import LibraryMismatch, PatternLibrary
     system, method = load_system_config(), load_method_config()
     if p not in [float(x) for x in method.p_values]:
         raise SystemExit(f"jident demo: error: --p {p:g} is not one of method.p_values {list(method.p_values)}")
@@ -165,7 +173,6 @@ def _listen(cases, procs, timeout, start_simulator):
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import Float64, Float64MultiArray
 
-    from .ros_io import LEVEL_NAMES, array_from_multiarray, qos_diagnostics, qos_latched, status_level, status_values
 
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
@@ -253,7 +260,6 @@ def _write_summary(out: Path, results, meta):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
 
     (out / "summary.json").write_text(json.dumps(
         dict(meta, cases=[dict(asdict(r), error_percent=r.error_percent, class_correct=r.class_correct)
@@ -296,7 +302,6 @@ def _write_summary(out: Path, results, meta):
 
 
 def _count_recording(bag: Path):
-    from .recording import read_bag
     counts = {}
     for m in read_bag(bag):
         counts[m.topic] = counts.get(m.topic, 0) + 1
@@ -318,7 +323,6 @@ def run(args) -> int:
     bag = out / "recording"
     logs = out / "logs"
     if bag.exists():
-        import shutil
         shutil.rmtree(bag)
     logs.mkdir(parents=True, exist_ok=True)
     library = _ensure_library(args.p)

@@ -42,6 +42,7 @@ This module never imports rclpy.
 """
 from __future__ import annotations
 
+import argparse
 import atexit
 import hashlib
 import io
@@ -1586,7 +1587,6 @@ def salvage_report_line(report: Mapping[str, Any]) -> str:
 def salvage_main(argv: list[str] | None = None) -> int:
     """``jident salvage <truncated.mcap> <out_dir>``: prints one line, returns 0, or
     prints a one-line error naming the file and returns 2."""
-    import argparse
 
     class _Parser(argparse.ArgumentParser):
         def error(self, message):

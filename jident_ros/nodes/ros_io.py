@@ -1,7 +1,7 @@
 """Conversions between numpy and the ROS messages of the node set, QoS profiles and diagnostics.
 
 rclpy and the message packages are imported inside the functions, so importing this module never
-needs ROS.  The layouts themselves are defined (and tested without ROS) in :mod:`jident_ros.windowing`.
+needs ROS.  The layouts themselves are defined (and tested without ROS) in :mod:`jident_ros.stream.detector`.
 """
 from __future__ import annotations
 
@@ -11,12 +11,8 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from .windowing import LayoutError, Window, pack, unpack
-
-#: diagnostic_msgs/DiagnosticStatus levels (the message field is a byte).
-OK, WARN, ERROR, STALE = 0, 1, 2, 3
-LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR", STALE: "STALE"}
-
+from jident_ros.identify.levels import ERROR, LEVEL_NAMES, OK, STALE, WARN  # noqa: F401  (re-exported)
+from jident_ros.stream.layout import LayoutError, Window, pack, unpack
 
 # --------------------------------------------------------------------------- Float64MultiArray
 

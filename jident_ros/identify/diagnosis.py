@@ -1,18 +1,18 @@
 """One window's diagnosis: gap estimate, the paper's image method, their fused verdict, a status.
 
 Shared by the diagnostic node (:mod:`jident_ros.nodes.diagnostic`, which publishes the result on
-``inertia_estimate`` and ``/diagnostics``) and the offline ``jident diagnose`` (:mod:`jident_ros.offline`,
+``inertia_estimate`` and ``/diagnostics``) and the offline ``jident diagnose`` (:mod:`jident_ros.cli.offline`,
 which runs it on the windows of a recording).  Plain numpy/scipy; never imports rclpy.
 
 For one window (48 pre-entry samples, the entry sample, 1999 after it; paper section 2):
 
-1. the gap estimate (:func:`jident_ros.method.gap.estimate_inertia`): J1 by least squares over the
+1. the gap estimate (:func:`jident_ros.identify.gap.estimate_inertia`): J1 by least squares over the
    samples inside the backlash zone, with its 95 % interval; when there is one, ``on_estimate`` is
    called with it at once, *before* the image method runs (latency), and the backlash width K2 is
-   estimated from the relative angle at re-contact (:func:`~jident_ros.method.gap.estimate_backlash_width`);
+   estimated from the relative angle at re-contact (:func:`~jident_ros.identify.gap.estimate_backlash_width`);
 2. the paper's image method (:func:`jident_ros.method.patterns.identify_window`, KHM exponent p,
    H vectors of eq. 33) against the pattern library;
-3. the fused verdict (:func:`jident_ros.method.fusion.fuse_verdict`): the best continuous J1 (the gap
+3. the fused verdict (:func:`jident_ros.identify.fusion.fuse_verdict`): the best continuous J1 (the gap
    estimate, else the image method's margin-weighted class vote), its class or "between classes", and
    whether the image vote agrees with the gap's nearest class;
 4. the level: OK (the class is the nominal J1), WARN (another class, between classes, or the image
@@ -25,17 +25,22 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Callable, Optional
 
 import numpy as np
 
-from .method.fusion import BETWEEN_Z, Verdict, fuse_verdict
-from .method.gap import (GapEstimate, NoGapError, WidthEstimate, estimate_backlash_width, estimate_inertia,
-                         nearest_class)
-from .method.patterns import Identification, LibraryMismatch, PatternLibrary, identify_window
-from .method.pipeline import SIGNALS
-from .ros_io import ERROR, LEVEL_NAMES, OK, WARN
+from jident_ros.identify.fusion import BETWEEN_Z, Verdict, fuse_verdict
+from jident_ros.identify.gap import (
+    GapEstimate,
+    NoGapError,
+    WidthEstimate,
+    estimate_backlash_width,
+    estimate_inertia,
+    nearest_class,
+)
+from jident_ros.identify.levels import ERROR, LEVEL_NAMES, OK, WARN
+from jident_ros.method.patterns import Identification, PatternLibrary, identify_window
+from jident_ros.method.pipeline import SIGNALS
 
 #: Gap estimators: ``auto`` (acceleration fit when a1 is there, else speed), ``acceleration``, ``speed``, ``off``.
 GAP_METHODS = ("auto", "acceleration", "anchored", "angle", "speed", "off")
@@ -55,7 +60,7 @@ class WindowDiagnosis:
                                     the window could not be diagnosed
     source : str | None         'gap' or 'image'
     class_kgm2 : float | None   identified class: the J1 class (K1 entry) nearest ``inertia_kgm2``
-    verdict : Verdict | None    the fused verdict (jident_ros.method.fusion)
+    verdict : Verdict | None    the fused verdict (jident_ros.identify.fusion)
     gap : GapEstimate | None    the gap estimate, when the window has a usable gap
     identification : Identification | None   the image method's answers (five signals, fused class)
     width : WidthEstimate | None    K2 estimated at re-contact, m (needs alpha1 and alpha2)
@@ -236,43 +241,4 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
     return WindowDiagnosis(level, text, vals, j1, source, cls, verdict, gap, idn, width, problems)
 
 
-def load_pattern_library(path, system, method, build_if_missing: bool = True,
-                         log: Callable[[str], Any] = lambda text: None,
-                         warn: Callable[[str], Any] = lambda text: None):
-    """Load the pattern library at ``path`` (or build and save it there when it is missing).
-
-    Returns ``(library, None)`` or ``(None, error)`` with a one-line reason: missing (and not to be
-    built), built for another configuration (LibraryMismatch), or the build failed.  ``log`` gets the
-    progress lines, ``warn`` a failed save (the built library is still used).
-    """
-    path = Path(path)
-    try:
-        lib = PatternLibrary.load(path, system, method)
-        log(f"pattern library {path}")
-        return lib, None
-    except FileNotFoundError as exc:
-        if not build_if_missing:
-            return None, f"pattern library missing: {exc}"
-    except LibraryMismatch as exc:
-        return None, f"pattern library unusable: {exc}"
-    n_classes = len(system.grid.inertia_classes_kgm2)
-    log(f"pattern library {path} not found: building it ({n_classes} J1 classes x "
-        f"{len(system.grid.backlash_widths_m)} widths, a few seconds)")
-    t0 = time.perf_counter()
-
-    def progress(k, n):
-        log(f"building pattern library: signal {k}/{n} done ({time.perf_counter() - t0:.1f} s)")
-
-    try:
-        lib = PatternLibrary.build(system, method, progress=progress)
-    except Exception as exc:
-        return None, f"pattern library could not be built: {type(exc).__name__}: {exc}"
-    try:
-        lib.save(path)
-        log(f"pattern library built in {time.perf_counter() - t0:.1f} s, saved to {path}")
-    except OSError as exc:
-        warn(f"pattern library built but not saved to {path}: {exc}")
-    return lib, None
-
-
-__all__ = ["GAP_METHODS", "WindowDiagnosis", "diagnose_window", "load_pattern_library"]
+__all__ = ["GAP_METHODS", "WindowDiagnosis", "diagnose_window"]

@@ -17,7 +17,7 @@ Sweeps (:func:`run_robustness`):
 
 Noise is :func:`jident_ros.sim.add_measurement_noise` (MATLAB's awgn 'measured'
 SNR over the window, on a1, m_el, omega1, a2, v2, omega2; angles are not noised).
-Plain numpy/scipy: no rclpy, no matplotlib (figures: ``jident_ros.report_robustness``).
+Plain numpy/scipy: no rclpy, no matplotlib (figures: ``jident_ros.evaluation.report_robustness``).
 """
 from __future__ import annotations
 
@@ -27,11 +27,18 @@ from typing import Sequence
 
 import numpy as np
 
-from ..sim import (Case, SystemConfig, WindowSet, add_measurement_noise, paper_grid_cases, quantise_encoders,
-                   simulate_grid)
-from .fusion import fuse_verdict
-from .gap import NoGapError, estimate_backlash_width, estimate_inertia, nearest_class
-from .patterns import PatternLibrary, identify_window
+from jident_ros.identify.fusion import fuse_verdict
+from jident_ros.identify.gap import GapEstimate, NoGapError, estimate_backlash_width, estimate_inertia, nearest_class
+from jident_ros.method.patterns import PatternLibrary, identify_window
+from jident_ros.sim import (
+    Case,
+    SystemConfig,
+    WindowSet,
+    add_measurement_noise,
+    paper_grid_cases,
+    quantise_encoders,
+    simulate_grid,
+)
 
 #: Gap-estimator channel sets: key -> (channels, fit method, description).
 CHANNEL_SETS = {
@@ -254,7 +261,6 @@ def image_and_verdict(system: SystemConfig, windows: WindowSet, gap: dict, libra
                       method, p: float = 2.0, stride: int = 1) -> tuple[dict, dict]:
     """The image method (identify_window at p) on every ``stride``-th window, and the fused
     verdict on every window (image answers where evaluated, the primary gap estimate)."""
-    from .gap import GapEstimate
     classes = tuple(float(c) for c in system.grid.inertia_classes_kgm2)
     n = len(windows.cases)
     fused, vote = np.full(n, -1), np.full(n, -1)
@@ -291,7 +297,6 @@ def gap_only_verdict(system: SystemConfig, gap: dict) -> dict:
     'between classes' flag do not depend on the image answers (fusion.fuse_verdict), so this equals
     the full verdict there; windows without a gap estimate get class -1 and source 'none' (the full
     verdict would fall back to the image vote)."""
-    from .gap import GapEstimate
     classes = tuple(float(c) for c in system.grid.inertia_classes_kgm2)
     g = gap[PRIMARY]
     n = g["estimate"].size

@@ -1,4 +1,4 @@
-"""Markdown and PNG figures of the robustness evaluation (:mod:`jident_ros.method.robustness`).
+"""Markdown and PNG figures of the robustness evaluation (:mod:`jident_ros.evaluation.robustness`).
 
 ``render_robustness(rob, figures)`` returns a markdown block for docs/results.md's generated
 section; ``write_robustness_figures(rob, outdir)`` writes the PNGs (matplotlib, Agg; imported
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .method.fusion import BETWEEN_Z
-from .method.robustness import CHANNEL_SETS, PRIMARY, RobustnessResult, Sweep
+from jident_ros.evaluation.robustness import CHANNEL_SETS, PRIMARY, RobustnessResult, Sweep
+from jident_ros.identify.fusion import BETWEEN_Z
 
 
 def _pct(x, nd=1) -> str:
@@ -38,7 +38,7 @@ def _by_snr(sweeps):
 
 def _pool(sweeps: list[Sweep], key: str = PRIMARY, mask_fn=None) -> dict:
     """Gap statistics pooled over several sweeps (same kind of cases)."""
-    err, cov, half, fail = [], [], [], 0
+    err, cov, half = [], [], []
     for s in sweeps:
         g = s.gap[key]
         m = np.ones(len(s.cases), bool) if mask_fn is None else mask_fn(s)

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .sim.simulate import UNITS, WindowSet
+from jident_ros.sim.simulate import UNITS, WindowSet
 
 _LABELS = {
     "a1": r"$a_1$ linear acceleration of the drive",

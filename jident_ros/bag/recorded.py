@@ -1,9 +1,9 @@
 """A drive recording -> its backlash-entry windows, cut the way the windowing node cuts them.
 
-Shared by ``jident diagnose`` (:mod:`jident_ros.offline`) and ``jident build-patterns
+Shared by ``jident diagnose`` (:mod:`jident_ros.cli.offline`) and ``jident build-patterns
 --from-recordings`` (:mod:`jident_ros.method.calibration`): both read the drive topics of a recording
 (docs/interfaces.md), feed ``drive/signals`` batch after batch through the windowing node's own
-:class:`~jident_ros.windowing.BacklashDetector`, follow ``drive/backlash_width`` when asked, and
+:class:`~jident_ros.stream.detector.BacklashDetector`, follow ``drive/backlash_width`` when asked, and
 look up each window's true J1 in ``drive/case`` / ``drive/true_inertia``.  The callers keep their
 own error types and messages (passed in as callables).
 
@@ -13,14 +13,22 @@ from __future__ import annotations
 
 from typing import Any, Callable, Iterator, Optional
 
-from .windowing import (CASE_TOPIC, DRIVE_TOPICS, TRUE_INERTIA_TOPIC, WIDTH_TOPIC, LayoutError, Window,
-                        topic_matches, unpack)
+from jident_ros.bag.recording import RecordingError, read_bag
+from jident_ros.stream.layout import (
+    CASE_TOPIC,
+    DRIVE_TOPICS,
+    TRUE_INERTIA_TOPIC,
+    WIDTH_TOPIC,
+    LayoutError,
+    Window,
+    topic_matches,
+    unpack,
+)
 
 
 def read_drive_messages(path, error: type) -> tuple[list, list]:
     """(the drive-topic messages of a recording as (topic, type, raw CDR) in receive order, every topic
     name).  An unreadable recording raises ``error`` with one line naming it."""
-    from .recording import RecordingError, read_bag
     kept, seen = [], set()
     try:
         for topic, msg_type, _, raw in read_bag(path, raw=True):

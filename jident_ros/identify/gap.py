@@ -61,7 +61,7 @@ from functools import lru_cache
 
 import numpy as np
 from scipy import stats
-
+from scipy.signal import savgol_filter
 
 #: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
 GAP_QUADRATIC_MIN = 12
@@ -145,7 +145,6 @@ def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_
         if "a1" in window:
             acc = np.asarray(window["a1"], float)
         elif "alpha1" in window or "omega1" in window:
-            from scipy.signal import savgol_filter
             if "alpha1" in window:   # a motor encoder: acceleration per sample^2
                 acc = savgol_filter(np.asarray(window["alpha1"], float), 7, 2, deriv=2)
             else:

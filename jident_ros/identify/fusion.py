@@ -20,7 +20,7 @@ from typing import Optional
 
 import numpy as np
 
-from .gap import GapEstimate, nearest_class
+from jident_ros.identify.gap import GapEstimate, nearest_class
 
 #: Standard errors within which a class must lie for the gap J1 to be "on" it.
 BETWEEN_Z = 3.0

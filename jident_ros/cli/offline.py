@@ -1,10 +1,10 @@
 """``jident diagnose``: the diagnostic node's per-window diagnosis on a recording, without ROS.
 
-Reads the ``drive/signals`` batches of an MCAP recording (:func:`jident_ros.recording.read_bag`; topic
+Reads the ``drive/signals`` batches of an MCAP recording (:func:`jident_ros.bag.recording.read_bag`; topic
 name ending in ``drive/signals``, any namespace; std_msgs/Float64MultiArray in the 2-D sample x channel
 layout of docs/interfaces.md), feeds them in receive-time order through the windowing node's
-detector (:class:`jident_ros.windowing.BacklashDetector`, paper inequality 1) and diagnoses each
-captured window with :func:`jident_ros.diagnosis.diagnose_window`, the function the diagnostic node
+detector (:class:`jident_ros.stream.detector.BacklashDetector`, paper inequality 1) and diagnoses each
+captured window with :func:`jident_ros.identify.diagnosis.diagnose_window`, the function the diagnostic node
 runs.  A recording of the node set therefore gives the same J1 estimates offline as live and as
 replayed (tested).
 
@@ -26,11 +26,16 @@ from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
-from .diagnosis import GAP_METHODS, WindowDiagnosis, diagnose_window, load_pattern_library
-from .recorded import DriveReplay, read_drive_messages
-from .ros_io import ERROR, LEVEL_NAMES
-from .windowing import (DRIVE_TOPICS, REQUIRED_CHANNELS, SIGNALS_TOPIC, WIDTH_TOPIC, BacklashDetector, pack,
-                        topic_matches as _matches)
+from jident_ros.bag.recorded import DriveReplay, read_drive_messages
+from jident_ros.bag.recording import RecordingError, deserialize
+from jident_ros.config import load_method_config, load_system_config
+from jident_ros.identify.diagnosis import GAP_METHODS, WindowDiagnosis, diagnose_window
+from jident_ros.identify.levels import ERROR, LEVEL_NAMES
+from jident_ros.identify.library import default_library_path, load_pattern_library
+from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
+from jident_ros.stream.detector import BacklashDetector
+from jident_ros.stream.layout import DRIVE_TOPICS, REQUIRED_CHANNELS, SIGNALS_TOPIC, WIDTH_TOPIC, pack
+from jident_ros.stream.layout import topic_matches as _matches
 
 
 class OfflineError(ValueError):
@@ -40,7 +45,7 @@ class OfflineError(ValueError):
 def multiarray_message(array, channels: Sequence[str], header: Sequence[float] = ()) -> dict:
     """(n, c) samples + channel names -> std_msgs/Float64MultiArray as a dict of fields in the
     drive/signals layout (``header`` values in front, data_offset = len(header)), e.g. for
-    :meth:`jident_ros.recording.BagWriter.write` without ROS."""
+    :meth:`jident_ros.bag.recording.BagWriter.write` without ROS."""
     data, dims, offset = pack(array, channels, header)
     return {"layout": {"dim": [{"label": label, "size": int(size), "stride": int(stride)}
                                for label, size, stride in dims], "data_offset": int(offset)},
@@ -55,7 +60,7 @@ class OfflineWindow:
     entry_time_s : drive clock t of the backlash-zone entry sample, s
     backlash_width_m : K2 the detector used, m
     true_inertia_kgm2 : J1 of the simulated case (drive/case, drive/true_inertia), kg m^2, or None
-    diagnosis : the :class:`~jident_ros.diagnosis.WindowDiagnosis`
+    diagnosis : the :class:`~jident_ros.identify.diagnosis.WindowDiagnosis`
     """
 
     window_id: int
@@ -155,7 +160,7 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
     p : KHM exponent of the image method, one of ``method.p_values``
     library : a loaded PatternLibrary (else loaded from ``library_path``, default the CLI's cache path,
         built and saved there when missing and ``build_if_missing``, as the diagnostic node does)
-    gap_method : one of :data:`jident_ros.diagnosis.GAP_METHODS`
+    gap_method : one of :data:`jident_ros.identify.diagnosis.GAP_METHODS`
     image_method : run the paper's image method
     backlash_width_m : K2, m; None: from drive/backlash_width messages, else the windowing node's default
     signals_topic : the drive/signals topic to read; None: the recording's only topic ending in drive/signals
@@ -167,8 +172,6 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
 
     Raises :class:`OfflineError` (one line naming the field and value) on bad input.
     """
-    from .config import load_method_config, load_system_config
-    from .nodes.windowing import DEFAULTS as WINDOWING_DEFAULTS
     system = load_system_config() if system is None else system
     method = load_method_config() if method is None else method
     if gap_method not in GAP_METHODS:
@@ -197,7 +200,6 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
     names = {rel: prefix + rel for rel in DRIVE_TOPICS}
     messages = [m for m in messages if m[0] in names.values()]
 
-    from .recording import RecordingError, deserialize
 
     def decode(topic_name, msg_type, raw):
         try:
@@ -217,7 +219,6 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
 
     result = OfflineResult(str(path), topic, width_source)
     if image_method and library is None:
-        from .cli import default_library_path
         lib_path = Path(library_path).expanduser() if library_path else default_library_path(system, method)
         result.library_path = str(lib_path)
         library, result.library_error = load_pattern_library(lib_path, system, method, build_if_missing,

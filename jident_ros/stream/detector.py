@@ -1,4 +1,4 @@
-"""Streaming backlash-entry detector and the Float64MultiArray layouts (pure numpy, never imports rclpy).
+"""Streaming backlash-entry detector (pure numpy, never imports rclpy).
 
 The windowing node feeds batches of samples (2-D arrays, one row per sample, columns named) into a
 :class:`BacklashDetector`.  It keeps the last 48 samples, watches paper inequality (1)
@@ -15,16 +15,7 @@ dropped, the history is cleared (continuity is lost), and the detector goes on w
 The one exception is an empty batch: it carries no sample, so nothing is lost; it is reported and
 counted, and the window in progress is kept (the stamp checks of the next batch still guard continuity).
 
-Layout of a batch / window as ``std_msgs/Float64MultiArray`` (see docs/interfaces.md)::
-
-    layout.dim[0]: label "sample",                      size n, stride n * c
-    layout.dim[1]: label "t,alpha1,alpha2,...",         size c, stride c
-    layout.data_offset: number of header values in front of the samples (0 for drive/signals)
-    data: header values, then the n x c samples, row-major (sample-major)
-
-:func:`pack` and :func:`unpack` convert between numpy and this layout using plain tuples
-``(label, size, stride)`` for the dims, so this module stays independent of rclpy
-(:mod:`jident_ros.ros_io` moves them into and out of the ROS message).
+The layouts themselves: :mod:`jident_ros.stream.layout`.
 """
 from __future__ import annotations
 
@@ -34,29 +25,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from .sim.simulate import CHANNELS
-
-#: Relative names of the drive's topics (docs/interfaces.md), as recordings hold them under any namespace.
-SIGNALS_TOPIC = "drive/signals"
-WIDTH_TOPIC = "drive/backlash_width"
-TRUE_INERTIA_TOPIC = "drive/true_inertia"
-CASE_TOPIC = "drive/case"
-DRIVE_TOPICS = (SIGNALS_TOPIC, WIDTH_TOPIC, TRUE_INERTIA_TOPIC, CASE_TOPIC)
-
-
-def topic_matches(topic: str, relative: str) -> bool:
-    """True when a recorded (absolute) topic name is ``relative`` in some namespace
-    (``/press3/drive/signals`` matches ``drive/signals``)."""
-    return topic == relative or topic == "/" + relative or topic.endswith("/" + relative)
-
-#: Label of dim[0] (rows = samples).
-SAMPLE_LABEL = "sample"
-#: Channel names a batch may carry ("t" = drive clock, s).
-KNOWN_CHANNELS = ("t",) + tuple(CHANNELS) + ("clutch_torque",)
-#: Channels without which inequality (1) cannot be evaluated.
-REQUIRED_CHANNELS = ("t", "alpha1", "alpha2")
-#: Default channel set of a window: the drive clock then every simulator channel.
-DEFAULT_CHANNELS = ("t",) + tuple(CHANNELS)
+from jident_ros.stream.layout import DEFAULT_CHANNELS, KNOWN_CHANNELS, REQUIRED_CHANNELS, LayoutError, Window, unpack
 
 #: Why a batch or a window was dropped.
 REASONS = {
@@ -71,151 +40,6 @@ REASONS = {
     "irregular_stamp": "t advanced by less than half the sample period",
     "short_history": "a backlash entry with fewer than samples_before_entry samples of history",
 }
-
-#: Window header (data_offset values in front of the samples of drive/window), in this order.
-WINDOW_HEADER = ("format", "entry_index", "entry_time_s", "backlash_width_m", "wheel_radius_m",
-                 "sample_period_s", "window_id")
-WINDOW_FORMAT = 1.0
-
-
-class LayoutError(ValueError):
-    """A message does not follow the documented layout (reason ``layout``)."""
-
-
-# --------------------------------------------------------------------------- layout
-
-
-def channel_label(channels: Sequence[str]) -> str:
-    """dim[1] label: channel names joined by commas."""
-    return ",".join(channels)
-
-
-def parse_channel_label(label: str) -> tuple:
-    """Channel names of a dim[1] label; raises LayoutError on empty or repeated names."""
-    names = tuple(s.strip() for s in str(label).split(","))
-    if not label or any(not s for s in names):
-        raise LayoutError(f"dim[1].label {label!r}: expected comma-separated channel names")
-    if len(set(names)) != len(names):
-        dup = sorted({s for s in names if names.count(s) > 1})
-        raise LayoutError(f"dim[1].label {label!r}: repeated channel {dup[0]!r}")
-    return names
-
-
-def pack(array: np.ndarray, channels: Sequence[str], header: Sequence[float] = ()):
-    """numpy (n, c) + channel names -> (flat float64 data, dims, data_offset).
-
-    dims is a list of (label, size, stride) for dim[0] (samples) and dim[1] (channels).
-    """
-    a = np.asarray(array, dtype=np.float64)
-    if a.ndim != 2 or a.shape[1] != len(channels):
-        raise ValueError(f"array: expected shape (n, {len(channels)}), got {a.shape}")
-    n, c = a.shape
-    head = np.asarray(header, dtype=np.float64).ravel()
-    data = np.concatenate([head, a.ravel()]) if head.size else np.ascontiguousarray(a).ravel()
-    dims = [(SAMPLE_LABEL, n, n * c), (channel_label(channels), c, c)]
-    return data, dims, int(head.size)
-
-
-def unpack(data, dims: Sequence, data_offset: int = 0):
-    """(flat data, dims, data_offset) -> (array (n, c) view, channel names, header array).
-
-    ``dims`` holds (label, size, stride) tuples or objects with those attributes (a ROS
-    MultiArrayDimension).  Raises :class:`LayoutError` with what is wrong.
-    """
-    dims = [_dim_tuple(d) for d in dims]
-    if len(dims) != 2:
-        raise LayoutError(f"layout.dim: expected 2 dimensions (sample, channel), got {len(dims)}")
-    (l0, n, s0), (l1, c, s1) = dims
-    if l0 != SAMPLE_LABEL:
-        raise LayoutError(f"dim[0].label: expected {SAMPLE_LABEL!r}, got {l0!r}")
-    channels = parse_channel_label(l1)
-    if c != len(channels):
-        raise LayoutError(f"dim[1].size {c} does not match the {len(channels)} channels named in its label")
-    if c < 1:
-        raise LayoutError("dim[1].size: need at least one channel")
-    if s1 != c or s0 != n * c:
-        raise LayoutError(f"strides ({s0}, {s1}): expected ({n * c}, {c}) for a row-major {n} x {c} array")
-    off = int(data_offset)
-    flat = np.asarray(data, dtype=np.float64)
-    if flat.ndim != 1:
-        flat = flat.ravel()
-    if off < 0 or flat.size != off + n * c:
-        raise LayoutError(f"data: {flat.size} values, expected data_offset {off} + {n} x {c} = {off + n * c}")
-    return flat[off:].reshape(n, c), channels, flat[:off]
-
-
-def _dim_tuple(d):
-    if isinstance(d, (tuple, list)):
-        label, size, stride = d
-    else:
-        label, size, stride = d.label, d.size, d.stride
-    try:
-        return str(label), int(size), int(stride)
-    except (TypeError, ValueError):
-        raise LayoutError(f"layout.dim: size/stride must be integers, got {size!r}/{stride!r}") from None
-
-
-# --------------------------------------------------------------------------- window
-
-
-@dataclass
-class Window:
-    """A captured window: samples_before + samples_from rows, the entry at ``entry_index``.
-
-    Attributes
-    ----------
-    data : ndarray (n, c)          samples, columns ``channels`` (SI units)
-    channels : tuple of str        column names, "t" first
-    entry_index : int              row of the entry sample (48)
-    entry_time_s : float           t of the entry sample (drive clock)
-    backlash_width_m : float       K2 used by the detector for this window
-    wheel_radius_m : float         r used in inequality (1)
-    sample_period_s : float
-    window_id : int                running number of captured windows (from 1)
-    """
-
-    data: np.ndarray
-    channels: tuple
-    entry_index: int
-    entry_time_s: float
-    backlash_width_m: float
-    wheel_radius_m: float
-    sample_period_s: float
-    window_id: int = 0
-
-    def __len__(self):
-        return self.data.shape[0]
-
-    def column(self, name: str) -> np.ndarray:
-        return self.data[:, self.channels.index(name)]
-
-    def as_dict(self) -> dict:
-        """Channels as a dict of 1-D arrays (the form identify_window/estimate_inertia take)."""
-        return {name: np.ascontiguousarray(self.data[:, i]) for i, name in enumerate(self.channels)}
-
-    def header(self) -> np.ndarray:
-        return np.array([WINDOW_FORMAT, self.entry_index, self.entry_time_s, self.backlash_width_m,
-                         self.wheel_radius_m, self.sample_period_s, self.window_id], dtype=np.float64)
-
-    def pack(self):
-        """(flat data, dims, data_offset) of the drive/window layout."""
-        return pack(self.data, self.channels, self.header())
-
-    @classmethod
-    def unpack(cls, data, dims, data_offset) -> "Window":
-        arr, channels, head = unpack(data, dims, data_offset)
-        if head.size != len(WINDOW_HEADER):
-            raise LayoutError(f"data_offset: a window carries {len(WINDOW_HEADER)} header values "
-                              f"{WINDOW_HEADER}, got {head.size}")
-        if head[0] != WINDOW_FORMAT:
-            raise LayoutError(f"window header format {head[0]!r}: this version reads {WINDOW_FORMAT}")
-        if not np.all(np.isfinite(head)):
-            raise LayoutError(f"window header: non-finite value in {head.tolist()}")
-        entry = int(head[1])
-        if entry != head[1] or not 0 <= entry < arr.shape[0]:
-            raise LayoutError(f"window header entry_index {head[1]!r}: not a row of the {arr.shape[0]}-sample window")
-        return cls(arr.copy(), channels, entry, float(head[2]), float(head[3]), float(head[4]), float(head[5]),
-                   int(head[6]))
 
 
 @dataclass

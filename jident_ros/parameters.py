@@ -1,0 +1,70 @@
+"""The parameters of the four nodes besides the model and method sections (config/system.yaml,
+config/method.yaml): one schema for the nodes, the CLI and the tests.  config/nodes.yaml holds the same
+defaults in the ROS 2 params-file format (a test keeps the two equal)."""
+
+
+#: Parameters of the simulator node (besides the model sections of config/system.yaml), with their defaults.
+SIMULATOR = {
+    "cases": "product",                     # product | zip | grid
+    "inertias_kgm2": [1.16, 1.073, 1.218],  # J1 of the cases
+    "backlash_widths_m": [0.005],           # K2
+    "consistencies_pa_sn": [0.025],         # eta_k
+    "gap_samples": 400,                     # steady-state samples before each case
+    "batch_size": 50,                       # samples per drive/signals message
+    "real_time_factor": 1.0,                # drive seconds per wall second; 0 = as fast as possible
+    "fast_sleep_s": 0.001,                  # pause per batch when real_time_factor = 0
+    "max_lead_s": 2.0,                      # real_time_factor 0: at most this many drive seconds ahead of
+                                            # the windowing node's drive/progress; 0 = no back-pressure
+    "progress_timeout_s": 2.0,              # no drive/progress for this long while waiting: back-pressure off
+    "start_time_s": 1.0,                    # drive clock of the first sample
+    "repeat": 1,                            # passes through the case list; 0 = forever
+    "publish_clock": True,
+    "wait_for_subscribers": 0,              # wait until drive/signals has this many subscribers
+    "wait_timeout_s": 30.0,
+    "exit_when_done": True,                 # exit after the last case (else stay up, idle)
+    "signals_queue_depth": 1000,
+}
+
+
+#: Parameters of the windowing node (besides the model sections of config/system.yaml), with their defaults.
+WINDOWING = {
+    "backlash_width_m": 0.005,            # K2 of inequality (1)
+    "backlash_width_from_topic": False,   # follow drive/backlash_width (simulator, replay) when published
+    "channels": ["alpha1", "alpha2", "omega2", "a1", "m_el", "omega1", "a2", "v2"],  # captured besides t
+    "gap_tolerance": 1.5,                 # a step of t above this many sample periods is a gap
+    "signals_queue_depth": 1000,
+    "window_queue_depth": 50,
+    "hardware_id": "",                    # default: the resolved drive namespace, e.g. /drive
+    "diagnostics_period_s": 1.0,          # summary status period; 0 = only on events
+    "progress_every_batches": 10,         # publish drive/progress (drive time read) every this many batches; 0 = off
+}
+
+
+#: Parameters of the diagnostic node (besides config/system.yaml and config/method.yaml), with their defaults.
+DIAGNOSTIC = {
+    "pattern_library": "",        # .npz; "" = the CLI's default path (~/.cache/jident_ros/patterns-<hash>.npz)
+    "build_if_missing": True,     # build (and save) the library when the file does not exist
+    "p": 2.0,                     # KHM exponent, one of method.p_values
+    "image_method": True,         # run the paper's image method on every window
+    "gap_method": "auto",         # auto | acceleration | anchored | angle | speed | off
+    "hardware_id": "",            # default: the resolved drive namespace, e.g. /drive
+    "stale_after_s": 5.0,         # STALE status after this long without a window; 0 = never
+    "record_dir": "",             # MCAP recording (bag directory); "" = no recording
+    "record_signals": True,       # also record drive/signals (+ drive/backlash_width, true_inertia, case)
+    "window_queue_depth": 50,
+    "signals_queue_depth": 1000,
+}
+
+
+#: Parameters of the replay node, with their defaults.
+REPLAY = {
+    "bag": "",                 # bag directory or .mcap file (or the first command-line argument)
+    "rate": 1.0,               # playback speed factor; 0 = as fast as possible
+    "fast_sleep_s": 0.001,     # pause between messages when rate = 0
+    "max_lead_s": 2.0,         # rate 0: at most this many drive seconds ahead of drive/progress; 0 = off
+    "progress_timeout_s": 2.0,  # no drive/progress for this long while waiting: back-pressure off
+    "publish_clock": True,
+    "topics": ["drive/signals", "drive/backlash_width", "drive/true_inertia", "drive/case"],
+    "wait_for_subscribers": 0,  # wait until drive/signals has this many subscribers
+    "wait_timeout_s": 30.0,
+}

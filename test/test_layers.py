@@ -1,0 +1,152 @@
+"""The package's layers (DEVELOPERS.md, issue 11): no import cycles, nothing outside ``nodes`` and ``cli``
+imports them, the core never imports rclpy, and imports stand at the top of a module except where an
+optional dependency (rclpy and the ROS message packages, matplotlib) must stay optional.
+
+The import graph is read from the source with ``ast`` (nothing is imported), so a violation is named
+with its file and line.
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PKG = Path(__file__).resolve().parents[1] / "jident_ros"
+
+#: Top-level packages whose modules may be imported lazily inside a function (optional dependencies).
+OPTIONAL = {"rclpy", "rcl_interfaces", "std_msgs", "sensor_msgs", "diagnostic_msgs", "rosgraph_msgs",
+            "builtin_interfaces", "lifecycle_msgs", "diagnostic_updater", "launch", "launch_ros",
+            "ament_index_python", "matplotlib", "tqdm",
+            "zstandard", "lz4"}  # the last two: compression codecs of the optional mcap extra
+#: Of those, the ROS client library and messages: never imported below nodes and cli.
+ROS = OPTIONAL - {"ament_index_python", "matplotlib", "tqdm",
+            "zstandard", "lz4"}  # the last two: compression codecs of the optional mcap extra
+#: Layers (first package part below jident_ros). A module may import its own layer and those listed.
+ALLOWED = {
+    "sim": set(),
+    "stream": {"sim"},
+    "method": {"sim", "stream", "bag", "config", "resources"},
+    "identify": {"sim", "stream", "method", "config", "resources"},
+    "evaluation": {"sim", "stream", "method", "identify", "config", "resources", "second_drive"},
+    "bag": {"sim", "stream"},
+    "second_drive": set(),
+    "nodes": {"sim", "stream", "method", "identify", "bag", "config", "resources", "parameters"},
+    "cli": {"sim", "stream", "method", "identify", "evaluation", "bag", "nodes", "config", "resources",
+            "parameters", "second_drive"},
+    "config": {"sim", "method", "resources"},
+    "parameters": set(),
+    "resources": set(),
+    "__init__": set(),
+}
+
+
+def module_name(path: Path) -> str:
+    rel = path.relative_to(PKG.parent).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def _imports(path: Path):
+    """(imported module, line, inside a function) for every import of ``path``; an import guarded by
+    ``try: ... except ImportError`` counts as a top-level one (the optional dependency is handled)."""
+    tree = ast.parse(path.read_text())
+    mod = module_name(path)
+    is_pkg = path.name == "__init__.py"
+    out = []
+
+    def visit(node, in_func):
+        for child in ast.iter_child_nodes(node):
+            nested = in_func or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef))
+            if isinstance(child, ast.Try) and any(h.type is not None and "ImportError" in ast.dump(h.type)
+                                                  for h in child.handlers):
+                nested = False   # guarded: an optional dependency may be missing
+            if isinstance(child, ast.Import):
+                out.extend((a.name, child.lineno, in_func) for a in child.names)
+            elif isinstance(child, ast.ImportFrom):
+                if child.level:
+                    base = mod.split(".")
+                    if not is_pkg:
+                        base = base[:-1]
+                    base = base[:len(base) - (child.level - 1)]
+                    target = ".".join(base + ([child.module] if child.module else []))
+                else:
+                    target = child.module
+                names = [f"{target}.{a.name}" for a in child.names]
+                # "from jident_ros.x import y" imports module x.y when y is a submodule
+                for n in names:
+                    sub = PKG.parent / (n.replace(".", "/") + ".py")
+                    subpkg = PKG.parent / n.replace(".", "/") / "__init__.py"
+                    out.append((n if sub.exists() or subpkg.exists() else target, child.lineno, in_func))
+            visit(child, nested)
+
+    visit(tree, False)
+    return out
+
+
+def _modules():
+    return {module_name(p): p for p in sorted(PKG.rglob("*.py"))}
+
+
+def _layer(mod: str) -> str:
+    parts = mod.split(".")
+    return parts[1] if len(parts) > 1 else "__init__"
+
+
+def test_no_import_cycles():
+    mods = _modules()
+    graph = {m: sorted({i for i, _, _ in _imports(p) if i in mods and i != m}) for m, p in mods.items()}
+    seen, stack, cycles = {}, [], []
+
+    def dfs(m):
+        seen[m] = 1
+        stack.append(m)
+        for n in graph[m]:
+            if seen.get(n) == 1:
+                cycles.append(stack[stack.index(n):] + [n])
+            elif n not in seen:
+                dfs(n)
+        stack.pop()
+        seen[m] = 2
+
+    for m in graph:
+        if m not in seen:
+            dfs(m)
+    assert not cycles, "import cycles: " + "; ".join(" -> ".join(c) for c in cycles)
+
+
+def test_layers():
+    bad = []
+    for m, p in _modules().items():
+        own = _layer(m)
+        for imp, line, _ in _imports(p):
+            if not imp.startswith("jident_ros.") and imp != "jident_ros":
+                continue
+            other = _layer(imp)
+            if other in (own, "__init__", "parameters") or other in ALLOWED.get(own, set()):
+                continue
+            bad.append(f"{p.relative_to(PKG.parent)}:{line} ({own}) imports {imp} ({other})")
+    assert not bad, "\n".join(bad)
+
+
+def test_core_never_imports_rclpy():
+    bad = [f"{p.relative_to(PKG.parent)}:{line} imports {imp}"
+           for m, p in _modules().items() if _layer(m) not in ("nodes", "cli")
+           for imp, line, _ in _imports(p) if imp.split(".")[0] in ROS]
+    assert not bad, "\n".join(bad)
+
+
+def test_imports_at_the_top_unless_optional():
+    bad = [f"{p.relative_to(PKG.parent)}:{line} imports {imp} inside a function"
+           for m, p in _modules().items() for imp, line, inside in _imports(p)
+           if inside and imp.split(".")[0] not in OPTIONAL]
+    assert not bad, f"{len(bad)} imports inside functions:\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize("layer", sorted(ALLOWED))
+def test_layer_table_names_real_packages(layer):
+    # a typo in ALLOWED would silently allow nothing or everything
+    assert layer == "__init__" or (PKG / layer).is_dir() or (PKG / f"{layer}.py").exists() \
+        or layer == "second_drive", layer
