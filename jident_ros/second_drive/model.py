@@ -200,12 +200,17 @@ class Drive:
         return self.kt * (y[PSI_D] * y[ISQ] - y[PSI_Q] * y[ISD])
 
     # -- right-hand side ------------------------------------------------------------------------
-    def rhs(self, t, y, out=None):
-        """dy/dt; also returns (m_el, T_c, theta_b, omega_ref) at (t, y)."""
+    def rhs(self, t, y, out=None, t_ref=None):
+        """dy/dt; also returns (m_el, T_c, theta_b, omega_ref) at (t, y).
+
+        ``t_ref``: time at which the (piecewise-constant) speed reference is
+        read; the integrator passes the step's midpoint so that a reference step
+        on a step boundary acts from that boundary on and not before it.
+        """
         if out is None:
             out = np.empty_like(y)
         w1, v2 = y[OMEGA1], y[V2]
-        wref = self.omega_ref(t)
+        wref = self.omega_ref(t if t_ref is None else t_ref)
         th = self.theta_b(t)
         # speed PI -> torque reference -> current references
         e = wref - y[WF]
@@ -299,8 +304,10 @@ class Result:
 def simulate(drive: Drive, duration_s: float, t0: float = 0.0) -> Result:
     """Fixed-step classical RK4, ``substeps`` steps per sample, all cases at once.
 
-    Starts from the exact steady state at t0.  Events (reference steps) must
-    lie on step boundaries to be resolved exactly; the CLI puts them on samples.
+    Starts from the exact steady state at t0.  Reference steps must lie on
+    step boundaries (the CLI puts them on samples): within a step the reference
+    is read at the step's midpoint, so the state at the step time is still the
+    one before the event.
     """
     p = drive.p
     ts = p.sample_period_s
@@ -317,7 +324,8 @@ def simulate(drive: Drive, duration_s: float, t0: float = 0.0) -> Result:
     t = t0
     for i in range(n_s):
         t = t0 + i * ts
-        _, m_el, tc, th, wref = drive.rhs(t, y, k1)
+        _, m_el, tc, th, _ = drive.rhs(t, y, k1, t_ref=t + 0.5 * h)
+        wref = drive.omega_ref(t)
         rec["omega1"][i] = y[OMEGA1]
         rec["alpha1"][i] = y[ALPHA1]
         rec["delta"][i] = y[DELTA]
@@ -332,11 +340,12 @@ def simulate(drive: Drive, duration_s: float, t0: float = 0.0) -> Result:
             break
         for j in range(p.substeps):
             tt = t + j * h
+            tm = tt + 0.5 * h
             if j:
-                drive.rhs(tt, y, k1)
-            drive.rhs(tt + 0.5 * h, y + (0.5 * h) * k1, k2)
-            drive.rhs(tt + 0.5 * h, y + (0.5 * h) * k2, k3)
-            drive.rhs(tt + h, y + h * k3, k4)
+                drive.rhs(tt, y, k1, t_ref=tm)
+            drive.rhs(tm, y + (0.5 * h) * k1, k2, t_ref=tm)
+            drive.rhs(tm, y + (0.5 * h) * k2, k3, t_ref=tm)
+            drive.rhs(tt + h, y + h * k3, k4, t_ref=tm)
             y = y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
     return Result(t=t0 + ts * np.arange(n_s), gear_ratio=drive.N, drum_radius_m=drive.Rd, **rec)
 
