@@ -291,3 +291,24 @@ def test_cli_bad_input_in_a_real_process_has_no_traceback(tmp_path):
                         "--steady-s", "-1"], capture_output=True, text=True, timeout=60)
     assert p.returncode == 2 and "Traceback" not in p.stderr
     assert p.stderr.strip().splitlines() == [p.stderr.strip()] and "--steady-s" in p.stderr and "-1" in p.stderr
+
+
+def test_wear_scenario_one_entry_per_event_with_changing_width():
+    """The zone widens between two events (on-grid 2.5 mm, then off-grid 6.2 mm):
+    each event has its entry shortly after the step, the first gap spans the
+    event's own width, and neither the step back up nor the wear ramp makes a gap."""
+    widths = (0.0025, 0.0062)
+    (rec,) = R.build_wear(P, ("reverse",), (1.131,), R.SensorConfig(), widths=widths, steady_s=0.2, seed=2)
+    tr = rec.truth
+    enc = tr["encoder"]
+    rel = rec.signals["alpha1"] - rec.signals["alpha2"] - enc["relative_offset_rad"]
+    assert [e["backlash_width_m"] for e in tr["events"]] == list(widths)
+    assert [e["on_paper_grid"] for e in tr["events"]] == [True, False]
+    for ev in tr["events"]:
+        assert 0 < ev["entry_time_s"] - ev["time_s"] < 0.01
+        g0 = ev["gaps"][0]
+        assert (g0["from_flank"], g0["to_flank"]) == (-1, 1)
+        b, e = g0["entry_index"], g0["end_index"]
+        two = 2 * ev["half_zone_rad"]
+        assert rel[e] - rel[b - 1] >= two - 2e-4 and rel[e - 1] - rel[b] <= two + 2e-4
+        assert all(g["entry_time_s"] < ev["time_s"] + 0.5 for g in ev["gaps"])   # none from step-up or wear

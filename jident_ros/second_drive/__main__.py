@@ -13,8 +13,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from .model import PAPER_INERTIAS_KGM2, PAPER_WIDTHS_M, DriveParams
-from .record import (FORMATS, SensorConfig, build_grid, grid_cases, truth_document, write_recording,
-                     write_truth)
+from .record import (FORMATS, WEAR_WIDTHS_M, SensorConfig, build_grid, build_wear, grid_cases,
+                     truth_document, write_recording, write_truth)
 
 PROG = "python -m jident_ros.second_drive"
 
@@ -44,6 +44,9 @@ def parser():
     p = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="output directory (created; must be new or empty)")
     p.add_argument("--format", default="jointstate", choices=FORMATS)
+    p.add_argument("--scenario", default="grid", choices=("grid", "wear"),
+                   help="grid: one event per recording (direction x J1 x K2); wear: one long recording per "
+                        "direction and J1, one event per width, the zone widening between events")
     p.add_argument("--snr-db", type=float, default=None, help="white noise, 'measured' SNR in dB (default: none)")
     p.add_argument("--encoder-counts", type=int, default=65536, help="counts per revolution (0: no quantisation)")
     p.add_argument("--wrap-encoders", action="store_true", help="single-turn encoders: angles mod 2 pi")
@@ -53,8 +56,10 @@ def parser():
     p.add_argument("--post-s", type=float, default=1.3, help="simulated time after the event, s (>= 1.25)")
     p.add_argument("--direction", default="both", choices=("forward", "reverse", "both"))
     p.add_argument("--gear-ratio", type=float, default=1.0, help="gearbox ratio N (1 or 4)")
-    p.add_argument("--inertias", type=_float_list, default=None, help="J1 values, kg m^2 (default: the 7 classes)")
-    p.add_argument("--widths", type=_float_list, default=None, help="K2 values, m (default: the paper's 6)")
+    p.add_argument("--inertias", type=_float_list, default=None,
+                   help="J1 values, kg m^2 (default: grid the 7 classes, wear 1.16)")
+    p.add_argument("--widths", type=_float_list, default=None,
+                   help="K2 values, m (default: grid the paper's 6; wear 10 increasing widths, on and off the grid)")
     p.add_argument("--namespace", default="", help="topic namespace, e.g. press3")
     p.add_argument("--imu", action="store_true", help="jointstate: also sensor_msgs/Imu on <ns>/imu (x = a1)")
     p.add_argument("--ros-distro", default="humble", choices=("humble", "jazzy"))
@@ -97,14 +102,19 @@ def main(argv=None):
     _validate(a)
     params = replace(DriveParams(), gear_ratio=float(a.gear_ratio))
     directions = ("forward", "reverse") if a.direction == "both" else (a.direction,)
-    inertias = a.inertias or (PAPER_INERTIAS_KGM2[:1] + PAPER_INERTIAS_KGM2[4:5] if a.quick
-                              else PAPER_INERTIAS_KGM2)
-    widths = a.widths or ((PAPER_WIDTHS_M[0], PAPER_WIDTHS_M[-1]) if a.quick else PAPER_WIDTHS_M)
     sensors = SensorConfig(encoder_counts=a.encoder_counts, wrap_encoders=a.wrap_encoders, snr_db=a.snr_db,
                            speed_noise_rad_s=a.speed_noise_rad_s, torque_noise_pct=a.torque_noise_pct)
-    cases = grid_cases(directions, inertias, widths)
     t_start = time.perf_counter()
-    recs = build_grid(params, cases, sensors, steady_s=a.steady_s, post_s=a.post_s, seed=a.seed)
+    if a.scenario == "grid":
+        inertias = a.inertias or (PAPER_INERTIAS_KGM2[:1] + PAPER_INERTIAS_KGM2[4:5] if a.quick
+                                  else PAPER_INERTIAS_KGM2)
+        widths = a.widths or ((PAPER_WIDTHS_M[0], PAPER_WIDTHS_M[-1]) if a.quick else PAPER_WIDTHS_M)
+        recs = build_grid(params, grid_cases(directions, inertias, widths), sensors, steady_s=a.steady_s,
+                          post_s=a.post_s, seed=a.seed)
+    else:
+        inertias = a.inertias or PAPER_INERTIAS_KGM2[:1]
+        widths = a.widths or ((0.0025, 0.0044, 0.01) if a.quick else WEAR_WIDTHS_M)
+        recs = build_wear(params, directions, inertias, sensors, widths=widths, steady_s=a.steady_s, seed=a.seed)
     t_sim = time.perf_counter() - t_start
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -113,12 +123,19 @@ def main(argv=None):
         rel = write_recording(out, rec, a.format, a.namespace, a.imu, a.ros_distro)
         files.append(rel)
         tr = rec.truth
-        print(f"{rel}: {tr['direction']} J1={tr['inertia_kgm2']:.3f} kg m^2 K2={tr['backlash_width_m']:.5f} m "
-              f"entry t={tr['entry_time_s']:.4f} s, first gap {tr['gaps'][0]['samples']} samples, "
-              f"{len(tr['gaps'])} gaps, {tr['n_samples']} samples", flush=True)
+        if a.scenario == "grid":
+            print(f"{rel}: {tr['direction']} J1={tr['inertia_kgm2']:.3f} kg m^2 K2={tr['backlash_width_m']:.5f} m "
+                  f"entry t={tr['entry_time_s']:.4f} s, first gap {tr['gaps'][0]['samples']} samples, "
+                  f"{len(tr['gaps'])} gaps, {tr['n_samples']} samples", flush=True)
+        else:
+            ev = tr["events"]
+            print(f"{rel}: {tr['direction']} J1={tr['inertia_kgm2']:.3f} kg m^2, {len(ev)} events, K2 "
+                  f"{ev[0]['backlash_width_m']:.5f} .. {ev[-1]['backlash_width_m']:.5f} m, entries at "
+                  + " ".join(f"{e['entry_time_s']:.3f}" if e["entry_time_s"] is not None else "none" for e in ev)
+                  + f" s, {tr['n_samples']} samples", flush=True)
     write_truth(out / "truth.json", truth_document(params, sensors, recs, a.format, files,
                                                    command=[PROG] + list(sys.argv[1:] if argv is None else argv),
-                                                   namespace=a.namespace))
+                                                   namespace=a.namespace, scenario=a.scenario))
     print(f"{len(recs)} recordings ({a.format}) + truth.json in {out}: simulated in {t_sim:.1f} s, "
           f"total {time.perf_counter() - t_start:.1f} s", flush=True)
     return 0

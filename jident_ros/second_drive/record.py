@@ -127,6 +127,22 @@ def measure(res, c, params: DriveParams, sensors: SensorConfig, rng, offsets):
     return sig
 
 
+def _t(x):
+    """A sample time for truth.json, rounded to the nanosecond (the bags' stamp resolution)."""
+    return round(float(x), 9)
+
+
+def _gap_list(res, c, gl):
+    """Every gap of case c: where it starts and ends, which flank it leaves and which it meets
+    (from_flank == to_flank: a bounce off one flank; otherwise a traversal of the zone)."""
+    n = res.t.size
+    return [{"entry_index": b, "entry_time_s": _t(res.t[b]),
+             "end_index": e, "end_time_s": _t(res.t[e]) if e < n else None,
+             "from_flank": int(np.sign(res.delta[b - 1, c])) if b > 0 else 0,
+             "to_flank": int(np.sign(res.delta[e, c])) if e < n else 0,
+             "samples": e - b} for b, e in gl]
+
+
 def build_grid(params: DriveParams, cases, sensors: SensorConfig, steady_s=1.0, post_s=1.3, seed=0,
                t0=0.0, min_after_entry_s=1.2):
     """Simulate the cases and return one Recording per case (signals + truth)."""
@@ -159,18 +175,15 @@ def build_grid(params: DriveParams, cases, sensors: SensorConfig, steady_s=1.0, 
             "gear_ratio": params.gear_ratio,
             "drum_radius_m": params.drum_radius_m,
             "bearing_friction_nms": params.motor.bearing_friction_nms,
-            "event": {"type": "speed_reference_step", "time_s": float(res.t[n_steady]), "index": n_steady,
+            "event": {"type": "speed_reference_step", "time_s": _t(res.t[n_steady]), "index": n_steady,
                       "omega_ref_before_rad_s": float(drive.w0[c]),
                       "omega_ref_after_rad_s": float(drive.w0[c] + drive.steps[0][1][c])},
             "entry_index": entry,
-            "entry_time_s": float(res.t[entry]),
+            "entry_time_s": _t(res.t[entry]),
             "entry_from_flank": int(np.sign(res.delta[entry - 1, c])),
             "recontact_index": recontact,
-            "recontact_time_s": float(res.t[recontact]) if recontact < n else None,
-            "gaps": [{"entry_index": b, "entry_time_s": float(res.t[b]),
-                      "end_index": e, "end_time_s": float(res.t[e]) if e < n else None,
-                      "from_flank": int(np.sign(res.delta[b - 1, c])),
-                      "samples": e - b} for b, e in gl],
+            "recontact_time_s": _t(res.t[recontact]) if recontact < n else None,
+            "gaps": _gap_list(res, c, gl),
             "encoder": {"counts_per_rev": sensors.encoder_counts, "wrapped": sensors.wrap_encoders,
                         "alpha1_offset_rad": offsets[0], "alpha2_offset_rad": offsets[1],
                         "relative_offset_rad": offsets[0] - params.gear_ratio * offsets[1],
@@ -180,7 +193,7 @@ def build_grid(params: DriveParams, cases, sensors: SensorConfig, steady_s=1.0, 
                       "rated_torque_nm": params.motor.rated_torque_nm, "seed": [seed, c]},
             "sample_period_s": ts,
             "n_samples": int(n),
-            "t0_s": float(res.t[0]),
+            "t0_s": _t(res.t[0]),
             "steady_s": float(n_steady * ts),
         }
         out.append(Recording(truth["name"], sig, truth))
@@ -296,7 +309,7 @@ def write_recording(out_dir: Path, rec: Recording, fmt: str, namespace="", imu=F
 
 
 def truth_document(params: DriveParams, sensors: SensorConfig, recordings, fmt, files, command=None,
-                   namespace=""):
+                   namespace="", scenario="grid"):
     from . import __doc__ as pkg_doc
     return {
         "schema": "jident_ros.second_drive/truth/1",
@@ -306,6 +319,7 @@ def truth_document(params: DriveParams, sensors: SensorConfig, recordings, fmt, 
                        "|alpha1 - N*alpha2 - relative_offset_rad| < K2/r (angles as recorded, before "
                        "quantisation), flank-to-flank travel 2*K2/r"),
         "format": fmt,
+        "scenario": scenario,
         "namespace": namespace,
         "command": command,
         "parameters": asdict(params),
@@ -318,3 +332,78 @@ def write_truth(path: Path, doc: dict):
     with open(path, "w") as f:
         json.dump(doc, f, indent=1, allow_nan=False)
         f.write("\n")
+
+
+# ---------------------------------------------------------------------------------------------- wear scenario
+WEAR_WIDTHS_M = (0.0025, 0.0031, 0.00375, 0.0044, 0.005, 0.0062, 0.0075, 0.0083, 0.009, 0.01)
+
+
+def build_wear(params: DriveParams, directions, inertias, sensors: SensorConfig, widths=WEAR_WIDTHS_M,
+               steady_s=1.0, period_s=3.0, seed=0, t0=0.0):
+    """One long recording per (direction, J1): the zone widens between events.
+
+    Event k at t_k = t0 + steady_s + k period_s: |omega_ref| steps down by
+    step_fraction (entry); at t_k + 1.5 s it steps back up; between t_k + 2.0 s
+    and t_k + 2.5 s, with the drive steady on its driving flank, the half-zone
+    grows linearly from widths[k]/r to widths[k+1]/r (wear). The run ends 1.5 s
+    after the last event.
+    """
+    if period_s < 3.0:
+        raise ValueError("period_s must be >= 3 s (1.5 s after the entry, 0.5 s wear ramp, 0.5 s steady)")
+    ts = params.sample_period_s
+    r = params.coupling.reference_radius_m
+    cases = [(d, float(j)) for d in directions for j in inertias]
+    sgn = np.array([DIRECTIONS[d] for d, _ in cases])
+    w0 = sgn * params.speed_reference_rad_s
+    dw = -w0 * params.step_fraction
+    n_per = int(round(period_s / ts))
+    k_ev = [int(round(steady_s / ts)) + k * n_per for k in range(len(widths))]
+    t_ev = [t0 + k * ts for k in k_ev]
+    steps, ramps = [], []
+    for k, te in enumerate(t_ev):
+        steps.append((te, dw))
+        steps.append((te + int(round(1.5 / ts)) * ts, -dw))         # back up 1.5 s later
+        if k + 1 < len(widths):
+            ramps.append((te + 2.0, 0.5, (widths[k + 1] - widths[k]) / r))
+    drive = Drive(params, [j for _, j in cases], w0, widths[0] / r, steps=steps, ramps=ramps)
+    res = simulate(drive, k_ev[-1] * ts + 1.5, t0=t0)
+    n = res.t.size
+    out = []
+    for c, (direction, j1) in enumerate(cases):
+        rng = np.random.default_rng([seed, 1000 + c])
+        offsets = draw_offsets(rng, params.gear_ratio)
+        sig = measure(res, c, params, sensors, rng, offsets)
+        gl = gaps(res.delta[:, c], res.theta_b[:, c])
+        if any(b < k_ev[0] for b, _ in gl):
+            raise RuntimeError(f"case {c}: spurious entry in the steady stretch")
+        events = []
+        for k, (ke, te) in enumerate(zip(k_ev, t_ev)):
+            nxt = k_ev[k + 1] if k + 1 < len(k_ev) else n
+            mine = [(b, e) for b, e in gl if ke <= b < nxt]
+            events.append({"index": ke, "time_s": _t(te), "type": "speed_reference_step",
+                           "backlash_width_m": widths[k], "half_zone_rad": widths[k] / r,
+                           "on_paper_grid": any(abs(widths[k] - g) < 1e-12 for g in PAPER_WIDTHS_M),
+                           "entry_index": mine[0][0] if mine else None,
+                           "entry_time_s": _t(res.t[mine[0][0]]) if mine else None,
+                           "gaps": _gap_list(res, c, mine)})
+        name = f"{'fwd' if direction == 'forward' else 'rev'}_J{j1:.3f}_wear"
+        truth = {
+            "name": name, "scenario": "wear", "direction": direction, "inertia_kgm2": j1,
+            "reference_radius_m": r, "gear_ratio": params.gear_ratio, "drum_radius_m": params.drum_radius_m,
+            "bearing_friction_nms": params.motor.bearing_friction_nms,
+            "omega_ref_rad_s": [float(w0[c]), float(w0[c] + dw[c])],
+            "wear_ramps": [{"start_s": _t(s_[c]), "duration_s": float(d_[c]),
+                            "from_width_m": widths[k], "to_width_m": widths[k + 1]}
+                           for k, (s_, d_, _) in enumerate(drive.ramps)],
+            "events": events,
+            "encoder": {"counts_per_rev": sensors.encoder_counts, "wrapped": sensors.wrap_encoders,
+                        "alpha1_offset_rad": offsets[0], "alpha2_offset_rad": offsets[1],
+                        "relative_offset_rad": offsets[0] - params.gear_ratio * offsets[1],
+                        "quantisation": "floor"},
+            "noise": {"snr_db": sensors.snr_db, "speed_noise_rad_s": sensors.speed_noise_rad_s,
+                      "torque_noise_pct_of_rated": sensors.torque_noise_pct,
+                      "rated_torque_nm": params.motor.rated_torque_nm, "seed": [seed, 1000 + c]},
+            "sample_period_s": ts, "n_samples": int(n), "t0_s": _t(res.t[0]), "steady_s": steady_s,
+        }
+        out.append(Recording(name, sig, truth))
+    return out
