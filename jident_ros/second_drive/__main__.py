@@ -13,8 +13,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from .model import PAPER_INERTIAS_KGM2, PAPER_WIDTHS_M, DriveParams
-from .record import (FORMATS, WEAR_WIDTHS_M, SensorConfig, build_grid, build_wear, grid_cases,
-                     truth_document, write_recording, write_truth)
+from .record import FORMATS, WEAR_WIDTHS_M, SensorConfig, build_grid, build_wear, grid_cases, truth_document, write_recording, write_truth
 
 PROG = "python -m jident_ros.second_drive"
 

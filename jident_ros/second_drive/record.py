@@ -21,6 +21,10 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from jident_ros.second_drive import __doc__ as pkg_doc
 
 from .model import PAPER_INERTIAS_KGM2, PAPER_WIDTHS_M, Drive, DriveParams, gaps, simulate
 
@@ -217,7 +221,6 @@ def read_csv(path: Path) -> dict:
 
 
 def _typestore(distro):
-    from rosbags.typesys import Stores, get_typestore
     return get_typestore({"humble": Stores.ROS2_HUMBLE, "jazzy": Stores.ROS2_JAZZY}[distro])
 
 
@@ -232,7 +235,6 @@ def _stamp_ns(t):
 
 def write_jointstate(path: Path, sig: dict, namespace="", imu=False, distro="humble"):
     """rosbag2 (MCAP) with one sensor_msgs/JointState per sample on <ns>/joint_states."""
-    from rosbags.rosbag2 import StoragePlugin, Writer
     store = _typestore(distro)
     JointState = store.types["sensor_msgs/msg/JointState"]
     Header = store.types["std_msgs/msg/Header"]
@@ -271,7 +273,6 @@ def write_signals(path: Path, sig: dict, namespace="", distro="humble", batch=BA
                   channels=SIGNAL_CHANNELS):
     """rosbag2 (MCAP): std_msgs/Float64MultiArray batches on <ns>/drive/signals
     (docs/interfaces.md layout), log time = t of the batch's last sample."""
-    from rosbags.rosbag2 import StoragePlugin, Writer
     store = _typestore(distro)
     F64MA = store.types["std_msgs/msg/Float64MultiArray"]
     Layout = store.types["std_msgs/msg/MultiArrayLayout"]
@@ -310,7 +311,6 @@ def write_recording(out_dir: Path, rec: Recording, fmt: str, namespace="", imu=F
 
 def truth_document(params: DriveParams, sensors: SensorConfig, recordings, fmt, files, command=None,
                    namespace="", scenario="grid"):
-    from . import __doc__ as pkg_doc
     return {
         "schema": "jident_ros.second_drive/truth/1",
         "model": "jident_ros.second_drive (vector-controlled IM, Hertz/Hunt-Crossley backlash, belt conveyor)",
