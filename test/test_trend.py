@@ -1,0 +1,318 @@
+"""Trend tracker of J1 and the backlash width (jident_ros/identify/trend.py, issue 14).  No ROS.
+
+Cost: ~10 s (200 detection trials, 20,000 steady windows, each twice for the sensitivity checks).
+The 100,000-window false-alarm run and the full target measurement are marked slow.
+"""
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from jident_ros.identify.trend import (
+    ERROR,
+    OK,
+    STATE_VERSION,
+    WARN,
+    TrendConfig,
+    TrendStateError,
+    TrendTracker,
+    coverage_to_se_scale,
+    cusum_arl,
+    cusum_threshold_for_arl,
+    detection_delays,
+    false_alarms,
+    format_targets,
+    measure_targets,
+    run_series,
+    siegmund_arl,
+    siegmund_check,
+    simulate_series,
+    wear_rate_accuracy,
+)
+
+J1 = 1.16
+
+
+def steady(n, seed=0, **kw):
+    return simulate_series(n, seed=seed, outlier_prob=0.0, **kw)
+
+
+# -- threshold design -------------------------------------------------------------------------------
+
+def test_cusum_arl_matches_published_values_and_simulation():
+    # Montgomery, Introduction to Statistical Quality Control, two-sided CUSUM k = 0.5: h = 4 -> 168, h = 5 -> 465
+    assert cusum_arl(4.0, 0.5) == pytest.approx(168, rel=0.01)
+    assert cusum_arl(5.0, 0.5) == pytest.approx(465, rel=0.01)
+    # Siegmund's closed form is close for small k
+    assert siegmund_arl(5.0, 0.5) == pytest.approx(2 * 465, rel=0.05)
+    h = cusum_threshold_for_arl(2000.0, 2.0)
+    assert cusum_arl(h, 2.0) == pytest.approx(2000.0, rel=1e-6)
+    r = siegmund_check(2000.0, runs=400, seed=3)
+    assert r["simulated_arl"] == pytest.approx(2000.0, abs=3 * r["simulated_arl_se"])
+    # an under-reported se (coverage 92 %) shortens the in-control run length as the integral equation predicts
+    r = siegmund_check(2000.0, runs=400, seed=4, se_scale=coverage_to_se_scale(0.92))
+    assert r["simulated_arl"] == pytest.approx(r["predicted_arl"], abs=3 * r["simulated_arl_se"])
+    assert TrendConfig().threshold_sd == pytest.approx(cusum_threshold_for_arl(1e6, 2.0))
+
+
+def test_coverage_to_se_scale():
+    assert coverage_to_se_scale(0.95) == pytest.approx(1.0)
+    assert coverage_to_se_scale(0.92) == pytest.approx(1.1195, abs=1e-3)
+    assert coverage_to_se_scale(0.99) == pytest.approx(0.761, abs=1e-3)
+
+
+# -- targets ----------------------------------------------------------------------------------------
+
+def test_step_detected_within_5_windows():
+    r = detection_delays(200, seed=0)
+    assert r["missed"] == 0 and r["false_before_step"] <= 1
+    assert r["median"] <= 2 and r["p95"] <= 3 and r["max"] <= 5, r
+    # sensitivity: the same test fails with the threshold doubled
+    h = TrendConfig().threshold_sd
+    slow = detection_delays(50, seed=0, config=TrendConfig(cusum_threshold_sd=2 * h))
+    assert slow["median"] > 2
+
+
+def test_false_alarm_rate_fast():
+    r = false_alarms(20_000, seed=11)
+    assert r["inertia_changes"] <= 2 and r["width_changes"] <= 2, r   # <= 1 per 10,000
+    # sensitivity: the same test fails with the threshold halved
+    h = TrendConfig().threshold_sd
+    bad = false_alarms(20_000, seed=11, config=TrendConfig(cusum_threshold_sd=h / 2))
+    assert bad["inertia_changes"] > 2
+
+
+@pytest.mark.slow
+def test_false_alarm_rate_100k_windows():
+    r = false_alarms(100_000, seed=1)
+    assert r["monitored_windows"] >= 100_000
+    assert r["inertia_per_10k"] <= 1.0 and r["width_per_10k"] <= 1.0, r
+
+
+@pytest.mark.slow
+def test_measure_targets_full():
+    r = measure_targets(0)
+    print(format_targets(r))
+    assert r["detection"]["max"] <= 5 and r["false_alarms"]["inertia_per_10k"] <= 1.0
+    assert r["wear"]["within_10pct"] == 1.0
+
+
+def test_wear_rate_within_10pct_after_20_windows():
+    r = wear_rate_accuracy(50, seed=2)
+    assert r["within_10pct"] == 1.0 and r["max_rel_error"] < 0.10, r
+    # units: 1e-5 m per hourly window
+    s = steady(20, width_growth_m_per_window=1e-5, width_se_pct=0.05)
+    u = run_series(s)[-1]
+    assert u.wear_rate_m_per_s == pytest.approx(1e-5 / 3600, rel=0.1)
+    assert u.wear_rate_m_per_day == pytest.approx(1e-5 * 24, rel=0.1)
+    assert u.wear_rate_se_m_per_day == pytest.approx(86400 * u.wear_rate_se_m_per_s)
+    # time to the 12 mm limit: (0.012 - width now) / rate, interval around it
+    ttl = (0.012 - u.width_m) / u.wear_rate_m_per_s
+    assert u.time_to_limit_s == pytest.approx(ttl)
+    assert u.time_to_limit_low_s < u.time_to_limit_s < u.time_to_limit_high_s
+    assert u.time_to_limit_s == pytest.approx((0.012 - s.true_width_m[-1]) / (1e-5 / 3600), rel=0.1)
+
+
+def test_no_time_to_limit_without_significant_wear():
+    s = steady(40, width_growth_m_per_window=0.0)
+    us = run_series(s)
+    assert sum(u.time_to_limit_s is not None for u in us[20:]) <= 2   # ~2.5 % one-sided false positives
+    assert all(u.wear_rate_m_per_s is not None for u in us[3:])
+
+
+# -- behaviour --------------------------------------------------------------------------------------
+
+def test_step_reported_and_rebaselined():
+    s = steady(80, step_at=40, step_pct=-2.5, seed=5)
+    tr = TrendTracker()
+    us = tr.batch(s.time_s, s.inertia_kgm2, s.inertia_se_kgm2)
+    ev = [e for u in us for e in u.changes]
+    assert len(ev) == 1
+    e = ev[0]
+    assert e.quantity == "inertia" and e.sign == -1 and 40 <= e.window_index <= 44
+    assert 38 <= e.onset_window_index <= 41 and e.onset_time_s == s.time_s[e.onset_window_index]
+    assert e.size_pct == pytest.approx(-2.5, abs=4 * 100 * e.size_se / J1)
+    u = us[e.window_index]
+    assert u.change and u.level == WARN and "change -2." in u.message
+    last = us[-1]
+    assert last.inertia_baseline_kgm2 == pytest.approx(J1 * 0.975, rel=0.003)
+    assert last.inertia_reference_kgm2 == pytest.approx(J1, rel=0.003)
+    assert abs(last.inertia_drift_pct) < 0.6
+    assert last.inertia_drift_from_reference_pct == pytest.approx(-2.5, abs=0.6)
+    assert last.level == WARN and "beyond the 2 % warning" in last.message   # still 2.5 % off the commissioned J1
+    assert last.inertia_kgm2 == pytest.approx(J1 * 0.975, rel=0.004)
+
+
+def test_single_outlier_does_not_fire_and_is_clipped():
+    s = steady(60, seed=7)
+    y = s.inertia_kgm2.copy()
+    y[40] = J1 * 1.3                       # ~60 standard errors
+    tr = TrendTracker()
+    us = tr.batch(s.time_s, y, s.inertia_se_kgm2)
+    assert not any(u.change for u in us)
+    assert abs(us[40].inertia_kgm2 - us[39].inertia_kgm2) < 0.003 * J1
+    assert all(u.level == OK for u in us)
+
+
+def test_health_levels():
+    cfg = TrendConfig(commissioning_windows=10)
+    tr = TrendTracker(cfg)
+    u = tr.update(0.0, J1, 0.005)
+    assert u.level == OK and u.commissioning and "1 of 10 windows" in u.message
+    s = steady(40, step_at=20, step_pct=6.0, seed=3)
+    us = TrendTracker(cfg).batch(s.time_s, s.inertia_kgm2, s.inertia_se_kgm2)
+    assert us[8].commissioning and not us[9].commissioning      # the 10th window completes the baseline
+    assert all(u.level == OK for u in us[:20])
+    assert us[-1].level == ERROR and "beyond the 5 % alarm" in us[-1].message
+    # width beyond the limit
+    s = steady(30, width_m=0.0119, width_growth_m_per_window=1e-5)
+    us = TrendTracker(cfg).batch(s.time_s, s.inertia_kgm2, s.inertia_se_kgm2, s.width_m, s.width_se_m)
+    assert us[-1].level == ERROR and "beyond the 12 mm limit" in us[-1].message
+    # projected time to the limit under the warning time
+    s = steady(30, width_m=0.0100, width_growth_m_per_window=1e-5)
+    u = TrendTracker(cfg).batch(s.time_s, s.inertia_kgm2, s.inertia_se_kgm2, s.width_m, s.width_se_m)[-1]
+    assert u.level == WARN and u.time_to_limit_s < 30 * 86400
+
+
+def test_width_jump_detected():
+    s = steady(70, seed=4, width_step_at=45, width_step_m=5e-5, width_se_pct=0.05)
+    us = TrendTracker().batch(s.time_s, s.inertia_kgm2, s.inertia_se_kgm2, s.width_m, s.width_se_m)
+    ev = [e for u in us for e in u.changes]
+    assert [e.quantity for e in ev] == ["width"] and ev[0].sign == 1 and 45 <= ev[0].window_index <= 48
+    assert ev[0].size == pytest.approx(5e-5, rel=0.3)
+    assert us[-1].wear_rate_m_per_day == pytest.approx(24e-5, rel=0.2)
+
+
+def test_missing_quantities_are_not_updated():
+    tr = TrendTracker(TrendConfig(commissioning_windows=3))
+    for i in range(5):
+        u = tr.update(3600.0 * i, J1, 0.005)
+    assert u.width_m is None and u.wear_rate_m_per_s is None and not u.skipped
+    u = tr.update(3600.0 * 5, None, None, 0.003, 3e-6)
+    assert not u.skipped and u.width_m == pytest.approx(0.003)
+    assert tr.to_dict()["inertia"]["n"] == 5 and tr.to_dict()["width"]["n"] == 1
+
+
+@pytest.mark.parametrize("args, field", [
+    ((200.0, float("nan"), 0.005), "inertia_kgm2"),
+    ((200.0, float("inf"), 0.005), "inertia_kgm2"),
+    ((200.0, -1.16, 0.005), "inertia_kgm2"),
+    ((200.0, 1.16, 0.0), "inertia_se_kgm2"),
+    ((200.0, 1.16, None), "inertia_se_kgm2"),
+    ((200.0, "1.16x", 0.005), "inertia_kgm2"),
+    ((200.0, 1.16, 0.005, 0.0, 1e-6), "width_m"),
+    ((200.0, 1.16, 0.005, 0.003, float("nan")), "width_se_m"),
+    ((float("nan"), 1.16, 0.005), "time_s"),
+    ((200.0, None, None), "no estimate"),
+])
+def test_bad_inputs_are_skipped_with_reason(args, field):
+    tr = TrendTracker()
+    for i in range(3):
+        tr.update(100.0 + i, J1, 0.005, 0.003, 3e-6)
+    before = tr.to_dict()
+    u = tr.update(*args)
+    assert u.skipped and field in u.reason and "skipped" in u.message
+    after = tr.to_dict()
+    assert after.pop("n_windows") == before.pop("n_windows") + 1
+    assert after == before
+
+
+def test_time_going_backwards_is_skipped():
+    tr = TrendTracker()
+    tr.update(100.0, J1, 0.005)
+    u = tr.update(50.0, J1, 0.005)
+    assert u.skipped and "before the previous" in u.reason
+
+
+def test_given_baseline_skips_commissioning():
+    tr = TrendTracker(TrendConfig(inertia_baseline_kgm2=1.16, inertia_baseline_se_kgm2=0.001))
+    u = tr.update(0.0, 1.161, 0.005)
+    assert not u.commissioning and u.inertia_baseline_kgm2 == 1.16 and u.inertia_drift_pct is not None
+
+
+def test_commissioning_by_duration():
+    tr = TrendTracker(TrendConfig(commissioning_duration_s=10 * 3600.0))
+    us = [tr.update(3600.0 * i, J1, 0.005) for i in range(12)]
+    assert us[9].commissioning and not us[10].commissioning
+
+
+def test_batch_equals_updates_and_nan_is_missing():
+    s = steady(30, seed=9)
+    a = TrendTracker().batch(s.time_s, s.inertia_kgm2, s.inertia_se_kgm2, s.width_m, s.width_se_m)
+    tr = TrendTracker()
+    b = [tr.update(*v) for v in zip(s.time_s, s.inertia_kgm2, s.inertia_se_kgm2, s.width_m, s.width_se_m)]
+    assert [u.to_dict() for u in a] == [u.to_dict() for u in b]
+    w = s.width_m.copy()
+    w[5] = np.nan
+    us = TrendTracker().batch(s.time_s, s.inertia_kgm2, s.inertia_se_kgm2, w, s.width_se_m, nan_is_missing=True)
+    assert not any(u.skipped for u in us)
+    us = TrendTracker().batch(s.time_s, s.inertia_kgm2, s.inertia_se_kgm2, w, s.width_se_m)
+    assert [u.window_index for u in us if u.skipped] == [5]
+
+
+def test_config_validation():
+    with pytest.raises(ValueError, match="^drift_alarm_pct"):
+        TrendConfig(drift_warn_pct=3.0, drift_alarm_pct=2.0)
+    with pytest.raises(ValueError, match="^commissioning_windows"):
+        TrendConfig(commissioning_windows=1)
+    with pytest.raises(ValueError, match="^innovation_clip_sd"):
+        TrendConfig(innovation_clip_sd=1.0)
+    with pytest.raises(ValueError, match="^width_limit_m"):
+        TrendConfig(width_limit_m=float("nan"))
+
+
+# -- state ------------------------------------------------------------------------------------------
+
+def test_restart_continues_identically(tmp_path):
+    s = simulate_series(140, step_at=60, seed=12, width_step_at=100, width_step_m=5e-5)
+    cols = (s.time_s, s.inertia_kgm2, s.inertia_se_kgm2, s.width_m, s.width_se_m)
+    for cut in (10, 62, 72, 102):      # commissioning, re-learning and refining after the J1 step, after the width step
+        a = TrendTracker()
+        a.batch(*(c[:cut] for c in cols))
+        path = tmp_path / "trend.json"
+        a.save(path)
+        assert os.listdir(tmp_path) == ["trend.json"]          # no temporary file left behind
+        b = TrendTracker.load(path)
+        assert b.to_dict() == a.to_dict()
+        ua = a.batch(*(c[cut:] for c in cols))
+        ub = b.batch(*(c[cut:] for c in cols))
+        assert [u.to_dict() for u in ua] == [u.to_dict() for u in ub]
+        assert a.to_dict() == b.to_dict()
+    assert len(a.changes) == 2
+
+
+def test_load_refuses_bad_files(tmp_path):
+    tr = TrendTracker()
+    tr.batch(*(c for c in (np.arange(5.0), np.full(5, J1), np.full(5, 0.005))))
+    path = tmp_path / "t.json"
+    tr.save(path)
+    good = json.loads(path.read_text())
+    assert good["version"] == STATE_VERSION
+    path.write_text(path.read_text()[:-20])
+    with pytest.raises(TrendStateError, match="not a readable trend state"):
+        TrendTracker.load(path)
+    for change, msg in ((lambda d: d.update(version=STATE_VERSION + 1), "version"),
+                        (lambda d: d.update(kind="other"), "kind"),
+                        (lambda d: d["inertia"].pop("cusum"), "missing field 'cusum'"),
+                        (lambda d: d["width"].update(t=[0.0]), "width regression buffer"),
+                        (lambda d: d["inertia"].update(phase="nap"), "phase")):
+        d = json.loads(json.dumps(good))
+        change(d)
+        path.write_text(json.dumps(d))
+        with pytest.raises(TrendStateError, match=msg):
+            TrendTracker.load(path)
+    with pytest.raises(FileNotFoundError):
+        TrendTracker.load(tmp_path / "absent.json")
+
+
+def test_save_replaces_existing_file(tmp_path):
+    path = tmp_path / "t.json"
+    path.write_text("old")
+    tr = TrendTracker()
+    tr.update(0.0, J1, 0.005)
+    tr.save(path)
+    assert TrendTracker.load(path).n_windows == 1
+    assert sorted(os.listdir(tmp_path)) == ["t.json"]
