@@ -109,7 +109,8 @@ def test_nominal_window_is_ok(windows, configs, library):
     assert d.message == f"J1 = {d.inertia_kgm2:.5g} kg m^2: nominal class 1.16"
     assert d.source == "gap" and abs(d.inertia_kgm2 - 1.16) / 1.16 < 1e-3 and d.class_kgm2 == 1.16
     assert v["verdict_class_kgm2"] == 1.16 and v["verdict_agree"] is True and v["verdict_between_classes"] is False
-    assert v["image_vote_class_kgm2"] == 1.16 and v["identified_class_kgm2"] == 1.16
+    assert v["image_class_kgm2"] == 1.16 and v["identified_class_kgm2"] == 1.16
+    assert d.status == "nominal" and d.refused_reason is None and v["status"] == "nominal"
     lo, hi = v["gap_ci95_kgm2"]
     assert lo < v["gap_j1_kgm2"] < hi
     assert abs(v["backlash_width_estimate_m"] - 0.005) < 3 * v["backlash_width_estimate_std_m"] + 1e-4
@@ -124,17 +125,32 @@ def test_other_class_is_warn(windows, configs, library):
     assert d.value_dict()["deviation_percent"] == pytest.approx(-7.5, abs=0.05)
 
 
-def test_image_method_disagreeing_with_the_gap_is_warn(windows, configs, library):
-    """Nominal J1 at eta_k = 0.0375 (off the pattern runs): the gap gives 1.16, the image vote another class."""
-    from jident_ros.identify.levels import WARN
+def test_image_method_disagreeing_outside_its_domain_is_information(windows, configs, library):
+    """Nominal J1 at eta_k = 0.0375 (off the pattern runs): the gap gives 1.16, the image method another class.
+    With the default image_min_margin (0: the image method is never trusted on this drive) that is
+    information, not a WARN (issue 12: a WARN must mean "look at this drive")."""
+    from jident_ros.identify.levels import OK
     d = _diagnose(windows, 2, configs, library)
     v = d.value_dict()
-    assert d.class_kgm2 == 1.16 and v["verdict_agree"] is False and v["image_vote_class_kgm2"] != 1.16
-    assert d.level == WARN and "nominal class 1.16; the image method disagrees" in d.message, d.message
+    assert d.class_kgm2 == 1.16 and v["verdict_agree"] is False and v["image_class_kgm2"] != 1.16
+    assert v["image_in_domain"] is False and "image_min_margin 0" in v["image_domain_reason"]
+    assert d.level == OK and "nominal class 1.16; information: the image method answers class" in d.message, d.message
+    assert "not a warning" in d.message
     # without the image method nothing disagrees
-    from jident_ros.identify.levels import OK
     g = _diagnose(windows, 2, configs, None, image_method=False)
     assert g.level == OK and g.value_dict()["verdict_agree"] == "unknown" and g.inertia_kgm2 == d.inertia_kgm2
+
+
+def test_image_method_disagreeing_inside_its_domain_is_warn(windows, configs, library):
+    from jident_ros.identify.levels import WARN
+    from jident_ros.identify.verdict import VerdictPolicy
+    margin = _diagnose(windows, 2, configs, library).value_dict()["image_margin"]
+    d = _diagnose(windows, 2, configs, library, policy=VerdictPolicy(image_min_margin=max(1.0, margin * 0.999)))
+    assert d.value_dict()["image_in_domain"] is True
+    assert d.level == WARN and "nominal class 1.16; the image method disagrees: its class" in d.message, d.message
+    # above its margin the same disagreement is information again
+    e = _diagnose(windows, 2, configs, library, policy=VerdictPolicy(image_min_margin=margin * 1.01))
+    assert e.level == 0 and "information" in e.message
 
 
 def test_between_classes_is_warn(windows, configs, library):
@@ -154,12 +170,30 @@ def test_no_gap_and_no_library_is_error(windows, configs):
                          "pattern library missing: no.npz")
     # with a gap but without the library the image method was asked for: the gap estimate, flagged ERROR
     e = _diagnose(windows, 0, configs, None, library_error="pattern library missing: no.npz")
-    assert e.level == ERROR and e.source == "gap" and "(from the gap only): pattern library missing" in e.message
+    assert e.level == ERROR and e.source == "gap" and "(from the gap only)" in e.message, e.message
+    assert e.message.endswith("; pattern library missing: no.npz"), e.message
 
 
-def test_no_gap_falls_back_to_the_image_vote(windows, configs, library):
-    d = _diagnose(windows, 0, configs, library, gap_method="off")
-    assert d.source == "image" and d.inertia_kgm2 == d.value_dict()["image_vote_class_kgm2"] == 1.16
+def test_no_gap_publishes_the_image_class_only_above_its_margin(windows, configs, library):
+    """Gap off: the image method's class goes out only inside its validity domain (margin >= image_min_margin,
+    a library width matching K2); else nothing, and the status says why."""
+    from jident_ros.identify.levels import ERROR, OK
+    from jident_ros.identify.verdict import VerdictPolicy
+    published = []
+    d = _diagnose(windows, 0, configs, library, gap_method="off", on_estimate=published.append)
+    assert d.inertia_kgm2 is None and published == [] and d.level == ERROR and d.status == "undiagnosed"
+    assert "image method: class 1.16 not published: image_min_margin 0" in d.message, d.message
+    trusted = VerdictPolicy(image_min_margin=1.5)   # window 0 is a pattern run: margin inf
+    d = _diagnose(windows, 0, configs, library, gap_method="off", on_estimate=published.append, policy=trusted)
+    assert d.source == "image" and d.inertia_kgm2 == d.value_dict()["image_class_kgm2"] == 1.16 and d.level == OK
+    assert published == [1.16] and "image method, margin inf >= image_min_margin 1.5" in d.message, d.message
+    # a K2 whose nearest library width (0.005) is 10 % off: outside the domain, nothing published
+    from jident_ros.identify.diagnosis import diagnose_window
+    system, method = configs
+    d = diagnose_window(windows.case(0), windows.entry_index, 0.0045, system.load.wheel_radius_m,
+                        windows.sample_period_s, library=library, system=system, method=method, p=2.0,
+                        gap_method="off", policy=trusted)
+    assert d.inertia_kgm2 is None and "library width 0.005 m is not within 5%" in d.message, d.message
 
 
 def test_the_gap_estimate_is_reported_before_the_image_method_runs(windows, configs, library, monkeypatch):
@@ -225,6 +259,7 @@ def test_jident_diagnose_command(recording, library_file, tmp_path, capsys):
     assert [w["true_inertia_kgm2"] for w in doc["windows"]] == list(TRUE_J1)
     for w in doc["windows"]:
         assert abs(w["error_percent"]) < 1.0 and w["values"]["estimate_source"] == "gap"
+        assert w["status"] in ("nominal", "deviating") and w["refused_reason"] is None and w["level"] in ("OK", "WARN")
         assert w["values"]["verdict_class_kgm2"] == w["true_inertia_kgm2"]
     # gap only, K2 from the option
     assert main(["diagnose", str(recording), "--no-image", "--backlash-width-m", "0.005", "--quiet"]) == 0

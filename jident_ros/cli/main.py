@@ -18,7 +18,14 @@ import numpy as np
 from jident_ros import __version__
 from jident_ros.bag.recording import salvage_main
 from jident_ros.cli.demo import main as demo_main
-from jident_ros.cli.offline import TABLE_HEADER, diagnose_recording, format_window_line, summary_line, write_json
+from jident_ros.cli.offline import (
+    TABLE_HEADER,
+    default_policy,
+    diagnose_recording,
+    format_window_line,
+    summary_line,
+    write_json,
+)
 from jident_ros.config import ConfigError, load_method_config, load_system_config
 from jident_ros.evaluation.evaluate import run_evaluation
 from jident_ros.evaluation.plotting import plot_case
@@ -230,10 +237,12 @@ def cmd_diagnose(args) -> int:
             header_printed = True
         print(format_window_line(window), flush=True)
 
+    overrides = {k: getattr(args, k) for k in ("image_min_margin", "plausible_min_ratio", "plausible_max_ratio")
+                 if getattr(args, k) is not None}
     result = diagnose_recording(args.recording, system=system, method=method, p=args.p, library_path=args.library,
                                 gap_method=args.gap_method, image_method=not args.no_image,
                                 backlash_width_m=args.backlash_width_m, signals_topic=args.topic, log=log,
-                                on_window=show)
+                                on_window=show, policy=default_policy(**overrides))
     if args.json:
         write_json(result, args.json)
     print(summary_line(result) + (f"; JSON: {args.json}" if args.json else ""))
@@ -300,6 +309,13 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--backlash-width-m", type=_positive("--backlash-width-m"),
                    help="K2 of inequality (1), m (default: the recording's drive/backlash_width, else 0.005)")
     g.add_argument("--topic", help="the drive/signals topic (default: the recording's one topic ending in drive/signals)")
+    g.add_argument("--image-min-margin", type=float,
+                   help="publish the image method's class alone (and warn on its disagreement) only at a fused "
+                        "margin >= this; 0 = never (default: the diagnostic node's image_min_margin)")
+    g.add_argument("--plausible-min-ratio", type=float,
+                   help="J1 below this x the nominal is refused (default: the diagnostic node's, 0.5)")
+    g.add_argument("--plausible-max-ratio", type=float,
+                   help="J1 above this x the nominal is refused (default: the diagnostic node's, 1.5)")
     g.add_argument("--json", metavar="OUT", help="also write every window's diagnosis to this JSON file")
     g.add_argument("--config", help="system config YAML (default: config/system.yaml)")
     g.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")

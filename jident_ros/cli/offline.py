@@ -32,6 +32,8 @@ from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.diagnosis import GAP_METHODS, WindowDiagnosis, diagnose_window
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES
 from jident_ros.identify.library import default_library_path, load_pattern_library
+from jident_ros.identify.verdict import VerdictPolicy
+from jident_ros.parameters import DIAGNOSTIC as DIAGNOSTIC_DEFAULTS
 from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
 from jident_ros.stream.detector import BacklashDetector
 from jident_ros.stream.layout import DRIVE_TOPICS, REQUIRED_CHANNELS, SIGNALS_TOPIC, WIDTH_TOPIC, pack
@@ -87,7 +89,8 @@ class OfflineWindow:
                 "backlash_width_m": self.backlash_width_m, "true_inertia_kgm2": self.true_inertia_kgm2,
                 "inertia_estimate_kgm2": d.inertia_kgm2, "estimate_source": d.source,
                 "identified_class_kgm2": d.class_kgm2, "error_percent": self.error_percent,
-                "level": d.level_name, "message": d.message,
+                "level": d.level_name, "status": d.status, "refused_reason": d.refused_reason,
+                "message": d.message,
                 "values": {k: _json_value(v) for k, v in d.values}}
 
 
@@ -150,7 +153,8 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
                        backlash_width_m: Optional[float] = None, signals_topic: Optional[str] = None,
                        channels: Optional[Sequence[str]] = None, gap_tolerance: Optional[float] = None,
                        log: Callable[[str], Any] = lambda text: None,
-                       on_window: Optional[Callable[[OfflineWindow], Any]] = None) -> OfflineResult:
+                       on_window: Optional[Callable[[OfflineWindow], Any]] = None,
+                       policy: Optional[VerdictPolicy] = None) -> OfflineResult:
     """Diagnose every backlash entry of a recording as the windowing + diagnostic nodes do.
 
     Parameters
@@ -169,6 +173,8 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
     gap_tolerance : the detector's gap tolerance in sample periods (default: the windowing node's)
     log : gets progress lines (library loading/building, warnings)
     on_window : called with each :class:`OfflineWindow` as soon as it is diagnosed
+    policy : the publishing policy (default: the diagnostic node's default parameters,
+        :func:`default_policy`)
 
     Raises :class:`OfflineError` (one line naming the field and value) on bad input.
     """
@@ -180,6 +186,9 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
         raise OfflineError("image_method: must be on when gap_method is off (nothing would be identified)")
     if float(p) not in [float(q) for q in method.p_values]:
         raise OfflineError(f"p: must be one of method.p_values {[float(q) for q in method.p_values]}, got {p!r}")
+    policy = default_policy() if policy is None else policy
+    for name, what in policy.problems():
+        raise OfflineError(f"{name}: must be {what}, got {getattr(policy, name)!r}")
     if backlash_width_m is not None and not (math.isfinite(backlash_width_m) and backlash_width_m > 0):
         raise OfflineError(f"backlash_width_m: must be a finite number > 0, got {backlash_width_m!r}")
     messages, all_topics = read_drive_messages(path, OfflineError)
@@ -243,7 +252,7 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
                                 win.sample_period_s, library=library, system=system, method=method, p=float(p),
                                 gap_method=gap_method, image_method=image_method,
                                 library_error=result.library_error or "", window_id=win.window_id,
-                                entry_time_s=win.entry_time_s)
+                                entry_time_s=win.entry_time_s, policy=policy)
         except Exception as exc:  # as the node: report the window, go on
             d = WindowDiagnosis(ERROR, f"window could not be diagnosed: internal error "
                                        f"{type(exc).__name__}: {exc}", [])
@@ -258,6 +267,11 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
     result.samples, result.batches = detector.samples_seen, detector.batches_seen
     result.dropped = {r: n for r, n in detector.counts.items() if n}
     return result
+
+
+def default_policy(**overrides) -> VerdictPolicy:
+    """The diagnostic node's default publishing policy (jident_ros/parameters.py), with ``overrides``."""
+    return VerdictPolicy.from_params(dict(DIAGNOSTIC_DEFAULTS, **overrides))
 
 
 def _make_detector(system, width, channels, batch_channels, gap_tolerance, defaults, topic_name):
@@ -317,5 +331,5 @@ def write_json(result: OfflineResult, out) -> Path:
     return out
 
 
-__all__ = ["OfflineError", "OfflineResult", "OfflineWindow", "diagnose_recording", "format_window_line",
+__all__ = ["OfflineError", "OfflineResult", "OfflineWindow", "default_policy", "diagnose_recording", "format_window_line",
            "multiarray_message", "summary_line", "write_json", "TABLE_HEADER"]

@@ -6,19 +6,22 @@ which runs it on the windows of a recording).  Plain numpy/scipy; never imports 
 
 For one window (48 pre-entry samples, the entry sample, 1999 after it; paper section 2):
 
+0. the input (:func:`jident_ros.identify.verdict.input_refusal`): a header or content that cannot
+   support an estimate is refused with one line naming the field (ERROR, nothing published);
 1. the gap estimate (:func:`jident_ros.identify.gap.estimate_inertia`): J1 by least squares over the
-   samples inside the backlash zone, with its 95 % interval; when there is one, ``on_estimate`` is
-   called with it at once, *before* the image method runs (latency), and the backlash width K2 is
-   estimated from the relative angle at re-contact (:func:`~jident_ros.identify.gap.estimate_backlash_width`);
+   samples inside the backlash zone, with its 95 % interval; the re-contact check
+   (:func:`~jident_ros.identify.verdict.recontact_check`: does the window's K2 agree with where the
+   load comes back?) and the publishing policy (:func:`~jident_ros.identify.verdict.decide_gap`:
+   plausible band, width consistency, ambiguity).  An accepted estimate is passed to ``on_estimate``
+   at once, *before* the image method runs (latency); the backlash width K2 is estimated from the
+   relative angle at re-contact (:func:`~jident_ros.identify.gap.estimate_backlash_width`);
 2. the paper's image method (:func:`jident_ros.method.patterns.identify_window`, KHM exponent p,
-   H vectors of eq. 33) against the pattern library;
-3. the fused verdict (:func:`jident_ros.identify.fusion.fuse_verdict`): the best continuous J1 (the gap
-   estimate, else the image method's margin-weighted class vote), its class or "between classes", and
-   whether the image vote agrees with the gap's nearest class;
-4. the level: OK (the class is the nominal J1), WARN (another class, between classes, or the image
-   method disagrees with the gap), ERROR (nothing could be identified, or the image method was asked
-   for and there is no usable pattern library), with a one-line message and the key/value pairs of
-   the DiagnosticStatus (docs/interfaces.md).
+   H vectors of eq. 33, the five signals fused) against the pattern library, and whether its answer
+   is in its validity domain (:func:`~jident_ros.identify.verdict.image_domain`);
+3. the verdict (:func:`jident_ros.identify.fusion.fuse_verdict`) and the level: the table of
+   docs/interfaces.md ("/diagnostics"), with a one-line message, a ``status`` (one of
+   :data:`~jident_ros.identify.verdict.STATUSES`), ``refused_reason`` when nothing was published, and
+   the key/value pairs of the DiagnosticStatus.
 """
 from __future__ import annotations
 
@@ -39,6 +42,15 @@ from jident_ros.identify.gap import (
     nearest_class,
 )
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES, OK, WARN
+from jident_ros.identify.verdict import (
+    VerdictPolicy,
+    decide_gap,
+    fmt_classes,
+    image_domain,
+    input_refusal,
+    recontact_check,
+    width_disagreement,
+)
 from jident_ros.method.patterns import Identification, PatternLibrary, identify_window
 from jident_ros.method.pipeline import SIGNALS
 
@@ -55,16 +67,19 @@ class WindowDiagnosis:
     level : int                 OK 0, WARN 1, ERROR 2 (diagnostic_msgs/DiagnosticStatus levels)
     message : str               one line, the status message
     values : list of (key, value)   the status key/values in publishing order (docs/interfaces.md)
-    inertia_kgm2 : float | None     J1 published on ``inertia_estimate``, kg m^2: the verdict's best
-                                    continuous J1 (gap estimate, else the image vote's class); None when
-                                    the window could not be diagnosed
+    inertia_kgm2 : float | None     J1 published on ``inertia_estimate``, kg m^2: the accepted gap
+                                    estimate, else the image method's class when it is trusted; None
+                                    when nothing was published (``refused_reason`` says why)
     source : str | None         'gap' or 'image'
-    class_kgm2 : float | None   identified class: the J1 class (K1 entry) nearest ``inertia_kgm2``
+    class_kgm2 : float | None   the class named: the J1 class (K1 entry) nearest ``inertia_kgm2``
     verdict : Verdict | None    the fused verdict (jident_ros.identify.fusion)
-    gap : GapEstimate | None    the gap estimate, when the window has a usable gap
+    gap : GapEstimate | None    the gap estimate, when the window has a usable gap (published or not)
     identification : Identification | None   the image method's answers (five signals, fused class)
     width : WidthEstimate | None    K2 estimated at re-contact, m (needs alpha1 and alpha2)
     problems : list of str      what partly or wholly failed, one reason each
+    status : str                'nominal', 'deviating', 'between_classes', 'ambiguous', 'refused' or
+                                'undiagnosed' (jident_ros.identify.verdict.STATUSES)
+    refused_reason : str | None     why nothing was published (one line), None when a J1 was
     """
 
     level: int
@@ -78,6 +93,8 @@ class WindowDiagnosis:
     identification: Optional[Identification] = None
     width: Optional[WidthEstimate] = None
     problems: list = field(default_factory=list)
+    status: str = "undiagnosed"
+    refused_reason: Optional[str] = None
 
     @property
     def level_name(self) -> str:
@@ -93,13 +110,22 @@ class WindowDiagnosis:
         return dict(self.values)
 
 
+def _finite_or_nan(v) -> float:
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        return math.nan
+    return x
+
+
 def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
                     sample_period_s: float, *, library: Optional[PatternLibrary], system, method, p: float,
                     gap_method: str = "auto", image_method: bool = True, nominal_kgm2: Optional[float] = None,
                     library_error: str = "", window_id: Optional[int] = None,
                     entry_time_s: Optional[float] = None,
                     on_estimate: Optional[Callable[[float], Any]] = None,
-                    started_at: Optional[float] = None) -> WindowDiagnosis:
+                    started_at: Optional[float] = None,
+                    policy: Optional[VerdictPolicy] = None) -> WindowDiagnosis:
     """Diagnose one window (see the module docstring).
 
     Parameters
@@ -120,27 +146,57 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
     library_error : why ``library`` is None, for the status (default "no pattern library")
     window_id, entry_time_s : reported in the status (entry_time_s defaults to t at the entry sample)
     on_estimate : called with the published J1 (kg m^2) as soon as it is known: right after the gap
-        fit when there is a gap, else after the image method
+        fit when its estimate is accepted, else after the image method when its class is trusted;
+        never when nothing is published
     started_at : ``time.perf_counter()`` when the window arrived (default: now); ``estimate_latency_ms``
         and ``processing_ms`` are measured from it
+    policy : the publishing policy (default :class:`~jident_ros.identify.verdict.VerdictPolicy()`, the
+        diagnostic node's default parameters)
     """
     t0 = time.perf_counter() if started_at is None else float(started_at)
     if gap_method not in GAP_METHODS:
         raise ValueError(f"gap_method: expected one of {', '.join(GAP_METHODS)}, got {gap_method!r}")
     if not image_method and gap_method == "off":
         raise ValueError("image_method: must be true when gap_method is off (nothing would be identified)")
+    policy = VerdictPolicy() if policy is None else policy
+    policy.check()
     nominal = float(system.motor.nominal_inertia_kgm2 if nominal_kgm2 is None else nominal_kgm2)
     classes = tuple(float(c) for c in (library.classes_kgm2 if library is not None
                                        else system.grid.inertia_classes_kgm2))
-    if entry_time_s is None and "t" in window_data:
-        entry_time_s = float(np.asarray(window_data["t"])[entry_index])
     vals: list = []
     if window_id is not None:
         vals.append(("window_id", int(window_id)))
-    if entry_time_s is not None:
-        vals.append(("entry_time_s", float(entry_time_s)))
-    vals += [("backlash_width_m", float(backlash_width_m)), ("p", float(p))]
     problems: list = []
+
+    def finish(level, status, text, j1=None, source=None, cls=None, **kw):
+        """The WindowDiagnosis with the head key/values in front."""
+        refused = kw.pop("refused_reason", None)
+        head = [("status", status)]
+        if refused:
+            head.append(("refused_reason", refused))
+        head += [("identified_class_kgm2", math.nan if cls is None else cls),
+                 ("inertia_estimate_kgm2", math.nan if j1 is None else j1),
+                 ("estimate_source", source or "none"), ("nominal_kgm2", nominal),
+                 ("deviation_percent", math.nan if cls is None else (cls - nominal) / nominal * 100.0)]
+        tail = list(kw.pop("tail", []))
+        if problems:
+            tail.append(("problems", "; ".join(problems)))
+        return WindowDiagnosis(level, text, head + vals + tail, j1, source, cls, problems=problems,
+                               status=status, refused_reason=refused, **kw)
+
+    # 0. the input
+    refusal = input_refusal(window_data, entry_index, backlash_width_m, wheel_radius_m, sample_period_s,
+                            system=system, policy=policy, nominal_kgm2=nominal)
+    if entry_time_s is None and refusal is None and "t" in window_data:
+        entry_time_s = float(np.asarray(window_data["t"], float)[entry_index])
+    if entry_time_s is not None:
+        vals.append(("entry_time_s", _finite_or_nan(entry_time_s)))
+    vals += [("backlash_width_m", _finite_or_nan(backlash_width_m)), ("p", float(p))]
+    if refusal is not None:
+        problems.append(refusal)
+        return finish(ERROR, "refused", f"window refused: {refusal}", refused_reason=refusal)
+    band = policy.band_kgm2(nominal)
+    vals.append(("plausible_band_kgm2", list(band)))
     latency_ms = None
 
     def publish(j1):
@@ -149,8 +205,8 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
             on_estimate(j1)
         latency_ms = (time.perf_counter() - t0) * 1e3
 
-    # 1. the gap: fast, published first
-    gap, gap_reason, width = None, "", None
+    # 1. the gap: fast; published first when the policy accepts it
+    gap, gap_reason, width, recontact, decision = None, "", None, None, None
     if gap_method != "off":
         try:
             gap = estimate_inertia(window_data, entry_index, backlash_width_m, wheel_radius_m, sample_period_s,
@@ -159,12 +215,25 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
         except NoGapError as exc:
             gap_reason = str(exc)
             problems.append(f"gap: {exc}")
+        if gap is None or gap.interval == "angles":   # K2 bounded the gap (or was blamed for its absence)
+            try:
+                recontact = recontact_check(window_data, entry_index, backlash_width_m, wheel_radius_m)
+            except NoGapError as exc:
+                vals.append(("width_consistent", f"unknown: {exc}"))
+        if recontact is not None:
+            vals += [("width_consistent", recontact.consistent), ("recontact_width_m", recontact.width_m),
+                     ("recontact_width_range_m", list(recontact.range_m)), ("recontact_signal", recontact.signal)]
+            if gap is None and not recontact.consistent:
+                problems.append(width_disagreement(recontact, backlash_width_m))
         if gap is not None:
-            publish(gap.inertia_kgm2)
+            decision = decide_gap(gap, classes, nominal, policy, recontact, backlash_width_m)
+            if decision.status == "accepted":
+                publish(gap.inertia_kgm2)
             vals += [("gap_j1_kgm2", gap.inertia_kgm2), ("gap_ci95_kgm2", list(gap.ci95_kgm2)),
                      ("gap_std_error_kgm2", gap.std_error_kgm2), ("gap_samples", gap.n_samples),
                      ("gap_fit", gap.method), ("gap_interval", gap.interval),
-                     ("gap_residual_rms", gap.residual_rms), ("gap_model_error_kgm2", gap.model_error_kgm2)]
+                     ("gap_residual_rms", gap.residual_rms), ("gap_model_error_kgm2", gap.model_error_kgm2),
+                     ("gap_classes_in_ci95_kgm2", list(decision.classes_in_ci)), ("gap_decision", decision.status)]
             if "alpha1" in window_data and "alpha2" in window_data:
                 try:
                     width = estimate_backlash_width(window_data, gap.gap_end, wheel_radius_m, sample_period_s,
@@ -177,8 +246,8 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                          ("backlash_width_estimate_method", width.method)]
     else:
         gap_reason = "gap method off"
-    # 2. the image method
-    idn = None
+    # 2. the image method, and whether its answer is trusted
+    idn, image_cls, in_domain, domain_reason = None, None, False, ""
     if image_method:
         if library is None:
             problems.append(library_error or "no pattern library")
@@ -193,52 +262,112 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                 except Exception as exc:
                     problems.append(f"image method: {type(exc).__name__}: {exc}")
     if idn is not None:
+        image_cls = classes[idn.fused_class_index]
+        lib_width = float(library.widths_m[idn.width_index])
+        in_domain, domain_reason = image_domain(idn.fused_margin, lib_width, float(backlash_width_m),
+                                                float(sample_period_s), float(system.sampling.sample_period_s),
+                                                policy)
+        if in_domain and recontact is not None and not recontact.consistent:
+            in_domain, domain_reason = False, "the window's K2 disagrees with the re-contact"
+        vals += [("image_class_kgm2", image_cls), ("image_margin", idn.fused_margin),
+                 ("image_in_domain", in_domain), ("image_min_margin", policy.image_min_margin)]
+        if not in_domain:
+            vals.append(("image_domain_reason", domain_reason))
         vals += [("fused_class_kgm2", idn.fused_inertia_kgm2), ("fused_margin", idn.fused_margin),
-                 ("library_width_m", library.widths_m[idn.width_index])]
+                 ("library_width_m", lib_width)]
         for s, a in idn.answers.items():
             vals += [(f"j1.{s}", a.inertia_kgm2), (f"h.{s}", a.h), (f"margin.{s}", a.margin)]
-    # 3. the verdict
-    if gap is None and idn is None:
-        text = "window could not be diagnosed: " + "; ".join(problems)
-        if problems:
-            vals.append(("problems", "; ".join(problems)))
-        return WindowDiagnosis(ERROR, text, vals, problems=problems)
-    verdict = fuse_verdict(classes, idn.answers if idn is not None else None,
-                           idn.fused_class_index if idn is not None else None, gap, gap_reason)
-    j1, source = float(verdict.inertia_kgm2), verdict.source
-    if source == "image":
+    library_missing = image_method and library is None
+    lib_text = library_error or "no pattern library"
+
+    def image_phrase(disagree_with: str) -> tuple:
+        """(level bump, text) for the image answer next to a gap class."""
+        if idn is None:
+            return OK, ""
+        if in_domain:
+            return WARN, (f"; the image method disagrees: its class {image_cls:g} (margin {idn.fused_margin:.3g}), "
+                          f"{disagree_with}")
+        return OK, (f"; information: the image method answers class {image_cls:g}, outside its validity domain "
+                    f"({domain_reason}): not a warning")
+
+    def timing():
+        return [("estimate_latency_ms", math.nan if latency_ms is None else latency_ms),
+                ("processing_ms", (time.perf_counter() - t0) * 1e3)]
+
+    # 3. the verdict and the level
+    if gap is not None and decision.status == "accepted":
+        verdict = fuse_verdict(classes, None, idn.fused_class_index if idn is not None else None, gap, gap_reason)
+        j1 = float(gap.inertia_kgm2)
+        nearest = classes[nearest_class(j1, classes)]
+        deviation = (j1 - nominal) / nominal * 100.0
+        if verdict.between_classes:
+            status, level, cls = "between_classes", WARN, None
+            text = (f"J1 = {j1:.5g} ± {gap.std_error_kgm2:.2g} kg m^2: between classes (none within "
+                    f"{BETWEEN_Z:g} standard errors), {deviation:+.1f} % from the nominal {nominal:g}")
+        elif nearest == nominal:
+            status, level, cls = "nominal", OK, nearest
+            text = f"J1 = {j1:.5g} kg m^2: nominal class {nearest:g}"
+        else:
+            status, level, cls = "deviating", WARN, nearest
+            text = (f"J1 = {j1:.5g} kg m^2: class {nearest:g} deviates from the nominal {nominal:g} by "
+                    f"{(nearest - nominal) / nominal * 100.0:+.1f} %")
+        if verdict.agree is False:
+            bump, phrase = image_phrase(f"the gap's nearest class {nearest:g}")
+            level, text = max(level, bump), text + phrase
+        if library_missing:
+            level, text = ERROR, text.replace(" kg m^2:", " kg m^2 (from the gap only):", 1) + f"; {lib_text}"
+        tail = _verdict_values(verdict, classes) + timing()
+        return finish(level, status, text, j1, "gap", cls, verdict=verdict, gap=gap, identification=idn,
+                      width=width, tail=tail)
+    if gap is not None and decision.status == "ambiguous":
+        j1, se = float(gap.inertia_kgm2), float(gap.std_error_kgm2)
+        held = decision.classes_in_ci
+        reason = decision.reason
+        if nominal in held or abs(j1 - nominal) <= BETWEEN_Z * se:
+            level, note = OK, f"consistent with the nominal {nominal:g}"
+        else:
+            level, note = WARN, (f"the nominal {nominal:g} is excluded (more than {BETWEEN_Z:g} standard errors "
+                                 f"from J1 = {j1:.4g} ± {se:.2g})")
+        text = f"{reason}: no class named, nothing published; {note}"
+        if idn is not None and image_cls not in held:
+            bump, phrase = image_phrase(f"outside the interval's classes {fmt_classes(held)}")
+            level, text = max(level, bump), text + phrase
+        if library_missing:
+            level, text = ERROR, text + f"; {lib_text}"
+        return finish(level, "ambiguous", text, gap=gap, identification=idn, width=width, refused_reason=reason,
+                      tail=timing())
+    if gap is not None:  # refused by the policy
+        reason = decision.reason
+        text = f"estimate refused: {reason}; nothing published"
+        if idn is not None:
+            text += f"; the image method answers class {image_cls:g} (margin {idn.fused_margin:.3g}), not published"
+        if library_missing:
+            text += f"; {lib_text}"
+        return finish(ERROR, "refused", text, gap=gap, identification=idn, width=width, refused_reason=reason,
+                      tail=timing())
+    if idn is not None and in_domain:  # no gap: the image method's class, trusted
+        j1 = float(image_cls)
         publish(j1)
-    cls = classes[nearest_class(j1, classes)]
-    deviation = (cls - nominal) / nominal * 100.0
-    if image_method and library is None:
-        level = ERROR
-        text = f"J1 = {j1:.5g} kg m^2 (from the gap only): {library_error or 'no pattern library'}"
-    elif verdict.between_classes:
-        level = WARN
-        text = (f"J1 = {j1:.5g} ± {gap.std_error_kgm2:.2g} kg m^2: between classes (none within "
-                f"{BETWEEN_Z:g} standard errors), "
-                f"{(j1 - nominal) / nominal * 100.0:+.1f} % from the nominal {nominal:g}")
-    elif cls == nominal:
-        level, text = OK, f"J1 = {j1:.5g} kg m^2: nominal class {cls:g}"
-    else:
-        level = WARN
-        text = f"J1 = {j1:.5g} kg m^2: class {cls:g} deviates from the nominal {nominal:g} by {deviation:+.1f} %"
-    if verdict.agree is False:
-        level = max(level, WARN)
-        text += (f"; the image method disagrees: its vote is class {classes[verdict.image_class_index]:g}, "
-                 f"the gap's nearest class {cls:g}")
-    head = [("identified_class_kgm2", cls), ("inertia_estimate_kgm2", j1), ("estimate_source", source),
-            ("nominal_kgm2", nominal), ("deviation_percent", deviation),
-            ("verdict_class_kgm2", math.nan if verdict.class_inertia_kgm2 is None else verdict.class_inertia_kgm2),
+        verdict = fuse_verdict(classes, None, idn.fused_class_index, None, gap_reason)
+        status, level = ("nominal", OK) if j1 == nominal else ("deviating", WARN)
+        what = "nominal class" if j1 == nominal else (
+            f"class {j1:g} deviates from the nominal {nominal:g} by {(j1 - nominal) / nominal * 100.0:+.1f} %; class")
+        text = (f"J1 = {j1:g} kg m^2 (image method, margin {idn.fused_margin:.3g} >= image_min_margin "
+                f"{policy.image_min_margin:g}; no gap estimate: {gap_reason}): {what} {j1:g}")
+        tail = _verdict_values(verdict, classes) + timing()
+        return finish(level, status, text, j1, "image", j1, verdict=verdict, identification=idn, width=width,
+                      tail=tail)
+    if idn is not None:
+        problems.append(f"image method: class {image_cls:g} not published: {domain_reason}")
+    reason = "; ".join(problems) or "nothing identified"
+    return finish(ERROR, "undiagnosed", f"window could not be diagnosed: {reason}", identification=idn,
+                  width=width, refused_reason=reason, tail=timing())
+
+
+def _verdict_values(verdict: Verdict, classes) -> list:
+    return [("verdict_class_kgm2", math.nan if verdict.class_inertia_kgm2 is None else verdict.class_inertia_kgm2),
             ("verdict_between_classes", verdict.between_classes),
             ("verdict_agree", "unknown" if verdict.agree is None else verdict.agree)]
-    if verdict.image_class_index is not None:
-        head.append(("image_vote_class_kgm2", classes[verdict.image_class_index]))
-    vals = head + vals
-    vals += [("estimate_latency_ms", latency_ms), ("processing_ms", (time.perf_counter() - t0) * 1e3)]
-    if problems:
-        vals.append(("problems", "; ".join(problems)))
-    return WindowDiagnosis(level, text, vals, j1, source, cls, verdict, gap, idn, width, problems)
 
 
 __all__ = ["GAP_METHODS", "WindowDiagnosis", "diagnose_window"]

@@ -4,16 +4,19 @@ A thin ROS adapter over :func:`jident_ros.identify.diagnosis.diagnose_window` (t
 ``jident diagnose`` runs offline on a recording).  For each window:
 
 1. the gap estimate (:func:`jident_ros.identify.gap.estimate_inertia`: J1 by least squares over the
-   samples inside the backlash zone) -- when there is one it is published at once on
+   samples inside the backlash zone) -- when the policy accepts it, it is published at once on
    ``inertia_estimate`` (std_msgs/Float64, kg m^2, transient local): the best continuous J1;
 2. the paper's image method (:func:`jident_ros.method.patterns.identify_window`, KHM exponent ``p``)
-   against the pattern library; when the window has no usable gap, the fused verdict's class J1
-   (the margin-weighted vote of the five signals, :mod:`jident_ros.identify.fusion`) is what goes
-   out on ``inertia_estimate``;
-3. one DiagnosticStatus "jident: inertia" on ``/diagnostics`` (REP 107): OK when the verdict's
-   class is the nominal J1; WARN when it deviates, lies between classes, or the image method's vote
-   disagrees with the gap; ERROR when the window could not be diagnosed or the pattern library is
-   unusable; a STALE status when no window arrived for ``stale_after_s``.
+   against the pattern library; when the window has no usable gap, its fused class goes out on
+   ``inertia_estimate`` only when it is trusted (fused margin >= ``image_min_margin``, a library width
+   matching the window's K2);
+3. one DiagnosticStatus "jident: inertia" on ``/diagnostics`` (REP 107), graded by the publishing
+   policy (:mod:`jident_ros.identify.verdict`; the table of docs/interfaces.md): OK for the nominal
+   class; WARN for a deviating class, a J1 between classes, or the image method disagreeing inside its
+   validity domain; ERROR when nothing could be diagnosed (refused input or estimate) or the pattern
+   library is unusable; a STALE status when no window arrived for ``stale_after_s``.  A J1 goes out
+   on ``inertia_estimate`` only when the data support it (plausible band, width consistency, no
+   ambiguous interval, the image method's class only above ``image_min_margin``).
 
 With ``record_dir`` set, the windows (and with ``record_signals`` the drive's signals), the estimates
 and the statuses are logged to an MCAP recording (jident_ros.bag.recording.BagWriter) closed on shutdown.
@@ -28,6 +31,7 @@ from pathlib import Path
 from jident_ros.identify.diagnosis import GAP_METHODS, diagnose_window
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES, STALE
 from jident_ros.identify.library import default_library_path, load_pattern_library
+from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id
 from jident_ros.nodes.params import (
     checked,
@@ -61,6 +65,8 @@ def validate(values: dict):
         require(n, cfg[n], cfg[n] >= 1, "an integer >= 1")
     require("image_method", cfg["image_method"], cfg["image_method"] or cfg["gap_method"] != "off",
             "true when gap_method is off (nothing would be identified)")
+    for name, what in VerdictPolicy.from_params(cfg).problems():
+        require(name, cfg[name], False, what)
     return cfg, system, method
 
 
@@ -81,6 +87,7 @@ def _node_class():
             defaults = dict(DEFAULTS, **system_defaults(), **method_defaults())
             self.cfg, self.system, self.method = validate(declare_parameters(self, defaults))
             c = self.cfg
+            self.policy = VerdictPolicy.from_params(c)
             self.hardware_id = drive_hardware_id(self, c["hardware_id"])
             self.nominal = float(self.system.motor.nominal_inertia_kgm2)
             self.diag = DiagnosticsPublisher(self)
@@ -243,8 +250,8 @@ def _node_class():
                                 p=c["p"], gap_method=c["gap_method"], image_method=c["image_method"],
                                 nominal_kgm2=self.nominal, library_error=self.library_error or "",
                                 window_id=win.window_id, entry_time_s=win.entry_time_s,
-                                on_estimate=self._publish_estimate, started_at=t_recv)
-            if d.diagnosed:
+                                on_estimate=self._publish_estimate, started_at=t_recv, policy=self.policy)
+            if d.level < ERROR:
                 self.get_logger().info(f"window {win.window_id} (entry t = {win.entry_time_s:.4f} s): {d.message} "
                                        f"[{LEVEL_NAMES[d.level]}]")
             else:

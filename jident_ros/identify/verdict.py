@@ -1,0 +1,312 @@
+"""The publishing policy of a window's diagnosis: when a J1 goes out, and which status level it gets.
+
+Principle: a J1 is published on ``inertia_estimate`` only when the data support it:
+
+* not from a window whose header or content cannot support an estimate (:func:`input_refusal`: a
+  sample period, wheel radius or backlash width <= 0 or non-finite, too few samples, a non-finite
+  or absurd value; one line naming the field);
+* not outside the plausible band of J1 (:attr:`VerdictPolicy.plausible_min_ratio` ..
+  :attr:`~VerdictPolicy.plausible_max_ratio` x the nominal J1);
+* not when the backlash width K2 the window was cut with disagrees with the re-contact the dynamics
+  show (:func:`recontact_check`: where a1 -- else the second difference of alpha1 -- drops at the
+  flank impact, |alpha1 - alpha2| must be K2/r);
+* not with a 95 % interval that holds two or more classes ("ambiguous": no class is named);
+* not from a guess: the image method's class alone only when its margin clears
+  :attr:`VerdictPolicy.image_min_margin` (chosen from an evaluation set by
+  :mod:`jident_ros.evaluation.verdicts` so that it is wrong in <= 1 % of the windows it answers) and
+  the window lies in its validity domain (a library width within
+  :attr:`VerdictPolicy.library_width_tolerance` of the window's K2, the library's sample period).
+
+Levels (docs/interfaces.md, "/diagnostics"): a WARN means "look at this drive". OK: the nominal
+class (or an ambiguous interval that holds the nominal class); WARN: a deviating class, a J1
+between classes, an ambiguous interval that excludes the nominal, or the image method disagreeing
+inside its validity domain; ERROR: nothing could be diagnosed (refused input, a refused estimate,
+no gap and no trusted image answer).  Plain numpy; never imports rclpy.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Mapping, Optional
+
+import numpy as np
+
+from jident_ros.identify.gap import GapEstimate, NoGapError, gap_interval
+
+#: Window channels whose magnitude is bounded (see :func:`input_bounds`).
+BOUNDED = ("m_el", "omega1", "omega2", "a1", "a2", "v2")
+
+#: Re-contact check: (before, after) -- the flanks must meet between ``before`` samples before and
+#: ``after`` samples after the end of the gap by the dynamics (gap.gap_interval's 'signature', where
+#: a1 -- or the second difference of alpha1 -- drops).  Measured on the 168 grid cases with the true
+#: K2 (noise-free, 30 dB, 2^16 and 2^18 encoders): the gap by the angles ends 0..1 samples after the
+#: a1 signature's end, -1..2 after the alpha1 one.  A gap that ends later holds loaded samples (a
+#: biased J1), so no margin after: a1 (2, 1), alpha1 (3, 2); one sample of margin before.  With K2
+#: x1.1 the angle gap ends 1..4 samples after the a1 signature's end, with x0.9 -2..0
+#: (`python -m jident_ros.evaluation.verdicts stress` shows what this lets through).
+RECONTACT_SLACK_SAMPLES = {"a1": (2, 1), "alpha1": (3, 2)}
+
+#: Statuses of a window (``WindowDiagnosis.status``).
+STATUSES = ("nominal", "deviating", "between_classes", "ambiguous", "refused", "undiagnosed")
+
+
+@dataclass(frozen=True)
+class VerdictPolicy:
+    """When a window's J1 is published, and the bounds of a plausible window.
+
+    The diagnostic node's parameters of the same names (jident_ros/parameters.py, config/nodes.yaml;
+    docs/interfaces.md) -- a test keeps these defaults equal to them.
+
+    plausible_min_ratio, plausible_max_ratio : the plausible band of J1, x the nominal J1
+    image_min_margin : the image method's class is published alone, and its disagreement with the
+        gap is a WARN, only at a fused margin (second-smallest over smallest fused H, eq. 33) >= this;
+        0 = never (no margin met the 1 % error target on the evaluation set).  Chosen by
+        ``python -m jident_ros.evaluation.verdicts threshold``
+    library_width_tolerance : the image method is in its validity domain only when the library width
+        it used is within this fraction of the window's K2
+    max_torque_factor : |m_el| above this many base torques M_b is absurd (refused)
+    max_speed_factor : |omega1|, |omega2| above this many synchronous speeds Omega_b is absurd; |v2|
+        above r times that; |a1|, |a2| above r x (max torque) / (plausible_min_ratio x nominal J1)
+    """
+
+    plausible_min_ratio: float = 0.5
+    plausible_max_ratio: float = 1.5
+    image_min_margin: float = 0.0
+    library_width_tolerance: float = 0.05
+    max_torque_factor: float = 100.0
+    max_speed_factor: float = 10.0
+
+    @classmethod
+    def from_params(cls, params: Mapping) -> "VerdictPolicy":
+        """The policy from a parameter dict (the diagnostic node's); missing keys take the defaults."""
+        return cls(**{f.name: float(params[f.name]) for f in fields(cls) if f.name in params})
+
+    def problems(self) -> list:
+        """(field, what it must be) for every invalid field; empty when valid."""
+        out = []
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v)):
+                out.append((f.name, "a finite number"))
+        if out:
+            return out
+        if not 0 < self.plausible_min_ratio < 1:
+            out.append(("plausible_min_ratio", "a number in (0, 1)"))
+        if not self.plausible_max_ratio > 1:
+            out.append(("plausible_max_ratio", "a number > 1"))
+        if not (self.image_min_margin == 0 or self.image_min_margin >= 1):
+            out.append(("image_min_margin", "0 (never) or a margin >= 1"))
+        for name in ("library_width_tolerance", "max_torque_factor", "max_speed_factor"):
+            if not getattr(self, name) > 0:
+                out.append((name, "a number > 0"))
+        return out
+
+    def check(self) -> None:
+        """ValueError 'field: must be ..., got ...' for the first invalid field."""
+        for name, what in self.problems():
+            raise ValueError(f"{name}: must be {what}, got {getattr(self, name)!r}")
+
+    def band_kgm2(self, nominal_kgm2: float) -> tuple:
+        return self.plausible_min_ratio * nominal_kgm2, self.plausible_max_ratio * nominal_kgm2
+
+
+# --------------------------------------------------------------------------- input
+
+
+def input_bounds(system, policy: VerdictPolicy, wheel_radius_m: float, nominal_kgm2: float) -> dict:
+    """Bounds of a plausible window: channel -> (bound of |value|, unit, why), from the configuration."""
+    base = system.motor.base
+    t_max = policy.max_torque_factor * base.torque_nm
+    w_max = policy.max_speed_factor * base.mechanical_speed_rad_s
+    a_max = wheel_radius_m * t_max / (policy.plausible_min_ratio * nominal_kgm2)
+    return {
+        "m_el": (t_max, "N m", f"{policy.max_torque_factor:g} x the base torque M_b {base.torque_nm:.4g} N m"),
+        "omega1": (w_max, "rad/s", f"{policy.max_speed_factor:g} x the synchronous speed "
+                                   f"{base.mechanical_speed_rad_s:.4g} rad/s"),
+        "omega2": (w_max, "rad/s", f"{policy.max_speed_factor:g} x the synchronous speed "
+                                   f"{base.mechanical_speed_rad_s:.4g} rad/s"),
+        "v2": (wheel_radius_m * w_max, "m/s", "r x the speed bound"),
+        "a1": (a_max, "m/s^2", "r x the torque bound / the smallest plausible J1"),
+        "a2": (a_max, "m/s^2", "r x the torque bound / the smallest plausible J1"),
+    }
+
+
+def _positive(name: str, v) -> Optional[str]:
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        return f"{name}: must be a finite number > 0, got {v!r}"
+    if not (math.isfinite(x) and x > 0):
+        return f"{name}: must be a finite number > 0, got {x!r}"
+    return None
+
+
+def input_refusal(window: Mapping, entry_index, backlash_width_m, wheel_radius_m, sample_period_s, *,
+                  system, policy: VerdictPolicy, nominal_kgm2: float) -> Optional[str]:
+    """Why the window's header or content cannot support an estimate (one line naming the field and
+    the value), or None.  Checks, in order: the header values (sample period, wheel radius, backlash
+    width > 0 and finite), the channels (1-D, all of one length), the length (at least the configured
+    ``sampling.samples_before_entry`` before the entry and ``samples_from_entry`` from it), every value
+    finite, and the magnitudes of :func:`input_bounds`."""
+    for name, v in (("sample_period_s", sample_period_s), ("wheel_radius_m", wheel_radius_m),
+                    ("backlash_width_m", backlash_width_m)):
+        why = _positive(name, v)
+        if why:
+            return why
+    if not window:
+        return "channels: the window holds no channel"
+    arrays = {}
+    for name, v in window.items():
+        try:
+            a = np.asarray(v, dtype=float)
+        except (TypeError, ValueError):
+            return f"channel {name}: not numeric"
+        if a.ndim != 1:
+            return f"channel {name}: expected one value per sample, got shape {a.shape}"
+        arrays[name] = a
+    lengths = {a.size for a in arrays.values()}
+    n = max(lengths)
+    if len(lengths) > 1:
+        bad = next(k for k, a in arrays.items() if a.size != n)
+        return f"channel {bad}: {arrays[bad].size} samples, the window's other channels have {n}"
+    s = system.sampling
+    if isinstance(entry_index, bool) or not isinstance(entry_index, (int, np.integer)):
+        return f"entry_index: must be an integer, got {entry_index!r}"
+    need = s.samples_before_entry + s.samples_from_entry
+    if n < need:
+        return (f"samples: {n} in the window, need >= {need} (sampling.samples_before_entry "
+                f"{s.samples_before_entry} + samples_from_entry {s.samples_from_entry})")
+    if not s.samples_before_entry <= entry_index <= n - s.samples_from_entry:
+        return (f"entry_index: {entry_index} leaves {entry_index} samples before the entry and {n - entry_index} "
+                f"from it; need >= {s.samples_before_entry} and >= {s.samples_from_entry}")
+    for name, a in arrays.items():
+        bad = np.flatnonzero(~np.isfinite(a))
+        if bad.size:
+            return f"channel {name}: non-finite value {float(a[bad[0]])!r} at sample {int(bad[0])}"
+    for name, (bound, unit, why) in input_bounds(system, policy, float(wheel_radius_m), nominal_kgm2).items():
+        if name in arrays:
+            k = int(np.argmax(np.abs(arrays[name])))
+            if abs(arrays[name][k]) > bound:
+                return (f"channel {name}: |value| {abs(arrays[name][k]):.4g} {unit} at sample {k} exceeds the "
+                        f"plausible {bound:.4g} {unit} ({why})")
+    return None
+
+
+# --------------------------------------------------------------------------- width consistency
+
+
+@dataclass(frozen=True)
+class RecontactCheck:
+    """Where the dynamics show the load coming back, and whether the window's K2 agrees with it.
+
+    signature_end : first sample after the gap by the dynamics (gap.gap_interval's 'signature')
+    signal : 'a1' or 'alpha1' (its second difference)
+    width_m : r |alpha1 - alpha2| at re-contact (midpoint of the samples around signature_end), m
+    range_m : (lo, hi) the width range consistent with the dynamics (RECONTACT_SLACK_SAMPLES), m:
+        r |alpha1 - alpha2| from ``before`` samples before to ``after`` samples after signature_end
+    consistent : the window's K2 lies in range_m
+    """
+
+    signature_end: int
+    signal: str
+    width_m: float
+    range_m: tuple
+    consistent: bool
+
+
+def recontact_check(window: Mapping, entry_index: int, backlash_width_m: float,
+                    wheel_radius_m: float) -> RecontactCheck:
+    """Compare K2 with the re-contact the dynamics show.  Needs alpha1, alpha2 and a1 (else the
+    second difference of alpha1); raises :class:`NoGapError` with the reason when it cannot tell."""
+    if "alpha1" not in window or "alpha2" not in window:
+        raise NoGapError("needs alpha1 and alpha2")
+    signal = "a1" if "a1" in window else "alpha1"
+    _, end, _ = gap_interval({signal: window[signal]}, entry_index, backlash_width_m, wheel_radius_m)
+    rel = np.abs(np.asarray(window["alpha1"], float) - np.asarray(window["alpha2"], float))
+    n = rel.size
+    before, after = RECONTACT_SLACK_SAMPLES[signal]
+    lo_i = max(entry_index, end - before)
+    hi_i = min(n - 1, end + after)
+    r = wheel_radius_m
+    lo, hi = r * float(rel[lo_i:end + 1].min()), r * float(rel[end:hi_i + 1].max())
+    width = 0.5 * r * (float(rel[max(end - 1, entry_index)]) + float(rel[min(end + 1, n - 1)]))
+    return RecontactCheck(int(end), signal, width, (lo, hi), bool(lo <= backlash_width_m <= hi))
+
+
+# --------------------------------------------------------------------------- classes
+
+
+def classes_in_interval(interval, classes) -> list:
+    """The classes (kg m^2) inside a closed interval, in increasing order."""
+    lo, hi = interval
+    return sorted(float(c) for c in classes if lo <= c <= hi)
+
+
+def fmt_classes(cls) -> str:
+    return ", ".join(f"{c:g}" for c in cls)
+
+
+@dataclass(frozen=True)
+class GapDecision:
+    """Whether the gap estimate may be published.
+
+    status : 'accepted', 'ambiguous' or 'refused'
+    reason : one line (why not), '' when accepted
+    classes_in_ci : the classes inside the 95 % interval
+    """
+
+    status: str
+    reason: str
+    classes_in_ci: tuple
+
+
+def decide_gap(gap: GapEstimate, classes, nominal_kgm2: float, policy: VerdictPolicy,
+               recontact: Optional[RecontactCheck], backlash_width_m: float) -> GapDecision:
+    """Publish the gap estimate or not (module docstring): plausible band, width consistency,
+    ambiguity (two or more classes in the 95 % interval)."""
+    j1 = gap.inertia_kgm2
+    held = tuple(classes_in_interval(gap.ci95_kgm2, classes))
+    lo, hi = policy.band_kgm2(nominal_kgm2)
+    if not lo <= j1 <= hi:
+        return GapDecision("refused", f"J1 = {j1:.4g} kg m^2 is outside the plausible band {lo:.4g}..{hi:.4g} "
+                                      f"kg m^2 ({policy.plausible_min_ratio:g}..{policy.plausible_max_ratio:g} x "
+                                      f"the nominal {nominal_kgm2:g}); a wrong K2, radius or torque scale?", held)
+    if recontact is not None and not recontact.consistent:
+        return GapDecision("refused", width_disagreement(recontact, backlash_width_m), held)
+    if len(held) >= 2:
+        a, b = gap.ci95_kgm2
+        return GapDecision("ambiguous", f"ambiguous: 95 % interval {a:.4g}..{b:.4g} kg m^2 holds classes "
+                                        f"{fmt_classes(held)}", held)
+    return GapDecision("accepted", "", held)
+
+
+def width_disagreement(rc: RecontactCheck, backlash_width_m: float) -> str:
+    return (f"backlash_width_m: the window's K2 = {backlash_width_m:.4g} m disagrees with the re-contact in the "
+            f"dynamics ({rc.signal} drops at sample {rc.signature_end}, where r|alpha1 - alpha2| = "
+            f"{rc.range_m[0]:.4g}..{rc.range_m[1]:.4g} m, about {rc.width_m:.4g} m)")
+
+
+# --------------------------------------------------------------------------- image method
+
+
+def image_domain(fused_margin: float, library_width_m: float, backlash_width_m: float, sample_period_s: float,
+                 library_sample_period_s: float, policy: VerdictPolicy) -> tuple:
+    """(inside, reason): is the image method's answer trusted (publishable alone; its disagreement a
+    WARN)?  Inside when image_min_margin > 0, the fused margin >= it, the library width within
+    library_width_tolerance of the window's K2, and the window's sample period the library's."""
+    if policy.image_min_margin <= 0:
+        return False, "image_min_margin 0: the image method never answers alone"
+    if not fused_margin >= policy.image_min_margin:
+        return False, f"its margin {fused_margin:.4g} is below image_min_margin {policy.image_min_margin:g}"
+    if abs(library_width_m - backlash_width_m) > policy.library_width_tolerance * backlash_width_m:
+        return False, (f"its library width {library_width_m:g} m is not within "
+                       f"{policy.library_width_tolerance:.0%} of the window's K2 {backlash_width_m:.4g} m")
+    if abs(sample_period_s - library_sample_period_s) > 1e-6 * library_sample_period_s:
+        return False, (f"the library is built for T_s = {library_sample_period_s:g} s, the window has "
+                       f"{sample_period_s:g} s")
+    return True, ""
+
+
+__all__ = ["BOUNDED", "RECONTACT_SLACK_SAMPLES", "STATUSES", "GapDecision", "RecontactCheck", "VerdictPolicy",
+           "classes_in_interval", "decide_gap", "fmt_classes", "image_domain", "input_bounds", "input_refusal",
+           "recontact_check", "width_disagreement"]
