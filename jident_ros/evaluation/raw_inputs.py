@@ -29,6 +29,7 @@ import math
 import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Optional, Sequence
 
 import numpy as np
@@ -38,6 +39,7 @@ from jident_ros.identify.gap import NoGapError, estimate_inertia, nearest_class
 from jident_ros.sim import Case, SystemConfig, simulate_grid
 from jident_ros.stream.detector import BacklashDetector, stream_batches
 from jident_ros.stream.flank import FlankDetector
+from jident_ros.stream.inputs import read_csv
 from jident_ros.stream.layout import DEFAULT_CHANNELS
 
 #: Channels that get white noise (as jident_ros.sim.add_measurement_noise, plus omega1).
@@ -216,6 +218,63 @@ def paper_consistency(system: SystemConfig, counts: int = 0) -> dict:
     vals = [d for d in diffs if d is not None]
     return {"cases": len(recs), "compared": len(vals),
             "difference_counts": {str(k): vals.count(k) for k in sorted(set(vals))}}
+
+
+def evaluate_second_drive(system: SystemConfig, directory, batch_size: int = 50) -> dict:
+    """The flank detector and the gap estimator on a directory of the second drive's CSV recordings
+    (``python -m jident_ros.second_drive --format csv``, ground truth in its truth.json, read only here):
+    r = the truth's reference radius and N its gear ratio (what a user configures), no K2."""
+    directory = Path(directory)
+    truth = json.loads((directory / "truth.json").read_text())
+    classes = tuple(system.grid.inertia_classes_kgm2)
+    rows = []
+    for tr in truth["recordings"]:
+        data, channels, _ = read_csv(directory / tr["file"])
+        ts = float(tr["sample_period_s"])
+        det = FlankDetector(float(tr["reference_radius_m"]), ts, channels=channels,
+                            gear_ratio=float(tr["gear_ratio"]), encoder_counts_per_rev=int(
+                                tr["encoder"]["counts_per_rev"] or 0),
+                            nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2,
+                            samples_before_entry=system.sampling.samples_before_entry,
+                            samples_from_entry=system.sampling.samples_from_entry)
+        rec = RawRecording(data, channels, int(tr["entry_index"]), float(tr["inertia_kgm2"]),
+                           float(tr["backlash_width_m"]), tr["direction"], int(tr["event"]["index"]))
+        evs = run_detector(det, rec, batch_size)
+        wins = [e.window for e in evs if e.kind == "window"]
+        t_entry = float(data[rec.entry_row, 0])
+        offsets = [int(round((w.entry_time_s - t_entry) / ts)) for w in wins]
+        hit = [k for k, o in enumerate(offsets) if abs(o) <= 1]
+        row = {"name": tr["name"], "direction": tr["direction"], "inertia_kgm2": rec.inertia_kgm2,
+               "backlash_width_m": rec.backlash_width_m, "windows": len(wins), "offsets": offsets,
+               "found": bool(hit), "false_entries": len(wins) - len(hit),
+               "false_in_steady": sum(1 for w in wins if w.entry_time_s < float(data[rec.steady_rows, 0])),
+               "drops": {k: v for k, v in det.counts.items() if v}, "width_error": None, "j1": None,
+               "class_ok": False, "gap_problem": "", "recontact_true": int(tr["recontact_index"]) - rec.entry_row}
+        if hit:
+            w = wins[hit[0]]
+            row["width_error"] = w.backlash_width_estimate_m / rec.backlash_width_m - 1.0
+            row["width_how"] = det.last_width.how if det.last_width else ""
+            row["recontact"] = w.recontact_index - w.entry_index
+            row["flags"] = w.flags
+            try:
+                gap = estimate_inertia(w.as_dict(), w.entry_index, w.backlash_width_m, w.wheel_radius_m,
+                                       w.sample_period_s, recontact_index=w.recontact_index,
+                                       bearing_friction_nms_per_rad=float(tr.get("bearing_friction_nms", 0.0)))
+                row["j1"] = gap.inertia_kgm2
+                row["class_ok"] = classes[nearest_class(gap.inertia_kgm2, classes)] == rec.inertia_kgm2
+            except NoGapError as exc:
+                row["gap_problem"] = str(exc)
+        rows.append(row)
+    werr = np.array([abs(r["width_error"]) for r in rows if r["width_error"] is not None and
+                     math.isfinite(r["width_error"])])
+    offs = [o for r in rows for o in r["offsets"][:1]]
+    return {"recordings": len(rows), "entries_found": sum(r["found"] for r in rows),
+            "false_entries": sum(r["false_entries"] for r in rows),
+            "false_in_steady": sum(r["false_in_steady"] for r in rows),
+            "entry_offset_counts": {str(k): offs.count(k) for k in sorted(set(offs))},
+            "width_max_abs_error": float(werr.max()) if werr.size else None,
+            "width_median_abs_error": float(np.median(werr)) if werr.size else None,
+            "width_estimates": int(werr.size), "class_correct": sum(r["class_ok"] for r in rows), "rows": rows}
 
 
 CONDITIONS = (("clean", None), ("30 dB", 30.0))

@@ -118,6 +118,66 @@ def recontact_index(acc: np.ndarray, entry_index: int, drop: float = 0.6, min_sa
     return entry_index + min_samples + int(np.argmax(below)) - 1
 
 
+def single_mass_run(m_el: np.ndarray, acc: np.ndarray, departure: int, inertia_seed_kgm2: float,
+                    pre_samples: int = 48, max_shift: int = 16, rel_tol: float = 0.01, k_sigma: float = 4.0,
+                    iterations: int = 4):
+    """(entry row, re-contact row, J1 fitted) of the backlash gap from the dynamics, or None.
+
+    Inside the zone the load torque on the motor is zero: m_el = J1 dω1/dt, one J1 for every sample (the
+    gap estimator's model).  Starting from ``inertia_seed_kgm2`` (J1_nom) with a wide tolerance (25 % of
+    |m_el|), the gap is the first run of samples from the departure on (entry at most ``max_shift`` after
+    it) whose residual |m_el - J acc| stays within the tolerance, ended by two samples outside it; J is
+    refitted by least squares over the run and the run found again with the tolerance
+    max(k_sigma * noise, rel_tol * |m_el|), noise from the steady samples before the departure (there
+    dω1/dt = 0), ``iterations`` times.  The entry is the first sample whose load torque has vanished; the
+    re-contact row the first with load again.
+    """
+    n = m_el.size
+    lo = max(departure - pre_samples, 0)
+    pre = slice(lo, max(departure - 1, lo + 2))
+    sm, sa = _noise(m_el[pre]), _noise(acc[pre])
+    j = float(inertia_seed_kgm2)
+    tol_rel = 0.25
+    entry = end = None
+    stop = min(n, departure + 4000)
+    for it in range(iterations + 1):
+        res = np.abs(m_el[departure:stop] - j * acc[departure:stop])
+        tol = np.maximum(k_sigma * math.hypot(sm, j * sa), tol_rel * np.abs(m_el[departure:stop]))
+        ok = res <= tol
+        run3 = ok[:-2] & ok[1:-1] & ok[2:]
+        if not run3[:max_shift + 1].any():
+            return None
+        e = int(np.argmax(run3[:max_shift + 1]))
+        bad2 = ~ok[e:-1] & ~ok[e + 1:]
+        if not bad2.any():
+            return None
+        g = e + int(np.argmax(bad2))
+        if g - e < 3:
+            return None
+        a, b = departure + e, departure + g
+        aa = acc[a:b]
+        den = float(aa @ aa)
+        if not den > 0:
+            return None
+        j_new = float(aa @ m_el[a:b]) / den
+        if not j_new > 0:
+            return None
+        if (a, b) == (entry, end) and it > 1:
+            break
+        entry, end, j = a, b, j_new
+        tol_rel = rel_tol
+    return entry, end, j
+
+
+def _noise(x: np.ndarray) -> float:
+    """White-noise standard deviation of a steady stretch, robust to a few samples of a starting transient
+    (the drive may act just before the clutch leaves its flank): 1.4826 MAD of the first differences / sqrt 2."""
+    if x.size < 5:
+        return 0.0
+    dx = np.diff(x)
+    return float(1.4826 * np.median(np.abs(dx - np.median(dx))) / math.sqrt(2.0))
+
+
 def estimate_width(window: dict, entry_index: int, wheel_radius_m: float, sample_period_s: float,
                    gear_ratio: float = 1.0, flank_rad: Optional[float] = None, recontact: Optional[int] = None,
                    angle_quantum_rad: float = 0.0, contact_samples: int = 32,
@@ -390,13 +450,14 @@ class FlankDetector(BacklashDetector):
     def _finish_flank(self, cap: _FlankCapture) -> Event:
         data = np.concatenate(cap.rows)
         dep = cap.departure_row
-        shift = self._refine(data, dep)
+        shift, recontact = self._refine(data, dep)
         e0 = dep + shift - self.samples_before_entry
         win = data[e0:e0 + self.window_length]
         e = self.samples_before_entry
         wd = {c: win[:, j] for j, c in enumerate(self.channels)}
+        rc = None if recontact is None or recontact - e0 >= self.window_length else recontact - e0
         res = estimate_width(wd, e, self.wheel_radius_m, self.sample_period_s, self.gear_ratio,
-                             flank_rad=cap.flank_rad, angle_quantum_rad=self.angle_quantum_rad,
+                             flank_rad=cap.flank_rad, recontact=rc, angle_quantum_rad=self.angle_quantum_rad,
                              contact_samples=self.contact_samples,
                              contact_tolerance_rad=self.contact_tolerance_rad)
         self.last_width = res
@@ -416,18 +477,17 @@ class FlankDetector(BacklashDetector):
         self.last_event = ev
         return ev
 
-    def _refine(self, data: np.ndarray, dep: int) -> int:
-        """Samples from the departure to the entry sample (module docstring), 0 .. refine_samples."""
-        if (self.nominal_inertia_kgm2 is None or not self.refine_samples or "a1" not in self.channels
-                or "m_el" not in self.channels):
-            return 0
-        m = data[:, self.channels.index("m_el")]
-        a = data[:, self.channels.index("a1")]
-        t_load = m - self.nominal_inertia_kgm2 * a / self.wheel_radius_m
-        steady = float(np.mean(t_load[max(dep - self.samples_before_entry, 0):max(dep - 2, 1)]))
-        if not abs(steady) > 0:
-            return 0
-        s = 1.0 if steady > 0 else -1.0
-        seg = s * t_load[dep:dep + self.refine_samples + 1] > self.load_drop_fraction * abs(steady)
-        return 0 if seg.all() else int(np.argmin(seg))
-
+    def _refine(self, data: np.ndarray, dep: int):
+        """(samples from the departure to the entry sample, re-contact row or None) from the dynamics
+        (:func:`single_mass_run`), (0, None) without m_el, a motor acceleration or J1_nom."""
+        if self.nominal_inertia_kgm2 is None or "m_el" not in self.channels:
+            return 0, None
+        wd = {c: data[:, j] for j, c in enumerate(self.channels)}
+        acc, _ = motor_acceleration(wd, self.wheel_radius_m, self.sample_period_s)
+        if acc is None:
+            return 0, None
+        run = single_mass_run(wd["m_el"], acc, dep, self.nominal_inertia_kgm2, self.samples_before_entry,
+                              self.refine_samples)
+        if run is None:
+            return 0, None
+        return run[0] - dep, run[1]
