@@ -99,7 +99,8 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                     library_error: str = "", window_id: Optional[int] = None,
                     entry_time_s: Optional[float] = None,
                     on_estimate: Optional[Callable[[float], Any]] = None,
-                    started_at: Optional[float] = None) -> WindowDiagnosis:
+                    started_at: Optional[float] = None, recontact_index: Optional[int] = None,
+                    width_estimate: Optional[WidthEstimate] = None) -> WindowDiagnosis:
     """Diagnose one window (see the module docstring).
 
     Parameters
@@ -123,6 +124,9 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
         fit when there is a gap, else after the image method
     started_at : ``time.perf_counter()`` when the window arrived (default: now); ``estimate_latency_ms``
         and ``processing_ms`` are measured from it
+    recontact_index, width_estimate : from a flank-detector window (raw encoder angles, no K2): the gap
+        ends at its re-contact row and its K2 estimate is reported instead of one from zone-centred angles
+        (:func:`detector_arguments`)
     """
     t0 = time.perf_counter() if started_at is None else float(started_at)
     if gap_method not in GAP_METHODS:
@@ -155,7 +159,8 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
         try:
             gap = estimate_inertia(window_data, entry_index, backlash_width_m, wheel_radius_m, sample_period_s,
                                    method=None if gap_method == "auto" else gap_method,
-                                   bearing_friction_nms_per_rad=system.motor.bearing_friction_nms_per_rad)
+                                   bearing_friction_nms_per_rad=system.motor.bearing_friction_nms_per_rad,
+                                   recontact_index=recontact_index)
         except NoGapError as exc:
             gap_reason = str(exc)
             problems.append(f"gap: {exc}")
@@ -165,7 +170,9 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                      ("gap_std_error_kgm2", gap.std_error_kgm2), ("gap_samples", gap.n_samples),
                      ("gap_fit", gap.method), ("gap_interval", gap.interval),
                      ("gap_residual_rms", gap.residual_rms), ("gap_model_error_kgm2", gap.model_error_kgm2)]
-            if "alpha1" in window_data and "alpha2" in window_data:
+            if width_estimate is not None:
+                width = width_estimate
+            elif "alpha1" in window_data and "alpha2" in window_data:
                 try:
                     width = estimate_backlash_width(window_data, gap.gap_end, wheel_radius_m, sample_period_s,
                                                     gap.inertia_kgm2)
@@ -241,4 +248,17 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
     return WindowDiagnosis(level, text, vals, j1, source, cls, verdict, gap, idn, width, problems)
 
 
-__all__ = ["GAP_METHODS", "WindowDiagnosis", "diagnose_window"]
+def detector_arguments(window) -> dict:
+    """diagnose_window's ``recontact_index`` and ``width_estimate`` for a captured
+    :class:`~jident_ros.stream.layout.Window`: a flank-detector window's own; none for the paper detector's."""
+    if getattr(window, "detector", "paper") != "flank":
+        return {}
+    est = None
+    if math.isfinite(window.backlash_width_estimate_m):
+        est = WidthEstimate(float(window.backlash_width_estimate_m), float(window.backlash_width_se_m),
+                            int(window.recontact_index), "flank")
+    return {"recontact_index": window.recontact_index if window.recontact_index >= 0 else None,
+            "width_estimate": est}
+
+
+__all__ = ["GAP_METHODS", "WindowDiagnosis", "detector_arguments", "diagnose_window"]
