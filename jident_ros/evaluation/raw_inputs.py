@@ -264,6 +264,14 @@ def evaluate_second_drive(system: SystemConfig, directory, batch_size: int = 50)
                 row["class_ok"] = classes[nearest_class(gap.inertia_kgm2, classes)] == rec.inertia_kgm2
             except NoGapError as exc:
                 row["gap_problem"] = str(exc)
+            try:   # the integral-form fit over the gap alone (no pre-entry steady-state assumption)
+                sp = estimate_inertia(w.as_dict(), w.entry_index, w.backlash_width_m, w.wheel_radius_m,
+                                      w.sample_period_s, method="speed", recontact_index=w.recontact_index,
+                                      bearing_friction_nms_per_rad=float(tr.get("bearing_friction_nms", 0.0)))
+                row["j1_speed_fit"] = sp.inertia_kgm2
+                row["class_ok_speed_fit"] = classes[nearest_class(sp.inertia_kgm2, classes)] == rec.inertia_kgm2
+            except NoGapError:
+                pass
         rows.append(row)
     werr = np.array([abs(r["width_error"]) for r in rows if r["width_error"] is not None and
                      math.isfinite(r["width_error"])])
@@ -274,7 +282,8 @@ def evaluate_second_drive(system: SystemConfig, directory, batch_size: int = 50)
             "entry_offset_counts": {str(k): offs.count(k) for k in sorted(set(offs))},
             "width_max_abs_error": float(werr.max()) if werr.size else None,
             "width_median_abs_error": float(np.median(werr)) if werr.size else None,
-            "width_estimates": int(werr.size), "class_correct": sum(r["class_ok"] for r in rows), "rows": rows}
+            "width_estimates": int(werr.size), "class_correct": sum(r["class_ok"] for r in rows),
+            "class_correct_speed_fit": sum(bool(r.get("class_ok_speed_fit")) for r in rows), "rows": rows}
 
 
 CONDITIONS = (("clean", None), ("30 dB", 30.0))
@@ -313,12 +322,24 @@ def main(argv=None) -> int:
     p.add_argument("--report", action="store_true", help="run the issue-12 detector targets on our simulator")
     p.add_argument("--steady-s", type=float, default=10.0)
     p.add_argument("--counts", type=int, default=65536)
+    p.add_argument("--second-drive", nargs="*", default=(), metavar="DIR",
+                   help="also evaluate these directories of the second drive's CSV recordings "
+                        "(python -m jident_ros.second_drive --format csv --out DIR)")
     p.add_argument("--json", default="", help="also write the full result here")
     a = p.parse_args(argv)
     if not a.report:
         p.print_help()
         return 0
-    res = report(load_system_config(), steady_s=a.steady_s, counts=a.counts)
+    system = load_system_config()
+    res = report(system, steady_s=a.steady_s, counts=a.counts)
+    for d in a.second_drive:
+        r = evaluate_second_drive(system, d)
+        res.setdefault("second_drive", {})[str(d)] = r
+        print(f"second drive {d}: entries {r['entries_found']}/{r['recordings']}, false {r['false_entries']} "
+              f"(in the steady stretches: {r['false_in_steady']}), entry offset {r['entry_offset_counts']}, K2 |error| "
+              f"median {_pct(r['width_median_abs_error'])} max {_pct(r['width_max_abs_error'])} "
+              f"({r['width_estimates']} estimates), class {r['class_correct']}/{r['recordings']} (default gap fit), "
+              f"{r['class_correct_speed_fit']}/{r['recordings']} (speed fit)")
     if a.json:
         with open(a.json, "w") as f:
             json.dump(res, f, indent=1, default=float)
