@@ -349,7 +349,8 @@ def jointstate_batches(path, sample_period_s: float, motor_joint: str = "motor",
     elif len(topics) > 1:
         raise OfflineError(f"recording {path}: several joint_states topics ({', '.join(topics)}); choose one with --topic")
     if not js:
-        raise OfflineError(f"recording {path}: no sensor_msgs/JointState topic ending in joint_states "
+        raise OfflineError(f"recording {path}: no drive/signals topic and no sensor_msgs/JointState topic ending in "
+                           f"joint_states "
                            f"(topics: {', '.join(sorted({c.topic for c in reader.connections})) or 'none'})")
     prefix = js[0].topic[:-len("joint_states")]
     imu = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/Imu" and c.topic == prefix + "imu"]
