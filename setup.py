@@ -36,6 +36,8 @@ setup(
         'PyYAML',
         'matplotlib',
         'tqdm',
+        # recordings: CDR, message definitions and type hashes (typestore), reading any rosbag2 bag
+        'rosbags',
     ],
     extras_require={
         'test': ['pytest', 'rosbags'],

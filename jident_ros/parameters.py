@@ -37,6 +37,14 @@ WINDOWING = {
     "hardware_id": "",                    # default: the resolved drive namespace, e.g. /drive
     "diagnostics_period_s": 1.0,          # summary status period; 0 = only on events
     "progress_every_batches": 10,         # publish drive/progress (drive time read) every this many batches; 0 = off
+    "input": "signals",                   # signals (drive/signals Float64MultiArray) | joint_states (sensor_msgs/JointState)
+    "detector": "auto",                   # auto (flank for joint_states, paper for signals) | flank | paper
+    "gear_ratio": 1.0,                    # N in delta = alpha1 - N alpha2 (flank detector)
+    "motor_joint": "motor",               # joint_states: the motor joint (alpha1, omega1, m_el)
+    "load_joint": "load",                 # joint_states: the load joint (alpha2, omega2)
+    "use_imu": False,                     # joint_states: a1 from sensor_msgs/Imu on imu
+    "imu_axis": "x",                      # linear_acceleration axis that is a1
+    "batch_size": 50,                     # joint_states: samples per batch handed to the detector
 }
 
 

@@ -76,7 +76,7 @@ def test_window_without_a_gap_is_rejected_with_a_reason():
     with pytest.raises(NoGapError, match="no backlash gap"):
         estimate_inertia(w, e, width, R, TS)
     w2, e, width = single_mass_window(1.16)
-    w2["a1"][:] = -1.0
+    w2["a1"][:] = 0.0
     del w2["alpha1"], w2["alpha2"]
     with pytest.raises(NoGapError, match="does not accelerate"):
         estimate_inertia(w2, e, width, R, TS)
@@ -291,3 +291,21 @@ def test_angle_fit_on_simulated_windows_is_within_three_standard_errors():
         assert g.method == "angle" and g.interval == "angles"
         assert abs(g.inertia_kgm2 / c.inertia_kgm2 - 1) < 1e-3, c
         assert abs(g.inertia_kgm2 - c.inertia_kgm2) <= 3 * g.std_error_kgm2, c
+
+
+def test_reverse_rotation_gives_the_same_j1_and_width_uncertainty(simulated):
+    """Issue 12: mirrored signals (reverse rotation) used to fall back on the coarse bracket (the contact fit's
+    slope came out negative); now the same J1, the same width and the same uncertainty both ways."""
+    for i, c in enumerate(simulated.cases):
+        fwd = simulated.case(i)
+        rev = {k: (v if k == "t" else -np.asarray(v)) for k, v in fwd.items()}
+        out = []
+        for w in (fwd, rev):
+            g = estimate_inertia(w, simulated.entry_index, c.backlash_width_m, R, simulated.sample_period_s)
+            est = estimate_backlash_width(w, g.gap_end, R, simulated.sample_period_s, g.inertia_kgm2)
+            out.append((g.inertia_kgm2, g.std_error_kgm2, est))
+        (j_f, s_f, w_f), (j_r, s_r, w_r) = out
+        assert w_f.method == w_r.method == "contact", c
+        assert j_r == pytest.approx(j_f, rel=1e-9) and s_r == pytest.approx(s_f, rel=1e-9)
+        assert w_r.width_m == pytest.approx(w_f.width_m, rel=1e-9)
+        assert w_r.std_m == pytest.approx(w_f.std_m, rel=1e-9)

@@ -20,8 +20,10 @@ from jident_ros.bag.recording import salvage_main
 from jident_ros.cli.demo import main as demo_main
 from jident_ros.cli.offline import (
     TABLE_HEADER,
+    OfflineError,
     default_policy,
     diagnose_recording,
+    diagnose_samples,
     format_window_line,
     summary_line,
     write_json,
@@ -38,6 +40,7 @@ from jident_ros.method.patterns import PatternLibrary
 from jident_ros.sim import Case, add_measurement_noise, paper_grid_cases, quantise_encoders, simulate_grid, steady_state
 from jident_ros.sim.model import Model
 from jident_ros.sim.motor import breakdown_slip, steady_state_phasors
+from jident_ros.stream.inputs import parse_map
 
 #: diagnosis.GAP_METHODS, spelled out so that `jident --help` does not import the method (test_config_cli)
 CLI_GAP_METHODS = ("auto", "acceleration", "anchored", "angle", "speed", "off")
@@ -239,10 +242,23 @@ def cmd_diagnose(args) -> int:
 
     overrides = {k: getattr(args, k) for k in ("image_min_margin", "plausible_min_ratio", "plausible_max_ratio")
                  if getattr(args, k) is not None}
-    result = diagnose_recording(args.recording, system=system, method=method, p=args.p, library_path=args.library,
-                                gap_method=args.gap_method, image_method=not args.no_image,
-                                backlash_width_m=args.backlash_width_m, signals_topic=args.topic, log=log,
-                                on_window=show, policy=default_policy(**overrides))
+    common = dict(system=system, method=method, p=args.p, library_path=args.library, gap_method=args.gap_method,
+                  image_method=not args.no_image, log=log, on_window=show,
+                  policy=default_policy(**overrides))
+    samples = dict(gear_ratio=args.gear_ratio, motor_joint=args.motor_joint, load_joint=args.load_joint,
+                   imu_axis=args.imu_axis, topic=args.topic, backlash_width_m=args.backlash_width_m,
+                   detector=args.detector or "flank")
+    if str(args.recording).lower().endswith(".csv"):
+        result = diagnose_samples(args.recording, maps=parse_map(args.map) if args.map else None, **common, **samples)
+    else:
+        try:
+            result = diagnose_recording(args.recording, backlash_width_m=args.backlash_width_m,
+                                        signals_topic=args.topic, detector=args.detector or "paper",
+                                        gear_ratio=args.gear_ratio, **common)
+        except OfflineError as exc:
+            if "no drive/signals topic" not in str(exc):
+                raise
+            result = diagnose_samples(args.recording, **common, **samples)     # a bag of /joint_states
     if args.json:
         write_json(result, args.json)
     print(summary_line(result) + (f"; JSON: {args.json}" if args.json else ""))
@@ -297,9 +313,11 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     e.add_argument("--quiet", action="store_true")
     e.set_defaults(func=cmd_evaluate)
-    g = sub.add_parser("diagnose", help="diagnose every backlash entry of a recording (drive/signals) as the "
+    g = sub.add_parser("diagnose", help="diagnose every backlash entry of a recording (drive/signals or "
+                       "/joint_states bag, or CSV) as the "
                        "windowing and diagnostic nodes do, without ROS")
-    g.add_argument("recording", help="bag directory or .mcap file (e.g. a diagnostic node's record_dir)")
+    g.add_argument("recording", help="bag directory or .mcap file (a diagnostic node's record_dir, or a "
+                   "`ros2 bag record` of joint_states [+ imu]), or a .csv file")
     g.add_argument("--p", type=_positive("--p"), default=2.0, help="KHM exponent p, one of method.p_values (default 2)")
     g.add_argument("--library", help="pattern library .npz (default: build-patterns' default path; built when missing)")
     g.add_argument("--gap-method", choices=CLI_GAP_METHODS, default="auto",
@@ -307,8 +325,20 @@ def build_parser() -> argparse.ArgumentParser:
                         "when alpha1 is, else speed)")
     g.add_argument("--no-image", action="store_true", help="skip the paper's image method (gap estimate only)")
     g.add_argument("--backlash-width-m", type=_positive("--backlash-width-m"),
-                   help="K2 of inequality (1), m (default: the recording's drive/backlash_width, else 0.005)")
-    g.add_argument("--topic", help="the drive/signals topic (default: the recording's one topic ending in drive/signals)")
+                   help="K2 of inequality (1), m, paper detector only (default for drive/signals recordings: their "
+                        "drive/backlash_width, else 0.005)")
+    g.add_argument("--detector", choices=("flank", "paper"),
+                   help="entry detector: flank (no K2, raw encoder angles; the default for JointState bags and CSV) "
+                        "or paper (inequality 1 with K2, zone-centred angles; the default for drive/signals)")
+    g.add_argument("--gear-ratio", type=_positive("--gear-ratio"), default=1.0,
+                   help="N in delta = alpha1 - N alpha2 (motor turns per load-encoder turn; default 1)")
+    g.add_argument("--motor-joint", default="motor", help="JointState name of the motor joint (default motor)")
+    g.add_argument("--load-joint", default="load", help="JointState name of the load joint (default load)")
+    g.add_argument("--imu-axis", choices=("x", "y", "z"), default="x",
+                   help="sensor_msgs/Imu linear_acceleration axis that is a1 (default x)")
+    g.add_argument("--map", metavar="CH=COL[:SCALE],...",
+                   help="CSV: other column names and scale factors to SI, e.g. alpha1=enc_motor:0.0000958738,t=time_ms:0.001")
+    g.add_argument("--topic", help="the drive/signals or joint_states topic (default: the recording's only one)")
     g.add_argument("--image-min-margin", type=float,
                    help="publish the image method's class alone (and warn on its disagreement) only at a fused "
                         "margin >= this; 0 = never (default: the diagnostic node's image_min_margin)")

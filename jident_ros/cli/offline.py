@@ -29,15 +29,23 @@ import numpy as np
 from jident_ros.bag.recorded import DriveReplay, read_drive_messages
 from jident_ros.bag.recording import RecordingError, deserialize
 from jident_ros.config import load_method_config, load_system_config
-from jident_ros.identify.diagnosis import GAP_METHODS, WindowDiagnosis, diagnose_window
+from jident_ros.identify.diagnosis import GAP_METHODS, WindowDiagnosis, detector_arguments, diagnose_window
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.parameters import DIAGNOSTIC as DIAGNOSTIC_DEFAULTS
 from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
-from jident_ros.stream.detector import BacklashDetector
+from jident_ros.stream.detector import BacklashDetector, stream_batches
+from jident_ros.stream.flank import DETECTORS, FlankDetector
+from jident_ros.stream.inputs import InputError, JointStateAdapter, read_csv
 from jident_ros.stream.layout import DRIVE_TOPICS, REQUIRED_CHANNELS, SIGNALS_TOPIC, WIDTH_TOPIC, pack
 from jident_ros.stream.layout import topic_matches as _matches
+
+try:  # reading a `ros2 bag record` of /joint_states (any storage, any distro) needs rosbags
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+except ImportError:  # pragma: no cover - the drive/signals path does not need it
+    AnyReader = None
 
 
 class OfflineError(ValueError):
@@ -70,6 +78,10 @@ class OfflineWindow:
     backlash_width_m: float
     true_inertia_kgm2: Optional[float]
     diagnosis: WindowDiagnosis
+    backlash_width_estimate_m: Optional[float] = None   # the flank detector's K2 of this traversal, m
+    backlash_width_se_m: Optional[float] = None
+    detector: str = "paper"
+    flags: tuple = ()                                   # "second_entry", "cut_off"
 
     @property
     def inertia_kgm2(self) -> Optional[float]:
@@ -90,7 +102,9 @@ class OfflineWindow:
                 "inertia_estimate_kgm2": d.inertia_kgm2, "estimate_source": d.source,
                 "identified_class_kgm2": d.class_kgm2, "error_percent": self.error_percent,
                 "level": d.level_name, "status": d.status, "refused_reason": d.refused_reason,
-                "message": d.message,
+                "message": d.message, "detector": self.detector,
+                "backlash_width_estimate_m": _json_value(self.backlash_width_estimate_m),
+                "backlash_width_se_m": _json_value(self.backlash_width_se_m), "flags": list(self.flags),
                 "values": {k: _json_value(v) for k, v in d.values}}
 
 
@@ -107,6 +121,8 @@ class OfflineResult:
     batches: int = 0
     library_path: Optional[str] = None
     library_error: Optional[str] = None
+    cut_off: list = field(default_factory=list)    # windows cut off by the end of the data: {entry_time_s, samples}
+    jitter: Optional[dict] = None                  # JointState stamp period statistics
 
     @property
     def estimates(self) -> list:
@@ -124,6 +140,8 @@ class OfflineResult:
                 "backlash_width_source": self.backlash_width_source, "samples": self.samples,
                 "batches": self.batches, "dropped": dict(self.dropped), "library": self.library_path,
                 "library_error": self.library_error, "levels": self.level_counts(),
+                "cut_off": [{k: _json_value(v) for k, v in c.items()} for c in self.cut_off],
+                "jitter": None if self.jitter is None else {k: _json_value(v) for k, v in self.jitter.items()},
                 "windows": [w.to_json() for w in self.windows]}
 
 
@@ -154,7 +172,8 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
                        channels: Optional[Sequence[str]] = None, gap_tolerance: Optional[float] = None,
                        log: Callable[[str], Any] = lambda text: None,
                        on_window: Optional[Callable[[OfflineWindow], Any]] = None,
-                       policy: Optional[VerdictPolicy] = None) -> OfflineResult:
+                       policy: Optional[VerdictPolicy] = None,
+                       detector: str = "paper", gear_ratio: float = 1.0) -> OfflineResult:
     """Diagnose every backlash entry of a recording as the windowing + diagnostic nodes do.
 
     Parameters
@@ -241,31 +260,19 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
         raise OfflineError(f"{topic_name}: the first message is not in the drive/signals layout ({reason})")
 
     def make_detector(batch_channels, topic_name, k2):
-        return _make_detector(system, k2, channels, batch_channels, gap_tolerance, WINDOWING_DEFAULTS, topic_name)
+        return _make_detector(system, k2, channels, batch_channels, gap_tolerance, WINDOWING_DEFAULTS, topic_name,
+                              detector, gear_ratio)
 
     replay = DriveReplay(names, width, follow_width, decode=decode, read_width=_float_data,
                          read_truth=lambda msg, topic_name: float(msg.data), make_detector=make_detector,
                          first_layout_error=first_layout_error, log=log)
+    diag = _window_diagnoser(system, method, p, library, gap_method, image_method, result, policy)
     for win in replay.windows(messages):
-        try:
-            d = diagnose_window(win.as_dict(), win.entry_index, win.backlash_width_m, win.wheel_radius_m,
-                                win.sample_period_s, library=library, system=system, method=method, p=float(p),
-                                gap_method=gap_method, image_method=image_method,
-                                library_error=result.library_error or "", window_id=win.window_id,
-                                entry_time_s=win.entry_time_s, policy=policy)
-        except Exception as exc:  # as the node: report the window, go on
-            d = WindowDiagnosis(ERROR, f"window could not be diagnosed: internal error "
-                                       f"{type(exc).__name__}: {exc}", [])
-        ow = OfflineWindow(win.window_id, win.entry_time_s, win.backlash_width_m,
-                           replay.true_inertia(win.entry_time_s, ts)[0], d)
-        result.windows.append(ow)
-        if on_window is not None:
-            on_window(ow)
+        _add_window(result, win, diag(win), replay.true_inertia(win.entry_time_s, ts)[0], on_window)
     detector = replay.detector
     if detector is None:
         raise OfflineError(f"recording {path}: topic {topic} holds no message")
-    result.samples, result.batches = detector.samples_seen, detector.batches_seen
-    result.dropped = {r: n for r, n in detector.counts.items() if n}
+    _finish(result, detector, log)
     return result
 
 
@@ -274,22 +281,174 @@ def default_policy(**overrides) -> VerdictPolicy:
     return VerdictPolicy.from_params(dict(DIAGNOSTIC_DEFAULTS, **overrides))
 
 
-def _make_detector(system, width, channels, batch_channels, gap_tolerance, defaults, topic_name):
+def _window_diagnoser(system, method, p, library, gap_method, image_method, result, policy=None):
+    def diag(win):
+        try:
+            return diagnose_window(win.as_dict(), win.entry_index, win.backlash_width_m, win.wheel_radius_m,
+                                   win.sample_period_s, library=library, system=system, method=method, p=float(p),
+                                   gap_method=gap_method, image_method=image_method,
+                                   library_error=result.library_error or "", window_id=win.window_id,
+                                   entry_time_s=win.entry_time_s, policy=policy, **detector_arguments(win))
+        except Exception as exc:  # as the node: report the window, go on
+            return WindowDiagnosis(ERROR, f"window could not be diagnosed: internal error "
+                                          f"{type(exc).__name__}: {exc}", [])
+    return diag
+
+
+def _add_window(result, win, d, true_j1, on_window):
+    est = getattr(win, "backlash_width_estimate_m", math.nan)
+    ow = OfflineWindow(win.window_id, win.entry_time_s, win.backlash_width_m, true_j1, d,
+                       est if math.isfinite(est) else None,
+                       win.backlash_width_se_m if math.isfinite(est) else None, win.detector,
+                       tuple(win.flag_names))
+    result.windows.append(ow)
+    if on_window is not None:
+        on_window(ow)
+
+
+def _finish(result, detector, log):
+    """The end of the data: a window in progress is reported (cut_off), the counts collected."""
+    for ev in detector.finish():
+        w = ev.window
+        result.cut_off.append({"entry_time_s": w.entry_time_s, "samples_from_entry": len(w) - w.entry_index})
+        log(f"window cut off by the end of the data: {ev.detail}")
+    result.samples, result.batches = detector.samples_seen, detector.batches_seen
+    result.dropped = {r: n for r, n in detector.counts.items() if n}
+
+
+def _make_detector(system, width, channels, batch_channels, gap_tolerance, defaults, topic_name,
+                   detector: str = "paper", gear_ratio: float = 1.0):
     sampling = system.sampling
     if channels is None:
         channels = [c for c in defaults["channels"] if c in batch_channels]
     missing = [c for c in REQUIRED_CHANNELS if c not in batch_channels]
     if missing:
-        raise OfflineError(f"{topic_name}: channel {missing[0]!r} missing (the batches carry "
-                           f"{','.join(batch_channels)}; inequality 1 needs t, alpha1, alpha2)")
+        raise OfflineError(f"{topic_name}: channel {missing[0]!r} missing (the data carry "
+                           f"{','.join(batch_channels)}; the detectors need t, alpha1, alpha2)")
+    common = dict(channels=("t",) + tuple(c for c in channels if c != "t"),
+                  samples_before_entry=sampling.samples_before_entry, samples_from_entry=sampling.samples_from_entry,
+                  gap_tolerance=defaults["gap_tolerance"] if gap_tolerance is None else gap_tolerance)
     try:
-        return BacklashDetector(width, system.load.wheel_radius_m, sampling.sample_period_s,
-                                channels=("t",) + tuple(c for c in channels if c != "t"),
-                                samples_before_entry=sampling.samples_before_entry,
-                                samples_from_entry=sampling.samples_from_entry,
-                                gap_tolerance=defaults["gap_tolerance"] if gap_tolerance is None else gap_tolerance)
+        if detector == "flank":
+            return FlankDetector(system.load.wheel_radius_m, sampling.sample_period_s, gear_ratio=gear_ratio,
+                                 nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2, **common)
+        if detector != "paper":
+            raise ValueError(f"detector: expected one of {', '.join(DETECTORS)}, got {detector!r}")
+        return BacklashDetector(width, system.load.wheel_radius_m, sampling.sample_period_s, **common)
     except ValueError as exc:
         raise OfflineError(str(exc)) from None
+
+
+# --------------------------------------------------------------------------- JointState bags, CSV files
+
+def jointstate_batches(path, sample_period_s: float, motor_joint: str = "motor", load_joint: str = "load",
+                       imu_axis: str = "x", topic: Optional[str] = None, batch_size: int = 50):
+    """(adapter, batch iterator, joint_states topic) of a `ros2 bag record` bag holding sensor_msgs/JointState
+    (topic ending in ``joint_states``, any namespace) and optionally sensor_msgs/Imu (ending in ``imu``),
+    read with rosbags' AnyReader; the header stamps give t."""
+    if AnyReader is None:
+        raise OfflineError("reading JointState bags needs the rosbags package (pip install rosbags)")
+    path = Path(path)
+    reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+    try:
+        reader.open()
+    except Exception as exc:
+        raise OfflineError(f"recording {path}: cannot be read as a rosbag2 bag ({type(exc).__name__}: {exc})") from None
+    js = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/JointState" and _matches(c.topic, "joint_states")]
+    topics = sorted({c.topic for c in js})
+    if topic is not None:
+        js = [c for c in js if c.topic == topic]
+        if not js:
+            raise OfflineError(f"joint_states topic {topic!r}: not in recording {path} (found: {', '.join(topics) or 'none'})")
+    elif len(topics) > 1:
+        raise OfflineError(f"recording {path}: several joint_states topics ({', '.join(topics)}); choose one with --topic")
+    if not js:
+        raise OfflineError(f"recording {path}: no drive/signals topic and no sensor_msgs/JointState topic ending in "
+                           f"joint_states "
+                           f"(topics: {', '.join(sorted({c.topic for c in reader.connections})) or 'none'})")
+    prefix = js[0].topic[:-len("joint_states")]
+    imu = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/Imu" and c.topic == prefix + "imu"]
+    adapter = JointStateAdapter(sample_period_s, motor_joint, load_joint, batch_size=batch_size,
+                                use_imu=bool(imu), imu_axis=imu_axis)
+
+    def batches():
+        try:
+            for conn, _, raw in reader.messages(connections=js + imu):
+                msg = reader.deserialize(raw, conn.msgtype)
+                stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+                if conn.msgtype.endswith("Imu"):
+                    yield from adapter.push_imu(stamp, msg.linear_acceleration)
+                else:
+                    yield from adapter.push(stamp, msg.name, msg.position, msg.velocity, msg.effort)
+            yield from adapter.flush()
+        finally:
+            reader.close()
+    return adapter, batches(), js[0].topic
+
+
+def diagnose_samples(path, *, system=None, method=None, p: float = 2.0, library=None, library_path=None,
+                     build_if_missing: bool = True, gap_method: str = "auto", image_method: bool = True,
+                     detector: str = "flank", backlash_width_m: Optional[float] = None, gear_ratio: float = 1.0,
+                     motor_joint: str = "motor", load_joint: str = "load", imu_axis: str = "x",
+                     topic: Optional[str] = None, maps: Optional[dict] = None,
+                     log: Callable[[str], Any] = lambda text: None,
+                     on_window: Optional[Callable[[OfflineWindow], Any]] = None,
+                     policy: Optional[VerdictPolicy] = None) -> OfflineResult:
+    """Diagnose a JointState bag or a CSV file (``.csv``) as the windowing (``input: joint_states``) and
+    diagnostic nodes do.  ``detector``: "flank" (no K2; the default for real drives) or "paper"
+    (inequality 1 with ``backlash_width_m``, zone-centred angles).  Raises OfflineError on bad input."""
+    system = load_system_config() if system is None else system
+    method = load_method_config() if method is None else method
+    policy = default_policy() if policy is None else policy
+    if detector not in DETECTORS:
+        raise OfflineError(f"detector: expected one of {', '.join(DETECTORS)}, got {detector!r}")
+    if detector == "paper" and backlash_width_m is None:
+        raise OfflineError("backlash_width_m: the paper detector (inequality 1) needs K2 (--backlash-width-m)")
+    if detector == "flank" and backlash_width_m is not None:
+        raise OfflineError("backlash_width_m: only for --detector paper (the flank detector needs no K2)")
+    if not (math.isfinite(gear_ratio) and gear_ratio > 0):
+        raise OfflineError(f"gear_ratio: must be a finite number > 0, got {gear_ratio!r}")
+    if float(p) not in [float(q) for q in method.p_values]:
+        raise OfflineError(f"p: must be one of method.p_values {[float(q) for q in method.p_values]}, got {p!r}")
+    ts = float(system.sampling.sample_period_s)
+    path = Path(path)
+    adapter = None
+    try:
+        if path.suffix.lower() == ".csv":
+            data, channels, ignored = read_csv(path, maps)
+            if ignored:
+                log(f"{path}: columns ignored (not channels): {', '.join(ignored)}")
+            source, batches = str(path), ((b, channels) for b in stream_batches(data, 50))
+        else:
+            adapter, batches, source = jointstate_batches(path, ts, motor_joint, load_joint, imu_axis, topic)
+    except InputError as exc:
+        raise OfflineError(str(exc)) from None
+    result = OfflineResult(str(path), source, "estimated" if detector == "flank" else "option")
+    if image_method and library is None:
+        lib_path = Path(library_path).expanduser() if library_path else default_library_path(system, method)
+        result.library_path = str(lib_path)
+        library, result.library_error = load_pattern_library(lib_path, system, method, build_if_missing,
+                                                             log=log, warn=log)
+    diag = _window_diagnoser(system, method, p, library, gap_method, image_method, result, policy)
+    det = None
+    for arr, channels in batches:
+        if det is None:
+            det = _make_detector(system, backlash_width_m, None, channels, None, WINDOWING_DEFAULTS, source,
+                                 detector, gear_ratio)
+        for ev in det.push(arr, channels):
+            if ev.kind == "window":
+                _add_window(result, ev.window, diag(ev.window), None, on_window)
+    if det is None:
+        raise OfflineError(f"recording {path}: no sample")
+    _finish(result, det, log)
+    if adapter is not None:
+        result.jitter = adapter.jitter()
+        result.dropped.update({f"jointstate.{k}": v for k, v in adapter.counts.items()
+                               if v and k in ("missing_joint", "imu_unmatched")})
+        if result.jitter.get("periods") and not result.jitter["period_matches"]:
+            log(f"{source}: stamp period {result.jitter['median_period_s']:.6g} s (median) does not match "
+                f"sampling.sample_period_s {ts:g} s")
+    return result
 
 
 # --------------------------------------------------------------------------- output
@@ -311,12 +470,18 @@ def format_window_line(w: OfflineWindow) -> str:
 
 def summary_line(result: OfflineResult) -> str:
     lv = result.level_counts()
-    k2 = {"option": "from --backlash-width-m", "default": "the windowing node's default"}.get(
-        result.backlash_width_source, f"from {result.backlash_width_source}")
+    k2 = {"option": "from --backlash-width-m", "default": "the windowing node's default",
+          "estimated": "estimated per window"}.get(result.backlash_width_source, f"from {result.backlash_width_source}")
     text = (f"{len(result.windows)} window(s) from {result.signals_topic} ({result.samples} samples in "
             f"{result.batches} batches, K2 {k2}): {lv['OK']} OK, {lv['WARN']} WARN, {lv['ERROR']} ERROR")
     if result.dropped:
         text += "; dropped: " + ", ".join(f"{r} {n}" for r, n in result.dropped.items())
+    if result.cut_off:
+        text += "; cut off by the end of the data: " + ", ".join(
+            f"entry at {c['entry_time_s']:.4f} s ({c['samples_from_entry']} samples)" for c in result.cut_off)
+    flagged = [w.window_id for w in result.windows if "second_entry" in w.flags]
+    if flagged:
+        text += f"; second entry inside window(s) {', '.join(map(str, flagged))}"
     errs = [abs(w.error_percent) for w in result.windows if w.error_percent is not None]
     if errs:
         text += f"; largest |J1 error| against the true J1 {max(errs):.3f} %"
@@ -331,5 +496,6 @@ def write_json(result: OfflineResult, out) -> Path:
     return out
 
 
-__all__ = ["OfflineError", "OfflineResult", "OfflineWindow", "default_policy", "diagnose_recording", "format_window_line",
+__all__ = ["OfflineError", "OfflineResult", "OfflineWindow", "default_policy", "diagnose_recording",
+           "diagnose_samples", "format_window_line", "jointstate_batches",
            "multiarray_message", "summary_line", "write_json", "TABLE_HEADER"]

@@ -125,7 +125,8 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                     entry_time_s: Optional[float] = None,
                     on_estimate: Optional[Callable[[float], Any]] = None,
                     started_at: Optional[float] = None,
-                    policy: Optional[VerdictPolicy] = None) -> WindowDiagnosis:
+                    policy: Optional[VerdictPolicy] = None, recontact_index: Optional[int] = None,
+                    width_estimate: Optional[WidthEstimate] = None) -> WindowDiagnosis:
     """Diagnose one window (see the module docstring).
 
     Parameters
@@ -152,6 +153,9 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
         and ``processing_ms`` are measured from it
     policy : the publishing policy (default :class:`~jident_ros.identify.verdict.VerdictPolicy()`, the
         diagnostic node's default parameters)
+    recontact_index, width_estimate : from a flank-detector window (raw encoder angles, no K2): the gap
+        ends at its re-contact row and its K2 estimate is reported instead of one from zone-centred angles
+        (:func:`detector_arguments`)
     """
     t0 = time.perf_counter() if started_at is None else float(started_at)
     if gap_method not in GAP_METHODS:
@@ -211,7 +215,8 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
         try:
             gap = estimate_inertia(window_data, entry_index, backlash_width_m, wheel_radius_m, sample_period_s,
                                    method=None if gap_method == "auto" else gap_method,
-                                   bearing_friction_nms_per_rad=system.motor.bearing_friction_nms_per_rad)
+                                   bearing_friction_nms_per_rad=system.motor.bearing_friction_nms_per_rad,
+                                   recontact_index=recontact_index)
         except NoGapError as exc:
             gap_reason = str(exc)
             problems.append(f"gap: {exc}")
@@ -234,7 +239,9 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                      ("gap_fit", gap.method), ("gap_interval", gap.interval),
                      ("gap_residual_rms", gap.residual_rms), ("gap_model_error_kgm2", gap.model_error_kgm2),
                      ("gap_classes_in_ci95_kgm2", list(decision.classes_in_ci)), ("gap_decision", decision.status)]
-            if "alpha1" in window_data and "alpha2" in window_data:
+            if width_estimate is not None:
+                width = width_estimate
+            elif "alpha1" in window_data and "alpha2" in window_data:
                 try:
                     width = estimate_backlash_width(window_data, gap.gap_end, wheel_radius_m, sample_period_s,
                                                     gap.inertia_kgm2)
@@ -370,4 +377,17 @@ def _verdict_values(verdict: Verdict, classes) -> list:
             ("verdict_agree", "unknown" if verdict.agree is None else verdict.agree)]
 
 
-__all__ = ["GAP_METHODS", "WindowDiagnosis", "diagnose_window"]
+def detector_arguments(window) -> dict:
+    """diagnose_window's ``recontact_index`` and ``width_estimate`` for a captured
+    :class:`~jident_ros.stream.layout.Window`: a flank-detector window's own; none for the paper detector's."""
+    if getattr(window, "detector", "paper") != "flank":
+        return {}
+    est = None
+    if math.isfinite(window.backlash_width_estimate_m):
+        est = WidthEstimate(float(window.backlash_width_estimate_m), float(window.backlash_width_se_m),
+                            int(window.recontact_index), "flank")
+    return {"recontact_index": window.recontact_index if window.recontact_index >= 0 else None,
+            "width_estimate": est}
+
+
+__all__ = ["GAP_METHODS", "WindowDiagnosis", "detector_arguments", "diagnose_window"]

@@ -124,12 +124,20 @@ class GapEstimate:
 
 
 def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
-                 drop: float = 0.6, min_samples: int = 3) -> tuple[int, int, str]:
-    """(start, end, how) of the first gap run from the entry sample."""
+                 drop: float = 0.6, min_samples: int = 3, recontact_index: int | None = None) -> tuple[int, int, str]:
+    """(start, end, how) of the first gap run from the entry sample.
+
+    ``recontact_index``: the first contact row as the detector found it (the flank detector, whose
+    windows hold raw encoder angles that inequality 1 cannot read); how = "detector"."""
     n = len(next(iter(window.values())))
     if not 0 <= entry_index < n - 1:
         raise NoGapError(f"entry_index: must be inside the window [0, {n - 2}], got {entry_index}")
-    if "alpha1" in window and "alpha2" in window:
+    if recontact_index is not None and recontact_index >= 0:
+        end = int(recontact_index)
+        if not entry_index < end <= n:
+            raise NoGapError(f"recontact_index {recontact_index}: not after the entry row {entry_index}")
+        how = "detector"
+    elif "alpha1" in window and "alpha2" in window:
         rel = np.abs(np.asarray(window["alpha1"], float) - np.asarray(window["alpha2"], float))
         inside = rel[entry_index:] < backlash_width_m / wheel_radius_m
         if not inside[0]:
@@ -152,9 +160,10 @@ def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_
         else:
             raise NoGapError("no gap signal: the window needs alpha1+alpha2, a1, alpha1 or omega1")
         a0 = acc[entry_index]
-        if not a0 > 0:
-            raise NoGapError(f"no backlash gap: the drive does not accelerate at the entry sample (a1 = {a0:.4g})")
-        below = acc[entry_index:] < drop * a0
+        if not abs(a0) > 0:
+            raise NoGapError(f"no backlash gap: the motor does not accelerate at the entry sample (a1 = {a0:.4g})")
+        # sign-invariant: either direction of rotation, accelerating or braking through the zone
+        below = np.sign(a0) * acc[entry_index:] < drop * abs(a0)
         if not below.any():
             raise NoGapError(f"no re-contact: the acceleration never drops below {drop:g} x its entry value "
                              f"to the end of the window (not a backlash entry?)")
@@ -168,11 +177,13 @@ def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_
 
 def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
                      sample_period_s: float, method: str | None = None,
-                     bearing_friction_nms_per_rad: float = 0.0) -> GapEstimate:
-    """Least-squares J1 over the gap; raises :class:`NoGapError` with a reason."""
+                     bearing_friction_nms_per_rad: float = 0.0, recontact_index: int | None = None) -> GapEstimate:
+    """Least-squares J1 over the gap; raises :class:`NoGapError` with a reason.  ``recontact_index``: see
+    :func:`gap_interval`."""
     if "m_el" not in window:
         raise NoGapError("no electromagnetic torque: the gap fit needs m_el")
-    start, end, how = gap_interval(window, entry_index, backlash_width_m, wheel_radius_m)
+    start, end, how = gap_interval(window, entry_index, backlash_width_m, wheel_radius_m,
+                                   recontact_index=recontact_index)
     m = np.asarray(window["m_el"], float)[start:end]
     if bearing_friction_nms_per_rad and "omega1" in window:
         m = m - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)[start:end]
@@ -470,16 +481,22 @@ def estimate_backlash_width(window: dict, gap_end: int, wheel_radius_m: float, s
     """
     if "alpha1" not in window or "alpha2" not in window:
         raise NoGapError("backlash width: needs both angles alpha1 and alpha2")
-    rel = np.abs(np.asarray(window["alpha1"], float) - np.asarray(window["alpha2"], float))
+    signed = np.asarray(window["alpha1"], float) - np.asarray(window["alpha2"], float)
+    rel = np.abs(signed)
     if not 1 <= gap_end < rel.size:
         raise NoGapError(f"backlash width: no re-contact inside the window (gap end {gap_end})")
     a, b = rel[gap_end - 1], rel[gap_end]
+    # the flank met: +1 for delta = +K2/r, -1 for -K2/r (reverse rotation).  The clutch torque on the
+    # motor side, (r/J1) m_el - a1, has the flank's sign; times it, it grows with the penetration |delta|
+    # - K2/r on either flank (without it the fit's slope was negative in reverse and the coarse bracket
+    # was used: issue 12)
+    side = 1.0 if signed[gap_end] >= 0 else -1.0
     mid, s_mid = 0.5 * (a + b), abs(b - a) / np.sqrt(12.0)
     post = np.arange(gap_end + 1, gap_end + 1 + CONTACT_FIT_SAMPLES)
     if ("a1" in window and "m_el" in window and sample_period_s and inertia_kgm2 and inertia_kgm2 > 0
             and post[-1] + 1 < rel.size):
         kappa = wheel_radius_m / inertia_kgm2
-        drop = kappa * np.asarray(window["m_el"], float)[post] - np.asarray(window["a1"], float)[post]
+        drop = side * (kappa * np.asarray(window["m_el"], float)[post] - np.asarray(window["a1"], float)[post])
         rate = (rel[post + 1] - rel[post - 1]) / (2.0 * sample_period_s)
         A = np.column_stack([rel[post], rate, np.ones(post.size)])
         coef, *_ = np.linalg.lstsq(A, drop, rcond=None)

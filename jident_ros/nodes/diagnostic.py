@@ -28,7 +28,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from jident_ros.identify.diagnosis import GAP_METHODS, diagnose_window
+from jident_ros.identify.diagnosis import GAP_METHODS, detector_arguments, diagnose_window
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES, STALE
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.identify.verdict import VerdictPolicy
@@ -250,8 +250,9 @@ def _node_class():
                                 p=c["p"], gap_method=c["gap_method"], image_method=c["image_method"],
                                 nominal_kgm2=self.nominal, library_error=self.library_error or "",
                                 window_id=win.window_id, entry_time_s=win.entry_time_s,
-                                on_estimate=self._publish_estimate, started_at=t_recv, policy=self.policy)
-            if d.level < ERROR:
+                                on_estimate=self._publish_estimate, started_at=t_recv, policy=self.policy,
+                                **detector_arguments(win))
+            if d.diagnosed:
                 self.get_logger().info(f"window {win.window_id} (entry t = {win.entry_time_s:.4f} s): {d.message} "
                                        f"[{LEVEL_NAMES[d.level]}]")
             else:

@@ -27,6 +27,8 @@ from jident_ros.nodes.ros_io import (
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import WINDOWING
 from jident_ros.stream.detector import REASONS, BacklashDetector
+from jident_ros.stream.flank import FlankDetector
+from jident_ros.stream.inputs import IMU_AXES, JointStateAdapter
 from jident_ros.stream.layout import KNOWN_CHANNELS
 
 NODE_NAME = "jident_windowing"
@@ -51,6 +53,15 @@ def validate(values: dict):
     require("diagnostics_period_s", cfg["diagnostics_period_s"], cfg["diagnostics_period_s"] >= 0, "a number >= 0")
     require("progress_every_batches", cfg["progress_every_batches"], cfg["progress_every_batches"] >= 0,
             "an integer >= 0 (0 = off)")
+    require("input", cfg["input"], cfg["input"] in ("signals", "joint_states"), "signals or joint_states")
+    require("detector", cfg["detector"], cfg["detector"] in ("auto", "flank", "paper"), "auto, flank or paper")
+    require("gear_ratio", cfg["gear_ratio"], cfg["gear_ratio"] > 0, "a finite number > 0")
+    require("motor_joint", cfg["motor_joint"], bool(cfg["motor_joint"]) and cfg["motor_joint"] != cfg["load_joint"],
+            "a joint name other than load_joint")
+    require("imu_axis", cfg["imu_axis"], cfg["imu_axis"] in IMU_AXES, "x, y or z")
+    require("batch_size", cfg["batch_size"], cfg["batch_size"] >= 1, "an integer >= 1")
+    if cfg["detector"] == "auto":
+        cfg["detector"] = "flank" if cfg["input"] == "joint_states" else "paper"
     system = system_config(values)
     return cfg, system
 
@@ -66,16 +77,35 @@ def _node_class():
             defaults = dict(DEFAULTS, **system_defaults())
             self.cfg, self.system = validate(declare_parameters(self, defaults))
             c, s = self.cfg, self.system
-            self.detector = BacklashDetector(
-                c["backlash_width_m"], s.load.wheel_radius_m, s.sampling.sample_period_s,
-                channels=("t",) + tuple(c["channels"]), samples_before_entry=s.sampling.samples_before_entry,
-                samples_from_entry=s.sampling.samples_from_entry, gap_tolerance=c["gap_tolerance"])
+            common = dict(samples_before_entry=s.sampling.samples_before_entry,
+                          samples_from_entry=s.sampling.samples_from_entry, gap_tolerance=c["gap_tolerance"])
+            chans = ("t",) + tuple(c["channels"])
+            if c["input"] == "joint_states":   # JointState carries alpha1, omega1, m_el, alpha2, omega2 (+ a1)
+                chans = tuple(ch for ch in chans if ch in ("t", "alpha1", "omega1", "m_el", "alpha2", "omega2")
+                              or (ch == "a1" and c["use_imu"]))
+            if c["detector"] == "flank":
+                self.detector = FlankDetector(s.load.wheel_radius_m, s.sampling.sample_period_s, channels=chans,
+                                              gear_ratio=c["gear_ratio"],
+                                              nominal_inertia_kgm2=s.motor.nominal_inertia_kgm2, **common)
+            else:
+                self.detector = BacklashDetector(c["backlash_width_m"], s.load.wheel_radius_m,
+                                                 s.sampling.sample_period_s, channels=chans, **common)
             self.hardware_id = drive_hardware_id(self, c["hardware_id"])
             self.diag = DiagnosticsPublisher(self)
             self.pub_window = self.create_publisher(Float64MultiArray, "drive/window",
                                                     qos_latched(c["window_queue_depth"]))
-            self.sub = self.create_subscription(Float64MultiArray, "drive/signals", self.on_signals,
-                                                qos_signals(c["signals_queue_depth"]))
+            self.adapter = None
+            if c["input"] == "joint_states":
+                from sensor_msgs.msg import Imu, JointState
+                self.adapter = JointStateAdapter(s.sampling.sample_period_s, c["motor_joint"], c["load_joint"],
+                                                 c["batch_size"], c["use_imu"], c["imu_axis"])
+                self.sub = self.create_subscription(JointState, "joint_states", self.on_joint_state,
+                                                    qos_signals(c["signals_queue_depth"]))
+                if c["use_imu"]:
+                    self.sub_imu = self.create_subscription(Imu, "imu", self.on_imu, qos_signals(c["signals_queue_depth"]))
+            else:
+                self.sub = self.create_subscription(Float64MultiArray, "drive/signals", self.on_signals,
+                                                    qos_signals(c["signals_queue_depth"]))
             # the simulator's back-pressure at real_time_factor 0 (and anyone's progress bar)
             self.pub_progress = (self.create_publisher(Float64, "drive/progress", qos_signals(10))
                                  if c["progress_every_batches"] > 0 else None)
@@ -87,7 +117,11 @@ def _node_class():
             self.drops_since_summary = 0
             if c["diagnostics_period_s"] > 0:
                 self.timer = self.create_timer(c["diagnostics_period_s"], self.on_timer)
-            self.get_logger().info(
+            if c["detector"] == "flank":
+                self.get_logger().info(f"watching {self.resolve_topic_name(self.sub.topic_name)} for flank departures "
+                                       f"(no K2); windows on {self.resolve_topic_name('drive/window')}")
+            else:
+                self.get_logger().info(
                 f"watching {self.resolve_topic_name('drive/signals')} for |alpha1 - alpha2| < K2/r = "
                 f"{self.detector.threshold_rad:.6g} rad (K2 = {c['backlash_width_m']:g} m"
                 f"{', following drive/backlash_width' if c['backlash_width_from_topic'] else ''}); windows of "
@@ -110,6 +144,39 @@ def _node_class():
                         self._report_drop(ev)
             except Exception as exc:  # never die on input: report, reset, go on
                 self._report_error("drive/signals callback", exc)
+
+        def on_joint_state(self, msg):
+            try:
+                st = msg.header.stamp
+                self._batches(self.adapter.push(st.sec + 1e-9 * st.nanosec, msg.name, msg.position, msg.velocity,
+                                                msg.effort))
+            except Exception as exc:  # never die on input: report, reset, go on
+                self._report_error("joint_states callback", exc)
+
+        def on_imu(self, msg):
+            try:
+                st = msg.header.stamp
+                self._batches(self.adapter.push_imu(st.sec + 1e-9 * st.nanosec, msg.linear_acceleration))
+            except Exception as exc:
+                self._report_error("imu callback", exc)
+
+        def _batches(self, batches):
+            for arr, channels in batches:
+                events = self.detector.push(arr, channels)
+                self._progress(arr, channels)
+                for ev in events:
+                    if ev.kind == "window":
+                        self.pub_window.publish(window_to_msg(ev.window))
+                    else:
+                        self._report_drop(ev)
+
+        def destroy_node(self):
+            try:   # a window in progress when the node stops: reported as cut_off
+                for ev in self.detector.finish():
+                    self._report_drop(ev)
+            except Exception:
+                pass
+            return super().destroy_node()
 
         def _progress(self, arr, channels):
             """drive/progress: the drive time of the last sample read, every progress_every_batches batches."""
@@ -151,7 +218,10 @@ def _node_class():
                 ("empty_batches", d.counts["empty"]), ("samples_seen", d.samples_seen),
                 ("batches_seen", d.batches_seen), ("callback_errors", self.errors),
                 ("backlash_width_m", d.backlash_width_m), ("threshold_rad", d.threshold_rad),
-                ("capturing", d.capturing)]
+                ("capturing", d.capturing), ("detector", self.cfg["detector"]), ("input", self.cfg["input"])]
+            if self.adapter is not None:
+                vals += [(f"jointstate.{k}", v) for k, v in self.adapter.counts.items()]
+                vals += [(f"jitter.{k}", v) for k, v in self.adapter.jitter().items()]
             vals += [(f"dropped.{r}", d.counts[r]) for r in REASONS if r != "empty"]
             return vals
 

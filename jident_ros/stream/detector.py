@@ -25,7 +25,15 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from jident_ros.stream.layout import DEFAULT_CHANNELS, KNOWN_CHANNELS, REQUIRED_CHANNELS, LayoutError, Window, unpack
+from jident_ros.stream.layout import (
+    DEFAULT_CHANNELS,
+    FLAG_CUT_OFF,
+    KNOWN_CHANNELS,
+    REQUIRED_CHANNELS,
+    LayoutError,
+    Window,
+    unpack,
+)
 
 #: Why a batch or a window was dropped.
 REASONS = {
@@ -39,6 +47,7 @@ REASONS = {
     "gap": "t advanced by more than gap_tolerance x the sample period (samples lost)",
     "irregular_stamp": "t advanced by less than half the sample period",
     "short_history": "a backlash entry with fewer than samples_before_entry samples of history",
+    "cut_off": "the data ended before the window was complete (finish(); the event carries the partial window)",
 }
 
 
@@ -295,6 +304,25 @@ class BacklashDetector:
         self._tail = np.concatenate([tail, x])[-self.samples_before_entry:]
         self._last_t = float(x[-1, self._i_t])
         return events
+
+    def finish(self) -> list:
+        """The data ended: a window in progress is reported as ``cut_off`` (a drop, counted); the event
+        carries the partial window (FLAG_CUT_OFF set) for an offline report.  Live, the windowing node
+        calls it when it shuts down."""
+        cap = self._capture
+        self._capture = None
+        if cap is None or cap.parts is None:
+            return []
+        data = np.concatenate(cap.parts)
+        e = self.samples_before_entry
+        w = Window(data, self.channels, e, cap.entry_time_s, cap.backlash_width_m, self.wheel_radius_m,
+                   self.sample_period_s, 0, flags=FLAG_CUT_OFF)
+        self.counts["cut_off"] += 1
+        ev = Event("drop", "cut_off", f"entry at t = {cap.entry_time_s:.6f} s: the data ended after "
+                                      f"{data.shape[0] - e} of {self.samples_from_entry} samples from the entry",
+                   window=w, window_dropped=True)
+        self.last_event = ev
+        return [ev]
 
     def _finish(self, cap: _Capture) -> Event:
         self._capture = None

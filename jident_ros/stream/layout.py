@@ -43,10 +43,27 @@ REQUIRED_CHANNELS = ("t", "alpha1", "alpha2")
 #: Default channel set of a window: the drive clock then every simulator channel.
 DEFAULT_CHANNELS = ("t",) + tuple(CHANNELS)
 
-#: Window header (data_offset values in front of the samples of drive/window), in this order.
-WINDOW_HEADER = ("format", "entry_index", "entry_time_s", "backlash_width_m", "wheel_radius_m",
-                 "sample_period_s", "window_id")
-WINDOW_FORMAT = 1.0
+#: Window header of format 1 (data_offset values in front of the samples of drive/window), in this order.
+WINDOW_HEADER_1 = ("format", "entry_index", "entry_time_s", "backlash_width_m", "wheel_radius_m",
+                   "sample_period_s", "window_id")
+#: Window header of format 2 (written by this version): format 1's fields, then what the detector learnt.
+WINDOW_HEADER = WINDOW_HEADER_1 + ("backlash_width_estimate_m", "backlash_width_se_m", "detector", "flags",
+                                   "recontact_index")
+WINDOW_FORMAT = 2.0
+#: Formats this version reads, with their header lengths.
+WINDOW_FORMATS = {1.0: len(WINDOW_HEADER_1), 2.0: len(WINDOW_HEADER)}
+#: Header field ``detector``: which detector captured the window.
+DETECTOR_CODES = {"paper": 0, "flank": 1}
+#: Header field ``flags`` (bits): another zone entry lies inside the window (information) ...
+FLAG_SECOND_ENTRY = 1
+#: ... the data ended before the window was complete (a partial window, reported, never published).
+FLAG_CUT_OFF = 2
+FLAG_NAMES = {FLAG_SECOND_ENTRY: "second_entry", FLAG_CUT_OFF: "cut_off"}
+
+
+def flag_names(flags: int) -> list:
+    """Names of the bits set in a window's ``flags``."""
+    return [name for bit, name in FLAG_NAMES.items() if int(flags) & bit]
 
 
 class LayoutError(ValueError):
@@ -139,10 +156,16 @@ class Window:
     channels : tuple of str        column names, "t" first
     entry_index : int              row of the entry sample (48)
     entry_time_s : float           t of the entry sample (drive clock)
-    backlash_width_m : float       K2 used by the detector for this window
+    backlash_width_m : float       K2 used by the detector for this window (paper detector); the flank
+                                   detector, which needs none, writes its estimate here (NaN: none)
     wheel_radius_m : float         r used in inequality (1)
     sample_period_s : float
     window_id : int                running number of captured windows (from 1)
+    backlash_width_estimate_m : float   K2 estimated from this traversal (flank detector), m; NaN: none
+    backlash_width_se_m : float    its standard uncertainty, m; NaN: none
+    detector : str                 "paper" (inequality 1 with a given K2) or "flank" (no K2 needed)
+    flags : int                    FLAG_SECOND_ENTRY | FLAG_CUT_OFF bits
+    recontact_index : int          row where the flanks meet again (the first contact sample), -1: unknown
     """
 
     data: np.ndarray
@@ -153,6 +176,11 @@ class Window:
     wheel_radius_m: float
     sample_period_s: float
     window_id: int = 0
+    backlash_width_estimate_m: float = float("nan")
+    backlash_width_se_m: float = float("nan")
+    detector: str = "paper"
+    flags: int = 0
+    recontact_index: int = -1
 
     def __len__(self):
         return self.data.shape[0]
@@ -164,9 +192,15 @@ class Window:
         """Channels as a dict of 1-D arrays (the form identify_window/estimate_inertia take)."""
         return {name: np.ascontiguousarray(self.data[:, i]) for i, name in enumerate(self.channels)}
 
+    @property
+    def flag_names(self) -> list:
+        return flag_names(self.flags)
+
     def header(self) -> np.ndarray:
         return np.array([WINDOW_FORMAT, self.entry_index, self.entry_time_s, self.backlash_width_m,
-                         self.wheel_radius_m, self.sample_period_s, self.window_id], dtype=np.float64)
+                         self.wheel_radius_m, self.sample_period_s, self.window_id,
+                         self.backlash_width_estimate_m, self.backlash_width_se_m, DETECTOR_CODES[self.detector],
+                         self.flags, self.recontact_index], dtype=np.float64)
 
     def pack(self):
         """(flat data, dims, data_offset) of the drive/window layout."""
@@ -174,16 +208,40 @@ class Window:
 
     @classmethod
     def unpack(cls, data, dims, data_offset) -> "Window":
+        """Format 2 and format 1 windows (format 1: no estimate, detector "paper", no flags)."""
         arr, channels, head = unpack(data, dims, data_offset)
-        if head.size != len(WINDOW_HEADER):
-            raise LayoutError(f"data_offset: a window carries {len(WINDOW_HEADER)} header values "
-                              f"{WINDOW_HEADER}, got {head.size}")
-        if head[0] != WINDOW_FORMAT:
-            raise LayoutError(f"window header format {head[0]!r}: this version reads {WINDOW_FORMAT}")
-        if not np.all(np.isfinite(head)):
-            raise LayoutError(f"window header: non-finite value in {head.tolist()}")
+        if head.size == 0:
+            raise LayoutError(f"data_offset: a window carries a header {WINDOW_HEADER}, got none")
+        fmt = float(head[0])
+        if fmt not in WINDOW_FORMATS and head.size not in WINDOW_FORMATS.values():
+            raise LayoutError(f"data_offset: a window carries {len(WINDOW_HEADER)} header values {WINDOW_HEADER} "
+                              f"(format 2) or {len(WINDOW_HEADER_1)} (format 1), got {head.size}")
+        if fmt not in WINDOW_FORMATS:
+            raise LayoutError(f"window header format {head[0]!r}: this version reads {sorted(WINDOW_FORMATS)}")
+        names = WINDOW_HEADER[:WINDOW_FORMATS[fmt]]
+        if head.size != len(names):
+            raise LayoutError(f"data_offset: a format-{fmt:g} window carries {len(names)} header values "
+                              f"{names}, got {head.size}")
+        # NaN is allowed where it means "none": the flank detector's width fields
+        may_be_nan = {"backlash_width_m", "backlash_width_estimate_m", "backlash_width_se_m"}
+        for name, v in zip(names, head):
+            if not np.isfinite(v) and not (name in may_be_nan and np.isnan(v)):
+                raise LayoutError(f"window header: {name} = {v!r} is not finite")
         entry = int(head[1])
         if entry != head[1] or not 0 <= entry < arr.shape[0]:
             raise LayoutError(f"window header entry_index {head[1]!r}: not a row of the {arr.shape[0]}-sample window")
+        extra = {}
+        if fmt == 2.0:
+            codes = {v: k for k, v in DETECTOR_CODES.items()}
+            if head[9] not in codes:
+                raise LayoutError(f"window header detector {head[9]!r}: expected one of {sorted(codes)}")
+            flags = int(head[10])
+            if flags != head[10] or flags < 0:
+                raise LayoutError(f"window header flags {head[10]!r}: expected a non-negative integer")
+            rc = int(head[11])
+            if rc != head[11] or not -1 <= rc < arr.shape[0]:
+                raise LayoutError(f"window header recontact_index {head[11]!r}: not -1 or a row of the window")
+            extra = dict(backlash_width_estimate_m=float(head[7]), backlash_width_se_m=float(head[8]),
+                         detector=codes[head[9]], flags=flags, recontact_index=rc)
         return cls(arr.copy(), channels, entry, float(head[2]), float(head[3]), float(head[4]), float(head[5]),
-                   int(head[6]))
+                   int(head[6]), **extra)

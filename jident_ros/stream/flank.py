@@ -1,0 +1,493 @@
+"""Backlash-zone entries found without a known backlash width (pure numpy, never imports rclpy).
+
+A real drive knows neither K2 nor where the zone's centre lies: its encoders have arbitrary offsets (the
+load encoder's moves each time the line slips on the wheel) and K2 is the very quantity that changes.
+:class:`FlankDetector` therefore works on the **relative angle**
+
+    delta = alpha1 - N alpha2          (N = ``gear_ratio``, motor turns per load turn; any offsets)
+
+and on what the clutch does, not on inequality (1):
+
+* **Contact** (the clutch on a flank, transmitting the load torque): delta is nearly constant (a steady
+  torque twists the coupling by a few mrad at most).  A run of ``contact_samples`` samples whose spread
+  (max - min) is at most ``contact_tolerance_rad`` is taken as contact; the **flank level** F is their mean
+  and the contact noise sigma their standard deviation.  F then follows slow drifts (wear, a load change)
+  with a first-order filter of time constant ``flank_time_constant_s``.
+* **Entry** (paper section 2: the backlash zone is entered): the first sample with |delta - F| above the
+  **departure threshold** max(``k_sigma`` sigma, ``min_departure_rad``) — the clutch has left its flank.
+  A slip of the line (alpha2 jumps, the load encoder's offset moves with it) moves delta by the same jump
+  and is caught by the same test.  After an entry, F is forgotten and learnt again from the next contact
+  (a slip is re-baselined there).
+* **Entry sample** (where the window is centred): the first sample in the zone.  When the window holds
+  ``m_el`` and ``a1`` (and ``nominal_inertia_kgm2`` is given) the departure sample is moved forward while
+  the load-torque estimate T_L = m_el - J1_nom a1 / r still carries more than ``load_drop_fraction`` of the
+  steady load torque: a coupling that unloads gradually (a drive that decelerates off its flank) is still in
+  contact while delta starts to move (at most ``refine_samples`` samples).  In the simulator's slip
+  scenario the departure sample is the entry sample already.
+* **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
+  ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
+  (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry
+  inside the window sets :data:`~jident_ros.stream.layout.FLAG_SECOND_ENTRY` (information).
+
+**Width estimate** (per window; docs/model.md's convention: theta_b = K2/r is the half-width, the flanks lie
+at +-K2/r from the centre):
+
+* **re-contact on the opposite flank** (a traversal: the drive crossed the zone, e.g. it braked off its
+  driving flank): delta travels 2 K2/r from the entry flank to the re-contact flank; each end is bracketed
+  by the samples on either side of the contact instant (uniform in between), so
+  K2 = r |P_recontact - P_entry| / 2 with P the bracket midpoints, se = (r/2) sqrt(b_e^2 + b_g^2)/sqrt(12);
+* **re-contact on the same flank** (the simulator's scenario, docs/model.md section 3: the line slips by K2,
+  delta jumps from the loaded flank to K2/r nearer the centre, the motor turns freely back to the flank):
+  the excursion from the flank level to the entry sample is K2/r — measured against the flank level
+  *after* re-contact (the settled end of the window), so that an offset moved by the slip cancels:
+  K2 = r |F_after - delta_entry|, se from F_after's spread, one sample's motion and the quantisation.
+  (On a real drive a same-flank excursion only bounds K2: it is K2/r exactly in the slip scenario.)
+
+The re-contact row (the first contact sample) comes from the motor's acceleration (a1, else the smoothed
+second difference of alpha1, else of omega1): the first sample after the entry whose acceleration has lost
+``recontact_drop`` of its entry value toward zero, sign-invariant, less one sample (the flanks meet between
+samples) — the rule of :func:`jident_ros.identify.gap.gap_interval`'s "signature".
+
+Same batch API, events and drop reasons as :class:`~jident_ros.stream.detector.BacklashDetector` (which it
+extends), so the windowing node and ``jident diagnose`` take either.  The result does not depend on how a
+stream is cut into batches (tested).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional, Sequence
+
+import numpy as np
+from scipy.signal import lfilter, savgol_filter
+
+from jident_ros.stream.detector import BacklashDetector, Event, _positive
+from jident_ros.stream.layout import DEFAULT_CHANNELS, FLAG_CUT_OFF, FLAG_SECOND_ENTRY, Window
+
+#: Detector names of the ``detector`` parameter.
+DETECTORS = ("flank", "paper")
+
+
+@dataclass
+class WidthResult:
+    """K2 of one traversal: width_m, its standard uncertainty se_m (NaN: none), how ('traversal',
+    'same_flank', or why not), the re-contact row (-1: unknown)."""
+
+    width_m: float
+    se_m: float
+    how: str
+    recontact_index: int = -1
+
+
+@dataclass
+class _FlankCapture:
+    rows: list                 # arrays of rows from (departure - samples_before_entry) on
+    count: int
+    departure_row: int         # row of the departure sample inside the capture
+    flank_rad: float           # the entry flank's level (delta)
+    flank_sigma_rad: float
+    second_entry_rows: list = field(default_factory=list)   # departures seen while capturing (capture rows)
+    skip: bool = False         # short history: the transient is skipped, not captured
+
+
+def motor_acceleration(window: dict, wheel_radius_m: float, sample_period_s: float):
+    """(dω1/dt in rad/s^2 per sample, source) from a1 (a1/r), else the smoothed second difference of
+    alpha1, else the smoothed difference of omega1 (Savitzky-Golay, 7 samples, quadratic); (None, '')
+    when the window has none of them."""
+    if "a1" in window:
+        return np.asarray(window["a1"], float) / wheel_radius_m, "a1"
+    if "alpha1" in window and len(window["alpha1"]) >= 7:
+        return savgol_filter(np.asarray(window["alpha1"], float), 7, 2, deriv=2) / sample_period_s ** 2, "alpha1"
+    if "omega1" in window and len(window["omega1"]) >= 7:
+        return savgol_filter(np.asarray(window["omega1"], float), 7, 2, deriv=1) / sample_period_s, "omega1"
+    return None, ""
+
+
+def recontact_index(acc: np.ndarray, entry_index: int, drop: float = 0.6, min_samples: int = 3) -> int:
+    """Row of the first contact sample after the entry, from the motor acceleration (sign-invariant):
+    the first row after ``entry_index`` where s·acc < drop·|acc(entry)| (s = the sign of acc at the entry),
+    less one (the flanks meet between samples; the row before the drop may already carry load).
+    -1 when the acceleration at the entry is 0 or never drops."""
+    a0 = float(acc[entry_index])
+    if not abs(a0) > 0 or not math.isfinite(a0):
+        return -1
+    s = 1.0 if a0 > 0 else -1.0
+    below = s * acc[entry_index + min_samples:] < drop * abs(a0)
+    if not below.any():
+        return -1
+    return entry_index + min_samples + int(np.argmax(below)) - 1
+
+
+def single_mass_run(m_el: np.ndarray, acc: np.ndarray, departure: int, inertia_seed_kgm2: float,
+                    pre_samples: int = 48, max_shift: int = 16, rel_tol: float = 0.01, k_sigma: float = 4.0,
+                    iterations: int = 4):
+    """(entry row, re-contact row, J1 fitted) of the backlash gap from the dynamics, or None.
+
+    Inside the zone the load torque on the motor is zero: m_el = J1 dω1/dt, one J1 for every sample (the
+    gap estimator's model).  Starting from ``inertia_seed_kgm2`` (J1_nom) with a wide tolerance (25 % of
+    |m_el|), the gap is the first run of samples from the departure on (entry at most ``max_shift`` after
+    it) whose residual |m_el - J acc| stays within the tolerance, ended by two samples outside it; J is
+    refitted by least squares over the run and the run found again with the tolerance
+    max(k_sigma * noise, rel_tol * |m_el|), noise from the steady samples before the departure (there
+    dω1/dt = 0), ``iterations`` times.  The entry is the first sample whose load torque has vanished; the
+    re-contact row the first with load again.
+    """
+    n = m_el.size
+    lo = max(departure - pre_samples, 0)
+    pre = slice(lo, max(departure - 1, lo + 2))
+    sm, sa = _noise(m_el[pre]), _noise(acc[pre])
+    j = float(inertia_seed_kgm2)
+    tol_rel = 0.25
+    entry = end = None
+    stop = min(n, departure + 4000)
+    for it in range(iterations + 1):
+        res = np.abs(m_el[departure:stop] - j * acc[departure:stop])
+        tol = np.maximum(k_sigma * math.hypot(sm, j * sa), tol_rel * np.abs(m_el[departure:stop]))
+        ok = res <= tol
+        run3 = ok[:-2] & ok[1:-1] & ok[2:]
+        if not run3[:max_shift + 1].any():
+            return None
+        e = int(np.argmax(run3[:max_shift + 1]))
+        bad2 = ~ok[e:-1] & ~ok[e + 1:]
+        if not bad2.any():
+            return None
+        g = e + int(np.argmax(bad2))
+        if g - e < 3:
+            return None
+        a, b = departure + e, departure + g
+        aa = acc[a:b]
+        den = float(aa @ aa)
+        if not den > 0:
+            return None
+        j_new = float(aa @ m_el[a:b]) / den
+        if not j_new > 0:
+            return None
+        if (a, b) == (entry, end) and it > 1:
+            break
+        entry, end, j = a, b, j_new
+        tol_rel = rel_tol
+    return entry, end, j
+
+
+def _noise(x: np.ndarray) -> float:
+    """White-noise standard deviation of a steady stretch, robust to a few samples of a starting transient
+    (the drive may act just before the clutch leaves its flank): 1.4826 MAD of the first differences / sqrt 2."""
+    if x.size < 5:
+        return 0.0
+    dx = np.diff(x)
+    return float(1.4826 * np.median(np.abs(dx - np.median(dx))) / math.sqrt(2.0))
+
+
+def estimate_width(window: dict, entry_index: int, wheel_radius_m: float, sample_period_s: float,
+                   gear_ratio: float = 1.0, flank_rad: Optional[float] = None, recontact: Optional[int] = None,
+                   angle_quantum_rad: float = 0.0, contact_samples: int = 32,
+                   contact_tolerance_rad: float = 2e-3) -> WidthResult:
+    """K2 of one traversal from raw angles (module docstring), with its standard uncertainty.
+
+    ``flank_rad``: the entry flank's delta level (learnt before the entry; default: the mean of the
+    samples before the entry); ``recontact``: the first contact row (default: :func:`recontact_index`
+    from the motor acceleration).
+    """
+    if "alpha1" not in window or "alpha2" not in window:
+        return WidthResult(math.nan, math.nan, "no angles")
+    d = np.asarray(window["alpha1"], float) - gear_ratio * np.asarray(window["alpha2"], float)
+    e = int(entry_index)
+    if not 2 <= e < d.size - 2:
+        return WidthResult(math.nan, math.nan, "entry at the window's edge")
+    f_entry = float(np.mean(d[:e])) if flank_rad is None else float(flank_rad)
+    if recontact is None:
+        acc, _ = motor_acceleration(window, wheel_radius_m, sample_period_s)
+        recontact = recontact_index(acc, e) if acc is not None else -1
+    g = int(recontact)
+    r = float(wheel_radius_m)
+    q2 = angle_quantum_rad ** 2 / 6.0               # two encoders, uniform quantisation error each
+    step_in, step_before, step_after = d[e] - d[e - 1], d[e - 1] - d[e - 2], d[e + 1] - d[e]
+    slip = abs(step_in) > 4.0 * max(abs(step_before), abs(step_after), 1e-12)
+    if slip:
+        # the slip scenario: delta jumped off the flank and the motor turns back to the same flank; the
+        # excursion, measured against the settled flank level after re-contact (an offset moved by the
+        # slip cancels), is K2/r
+        tail = d[-contact_samples:]
+        if tail.size < contact_samples or np.ptp(tail) > contact_tolerance_rad:
+            return WidthResult(math.nan, math.nan, "window ends out of steady contact", g)
+        f_after = float(np.mean(tail))
+        width = r * abs(f_after - d[e])
+        se = r * math.sqrt(float(np.var(tail, ddof=1)) + step_after ** 2 / 12.0 + q2)
+        return WidthResult(width, se, "same_flank", g)
+    if g <= e + 2:
+        return WidthResult(math.nan, math.nan, "no re-contact found", g)
+    s = 1.0 if d[e] >= f_entry else -1.0          # direction in which delta left its flank
+    if (d[g - 1] - d[g - 3]) * s <= 0:
+        return WidthResult(math.nan, math.nan, "bounce back to the same flank (width not observable)", g)
+    # a traversal: 2 K2/r from flank to flank, each end bracketed by the samples around the contact instant
+    p_e, b_e = 0.5 * (d[e - 1] + d[e]), abs(step_in)
+    p_g, b_g = 0.5 * (d[g - 1] + d[g]), abs(d[g] - d[g - 1])
+    width = 0.5 * r * abs(p_g - p_e)
+    se = 0.5 * r * math.sqrt((b_e ** 2 + b_g ** 2) / 12.0 + 2 * q2)
+    return WidthResult(width, se, "traversal", g)
+
+
+class FlankDetector(BacklashDetector):
+    """Streaming detector of backlash-zone entries that needs no K2 and no zone-centred angles
+    (module docstring), and window capture.
+
+    Parameters
+    ----------
+    wheel_radius_m : float         r (> 0): K2 = r theta_b
+    sample_period_s : float        T_s (> 0)
+    channels : names to capture, must include "t", "alpha1", "alpha2" (window column order)
+    samples_before_entry, samples_from_entry, gap_tolerance : as BacklashDetector (48, 2000, 1.5)
+    gear_ratio : float             N in delta = alpha1 - N alpha2 (motor turns per load-encoder turn), 1
+    nominal_inertia_kgm2 : float   J1_nom for the load-torque refinement of the entry sample; None = off
+    contact_samples : int          run length that makes a contact (32 = 16 ms)
+    contact_tolerance_rad : float  largest spread of delta over such a run (2 mrad)
+    k_sigma : float                departure threshold in contact-noise standard deviations (8)
+    min_departure_rad : float      departure threshold floor (1.5 mrad: 16 counts of a 2^16 encoder;
+                                   the grid's smallest half-zone is 25 mrad)
+    flank_time_constant_s : float  drift tracking of the flank level (0.05 s)
+    encoder_counts_per_rev : int   for the width uncertainty (quantisation), 0 = ideal angles
+    refine_samples : int           the entry sample may move this far past the departure (16)
+    load_drop_fraction : float     ... while T_L keeps more than this share of the steady load (0.5)
+    """
+
+    def __init__(self, wheel_radius_m: float, sample_period_s: float,
+                 channels: Sequence[str] = DEFAULT_CHANNELS, samples_before_entry: int = 48,
+                 samples_from_entry: int = 2000, gap_tolerance: float = 1.5, gear_ratio: float = 1.0,
+                 nominal_inertia_kgm2: Optional[float] = None, contact_samples: int = 32,
+                 contact_tolerance_rad: float = 2e-3, k_sigma: float = 8.0, min_departure_rad: float = 1.5e-3,
+                 flank_time_constant_s: float = 0.05, encoder_counts_per_rev: int = 0,
+                 refine_samples: int = 16, load_drop_fraction: float = 0.5):
+        for name, v in (("gear_ratio", gear_ratio), ("contact_tolerance_rad", contact_tolerance_rad),
+                        ("k_sigma", k_sigma), ("min_departure_rad", min_departure_rad),
+                        ("flank_time_constant_s", flank_time_constant_s),
+                        ("load_drop_fraction", load_drop_fraction)):
+            if not _positive(v):
+                raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
+        if nominal_inertia_kgm2 is not None and not _positive(nominal_inertia_kgm2):
+            raise ValueError(f"nominal_inertia_kgm2: must be a finite number > 0 or None, got {nominal_inertia_kgm2!r}")
+        for name, v, lo in (("contact_samples", contact_samples, 4), ("encoder_counts_per_rev", encoder_counts_per_rev, 0),
+                            ("refine_samples", refine_samples, 0)):
+            if isinstance(v, bool) or int(v) != v or v < lo:
+                raise ValueError(f"{name}: must be an integer >= {lo}, got {v!r}")
+        # the base class validates the rest; its K2 is a placeholder the flank detector never uses
+        super().__init__(1.0, wheel_radius_m, sample_period_s, channels, samples_before_entry,
+                         samples_from_entry, gap_tolerance)
+        self.gear_ratio = float(gear_ratio)
+        self.nominal_inertia_kgm2 = None if nominal_inertia_kgm2 is None else float(nominal_inertia_kgm2)
+        self.contact_samples = int(contact_samples)
+        self.contact_tolerance_rad = float(contact_tolerance_rad)
+        self.k_sigma = float(k_sigma)
+        self.min_departure_rad = float(min_departure_rad)
+        self.flank_time_constant_s = float(flank_time_constant_s)
+        self.encoder_counts_per_rev = int(encoder_counts_per_rev)
+        self.refine_samples = int(refine_samples)
+        self.load_drop_fraction = float(load_drop_fraction)
+        self._alpha = 1.0 - math.exp(-self.sample_period_s / self.flank_time_constant_s)
+        self.backlash_width_m = math.nan
+        self.last_width: Optional[WidthResult] = None
+        self.second_entries = 0
+        self.reset()
+
+    # ------------------------------------------------------------- state
+    @property
+    def threshold_rad(self) -> float:
+        """The departure threshold |delta - F| of the current contact (NaN while no flank is known)."""
+        if self._flank is None:
+            return math.nan
+        return max(self.k_sigma * self._sigma, self.min_departure_rad)
+
+    @property
+    def flank_rad(self) -> Optional[float]:
+        """The current flank level of delta (None: no contact learnt yet)."""
+        return self._flank
+
+    @property
+    def capturing(self) -> bool:
+        cap = getattr(self, "_fcap", None)
+        return cap is not None and not cap.skip
+
+    @property
+    def angle_quantum_rad(self) -> float:
+        if not self.encoder_counts_per_rev:
+            return 0.0
+        q = 2.0 * math.pi / self.encoder_counts_per_rev
+        return math.hypot(q, self.gear_ratio * q) / math.sqrt(2.0)
+
+    def reset(self) -> None:
+        """Forget the history, the flank and the window in progress (continuity lost)."""
+        if not hasattr(self, "gear_ratio"):     # called by the base __init__ before ours has run
+            return
+        self._tail = np.empty((0, len(self.channels)))
+        self._last_t = None
+        self._recent = np.empty(0)              # the last contact_samples - 1 delta values
+        self._flank: Optional[float] = None
+        self._sigma = 0.0
+        self._fcap: Optional[_FlankCapture] = None
+
+    def set_backlash_width(self, backlash_width_m: float) -> None:
+        """The flank detector needs no K2; a given width is ignored (kept for the node's interface)."""
+        if getattr(self, "gear_ratio", None) is None:
+            return
+
+    # ------------------------------------------------------------- detection
+    def _delta(self, x: np.ndarray) -> np.ndarray:
+        return x[:, self._i_a1] - self.gear_ratio * x[:, self._i_a2]
+
+    def _track(self, d: np.ndarray) -> list:
+        """Run the contact tracker over the delta values ``d`` of one batch; returns the departures
+        (entries) in order as (batch row, flank level it left, contact sigma).  Vectorised per stretch."""
+        departures = []
+        i, n, L = 0, d.size, self.contact_samples
+        while i < n:
+            if self._flank is None:                 # learning: the first run of L steady samples
+                carried = self._recent.size
+                seq = np.concatenate([self._recent, d[i:]])
+                if seq.size < L:
+                    self._recent = seq
+                    return departures
+                runs = np.lib.stride_tricks.sliding_window_view(seq, L)
+                ok = np.ptp(runs, axis=1) <= self.contact_tolerance_rad
+                if not ok.any():
+                    self._recent = seq[-(L - 1):]
+                    return departures
+                k = int(np.argmax(ok))
+                self._flank = float(runs[k].mean())
+                self._sigma = float(runs[k].std(ddof=1))
+                self._recent = np.empty(0)
+                i += k + L - carried               # the first sample after the contact run
+                continue
+            # contact: first-order tracking of the flank; departure when |delta - F_prev| > threshold
+            thr = self.threshold_rad
+            seg = d[i:]
+            f = lfilter([self._alpha], [1.0, self._alpha - 1.0], seg,
+                        zi=[(1.0 - self._alpha) * self._flank])[0]
+            prev = np.concatenate([[self._flank], f[:-1]])
+            out = np.abs(seg - prev) > thr
+            if not out.any():
+                self._flank = float(f[-1])
+                return departures
+            k = int(np.argmax(out))
+            departures.append((i + k, float(prev[k]), self._sigma))
+            self._flank = None
+            self._recent = np.empty(0)
+            i += k + 1      # the departure sample itself cannot be part of the next contact run
+        return departures
+
+    def _consume(self, x: np.ndarray) -> list:
+        events = []
+        deps = self._track(self._delta(x))
+        n = x.shape[0]
+        pos = 0                                   # rows of x before pos are consumed
+        need = self.window_length + self.refine_samples
+        for k, flank, sigma in deps:
+            cap = self._fcap
+            if cap is not None:
+                take = min(need - cap.count, k - pos)     # rows before k belong to the running capture
+                if take > 0:
+                    self._append(cap, x[pos:pos + take])
+                    pos += take
+                if cap.count < need:
+                    if not cap.skip:
+                        cap.second_entry_rows.append(cap.count + (k - pos))
+                    continue
+                events += self._close(cap)
+            # a new entry at row k (no capture running now)
+            hist = np.concatenate([self._tail, x[:k]])[-self.samples_before_entry:]
+            t_k = float(x[k, self._i_t])
+            if hist.shape[0] < self.samples_before_entry:
+                ev = Event("drop", "short_history",
+                           f"entry at t = {t_k!r} s with {hist.shape[0]} of "
+                           f"{self.samples_before_entry} history samples")
+                self.counts["short_history"] += 1
+                self.last_event = ev
+                events.append(ev)
+                self._fcap = _FlankCapture([], self.samples_before_entry, self.samples_before_entry,
+                                           math.nan, math.nan, skip=True)
+            else:
+                self._fcap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma)
+            pos = k
+        cap = self._fcap
+        if cap is not None and pos < n:
+            take = min(need - cap.count, n - pos)
+            self._append(cap, x[pos:pos + take])
+            pos += take
+            if cap.count >= need:
+                events += self._close(cap)
+        self._tail = np.concatenate([self._tail, x])[-self.samples_before_entry:]
+        self._last_t = float(x[-1, self._i_t])
+        return events
+
+    def _append(self, cap: _FlankCapture, rows: np.ndarray) -> None:
+        if not cap.skip:
+            cap.rows.append(rows)
+        cap.count += rows.shape[0]
+
+    def _close(self, cap: _FlankCapture) -> list:
+        self._fcap = None
+        if cap.skip:
+            return []
+        return [self._finish_flank(cap)]
+
+    def finish(self) -> list:
+        """The data ended: a window in progress is reported as ``cut_off`` (a drop, counted); the event
+        carries the partial window (FLAG_CUT_OFF set) for an offline report."""
+        cap = self._fcap
+        if cap is None or cap.skip:
+            self._fcap = None
+            return []
+        self._fcap = None
+        data = np.concatenate(cap.rows)
+        e = cap.departure_row
+        w = Window(data, self.channels, e, float(data[e, self._i_t]), math.nan, self.wheel_radius_m,
+                   self.sample_period_s, 0, detector="flank", flags=FLAG_CUT_OFF)
+        self.counts["cut_off"] += 1
+        ev = Event("drop", "cut_off", f"entry at t = {w.entry_time_s:.6f} s: the data ended after "
+                                      f"{data.shape[0] - e} of {self.samples_from_entry} samples from the entry",
+                   window=w, window_dropped=True)
+        self.last_event = ev
+        return [ev]
+
+    def _finish_flank(self, cap: _FlankCapture) -> Event:
+        data = np.concatenate(cap.rows)
+        dep = cap.departure_row
+        shift, recontact = self._refine(data, dep)
+        e0 = dep + shift - self.samples_before_entry
+        win = data[e0:e0 + self.window_length]
+        e = self.samples_before_entry
+        wd = {c: win[:, j] for j, c in enumerate(self.channels)}
+        rc = None if recontact is None or recontact - e0 >= self.window_length else recontact - e0
+        res = estimate_width(wd, e, self.wheel_radius_m, self.sample_period_s, self.gear_ratio,
+                             flank_rad=cap.flank_rad, recontact=rc, angle_quantum_rad=self.angle_quantum_rad,
+                             contact_samples=self.contact_samples,
+                             contact_tolerance_rad=self.contact_tolerance_rad)
+        self.last_width = res
+        flags = 0
+        if any(dep + shift < r < e0 + self.window_length for r in cap.second_entry_rows):
+            flags |= FLAG_SECOND_ENTRY
+            self.second_entries += 1
+        self.windows_captured += 1
+        if math.isfinite(res.width_m):
+            self.backlash_width_m = res.width_m
+        w = Window(np.ascontiguousarray(win), self.channels, e, float(win[e, self._i_t]), res.width_m,
+                   self.wheel_radius_m, self.sample_period_s, self.windows_captured,
+                   backlash_width_estimate_m=res.width_m, backlash_width_se_m=res.se_m, detector="flank",
+                   flags=flags, recontact_index=res.recontact_index)
+        ev = Event("window", detail=f"window {w.window_id}: entry at t = {w.entry_time_s:.6f} s, K2 estimate "
+                                    f"{res.width_m:.6g} m ({res.how})", window=w)
+        self.last_event = ev
+        return ev
+
+    def _refine(self, data: np.ndarray, dep: int):
+        """(samples from the departure to the entry sample, re-contact row or None) from the dynamics
+        (:func:`single_mass_run`), (0, None) without m_el, a motor acceleration or J1_nom."""
+        if self.nominal_inertia_kgm2 is None or "m_el" not in self.channels:
+            return 0, None
+        wd = {c: data[:, j] for j, c in enumerate(self.channels)}
+        acc, _ = motor_acceleration(wd, self.wheel_radius_m, self.sample_period_s)
+        if acc is None:
+            return 0, None
+        run = single_mass_run(wd["m_el"], acc, dep, self.nominal_inertia_kgm2, self.samples_before_entry,
+                              self.refine_samples)
+        if run is None:
+            return 0, None
+        return run[0] - dep, run[1]

@@ -1,0 +1,139 @@
+"""The flank detector (jident_ros/stream/flank.py): entries without K2 on raw encoder angles, the entry sample
+against inequality 1, the width estimate, batching, format-2 windows, cut-off windows, second entries."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from jident_ros.config import load_system_config
+from jident_ros.evaluation.raw_inputs import evaluate_condition, flank_detector, raw_recordings, run_detector
+from jident_ros.stream.detector import BacklashDetector, stream_batches
+from jident_ros.stream.flank import FlankDetector
+from jident_ros.stream.layout import FLAG_CUT_OFF, FLAG_SECOND_ENTRY, WINDOW_HEADER_1, Window, pack
+
+J1S = (1.16, 0.957)
+K2S = (0.0025, 0.01)
+
+
+@pytest.fixture(scope="module")
+def system():
+    return load_system_config()
+
+
+@pytest.mark.parametrize("snr, direction, width_tol", [(None, "forward", 0.05), (None, "reverse", 0.05),
+                                                       (30.0, "forward", 0.10), (30.0, "reverse", 0.10)])
+def test_raw_encoder_recordings_without_k2(system, snr, direction, width_tol):
+    """Random encoder offsets, a slip that moves the load offset, 2^16 counts, 1 s steady: every entry found
+    on its sample, no false entry, K2 within 5 % (clean) / 10 % (30 dB), the gap J1's class right."""
+    recs = raw_recordings(system, J1S, K2S, snr_db=snr, direction=direction, steady_s=1.0, seed=5)
+    res = evaluate_condition(system, recs, 65536)
+    assert res["entries_found"] == len(recs) and res["false_entries"] == 0
+    assert res["entry_offset_counts"] == {"0": len(recs)}
+    assert res["width_estimates"] == len(recs) and res["width_max_abs_error"] < width_tol
+    assert res["class_correct"] == len(recs)
+
+
+def test_same_entry_sample_as_inequality_1_with_zone_centred_angles(system):
+    recs = raw_recordings(system, J1S, K2S, raw_angles=False, counts=0, steady_s=0.5)
+    s = system.sampling
+    for rec in recs:
+        paper = BacklashDetector(rec.backlash_width_m, system.load.wheel_radius_m, s.sample_period_s)
+        pw = [e.window for e in run_detector(paper, rec) if e.kind == "window"]
+        fw = [e.window for e in run_detector(flank_detector(system, 0), rec) if e.kind == "window"]
+        assert len(pw) == len(fw) == 1
+        assert fw[0].entry_time_s == pw[0].entry_time_s
+        np.testing.assert_array_equal(fw[0].data, pw[0].data)
+
+
+def test_windows_do_not_depend_on_the_batching(system):
+    rec = raw_recordings(system, (1.073,), (0.005,), snr_db=30.0, steady_s=0.5, seed=2)[0]
+    ref = [e.window for e in run_detector(flank_detector(system), rec, batch_size=50) if e.kind == "window"]
+    rng = np.random.default_rng(0)
+    for trial in range(3):
+        det = flank_detector(system)
+        cuts = np.sort(rng.choice(np.arange(1, len(rec.data)), size=300, replace=False))
+        evs = []
+        for part in np.split(rec.data, cuts):
+            evs += det.push(part, rec.channels)
+        got = [e.window for e in evs if e.kind == "window"]
+        assert len(got) == len(ref) == 1
+        np.testing.assert_array_equal(got[0].data, ref[0].data)
+        assert got[0].backlash_width_estimate_m == ref[0].backlash_width_estimate_m
+    one = [e.window for e in run_detector(flank_detector(system), rec, batch_size=1) if e.kind == "window"]
+    np.testing.assert_array_equal(one[0].data, ref[0].data)
+
+
+def test_format_2_header_round_trip_and_format_1_still_unpacks(system):
+    rec = raw_recordings(system, (1.16,), (0.005,), steady_s=0.3)[0]
+    w = [e.window for e in run_detector(flank_detector(system), rec) if e.kind == "window"][0]
+    assert w.detector == "flank" and w.recontact_index > w.entry_index
+    back = Window.unpack(*w.pack())
+    assert back.detector == "flank" and back.flags == w.flags and back.recontact_index == w.recontact_index
+    assert back.backlash_width_estimate_m == w.backlash_width_estimate_m
+    old_header = [1.0, 48, 1.5, 0.005, 0.1, 5e-4, 3]
+    assert len(old_header) == len(WINDOW_HEADER_1)
+    old = Window.unpack(*pack(w.data, w.channels, old_header))
+    assert old.detector == "paper" and old.flags == 0 and math.isnan(old.backlash_width_estimate_m)
+    assert old.window_id == 3 and old.backlash_width_m == 0.005
+
+
+def test_a_window_cut_off_by_the_end_of_the_data_is_reported(system):
+    rec = raw_recordings(system, (1.16,), (0.005,), steady_s=0.3)[0]
+    det = flank_detector(system)
+    evs = []
+    for b in stream_batches(rec.data[:rec.entry_row + 700], 50):
+        evs += det.push(b, rec.channels)
+    assert not [e for e in evs if e.kind == "window"] and det.capturing
+    end = det.finish()
+    assert len(end) == 1 and end[0].reason == "cut_off" and det.counts["cut_off"] == 1
+    assert end[0].window.flags & FLAG_CUT_OFF and end[0].window.entry_time_s == rec.data[rec.entry_row, 0]
+    assert det.finish() == []
+    paper = BacklashDetector(0.005, 0.1, 5e-4)
+    rec0 = raw_recordings(system, (1.16,), (0.005,), steady_s=0.3, raw_angles=False, counts=0)[0]
+    for b in stream_batches(rec0.data[:rec0.entry_row + 10], 50):
+        paper.push(b, rec0.channels)
+    assert [e.reason for e in paper.finish()] == ["cut_off"] and paper.counts["cut_off"] == 1
+
+
+def _synthetic(jumps, n=4000, ts=5e-4, w=150.0):
+    """t, alpha1, alpha2 turning steadily, the load encoder jumping by ``jumps`` {row: rad}."""
+    t = 1.0 + np.arange(n) * ts
+    a1 = 3.0 + w * (t - 1.0)
+    a2 = 1.0 + w * (t - 1.0)
+    for row, j in jumps.items():
+        a2[row:] += j
+    return np.column_stack([t, a1, a2]), ("t", "alpha1", "alpha2")
+
+
+def test_second_entry_inside_a_window_is_flagged():
+    data, ch = _synthetic({500: 0.03, 1500: 0.05})
+    det = FlankDetector(0.1, 5e-4, channels=ch)
+    evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)]
+    wins = [e.window for e in evs if e.kind == "window"]
+    assert len(wins) == 1 and wins[0].entry_time_s == data[500, 0]
+    assert wins[0].flags & FLAG_SECOND_ENTRY and det.second_entries == 1
+    data, ch = _synthetic({500: 0.03, 3000: 0.05})
+    det = FlankDetector(0.1, 5e-4, channels=ch)
+    evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)] + det.finish()
+    wins = [e.window for e in evs if e.kind == "window"]
+    assert len(wins) == 1 and not wins[0].flags                   # the second entry comes after the window
+    assert [e.reason for e in evs if e.kind == "drop"] == ["cut_off"]
+
+
+def test_slow_flank_drift_is_followed_not_taken_for_an_entry():
+    data, ch = _synthetic({})
+    data[:, 2] += np.linspace(0.0, 0.02, len(data))               # 20 mrad of wear over 2 s
+    det = FlankDetector(0.1, 5e-4, channels=ch)
+    evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)]
+    assert evs == [] and det.flank_rad is not None
+
+
+def test_bad_configuration_raises_with_the_name():
+    with pytest.raises(ValueError, match="gear_ratio"):
+        FlankDetector(0.1, 5e-4, gear_ratio=0.0)
+    with pytest.raises(ValueError, match="contact_samples"):
+        FlankDetector(0.1, 5e-4, contact_samples=2)
+    with pytest.raises(ValueError, match="wheel_radius_m"):
+        FlankDetector(0.0, 5e-4)

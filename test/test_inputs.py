@@ -1,0 +1,108 @@
+"""Standard inputs (jident_ros/stream/inputs.py): JointState per sample -> the batched path's windows, IMU a1 by
+stamp, NaN = absent, missing joints, period/jitter, CSV with --map."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from jident_ros.config import load_system_config
+from jident_ros.evaluation.raw_inputs import flank_detector, raw_recordings, run_detector
+from jident_ros.stream.detector import stream_batches
+from jident_ros.stream.inputs import InputError, JointStateAdapter, parse_map, read_csv
+
+CH = ("t", "alpha1", "alpha2", "omega2", "a1", "m_el", "omega1")
+
+
+@pytest.fixture(scope="module")
+def recording():
+    system = load_system_config()
+    rec = raw_recordings(system, (1.102,), (0.005,), snr_db=30.0, steady_s=0.3, seed=4, channels=CH)[0]
+    return system, rec
+
+
+def joint_messages(rec, imu=False):
+    col = rec.column
+    for k in range(len(rec.data)):
+        yield (float(col("t")[k]), ["load", "motor"], [col("alpha2")[k], col("alpha1")[k]],
+               [col("omega2")[k], col("omega1")[k]], [math.nan, col("m_el")[k]])
+
+
+def test_jointstate_per_sample_gives_the_batched_paths_windows(recording):
+    system, rec = recording
+    ref = [e.window for e in run_detector(flank_detector(system, channels=CH), rec) if e.kind == "window"]
+    ad = JointStateAdapter(system.sampling.sample_period_s, use_imu=True, batch_size=37)
+    det = flank_detector(system, channels=CH)
+    evs = []
+    a1 = rec.column("a1")
+    for k, msg in enumerate(joint_messages(rec)):
+        batches = ad.push(*msg)
+        if k % 3 == 0:      # the IMU message sometimes comes first, sometimes after
+            batches += ad.push_imu(msg[0] + 1e-6, (a1[k], 0.0, 9.81))
+        else:
+            batches += ad.push_imu(msg[0] - 1e-6, (a1[k], 0.0, 9.81))
+        for arr, ch in batches:
+            evs += det.push(arr, ch)
+    for arr, ch in ad.flush():
+        evs += det.push(arr, ch)
+    got = [e.window for e in evs if e.kind == "window"]
+    assert len(got) == len(ref) == 1
+    assert set(got[0].channels) == set(CH)
+    for c in CH:
+        np.testing.assert_array_equal(got[0].column(c), ref[0].column(c))
+    assert got[0].backlash_width_estimate_m == ref[0].backlash_width_estimate_m
+    j = ad.jitter()
+    assert j["period_matches"] and j["max_abs_deviation_s"] < 1e-9
+    assert ad.counts["imu_unmatched"] == 0
+
+
+def test_nan_interfaces_absent_missing_joint_and_late_nan(recording):
+    system, rec = recording
+    ad = JointStateAdapter(5e-4, motor_joint="m", load_joint="l", batch_size=2)
+    assert ad.push(1.0, ["m", "l"], [1.0, 2.0], [3.0, math.nan], [4.0, 5.0]) == []
+    assert ad.channels == ("t", "alpha1", "omega1", "m_el", "alpha2")     # load velocity absent throughout
+    out = ad.push(1.0005, ["m", "l"], [1.1, math.nan], [3.0, 0.0], [4.0, 5.0])
+    assert len(out) == 1 and math.isnan(out[0][0][1, 4])                   # a late NaN is carried: a drop later
+    assert ad.push(1.001, ["m"], [1.0], [1.0], [1.0]) == [] and ad.counts["missing_joint"] == 1
+    ad.push(1.0025, ["m", "l"], [1.0, 2.0], [1.0, 1.0], [1.0, 1.0])
+    assert not ad.jitter()["period_matches"] or ad.jitter()["max_abs_deviation_s"] > 1e-4
+    with pytest.raises(ValueError, match="imu_axis"):
+        JointStateAdapter(5e-4, imu_axis="w")
+    with pytest.raises(ValueError, match="motor_joint"):
+        JointStateAdapter(5e-4, motor_joint="a", load_joint="a")
+
+
+def test_csv_with_and_without_map(tmp_path, recording):
+    system, rec = recording
+    p = tmp_path / "trace.csv"
+    cols = ["time_ms", "enc_motor", "alpha2", "m_el", "note"]
+    counts = 2 * math.pi / 65536
+    with open(p, "w") as f:
+        f.write(",".join(cols) + "\n")
+        for k in range(5):
+            f.write(f"{1000 + k * 0.5},{k * 7},{0.1 * k},{150.5},x\n")
+    data, ch, ignored = read_csv(p, parse_map(f"t=time_ms:0.001,alpha1=enc_motor:{counts!r}"))
+    assert ch == ("t", "alpha1", "alpha2", "m_el") and ignored == ["note"]
+    np.testing.assert_allclose(data[:, 0], 1.0 + 0.0005 * np.arange(5))
+    np.testing.assert_allclose(data[:, 1], 7 * counts * np.arange(5))
+    with pytest.raises(InputError, match="no time column"):
+        read_csv(p)
+    with pytest.raises(InputError, match="unknown channel 'torque'"):
+        parse_map("torque=x")
+    with pytest.raises(InputError, match="scale 'abc'"):
+        parse_map("t=time_ms:abc")
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,alpha1\n0.0,1.0\n0.0005,oops\n")
+    with pytest.raises(InputError, match="line 3: column 'alpha1' value 'oops'"):
+        read_csv(bad)
+    # the documented names need no map; a CSV of a recording gives the same windows as its array
+    full = tmp_path / "full.csv"
+    np.savetxt(full, rec.data, delimiter=",", header=",".join(rec.channels), comments="", fmt="%.17g")
+    data, ch, _ = read_csv(full)
+    assert ch == ("t", "alpha1", "alpha2", "omega2", "a1", "m_el", "omega1")
+    det = flank_detector(system, channels=CH)
+    evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)]
+    ref = [e.window for e in run_detector(flank_detector(system, channels=CH), rec) if e.kind == "window"]
+    got = [e.window for e in evs if e.kind == "window"]
+    np.testing.assert_array_equal(got[0].data, ref[0].data)
