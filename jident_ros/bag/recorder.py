@@ -217,6 +217,7 @@ class Recorder:
                 return self._drop("recorder closed" if self._closed else "recorder stopped")
             if bag.error is not None:
                 return self._drop(self._stopped_reason())
+            accepted = bag.message_count + bag.messages_lost
             try:
                 if topic not in self._topics:
                     self.add_topic(topic, msg_type)
@@ -226,19 +227,21 @@ class Recorder:
                 self.last_error = f"{topic}: {exc}"
                 return self._drop("unrecordable message")
             except (RecordingError, OSError) as exc:   # the bag: disk full, I/O error
+                in_lost_chunk = bag.message_count + bag.messages_lost > accepted
                 self._failed(bag, exc)
-                return self._drop(self._stopped_reason())
+                return False if in_lost_chunk else self._drop(self._stopped_reason())
             self.messages_written += 1
             return True
 
     def _failed(self, bag: BagWriter, exc: BaseException) -> None:
-        """The bag stopped (the writer finalised what it could): count the messages of the chunk that
-        never reached the disk as dropped, keep the reason."""
-        lost = bag.messages_lost - self.drop_reasons.get("lost in the unwritten chunk", 0)
+        """The bag stopped (the writer finalised what it could): the messages of the chunk that never
+        reached the disk are dropped (reason "lost in the unwritten chunk"); keep the reason."""
+        key = "lost in the unwritten chunk"
+        lost = bag.messages_lost - self.drop_reasons.get(key, 0)
         if lost > 0:
-            self.drop_reasons["lost in the unwritten chunk"] = bag.messages_lost
+            self.drop_reasons[key] = bag.messages_lost
             self.messages_dropped += lost
-            self.messages_written -= lost
+            self.messages_written = bag.message_count
         self._fail(str(exc))
 
     def _stopped_reason(self) -> str:

@@ -205,6 +205,7 @@ class _File:
         self.t_max: int | None = None
         self.open_chunk: dict[str, int] = {}   # topic -> messages in the chunk not yet on disk
         self.chunk_opened_at: float | None = None
+        self.chunks = 0
         self.opened_at = time.monotonic()
         self.finalised = False
 
@@ -283,7 +284,9 @@ class BagWriter:
         self.error: str | None = None      # why the bag stopped (a failed write), else None
         self.disk_full = False
         self.messages_lost = 0             # messages of a chunk whose write failed
+        self._reserve_fd, self._reserved = -1, 0
         self._file = self._open_file()
+        self._ensure_reserve()
         ref = weakref.ref(self)
         self._atexit = lambda: (ref() is not None and ref().close())
         atexit.register(self._atexit)
@@ -464,6 +467,35 @@ class BagWriter:
             f.out.fsync()
         f.open_chunk = {}
         f.chunk_opened_at = None
+        f.chunks += 1
+        self._ensure_reserve()
+
+    # ---- room to finalise on a full disk ----
+    _RESERVE_NAME = ".jident_reserve"
+    _RESERVE_STEP = 64 * 1024
+
+    def _ensure_reserve(self) -> None:
+        """Keep disk space allocated (a hidden file in the bag directory, removed at close) for what
+        closing needs: the summary (about 200 bytes per chunk), the rosbag2 metadata record and
+        metadata.yaml.  Freed when a write fails, so that a full disk still gets a finalised bag."""
+        need = self._RESERVE_STEP + 256 * self._file.chunks + 2048 * len(self._topics)
+        if need <= self._reserved:
+            return
+        need = -(-need // self._RESERVE_STEP) * self._RESERVE_STEP
+        try:
+            if self._reserve_fd < 0:
+                self._reserve_fd = os.open(self.bag_dir / self._RESERVE_NAME, os.O_WRONLY | os.O_CREAT, 0o600)
+            os.posix_fallocate(self._reserve_fd, 0, need)
+            self._reserved = need
+        except OSError:
+            pass  # nearly full already: the next failed write releases what is reserved
+
+    def _release_reserve(self) -> None:
+        if self._reserve_fd >= 0:
+            fd, self._reserve_fd = self._reserve_fd, -1
+            os.close(fd)
+        (self.bag_dir / self._RESERVE_NAME).unlink(missing_ok=True)
+        self._reserved = 0
 
     def _flush(self, f: _File) -> None:
         f.w.flush()
@@ -494,7 +526,8 @@ class BagWriter:
             if self.error is not None:
                 raise RecordingError(f"{self._file.path}: {self.error}")
             self._write_metadata()
-            f = self._open_file()
+            f = self._file = self._open_file()
+            self._ensure_reserve()
             for t in self._topics.values():
                 self._register(f, t)
             return f.path
@@ -552,6 +585,7 @@ class BagWriter:
         f.count -= lost
         reason = "disk full (ENOSPC)" if exc.errno == errno.ENOSPC else f"write failed ({exc.strerror or exc})"
         self._note_error(f"{reason}; {lost} message(s) of the unwritten chunk lost", exc)
+        self._release_reserve()
         try:
             _forget_lost_chunk(f.w, f.out.committed, {f.channels[t]: n for t, n in f.open_chunk.items()})
             f.open_chunk = {}
@@ -611,6 +645,7 @@ class BagWriter:
                 atexit.unregister(self._atexit)
             except Exception:  # pragma: no cover
                 pass
+            self._release_reserve()
             self._finish(self._file)
             self._write_metadata()
             return True
