@@ -234,6 +234,9 @@ def cmd_diagnose(args) -> int:
                                 gap_method=args.gap_method, image_method=not args.no_image,
                                 backlash_width_m=args.backlash_width_m, signals_topic=args.topic, log=log,
                                 on_window=show)
+    if args.quiet:  # a recording read by salvaging it, dropped batches: said even when quiet
+        for text in result.notes:
+            print(f"jident diagnose: {text}", file=sys.stderr)
     if args.json:
         write_json(result, args.json)
     print(summary_line(result) + (f"; JSON: {args.json}" if args.json else ""))
