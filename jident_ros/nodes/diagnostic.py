@@ -158,8 +158,13 @@ def _node_class():
             self.recorder, self.recorder_error = None, None
             if not c["record"]:
                 return
-            from jident_ros.bag.recorder import Recorder, RecorderError
             log = self.get_logger()
+            try:
+                from jident_ros.bag.recorder import Recorder, RecorderError
+            except ImportError as exc:  # mcap / rosbags (the 'mcap' extra) missing: say so, run on
+                self.recorder_error = f"not recording: {exc} (the recorder needs mcap and rosbags)"
+                log.error(self.recorder_error)
+                return
             if c["record_dir"]:
                 log.warning("record_dir is deprecated: use record_root (bags get rosbag2 names under it)")
             try:
