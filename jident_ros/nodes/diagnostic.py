@@ -211,6 +211,8 @@ def _node_class():
                     return
                 st = self.recorder.status()
                 level = ERROR if st["state"] == "error" else OK
+                if level == OK and self.get_clock().now().nanoseconds == 0:
+                    return  # use_sim_time and no /clock yet: an OK status can wait for a stamp
                 text = (f"recording to {st['bag']}" if level == OK
                         else f"recording stopped: {st['error']}; {st['messages_dropped']} message(s) dropped")
                 values = [(k, st[k]) for k in ("bag", "file", "files", "bytes_written", "messages_written",
