@@ -9,7 +9,8 @@ and the disk budget of a day of drive/signals at 2 kHz.
 * Per round (interleaved old/new, ``--rounds`` rounds, medians reported): serialise and deserialise a
   1000 x 9 ``std_msgs/Float64MultiArray`` (best of 200 calls, per call); write ``--batches`` drive/signals
   batches (50 samples x 9 channels, from an already decoded message as the node's dict path does, and as
-  CDR bytes as the node's raw subscription does) to a new bag, zstd, including close.
+  CDR bytes as the node's raw subscription does) to a new bag, zstd: open + writes + close, and the writes
+  alone (close writes the summary and metadata.yaml once per file; the new one also frees its reserve).
 * **Disk budget**: ``--budget-s`` drive seconds of a simulated drive (the simulator's cases between
   steady-state gaps, the node's batch of 50 samples, the default 8 channels + t) written by the
   :class:`~jident_ros.bag.recorder.Recorder` with its defaults, a chunk every 0.5 s of drive time (what
@@ -71,15 +72,18 @@ def best_per_call(fn, calls: int = 200) -> float:
     return best
 
 
-def time_write(writer_cls, tmp: Path, tag: str, msgs, raw: bool) -> float:
+def time_write(writer_cls, tmp: Path, tag: str, msgs, raw: bool) -> tuple[float, float]:
+    """(open + writes + close, the writes alone) in s."""
     bag = tmp / f"{tag}-{time.monotonic_ns()}"
     t0 = time.perf_counter()
     w = writer_cls(bag)
     w.add_topic("/drive/signals", SIGNALS)
+    t1 = time.perf_counter()
     for i, m in enumerate(msgs):
         w.write("/drive/signals", m, 10**18 + i * 25_000_000)
+    t2 = time.perf_counter()
     w.close()
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, t2 - t1
 
 
 def compare(rounds: int, batches: int) -> dict:
@@ -96,20 +100,22 @@ def compare(rounds: int, batches: int) -> dict:
         new_small = [M.deserialize(SIGNALS, M.serialize(SIGNALS, m)) for m in small]
         small_cdr = [M.serialize(SIGNALS, m) for m in small]
         rows = {k: [] for k in ("ser_old", "ser_new", "de_old", "de_new", "write_old", "write_new",
-                                "write_raw_old", "write_raw_new")}
+                                "write_raw_old", "write_raw_new", "loop_old", "loop_new", "loop_raw_old",
+                                "loop_raw_new")}
         for _ in range(rounds):
             rows["ser_old"].append(best_per_call(lambda: old.serialize(SIGNALS, old_big)))
             rows["ser_new"].append(best_per_call(lambda: M.serialize(SIGNALS, new_big)))
             rows["de_old"].append(best_per_call(lambda: old.deserialize(SIGNALS, cdr)))
             rows["de_new"].append(best_per_call(lambda: M.deserialize(SIGNALS, cdr)))
-            rows["write_old"].append(time_write(old.BagWriter, tmp, "old", old_small, False))
-            rows["write_new"].append(time_write(BagWriter, tmp, "new", new_small, False))
-            rows["write_raw_old"].append(time_write(old.BagWriter, tmp, "oldraw", small_cdr, True))
-            rows["write_raw_new"].append(time_write(BagWriter, tmp, "newraw", small_cdr, True))
+            for key, cls, msgs in (("old", old.BagWriter, old_small), ("new", BagWriter, new_small),
+                                   ("raw_old", old.BagWriter, small_cdr), ("raw_new", BagWriter, small_cdr)):
+                total, loop = time_write(cls, tmp, key, msgs, "raw" in key)
+                rows[f"write_{key}"].append(total)
+                rows[f"loop_{key}"].append(loop)
     med = {k: statistics.median(v) for k, v in rows.items()}
     return {"rounds": rounds, "batches": batches, "median_s": med,
             "ratio_old_over_new": {k: med[f"{k}_old"] / med[f"{k}_new"]
-                                   for k in ("ser", "de", "write", "write_raw")}}
+                                   for k in ("ser", "de", "write", "write_raw", "loop", "loop_raw")}}
 
 
 def simulated_stream(seconds: float):
@@ -172,6 +178,10 @@ def main(argv=None) -> int:
           f"new {med['write_new'] * 1e3:8.1f} ms  ratio {ratio['write']:.2f}")
     print(f"  write {c['batches']} batches (50x9), CDR bytes: old {med['write_raw_old'] * 1e3:8.1f} ms  "
           f"new {med['write_raw_new'] * 1e3:8.1f} ms  ratio {ratio['write_raw']:.2f}")
+    print(f"  ... the {c['batches']} writes alone, messages : old {med['loop_old'] * 1e3:8.1f} ms  "
+          f"new {med['loop_new'] * 1e3:8.1f} ms  ratio {ratio['loop']:.2f}")
+    print(f"  ... the {c['batches']} writes alone, CDR bytes: old {med['loop_raw_old'] * 1e3:8.1f} ms  "
+          f"new {med['loop_raw_new'] * 1e3:8.1f} ms  ratio {ratio['loop_raw']:.2f}")
     b = res["budget"]
     for kind in ("simulated", "white_noise"):
         r = b[kind]
