@@ -38,10 +38,15 @@ setup(
         'tqdm',
         # recordings: CDR, message definitions and type hashes (typestore), reading any rosbag2 bag
         'rosbags',
+        # the diagnostic node records by default (MCAP, zstd chunks)
+        'mcap',
+        'zstandard',
+        'lz4',
     ],
     extras_require={
         'test': ['pytest', 'rosbags'],
-        'mcap': ['mcap', 'mcap-ros2-support', 'zstandard', 'lz4'],
+        # byte-compatibility tests against mcap-ros2-support's writer/reader
+        'mcap': ['mcap-ros2-support'],
     },
     zip_safe=True,
     maintainer='jident developers',

@@ -57,8 +57,15 @@ DIAGNOSTIC = {
     "gap_method": "auto",         # auto | acceleration | anchored | angle | speed | off
     "hardware_id": "",            # default: the resolved drive namespace, e.g. /drive
     "stale_after_s": 5.0,         # STALE status after this long without a window; 0 = never
-    "record_dir": "",             # MCAP recording (bag directory); "" = no recording
+    "record": True,               # record to a rosbag2 MCAP bag (docs/recording.md)
+    "record_root": "",            # bags go to <root>/rosbag2_YYYY_MM_DD-HH_MM_SS; "" = $JIDENT_DATA_DIR/bags,
+                                  # else ~/.local/share/jident_ros/bags
+    "record_dir": "",             # deprecated: this exact bag directory (new or empty) instead of record_root
     "record_signals": True,       # also record drive/signals (+ drive/backlash_width, true_inertia, case)
+    "max_bag_size_bytes": 1073741824,        # split the bag's .mcap file at 1 GiB; 0 = no limit
+    "max_bag_duration_s": 3600.0,            # ... and every hour; 0 = no limit
+    "retention_max_total_bytes": 20000000000,  # delete the oldest complete bags over 20 GB; 0 = no limit
+    "retention_max_age_s": 604800.0,         # ... and those older than 7 days; 0 = no limit
     "window_queue_depth": 50,
     "signals_queue_depth": 1000,
     # the publishing policy (jident_ros.identify.verdict.VerdictPolicy; docs/interfaces.md "/diagnostics")

@@ -6,7 +6,9 @@
   themselves in the ament index), ROS_DOMAIN_ID is unique to this run (kept
   from the environment when scripts/test.sh already chose one) and DDS
   discovery stays on localhost.  The same values are applied to ``os.environ``
-  for the session, so in-process ``rclpy.init()`` and subprocesses agree.
+  for the session, so in-process ``rclpy.init()`` and subprocesses agree.  JIDENT_DATA_DIR points to a
+  session temporary directory: the diagnostic node records by default, and never into the home directory
+  from a test.
 * Tests marked ``ros`` are skipped with a reason when rclpy cannot be imported,
   unless JIDENT_REQUIRE_ROS=1 (set by scripts/test.sh), in which case they fail:
   the venv that scripts/setup.sh builds always has rclpy.
@@ -36,7 +38,7 @@ def _unique_domain_id() -> str:
 
 
 @pytest.fixture(scope="session")
-def ros_env():
+def ros_env(tmp_path_factory):
     prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
     if sys.prefix not in prefixes:
         prefixes.insert(0, sys.prefix)
@@ -45,6 +47,7 @@ def ros_env():
         "ROS_DOMAIN_ID": _unique_domain_id(),
         "ROS_AUTOMATIC_DISCOVERY_RANGE": os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") or "LOCALHOST",
         "PYTHONUNBUFFERED": "1",
+        "JIDENT_DATA_DIR": str(tmp_path_factory.mktemp("jident_data")),
     }
     with pytest.MonkeyPatch.context() as mp:
         for key, value in values.items():

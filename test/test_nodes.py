@@ -321,7 +321,8 @@ def test_replay_gives_the_same_estimates(pipeline, node_env, library, ros, procs
     procs.append(Proc(node_env, tmp_path, "diagnostic", *ns, "-p", f"pattern_library:={library}"))
     procs.append(Proc(node_env, tmp_path, "windowing", *ns))
     assert ros.spin_until(est.matched), logs(*procs)
-    rep = Proc(node_env, tmp_path, "replay", *ns, "-p", "rate:=0.0", "-p", "wait_for_subscribers:=1",
+    # 2 subscribers of drive/signals: the windowing node and the diagnostic node's recorder (on by default)
+    rep = Proc(node_env, tmp_path, "replay", *ns, "-p", "rate:=0.0", "-p", "wait_for_subscribers:=2",
                args=(str(pipeline["bag"]),))
     procs.append(rep)
     assert ros.spin_until(lambda: len(est) >= 2), logs(*procs)

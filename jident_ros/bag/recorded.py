@@ -7,12 +7,18 @@ Shared by ``jident diagnose`` (:mod:`jident_ros.cli.offline`) and ``jident build
 look up each window's true J1 in ``drive/case`` / ``drive/true_inertia``.  The callers keep their
 own error types and messages (passed in as callables).
 
+The ``drive/signals`` batches are taken in the order of their samples' drive time (the ``t`` column),
+not in the order they were received: a recording's receive times are whatever clock its recorder used
+(:func:`in_sample_time_order`).  A batch that cannot be read (undecodable, or not in the drive/signals
+layout) is dropped and counted as the windowing node does -- also the first one.
+
 Plain numpy; never imports rclpy.
 """
 from __future__ import annotations
 
 from typing import Any, Callable, Iterator, Optional
 
+from jident_ros.bag.messages import deserialize
 from jident_ros.bag.recording import RecordingError, read_bag
 from jident_ros.stream.layout import (
     CASE_TOPIC,
@@ -26,12 +32,14 @@ from jident_ros.stream.layout import (
 )
 
 
-def read_drive_messages(path, error: type) -> tuple[list, list]:
+def read_drive_messages(path, error: type, note: Callable[[str], Any] = lambda text: None) -> tuple[list, list]:
     """(the drive-topic messages of a recording as (topic, type, raw CDR) in receive order, every topic
-    name).  An unreadable recording raises ``error`` with one line naming it."""
+    name).  An unreadable or damaged recording raises ``error`` with one line naming the file and the
+    problem; a file its recorder never finalised (killed) is read by salvaging it, and ``note`` gets one
+    line saying so."""
     kept, seen = [], set()
     try:
-        for topic, msg_type, _, raw in read_bag(path, raw=True):
+        for topic, msg_type, _, raw in read_bag(path, raw=True, on_salvage=note):
             seen.add(topic)
             if any(topic_matches(topic, rel) for rel in DRIVE_TOPICS):
                 kept.append((topic, msg_type, raw))
@@ -40,6 +48,39 @@ def read_drive_messages(path, error: type) -> tuple[list, list]:
     except OSError as exc:
         raise error(f"recording {path}: {exc.strerror or exc}") from None
     return kept, sorted(seen)
+
+
+def _first_t(msg_type: str, raw) -> Optional[float]:
+    """Drive time ``t`` of the first sample of a drive/signals batch, or None (unreadable, empty, no t column)."""
+    try:
+        msg = deserialize(msg_type, raw)
+        arr, channels, _ = unpack(msg.data, msg.layout.dim, msg.layout.data_offset)
+    except (ValueError, LayoutError, AttributeError):
+        return None
+    if not arr.shape[0] or "t" not in channels:
+        return None
+    return float(arr[0, channels.index("t")])
+
+
+def in_sample_time_order(messages: list, signals_topic: str) -> list:
+    """``messages`` ((topic, type, raw) in receive order) with the ``signals_topic`` batches sorted by the
+    drive time of their first sample (stable).  Every other message keeps its place before the batch
+    that was received after it; an unreadable batch keeps its place after the batch before it."""
+    keys = [None] * len(messages)
+    last = float("-inf")
+    for i, (topic, msg_type, raw) in enumerate(messages):
+        if topic == signals_topic:
+            t = _first_t(msg_type, raw)
+            last = last if t is None else t
+            keys[i] = (last, 1)
+    following = (float("inf"), 0)
+    for i in range(len(messages) - 1, -1, -1):
+        if keys[i] is None:
+            keys[i] = (following[0], 0)
+        else:
+            following = keys[i]
+    order = sorted(range(len(messages)), key=lambda i: (keys[i], i))
+    return [messages[i] for i in order]
 
 
 class DriveReplay:
@@ -53,21 +94,23 @@ class DriveReplay:
         with ``backlash_width_from_topic``)
     decode : (topic, type, raw) -> message
     read_width, read_truth : (message, topic) -> float; may raise the caller's error
-    make_detector : (channels of the first batch, topic, K2) -> BacklashDetector; may raise
-    first_layout_error : (topic, reason) -> raises: the first batch is not in the drive/signals layout
-    log : gets one-line notes (a drive/case message that could not be read)
+    make_detector : (channels of the first readable batch, topic, K2) -> BacklashDetector; may raise
+    log : gets one-line notes (a drive/case message or a drive/signals batch that could not be read)
 
-    After :meth:`windows`: ``detector`` (None when drive/signals held no message), ``widths_used`` (m).
+    After :meth:`windows`: ``detector`` (None when drive/signals held no readable batch),
+    ``widths_used`` (m), ``dropped_before_start`` (reasons of the unreadable batches before the first
+    readable one; they are counted in the detector's ``layout`` drops once it exists).
     """
 
     def __init__(self, names: dict, width: float, follow_width: bool, *, decode: Callable,
                  read_width: Callable, read_truth: Callable, make_detector: Callable,
-                 first_layout_error: Callable, log: Callable[[str], Any] = lambda text: None):
+                 log: Callable[[str], Any] = lambda text: None):
         self.names = names
         self.width = float(width)
         self.follow_width = follow_width
         self.decode, self.read_width, self.read_truth = decode, read_width, read_truth
-        self.make_detector, self.first_layout_error, self.log = make_detector, first_layout_error, log
+        self.make_detector, self.log = make_detector, log
+        self.dropped_before_start: list = []
         self.detector = None
         self.widths_used = [self.width]
         self.cases: list = []   # (entry_time_s, J1) rows of drive/case
@@ -102,15 +145,19 @@ class DriveReplay:
                         self.cases.append((float(row[cols.index("entry_time_s")]),
                                            float(row[cols.index("inertia_kgm2")])))
                 continue
-            msg = self.decode(topic, msg_type, raw)
             try:
+                msg = self.decode(topic, msg_type, raw)
                 arr, channels, _ = unpack(msg.data, msg.layout.dim, msg.layout.data_offset)
-            except LayoutError as exc:
+            except Exception as exc:  # undecodable CDR (the caller's error) or LayoutError: drop the batch
                 arr, channels, layout_error = None, None, str(exc)
+                self.log(f"{topic}: batch dropped (layout): {layout_error}")
             if self.detector is None:
                 if arr is None:
-                    self.first_layout_error(topic, layout_error)
+                    self.dropped_before_start.append(layout_error)
+                    continue
                 self.detector = self.make_detector(channels, topic, self.width)
+                for reason in self.dropped_before_start:
+                    self.detector.reject("layout", reason)
             if arr is None:
                 events = [self.detector.reject("layout", layout_error)]
             else:

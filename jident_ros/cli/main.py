@@ -259,6 +259,9 @@ def cmd_diagnose(args) -> int:
             if "no drive/signals topic" not in str(exc):
                 raise
             result = diagnose_samples(args.recording, **common, **samples)     # a bag of /joint_states
+    if args.quiet:  # a recording read by salvaging it, dropped batches: said even when quiet
+        for text in result.notes:
+            print(f"jident diagnose: {text}", file=sys.stderr)
     if args.json:
         write_json(result, args.json)
     print(summary_line(result) + (f"; JSON: {args.json}" if args.json else ""))

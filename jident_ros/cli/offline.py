@@ -2,7 +2,8 @@
 
 Reads the ``drive/signals`` batches of an MCAP recording (:func:`jident_ros.bag.recording.read_bag`; topic
 name ending in ``drive/signals``, any namespace; std_msgs/Float64MultiArray in the 2-D sample x channel
-layout of docs/interfaces.md), feeds them in receive-time order through the windowing node's
+layout of docs/interfaces.md), feeds them in the order of their samples' drive time ``t`` (not the
+recorder's receive time) through the windowing node's
 detector (:class:`jident_ros.stream.detector.BacklashDetector`, paper inequality 1) and diagnoses each
 captured window with :func:`jident_ros.identify.diagnosis.diagnose_window`, the function the diagnostic node
 runs.  A recording of the node set therefore gives the same J1 estimates offline as live and as
@@ -26,8 +27,8 @@ from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
-from jident_ros.bag.recorded import DriveReplay, read_drive_messages
-from jident_ros.bag.recording import RecordingError, deserialize
+from jident_ros.bag.recorded import DriveReplay, in_sample_time_order, read_drive_messages
+from jident_ros.bag.recording import deserialize
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.diagnosis import GAP_METHODS, WindowDiagnosis, detector_arguments, diagnose_window
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES
@@ -123,6 +124,7 @@ class OfflineResult:
     library_error: Optional[str] = None
     cut_off: list = field(default_factory=list)    # windows cut off by the end of the data: {entry_time_s, samples}
     jitter: Optional[dict] = None                  # JointState stamp period statistics
+    notes: list = field(default_factory=list)      # one line each: a file read by salvaging it, dropped batches
 
     @property
     def estimates(self) -> list:
@@ -139,7 +141,7 @@ class OfflineResult:
         return {"recording": self.recording, "signals_topic": self.signals_topic,
                 "backlash_width_source": self.backlash_width_source, "samples": self.samples,
                 "batches": self.batches, "dropped": dict(self.dropped), "library": self.library_path,
-                "library_error": self.library_error, "levels": self.level_counts(),
+                "library_error": self.library_error, "notes": list(self.notes), "levels": self.level_counts(),
                 "cut_off": [{k: _json_value(v) for k, v in c.items()} for c in self.cut_off],
                 "jitter": None if self.jitter is None else {k: _json_value(v) for k, v in self.jitter.items()},
                 "windows": [w.to_json() for w in self.windows]}
@@ -210,7 +212,8 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
         raise OfflineError(f"{name}: must be {what}, got {getattr(policy, name)!r}")
     if backlash_width_m is not None and not (math.isfinite(backlash_width_m) and backlash_width_m > 0):
         raise OfflineError(f"backlash_width_m: must be a finite number > 0, got {backlash_width_m!r}")
-    messages, all_topics = read_drive_messages(path, OfflineError)
+    notes: list = []
+    messages, all_topics = read_drive_messages(path, OfflineError, note=notes.append)
     found = sorted({t for t, _, _ in messages if _matches(t, SIGNALS_TOPIC)})
     if signals_topic is not None:
         if signals_topic not in found:
@@ -226,13 +229,12 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
         topic = found[0]
     prefix = topic[:-len(SIGNALS_TOPIC)]
     names = {rel: prefix + rel for rel in DRIVE_TOPICS}
-    messages = [m for m in messages if m[0] in names.values()]
-
+    messages = in_sample_time_order([m for m in messages if m[0] in names.values()], topic)
 
     def decode(topic_name, msg_type, raw):
         try:
             return deserialize(msg_type, raw)
-        except (RecordingError, ValueError) as exc:
+        except ValueError as exc:
             raise OfflineError(f"{topic_name}: undecodable {msg_type} message ({exc})") from None
 
     # K2: the option, else the recording's drive/backlash_width, else the windowing node's default
@@ -245,7 +247,9 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
         width, width_source = float(WINDOWING_DEFAULTS["backlash_width_m"]), "default"
     follow_width = width_source not in ("option", "default")
 
-    result = OfflineResult(str(path), topic, width_source)
+    result = OfflineResult(str(path), topic, width_source, notes=notes)
+    for text in notes:
+        log(text)
     if image_method and library is None:
         lib_path = Path(library_path).expanduser() if library_path else default_library_path(system, method)
         result.library_path = str(lib_path)
@@ -256,22 +260,26 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
 
     ts = float(system.sampling.sample_period_s)
 
-    def first_layout_error(topic_name, reason):
-        raise OfflineError(f"{topic_name}: the first message is not in the drive/signals layout ({reason})")
-
     def make_detector(batch_channels, topic_name, k2):
         return _make_detector(system, k2, channels, batch_channels, gap_tolerance, WINDOWING_DEFAULTS, topic_name,
                               detector, gear_ratio)
 
     replay = DriveReplay(names, width, follow_width, decode=decode, read_width=_float_data,
                          read_truth=lambda msg, topic_name: float(msg.data), make_detector=make_detector,
-                         first_layout_error=first_layout_error, log=log)
+                         log=log)
     diag = _window_diagnoser(system, method, p, library, gap_method, image_method, result, policy)
     for win in replay.windows(messages):
         _add_window(result, win, diag(win), replay.true_inertia(win.entry_time_s, ts)[0], on_window)
     detector = replay.detector
     if detector is None:
+        if replay.dropped_before_start:
+            raise OfflineError(f"recording {path}: topic {topic} holds no readable batch "
+                               f"({len(replay.dropped_before_start)} dropped: {replay.dropped_before_start[0]})")
         raise OfflineError(f"recording {path}: topic {topic} holds no message")
+    if replay.dropped_before_start:
+        notes.append(f"{topic}: {len(replay.dropped_before_start)} unreadable batch(es) before the first readable "
+                     f"one dropped and counted (layout): {replay.dropped_before_start[0]}")
+        log(notes[-1])
     _finish(result, detector, log)
     return result
 

@@ -9,7 +9,7 @@ import numpy as np
 
 from jident_ros.evaluation.evaluate import Evaluation, GridResult
 from jident_ros.evaluation.report_robustness import render_robustness
-from jident_ros.method.image import render_intensity, write_png
+from jident_ros.method.image import render_intensity
 from jident_ros.method.pipeline import SIGNALS
 from jident_ros.method.scalogram import wavelet_scalogram
 from jident_ros.sim import Case, simulate_grid
@@ -204,6 +204,16 @@ def write_results_section(markdown: str, path: str | Path = "docs/results.md") -
     return path
 
 
+
+def save_intensity_png(path, image, cmap: str = "gray") -> Path:
+    """Write an intensity image X1 (values in [0, 1], row 0 at the top) as a PNG through matplotlib's
+    ``imsave`` with the colour map ``cmap`` ('gray', or 'jet' like the paper's Fig. 2) over [0, 1]."""
+    from matplotlib.image import imsave  # optional dependency: only the report's figures need it
+    out = Path(path)
+    imsave(out, np.asarray(image, dtype=float), cmap=cmap, vmin=0.0, vmax=1.0, origin="upper")
+    return out
+
+
 def write_figures(ev: Evaluation, system, method, outdir: str | Path = "docs/figures") -> dict:
     """The paper's Fig. 2 case as an X1 image, and H bar charts of the paper's examples."""
     import matplotlib
@@ -218,7 +228,7 @@ def write_figures(ev: Evaluation, system, method, outdir: str | Path = "docs/fig
                              precision=method.wavefun_precision)
     x1 = render_intensity(scal, shape=(method.image_rows, method.image_cols), n_colors=method.n_colors)
     for cmap in ("gray", "jet"):
-        p = write_png(out / f"fig2_a1_scalogram_{cmap}.png", x1, colormap=cmap)
+        p = save_intensity_png(out / f"fig2_a1_scalogram_{cmap}.png", x1, cmap)
         figs[f"X1 of a1 for the paper's Fig. 2 case (J1 = 1.073, 0.005 m, η_k = 0.025), {cmap}"] = \
             str(p.relative_to(out.parent))
     # H bar charts

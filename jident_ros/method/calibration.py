@@ -40,8 +40,8 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
-from jident_ros.bag.recorded import DriveReplay, read_drive_messages
-from jident_ros.bag.recording import RecordingError, deserialize
+from jident_ros.bag.recorded import DriveReplay, in_sample_time_order, read_drive_messages
+from jident_ros.bag.recording import deserialize
 from jident_ros.method.patterns import PatternLibrary, h5_table, library_metadata
 from jident_ros.method.pipeline import SIGNALS, MethodConfig, batch_features, pre_entry_reference
 from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
@@ -176,7 +176,7 @@ def read_calibration_windows(path, system, *, inertia_kgm2: Optional[float] = No
         raise CalibrationError(f"backlash_width_m: must be a finite number > 0, got {backlash_width_m!r}")
     if not Path(path).exists():
         raise CalibrationError(f"recording {name}: no such file or directory")
-    messages, topics = read_drive_messages(path, CalibrationError)
+    messages, topics = read_drive_messages(path, CalibrationError, note=log)
     found = sorted({t for t, _, _ in messages if _matches(t, SIGNALS_TOPIC)})
     if not found:
         raise CalibrationError(f"recording {name}: no drive/signals topic "
@@ -186,12 +186,12 @@ def read_calibration_windows(path, system, *, inertia_kgm2: Optional[float] = No
                                f"record one drive per calibration recording")
     prefix = found[0][:-len(SIGNALS_TOPIC)]
     names = {rel: prefix + rel for rel in DRIVE_TOPICS}
-    messages = [m for m in messages if m[0] in names.values()]
+    messages = in_sample_time_order([m for m in messages if m[0] in names.values()], found[0])
 
     def decode(topic, msg_type, raw):
         try:
             return deserialize(msg_type, raw)
-        except (RecordingError, ValueError) as exc:
+        except ValueError as exc:
             raise CalibrationError(f"recording {name}: undecodable {msg_type} message on {topic} ({exc})") from None
 
     def positive_data(msg, topic):
@@ -213,10 +213,6 @@ def read_calibration_windows(path, system, *, inertia_kgm2: Optional[float] = No
     sampling = system.sampling
     ts = float(sampling.sample_period_s)
 
-    def first_layout_error(topic, reason):
-        raise CalibrationError(f"recording {name}: the first {topic} message is not in the "
-                               f"drive/signals layout ({reason})")
-
     def make_detector(channels, topic, k2):
         missing = [c for c in ("t", "alpha1", "alpha2") + SIGNALS if c not in channels]
         if missing:
@@ -231,7 +227,7 @@ def read_calibration_windows(path, system, *, inertia_kgm2: Optional[float] = No
 
     replay = DriveReplay(names, width, follow_width, decode=decode, read_width=positive_data,
                          read_truth=positive_data, make_detector=make_detector,
-                         first_layout_error=first_layout_error, log=lambda text: log(f"{name}: {text}"))
+                         log=lambda text: log(f"{name}: {text}"))
     windows: list = []
     unlabelled = None
     for win in replay.windows(messages):
@@ -246,7 +242,8 @@ def read_calibration_windows(path, system, *, inertia_kgm2: Optional[float] = No
                                       win.entry_time_s, source))
     detector, widths_used = replay.detector, replay.widths_used
     if detector is None:
-        raise CalibrationError(f"recording {name}: topic {found[0]} holds no message")
+        raise CalibrationError(f"recording {name}: topic {found[0]} holds no readable message"
+                               + (f" ({replay.dropped_before_start[0]})" if replay.dropped_before_start else ""))
     drops = ", ".join(f"{r} {n}" for r, n in detector.counts.items() if n)
     if drops:
         log(f"{name}: windowing drops: {drops}")

@@ -21,8 +21,8 @@ This module reproduces that picture deterministically:
   the image: every pixel shows one data cell, so the histogram is a count of
   the drawn cells' levels weighted by how many pixels show each cell
   (:func:`drawn_cells`, :func:`level_histogram_from_cells`).
-* :func:`write_png` writes an 8-bit PNG (grey, or an analytic ``'jet'``
-  colour map like the paper's Fig. 2) using only ``zlib`` and ``struct``.
+
+PNG files of X1 are written with matplotlib (``jident_ros.evaluation.report.save_intensity_png``).
 
 Only numpy and the standard library are used.
 """
@@ -30,17 +30,12 @@ Only numpy and the standard library are used.
 from __future__ import annotations
 
 import functools
-import os
-import struct
-import zlib
-from pathlib import Path
 
 import numpy as np
 
 __all__ = [
     "X1_SHAPE",
     "DEFAULT_N_COLORS",
-    "COLORMAPS",
     "pixel_cell_indices",
     "drawn_cells",
     "render_intensity",
@@ -48,7 +43,6 @@ __all__ = [
     "level_histogram",
     "level_histogram_from_cells",
     "render_level_histogram",
-    "write_png",
 ]
 
 #: Shape (rows a, columns b) of the paper's intensity matrix X1: the plot
@@ -57,9 +51,6 @@ X1_SHAPE = (343, 436)
 
 #: Length of MATLAB's default colour map before R2014b (``jet(64)``/``gray(64)``).
 DEFAULT_N_COLORS = 64
-
-#: Colour maps understood by :func:`write_png`.
-COLORMAPS = ("gray", "jet")
 
 _ORIGINS = ("upper", "lower")
 
@@ -457,69 +448,3 @@ def render_level_histogram(
     rows, row_pixels, columns, column_pixels = drawn_cells(data.shape, shape, origin)
     cells = np.take(np.take(data, columns, axis=-1), rows, axis=-2)   # C-contiguous (..., rows, columns)
     return level_histogram_from_cells(cells, cmin, cmax, row_pixels, column_pixels, n_colors)
-
-
-# --------------------------------------------------------------------------
-# PNG output
-# --------------------------------------------------------------------------
-
-
-def _jet_rgb(values: np.ndarray) -> np.ndarray:
-    """Analytic MATLAB-like ``jet``: dark blue (0) -> cyan -> yellow -> dark red (1)."""
-    v = values[..., None]
-    centres = np.array([3.0, 2.0, 1.0])  # red, green, blue
-    return np.clip(1.5 - np.abs(4.0 * v - centres), 0.0, 1.0)
-
-
-def _png_chunk(kind: bytes, data: bytes) -> bytes:
-    crc = zlib.crc32(kind + data) & 0xFFFFFFFF
-    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", crc)
-
-
-def write_png(path, image, colormap: str = "gray") -> Path:
-    """Write an intensity image as an 8-bit PNG (standard library only).
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        Output file name.
-    image : array_like, shape (n_rows, n_columns)
-        Intensities in [0, 1] (X1); row 0 is the top row of the picture.
-    colormap : {'gray', 'jet'}, optional
-        ``'gray'`` (default): one 8-bit channel, ``round(255 * image)``.
-        ``'jet'``: RGB through an analytic jet colour map, for a colour
-        picture like the paper's Fig. 2.
-
-    Returns
-    -------
-    pathlib.Path
-        The written file: PNG signature, IHDR (bit depth 8, colour type 0 or
-        2), one zlib-compressed IDAT with filter type 0 on every row, IEND.
-    """
-    if not isinstance(path, (str, os.PathLike)):
-        raise ValueError(f"path: expected a file name, got {_short(path)}")
-    array = _check_image(image)
-    if array.ndim != 2:
-        raise ValueError(f"image: expected shape (n_rows, n_columns), got ndim={array.ndim}")
-    if colormap == "gray":
-        pixels = np.rint(array * 255.0).astype(np.uint8)
-        colour_type = 0
-    elif colormap == "jet":
-        pixels = np.rint(_jet_rgb(array) * 255.0).astype(np.uint8)
-        colour_type = 2
-    else:
-        raise ValueError(f"colormap: expected one of {COLORMAPS}, got {_short(colormap)}")
-    height, width = array.shape
-    rows = pixels.reshape(height, -1)
-    scanlines = np.zeros((height, rows.shape[1] + 1), dtype=np.uint8)  # filter byte 0
-    scanlines[:, 1:] = rows
-    header = struct.pack(">IIBBBBB", width, height, 8, colour_type, 0, 0, 0)
-    payload = (
-        b"\x89PNG\r\n\x1a\n"
-        + _png_chunk(b"IHDR", header)
-        + _png_chunk(b"IDAT", zlib.compress(scanlines.tobytes(), 9))
-        + _png_chunk(b"IEND", b"")
-    )
-    out = Path(path)
-    out.write_bytes(payload)
-    return out

@@ -18,10 +18,14 @@ A thin ROS adapter over :func:`jident_ros.identify.diagnosis.diagnose_window` (t
    on ``inertia_estimate`` only when the data support it (plausible band, width consistency, no
    ambiguous interval, the image method's class only above ``image_min_margin``).
 
-With ``record_dir`` set, the windows (and with ``record_signals`` the drive's signals), the estimates
-and the statuses are logged to an MCAP recording (jident_ros.bag.recording.BagWriter) closed on shutdown.
+Unless ``record`` is false, the windows (and with ``record_signals`` the drive's signals), the estimates
+and the statuses are recorded (jident_ros.bag.recorder.Recorder) into a rosbag2 bag
+``<record_root>/rosbag2_YYYY_MM_DD-HH_MM_SS/``, split by ``max_bag_size_bytes`` / ``max_bag_duration_s``,
+old bags deleted by ``retention_max_total_bytes`` / ``retention_max_age_s``, stamped with the wall clock,
+finalised on shutdown.  A status "jident: recorder" (1 Hz) reports it: OK while recording, ERROR with
+the reason (unusable root, disk full: the part written is finalised) and the dropped messages.
 
-    ros2 run jident_ros diagnostic --ros-args -p record_dir:=out/run1
+    ros2 run jident_ros diagnostic --ros-args -p record_root:=out/bags
 """
 from __future__ import annotations
 
@@ -29,7 +33,7 @@ import time
 from pathlib import Path
 
 from jident_ros.identify.diagnosis import GAP_METHODS, detector_arguments, diagnose_window
-from jident_ros.identify.levels import ERROR, LEVEL_NAMES, STALE
+from jident_ros.identify.levels import ERROR, LEVEL_NAMES, OK, STALE
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id
@@ -48,6 +52,7 @@ from jident_ros.parameters import DIAGNOSTIC
 
 NODE_NAME = "jident_diagnostic"
 STATUS_NAME = "jident: inertia"
+RECORDER_STATUS_NAME = "jident: recorder"
 
 DEFAULTS = DIAGNOSTIC
 
@@ -63,6 +68,8 @@ def validate(values: dict):
     require("stale_after_s", cfg["stale_after_s"], cfg["stale_after_s"] >= 0, "a number >= 0 (0 = never)")
     for n in ("window_queue_depth", "signals_queue_depth"):
         require(n, cfg[n], cfg[n] >= 1, "an integer >= 1")
+    for n in ("max_bag_size_bytes", "max_bag_duration_s", "retention_max_total_bytes", "retention_max_age_s"):
+        require(n, cfg[n], cfg[n] >= 0, "a number >= 0 (0 = no limit)")
     require("image_method", cfg["image_method"], cfg["image_method"] or cfg["gap_method"] != "off",
             "true when gap_method is off (nothing would be identified)")
     for name, what in VerdictPolicy.from_params(cfg).problems():
@@ -92,7 +99,7 @@ def _node_class():
             self.nominal = float(self.system.motor.nominal_inertia_kgm2)
             self.diag = DiagnosticsPublisher(self)
             self.pub_estimate = self.create_publisher(Float64, "inertia_estimate", qos_latched())
-            self.bag = None
+            self.bag = self.recorder = None
             self.bag_topics = {}
             self.windows_seen = 0
             self.last_estimate = None
@@ -113,9 +120,12 @@ def _node_class():
                     self.create_subscription(Float64, name, lambda m, n=name: self._record(n, m), deep)
                 self.create_subscription(Float64MultiArray, "drive/case",
                                          lambda m: self._record("drive/case", m), deep)
-            if self.bag is not None:  # a chunk never waits long in memory, even when messages pause
+            if self.recorder is not None or self.recorder_error:  # steady clock: no /clock can stop it
                 from rclpy.clock import Clock, ClockType
-                self.flush_timer = self.create_timer(0.5, self._flush_bag, clock=Clock(clock_type=ClockType.STEADY_TIME))
+                steady = Clock(clock_type=ClockType.STEADY_TIME)
+                # a chunk never waits long in memory (flush_age_s 0.5 s), even when messages pause
+                self.flush_timer = self.create_timer(0.25, self._flush_bag, clock=steady)
+                self.recorder_timer = self.create_timer(1.0, self._publish_recorder_status, clock=steady)
             self._last_window_ns = None
             self._start_ns = None
             if c["stale_after_s"] > 0:
@@ -151,59 +161,78 @@ def _node_class():
 
         # ----------------------------------------------------------------- recording
         def _start_recording(self):
-            rd = self.cfg["record_dir"]
-            if not rd:
+            c = self.cfg
+            self.recorder, self.recorder_error = None, None
+            if not c["record"]:
                 return
+            log = self.get_logger()
             try:
-                from jident_ros.bag.recording import BagWriter
-            except ImportError as exc:
-                self.get_logger().warning(f"record_dir is set but MCAP logging is unavailable "
-                                          f"(jident_ros.bag.recording: {exc}); logging disabled")
+                from jident_ros.bag.recorder import Recorder, RecorderError
+            except ImportError as exc:  # mcap / rosbags (the 'mcap' extra) missing: say so, run on
+                self.recorder_error = f"not recording: {exc} (the recorder needs mcap and rosbags)"
+                log.error(self.recorder_error)
                 return
+            if c["record_dir"]:
+                log.warning("record_dir is deprecated: use record_root (bags get rosbag2 names under it)")
             try:
-                self.bag = BagWriter(str(Path(rd).expanduser()))
-                topics = [("drive/window", "std_msgs/msg/Float64MultiArray", qos_latched(self.cfg["window_queue_depth"])),
+                self.recorder = Recorder(
+                    c["record_root"] or None, bag_dir=c["record_dir"] or None,
+                    max_bag_size_bytes=c["max_bag_size_bytes"], max_bag_duration_s=c["max_bag_duration_s"],
+                    retention_max_total_bytes=c["retention_max_total_bytes"],
+                    retention_max_age_s=c["retention_max_age_s"],
+                    custom_data={"node": self.get_fully_qualified_name()}, log=log.info)
+                topics = [("drive/window", "std_msgs/msg/Float64MultiArray", qos_latched(c["window_queue_depth"])),
                           ("inertia_estimate", "std_msgs/msg/Float64", qos_latched()),
                           ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", self.diag.pub.qos_profile)]
-                if self.cfg["record_signals"]:
-                    topics += [("drive/signals", "std_msgs/msg/Float64MultiArray",
-                                qos_signals(self.cfg["signals_queue_depth"])),
+                if c["record_signals"]:
+                    topics += [("drive/signals", "std_msgs/msg/Float64MultiArray", qos_signals(c["signals_queue_depth"])),
                                ("drive/backlash_width", "std_msgs/msg/Float64", qos_latched()),
                                ("drive/true_inertia", "std_msgs/msg/Float64", qos_latched()),
                                ("drive/case", "std_msgs/msg/Float64MultiArray", qos_latched())]
                 for name, typ, qos in topics:
                     full = self.resolve_topic_name(name)
-                    self.bag.add_topic(full, typ, qos)
-                    self.bag_topics[name] = full
-                self.get_logger().info(f"recording to {rd}")
-            except Exception as exc:
-                self.get_logger().error(f"recording to {rd} failed: {type(exc).__name__}: {exc}; logging disabled")
+                    self.recorder.add_topic(full, typ, qos)
+                    self.bag_topics[name] = (full, typ)
+                log.info(f"recording to {self.recorder.bag_dir}")
+            except (RecorderError, ValueError) as exc:
+                self.recorder_error = f"not recording: {exc}"
+                log.error(self.recorder_error)
                 self._close_bag()
+            self.bag = self.recorder
 
         def _record(self, name, msg):
-            if self.bag is None:
-                return
-            try:
-                self.bag.write(self.bag_topics[name], msg, self.get_clock().now().nanoseconds)
-            except Exception as exc:
-                self.get_logger().error(f"recording failed: {type(exc).__name__}: {exc}; logging disabled")
-                self._close_bag()
+            if self.recorder is not None:  # wall-clock stamp, never raises: drops are counted
+                self.recorder.write(*self.bag_topics[name], msg)
 
         def _flush_bag(self):
-            if self.bag is not None:
-                try:
-                    self.bag.maybe_flush()
-                except Exception as exc:
-                    self.get_logger().error(f"recording failed: {type(exc).__name__}: {exc}; logging disabled")
-                    self._close_bag()
+            if self.recorder is not None:
+                self.recorder.maybe_flush()
+
+        def _publish_recorder_status(self):
+            try:
+                if self.recorder_error:
+                    self._publish_status(make_status(RECORDER_STATUS_NAME, ERROR, self.recorder_error,
+                                                     self.hardware_id, [("record_root", self.cfg["record_root"])]))
+                    return
+                if self.recorder is None:
+                    return
+                st = self.recorder.status()
+                level = ERROR if st["state"] == "error" else OK
+                if level == OK and self.get_clock().now().nanoseconds == 0:
+                    return  # use_sim_time and no /clock yet: an OK status can wait for a stamp
+                text = (f"recording to {st['bag']}" if level == OK
+                        else f"recording stopped: {st['error']}; {st['messages_dropped']} message(s) dropped")
+                values = [(k, st[k]) for k in ("bag", "file", "files", "bytes_written", "messages_written",
+                                               "messages_dropped", "splits", "bags_deleted", "bytes_deleted")]
+                values += [(f"dropped: {k}", v) for k, v in st["drop_reasons"].items()]
+                self._publish_status(make_status(RECORDER_STATUS_NAME, level, text, self.hardware_id, values))
+            except Exception as exc:
+                self.get_logger().error(f"recorder status failed: {type(exc).__name__}: {exc}", once=True)
 
         def _close_bag(self):
-            bag, self.bag = self.bag, None
-            if bag is not None:
-                try:
-                    bag.close()
-                except Exception as exc:
-                    self.get_logger().error(f"closing the recording failed: {type(exc).__name__}: {exc}")
+            rec, self.recorder = self.recorder, None
+            if rec is not None:
+                rec.close()
 
         def close(self):
             self._close_bag()

@@ -2,7 +2,8 @@
 
     ros2 run jident_ros replay out/run1 --ros-args -p rate:=10.0
 
-Reads the bag directory (or .mcap file) with :func:`jident_ros.bag.recording.read_bag` and republishes,
+Reads the bag directory (also one split into several .mcap files) or .mcap file with
+:func:`jident_ros.bag.recording.read_bag` and republishes,
 in receive-time order, every recorded topic whose name ends with one of ``topics`` (default
 drive/signals, drive/backlash_width, drive/true_inertia, drive/case) on the corresponding *relative*
 name, so ``-r __ns:=/press3`` replays into another namespace.  The messages go out as recorded
@@ -11,6 +12,10 @@ differences divided by ``rate`` (0 = as fast as the windowing node reads: ``fast
 messages and at most ``max_lead_s`` drive seconds ahead of its ``drive/progress``, see ProgressGate).
 With ``publish_clock``, /clock follows the ``t`` column of each drive/signals batch (recorded
 /clock messages are not replayed), exactly as the simulator publishes it.
+
+A recording its recorder never finalised (killed) is replayed by salvaging it on the fly (one warning
+line says so); a missing, non-MCAP or damaged recording is one line naming the file and the problem, exit
+status 2.
 """
 from __future__ import annotations
 
@@ -83,11 +88,15 @@ def _node_class(args):
             self.cfg = validate(declare_parameters(self, DEFAULTS), _positional(args))
             self.exit_code = 0
             try:
-                from jident_ros.bag.recording import read_bag
+                from jident_ros.bag.recording import RecordingError, read_bag
             except ImportError as exc:
                 raise ParameterError(f"parameter bag: cannot read recordings here (jident_ros.bag.recording: {exc})")
-            self.read_bag = read_bag
+            self.read_bag, self.RecordingError = read_bag, RecordingError
             self.bag = str(Path(self.cfg["bag"]).expanduser())
+            try:
+                read_bag(self.bag, raw=True)  # checks the files (named, MCAP) before anything is published
+            except RecordingError as exc:
+                raise ParameterError(f"recording {exc}") from None
             self.pubs = {}
             self.pub_clock = (self.create_publisher(Clock, "/clock", qos_clock())
                               if self.cfg["publish_clock"] else None)
@@ -127,6 +136,8 @@ def _node_class(args):
                     if c["rate"] == 0 and c["max_lead_s"] > 0 else None)
             try:
                 self._replay(gate)
+            except self.RecordingError as exc:  # damaged on the way: one line, status 2
+                raise ParameterError(f"recording {exc}") from None
             finally:
                 if gate is not None:
                     gate.close()
@@ -135,7 +146,8 @@ def _node_class(args):
             c = self.cfg
             wall0 = rec0 = None
             counts = {}
-            for topic, msg_type, log_ns, raw in self.read_bag(self.bag, raw=True):
+            for topic, msg_type, log_ns, raw in self.read_bag(self.bag, raw=True,
+                                                              on_salvage=self.get_logger().warning):
                 if not self.context.ok():
                     return
                 rel = self._match(topic)
