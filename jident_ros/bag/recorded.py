@@ -57,7 +57,11 @@ class DriveReplay:
     first_layout_error : (topic, reason) -> raises: the first batch is not in the drive/signals layout
     log : gets one-line notes (a drive/case message that could not be read)
 
-    After :meth:`windows`: ``detector`` (None when drive/signals held no message), ``widths_used`` (m).
+    After :meth:`windows`: ``detector`` (None when drive/signals held no message), ``widths_used`` (m),
+    ``clock_jumps`` (times the drive clock jumped forward between two batches while no window was being
+    captured: a recording that resumes after a pause, e.g. one transient an hour; the detector's history
+    restarts there, so the first batch after the jump is kept and cannot fake an entry; a jump inside a
+    window is left to the detector, which drops that window as a ``gap``).
     """
 
     def __init__(self, names: dict, width: float, follow_width: bool, *, decode: Callable,
@@ -72,6 +76,8 @@ class DriveReplay:
         self.widths_used = [self.width]
         self.cases: list = []   # (entry_time_s, J1) rows of drive/case
         self.truth: list = []   # (t of the first sample after the message, J1) from drive/true_inertia
+        self.clock_jumps = 0
+        self._last_t: Optional[float] = None
 
     def windows(self, messages) -> Iterator[Window]:
         """Every window the detector captures from ``messages`` ((topic, type, raw) in receive order)."""
@@ -114,13 +120,29 @@ class DriveReplay:
             if arr is None:
                 events = [self.detector.reject("layout", layout_error)]
             else:
-                if pending_truth is not None and arr.shape[0] and "t" in channels:
-                    self.truth.append((float(arr[0, channels.index("t")]), pending_truth))
+                t_col = channels.index("t") if arr.shape[0] and "t" in channels else None
+                if pending_truth is not None and t_col is not None:
+                    self.truth.append((float(arr[0, t_col]), pending_truth))
                     pending_truth = None
+                if t_col is not None:
+                    self._resume_after_jump(float(arr[0, t_col]))
                 events = self.detector.push(arr, channels)
+                if any(ev.kind == "drop" and ev.reason not in ("empty", "short_history") for ev in events):
+                    self._last_t = None          # the detector was reset
+                elif t_col is not None:
+                    self._last_t = float(arr[-1, t_col])
             for ev in events:
                 if ev.kind == "window":
                     yield ev.window
+
+    def _resume_after_jump(self, t_first: float) -> None:
+        """A forward jump of the drive clock between batches, outside a window: restart the detector's
+        history (counted in ``clock_jumps``) instead of letting it drop the batch as a ``gap``."""
+        d = self.detector
+        if self._last_t is not None and t_first - self._last_t > d.gap_tolerance * d.sample_period_s \
+                and not d.capturing:
+            d.reset()
+            self.clock_jumps += 1
 
     def true_inertia(self, entry_time_s: float, sample_period_s: float) -> tuple[Optional[float], str]:
         """(J1 in kg m^2, the topic it came from) of the window entering the zone at ``entry_time_s``:

@@ -102,6 +102,7 @@ class OfflineResult:
     dropped: dict = field(default_factory=dict)    # windowing drop reason -> count (non-zero only)
     samples: int = 0
     batches: int = 0
+    clock_jumps: int = 0                # forward jumps of t between batches outside a window (DriveReplay)
     library_path: Optional[str] = None
     library_error: Optional[str] = None
 
@@ -119,7 +120,7 @@ class OfflineResult:
     def to_json(self) -> dict:
         return {"recording": self.recording, "signals_topic": self.signals_topic,
                 "backlash_width_source": self.backlash_width_source, "samples": self.samples,
-                "batches": self.batches, "dropped": dict(self.dropped), "library": self.library_path,
+                "batches": self.batches, "clock_jumps": self.clock_jumps, "dropped": dict(self.dropped), "library": self.library_path,
                 "library_error": self.library_error, "levels": self.level_counts(),
                 "windows": [w.to_json() for w in self.windows]}
 
@@ -257,6 +258,7 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
         raise OfflineError(f"recording {path}: topic {topic} holds no message")
     result.samples, result.batches = detector.samples_seen, detector.batches_seen
     result.dropped = {r: n for r, n in detector.counts.items() if n}
+    result.clock_jumps = replay.clock_jumps
     return result
 
 
@@ -301,6 +303,8 @@ def summary_line(result: OfflineResult) -> str:
         result.backlash_width_source, f"from {result.backlash_width_source}")
     text = (f"{len(result.windows)} window(s) from {result.signals_topic} ({result.samples} samples in "
             f"{result.batches} batches, K2 {k2}): {lv['OK']} OK, {lv['WARN']} WARN, {lv['ERROR']} ERROR")
+    if result.clock_jumps:
+        text += f"; the drive clock jumped forward {result.clock_jumps} time(s) between windows (history restarted)"
     if result.dropped:
         text += "; dropped: " + ", ".join(f"{r} {n}" for r, n in result.dropped.items())
     errs = [abs(w.error_percent) for w in result.windows if w.error_percent is not None]
