@@ -247,7 +247,8 @@ def read_calibration_windows(path, system, *, inertia_kgm2: Optional[float] = No
     detector, widths_used = replay.detector, replay.widths_used
     if detector is None:
         raise CalibrationError(f"recording {name}: topic {found[0]} holds no message")
-    drops = ", ".join(f"{r} {n}" for r, n in detector.counts.items() if n)
+    drops = ", ".join([f"{r} {n}" for r, n in detector.counts.items() if n] +
+                      ([f"clock jumps {replay.clock_jumps}"] if replay.clock_jumps else []))
     if drops:
         log(f"{name}: windowing drops: {drops}")
     if unlabelled is not None:
