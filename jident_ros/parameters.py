@@ -48,6 +48,39 @@ WINDOWING = {
 }
 
 
+#: Trend of J1 and the backlash width (issue 14; jident_ros.identify.trend.TrendConfig.from_parameters), parameters
+#: of the diagnostic node.  0 means "not set" where TrendConfig takes None (ROS parameters cannot be None).
+TREND = {
+    "trend_enabled": True,                           # follow the trend and publish the "jident: trend" status
+    "trend_state_file": "",                          # tracker state (JSON, written atomically); "" = not kept
+    "trend_commissioning_windows": 20,               # windows that learn the baseline
+    "trend_commissioning_duration_s": 0.0,           # instead: learn over this drive time, s (0 = by windows)
+    "trend_inertia_baseline_kgm2": 0.0,              # given J1 baseline (0 = learn it)
+    "trend_inertia_baseline_se_kgm2": 0.0,
+    "trend_width_baseline_m": 0.0,                   # given width baseline (0 = learn it)
+    "trend_width_baseline_se_m": 0.0,
+    "trend_target_arl_windows": 1000000.0,           # in-control average run length the CUSUM is designed for
+    "trend_cusum_reference_sd": 2.0,                 # CUSUM k, standard deviations
+    "trend_cusum_threshold_sd": 0.0,                 # CUSUM h (0 = from trend_target_arl_windows)
+    "trend_innovation_clip_sd": 4.0,                 # innovations clipped at +- this
+    "trend_se_scale_from_commissioning": False,      # scale the reported errors by the commissioning scatter
+    "trend_se_scale_max": 3.0,
+    "trend_inertia_process_sd_pct_per_window": 0.02,  # J1 random walk, % of the baseline per window
+    "trend_relearn_windows": 5,                      # windows after a change forming the new baseline
+    "trend_change_hold_windows": 24,                 # WARN for this many windows after a change
+    "trend_drift_warn_pct": 2.0,                     # J1 drift giving WARN, %
+    "trend_drift_alarm_pct": 5.0,                    # J1 drift giving ERROR, %
+    "trend_width_limit_m": 0.012,                    # backlash width limit (ERROR), m
+    "trend_width_warn_m": 0.0,                       # WARN width, m (0 = 90 % of the limit)
+    "trend_time_to_limit_warn_s": 2592000.0,         # WARN when the limit is projected sooner, s (30 days; 0 = off)
+    "trend_width_regression_windows": 50,            # windows of the wear-rate regression
+    "trend_width_se_floor_m": 1.0e-6,                # floor of the width standard error, m
+    "trend_width_change_detection": True,            # CUSUM on the width too
+    "trend_wear_significance_sd": 1.96,              # wear rate significant above this many standard errors
+    "trend_max_changes_kept": 100,                   # change events kept in the state
+}
+
+
 #: Parameters of the diagnostic node (besides config/system.yaml and config/method.yaml), with their defaults.
 DIAGNOSTIC = {
     "pattern_library": "",        # .npz; "" = the CLI's default path (~/.cache/jident_ros/patterns-<hash>.npz)
@@ -76,6 +109,7 @@ DIAGNOSTIC = {
     "library_width_tolerance": 0.05,  # image method valid only with a library width within 5 % of the window's K2
     "max_torque_factor": 100.0,   # |m_el| above 100 x the base torque M_b is absurd: window refused
     "max_speed_factor": 10.0,     # |omega1|, |omega2| above 10 x the synchronous speed is absurd: window refused
+    **TREND,                      # the trend (issue 14): wired by the node once it publishes the trend
 }
 
 

@@ -272,7 +272,8 @@ def test_cli_errors_are_one_line(case, recordings, tmp_path, capsys):
         argv, needles = base + [str(d)], [str(d), "no drive/signals topic", "/drive/true_inertia"]
     elif case == "no_entry":
         argv, needles = base + [str(r["no_entry"]), "--label", "no_entry=1.16"], \
-            [str(r["no_entry"]), "no backlash entry", "K2 = 0.0025, 0.00375 m", "drops: gap 1"]
+            [str(r["no_entry"]), "no backlash entry", "K2 = 0.0025, 0.00375 m",
+                                                                 "drops: clock jumps 1"]
     elif case == "no_label":
         argv, needles = base + [str(r["c5"]), str(r["truth"])], [str(r["c5"]), "no J1 label", "--label"]
     elif case == "one_class":

@@ -112,7 +112,7 @@ def test_install_requires_never_pull_ros_wheels():
         pytest.fail(f"{PACKAGE_NAME} is not pip-installed in {sys.prefix}: {SETUP_HINT}")
     core = [r for r in requires if "extra ==" not in r]
     names = {r.split(";")[0].split("[")[0].split("<")[0].split(">")[0].split("=")[0].strip().lower() for r in core}
-    assert names == {"numpy", "scipy", "pywavelets", "pyyaml", "matplotlib", "tqdm"}
+    assert names == {"numpy", "scipy", "pywavelets", "pyyaml", "matplotlib", "tqdm", "rosbags", "mcap", "zstandard", "lz4"}
     assert not [r for r in requires if r.lower().startswith(("ros-", "rclpy"))]
 
 

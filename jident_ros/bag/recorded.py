@@ -18,11 +18,15 @@ from __future__ import annotations
 
 from typing import Any, Callable, Iterator, Optional
 
+import numpy as np
+
 from jident_ros.bag.messages import deserialize
 from jident_ros.bag.recording import RecordingError, read_bag
 from jident_ros.stream.layout import (
     CASE_TOPIC,
     DRIVE_TOPICS,
+    KNOWN_CHANNELS,
+    SIGNALS_TOPIC,
     TRUE_INERTIA_TOPIC,
     WIDTH_TOPIC,
     LayoutError,
@@ -99,7 +103,11 @@ class DriveReplay:
 
     After :meth:`windows`: ``detector`` (None when drive/signals held no readable batch),
     ``widths_used`` (m), ``dropped_before_start`` (reasons of the unreadable batches before the first
-    readable one; they are counted in the detector's ``layout`` drops once it exists).
+    readable one; they are counted in the detector's ``layout`` drops once it exists), ``clock_jumps``
+    (times the drive clock jumped forward between two batches while no window was being
+    captured: a recording that resumes after a pause, e.g. one transient an hour; the detector's history
+    restarts there, so the first batch after the jump is kept and cannot fake an entry; a jump inside a
+    window is left to the detector, which drops that window as a ``gap``).
     """
 
     def __init__(self, names: dict, width: float, follow_width: bool, *, decode: Callable,
@@ -115,12 +123,24 @@ class DriveReplay:
         self.widths_used = [self.width]
         self.cases: list = []   # (entry_time_s, J1) rows of drive/case
         self.truth: list = []   # (t of the first sample after the message, J1) from drive/true_inertia
+        self.clock_jumps = 0
+        self._last_t: Optional[float] = None
 
     def windows(self, messages) -> Iterator[Window]:
-        """Every window the detector captures from ``messages`` ((topic, type, raw) in receive order)."""
+        """Every window the detector captures from ``messages`` ((topic, type, raw) in receive order).
+
+        Consecutive drive/signals batches (same channels, nothing else in between) are pushed to the
+        detector as one array when they are clean (finite, known channels, every step of t within
+        [T_s/2, gap_tolerance T_s]): the detector's result does not depend on how the stream is cut
+        into batches, and its per-batch cost (~0.1 ms) dominated long recordings.  Any other run is
+        pushed batch by batch, so drops are counted exactly as the windowing node counts them."""
         names = self.names
         pending_truth = None
+        run: list = []                  # clean-looking decoded batches not yet pushed: (array, channels)
         for topic, msg_type, raw in messages:
+            if topic != names[SIGNALS_TOPIC]:
+                yield from self._windows_of(self._push_run(run))
+                run = []
             if topic == names[WIDTH_TOPIC]:
                 if self.follow_width:
                     w = self.read_width(self.decode(topic, msg_type, raw), topic)
@@ -159,15 +179,72 @@ class DriveReplay:
                 for reason in self.dropped_before_start:
                     self.detector.reject("layout", reason)
             if arr is None:
-                events = [self.detector.reject("layout", layout_error)]
-            else:
-                if pending_truth is not None and arr.shape[0] and "t" in channels:
-                    self.truth.append((float(arr[0, channels.index("t")]), pending_truth))
-                    pending_truth = None
-                events = self.detector.push(arr, channels)
-            for ev in events:
-                if ev.kind == "window":
-                    yield ev.window
+                yield from self._windows_of(self._push_run(run))
+                run = []
+                yield from self._windows_of([self.detector.reject("layout", layout_error)])
+                continue
+            if pending_truth is not None and arr.shape[0] and "t" in channels:
+                self.truth.append((float(arr[0, channels.index("t")]), pending_truth))
+                pending_truth = None
+            if run and (tuple(channels) != tuple(run[0][1]) or not arr.shape[0] or
+                        sum(a.shape[0] for a, _ in run) >= self.MAX_RUN_SAMPLES):
+                yield from self._windows_of(self._push_run(run))
+                run = []
+            run.append((arr, channels))
+        yield from self._windows_of(self._push_run(run))
+
+    #: longest run of batches pushed as one array, samples
+    MAX_RUN_SAMPLES = 50_000
+
+    @staticmethod
+    def _windows_of(events) -> Iterator[Window]:
+        for ev in events:
+            if ev.kind == "window":
+                yield ev.window
+
+    def _clean_run(self, arr, channels) -> bool:
+        """True when pushing ``arr`` (several batches joined) cannot produce a drop."""
+        d = self.detector
+        if "t" not in channels or any(c not in KNOWN_CHANNELS for c in channels) or \
+                any(c not in channels for c in d.channels) or not np.isfinite(arr).all():
+            return False
+        dt = np.diff(arr[:, list(channels).index("t")])
+        ts = d.sample_period_s
+        return bool(np.all(dt >= 0.5 * ts) and np.all(dt <= d.gap_tolerance * ts))
+
+    def _push_run(self, run) -> list:
+        if not run:
+            return []
+        if len(run) > 1:
+            arr = np.concatenate([a for a, _ in run])
+            if self._clean_run(arr, run[0][1]):
+                events = self._push(arr, run[0][1])
+                self.detector.batches_seen += len(run) - 1     # count the recorded batches
+                return events
+        events = []
+        for a, ch in run:
+            events += self._push(a, ch)
+        return events
+
+    def _push(self, arr, channels) -> list:
+        t_col = channels.index("t") if arr.shape[0] and "t" in channels else None
+        if t_col is not None:
+            self._resume_after_jump(float(arr[0, t_col]))
+        events = self.detector.push(arr, channels)
+        if any(ev.kind == "drop" and ev.reason not in ("empty", "short_history") for ev in events):
+            self._last_t = None          # the detector was reset
+        elif t_col is not None:
+            self._last_t = float(arr[-1, t_col])
+        return events
+
+    def _resume_after_jump(self, t_first: float) -> None:
+        """A forward jump of the drive clock between batches, outside a window: restart the detector's
+        history (counted in ``clock_jumps``) instead of letting it drop the batch as a ``gap``."""
+        d = self.detector
+        if self._last_t is not None and t_first - self._last_t > d.gap_tolerance * d.sample_period_s \
+                and not d.capturing:
+            d.reset()
+            self.clock_jumps += 1
 
     def true_inertia(self, entry_time_s: float, sample_period_s: float) -> tuple[Optional[float], str]:
         """(J1 in kg m^2, the topic it came from) of the window entering the zone at ``entry_time_s``:

@@ -3,6 +3,7 @@
 jident simulate --j1 1.073 --backlash 0.005 --eta 0.025 --out case.npz --plot case.png
 jident simulate --grid --out grid.npz
 jident diagnose out/run1 --json out/run1.json
+jident simulate --scenario wear --windows 40 --snr-db 30 --out out/wear && jident trend out/wear --out out/trend
 jident info
 """
 from __future__ import annotations
@@ -28,6 +29,7 @@ from jident_ros.cli.offline import (
     summary_line,
     write_json,
 )
+from jident_ros.cli.trend import add_scenario_arguments, add_trend_parser, cmd_simulate_scenario
 from jident_ros.config import ConfigError, load_method_config, load_system_config
 from jident_ros.evaluation.evaluate import run_evaluation
 from jident_ros.evaluation.plotting import plot_case
@@ -80,6 +82,8 @@ def _progress(total, desc, enabled):
 
 
 def cmd_simulate(args) -> int:
+    if args.scenario:
+        return cmd_simulate_scenario(args)
     cfg = load_system_config(args.config)
     if args.grid:
         if any(v is not None for v in (args.j1, args.backlash, args.eta)):
@@ -289,6 +293,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--plot", help="write a PNG of the five signals of the (first) case")
     s.add_argument("--config", help="system config YAML (default: config/system.yaml)")
     s.add_argument("--quiet", action="store_true")
+    add_scenario_arguments(s)
     s.set_defaults(func=cmd_simulate)
     b = sub.add_parser("build-patterns", help="build the pattern library (simulated eta_k = 0.025 runs, or "
                        "calibration recordings with known J1: --from-recordings)")
@@ -354,6 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     g.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     g.set_defaults(func=cmd_diagnose)
+    add_trend_parser(sub)
     sub.add_parser("salvage", help="recover every complete chunk of a truncated MCAP recording "
                    "(jident salvage <truncated.mcap> <out_dir>)", add_help=False)
     sub.add_parser("demo", help="end-to-end demo: simulator, windowing and diagnostic nodes over DDS on a few "

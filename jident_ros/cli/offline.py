@@ -120,6 +120,7 @@ class OfflineResult:
     dropped: dict = field(default_factory=dict)    # windowing drop reason -> count (non-zero only)
     samples: int = 0
     batches: int = 0
+    clock_jumps: int = 0                # forward jumps of t between batches outside a window (DriveReplay)
     library_path: Optional[str] = None
     library_error: Optional[str] = None
     cut_off: list = field(default_factory=list)    # windows cut off by the end of the data: {entry_time_s, samples}
@@ -140,7 +141,8 @@ class OfflineResult:
     def to_json(self) -> dict:
         return {"recording": self.recording, "signals_topic": self.signals_topic,
                 "backlash_width_source": self.backlash_width_source, "samples": self.samples,
-                "batches": self.batches, "dropped": dict(self.dropped), "library": self.library_path,
+                "batches": self.batches, "clock_jumps": self.clock_jumps, "dropped": dict(self.dropped),
+                "library": self.library_path,
                 "library_error": self.library_error, "notes": list(self.notes), "levels": self.level_counts(),
                 "cut_off": [{k: _json_value(v) for k, v in c.items()} for c in self.cut_off],
                 "jitter": None if self.jitter is None else {k: _json_value(v) for k, v in self.jitter.items()},
@@ -281,6 +283,7 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
                      f"one dropped and counted (layout): {replay.dropped_before_start[0]}")
         log(notes[-1])
     _finish(result, detector, log)
+    result.clock_jumps = replay.clock_jumps
     return result
 
 
@@ -482,6 +485,8 @@ def summary_line(result: OfflineResult) -> str:
           "estimated": "estimated per window"}.get(result.backlash_width_source, f"from {result.backlash_width_source}")
     text = (f"{len(result.windows)} window(s) from {result.signals_topic} ({result.samples} samples in "
             f"{result.batches} batches, K2 {k2}): {lv['OK']} OK, {lv['WARN']} WARN, {lv['ERROR']} ERROR")
+    if result.clock_jumps:
+        text += f"; the drive clock jumped forward {result.clock_jumps} time(s) between windows (history restarted)"
     if result.dropped:
         text += "; dropped: " + ", ".join(f"{r} {n}" for r, n in result.dropped.items())
     if result.cut_off:

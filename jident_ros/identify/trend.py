@@ -251,12 +251,89 @@ class TrendConfig:
         return asdict(self)
 
     @classmethod
+    def from_parameters(cls, params) -> "TrendConfig":
+        """From node parameters (``trend_*`` names, :data:`PARAMETER_FIELDS`; defaults in
+        jident_ros.parameters.TREND): 0 stands for None where the field takes None (ROS parameters
+        cannot be None); other keys are ignored, missing ones keep the default.  ValueError naming the
+        parameter and its value on a bad one."""
+        return _config_from_parameters(cls, params)
+
+    @classmethod
     def from_dict(cls, d: dict) -> "TrendConfig":
         names = {f.name for f in fields(cls)}
         unknown = set(d) - names
         if unknown:
             raise ValueError(f"{sorted(unknown)[0]}: unknown trend parameter")
         return cls(**d)
+
+
+#: parameter name -> TrendConfig field, for the parameters that map one to one.
+PARAMETER_FIELDS = {
+    "trend_commissioning_windows": "commissioning_windows",
+    "trend_commissioning_duration_s": "commissioning_duration_s",
+    "trend_inertia_baseline_kgm2": "inertia_baseline_kgm2",
+    "trend_inertia_baseline_se_kgm2": "inertia_baseline_se_kgm2",
+    "trend_width_baseline_m": "width_baseline_m",
+    "trend_width_baseline_se_m": "width_baseline_se_m",
+    "trend_target_arl_windows": "target_arl_windows",
+    "trend_cusum_reference_sd": "cusum_reference_sd",
+    "trend_cusum_threshold_sd": "cusum_threshold_sd",
+    "trend_innovation_clip_sd": "innovation_clip_sd",
+    "trend_se_scale_from_commissioning": "se_scale_from_commissioning",
+    "trend_se_scale_max": "se_scale_max",
+    "trend_inertia_process_sd_pct_per_window": "inertia_process_sd_pct_per_window",
+    "trend_relearn_windows": "relearn_windows",
+    "trend_change_hold_windows": "change_hold_windows",
+    "trend_drift_warn_pct": "drift_warn_pct",
+    "trend_drift_alarm_pct": "drift_alarm_pct",
+    "trend_width_limit_m": "width_limit_m",
+    "trend_width_warn_m": "width_warn_m",
+    "trend_time_to_limit_warn_s": "time_to_limit_warn_s",
+    "trend_width_regression_windows": "width_regression_windows",
+    "trend_width_se_floor_m": "width_se_floor_m",
+    "trend_width_change_detection": "width_change_detection",
+    "trend_wear_significance_sd": "wear_significance_sd",
+    "trend_max_changes_kept": "max_changes_kept",
+}
+#: Fields whose "not set" (None) is given as 0 in the parameters.
+ZERO_IS_NONE = {"commissioning_duration_s", "inertia_baseline_kgm2", "width_baseline_m", "cusum_threshold_sd",
+                "width_warn_m", "time_to_limit_warn_s"}
+#: Node parameters of the trend that are not TrendConfig fields.
+NODE_ONLY = {"trend_enabled", "trend_state_file"}
+_INT_FIELDS = {"commissioning_windows", "relearn_windows", "change_hold_windows", "width_regression_windows",
+               "max_changes_kept"}
+_BOOL_FIELDS = {"se_scale_from_commissioning", "width_change_detection"}
+
+
+def _config_from_parameters(cls, params) -> "TrendConfig":
+    kw = {}
+    for pname, fname in PARAMETER_FIELDS.items():
+        if pname not in params:
+            continue
+        v = params[pname]
+        if fname in _BOOL_FIELDS:
+            if not isinstance(v, bool):
+                raise ValueError(f"{pname}: must be true or false, got {v!r}")
+        elif isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ValueError(f"{pname}: must be a number, got {v!r}")
+        elif fname in _INT_FIELDS:
+            if float(v) != int(v):
+                raise ValueError(f"{pname}: must be an integer, got {v!r}")
+            v = int(v)
+        elif fname in ZERO_IS_NONE and v == 0:
+            v = None
+        else:
+            v = float(v)
+        kw[fname] = v
+    try:
+        return cls(**kw)
+    except ValueError as exc:
+        text = str(exc)
+        for pname, fname in PARAMETER_FIELDS.items():
+            if text.startswith(fname + ":"):
+                raise ValueError("trend_" + text) from None
+        raise
+
 
 
 @dataclass(frozen=True)

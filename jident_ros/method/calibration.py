@@ -244,7 +244,8 @@ def read_calibration_windows(path, system, *, inertia_kgm2: Optional[float] = No
     if detector is None:
         raise CalibrationError(f"recording {name}: topic {found[0]} holds no readable message"
                                + (f" ({replay.dropped_before_start[0]})" if replay.dropped_before_start else ""))
-    drops = ", ".join(f"{r} {n}" for r, n in detector.counts.items() if n)
+    drops = ", ".join([f"{r} {n}" for r, n in detector.counts.items() if n] +
+                      ([f"clock jumps {replay.clock_jumps}"] if replay.clock_jumps else []))
     if drops:
         log(f"{name}: windowing drops: {drops}")
     if unlabelled is not None:

@@ -1,0 +1,599 @@
+"""``jident trend REC... --out DIR``: the trend of J1 and the backlash width over many recordings
+(issue 14, offline), and ``jident simulate --scenario wear``: a long simulated run written as a recording.
+
+Trend
+-----
+Every recording is diagnosed window by window exactly as ``jident diagnose`` does
+(:func:`jident_ros.cli.offline.diagnose_recording`; by default the gap estimator only, no image method).
+Each window becomes a :class:`TrendWindow` (time, J1 with its standard error and 95 % interval, width
+with its standard error, or the reason why it has none).  The windows of all recordings are sorted by
+their **drive time**: ``entry_time_s``, the ``t`` column (drive clock, s) of the window's entry sample,
+as the drive publishes it on ``drive/signals`` (recordings are assumed to share one drive clock; the bag's
+receive time is not used).  They then go through one :class:`jident_ros.identify.trend.TrendTracker`
+in that order (J1 from the gap fit and its standard error; the width from
+:func:`jident_ros.identify.gap.estimate_backlash_width`).  Outputs: ``DIR/trend.csv`` (one row per window),
+``DIR/trend.png`` (J1 and K2 against time with their bands, the baseline and the detected changes) and a
+summary on stdout.  ``--state FILE`` resumes from a saved tracker (windows at or before its last time are
+left out: already in the state) and saves it back (atomically).
+
+Scenario recording
+------------------
+:func:`write_scenario_recording` simulates a :class:`jident_ros.sim.scenarios.Scenario` and writes it in
+the ``drive/signals`` layout the simulator node publishes (50-sample std_msgs/Float64MultiArray batches,
+with ``drive/true_inertia``, ``drive/backlash_width`` and a ``drive/case`` row before each event).  The drive
+clock jumps between events: event i's stream starts ``gap_samples + 48`` samples before its entry time
+``scenario.entry_times_s[i]`` (a steady stretch), runs 2000 samples from the entry and stops; the next
+event's stream starts an interval later.  ``jident diagnose`` restarts the detector's history at such a
+jump (:class:`jident_ros.bag.recorded.DriveReplay`, ``clock_jumps``), so no window is lost and no entry is
+faked.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Optional, Sequence
+
+import numpy as np
+
+from jident_ros.bag.recording import BagWriter
+from jident_ros.cli.offline import OfflineError, diagnose_recording, multiarray_message
+from jident_ros.config import load_method_config, load_system_config
+from jident_ros.identify.library import default_library_path, load_pattern_library
+from jident_ros.identify.trend import SECONDS_PER_DAY, TrendConfig, TrendStateError, TrendTracker
+from jident_ros.nodes.simulator import CASE_LABEL
+from jident_ros.sim import PAPER_SIGNALS, add_measurement_noise, simulate_grid
+from jident_ros.sim.scenarios import SCENARIOS, Scenario, wear_scenario
+from jident_ros.stream.detector import embed_windows
+from jident_ros.stream.layout import DEFAULT_CHANNELS
+
+#: z of the 95 % interval, to turn an interval into a standard error when only the interval is known
+Z95 = 1.959963984540054
+
+#: Channels add_measurement_noise perturbs by default (the angles are left to the encoder model).
+NOISY_CHANNELS = PAPER_SIGNALS + ("omega2",)
+
+CSV_COLUMNS = ("time_s", "recording", "window_id", "inertia_kgm2", "inertia_se_kgm2", "inertia_ci_low_kgm2",
+               "inertia_ci_high_kgm2", "backlash_width_m", "backlash_width_se_m", "true_inertia_kgm2",
+               "inertia_smoothed_kgm2", "inertia_smoothed_se_kgm2", "inertia_baseline_kgm2", "inertia_drift_pct",
+               "backlash_width_smoothed_m", "backlash_width_smoothed_se_m", "wear_rate_m_per_day",
+               "wear_rate_se_m_per_day", "time_to_limit_s", "change", "change_quantity", "level", "skip_reason")
+
+
+# --------------------------------------------------------------------------- per-window input
+
+@dataclass(frozen=True)
+class TrendWindow:
+    """What the trend needs of one diagnosed window.
+
+    time_s : drive clock t of the entry sample, s
+    inertia_kgm2, inertia_se_kgm2 : J1 from the gap fit and its standard error, kg m^2 (None: no gap J1)
+    inertia_ci_low_kgm2, inertia_ci_high_kgm2 : its 95 % interval, kg m^2
+    width_m, width_se_m : backlash width K2 estimated at re-contact and its standard uncertainty, m
+    skip_reason : why there is no J1 (None when there is one)
+    true_inertia_kgm2 : from drive/case or drive/true_inertia when the recording has it
+    """
+
+    time_s: float
+    recording: str
+    window_id: int
+    inertia_kgm2: Optional[float]
+    inertia_se_kgm2: Optional[float]
+    inertia_ci_low_kgm2: Optional[float]
+    inertia_ci_high_kgm2: Optional[float]
+    width_m: Optional[float]
+    width_se_m: Optional[float]
+    skip_reason: Optional[str]
+    true_inertia_kgm2: Optional[float] = None
+
+
+def trend_window(ow, recording: str) -> TrendWindow:
+    """An :class:`jident_ros.cli.offline.OfflineWindow` -> :class:`TrendWindow`.  The trend uses the gap
+    estimate (it has a standard error); a J1 of the image method alone has none and is skipped with
+    that reason.  A standard error missing where the 95 % interval is known is (high - low) / (2 x 1.96)."""
+    d = ow.diagnosis
+    g, w = d.gap, d.width
+    j = se = lo = hi = None
+    reason = None
+    if g is not None:
+        j = float(g.inertia_kgm2)
+        lo, hi = (float(v) for v in g.ci95_kgm2)
+        se = float(g.std_error_kgm2) if g.std_error_kgm2 is not None else (hi - lo) / (2 * Z95)
+    elif d.inertia_kgm2 is not None:
+        reason = f"J1 {d.inertia_kgm2:.5g} kg m^2 from the {d.source} method has no standard error"
+    else:
+        reason = "; ".join(d.problems) or d.message
+    wm = wse = None
+    if w is not None and g is not None:
+        wm, wse = float(w.width_m), float(w.std_m)
+    return TrendWindow(float(ow.entry_time_s), recording, int(ow.window_id), j, se, lo, hi, wm, wse, reason,
+                       ow.true_inertia_kgm2)
+
+
+# --------------------------------------------------------------------------- the run
+
+@dataclass
+class TrendRun:
+    """Result of :func:`run_trend`."""
+
+    windows: list                # TrendWindow, in time order (the ones fed to the tracker)
+    updates: list                # TrendUpdate, one per window
+    tracker: TrendTracker
+    recordings: list             # (path, windows, samples, dropped dict, clock jumps)
+    already_in_state: int = 0    # windows at or before the resumed state's last time, left out
+    seconds: float = 0.0
+
+
+def run_trend(recordings: Sequence, *, system=None, method=None, config: Optional[TrendConfig] = None,
+              tracker: Optional[TrendTracker] = None, p: float = 2.0, gap_method: str = "auto",
+              image_method: bool = False, library_path=None, backlash_width_m: Optional[float] = None,
+              log: Callable[[str], Any] = lambda text: None,
+              on_window: Optional[Callable[[Any], Any]] = None,
+              on_recording: Optional[Callable[[int, str], Any]] = None) -> TrendRun:
+    """Diagnose every recording (``diagnose_recording``), sort all windows by drive time and run the
+    tracker (``tracker``, e.g. restored from a state, else a new one with ``config``) over them."""
+    t0 = time.perf_counter()
+    system = load_system_config() if system is None else system
+    method = load_method_config() if method is None else method
+    library = None
+    if image_method:
+        lib_path = Path(library_path).expanduser() if library_path else default_library_path(system, method)
+        library, err = load_pattern_library(lib_path, system, method, True, log=log, warn=log)
+        if err:
+            log(f"{err}; windows are diagnosed from the gap only")
+    windows, summary = [], []
+    for k, rec in enumerate(recordings):
+        if on_recording is not None:
+            on_recording(k, str(rec))
+        res = diagnose_recording(rec, system=system, method=method, p=p, library=library,
+                                 library_path=library_path, build_if_missing=False, gap_method=gap_method,
+                                 image_method=image_method and library is not None,
+                                 backlash_width_m=backlash_width_m, log=log, on_window=on_window)
+        windows.extend(trend_window(w, str(rec)) for w in res.windows)
+        summary.append((str(rec), len(res.windows), res.samples, dict(res.dropped), res.clock_jumps))
+    windows.sort(key=lambda w: w.time_s)          # stable: recording order breaks ties
+    tr = tracker if tracker is not None else TrendTracker(config)
+    skipped_old = 0
+    if tr.last_time_s is not None:
+        n0 = len(windows)
+        windows = [w for w in windows if w.time_s > tr.last_time_s]
+        skipped_old = n0 - len(windows)
+    updates = [tr.update(w.time_s, w.inertia_kgm2, w.inertia_se_kgm2, w.width_m, w.width_se_m) for w in windows]
+    return TrendRun(windows, updates, tr, summary, skipped_old, time.perf_counter() - t0)
+
+
+# --------------------------------------------------------------------------- outputs
+
+def _num(v) -> str:
+    return "" if v is None or (isinstance(v, float) and not math.isfinite(v)) else repr(float(v))
+
+
+def write_trend_csv(run: TrendRun, path) -> Path:
+    """One row per window (columns :data:`CSV_COLUMNS`); ``change`` is 1 on the window at which a
+    change was detected (``change_quantity``: inertia, width or both)."""
+    path = Path(path)
+    with open(path, "w", newline="") as f:
+        wr = csv.writer(f)
+        wr.writerow(CSV_COLUMNS)
+        for w, u in zip(run.windows, run.updates):
+            reason = w.skip_reason if w.inertia_kgm2 is None else (u.reason if u.skipped else None)
+            wr.writerow([_num(w.time_s), w.recording, w.window_id, _num(w.inertia_kgm2), _num(w.inertia_se_kgm2),
+                         _num(w.inertia_ci_low_kgm2), _num(w.inertia_ci_high_kgm2), _num(w.width_m),
+                         _num(w.width_se_m), _num(w.true_inertia_kgm2), _num(u.inertia_kgm2),
+                         _num(u.inertia_se_kgm2), _num(u.inertia_baseline_kgm2), _num(u.inertia_drift_pct),
+                         _num(u.width_m), _num(u.width_se_m), _num(u.wear_rate_m_per_day),
+                         _num(u.wear_rate_se_m_per_day), _num(u.time_to_limit_s), int(u.change),
+                         "+".join(c.quantity for c in u.changes), u.level_name, reason or ""])
+    return path
+
+
+def _days(t, t0):
+    return (np.asarray(t, dtype=float) - t0) / SECONDS_PER_DAY
+
+
+def plot_trend(run: TrendRun, path, config: TrendConfig) -> Path:
+    """trend.png: J1 (top) and K2 (bottom) against drive time in days: the per-window estimates with
+    their 95 % intervals, the smoothed value with its 95 % band, the baseline, the true J1 when known,
+    the width limit when within reach, and the detected changes (vertical lines)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    ws, us = run.windows, run.updates
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7.5), sharex=True, constrained_layout=True)
+    if not ws:
+        ax1.set_title("no window")
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        return path
+    t0 = ws[0].time_s
+    x = _days([w.time_s for w in ws], t0)
+    few = len(ws) <= 400
+
+    def col(seq, name):
+        return np.array([np.nan if getattr(s, name) is None else getattr(s, name) for s in seq], dtype=float)
+
+    def band(ax, v, se, color, label):
+        ax.plot(x, v, color=color, lw=1.5, label=label)
+        ax.fill_between(x, v - Z95 * se, v + Z95 * se, color=color, alpha=0.2, lw=0)
+
+    # J1
+    j, lo, hi = col(ws, "inertia_kgm2"), col(ws, "inertia_ci_low_kgm2"), col(ws, "inertia_ci_high_kgm2")
+    if few:
+        ax1.errorbar(x, j, yerr=[j - lo, hi - j], fmt="o", ms=3, lw=0.6, color="0.45", label="J1 per window (95 % CI)")
+    else:
+        ax1.plot(x, j, ".", ms=2, color="0.45", label="J1 per window")
+    band(ax1, col(us, "inertia_kgm2"), col(us, "inertia_se_kgm2"), "C0", "smoothed (95 % band)")
+    ax1.step(x, col(us, "inertia_baseline_kgm2"), where="post", color="C2", lw=1.2, ls="--", label="baseline")
+    truth = col(ws, "true_inertia_kgm2")
+    if np.isfinite(truth).any():
+        ax1.step(x, truth, where="post", color="C3", lw=0.8, ls=":", label="true J1")
+    ax1.set_ylabel("J1 [kg m$^2$]")
+    # width
+    wm, wse = col(ws, "width_m"), col(ws, "width_se_m")
+    if few:
+        ax2.errorbar(x, wm * 1e3, yerr=Z95 * wse * 1e3, fmt="o", ms=3, lw=0.6, color="0.45",
+                     label="K2 per window (95 %)")
+    else:
+        ax2.plot(x, wm * 1e3, ".", ms=2, color="0.45", label="K2 per window")
+    wv, wvse = col(us, "width_m") * 1e3, col(us, "width_se_m") * 1e3
+    band(ax2, wv, wvse, "C1", "regression line (95 % band)")
+    ax2.step(x, col(us, "width_baseline_m") * 1e3, where="post", color="C2", lw=1.2, ls="--", label="baseline")
+    top = np.nanmax(np.concatenate([wm * 1e3, wv])) if np.isfinite(wm).any() else None
+    if top is not None and config.width_limit_m * 1e3 <= 1.3 * top:
+        ax2.axhline(config.width_limit_m * 1e3, color="C3", lw=1.0, label="width limit")
+    ax2.set_ylabel("backlash width K2 [mm]")
+    ax2.set_xlabel(f"drive time since the first window [days] (t0 = {t0:.0f} s)")
+    for u in us:
+        for c in u.changes:
+            ax = ax1 if c.quantity == "inertia" else ax2
+            xc = _days(c.time_s, t0)
+            ax.axvline(xc, color="C3", lw=1.0)
+            txt = f"{c.size_pct:+.1f} %" if c.quantity == "inertia" else f"{c.size * 1e3:+.2f} mm"
+            ax.annotate(f"change {txt}", xy=(xc, 0.97), xycoords=("data", "axes fraction"), fontsize=8,
+                        color="C3", ha="left", va="top", rotation=90)
+    last = us[-1]
+    ax1.set_title(f"J1 trend: {last.level_name}", loc="left", fontsize=10)
+    rate = "" if last.wear_rate_m_per_day is None else \
+        f": wear {last.wear_rate_m_per_day * 1e3:.3g} ± {last.wear_rate_se_m_per_day * 1e3:.2g} mm/day"
+    ax2.set_title(f"backlash width{rate}", loc="left", fontsize=10)
+    for ax in (ax1, ax2):
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8, loc="lower right")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _pm(v, se, scale=1.0, fmt=".4g", sefmt=".2g"):
+    if v is None:
+        return "-"
+    return f"{v * scale:{fmt}}" + ("" if se is None else f" ± {se * scale:{sefmt}}")
+
+
+def format_summary(run: TrendRun, config: TrendConfig) -> str:
+    """The stdout summary: windows, time span, baseline, current values, drift, changes, wear, health."""
+    ws, us = run.windows, run.updates
+    lines = []
+    n_rec = len(run.recordings)
+    dropped: dict = {}
+    for *_, d, _ in run.recordings:
+        for r, n in d.items():
+            dropped[r] = dropped.get(r, 0) + n
+    jumps = sum(r[4] for r in run.recordings)
+    used = sum(1 for u in us if not u.skipped)
+    skipped = len(us) - used
+    text = (f"windows: {len(ws)} from {n_rec} recording(s) in drive-time order; {used} used by the trend, "
+            f"{skipped} skipped")
+    if skipped:
+        reasons: dict = {}
+        for w, u in zip(ws, us):
+            if u.skipped:
+                r = (w.skip_reason or u.reason or "?").split(":")[0]
+                reasons[r] = reasons.get(r, 0) + 1
+        text += " (" + ", ".join(f"{r}: {n}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1])) + ")"
+    if run.already_in_state:
+        text += f"; {run.already_in_state} already in the state (at or before its last time) left out"
+    lines.append(text)
+    if dropped or jumps:
+        lines.append("detector: " + ", ".join([f"{r} {n}" for r, n in dropped.items()] +
+                                              ([f"{jumps} clock jump(s) between windows"] if jumps else [])))
+    if not ws:
+        return "\n".join(lines + ["no window: nothing to trend"])
+    t0, t1 = ws[0].time_s, ws[-1].time_s
+    lines.append(f"time: drive clock t of the entry samples, {t0:.0f} s to {t1:.0f} s "
+                 f"({(t1 - t0) / SECONDS_PER_DAY:.3g} days)")
+    last = us[-1]
+    if last.inertia_baseline_kgm2 is not None:
+        ref = "" if last.inertia_reference_kgm2 == last.inertia_baseline_kgm2 else \
+            f" (commissioned {last.inertia_reference_kgm2:.5g} kg m^2)"
+        lines.append(f"J1 baseline {_pm(last.inertia_baseline_kgm2, last.inertia_baseline_se_kgm2, fmt='.5g')} "
+                     f"kg m^2{ref}; now {_pm(last.inertia_kgm2, last.inertia_se_kgm2, fmt='.5g')} kg m^2, drift "
+                     f"{last.inertia_drift_pct:+.2f} ± {last.inertia_drift_se_pct:.2f} % "
+                     f"({last.inertia_drift_from_reference_pct:+.2f} % of the commissioned)")
+    elif last.inertia_kgm2 is not None:
+        lines.append(f"J1 {_pm(last.inertia_kgm2, last.inertia_se_kgm2, fmt='.5g')} kg m^2 (baseline still "
+                     f"being learnt: {config.commissioning_windows} windows needed)")
+    if last.width_m is not None:
+        text = f"backlash width now {_pm(last.width_m, last.width_se_m, 1e3)} mm"
+        if last.width_baseline_m is not None:
+            text += f" (baseline {_pm(last.width_baseline_m, last.width_baseline_se_m, 1e3)} mm"
+            text += "" if last.width_drift_pct is None else f", {last.width_drift_pct:+.1f} %"
+            text += ")"
+        if last.wear_rate_m_per_day is not None:
+            text += (f"; wear rate {last.wear_rate_m_per_day * 1e3:.4g} ± {last.wear_rate_se_m_per_day * 1e3:.2g} "
+                     f"mm/day")
+        if last.time_to_limit_s is not None:
+            text += (f"; {config.width_limit_m * 1e3:.4g} mm limit in {last.time_to_limit_s / SECONDS_PER_DAY:.3g} "
+                     f"days [{last.time_to_limit_low_s / SECONDS_PER_DAY:.3g}, "
+                     f"{last.time_to_limit_high_s / SECONDS_PER_DAY:.3g}]")
+        else:
+            text += f"; no significant wear towards the {config.width_limit_m * 1e3:.4g} mm limit"
+        lines.append(text)
+    changes = [c for u in us for c in u.changes]
+    if changes:
+        lines.append(f"changes: {len(changes)}")
+        for c in changes:
+            size = (f"{c.size:+.4g} ± {c.size_se:.2g} kg m^2 ({c.size_pct:+.2f} %)" if c.quantity == "inertia"
+                    else f"{c.size * 1e3:+.3g} ± {c.size_se * 1e3:.2g} mm ({c.size_pct:+.1f} %)")
+            lines.append(f"  {c.quantity}: {size} detected at t = {c.time_s:.0f} s (window {c.window_index}), "
+                         f"onset t = {c.onset_time_s:.0f} s (window {c.onset_window_index})")
+    else:
+        lines.append("changes: none detected")
+    lines.append(f"health: {last.level_name}: {last.message}")
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- scenario recording
+
+def write_scenario_recording(out, system, scenario: Scenario, *, snr_db: Optional[float] = None, seed: int = 0,
+                             gap_samples: int = 100, batch_size: int = 50, namespace: str = "",
+                             chunk_cases: int = 200, progress: Optional[Callable[[int], Any]] = None) -> Path:
+    """Simulate ``scenario`` (``chunk_cases`` events at a time) and write it as an MCAP bag directory
+    ``out`` in the simulator node's topics (see the module docstring).  ``snr_db``: white noise as
+    ``jident simulate --snr-db`` (add_measurement_noise, per event, seed ``seed`` + chunk).
+    ``progress(n)`` is called after every n events written."""
+    if int(gap_samples) != gap_samples or gap_samples < 0:
+        raise ValueError(f"gap_samples: must be an integer >= 0, got {gap_samples!r}")
+    if int(batch_size) != batch_size or batch_size < 1:
+        raise ValueError(f"batch_size: must be an integer >= 1, got {batch_size!r}")
+    out = Path(out)
+    ns = namespace.rstrip("/")
+
+    def topic(rel):
+        return f"{ns}/{rel}"
+    case_cols = CASE_LABEL.split(",")
+    with BagWriter(out, flush_every_s=None) as bag:
+        bag.add_topic(topic("drive/signals"), "std_msgs/msg/Float64MultiArray")
+        for rel in ("drive/true_inertia", "drive/backlash_width"):
+            bag.add_topic(topic(rel), "std_msgs/msg/Float64", qos="transient_local")
+        bag.add_topic(topic("drive/case"), "std_msgs/msg/Float64MultiArray", qos="transient_local")
+        n = len(scenario)
+        for c0 in range(0, n, chunk_cases):
+            cases = scenario.cases[c0:c0 + chunk_cases]
+            clean = simulate_grid(system, cases)
+            stream, entry_rows = embed_windows(clean, int(gap_samples), 0.0, DEFAULT_CHANNELS)
+            ts = clean.sample_period_s
+            per = int(gap_samples) + len(clean.t)
+            if snr_db is not None:
+                # the window as `jident simulate --snr-db` (add_measurement_noise); the steady stretch before
+                # it gets noise of the same power (the angles stay clean: encoders, as add_measurement_noise)
+                rng = np.random.default_rng([int(seed), c0])
+                noisy = add_measurement_noise(clean, snr_db, int(rng.integers(2 ** 31)))
+                lead = np.zeros(per, dtype=bool)
+                lead[:int(gap_samples)] = True
+                for j, name in enumerate(DEFAULT_CHANNELS):
+                    if name not in NOISY_CHANNELS:
+                        continue
+                    x = clean.signals[name]
+                    sd = np.sqrt(np.mean(x * x, axis=1) / 10.0 ** (snr_db / 10.0))
+                    block = stream[:, j].reshape(len(cases), per)
+                    block[:, ~lead] = noisy.signals[name]
+                    block[:, lead] += sd[:, None] * rng.standard_normal((len(cases), int(gap_samples)))
+            for i, c in enumerate(cases):
+                rows = stream[i * per:(i + 1) * per]
+                t_entry = float(scenario.entry_times_s[c0 + i])
+                rows[:, 0] = t_entry + (np.arange(per) - (entry_rows[i] - i * per)) * ts
+                t_case = int(round((rows[0, 0] - ts / 2) * 1e9))
+                bag.write(topic("drive/true_inertia"), {"data": c.inertia_kgm2}, t_case)
+                bag.write(topic("drive/backlash_width"), {"data": c.backlash_width_m}, t_case)
+                row = np.array([[c0 + i, c.inertia_kgm2, c.backlash_width_m, c.consistency_pa_sn, t_entry]])
+                bag.write(topic("drive/case"), multiarray_message(row, case_cols), t_case)
+                for s in range(0, per, int(batch_size)):
+                    b = rows[s:s + int(batch_size)]
+                    bag.write(topic("drive/signals"), multiarray_message(b, DEFAULT_CHANNELS),
+                              int(round(b[-1, 0] * 1e9)))
+            if progress is not None:
+                progress(len(cases))
+    return out
+
+
+# --------------------------------------------------------------------------- command line
+
+def _finite_float(name, positive=True, allow_zero=False):
+    def parse(text):
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
+        if not math.isfinite(v) or (positive and not (v > 0 or (allow_zero and v == 0))):
+            raise argparse.ArgumentTypeError(f"{name} must be a finite number{' > 0' if positive else ''}, got {text}")
+        return v
+    return parse
+
+
+def _count(name, minimum):
+    def parse(text):
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be an integer, got {text!r}") from None
+        if v < minimum:
+            raise argparse.ArgumentTypeError(f"{name} must be >= {minimum}, got {v}")
+        return v
+    return parse
+
+
+def add_scenario_arguments(s) -> None:
+    """The ``jident simulate --scenario ...`` options (added to the simulate subparser)."""
+    s.add_argument("--scenario", choices=SCENARIOS,
+                   help="a long run written as a recording (--out DIR): 'wear' = the backlash width grows "
+                        "linearly and J1 steps once (sim/scenarios.py)")
+    s.add_argument("--windows", type=_count("--windows", 1), default=40,
+                   help="scenario: number of backlash entries (default 40)")
+    s.add_argument("--interval-s", type=_finite_float("--interval-s"), default=3600.0,
+                   help="scenario: drive time between entries, s (default 3600)")
+    s.add_argument("--width-start-m", type=_finite_float("--width-start-m"), default=0.0025,
+                   help="scenario: K2 at the first entry, m (default 0.0025)")
+    s.add_argument("--width-end-m", type=_finite_float("--width-end-m"),
+                   help="scenario: K2 at the last entry, m (default 0.0035)")
+    s.add_argument("--width-growth-m-per-day", type=_finite_float("--width-growth-m-per-day", False),
+                   help="scenario: wear rate instead of --width-end-m, m/day")
+    s.add_argument("--j1-step-at", type=_count("--j1-step-at", 0),
+                   help="scenario: first entry (0-based) with the stepped J1 (default: half-way)")
+    s.add_argument("--j1-step-pct", type=_finite_float("--j1-step-pct", False), default=2.5,
+                   help="scenario: J1 step, %% (default 2.5; 0: no step)")
+    s.add_argument("--gap-samples", type=_count("--gap-samples", 0), default=100,
+                   help="scenario: steady samples before each entry's 48 pre-entry samples (default 100)")
+
+
+def cmd_simulate_scenario(args) -> int:
+    """``jident simulate --scenario wear --windows N --interval-s S --out REC``."""
+    if not args.out:
+        raise OfflineError("--out: the scenario needs a bag directory to write")
+    if args.grid or args.backlash is not None or args.plot:
+        raise OfflineError("--scenario: drop --grid/--backlash/--plot (the scenario sets K2 per entry)")
+    if args.encoder_counts is not None:
+        raise OfflineError("--encoder-counts: not supported with --scenario")
+    out = Path(args.out)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise OfflineError(f"--out {out}: already exists and is not an empty directory")
+    system = load_system_config(args.config)
+    n = args.windows
+    step_at = args.j1_step_at if args.j1_step_at is not None else (n // 2 if args.j1_step_pct else None)
+    if step_at is not None and step_at >= n:
+        raise OfflineError(f"--j1-step-at: must be < --windows ({n}), got {step_at}")
+    if args.j1_step_pct == 0:
+        step_at = None
+    sc = wear_scenario(system, n, args.interval_s, args.width_start_m, args.width_end_m, args.width_growth_m_per_day,
+                       args.j1, step_at, args.j1_step_pct, args.eta)
+    bar = None
+    if not args.quiet:
+        from tqdm import tqdm
+        bar = tqdm(total=n, desc="simulating + writing", unit="window", file=sys.stderr, leave=False)
+    t0 = time.perf_counter()
+    try:
+        write_scenario_recording(out, system, sc, snr_db=args.snr_db, seed=args.seed, gap_samples=args.gap_samples,
+                                 progress=None if bar is None else bar.update)
+    finally:
+        if bar is not None:
+            bar.close()
+    if not args.quiet:
+        w = sc.true_width_m
+        step = ("no J1 step" if sc.j1_step_at_window is None else
+                f"J1 {sc.cases[0].inertia_kgm2:g} -> {sc.cases[sc.j1_step_at_window].inertia_kgm2:.5g} kg m^2 at "
+                f"entry {sc.j1_step_at_window} (t = {sc.j1_step_time_s:.0f} s)")
+        print(f"wear scenario: {n} entries every {args.interval_s:g} s (t = {sc.entry_times_s[0]:.0f} .. "
+              f"{sc.entry_times_s[-1]:.0f} s), K2 {w[0] * 1e3:.4g} -> {w[-1] * 1e3:.4g} mm "
+              f"({sc.wear_rate_m_per_day * 1e3:.4g} mm/day), {step}"
+              + ("" if args.snr_db is None else f", {args.snr_db:g} dB noise")
+              + f"; written in {time.perf_counter() - t0:.1f} s -> {out}")
+    return 0
+
+
+def add_trend_parser(sub) -> None:
+    """Register ``jident trend`` on the main parser's subparsers."""
+    g = sub.add_parser("trend", help="trend of J1 and the backlash width over many recordings (diagnose every "
+                       "window, time order, change detection, wear rate): trend.csv, trend.png, a summary")
+    g.add_argument("recordings", nargs="+", metavar="REC", help="bag directories or .mcap files (any order)")
+    g.add_argument("--out", required=True, metavar="DIR", help="directory for trend.csv and trend.png")
+    g.add_argument("--state", metavar="FILE", help="resume from this tracker state when it exists and save the "
+                   "state to it at the end (atomic write)")
+    g.add_argument("--commissioning-windows", type=_count("--commissioning-windows", 2),
+                   help="windows that learn the baseline (default 20)")
+    g.add_argument("--drift-warn-pct", type=_finite_float("--drift-warn-pct"),
+                   help="J1 drift from the baseline giving WARN, %% (default 2)")
+    g.add_argument("--drift-alarm-pct", type=_finite_float("--drift-alarm-pct"),
+                   help="J1 drift giving ERROR, %% (default 5)")
+    g.add_argument("--width-limit-m", type=_finite_float("--width-limit-m"),
+                   help="backlash width limit (ERROR beyond; time to it projected), m (default 0.012)")
+    g.add_argument("--p", type=_finite_float("--p"), default=2.0, help="KHM exponent of the image method (default 2)")
+    g.add_argument("--gap-method", choices=("auto", "acceleration", "anchored", "angle", "speed"), default="auto",
+                   help="gap estimator (default auto, as jident diagnose)")
+    g.add_argument("--image-method", action=argparse.BooleanOptionalAction, default=False,
+                   help="also run the paper's image method on every window (slow; the trend uses the gap "
+                        "estimate either way; default: off)")
+    g.add_argument("--library", help="pattern library .npz for --image-method")
+    g.add_argument("--backlash-width-m", type=_finite_float("--backlash-width-m"),
+                   help="K2 of inequality (1), m (default: the recording's drive/backlash_width, else 0.005)")
+    g.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    g.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
+    g.add_argument("--quiet", action="store_true", help="no progress bar")
+    g.set_defaults(func=cmd_trend)
+
+
+def _trend_config(args, saved: Optional[dict]) -> TrendConfig:
+    d = dict(saved) if saved else {}
+    for name in ("commissioning_windows", "drift_warn_pct", "drift_alarm_pct", "width_limit_m"):
+        v = getattr(args, name)
+        if v is not None:
+            d[name] = v
+    return TrendConfig.from_dict(d)
+
+
+def cmd_trend(args) -> int:
+    missing = [r for r in args.recordings if not Path(r).exists()]
+    if missing:
+        raise OfflineError(f"recording {missing[0]}: no such file or directory")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise OfflineError(f"--out {out}: exists and is not a directory")
+    system = load_system_config(args.config)
+    method = load_method_config(args.method_config)
+    tracker = None
+    if args.state and Path(args.state).exists():
+        try:
+            saved = TrendTracker.load(args.state)
+            tracker = TrendTracker.load(args.state, _trend_config(args, saved.config.to_dict()))
+        except TrendStateError as exc:
+            raise OfflineError(f"--state: {exc}") from None
+        config = tracker.config
+    else:
+        config = _trend_config(args, None)
+    out.mkdir(parents=True, exist_ok=True)
+    bar, log = None, (lambda text: None)
+    if not args.quiet:
+        from tqdm import tqdm
+        bar = tqdm(desc="diagnosing", unit="window", file=sys.stderr, leave=False)
+
+        def log(text):
+            bar.write(f"jident trend: {text}", file=sys.stderr)
+    n_rec = len(args.recordings)
+    try:
+        run = run_trend(args.recordings, system=system, method=method, config=config, tracker=tracker, p=args.p,
+                        gap_method=args.gap_method, image_method=args.image_method, library_path=args.library,
+                        backlash_width_m=args.backlash_width_m, log=log,
+                        on_window=None if bar is None else (lambda w: bar.update(1)),
+                        on_recording=None if bar is None else
+                        (lambda k, rec: bar.set_description(f"recording {k + 1}/{n_rec}")))
+    finally:
+        if bar is not None:
+            bar.close()
+    csv_path = write_trend_csv(run, out / "trend.csv")
+    png_path = plot_trend(run, out / "trend.png", run.tracker.config)
+    if args.state:
+        run.tracker.save(args.state)
+    print(format_summary(run, run.tracker.config))
+    print(f"wrote {csv_path} and {png_path}" + (f"; state {args.state}" if args.state else "")
+          + f" ({run.seconds:.1f} s)")
+    return 0 if run.windows else 1
+
+
+__all__ = ["CSV_COLUMNS", "TrendRun", "TrendWindow", "add_scenario_arguments", "add_trend_parser",
+           "cmd_simulate_scenario", "cmd_trend", "format_summary", "plot_trend", "run_trend", "trend_window",
+           "write_scenario_recording", "write_trend_csv"]

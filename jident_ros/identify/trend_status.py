@@ -1,0 +1,68 @@
+"""The pure pieces the diagnostic node needs for the trend (issue 14 part 2); no ROS.
+
+* :func:`trend_config_from_parameters`: node parameters (``trend_*`` names, defaults in
+  :data:`jident_ros.parameters.TREND`) -> :class:`~jident_ros.identify.trend.TrendConfig`.  ROS
+  parameters cannot be None, so 0 (or "") stands for "not set" where the config takes None.
+* :func:`trend_status`: a :class:`~jident_ros.identify.trend.TrendUpdate` -> the "jident: trend"
+  DiagnosticStatus content: (level, message, [(key, value), ...]) with the levels of
+  diagnostic_msgs (OK 0, WARN 1, ERROR 2), the tracker's one-line message and the numbers as key/values
+  (SI units in the key names; '' where a value is not known yet).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, Optional
+
+from jident_ros.identify.trend import SECONDS_PER_DAY, TrendConfig, TrendUpdate
+
+
+def trend_config_from_parameters(params: Mapping[str, Any]) -> TrendConfig:
+    """:meth:`TrendConfig.from_parameters` (node parameters ``trend_*`` -> TrendConfig)."""
+    return TrendConfig.from_parameters(params)
+
+
+#: Name of the DiagnosticStatus.
+TREND_STATUS_NAME = "jident: trend"
+
+def _v(x: Optional[float]) -> Any:
+    return "" if x is None or (isinstance(x, float) and not math.isfinite(x)) else float(x)
+
+
+def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
+    """(level, message, key/values) of the "jident: trend" status after update ``u``.
+
+    The message is the tracker's one line (J1 drift from the baseline with its standard error, a
+    recent change, width, wear rate, time to the limit; or why the window was skipped).  Key/values,
+    in this order: window_index, time_s, skipped, skip_reason, commissioning, inertia_kgm2 (smoothed),
+    inertia_se_kgm2, inertia_baseline_kgm2, inertia_reference_kgm2, inertia_drift_pct,
+    inertia_drift_se_pct, inertia_drift_from_reference_pct, backlash_width_m (regression line),
+    backlash_width_se_m, backlash_width_baseline_m, wear_rate_m_per_day, wear_rate_se_m_per_day,
+    time_to_limit_days (+ _low, _high), changes_detected (at this window), and for the last change
+    of this window: last_change_quantity, last_change_time_s, last_change_onset_time_s,
+    last_change_size, last_change_size_pct."""
+    def days(s):
+        return None if s is None else s / SECONDS_PER_DAY
+    vals = [("window_index", int(u.window_index)), ("time_s", _v(u.time_s)), ("skipped", bool(u.skipped)),
+            ("skip_reason", u.reason or ""), ("commissioning", bool(u.commissioning)),
+            ("inertia_kgm2", _v(u.inertia_kgm2)), ("inertia_se_kgm2", _v(u.inertia_se_kgm2)),
+            ("inertia_baseline_kgm2", _v(u.inertia_baseline_kgm2)),
+            ("inertia_reference_kgm2", _v(u.inertia_reference_kgm2)),
+            ("inertia_drift_pct", _v(u.inertia_drift_pct)), ("inertia_drift_se_pct", _v(u.inertia_drift_se_pct)),
+            ("inertia_drift_from_reference_pct", _v(u.inertia_drift_from_reference_pct)),
+            ("backlash_width_m", _v(u.width_m)), ("backlash_width_se_m", _v(u.width_se_m)),
+            ("backlash_width_baseline_m", _v(u.width_baseline_m)),
+            ("wear_rate_m_per_day", _v(u.wear_rate_m_per_day)),
+            ("wear_rate_se_m_per_day", _v(u.wear_rate_se_m_per_day)),
+            ("time_to_limit_days", _v(days(u.time_to_limit_s))),
+            ("time_to_limit_low_days", _v(days(u.time_to_limit_low_s))),
+            ("time_to_limit_high_days", _v(days(u.time_to_limit_high_s))),
+            ("changes_detected", len(u.changes))]
+    if u.changes:
+        c = u.changes[-1]
+        vals += [("last_change_quantity", c.quantity), ("last_change_time_s", c.time_s),
+                 ("last_change_onset_time_s", c.onset_time_s), ("last_change_size", c.size),
+                 ("last_change_size_pct", c.size_pct)]
+    return int(u.level), u.message, vals
+
+
+__all__ = ["TREND_STATUS_NAME", "trend_config_from_parameters", "trend_status"]

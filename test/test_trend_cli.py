@@ -1,0 +1,232 @@
+"""`jident trend`, `jident simulate --scenario wear` (jident_ros/cli/trend.py, sim/scenarios.py), the offline
+replay across clock jumps and joined batches (bag/recorded.py), and the node's pure trend pieces
+(identify/trend_status.py, TrendConfig.from_parameters)."""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from jident_ros.cli.main import main as jident
+from jident_ros.config import load_system_config
+
+
+@pytest.fixture(scope="module")
+def system():
+    return load_system_config()
+
+
+@pytest.fixture(scope="module")
+def wear40(tmp_path_factory):
+    """40 entries an hour apart, 30 dB, K2 2.5 -> 3.5 mm, J1 +2.5 % from entry 20 (about 2 s)."""
+    out = tmp_path_factory.mktemp("wear") / "wear40"
+    assert jident(["simulate", "--scenario", "wear", "--windows", "40", "--snr-db", "30", "--out", str(out),
+                   "--quiet"]) == 0
+    return out
+
+
+# --------------------------------------------------------------------------- scenario
+
+def test_wear_scenario_times_widths_and_step(system):
+    from jident_ros.sim.scenarios import wear_scenario
+    sc = wear_scenario(system, 11, 3600.0, 0.0025, 0.0035, j1_kgm2=1.16, j1_step_at_window=4, j1_step_pct=2.5)
+    assert len(sc) == 11
+    assert np.allclose(np.diff(sc.entry_times_s), 3600.0) and sc.entry_times_s[0] == 3600.0
+    assert np.allclose(sc.true_width_m, np.linspace(0.0025, 0.0035, 11))
+    assert np.allclose(sc.true_inertia_kgm2[:4], 1.16) and np.allclose(sc.true_inertia_kgm2[4:], 1.16 * 1.025)
+    assert sc.j1_step_time_s == sc.entry_times_s[4]
+    assert sc.wear_rate_m_per_day == pytest.approx(0.001 / 10 / 3600 * 86400)
+    by_rate = wear_scenario(system, 5, 86400.0, 0.003, width_growth_m_per_day=1e-4)
+    assert np.allclose(np.diff(by_rate.true_width_m), 1e-4)
+
+
+@pytest.mark.parametrize("kw, field", [({"n_windows": 0}, "n_windows"), ({"interval_s": -1.0}, "interval_s"),
+                                       ({"j1_step_at_window": 10}, "j1_step_at_window"),
+                                       ({"width_end_m": 0.004, "width_growth_m_per_day": 1e-4}, "width_end_m"),
+                                       ({"width_growth_m_per_day": -1.0}, "the width reaches")])
+def test_wear_scenario_refuses_bad_arguments(system, kw, field):
+    from jident_ros.sim.scenarios import wear_scenario
+    args = dict(n_windows=10, interval_s=3600.0)
+    args.update(kw)
+    with pytest.raises(ValueError, match=field):
+        wear_scenario(system, **args)
+
+
+# --------------------------------------------------------------------------- offline replay
+
+def test_one_entry_an_hour_loses_nothing(system, tmp_path):
+    """Each entry's stream starts 48 samples before it (the first 50-sample batch holds the entry):
+    without the clock-jump handling the detector dropped that batch as a 'gap' and lost the window."""
+    from jident_ros.cli.offline import diagnose_recording
+    from jident_ros.cli.trend import write_scenario_recording
+    from jident_ros.sim.scenarios import wear_scenario
+    sc = wear_scenario(system, 6, 3600.0, 0.0025, 0.003, j1_step_at_window=3)
+    rec = write_scenario_recording(tmp_path / "rec", system, sc, gap_samples=0)
+    res = diagnose_recording(rec, system=system, image_method=False)
+    assert res.dropped == {}
+    assert res.clock_jumps == 5
+    assert [w.entry_time_s for w in res.windows] == pytest.approx(list(sc.entry_times_s), abs=1e-6)
+    assert [w.true_inertia_kgm2 for w in res.windows] == pytest.approx(list(sc.true_inertia_kgm2))
+    for w, c in zip(res.windows, sc.cases):
+        assert w.inertia_kgm2 == pytest.approx(c.inertia_kgm2, rel=0.01)
+
+
+def test_joined_batches_give_the_same_windows_and_drops(system, tmp_path, monkeypatch):
+    """A NaN batch in the steady stretch is dropped ('nonfinite', counted once) whether the clean batches
+    around it go to the detector joined or one by one; the windows are the same."""
+    from jident_ros.bag.recorded import DriveReplay
+    from jident_ros.bag.recording import BagWriter
+    from jident_ros.cli.offline import diagnose_recording, multiarray_message
+    from jident_ros.sim import Case, simulate_grid
+    from jident_ros.stream.detector import embed_windows
+    from jident_ros.stream.layout import DEFAULT_CHANNELS
+    ws = simulate_grid(system, [Case(1.16, 0.005, 0.025), Case(1.073, 0.005, 0.025), Case(1.218, 0.005, 0.025)])
+    stream, _ = embed_windows(ws, 400, 1.0, DEFAULT_CHANNELS)
+    per = 400 + len(ws.t)
+    s0 = (per // 50 + 1) * 50                                        # one whole batch in case 1's steady stretch
+    stream[s0:s0 + 50, DEFAULT_CHANNELS.index("m_el")] = np.nan
+    with BagWriter(tmp_path / "rec") as bag:
+        bag.add_topic("/drive/signals", "std_msgs/msg/Float64MultiArray")
+        for s in range(0, stream.shape[0], 50):
+            b = stream[s:s + 50]
+            bag.write("/drive/signals", multiarray_message(b, DEFAULT_CHANNELS), int(b[-1, 0] * 1e9))
+    joined = diagnose_recording(tmp_path / "rec", system=system, image_method=False)
+    monkeypatch.setattr(DriveReplay, "MAX_RUN_SAMPLES", 1)       # every batch alone
+    single = diagnose_recording(tmp_path / "rec", system=system, image_method=False)
+    assert joined.dropped == single.dropped == {"nonfinite": 1}
+    assert joined.batches == single.batches == math.ceil(stream.shape[0] / 50)
+    assert len(joined.windows) == 3
+    assert [(w.entry_time_s, w.inertia_kgm2) for w in joined.windows] == \
+        [(w.entry_time_s, w.inertia_kgm2) for w in single.windows]
+
+
+# --------------------------------------------------------------------------- jident trend
+
+def _rows(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_jident_trend_end_to_end(wear40, tmp_path, capsys):
+    out = tmp_path / "trend"
+    assert jident(["trend", str(wear40), "--out", str(out), "--quiet"]) == 0
+    text = capsys.readouterr().out
+    rows = _rows(out / "trend.csv")
+    assert len(rows) == 40
+    for col in ("time_s", "inertia_kgm2", "inertia_ci_low_kgm2", "inertia_ci_high_kgm2", "backlash_width_m",
+                "change", "inertia_smoothed_kgm2", "backlash_width_smoothed_m", "level", "skip_reason"):
+        assert col in rows[0]
+    times = [float(r["time_s"]) for r in rows]
+    assert times == sorted(times) and times[0] == 3600.0
+    changed = [i for i, r in enumerate(rows) if r["change"] == "1" and "inertia" in r["change_quantity"]]
+    assert len(changed) == 1 and 20 <= changed[0] <= 24           # the J1 step is at entry 20
+    assert all(r["change"] == "0" for i, r in enumerate(rows) if i < 20)
+    assert (out / "trend.png").stat().st_size > 10_000
+    # summary: the step, the wear rate near the truth (1 mm over 39 h = 0.615 mm/day)
+    assert "inertia: +" in text and "health: WARN" in text
+    rate = float(text.split("wear rate ")[1].split(" ")[0])
+    assert rate == pytest.approx(1.0 / 39 * 24, rel=0.2)
+
+
+def test_trend_state_resumes_where_it_stopped(system, tmp_path, capsys):
+    from jident_ros.cli.trend import write_scenario_recording
+    from jident_ros.identify.trend import TrendTracker
+    from jident_ros.sim.scenarios import wear_scenario
+    sc = wear_scenario(system, 16, 3600.0, j1_step_at_window=12)
+    half = [dataclasses.replace(sc, cases=sc.cases[s], entry_times_s=sc.entry_times_s[s])
+            for s in (slice(0, 8), slice(8, 16))]
+    recs = [write_scenario_recording(tmp_path / f"r{k}", system, h, snr_db=30.0, seed=k)
+            for k, h in enumerate(half)]
+    state = tmp_path / "trend.json"
+    common = ["--quiet", "--commissioning-windows", "5"]
+    assert jident(["trend", str(recs[0]), "--out", str(tmp_path / "a"), "--state", str(state), *common]) == 0
+    assert TrendTracker.load(state).n_windows == 8
+    # both recordings, given in reverse order: the first 8 windows are already in the state
+    assert jident(["trend", str(recs[1]), str(recs[0]), "--out", str(tmp_path / "b"), "--state", str(state),
+                   *common]) == 0
+    assert "8 already in the state" in capsys.readouterr().out
+    resumed = TrendTracker.load(state)
+    assert jident(["trend", str(recs[1]), str(recs[0]), "--out", str(tmp_path / "c"), *common]) == 0
+    one_pass = _rows(tmp_path / "c" / "trend.csv")
+    assert resumed.n_windows == 16 and len(one_pass) == 16
+    assert resumed.config.commissioning_windows == 5
+    assert resumed.to_dict()["inertia"]["x"] == pytest.approx(float(one_pass[-1]["inertia_smoothed_kgm2"]), rel=1e-12)
+    assert len(_rows(tmp_path / "b" / "trend.csv")) == 8
+
+
+def test_trend_bad_input_is_one_line(wear40, tmp_path, capsys):
+    def err(argv):
+        assert jident(argv) == 2
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("jident: error:")
+        return lines[0]
+    assert "nope" in err(["trend", str(tmp_path / "nope"), "--out", str(tmp_path / "o")])
+    bad_state = tmp_path / "s.json"
+    bad_state.write_text("{not json")
+    assert "--state" in err(["trend", str(wear40), "--out", str(tmp_path / "o"), "--state", str(bad_state), "--quiet"])
+    bad_state.write_text(json.dumps({"kind": "other"}))
+    assert "kind" in err(["trend", str(wear40), "--out", str(tmp_path / "o"), "--state", str(bad_state), "--quiet"])
+    assert "--commissioning-windows" in err(["trend", str(wear40), "--out", str(tmp_path / "o"),
+                                             "--commissioning-windows", "1"])
+    assert "--j1-step-at" in err(["simulate", "--scenario", "wear", "--windows", "5", "--j1-step-at", "5",
+                                  "--out", str(tmp_path / "w")])
+    assert "not an empty directory" in err(["simulate", "--scenario", "wear", "--out", str(wear40)])
+
+
+# --------------------------------------------------------------------------- node pieces
+
+def test_trend_parameters_map_to_the_config():
+    from jident_ros.identify.trend import PARAMETER_FIELDS, TrendConfig
+    from jident_ros.parameters import DIAGNOSTIC, TREND
+    assert TrendConfig.from_parameters(TREND) == TrendConfig()       # the defaults agree
+    assert set(PARAMETER_FIELDS.values()) == {f.name for f in dataclasses.fields(TrendConfig)}
+    assert set(TREND) - set(PARAMETER_FIELDS) == {"trend_enabled", "trend_state_file"}
+    assert all(DIAGNOSTIC[k] == v for k, v in TREND.items())
+    cfg = TrendConfig.from_parameters({"trend_commissioning_windows": 10, "trend_width_warn_m": 0.01,
+                                       "trend_inertia_baseline_kgm2": 1.2, "trend_cusum_threshold_sd": 0.0})
+    assert (cfg.commissioning_windows, cfg.width_warn_m, cfg.inertia_baseline_kgm2, cfg.cusum_threshold_sd) == \
+        (10, 0.01, 1.2, None)
+    with pytest.raises(ValueError, match="trend_commissioning_windows"):
+        TrendConfig.from_parameters({"trend_commissioning_windows": 2.5})
+    with pytest.raises(ValueError, match="trend_drift_alarm_pct"):
+        TrendConfig.from_parameters({"trend_drift_alarm_pct": 1.0})
+    with pytest.raises(ValueError, match="trend_width_change_detection"):
+        TrendConfig.from_parameters({"trend_width_change_detection": 1})
+
+
+def test_trend_status_levels_messages_and_values():
+    from jident_ros.identify.trend import TrendConfig, TrendTracker, simulate_series
+    from jident_ros.identify.trend_status import TREND_STATUS_NAME, trend_status
+    assert TREND_STATUS_NAME == "jident: trend"
+    s = simulate_series(60, step_at=40, step_pct=6.0, seed=3, width_growth_m_per_window=2e-6)
+    tr = TrendTracker(TrendConfig(commissioning_windows=20))
+    ups = tr.batch(s.time_s, s.inertia_kgm2, s.inertia_se_kgm2, s.width_m, s.width_se_m)
+    level, msg, vals = trend_status(ups[5])
+    assert level == 0 and "learning the baseline" in msg and dict(vals)["commissioning"] is True
+    level, msg, vals = trend_status(ups[30])
+    d = dict(vals)
+    assert level == 0 and d["inertia_drift_pct"] != "" and d["wear_rate_m_per_day"] > 0
+    assert d["changes_detected"] == 0 and "last_change_quantity" not in d
+    fired = next(u for u in ups if u.changes)
+    level, msg, vals = trend_status(fired)
+    d = dict(vals)
+    assert level == 2 and "change +" in msg              # +6 % > the 5 % alarm
+    assert d["last_change_quantity"] == "inertia" and d["last_change_size_pct"] == pytest.approx(6.0, abs=1.5)
+    skipped = tr.update(float(s.time_s[-1]) + 1.0, float("nan"), 0.01)
+    level, msg, vals = trend_status(skipped)
+    assert dict(vals)["skipped"] is True and "inertia_kgm2" in dict(vals)["skip_reason"] and "skipped" in msg
+
+
+@pytest.mark.slow
+def test_trend_targets_quick_run():
+    """python -m jident_ros.evaluation.trend_targets --quick (about 20 s)."""
+    from jident_ros.evaluation.trend_targets import format_table, measure
+    r = measure(seed=0, quick=True)
+    assert r["detection"]["missed"] == 0 and r["detection"]["median"] <= 3
+    assert r["false"]["per_10k"] <= 1.0
+    assert 0.9 <= r["steady"]["coverage95"] <= 0.99
+    assert "| tracker update" in format_table(r)
