@@ -139,7 +139,7 @@ def cmd_info(args) -> int:
         load = r * (cfg.load.process_force_n + film[i])
         print(f"  {c.consistency_pa_sn:14g} | {slip[i] * 100:8.3f} | {y[4, i] * 30 / math.pi:11.1f} | "
               f"{v2[i]:8.3f} | {load:10.2f} | {load / b.torque_nm:11.3f} | "
-              f"{100 * film[i] / (cfg.load.process_force_n + film[i]):14.1f} | {load * y[4, i] / 1e3:11.2f}")
+              f"{100 * film[i] / (cfg.load.process_force_n + film[i]):14.3g} | {load * y[4, i] / 1e3:11.2f}")
     return 0
 
 
@@ -259,7 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--encoder-counts", type=int, help="quantise alpha1/alpha2 to this many counts per revolution")
     s.add_argument("--out", help="write the windows to this .npz file")
     s.add_argument("--plot", help="write a PNG of the five signals of the (first) case")
-    s.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    s.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     s.add_argument("--quiet", action="store_true")
     s.set_defaults(func=cmd_simulate)
     b = sub.add_parser("build-patterns", help="build the pattern library (simulated eta_k = 0.025 runs, or "
@@ -275,7 +275,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--out", help="library file (default: ~/.cache/jident_ros/patterns-<hash>.npz)")
     b.add_argument("--p", type=_positive("--p"), action="append", help="KHM exponent p (repeatable; default: config)")
     b.add_argument("--variant", choices=("paper", "load_scaled"), help="method variant (default: config)")
-    b.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    b.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     b.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     b.add_argument("--quiet", action="store_true")
     b.set_defaults(func=cmd_build_patterns)
@@ -284,7 +284,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--quick", action="store_true", help="noise-free only, no reading comparison (smoke run)")
     e.add_argument("--no-figures", action="store_true")
     e.add_argument("--p", type=_positive("--p"), action="append", help="KHM exponent p (repeatable; default: config)")
-    e.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    e.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     e.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     e.add_argument("--quiet", action="store_true")
     e.set_defaults(func=cmd_evaluate)
@@ -301,7 +301,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="K2 of inequality (1), m (default: the recording's drive/backlash_width, else 0.005)")
     g.add_argument("--topic", help="the drive/signals topic (default: the recording's one topic ending in drive/signals)")
     g.add_argument("--json", metavar="OUT", help="also write every window's diagnosis to this JSON file")
-    g.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    g.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     g.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     g.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     g.set_defaults(func=cmd_diagnose)
@@ -310,7 +310,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("demo", help="end-to-end demo: simulator, windowing and diagnostic nodes over DDS on a few "
                    "cases (jident demo --help)", add_help=False)
     i = sub.add_parser("info", help="print base values and the steady state of the model")
-    i.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    i.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     i.set_defaults(func=cmd_info)
     return p
 
