@@ -124,16 +124,33 @@ def test_other_class_is_warn(windows, configs, library):
     assert d.value_dict()["deviation_percent"] == pytest.approx(-7.5, abs=0.05)
 
 
-def test_image_method_disagreeing_with_the_gap_is_warn(windows, configs, library):
-    """Nominal J1 at eta_k = 0.0375 (off the pattern runs): the gap gives 1.16, the image vote another class."""
-    from jident_ros.identify.levels import WARN
+def test_image_method_agrees_with_the_gap_on_the_default_profile(windows, configs, library):
+    """Nominal J1 at eta_k = 0.0375 (off the pattern runs) on the paper-consistent default drive: the gap and the
+    image vote both give 1.16, so the status is OK."""
+    from jident_ros.identify.levels import OK
     d = _diagnose(windows, 2, configs, library)
+    v = d.value_dict()
+    assert d.class_kgm2 == 1.16 and v["verdict_agree"] is True and v["image_vote_class_kgm2"] == 1.16
+    assert d.level == OK, d.message
+
+
+def test_image_method_disagreeing_with_the_gap_is_warn(configs):
+    """On the heavy-film stress profile (config/profiles/heavy_film.yaml) the eta_k groups differ in load by
+    +-15 %: nominal J1 at eta_k = 0.0375, the gap gives 1.16, the image vote another class -> WARN."""
+    from jident_ros.config import load_system_config
+    from jident_ros.identify.levels import OK, WARN
+    from jident_ros.method.patterns import PatternLibrary
+    from jident_ros.sim import Case, simulate_grid
+    heavy = load_system_config("heavy_film")
+    cfg = (heavy, configs[1])
+    ws = simulate_grid(heavy, [Case(1.16, 0.005, 0.0375)])
+    lib = PatternLibrary.build(*cfg)
+    d = _diagnose(ws, 0, cfg, lib)
     v = d.value_dict()
     assert d.class_kgm2 == 1.16 and v["verdict_agree"] is False and v["image_vote_class_kgm2"] != 1.16
     assert d.level == WARN and "nominal class 1.16; the image method disagrees" in d.message, d.message
     # without the image method nothing disagrees
-    from jident_ros.identify.levels import OK
-    g = _diagnose(windows, 2, configs, None, image_method=False)
+    g = _diagnose(ws, 0, cfg, None, image_method=False)
     assert g.level == OK and g.value_dict()["verdict_agree"] == "unknown" and g.inertia_kgm2 == d.inertia_kgm2
 
 

@@ -20,7 +20,7 @@ from jident_ros.bag.recording import salvage_main
 from jident_ros.cli.demo import main as demo_main
 from jident_ros.cli.offline import TABLE_HEADER, diagnose_recording, format_window_line, summary_line, write_json
 from jident_ros.config import ConfigError, load_method_config, load_system_config
-from jident_ros.evaluation.evaluate import run_evaluation
+from jident_ros.evaluation.evaluate import VALIDITY_FILM_SHARES, run_evaluation
 from jident_ros.evaluation.plotting import plot_case
 from jident_ros.evaluation.report import render_markdown, write_figures, write_results_section
 from jident_ros.evaluation.report_robustness import write_robustness_figures
@@ -196,10 +196,21 @@ def cmd_evaluate(args) -> int:
     system = load_system_config(args.config)
     method = _method_config(args)
     log = (lambda *a: None) if args.quiet else (lambda msg: print(msg, flush=True))
-    readings = () if args.quick else ("dyadic", "linear", "swt")
-    snr = () if args.quick else (40.0, 30.0)
-    ev = run_evaluation(system, method, snr_db=snr, seeds=(1, 2)[:len(snr)], readings=readings, log=log)
-    ev.command = "jident evaluate" + (" --quick" if args.quick else "")
+    if args.full:
+        args.validity_map = "full"
+    readings = ("dyadic", "linear", "swt") if args.full else ()
+    snr = () if args.quick else ((40.0, 30.0) if args.full else (30.0,))
+    heavy = load_system_config("heavy_film")
+    stress = None if heavy == system else heavy
+    shares = VALIDITY_FILM_SHARES if not args.quick else (0.01,)
+    if args.validity_map == "off":
+        shares, stress = (), None
+    ev = run_evaluation(system, method, snr_db=snr, seeds=(2,) if snr == (30.0,) else (1, 2)[:len(snr)],
+                        readings=readings, log=log,
+                        film_shares=shares, stress_system=stress, full_map=args.validity_map == "full")
+    ev.command = "jident evaluate" + (" --quick" if args.quick else "") + (" --full" if args.full else (
+        f" --validity-map {args.validity_map}" if args.validity_map != "default" else "")) + (
+        f" --config {args.config}" if args.config else "")
     figs = {} if args.no_figures else write_figures(ev, system, method, Path(args.results).parent / "figures")
     rob = run_robustness(system, method, log=log, quick=args.quick)
     rob.command = ev.command
@@ -283,6 +294,11 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--results", default="docs/results.md", help="results file to update ('-' prints)")
     e.add_argument("--quick", action="store_true", help="noise-free only, no reading comparison (smoke run)")
     e.add_argument("--no-figures", action="store_true")
+    e.add_argument("--full", action="store_true", help="also the sweeps beyond the 2-minute budget: SNR 40 dB, the "
+                   "'linear' and 'swt' readings of level 10 (~3 CPU minutes) and --validity-map full")
+    e.add_argument("--validity-map", choices=("default", "full", "off"), default="default",
+                   help="film-share validity map: default = noise-free at every share + the equal-load ablation on the "
+                   "heavy-film profile, p = 2 and 3; full = every p, the ablation and the default sensor set at every share")
     e.add_argument("--p", type=_positive("--p"), action="append", help="KHM exponent p (repeatable; default: config)")
     e.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     e.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
