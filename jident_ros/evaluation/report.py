@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jident_ros.evaluation.evaluate import Evaluation, GridResult
+from jident_ros.evaluation.evaluate import PAPER_EXAMPLES, Evaluation, GridResult
 from jident_ros.evaluation.report_robustness import render_robustness
 from jident_ros.method.image import render_intensity, write_png
 from jident_ros.method.pipeline import SIGNALS
@@ -164,7 +164,6 @@ def _validity_lines(ev: Evaluation, figures: dict) -> list[str]:
 
 
 def _paper_ratio_text() -> str:
-    from jident_ros.evaluation.evaluate import PAPER_EXAMPLES
     m = [np.sort(h)[1] / np.sort(h)[0] for *_, h in PAPER_EXAMPLES]
     return (f"margins (second-smallest / smallest H) of {min(m):.3g}–{max(m):.3g}, median {np.median(m):.3g} over "
             "its 16 examples")
@@ -506,7 +505,6 @@ def write_figures(ev: Evaluation, system, method, outdir: str | Path = "docs/fig
         ax1.legend(fontsize=7)
         ax2.loglog(x, [np.median(_at_p(q[1].margins(), q[1].p_values, vps)[:, ~q[1].pattern_mask]) for q in pts], "o-",
                    label="ours (126 cases)")
-        from jident_ros.evaluation.evaluate import PAPER_EXAMPLES
         pm = np.median([np.sort(h)[1] / np.sort(h)[0] for *_, h in PAPER_EXAMPLES])
         ax2.axhline(pm, color="r", ls="--", label=f"paper's 16 examples, median {pm:.3g}")
         ax2.set_xlabel("film share [%]")
