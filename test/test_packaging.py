@@ -395,7 +395,9 @@ def test_colcon_build_and_ros2_run_lookup(repo_root, tmp_path, ros_env):
     )
     found = _run([sys.executable, "-c", probe], env=run_env, cwd=tmp_path)
     assert found.returncode == 0, _explain(found)
-    exe_found, module_file, config_file = found.stdout.splitlines()
+    exe_found, module_file, config_file, profile_file, film_area = found.stdout.splitlines()
+    assert Path(profile_file) == share / "config" / "profiles" / "heavy_film.yaml", profile_file
+    assert float(film_area) == 0.14
     assert Path(exe_found) == exe
     assert Path(module_file).is_relative_to(prefix), "the installed copy must be imported, not the checkout"
     assert Path(config_file) == share / "config" / "system.yaml"
