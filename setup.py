@@ -18,6 +18,7 @@ data_files = [
     ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
     ('share/' + package_name, ['package.xml']),
     ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+    ('share/' + package_name + '/config/profiles', sorted(glob('config/profiles/*.yaml'))),
 ]
 if os.path.isdir('launch'):
     data_files.append(('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))))

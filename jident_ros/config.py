@@ -156,9 +156,59 @@ def default_system_config_path() -> Path:
     return default_config_path("system.yaml")
 
 
+#: Folder of the named drive profiles inside the config folder (``config/profiles/<name>.yaml``).
+PROFILES_DIR = "profiles"
+
+
+def profile_names() -> list[str]:
+    """Names of the drive profiles shipped in ``config/profiles/`` (wherever the config folder is)."""
+    try:
+        folder = default_config_path(PROFILES_DIR + "/heavy_film.yaml").parent
+    except FileNotFoundError:
+        return []
+    return sorted(p.stem for p in folder.glob("*.yaml"))
+
+
+def resolve_config_path(path_or_profile: str | Path | None) -> Path:
+    """The system configuration file meant by ``--config``: an existing file, else a profile name
+    (``heavy_film`` -> ``config/profiles/heavy_film.yaml``, found as :func:`default_config_path` finds the
+    default configuration: checkout, ament share dir, pip share dir); None -> ``config/system.yaml``."""
+    if path_or_profile is None or str(path_or_profile) == "":
+        return default_system_config_path()
+    p = Path(path_or_profile)
+    if p.is_file():
+        return p
+    name = str(path_or_profile)
+    if "/" not in name and "\\" not in name and not name.endswith((".yaml", ".yml")):
+        try:
+            return default_config_path(f"{PROFILES_DIR}/{name}.yaml")
+        except FileNotFoundError:
+            known = ", ".join(profile_names()) or "none found"
+            raise ConfigError(f"config: {name!r} is neither a file nor a drive profile (profiles: {known})") from None
+    raise ConfigError(f"config file: no such file {name!r}")
+
+
 def load_system_config(path: str | Path | None = None) -> SystemConfig:
-    """Load ``config/system.yaml`` (or the given file) into a SystemConfig."""
-    return system_config_from_dict(load_yaml(path or default_system_config_path()))
+    """Load ``config/system.yaml``, the given file or the named profile (:func:`resolve_config_path`).
+
+    A profile file may give only the fields it changes; the others are those of ``config/system.yaml``
+    (not the dataclass defaults), so a profile is "the default drive except ...". """
+    target = resolve_config_path(path)
+    data = strip_ros_wrapper(load_yaml(target))
+    base = default_system_config_path()
+    if _is_profile(target) and target.resolve() != base.resolve():
+        merged = {k: dict(v) if isinstance(v, Mapping) else v for k, v in strip_ros_wrapper(load_yaml(base)).items()}
+        for section, values in (data or {}).items():
+            if isinstance(values, Mapping) and isinstance(merged.get(section), Mapping):
+                merged[section].update(values)
+            else:
+                merged[section] = values
+        data = merged
+    return system_config_from_dict(data)
+
+
+def _is_profile(path: Path) -> bool:
+    return path.parent.name == PROFILES_DIR
 
 
 def config_to_dict(cfg: SystemConfig) -> dict:

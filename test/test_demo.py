@@ -30,6 +30,10 @@ def test_demo_runs_end_to_end(ros_env, tmp_path):
     for c in cases:
         assert abs(c["error_percent"]) < 1.0 and c["class_correct"], c
         assert c["level"] == "WARN"  # neither is the nominal 1.16
+        # on the paper-consistent default drive the image method names the gap estimate's class
+        assert c["image_agrees"] and c["image_class_kgm2"] == c["true_inertia_kgm2"], c
+    md = (out / "summary.md").read_text()
+    assert "How to read this" in md and "name the same class in 2 of 2 cases" in md, md
     assert "true J1 = 1.1020" in r.stdout and "identified" in r.stdout
     topics = summary["recorded_topics"]
     assert topics["/demo/drive/window"] == 2 and topics["/demo/inertia_estimate"] == 2, topics

@@ -63,8 +63,13 @@ def library(windows, system, method):
 
 
 @pytest.fixture(scope="module")
-def hists(windows, method):
-    """signal -> (values (B, 64), counts (B, 64), init (B,)) of the HIST_WINDOWS, as the pipeline makes them."""
+def hists(pattern_cases, method):
+    """signal -> (values (B, 64), counts (B, 64), init (B,)) of the HIST_WINDOWS, as the pipeline makes them.
+
+    Pinned to the heavy-film profile's windows: the KHM-equivalence test below excludes a1 at p = 3 (the class
+    and the batch function settle in different local optima there, docs/method.md); that list was measured on
+    these histograms.  On the default drive's windows a2 at p = 3 settles in different optima as well."""
+    windows = simulate_grid(load_system_config("heavy_film"), pattern_cases + EXTRA_CASES)
     out = {}
     for name in SIGNALS:
         x = windows.signals[name][list(HIST_WINDOWS)]
@@ -800,14 +805,15 @@ def test_load_method_config_file(tmp_path):
     assert load_method_config(p) == MethodConfig(variant="load_scaled")
 
 
-def test_equal_load_grid_equalises_the_load_and_keeps_the_pattern_runs(windows, system):
-    """The ablation of docs/method.md: every eta_k group at the pattern group's steady load."""
+def test_equal_load_grid_equalises_the_load_and_keeps_the_pattern_runs(windows):
+    """The ablation of docs/method.md: every eta_k group at the pattern group's steady load.  On the heavy-film
+    profile, where the groups' loads differ by ~15 % (on the default drive by 0.015 %)."""
     from jident_ros.evaluation.evaluate import equal_load_grid
+    system = load_system_config("heavy_film")
     g = system.grid
     # two pattern runs (they fix the line speed) and the EXTRA_CASES, at eta_k 0.0375 and 0.0125
     sub = [0, 41, 42, 43, 44]
-    clean = dataclasses.replace(windows, signals={k: v[sub] for k, v in windows.signals.items()},
-                                cases=[windows.cases[i] for i in sub], initial_slip=windows.initial_slip[sub])
+    clean = simulate_grid(system, [windows.cases[i] for i in sub])
     eq = equal_load_grid(system, clean)
     assert eq.cases == clean.cases
     pre = slice(0, clean.entry_index)

@@ -258,14 +258,13 @@ def test_pipeline_diagnostics(pipeline):
     from jident_ros.identify.levels import OK, WARN
     from jident_ros.nodes.ros_io import status_level, status_values
     sts = statuses(pipeline["diags"], "jident: inertia", "/e2e/drive")
-    # the verdict (jident_ros.identify.verdict): the first window is the nominal class by the gap: OK, even
-    # though at eta_k = 0.0375 (off the pattern runs) the image method picks another class -- outside its
-    # validity domain (image_min_margin 0 on this drive) that is information, not a WARN. The second deviates.
+    # the verdict (jident_ros.identify.verdict) on the paper-consistent default drive: the first window is the
+    # nominal class by the gap and by the image method (eta_k = 0.0375, off the pattern runs): OK. The second
+    # deviates (1.073): WARN.  (On the heavy-film profile the image method disagrees: test_offline.)
     assert [status_level(s) for s in sts] == [OK, WARN], [s.message for s in sts]
-    assert "nominal class 1.16" in sts[0].message and "information: the image method" in sts[0].message, \
-        sts[0].message
+    assert "nominal class 1.16" in sts[0].message and "disagrees" not in sts[0].message, sts[0].message
     assert "deviates from the nominal" in sts[1].message, sts[1].message
-    assert status_values(sts[0])["verdict_agree"] == "false"
+    assert status_values(sts[0])["verdict_agree"] == "true"
     assert [status_values(s)["status"] for s in sts] == ["nominal", "deviating"]
     for s, true in zip(sts, (1.16, 1.073)):
         v = status_values(s)

@@ -125,31 +125,54 @@ def test_other_class_is_warn(windows, configs, library):
     assert d.value_dict()["deviation_percent"] == pytest.approx(-7.5, abs=0.05)
 
 
-def test_image_method_disagreeing_outside_its_domain_is_information(windows, configs, library):
-    """Nominal J1 at eta_k = 0.0375 (off the pattern runs): the gap gives 1.16, the image method another class.
-    With the default image_min_margin (0: the image method is never trusted on this drive) that is
-    information, not a WARN (issue 12: a WARN must mean "look at this drive")."""
+def test_image_method_agrees_with_the_gap_on_the_default_profile(windows, configs, library):
+    """Nominal J1 at eta_k = 0.0375 (off the pattern runs) on the paper-consistent default drive: the gap and the
+    image method both give 1.16, so the status is OK."""
     from jident_ros.identify.levels import OK
     d = _diagnose(windows, 2, configs, library)
+    v = d.value_dict()
+    assert d.class_kgm2 == 1.16 and v["verdict_agree"] is True and v["image_class_kgm2"] == 1.16
+    assert d.level == OK and "disagrees" not in d.message and "information" not in d.message, d.message
+
+
+@pytest.fixture(scope="module")
+def heavy(configs):
+    """The heavy-film stress profile (config/profiles/heavy_film.yaml): the eta_k groups differ in load by
+    +-15 %, so at eta_k = 0.0375 the image method answers another class than the gap's nominal 1.16."""
+    from jident_ros.config import load_system_config
+    from jident_ros.method.patterns import PatternLibrary
+    from jident_ros.sim import Case, simulate_grid
+    system = load_system_config("heavy_film")
+    cfg = (system, configs[1])
+    return simulate_grid(system, [Case(1.16, 0.005, 0.0375)]), cfg, PatternLibrary.build(*cfg)
+
+
+def test_image_method_disagreeing_outside_its_domain_is_information(heavy):
+    """With the default image_min_margin (0: the image method is never trusted alone) a disagreement is
+    information, not a WARN (issue 12: a WARN must mean "look at this drive")."""
+    from jident_ros.identify.levels import OK
+    ws, cfg, lib = heavy
+    d = _diagnose(ws, 0, cfg, lib)
     v = d.value_dict()
     assert d.class_kgm2 == 1.16 and v["verdict_agree"] is False and v["image_class_kgm2"] != 1.16
     assert v["image_in_domain"] is False and "image_min_margin 0" in v["image_domain_reason"]
     assert d.level == OK and "nominal class 1.16; information: the image method answers class" in d.message, d.message
     assert "not a warning" in d.message
     # without the image method nothing disagrees
-    g = _diagnose(windows, 2, configs, None, image_method=False)
+    g = _diagnose(ws, 0, cfg, None, image_method=False)
     assert g.level == OK and g.value_dict()["verdict_agree"] == "unknown" and g.inertia_kgm2 == d.inertia_kgm2
 
 
-def test_image_method_disagreeing_inside_its_domain_is_warn(windows, configs, library):
+def test_image_method_disagreeing_inside_its_domain_is_warn(heavy):
     from jident_ros.identify.levels import WARN
     from jident_ros.identify.verdict import VerdictPolicy
-    margin = _diagnose(windows, 2, configs, library).value_dict()["image_margin"]
-    d = _diagnose(windows, 2, configs, library, policy=VerdictPolicy(image_min_margin=max(1.0, margin * 0.999)))
+    ws, cfg, lib = heavy
+    margin = _diagnose(ws, 0, cfg, lib).value_dict()["image_margin"]
+    d = _diagnose(ws, 0, cfg, lib, policy=VerdictPolicy(image_min_margin=max(1.0, margin * 0.999)))
     assert d.value_dict()["image_in_domain"] is True
     assert d.level == WARN and "nominal class 1.16; the image method disagrees: its class" in d.message, d.message
     # above its margin the same disagreement is information again
-    e = _diagnose(windows, 2, configs, library, policy=VerdictPolicy(image_min_margin=margin * 1.01))
+    e = _diagnose(ws, 0, cfg, lib, policy=VerdictPolicy(image_min_margin=margin * 1.01))
     assert e.level == 0 and "information" in e.message
 
 

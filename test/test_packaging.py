@@ -297,6 +297,7 @@ def test_pip_wheel_install_ships_config(repo_root, tmp_path):
     assert inst.returncode == 0, _explain(inst)
 
     assert (target / "share" / PACKAGE_NAME / "config" / "system.yaml").is_file()
+    assert (target / "share" / PACKAGE_NAME / "config" / "profiles" / "heavy_film.yaml").is_file()
     assert (target / "share" / PACKAGE_NAME / "package.xml").is_file()
     assert (target / "share" / "ament_index" / "resource_index" / "packages" / PACKAGE_NAME).is_file()
     assert (target / "bin" / "jident").is_file(), "pip puts console scripts in bin/ (setup.cfg must not move them)"
@@ -311,11 +312,16 @@ def test_pip_wheel_install_ships_config(repo_root, tmp_path):
         import jident_ros, jident_ros.resources as r
         print(jident_ros.__file__)
         print(r.default_config_path('system.yaml'))
+        import jident_ros.config as c
+        print(c.resolve_config_path('heavy_film'))
+        print(c.load_system_config('heavy_film').load.film_area_m2)
         """
     )
     found = _run([target_py, "-c", probe], env=env, cwd=tmp_path)
     assert found.returncode == 0, _explain(found)
-    module_file, config_file = found.stdout.splitlines()
+    module_file, config_file, profile_file, film_area = found.stdout.splitlines()
+    assert Path(profile_file) == target / "share" / PACKAGE_NAME / "config" / "profiles" / "heavy_film.yaml"
+    assert float(film_area) == 0.14
     assert Path(module_file).is_relative_to(target), module_file
     assert Path(config_file) == target / "share" / PACKAGE_NAME / "config" / "system.yaml"
     helped = _run([target / "bin" / "jident", "--help"], env=env, cwd=tmp_path, timeout=120)
@@ -382,11 +388,16 @@ def test_colcon_build_and_ros2_run_lookup(repo_root, tmp_path, ros_env):
         print(os.path.join(get_package_prefix('jident_ros'), 'lib', 'jident_ros', 'jident'))
         print(jident_ros.__file__)
         print(r.default_config_path('system.yaml'))
+        import jident_ros.config as c
+        print(c.resolve_config_path('heavy_film'))
+        print(c.load_system_config('heavy_film').load.film_area_m2)
         """
     )
     found = _run([sys.executable, "-c", probe], env=run_env, cwd=tmp_path)
     assert found.returncode == 0, _explain(found)
-    exe_found, module_file, config_file = found.stdout.splitlines()
+    exe_found, module_file, config_file, profile_file, film_area = found.stdout.splitlines()
+    assert Path(profile_file) == share / "config" / "profiles" / "heavy_film.yaml", profile_file
+    assert float(film_area) == 0.14
     assert Path(exe_found) == exe
     assert Path(module_file).is_relative_to(prefix), "the installed copy must be imported, not the checkout"
     assert Path(config_file) == share / "config" / "system.yaml"

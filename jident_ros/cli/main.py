@@ -31,7 +31,7 @@ from jident_ros.cli.offline import (
 )
 from jident_ros.cli.trend import add_scenario_arguments, add_trend_parser, cmd_simulate_scenario
 from jident_ros.config import ConfigError, load_method_config, load_system_config
-from jident_ros.evaluation.evaluate import run_evaluation
+from jident_ros.evaluation.evaluate import VALIDITY_FILM_SHARES, run_evaluation
 from jident_ros.evaluation.plotting import plot_case
 from jident_ros.evaluation.report import render_markdown, write_figures, write_results_section
 from jident_ros.evaluation.report_robustness import write_robustness_figures
@@ -153,7 +153,7 @@ def cmd_info(args) -> int:
         load = r * (cfg.load.process_force_n + film[i])
         print(f"  {c.consistency_pa_sn:14g} | {slip[i] * 100:8.3f} | {y[4, i] * 30 / math.pi:11.1f} | "
               f"{v2[i]:8.3f} | {load:10.2f} | {load / b.torque_nm:11.3f} | "
-              f"{100 * film[i] / (cfg.load.process_force_n + film[i]):14.1f} | {load * y[4, i] / 1e3:11.2f}")
+              f"{100 * film[i] / (cfg.load.process_force_n + film[i]):14.3g} | {load * y[4, i] / 1e3:11.2f}")
     return 0
 
 
@@ -210,10 +210,21 @@ def cmd_evaluate(args) -> int:
     system = load_system_config(args.config)
     method = _method_config(args)
     log = (lambda *a: None) if args.quiet else (lambda msg: print(msg, flush=True))
-    readings = () if args.quick else ("dyadic", "linear", "swt")
-    snr = () if args.quick else (40.0, 30.0)
-    ev = run_evaluation(system, method, snr_db=snr, seeds=(1, 2)[:len(snr)], readings=readings, log=log)
-    ev.command = "jident evaluate" + (" --quick" if args.quick else "")
+    if args.full:
+        args.validity_map = "full"
+    readings = ("dyadic", "linear", "swt") if args.full else ()
+    snr = () if args.quick else ((40.0, 30.0) if args.full else (30.0,))
+    heavy = load_system_config("heavy_film")
+    stress = None if heavy == system else heavy
+    shares = VALIDITY_FILM_SHARES if not args.quick else (0.01,)
+    if args.validity_map == "off":
+        shares, stress = (), None
+    ev = run_evaluation(system, method, snr_db=snr, seeds=(2,) if snr == (30.0,) else (1, 2)[:len(snr)],
+                        readings=readings, log=log,
+                        film_shares=shares, stress_system=stress, full_map=args.validity_map == "full")
+    ev.command = "jident evaluate" + (" --quick" if args.quick else "") + (" --full" if args.full else (
+        f" --validity-map {args.validity_map}" if args.validity_map != "default" else "")) + (
+        f" --config {args.config}" if args.config else "")
     figs = {} if args.no_figures else write_figures(ev, system, method, Path(args.results).parent / "figures")
     rob = run_robustness(system, method, log=log, quick=args.quick)
     rob.command = ev.command
@@ -291,7 +302,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--encoder-counts", type=int, help="quantise alpha1/alpha2 to this many counts per revolution")
     s.add_argument("--out", help="write the windows to this .npz file")
     s.add_argument("--plot", help="write a PNG of the five signals of the (first) case")
-    s.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    s.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     s.add_argument("--quiet", action="store_true")
     add_scenario_arguments(s)
     s.set_defaults(func=cmd_simulate)
@@ -308,7 +319,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--out", help="library file (default: ~/.cache/jident_ros/patterns-<hash>.npz)")
     b.add_argument("--p", type=_positive("--p"), action="append", help="KHM exponent p (repeatable; default: config)")
     b.add_argument("--variant", choices=("paper", "load_scaled"), help="method variant (default: config)")
-    b.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    b.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     b.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     b.add_argument("--quiet", action="store_true")
     b.set_defaults(func=cmd_build_patterns)
@@ -316,8 +327,13 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--results", default="docs/results.md", help="results file to update ('-' prints)")
     e.add_argument("--quick", action="store_true", help="noise-free only, no reading comparison (smoke run)")
     e.add_argument("--no-figures", action="store_true")
+    e.add_argument("--full", action="store_true", help="also the sweeps beyond the 2-minute budget: SNR 40 dB, the "
+                   "'linear' and 'swt' readings of level 10 (~3 CPU minutes) and --validity-map full")
+    e.add_argument("--validity-map", choices=("default", "full", "off"), default="default",
+                   help="film-share validity map: default = noise-free at every share + the equal-load ablation on the "
+                   "heavy-film profile, p = 2 and 3; full = every p, the ablation and the default sensor set at every share")
     e.add_argument("--p", type=_positive("--p"), action="append", help="KHM exponent p (repeatable; default: config)")
-    e.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    e.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     e.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     e.add_argument("--quiet", action="store_true")
     e.set_defaults(func=cmd_evaluate)
@@ -355,7 +371,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--plausible-max-ratio", type=float,
                    help="J1 above this x the nominal is refused (default: the diagnostic node's, 1.5)")
     g.add_argument("--json", metavar="OUT", help="also write every window's diagnosis to this JSON file")
-    g.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    g.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     g.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     g.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     g.set_defaults(func=cmd_diagnose)
@@ -365,7 +381,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("demo", help="end-to-end demo: simulator, windowing and diagnostic nodes over DDS on a few "
                    "cases (jident demo --help)", add_help=False)
     i = sub.add_parser("info", help="print base values and the steady state of the model")
-    i.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    i.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     i.set_defaults(func=cmd_info)
     return p
 

@@ -18,11 +18,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from jident_ros.identify.gap import NoGapError, estimate_inertia, nearest_class
+from jident_ros.identify.gap import NoGapError, estimate_backlash_width, estimate_inertia, nearest_class
 from jident_ros.method.patterns import PatternLibrary, fuse
 from jident_ros.method.pipeline import SIGNALS, MethodConfig, batch_features, h_vector, margin, pre_entry_reference
 from jident_ros.sim import Case, SystemConfig, WindowSet, add_measurement_noise, paper_grid_cases, simulate_grid
 from jident_ros.sim.model import Model
+from jident_ros.sim.profiles import film_share, with_film_share
+from jident_ros.sim.sensors import DEFAULT_SENSORS, SensorSpec, apply_sensors
+
+#: Film shares of the validity map (share of the load the film carries at the pattern eta_k); the default
+#: profile's share and the heavy-film profile are evaluated beside them.
+VALIDITY_FILM_SHARES = (0.0001, 0.001, 0.003, 0.01, 0.03, 0.1)
+#: Seed of the default sensor set's noise on the evaluation grid.
+SENSOR_SEED = 3
 
 #: The paper's 16 example cases (tables 1-4): signal, J1, width, eta_k, p, the paper's H vector.
 PAPER_EXAMPLES = [
@@ -114,21 +122,25 @@ def evaluate_grid(system: SystemConfig, method: MethodConfig, clean: WindowSet, 
 
 
 def grid_result(system: SystemConfig, method: MethodConfig, library: PatternLibrary, tested: WindowSet,
-                feats: np.ndarray, label: str, seconds: float = 0.0, library_seconds: float = 0.0) -> GridResult:
+                feats: np.ndarray, label: str, seconds: float = 0.0, library_seconds: float = 0.0, *,
+                widths_m=None, width_mode: str = "nearest") -> GridResult:
     """GridResult of tested windows whose features are known.
 
     ``feats`` has shape (n_p, n_cases, n_signals, n_clusters) (p in ``library.p_values``
-    order); H (eq. 33) of each case is taken against the library's width nearest to the case's.
+    order); H (eq. 33) of each case is taken against the library's patterns at the case's width
+    (or at ``widths_m[i]``, e.g. the gap estimator's width estimate) picked by ``width_mode``
+    (:meth:`PatternLibrary.patterns_at`: the nearest library width, or interpolated).
     """
     ps = library.p_values
     classes = list(system.grid.inertia_classes_kgm2)
     n = len(tested.cases)
     h = np.zeros((len(ps), n, len(SIGNALS), len(classes)))
     for i, c in enumerate(tested.cases):
-        e = library.width_index(c.backlash_width_m)
+        w = c.backlash_width_m if widths_m is None else float(widths_m[i])
         for k in range(len(ps)):
             for s in range(len(SIGNALS)):
-                h[k, i, s] = h_vector(library.centres[k, e, s], feats[k, i, s], library.h5[k, e, s])
+                n2, h5 = library.patterns_at(k, s, w, width_mode)
+                h[k, i, s] = h_vector(n2, feats[k, i, s], h5)
     true = np.array([classes.index(c.inertia_kgm2) for c in tested.cases])
     pmask = np.array([c.consistency_pa_sn == system.grid.pattern_consistency_pa_sn for c in tested.cases])
     res = GridResult(label, method, ps, list(tested.cases), true, h, pmask, seconds, library_seconds)
@@ -147,6 +159,12 @@ class Evaluation:
     best: list = field(default_factory=list)
     command: str = "jident evaluate"
     ablation_examples: list = field(default_factory=list)   # paper examples on equal_load_grid
+    validity: list = field(default_factory=list)             # one dict per film share (validity map)
+    width_mismatch: dict = field(default_factory=dict)       # accuracy vs window/library width mismatch
+    halfway: dict = field(default_factory=dict)              # nearest vs width_interp at halfway widths
+    sensors: str = ""                                        # the default sensor set, in words
+    film_share: float = float("nan")                         # the evaluated profile's share
+    ablation_share: float = float("nan")                     # the profile the ablation ran on
 
 
 def paper_examples(system: SystemConfig, method: MethodConfig, clean: WindowSet, result: GridResult) -> list:
@@ -261,7 +279,10 @@ def _pattern_order(system: SystemConfig, windows: WindowSet) -> list:
 
 def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 30.0), seeds=(1, 2),
                    readings=("dyadic", "linear", "swt"), variants=("paper", "load_scaled"), progress=None,
-                   log=print, jobs: int | None = None, ablation: bool = True) -> Evaluation:
+                   log=print, jobs: int | None = None, ablation: bool = True,
+                   sensors: SensorSpec | None = DEFAULT_SENSORS, film_shares=VALIDITY_FILM_SHARES,
+                   stress_system: SystemConfig | None = None, full_map: bool = False,
+                   halfway: bool = True) -> Evaluation:
     """The whole evaluation: every variant noise-free and noisy, the gap estimator, the level-10 readings.
 
     The work is split into one task per (method configuration, data set, signal):
@@ -273,6 +294,14 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     ``seconds`` is the worker time of its tasks.  With ``ablation`` the paper-faithful
     mode also runs on :func:`equal_load_grid` (every eta_k group at the pattern load),
     against the same library; its paper examples go to ``Evaluation.ablation_examples``.
+
+    Issue 13 additions: ``sensors`` adds a data set recorded by that sensor set (:mod:`jident_ros.sim.sensors`)
+    beside the awgn ones; the validity map runs the paper-faithful mode noise-free on the grid of every
+    ``film_shares`` profile (:func:`sim.profiles.with_film_share`, own library each) and of ``stress_system``
+    (the heavy-film profile), where the equal-load ablation runs (``full_map``: at every share, and the
+    sensor set at every share too); ``halfway`` simulates windows at widths halfway between the library's
+    and identifies them with the nearest width's patterns and with ``width_interp`` at the gap estimator's
+    width estimate; the width mismatch map reuses the noise-free features against every library width.
     """
     t0 = time.perf_counter()
     cases = paper_grid_cases(system)
@@ -281,27 +310,58 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     log(f"simulated {len(cases)} cases in {t_sim:.1f} s")
     datasets = [("noise-free", clean)] + [(f"SNR {snr:g} dB (seed {seed})", add_measurement_noise(clean, snr, seed))
                                            for snr, seed in zip(snr_db, seeds)]
+    if sensors is not None:
+        datasets.append((sensor_label(sensors), apply_sensors(clean, sensors, SENSOR_SEED,
+                                                              system.motor.base.torque_nm)))
     # (method, [(result label, data name, windows, notes)]) in the order of the results;
     # every configuration's first data set is the noise-free grid
     configs = []
     for variant in variants:
         m = dataclasses.replace(method, variant=variant)
+        data_sets = datasets if variant == "paper" else datasets[:1]   # load_scaled: noise-free only
         configs.append((m, [(f"{variant}, {name}", name, data, {"variant": variant, "data": name})
-                            for name, data in datasets]))
-        if ablation and variant == "paper":
+                            for name, data in data_sets], system))
+        if ablation and variant == "paper" and stress_system is None:
             t1 = time.perf_counter()
             equal = equal_load_grid(system, clean)
             log(f"equal-load ablation grid simulated in {time.perf_counter() - t1:.1f} s")
             configs[-1][1].append(("paper, equal-load ablation, noise-free", "equal-load ablation", equal,
                                    {"ablation": "equal load", "data": "equal-load ablation",
                                     "process_force_n": equal.metadata["equal_load_process_force_n"]}))
+    paper_config = next((i for i, (m, _, _) in enumerate(configs) if m.variant == "paper"), None)
+    if halfway and paper_config is not None:
+        half = simulate_grid(system, halfway_width_cases(system))
+        configs[paper_config][1].append(("paper, halfway widths, noise-free, nearest width", "halfway", half,
+                                         {"halfway": True, "data": "halfway widths", "windows": half}))
+    # the validity map: the paper-faithful mode on other film shares (own library each)
+    pm = dataclasses.replace(method, variant="paper")
+    if not full_map:   # the budget of the default run: the validity map at the issue's p = 2 and 3
+        pm = dataclasses.replace(pm, p_values=tuple(p for p in method.p_values if p in (2.0, 3.0)) or method.p_values)
+    profiles = [(f"film share {100 * sh:g} %", with_film_share(system, sh), sh) for sh in film_shares]
+    if stress_system is not None:
+        profiles.append(("heavy-film profile", stress_system, film_share(stress_system)))
+    for name, sysx, sh in profiles:
+        t1 = time.perf_counter()
+        cl = simulate_grid(sysx, cases)
+        runs = [(f"paper, {name}, noise-free", "noise-free", cl, {"validity": sh, "data": "noise-free"})]
+        if ablation and (full_map or sysx is stress_system):
+            eq = equal_load_grid(sysx, cl)
+            runs.append((f"paper, {name}, equal-load ablation", "equal-load ablation", eq,
+                         {"validity": sh, "ablation": "equal load", "data": "equal-load ablation",
+                          "process_force_n": eq.metadata["equal_load_process_force_n"]}))
+        if full_map and sensors is not None:
+            runs.append((f"paper, {name}, {sensor_label(sensors)}", "sensors",
+                         apply_sensors(cl, sensors, SENSOR_SEED, sysx.motor.base.torque_nm),
+                         {"validity": sh, "data": "sensors"}))
+        configs.append((pm, runs, sysx))
+        log(f"validity map: {name} simulated in {time.perf_counter() - t1:.1f} s")
     for reading in readings:
         if reading != method.scale_reading:
             m = dataclasses.replace(method, scale_reading=reading, p_values=(2.0,), variant="paper")
             configs.append((m, [(f"paper, reading '{reading}', noise-free", "noise-free", clean,
-                                 {"reading": reading})]))
+                                 {"reading": reading})], system))
     tasks, keys = [], []
-    for c, (m, runs) in enumerate(configs):
+    for c, (m, runs, _) in enumerate(configs):
         for d, (_, _, data, _) in enumerate(runs):
             refs = np.array([pre_entry_reference(data.case(i), data.entry_index) for i in range(len(data.cases))])
             for s, name in enumerate(SIGNALS):
@@ -317,25 +377,47 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
         done = [_feature_task(tasks[t]) for t in order]
     outputs = dict(zip([keys[t] for t in order], done))
 
-    results = []
+    results, libraries = [], {}
     pattern = _pattern_order(system, clean)
-    for c, (m, runs) in enumerate(configs):
+    for c, (m, runs, sysx) in enumerate(configs):
         library = None
         for d, (label, _, data, note) in enumerate(runs):
             parts = [outputs[(c, d, s)] for s in range(len(SIGNALS))]
             feats = np.stack([centres for centres, _, _ in parts], axis=2)   # (n_p, n_cases, n_signals, K)
             if library is None:   # runs[0] is the noise-free grid, which holds the pattern runs
                 ranges = np.stack([r for _, r, _ in parts], axis=1)         # (n_cases, n_signals, 2)
-                library = PatternLibrary.from_features(feats, ranges, pattern, system, m)
-            res = grid_result(system, m, library, data, feats, label, sum(t for _, _, t in parts))
+                library = PatternLibrary.from_features(feats, ranges, pattern, sysx, m)
+                libraries[c] = library
+            res = grid_result(sysx, m, library, data, feats, label, sum(t for _, _, t in parts))
             res.notes.update(note)
+            if note.get("halfway"):
+                res.pattern_mask[:] = False   # no halfway window is a pattern run
             results.append(res)
     for res in results:
         log(_summary(res))
     gaps, best, examples, ablation_examples = [], [], [], []
+    validity = []
+    for c, (m, runs, sysx) in enumerate(configs):
+        rs = [r for r in results if r.notes.get("validity") is not None and r.label in {x[0] for x in runs}]
+        if not rs:
+            continue
+        base = next(r for r in rs if r.notes["data"] == "noise-free")
+        entry = {"share": base.notes["validity"], "label": base.label, "result": base,
+                 "examples": paper_examples(sysx, base.method, runs[0][2], base),
+                 "stress": sysx is stress_system}
+        for r in rs:
+            if r.notes["data"] == "equal-load ablation":
+                entry["ablation"] = r
+                entry["ablation_examples"] = paper_examples(sysx, r.method, runs[0][2], r)
+            elif r.notes["data"] == "sensors":
+                entry["sensors"] = r
+        validity.append(entry)
     for res in results:
-        if res.notes.get("ablation"):
+        if res.notes.get("ablation") and res.notes.get("validity") is None:
             ablation_examples = paper_examples(system, res.method, clean, res)
+    stress = next((v for v in validity if v["stress"] and "ablation" in v), None)
+    if stress is not None:
+        ablation_examples = stress["ablation_examples"]
     paper_results = {r.notes.get("data"): r for r in results if r.notes.get("variant") == "paper"}
     for name, data in datasets:
         res = paper_results.get(name)
@@ -348,8 +430,88 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
         best.append(best_verdict(g, res))
         log(f"gap estimator, {name}: class accuracy {g['class_ok'].mean() * 100:.1f} %, "
             f"max |error| {np.nanmax(np.abs(g['rel_error'])) * 100:.2f} %")
-    return Evaluation(results, examples, system, time.perf_counter() - t0, t_sim, gaps, best,
-                      ablation_examples=ablation_examples)
+    paper_clean = paper_results.get("noise-free")
+    mismatch = width_mismatch_map(system, paper_clean, libraries[paper_config]) if paper_clean is not None else {}
+    half = {}
+    hres = next((r for r in results if r.notes.get("halfway")), None)
+    if hres is not None:
+        half = halfway_comparison(system, hres, libraries[paper_config])
+    ev = Evaluation(results, examples, system, time.perf_counter() - t0, t_sim, gaps, best,
+                    ablation_examples=ablation_examples, validity=validity, width_mismatch=mismatch,
+                    halfway=half, sensors="" if sensors is None else sensors.describe(
+                        system.sampling.sample_period_s, system.motor.base.torque_nm),
+                    film_share=film_share(system))
+    ev.ablation_share = stress["share"] if stress is not None else ev.film_share
+    return ev
+
+
+def sensor_label(spec: SensorSpec) -> str:
+    """Data-set label of a sensor set: 'sensors (default set, seed 3)' or 'sensors (custom, seed 3)'."""
+    return f"sensors ({'default set' if spec == DEFAULT_SENSORS else 'custom'}, seed {SENSOR_SEED})"
+
+
+def halfway_width_cases(system: SystemConfig) -> list[Case]:
+    """Every J1 class and eta_k at the widths halfway between neighbouring library widths."""
+    g = system.grid
+    w = sorted(g.backlash_widths_m)
+    half = [0.5 * (a + b) for a, b in zip(w[:-1], w[1:])]
+    return [Case(float(j), float(x), float(e)) for e in g.consistency_indices_pa_sn
+            for j in g.inertia_classes_kgm2 for x in half]
+
+
+def estimated_widths(system: SystemConfig, windows: WindowSet) -> np.ndarray:
+    """The gap estimator's backlash-width estimate of every window (gap.estimate_backlash_width; NaN where
+    there is no gap), as the diagnostic node would give it to a width-aware library."""
+    r = system.load.wheel_radius_m
+    out = np.full(len(windows.cases), np.nan)
+    for i, c in enumerate(windows.cases):
+        win = {k: windows.signals[k][i] for k in ("alpha1", "alpha2", "a1", "m_el")}
+        try:
+            g = estimate_inertia(win, windows.entry_index, c.backlash_width_m, r, windows.sample_period_s)
+            out[i] = estimate_backlash_width(win, g.gap_end, r, windows.sample_period_s, g.inertia_kgm2).width_m
+        except NoGapError:
+            continue
+    return out
+
+
+def halfway_comparison(system: SystemConfig, nearest: GridResult, library: PatternLibrary) -> dict:
+    """Windows at halfway widths: the paper's nearest-width patterns against ``width_interp`` patterns at
+    the gap estimator's width estimate (falls back to the nominal width where there is no estimate)."""
+    cases = nearest.cases
+    sim = nearest.notes["windows"]
+    est = estimated_widths(system, sim)
+    used = np.where(np.isfinite(est), est, [c.backlash_width_m for c in cases])
+    interp = grid_result(system, nearest.method, library, sim, nearest.notes["centres"],
+                         "paper, halfway widths, noise-free, width_interp", widths_m=used, width_mode="width_interp")
+    interp.pattern_mask[:] = False
+    true_w = np.array([c.backlash_width_m for c in cases])
+    return {"nearest": nearest, "width_interp": interp,
+            "width_error_max": float(np.nanmax(np.abs(est - true_w) / true_w)) if np.isfinite(est).any() else np.nan,
+            "no_estimate": int((~np.isfinite(est)).sum())}
+
+
+def width_mismatch_map(system: SystemConfig, result: GridResult, library: PatternLibrary) -> dict:
+    """Fused accuracy (per p) of the headline windows identified with the patterns of every library width:
+    mismatch = library width / window width - 1 (0: the paper's case).  Reuses the windows' features."""
+    feats = result.notes["centres"]
+    mask = ~result.pattern_mask
+    widths = np.array(library.widths_m)
+    rows = {}
+    for i, c in enumerate(result.cases):
+        if not mask[i]:
+            continue
+        for e, w in enumerate(widths):
+            mis = round(float(w / c.backlash_width_m - 1.0), 4)
+            for k in range(len(result.p_values)):
+                hs = [h_vector(library.centres[k, e, s], feats[k, i, s], library.h5[k, e, s])
+                      for s in range(len(SIGNALS))]
+                ok = fuse(hs)[0] == result.true_class[i]
+                rows.setdefault(mis, np.zeros((len(result.p_values), 2), int))
+                rows[mis][k] += (int(ok), 1)
+    mis = np.array(sorted(rows))
+    acc = np.array([rows[m][:, 0] / rows[m][:, 1] for m in mis])            # (n_mismatch, n_p)
+    n = np.array([rows[m][0, 1] for m in mis])
+    return {"mismatch": mis, "accuracy": acc, "n": n, "p_values": result.p_values}
 
 
 def _summary(res: GridResult) -> str:

@@ -94,6 +94,16 @@ def _grid_side_by_side(rob: RobustnessResult) -> list[str]:
             out.append(f"| {s.snr_db:g} dB, all {len(sws)} seeds ({n} windows; verdict without image answers on the "
                        f"extra seeds) | – | – | {_pct(gacc)} | **{_pct(facc)}** | {_pct(btw)} | "
                        f"{_num(st['median'])} % / {_num(st['max'])} % | {_pct(st['coverage'])} | {_num(st['ci_half'])} % |")
+    for s in getattr(rob, "sensors", []):   # sensors in physical terms beside the awgn rows
+        a = s.accuracy(classes)
+        h = s.accuracy(classes, ~s.pattern_mask(rob.pattern_eta))
+        g = s.gap_summary()
+        out.append(f"| {s.label} | {_pct(a.get('image'))} | {_pct(h.get('image'))} | {_pct(a['gap'])} | "
+                   f"**{_pct(a.get('fused'))}** | {_pct(a.get('between'))} | {_num(g['median'])} % / {_num(g['max'])} % | "
+                   f"{_pct(g['coverage'])} | {_num(g['ci_half'])} % |")
+    if getattr(rob, "sensors", None):
+        out += ["", f"'default sensor set' = `sim.sensors.DEFAULT_SENSORS` ({rob.sensor_set}); × k multiplies every "
+                "noise level (encoder and accelerometer range unchanged). The SNR rows are MATLAB's awgn 'measured'."]
     return out
 
 
@@ -283,15 +293,18 @@ def _findings(rob: RobustnessResult) -> list[str]:
                      f"{st['n']} noisy grid windows (nominal 95 %).")
     if rob.quantisation:
         e0 = rob.grid[0].gap[PRIMARY]["gap_end"]
-        parts = []
+        parts, shift = [], 0
         for q in rob.quantisation:
             e = q.gap[PRIMARY]["gap_end"]
+            both = (e >= 0) & (e0 >= 0)
+            shift = max(shift, int(np.max(np.abs(e[both] - e0[both]))) if both.any() else 0)
             late = (e > e0) & (e0 >= 0)
             early = (e < e0) & (e >= 0)
             err = np.abs(q.gap[PRIMARY]["rel_error"])
             parts.append(f"{q.counts_per_rev} counts/rev: {int(late.sum())} late, {int(early.sum())} early"
                          + (f" (max |J1 error| of the late ones {np.nanmax(err[late]) * 100:.2f} %)" if late.any() else ""))
-        lines.append("* Encoder quantisation moves the end of the gap interval by at most one sample. A gap end one "
+        lines.append(f"* Encoder quantisation moves the end of the gap interval by at most {shift} sample"
+                     f"{'' if shift == 1 else 's'}. A gap end one "
                      "sample late puts a sample with flank contact into the fit and biases J1; one sample early only "
                      "drops a sample. " + "; ".join(parts) + ".")
         enc = [q for q in rob.quantisation if "angle" in q.gap and "angle_eq1" in q.gap]
@@ -317,8 +330,11 @@ def _findings(rob: RobustnessResult) -> list[str]:
         dw = rob.notes.get("gap_speed_change_rad_s", (np.nan, np.nan))
         fails = "; ".join(f"{_snr_name(s)}: {s.gap_summary('speed')['failed']} of {len(s.cases)} without a gap, "
                           f"median error {_num(s.gap_summary('speed')['median'], 1)} %" for s in sp)
+        worst = max(sp, key=lambda s: s.gap_summary("speed")["failed"])
+        verdict = ("collapses under this noise model" if worst.gap_summary("speed")["failed"] > len(worst.cases) / 2
+                   else "degrades under this noise model")
         lines.append(
-            "* The ω1+m_el speed fit is exact noise-free but collapses under this noise model: the 'measured' SNR is "
+            f"* The ω1+m_el speed fit is exact noise-free but {verdict}: the 'measured' SNR is "
             f"relative to the mean square of ω1 (RMS {rms[0]:.0f}–{rms[1]:.0f} rad/s, the running speed), so at 30 dB "
             f"the ω1 noise has an RMS of {rms[0] / 10 ** 1.5:.1f}–{rms[1] / 10 ** 1.5:.1f} rad/s, more than the whole "
             f"speed change across the gap ({dw[0]:.2f}–{dw[1]:.2f} rad/s), and the gap signature (smoothed dω1/dt) is "

@@ -39,6 +39,7 @@ from jident_ros.sim import (
     quantise_encoders,
     simulate_grid,
 )
+from jident_ros.sim.sensors import DEFAULT_SENSORS, apply_sensors
 
 #: Gap-estimator channel sets: key -> (channels, fit method, description).
 CHANNEL_SETS = {
@@ -198,6 +199,8 @@ class RobustnessResult:
     notes: dict = field(default_factory=dict)
     attribution: list = field(default_factory=list)   # gap estimator, target SNR on one channel only
     command: str = "jident evaluate"
+    sensors: list = field(default_factory=list)       # Sweep per sensor-noise factor (default sensor set x k)
+    sensor_set: str = ""                              # the default sensor set in words
 
     def sweep(self, group: str, label: str) -> Sweep:
         for s in getattr(self, group):
@@ -368,13 +371,14 @@ def run_robustness(system: SystemConfig, method, library: PatternLibrary | None 
                    offgrid_j1=OFFGRID_J1, offgrid_widths=OFFGRID_WIDTHS_M, encoder_counts=ENCODER_COUNTS,
                    sample_periods=SAMPLE_PERIODS_S, target_snr_db: float = TARGET_SNR_DB, p: float = 2.0,
                    image_stride: int = 1, grid_cases: Sequence[Case] | None = None,
-                   quick: bool = False) -> RobustnessResult:
+                   quick: bool = False, sensor_factors: Sequence[float] = (1.0, 3.0, 10.0)) -> RobustnessResult:
     """Every sweep (module docstring); ``image_stride`` > 1 runs the image method (and with it the
     image part of the fused verdict) on every k-th window only. ``grid_cases`` replaces the 168 grid
     cases (tests). The pattern library is built from the noise-free eta_k = 0.025 runs at p unless given.
     ``quick`` (smoke run, ~15 s): SNR 30 dB only, no extra seeds, the image method on every 4th window."""
     if quick:
         snr_db, extra_seeds, image_stride = (target_snr_db,), (), max(image_stride, 4)
+        sensor_factors = tuple(sensor_factors)[:1]
     t_all = time.perf_counter()
     log = log or (lambda *a: None)
     timings = {}
@@ -413,6 +417,16 @@ def run_robustness(system: SystemConfig, method, library: PatternLibrary | None 
         log(f"robustness, grid {sw.label}: gap max |error| {s['max'] * 100:.3f} %, CI coverage "
             f"{s['coverage'] * 100:.1f} %, fused {a['fused'] * 100:.1f} %, image {a['image'] * 100:.1f} % "
             f"({sw.seconds:.1f} s)")
+    sensor_sweeps = []
+    for k, factor in enumerate(sensor_factors):
+        sd = noise_seed(seed, 0.0, 20 + k)
+        sw = evaluate_windows(system, apply_sensors(clean, DEFAULT_SENSORS.scaled(factor), sd,
+                                                   system.motor.base.torque_nm),
+                              f"default sensor set × {factor:g} (seed {sd})", "sensors", seed=sd, **kw)
+        sensor_sweeps.append(sw)
+        a = sw.accuracy(classes)
+        log(f"robustness, grid {sw.label}: gap class {a['gap'] * 100:.1f} %, fused {a['fused'] * 100:.1f} %, "
+            f"image {a['image'] * 100:.1f} % ({sw.seconds:.1f} s)")
     grid_extra = []
     for es in extra_seeds:
         for k, snr in enumerate(levels[1:], start=1):
@@ -479,6 +493,8 @@ def run_robustness(system: SystemConfig, method, library: PatternLibrary | None 
                            time.perf_counter() - t_all, timings, int(image_stride),
                            float(system.load.wheel_radius_m))
     res.attribution = attribution
+    res.sensors = sensor_sweeps
+    res.sensor_set = DEFAULT_SENSORS.describe(clean.sample_period_s, system.motor.base.torque_nm)
     res.notes.update(speed_scale(clean, grid[0]))
     res.targets = check_targets(res, target_snr_db)
     for t in res.targets:

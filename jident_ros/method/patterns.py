@@ -33,6 +33,9 @@ from jident_ros.sim import Case, simulate_grid
 from jident_ros.sim.params import SystemConfig
 
 FORMAT_VERSION = 1
+#: How a window's backlash width picks its patterns: the paper's nearest library width, or (a variant
+#: beyond the paper, issue 13) the N2 matrices and h5 interpolated linearly in width to the window's width.
+WIDTH_MODES = ("nearest", "width_interp")
 
 
 class LibraryMismatch(ValueError):
@@ -192,6 +195,31 @@ class PatternLibrary:
             raise ValueError(f"backlash_width_m: must be a finite number > 0, got {width_m!r}")
         return int(np.argmin(np.abs(np.array(self.widths_m) - width_m)))
 
+    def patterns_at(self, k: int, s: int, width_m: float, mode: str = "nearest") -> tuple[np.ndarray, float]:
+        """(N2, h5) of p index ``k`` and signal index ``s`` for a window of backlash width ``width_m``.
+
+        ``nearest`` (the paper: patterns and tests at the same width e): the library width nearest to
+        ``width_m``.  ``width_interp`` (beyond the paper): N2 (the KHM centres of the seven pattern runs)
+        and h5 interpolated linearly in width between the two library widths around ``width_m``; outside
+        the library's widths the nearest end is used (no extrapolation)."""
+        if mode == "nearest":
+            e = self.width_index(width_m)
+            return self.centres[k, e, s], float(self.h5[k, e, s])
+        if mode != "width_interp":
+            raise ValueError(f"width mode: one of {', '.join(WIDTH_MODES)}, got {mode!r}")
+        self.width_index(width_m)  # validates width_m
+        w = np.asarray(self.widths_m, dtype=float)
+        order = np.argsort(w)
+        ws = w[order]
+        if width_m <= ws[0] or width_m >= ws[-1] or ws.size == 1:
+            e = self.width_index(width_m)
+            return self.centres[k, e, s], float(self.h5[k, e, s])
+        j = int(np.searchsorted(ws, width_m))           # ws[j - 1] < width_m <= ws[j]
+        lo, hi = int(order[j - 1]), int(order[j])
+        t = (width_m - ws[j - 1]) / (ws[j] - ws[j - 1])
+        n2 = (1.0 - t) * self.centres[k, lo, s] + t * self.centres[k, hi, s]
+        return n2, float((1.0 - t) * self.h5[k, lo, s] + t * self.h5[k, hi, s])
+
     def p_index(self, p: float) -> int:
         for k, q in enumerate(self.p_values):
             if q == float(p):
@@ -255,8 +283,13 @@ class Identification:
 
 
 def identify_window(window: dict, entry_index: int, backlash_width_m: float, library: PatternLibrary,
-                    method: MethodConfig, p: float, signals: Sequence[str] = SIGNALS) -> Identification:
-    """Identify J1 from one window (dict of 1-D arrays per signal)."""
+                    method: MethodConfig, p: float, signals: Sequence[str] = SIGNALS,
+                    width_mode: str = "nearest") -> Identification:
+    """Identify J1 from one window (dict of 1-D arrays per signal).
+
+    ``width_mode`` (:data:`WIDTH_MODES`): ``nearest`` compares with the patterns of the library width
+    nearest to ``backlash_width_m`` (the paper); ``width_interp`` with the patterns interpolated to it
+    (give the window's estimated width, e.g. :func:`jident_ros.identify.gap.estimate_backlash_width`)."""
     e = library.width_index(backlash_width_m)
     k = library.p_index(p)
     ref = pre_entry_reference(window, entry_index) if "m_el" in window else None
@@ -264,7 +297,8 @@ def identify_window(window: dict, entry_index: int, backlash_width_m: float, lib
     centres, _ = window_features(window, method, [p], signals, ref, entry_index)
     for j, name in enumerate(signals):
         s = library.signals.index(name)
-        h = h_vector(library.centres[k, e, s], centres[0, j], library.h5[k, e, s])
+        n2, h5 = library.patterns_at(k, s, backlash_width_m, width_mode)
+        h = h_vector(n2, centres[0, j], h5)
         c = int(np.argmin(h))
         answers[name] = SignalAnswer(name, float(p), h, c, library.classes_kgm2[c], margin(h))
     fc, fm = fuse([a.h for a in answers.values()])

@@ -22,12 +22,19 @@ import time
 
 import numpy as np
 
-from jident_ros.nodes.params import checked, declare_parameters, require, system_config, system_defaults
+from jident_ros.nodes.params import (
+    ParameterError,
+    checked,
+    declare_parameters,
+    require,
+    system_config,
+    system_defaults,
+)
 from jident_ros.nodes.ros_io import clock_msg, multiarray_from_array, qos_clock, qos_latched, qos_signals
 from jident_ros.nodes.runtime import ProgressGate, spin
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import SIMULATOR
-from jident_ros.sim import Case, paper_grid_cases, simulate_grid
+from jident_ros.sim import Case, check_stable, paper_grid_cases, simulate_grid
 from jident_ros.stream.detector import embed_windows
 from jident_ros.stream.layout import DEFAULT_CHANNELS
 
@@ -78,6 +85,10 @@ def validate(values: dict):
             "an integer >= 1")
     system = system_config(values)
     cases = build_cases(cfg, system)
+    try:  # inputs the simulation cannot integrate (an overload, a step too coarse for J1): one line, not NaN batches
+        check_stable(system, cases)
+    except ValueError as exc:
+        raise ParameterError(f"model parameters: {exc}") from None
     return cfg, system, cases
 
 

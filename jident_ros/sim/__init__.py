@@ -7,6 +7,7 @@ from jident_ros.sim.simulate import (
                                    Case,
                                    WindowSet,
                                    add_measurement_noise,
+                                   check_stable,
                                    paper_grid_cases,
                                    quantise_encoders,
                                    simulate_grid,
@@ -14,5 +15,5 @@ from jident_ros.sim.simulate import (
 )
 
 __all__ = ["BaseValues", "GridParams", "LoadParams", "MotorParams", "SamplingParams", "SystemConfig",
-           "CHANNELS", "PAPER_SIGNALS", "UNITS", "Case", "WindowSet", "add_measurement_noise",
+           "CHANNELS", "PAPER_SIGNALS", "UNITS", "Case", "WindowSet", "add_measurement_noise", "check_stable",
            "paper_grid_cases", "quantise_encoders", "simulate_grid", "steady_state"]

@@ -142,8 +142,8 @@ class LoadParams:
     line_stiffness_n_per_m: float = 2.0e5
     line_damping_ns_per_m: float = 316.0
     mass_kg: float = 50.0
-    process_force_n: float = 1040.0
-    film_area_m2: float = 0.14
+    process_force_n: float = 1475.219
+    film_area_m2: float = 1.4226e-4
     film_thickness_m: float = 5.0e-5
     flow_index: float = 0.93
     film_regularisation_speed_m_s: float = 0.01

@@ -22,6 +22,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from jident_ros.sim.checks import check_finite, check_step
 from jident_ros.sim.model import (
     ALPHA1,
     DELTA,
@@ -188,6 +189,19 @@ def steady_state(config: SystemConfig, cases: Sequence[Case], t0: float):
     return y, slip
 
 
+def check_stable(config: SystemConfig, cases: Sequence[Case], sample_period_s: float | None = None,
+                 substeps: int | None = None) -> None:
+    """Refuse (:class:`~jident_ros.sim.checks.SimulationDiverges`, a ValueError, one line with the reason)
+    cases whose RK4 step would diverge, before anything is integrated (:func:`checks.check_step`).
+    A steady state the motor cannot reach (overload) raises the ValueError of :func:`steady_state`."""
+    cases = list(cases)
+    s = config.sampling
+    ts = s.sample_period_s if sample_period_s is None else float(sample_period_s)
+    sub = s.integration_substeps if substeps is None else int(substeps)
+    y, _ = steady_state(config, cases, 0.0)
+    check_step(Model(config), y, CaseArrays(*_case_arrays(cases, config)), cases, ts, sub)
+
+
 def _rk4_window(model: Model, y: np.ndarray, case: CaseArrays, t0: float, dt: float,
                 substeps: int, n_samples: int, event_index: int, on_event, progress=None):
     """Integrate, recording the state at every sample; returns (n_samples, N_STATES, n)."""
@@ -228,7 +242,7 @@ def _rk4_window(model: Model, y: np.ndarray, case: CaseArrays, t0: float, dt: fl
 
 
 def simulate_grid(config: SystemConfig, cases: Sequence[Case], *, sample_period_s: float | None = None,
-                  substeps: int | None = None, event: bool = True, progress=None) -> WindowSet:
+                  substeps: int | None = None, event: bool = True, progress=None, check: bool = True) -> WindowSet:
     """Simulate the backlash-entry window of every case (vectorised).
 
     Parameters
@@ -240,6 +254,9 @@ def simulate_grid(config: SystemConfig, cases: Sequence[Case], *, sample_period_
         False runs the steady state on without the slip (for validation).
     progress : callable(k, n) or None
         Called after each recorded sample.
+    check : bool
+        Refuse inputs whose RK4 step would diverge before integrating and a non-finite result after
+        (:mod:`jident_ros.sim.checks`; :class:`~jident_ros.sim.checks.SimulationDiverges`, a ValueError).
 
     Returns
     -------
@@ -261,6 +278,8 @@ def simulate_grid(config: SystemConfig, cases: Sequence[Case], *, sample_period_
     j1, theta_b, eta = _case_arrays(cases, config)
     y, slip = steady_state(config, cases, t0)
     case = CaseArrays(j1, theta_b, eta)
+    if check:
+        check_step(model, y, case, cases, ts, sub)
 
     def on_event(state):
         if event:
@@ -270,8 +289,10 @@ def simulate_grid(config: SystemConfig, cases: Sequence[Case], *, sample_period_
     rec = _rk4_window(model, y, case, t0, ts, sub, n_samples, n_pre, on_event, prog)
     t = (np.arange(n_samples) - n_pre) * ts
     signals = derived_signals(model, rec, t, case)
-    return WindowSet(t, signals, cases, n_pre, ts, slip,
-                     metadata={"substeps": sub, "event": event})
+    out = WindowSet(t, signals, cases, n_pre, ts, slip, metadata={"substeps": sub, "event": event})
+    if check:
+        check_finite(out)
+    return out
 
 
 def derived_signals(model: Model, rec: np.ndarray, t: np.ndarray, case: CaseArrays) -> dict:

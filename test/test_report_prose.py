@@ -1,0 +1,66 @@
+"""Generated sentences of docs/results.md say what their numbers say (issue 13 item 5): change a number, the
+sentence changes."""
+import numpy as np
+
+from jident_ros.evaluation.report import (
+    sentence_ablation,
+    sentence_paper_claim,
+    sentence_variant,
+    trust_limits,
+    trust_sentence,
+)
+
+
+class _Result:
+    def __init__(self, fused, p_values=(2.0, 3.0)):
+        self.fused, self.p_values = np.asarray(fused, float), tuple(p_values)
+
+    def accuracy(self):
+        return {"fused": self.fused}
+
+
+def _entry(share, fused, n_right=16):
+    ex = [{"p": 2, "ours_class": 0, "true": 0 if i < n_right else 1} for i in range(16)]
+    return {"share": share, "result": _Result(fused), "examples": ex}
+
+
+def test_the_paper_claim_sentence_follows_the_accuracy():
+    assert "is reproduced" in sentence_paper_claim(1.0, 1.0, 16, 16)
+    assert "not every case right" in sentence_paper_claim(0.992, 1.0, 16, 16)
+    s = sentence_paper_claim(0.381, 0.421, 4, 16)
+    assert "is not reproduced" in s and "38.1 %–42.1 %" in s and "4 of 16" in s
+    assert "is reproduced" not in sentence_paper_claim(1.0, 1.0, 15, 16)
+
+
+def test_the_variant_sentence_follows_the_comparison():
+    assert "worse" in sentence_variant("load_scaled", (0.15, 0.2), (0.38, 0.42))
+    assert "better" in sentence_variant("load_scaled", (0.5, 0.6), (0.38, 0.42))
+    assert "overlapping" in sentence_variant("load_scaled", (0.4, 0.5), (0.38, 0.42))
+
+
+def test_the_ablation_sentence_names_what_recovered_and_what_got_worse():
+    base = np.array([0.34, 0.14, 0.36, 0.62, 0.15])
+    s = sentence_ablation(base, np.array([0.82, 0.14, 0.16, 0.36, 0.76]))
+    assert s.startswith("With every η_k group at the same load a1 (34.0 % → 82.0 %)")
+    assert "v2" in s.split("recover")[0] and "omega1 (36.0 % → 16.0 %)" in s and "m_el changes by less" in s
+    s2 = sentence_ablation(base, base + 0.01)
+    assert "recover" not in s2 and "worse" not in s2
+
+
+def test_the_trust_sentence_follows_the_map():
+    mismatch = {"mismatch": np.array([-0.2, 0.0, 0.2]), "accuracy": np.array([[0.3], [1.0], [0.4]])}
+    vm = [_entry(0.0001, [1, 1]), _entry(0.001, [0.99, 1]), _entry(0.01, [0.9, 0.94])]
+    lim = trust_limits(vm, mismatch)
+    assert lim == {"share": 0.001, "width": 0.0}
+    s = trust_sentence(lim, 0.63)
+    assert "at most 0.1 % of the load" in s and "63.0 %" in s and "gap estimate" in s
+    # one number changes, the sentence changes
+    vm[2] = _entry(0.01, [0.96, 0.97])
+    assert "at most 1 % of the load" in trust_sentence(trust_limits(vm, mismatch), 0.63)
+    vm[1] = _entry(0.001, [1, 1], n_right=15)      # an example wrong at 0.1 %
+    assert "at most 0.01 % of the load" in trust_sentence(trust_limits(vm, mismatch), 0.63)
+    assert "as good as the default set (97.0 %" in trust_sentence(lim, 0.97)
+    mismatch["accuracy"][2, 0] = 0.99
+    assert trust_limits(vm, mismatch)["width"] == 0.0       # -20 % still fails
+    mismatch["accuracy"][0, 0] = 0.99
+    assert trust_limits(vm, mismatch)["width"] == 0.2
