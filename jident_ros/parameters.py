@@ -104,7 +104,7 @@ DIAGNOSTIC = {
     # the publishing policy (jident_ros.identify.verdict.VerdictPolicy; docs/interfaces.md "/diagnostics")
     "plausible_min_ratio": 0.5,   # J1 below this x the nominal is refused, not published
     "plausible_max_ratio": 1.5,   # J1 above this x the nominal is refused, not published
-    "image_min_margin": 0.0,      # the image method's class alone / its disagreement as a WARN only at a fused
+    "image_min_margin": 1.401117,  # the image method's class alone / its disagreement as a WARN only at a fused
                                   # margin >= this; 0 = never. From `python -m jident_ros.evaluation.verdicts threshold`
     "library_width_tolerance": 0.05,  # image method valid only with a library width within 5 % of the window's K2
     "max_torque_factor": 100.0,   # |m_el| above 100 x the base torque M_b is absurd: window refused

@@ -148,11 +148,12 @@ def heavy(configs):
 
 
 def test_image_method_disagreeing_outside_its_domain_is_information(heavy):
-    """With the default image_min_margin (0: the image method is never trusted alone) a disagreement is
-    information, not a WARN (issue 12: a WARN must mean "look at this drive")."""
+    """With image_min_margin 0 (the image method is never trusted alone) a disagreement is information, not
+    a WARN (issue 12: a WARN must mean "look at this drive")."""
     from jident_ros.identify.levels import OK
+    from jident_ros.identify.verdict import VerdictPolicy
     ws, cfg, lib = heavy
-    d = _diagnose(ws, 0, cfg, lib)
+    d = _diagnose(ws, 0, cfg, lib, policy=VerdictPolicy(image_min_margin=0.0))
     v = d.value_dict()
     assert d.class_kgm2 == 1.16 and v["verdict_agree"] is False and v["image_class_kgm2"] != 1.16
     assert v["image_in_domain"] is False and "image_min_margin 0" in v["image_domain_reason"]
@@ -203,7 +204,8 @@ def test_no_gap_publishes_the_image_class_only_above_its_margin(windows, configs
     from jident_ros.identify.levels import ERROR, OK
     from jident_ros.identify.verdict import VerdictPolicy
     published = []
-    d = _diagnose(windows, 0, configs, library, gap_method="off", on_estimate=published.append)
+    never = VerdictPolicy(image_min_margin=0.0)
+    d = _diagnose(windows, 0, configs, library, gap_method="off", on_estimate=published.append, policy=never)
     assert d.inertia_kgm2 is None and published == [] and d.level == ERROR and d.status == "undiagnosed"
     assert "image method: class 1.16 not published: image_min_margin 0" in d.message, d.message
     trusted = VerdictPolicy(image_min_margin=1.5)   # window 0 is a pattern run: margin inf

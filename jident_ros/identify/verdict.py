@@ -71,7 +71,7 @@ class VerdictPolicy:
 
     plausible_min_ratio: float = 0.5
     plausible_max_ratio: float = 1.5
-    image_min_margin: float = 0.0
+    image_min_margin: float = 1.401117   # python -m jident_ros.evaluation.verdicts threshold
     library_width_tolerance: float = 0.05
     max_torque_factor: float = 100.0
     max_speed_factor: float = 10.0
