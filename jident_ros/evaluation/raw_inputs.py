@@ -96,7 +96,7 @@ def gap_summary(rows: list) -> dict:
             "j1_max_abs_error": float(err.max()) if err.size else None, "fits": fits}
 
 
-def _event_window(wins: list, entry_t: float, recontact_t: float, ts: float):
+def event_window(wins: list, entry_t: float, recontact_t: float, ts: float):
     for w in wins:
         if entry_t - (EVENT_WINDOW_EARLY_SAMPLES + 0.5) * ts <= w.entry_time_s < recontact_t:
             return w
@@ -233,7 +233,7 @@ def evaluate_condition(system: SystemConfig, recs: list, counts: int) -> dict:
             row["width_m"], row["width_se_m"] = w.backlash_width_estimate_m, w.backlash_width_se_m
             row["width_error"] = w.backlash_width_estimate_m / rec.backlash_width_m - 1.0
             row["flags"] = w.flags
-        ev = _event_window(wins, t_entry, t_entry + 1.5 * ts, ts)   # the simulator's truth has no re-contact row
+        ev = event_window(wins, t_entry, t_entry + 1.5 * ts, ts)   # the simulator's truth has no re-contact row
         if ev is not None:
             row.update(gap_row(ev, rec.inertia_kgm2, classes, system.motor.nominal_inertia_kgm2,
                                system.motor.bearing_friction_nms_per_rad))
@@ -309,7 +309,7 @@ def evaluate_second_drive(system: SystemConfig, directory, batch_size: int = 50)
             row["width_how"] = det.last_width.how if det.last_width else ""
             row["flags"] = w.flags
         # the gap fits on the event's window, also when its entry sample is a few samples early
-        ev = _event_window(wins, t_entry, float(data[int(tr["recontact_index"]), 0]), ts)
+        ev = event_window(wins, t_entry, float(data[int(tr["recontact_index"]), 0]), ts)
         if ev is not None:
             row["recontact"] = ev.recontact_index - ev.entry_index
             b1 = float(tr.get("bearing_friction_nms", 0.0))

@@ -139,10 +139,12 @@ class GapEstimate:
                                     for 'angle'
     model_error_kgm2 : float        'acceleration': |J1 with a linear torque term - J1|; 'angle': the same for
                                     its torque model; included in std_error_kgm2 (0 for the other fits)
-    gap_start, gap_end : int        sample indices, end exclusive
+    gap_start, gap_end : int        the gap interval's sample indices (entry row, re-contact row = end exclusive), as
+                                    ``interval`` found it; the width estimate reads the re-contact at gap_end
     method : str                    'acceleration', 'gap_only', 'anchored', 'angle' or 'speed'
-    interval : str                  'angles', 'signature' or 'detector' (the candidate interval; 'gap_only'
-                                    may drop end samples of it: gap_start, gap_end are the fitted samples)
+    interval : str                  'angles', 'signature' or 'detector' (how the gap interval was found)
+    fit_start, fit_end : int        the samples the fit used ('gap_only' drops end samples of the interval that the
+                                    dynamics show to be out of the zone; -1: the gap interval itself)
     model_choice : str              how the fit was chosen: '' when the caller named it, else the
                                     pre-entry steadiness test's verdict (:func:`pre_entry_steady`)
     """
@@ -157,6 +159,8 @@ class GapEstimate:
     interval: str
     model_error_kgm2: float = 0.0
     model_choice: str = ""
+    fit_start: int = -1
+    fit_end: int = -1
 
     @property
     def n_samples(self) -> int:
@@ -219,7 +223,9 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
                      sample_period_s: float, method: str | None = None,
                      bearing_friction_nms_per_rad: float = 0.0, recontact_index: int | None = None) -> GapEstimate:
     """Least-squares J1 over the gap; raises :class:`NoGapError` with a reason.  ``recontact_index``: see
-    :func:`gap_interval`."""
+    :func:`gap_interval`.  ``method``: one of :data:`FITS`, or None / 'auto' for the model choice (the module
+    docstring): with a1, the joint fit when the pre-entry m_el is steady (:func:`pre_entry_steady`), else
+    'gap_only'; without a1, 'angle' (α1) or 'speed'."""
     if "m_el" not in window:
         raise NoGapError("no electromagnetic torque: the gap fit needs m_el")
     start, end, how = gap_interval(window, entry_index, backlash_width_m, wheel_radius_m,
@@ -228,13 +234,16 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     if bearing_friction_nms_per_rad and "omega1" in window:
         m = m - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)[start:end]
     choice = ""
-    if method is None:
+    fit_span = (start, end)
+    if method is None or method == "auto":
+        method = None
         if "a1" in window:
             test = pre_entry_steady(np.asarray(window["m_el"], float)[:start])
             method = "acceleration" if test.steady else "gap_only"
             choice = test.describe()
         else:
             method = "angle" if "alpha1" in window else "speed"
+            choice = f"{method}: no a1 in the window"
     n = end - start
     model_error = 0.0
     if method == "gap_only":
@@ -245,7 +254,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
             mf = mf - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)
         fit = gap_only_fit(mf, np.asarray(window["a1"], float) / wheel_radius_m, start, end)
         j, se, res, dof, model_error = fit["j1"], fit["se"], fit["residual"], fit["dof"], fit["model_error"]
-        start, end = fit["start"], fit["end"]
+        fit_span = (fit["start"], fit["end"])
     elif method == "acceleration":
         if "a1" not in window:
             raise NoGapError("method 'acceleration' needs a1 (use 'speed' with omega1)")
@@ -321,7 +330,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
                          f"(> {MAX_RELATIVE_STD_ERROR:.0%}); the window shows no free acceleration of the motor")
     half = _t975(max(int(dof), 1)) * se
     return GapEstimate(j, se, (j - half, j + half), float(np.sqrt(np.mean(res ** 2))), start, end, method, how,
-                       float(model_error), choice)
+                       float(model_error), choice, int(fit_span[0]), int(fit_span[1]))
 
 
 @dataclass(frozen=True)
