@@ -87,7 +87,7 @@ DIAGNOSTIC = {
     "build_if_missing": True,     # build (and save) the library when the file does not exist
     "p": 2.0,                     # KHM exponent, one of method.p_values
     "image_method": True,         # run the paper's image method on every window
-    "gap_method": "auto",         # auto | acceleration | anchored | angle | speed | off
+    "gap_method": "auto",         # auto | acceleration | gap_only | anchored | angle | speed | off
     "hardware_id": "",            # default: the resolved drive namespace, e.g. /drive
     "stale_after_s": 5.0,         # STALE status after this long without a window; 0 = never
     "record": True,               # record to a rosbag2 MCAP bag (docs/recording.md)

@@ -236,7 +236,8 @@ def test_the_gap_estimate_is_reported_before_the_image_method_runs(windows, conf
 
 
 def test_bad_arguments_name_the_field(windows, configs, library):
-    with pytest.raises(ValueError, match="gap_method: expected one of auto, acceleration, anchored, angle, speed, off, got 'fast'"):
+    with pytest.raises(ValueError, match="gap_method: expected one of auto, acceleration, gap_only, anchored, angle, "
+                                         "speed, off, got 'fast'"):
         _diagnose(windows, 0, configs, library, gap_method="fast")
     with pytest.raises(ValueError, match="image_method"):
         _diagnose(windows, 0, configs, library, gap_method="off", image_method=False)

@@ -45,7 +45,7 @@ from jident_ros.sim.motor import breakdown_slip, steady_state_phasors
 from jident_ros.stream.inputs import parse_map
 
 #: diagnosis.GAP_METHODS, spelled out so that `jident --help` does not import the method (test_config_cli)
-CLI_GAP_METHODS = ("auto", "acceleration", "anchored", "angle", "speed", "off")
+CLI_GAP_METHODS = ("auto", "acceleration", "gap_only", "anchored", "angle", "speed", "off")
 
 
 class CliError(Exception):

@@ -19,7 +19,11 @@ signals:
 ``python -m jident_ros.evaluation.raw_inputs --report`` runs the targets of issue 12 on the grid (7 J1 x 6
 K2, eta_k of the pattern group) with the flank detector (no K2 given), clean and at 30 dB, both directions,
 2^16-count encoders, 10 s steady stretches: entries found and false, the entry sample against the truth
-(and against inequality 1 with zone-centred angles and the true K2), K2 error, class from the gap J1.
+(and against inequality 1 with zone-centred angles and the true K2), K2 error, and the default gap fit (the
+model choice of :func:`jident_ros.identify.gap.estimate_inertia`) on every event window: class, 95 % interval
+coverage, 'ambiguous' (two classes in the interval), J1 published by the verdict policy
+(:func:`jident_ros.identify.verdict.decide_gap`) and how many of those are more than 10 % off.  With
+``--second-drive DIR...`` the same on the second drive's CSV recordings (docs/second_drive.md).
 """
 from __future__ import annotations
 
@@ -36,6 +40,7 @@ import numpy as np
 
 from jident_ros.config import load_system_config
 from jident_ros.identify.gap import NoGapError, estimate_inertia, nearest_class
+from jident_ros.identify.verdict import VerdictPolicy, decide_gap
 from jident_ros.sim import Case, SystemConfig, simulate_grid
 from jident_ros.stream.detector import BacklashDetector, stream_batches
 from jident_ros.stream.flank import FlankDetector
@@ -44,6 +49,58 @@ from jident_ros.stream.layout import DEFAULT_CHANNELS
 
 #: Channels that get white noise (as jident_ros.sim.add_measurement_noise, plus omega1).
 NOISY = ("a1", "m_el", "omega1", "a2", "v2", "omega2")
+
+#: The event's window for the gap fit: the first window whose entry lies from this many samples before the
+#: true entry up to the true re-contact (the detector's 'found' counts only |offset| <= 1).
+EVENT_WINDOW_EARLY_SAMPLES = 4
+#: A published J1 this far from the truth is counted as misleading (issue 12: none may be).
+PUBLISHED_TOLERANCE = 0.10
+
+
+def gap_row(w, true_j1: float, classes, nominal_kgm2: float, bearing_friction: float = 0.0,
+            method: Optional[str] = None, policy: Optional[VerdictPolicy] = None) -> dict:
+    """The gap fit (``method`` None: the default model choice) on one detector window, judged against the
+    truth: j1, rel_error, class_ok, covered (95 % interval), ambiguous (two or more classes in it),
+    published (the verdict policy accepts it; a flank window carries no K2 to check it against), fit (the
+    fit used), gap_problem (why there is none)."""
+    policy = VerdictPolicy() if policy is None else policy
+    try:
+        g = estimate_inertia(w.as_dict(), w.entry_index, w.backlash_width_m, w.wheel_radius_m, w.sample_period_s,
+                             method=method, bearing_friction_nms_per_rad=bearing_friction,
+                             recontact_index=w.recontact_index)
+    except NoGapError as exc:
+        return {"j1": None, "rel_error": None, "class_ok": False, "covered": False, "ambiguous": False,
+                "published": False, "fit": "", "gap_problem": str(exc)}
+    dec = decide_gap(g, classes, nominal_kgm2, policy, None, w.backlash_width_m)
+    return {"j1": g.inertia_kgm2, "rel_error": g.inertia_kgm2 / true_j1 - 1.0,
+            "class_ok": classes[nearest_class(g.inertia_kgm2, classes)] == true_j1,
+            "covered": bool(g.ci95_kgm2[0] <= true_j1 <= g.ci95_kgm2[1]), "ambiguous": dec.status == "ambiguous",
+            "published": dec.status == "accepted", "fit": g.method, "gap_problem": ""}
+
+
+def gap_summary(rows: list) -> dict:
+    """Counts over the rows of :func:`gap_row` (rows without a fit included as failures)."""
+    fitted = [r for r in rows if r.get("j1") is not None]
+    err = np.array([abs(r["rel_error"]) for r in fitted])
+    fits: dict = {}
+    for r in fitted:
+        fits[r["fit"]] = fits.get(r["fit"], 0) + 1
+    return {"gap_windows": len(rows), "gap_fitted": len(fitted),
+            "class_correct": sum(bool(r.get("class_ok")) for r in rows),
+            "ci_covers": sum(bool(r.get("covered")) for r in rows),
+            "ambiguous": sum(bool(r.get("ambiguous")) for r in rows),
+            "published": sum(bool(r.get("published")) for r in rows),
+            "published_off": sum(bool(r.get("published")) and abs(r["rel_error"]) > PUBLISHED_TOLERANCE
+                                 for r in rows),
+            "j1_median_abs_error": float(np.median(err)) if err.size else None,
+            "j1_max_abs_error": float(err.max()) if err.size else None, "fits": fits}
+
+
+def event_window(wins: list, entry_t: float, recontact_t: float, ts: float):
+    for w in wins:
+        if entry_t - (EVENT_WINDOW_EARLY_SAMPLES + 0.5) * ts <= w.entry_time_s < recontact_t:
+            return w
+    return None
 
 
 @dataclass
@@ -176,14 +233,10 @@ def evaluate_condition(system: SystemConfig, recs: list, counts: int) -> dict:
             row["width_m"], row["width_se_m"] = w.backlash_width_estimate_m, w.backlash_width_se_m
             row["width_error"] = w.backlash_width_estimate_m / rec.backlash_width_m - 1.0
             row["flags"] = w.flags
-            try:
-                gap = estimate_inertia(w.as_dict(), w.entry_index, w.backlash_width_m, w.wheel_radius_m,
-                                       w.sample_period_s, recontact_index=w.recontact_index,
-                                       bearing_friction_nms_per_rad=system.motor.bearing_friction_nms_per_rad)
-                row["j1"] = gap.inertia_kgm2
-                row["class_ok"] = classes[nearest_class(gap.inertia_kgm2, classes)] == rec.inertia_kgm2
-            except NoGapError as exc:
-                row["gap_problem"] = str(exc)
+        ev = event_window(wins, t_entry, t_entry + 1.5 * ts, ts)   # the simulator's truth has no re-contact row
+        if ev is not None:
+            row.update(gap_row(ev, rec.inertia_kgm2, classes, system.motor.nominal_inertia_kgm2,
+                               system.motor.bearing_friction_nms_per_rad))
         rows.append(row)
     n = len(rows)
     werr = np.array([abs(r["width_error"]) for r in rows if r["width_error"] is not None and
@@ -196,8 +249,7 @@ def evaluate_condition(system: SystemConfig, recs: list, counts: int) -> dict:
             "entry_offset_counts": {str(k): offs.count(k) for k in sorted(set(offs))},
             "width_max_abs_error": float(werr.max()) if werr.size else None,
             "width_median_abs_error": float(np.median(werr)) if werr.size else None,
-            "width_estimates": int(werr.size),
-            "class_correct": sum(r["class_ok"] for r in rows), "rows": rows}
+            "width_estimates": int(werr.size), **gap_summary(rows), "rows": rows}
 
 
 def paper_consistency(system: SystemConfig, counts: int = 0) -> dict:
@@ -227,6 +279,7 @@ def evaluate_second_drive(system: SystemConfig, directory, batch_size: int = 50)
     directory = Path(directory)
     truth = json.loads((directory / "truth.json").read_text())
     classes = tuple(system.grid.inertia_classes_kgm2)
+    nominal = system.motor.nominal_inertia_kgm2
     rows = []
     for tr in truth["recordings"]:
         data, channels, _ = read_csv(directory / tr["file"])
@@ -254,24 +307,15 @@ def evaluate_second_drive(system: SystemConfig, directory, batch_size: int = 50)
             w = wins[hit[0]]
             row["width_error"] = w.backlash_width_estimate_m / rec.backlash_width_m - 1.0
             row["width_how"] = det.last_width.how if det.last_width else ""
-            row["recontact"] = w.recontact_index - w.entry_index
             row["flags"] = w.flags
-            try:
-                gap = estimate_inertia(w.as_dict(), w.entry_index, w.backlash_width_m, w.wheel_radius_m,
-                                       w.sample_period_s, recontact_index=w.recontact_index,
-                                       bearing_friction_nms_per_rad=float(tr.get("bearing_friction_nms", 0.0)))
-                row["j1"] = gap.inertia_kgm2
-                row["class_ok"] = classes[nearest_class(gap.inertia_kgm2, classes)] == rec.inertia_kgm2
-            except NoGapError as exc:
-                row["gap_problem"] = str(exc)
-            try:   # the integral-form fit over the gap alone (no pre-entry steady-state assumption)
-                sp = estimate_inertia(w.as_dict(), w.entry_index, w.backlash_width_m, w.wheel_radius_m,
-                                      w.sample_period_s, method="speed", recontact_index=w.recontact_index,
-                                      bearing_friction_nms_per_rad=float(tr.get("bearing_friction_nms", 0.0)))
-                row["j1_speed_fit"] = sp.inertia_kgm2
-                row["class_ok_speed_fit"] = classes[nearest_class(sp.inertia_kgm2, classes)] == rec.inertia_kgm2
-            except NoGapError:
-                pass
+        # the gap fits on the event's window, also when its entry sample is a few samples early
+        ev = event_window(wins, t_entry, float(data[int(tr["recontact_index"]), 0]), ts)
+        if ev is not None:
+            row["recontact"] = ev.recontact_index - ev.entry_index
+            b1 = float(tr.get("bearing_friction_nms", 0.0))
+            row.update(gap_row(ev, rec.inertia_kgm2, classes, nominal, b1))
+            row["alternatives"] = {m: gap_row(ev, rec.inertia_kgm2, classes, nominal, b1, method=m)
+                                   for m in SECOND_DRIVE_ALTERNATIVES}
         rows.append(row)
     werr = np.array([abs(r["width_error"]) for r in rows if r["width_error"] is not None and
                      math.isfinite(r["width_error"])])
@@ -282,11 +326,24 @@ def evaluate_second_drive(system: SystemConfig, directory, batch_size: int = 50)
             "entry_offset_counts": {str(k): offs.count(k) for k in sorted(set(offs))},
             "width_max_abs_error": float(werr.max()) if werr.size else None,
             "width_median_abs_error": float(np.median(werr)) if werr.size else None,
-            "width_estimates": int(werr.size), "class_correct": sum(r["class_ok"] for r in rows),
-            "class_correct_speed_fit": sum(bool(r.get("class_ok_speed_fit")) for r in rows), "rows": rows}
+            "width_estimates": int(werr.size), **gap_summary(rows),
+            "alternatives": {m: gap_summary([r["alternatives"][m] for r in rows if "alternatives" in r])
+                             for m in SECOND_DRIVE_ALTERNATIVES}, "rows": rows}
 
 
 CONDITIONS = (("clean", None), ("30 dB", 30.0))
+
+#: The single fits run beside the default on the second drive's event windows.
+SECOND_DRIVE_ALTERNATIVES = ("acceleration", "gap_only", "speed")
+
+
+def gap_line(res: dict) -> str:
+    """The gap part of a report line."""
+    n = res["gap_windows"]
+    return (f"gap fit on {n} event windows: class {res['class_correct']}/{n}, 95 % CI covers "
+            f"{res['ci_covers']}/{n}, ambiguous {res['ambiguous']}/{n}, published {res['published']} "
+            f"({res['published_off']} > {PUBLISHED_TOLERANCE:.0%} off), |J1 error| median "
+            f"{_pct(res['j1_median_abs_error'])} max {_pct(res['j1_max_abs_error'])}, fits {res['fits']}")
 
 
 def report(system: SystemConfig, steady_s: float = 10.0, counts: int = 65536, seed: int = 12,
@@ -307,8 +364,7 @@ def report(system: SystemConfig, steady_s: float = 10.0, counts: int = 65536, se
             log(f"{key:>14}: entries {res['entries_found']}/{res['recordings']}, false {res['false_entries']} "
                 f"(in {res['steady_s_total']:.0f} s steady: {res['false_in_steady']}), entry offset "
                 f"{res['entry_offset_counts']}, K2 |error| median {_pct(res['width_median_abs_error'])} "
-                f"max {_pct(res['width_max_abs_error'])} ({res['width_estimates']} estimates), class "
-                f"{res['class_correct']}/{res['recordings']}")
+                f"max {_pct(res['width_max_abs_error'])} ({res['width_estimates']} estimates); {gap_line(res)}")
     out["elapsed_s"] = time.perf_counter() - t0
     return out
 
@@ -338,8 +394,12 @@ def main(argv=None) -> int:
         print(f"second drive {d}: entries {r['entries_found']}/{r['recordings']}, false {r['false_entries']} "
               f"(in the steady stretches: {r['false_in_steady']}), entry offset {r['entry_offset_counts']}, K2 |error| "
               f"median {_pct(r['width_median_abs_error'])} max {_pct(r['width_max_abs_error'])} "
-              f"({r['width_estimates']} estimates), class {r['class_correct']}/{r['recordings']} (default gap fit), "
-              f"{r['class_correct_speed_fit']}/{r['recordings']} (speed fit)")
+              f"({r['width_estimates']} estimates); default {gap_line(r)}")
+        for m, alt in r["alternatives"].items():
+            print(f"    fit {m!r} alone: class {alt['class_correct']}/{alt['gap_windows']}, CI covers "
+                  f"{alt['ci_covers']}, ambiguous {alt['ambiguous']}, published {alt['published']} "
+                  f"({alt['published_off']} > {PUBLISHED_TOLERANCE:.0%} off), |J1 error| median "
+                  f"{_pct(alt['j1_median_abs_error'])} max {_pct(alt['j1_max_abs_error'])}")
     if a.json:
         with open(a.json, "w") as f:
             json.dump(res, f, indent=1, default=float)

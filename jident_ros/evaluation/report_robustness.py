@@ -448,7 +448,8 @@ def write_robustness_figures(rob: RobustnessResult, outdir: str | Path = "docs/f
     xs = [inf_x if s.snr_db is None else s.snr_db for s in rob.grid]
     extra = _by_snr(rob.grid_extra)
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.6), constrained_layout=True)
-    colours = {"angles": "C0", "no_angles": "C1", "speed": "C2", "anchored": "C3", "angle": "C4", "angle_eq1": "C5"}
+    colours = {"angles": "C0", "no_angles": "C1", "speed": "C2", "anchored": "C3", "angle": "C4", "angle_eq1": "C5",
+               "gap_only": "C6"}
     for key in CHANNEL_SETS:
         if key not in rob.grid[0].gap:
             continue

@@ -42,9 +42,13 @@ from jident_ros.sim import (
 from jident_ros.sim.sensors import DEFAULT_SENSORS, apply_sensors
 
 #: Gap-estimator channel sets: key -> (channels, fit method, description).
+#: 'auto' is the default of the product (gap.estimate_inertia's model choice: the joint fit when the
+#: pre-entry torque is steady, else 'gap_only'); 'gap_only' beside it shows what the fit without the
+#: pre-entry anchor gives on the same windows.
 CHANNEL_SETS = {
-    "angles": (("alpha1", "alpha2", "a1", "m_el"), "acceleration", "α1+α2+a1+m_el"),
-    "no_angles": (("a1", "m_el"), "acceleration", "a1+m_el (no angles)"),
+    "angles": (("alpha1", "alpha2", "a1", "m_el"), "auto", "α1+α2+a1+m_el"),
+    "no_angles": (("a1", "m_el"), "auto", "a1+m_el (no angles)"),
+    "gap_only": (("alpha1", "alpha2", "a1", "m_el"), "gap_only", "α1+α2+a1+m_el, gap-only fit (in-zone samples, no pre-entry anchor)"),
     "anchored": (("alpha1", "alpha2", "a1", "m_el"), "anchored", "α1+α2+a1+m_el, first-release fit (pre-entry anchor)"),
     "speed": (("omega1", "m_el"), "speed", "ω1+m_el (speed fit)"),
     "angle_eq1": (("alpha1", "alpha2", "m_el"), "angle", "α1+α2+m_el (no accelerometer)"),

@@ -55,7 +55,7 @@ from jident_ros.method.patterns import Identification, PatternLibrary, identify_
 from jident_ros.method.pipeline import SIGNALS
 
 #: Gap estimators: ``auto`` (acceleration fit when a1 is there, else speed), ``acceleration``, ``speed``, ``off``.
-GAP_METHODS = ("auto", "acceleration", "anchored", "angle", "speed", "off")
+GAP_METHODS = ("auto", "acceleration", "gap_only", "anchored", "angle", "speed", "off")
 
 
 @dataclass
@@ -236,7 +236,8 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                 publish(gap.inertia_kgm2)
             vals += [("gap_j1_kgm2", gap.inertia_kgm2), ("gap_ci95_kgm2", list(gap.ci95_kgm2)),
                      ("gap_std_error_kgm2", gap.std_error_kgm2), ("gap_samples", gap.n_samples),
-                     ("gap_fit", gap.method), ("gap_interval", gap.interval),
+                     ("gap_fit", gap.method), ("gap_model_choice", gap.model_choice or "given"),
+                     ("gap_interval", gap.interval),
                      ("gap_residual_rms", gap.residual_rms), ("gap_model_error_kgm2", gap.model_error_kgm2),
                      ("gap_classes_in_ci95_kgm2", list(decision.classes_in_ci)), ("gap_decision", decision.status)]
             if width_estimate is not None:

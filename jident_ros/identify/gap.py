@@ -35,6 +35,21 @@ Fits
   Uncertainty: covariance of the Gauss-Newton solution with each channel's residual
   variance (robust to a wrong noise ratio), plus, in quadrature, the change of J1 when
   the torque model gets a linear term too (the model-form error).
+* ``"gap_only"`` (a1 and m_el measured; no assumption about the drive before the entry):
+  over the in-zone samples only, m_el − b1 ω1 = J1 a1/r sample by sample, the torque taken as
+  measured (no torque model, no pre-entry anchoring).  Both sides are noisy, so J1 is the
+  errors-in-variables (Deming) slope through the origin with the two noise levels measured on
+  the window (robust scale of second differences).  The in-zone sample set comes from the
+  dynamics: the interval's end samples whose load torque m_el − b1 ω1 − J1 a1/r is not zero
+  within its noise (GAP_ONLY_TRIM_SIGMA) are dropped — an entry found a sample or two early, or a
+  re-contact row one late, does not bias J1.  Uncertainty: the residual standard error, and in
+  quadrature the model error, the change of J1 when one more sample is dropped at each end of the
+  in-zone set.
+* ``"auto"`` (``method=None`` with a1 in the window; the default): the **model choice**.  The joint
+  fit's assumption, a steady torque before the entry, is tested on the pre-entry m_el samples
+  (:func:`pre_entry_steady`: a quadratic in time against a constant, F test).  Steady: the joint
+  fit (``"acceleration"``); not steady (e.g. a speed controller swinging the torque just before
+  the entry): ``"gap_only"``.  The estimate's ``model_choice`` says which and why.
 * ``"anchored"`` (the estimator of the first release, kept for comparison): m0 = the
   pre-entry mean, m_el ≈ m0 + b t + c t^2 fitted over the gap, then a1 = (r/J1) m_hat
   through the origin.
@@ -84,6 +99,27 @@ ANGLE_REL_SE_FLOOR = 2e-4
 #: window carries no free acceleration (e.g. a steady state mistaken for an entry).
 MAX_RELATIVE_STD_ERROR = 0.25
 
+#: Model choice ('auto'): the pre-entry m_el is steady unless a quadratic in time explains it better
+#: than a constant at this significance (F test); then the joint fit's anchoring is not used.
+STEADY_P_VALUE = 1e-3
+#: ... and the fitted slope and curvature move it by more than this fraction of its level over the
+#: pre-entry samples (a practical significance: noise-free windows have no noise to compare with; our
+#: simulator's steady state still drifts by 3-6e-6 of the load, far below what biases the joint fit).
+STEADY_REL_TOL = 1e-4
+
+#: 'gap_only' fit: an end sample of the in-zone set is dropped while its load torque
+#: |m_el - b1 w1 - J1 a1/r| exceeds this many standard deviations of the per-sample residual ...
+GAP_ONLY_TRIM_SIGMA = 3.0
+#: ... or this fraction of the median |m_el| over the gap (the floor for noise-free windows) ...
+GAP_ONLY_TRIM_REL = 0.005
+#: ... at most this many samples at the entry end and at the re-contact end.
+GAP_ONLY_MAX_TRIM = (4, 3)
+#: 'gap_only' fit: relative floor of the standard error (noise-free: the samples' own rounding).
+GAP_ONLY_REL_SE_FLOOR = 2e-4
+
+#: Fits of :func:`estimate_inertia` (None = the model choice, 'auto').
+FITS = ("acceleration", "gap_only", "anchored", "angle", "speed")
+
 
 class NoGapError(ValueError):
     """The window holds no usable backlash gap."""
@@ -103,9 +139,14 @@ class GapEstimate:
                                     for 'angle'
     model_error_kgm2 : float        'acceleration': |J1 with a linear torque term - J1|; 'angle': the same for
                                     its torque model; included in std_error_kgm2 (0 for the other fits)
-    gap_start, gap_end : int        sample indices, end exclusive
-    method : str                    'acceleration', 'anchored', 'angle' or 'speed'
-    interval : str                  'angles' or 'signature'
+    gap_start, gap_end : int        the gap interval's sample indices (entry row, re-contact row = end exclusive), as
+                                    ``interval`` found it; the width estimate reads the re-contact at gap_end
+    method : str                    'acceleration', 'gap_only', 'anchored', 'angle' or 'speed'
+    interval : str                  'angles', 'signature' or 'detector' (how the gap interval was found)
+    fit_start, fit_end : int        the samples the fit used ('gap_only' drops end samples of the interval that the
+                                    dynamics show to be out of the zone; -1: the gap interval itself)
+    model_choice : str              how the fit was chosen: '' when the caller named it, else the
+                                    pre-entry steadiness test's verdict (:func:`pre_entry_steady`)
     """
 
     inertia_kgm2: float
@@ -117,6 +158,9 @@ class GapEstimate:
     method: str
     interval: str
     model_error_kgm2: float = 0.0
+    model_choice: str = ""
+    fit_start: int = -1
+    fit_end: int = -1
 
     @property
     def n_samples(self) -> int:
@@ -179,7 +223,9 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
                      sample_period_s: float, method: str | None = None,
                      bearing_friction_nms_per_rad: float = 0.0, recontact_index: int | None = None) -> GapEstimate:
     """Least-squares J1 over the gap; raises :class:`NoGapError` with a reason.  ``recontact_index``: see
-    :func:`gap_interval`."""
+    :func:`gap_interval`.  ``method``: one of :data:`FITS`, or None / 'auto' for the model choice (the module
+    docstring): with a1, the joint fit when the pre-entry m_el is steady (:func:`pre_entry_steady`), else
+    'gap_only'; without a1, 'angle' (α1) or 'speed'."""
     if "m_el" not in window:
         raise NoGapError("no electromagnetic torque: the gap fit needs m_el")
     start, end, how = gap_interval(window, entry_index, backlash_width_m, wheel_radius_m,
@@ -187,11 +233,29 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     m = np.asarray(window["m_el"], float)[start:end]
     if bearing_friction_nms_per_rad and "omega1" in window:
         m = m - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)[start:end]
-    if method is None:
-        method = "acceleration" if "a1" in window else "angle" if "alpha1" in window else "speed"
+    choice = ""
+    fit_span = (start, end)
+    if method is None or method == "auto":
+        method = None
+        if "a1" in window:
+            test = pre_entry_steady(np.asarray(window["m_el"], float)[:start])
+            method = "acceleration" if test.steady else "gap_only"
+            choice = test.describe()
+        else:
+            method = "angle" if "alpha1" in window else "speed"
+            choice = f"{method}: no a1 in the window"
     n = end - start
     model_error = 0.0
-    if method == "acceleration":
+    if method == "gap_only":
+        if "a1" not in window:
+            raise NoGapError("method 'gap_only' needs a1 (use 'speed' with omega1)")
+        mf = np.asarray(window["m_el"], float)
+        if bearing_friction_nms_per_rad and "omega1" in window:
+            mf = mf - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)
+        fit = gap_only_fit(mf, np.asarray(window["a1"], float) / wheel_radius_m, start, end)
+        j, se, res, dof, model_error = fit["j1"], fit["se"], fit["residual"], fit["dof"], fit["model_error"]
+        fit_span = (fit["start"], fit["end"])
+    elif method == "acceleration":
         if "a1" not in window:
             raise NoGapError("method 'acceleration' needs a1 (use 'speed' with omega1)")
         friction = None
@@ -258,7 +322,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         cov = (res @ res) / dof * np.linalg.inv(A.T @ A) if dof > 0 else np.full((2, 2), np.inf)
         se = float(np.sqrt(cov[0, 0]))
     else:
-        raise ValueError(f"method: expected 'acceleration', 'anchored', 'angle' or 'speed', got {method!r}")
+        raise ValueError(f"method: expected one of {', '.join(FITS)} (or None: the model choice), got {method!r}")
     if not np.isfinite(j) or j <= 0:
         raise NoGapError(f"gap fit gave a non-physical J1 = {j!r}")
     if not se <= MAX_RELATIVE_STD_ERROR * j:
@@ -266,7 +330,147 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
                          f"(> {MAX_RELATIVE_STD_ERROR:.0%}); the window shows no free acceleration of the motor")
     half = _t975(max(int(dof), 1)) * se
     return GapEstimate(j, se, (j - half, j + half), float(np.sqrt(np.mean(res ** 2))), start, end, method, how,
-                       float(model_error))
+                       float(model_error), choice, int(fit_span[0]), int(fit_span[1]))
+
+
+@dataclass(frozen=True)
+class SteadinessTest:
+    """Whether the torque before the entry is steady (the joint fit's assumption), :func:`pre_entry_steady`.
+
+    steady : bool          use the joint fit
+    f_statistic : float    F of a quadratic in time against a constant (slope and curvature); 0 for a
+                           constant to rounding, inf for an exact non-constant quadratic
+    p_value : float        its upper tail probability (F with 2 and n - 3 degrees of freedom)
+    n_samples : int        pre-entry samples tested
+    reason : str           why not steady ('' when steady)
+    """
+
+    steady: bool
+    f_statistic: float
+    p_value: float
+    n_samples: int
+    reason: str = ""
+
+    def describe(self) -> str:
+        """One phrase for GapEstimate.model_choice and the status."""
+        if self.steady:
+            return (f"acceleration: pre-entry m_el steady (F = {self.f_statistic:.3g}, p = {self.p_value:.3g} over "
+                    f"{self.n_samples} samples)")
+        return f"gap_only: {self.reason}"
+
+
+def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTest:
+    """Test the joint fit's assumption on the pre-entry m_el samples: a steady torque, m_el = m0 + white
+    noise.  Regress m_el on (1, t, t^2); not steady when the slope and curvature explain more than the noise
+    would (F test with 2 and n - 3 degrees of freedom, p < ``p_value``) and move it by more than
+    STEADY_REL_TOL of its level (so a noise-free window, with no noise to compare with, is steady when
+    its trend stays below that).  Fewer than 6 samples:
+    not steady (untestable, so the joint fit's anchoring is not used)."""
+    x = np.asarray(m_el_pre, float)
+    n = x.size
+    if n < 6:
+        return SteadinessTest(False, np.nan, np.nan, n, f"{n} pre-entry samples, too few to test a steady torque")
+    scale = max(float(np.max(np.abs(x))), 1e-300)
+    tt = np.linspace(-1.0, 1.0, n)
+    A = np.column_stack([np.ones(n), tt, tt * tt])
+    coef, *_ = np.linalg.lstsq(A, x, rcond=None)
+    rss0 = float(np.sum((x - x.mean()) ** 2))
+    rss2 = float(np.sum((x - A @ coef) ** 2))
+    if rss2 <= (1e-12 * scale) ** 2 * n:               # an exact polynomial, no noise to compare with
+        f, p = (0.0, 1.0) if rss0 <= (1e-12 * scale) ** 2 * n else (np.inf, 0.0)
+    else:
+        f = max((rss0 - rss2) / 2.0 / (rss2 / (n - 3)), 0.0)
+        p = float(stats.f.sf(f, 2, n - 3))
+    if np.ptp(A[:, 1:] @ coef[1:]) <= STEADY_REL_TOL * scale:    # slope and curvature move it by next to nothing
+        return SteadinessTest(True, float(f), p, n)
+    if p < p_value:
+        return SteadinessTest(False, float(f), p, n,
+                              f"pre-entry m_el not steady: slope and curvature over {n} samples, F = {f:.3g}, "
+                              f"p = {p:.2g} < {p_value:g} (range {np.ptp(x):.4g} N m)")
+    return SteadinessTest(True, float(f), p, n)
+
+
+def _robust_noise(*segments) -> float:
+    """White-noise standard deviation from the second differences of the segments (1.4826 MAD / sqrt 6):
+    blind to a smooth signal and to a few samples of a transient."""
+    d2 = np.concatenate([np.diff(np.asarray(x, float), 2) for x in segments if len(x) >= 3] or [np.zeros(0)])
+    if d2.size < 3:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+
+
+def _origin_slope(y: np.ndarray, x: np.ndarray, sy: float, sx: float) -> float:
+    """Slope J of y = J x through the origin with errors in both variables (Deming regression with the
+    error-variance ratio (sy/sx)^2); ordinary least squares of y on x when x is exact (sx = 0)."""
+    sxx, syy, sxy = float(x @ x), float(y @ y), float(x @ y)
+    if not sxy:
+        return np.nan
+    if not sx > 0:
+        return sxy / sxx
+    if not sy > 0:
+        return syy / sxy
+    d = (sy / sx) ** 2
+    q = syy - d * sxx
+    return (q + np.sign(sxy) * np.sqrt(q * q + 4.0 * d * sxy * sxy)) / (2.0 * sxy)
+
+
+def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
+                 trim_sigma: float = GAP_ONLY_TRIM_SIGMA, trim_rel: float = GAP_ONLY_TRIM_REL,
+                 max_trim: tuple = GAP_ONLY_MAX_TRIM) -> dict:
+    """The 'gap_only' fit (module docstring): J1 from torque[k] = J1 acc[k] over the in-zone samples.
+
+    ``torque``: m_el − b1 ω1 over the whole window, N m; ``acc``: dω1/dt (a1/r), rad/s^2; [start, end): the
+    candidate interval (the entry row to the re-contact row).  The noise levels of both come from the
+    second differences of the pre-entry and candidate samples; J1 is the Deming slope through the origin.
+    The in-zone set: J1 fitted on the candidate's core (two samples off each end), then end samples whose
+    load torque |torque − J1 acc| exceeds max(trim_sigma x its standard deviation, trim_rel x the median
+    |torque|) are dropped (at most ``max_trim`` = (entry end, re-contact end)), J1 refitted, until the set
+    stays the same.  Returns j1, se (kg m^2; residual standard error and model error in quadrature, at
+    least GAP_ONLY_REL_SE_FLOOR j1), model_error (|J1 with one more sample off each end − J1|), residual
+    (N m), dof, start, end (the fitted samples); raises NoGapError when fewer than 3 samples remain or J1
+    is not positive."""
+    y_all, x_all = np.asarray(torque, float), np.asarray(acc, float)
+    sy = _robust_noise(y_all[:start], y_all[start:end])
+    sx = _robust_noise(x_all[:start], x_all[start:end])
+    if sx <= 1e-9 * float(np.max(np.abs(x_all[start:end]))):
+        sx = 0.0
+    if sy <= 1e-9 * float(np.max(np.abs(y_all[start:end]))):
+        sy = 0.0
+
+    def slope(a, b):
+        return _origin_slope(y_all[a:b], x_all[a:b], sy, sx)
+
+    core = (start + 2, end - 2) if end - start >= 10 else (start, end)
+    j = slope(*core)
+    if not np.isfinite(j) or j <= 0:
+        raise NoGapError(f"gap fit gave a non-physical J1 = {j!r} (m_el against a1 over the gap)")
+    lo, hi = start, end
+    level = float(np.median(np.abs(y_all[start:end])))
+    for it in range(4):
+        res = y_all[start:end] - j * x_all[start:end]
+        tol = max(trim_sigma * float(np.hypot(sy, j * sx)), trim_rel * level)
+        new_lo, new_hi = start, end
+        while new_lo - start < max_trim[0] and new_hi - new_lo > 3 and abs(res[new_lo - start]) > tol:
+            new_lo += 1
+        while end - new_hi < max_trim[1] and new_hi - new_lo > 3 and abs(res[new_hi - 1 - start]) > tol:
+            new_hi -= 1
+        if (new_lo, new_hi) == (lo, hi) and it > 0:
+            break
+        lo, hi = new_lo, new_hi
+        j = slope(lo, hi)
+        if not np.isfinite(j) or j <= 0:
+            raise NoGapError(f"gap fit gave a non-physical J1 = {j!r} (m_el against a1 over the gap)")
+    n = hi - lo
+    if n < 3:
+        raise NoGapError(f"gap too short: {n} samples in the zone by the dynamics, need >= 3")
+    x, y = x_all[lo:hi], y_all[lo:hi]
+    res = y - j * x
+    dof = n - 1
+    se_stat = float(np.sqrt(float(res @ res) / dof / float(x @ x)))
+    model_error = abs(slope(lo + 1, hi - 1) - j) if n >= 6 else 0.0
+    se = max(float(np.hypot(se_stat, model_error)), GAP_ONLY_REL_SE_FLOOR * j)
+    return {"j1": float(j), "se": se, "model_error": float(model_error), "residual": res, "dof": dof,
+            "start": int(lo), "end": int(hi), "noise": (sy, sx)}
 
 
 def _torque_powers(n_gap: int, linear_term: bool = False) -> tuple:
