@@ -45,12 +45,11 @@ from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import SIMULATOR, SIMULATOR_PARAMS
 from jident_ros.sim import Case, paper_grid_cases, simulate_grid
 from jident_ros.stream.detector import embed_windows
-from jident_ros.stream.layout import DEFAULT_CHANNELS
+from jident_ros.stream.layout import CASE_LABEL, DEFAULT_CHANNELS
 
 NODE_NAME = "jident_simulator"
 #: Wall-clock pause after announcing a case whose backlash width differs from the previous one, s.
 CASE_SETTLE_S = 0.05
-CASE_LABEL = "case_index,inertia_kgm2,backlash_width_m,consistency_pa_sn,entry_time_s"
 
 DEFAULTS = SIMULATOR
 
