@@ -146,3 +146,23 @@ SIMULATOR = defaults(SIMULATOR_PARAMS)
 WINDOWING = defaults(WINDOWING_PARAMS)
 DIAGNOSTIC = defaults(DIAGNOSTIC_PARAMS)
 REPLAY = defaults(REPLAY_PARAMS)
+
+
+_TYPE_NAMES = {bool: "bool", int: "integer", float: "double", str: "string"}
+
+
+def _type_name(default) -> str:
+    if isinstance(default, list):
+        return ("string" if default and isinstance(default[0], str) else "double") + "[]"
+    return _TYPE_NAMES[type(default)]
+
+
+def markdown_table(schema: dict) -> str:
+    """The declared parameters of a node as a Markdown table (docs/interfaces.md holds these, a test
+    keeps them equal): name, type, default, range, whether a change at run time takes effect, description."""
+    rows = ["| parameter | type | default | range | at run time | description |", "|---|---|---|---|---|---|"]
+    for name, p in schema.items():
+        default = f"`{p.default!r}`" if p.default != "" else '`""`'
+        rows.append(f"| `{name}` | {_type_name(p.default)} | {default} | {p.range_text() or '—'} | "
+                    f"{'read-only' if p.read_only else 'settable'} | {p.description} |")
+    return "\n".join(rows)

@@ -21,8 +21,6 @@ import numpy as np
 import pytest
 from test_nodes import REPO, TIMEOUT, Proc, _good_stream, library, logs, node_env, procs, ros, statuses  # noqa: F401
 
-pytestmark = pytest.mark.ros
-
 
 def _call(ros, srv_type, name, request, timeout=TIMEOUT):
     client = ros.node.create_client(srv_type, name)
@@ -91,6 +89,7 @@ def _window(window_id=1, **changes):
 # --------------------------------------------------------------------------- windowing
 
 
+@pytest.mark.ros
 def test_windowing_parameters_described_validated_and_applied(node_env, ros, procs, tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray
 
@@ -137,6 +136,7 @@ def diag_node(node_env, library, tmp_path_factory):
     p.stop()
 
 
+@pytest.mark.ros
 def test_diagnostic_is_a_lifecycle_node_active_after_start(diag_node, ros):
     from lifecycle_msgs.msg import State
     from lifecycle_msgs.srv import GetState
@@ -144,6 +144,7 @@ def test_diagnostic_is_a_lifecycle_node_active_after_start(diag_node, ros):
     assert st.current_state.id == State.PRIMARY_STATE_ACTIVE, (st.current_state, logs(diag_node))
 
 
+@pytest.mark.ros
 def test_diagnostic_parameters_described_validated_and_applied(diag_node, library, ros):
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import Float64MultiArray
@@ -181,6 +182,7 @@ def test_diagnostic_parameters_described_validated_and_applied(diag_node, librar
     assert _get(ros, node, "gap_method") == "auto"
 
 
+@pytest.mark.ros
 def test_diagnostic_reports_lost_and_mismatched_windows(node_env, library, ros, procs, tmp_path):
     """window_id gaps are counted and named (a burst of 408 windows: every window diagnosed or counted
     lost); a window whose length, sample period or wheel radius differ from the configuration is not
@@ -235,6 +237,7 @@ def test_diagnostic_reports_lost_and_mismatched_windows(node_env, library, ros, 
 # --------------------------------------------------------------------------- simulator
 
 
+@pytest.mark.ros
 def test_simulator_answers_parameter_requests_while_streaming(node_env, ros, procs, tmp_path):
     """Timers, not a blocking loop: at real time, get_parameters/describe_parameters answer within 0.5 s
     (median of 10 calls; the old blocking loop answered after the stream, 3 s)."""
@@ -267,6 +270,7 @@ def test_simulator_answers_parameter_requests_while_streaming(node_env, ros, pro
     assert not r.successful and "read-only" in r.reason
 
 
+@pytest.mark.ros
 def test_simulator_warns_when_it_starts_without_a_subscriber(node_env, tmp_path):
     from jident_ros.parameters import SIMULATOR
     assert SIMULATOR["wait_for_subscribers"] == 1
@@ -279,6 +283,7 @@ def test_simulator_warns_when_it_starts_without_a_subscriber(node_env, tmp_path)
 # --------------------------------------------------------------------------- one line, exit 2
 
 
+@pytest.mark.ros
 def test_params_file_errors_and_model_overload_give_one_line(node_env, tmp_path):
     (tmp_path / "malformed.yaml").write_text("a: [1, 2\n")
     (tmp_path / "plain.yaml").write_text("backlash_width_m: 0.005\n")
@@ -314,3 +319,10 @@ def test_schema_defaults_fit_their_ranges():
             assert coerce(name, p.default, p) == p.default, name
             assert p.description and "\n" not in p.description, name
     assert np.isfinite(P.MAX_DEPTH)
+
+
+@pytest.mark.parametrize("which", ["SIMULATOR_PARAMS", "WINDOWING_PARAMS", "DIAGNOSTIC_PARAMS", "REPLAY_PARAMS"])
+def test_interfaces_doc_holds_the_generated_parameter_tables(which):
+    from jident_ros import parameters as P
+    doc = (REPO / "docs" / "interfaces.md").read_text()
+    assert P.markdown_table(getattr(P, which)) in doc, f"regenerate the {which} table (parameters.markdown_table)"

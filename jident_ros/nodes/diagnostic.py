@@ -61,6 +61,12 @@ from jident_ros.nodes.ros_io import LayoutError, make_status, qos_latched, qos_s
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, GAP_METHOD_CHOICES
 
+try:  # the bag layer needs the optional mcap package
+    from jident_ros.bag.recording import BagWriter
+    _BAG_IMPORT_ERROR = None
+except ImportError as _exc:
+    BagWriter, _BAG_IMPORT_ERROR = None, _exc
+
 NODE_NAME = "jident_diagnostic"
 #: Each window's result.
 STATUS_NAME = "jident: inertia"
@@ -128,7 +134,8 @@ class Recording:
     ``error`` (the recorder status says it)."""
 
     def __init__(self, node, bag_dir: str, topics):
-        from jident_ros.bag.recording import BagWriter  # the bag layer: optional mcap dependency
+        if BagWriter is None:
+            raise RuntimeError(f"MCAP recording is unavailable here (jident_ros.bag.recording: {_BAG_IMPORT_ERROR})")
         self.node, self.bag_dir = node, bag_dir
         self.topics, self.count, self.error = {}, 0, None
         self.writer = BagWriter(bag_dir)
