@@ -167,6 +167,8 @@ class PatternLibrary:
                 lib = cls(z["centres"], z["h5"], z["ranges"], tuple(float(p) for p in z["p_values"]),
                           tuple(float(w) for w in z["widths_m"]), tuple(float(c) for c in z["classes_kgm2"]),
                           tuple(str(s) for s in z["signals"]), meta)
+        except KeyError as exc:  # a readable .npz without the library's arrays
+            raise LibraryMismatch(f"{where}: not a jident pattern library ({exc})") from None
         except Exception as exc:  # zip (truncated, bad CRC), zlib, npy format, JSON: all "unreadable"
             raise LibraryMismatch(f"{where}: unreadable ({type(exc).__name__}: {exc}); rebuild it with "
                                   "`jident build-patterns`") from None
@@ -206,13 +208,16 @@ class PatternLibrary:
     def check_matches(self, system: SystemConfig, method: MethodConfig, where: str = "pattern library") -> None:
         want = library_metadata(system, method)
         diffs = []
-        if tuple(self.classes_kgm2) != tuple(float(c) for c in system.grid.inertia_classes_kgm2):
+        # a simulated library holds the configuration's classes and widths; a calibration library
+        # (source "recordings") the labels of its recordings (its shapes are checked by check_consistent)
+        simulated = self.metadata.get("source") != "recordings"
+        if simulated and sorted(self.classes_kgm2) != sorted(float(c) for c in system.grid.inertia_classes_kgm2):
             diffs.append(f"{len(self.classes_kgm2)} J1 classes {list(self.classes_kgm2)}, configuration "
                          f"{len(system.grid.inertia_classes_kgm2)} (grid.inertia_classes_kgm2)")
-        if tuple(self.widths_m) != tuple(float(w) for w in system.grid.backlash_widths_m):
+        if simulated and sorted(self.widths_m) != sorted(float(w) for w in system.grid.backlash_widths_m):
             diffs.append(f"widths {list(self.widths_m)}, configuration {list(system.grid.backlash_widths_m)} "
                          "(grid.backlash_widths_m)")
-        if tuple(self.p_values) != tuple(float(p) for p in method.p_values):
+        if sorted(self.p_values) != sorted(float(p) for p in method.p_values):
             diffs.append(f"p values {list(self.p_values)}, configuration {list(method.p_values)} (method.p_values)")
         for part in ("system", "method"):
             if self.metadata.get(f"{part}_hash") != want[f"{part}_hash"]:
