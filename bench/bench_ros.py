@@ -274,7 +274,7 @@ class Listener:
                 continue
             if s.name == "jident: inertia":
                 self.inertia.append((recv, status_values(s), status_level(s)))
-            elif s.name == "jident: windowing":
+            elif s.name in ("jident: windowing", "jident_windowing: rate"):
                 self.windowing.append((recv, status_values(s), status_level(s), s.message))
 
     def spin_until(self, pred, timeout: float, every=None) -> bool:

@@ -1,127 +1,240 @@
 """The parameters of the four nodes besides the model and method sections (config/system.yaml,
-config/method.yaml): one schema for the nodes, the CLI and the tests.  config/nodes.yaml holds the same
-defaults in the ROS 2 params-file format (a test keeps the two equal)."""
+config/method.yaml): one schema for the nodes, the CLI, the docs and the tests.
+
+Each entry is a :class:`Param`: its default (whose Python type is the ROS parameter type), a one-line
+description, its range (``min``/``max``, inclusive; ``min_exclusive`` when the bound itself is refused),
+its allowed values (``choices``) and whether a change at run time can take effect (``read_only``).  The
+nodes declare every parameter with a ``rcl_interfaces/ParameterDescriptor`` built from it
+(:func:`jident_ros.nodes.params.descriptor`), so ``ros2 param describe`` (the ``describe_parameters``
+service) tells the type, the description and the range.  ``SIMULATOR``, ``WINDOWING``, ``DIAGNOSTIC``,
+``REPLAY`` are the plain {name: default} dicts derived from the schemas; config/nodes.yaml holds the
+same defaults in the ROS 2 params-file format (a test keeps the two equal).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
 
 
-#: Parameters of the simulator node (besides the model sections of config/system.yaml), with their defaults.
-SIMULATOR = {
-    "cases": "product",                     # product | zip | grid
-    "inertias_kgm2": [1.16, 1.073, 1.218],  # J1 of the cases
-    "backlash_widths_m": [0.005],           # K2
-    "consistencies_pa_sn": [0.025],         # eta_k
-    "gap_samples": 400,                     # steady-state samples before each case
-    "batch_size": 50,                       # samples per drive/signals message
-    "real_time_factor": 1.0,                # drive seconds per wall second; 0 = as fast as possible
-    "fast_sleep_s": 0.001,                  # pause per batch when real_time_factor = 0
-    "max_lead_s": 2.0,                      # real_time_factor 0: at most this many drive seconds ahead of
-                                            # the windowing node's drive/progress; 0 = no back-pressure
-    "progress_timeout_s": 2.0,              # no drive/progress for this long while waiting: back-pressure off
-    "start_time_s": 1.0,                    # drive clock of the first sample
-    "repeat": 1,                            # passes through the case list; 0 = forever
-    "publish_clock": True,
-    "wait_for_subscribers": 0,              # wait until drive/signals has this many subscribers
-    "wait_timeout_s": 30.0,
-    "exit_when_done": True,                 # exit after the last case (else stay up, idle)
-    "signals_queue_depth": 1000,
+@dataclass(frozen=True)
+class Param:
+    """One node parameter: default, description, inclusive range [min, max], choices, read_only."""
+
+    default: Any
+    description: str
+    min: float | None = None
+    max: float | None = None
+    read_only: bool = True
+    choices: tuple = ()
+    min_exclusive: bool = False   # the range is (min, max]: min itself is refused
+
+    def range_text(self) -> str:
+        """The range as the docs and the one-line errors say it ("" when there is none)."""
+        if self.choices:
+            return "one of " + ", ".join(str(c) for c in self.choices)
+        lo = "" if self.min is None else (f"> {self.min:g}" if self.min_exclusive else f">= {self.min:g}")
+        hi = "" if self.max is None else f"<= {self.max:g}"
+        return " and ".join(x for x in (lo, hi) if x)
+
+
+def defaults(schema: dict) -> dict:
+    """{name: default} of a schema."""
+    return {name: p.default for name, p in schema.items()}
+
+
+#: Upper bound of the queue depths (a keep-last history of more is a memory leak in disguise).
+MAX_DEPTH = 100_000
+
+#: The simulator node (besides the model sections of config/system.yaml).  Everything is fixed at start
+#: (the cases are simulated before the first batch): read-only.
+SIMULATOR_PARAMS = {
+    "cases": Param("product", "how the case lists combine: product (every combination), zip (element-wise), "
+                   "grid (the paper's 168 cases of system.yaml)", choices=("product", "zip", "grid")),
+    "inertias_kgm2": Param([1.16, 1.073, 1.218], "J1 of the simulated cases, kg m^2 (each > 0)", min=0.0,
+                           min_exclusive=True),
+    "backlash_widths_m": Param([0.005], "backlash width K2 of the simulated cases, m (each > 0)", min=0.0,
+                               min_exclusive=True),
+    "consistencies_pa_sn": Param([0.025], "consistency index eta_k of the simulated cases, Pa s^n (each > 0)",
+                                 min=0.0, min_exclusive=True),
+    "gap_samples": Param(400, "steady-state samples before each case", min=0, max=1_000_000),
+    "batch_size": Param(50, "samples per drive/signals message", min=1, max=MAX_DEPTH),
+    "real_time_factor": Param(1.0, "drive seconds per wall second; 0 = as fast as the windowing node reads "
+                              "(back-pressure by drive/progress)", min=0.0, max=1000.0),
+    "fast_sleep_s": Param(0.001, "timer period per batch when real_time_factor = 0, s", min=0.0, max=1.0),
+    "max_lead_s": Param(2.0, "real_time_factor 0: at most this many drive seconds ahead of the windowing "
+                        "node's drive/progress; 0 = no back-pressure", min=0.0, max=3600.0),
+    "progress_timeout_s": Param(2.0, "no drive/progress for this long while waiting: back-pressure off "
+                                "(warning), s", min=0.0, max=3600.0, min_exclusive=True),
+    "start_time_s": Param(1.0, "drive clock of the first sample, s", min=0.0, max=1e9),
+    "repeat": Param(1, "passes through the case list; 0 = forever", min=0, max=1_000_000),
+    "publish_clock": Param(True, "publish the drive clock on /clock (the other nodes may use_sim_time; the launch "
+                           "file remaps it into a namespaced drive)"),
+    "wait_for_subscribers": Param(1, "wait until drive/signals has this many subscribers (1: the windowing "
+                                  "node) before the first case; 0 = start at once (warned when nobody listens)",
+                                  min=0, max=1000),
+    "wait_timeout_s": Param(30.0, "give up (exit status 1) when the subscribers are not there after this "
+                            "long, s", min=0.0, max=86400.0, min_exclusive=True),
+    "exit_when_done": Param(True, "exit after the last case (else stay up, idle)"),
+    "signals_queue_depth": Param(1000, "keep-last depth of the drive/signals publisher", min=1, max=MAX_DEPTH),
 }
 
-
-#: Parameters of the windowing node (besides the model sections of config/system.yaml), with their defaults.
-WINDOWING = {
-    "backlash_width_m": 0.005,            # K2 of inequality (1)
-    "backlash_width_from_topic": False,   # follow drive/backlash_width (simulator, replay) when published
-    "channels": ["alpha1", "alpha2", "omega2", "a1", "m_el", "omega1", "a2", "v2"],  # captured besides t
-    "gap_tolerance": 1.5,                 # a step of t above this many sample periods is a gap
-    "signals_queue_depth": 1000,
-    "window_queue_depth": 50,
-    "hardware_id": "",                    # default: the resolved drive namespace, e.g. /drive
-    "diagnostics_period_s": 1.0,          # summary status period; 0 = only on events
-    "progress_every_batches": 10,         # publish drive/progress (drive time read) every this many batches; 0 = off
-    "input": "signals",                   # signals (drive/signals Float64MultiArray) | joint_states (sensor_msgs/JointState)
-    "detector": "auto",                   # auto (flank for joint_states, paper for signals) | flank | paper
-    "gear_ratio": 1.0,                    # N in delta = alpha1 - N alpha2 (flank detector)
-    "motor_joint": "motor",               # joint_states: the motor joint (alpha1, omega1, m_el)
-    "load_joint": "load",                 # joint_states: the load joint (alpha2, omega2)
-    "use_imu": False,                     # joint_states: a1 from sensor_msgs/Imu on imu
-    "imu_axis": "x",                      # linear_acceleration axis that is a1
-    "batch_size": 50,                     # joint_states: samples per batch handed to the detector
+#: The windowing node (besides the model sections of config/system.yaml).
+WINDOWING_PARAMS = {
+    "backlash_width_m": Param(0.005, "K2 of inequality (1) |alpha1 - alpha2| < K2/r, m (settable at run "
+                              "time: a window in progress keeps its K2)", min=0.0, max=1.0, min_exclusive=True,
+                              read_only=False),
+    "backlash_width_from_topic": Param(False, "follow drive/backlash_width (simulator, replay) when published"),
+    "channels": Param(["alpha1", "alpha2", "omega2", "a1", "m_el", "omega1", "a2", "v2"],
+                      "channels captured besides t (must hold alpha1 and alpha2)"),
+    "gap_tolerance": Param(1.5, "a step of t above this many sample periods is a gap (samples lost)",
+                           min=1.0, max=1000.0, min_exclusive=True, read_only=False),
+    "signals_queue_depth": Param(1000, "keep-last depth of the drive/signals subscription", min=1, max=MAX_DEPTH),
+    "window_queue_depth": Param(50, "keep-last depth of the drive/window publisher (transient local)",
+                                min=1, max=MAX_DEPTH),
+    "hardware_id": Param("", "hardware_id of the /diagnostics statuses; empty = the resolved drive "
+                         "namespace, e.g. /drive", read_only=False),
+    "diagnostics_period_s": Param(1.0, "period of the rate status on /diagnostics, s (steady clock); "
+                                  "0 = only the event statuses", min=0.0, max=3600.0),
+    "progress_every_batches": Param(10, "publish drive/progress (drive time read) every this many batches; "
+                                    "0 = off", min=0, max=MAX_DEPTH),
+    "input": Param("signals", "what the drive publishes: signals (drive/signals, std_msgs/Float64MultiArray "
+                   "batches) | joint_states (sensor_msgs/JointState, one message per sample)",
+                   choices=("signals", "joint_states")),
+    "detector": Param("auto", "entry detector: flank (no K2, any encoder offsets) | paper (inequality 1 with "
+                      "backlash_width_m, zone-centred angles) | auto (flank for joint_states, paper for signals)",
+                      choices=("auto", "flank", "paper")),
+    "gear_ratio": Param(1.0, "N in delta = alpha1 - N alpha2: motor turns per load-encoder turn (flank detector)",
+                        min=0.0, max=1000.0, min_exclusive=True),
+    "motor_joint": Param("motor", "joint_states: the motor joint (position alpha1, velocity omega1, effort m_el)"),
+    "load_joint": Param("load", "joint_states: the load joint (position alpha2, velocity omega2)"),
+    "use_imu": Param(False, "joint_states: a1 from sensor_msgs/Imu on imu (matched by stamp)"),
+    "imu_axis": Param("x", "joint_states: the Imu linear_acceleration axis that is a1", choices=("x", "y", "z")),
+    "batch_size": Param(50, "joint_states: samples per batch handed to the detector", min=1, max=MAX_DEPTH),
 }
 
+#: The gap method values of the diagnostic node; ``none`` is the preferred spelling of "no gap estimate",
+#: ``off`` (which a command line reads as YAML false) is still accepted.
+GAP_METHOD_CHOICES = ("auto", "acceleration", "gap_only", "anchored", "angle", "speed", "none", "off")
 
-#: Trend of J1 and the backlash width (issue 14; jident_ros.identify.trend.TrendConfig.from_parameters), parameters
-#: of the diagnostic node.  0 means "not set" where TrendConfig takes None (ROS parameters cannot be None).
-TREND = {
-    "trend_enabled": True,                           # follow the trend and publish the "jident: trend" status
-    "trend_state_file": "",                          # tracker state (JSON, written atomically); "" = not kept
-    "trend_commissioning_windows": 20,               # windows that learn the baseline
-    "trend_commissioning_duration_s": 0.0,           # instead: learn over this drive time, s (0 = by windows)
-    "trend_inertia_baseline_kgm2": 0.0,              # given J1 baseline (0 = learn it)
-    "trend_inertia_baseline_se_kgm2": 0.0,
-    "trend_width_baseline_m": 0.0,                   # given width baseline (0 = learn it)
-    "trend_width_baseline_se_m": 0.0,
-    "trend_target_arl_windows": 1000000.0,           # in-control average run length the CUSUM is designed for
-    "trend_cusum_reference_sd": 2.0,                 # CUSUM k, standard deviations
-    "trend_cusum_threshold_sd": 0.0,                 # CUSUM h (0 = from trend_target_arl_windows)
-    "trend_innovation_clip_sd": 4.0,                 # innovations clipped at +- this
-    "trend_se_scale_from_commissioning": False,      # scale the reported errors by the commissioning scatter
-    "trend_se_scale_max": 3.0,
-    "trend_inertia_process_sd_pct_per_window": 0.02,  # J1 random walk, % of the baseline per window
-    "trend_relearn_windows": 5,                      # windows after a change forming the new baseline
-    "trend_change_hold_windows": 24,                 # WARN for this many windows after a change
-    "trend_drift_warn_pct": 2.0,                     # J1 drift giving WARN, %
-    "trend_drift_alarm_pct": 5.0,                    # J1 drift giving ERROR, %
-    "trend_width_limit_m": 0.012,                    # backlash width limit (ERROR), m
-    "trend_width_warn_m": 0.0,                       # WARN width, m (0 = 90 % of the limit)
-    "trend_time_to_limit_warn_s": 2592000.0,         # WARN when the limit is projected sooner, s (30 days; 0 = off)
-    "trend_width_regression_windows": 50,            # windows of the wear-rate regression
-    "trend_width_se_floor_m": 1.0e-6,                # floor of the width standard error, m
-    "trend_width_change_detection": True,            # CUSUM on the width too
-    "trend_wear_significance_sd": 1.96,              # wear rate significant above this many standard errors
-    "trend_max_changes_kept": 100,                   # change events kept in the state
+#: Trend of J1 and the backlash width (issue 14; jident_ros.identify.trend.TrendConfig.from_parameters),
+#: parameters of the diagnostic node.  0 means "not set" where TrendConfig takes None.
+TREND_PARAMS = {
+    "trend_enabled": Param(True, 'follow the trend and publish the "jident: trend" status'),
+    "trend_state_file": Param("", 'tracker state (JSON, written atomically); "" = not kept'),
+    "trend_commissioning_windows": Param(20, 'windows that learn the baseline', min=0, max=10**9),
+    "trend_commissioning_duration_s": Param(0.0, 'instead: learn over this drive time, s (0 = by windows)', min=0.0, max=1e12),
+    "trend_inertia_baseline_kgm2": Param(0.0, 'given J1 baseline (0 = learn it)', min=0.0, max=1e12),
+    "trend_inertia_baseline_se_kgm2": Param(0.0, 'inertia baseline se kgm2', min=0.0, max=1e12),
+    "trend_width_baseline_m": Param(0.0, 'given width baseline (0 = learn it)', min=0.0, max=1e12),
+    "trend_width_baseline_se_m": Param(0.0, 'width baseline se m', min=0.0, max=1e12),
+    "trend_target_arl_windows": Param(1000000.0, 'in-control average run length the CUSUM is designed for', min=0.0, max=1e12),
+    "trend_cusum_reference_sd": Param(2.0, 'CUSUM k, standard deviations', min=0.0, max=1e12),
+    "trend_cusum_threshold_sd": Param(0.0, 'CUSUM h (0 = from trend_target_arl_windows)', min=0.0, max=1e12),
+    "trend_innovation_clip_sd": Param(4.0, 'innovations clipped at +- this', min=0.0, max=1e12),
+    "trend_se_scale_from_commissioning": Param(False, 'scale the reported errors by the commissioning scatter'),
+    "trend_se_scale_max": Param(3.0, 'se scale max', min=0.0, max=1e12),
+    "trend_inertia_process_sd_pct_per_window": Param(0.02, 'J1 random walk, % of the baseline per window', min=0.0, max=1e12),
+    "trend_relearn_windows": Param(5, 'windows after a change forming the new baseline', min=0, max=10**9),
+    "trend_change_hold_windows": Param(24, 'WARN for this many windows after a change', min=0, max=10**9),
+    "trend_drift_warn_pct": Param(2.0, 'J1 drift giving WARN, %', min=0.0, max=1e12),
+    "trend_drift_alarm_pct": Param(5.0, 'J1 drift giving ERROR, %', min=0.0, max=1e12),
+    "trend_width_limit_m": Param(0.012, 'backlash width limit (ERROR), m', min=0.0, max=1e12),
+    "trend_width_warn_m": Param(0.0, 'WARN width, m (0 = 90 % of the limit)', min=0.0, max=1e12),
+    "trend_time_to_limit_warn_s": Param(2592000.0, 'WARN when the limit is projected sooner, s (30 days; 0 = off)', min=0.0, max=1e12),
+    "trend_width_regression_windows": Param(50, 'windows of the wear-rate regression', min=0, max=10**9),
+    "trend_width_se_floor_m": Param(1.0e-6, 'floor of the width standard error, m', min=0.0, max=1e12),
+    "trend_width_change_detection": Param(True, 'CUSUM on the width too'),
+    "trend_wear_significance_sd": Param(1.96, 'wear rate significant above this many standard errors', min=0.0, max=1e12),
+    "trend_max_changes_kept": Param(100, 'change events kept in the state', min=0, max=10**9),
 }
 
-
-#: Parameters of the diagnostic node (besides config/system.yaml and config/method.yaml), with their defaults.
-DIAGNOSTIC = {
-    "pattern_library": "",        # .npz; "" = the CLI's default path (~/.cache/jident_ros/patterns-<hash>.npz)
-    "build_if_missing": True,     # build (and save) the library when the file does not exist
-    "p": 2.0,                     # KHM exponent, one of method.p_values
-    "image_method": True,         # run the paper's image method on every window
-    "gap_method": "auto",         # auto | acceleration | gap_only | anchored | angle | speed | off
-    "hardware_id": "",            # default: the resolved drive namespace, e.g. /drive
-    "stale_after_s": 5.0,         # STALE status after this long without a window; 0 = never
-    "record": True,               # record to a rosbag2 MCAP bag (docs/recording.md)
-    "record_root": "",            # bags go to <root>/rosbag2_YYYY_MM_DD-HH_MM_SS; "" = $JIDENT_DATA_DIR/bags,
-                                  # else ~/.local/share/jident_ros/bags
-    "record_dir": "",             # deprecated: this exact bag directory (new or empty) instead of record_root
-    "record_signals": True,       # also record drive/signals (+ drive/backlash_width, true_inertia, case)
-    "max_bag_size_bytes": 1073741824,        # split the bag's .mcap file at 1 GiB; 0 = no limit
-    "max_bag_duration_s": 3600.0,            # ... and every hour; 0 = no limit
-    "retention_max_total_bytes": 20000000000,  # delete the oldest complete bags over 20 GB; 0 = no limit
-    "retention_max_age_s": 604800.0,         # ... and those older than 7 days; 0 = no limit
-    "window_queue_depth": 50,
-    "signals_queue_depth": 1000,
+#: The diagnostic node (besides config/system.yaml and config/method.yaml).
+DIAGNOSTIC_PARAMS = {
+    "pattern_library": Param("", "pattern library .npz; empty = ~/.cache/jident_ros/patterns-<hash>.npz "
+                             "(as `jident build-patterns`)"),
+    "build_if_missing": Param(True, "build (and save) the pattern library when the file does not exist"),
+    "p": Param(2.0, "KHM exponent p of the image method, one of method.p_values", min=1.0, max=100.0,
+               read_only=False),
+    "image_method": Param(True, "run the paper's image method on every window", read_only=False),
+    "gap_method": Param("auto", "J1 from the backlash gap: auto | acceleration | gap_only | anchored | angle | speed | "
+                        "none (off is accepted)", choices=GAP_METHOD_CHOICES, read_only=False),
+    "hardware_id": Param("", "hardware_id of the /diagnostics statuses; empty = the resolved drive namespace",
+                         read_only=False),
+    "stale_after_s": Param(5.0, "STALE when no drive/window arrived for this long (steady clock), s; "
+                           "0 = never", min=0.0, max=86400.0, read_only=False),
+    "record": Param(True, "record to a rosbag2 MCAP bag (docs/recording.md)"),
+    "record_root": Param("", "bags go to <root>/rosbag2_YYYY_MM_DD-HH_MM_SS; empty = $JIDENT_DATA_DIR/bags, else "
+                         "$XDG_DATA_HOME/jident_ros/bags, else ~/.local/share/jident_ros/bags"),
+    "record_dir": Param("", "deprecated: this exact bag directory (new or empty) instead of record_root"),
+    "max_bag_size_bytes": Param(1073741824, "split the bag's .mcap file at this size, bytes; 0 = no limit",
+                                min=0, max=2**62),
+    "max_bag_duration_s": Param(3600.0, "split the bag's .mcap file after this long, s; 0 = no limit",
+                                min=0.0, max=1e9),
+    "retention_max_total_bytes": Param(20000000000, "delete the oldest complete bags above this total, bytes; "
+                                       "0 = no limit", min=0, max=2**62),
+    "retention_max_age_s": Param(604800.0, "delete complete bags older than this, s; 0 = no limit",
+                                 min=0.0, max=1e10),
+    "record_signals": Param(True, "also record drive/signals, drive/backlash_width, drive/true_inertia, "
+                            "drive/case (replayable)"),
+    "window_queue_depth": Param(50, "keep-last depth of the drive/window subscription", min=1, max=MAX_DEPTH),
+    "signals_queue_depth": Param(1000, "keep-last depth of the recorder's drive/signals subscription",
+                                 min=1, max=MAX_DEPTH),
     # the publishing policy (jident_ros.identify.verdict.VerdictPolicy; docs/interfaces.md "/diagnostics")
-    "plausible_min_ratio": 0.5,   # J1 below this x the nominal is refused, not published
-    "plausible_max_ratio": 1.5,   # J1 above this x the nominal is refused, not published
-    "image_min_margin": 1.401117,  # the image method's class alone / its disagreement as a WARN only at a fused
-                                  # margin >= this; 0 = never. From `python -m jident_ros.evaluation.verdicts threshold`
-    "library_width_tolerance": 0.05,  # image method valid only with a library width within 5 % of the window's K2
-    "max_torque_factor": 100.0,   # |m_el| above 100 x the base torque M_b is absurd: window refused
-    "max_speed_factor": 10.0,     # |omega1|, |omega2| above 10 x the synchronous speed is absurd: window refused
-    **TREND,                      # the trend (issue 14): wired by the node once it publishes the trend
+    "plausible_min_ratio": Param(0.5, "J1 below this x the nominal is refused, not published", min=0.0,
+                                 max=1.0, min_exclusive=True, read_only=False),
+    "plausible_max_ratio": Param(1.5, "J1 above this x the nominal is refused, not published", min=1.0, max=100.0,
+                                 read_only=False),
+    "image_min_margin": Param(1.401117, "the image method's class alone, and its disagreement as a WARN, only at "
+                              "a fused margin >= this; 0 = never (from `python -m jident_ros.evaluation.verdicts "
+                              "threshold`)", min=0.0, max=1e12, read_only=False),
+    "library_width_tolerance": Param(0.05, "the image method is valid only with a library width within this "
+                                     "fraction of the window's K2", min=0.0, max=1.0, read_only=False),
+    "max_torque_factor": Param(100.0, "|m_el| above this x the base torque M_b is absurd: window refused",
+                               min=1.0, max=1e6, read_only=False),
+    "max_speed_factor": Param(10.0, "|omega1|, |omega2| above this x the synchronous speed is absurd: window "
+                              "refused", min=1.0, max=1e6, read_only=False),
+    **TREND_PARAMS,
 }
 
-
-#: Parameters of the replay node, with their defaults.
-REPLAY = {
-    "bag": "",                 # bag directory or .mcap file (or the first command-line argument)
-    "rate": 1.0,               # playback speed factor; 0 = as fast as possible
-    "fast_sleep_s": 0.001,     # pause between messages when rate = 0
-    "max_lead_s": 2.0,         # rate 0: at most this many drive seconds ahead of drive/progress; 0 = off
-    "progress_timeout_s": 2.0,  # no drive/progress for this long while waiting: back-pressure off
-    "publish_clock": True,
-    "topics": ["drive/signals", "drive/backlash_width", "drive/true_inertia", "drive/case"],
-    "wait_for_subscribers": 0,  # wait until drive/signals has this many subscribers
-    "wait_timeout_s": 30.0,
+#: The replay node.  Everything is fixed at start: read-only.
+REPLAY_PARAMS = {
+    "bag": Param("", "bag directory or .mcap file (or the first command-line argument)"),
+    "rate": Param(1.0, "playback speed factor; 0 = as fast as the windowing node reads", min=0.0, max=1000.0),
+    "fast_sleep_s": Param(0.001, "timer period per message when rate = 0, s", min=0.0, max=1.0),
+    "max_lead_s": Param(2.0, "rate 0: at most this many drive seconds ahead of drive/progress; 0 = off",
+                        min=0.0, max=3600.0),
+    "progress_timeout_s": Param(2.0, "no drive/progress for this long while waiting: back-pressure off, s",
+                                min=0.0, max=3600.0, min_exclusive=True),
+    "publish_clock": Param(True, "publish /clock from the t column of drive/signals (remap it per drive)"),
+    "topics": Param(["drive/signals", "drive/backlash_width", "drive/true_inertia", "drive/case"],
+                    "relative names of the recorded topics to republish"),
+    "wait_for_subscribers": Param(0, "wait until drive/signals has this many subscribers", min=0, max=1000),
+    "wait_timeout_s": Param(30.0, "give up when the subscribers are not there after this long, s",
+                            min=0.0, max=86400.0, min_exclusive=True),
 }
+
+SIMULATOR = defaults(SIMULATOR_PARAMS)
+WINDOWING = defaults(WINDOWING_PARAMS)
+DIAGNOSTIC = defaults(DIAGNOSTIC_PARAMS)
+REPLAY = defaults(REPLAY_PARAMS)
+TREND = defaults(TREND_PARAMS)
+
+
+_TYPE_NAMES = {bool: "bool", int: "integer", float: "double", str: "string"}
+
+
+def _type_name(default) -> str:
+    if isinstance(default, list):
+        return ("string" if default and isinstance(default[0], str) else "double") + "[]"
+    return _TYPE_NAMES[type(default)]
+
+
+def markdown_table(schema: dict) -> str:
+    """The declared parameters of a node as a Markdown table (docs/interfaces.md holds these, a test
+    keeps them equal): name, type, default, range, whether a change at run time takes effect, description."""
+    rows = ["| parameter | type | default | range | at run time | description |", "|---|---|---|---|---|---|"]
+    for name, p in schema.items():
+        default = f"`{p.default!r}`" if p.default != "" else '`""`'
+        rows.append(f"| `{name}` | {_type_name(p.default)} | {default} | {p.range_text() or '—'} | "
+                    f"{'read-only' if p.read_only else 'settable'} | {p.description} |")
+    return "\n".join(rows)

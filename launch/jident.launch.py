@@ -23,7 +23,8 @@ ARGUMENTS = {
     "namespace": ("", "namespace of the drive, e.g. press3 (topics become /press3/drive/...)"),
     "config_dir": ("", "folder with system.yaml, method.yaml, nodes.yaml (default: the package's share/config)"),
     "simulator": ("true", "start the simulator (false: wait for a real drive or a replay)"),
-    "use_sim_time": ("true", "windowing and diagnostic follow /clock (the simulator's drive clock)"),
+    "use_sim_time": ("true", "windowing and diagnostic follow the simulator's drive clock (/clock; /<namespace>/clock "
+                     "when namespaced: with two drives a shared /clock would mix their clocks)"),
     "real_time_factor": ("1.0", "simulator speed: drive seconds per wall second; 0 = as fast as the windowing node reads"),
     "cases": ("", "simulator: product | zip | grid (default: nodes.yaml)"),
     "backlash_width_m": ("", "windowing: K2 in m (default: nodes.yaml; the simulator's width is followed)"),
@@ -49,23 +50,27 @@ def _setup(context):
         p.update({k: v for k, v in overrides.items() if v is not None})
         return files + [p]
 
-    ns = arg["namespace"]
+    ns = arg["namespace"].strip("/")
     sim_time = _truthy(arg["use_sim_time"]) and _truthy(arg["simulator"])
+    # /clock is global: two drives with sim time would follow each other's clock.  A namespaced drive gets
+    # its own: the simulator publishes /<ns>/clock and its windowing and diagnostic nodes follow that one.
+    remap = [("/clock", f"/{ns}/clock")] if ns and sim_time else []
     recording = bool(arg["record_dir"])
     diag = Node(package="jident_ros", executable="diagnostic", name="jident_diagnostic", namespace=ns,
-                output="screen",
+                output="screen", remappings=remap,
                 parameters=params("jident_diagnostic", use_sim_time=sim_time,
                                   pattern_library=arg["pattern_library"] or None,
                                   record_dir=arg["record_dir"] or None,
                                   p=float(arg["p"]) if arg["p"] else None))
     win = Node(package="jident_ros", executable="windowing", name="jident_windowing", namespace=ns, output="screen",
+               remappings=remap,
                parameters=params("jident_windowing", use_sim_time=sim_time,
                                  backlash_width_from_topic=True if _truthy(arg["simulator"]) else None,
                                  backlash_width_m=float(arg["backlash_width_m"]) if arg["backlash_width_m"] else None))
     actions = [diag, win]
     if _truthy(arg["simulator"]):
         sim = Node(package="jident_ros", executable="simulator", name="jident_simulator", namespace=ns,
-                   output="screen",
+                   output="screen", remappings=remap,
                    parameters=params("jident_simulator", use_sim_time=False,
                                      real_time_factor=float(arg["real_time_factor"]),
                                      cases=arg["cases"] or None,

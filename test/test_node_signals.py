@@ -94,3 +94,104 @@ def test_sigkill_mid_run_then_salvage_recovers_the_complete_chunks(node_env, lib
     # chunks are flushed every 0.5 s (node timer): at 1x real time at most ~0.5 s + in flight is lost
     print(f"SIGKILL: {n_rec} of {n_ref} samples recovered")
     assert n_ref - n_rec <= int(1.0 / TS), (n_rec, n_ref)
+
+
+# --------------------------------------------------------------------------- many stops (issue 15, item 1)
+
+
+def _stop_many(node_env, library, tmp_path, n_stops: int, concurrency: int, seed: int = 0):
+    """Start recording diagnostic nodes under load (this process streams drive/signals batches and
+    windows into their namespaces), stop each with SIGINT or SIGTERM at a random moment after its
+    recording began (during the library load, the subscriptions' creation or the spin), and return
+    [(signal, returncode, bag finalised, messages, log)]."""
+    import random
+    import threading
+    import time
+
+    from std_msgs.msg import Float64MultiArray
+    from test_nodes import _good_stream
+
+    from jident_ros.bag.recording import read_bag
+    from jident_ros.nodes.ros_io import multiarray_from_array, qos_latched, qos_signals, window_to_msg
+    from jident_ros.stream.detector import BacklashDetector
+    from jident_ros.stream.layout import DEFAULT_CHANNELS
+    rng = random.Random(seed)
+    _, (stream, _) = _good_stream()
+    (ev,) = BacklashDetector(0.005, 0.1, 5e-4).push(stream, DEFAULT_CHANNELS)
+    window = window_to_msg(ev.window)
+    batches = [multiarray_from_array(stream[s:s + 50], DEFAULT_CHANNELS) for s in range(0, len(stream), 50)]
+    ros = Ros("jident_test_stops")
+    namespaces = [f"/stop{k}" for k in range(concurrency)]
+    sig_pubs = [ros.node.create_publisher(Float64MultiArray, f"{ns}/drive/signals", qos_signals()) for ns in namespaces]
+    win_pubs = [ros.node.create_publisher(Float64MultiArray, f"{ns}/drive/window", qos_latched(10))
+                for ns in namespaces]
+    stop_load = threading.Event()
+
+    def load():  # ~40 batches/s and a window every 0.5 s into every namespace
+        k = 0
+        while not stop_load.is_set():
+            for p in sig_pubs:
+                p.publish(batches[k % len(batches)])
+            if k % 20 == 0:
+                for p in win_pubs:
+                    p.publish(window)
+            k += 1
+            time.sleep(0.025)
+
+    loader = threading.Thread(target=load, daemon=True)
+    loader.start()
+    results = []
+    try:
+        done = 0
+        while done < n_stops:
+            batch = []
+            for slot in range(min(concurrency, n_stops - done)):
+                bag = tmp_path / f"bag{done + slot}"
+                sig = signal.SIGINT if (done + slot) % 2 == 0 else signal.SIGTERM
+                p = Proc(node_env, tmp_path, "diagnostic", "-r", f"__ns:={namespaces[slot]}",
+                         "-p", f"pattern_library:={library}", "-p", f"record_dir:={bag}", "-p", "stale_after_s:=0.0")
+                batch.append((p, bag, sig, rng.uniform(0.0, 1.5)))
+            for p, bag, sig, delay in batch:
+                end = time.monotonic() + 60
+                while time.monotonic() < end and p.alive() and "recording to" not in p.text():
+                    time.sleep(0.02)
+                time.sleep(delay)
+                rc = p.stop(sig, timeout=30)
+                try:
+                    n = sum(1 for _ in read_bag(bag))
+                    ok = (bag / "metadata.yaml").is_file()
+                except Exception as exc:  # not finalised
+                    n, ok = f"{type(exc).__name__}: {exc}", False
+                results.append((sig, rc, ok, n, p.text()[-2000:]))
+            done += len(batch)
+    finally:
+        stop_load.set()
+        loader.join(5)
+        ros.close()
+    return results
+
+
+def _report(results):
+    finalised = sum(ok for _, _, ok, _, _ in results)
+    segv = sum(rc == -signal.SIGSEGV for _, rc, _, _, _ in results)
+    bad = [(s.name, rc, n, log) for s, rc, ok, n, log in results if not ok or rc != 0]
+    print(f"{len(results)} stops (SIGINT and SIGTERM, random moments, under load): {finalised} finalised bags, "
+          f"{segv} SIGSEGV, {len(bad)} not clean")
+    return finalised, segv, bad
+
+
+@pytest.mark.ros
+def test_four_stops_under_load_finalise_every_bag(node_env, library, tmp_path):
+    """The fast variant of the 200-stop test (4 nodes at once; -m slow runs the 200)."""
+    results = _stop_many(node_env, library, tmp_path, n_stops=4, concurrency=4, seed=1)
+    finalised, segv, bad = _report(results)
+    assert finalised == 4 and segv == 0 and not bad, bad[:2]
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_200_stops_under_load_finalise_every_bag(node_env, library, tmp_path):
+    """Issue 15 target: 200/200 finalised bags, 0 SIGSEGV (about 10 minutes)."""
+    results = _stop_many(node_env, library, tmp_path, n_stops=200, concurrency=4, seed=2)
+    finalised, segv, bad = _report(results)
+    assert finalised == 200 and segv == 0 and not bad, bad[:2]

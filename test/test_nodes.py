@@ -51,9 +51,11 @@ def test_launch_file_compiles():
     py_compile.compile(str(REPO / "launch" / "jident.launch.py"), doraise=True)
 
 
-def test_importing_the_nodes_needs_no_rclpy():
-    code = ("import sys, jident_ros.nodes.simulator, jident_ros.nodes.windowing, jident_ros.nodes.diagnostic, "
-            "jident_ros.nodes.replay, jident_ros.nodes.ros_io, jident_ros.stream.detector; "
+def test_the_core_and_ros_io_need_no_rclpy():
+    """The node modules import rclpy at the top (their classes derive from Node); the core, the CLI's
+    offline diagnosis and ros_io (used by the CLI) never do."""
+    code = ("import sys, jident_ros.nodes.ros_io, jident_ros.nodes.params, jident_ros.parameters, "
+            "jident_ros.stream.detector, jident_ros.identify.diagnosis, jident_ros.cli.offline; "
             "assert 'rclpy' not in sys.modules, 'rclpy imported'")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
                        env=dict(os.environ, PYTHONPATH=str(REPO)))
@@ -283,8 +285,10 @@ def test_pipeline_diagnostics(pipeline):
         # K2 from the relative angle at re-contact, within a sample's travel of the detector's 0.005 m
         width, width_std = float(v["backlash_width_estimate_m"]), float(v["backlash_width_estimate_std_m"])
         assert 0 < width_std < 0.0005 and abs(width - 0.005) < 0.0005, (width, width_std)
-    # use_sim_time: the statuses are stamped with the drive clock (simulation starts at t = 1 s)
-    arrays = [a for a in pipeline["diags"] if any(s.hardware_id == "/e2e/drive" for s in a.status)]
+    # use_sim_time: the windows' statuses are stamped with the drive clock (simulation starts at t = 1 s);
+    # the periodic task statuses (steady timer) may go out before the first /clock (stamp 0)
+    arrays = [a for a in pipeline["diags"] if any(s.hardware_id == "/e2e/drive" and s.name == "jident: inertia"
+                                                  for s in a.status)]
     stamps = [a.header.stamp.sec + 1e-9 * a.header.stamp.nanosec for a in arrays]
     assert all(1.0 < t < 10.0 for t in stamps), stamps
     # the windows' entry times are the simulator's
@@ -460,9 +464,70 @@ def test_bad_messages_are_reported_and_the_windowing_node_keeps_running(node_env
     assert win.stop(signal.SIGTERM, timeout=10.0) == 0, logs(win)  # clean exit on SIGTERM
 
 
+def damaged_libraries(library, tmp_path) -> dict:
+    """Damaged copies of a good library: {name: (path, what the error must say)}."""
+    import zipfile
+
+    from jident_ros.method.patterns import PatternLibrary
+    raw = library.read_bytes()
+    out = {}
+    p = tmp_path / "truncated.npz"
+    p.write_bytes(raw[: len(raw) // 2])
+    out["truncated"] = (p, "unreadable")
+    with zipfile.ZipFile(library) as z:
+        info = z.getinfo("centres.npy")
+    p = tmp_path / "badcrc.npz"
+    data = bytearray(raw)
+    k = info.header_offset + 30 + len(info.filename) + len(info.extra) + info.compress_size // 2
+    data[k] ^= 0xFF
+    p.write_bytes(bytes(data))
+    out["bad_crc"] = (p, "unreadable")
+    p = tmp_path / "empty.npz"
+    p.write_bytes(b"")
+    out["empty"] = (p, "empty file")
+    lib = PatternLibrary.load(library)
+    h5 = lib.h5.copy()
+    h5[0, 0, 0] = np.nan
+    out["nan_h5"] = (PatternLibrary(lib.centres, h5, lib.ranges, lib.p_values, lib.widths_m, lib.classes_kgm2,
+                                    lib.signals, lib.metadata).save(tmp_path / "nan.npz"), "non-finite")
+    three = PatternLibrary(lib.centres[:, :, :, :3], lib.h5, lib.ranges[:, :, :3], lib.p_values, lib.widths_m,
+                           lib.classes_kgm2, lib.signals, lib.metadata).save(tmp_path / "three.npz")
+    out["3_of_7_rows"] = (three, "shape")
+    three_classes = PatternLibrary(lib.centres[:, :, :, :3], lib.h5, lib.ranges[:, :, :3], lib.p_values,
+                                   lib.widths_m, lib.classes_kgm2[:3], lib.signals,
+                                   lib.metadata).save(tmp_path / "three_classes.npz")
+    out["3_of_7_classes"] = (three_classes, "J1 classes")
+    return out
+
+
+def test_damaged_libraries_are_refused_with_the_file_and_the_problem(library, tmp_path):
+    """load_pattern_library never raises: every damaged library is an error naming the file and the problem."""
+    from jident_ros.config import load_method_config, load_system_config
+    from jident_ros.identify.library import load_pattern_library
+    system, method = load_system_config(), load_method_config()
+    for name, (path, what) in damaged_libraries(library, tmp_path).items():
+        lib, error = load_pattern_library(path, system, method, build_if_missing=False)
+        assert lib is None and error, name
+        assert str(path) in error and what in error, (name, error)
+        assert "\n" not in error
+
+
+def test_jident_diagnose_with_a_damaged_library_says_it_in_one_line(library, tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    for name, (path, what) in list(damaged_libraries(library, tmp_path).items())[:2]:
+        r = subprocess.run([sys.executable, "-m", "jident_ros.cli", "diagnose", str(tmp_path), "--library", str(path)],
+                           capture_output=True, text=True, timeout=120, env=env)
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1, (name, r.stderr)
+        assert str(path) in lines[0] and what in lines[0], (name, lines[0])
+
+
 @pytest.mark.ros
 def test_diagnostic_with_a_bad_or_missing_library_reports_error_and_keeps_running(node_env, library, ros, procs,
                                                                                    tmp_path):
+    """Mismatched, missing and damaged libraries (truncated zip, bad CRC, empty file, NaN h5, 3 of 7 class
+    rows): an ERROR "jident_diagnostic: library" status naming the file and the problem, once a second; the
+    node keeps running and publishes the gap estimate of a window (its window status ERROR)."""
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import Float64, Float64MultiArray
 
@@ -475,36 +540,40 @@ def test_diagnostic_with_a_bad_or_missing_library_reports_error_and_keeps_runnin
     lib.metadata = dict(lib.metadata, system=dict(lib.metadata["system"], load=dict(
         lib.metadata["system"]["load"], wheel_radius_m=0.2)), system_hash="0" * 64)
     other = lib.save(tmp_path / "other.npz")
+    cases = {"mis": (other, "wheel_radius_m"), "gone": (tmp_path / "no.npz", "missing")}
+    cases.update({"lib_" + k: v for k, v in damaged_libraries(library, tmp_path).items()})
     diags = ros.collect(DiagnosticArray, "/diagnostics", qos_diagnostics())
-    est = ros.collect(Float64, "/mis/inertia_estimate", qos_latched(10))
-    pub = ros.node.create_publisher(Float64MultiArray, "/mis/drive/window", qos_latched(10))
-    mis = Proc(node_env, tmp_path, "diagnostic", "-r", "__ns:=/mis", "-p", f"pattern_library:={other}")
-    gone = Proc(node_env, tmp_path, "diagnostic", "-r", "__ns:=/gone", "-p", f"pattern_library:={tmp_path / 'no.npz'}",
-                "-p", "build_if_missing:=false", "-p", "stale_after_s:=1.0")
-    procs += [mis, gone]
-    name = "jident: inertia"
-    levels = lambda ns: {status_level(s) for s in statuses(diags, name, ns)}  # noqa: E731
+    est = {ns: ros.collect(Float64, f"/{ns}/inertia_estimate", qos_latched(10)) for ns in cases}
+    pubs = {ns: ros.node.create_publisher(Float64MultiArray, f"/{ns}/drive/window", qos_latched(10)) for ns in cases}
+    running = {ns: Proc(node_env, tmp_path, "diagnostic", "-r", f"__ns:=/{ns}", "-p", f"pattern_library:={path}",
+                        "-p", "build_if_missing:=false", "-p", "stale_after_s:=1.0") for ns, (path, _) in cases.items()}
+    procs += list(running.values())
+    task = "jident_diagnostic: library"
+    levels = lambda ns, name: {status_level(s) for s in statuses(diags, name, f"/{ns}/drive")}  # noqa: E731
     # the library error is repeated once a second, so a status published before we matched is no loss
-    assert ros.spin_until(lambda: ERROR in levels("/mis/drive") and {ERROR, STALE} <= levels("/gone/drive")), \
-        logs(mis, gone)
-    first = statuses(diags, name, "/mis/drive")[0]
-    assert status_level(first) == ERROR and "wheel_radius_m" in first.message
-    g0 = [s for s in statuses(diags, name, "/gone/drive") if status_level(s) == ERROR][0]
-    assert "missing" in g0.message and "no.npz" in g0.message
-    assert sum("wheel_radius_m" in line for line in mis.text().splitlines()) == 1  # one log line
+    assert ros.spin_until(lambda: all(ERROR in levels(ns, task) for ns in cases)), logs(*running.values())
+    assert ros.spin_until(lambda: STALE in levels("gone", "jident_diagnostic: diagnosis"))
+    for ns, (path, what) in cases.items():
+        first = statuses(diags, task, f"/{ns}/drive")[0]
+        assert status_level(first) == ERROR and what in first.message, (ns, first.message)
+        assert path.name in first.message, (ns, first.message)
+    assert sum("wheel_radius_m" in line for line in running["mis"].text().splitlines()) == 1  # one log line
     # a window still gets its gap estimate, flagged ERROR because the library is unusable
     sim, (stream, rows) = _good_stream()
     det = BacklashDetector(0.005, 0.1, 5e-4)
     (ev,) = det.push(stream, DEFAULT_CHANNELS)
-    assert ros.spin_until(lambda: pub.get_subscription_count() >= 1)
-    pub.publish(window_to_msg(ev.window))
-    assert ros.spin_until(lambda: est), logs(mis)
-    assert ros.spin_until(lambda: any("estimate_source" in status_values(s)
-                                      for s in statuses(diags, name, "/mis/drive"))), logs(mis)
-    (s,) = [s for s in statuses(diags, name, "/mis/drive") if "estimate_source" in status_values(s)]
-    assert status_level(s) == ERROR and abs(est[0].data - 1.16) < 0.01
-    assert status_values(s)["estimate_source"] == "gap"
-    assert mis.alive() and gone.alive(), logs(mis, gone)
+    assert ros.spin_until(lambda: all(p.get_subscription_count() >= 1 for p in pubs.values()))
+    for p in pubs.values():
+        p.publish(window_to_msg(ev.window))
+    assert ros.spin_until(lambda: all(est.values())), logs(*running.values())
+    for ns in cases:
+        assert ros.spin_until(lambda: any("estimate_source" in status_values(s)
+                                          for s in statuses(diags, "jident: inertia", f"/{ns}/drive")))
+        (s,) = [s for s in statuses(diags, "jident: inertia", f"/{ns}/drive") if "estimate_source" in status_values(s)]
+        assert status_level(s) == ERROR and abs(est[ns][0].data - 1.16) < 0.01, (ns, s.message)
+        assert status_values(s)["estimate_source"] == "gap"
+    for ns, p in running.items():
+        assert p.alive() and "Traceback" not in p.text(), logs(p)
 
 
 @pytest.mark.ros

@@ -58,10 +58,9 @@ def write_recording(bag_dir: Path, system, inertias=TRUE_J1, eta=0.0375, namespa
     """Simulate the cases and write them as the diagnostic node records the simulator's topics."""
     from jident_ros.bag.recording import BagWriter
     from jident_ros.cli.offline import multiarray_message
-    from jident_ros.nodes.simulator import CASE_LABEL
     from jident_ros.sim import Case, simulate_grid
     from jident_ros.stream.detector import embed_windows
-    from jident_ros.stream.layout import DEFAULT_CHANNELS
+    from jident_ros.stream.layout import CASE_LABEL, DEFAULT_CHANNELS
     cases = [Case(j, 0.005, eta) for j in inertias]
     ws = simulate_grid(system, cases)
     stream, entry_rows = embed_windows(ws, gap, start_time_s, DEFAULT_CHANNELS)
@@ -237,14 +236,14 @@ def test_the_gap_estimate_is_reported_before_the_image_method_runs(windows, conf
 
 def test_bad_arguments_name_the_field(windows, configs, library):
     with pytest.raises(ValueError, match="gap_method: expected one of auto, acceleration, gap_only, anchored, angle, "
-                                         "speed, off, got 'fast'"):
+                                         "speed, none, off, got 'fast'"):
         _diagnose(windows, 0, configs, library, gap_method="fast")
     with pytest.raises(ValueError, match="image_method"):
         _diagnose(windows, 0, configs, library, gap_method="off", image_method=False)
 
 
 def test_diagnosis_and_offline_need_no_rclpy():
-    code = ("import sys, jident_ros.identify.diagnosis, jident_ros.cli.offline, jident_ros.nodes.diagnostic; "
+    code = ("import sys, jident_ros.identify.diagnosis, jident_ros.cli.offline, jident_ros.nodes.ros_io; "
             "assert 'rclpy' not in sys.modules, 'rclpy imported'")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
                        env=dict(os.environ, PYTHONPATH=str(REPO)))

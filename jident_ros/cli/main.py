@@ -36,7 +36,7 @@ from jident_ros.evaluation.plotting import plot_case
 from jident_ros.evaluation.report import render_markdown, write_figures, write_results_section
 from jident_ros.evaluation.report_robustness import write_robustness_figures
 from jident_ros.evaluation.robustness import run_robustness
-from jident_ros.identify.library import default_library_path
+from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.method.calibration import library_from_labelled_windows, parse_labels, pattern_grid, read_recordings
 from jident_ros.method.patterns import PatternLibrary
 from jident_ros.sim import Case, add_measurement_noise, paper_grid_cases, quantise_encoders, simulate_grid, steady_state
@@ -45,7 +45,7 @@ from jident_ros.sim.motor import breakdown_slip, steady_state_phasors
 from jident_ros.stream.inputs import parse_map
 
 #: diagnosis.GAP_METHODS, spelled out so that `jident --help` does not import the method (test_config_cli)
-CLI_GAP_METHODS = ("auto", "acceleration", "gap_only", "anchored", "angle", "speed", "off")
+CLI_GAP_METHODS = ("auto", "acceleration", "gap_only", "anchored", "angle", "speed", "none", "off")
 
 
 class CliError(Exception):
@@ -247,6 +247,13 @@ def cmd_diagnose(args) -> int:
     log = (lambda text: None) if args.quiet else (lambda text: print(f"jident diagnose: {text}", file=sys.stderr,
                                                                      flush=True))
     header_printed = False
+    library = None
+    if args.library and not args.no_image:
+        # an explicitly given library must be usable: one line naming the file and the problem, exit 2
+        library, error = load_pattern_library(Path(args.library).expanduser(), system, method,
+                                              build_if_missing=False)
+        if error:
+            raise CliError(error)
 
     def show(window):
         nonlocal header_printed
@@ -257,7 +264,7 @@ def cmd_diagnose(args) -> int:
 
     overrides = {k: getattr(args, k) for k in ("image_min_margin", "plausible_min_ratio", "plausible_max_ratio")
                  if getattr(args, k) is not None}
-    common = dict(system=system, method=method, p=args.p, library_path=args.library, gap_method=args.gap_method,
+    common = dict(system=system, method=method, p=args.p, library=library, library_path=args.library, gap_method=args.gap_method,
                   image_method=not args.no_image, log=log, on_window=show,
                   policy=default_policy(**overrides))
     samples = dict(gear_ratio=args.gear_ratio, motor_joint=args.motor_joint, load_joint=args.load_joint,

@@ -205,8 +205,8 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
     method = load_method_config() if method is None else method
     if gap_method not in GAP_METHODS:
         raise OfflineError(f"gap_method: expected one of {', '.join(GAP_METHODS)}, got {gap_method!r}")
-    if not image_method and gap_method == "off":
-        raise OfflineError("image_method: must be on when gap_method is off (nothing would be identified)")
+    if not image_method and gap_method in ("none", "off"):
+        raise OfflineError("image_method: must be on when gap_method is none (nothing would be identified)")
     if float(p) not in [float(q) for q in method.p_values]:
         raise OfflineError(f"p: must be one of method.p_values {[float(q) for q in method.p_values]}, got {p!r}")
     policy = default_policy() if policy is None else policy

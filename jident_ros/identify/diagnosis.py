@@ -55,7 +55,9 @@ from jident_ros.method.patterns import Identification, PatternLibrary, identify_
 from jident_ros.method.pipeline import SIGNALS
 
 #: Gap estimators: ``auto`` (acceleration fit when a1 is there, else speed), ``acceleration``, ``speed``, ``off``.
-GAP_METHODS = ("auto", "acceleration", "gap_only", "anchored", "angle", "speed", "off")
+#: ``none`` (preferred) and ``off`` both mean: no gap estimate.
+GAP_METHODS = ("auto", "acceleration", "gap_only", "anchored", "angle", "speed", "none", "off")
+NO_GAP = ("none", "off")
 
 
 @dataclass
@@ -160,7 +162,7 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
     t0 = time.perf_counter() if started_at is None else float(started_at)
     if gap_method not in GAP_METHODS:
         raise ValueError(f"gap_method: expected one of {', '.join(GAP_METHODS)}, got {gap_method!r}")
-    if not image_method and gap_method == "off":
+    if not image_method and gap_method in NO_GAP:
         raise ValueError("image_method: must be true when gap_method is off (nothing would be identified)")
     policy = VerdictPolicy() if policy is None else policy
     policy.check()
@@ -211,7 +213,7 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
 
     # 1. the gap: fast; published first when the policy accepts it
     gap, gap_reason, width, recontact, decision = None, "", None, None, None
-    if gap_method != "off":
+    if gap_method not in NO_GAP:
         try:
             gap = estimate_inertia(window_data, entry_index, backlash_width_m, wheel_radius_m, sample_period_s,
                                    method=None if gap_method == "auto" else gap_method,

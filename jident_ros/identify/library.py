@@ -21,8 +21,9 @@ def load_pattern_library(path, system, method, build_if_missing: bool = True,
                          warn: Callable[[str], Any] = lambda text: None):
     """Load the pattern library at ``path`` (or build and save it there when it is missing).
 
-    Returns ``(library, None)`` or ``(None, error)`` with a one-line reason: missing (and not to be
-    built), built for another configuration (LibraryMismatch), or the build failed.  ``log`` gets the
+    Returns ``(library, None)`` or ``(None, error)`` with a one-line reason naming the file: missing (and
+    not to be built), unreadable (empty, truncated zip, bad CRC), inconsistent (shapes, NaN/Inf, class
+    count), built for another configuration (LibraryMismatch), or the build failed.  ``log`` gets the
     progress lines, ``warn`` a failed save (the built library is still used).
     """
     path = Path(path)
@@ -35,6 +36,8 @@ def load_pattern_library(path, system, method, build_if_missing: bool = True,
             return None, f"pattern library missing: {exc}"
     except LibraryMismatch as exc:
         return None, f"pattern library unusable: {exc}"
+    except Exception as exc:  # whatever else a damaged file raises: never a traceback, always the reason
+        return None, f"pattern library unusable: {path}: {type(exc).__name__}: {exc}"
     n_classes = len(system.grid.inertia_classes_kgm2)
     log(f"pattern library {path} not found: building it ({n_classes} J1 classes x "
         f"{len(system.grid.backlash_widths_m)} widths, a few seconds)")

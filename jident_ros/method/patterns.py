@@ -161,24 +161,67 @@ class PatternLibrary:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"pattern library: no such file {str(path)!r} (build it with `jident build-patterns`)")
+        where = f"pattern library {str(path)!r}"
+        if path.stat().st_size == 0:
+            raise LibraryMismatch(f"{where}: empty file; rebuild it with `jident build-patterns`")
         try:
             with np.load(path, allow_pickle=False) as z:
                 meta = json.loads(str(z["metadata"]))
                 lib = cls(z["centres"], z["h5"], z["ranges"], tuple(float(p) for p in z["p_values"]),
                           tuple(float(w) for w in z["widths_m"]), tuple(float(c) for c in z["classes_kgm2"]),
                           tuple(str(s) for s in z["signals"]), meta)
-        except (KeyError, ValueError, OSError) as exc:
-            raise LibraryMismatch(f"pattern library {str(path)!r}: not a jident pattern library ({exc})") from None
-        if meta.get("format") != FORMAT_VERSION:
-            raise LibraryMismatch(f"pattern library {str(path)!r}: format {meta.get('format')!r}, "
+        except KeyError as exc:  # a readable .npz without the library's arrays
+            raise LibraryMismatch(f"{where}: not a jident pattern library ({exc})") from None
+        except Exception as exc:  # zip (truncated, bad CRC), zlib, npy format, JSON: all "unreadable"
+            raise LibraryMismatch(f"{where}: unreadable ({type(exc).__name__}: {exc}); rebuild it with "
+                                  "`jident build-patterns`") from None
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT_VERSION:
+            got = meta.get("format") if isinstance(meta, dict) else meta
+            raise LibraryMismatch(f"{where}: format {got!r}, "
                                   f"this version reads format {FORMAT_VERSION}; rebuild it")
+        lib.check_consistent(where)
         if system is not None and method is not None:
             lib.check_matches(system, method, str(path))
         return lib
 
+    def check_consistent(self, where: str = "pattern library") -> None:
+        """LibraryMismatch naming the problem when the arrays disagree with each other (shapes) or hold
+        non-finite values: a damaged or hand-edited file is never used."""
+        n_p, n_w, n_s, n_c = len(self.p_values), len(self.widths_m), len(self.signals), len(self.classes_kgm2)
+        want = {"centres": (n_p, n_w, n_s, n_c), "h5": (n_p, n_w, n_s), "ranges": (n_w, n_s, n_c, 2)}
+        for name, shape in want.items():
+            arr = np.asarray(getattr(self, name))
+            got = arr.shape[:len(shape)] if name == "centres" else arr.shape
+            if got != shape or (name == "centres" and arr.ndim != 5):
+                raise LibraryMismatch(f"{where}: {name} has shape {arr.shape}, expected {shape}"
+                                      f"{' + (n_clusters,)' if name == 'centres' else ''} for {n_c} J1 classes, "
+                                      f"{n_w} widths, {n_s} signals, {n_p} p values; rebuild it")
+            if not np.issubdtype(arr.dtype, np.number):
+                raise LibraryMismatch(f"{where}: {name} is not numeric ({arr.dtype}); rebuild it")
+            bad = int(np.size(arr) - np.count_nonzero(np.isfinite(arr)))
+            if bad:
+                raise LibraryMismatch(f"{where}: {name} holds {bad} non-finite value(s) (NaN/Inf); rebuild it")
+        for name, vals in (("p_values", self.p_values), ("widths_m", self.widths_m),
+                           ("classes_kgm2", self.classes_kgm2)):
+            if not vals or not all(np.isfinite(v) and v > 0 for v in vals):
+                raise LibraryMismatch(f"{where}: {name} {list(vals)} must be finite numbers > 0; rebuild it")
+        if tuple(self.signals) != tuple(SIGNALS):
+            raise LibraryMismatch(f"{where}: signals {list(self.signals)}, expected {list(SIGNALS)}; rebuild it")
+
     def check_matches(self, system: SystemConfig, method: MethodConfig, where: str = "pattern library") -> None:
         want = library_metadata(system, method)
         diffs = []
+        # a simulated library holds the configuration's classes and widths; a calibration library
+        # (source "recordings") the labels of its recordings (its shapes are checked by check_consistent)
+        simulated = self.metadata.get("source") != "recordings"
+        if simulated and sorted(self.classes_kgm2) != sorted(float(c) for c in system.grid.inertia_classes_kgm2):
+            diffs.append(f"{len(self.classes_kgm2)} J1 classes {list(self.classes_kgm2)}, configuration "
+                         f"{len(system.grid.inertia_classes_kgm2)} (grid.inertia_classes_kgm2)")
+        if simulated and sorted(self.widths_m) != sorted(float(w) for w in system.grid.backlash_widths_m):
+            diffs.append(f"widths {list(self.widths_m)}, configuration {list(system.grid.backlash_widths_m)} "
+                         "(grid.backlash_widths_m)")
+        if sorted(self.p_values) != sorted(float(p) for p in method.p_values):
+            diffs.append(f"p values {list(self.p_values)}, configuration {list(method.p_values)} (method.p_values)")
         for part in ("system", "method"):
             if self.metadata.get(f"{part}_hash") != want[f"{part}_hash"]:
                 diffs += [f"{part}.{k}: library {a!r}, configuration {b!r}"

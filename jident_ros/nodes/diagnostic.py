@@ -4,57 +4,86 @@ A thin ROS adapter over :func:`jident_ros.identify.diagnosis.diagnose_window` (t
 ``jident diagnose`` runs offline on a recording).  For each window:
 
 1. the gap estimate (:func:`jident_ros.identify.gap.estimate_inertia`: J1 by least squares over the
-   samples inside the backlash zone) -- when the policy accepts it, it is published at once on
+   samples inside the backlash zone) -- when there is one it is published at once on
    ``inertia_estimate`` (std_msgs/Float64, kg m^2, transient local): the best continuous J1;
 2. the paper's image method (:func:`jident_ros.method.patterns.identify_window`, KHM exponent ``p``)
-   against the pattern library; when the window has no usable gap, its fused class goes out on
-   ``inertia_estimate`` only when it is trusted (fused margin >= ``image_min_margin``, a library width
-   matching the window's K2);
-3. one DiagnosticStatus "jident: inertia" on ``/diagnostics`` (REP 107), graded by the publishing
-   policy (:mod:`jident_ros.identify.verdict`; the table of docs/interfaces.md): OK for the nominal
-   class; WARN for a deviating class, a J1 between classes, or the image method disagreeing inside its
-   validity domain; ERROR when nothing could be diagnosed (refused input or estimate) or the pattern
-   library is unusable; a STALE status when no window arrived for ``stale_after_s``.  A J1 goes out
-   on ``inertia_estimate`` only when the data support it (plausible band, width consistency, no
-   ambiguous interval, the image method's class only above ``image_min_margin``).
+   against the pattern library; when the window has no usable gap, the fused verdict's class J1
+   (the margin-weighted vote of the five signals, :mod:`jident_ros.identify.fusion`) is what goes
+   out on ``inertia_estimate``;
+3. one DiagnosticStatus "jident: inertia" on ``/diagnostics`` (REP 107) per window: OK when the verdict's
+   class is the nominal J1; WARN when it deviates, lies between classes, or the image method's vote
+   disagrees with the gap; ERROR when the window could not be diagnosed (unreadable, or its length, sample
+   period or wheel radius differ from the configuration).
 
-Unless ``record`` is false, the windows (and with ``record_signals`` the drive's signals), the estimates
-and the statuses are recorded (jident_ros.bag.recorder.Recorder) into a rosbag2 bag
-``<record_root>/rosbag2_YYYY_MM_DD-HH_MM_SS/``, split by ``max_bag_size_bytes`` / ``max_bag_duration_s``,
-old bags deleted by ``retention_max_total_bytes`` / ``retention_max_age_s``, stamped with the wall clock,
-finalised on shutdown.  A status "jident: recorder" (1 Hz) reports it: OK while recording, ERROR with
-the reason (unusable root, disk full: the part written is finalised) and the dropped messages.
+Besides, once a second (steady clock), one status per task (:class:`jident_ros.nodes.diagnostics.Updater`):
+"jident_diagnostic: diagnosis" (windows seen/lost/mismatched; STALE when the input stopped),
+"jident_diagnostic: library" (ERROR naming the file and the problem when the pattern library is unusable;
+the gap estimates go on), "jident_diagnostic: recorder".
 
-    ros2 run jident_ros diagnostic --ros-args -p record_root:=out/bags
+A managed (lifecycle) node: parameters are declared and checked in the constructor; ``configure`` loads the
+pattern library, opens the recording and creates the topics; ``activate`` starts diagnosing; ``deactivate``
+ignores windows (counted); ``cleanup``/``shutdown`` finalise the recording.  ``ros2 run jident_ros
+diagnostic`` configures and activates it at once (autostart).
+
+With ``record_dir`` set, the windows (and with ``record_signals`` the drive's signals), the estimates
+and the statuses are logged to an MCAP recording (``self.recorder``, :class:`Recording`) closed on shutdown
+before the ROS context goes down (:mod:`jident_ros.nodes.runtime`).
+
+    ros2 run jident_ros diagnostic --ros-args -p record_dir:=out/run1
 """
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 
+from rclpy.clock import Clock, ClockType
+from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
+from std_msgs.msg import Float64, Float64MultiArray
+
 from jident_ros.identify.diagnosis import GAP_METHODS, detector_arguments, diagnose_window
-from jident_ros.identify.levels import ERROR, LEVEL_NAMES, OK, STALE
+from jident_ros.identify.levels import ERROR, LEVEL_NAMES, OK, STALE, WARN
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.identify.verdict import VerdictPolicy
-from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id
+from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater
 from jident_ros.nodes.params import (
+    RuntimeParameters,
     checked,
     declare_parameters,
     method_config,
     method_defaults,
+    model_schema,
+    node_options,
     require,
     system_config,
     system_defaults,
 )
 from jident_ros.nodes.ros_io import LayoutError, make_status, qos_latched, qos_signals, window_from_msg
 from jident_ros.nodes.runtime import main as run_main
-from jident_ros.parameters import DIAGNOSTIC
+from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, GAP_METHOD_CHOICES
+
+try:  # the recorder needs mcap and rosbags: without them the node runs on and says so
+    from jident_ros.bag.recorder import Recorder, RecorderError
+    _BAG_IMPORT_ERROR = None
+except ImportError as _exc:  # pragma: no cover - both are install requirements
+    Recorder, RecorderError, _BAG_IMPORT_ERROR = None, RuntimeError, _exc
 
 NODE_NAME = "jident_diagnostic"
+#: Each window's result.
 STATUS_NAME = "jident: inertia"
-RECORDER_STATUS_NAME = "jident: recorder"
+#: Periodic tasks (status names "jident_diagnostic: <task>").
+TASKS = ("diagnosis", "library", "recorder")
+#: Period of the task statuses, s (steady clock).
+TASK_PERIOD_S = 1.0
+#: Lost window ids kept for the status (the count is complete).
+LOST_IDS_SHOWN = 20
 
 DEFAULTS = DIAGNOSTIC
+
+
+def gap_method_of(value: str) -> str:
+    """The diagnosis' name of a gap_method parameter value (``none`` and ``off`` mean no gap estimate)."""
+    return "off" if value in ("none", "off") else value
 
 
 def validate(values: dict):
@@ -63,18 +92,25 @@ def validate(values: dict):
     method = method_config(values)
     require("p", cfg["p"], cfg["p"] in [float(p) for p in method.p_values],
             f"one of method.p_values {list(method.p_values)}")
-    require("gap_method", cfg["gap_method"], cfg["gap_method"] in GAP_METHODS,
-            "one of " + ", ".join(GAP_METHODS))
-    require("stale_after_s", cfg["stale_after_s"], cfg["stale_after_s"] >= 0, "a number >= 0 (0 = never)")
+    require("gap_method", cfg["gap_method"], cfg["gap_method"] in GAP_METHOD_CHOICES,
+            "one of " + ", ".join(GAP_METHOD_CHOICES[:-1]) + " (off is accepted for none)")
+    assert gap_method_of(cfg["gap_method"]) in GAP_METHODS
+    require("stale_after_s", cfg["stale_after_s"], 0 <= cfg["stale_after_s"] <= 86400,
+            "a number >= 0 and <= 86400 (0 = never)")
     for n in ("window_queue_depth", "signals_queue_depth"):
-        require(n, cfg[n], cfg[n] >= 1, "an integer >= 1")
+        require(n, cfg[n], 1 <= cfg[n] <= DIAGNOSTIC_PARAMS[n].max, f"an integer >= 1 and <= {DIAGNOSTIC_PARAMS[n].max}")
+    require("image_method", cfg["image_method"], cfg["image_method"] or gap_method_of(cfg["gap_method"]) != "off",
+            "true when gap_method is none (nothing would be identified)")
     for n in ("max_bag_size_bytes", "max_bag_duration_s", "retention_max_total_bytes", "retention_max_age_s"):
         require(n, cfg[n], cfg[n] >= 0, "a number >= 0 (0 = no limit)")
-    require("image_method", cfg["image_method"], cfg["image_method"] or cfg["gap_method"] != "off",
-            "true when gap_method is off (nothing would be identified)")
     for name, what in VerdictPolicy.from_params(cfg).problems():
         require(name, cfg[name], False, what)
     return cfg, system, method
+
+
+def schema() -> dict:
+    """Every parameter of the node: its own, the model's (system.yaml) and the method's (method.yaml)."""
+    return dict(DIAGNOSTIC_PARAMS, **model_schema(system_defaults()), **model_schema(method_defaults()))
 
 
 def library_path(cfg, system, method) -> Path:
@@ -83,241 +119,417 @@ def library_path(cfg, system, method) -> Path:
     return default_library_path(system, method)
 
 
-def _node_class():
-    from rclpy.node import Node
-    from std_msgs.msg import Float64, Float64MultiArray
+def id_ranges(ids) -> str:
+    """[3, 4, 5, 9] -> '3-5 9'."""
+    out, ids = [], sorted(ids)
+    i = 0
+    while i < len(ids):
+        j = i
+        while j + 1 < len(ids) and ids[j + 1] == ids[j] + 1:
+            j += 1
+        out.append(str(ids[i]) if i == j else f"{ids[i]}-{ids[j]}")
+        i = j + 1
+    return " ".join(out)
 
 
-    class DiagnosticNode(Node):
-        def __init__(self):
-            super().__init__(NODE_NAME)
-            defaults = dict(DEFAULTS, **system_defaults(), **method_defaults())
-            self.cfg, self.system, self.method = validate(declare_parameters(self, defaults))
-            c = self.cfg
-            self.policy = VerdictPolicy.from_params(c)
-            self.hardware_id = drive_hardware_id(self, c["hardware_id"])
-            self.nominal = float(self.system.motor.nominal_inertia_kgm2)
-            self.diag = DiagnosticsPublisher(self)
-            self.pub_estimate = self.create_publisher(Float64, "inertia_estimate", qos_latched())
-            self.bag = self.recorder = None
-            self.bag_topics = {}
-            self.windows_seen = 0
-            self.last_estimate = None
-            self._stale_reported_at = None
-            self._start_recording()
-            self.library, self.library_error = None, None
-            if c["image_method"]:
-                self._load_library()
-            self.sub_window = self.create_subscription(Float64MultiArray, "drive/window", self.on_window,
-                                                       qos_latched(c["window_queue_depth"]))
-            if self.bag is not None and c["record_signals"]:
-                sq = qos_signals(c["signals_queue_depth"])
-                # raw: the CDR bytes go to the recording as received, never decoded here
-                self.create_subscription(Float64MultiArray, "drive/signals",
-                                         lambda m: self._record("drive/signals", m), sq, raw=True)
-                deep = qos_latched(100)  # keep every case message while a window is being diagnosed
-                for name in ("drive/backlash_width", "drive/true_inertia"):
-                    self.create_subscription(Float64, name, lambda m, n=name: self._record(n, m), deep)
-                self.create_subscription(Float64MultiArray, "drive/case",
-                                         lambda m: self._record("drive/case", m), deep)
-            if self.recorder is not None or self.recorder_error:  # steady clock: no /clock can stop it
-                from rclpy.clock import Clock, ClockType
-                steady = Clock(clock_type=ClockType.STEADY_TIME)
-                # a chunk never waits long in memory (flush_age_s 0.5 s), even when messages pause
-                self.flush_timer = self.create_timer(0.25, self._flush_bag, clock=steady)
-                self.recorder_timer = self.create_timer(1.0, self._publish_recorder_status, clock=steady)
-            self._last_window_ns = None
-            self._start_ns = None
-            if c["stale_after_s"] > 0:
-                self.timer = self.create_timer(min(1.0, c["stale_after_s"] / 2), self.on_timer)
-            if self.library_error:
-                # repeated (1 Hz, steady clock) while it lasts: a subscriber that joins later still sees it
-                from rclpy.clock import Clock, ClockType
-                self._publish_library_error()
-                self.library_timer = self.create_timer(1.0, self._publish_library_error,
-                                                       clock=Clock(clock_type=ClockType.STEADY_TIME))
-            self.get_logger().info(
-                f"ready: windows from {self.resolve_topic_name('drive/window')}, J1 on "
-                f"{self.resolve_topic_name('inertia_estimate')} (p = {c['p']:g}, gap method {c['gap_method']}, "
-                f"image method {'on' if c['image_method'] else 'off'})")
+class Recording:
+    """The node's recorder behind one seam: ``write(name, msg)``, ``flush()``, ``close()`` (idempotent,
+    finalises the bag), ``status()``, over :class:`jident_ros.bag.recorder.Recorder` (rosbag2-named bags
+    under ``record_root``, split by size / duration, retention, wall-clock stamps that no /clock can move).
+    A failure (disk full) finalises what was written; ``error`` says it and further writes are counted as
+    dropped."""
 
-        # ----------------------------------------------------------------- library
-        def _load_library(self):
-            c = self.cfg
-            self.library_path = library_path(c, self.system, self.method)
-            log = self.get_logger()
-            self.library, self.library_error = load_pattern_library(
-                self.library_path, self.system, self.method, c["build_if_missing"], log=log.info, warn=log.warning)
-            if self.library_error:
-                log.error(self.library_error)
+    def __init__(self, node, cfg: dict, topics):
+        if Recorder is None:
+            raise RuntimeError(f"MCAP recording is unavailable here (jident_ros.bag.recorder: {_BAG_IMPORT_ERROR})")
+        self.node = node
+        self.recorder = Recorder(
+            cfg["record_root"] or None, bag_dir=cfg["record_dir"] or None,
+            max_bag_size_bytes=cfg["max_bag_size_bytes"], max_bag_duration_s=cfg["max_bag_duration_s"],
+            retention_max_total_bytes=cfg["retention_max_total_bytes"],
+            retention_max_age_s=cfg["retention_max_age_s"],
+            custom_data={"node": node.get_fully_qualified_name()}, log=node.get_logger().info)
+        self.bag_dir = str(self.recorder.bag_dir)
+        self.topics = {}
+        try:
+            for name, typ, qos in topics:
+                full = node.resolve_topic_name(name)
+                self.recorder.add_topic(full, typ, qos)
+                self.topics[name] = (full, typ)
+        except Exception:
+            self.close()
+            raise
 
-        def _publish_library_error(self):
-            try:
-                self._publish_status(make_status(STATUS_NAME, ERROR, self.library_error, self.hardware_id,
-                                                 [("pattern_library", str(self.library_path)),
-                                                  ("windows_seen", self.windows_seen)]))
-            except Exception as exc:
-                self.get_logger().error(f"status failed: {type(exc).__name__}: {exc}", once=True)
+    @property
+    def open(self) -> bool:
+        return not self.recorder.closed
 
-        # ----------------------------------------------------------------- recording
-        def _start_recording(self):
-            c = self.cfg
-            self.recorder, self.recorder_error = None, None
-            if not c["record"]:
+    @property
+    def error(self):
+        st = self.recorder.status()
+        return st["error"] or None
+
+    def write(self, name: str, msg) -> None:
+        if name in self.topics:
+            self.recorder.write(*self.topics[name], msg)   # never raises: drops are counted by reason
+
+    def flush(self) -> None:
+        self.recorder.maybe_flush()
+
+    def close(self) -> None:
+        self.recorder.close()
+
+    def status(self) -> dict:
+        st = self.recorder.status()
+        out = {k: st[k] for k in ("state", "bag", "file", "files", "bytes_written", "messages_written",
+                                  "messages_dropped", "splits", "bags_deleted", "bytes_deleted")}
+        out.update({f"dropped: {k}": v for k, v in st["drop_reasons"].items()})
+        return out
+
+
+class DiagnosticNode(LifecycleNode):
+    """The diagnostic node (composable: keyword arguments go to rclpy's LifecycleNode)."""
+
+    def __init__(self, **kwargs):
+        super().__init__(kwargs.pop("node_name", NODE_NAME), **node_options(kwargs))
+        self.schema = schema()
+        values = declare_parameters(self, self.schema, validate)
+        self.cfg, self.system, self.method = validate(values)
+        c = self.cfg
+        self.policy = VerdictPolicy.from_params(c)   # what may be published (identify/verdict.py)
+        self.hardware_id = drive_hardware_id(self, c["hardware_id"])
+        self.nominal = float(self.system.motor.nominal_inertia_kgm2)
+        s = self.system.sampling
+        self.window_length = s.samples_before_entry + s.samples_from_entry
+        self.steady = Clock(clock_type=ClockType.STEADY_TIME)
+        # state
+        self.active = False
+        self.recorder = None
+        self.recorder_error = None
+        self.library, self.library_error, self.library_path = None, None, None
+        self.pub_estimate = None
+        self.subs = []
+        self.windows_seen = self.windows_diagnosed = self.windows_mismatched = self.windows_inactive = 0
+        self.windows_lost = 0
+        self.lost_ids = []                 # the last LOST_IDS_SHOWN lost ids
+        self.lost_in_period = 0
+        self.last_window_id = None
+        self.window_id_restarts = 0
+        self.last_estimate = None
+        self.last_message = ""
+        self.last_input = None             # steady time (s) of the last drive/window or drive/progress
+        self.started = time.monotonic()
+        # /diagnostics: event statuses and the periodic tasks
+        self.diag = DiagnosticsPublisher(self)
+        self.diag.listeners.append(lambda msg: self._record("/diagnostics", msg))
+        self.updater = make_updater(self, TASK_PERIOD_S, self.diag)
+        self.updater.setHardwareID(self.hardware_id)
+        self.updater.add("diagnosis", self.diagnosis_status)
+        self.updater.add("library", self.library_status)
+        self.updater.add("recorder", self.recorder_status)
+        self.parameters = RuntimeParameters(self, self.schema, values, validate, self.on_parameters)
+
+    # ----------------------------------------------------------------- lifecycle
+    def autostart(self) -> None:
+        """Configure + activate (``ros2 run``, the launch file): the node works as an unmanaged one."""
+        self.trigger_configure()
+        self.trigger_activate()
+
+    def on_configure(self, state):
+        c = self.cfg
+        self._start_recording()
+        if c["image_method"]:
+            self._load_library()
+        self.pub_estimate = self.create_lifecycle_publisher(Float64, "inertia_estimate", qos_latched())
+        self.subs.append(self.create_subscription(Float64MultiArray, "drive/window", self.on_window,
+                                                  qos_latched(c["window_queue_depth"])))
+        # the windowing node's drive/progress: evidence that input flows between windows (STALE)
+        self.subs.append(self.create_subscription(Float64, "drive/progress", self.on_progress, qos_signals(10)))
+        if self.recorder is not None and c["record_signals"]:
+            sq = qos_signals(c["signals_queue_depth"])
+            # raw: the CDR bytes go to the recording as received, never decoded here
+            self.subs.append(self.create_subscription(Float64MultiArray, "drive/signals",
+                                                      lambda m: self._record("drive/signals", m), sq, raw=True))
+            deep = qos_latched(100)  # keep every case message while a window is being diagnosed
+            for name in ("drive/backlash_width", "drive/true_inertia"):
+                self.subs.append(self.create_subscription(Float64, name, lambda m, n=name: self._record(n, m), deep))
+            self.subs.append(self.create_subscription(Float64MultiArray, "drive/case",
+                                                      lambda m: self._record("drive/case", m), deep))
+        if self.recorder is not None:  # a chunk never waits long in memory (flush age 0.5 s), even when messages pause
+            self.flush_timer = self.create_timer(0.25, self._flush_bag, clock=self.steady)
+        self.updater.force_update()
+        self.get_logger().info(
+            f"ready: windows from {self.resolve_topic_name('drive/window')}, J1 on "
+            f"{self.resolve_topic_name('inertia_estimate')} (p = {c['p']:g}, gap method {c['gap_method']}, "
+            f"image method {'on' if c['image_method'] else 'off'})")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state):
+        self.active = True
+        return super().on_activate(state)
+
+    def on_deactivate(self, state):
+        self.active = False
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state):
+        self.active = False
+        for sub in self.subs:
+            self.destroy_subscription(sub)
+        self.subs = []
+        if self.pub_estimate is not None:
+            self.destroy_lifecycle_publisher(self.pub_estimate)
+            self.pub_estimate = None
+        self.close()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state):
+        self.active = False
+        self.close()
+        return TransitionCallbackReturn.SUCCESS
+
+    def close(self) -> None:
+        """Finalise the recording (idempotent; the runtime calls it before the context goes down)."""
+        rec, self.recorder = self.recorder, None
+        if rec is not None:
+            rec.close()
+            self.recorder_error = rec.error or self.recorder_error
+            self._closed_recorder = rec
+
+    # ----------------------------------------------------------------- parameters at run time
+    def on_parameters(self, changed: dict) -> None:
+        """Apply accepted changes: p, gap_method, image_method (loads the library when switched on),
+        stale_after_s, hardware_id take effect with the next window / status."""
+        self.cfg.update(changed)
+        self.policy = VerdictPolicy.from_params(self.cfg)
+        if "hardware_id" in changed:
+            self.hardware_id = drive_hardware_id(self, changed["hardware_id"])
+            self.updater.setHardwareID(self.hardware_id)
+        if changed.get("image_method") and self.library is None and self.library_error is None:
+            self._load_library()
+        self.get_logger().info("parameters changed: " + ", ".join(f"{k} = {v!r}" for k, v in sorted(changed.items())))
+
+    # ----------------------------------------------------------------- library
+    def _load_library(self):
+        c = self.cfg
+        self.library_path = library_path(c, self.system, self.method)
+        log = self.get_logger()
+        self.library, self.library_error = load_pattern_library(
+            self.library_path, self.system, self.method, c["build_if_missing"], log=log.info, warn=log.warning)
+        if self.library_error:
+            log.error(self.library_error)
+
+    def library_status(self, stat):
+        if not self.cfg["image_method"]:
+            stat.summary(OK, "image method off: no pattern library used")
+        elif self.library_error:
+            stat.summary(ERROR, self.library_error + " (gap estimates go on)")
+        elif self.library is None:
+            stat.summary(OK, "pattern library not loaded yet (node not configured)")
+        else:
+            lib = self.library
+            stat.summary(OK, f"pattern library {self.library_path}: {len(lib.classes_kgm2)} J1 classes x "
+                         f"{len(lib.widths_m)} widths x p {list(lib.p_values)}")
+        stat.add("pattern_library", str(self.library_path or ""))
+        stat.add("image_method", self.cfg["image_method"])
+        return stat
+
+    # ----------------------------------------------------------------- recording
+    def _start_recording(self):
+        c = self.cfg
+        if not c["record"]:
+            return
+        if c["record_dir"]:
+            self.get_logger().warning("record_dir is deprecated: use record_root (bags get rosbag2 names under it)")
+        topics = [("drive/window", "std_msgs/msg/Float64MultiArray", qos_latched(self.cfg["window_queue_depth"])),
+                  ("inertia_estimate", "std_msgs/msg/Float64", qos_latched()),
+                  ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", self.diag.pub.qos_profile)]
+        if self.cfg["record_signals"]:
+            topics += [("drive/signals", "std_msgs/msg/Float64MultiArray",
+                        qos_signals(self.cfg["signals_queue_depth"])),
+                       ("drive/backlash_width", "std_msgs/msg/Float64", qos_latched()),
+                       ("drive/true_inertia", "std_msgs/msg/Float64", qos_latched()),
+                       ("drive/case", "std_msgs/msg/Float64MultiArray", qos_latched())]
+        try:
+            self.recorder = Recording(self, c, topics)
+            self.get_logger().info(f"recording to {self.recorder.bag_dir}")
+        except (RecorderError, RuntimeError, ValueError, OSError) as exc:
+            self.recorder_error = f"not recording: {exc}"
+            self.get_logger().error(self.recorder_error)
+
+    def _record(self, name, msg):
+        if self.recorder is not None:
+            self.recorder.write(name, msg)
+            if self.recorder.error:
+                self.close()
+
+    def _flush_bag(self):
+        if self.recorder is not None:
+            self.recorder.flush()
+            if self.recorder.error:
+                self.close()
+
+    def recorder_status(self, stat):
+        rec = self.recorder or getattr(self, "_closed_recorder", None)
+        if self.recorder_error:
+            stat.summary(ERROR, self.recorder_error)
+        elif not self.cfg["record"]:
+            stat.summary(OK, "not recording (record is false)")
+        elif self.recorder is not None:
+            stat.summary(OK, f"recording to {self.recorder.bag_dir}")
+        else:
+            stat.summary(OK, "recording closed")
+        if rec is not None:
+            for k, v in rec.status().items():
+                stat.add(k, v)
+        return stat
+
+    # ----------------------------------------------------------------- windows
+    def on_progress(self, msg):
+        self.last_input = time.monotonic()
+
+    def on_window(self, msg):
+        t_recv = time.perf_counter()
+        self.last_input = time.monotonic()
+        try:
+            self._record("drive/window", msg)
+            if not self.active:
+                self.windows_inactive += 1
                 return
-            log = self.get_logger()
+            self.windows_seen += 1
+            self._diagnose(msg, t_recv)
+        except Exception as exc:  # never die on a window: report, go on
+            text = f"window could not be diagnosed: internal error {type(exc).__name__}: {exc}"
+            self.get_logger().error(text)
             try:
-                from jident_ros.bag.recorder import Recorder, RecorderError
-            except ImportError as exc:  # mcap / rosbags (the 'mcap' extra) missing: say so, run on
-                self.recorder_error = f"not recording: {exc} (the recorder needs mcap and rosbags)"
-                log.error(self.recorder_error)
-                return
-            if c["record_dir"]:
-                log.warning("record_dir is deprecated: use record_root (bags get rosbag2 names under it)")
-            try:
-                self.recorder = Recorder(
-                    c["record_root"] or None, bag_dir=c["record_dir"] or None,
-                    max_bag_size_bytes=c["max_bag_size_bytes"], max_bag_duration_s=c["max_bag_duration_s"],
-                    retention_max_total_bytes=c["retention_max_total_bytes"],
-                    retention_max_age_s=c["retention_max_age_s"],
-                    custom_data={"node": self.get_fully_qualified_name()}, log=log.info)
-                topics = [("drive/window", "std_msgs/msg/Float64MultiArray", qos_latched(c["window_queue_depth"])),
-                          ("inertia_estimate", "std_msgs/msg/Float64", qos_latched()),
-                          ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", self.diag.pub.qos_profile)]
-                if c["record_signals"]:
-                    topics += [("drive/signals", "std_msgs/msg/Float64MultiArray", qos_signals(c["signals_queue_depth"])),
-                               ("drive/backlash_width", "std_msgs/msg/Float64", qos_latched()),
-                               ("drive/true_inertia", "std_msgs/msg/Float64", qos_latched()),
-                               ("drive/case", "std_msgs/msg/Float64MultiArray", qos_latched())]
-                for name, typ, qos in topics:
-                    full = self.resolve_topic_name(name)
-                    self.recorder.add_topic(full, typ, qos)
-                    self.bag_topics[name] = (full, typ)
-                log.info(f"recording to {self.recorder.bag_dir}")
-            except (RecorderError, ValueError) as exc:
-                self.recorder_error = f"not recording: {exc}"
-                log.error(self.recorder_error)
-                self._close_bag()
-            self.bag = self.recorder
+                self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id))
+            except Exception:
+                pass
 
-        def _record(self, name, msg):
-            if self.recorder is not None:  # wall-clock stamp, never raises: drops are counted
-                self.recorder.write(*self.bag_topics[name], msg)
+    def _publish_estimate(self, j1):
+        m = Float64(data=float(j1))
+        self.pub_estimate.publish(m)
+        self._record("inertia_estimate", m)
+        self.last_estimate = float(j1)
 
-        def _flush_bag(self):
-            if self.recorder is not None:
-                self.recorder.maybe_flush()
+    def _count_window_id(self, window_id: int) -> None:
+        """Lost windows: a jump of window_id (the windowing node numbers its windows from 1); a smaller id
+        is a restart of the windowing node (counted, not a loss)."""
+        last = self.last_window_id
+        if last is not None and window_id > last + 1:
+            lost = range(last + 1, window_id)
+            self.windows_lost += len(lost)
+            self.lost_in_period += len(lost)
+            self.lost_ids = (self.lost_ids + list(lost)[-LOST_IDS_SHOWN:])[-LOST_IDS_SHOWN:]
+            self.get_logger().warning(f"{len(lost)} window(s) lost before window {window_id} (ids "
+                                      f"{id_ranges(list(lost)[-LOST_IDS_SHOWN:])})", throttle_duration_sec=1.0)
+        elif last is not None and window_id <= last:
+            self.window_id_restarts += 1
+        self.last_window_id = window_id
 
-        def _publish_recorder_status(self):
-            try:
-                if self.recorder_error:
-                    self._publish_status(make_status(RECORDER_STATUS_NAME, ERROR, self.recorder_error,
-                                                     self.hardware_id, [("record_root", self.cfg["record_root"])]))
-                    return
-                if self.recorder is None:
-                    return
-                st = self.recorder.status()
-                level = ERROR if st["state"] == "error" else OK
-                if level == OK and self.get_clock().now().nanoseconds == 0:
-                    return  # use_sim_time and no /clock yet: an OK status can wait for a stamp
-                text = (f"recording to {st['bag']}" if level == OK
-                        else f"recording stopped: {st['error']}; {st['messages_dropped']} message(s) dropped")
-                values = [(k, st[k]) for k in ("bag", "file", "files", "bytes_written", "messages_written",
-                                               "messages_dropped", "splits", "bags_deleted", "bytes_deleted")]
-                values += [(f"dropped: {k}", v) for k, v in st["drop_reasons"].items()]
-                self._publish_status(make_status(RECORDER_STATUS_NAME, level, text, self.hardware_id, values))
-            except Exception as exc:
-                self.get_logger().error(f"recorder status failed: {type(exc).__name__}: {exc}", once=True)
+    def check_window(self, win) -> tuple[list, list]:
+        """(errors, warnings) of a window against the configuration: its length, its header's sample
+        period and wheel radius (errors: the diagnosis would be wrong), its K2 (a warning when it lies
+        outside the library's widths and the image method is on)."""
+        errors, warnings = [], []
+        if len(win) != self.window_length:
+            errors.append(f"length {len(win)} samples, configuration {self.window_length} "
+                          "(sampling.samples_before_entry + samples_from_entry)")
+        ts = self.system.sampling.sample_period_s
+        if not (math.isfinite(win.sample_period_s) and abs(win.sample_period_s - ts) <= 1e-9 * ts):
+            errors.append(f"sample period {win.sample_period_s!r} s, configuration {ts!r} s (sampling.sample_period_s)")
+        r = self.system.load.wheel_radius_m
+        if not (math.isfinite(win.wheel_radius_m) and abs(win.wheel_radius_m - r) <= 1e-9 * r):
+            errors.append(f"wheel radius {win.wheel_radius_m!r} m, configuration {r!r} m (load.wheel_radius_m)")
+        widths = self.system.grid.backlash_widths_m
+        k2 = win.backlash_width_m
+        if not (math.isfinite(k2) and k2 > 0):
+            errors.append(f"backlash width K2 {k2!r} m: not a width")
+        elif self.cfg["image_method"] and not (min(widths) * (1 - 1e-9) <= k2 <= max(widths) * (1 + 1e-9)):
+            warnings.append(f"K2 {k2:g} m outside the library's widths {min(widths):g} .. {max(widths):g} m "
+                            "(grid.backlash_widths_m): the image method uses the nearest")
+        return errors, warnings
 
-        def _close_bag(self):
-            rec, self.recorder = self.recorder, None
-            if rec is not None:
-                rec.close()
+    def _diagnose(self, msg, t_recv):
+        c = self.cfg
+        try:
+            win = window_from_msg(msg)
+        except LayoutError as exc:
+            text = f"window could not be diagnosed: unreadable drive/window message: {exc}"
+            self.get_logger().error(text)
+            self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id))
+            return
+        self._count_window_id(int(win.window_id))
+        errors, warnings = self.check_window(win)
+        if errors:
+            self.windows_mismatched += 1
+            text = f"window {win.window_id} not diagnosed: it does not match the configuration: " + "; ".join(errors)
+            self.get_logger().error(text, throttle_duration_sec=1.0)
+            self.last_message = text
+            self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id,
+                                          [("window_id", win.window_id), ("entry_time_s", win.entry_time_s),
+                                           ("mismatch", "; ".join(errors))]))
+            return
+        # the gap estimate goes out on inertia_estimate (on_estimate) before the image method runs
+        d = diagnose_window(win.as_dict(), win.entry_index, win.backlash_width_m, win.wheel_radius_m,
+                            win.sample_period_s, library=self.library if c["image_method"] else None,
+                            system=self.system, method=self.method, p=c["p"],
+                            gap_method=gap_method_of(c["gap_method"]), image_method=c["image_method"],
+                            nominal_kgm2=self.nominal, library_error=self.library_error or "",
+                            window_id=win.window_id, entry_time_s=win.entry_time_s,
+                            on_estimate=self._publish_estimate, started_at=t_recv, policy=self.policy,
+                            **detector_arguments(win))
+        level, message, values = d.level, d.message, list(d.values)
+        if warnings:
+            self.windows_mismatched += 1
+            level = max(level, WARN)
+            message = f"{message}; {'; '.join(warnings)}"
+            values.append(("mismatch", "; ".join(warnings)))
+        if d.diagnosed:
+            self.windows_diagnosed += 1
+            self.get_logger().info(f"window {win.window_id} (entry t = {win.entry_time_s:.4f} s): {message} "
+                                   f"[{LEVEL_NAMES[level]}]")
+        else:
+            self.get_logger().error(message)
+        self.last_message = message
+        self.diag.publish(make_status(STATUS_NAME, level, message, self.hardware_id, values))
 
-        def close(self):
-            self._close_bag()
-
-        # ----------------------------------------------------------------- windows
-        def on_window(self, msg):
-            t_recv = time.perf_counter()
-            try:
-                self._record("drive/window", msg)
-                self._last_window_ns = self.get_clock().now().nanoseconds
-                self._stale_reported_at = None
-                self.windows_seen += 1
-                self._diagnose(msg, t_recv)
-            except Exception as exc:  # never die on a window: report, go on
-                text = f"window could not be diagnosed: internal error {type(exc).__name__}: {exc}"
-                self.get_logger().error(text)
-                try:
-                    self._publish_status(make_status(STATUS_NAME, ERROR, text, self.hardware_id))
-                except Exception:
-                    pass
-
-        def _publish_estimate(self, j1):
-            m = Float64(data=float(j1))
-            self.pub_estimate.publish(m)
-            self._record("inertia_estimate", m)
-            self.last_estimate = float(j1)
-
-        def _publish_status(self, status):
-            arr = self.diag.publish(status)
-            self._record("/diagnostics", arr)
-
-        def _diagnose(self, msg, t_recv):
-            c = self.cfg
-            try:
-                win = window_from_msg(msg)
-            except LayoutError as exc:
-                text = f"window could not be diagnosed: unreadable drive/window message: {exc}"
-                self.get_logger().error(text)
-                self._publish_status(make_status(STATUS_NAME, ERROR, text, self.hardware_id))
-                return
-            # the gap estimate goes out on inertia_estimate (on_estimate) before the image method runs
-            d = diagnose_window(win.as_dict(), win.entry_index, win.backlash_width_m, win.wheel_radius_m,
-                                win.sample_period_s, library=self.library, system=self.system, method=self.method,
-                                p=c["p"], gap_method=c["gap_method"], image_method=c["image_method"],
-                                nominal_kgm2=self.nominal, library_error=self.library_error or "",
-                                window_id=win.window_id, entry_time_s=win.entry_time_s,
-                                on_estimate=self._publish_estimate, started_at=t_recv, policy=self.policy,
-                                **detector_arguments(win))
-            if d.diagnosed:
-                self.get_logger().info(f"window {win.window_id} (entry t = {win.entry_time_s:.4f} s): {d.message} "
-                                       f"[{LEVEL_NAMES[d.level]}]")
-            else:
-                self.get_logger().error(d.message)
-            self._publish_status(make_status(STATUS_NAME, d.level, d.message, self.hardware_id, d.values))
-
-        # ----------------------------------------------------------------- stale
-        def on_timer(self):
-            try:
-                now = self.get_clock().now().nanoseconds
-                if now == 0:
-                    return  # use_sim_time and no /clock yet
-                if self._start_ns is None:
-                    self._start_ns = now
-                last = self._last_window_ns if self._last_window_ns is not None else self._start_ns
-                stale = self.cfg["stale_after_s"]
-                age = (now - last) / 1e9
-                if age < stale:
-                    return
-                if self._stale_reported_at is not None and (now - self._stale_reported_at) / 1e9 < stale:
-                    return
-                self._stale_reported_at = now
-                what = ("no window received yet" if self._last_window_ns is None
-                        else f"no window for {age:.1f} s")
-                vals = [("stale_after_s", stale), ("windows_seen", self.windows_seen)]
-                if self.last_estimate is not None:
-                    vals.append(("last_estimate_kgm2", self.last_estimate))
-                self._publish_status(make_status(STATUS_NAME, STALE, what, self.hardware_id, vals))
-            except Exception as exc:
-                self.get_logger().error(f"stale check failed: {type(exc).__name__}: {exc}")
-
-    return DiagnosticNode
+    # ----------------------------------------------------------------- periodic status
+    def diagnosis_status(self, stat):
+        """"jident_diagnostic: diagnosis": STALE when no drive/window and no drive/progress arrived for
+        stale_after_s (steady clock: the input stopped, REP 107), WARN when windows were lost (window_id
+        gaps) in the period, else OK."""
+        now = time.monotonic()
+        stale = self.cfg["stale_after_s"]
+        age = now - (self.last_input if self.last_input is not None else self.started)
+        if not self.active:
+            stat.summary(OK, "inactive (lifecycle): windows are not diagnosed")
+        elif stale > 0 and age >= stale:
+            stat.summary(STALE, "no input received yet (no drive/window, no drive/progress)" if self.last_input is None
+                         else f"no input for {age:.1f} s (no drive/window, no drive/progress)")
+        elif self.lost_in_period:
+            stat.summary(WARN, f"{self.lost_in_period} window(s) lost in the last period (window_id gaps; "
+                         f"{self.windows_lost} in all, last ids {id_ranges(self.lost_ids)})")
+        else:
+            stat.summary(OK, f"{self.windows_diagnosed} window(s) diagnosed" +
+                         (f"; last: {self.last_message}" if self.last_message else ""))
+        self.lost_in_period = 0
+        for k, v in (("windows_seen", self.windows_seen), ("windows_diagnosed", self.windows_diagnosed),
+                     ("windows_lost", self.windows_lost), ("lost_window_ids", id_ranges(self.lost_ids)),
+                     ("windows_mismatched", self.windows_mismatched),
+                     ("windows_ignored_inactive", self.windows_inactive),
+                     ("window_id_restarts", self.window_id_restarts),
+                     ("last_window_id", -1 if self.last_window_id is None else self.last_window_id),
+                     ("input_age_s", age), ("stale_after_s", stale), ("p", self.cfg["p"]),
+                     ("gap_method", self.cfg["gap_method"]), ("image_method", self.cfg["image_method"])):
+            stat.add(k, v)
+        if self.last_estimate is not None:
+            stat.add("last_estimate_kgm2", self.last_estimate)
+        return stat
 
 
 def main(args=None) -> int:
-    return run_main(lambda: _node_class()(), NODE_NAME, args)
+    return run_main(lambda argv: DiagnosticNode(), NODE_NAME, args)
 
 
 if __name__ == "__main__":

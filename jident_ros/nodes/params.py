@@ -1,4 +1,5 @@
-"""Parameters of the nodes: declared in ONE place from a dict of defaults, validated at start.
+"""Parameters of the nodes: declared in ONE place from the schema (jident_ros/parameters.py), typed and
+described (ParameterDescriptor), validated at start and at every change at run time.
 
 The model and method sections of ``config/system.yaml`` and ``config/method.yaml`` are declared as dotted
 parameters (``load.wheel_radius_m``, ``method.p_values``, ...) with the package's files as defaults, so the
@@ -10,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 from jident_ros.config import (
     ConfigError,
@@ -20,6 +21,7 @@ from jident_ros.config import (
     method_config_from_dict,
     system_config_from_dict,
 )
+from jident_ros.parameters import Param
 
 #: Sections of the shared configuration files (config/system.yaml, config/method.yaml).
 SYSTEM_SECTIONS = ("motor", "load", "sampling", "grid")
@@ -83,27 +85,195 @@ def method_defaults() -> dict:
     return out
 
 
+# --------------------------------------------------------------------------- schema
+
+#: Units of the model's and the method's field names (suffix -> unit), longest suffix first.
+_UNITS = (("_nms_per_rad", "N m s/rad"), ("_nm_per_rad", "N m/rad"), ("_ns_per_m", "N s/m"),
+          ("_n_per_m", "N/m"), ("_pa_sn", "Pa s^n"), ("_kgm2", "kg m^2"), ("_m_s", "m/s"), ("_m2", "m^2"),
+          ("_rad", "rad"), ("_hz", "Hz"), ("_pu", "per unit"), ("_kg", "kg"), ("_m", "m"), ("_s", "s"),
+          ("_v", "V"), ("_n", "N"))
+
+
+def describe_field(name: str) -> str:
+    """One-line description of a dotted model/method parameter from its field name and unit suffix:
+    ``load.wheel_radius_m`` -> ``load: wheel radius, m (config/system.yaml; fixed at start)``."""
+    section, _, field = name.partition(".")
+    unit = ""
+    for suffix, u in _UNITS:
+        if field.endswith(suffix):
+            field, unit = field[: -len(suffix)], u
+            break
+    text = f"{section}: {field.replace('.', ' ').replace('_', ' ')}" + (f", {unit}" if unit else "")
+    source = "config/method.yaml" if section in METHOD_SECTIONS else "config/system.yaml"
+    return f"{text} ({source}; fixed at start)"
+
+
+def model_schema(values: Mapping[str, Any]) -> dict:
+    """Params of the dotted model/method parameters (read-only, described from their names)."""
+    return {name: Param(v, describe_field(name)) for name, v in values.items()}
+
+
+def parameter_type(default: Any) -> int:
+    """rcl_interfaces ParameterType of a default value."""
+    from rcl_interfaces.msg import ParameterType as T
+    if isinstance(default, bool):
+        return T.PARAMETER_BOOL
+    if isinstance(default, int):
+        return T.PARAMETER_INTEGER
+    if isinstance(default, float):
+        return T.PARAMETER_DOUBLE
+    if isinstance(default, str):
+        return T.PARAMETER_STRING
+    if isinstance(default, (list, tuple)):
+        first = default[0] if default else 0.0
+        if isinstance(first, str):
+            return T.PARAMETER_STRING_ARRAY
+        if isinstance(first, bool):
+            return T.PARAMETER_BOOL_ARRAY
+        if isinstance(first, int) and all(isinstance(x, int) for x in default):
+            return T.PARAMETER_INTEGER_ARRAY
+        return T.PARAMETER_DOUBLE_ARRAY
+    raise TypeError(f"no ROS parameter type for {default!r}")
+
+
+def descriptor(name: str, param: Param):
+    """rcl_interfaces/ParameterDescriptor of a schema entry: type, description, range, read_only."""
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+    from rcl_interfaces.msg import ParameterType as T
+    typ = parameter_type(param.default)
+    constraints = param.range_text()
+    d = ParameterDescriptor(name=name, type=typ, description=param.description, read_only=param.read_only,
+                            additional_constraints=constraints)
+    if param.min is not None or param.max is not None:
+        lo = -math.inf if param.min is None else param.min
+        hi = math.inf if param.max is None else param.max
+        if typ == T.PARAMETER_DOUBLE:
+            d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+        elif typ == T.PARAMETER_INTEGER:
+            big = 2 ** 63 - 1
+            d.integer_range = [IntegerRange(from_value=int(max(lo, -big)), to_value=int(min(hi, big)), step=1)]
+    return d
+
+
 # --------------------------------------------------------------------------- declaration
 
+#: Parameters rclpy and its helpers declare on every node (not ours, never refused).
+BUILTIN_PARAMETERS = ("use_sim_time", "start_type_description_service")
+BUILTIN_PREFIXES = ("qos_overrides.", "diagnostic_updater.")
 
-def declare_parameters(node, defaults: Mapping[str, Any]) -> dict:
-    """Declare every parameter of ``defaults`` (dynamically typed: validation is ours) and return
-    {name: value}.  An override naming no parameter of this node is refused (a typo), unless it
-    belongs to a shared configuration section this node does not use."""
-    from rcl_interfaces.msg import ParameterDescriptor
-    node.declare_parameters("", [(name, _ros_value(v), ParameterDescriptor(dynamic_typing=True))
-                                 for name, v in defaults.items()])
-    values = {name: node.get_parameter(name).value for name in defaults}
-    used = {name.split(".")[0] for name in defaults}
-    for name, param in sorted(getattr(node, "_parameter_overrides", {}).items()):
-        if name in defaults or name == "use_sim_time" or name.startswith("qos_overrides."):
+
+def node_options(kwargs: dict) -> dict:
+    """Node keyword arguments of a jident node: the parameter overrides (command line, params files,
+    ``parameter_overrides=``) are declared as given, so :func:`declare_parameters` can read them
+    through the public API, check them and declare them again with their types and descriptors."""
+    kwargs = dict(kwargs)
+    kwargs["automatically_declare_parameters_from_overrides"] = True
+    kwargs.setdefault("allow_undeclared_parameters", False)
+    return kwargs
+
+
+def coerce(name: str, value: Any, param: Param) -> Any:
+    """A given value in the type of its default (ParameterError naming it otherwise).  ``gap_method``:
+    a command line reads ``off`` as YAML false; false means ``off`` there."""
+    if name == "gap_method" and value is False:
+        value = "off"
+    value = check(name, value, param.default)
+    what = param.range_text()
+    if param.choices and value not in param.choices:
+        raise ParameterError(f"parameter {name}: must be {what}, got {value!r}")
+    if param.min is not None or param.max is not None:
+        for i, x in enumerate(value if isinstance(value, list) else [value]):
+            low = param.min is not None and (x <= param.min if param.min_exclusive else x < param.min)
+            high = param.max is not None and x > param.max
+            if low or high:
+                where = f"{name}[{i}]" if isinstance(value, list) else name
+                raise ParameterError(f"parameter {where}: must be {what}, got {x!r}")
+    return value
+
+
+def declare_parameters(node, schema: Mapping[str, Param], validate: Callable[[dict], Any] | None = None) -> dict:
+    """Read the given values of every parameter of ``schema`` (defaults for those not given), coerce
+    them to their types, ``validate`` them, then declare each with its typed descriptor; return
+    {name: value}.
+
+    The node must have been built with :func:`node_options` (overrides declared as given).  A given
+    parameter that names no parameter of this node is refused (a typo), unless it belongs to a shared
+    configuration section this node does not use (then it is undeclared: it has no effect here)."""
+    given = {name: node.get_parameter(name).value for name in node.list_parameters([], 0).names}
+    used = {name.split(".")[0] for name in schema}
+    for name in sorted(given):
+        if name in schema or name in BUILTIN_PARAMETERS or name.startswith(BUILTIN_PREFIXES):
             continue
         section = name.split(".")[0]
         if section in SHARED_SECTIONS and section not in used:
-            continue  # e.g. method.yaml given to every node of a launch file
+            node.undeclare_parameter(name)  # e.g. method.yaml given to every node of a launch file
+            continue
         raise ParameterError(f"parameter {name}: unknown parameter of node {node.get_name()} "
-                             f"(value {param.value!r})")
+                             f"(value {given[name]!r})")
+    values = {name: coerce(name, given.get(name, p.default), p) for name, p in schema.items()}
+    if validate is not None:
+        validate(values)
+    for name, p in schema.items():
+        if node.has_parameter(name):
+            node.undeclare_parameter(name)
+        node.declare_parameter(name, _ros_value(values[name]), descriptor(name, p), ignore_override=True)
     return values
+
+
+class RuntimeParameters:
+    """Changes of a running node's parameters, after rclpy's parameter callbacks:
+
+    * pre-set: coerce what a command line gives (an integer for a float, ``gap_method:=off`` read as
+      false) to the declared type;
+    * on-set: check the types and ``validate`` the whole set of values with the change (the same checks
+      as at start); a bad value is refused with the one-line reason (SetParametersResult);
+    * post-set: ``apply`` the accepted changes ({name: value}) to the running node.
+
+    Read-only parameters (a change could not take effect) are refused by rclpy before these run."""
+
+    def __init__(self, node, schema: Mapping[str, Param], values: dict, validate: Callable[[dict], Any],
+                 apply: Callable[[dict], None]):
+        self.node, self.schema, self.values = node, schema, dict(values)
+        self.validate, self.apply = validate, apply
+        node.add_pre_set_parameters_callback(self._pre_set)
+        node.add_on_set_parameters_callback(self._on_set)
+        node.add_post_set_parameters_callback(self._post_set)
+
+    def _pre_set(self, parameters):
+        from rclpy.parameter import Parameter
+        out = []
+        for prm in parameters:
+            p = self.schema.get(prm.name)
+            if p is not None and not p.read_only:
+                try:
+                    v = coerce(prm.name, prm.value, p)
+                    prm = Parameter(prm.name, value=_ros_value(v))
+                except ParameterError:
+                    pass  # refused with the reason by _on_set
+            out.append(prm)
+        return out
+
+    def _on_set(self, parameters):
+        from rcl_interfaces.msg import SetParametersResult
+        candidate = dict(self.values)
+        try:
+            for prm in parameters:
+                if prm.name in self.schema:
+                    candidate[prm.name] = coerce(prm.name, prm.value, self.schema[prm.name])
+            self.validate(candidate)
+        except ParameterError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _post_set(self, parameters):
+        changed = {prm.name: coerce(prm.name, prm.value, self.schema[prm.name])
+                   for prm in parameters if prm.name in self.schema}
+        self.values.update(changed)
+        if changed:
+            try:
+                self.apply(changed)
+            except Exception as exc:  # never die on a parameter change: say so
+                self.node.get_logger().error(f"applying {sorted(changed)} failed: {type(exc).__name__}: {exc}")
 
 
 def check(name: str, value: Any, default: Any) -> Any:

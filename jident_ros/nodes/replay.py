@@ -12,19 +12,25 @@ differences divided by ``rate`` (0 = as fast as the windowing node reads: ``fast
 messages and at most ``max_lead_s`` drive seconds ahead of its ``drive/progress``, see ProgressGate).
 With ``publish_clock``, /clock follows the ``t`` column of each drive/signals batch (recorded
 /clock messages are not replayed), exactly as the simulator publishes it.
-
-A recording its recorder never finalised (killed) is replayed by salvaging it on the fly (one warning
-line says so); a missing, non-MCAP or damaged recording is one line naming the file and the problem, exit
-status 2.
 """
 from __future__ import annotations
 
 import importlib
+import itertools
 import sys
 import time
 from pathlib import Path
 
-from jident_ros.nodes.params import ParameterError, checked, declare_parameters, require
+from rclpy.clock import Clock as RosClock
+from rclpy.clock import ClockType
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.serialization import deserialize_message
+from rclpy.utilities import remove_ros_args
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Float64MultiArray
+
+from jident_ros.nodes.params import ParameterError, checked, declare_parameters, node_options, require
 from jident_ros.nodes.ros_io import (
     LayoutError,
     array_from_multiarray,
@@ -36,7 +42,7 @@ from jident_ros.nodes.ros_io import (
 )
 from jident_ros.nodes.runtime import ProgressGate
 from jident_ros.nodes.runtime import main as run_main
-from jident_ros.parameters import REPLAY
+from jident_ros.parameters import REPLAY, REPLAY_PARAMS
 
 NODE_NAME = "jident_replay"
 
@@ -67,140 +73,183 @@ def validate(values: dict, argv_bag: str | None):
 
 
 def _positional(args) -> str | None:
-    from rclpy.utilities import remove_ros_args
     rest = remove_ros_args(args)[1:]
     if len(rest) > 1:
         raise ParameterError(f"parameter bag: expected one recording argument, got {rest!r}")
     return rest[0] if rest else None
 
 
-def _node_class(args):
-
-    from rclpy.node import Node
-    from rclpy.serialization import deserialize_message
-    from rosgraph_msgs.msg import Clock
-    from std_msgs.msg import Float64MultiArray
+def schema() -> dict:
+    return dict(REPLAY_PARAMS)
 
 
-    class ReplayNode(Node):
-        def __init__(self):
-            super().__init__(NODE_NAME)
-            self.cfg = validate(declare_parameters(self, DEFAULTS), _positional(args))
-            self.exit_code = 0
-            try:
-                from jident_ros.bag.recording import RecordingError, read_bag
-            except ImportError as exc:
-                raise ParameterError(f"parameter bag: cannot read recordings here (jident_ros.bag.recording: {exc})")
-            self.read_bag, self.RecordingError = read_bag, RecordingError
-            self.bag = str(Path(self.cfg["bag"]).expanduser())
-            try:
-                read_bag(self.bag, raw=True)  # checks the files (named, MCAP) before anything is published
-            except RecordingError as exc:
-                raise ParameterError(f"recording {exc}") from None
-            self.pubs = {}
-            self.pub_clock = (self.create_publisher(Clock, "/clock", qos_clock())
-                              if self.cfg["publish_clock"] else None)
-            self._imp = importlib
-            self.get_logger().info(f"replaying {self.bag} at rate {self.cfg['rate']:g}")
+class ReplayNode(Node):
+    """The replay node (composable: keyword arguments go to rclpy's Node; ``bag`` may be given as
+    ``argv_bag``).  Replays from a timer: a state machine WAITING -> REPLAYING -> DONE; at rate > 0
+    every tick publishes the messages due by the wall clock, at 0 one message per tick of
+    ``fast_sleep_s`` when the windowing node's progress allows it (:class:`ProgressGate`)."""
 
-        def _publisher(self, rel, msg_type):
-            pub = self.pubs.get(rel)
-            if pub is None:
-                mod, cls = TYPES.get(msg_type, (None, None))
-                if mod is None:
-                    return None
-                typ = getattr(self._imp.import_module(mod), cls)
-                qos = qos_signals() if rel == "drive/signals" else qos_latched()
-                pub = self.pubs[rel] = self.create_publisher(typ, rel, qos)
-            return pub
+    def __init__(self, argv_bag: str | None = None, **kwargs):
+        super().__init__(kwargs.pop("node_name", NODE_NAME), **node_options(kwargs))
+        self.schema = schema()
+        self.cfg = validate(declare_parameters(self, self.schema, lambda v: validate(v, argv_bag)), argv_bag)
+        self.exit_code = 0
+        self.done = False
+        try:
+            from jident_ros.bag.recording import RecordingError, read_bag  # the bag layer: optional mcap dependency
+        except ImportError as exc:
+            raise ParameterError(f"parameter bag: cannot read recordings here (jident_ros.bag.recording: {exc})")
+        self.RecordingError = RecordingError
+        self.bag = str(Path(self.cfg["bag"]).expanduser())
+        try:
+            # a killed recording is salvaged on the fly (one warning); the first message is read here so that a
+            # missing, non-MCAP or damaged file is one line naming it before anything is published (exit 2)
+            messages = iter(read_bag(self.bag, raw=True, on_salvage=self.get_logger().warning))
+            first = next(messages, None)
+        except RecordingError as exc:
+            raise ParameterError(f"recording {exc}") from None
+        except Exception as exc:
+            raise ParameterError(f"parameter bag: {self.bag}: {exc}") from None
+        self.messages = itertools.chain([] if first is None else [first], messages)
+        self.pubs = {}
+        self.pub_clock = (self.create_publisher(Clock, "/clock", qos_clock())
+                          if self.cfg["publish_clock"] else None)
+        self.counts = {}
+        self.pending = None
+        self.gate = None
+        self.wall0 = self.rec0 = None
+        self.state = "waiting"
+        c = self.cfg
+        self.wait_deadline = time.monotonic() + c["wait_timeout_s"]
+        self.settle_until = 0.0
+        period = c["fast_sleep_s"] if c["rate"] == 0 else 0.005
+        self.timer = self.create_timer(max(period, 1e-4), self.on_tick,
+                                       clock=RosClock(clock_type=ClockType.STEADY_TIME))
+        self.get_logger().info(f"replaying {self.bag} at rate {c['rate']:g}")
 
-        def _match(self, topic):
-            for rel in self.cfg["topics"]:
-                if topic == "/" + rel or topic.endswith("/" + rel):
-                    return rel
-            return None
-
-        def run(self):
-            c = self.cfg
-            if c["wait_for_subscribers"] > 0:
-                pub = self._publisher("drive/signals", "std_msgs/msg/Float64MultiArray")
-                deadline = time.monotonic() + c["wait_timeout_s"]
-                while self.context.ok() and pub.get_subscription_count() < c["wait_for_subscribers"]:
-                    if time.monotonic() > deadline:
-                        self.get_logger().error("no subscriber of drive/signals; giving up")
-                        self.exit_code = 1
-                        return
-                    time.sleep(0.05)
-                time.sleep(0.2)
-            gate = (ProgressGate(self, c["max_lead_s"], c["progress_timeout_s"])
-                    if c["rate"] == 0 and c["max_lead_s"] > 0 else None)
-            try:
-                self._replay(gate)
-            except self.RecordingError as exc:  # damaged on the way: one line, status 2
-                raise ParameterError(f"recording {exc}") from None
-            finally:
-                if gate is not None:
-                    gate.close()
-
-        def _replay(self, gate):
-            c = self.cfg
-            wall0 = rec0 = None
-            counts = {}
-            for topic, msg_type, log_ns, raw in self.read_bag(self.bag, raw=True,
-                                                              on_salvage=self.get_logger().warning):
-                if not self.context.ok():
-                    return
-                rel = self._match(topic)
-                if rel is None:
-                    continue
-                pub = self._publisher(rel, msg_type)
-                if pub is None:
-                    self.get_logger().warning(f"{topic}: type {msg_type} is not replayed", once=True)
-                    continue
-                if c["rate"] > 0:
-                    if wall0 is None:
-                        wall0, rec0 = time.monotonic(), log_ns
-                    delay = wall0 + (log_ns - rec0) / 1e9 / c["rate"] - time.monotonic()
-                    if delay > 0:
-                        time.sleep(delay)
-                elif c["fast_sleep_s"] > 0:
-                    time.sleep(c["fast_sleep_s"])
-                t_last = None
-                if rel == "drive/signals" and (gate is not None or self.pub_clock is not None):
-                    t_last = self._last_t(deserialize_message(bytes(raw), Float64MultiArray))
-                if gate is not None and t_last is not None:
-                    gate.wait(t_last)
-                pub.publish(bytes(raw))
-                counts[rel] = counts.get(rel, 0) + 1
-                if t_last is not None and self.pub_clock is not None:
-                    self._publish_clock(t_last)
-            if self.context.ok():
-                self.get_logger().info("replayed " + ", ".join(f"{n} x {k}" for k, n in counts.items())
-                                       if counts else "nothing to replay: no matching topic")
-                from rclpy.duration import Duration
-                for pub in self.pubs.values():
-                    try:
-                        pub.wait_for_all_acked(Duration(seconds=5.0))
-                    except Exception:
-                        time.sleep(0.5)
-
-        @staticmethod
-        def _last_t(msg):
-            """Drive time of a drive/signals batch's last sample, or None (bad layout, no t)."""
-            try:
-                return last_sample_time(*array_from_multiarray(msg))
-            except LayoutError:
+    def _publisher(self, rel, msg_type):
+        pub = self.pubs.get(rel)
+        if pub is None:
+            mod, cls = TYPES.get(msg_type, (None, None))
+            if mod is None:
                 return None
+            typ = getattr(importlib.import_module(mod), cls)
+            qos = qos_signals() if rel == "drive/signals" else qos_latched()
+            pub = self.pubs[rel] = self.create_publisher(typ, rel, qos)
+        return pub
 
-        def _publish_clock(self, t: float):
-            self.pub_clock.publish(clock_msg(t))
+    def _match(self, topic):
+        for rel in self.cfg["topics"]:
+            if topic == "/" + rel or topic.endswith("/" + rel):
+                return rel
+        return None
 
-    return ReplayNode
+    # ----------------------------------------------------------------- replaying (timer)
+    def on_tick(self):
+        try:
+            if self.state == "waiting":
+                self._tick_waiting()
+            elif self.state == "replaying":
+                self._tick_replaying()
+        except self.RecordingError as exc:  # damaged on the way: one line naming the file, exit status 2
+            print(f"replay: recording {exc}", file=sys.stderr, flush=True)
+            self.exit_code = 2
+            self._finish()
+        except Exception as exc:  # a bad message: one line, exit status 1
+            self.get_logger().error(f"replay of {self.bag} failed: {type(exc).__name__}: {exc}")
+            self.exit_code = 1
+            self._finish()
+
+    def _tick_waiting(self):
+        c = self.cfg
+        want = c["wait_for_subscribers"]
+        if want > 0:
+            pub = self._publisher("drive/signals", "std_msgs/msg/Float64MultiArray")
+            if pub.get_subscription_count() < want:
+                if time.monotonic() > self.wait_deadline:
+                    self.get_logger().error("no subscriber of drive/signals; giving up")
+                    self.exit_code = 1
+                    self._finish()
+                return
+            self.settle_until = time.monotonic() + 0.2
+        self.state = "replaying"
+        if c["rate"] == 0 and c["max_lead_s"] > 0:
+            self.gate = ProgressGate(self, c["max_lead_s"], c["progress_timeout_s"])
+
+    def _next(self):
+        """The next message to replay: (rel, pub, log_ns, raw, t_last) or None at the end."""
+        for topic, msg_type, log_ns, raw in self.messages:
+            rel = self._match(topic)
+            if rel is None:
+                continue
+            pub = self._publisher(rel, msg_type)
+            if pub is None:
+                self.get_logger().warning(f"{topic}: type {msg_type} is not replayed", once=True)
+                continue
+            t_last = None
+            if rel == "drive/signals" and (self.gate is not None or self.pub_clock is not None):
+                t_last = self._last_t(deserialize_message(bytes(raw), Float64MultiArray))
+            return rel, pub, log_ns, raw, t_last
+        return None
+
+    def _tick_replaying(self):
+        c = self.cfg
+        now = time.monotonic()
+        if now < self.settle_until:
+            return
+        while True:
+            if self.pending is None:
+                self.pending = self._next()
+                if self.pending is None:
+                    self._finish()
+                    return
+            rel, pub, log_ns, raw, t_last = self.pending
+            if c["rate"] > 0:
+                if self.wall0 is None:
+                    self.wall0, self.rec0 = now, log_ns
+                if self.wall0 + (log_ns - self.rec0) / 1e9 / c["rate"] > now:
+                    return                              # not due yet
+            elif self.gate is not None and t_last is not None and not self.gate.allows(t_last):
+                return                                  # the windowing node is behind: next tick
+            pub.publish(bytes(raw))
+            self.counts[rel] = self.counts.get(rel, 0) + 1
+            if t_last is not None and self.pub_clock is not None:
+                self.pub_clock.publish(clock_msg(t_last))
+            self.pending = None
+            if c["rate"] == 0:
+                return                                  # one message per tick of fast_sleep_s
+
+    def _finish(self):
+        self.timer.cancel()
+        if self.gate is not None:
+            self.gate.close()
+            self.gate = None
+        if self.exit_code == 0:
+            self.get_logger().info("replayed " + ", ".join(f"{n} x {k}" for k, n in self.counts.items())
+                                   if self.counts else "nothing to replay: no matching topic")
+        self.state = "done"
+        self.done = True
+
+    def finish(self, stopping) -> None:
+        """After the spin: give reliable readers the last messages."""
+        for pub in self.pubs.values():
+            try:
+                pub.wait_for_all_acked(Duration(seconds=5.0))
+            except Exception:
+                time.sleep(0.5)
+
+    @staticmethod
+    def _last_t(msg):
+        """Drive time of a drive/signals batch's last sample, or None (bad layout, no t)."""
+        try:
+            return last_sample_time(*array_from_multiarray(msg))
+        except LayoutError:
+            return None
 
 
 def main(args=None) -> int:
     args = sys.argv if args is None else args
-    return run_main(lambda: _node_class(args)(), NODE_NAME, args)
+    return run_main(lambda argv: ReplayNode(argv_bag=_positional(argv)), NODE_NAME, args)
 
 
 if __name__ == "__main__":

@@ -1,33 +1,73 @@
-"""Running a node: init, build, spin, close (Ctrl-C and SIGTERM end it cleanly), and the back-pressure
-gate of the streaming nodes."""
+"""Running a node: init, build, spin, stop — the shutdown path — and the back-pressure gate of the
+streaming nodes.
+
+The shutdown path (issue 15, item 1).  rclpy's own signal handling shuts the ROS context down from the
+signal handler, while the executor may still be waiting on it: under load that race crashed a recording
+node (SIGSEGV in ``rcl_trigger_guard_condition``) before the recording was finalised.  Here rclpy is
+initialised with ``SignalHandlerOptions.NO``; SIGINT and SIGTERM only set a flag (:class:`StopFlag`), the
+spin loop wakes at least every ``SPIN_PERIOD_S`` and sees it, and then, in this order and in the main
+thread: ``node.close()`` (finalises the recording), ``node.destroy_node()``, the executor's and the
+context's shutdown.  Whatever signal arrives and whenever (during start-up, the library build, a
+window's diagnosis or the teardown itself), nothing is torn down under a running callback.
+"""
 from __future__ import annotations
 
 import math
+import re
+import signal
 import sys
 import time
+from pathlib import Path
 from typing import Any, Callable
+
+import yaml
 
 from jident_ros.nodes.params import EXIT_BAD_PARAMETER, ParameterError
 from jident_ros.nodes.ros_io import qos_signals
 
+#: The spin loop looks at the stop flag at least this often, s.
+SPIN_PERIOD_S = 0.1
 
-def context_ok(node) -> bool:
-    return node.context.ok()
+
+class StopFlag:
+    """SIGINT/SIGTERM handlers that only record the signal (the spin loop acts on it)."""
+
+    def __init__(self):
+        self.signum = None
+        self._previous = {}
+
+    def install(self) -> "StopFlag":
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._previous[sig] = signal.signal(sig, self._handler)
+        return self
+
+    def _handler(self, signum, frame):
+        if self.signum is None:
+            self.signum = signum
+
+    @property
+    def set(self) -> bool:
+        return self.signum is not None
+
+    def restore(self) -> None:
+        for sig, prev in self._previous.items():
+            signal.signal(sig, prev)
+        self._previous.clear()
 
 
 class ProgressGate:
     """Back-pressure for a node that streams ``drive/signals`` as fast as it can (simulator and replay
-    at rate 0): it publishes a batch ending at drive time t only when the windowing node has reported,
+    at rate 0): a batch ending at drive time t may go out only when the windowing node has reported,
     on ``drive/progress``, that it has read up to t - ``max_lead_s``.
 
-    The first batch's time is the baseline (nothing read yet).  With no progress message for
-    ``timeout_s`` while waiting (no windowing node, or one without progress), the gate opens for good
-    and says so once in the log: the stream never stalls for ever.  Call :meth:`close` when done (the
-    gate spins the node on an executor of its own while it waits).
+    Non-blocking: the streaming timer asks :meth:`allows` and publishes nothing on that tick when the
+    answer is no (the node keeps spinning: progress messages and parameter requests are served).  The
+    first batch's time is the baseline (nothing read yet).  With no progress message for ``timeout_s``
+    while waiting (no windowing node, or one without progress), the gate opens for good and says so once
+    in the log: the stream never stalls for ever.
     """
 
     def __init__(self, node, max_lead_s: float, timeout_s: float):
-        from rclpy.executors import SingleThreadedExecutor
         from std_msgs.msg import Float64
 
         self.node, self.max_lead_s, self.timeout_s = node, float(max_lead_s), float(timeout_s)
@@ -35,9 +75,8 @@ class ProgressGate:
         self.progress_wall = None       # monotonic time of the last progress message
         self.waited_s = 0.0
         self.active = True
+        self._wait_start = None         # monotonic start of the current wait
         self.sub = node.create_subscription(Float64, "drive/progress", self._on_progress, qos_signals(10))
-        self.executor = SingleThreadedExecutor(context=node.context)
-        self.executor.add_node(node)
 
     def _on_progress(self, msg):
         t = float(msg.data)
@@ -45,93 +84,142 @@ class ProgressGate:
             self.progress_t = t
             self.progress_wall = time.monotonic()
 
-    def wait(self, t_last: float) -> None:
-        """Block until the windowing node has read up to ``t_last - max_lead_s`` (or the gate opened)."""
+    def allows(self, t_last: float) -> bool:
+        """True when a batch ending at ``t_last`` may go out now (or the gate has opened for good)."""
         if not self.active:
-            return
+            return True
         if self.progress_t is None:
             self.progress_t = t_last       # baseline: the stream starts here
-        target = t_last - self.max_lead_s
-        if self.progress_t >= target:
-            return
-        t0 = time.monotonic()
-        while self.node.context.ok() and self.progress_t < target:
-            try:
-                self.executor.spin_once(timeout_sec=0.01)
-            except Exception:   # the context went down (Ctrl-C, SIGTERM) during the wait
-                return
-            last = t0 if self.progress_wall is None else max(self.progress_wall, t0)
-            if time.monotonic() - last > self.timeout_s:
-                self.node.get_logger().warning(
-                    f"no drive/progress from a windowing node for {self.timeout_s:g} s (read up to t = "
-                    f"{self.progress_t:.4f} s, streamed to t = {t_last:.4f} s): back-pressure off, pacing by "
-                    "fast_sleep_s only")
-                self.active = False
-                break
-        self.waited_s += time.monotonic() - t0
+        if self.progress_t >= t_last - self.max_lead_s:
+            self._end_wait()
+            return True
+        now = time.monotonic()
+        if self._wait_start is None:
+            self._wait_start = now
+        last = self._wait_start if self.progress_wall is None else max(self.progress_wall, self._wait_start)
+        if now - last > self.timeout_s:
+            self.node.get_logger().warning(
+                f"no drive/progress from a windowing node for {self.timeout_s:g} s (read up to t = "
+                f"{self.progress_t:.4f} s, streamed to t = {t_last:.4f} s): back-pressure off, pacing by "
+                "fast_sleep_s only")
+            self.active = False
+            self._end_wait()
+            return True
+        return False
+
+    def _end_wait(self):
+        if self._wait_start is not None:
+            self.waited_s += time.monotonic() - self._wait_start
+            self._wait_start = None
 
     def close(self) -> None:
-        self.executor.remove_node(self.node)
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_subscription(self.sub)
+        self._end_wait()
+        if self.sub is not None:
+            self.node.destroy_subscription(self.sub)
+            self.sub = None
 
 
-def spin(node, period_s: float = 0.25) -> None:
-    """Spin until the context is shut down (Ctrl-C, SIGTERM, rclpy.shutdown).
+# --------------------------------------------------------------------------- params files
 
-    Instead of ``rclpy.spin``: a plain wait could, rarely (seen about once in ten SIGTERMs with
-    traffic), miss the wake-up of rclpy's signal handling and never return; waking every
-    ``period_s`` to look at the context makes the shutdown certain.  A shutdown that races the wait
-    ends the loop like any other."""
-    from rclpy.executors import SingleThreadedExecutor
-    executor = SingleThreadedExecutor(context=node.context)
-    executor.add_node(node)
-    try:
-        while node.context.ok():
-            try:
-                executor.spin_once(timeout_sec=period_s)
-            except Exception:
-                # SIGINT/SIGTERM may shut the context down between the check above and the wait
-                # inside spin_once (RCLError "the given context is not valid", seen once in CI):
-                # that is a clean stop, anything else is not
-                if node.context.ok():
-                    raise
-                break
-    finally:
-        executor.shutdown(timeout_sec=1.0)
+_RCL_LOCATION = re.compile(r",? at /[^,]*\.c:\d+")
 
 
-def main(factory: Callable[[], Any], prog: str, args=None) -> int:
-    """Run a node: init, build (``factory``), spin (or its ``run()``), close; returns the exit status.
+def check_params_files(args) -> None:
+    """ParameterError (one line naming the file and the problem) for a ``--params-file`` that rcl
+    would refuse with a multi-line error before any of our code runs: missing, unreadable, not YAML,
+    or not the ROS 2 params-file layout (``<node name>: {ros__parameters: {...}}``)."""
+    args = list(args or [])
+    files = [args[i + 1] for i, a in enumerate(args[:-1]) if a == "--params-file"]
+    for f in files:
+        path = Path(f)
+        try:
+            doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise ParameterError(f"--params-file {f}: cannot read it ({exc.strerror or exc})") from None
+        except yaml.YAMLError as exc:
+            where = getattr(exc, "problem_mark", None)
+            at = f" at line {where.line + 1}" if where is not None else ""
+            raise ParameterError(f"--params-file {f}: not YAML{at} ({getattr(exc, 'problem', None) or exc})") \
+                from None
+        if not isinstance(doc, dict) or not doc:
+            raise ParameterError(f"--params-file {f}: not a ROS 2 params file (expected "
+                                 "'<node name>: {ros__parameters: {...}}', got "
+                                 f"{type(doc).__name__ if doc is not None else 'an empty file'})")
+        for key, section in doc.items():
+            if not isinstance(section, dict) or "ros__parameters" not in section:
+                raise ParameterError(f"--params-file {f}: not a ROS 2 params file (section {key!r} has no "
+                                     "ros__parameters)")
 
-    * ParameterError -> its one line on stderr, status 2;
-    * Ctrl-C / SIGTERM -> clean shutdown, status 0 (``node.close()`` runs in every case);
-    * the node may set ``exit_code``.
+
+def rcl_error_line(exc: Exception) -> str:
+    """Rcl's error text on one line, without the C source locations."""
+    text = " ".join(str(exc).split())
+    return _RCL_LOCATION.sub("", text)
+
+
+# --------------------------------------------------------------------------- main
+
+
+def spin(node, executor, stop: StopFlag, period_s: float = SPIN_PERIOD_S) -> None:
+    """Spin until a signal arrives, the node is ``done`` or the context is shut down."""
+    while not stop.set and not getattr(node, "done", False) and node.context.ok():
+        executor.spin_once(timeout_sec=period_s)
+
+
+def main(factory: Callable[..., Any], prog: str, args=None) -> int:
+    """Run a node: init, build (``factory(args)``), spin, stop; returns the exit status.
+
+    * a bad ``--params-file``, a bad argument of rcl, or a ParameterError -> one line on stderr, status 2;
+    * SIGINT / SIGTERM at any moment -> the shutdown path of the module docstring, status 0;
+    * the node may set ``done`` (the spin ends) and ``exit_code``; ``finish()`` runs after the spin
+      when the node ended by itself (e.g. waiting for the last batches to be acknowledged).
     """
     import rclpy
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
     args = sys.argv if args is None else args
-    rclpy.init(args=args)
-    node = None
+    stop = StopFlag().install()
+    node = executor = None
     code = 0
     try:
-        node = factory()
-        if hasattr(node, "run"):
-            node.run()
-        else:
-            spin(node)
-        code = int(getattr(node, "exit_code", 0) or 0)
-    except ParameterError as exc:
-        print(f"{prog}: {exc}", file=sys.stderr, flush=True)
-        code = EXIT_BAD_PARAMETER
-    except (KeyboardInterrupt, ExternalShutdownException):
-        code = int(getattr(node, "exit_code", 0) or 0) if node is not None else 0
+        try:
+            check_params_files(args)
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        except ParameterError as exc:
+            print(f"{prog}: {exc}", file=sys.stderr, flush=True)
+            return EXIT_BAD_PARAMETER
+        except Exception as exc:  # RCLError: rcl refused the arguments before our code ran
+            print(f"{prog}: {rcl_error_line(exc)}", file=sys.stderr, flush=True)
+            return EXIT_BAD_PARAMETER
+        try:
+            node = factory(args)
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+            if hasattr(node, "autostart"):
+                node.autostart()
+            spin(node, executor, stop)
+            if not stop.set and hasattr(node, "finish"):
+                node.finish(lambda: stop.set)
+            code = int(getattr(node, "exit_code", 0) or 0)
+        except ParameterError as exc:
+            print(f"{prog}: {exc}", file=sys.stderr, flush=True)
+            code = EXIT_BAD_PARAMETER
+        except Exception as exc:
+            if node is None and type(exc).__module__.startswith("rclpy"):  # e.g. a bad remapping
+                print(f"{prog}: {rcl_error_line(exc)}", file=sys.stderr, flush=True)
+                code = EXIT_BAD_PARAMETER
+            else:
+                raise
     finally:
-        if node is not None:
-            try:
-                if hasattr(node, "close"):
-                    node.close()
-            finally:
+        try:
+            if node is not None and hasattr(node, "close"):
+                node.close()                # the recording is finalised here, the context still up
+        finally:
+            if executor is not None:
+                executor.shutdown(timeout_sec=1.0)
+            if node is not None:
                 node.destroy_node()
-        rclpy.try_shutdown()
+            rclpy.try_shutdown()
+            stop.restore()
     return code

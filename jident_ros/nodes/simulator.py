@@ -12,7 +12,8 @@ Publishes (topic names relative, see docs/interfaces.md):
 Every case is preceded by ``gap_samples`` steady-state samples; the drive clock runs on without a
 break.  ``real_time_factor`` paces the drive clock against the wall clock (0 = as fast as the windowing
 node reads: a ``fast_sleep_s`` pause per batch and at most ``max_lead_s`` drive seconds ahead of its
-``drive/progress``, :class:`jident_ros.nodes.ProgressGate`).
+``drive/progress``, :class:`jident_ros.nodes.runtime.ProgressGate`), from a timer: parameter requests
+are answered while it streams.
 
     ros2 run jident_ros simulator --ros-args -p inertias_kgm2:="[1.16, 1.073]" -p real_time_factor:=0.0
 """
@@ -21,27 +22,34 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from rclpy.clock import Clock as RosClock
+from rclpy.clock import ClockType
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Float64, Float64MultiArray
 
 from jident_ros.nodes.params import (
     ParameterError,
     checked,
     declare_parameters,
+    model_schema,
+    node_options,
     require,
     system_config,
     system_defaults,
 )
 from jident_ros.nodes.ros_io import clock_msg, multiarray_from_array, qos_clock, qos_latched, qos_signals
-from jident_ros.nodes.runtime import ProgressGate, spin
+from jident_ros.nodes.runtime import ProgressGate
 from jident_ros.nodes.runtime import main as run_main
-from jident_ros.parameters import SIMULATOR
+from jident_ros.parameters import SIMULATOR, SIMULATOR_PARAMS
 from jident_ros.sim import Case, check_stable, paper_grid_cases, simulate_grid
 from jident_ros.stream.detector import embed_windows
-from jident_ros.stream.layout import DEFAULT_CHANNELS
+from jident_ros.stream.layout import CASE_LABEL, DEFAULT_CHANNELS
 
 NODE_NAME = "jident_simulator"
 #: Wall-clock pause after announcing a case whose backlash width differs from the previous one, s.
 CASE_SETTLE_S = 0.05
-CASE_LABEL = "case_index,inertia_kgm2,backlash_width_m,consistency_pa_sn,entry_time_s"
 
 DEFAULTS = SIMULATOR
 
@@ -68,21 +76,14 @@ def build_cases(cfg: dict, system) -> list:
 
 def validate(values: dict):
     cfg = checked(values, DEFAULTS, DEFAULTS)
+    P = SIMULATOR_PARAMS
     require("cases", cfg["cases"], cfg["cases"] in ("product", "zip", "grid"), "one of product, zip, grid")
-    require("gap_samples", cfg["gap_samples"], cfg["gap_samples"] >= 0, "an integer >= 0")
-    require("batch_size", cfg["batch_size"], cfg["batch_size"] >= 1, "an integer >= 1")
-    require("real_time_factor", cfg["real_time_factor"], cfg["real_time_factor"] >= 0,
-            "a number >= 0 (0 = as fast as possible)")
-    require("fast_sleep_s", cfg["fast_sleep_s"], 0 <= cfg["fast_sleep_s"] <= 1, "a number in [0, 1]")
-    require("max_lead_s", cfg["max_lead_s"], cfg["max_lead_s"] >= 0, "a number >= 0 (0 = no back-pressure)")
-    require("progress_timeout_s", cfg["progress_timeout_s"], cfg["progress_timeout_s"] > 0, "a number > 0")
-    require("start_time_s", cfg["start_time_s"], cfg["start_time_s"] >= 0, "a number >= 0")
-    require("repeat", cfg["repeat"], cfg["repeat"] >= 0, "an integer >= 0 (0 = forever)")
-    require("wait_for_subscribers", cfg["wait_for_subscribers"], cfg["wait_for_subscribers"] >= 0,
-            "an integer >= 0")
-    require("wait_timeout_s", cfg["wait_timeout_s"], cfg["wait_timeout_s"] > 0, "a number > 0")
-    require("signals_queue_depth", cfg["signals_queue_depth"], cfg["signals_queue_depth"] >= 1,
-            "an integer >= 1")
+    for name in ("gap_samples", "batch_size", "real_time_factor", "fast_sleep_s", "max_lead_s", "progress_timeout_s",
+                 "start_time_s", "repeat", "wait_for_subscribers", "wait_timeout_s", "signals_queue_depth"):
+        p, v = P[name], cfg[name]
+        ok = ((p.min is None or (v > p.min if p.min_exclusive else v >= p.min))
+              and (p.max is None or v <= p.max))
+        require(name, v, ok, ("an integer " if isinstance(p.default, int) else "a number ") + p.range_text())
     system = system_config(values)
     cases = build_cases(cfg, system)
     try:  # inputs the simulation cannot integrate (an overload, a step too coarse for J1): one line, not NaN batches
@@ -92,145 +93,191 @@ def validate(values: dict):
     return cfg, system, cases
 
 
-def _node_class():
-    from rclpy.node import Node
-    from rosgraph_msgs.msg import Clock
-    from std_msgs.msg import Float64, Float64MultiArray
+def schema() -> dict:
+    """Every parameter of the node: its own (jident_ros/parameters.py) and the model's (system.yaml)."""
+    return dict(SIMULATOR_PARAMS, **model_schema(system_defaults()))
 
 
-    class SimulatorNode(Node):
-        def __init__(self):
-            super().__init__(NODE_NAME)
-            defaults = dict(DEFAULTS, **system_defaults())
-            self.cfg, self.system, self.cases = validate(declare_parameters(self, defaults))
-            self.exit_code = 0
-            c = self.cfg
-            self.pub_signals = self.create_publisher(Float64MultiArray, "drive/signals",
-                                                     qos_signals(c["signals_queue_depth"]))
-            self.pub_clock = self.create_publisher(Clock, "/clock", qos_clock()) if c["publish_clock"] else None
-            self.pub_inertia = self.create_publisher(Float64, "drive/true_inertia", qos_latched())
-            self.pub_width = self.create_publisher(Float64, "drive/backlash_width", qos_latched())
-            # every case stays available to late subscribers while the node lives
-            self.pub_case = self.create_publisher(Float64MultiArray, "drive/case",
-                                                  qos_latched(min(len(self.cases), 1000)))
-            t0 = time.perf_counter()
+class SimulatorNode(Node):
+    """The simulator node (composable: keyword arguments go to rclpy's Node).
+
+    Streams from a timer (never a blocking loop: parameter requests are answered while it streams): a
+    state machine WAITING (for ``wait_for_subscribers``) -> STREAMING -> DONE; at real_time_factor > 0
+    every tick publishes the batches due by the wall clock, at 0 one batch per tick of ``fast_sleep_s``
+    when the windowing node's progress allows it (:class:`ProgressGate`)."""
+
+    def __init__(self, **kwargs):
+        super().__init__(kwargs.pop("node_name", NODE_NAME), **node_options(kwargs))
+        self.schema = schema()
+        values = declare_parameters(self, self.schema, validate)
+        self.cfg, self.system, self.cases = validate(values)
+        self.exit_code = 0
+        self.done = False
+        c = self.cfg
+        self.pub_signals = self.create_publisher(Float64MultiArray, "drive/signals",
+                                                 qos_signals(c["signals_queue_depth"]))
+        self.pub_clock = self.create_publisher(Clock, "/clock", qos_clock()) if c["publish_clock"] else None
+        self.pub_inertia = self.create_publisher(Float64, "drive/true_inertia", qos_latched())
+        self.pub_width = self.create_publisher(Float64, "drive/backlash_width", qos_latched())
+        # every case stays available to late subscribers while the node lives
+        self.pub_case = self.create_publisher(Float64MultiArray, "drive/case",
+                                              qos_latched(min(len(self.cases), 1000)))
+        t0 = time.perf_counter()
+        try:
             self.windows = simulate_grid(self.system, self.cases)
-            self.stream, self.entry_rows = embed_windows(self.windows, c["gap_samples"], 0.0, DEFAULT_CHANNELS)
-            self.per_case = c["gap_samples"] + len(self.windows.t)
-            self.ts = self.windows.sample_period_s
-            self.get_logger().info(
-                f"simulated {len(self.cases)} case(s) in {time.perf_counter() - t0:.2f} s; publishing "
-                f"{c['batch_size']}-sample batches at real-time factor {c['real_time_factor']:g} "
-                f"on {self.resolve_topic_name('drive/signals')}")
-            self._multiarray = multiarray_from_array
+        except ValueError as exc:  # the model cannot run these cases (e.g. an overload): one line
+            raise ParameterError(f"parameter consistencies_pa_sn/inertias_kgm2/backlash_widths_m: {exc}") from None
+        self.stream, self.entry_rows = embed_windows(self.windows, c["gap_samples"], 0.0, DEFAULT_CHANNELS)
+        self.per_case = c["gap_samples"] + len(self.windows.t)
+        self.ts = self.windows.sample_period_s
+        self.get_logger().info(
+            f"simulated {len(self.cases)} case(s) in {time.perf_counter() - t0:.2f} s; publishing "
+            f"{c['batch_size']}-sample batches at real-time factor {c['real_time_factor']:g} "
+            f"on {self.resolve_topic_name('drive/signals')}")
+        self.gate = None
+        self.batches = self._batches()
+        self.pending = None          # the next batch (t_last, kind, payload) not yet published
+        self.passes = 0
+        self.state = "waiting"
+        self.wait_deadline = time.monotonic() + c["wait_timeout_s"]
+        self.settle_until = 0.0
+        self.wall0 = None
+        steady = RosClock(clock_type=ClockType.STEADY_TIME)
+        period = c["fast_sleep_s"] if c["real_time_factor"] == 0 else min(0.01, c["batch_size"] * self.ts /
+                                                                            max(c["real_time_factor"], 1e-9))
+        self.timer = self.create_timer(max(period, 1e-4), self.on_tick, clock=steady)
+        if c["wait_for_subscribers"] > 0:
+            self.get_logger().info(f"waiting for {c['wait_for_subscribers']} subscriber(s) of "
+                                   f"{self.resolve_topic_name('drive/signals')}")
 
-        # ----------------------------------------------------------------- main loop
-        def run(self):
-            c = self.cfg
-            if not self._wait_for_subscribers():
-                return
-            n_rows = self.stream.shape[0]
-            # back-pressure from the windowing node at real_time_factor 0
-            gate = (ProgressGate(self, c["max_lead_s"], c["progress_timeout_s"])
-                    if c["real_time_factor"] == 0 and c["max_lead_s"] > 0 else None)
-            try:
-                self._stream(n_rows, gate)
-            finally:
-                if gate is not None:
-                    gate.close()
-            if not self.context.ok():
-                return
-            self._drain()
-            if not c["exit_when_done"]:
-                spin(self)
+    # ----------------------------------------------------------------- streaming (timer)
+    def _batches(self):
+        """(kind, payload) items in order: ('case', (i, case, entry_t)), ('settle', None), ('batch', rows)."""
+        c = self.cfg
+        sample0 = 0
+        n_rows = self.stream.shape[0]
+        while c["repeat"] == 0 or self.passes < c["repeat"]:
+            for i, case in enumerate(self.cases):
+                base = sample0 + i * self.per_case
+                entry_t = c["start_time_s"] + (base + c["gap_samples"] + self.windows.entry_index) * self.ts
+                yield "case", (i, case, entry_t)
+                if i > 0 and case.backlash_width_m != self.cases[i - 1].backlash_width_m:
+                    # the windowing node must hear the new K2 (drive/backlash_width, another topic:
+                    # no ordering with drive/signals) before this case's samples: the simulated
+                    # stream jumps between cases, and with the old K2 that jump could look like an entry
+                    yield "settle", None
+                rows = self.stream[i * self.per_case:(i + 1) * self.per_case].copy()
+                rows[:, 0] = c["start_time_s"] + (base + np.arange(rows.shape[0])) * self.ts
+                for s in range(0, rows.shape[0], c["batch_size"]):
+                    yield "batch", rows[s:s + c["batch_size"]]
+            sample0 += n_rows
+            self.passes += 1
 
-        def _stream(self, n_rows: int, gate) -> None:
-            c = self.cfg
-            wall0 = time.monotonic()
-            passes = 0
-            sample0 = 0  # running sample number of the drive clock
-            while self.context.ok() and (c["repeat"] == 0 or passes < c["repeat"]):
-                for i, case in enumerate(self.cases):
-                    if not self.context.ok():
-                        return
-                    base = sample0 + i * self.per_case
-                    entry_t = c["start_time_s"] + (base + c["gap_samples"] + self.windows.entry_index) * self.ts
-                    self._publish_case(i, case, entry_t)
-                    if i > 0 and case.backlash_width_m != self.cases[i - 1].backlash_width_m:
-                        # the windowing node must hear the new K2 (drive/backlash_width, another topic:
-                        # no ordering with drive/signals) before this case's samples: the simulated
-                        # stream jumps between cases, and with the old K2 that jump could look like an entry
-                        time.sleep(CASE_SETTLE_S)
-                    rows = self.stream[i * self.per_case:(i + 1) * self.per_case].copy()
-                    rows[:, 0] = c["start_time_s"] + (base + np.arange(rows.shape[0])) * self.ts
-                    for s in range(0, rows.shape[0], c["batch_size"]):
-                        batch = rows[s:s + c["batch_size"]]
-                        t_last = float(batch[-1, 0])
-                        if c["real_time_factor"] > 0:
-                            delay = wall0 + (t_last - c["start_time_s"]) / c["real_time_factor"] - time.monotonic()
-                            if delay > 0:
-                                time.sleep(delay)
-                        else:
-                            if c["fast_sleep_s"] > 0:
-                                time.sleep(c["fast_sleep_s"])
-                            if gate is not None:
-                                gate.wait(t_last)
-                        if not self.context.ok():
-                            return
-                        self.pub_signals.publish(self._multiarray(batch, self.stream_channels))
-                        if self.pub_clock is not None:
-                            self._publish_clock(t_last)
-                sample0 += n_rows
-                passes += 1
+    def on_tick(self):
+        try:
+            if self.state == "waiting":
+                self._tick_waiting()
+            elif self.state == "streaming":
+                self._tick_streaming()
+        except Exception as exc:  # never a traceback from a timer: say it, stop
+            self.get_logger().error(f"streaming failed: {type(exc).__name__}: {exc}")
+            self.exit_code = 1
+            self._finish_streaming()
+
+    def _tick_waiting(self):
+        c = self.cfg
+        want = c["wait_for_subscribers"]
+        have = self.pub_signals.get_subscription_count()
+        if want > 0 and have < want:
+            if time.monotonic() > self.wait_deadline:
+                self.get_logger().error(f"no {want} subscriber(s) of {self.resolve_topic_name('drive/signals')} "
+                                        f"after {c['wait_timeout_s']:g} s; giving up")
+                self.exit_code = 1
+                self.state = "done"
+                self.done = True
+            return
+        if have == 0:
+            self.get_logger().warning(f"starting without any subscriber of {self.resolve_topic_name('drive/signals')}"
+                                      " (wait_for_subscribers is 0): the first batches may be lost")
+        self.state = "streaming"
+        self.settle_until = time.monotonic() + (0.2 if want > 0 else 0.0)  # let the reliable reader finish matching
+        if c["real_time_factor"] == 0 and c["max_lead_s"] > 0:
+            self.gate = ProgressGate(self, c["max_lead_s"], c["progress_timeout_s"])
+
+    def _tick_streaming(self):
+        c = self.cfg
+        now = time.monotonic()
+        if now < self.settle_until:
+            return
+        rt = c["real_time_factor"]
+        while True:
+            if self.pending is None:
+                self.pending = next(self.batches, None)
+                if self.pending is None:
+                    self._finish_streaming()
+                    return
+            kind, payload = self.pending
+            if kind == "case":
+                self._publish_case(*payload)
+            elif kind == "settle":
+                self.pending = None
+                self.settle_until = time.monotonic() + CASE_SETTLE_S
+                return
+            else:
+                t_last = float(payload[-1, 0])
+                if rt > 0:
+                    if self.wall0 is None:
+                        self.wall0 = now - (t_last - c["start_time_s"]) / rt
+                    if self.wall0 + (t_last - c["start_time_s"]) / rt > now:
+                        return                       # not due yet
+                elif self.gate is not None and not self.gate.allows(t_last):
+                    return                           # the windowing node is behind: next tick
+                self.pub_signals.publish(multiarray_from_array(payload, DEFAULT_CHANNELS))
+                if self.pub_clock is not None:
+                    self.pub_clock.publish(clock_msg(t_last))
+                if rt == 0:
+                    self.pending = None
+                    return                           # one batch per tick of fast_sleep_s
+            self.pending = None
+
+    def _finish_streaming(self):
+        self.timer.cancel()
+        gate, self.gate = self.gate, None
+        waited = ""
+        if gate is not None:
             waited = (f"; waited {gate.waited_s:.2f} s for the windowing node (back-pressure)"
-                      if gate is not None and gate.waited_s else "")
-            self.get_logger().info(f"done: {passes} pass(es) over {len(self.cases)} case(s){waited}")
+                      if gate.waited_s else "")
+            gate.close()
+        self.get_logger().info(f"done: {self.passes} pass(es) over {len(self.cases)} case(s){waited}")
+        self.state = "done"
+        if self.cfg["exit_when_done"]:
+            self.done = True
 
-        stream_channels = DEFAULT_CHANNELS
+    def finish(self, stopping) -> None:
+        """After the spin (the cases are done): give reliable readers the last batches."""
+        if self.exit_code == 0:
+            self._drain()
 
-        def _wait_for_subscribers(self) -> bool:
-            want = self.cfg["wait_for_subscribers"]
-            if want <= 0:
-                return True
-            topic = self.resolve_topic_name("drive/signals")
-            self.get_logger().info(f"waiting for {want} subscriber(s) of {topic}")
-            deadline = time.monotonic() + self.cfg["wait_timeout_s"]
-            while self.context.ok() and self.pub_signals.get_subscription_count() < want:
-                if time.monotonic() > deadline:
-                    self.get_logger().error(f"no {want} subscriber(s) of {topic} after "
-                                            f"{self.cfg['wait_timeout_s']:g} s; giving up")
-                    self.exit_code = 1
-                    return False
-                time.sleep(0.05)
-            time.sleep(0.2)  # let the reliable reader finish matching
-            return self.context.ok()
+    def _publish_case(self, i, case, entry_t):
+        self.pub_inertia.publish(Float64(data=case.inertia_kgm2))
+        self.pub_width.publish(Float64(data=case.backlash_width_m))
+        row = np.array([[i, case.inertia_kgm2, case.backlash_width_m, case.consistency_pa_sn, entry_t]])
+        self.pub_case.publish(multiarray_from_array(row, CASE_LABEL.split(",")))
+        self.get_logger().info(f"case {i + 1}/{len(self.cases)}: J1 = {case.inertia_kgm2:g} kg m^2, "
+                               f"K2 = {case.backlash_width_m:g} m, eta_k = {case.consistency_pa_sn:g} "
+                               f"Pa s^n (entry at t = {entry_t:.4f} s)")
 
-        def _publish_case(self, i, case, entry_t):
-            self.pub_inertia.publish(Float64(data=case.inertia_kgm2))
-            self.pub_width.publish(Float64(data=case.backlash_width_m))
-            row = np.array([[i, case.inertia_kgm2, case.backlash_width_m, case.consistency_pa_sn, entry_t]])
-            self.pub_case.publish(self._multiarray(row, CASE_LABEL.split(",")))
-            self.get_logger().info(f"case {i + 1}/{len(self.cases)}: J1 = {case.inertia_kgm2:g} kg m^2, "
-                                   f"K2 = {case.backlash_width_m:g} m, eta_k = {case.consistency_pa_sn:g} "
-                                   f"Pa s^n (entry at t = {entry_t:.4f} s)")
-
-        def _publish_clock(self, t: float):
-            self.pub_clock.publish(clock_msg(t))
-
-        def _drain(self):
-            """Give reliable readers the last batches before the node goes away."""
-            from rclpy.duration import Duration
-            try:
-                for pub in (self.pub_signals, self.pub_case, self.pub_inertia, self.pub_width):
-                    pub.wait_for_all_acked(Duration(seconds=5.0))
-            except Exception:  # not supported by every rmw
-                time.sleep(0.5)
-
-    return SimulatorNode
+    def _drain(self):
+        """Give reliable readers the last batches before the node goes away."""
+        try:
+            for pub in (self.pub_signals, self.pub_case, self.pub_inertia, self.pub_width):
+                pub.wait_for_all_acked(Duration(seconds=5.0))
+        except Exception:  # not supported by every rmw
+            time.sleep(0.5)
 
 
 def main(args=None) -> int:
-    return run_main(lambda: _node_class()(), NODE_NAME, args)
+    return run_main(lambda argv: SimulatorNode(), NODE_NAME, args)
 
 
 if __name__ == "__main__":

@@ -27,6 +27,8 @@ WIDTH_TOPIC = "drive/backlash_width"
 TRUE_INERTIA_TOPIC = "drive/true_inertia"
 CASE_TOPIC = "drive/case"
 DRIVE_TOPICS = (SIGNALS_TOPIC, WIDTH_TOPIC, TRUE_INERTIA_TOPIC, CASE_TOPIC)
+#: Channels of a drive/case message (one row per case, published by the simulator).
+CASE_LABEL = "case_index,inertia_kgm2,backlash_width_m,consistency_pa_sn,entry_time_s"
 
 
 def topic_matches(topic: str, relative: str) -> bool:
