@@ -72,6 +72,9 @@ SIMULATOR_PARAMS = {
     "wait_for_subscribers": Param(1, "wait until drive/signals has this many subscribers (1: the windowing "
                                   "node) before the first case; 0 = start at once (warned when nobody listens)",
                                   min=0, max=1000),
+    "wait_for_node": Param("jident_windowing", "with wait_for_subscribers > 0, also wait until a node of this name "
+                           "(any namespace) subscribes to drive/signals: the diagnostic node's recorder alone "
+                           "does not start the stream; empty = any subscribers"),
     "wait_timeout_s": Param(30.0, "give up (exit status 1) when the subscribers are not there after this "
                             "long, s", min=0.0, max=86400.0, min_exclusive=True),
     "exit_when_done": Param(True, "exit after the last case (else stay up, idle)"),
@@ -119,20 +122,25 @@ GAP_METHOD_CHOICES = ("auto", "acceleration", "gap_only", "anchored", "angle", "
 #: Trend of J1 and the backlash width (issue 14; jident_ros.identify.trend.TrendConfig.from_parameters),
 #: parameters of the diagnostic node.  0 means "not set" where TrendConfig takes None.
 TREND_PARAMS = {
-    "trend_enabled": Param(True, 'follow the trend and publish the "jident: trend" status'),
-    "trend_state_file": Param("", 'tracker state (JSON, written atomically); "" = not kept'),
+    "trend_enabled": Param(True, 'follow the trend of J1 and K2: inertia_trend, backlash_width_trend and the '
+                           '"jident_diagnostic: trend" status'),
+    "trend_state_file": Param("", 'tracker state file (JSON, written atomically after each window, read at start) so the '
+                              'trend survives a restart; "" = not kept'),
     "trend_commissioning_windows": Param(20, 'windows that learn the baseline', min=0, max=10**9),
     "trend_commissioning_duration_s": Param(0.0, 'instead: learn over this drive time, s (0 = by windows)', min=0.0, max=1e12),
-    "trend_inertia_baseline_kgm2": Param(0.0, 'given J1 baseline (0 = learn it)', min=0.0, max=1e12),
-    "trend_inertia_baseline_se_kgm2": Param(0.0, 'inertia baseline se kgm2', min=0.0, max=1e12),
-    "trend_width_baseline_m": Param(0.0, 'given width baseline (0 = learn it)', min=0.0, max=1e12),
-    "trend_width_baseline_se_m": Param(0.0, 'width baseline se m', min=0.0, max=1e12),
-    "trend_target_arl_windows": Param(1000000.0, 'in-control average run length the CUSUM is designed for', min=0.0, max=1e12),
+    "trend_inertia_baseline_kgm2": Param(0.0, 'given J1 baseline, kg m^2 (0 = learn it)', min=0.0, max=1e12),
+    "trend_inertia_baseline_se_kgm2": Param(0.0, 'standard error of the given J1 baseline, kg m^2', min=0.0, max=1e12),
+    "trend_width_baseline_m": Param(0.0, 'given width baseline, m (0 = learn it)', min=0.0, max=1e12),
+    "trend_width_baseline_se_m": Param(0.0, 'standard error of the given width baseline, m', min=0.0, max=1e12),
+    "trend_target_arl_windows": Param(1000000.0, 'in-control average run length (windows) the CUSUM threshold is '
+                                      'designed for', min=0.0, max=1e12),
     "trend_cusum_reference_sd": Param(2.0, 'CUSUM k, standard deviations', min=0.0, max=1e12),
     "trend_cusum_threshold_sd": Param(0.0, 'CUSUM h (0 = from trend_target_arl_windows)', min=0.0, max=1e12),
-    "trend_innovation_clip_sd": Param(4.0, 'innovations clipped at +- this', min=0.0, max=1e12),
+    "trend_innovation_clip_sd": Param(4.0, 'standardised innovations clipped at +- this many standard deviations',
+                                      min=0.0, max=1e12),
     "trend_se_scale_from_commissioning": Param(False, 'scale the reported errors by the commissioning scatter'),
-    "trend_se_scale_max": Param(3.0, 'se scale max', min=0.0, max=1e12),
+    "trend_se_scale_max": Param(3.0, 'largest scale of the reported standard errors from the commissioning '
+                                'scatter', min=0.0, max=1e12),
     "trend_inertia_process_sd_pct_per_window": Param(0.02, 'J1 random walk, % of the baseline per window', min=0.0, max=1e12),
     "trend_relearn_windows": Param(5, 'windows after a change forming the new baseline', min=0, max=10**9),
     "trend_change_hold_windows": Param(24, 'WARN for this many windows after a change', min=0, max=10**9),
@@ -143,7 +151,7 @@ TREND_PARAMS = {
     "trend_time_to_limit_warn_s": Param(2592000.0, 'WARN when the limit is projected sooner, s (30 days; 0 = off)', min=0.0, max=1e12),
     "trend_width_regression_windows": Param(50, 'windows of the wear-rate regression', min=0, max=10**9),
     "trend_width_se_floor_m": Param(1.0e-6, 'floor of the width standard error, m', min=0.0, max=1e12),
-    "trend_width_change_detection": Param(True, 'CUSUM on the width too'),
+    "trend_width_change_detection": Param(True, 'change detection (CUSUM) on the width too'),
     "trend_wear_significance_sd": Param(1.96, 'wear rate significant above this many standard errors', min=0.0, max=1e12),
     "trend_max_changes_kept": Param(100, 'change events kept in the state', min=0, max=10**9),
 }

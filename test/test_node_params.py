@@ -247,8 +247,10 @@ def test_simulator_answers_parameter_requests_while_streaming(node_env, ros, pro
     from jident_ros.nodes import simulator
     from jident_ros.nodes.ros_io import qos_signals
     signals = ros.collect(Float64MultiArray, "/ps/drive/signals", qos_signals())
+    # the subscriber is this test (no windowing node): wait_for_node "" = any subscriber
     sim = Proc(node_env, tmp_path, "simulator", "-r", "__ns:=/ps", "-p", "real_time_factor:=1.0",
-               "-p", "repeat:=0", "-p", "inertias_kgm2:=[1.16]", "-p", "publish_clock:=false")
+               "-p", "repeat:=0", "-p", "inertias_kgm2:=[1.16]", "-p", "publish_clock:=false",
+               "-p", 'wait_for_node:=""')
     procs.append(sim)
     assert ros.spin_until(lambda: len(signals) >= 20), logs(sim)
     _check_descriptors(_describe(ros, "/ps/jident_simulator", simulator.schema()), simulator.schema())
@@ -278,6 +280,23 @@ def test_simulator_warns_when_it_starts_without_a_subscriber(node_env, tmp_path)
              "-p", "inertias_kgm2:=[1.16]", "-p", "real_time_factor:=0.0", "-p", "publish_clock:=false")
     assert p.wait() == 0, logs(p)
     assert "starting without any subscriber" in p.text(), logs(p)
+
+
+@pytest.mark.ros
+def test_simulator_waits_for_the_windowing_node_not_any_subscriber(node_env, ros, tmp_path):
+    """wait_for_node (default jident_windowing): a subscriber of drive/signals that is not the windowing node
+    (here this test, as the diagnostic node's recorder would be) does not start the stream."""
+    from std_msgs.msg import Float64MultiArray
+
+    from jident_ros.nodes.ros_io import qos_signals
+    from jident_ros.parameters import SIMULATOR
+    assert SIMULATOR["wait_for_node"] == "jident_windowing"
+    signals = ros.collect(Float64MultiArray, "/wn/drive/signals", qos_signals())
+    p = Proc(node_env, tmp_path, "simulator", "-r", "__ns:=/wn", "-p", "inertias_kgm2:=[1.16]",
+             "-p", "wait_timeout_s:=2.0", "-p", "publish_clock:=false")
+    ros.spin_until(lambda: p.p.poll() is not None, TIMEOUT)
+    assert p.wait() == 1 and not signals, logs(p)
+    assert "no subscription of /wn/drive/signals by a node named 'jident_windowing'" in p.text(), logs(p)
 
 
 # --------------------------------------------------------------------------- one line, exit 2

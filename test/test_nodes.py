@@ -587,7 +587,8 @@ def test_simulator_back_pressure_waits_for_drive_progress(node_env, ros, procs, 
     progress = ros.node.create_publisher(Float64, "/bp/drive/progress", qos_signals(10))
     last_t = lambda: max((array_from_multiarray(m)[0][-1, 0] for m in signals), default=-1.0)  # noqa: E731
     common = ["-p", "cases:=zip", "-p", "inertias_kgm2:=[1.16]", "-p", "real_time_factor:=0.0",
-              "-p", "wait_for_subscribers:=1", "-p", "publish_clock:=false", "-p", "start_time_s:=1.0"]
+              "-p", "wait_for_subscribers:=1", "-p", 'wait_for_node:=""',   # the subscriber is this test
+              "-p", "publish_clock:=false", "-p", "start_time_s:=1.0"]
     sim = Proc(node_env, tmp_path, "simulator", "-r", "__ns:=/bp", *common,
                "-p", "max_lead_s:=0.5", "-p", "progress_timeout_s:=30.0")
     procs.append(sim)

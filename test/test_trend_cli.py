@@ -201,7 +201,7 @@ def test_trend_parameters_map_to_the_config():
 def test_trend_status_levels_messages_and_values():
     from jident_ros.identify.trend import TrendConfig, TrendTracker, simulate_series
     from jident_ros.identify.trend_status import TREND_STATUS_NAME, trend_status
-    assert TREND_STATUS_NAME == "jident: trend"
+    assert TREND_STATUS_NAME == "jident_diagnostic: trend"
     s = simulate_series(60, step_at=40, step_pct=6.0, seed=3, width_growth_m_per_window=2e-6)
     tr = TrendTracker(TrendConfig(commissioning_windows=20))
     ups = tr.batch(s.time_s, s.inertia_kgm2, s.inertia_se_kgm2, s.width_m, s.width_se_m)

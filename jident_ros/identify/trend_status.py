@@ -3,9 +3,12 @@
 * :func:`trend_config_from_parameters`: node parameters (``trend_*`` names, defaults in
   :data:`jident_ros.parameters.TREND`) -> :class:`~jident_ros.identify.trend.TrendConfig`.  ROS
   parameters cannot be None, so 0 (or "") stands for "not set" where the config takes None.
-* :func:`trend_status`: a :class:`~jident_ros.identify.trend.TrendUpdate` -> the "jident: trend"
-  DiagnosticStatus content: (level, message, [(key, value), ...]) with the levels of
-  diagnostic_msgs (OK 0, WARN 1, ERROR 2), the tracker's one-line message and the numbers as key/values
+* :func:`trend_inputs`: one window's diagnosis -> what the tracker takes of it (the published J1 of
+  the gap estimate with its standard error, the backlash width estimate with its standard uncertainty).
+* :func:`trend_status`: a :class:`~jident_ros.identify.trend.TrendUpdate` -> the content of the
+  diagnostic node's periodic "jident_diagnostic: trend" DiagnosticStatus: (level, message,
+  [(key, value), ...]) with the levels of diagnostic_msgs (OK 0, WARN 1, ERROR 2), the tracker's one-line
+  message and the numbers as key/values
   (SI units in the key names; '' where a value is not known yet).
 """
 from __future__ import annotations
@@ -21,15 +24,42 @@ def trend_config_from_parameters(params: Mapping[str, Any]) -> TrendConfig:
     return TrendConfig.from_parameters(params)
 
 
-#: Name of the DiagnosticStatus.
-TREND_STATUS_NAME = "jident: trend"
+#: Name of the DiagnosticStatus (the diagnostic node's periodic task "trend").
+TREND_STATUS_NAME = "jident_diagnostic: trend"
+
+#: z of the two-sided 95 % interval (a standard error from the interval when the fit gave none).
+Z95 = 1.959963984540054
+
+
+def trend_inputs(diagnosis, width_se_floor_m: float = 0.0) -> tuple:
+    """(inertia_kgm2, inertia_se_kgm2, width_m, width_se_m) for :meth:`TrendTracker.update` from one
+    window's :class:`~jident_ros.identify.diagnosis.WindowDiagnosis`.
+
+    J1 only when the published J1 is the gap estimate (``source == 'gap'``: the policy accepted it): its
+    standard error is the fit's, else (high - low) / (2 x 1.96) of its 95 % interval; a J1 of the image
+    method alone has no standard error and is not used.  The width K2 whenever the window has a width
+    estimate (re-contact), its standard uncertainty at least ``width_se_floor_m`` (the tracker's floor).
+    None where a quantity is not known."""
+    j = jse = w = wse = None
+    g = getattr(diagnosis, "gap", None)
+    if g is not None and getattr(diagnosis, "source", None) == "gap" and diagnosis.inertia_kgm2 is not None:
+        j = float(g.inertia_kgm2)
+        se = g.std_error_kgm2
+        if se is None or not math.isfinite(float(se)):
+            lo, hi = (float(v) for v in g.ci95_kgm2)
+            se = (hi - lo) / (2 * Z95)
+        jse = float(se)
+    width = getattr(diagnosis, "width", None)
+    if width is not None and math.isfinite(float(width.width_m)) and math.isfinite(float(width.std_m)):
+        w, wse = float(width.width_m), max(float(width.std_m), float(width_se_floor_m))
+    return j, jse, w, wse
 
 def _v(x: Optional[float]) -> Any:
     return "" if x is None or (isinstance(x, float) and not math.isfinite(x)) else float(x)
 
 
 def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
-    """(level, message, key/values) of the "jident: trend" status after update ``u``.
+    """(level, message, key/values) of the trend status after update ``u``.
 
     The message is the tracker's one line (J1 drift from the baseline with its standard error, a
     recent change, width, wear rate, time to the limit; or why the window was skipped).  Key/values,
@@ -65,4 +95,4 @@ def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
     return int(u.level), u.message, vals
 
 
-__all__ = ["TREND_STATUS_NAME", "trend_config_from_parameters", "trend_status"]
+__all__ = ["TREND_STATUS_NAME", "trend_config_from_parameters", "trend_inputs", "trend_status"]

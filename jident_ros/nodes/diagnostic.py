@@ -18,22 +18,33 @@ A thin ROS adapter over :func:`jident_ros.identify.diagnosis.diagnose_window` (t
 Besides, once a second (steady clock), one status per task (:class:`jident_ros.nodes.diagnostics.Updater`):
 "jident_diagnostic: diagnosis" (windows seen/lost/mismatched; STALE when the input stopped),
 "jident_diagnostic: library" (ERROR naming the file and the problem when the pattern library is unusable;
-the gap estimates go on), "jident_diagnostic: recorder".
+the gap estimates go on), "jident_diagnostic: recorder" (the bag, its files, bytes, messages written and
+dropped by reason; ERROR with the reason when recording failed), "jident_diagnostic: trend" (with
+``trend_enabled``: the trend of J1 and of the backlash width K2, :mod:`jident_ros.identify.trend`).
+
+The trend: every diagnosed window updates a :class:`~jident_ros.identify.trend.TrendTracker` with its entry
+time, the published J1 when it is the gap estimate (with its standard error) and the backlash width estimate
+(with its standard uncertainty) (:func:`jident_ros.identify.trend_status.trend_inputs`); the smoothed J1 goes
+out on ``inertia_trend`` and the width's regression line on ``backlash_width_trend`` (std_msgs/Float64,
+kg m^2 and m, transient local) once known.  With ``trend_state_file`` the tracker's state is written
+atomically after each update and read at start (a corrupt file: ERROR status, moved aside, a fresh start).
 
 A managed (lifecycle) node: parameters are declared and checked in the constructor; ``configure`` loads the
 pattern library, opens the recording and creates the topics; ``activate`` starts diagnosing; ``deactivate``
 ignores windows (counted); ``cleanup``/``shutdown`` finalise the recording.  ``ros2 run jident_ros
 diagnostic`` configures and activates it at once (autostart).
 
-With ``record_dir`` set, the windows (and with ``record_signals`` the drive's signals), the estimates
-and the statuses are logged to an MCAP recording (``self.recorder``, :class:`Recording`) closed on shutdown
-before the ROS context goes down (:mod:`jident_ros.nodes.runtime`).
+With ``record`` (the default), the windows (and with ``record_signals`` the drive's signals), the
+estimates, the trend and the statuses are logged to a rosbag2 MCAP bag under ``record_root``
+(``self.recorder``, :class:`Recording` over :class:`jident_ros.bag.recorder.Recorder`) finalised on
+shutdown before the ROS context goes down (:mod:`jident_ros.nodes.runtime`).
 
-    ros2 run jident_ros diagnostic --ros-args -p record_dir:=out/run1
+    ros2 run jident_ros diagnostic --ros-args -p record_root:=out/bags
 """
 from __future__ import annotations
 
 import math
+import os
 import time
 from pathlib import Path
 
@@ -44,9 +55,12 @@ from std_msgs.msg import Float64, Float64MultiArray
 from jident_ros.identify.diagnosis import GAP_METHODS, detector_arguments, diagnose_window
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES, OK, STALE, WARN
 from jident_ros.identify.library import default_library_path, load_pattern_library
+from jident_ros.identify.trend import TrendConfig, TrendStateError, TrendTracker
+from jident_ros.identify.trend_status import trend_inputs, trend_status
 from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater
 from jident_ros.nodes.params import (
+    ParameterError,
     RuntimeParameters,
     checked,
     declare_parameters,
@@ -72,7 +86,7 @@ NODE_NAME = "jident_diagnostic"
 #: Each window's result.
 STATUS_NAME = "jident: inertia"
 #: Periodic tasks (status names "jident_diagnostic: <task>").
-TASKS = ("diagnosis", "library", "recorder")
+TASKS = ("diagnosis", "library", "recorder", "trend")
 #: Period of the task statuses, s (steady clock).
 TASK_PERIOD_S = 1.0
 #: Lost window ids kept for the status (the count is complete).
@@ -105,6 +119,10 @@ def validate(values: dict):
         require(n, cfg[n], cfg[n] >= 0, "a number >= 0 (0 = no limit)")
     for name, what in VerdictPolicy.from_params(cfg).problems():
         require(name, cfg[name], False, what)
+    try:
+        TrendConfig.from_parameters(cfg)
+    except ValueError as exc:  # names the trend_* parameter and its value
+        raise ParameterError(f"parameter {exc}") from None
     return cfg, system, method
 
 
@@ -219,6 +237,13 @@ class DiagnosticNode(LifecycleNode):
         self.last_message = ""
         self.last_input = None             # steady time (s) of the last drive/window or drive/progress
         self.started = time.monotonic()
+        self.trend = None                  # TrendTracker (trend_enabled, configured)
+        self.trend_update = None           # its last TrendUpdate
+        self.trend_error = None            # why the trend's state file was not used (ERROR), one line
+        self.trend_save_error = None       # the last failure to write the state file (ERROR), one line
+        self.trend_windows_without_estimate = 0
+        self.trend_saves = 0
+        self.pub_inertia_trend = self.pub_width_trend = None
         # /diagnostics: event statuses and the periodic tasks
         self.diag = DiagnosticsPublisher(self)
         self.diag.listeners.append(lambda msg: self._record("/diagnostics", msg))
@@ -227,6 +252,7 @@ class DiagnosticNode(LifecycleNode):
         self.updater.add("diagnosis", self.diagnosis_status)
         self.updater.add("library", self.library_status)
         self.updater.add("recorder", self.recorder_status)
+        self.updater.add("trend", self.trend_status)
         self.parameters = RuntimeParameters(self, self.schema, values, validate, self.on_parameters)
 
     # ----------------------------------------------------------------- lifecycle
@@ -241,6 +267,10 @@ class DiagnosticNode(LifecycleNode):
         if c["image_method"]:
             self._load_library()
         self.pub_estimate = self.create_lifecycle_publisher(Float64, "inertia_estimate", qos_latched())
+        if c["trend_enabled"]:
+            self._start_trend()
+            self.pub_inertia_trend = self.create_lifecycle_publisher(Float64, "inertia_trend", qos_latched())
+            self.pub_width_trend = self.create_lifecycle_publisher(Float64, "backlash_width_trend", qos_latched())
         self.subs.append(self.create_subscription(Float64MultiArray, "drive/window", self.on_window,
                                                   qos_latched(c["window_queue_depth"])))
         # the windowing node's drive/progress: evidence that input flows between windows (STALE)
@@ -277,9 +307,11 @@ class DiagnosticNode(LifecycleNode):
         for sub in self.subs:
             self.destroy_subscription(sub)
         self.subs = []
-        if self.pub_estimate is not None:
-            self.destroy_lifecycle_publisher(self.pub_estimate)
-            self.pub_estimate = None
+        for name in ("pub_estimate", "pub_inertia_trend", "pub_width_trend"):
+            pub = getattr(self, name)
+            if pub is not None:
+                self.destroy_lifecycle_publisher(pub)
+                setattr(self, name, None)
         self.close()
         return TransitionCallbackReturn.SUCCESS
 
@@ -343,6 +375,8 @@ class DiagnosticNode(LifecycleNode):
             self.get_logger().warning("record_dir is deprecated: use record_root (bags get rosbag2 names under it)")
         topics = [("drive/window", "std_msgs/msg/Float64MultiArray", qos_latched(self.cfg["window_queue_depth"])),
                   ("inertia_estimate", "std_msgs/msg/Float64", qos_latched()),
+                  ("inertia_trend", "std_msgs/msg/Float64", qos_latched()),
+                  ("backlash_width_trend", "std_msgs/msg/Float64", qos_latched()),
                   ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", self.diag.pub.qos_profile)]
         if self.cfg["record_signals"]:
             topics += [("drive/signals", "std_msgs/msg/Float64MultiArray",
@@ -493,6 +527,93 @@ class DiagnosticNode(LifecycleNode):
             self.get_logger().error(message)
         self.last_message = message
         self.diag.publish(make_status(STATUS_NAME, level, message, self.hardware_id, values))
+        if self.trend is not None:
+            self._update_trend(win, d)
+
+    # ----------------------------------------------------------------- trend
+    def _start_trend(self):
+        """A TrendTracker from the trend_* parameters; with trend_state_file, the saved state when there is
+        one (a file that cannot be read is moved aside to <file>.corrupt-<UTC time> and the trend starts
+        fresh: ERROR on the trend status, nothing overwritten)."""
+        c = self.cfg
+        config = TrendConfig.from_parameters(c)   # checked by validate()
+        self.trend = TrendTracker(config)
+        path = c["trend_state_file"]
+        if not path:
+            return
+        path = os.path.expanduser(path)
+        try:
+            self.trend = TrendTracker.load(path, config)
+            self.get_logger().info(f"trend state read from {path} ({self.trend.n_windows} window(s) so far)")
+        except FileNotFoundError:
+            self.get_logger().info(f"trend state file {path} does not exist yet: the trend starts fresh")
+        except (TrendStateError, OSError) as exc:
+            aside = f"{path}.corrupt-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}"
+            try:
+                os.replace(path, aside)
+                kept = f"moved to {aside}"
+            except OSError as mv:
+                kept = f"could not be moved aside ({mv}); it will be overwritten"
+            self.trend_error = f"trend state unusable: {exc}; {kept}; the trend started fresh"
+            self.get_logger().error(self.trend_error)
+
+    def _update_trend(self, win, d):
+        """One diagnosed window into the tracker; publish the smoothed J1 and width; save the state."""
+        j, jse, w, wse = trend_inputs(d, self.trend.config.width_se_floor_m)
+        if j is None and w is None:   # nothing to follow in this window (its status says why)
+            self.trend_windows_without_estimate += 1
+            return
+        u = self.trend.update(win.entry_time_s, j, jse, w, wse)
+        self.trend_update = u
+        if u.skipped:
+            self.get_logger().warning(f"trend: window {win.window_id} skipped: {u.reason}",
+                                      throttle_duration_sec=1.0)
+            return
+        for pub, name, value in ((self.pub_inertia_trend, "inertia_trend", u.inertia_kgm2),
+                                 (self.pub_width_trend, "backlash_width_trend", u.width_m)):
+            if pub is not None and value is not None and math.isfinite(value):
+                m = Float64(data=float(value))
+                pub.publish(m)
+                self._record(name, m)
+        for ev in u.changes:
+            self.get_logger().warning(f"trend: change of {ev.quantity} detected at window {win.window_id}: "
+                                      f"{ev.size_pct:+.2f} % (onset t = {ev.onset_time_s:.3f} s)")
+        if self.cfg["trend_state_file"]:
+            path = os.path.expanduser(self.cfg["trend_state_file"])
+            try:
+                self.trend.save(path)
+                self.trend_saves += 1
+                self.trend_save_error = None
+            except (OSError, ValueError) as exc:
+                self.trend_save_error = f"trend state not written to {path}: {exc}"
+                self.get_logger().error(self.trend_save_error, throttle_duration_sec=10.0)
+
+    def trend_status(self, stat):
+        """"jident_diagnostic: trend": the tracker's level and one line with its numbers
+        (:func:`jident_ros.identify.trend_status.trend_status`); ERROR when its state file was unusable
+        (a fresh start) or cannot be written."""
+        if not self.cfg["trend_enabled"]:
+            stat.summary(OK, "trend off (trend_enabled is false)")
+            return stat
+        if self.trend is None:
+            stat.summary(OK, "trend not started yet (node not configured)")
+            return stat
+        u = self.trend_update
+        if u is None:
+            level, message, values = OK, "no window with a J1 or width estimate yet", []
+        else:
+            level, message, values = trend_status(u)
+        problems = [p for p in (self.trend_error, self.trend_save_error) if p]
+        if problems:
+            level, message = ERROR, "; ".join(problems) + f"; {message}"
+        stat.summary(level, message)
+        for k, v in values:
+            stat.add(k, v)
+        for k, v in (("windows_updated", self.trend.n_windows),
+                     ("windows_without_estimate", self.trend_windows_without_estimate),
+                     ("state_file", self.cfg["trend_state_file"]), ("state_saves", self.trend_saves)):
+            stat.add(k, v)
+        return stat
 
     # ----------------------------------------------------------------- periodic status
     def diagnosis_status(self, stat):

@@ -88,8 +88,9 @@ def validate(values: dict):
     cases = build_cases(cfg, system)
     try:  # inputs the simulation cannot integrate (an overload, a step too coarse for J1): one line, not NaN batches
         check_stable(system, cases)
-    except ValueError as exc:
-        raise ParameterError(f"model parameters: {exc}") from None
+    except ValueError as exc:  # name what the user sets: the case lists (or the model sections)
+        raise ParameterError(f"parameter consistencies_pa_sn/inertias_kgm2/backlash_widths_m or model "
+                             f"parameters: {exc}") from None
     return cfg, system, cases
 
 
@@ -148,7 +149,8 @@ class SimulatorNode(Node):
         self.timer = self.create_timer(max(period, 1e-4), self.on_tick, clock=steady)
         if c["wait_for_subscribers"] > 0:
             self.get_logger().info(f"waiting for {c['wait_for_subscribers']} subscriber(s) of "
-                                   f"{self.resolve_topic_name('drive/signals')}")
+                                   f"{self.resolve_topic_name('drive/signals')}" +
+                                   (f", one of them the node {c['wait_for_node']!r}" if c["wait_for_node"] else ""))
 
     # ----------------------------------------------------------------- streaming (timer)
     def _batches(self):
@@ -188,10 +190,14 @@ class SimulatorNode(Node):
         c = self.cfg
         want = c["wait_for_subscribers"]
         have = self.pub_signals.get_subscription_count()
-        if want > 0 and have < want:
+        missing_node = want > 0 and have >= want and not self._named_subscriber()
+        if want > 0 and (have < want or missing_node):
             if time.monotonic() > self.wait_deadline:
-                self.get_logger().error(f"no {want} subscriber(s) of {self.resolve_topic_name('drive/signals')} "
-                                        f"after {c['wait_timeout_s']:g} s; giving up")
+                topic = self.resolve_topic_name('drive/signals')
+                what = (f"no subscription of {topic} by a node named {c['wait_for_node']!r} ({have} other "
+                        "subscriber(s); parameter wait_for_node)" if missing_node
+                        else f"{have} of {want} subscriber(s) of {topic}")
+                self.get_logger().error(f"{what} after {c['wait_timeout_s']:g} s; giving up")
                 self.exit_code = 1
                 self.state = "done"
                 self.done = True
@@ -203,6 +209,15 @@ class SimulatorNode(Node):
         self.settle_until = time.monotonic() + (0.2 if want > 0 else 0.0)  # let the reliable reader finish matching
         if c["real_time_factor"] == 0 and c["max_lead_s"] > 0:
             self.gate = ProgressGate(self, c["max_lead_s"], c["progress_timeout_s"])
+
+    def _named_subscriber(self) -> bool:
+        """True when wait_for_node is empty or a node of that name subscribes to drive/signals (the graph
+        names each subscription's node: the diagnostic node's recorder is not the windowing node)."""
+        name = self.cfg["wait_for_node"]
+        if not name:
+            return True
+        infos = self.get_subscriptions_info_by_topic(self.resolve_topic_name("drive/signals"))
+        return any(i.node_name == name for i in infos)
 
     def _tick_streaming(self):
         c = self.cfg
