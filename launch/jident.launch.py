@@ -1,7 +1,7 @@
 """Start the jident_ros node set: simulator -> windowing -> diagnostic (docs/interfaces.md).
 
     ros2 launch jident_ros jident.launch.py
-    ros2 launch jident_ros jident.launch.py namespace:=press3 real_time_factor:=0.0 record_dir:=out/run1
+    ros2 launch jident_ros jident.launch.py namespace:=press3 real_time_factor:=0.0 record_root:=out/bags
 
 Parameters: config/system.yaml and config/method.yaml (the model and the method, shared with the CLI),
 then each node's section of config/nodes.yaml merged here with the launch arguments (merging in Python
@@ -29,7 +29,9 @@ ARGUMENTS = {
     "cases": ("", "simulator: product | zip | grid (default: nodes.yaml)"),
     "backlash_width_m": ("", "windowing: K2 in m (default: nodes.yaml; the simulator's width is followed)"),
     "pattern_library": ("", "diagnostic: pattern library .npz (default: the CLI's cache path, built if missing)"),
-    "record_dir": ("", "diagnostic: MCAP recording directory (empty: no recording)"),
+    "record": ("", "diagnostic: record a rosbag2 MCAP bag, true | false (default: nodes.yaml, true)"),
+    "record_root": ("", "diagnostic: bags go to <record_root>/rosbag2_<time> (default: nodes.yaml, the data dir)"),
+    "record_dir": ("", "diagnostic, deprecated: record into exactly this bag directory instead of under record_root"),
     "p": ("", "diagnostic: KHM exponent p (default: nodes.yaml)"),
 }
 
@@ -55,11 +57,14 @@ def _setup(context):
     # /clock is global: two drives with sim time would follow each other's clock.  A namespaced drive gets
     # its own: the simulator publishes /<ns>/clock and its windowing and diagnostic nodes follow that one.
     remap = [("/clock", f"/{ns}/clock")] if ns and sim_time else []
-    recording = bool(arg["record_dir"])
+    dsec = sections["/**/jident_diagnostic"]["ros__parameters"]
+    record = _truthy(arg["record"]) if arg["record"] else bool(dsec["record"])
+    recording_signals = record and bool(dsec["record_signals"])
     diag = Node(package="jident_ros", executable="diagnostic", name="jident_diagnostic", namespace=ns,
                 output="screen", remappings=remap,
                 parameters=params("jident_diagnostic", use_sim_time=sim_time,
                                   pattern_library=arg["pattern_library"] or None,
+                                  record=record, record_root=arg["record_root"] or None,
                                   record_dir=arg["record_dir"] or None,
                                   p=float(arg["p"]) if arg["p"] else None))
     win = Node(package="jident_ros", executable="windowing", name="jident_windowing", namespace=ns, output="screen",
@@ -74,8 +79,9 @@ def _setup(context):
                    parameters=params("jident_simulator", use_sim_time=False,
                                      real_time_factor=float(arg["real_time_factor"]),
                                      cases=arg["cases"] or None,
-                                     # the windowing node, plus the diagnostic node's recorder when recording
-                                     wait_for_subscribers=2 if recording else 1, wait_timeout_s=120.0))
+                                     # the windowing node (wait_for_node), plus the diagnostic node's
+                                     # recorder when it records drive/signals
+                                     wait_for_subscribers=2 if recording_signals else 1, wait_timeout_s=120.0))
         # give the diagnostic node a few seconds for the last window, then stop everything
         actions += [sim, RegisterEventHandler(OnProcessExit(target_action=sim, on_exit=[TimerAction(
             period=3.0, actions=[EmitEvent(event=Shutdown(reason="the simulator has run its cases"))])]))]
