@@ -252,7 +252,7 @@ class DiagnosticNode(LifecycleNode):
         self.updater.add("diagnosis", self.diagnosis_status)
         self.updater.add("library", self.library_status)
         self.updater.add("recorder", self.recorder_status)
-        self.updater.add("trend", self.trend_status)
+        self.updater.add("trend", self.trend_task_status)
         self.parameters = RuntimeParameters(self, self.schema, values, validate, self.on_parameters)
 
     # ----------------------------------------------------------------- lifecycle
@@ -588,7 +588,7 @@ class DiagnosticNode(LifecycleNode):
                 self.trend_save_error = f"trend state not written to {path}: {exc}"
                 self.get_logger().error(self.trend_save_error, throttle_duration_sec=10.0)
 
-    def trend_status(self, stat):
+    def trend_task_status(self, stat):
         """"jident_diagnostic: trend": the tracker's level and one line with its numbers
         (:func:`jident_ros.identify.trend_status.trend_status`); ERROR when its state file was unusable
         (a fresh start) or cannot be written."""
