@@ -2,7 +2,7 @@
 
 * default parameters: a rosbag2-named bag under $JIDENT_DATA_DIR/bags, finalised on SIGTERM, read by
   rosbags, holding the drive/signals the test published (wall-clock stamps) and the node's own
-  "jident: recorder" statuses (OK);
+  "jident_diagnostic: recorder" statuses (OK);
 * an unusable record root (a file): a periodic ERROR status naming it and the reason; the node runs on.
 """
 from __future__ import annotations
@@ -30,7 +30,7 @@ def _batch(i: int):
 
 
 def _recorder_statuses(arrays, hw):
-    return [s for a in arrays for s in a.status if s.name == "jident: recorder" and s.hardware_id == hw]
+    return [s for a in arrays for s in a.status if s.name == "jident_diagnostic: recorder" and s.hardware_id == hw]
 
 
 def test_default_parameters_leave_a_bag_that_rosbags_reads(node_env, library, tmp_path):
@@ -69,7 +69,7 @@ def test_default_parameters_leave_a_bag_that_rosbags_reads(node_env, library, tm
     assert [float(m.data[0]) for _, m in signals] == [1.0 + i * 50 * 5e-4 for i in range(5)]
     assert all(t0 <= t <= t1 for t, _ in signals)          # wall clock, not a ROS clock
     recorder_status = [s for topic, _, m in rows if topic == "/diagnostics" for s in m.status
-                       if s.name == "jident: recorder"]
+                       if s.name == "jident_diagnostic: recorder"]
     assert recorder_status and recorder_status[0].level == 0
 
 

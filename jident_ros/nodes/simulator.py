@@ -89,7 +89,7 @@ def validate(values: dict):
     try:  # inputs the simulation cannot integrate (an overload, a step too coarse for J1): one line, not NaN batches
         check_stable(system, cases)
     except ValueError as exc:
-        raise ParameterError(f"model parameters: {exc}") from None
+        raise ParameterError(f"parameter consistencies_pa_sn, inertias_kgm2, backlash_widths_m (the cases) with the model: {exc}") from None
     return cfg, system, cases
 
 
