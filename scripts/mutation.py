@@ -412,6 +412,7 @@ def main(argv=None) -> int:
     ap.add_argument("--list", action="store_true", help="list the mutants and exit")
     ap.add_argument("--json", type=Path, help="write every mutant's outcome to this file")
     args = ap.parse_args(argv)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))    # kill <pid>: the temporary trees are removed
 
     modules = args.module or list(MODULES)
     equivalent = load_equivalent()

@@ -9,6 +9,7 @@ Pure Python, milliseconds.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -63,7 +64,7 @@ def test_between_z_parameter():
     assert not fuse_verdict(CLASSES, gap=gap(1.131 + 3.5 * se, se), between_z=4.0).between_classes
 
 
-@pytest.mark.parametrize("z, between", [(2.5, False), (3.5, True)])
+@pytest.mark.parametrize("z, between", [(2.5, False), (2.98, False), (3.02, True), (3.5, True)])
 def test_standard_error_from_the_interval_when_not_carried(z, between):
     """An estimate without its standard error (NaN): se = half-width of the 95 % interval / 1.96."""
     se = 0.002
@@ -123,3 +124,9 @@ def test_an_infinite_margin_is_a_confident_vote():
     a = {"a1": answer("a1", 5, math.inf), "m_el": answer("m_el", 1, 3.0), "v2": answer("v2", 1, 3.0)}
     assert image_vote(a) == 5
     assert image_vote({"a1": answer("a1", 5, math.inf)}, fused_class_index=2) == 5
+
+
+def test_a_verdict_is_immutable():
+    v = fuse_verdict(CLASSES, {}, 1, gap(1.131, 0.002))
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        v.between_classes = True

@@ -169,3 +169,20 @@ def test_quantile_initialisation_uses_midpoint_levels():
         warnings.simplefilter("ignore", ConvergenceWarning)
         m = KHarmonicMeans(n_clusters=4, p=2.0, init="quantile", max_iter=1).fit(x)
     np.testing.assert_allclose(m.init_centers_, [0.0, 1.0, 2.0, 3.0], rtol=1e-14)
+
+
+@pytest.mark.parametrize("X, shown", [("abc", "'abc'"), (["a", "b"], "array with shape (2,)"),
+                                      ([[1.0, 2.0], [3.0, 4.0]], "shape (2, 2)")])
+def test_bad_data_is_named_with_its_value_or_shape(X, shown):
+    with pytest.raises(ValueError, match="X must be") as exc:
+        KHarmonicMeans(n_clusters=2, init="quantile").fit(X)
+    assert shown in str(exc.value)
+
+
+def test_duplicates_over_all_equal_data_spread_over_max_abs_v_1():
+    """Module docstring: with all data equal the spread interval's width uses R = max(|v|, 1)."""
+    for v, width in ((0.2, 1.0), (4.0, 4.0)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            m = KHarmonicMeans(n_clusters=3, p=2.0, init="paper", init_value=v, max_iter=1).fit(np.full(6, 0.3))
+        np.testing.assert_allclose(m.init_centers_, v + width * np.array([-0.5, 0.0, 0.5]), rtol=1e-14)
