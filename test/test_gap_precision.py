@@ -23,6 +23,7 @@ from jident_ros.identify.gap import (
     ANGLE_REL_SE_FLOOR,
     GAP_QUADRATIC_MIN,
     MAX_RELATIVE_STD_ERROR,
+    GapEstimate,
     NoGapError,
     estimate_backlash_width,
     estimate_inertia,
@@ -388,3 +389,14 @@ def test_contact_fit_does_not_use_the_first_contact_sample(simulated):
         w[k][g.gap_end] *= 1.5
     got = estimate_backlash_width(w, g.gap_end, R, simulated.sample_period_s, g.inertia_kgm2)
     assert (got.width_m, got.std_m, got.method) == (ref.width_m, ref.std_m, ref.method)
+
+
+def test_model_error_is_the_change_of_j1_with_a_linear_torque_term():
+    """GapEstimate.model_error_kgm2 ('acceleration'): |J1 with a linear torque term - J1|, in the standard error.
+    With a gap torque that has a linear term the extended model is exact, so the model error is the fit's error."""
+    w, width = exact_window(1.16, torque=(150.0, 3000.0, -8000.0, 0.0))
+    g = estimate_inertia({k: w[k] for k in ("alpha1", "alpha2", "a1", "m_el")}, N_PRE, width, R, TS)
+    assert g.model_error_kgm2 > 1e-6
+    assert g.model_error_kgm2 == pytest.approx(abs(g.inertia_kgm2 - 1.16), rel=1e-6)
+    assert g.std_error_kgm2 >= g.model_error_kgm2
+    assert GapEstimate(1.0, 0.1, (0.8, 1.2), 0.0, 48, 60, "speed", "angles").model_error_kgm2 == 0.0
