@@ -400,3 +400,8 @@ def test_model_error_is_the_change_of_j1_with_a_linear_torque_term():
     assert g.model_error_kgm2 == pytest.approx(abs(g.inertia_kgm2 - 1.16), rel=1e-6)
     assert g.std_error_kgm2 >= g.model_error_kgm2
     assert GapEstimate(1.0, 0.1, (0.8, 1.2), 0.0, 48, 60, "speed", "angles").model_error_kgm2 == 0.0
+    for method in ("anchored", "speed"):                                           # "0 for the other fits"
+        assert estimate_inertia(w, N_PRE, width, R, TS, method).model_error_kgm2 == 0.0
+    ga = estimate_inertia(motor_angles(w), N_PRE, width, R, TS, "angle")            # the same for the angle fit
+    assert ga.method == "angle" and ga.model_error_kgm2 > 1e-6
+    assert ga.model_error_kgm2 == pytest.approx(abs(ga.inertia_kgm2 - 1.16), rel=1e-4)
