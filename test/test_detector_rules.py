@@ -117,6 +117,7 @@ def test_entry_without_enough_history_is_dropped_and_its_samples_skipped():
     ev = feed(d, stream(rel), 2)
     assert [e.kind for e in ev] == ["drop", "window"]
     assert ev[0].reason == "short_history" and "1 of 3" in ev[0].detail
+    assert ev[0].window_dropped is False                          # no window was in progress
     assert entry_rows(ev) == [6]
     assert d.counts["short_history"] == 1 and d.dropped_total == 1 and d.windows_captured == 1
     # exactly enough history: captured

@@ -186,3 +186,9 @@ def test_duplicates_over_all_equal_data_spread_over_max_abs_v_1():
             warnings.simplefilter("ignore", ConvergenceWarning)
             m = KHarmonicMeans(n_clusters=3, p=2.0, init="paper", init_value=v, max_iter=1).fit(np.full(6, 0.3))
         np.testing.assert_allclose(m.init_centers_, v + width * np.array([-0.5, 0.0, 0.5]), rtol=1e-14)
+
+
+def test_documented_defaults():
+    m = KHarmonicMeans()
+    assert (m.n_clusters, m.p, m.init, m.max_iter, m.tol, m.damping, m.duplicate_spread, m.compress) == \
+        (7, 2.0, "paper", 3000, 1e-10, "auto", 1.0, "auto")
