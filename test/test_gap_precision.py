@@ -345,7 +345,7 @@ def test_cubic_term_from_eight_gap_samples_on():
 def test_five_pre_entry_samples_still_give_the_noise_levels_and_dof():
     """The pre-entry samples give the noise levels and the t degrees of freedom (pre-entry samples - 1), down to 5."""
     w, width = exact_window(1.16, n_pre=5, acc_noise=0.2, seed=5)
-    g = estimate_inertia({k: w[k] for k in ("alpha1", "alpha2", "a1", "m_el")}, 5, width, R, TS)
+    g = estimate_inertia({k: w[k] for k in ("alpha1", "alpha2", "a1", "m_el")}, 5, width, R, TS, "acceleration")
     assert _half_width(g) == pytest.approx(stats.t.ppf(0.975, 4) * g.std_error_kgm2, rel=1e-12)
 
 
