@@ -69,8 +69,9 @@ SIMULATOR_PARAMS = {
     "repeat": Param(1, "passes through the case list; 0 = forever", min=0, max=1_000_000),
     "publish_clock": Param(True, "publish the drive clock on /clock (the other nodes may use_sim_time; the launch "
                            "file remaps it into a namespaced drive)"),
-    "wait_for_subscribers": Param(1, "wait until drive/signals has this many subscribers (1: the windowing "
-                                  "node) before the first case; 0 = start at once (warned when nobody listens)",
+    "wait_for_subscribers": Param(1, "wait until drive/signals has this many subscribers other than the "
+                                  "diagnostic node's recorder (1: the windowing node) before the first case; "
+                                  "0 = start at once (warned when nobody listens)",
                                   min=0, max=1000),
     "wait_timeout_s": Param(30.0, "give up (exit status 1) when the subscribers are not there after this "
                             "long, s", min=0.0, max=86400.0, min_exclusive=True),

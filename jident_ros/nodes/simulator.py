@@ -187,7 +187,10 @@ class SimulatorNode(Node):
     def _tick_waiting(self):
         c = self.cfg
         want = c["wait_for_subscribers"]
-        have = self.pub_signals.get_subscription_count()
+        # the diagnostic node's recorder also subscribes to drive/signals: it is not the reader the stream waits
+        # for (the windowing node is), so it does not count
+        have = sum(1 for info in self.get_subscriptions_info_by_topic(self.pub_signals.topic_name)
+                   if info.node_name != "jident_diagnostic")
         if want > 0 and have < want:
             if time.monotonic() > self.wait_deadline:
                 self.get_logger().error(f"no {want} subscriber(s) of {self.resolve_topic_name('drive/signals')} "
