@@ -58,6 +58,6 @@ def test_the_cli_says_it_in_one_line_and_exits_2():
 
 def test_the_simulator_node_refuses_it_at_parameter_validation():
     values = dict(DEFAULTS, inertias_kgm2=[1e-9])
-    with pytest.raises(ParameterError, match="model parameters: .*would diverge"):
+    with pytest.raises(ParameterError, match="with the model: .*would diverge"):
         validate(values)
     validate(dict(DEFAULTS))   # the defaults pass

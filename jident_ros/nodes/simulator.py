@@ -89,8 +89,8 @@ def validate(values: dict):
     try:  # inputs the simulation cannot integrate (an overload, a step too coarse for J1): one line, not NaN batches
         check_stable(system, cases)
     except ValueError as exc:  # name what the user sets: the case lists (or the model sections)
-        raise ParameterError(f"parameter consistencies_pa_sn/inertias_kgm2/backlash_widths_m or model "
-                             f"parameters: {exc}") from None
+        raise ParameterError(f"parameter consistencies_pa_sn, inertias_kgm2, backlash_widths_m (the cases) with "
+                             f"the model: {exc}") from None
     return cfg, system, cases
 
 
