@@ -296,7 +296,8 @@ def test_simulator_warns_when_it_starts_without_a_subscriber(node_env, tmp_path)
 
 
 @pytest.mark.ros
-@pytest.mark.xfail(reason="failed in the final clean-clone run (stop 10 note), passed on the integrate branch; not yet investigated", strict=False)
+@pytest.mark.xfail(reason="failed in the final clean-clone run (stop 10 note); not yet investigated",
+                   strict=False)
 def test_simulator_waits_for_the_windowing_node_not_any_subscriber(node_env, ros, tmp_path):
     """wait_for_node (default jident_windowing): a subscriber of drive/signals that is not the windowing node
     (here this test, as the diagnostic node's recorder would be) does not start the stream."""

@@ -291,7 +291,8 @@ while True:
 
 
 @pytest.mark.parametrize("sig", ["SIGTERM", pytest.param("SIGINT", marks=pytest.mark.xfail(
-    reason="known bug (stop 10 note): SIGINT finalisation of a plain-process recorder fails in fresh clones; under investigation", strict=False))])
+    reason="known bug (stop 10 note): SIGINT finalisation of a plain-process recorder fails in fresh clones",
+    strict=False))])
 def test_signal_under_load_finalises_the_bag(tmp_path, sig):
     import signal
     script = tmp_path / "child.py"
