@@ -3,7 +3,8 @@
 simulator node publishes them (drive/signals batches; drive/true_inertia, drive/backlash_width, drive/case).
 
 Cost: one simulate_grid call (the 42 pattern runs at eta_k = 0.025 + 3 held-out runs, EXTRA_CASES), the
-simulator-built library (the fixtures ``windows`` and ``library`` of conftest.py) and the recordings-built one (each 42 windows), a few small builds.
+simulator-built library (the fixtures ``windows`` and ``library`` of conftest.py) and the recordings-built
+one (each 42 windows), a few small builds.
 """
 from __future__ import annotations
 
