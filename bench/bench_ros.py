@@ -59,6 +59,8 @@ sys.path.insert(0, str(REPO))
 
 import numpy as np  # noqa: E402
 
+from jident_ros.resources import node_command, stop_process  # noqa: E402
+
 SIM_START_S = 1.0          # simulator start_time_s (its default)
 GAP_SAMPLES = 400          # simulator gap_samples (its default)
 BATCH = 50                 # simulator batch_size (its default)
@@ -138,7 +140,6 @@ class Proc:
     """A node process with its output in a log file."""
 
     def __init__(self, env, logdir: Path, node: str, *ros_args: str):
-        from jident_ros.resources import node_command
         self.name = node
         self.cmd = [*node_command(node), "--ros-args", *ros_args]
         self.log = logdir / f"{node}.log"
@@ -177,16 +178,10 @@ class Proc:
         return (int(fields[11]) + int(fields[12])) / CLK_TCK
 
     def stop(self, sig=signal.SIGINT, timeout=20.0) -> int:
-        if self.p.poll() is None:
-            self.p.send_signal(sig)
-            try:
-                self.p.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.p.kill()
-                self.p.wait()
+        rc = stop_process(self.p, sig, timeout)
         if not self.out.closed:
             self.out.close()
-        return self.p.returncode
+        return rc
 
 
 # --------------------------------------------------------------------------- the bench's node

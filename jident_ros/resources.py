@@ -22,7 +22,9 @@ The first folder that holds the requested file wins.
 from __future__ import annotations
 
 import os
+import signal
 import site
+import subprocess
 import sys
 from pathlib import Path
 
@@ -129,3 +131,16 @@ def node_command(name: str, *, require_index: bool = False) -> list[str]:
                                 f"(<ament prefix>/lib/{PACKAGE_NAME}/{name}; AMENT_PREFIX_PATH={prefixes!r}); "
                                 f"run `bash scripts/setup.sh` or `colcon build` and source install/setup.bash")
     return [sys.executable, "-m", f"{PACKAGE_NAME}.nodes.{name}"]
+
+
+def stop_process(proc: subprocess.Popen, sig: int = signal.SIGINT, timeout_s: float = 20.0) -> int:
+    """Stop a node process started from :func:`node_command`: ``sig`` (SIGINT: the node's shutdown path,
+    which finalises a recording), then SIGKILL if it has not ended after ``timeout_s``; its exit status."""
+    if proc.poll() is None:
+        proc.send_signal(sig)
+        try:
+            proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return proc.returncode

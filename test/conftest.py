@@ -22,12 +22,43 @@ from pathlib import Path
 
 import pytest
 
+from jident_ros.config import load_system_config
+from jident_ros.method.patterns import PatternLibrary
+from jident_ros.sim import paper_grid_cases, simulate_grid
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="session")
 def repo_root() -> Path:
     return REPO_ROOT
+
+
+@pytest.fixture(scope="module")
+def system():
+    """The model's configuration, the package's config/system.yaml."""
+    return load_system_config()
+
+
+@pytest.fixture(scope="module")
+def pattern_cases(system):
+    """The 42 pattern runs: every J1 class x every backlash width at the pattern eta_k (class-major,
+    width-minor)."""
+    return paper_grid_cases(system, [system.grid.pattern_consistency_pa_sn])
+
+
+@pytest.fixture(scope="module")
+def windows(request, system, pattern_cases):
+    """One simulation: the 42 pattern runs (``pattern_cases``), then the test module's ``EXTRA_CASES``
+    (off-pattern runs, none when the module has no such list)."""
+    return simulate_grid(system, pattern_cases + list(getattr(request.module, "EXTRA_CASES", ())))
+
+
+@pytest.fixture(scope="module")
+def library(windows, pattern_cases, system, method):
+    """The pattern library of the simulated pattern runs (the first ``len(pattern_cases)`` windows)
+    under the test module's ``method`` fixture."""
+    return PatternLibrary.from_windows(windows, list(range(len(pattern_cases))), system, method)
 
 
 def _unique_domain_id() -> str:

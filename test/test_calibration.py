@@ -2,8 +2,9 @@
 --from-recordings`).  No ROS: the recordings are written with BagWriter from simulated cases, the way the
 simulator node publishes them (drive/signals batches; drive/true_inertia, drive/backlash_width, drive/case).
 
-Cost: one simulate_grid call (the 42 pattern runs at eta_k = 0.025 + 3 held-out runs), the simulator-built
-library and the recordings-built one (each 42 windows), a few small builds.
+Cost: one simulate_grid call (the 42 pattern runs at eta_k = 0.025 + 3 held-out runs, EXTRA_CASES), the
+simulator-built library (the fixtures ``windows`` and ``library`` of conftest.py) and the recordings-built
+one (each 42 windows), a few small builds.
 """
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import pytest
 
 from jident_ros.bag.recording import BagWriter
 from jident_ros.cli.main import main
-from jident_ros.config import load_method_config, load_system_config
+from jident_ros.config import load_method_config
 from jident_ros.method import normalise as nz
 from jident_ros.method.calibration import (
     CalibrationError,
@@ -25,7 +26,7 @@ from jident_ros.method.calibration import (
 )
 from jident_ros.method.patterns import LibraryMismatch, PatternLibrary, identify_window
 from jident_ros.method.pipeline import SIGNALS, batch_features
-from jident_ros.sim import Case, simulate_grid
+from jident_ros.sim import Case
 from jident_ros.stream.detector import embed_windows
 from jident_ros.stream.layout import DEFAULT_CHANNELS, pack
 
@@ -34,7 +35,7 @@ F64 = "std_msgs/msg/Float64"
 F64MA = "std_msgs/msg/Float64MultiArray"
 CASE_LABEL = "case_index,inertia_kgm2,backlash_width_m,consistency_pa_sn,entry_time_s"
 #: Held-out runs (not pattern runs): identified with both libraries.
-HELD_OUT = [Case(1.073, 0.005, 0.0375), Case(1.189, 0.0075, 0.0375), Case(0.957, 0.0025, 0.0125)]
+EXTRA_CASES = [Case(1.073, 0.005, 0.0375), Case(1.189, 0.0075, 0.0375), Case(0.957, 0.0025, 0.0125)]
 
 
 # ------------------------------------------------------------------ helpers
@@ -96,42 +97,24 @@ def assert_one_line_error(rc, err, *needles):
 
 # ------------------------------------------------------------------ fixtures
 @pytest.fixture(scope="module")
-def system():
-    return load_system_config()
-
-
-@pytest.fixture(scope="module")
 def method():
     return load_method_config()
 
 
 @pytest.fixture(scope="module")
-def sim(system):
-    """42 pattern runs (class-major in grid order, width-minor) followed by HELD_OUT."""
-    g = system.grid
-    cases = [Case(j, w, g.pattern_consistency_pa_sn) for j in g.inertia_classes_kgm2 for w in g.backlash_widths_m]
-    return simulate_grid(system, cases + HELD_OUT)
-
-
-@pytest.fixture(scope="module")
-def sim_library(sim, system, method):
-    return PatternLibrary.from_windows(sim, list(range(42)), system, method)
-
-
-@pytest.fixture(scope="module")
-def recordings(sim, system, tmp_path_factory):
+def recordings(windows, system, tmp_path_factory):
     """Pattern runs split over recordings labelled in every supported way, plus held-out and broken ones."""
     d = tmp_path_factory.mktemp("calibration")
     nw = len(system.grid.backlash_widths_m)
     per_class = lambda fs: [f * nw + e for f in fs for e in range(nw)]  # noqa: E731
     return {
-        "truth": write_recording(d / "rec_truth", sim, per_class([0, 1, 2]), truth=("true_inertia",)),
-        "case": write_recording(d / "rec_case", sim, per_class([3, 4]), truth=("case",)),
-        "c5": write_recording(d / "rec_c5", sim, per_class([5]), truth=()),   # J1 by --label (name)
-        "c6": write_recording(d / "rec_c6", sim, per_class([6]), truth=()),   # J1 by --label (full path)
-        "held_out": write_recording(d / "held_out", sim, [42, 43, 44]),
-        "no_width": write_recording(d / "no_width", sim, [0], width=False),
-        "no_entry": write_recording(d / "no_entry", sim, [0, 1], rows=300),
+        "truth": write_recording(d / "rec_truth", windows, per_class([0, 1, 2]), truth=("true_inertia",)),
+        "case": write_recording(d / "rec_case", windows, per_class([3, 4]), truth=("case",)),
+        "c5": write_recording(d / "rec_c5", windows, per_class([5]), truth=()),   # J1 by --label (name)
+        "c6": write_recording(d / "rec_c6", windows, per_class([6]), truth=()),   # J1 by --label (full path)
+        "held_out": write_recording(d / "held_out", windows, [42, 43, 44]),
+        "no_width": write_recording(d / "no_width", windows, [0], width=False),
+        "no_entry": write_recording(d / "no_entry", windows, [0, 1], rows=300),
         "dir": d,
     }
 
@@ -149,22 +132,22 @@ def class_permutation(rec_lib, sim_lib):
 
 
 # ------------------------------------------------------------------ (a) equals the simulator-built library
-def test_recordings_library_equals_simulator_library(rec_library, sim_library, system):
+def test_recordings_library_equals_simulator_library(rec_library, library, system):
     """Same windows -> same patterns.  What differs: the classes are sorted ascending (the simulator
     library keeps the grid order), and the metadata says where the patterns came from."""
     assert rec_library.classes_kgm2 == tuple(sorted(system.grid.inertia_classes_kgm2))
-    assert rec_library.widths_m == sim_library.widths_m and rec_library.p_values == sim_library.p_values
+    assert rec_library.widths_m == library.widths_m and rec_library.p_values == library.p_values
     assert rec_library.signals == SIGNALS
-    perm = class_permutation(rec_library, sim_library)
-    np.testing.assert_allclose(rec_library.centres, sim_library.centres[:, :, :, perm], rtol=1e-12, atol=1e-14)
-    np.testing.assert_allclose(rec_library.ranges, sim_library.ranges[:, :, perm], rtol=1e-12, atol=1e-14)
-    np.testing.assert_allclose(rec_library.h5, sim_library.h5, rtol=1e-12)
+    perm = class_permutation(rec_library, library)
+    np.testing.assert_allclose(rec_library.centres, library.centres[:, :, :, perm], rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(rec_library.ranges, library.ranges[:, :, perm], rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(rec_library.h5, library.h5, rtol=1e-12)
     meta = rec_library.metadata
     for k in ("format", "system_hash", "method_hash", "system", "method"):
-        assert meta[k] == sim_library.metadata[k], k
+        assert meta[k] == library.metadata[k], k
     assert meta["source"] == "recordings"
     assert pattern_window_counts(rec_library).tolist() == [[1] * 7] * 6
-    assert (pattern_window_counts(sim_library) == 1).all()
+    assert (pattern_window_counts(library) == 1).all()
     recs = {r["file"].rsplit("/", 1)[-1]: r for r in meta["recordings"]}
     assert {k: v["windows"] for k, v in recs.items()} == {"rec_truth": 18, "rec_case": 12, "rec_c5": 6, "rec_c6": 6}
     assert recs["rec_truth"]["label_sources"] == ["/drive/true_inertia"]
@@ -181,32 +164,32 @@ def test_recordings_library_save_load_keeps_configuration_check(rec_library, sys
         PatternLibrary.load(path, system, method.replace(eq12="literal"))
 
 
-def test_windows_are_the_simulated_ones_with_their_labels(recordings, sim, system):
+def test_windows_are_the_simulated_ones_with_their_labels(recordings, windows, system):
     ws = read_calibration_windows(recordings["case"], system)
     nw = len(system.grid.backlash_widths_m)
     assert len(ws) == 2 * nw
     for k, w in enumerate(ws):
         i = 3 * nw + k
-        assert (w.inertia_kgm2, w.backlash_width_m) == (sim.cases[i].inertia_kgm2, sim.cases[i].backlash_width_m)
-        assert w.entry_index == sim.entry_index and w.label_source == "/drive/case"
+        assert (w.inertia_kgm2, w.backlash_width_m) == (windows.cases[i].inertia_kgm2, windows.cases[i].backlash_width_m)
+        assert w.entry_index == windows.entry_index and w.label_source == "/drive/case"
         for name in SIGNALS:
-            np.testing.assert_array_equal(w.data[name], sim.signals[name][i])
+            np.testing.assert_array_equal(w.data[name], windows.signals[name][i])
     # the command-line label wins over the recording's messages; --backlash-width-m over drive/backlash_width
     ws = read_calibration_windows(recordings["held_out"], system, inertia_kgm2=2.0, backlash_width_m=0.004)
     assert {w.inertia_kgm2 for w in ws} == {2.0} and {w.backlash_width_m for w in ws} == {0.004}
 
 
 # ------------------------------------------------------------------ (b) same answers on a held-out recording
-def test_held_out_recording_identified_as_with_the_simulator_library(recordings, rec_library, sim_library, sim,
+def test_held_out_recording_identified_as_with_the_simulator_library(recordings, rec_library, library, windows,
                                                                      system, method):
     held = read_calibration_windows(recordings["held_out"], system)
     assert [(w.inertia_kgm2, w.backlash_width_m) for w in held] == [(c.inertia_kgm2, c.backlash_width_m)
-                                                                     for c in HELD_OUT]
-    perm = class_permutation(rec_library, sim_library)
+                                                                     for c in EXTRA_CASES]
+    perm = class_permutation(rec_library, library)
     for k, w in enumerate(held):
         for p in (2.0, 9.0):
             a = identify_window(w.data, w.entry_index, w.backlash_width_m, rec_library, method, p)
-            b = identify_window(sim.case(42 + k), sim.entry_index, HELD_OUT[k].backlash_width_m, sim_library,
+            b = identify_window(windows.case(42 + k), windows.entry_index, EXTRA_CASES[k].backlash_width_m, library,
                                 method, p)
             assert a.fused_inertia_kgm2 == b.fused_inertia_kgm2 and a.width_index == b.width_index
             for name in SIGNALS:
@@ -215,19 +198,19 @@ def test_held_out_recording_identified_as_with_the_simulator_library(recordings,
 
 
 # ------------------------------------------------------------------ averaging
-def test_windows_of_one_pattern_are_averaged(sim, system, method):
+def test_windows_of_one_pattern_are_averaged(windows, system, method):
     """Two windows of J1 = 1.073 at K2 = 0.005 (eta_k 0.025 and 0.0375) and one of 1.16: the 1.073 pattern
     is the mean of the two windows' centres and (h3, k3); h5 comes from the means."""
     g = system.grid
     nw, e = len(g.backlash_widths_m), g.backlash_widths_m.index(0.005)
     idx = [g.inertia_classes_kgm2.index(1.073) * nw + e, 42, g.inertia_classes_kgm2.index(1.16) * nw + e]
-    wins = [LabelledWindow(sim.case(i), sim.entry_index, sim.cases[i].inertia_kgm2, 0.005, "x") for i in idx]
+    wins = [LabelledWindow(windows.case(i), windows.entry_index, windows.cases[i].inertia_kgm2, 0.005, "x") for i in idx]
     lib = library_from_labelled_windows(wins, system, method)
     assert lib.classes_kgm2 == (1.073, 1.16) and lib.widths_m == (0.005,)
     assert pattern_window_counts(lib).tolist() == [[2, 1]]
     ps = lib.p_values
     for s, name in enumerate(SIGNALS):
-        cen, rps, _ = batch_features(sim.signals[name][idx], name, method, ps)
+        cen, rps, _ = batch_features(windows.signals[name][idx], name, method, ps)
         np.testing.assert_allclose(lib.centres[:, 0, s, 0], cen[:, :2].mean(axis=1), rtol=1e-12)
         np.testing.assert_allclose(lib.centres[:, 0, s, 1], cen[:, 2], rtol=1e-12)
         mean_range = [np.mean([r.h3 for r in rps[:2]]), np.mean([r.k3 for r in rps[:2]])]

@@ -2,7 +2,8 @@
 34-35), batched KHM (eqs. 26-30), pipeline (eq. 33), pattern library, method config.
 
 Cost: one simulate_grid call (the 42 pattern runs at eta_k = 0.025 plus 3 test
-runs) and one pattern library (default method), both module-scoped.
+runs, EXTRA_CASES) and one pattern library (default method), both module-scoped: the fixtures ``windows``
+and ``library`` of conftest.py.
 """
 from __future__ import annotations
 
@@ -36,30 +37,8 @@ HIST_WINDOWS = (0, 3, 13, 27, 41, 42, 43, 44)
 
 # ------------------------------------------------------------------ fixtures
 @pytest.fixture(scope="module")
-def system():
-    return load_system_config()
-
-
-@pytest.fixture(scope="module")
 def method():
     return MethodConfig()
-
-
-@pytest.fixture(scope="module")
-def pattern_cases(system):
-    g = system.grid
-    return [Case(j, w, g.pattern_consistency_pa_sn) for j in g.inertia_classes_kgm2 for w in g.backlash_widths_m]
-
-
-@pytest.fixture(scope="module")
-def windows(system, pattern_cases):
-    """42 pattern runs (class-major, width-minor) followed by EXTRA_CASES."""
-    return simulate_grid(system, pattern_cases + EXTRA_CASES)
-
-
-@pytest.fixture(scope="module")
-def library(windows, system, method):
-    return PatternLibrary.from_windows(windows, list(range(42)), system, method)
 
 
 @pytest.fixture(scope="module")

@@ -19,7 +19,19 @@ import time
 
 import numpy as np
 import pytest
-from test_nodes import REPO, TIMEOUT, Proc, _good_stream, library, logs, node_env, procs, ros, statuses  # noqa: F401
+from test_nodes import (  # noqa: F401
+    REPO,
+    TIMEOUT,
+    Proc,
+    _good_stream,
+    library,
+    logs,
+    node_env,
+    one_line_failures,
+    procs,
+    ros,
+    statuses,
+)
 
 
 def _call(ros, srv_type, name, request, timeout=TIMEOUT):
@@ -330,12 +342,9 @@ def test_params_file_errors_and_model_overload_give_one_line(node_env, tmp_path)
         ("simulator", ["-p", "consistencies_pa_sn:=[1000000.0]"], "consistencies_pa_sn", "pull-out torque"),
         ("diagnostic", ["-p", "gap_method:=fast"], "gap_method", "fast"),
     ]
-    running = [(Proc(node_env, tmp_path, node, *args), a, b) for node, args, a, b in cases]
-    for proc, a, b in running:
-        rc = proc.wait(TIMEOUT)
-        out = proc.text().strip().splitlines()
-        assert rc == 2 and len(out) == 1, logs(proc)
-        assert a in out[0] and b in out[0] and "Traceback" not in out[0], out[0]
+    lines = one_line_failures(node_env, tmp_path, [(node, args) for node, args, _, _ in cases])
+    for line, (_, _, a, b) in zip(lines, cases):
+        assert a in line and b in line and "Traceback" not in line, line
 
 
 def test_cli_gap_method_none(tmp_path):

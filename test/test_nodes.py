@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 import yaml
 
+from jident_ros.resources import node_command, stop_process
+
 REPO = Path(__file__).resolve().parents[1]
 NODES = ("simulator", "windowing", "diagnostic", "replay")
 TIMEOUT = 60.0  # per wait; a healthy run needs a few seconds
@@ -73,7 +75,6 @@ class Proc:
         self.log = tmp / f"{node}-{os.getpid()}-{time.monotonic_ns()}.log"
         self.out = open(self.log, "w")
         # found as `ros2 run jident_ros <node>` finds it: ament index prefix + lib/jident_ros/<node>
-        from jident_ros.resources import node_command
         cmd = node_command(node, require_index=os.environ.get("JIDENT_REQUIRE_ROS") == "1")
         self.p = subprocess.Popen([*cmd, *args, "--ros-args", *ros_args],
                                   env=env, cwd=tmp, stdout=self.out, stderr=subprocess.STDOUT)
@@ -87,15 +88,9 @@ class Proc:
         return self.p.poll() is None
 
     def stop(self, sig=signal.SIGTERM, timeout=20.0) -> int:
-        if self.p.poll() is None:
-            self.p.send_signal(sig)
-            try:
-                self.p.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.p.kill()
-                self.p.wait()
+        rc = stop_process(self.p, sig, timeout)
         self.out.close()
-        return self.p.returncode
+        return rc
 
     def wait(self, timeout=TIMEOUT) -> int:
         self.p.wait(timeout)
@@ -104,6 +99,19 @@ class Proc:
 
 def logs(*procs) -> str:
     return "\n".join(f"--- {p.name} (rc {p.p.poll()}) ---\n{p.text()[-3000:]}" for p in procs)
+
+
+def one_line_failures(env, tmp: Path, runs) -> list[str]:
+    """Start every (node, ros args) of ``runs`` at once; each must stop with exit status 2 and one line
+    of output (a bad parameter, a bad params file): those lines, in the order of ``runs``."""
+    running = [Proc(env, tmp, node, *args) for node, args in runs]
+    lines = []
+    for proc in running:
+        rc = proc.wait(TIMEOUT)
+        out = proc.text().strip().splitlines()
+        assert rc == 2 and len(out) == 1, logs(proc)
+        lines.append(out[0])
+    return lines
 
 
 class Inbox(list):
@@ -367,13 +375,9 @@ def test_bad_parameters_stop_the_node_with_one_line(node_env, tmp_path):
         ("diagnostic", ["-p", "method.wavelets.a1:=nowave"], "method.wavelets.a1", "nowave"),
         ("replay", ["-p", "rate:=1.0"], "bag", "''"),
     ]
-    running = [(Proc(node_env, tmp_path, node, *args), name, value) for node, args, name, value in cases]
-    for proc, name, value in running:
-        rc = proc.wait(TIMEOUT)
-        out = proc.text().strip().splitlines()
-        assert rc == 2, logs(proc)
-        assert len(out) == 1, out
-        assert f"parameter {name}:" in out[0] and value in out[0], out[0]
+    lines = one_line_failures(node_env, tmp_path, [(node, args) for node, args, _, _ in cases])
+    for line, (_, _, name, value) in zip(lines, cases):
+        assert f"parameter {name}:" in line and value in line, line
 
 
 # --------------------------------------------------------------------------- bad input

@@ -39,7 +39,7 @@ from jident_ros.identify.levels import LEVEL_NAMES
 from jident_ros.identify.library import default_library_path
 from jident_ros.method.patterns import LibraryMismatch, PatternLibrary
 from jident_ros.nodes.ros_io import array_from_multiarray, qos_diagnostics, qos_latched, status_level, status_values
-from jident_ros.resources import node_command
+from jident_ros.resources import node_command, stop_process
 
 #: Default cases (J1 kg m^2, backlash width m, eta_k Pa s^n): five of the paper's seven classes, five
 #: widths, and every eta_k but the pattern runs' 0.025 -- none is a pattern run.
@@ -152,15 +152,9 @@ class NodeProcess:
         return self.proc.poll() is None
 
     def stop(self, sig=signal.SIGINT, timeout: float = 20.0) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        rc = stop_process(self.proc, sig, timeout)
         self._log.close()
-        return self.proc.returncode
+        return rc
 
     def tail(self, n: int = 15) -> str:
         if not self._log.closed:

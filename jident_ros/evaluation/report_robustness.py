@@ -45,7 +45,7 @@ def _pool(sweeps: list[Sweep], key: str = PRIMARY, mask_fn=None) -> dict:
         e = np.abs(g["rel_error"][m])
         err.append(e)
         cov.append(g["covered"][m])
-        half.append((0.5 * (g["hi"] - g["lo"]) / s.true_j1)[m])
+        half.append((0.5 * (g["hi"] - g["lo"]) / s.true_inertia_kgm2)[m])
     e, c, h = np.concatenate(err), np.concatenate(cov), np.concatenate(half)
     ok = np.isfinite(e)
     return {"n": int(e.size), "failed": int((~ok).sum()),
@@ -68,6 +68,17 @@ def _targets(rob: RobustnessResult) -> list[str]:
     return out
 
 
+def _grid_row(s: Sweep, rob: RobustnessResult) -> str:
+    """One data set's row of the grid table: image method, gap estimate and fused verdict side by side."""
+    classes = rob.classes_kgm2
+    a = s.accuracy(classes)
+    h = s.accuracy(classes, ~s.pattern_mask(rob.pattern_eta))
+    g = s.gap_summary()
+    return (f"| {s.label} | {_pct(a.get('image'))} | {_pct(h.get('image'))} | {_pct(a['gap'])} | "
+            f"**{_pct(a.get('fused'))}** | {_pct(a.get('between'))} | {_num(g['median'])} % / {_num(g['max'])} % | "
+            f"{_pct(g['coverage'])} | {_num(g['ci_half'])} % |")
+
+
 def _grid_side_by_side(rob: RobustnessResult) -> list[str]:
     classes = rob.classes_kgm2
     out = ["| data | paper image method, fused class (all 168) | same, 126 cases at η_k ≠ 0.025 | "
@@ -76,12 +87,7 @@ def _grid_side_by_side(rob: RobustnessResult) -> list[str]:
            "|---|---|---|---|---|---|---|---|---|"]
     extra = _by_snr(rob.grid_extra)
     for s in rob.grid:
-        a = s.accuracy(classes)
-        h = s.accuracy(classes, ~s.pattern_mask(rob.pattern_eta))
-        g = s.gap_summary()
-        out.append(f"| {s.label} | {_pct(a.get('image'))} | {_pct(h.get('image'))} | {_pct(a['gap'])} | "
-                   f"**{_pct(a.get('fused'))}** | {_pct(a.get('between'))} | {_num(g['median'])} % / {_num(g['max'])} % | "
-                   f"{_pct(g['coverage'])} | {_num(g['ci_half'])} % |")
+        out.append(_grid_row(s, rob))
         more = [x for x in extra.get(s.snr_db, []) if x.verdict is not None]
         if more:
             sws = [s] + more
@@ -95,12 +101,7 @@ def _grid_side_by_side(rob: RobustnessResult) -> list[str]:
                        f"extra seeds) | – | – | {_pct(gacc)} | **{_pct(facc)}** | {_pct(btw)} | "
                        f"{_num(st['median'])} % / {_num(st['max'])} % | {_pct(st['coverage'])} | {_num(st['ci_half'])} % |")
     for s in getattr(rob, "sensors", []):   # sensors in physical terms beside the awgn rows
-        a = s.accuracy(classes)
-        h = s.accuracy(classes, ~s.pattern_mask(rob.pattern_eta))
-        g = s.gap_summary()
-        out.append(f"| {s.label} | {_pct(a.get('image'))} | {_pct(h.get('image'))} | {_pct(a['gap'])} | "
-                   f"**{_pct(a.get('fused'))}** | {_pct(a.get('between'))} | {_num(g['median'])} % / {_num(g['max'])} % | "
-                   f"{_pct(g['coverage'])} | {_num(g['ci_half'])} % |")
+        out.append(_grid_row(s, rob))
     if getattr(rob, "sensors", None):
         out += ["", f"'default sensor set' = `sim.sensors.DEFAULT_SENSORS` ({rob.sensor_set}); × k multiplies every "
                 "noise level (encoder and accelerometer range unchanged). The SNR rows are MATLAB's awgn 'measured'."]
@@ -138,7 +139,7 @@ def _offgrid_j1(rob: RobustnessResult) -> list[str]:
     values = sorted({c.inertia_kgm2 for c in rob.offgrid_j1[0].cases}, reverse=True)
     for j in values:
         for s in rob.offgrid_j1:
-            m = s.true_j1 == j
+            m = s.true_inertia_kgm2 == j
             g = s.gap_summary(PRIMARY, m)
             o = s.offclass_outcomes(classes, m)
             near = classes[s.nearest_true_class(classes)[m][0]]
@@ -163,7 +164,7 @@ def _offgrid_width(rob: RobustnessResult) -> list[str]:
     widths = sorted({c.backlash_width_m for c in rob.offgrid_width[0].cases})
     for w in widths:
         for s in rob.offgrid_width:
-            m = s.true_width == w
+            m = s.true_width_m == w
             g = s.gap_summary(PRIMARY, m)
             ws = s.width_summary(m)
             a = s.accuracy(classes, m)
@@ -342,13 +343,13 @@ def _findings(rob: RobustnessResult) -> list[str]:
             "ignores its small integration bias and rarely covers J1.")
     clean = rob.grid[0]
     if clean.width is not None:
-        w = clean.true_width
+        w = clean.true_width_m
         errs = {x: float(np.nanmax(np.abs(clean.width["rel_error"][w == x]))) for x in sorted(set(w))}
         offw = [s for s in rob.offgrid_width if s.snr_db is None]
         if offw:
             s = offw[0]
-            errs.update({x: float(np.nanmax(np.abs(s.width["rel_error"][s.true_width == x])))
-                         for x in sorted(set(s.true_width))})
+            errs.update({x: float(np.nanmax(np.abs(s.width["rel_error"][s.true_width_m == x])))
+                         for x in sorted(set(s.true_width_m))})
         how = clean.width["method"]
         n_contact = int(np.sum(how == "contact"))
         lines.append(f"* Noise-free, the width comes from the contact-torque fit in {n_contact} of {how.size} grid "
@@ -501,7 +502,7 @@ def write_robustness_figures(rob: RobustnessResult, outdir: str | Path = "docs/f
         data, pos, labels, cols = [], [], [], []
         for k, j in enumerate(values):
             for d, s in enumerate(rob.offgrid_j1):
-                e = s.gap[PRIMARY]["rel_error"][s.true_j1 == j] * 100
+                e = s.gap[PRIMARY]["rel_error"][s.true_inertia_kgm2 == j] * 100
                 data.append(e[np.isfinite(e)])
                 pos.append(k * 3 + d)
                 cols.append(f"C{d}")
@@ -564,7 +565,7 @@ def write_robustness_figures(rob: RobustnessResult, outdir: str | Path = "docs/f
     if sws:
         fig, ax = plt.subplots(figsize=(8, 4), constrained_layout=True)
         for s, mk in zip(sws, "os^"):
-            ax.plot(s.true_width * 1e3, s.width["rel_error"] * 100, mk, ms=4, alpha=0.6,
+            ax.plot(s.true_width_m * 1e3, s.width["rel_error"] * 100, mk, ms=4, alpha=0.6,
                     label={"grid": "grid", "offgrid_j1": "off-grid J1", "offgrid_width": "off-grid widths"}[s.kind])
         for y in (-5, 5):
             ax.axhline(y, color="k", ls=":", lw=1)

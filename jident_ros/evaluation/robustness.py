@@ -32,6 +32,7 @@ from jident_ros.identify.gap import GapEstimate, NoGapError, estimate_backlash_w
 from jident_ros.method.patterns import PatternLibrary, identify_window
 from jident_ros.sim import (
     Case,
+    CaseTruths,
     SystemConfig,
     WindowSet,
     add_measurement_noise,
@@ -71,7 +72,7 @@ TARGET_SNR_DB = 30.0
 
 
 @dataclass
-class Sweep:
+class Sweep(CaseTruths):
     """Every method's answer on one set of windows (arrays indexed by case).
 
     gap[key] : dict with 'estimate', 'lo', 'hi' (kg m^2), 'rel_error', 'covered' (bool),
@@ -95,22 +96,14 @@ class Sweep:
     image: dict | None = None
     seconds: float = 0.0
 
-    # ------------------------------------------------------------ truths
-    @property
-    def true_j1(self) -> np.ndarray:
-        return np.array([c.inertia_kgm2 for c in self.cases])
-
-    @property
-    def true_width(self) -> np.ndarray:
-        return np.array([c.backlash_width_m for c in self.cases])
-
+    # ------------------------------------------------------------ truths (and CaseTruths')
     def true_class(self, classes) -> np.ndarray:
         """Index of the true J1 in ``classes``, -1 when J1 is off the classes."""
         cl = [float(c) for c in classes]
-        return np.array([cl.index(j) if j in cl else -1 for j in self.true_j1])
+        return np.array([cl.index(j) if j in cl else -1 for j in self.true_inertia_kgm2])
 
     def nearest_true_class(self, classes) -> np.ndarray:
-        return np.array([nearest_class(j, classes) for j in self.true_j1])
+        return np.array([nearest_class(j, classes) for j in self.true_inertia_kgm2])
 
     def pattern_mask(self, pattern_eta: float) -> np.ndarray:
         return np.array([c.consistency_pa_sn == pattern_eta for c in self.cases])
@@ -123,7 +116,7 @@ class Sweep:
         err = np.abs(g["rel_error"][m])
         ok = np.isfinite(err)
         n_gap = g["n_gap"][m][ok]
-        half = (0.5 * (g["hi"] - g["lo"]) / self.true_j1)[m][ok]
+        half = (0.5 * (g["hi"] - g["lo"]) / self.true_inertia_kgm2)[m][ok]
         return {"n": int(m.sum()), "failed": int((~ok).sum()),
                 "median": float(np.median(err[ok])) if ok.any() else np.nan,
                 "max": float(np.max(err[ok])) if ok.any() else np.nan,
@@ -451,29 +444,25 @@ def run_robustness(system: SystemConfig, method, library: PatternLibrary | None 
 
     # (b) off-grid J1 ------------------------------------------------------------------------
     noisy_levels = [None] + ([target_snr_db] if target_snr_db is not None else [])
-    offj = []
-    if offgrid_j1:
+
+    def offgrid_sweeps(cases, kind: str, name: str, salt: int) -> list[Sweep]:
+        """The off-grid cases simulated once, evaluated noise-free and at the target SNR (noise seed salt)."""
         t0 = time.perf_counter()
-        w = simulate_grid(system, offgrid_j1_cases(system, offgrid_j1))
-        for k, snr in enumerate(noisy_levels):
-            sd = None if snr is None else noise_seed(seed, snr, 1)
-            offj.append(evaluate_windows(system, _noisy(w, snr, sd), _data_label(snr, sd), "offgrid_j1",
-                                         snr_db=snr, seed=sd, **kw))
-        timings["off-grid J1"] = time.perf_counter() - t0
-        log(f"robustness, off-grid J1: {len(w.cases)} cases x {len(offj)} data sets ({timings['off-grid J1']:.1f} s)")
+        w = simulate_grid(system, cases)
+        sweeps = []
+        for snr in noisy_levels:
+            sd = None if snr is None else noise_seed(seed, snr, salt)
+            sweeps.append(evaluate_windows(system, _noisy(w, snr, sd), _data_label(snr, sd), kind,
+                                           snr_db=snr, seed=sd, **kw))
+        timings[name] = time.perf_counter() - t0
+        log(f"robustness, {name}: {len(w.cases)} cases x {len(sweeps)} data sets ({timings[name]:.1f} s)")
+        return sweeps
+
+    offj = offgrid_sweeps(offgrid_j1_cases(system, offgrid_j1), "offgrid_j1", "off-grid J1", 1) if offgrid_j1 else []
 
     # (c) off-grid widths --------------------------------------------------------------------
-    offw = []
-    if offgrid_widths:
-        t0 = time.perf_counter()
-        w = simulate_grid(system, offgrid_width_cases(system, offgrid_widths))
-        for k, snr in enumerate(noisy_levels):
-            sd = None if snr is None else noise_seed(seed, snr, 2)
-            offw.append(evaluate_windows(system, _noisy(w, snr, sd), _data_label(snr, sd), "offgrid_width",
-                                         snr_db=snr, seed=sd, **kw))
-        timings["off-grid widths"] = time.perf_counter() - t0
-        log(f"robustness, off-grid widths: {len(w.cases)} cases x {len(offw)} data sets "
-            f"({timings['off-grid widths']:.1f} s)")
+    offw = (offgrid_sweeps(offgrid_width_cases(system, offgrid_widths), "offgrid_width", "off-grid widths", 2)
+            if offgrid_widths else [])
 
     # (d) encoder quantisation ---------------------------------------------------------------
     t0 = time.perf_counter()

@@ -33,6 +33,8 @@ import functools
 
 import numpy as np
 
+from jident_ros.method.checks import finite_real_array, int_at_least, short
+
 __all__ = [
     "X1_SHAPE",
     "DEFAULT_N_COLORS",
@@ -60,59 +62,25 @@ _ORIGINS = ("upper", "lower")
 # --------------------------------------------------------------------------
 
 
-def _short(value) -> str:
-    text = " ".join(repr(value).split())
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
-def _real_array(name: str, value, min_ndim: int) -> np.ndarray:
-    if isinstance(value, (str, bytes)):
-        raise ValueError(f"{name}: expected a numeric array, got {_short(value)}")
-    try:
-        array = np.asarray(value)
-    except Exception as exc:  # ragged nested sequences and the like
-        raise ValueError(f"{name}: not convertible to an array ({exc})") from None
-    if array.dtype.kind not in "biuf":
-        raise ValueError(f"{name}: expected real numbers, got dtype {array.dtype}")
-    if array.ndim < min_ndim:
-        raise ValueError(f"{name}: expected at least {min_ndim} dimensions, got ndim={array.ndim}")
-    if array.size == 0:
-        raise ValueError(f"{name}: is empty (shape {array.shape})")
-    array = array.astype(np.float64, copy=False)
-    finite = np.isfinite(array)
-    if not finite.all():
-        where = tuple(int(i) for i in np.argwhere(~finite)[0])
-        raise ValueError(f"{name}: contains non-finite value {array[where]} at index {where}")
-    return array
-
-
-def _int_at_least(name: str, value, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{name}: expected an integer, got {_short(value)}")
-    if value < minimum:
-        raise ValueError(f"{name}: must be >= {minimum}, got {value}")
-    return int(value)
-
-
 def _check_shape(shape) -> tuple:
     try:
         height, width = shape
     except (TypeError, ValueError):
-        raise ValueError(f"shape: expected (n_rows, n_columns), got {_short(shape)}") from None
+        raise ValueError(f"shape: expected (n_rows, n_columns), got {short(shape)}") from None
     for value in (height, width):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-            raise ValueError(f"shape: expected two positive integers, got {_short(shape)}")
+            raise ValueError(f"shape: expected two positive integers, got {short(shape)}")
     return int(height), int(width)
 
 
 def _check_origin(origin) -> str:
     if origin not in _ORIGINS:
-        raise ValueError(f"origin: expected one of {_ORIGINS}, got {_short(origin)}")
+        raise ValueError(f"origin: expected one of {_ORIGINS}, got {short(origin)}")
     return origin
 
 
 def _check_image(image) -> np.ndarray:
-    array = _real_array("image", image, min_ndim=2)
+    array = finite_real_array("image", image, min_ndim=2)
     low, high = array.min(), array.max()
     if low < 0.0 or high > 1.0:
         bad = low if low < 0.0 else high
@@ -166,10 +134,10 @@ def pixel_cell_indices(data_shape, shape=X1_SHAPE, origin: str = "upper"):
     try:
         n_rows, n_columns = (int(v) for v in tuple(data_shape)[-2:])
     except (TypeError, ValueError):
-        message = f"data_shape: expected (n_scales, n_samples), got {_short(data_shape)}"
+        message = f"data_shape: expected (n_scales, n_samples), got {short(data_shape)}"
         raise ValueError(message) from None
     if len(tuple(data_shape)) < 2 or n_rows < 1 or n_columns < 1:
-        raise ValueError(f"data_shape: expected two positive sizes, got {_short(data_shape)}")
+        raise ValueError(f"data_shape: expected two positive sizes, got {short(data_shape)}")
     height, width = _check_shape(shape)
     return _cell_indices_cached(n_rows, n_columns, height, width, _check_origin(origin))
 
@@ -265,21 +233,31 @@ def render_intensity(
     pixel centres. Cost: one gather of n_rows x n_columns cells per image
     (index maps cached per data shape) plus min/max over the data.
     """
-    data = _real_array("scalogram", scalogram, min_ndim=2)
-    height, width = _check_shape(shape)
-    n_colors = _int_at_least("n_colors", n_colors, 2)
-    origin = _check_origin(origin)
-    if clim is None:
-        cmin = data.min(axis=(-2, -1), keepdims=True)
-        cmax = data.max(axis=(-2, -1), keepdims=True)
-    else:
-        limits = _real_array("clim", clim, min_ndim=1)
-        if limits.shape != (2,) or not limits[0] < limits[1]:
-            raise ValueError(f"clim: expected (cmin, cmax) with cmin < cmax, got {_short(clim)}")
-        cmin, cmax = limits[0], limits[1]
+    data, (height, width), n_colors, origin, cmin, cmax = _rendering_arguments(scalogram, shape, n_colors, clim,
+                                                                               origin)
     rows, columns = _cell_indices_cached(data.shape[-2], data.shape[-1], height, width, origin)
     sampled = data[..., rows[:, None], columns[None, :]]
-    return _colour_levels(sampled, cmin, cmax, n_colors) / (n_colors - 1)
+    return _colour_levels(sampled, cmin[..., None, None], cmax[..., None, None], n_colors) / (n_colors - 1)
+
+
+def _rendering_arguments(scalogram, shape, n_colors, clim, origin):
+    """The checked arguments of a rendering (:func:`render_intensity`, :func:`render_level_histogram`):
+    (data, (height, width), n_colors, origin, cmin, cmax), the colour limits of shape ``data.shape[:-2]``
+    (each scalogram's minimum and maximum, MATLAB's automatic CLim, or ``clim``)."""
+    data = finite_real_array("scalogram", scalogram, min_ndim=2)
+    height_width = _check_shape(shape)
+    n_colors = int_at_least("n_colors", n_colors, 2)
+    origin = _check_origin(origin)
+    if clim is None:
+        cmin = data.min(axis=(-2, -1))
+        cmax = data.max(axis=(-2, -1))
+    else:
+        limits = finite_real_array("clim", clim, min_ndim=1)
+        if limits.shape != (2,) or not limits[0] < limits[1]:
+            raise ValueError(f"clim: expected (cmin, cmax) with cmin < cmax, got {short(clim)}")
+        cmin = np.full(data.shape[:-2], limits[0])
+        cmax = np.full(data.shape[:-2], limits[1])
+    return data, height_width, n_colors, origin, cmin, cmax
 
 
 def _colour_levels(values, cmin, cmax, n_colors: int) -> np.ndarray:
@@ -313,7 +291,7 @@ def intensity_levels(image, n_colors: int = DEFAULT_N_COLORS) -> np.ndarray:
         ``round(image * (N - 1))``: the colour index minus one of every pixel.
     """
     array = _check_image(image)
-    n_colors = _int_at_least("n_colors", n_colors, 2)
+    n_colors = int_at_least("n_colors", n_colors, 2)
     return np.rint(array * (n_colors - 1)).astype(np.intp)
 
 
@@ -432,19 +410,7 @@ def render_level_histogram(
     image_min, image_max : ndarray of float64, shape (...)
         Identical to ``X1.min(axis=(-2, -1))`` and ``X1.max(axis=(-2, -1))``.
     """
-    data = _real_array("scalogram", scalogram, min_ndim=2)
-    _check_shape(shape)
-    n_colors = _int_at_least("n_colors", n_colors, 2)
-    origin = _check_origin(origin)
-    if clim is None:
-        cmin = data.min(axis=(-2, -1))
-        cmax = data.max(axis=(-2, -1))
-    else:
-        limits = _real_array("clim", clim, min_ndim=1)
-        if limits.shape != (2,) or not limits[0] < limits[1]:
-            raise ValueError(f"clim: expected (cmin, cmax) with cmin < cmax, got {_short(clim)}")
-        cmin = np.full(data.shape[:-2], limits[0])
-        cmax = np.full(data.shape[:-2], limits[1])
+    data, _, n_colors, origin, cmin, cmax = _rendering_arguments(scalogram, shape, n_colors, clim, origin)
     rows, row_pixels, columns, column_pixels = drawn_cells(data.shape, shape, origin)
     cells = np.take(np.take(data, columns, axis=-1), rows, axis=-2)   # C-contiguous (..., rows, columns)
     return level_histogram_from_cells(cells, cmin, cmax, row_pixels, column_pixels, n_colors)

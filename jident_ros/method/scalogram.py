@@ -57,6 +57,8 @@ import numpy as np
 import pywt
 import scipy.fft
 
+from jident_ros.method.checks import finite_real_array, int_at_least, short
+
 __all__ = [
     "DEFAULT_PRECISION",
     "READINGS",
@@ -100,37 +102,8 @@ _COLON_RTOL = 4.0 * np.finfo(float).eps
 # --------------------------------------------------------------------------
 
 
-def _short(value) -> str:
-    text = repr(value)
-    text = " ".join(text.split())
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
-def _finite_real_array(name: str, value) -> np.ndarray:
-    """Convert ``value`` to a float64 array, or raise a one-line ValueError."""
-    if isinstance(value, (str, bytes)):
-        raise ValueError(f"{name}: expected a numeric array, got {_short(value)}")
-    try:
-        array = np.asarray(value)
-    except Exception as exc:  # ragged nested sequences and the like
-        raise ValueError(f"{name}: not convertible to an array ({exc})") from None
-    if array.dtype.kind == "c":
-        raise ValueError(f"{name}: expected real values, got complex dtype {array.dtype}")
-    if array.dtype.kind not in "biuf":
-        raise ValueError(f"{name}: expected real numbers, got dtype {array.dtype}")
-    array = array.astype(np.float64, copy=False)
-    if array.size == 0:
-        raise ValueError(f"{name}: is empty (shape {array.shape})")
-    finite = np.isfinite(array)
-    if not finite.all():
-        where = tuple(int(i) for i in np.argwhere(~finite)[0])
-        bad = array[where]
-        raise ValueError(f"{name}: contains non-finite value {bad} at index {where}")
-    return array
-
-
 def _check_signal(signal) -> np.ndarray:
-    array = _finite_real_array("signal", signal)
+    array = finite_real_array("signal", signal)
     if array.ndim not in (1, 2):
         raise ValueError(
             f"signal: expected shape (n_samples,) or (n_signals, n_samples), got ndim={array.ndim}"
@@ -139,7 +112,7 @@ def _check_signal(signal) -> np.ndarray:
 
 
 def _check_scales(scales) -> tuple:
-    array = _finite_real_array("scales", scales)
+    array = finite_real_array("scales", scales)
     if array.ndim == 0:
         array = array.reshape(1)
     if array.ndim != 1:
@@ -152,23 +125,15 @@ def _check_scales(scales) -> tuple:
 
 def _check_precision(precision) -> int:
     if isinstance(precision, bool) or not isinstance(precision, (int, np.integer)):
-        raise ValueError(f"precision: expected an integer, got {_short(precision)}")
+        raise ValueError(f"precision: expected an integer, got {short(precision)}")
     if not 1 <= precision <= _MAX_PRECISION:
         raise ValueError(f"precision: must be in [1, {_MAX_PRECISION}], got {precision}")
     return int(precision)
 
 
-def _check_positive_int(name: str, value, minimum: int = 1) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{name}: expected an integer, got {_short(value)}")
-    if value < minimum:
-        raise ValueError(f"{name}: must be >= {minimum}, got {value}")
-    return int(value)
-
-
 def _check_wavelet_name(wavelet) -> str:
     if not isinstance(wavelet, str):
-        raise ValueError(f"wavelet: expected a wavelet name such as 'sym5', got {_short(wavelet)}")
+        raise ValueError(f"wavelet: expected a wavelet name such as 'sym5', got {short(wavelet)}")
     return wavelet
 
 
@@ -435,7 +400,7 @@ def wavelet_filter_bank(
         _check_wavelet_name(wavelet),
         _check_scales(scales),
         _check_precision(precision),
-        _check_positive_int("n_samples", n_samples),
+        int_at_least("n_samples", n_samples),
     )
 
 
@@ -557,7 +522,7 @@ def scalogram(coefs) -> np.ndarray:
         scalogram (percentages undefined).
     """
     if isinstance(coefs, (str, bytes)):
-        raise ValueError(f"coefs: expected a numeric array, got {_short(coefs)}")
+        raise ValueError(f"coefs: expected a numeric array, got {short(coefs)}")
     try:
         array = np.asarray(coefs)
     except Exception as exc:
@@ -659,12 +624,12 @@ def scales_for_reading(reading: str = "dyadic", level: int = 10) -> np.ndarray:
     -------
     ndarray of float, shape (n_scales,)
     """
-    level = _check_positive_int("level", level)
+    level = int_at_least("level", level)
     if reading == "linear":
         return np.arange(1, 2**level + 1, dtype=np.float64)
     if reading in ("dyadic", "swt"):
         return 2.0 ** np.arange(1, level + 1)
-    raise ValueError(f"reading: expected one of {READINGS}, got {_short(reading)}")
+    raise ValueError(f"reading: expected one of {READINGS}, got {short(reading)}")
 
 
 def swt_details(signal, wavelet: str, level: int = 10) -> np.ndarray:
@@ -693,7 +658,7 @@ def swt_details(signal, wavelet: str, level: int = 10) -> np.ndarray:
     wavelet = _check_wavelet_name(wavelet)
     if wavelet not in pywt.wavelist(kind="discrete"):
         raise ValueError(f"wavelet: expected a discrete wavelet name for the SWT, got {wavelet!r}")
-    level = _check_positive_int("level", level)
+    level = int_at_least("level", level)
     n_samples = array.shape[-1]
     if n_samples % (2**level):
         raise ValueError(

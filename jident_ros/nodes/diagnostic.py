@@ -65,12 +65,10 @@ from jident_ros.nodes.params import (
     checked,
     declare_parameters,
     method_config,
-    method_defaults,
-    model_schema,
     node_options,
+    node_schema,
     require,
     system_config,
-    system_defaults,
 )
 from jident_ros.nodes.ros_io import LayoutError, make_status, qos_latched, qos_signals, window_from_msg
 from jident_ros.nodes.runtime import main as run_main
@@ -128,7 +126,7 @@ def validate(values: dict):
 
 def schema() -> dict:
     """Every parameter of the node: its own, the model's (system.yaml) and the method's (method.yaml)."""
-    return dict(DIAGNOSTIC_PARAMS, **model_schema(system_defaults()), **model_schema(method_defaults()))
+    return node_schema(DIAGNOSTIC_PARAMS, method=True)
 
 
 def library_path(cfg, system, method) -> Path:

@@ -113,6 +113,13 @@ def model_schema(values: Mapping[str, Any]) -> dict:
     return {name: Param(v, describe_field(name)) for name, v in values.items()}
 
 
+def node_schema(own: Mapping[str, Param], *, method: bool = False) -> dict:
+    """Every parameter of a node: its ``own`` (jident_ros/parameters.py) and the model's (system.yaml),
+    with ``method`` the method's (method.yaml) too."""
+    shared = dict(system_defaults(), **(method_defaults() if method else {}))
+    return dict(own, **model_schema(shared))
+
+
 def parameter_type(default: Any) -> int:
     """rcl_interfaces ParameterType of a default value."""
     from rcl_interfaces.msg import ParameterType as T
@@ -325,19 +332,20 @@ def checked(values: Mapping[str, Any], defaults: Mapping[str, Any], names) -> di
     return {n: check(n, values[n], defaults[n]) for n in names}
 
 
-def system_config(values: Mapping[str, Any]):
-    """SystemConfig from the declared dotted parameters (ParameterError on a bad value)."""
-    sub = {k: v for k, v in values.items() if k.split(".")[0] in SYSTEM_SECTIONS}
+def _sections_config(values: Mapping[str, Any], sections, from_dict):
+    """``from_dict`` of the declared dotted parameters of ``sections`` (ParameterError on a bad value)."""
+    sub = {k: v for k, v in values.items() if k.split(".")[0] in sections}
     try:
-        return system_config_from_dict(nest(sub))
+        return from_dict(nest(sub))
     except ConfigError as exc:
         raise ParameterError(f"parameter {exc}") from None
+
+
+def system_config(values: Mapping[str, Any]):
+    """SystemConfig from the declared dotted parameters (ParameterError on a bad value)."""
+    return _sections_config(values, SYSTEM_SECTIONS, system_config_from_dict)
 
 
 def method_config(values: Mapping[str, Any]):
     """MethodConfig from the declared ``method.*`` parameters (ParameterError on a bad value)."""
-    sub = {k: v for k, v in values.items() if k.split(".")[0] in METHOD_SECTIONS}
-    try:
-        return method_config_from_dict(nest(sub))
-    except ConfigError as exc:
-        raise ParameterError(f"parameter {exc}") from None
+    return _sections_config(values, METHOD_SECTIONS, method_config_from_dict)

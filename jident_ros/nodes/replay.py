@@ -40,7 +40,7 @@ from jident_ros.nodes.ros_io import (
     qos_latched,
     qos_signals,
 )
-from jident_ros.nodes.runtime import ProgressGate
+from jident_ros.nodes.runtime import ProgressGate, tick
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import REPLAY, REPLAY_PARAMS
 
@@ -146,19 +146,7 @@ class ReplayNode(Node):
 
     # ----------------------------------------------------------------- replaying (timer)
     def on_tick(self):
-        try:
-            if self.state == "waiting":
-                self._tick_waiting()
-            elif self.state == "replaying":
-                self._tick_replaying()
-        except self.RecordingError as exc:  # damaged on the way: one line naming the file, exit status 2
-            print(f"replay: recording {exc}", file=sys.stderr, flush=True)
-            self.exit_code = 2
-            self._finish()
-        except Exception as exc:  # a bad message: one line, exit status 1
-            self.get_logger().error(f"replay of {self.bag} failed: {type(exc).__name__}: {exc}")
-            self.exit_code = 1
-            self._finish()
+        tick(self.state, {"waiting": self._tick_waiting, "replaying": self._tick_replaying}, self._failed)
 
     def _tick_waiting(self):
         c = self.cfg
@@ -218,6 +206,16 @@ class ReplayNode(Node):
             self.pending = None
             if c["rate"] == 0:
                 return                                  # one message per tick of fast_sleep_s
+
+    def _failed(self, exc: Exception) -> None:
+        """A failure while replaying: one line, stop."""
+        if isinstance(exc, self.RecordingError):  # damaged on the way: one line naming the file, exit status 2
+            print(f"replay: recording {exc}", file=sys.stderr, flush=True)
+            self.exit_code = 2
+        else:  # a bad message: one line, exit status 1
+            self.get_logger().error(f"replay of {self.bag} failed: {type(exc).__name__}: {exc}")
+            self.exit_code = 1
+        self._finish()
 
     def _finish(self):
         self.timer.cancel()

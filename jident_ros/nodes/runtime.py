@@ -18,7 +18,7 @@ import signal
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import yaml
 
@@ -155,6 +155,22 @@ def rcl_error_line(exc: Exception) -> str:
     """Rcl's error text on one line, without the C source locations."""
     text = " ".join(str(exc).split())
     return _RCL_LOCATION.sub("", text)
+
+
+# --------------------------------------------------------------------------- timer-driven nodes
+
+
+def tick(state: str, handlers: Mapping[str, Callable[[], None]], fail: Callable[[Exception], None]) -> None:
+    """One timer tick of a streaming node's state machine (simulator, replay): the handler of ``state``
+    (none, e.g. in ``done``: nothing to do); any exception goes to ``fail`` (one line, an exit status,
+    the end of the stream): never a traceback from a timer."""
+    handler = handlers.get(state)
+    if handler is None:
+        return
+    try:
+        handler()
+    except Exception as exc:
+        fail(exc)
 
 
 # --------------------------------------------------------------------------- main

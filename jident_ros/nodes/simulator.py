@@ -33,14 +33,13 @@ from jident_ros.nodes.params import (
     ParameterError,
     checked,
     declare_parameters,
-    model_schema,
     node_options,
+    node_schema,
     require,
     system_config,
-    system_defaults,
 )
 from jident_ros.nodes.ros_io import clock_msg, multiarray_from_array, qos_clock, qos_latched, qos_signals
-from jident_ros.nodes.runtime import ProgressGate
+from jident_ros.nodes.runtime import ProgressGate, tick
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import SIMULATOR, SIMULATOR_PARAMS
 from jident_ros.sim import Case, check_stable, paper_grid_cases, simulate_grid
@@ -96,7 +95,7 @@ def validate(values: dict):
 
 def schema() -> dict:
     """Every parameter of the node: its own (jident_ros/parameters.py) and the model's (system.yaml)."""
-    return dict(SIMULATOR_PARAMS, **model_schema(system_defaults()))
+    return node_schema(SIMULATOR_PARAMS)
 
 
 class SimulatorNode(Node):
@@ -176,15 +175,7 @@ class SimulatorNode(Node):
             self.passes += 1
 
     def on_tick(self):
-        try:
-            if self.state == "waiting":
-                self._tick_waiting()
-            elif self.state == "streaming":
-                self._tick_streaming()
-        except Exception as exc:  # never a traceback from a timer: say it, stop
-            self.get_logger().error(f"streaming failed: {type(exc).__name__}: {exc}")
-            self.exit_code = 1
-            self._finish_streaming()
+        tick(self.state, {"waiting": self._tick_waiting, "streaming": self._tick_streaming}, self._failed)
 
     def _tick_waiting(self):
         c = self.cfg
@@ -254,6 +245,12 @@ class SimulatorNode(Node):
                     self.pending = None
                     return                           # one batch per tick of fast_sleep_s
             self.pending = None
+
+    def _failed(self, exc: Exception) -> None:
+        """A failure while streaming: one line, exit status 1, stop."""
+        self.get_logger().error(f"streaming failed: {type(exc).__name__}: {exc}")
+        self.exit_code = 1
+        self._finish_streaming()
 
     def _finish_streaming(self):
         self.timer.cancel()

@@ -22,11 +22,10 @@ from jident_ros.nodes.params import (
     RuntimeParameters,
     checked,
     declare_parameters,
-    model_schema,
     node_options,
+    node_schema,
     require,
     system_config,
-    system_defaults,
 )
 from jident_ros.nodes.ros_io import (
     LayoutError,
@@ -84,7 +83,7 @@ def validate(values: dict):
 
 def schema() -> dict:
     """Every parameter of the node: its own (jident_ros/parameters.py) and the model's (system.yaml)."""
-    return dict(WINDOWING_PARAMS, **model_schema(system_defaults()))
+    return node_schema(WINDOWING_PARAMS)
 
 
 class WindowingNode(Node):
@@ -173,15 +172,9 @@ class WindowingNode(Node):
             try:
                 arr, channels = array_from_multiarray(msg)
             except LayoutError as exc:
-                events = [self.detector.reject("layout", str(exc))]
+                self._publish_events([self.detector.reject("layout", str(exc))])
             else:
-                events = self.detector.push(arr, channels)
-                self._progress(arr, channels)
-            for ev in events:
-                if ev.kind == "window":
-                    self.pub_window.publish(window_to_msg(ev.window))
-                else:
-                    self._report_drop(ev)
+                self._batches([(arr, channels)])
         except Exception as exc:  # never die on input: report, reset, go on
             self._report_error("drive/signals callback", exc)
 
@@ -202,14 +195,19 @@ class WindowingNode(Node):
             self._report_error("imu callback", exc)
 
     def _batches(self, batches):
+        """Push (array, channels) batches through the detector; publish what each one gives."""
         for arr, channels in batches:
             events = self.detector.push(arr, channels)
             self._progress(arr, channels)
-            for ev in events:
-                if ev.kind == "window":
-                    self.pub_window.publish(window_to_msg(ev.window))
-                else:
-                    self._report_drop(ev)
+            self._publish_events(events)
+
+    def _publish_events(self, events):
+        """A window on drive/window; a dropped window or batch on /diagnostics (with its reason)."""
+        for ev in events:
+            if ev.kind == "window":
+                self.pub_window.publish(window_to_msg(ev.window))
+            else:
+                self._report_drop(ev)
 
     def close(self) -> None:
         """At shutdown: a window in progress is reported as cut off by the end of the data."""

@@ -5,6 +5,7 @@ from jident_ros.sim.simulate import (
                                    PAPER_SIGNALS,
                                    UNITS,
                                    Case,
+                                   CaseTruths,
                                    WindowSet,
                                    add_measurement_noise,
                                    check_stable,
@@ -15,5 +16,5 @@ from jident_ros.sim.simulate import (
 )
 
 __all__ = ["BaseValues", "GridParams", "LoadParams", "MotorParams", "SamplingParams", "SystemConfig",
-           "CHANNELS", "PAPER_SIGNALS", "UNITS", "Case", "WindowSet", "add_measurement_noise", "check_stable",
+           "CHANNELS", "PAPER_SIGNALS", "UNITS", "Case", "CaseTruths", "WindowSet", "add_measurement_noise", "check_stable",
            "paper_grid_cases", "quantise_encoders", "simulate_grid", "steady_state"]

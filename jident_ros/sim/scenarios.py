@@ -16,7 +16,7 @@ from typing import Optional
 import numpy as np
 
 from jident_ros.sim.params import SystemConfig
-from jident_ros.sim.simulate import Case
+from jident_ros.sim.simulate import Case, CaseTruths
 
 SECONDS_PER_DAY = 86400.0
 #: Scenario names understood by ``jident simulate --scenario``.
@@ -24,7 +24,7 @@ SCENARIOS = ("wear",)
 
 
 @dataclass(frozen=True)
-class Scenario:
+class Scenario(CaseTruths):
     """A long run of backlash entries.
 
     cases : list of Case, one per event (J1, K2, eta_k at that event)
@@ -43,14 +43,6 @@ class Scenario:
 
     def __len__(self):
         return len(self.cases)
-
-    @property
-    def true_inertia_kgm2(self) -> np.ndarray:
-        return np.array([c.inertia_kgm2 for c in self.cases])
-
-    @property
-    def true_width_m(self) -> np.ndarray:
-        return np.array([c.backlash_width_m for c in self.cases])
 
     @property
     def wear_rate_m_per_day(self) -> float:

@@ -75,6 +75,21 @@ class Case:
                 raise ValueError(f"Case.{name} must be a finite number > 0, got {v!r}")
 
 
+class CaseTruths:
+    """The true values of a ``cases`` list (Case per window or event), as arrays indexed by case: a
+    mixin of the classes that carry such a list (robustness sweeps, long-run scenarios)."""
+
+    @property
+    def true_inertia_kgm2(self) -> np.ndarray:
+        """J_1 of every case, kg m^2."""
+        return np.array([c.inertia_kgm2 for c in self.cases])
+
+    @property
+    def true_width_m(self) -> np.ndarray:
+        """Backlash width K_2 of every case, m."""
+        return np.array([c.backlash_width_m for c in self.cases])
+
+
 def paper_grid_cases(config: SystemConfig, consistencies: Iterable[float] | None = None) -> list[Case]:
     """The paper's grid: every eta_k x every J_1 class x every backlash width.
 
