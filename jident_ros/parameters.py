@@ -104,8 +104,10 @@ WINDOWING_PARAMS = {
                    "batches) | joint_states (sensor_msgs/JointState, one message per sample)",
                    choices=("signals", "joint_states")),
     "detector": Param("auto", "entry detector: flank (no K2, any encoder offsets) | paper (inequality 1 with "
-                      "backlash_width_m, zone-centred angles) | auto (flank for joint_states, paper for signals)",
-                      choices=("auto", "flank", "paper")),
+                      "backlash_width_m, zone-centred angles) | dynamics (no angles: the load-torque step m_el - "
+                      "J1_nom dω1/dt, from a1 or the alpha1 encoder) | auto (flank for joint_states, dynamics for "
+                      "joint_states whose channels hold no alpha2, paper for signals)",
+                      choices=("auto", "flank", "paper", "dynamics")),
     "gear_ratio": Param(1.0, "N in delta = alpha1 - N alpha2: motor turns per load-encoder turn (flank detector)",
                         min=0.0, max=1000.0, min_exclusive=True),
     "motor_joint": Param("motor", "joint_states: the motor joint (position alpha1, velocity omega1, effort m_el)"),

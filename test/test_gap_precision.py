@@ -220,7 +220,9 @@ def test_anchored_estimate_is_the_least_squares_one():
 
 
 def test_speed_interval_uses_t_with_gap_samples_minus_two_dof():
-    """'speed': ∫m_el dt = J1 Δω1 + c, two parameters over the n gap samples (n - 2 dof), ordinary least squares."""
+    """'speed': ω1 = ω1_0 + ∫m_el dt / J1, ω1 regressed on the integral (n - 2 dof), the slope's variance
+    inflated by the residual's lag-1 autocorrelation (1 + rho)/(1 - rho), rho >= 0, and the larger change of J1 when
+    one or two samples are dropped at each end added in quadrature (gap.speed_fit)."""
     n_gap = 20
     w, width = exact_window(1.16, torque=(150.0, 4000.0, 0.0, 0.0))
     w["omega1"] = w["omega1"] + 2e-4 * np.random.default_rng(3).standard_normal(len(w["omega1"]))
@@ -228,13 +230,17 @@ def test_speed_interval_uses_t_with_gap_samples_minus_two_dof():
     gap = slice(N_PRE, N_PRE + n_gap)
     m, om = w["m_el"][gap], w["omega1"][gap]
     y = np.concatenate([[0.0], np.cumsum((m[1:] + m[:-1]) / 2) * TS])
-    A = np.column_stack([om - om[0], np.ones(n_gap)])
-    coef, rss, *_ = np.linalg.lstsq(A, y, rcond=None)
-    se = np.sqrt(rss[0] / (n_gap - 2) * np.linalg.inv(A.T @ A)[0, 0])
-    assert g.inertia_kgm2 == pytest.approx(coef[0], rel=1e-12)
+    A = np.column_stack([np.ones(n_gap), y])
+    coef, rss, *_ = np.linalg.lstsq(A, om, rcond=None)
+    res = om - A @ coef
+    rho = max(float(res[1:] @ res[:-1]) / float(res @ res), 0.0)
+    se_k = np.sqrt(rss[0] / (n_gap - 2) * np.linalg.inv(A.T @ A)[1, 1] * (1 + rho) / (1 - rho))
+    trims = [np.linalg.lstsq(A[k:-k] - [0, y[k]], om[k:-k], rcond=None)[0] for k in (1, 2)]
+    se = np.hypot(se_k / coef[1] ** 2, max(abs(1 / c[1] - 1 / coef[1]) for c in trims))
+    assert g.inertia_kgm2 == pytest.approx(1 / coef[1], rel=1e-12)
     assert g.std_error_kgm2 == pytest.approx(se, rel=1e-9)
     assert _half_width(g) == pytest.approx(stats.t.ppf(0.975, n_gap - 2) * se, rel=1e-9)
-    assert g.residual_rms == pytest.approx(np.sqrt(rss[0] / n_gap), rel=1e-9)
+    assert g.residual_rms == pytest.approx(np.sqrt(rss[0] / n_gap) / coef[1], rel=1e-9)
 
 
 def test_angle_fit_standard_error_has_its_floor():

@@ -358,9 +358,10 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--backlash-width-m", type=_positive("--backlash-width-m"),
                    help="K2 of inequality (1), m, paper detector only (default for drive/signals recordings: their "
                         "drive/backlash_width, else 0.005)")
-    g.add_argument("--detector", choices=("flank", "paper"),
-                   help="entry detector: flank (no K2, raw encoder angles; the default for JointState bags and CSV) "
-                        "or paper (inequality 1 with K2, zone-centred angles; the default for drive/signals)")
+    g.add_argument("--detector", choices=("flank", "paper", "dynamics"),
+                   help="entry detector: flank (no K2, raw encoder angles; the default for JointState bags and CSV), "
+                        "paper (inequality 1 with K2, zone-centred angles; the default for drive/signals) or dynamics "
+                        "(no angles needed: the load-torque step from m_el and a1 or the alpha1 encoder)")
     g.add_argument("--gear-ratio", type=_positive("--gear-ratio"), default=1.0,
                    help="N in delta = alpha1 - N alpha2 (motor turns per load-encoder turn; default 1)")
     g.add_argument("--motor-joint", default="motor", help="JointState name of the motor joint (default motor)")

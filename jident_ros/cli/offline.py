@@ -37,6 +37,7 @@ from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.parameters import DIAGNOSTIC as DIAGNOSTIC_DEFAULTS
 from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
 from jident_ros.stream.detector import BacklashDetector, stream_batches
+from jident_ros.stream.dynamics import DynamicsDetector
 from jident_ros.stream.flank import DETECTORS, FlankDetector
 from jident_ros.stream.inputs import InputError, JointStateAdapter, read_csv
 from jident_ros.stream.layout import DRIVE_TOPICS, REQUIRED_CHANNELS, SIGNALS_TOPIC, WIDTH_TOPIC, pack
@@ -332,14 +333,18 @@ def _make_detector(system, width, channels, batch_channels, gap_tolerance, defau
     sampling = system.sampling
     if channels is None:
         channels = [c for c in defaults["channels"] if c in batch_channels]
-    missing = [c for c in REQUIRED_CHANNELS if c not in batch_channels]
+    needed = REQUIRED_CHANNELS if detector != "dynamics" else ("t", "m_el")
+    missing = [c for c in needed if c not in batch_channels]
     if missing:
         raise OfflineError(f"{topic_name}: channel {missing[0]!r} missing (the data carry "
-                           f"{','.join(batch_channels)}; the detectors need t, alpha1, alpha2)")
+                           f"{','.join(batch_channels)}; the {detector} detector needs {', '.join(needed)})")
     common = dict(channels=("t",) + tuple(c for c in channels if c != "t"),
                   samples_before_entry=sampling.samples_before_entry, samples_from_entry=sampling.samples_from_entry,
                   gap_tolerance=defaults["gap_tolerance"] if gap_tolerance is None else gap_tolerance)
     try:
+        if detector == "dynamics":
+            return DynamicsDetector(system.load.wheel_radius_m, sampling.sample_period_s, gear_ratio=gear_ratio,
+                                    nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2, **common)
         if detector == "flank":
             return FlankDetector(system.load.wheel_radius_m, sampling.sample_period_s, gear_ratio=gear_ratio,
                                  nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2, **common)
@@ -415,8 +420,8 @@ def diagnose_samples(path, *, system=None, method=None, p: float = 2.0, library=
         raise OfflineError(f"detector: expected one of {', '.join(DETECTORS)}, got {detector!r}")
     if detector == "paper" and backlash_width_m is None:
         raise OfflineError("backlash_width_m: the paper detector (inequality 1) needs K2 (--backlash-width-m)")
-    if detector == "flank" and backlash_width_m is not None:
-        raise OfflineError("backlash_width_m: only for --detector paper (the flank detector needs no K2)")
+    if detector in ("flank", "dynamics") and backlash_width_m is not None:
+        raise OfflineError("backlash_width_m: only for --detector paper (the flank and dynamics detectors need no K2)")
     if not (math.isfinite(gear_ratio) and gear_ratio > 0):
         raise OfflineError(f"gear_ratio: must be a finite number > 0, got {gear_ratio!r}")
     if float(p) not in [float(q) for q in method.p_values]:
@@ -434,7 +439,7 @@ def diagnose_samples(path, *, system=None, method=None, p: float = 2.0, library=
             adapter, batches, source = jointstate_batches(path, ts, motor_joint, load_joint, imu_axis, topic)
     except InputError as exc:
         raise OfflineError(str(exc)) from None
-    result = OfflineResult(str(path), source, "estimated" if detector == "flank" else "option")
+    result = OfflineResult(str(path), source, "estimated" if detector != "paper" else "option")
     if image_method and library is None:
         lib_path = Path(library_path).expanduser() if library_path else default_library_path(system, method)
         result.library_path = str(lib_path)

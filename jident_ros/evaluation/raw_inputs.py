@@ -39,10 +39,12 @@ from typing import Optional, Sequence
 import numpy as np
 
 from jident_ros.config import load_system_config
+from jident_ros.identify.diagnosis import detector_arguments
 from jident_ros.identify.gap import NoGapError, estimate_inertia, nearest_class
 from jident_ros.identify.verdict import VerdictPolicy, decide_gap
 from jident_ros.sim import Case, SystemConfig, simulate_grid
 from jident_ros.stream.detector import BacklashDetector, stream_batches
+from jident_ros.stream.dynamics import DynamicsDetector
 from jident_ros.stream.flank import FlankDetector
 from jident_ros.stream.inputs import read_csv
 from jident_ros.stream.layout import DEFAULT_CHANNELS
@@ -67,7 +69,8 @@ def gap_row(w, true_j1: float, classes, nominal_kgm2: float, bearing_friction: f
     try:
         g = estimate_inertia(w.as_dict(), w.entry_index, w.backlash_width_m, w.wheel_radius_m, w.sample_period_s,
                              method=method, bearing_friction_nms_per_rad=bearing_friction,
-                             recontact_index=w.recontact_index)
+                             recontact_index=w.recontact_index,
+                             entry_uncertainty_samples=detector_arguments(w).get("entry_uncertainty_samples", 0))
     except NoGapError as exc:
         return {"j1": None, "rel_error": None, "class_ok": False, "covered": False, "ambiguous": False,
                 "published": False, "fit": "", "gap_problem": str(exc)}
@@ -209,13 +212,40 @@ def flank_detector(system: SystemConfig, counts: int = 65536, **kw) -> FlankDete
                          nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2, **kw)
 
 
-def evaluate_condition(system: SystemConfig, recs: list, counts: int) -> dict:
+#: The inputs the dynamics detector is measured on: the channels a drive without them lacks.
+DYNAMICS_INPUTS = {"no load encoder": ("alpha2", "omega2", "a2", "v2"),
+                   "no load encoder, no accelerometer": ("alpha2", "omega2", "a2", "v2", "a1")}
+
+
+def without(rec: RawRecording, absent: Sequence[str]) -> RawRecording:
+    """The recording without the channels ``absent`` (a drive that lacks those sensors)."""
+    keep = [c for c in rec.channels if c not in absent]
+    idx = [rec.channels.index(c) for c in keep]
+    return RawRecording(rec.data[:, idx], tuple(keep), rec.entry_row, rec.inertia_kgm2, rec.backlash_width_m,
+                        rec.direction, rec.steady_rows)
+
+
+def make_detector(kind: str, system: SystemConfig, wheel_radius_m: float, sample_period_s: float, channels,
+                  gear_ratio: float = 1.0, counts: int = 65536):
+    """The flank (:class:`FlankDetector`) or dynamics (:class:`DynamicsDetector`) detector of a recording."""
+    s = system.sampling
+    common = dict(channels=channels, gear_ratio=gear_ratio, encoder_counts_per_rev=counts,
+                  nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2,
+                  samples_before_entry=s.samples_before_entry, samples_from_entry=s.samples_from_entry)
+    if kind == "dynamics":
+        return DynamicsDetector(wheel_radius_m, sample_period_s, **common)
+    if kind == "flank":
+        return FlankDetector(wheel_radius_m, sample_period_s, **common)
+    raise ValueError(f"detector: expected flank or dynamics, got {kind!r}")
+
+
+def evaluate_condition(system: SystemConfig, recs: list, counts: int, detector: str = "flank") -> dict:
     """Per recording: windows, entry offset (samples), K2 relative error, gap J1 and its class."""
     classes = tuple(system.grid.inertia_classes_kgm2)
     ts = system.sampling.sample_period_s
     rows = []
     for rec in recs:
-        det = flank_detector(system, counts)
+        det = make_detector(detector, system, system.load.wheel_radius_m, ts, rec.channels, counts=counts)
         evs = run_detector(det, rec)
         wins = [e.window for e in evs if e.kind == "window"]
         t_entry = float(rec.data[rec.entry_row, 0])
@@ -272,10 +302,12 @@ def paper_consistency(system: SystemConfig, counts: int = 0) -> dict:
             "difference_counts": {str(k): vals.count(k) for k in sorted(set(vals))}}
 
 
-def evaluate_second_drive(system: SystemConfig, directory, batch_size: int = 50) -> dict:
+def evaluate_second_drive(system: SystemConfig, directory, batch_size: int = 50, detector: str = "flank",
+                          absent: Sequence[str] = ()) -> dict:
     """The flank detector and the gap estimator on a directory of the second drive's CSV recordings
     (``python -m jident_ros.second_drive --format csv``, ground truth in its truth.json, read only here):
-    r = the truth's reference radius and N its gear ratio (what a user configures), no K2."""
+    r = the truth's reference radius and N its gear ratio (what a user configures), no K2.  ``absent``: channels
+    taken out (a drive without those sensors)."""
     directory = Path(directory)
     truth = json.loads((directory / "truth.json").read_text())
     classes = tuple(system.grid.inertia_classes_kgm2)
@@ -284,14 +316,11 @@ def evaluate_second_drive(system: SystemConfig, directory, batch_size: int = 50)
     for tr in truth["recordings"]:
         data, channels, _ = read_csv(directory / tr["file"])
         ts = float(tr["sample_period_s"])
-        det = FlankDetector(float(tr["reference_radius_m"]), ts, channels=channels,
-                            gear_ratio=float(tr["gear_ratio"]), encoder_counts_per_rev=int(
-                                tr["encoder"]["counts_per_rev"] or 0),
-                            nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2,
-                            samples_before_entry=system.sampling.samples_before_entry,
-                            samples_from_entry=system.sampling.samples_from_entry)
-        rec = RawRecording(data, channels, int(tr["entry_index"]), float(tr["inertia_kgm2"]),
-                           float(tr["backlash_width_m"]), tr["direction"], int(tr["event"]["index"]))
+        rec = without(RawRecording(data, channels, int(tr["entry_index"]), float(tr["inertia_kgm2"]),
+                                   float(tr["backlash_width_m"]), tr["direction"], int(tr["event"]["index"])), absent)
+        data, channels = rec.data, rec.channels
+        det = make_detector(detector, system, float(tr["reference_radius_m"]), ts, channels, float(tr["gear_ratio"]),
+                            int(tr["encoder"]["counts_per_rev"] or 0))
         evs = run_detector(det, rec, batch_size)
         wins = [e.window for e in evs if e.kind == "window"]
         t_entry = float(data[rec.entry_row, 0])
@@ -347,24 +376,29 @@ def gap_line(res: dict) -> str:
 
 
 def report(system: SystemConfig, steady_s: float = 10.0, counts: int = 65536, seed: int = 12,
-           log=print) -> dict:
-    out = {"counts_per_rev": counts, "steady_s": steady_s, "conditions": {}}
+           log=print, detector: str = "flank") -> dict:
+    """The flank detector (``detector`` "flank") on our simulator's recordings, or the dynamics detector
+    ("dynamics") on the same recordings without the channels of each :data:`DYNAMICS_INPUTS` set."""
+    out = {"counts_per_rev": counts, "steady_s": steady_s, "detector": detector, "conditions": {}}
     t0 = time.perf_counter()
-    pc = paper_consistency(system)
-    out["paper_consistency"] = pc
-    log(f"entry sample vs inequality 1 (zone-centred angles, true K2, {pc['compared']}/{pc['cases']} cases): "
-        f"flank - paper = {pc['difference_counts']}")
+    if detector == "flank":
+        pc = paper_consistency(system)
+        out["paper_consistency"] = pc
+        log(f"entry sample vs inequality 1 (zone-centred angles, true K2, {pc['compared']}/{pc['cases']} cases): "
+            f"flank - paper = {pc['difference_counts']}")
+    inputs = {"": ()} if detector == "flank" else DYNAMICS_INPUTS
     for label, snr in CONDITIONS:
         for direction in ("forward", "reverse"):
             recs = raw_recordings(system, snr_db=snr, counts=counts, steady_s=steady_s, direction=direction,
                                   seed=seed + (0 if snr is None else 1) + (0 if direction == "forward" else 2))
-            res = evaluate_condition(system, recs, counts)
-            key = f"{label} {direction}"
-            out["conditions"][key] = res
-            log(f"{key:>14}: entries {res['entries_found']}/{res['recordings']}, false {res['false_entries']} "
-                f"(in {res['steady_s_total']:.0f} s steady: {res['false_in_steady']}), entry offset "
-                f"{res['entry_offset_counts']}, K2 |error| median {_pct(res['width_median_abs_error'])} "
-                f"max {_pct(res['width_max_abs_error'])} ({res['width_estimates']} estimates); {gap_line(res)}")
+            for name, absent in inputs.items():
+                res = evaluate_condition(system, [without(r, absent) for r in recs], counts, detector)
+                key = f"{label} {direction}" + (f", {name}" if name else "")
+                out["conditions"][key] = res
+                log(f"{key:>14}: entries {res['entries_found']}/{res['recordings']}, false {res['false_entries']} "
+                    f"(in {res['steady_s_total']:.0f} s steady: {res['false_in_steady']}), entry offset "
+                    f"{res['entry_offset_counts']}, K2 |error| median {_pct(res['width_median_abs_error'])} "
+                    f"max {_pct(res['width_max_abs_error'])} ({res['width_estimates']} estimates); {gap_line(res)}")
     out["elapsed_s"] = time.perf_counter() - t0
     return out
 
@@ -381,17 +415,21 @@ def main(argv=None) -> int:
     p.add_argument("--second-drive", nargs="*", default=(), metavar="DIR",
                    help="also evaluate these directories of the second drive's CSV recordings "
                         "(python -m jident_ros.second_drive --format csv --out DIR)")
+    p.add_argument("--detector", choices=("flank", "dynamics"), default="flank",
+                   help="flank (raw angles, no K2) or dynamics (the load-torque step; run without the load encoder, "
+                        "and without it and a1)")
     p.add_argument("--json", default="", help="also write the full result here")
     a = p.parse_args(argv)
     if not a.report:
         p.print_help()
         return 0
     system = load_system_config()
-    res = report(system, steady_s=a.steady_s, counts=a.counts)
-    for d in a.second_drive:
-        r = evaluate_second_drive(system, d)
-        res.setdefault("second_drive", {})[str(d)] = r
-        print(f"second drive {d}: entries {r['entries_found']}/{r['recordings']}, false {r['false_entries']} "
+    res = report(system, steady_s=a.steady_s, counts=a.counts, detector=a.detector)
+    inputs = {"": ()} if a.detector == "flank" else DYNAMICS_INPUTS
+    for d, (name, absent) in ((d, x) for d in a.second_drive for x in inputs.items()):
+        r = evaluate_second_drive(system, d, detector=a.detector, absent=absent)
+        res.setdefault("second_drive", {})[str(d) + (f", {name}" if name else "")] = r
+        print(f"second drive {d}{', ' + name if name else ''}: entries {r['entries_found']}/{r['recordings']}, false {r['false_entries']} "
               f"(in the steady stretches: {r['false_in_steady']}), entry offset {r['entry_offset_counts']}, K2 |error| "
               f"median {_pct(r['width_median_abs_error'])} max {_pct(r['width_max_abs_error'])} "
               f"({r['width_estimates']} estimates); default {gap_line(r)}")

@@ -26,6 +26,8 @@ Plain numpy; never imports rclpy.
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import sys
 import time
 from collections import Counter
@@ -36,7 +38,7 @@ import numpy as np
 
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.evaluation.robustness import OFFGRID_J1, noise_seed, offgrid_j1_cases
-from jident_ros.identify.diagnosis import diagnose_window
+from jident_ros.identify.diagnosis import diagnose_window, mirrored, rotation_sign
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.method.patterns import identify_window
@@ -275,9 +277,36 @@ def _load(p: float):
     return system, method, library
 
 
+def reverse_evaluation(system, method, library, p: float = 2.0) -> dict:
+    """The image method on reversed windows (every channel but t mirrored) of the grid, noise-free: its fused class
+    on the forward window, on the mirrored window as it is (what it did before the mirror), and on the mirrored
+    window through diagnosis.rotation_sign + mirrored (what diagnose_window does now), and the margins."""
+    cases = paper_grid_cases(system)
+    ws = simulate_grid(system, cases)
+    out = {"windows": 0, "forward_correct": 0, "reverse_raw_correct": 0, "reverse_raw_same": 0,
+           "reverse_mirrored_same": 0, "reverse_detected": 0, "reverse_raw_margin_min": math.inf}
+    classes = [float(c) for c in library.classes_kgm2]
+    for i, c in enumerate(ws.cases):
+        fwd = ws.case(i)
+        rev = mirrored(fwd)
+        a = identify_window(fwd, ws.entry_index, c.backlash_width_m, library, method, p)
+        b = identify_window(rev, ws.entry_index, c.backlash_width_m, library, method, p)
+        sign = rotation_sign(rev, ws.entry_index)
+        m = identify_window(mirrored(rev) if sign < 0 else rev, ws.entry_index, c.backlash_width_m, library, method, p)
+        out["windows"] += 1
+        out["forward_correct"] += classes[a.fused_class_index] == c.inertia_kgm2
+        out["reverse_raw_correct"] += classes[b.fused_class_index] == c.inertia_kgm2
+        out["reverse_raw_same"] += b.fused_class_index == a.fused_class_index
+        out["reverse_mirrored_same"] += (m.fused_class_index == a.fused_class_index and m.fused_margin == a.fused_margin)
+        out["reverse_detected"] += sign < 0
+        out["reverse_raw_margin_min"] = min(out["reverse_raw_margin_min"], float(b.fused_margin))
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m jident_ros.evaluation.verdicts", description=__doc__.split("\n\n")[0])
-    ap.add_argument("what", choices=("threshold", "stress"), help="threshold: image_min_margin; stress: the table")
+    ap.add_argument("what", choices=("threshold", "stress", "reverse"),
+                    help="threshold: image_min_margin; stress: the table; reverse: the image method on mirrored windows")
     ap.add_argument("--p", type=float, default=2.0, help="KHM exponent (default 2, the diagnostic node's p)")
     ap.add_argument("--image-min-margin", type=float,
                     help="stress: the policy's image_min_margin (default: VerdictPolicy's default)")
@@ -291,6 +320,8 @@ def main(argv=None) -> int:
         print(choice.describe())
         print(f"image_min_margin: {choice.parameter_value!r}   "
               f"# jident_ros/parameters.py DIAGNOSTIC, config/nodes.yaml, identify/verdict.py VerdictPolicy")
+    elif args.what == "reverse":
+        print(json.dumps(reverse_evaluation(system, method, library, args.p)))
     else:
         policy = VerdictPolicy() if args.image_min_margin is None else VerdictPolicy(image_min_margin=args.image_min_margin)
         rows = stress_evaluation(system, method, library, policy, args.p, log=log)

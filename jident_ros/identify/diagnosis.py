@@ -128,7 +128,8 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                     on_estimate: Optional[Callable[[float], Any]] = None,
                     started_at: Optional[float] = None,
                     policy: Optional[VerdictPolicy] = None, recontact_index: Optional[int] = None,
-                    width_estimate: Optional[WidthEstimate] = None) -> WindowDiagnosis:
+                    width_estimate: Optional[WidthEstimate] = None,
+                    entry_uncertainty_samples: int = 0) -> WindowDiagnosis:
     """Diagnose one window (see the module docstring).
 
     Parameters
@@ -158,6 +159,8 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
     recontact_index, width_estimate : from a flank-detector window (raw encoder angles, no K2): the gap
         ends at its re-contact row and its K2 estimate is reported instead of one from zone-centred angles
         (:func:`detector_arguments`)
+    entry_uncertainty_samples : the entry row is known to +- this many samples (a dynamics-detector window
+        without a1, :func:`detector_arguments`): the gap fit's uncertainty takes it in
     """
     t0 = time.perf_counter() if started_at is None else float(started_at)
     if gap_method not in GAP_METHODS:
@@ -218,7 +221,8 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
             gap = estimate_inertia(window_data, entry_index, backlash_width_m, wheel_radius_m, sample_period_s,
                                    method=None if gap_method == "auto" else gap_method,
                                    bearing_friction_nms_per_rad=system.motor.bearing_friction_nms_per_rad,
-                                   recontact_index=recontact_index)
+                                   recontact_index=recontact_index,
+                                   entry_uncertainty_samples=entry_uncertainty_samples)
         except NoGapError as exc:
             gap_reason = str(exc)
             problems.append(f"gap: {exc}")
@@ -267,8 +271,11 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                 problems.append(f"image method: the window has none of {', '.join(SIGNALS)}")
             else:
                 try:
-                    idn = identify_window(window_data, entry_index, backlash_width_m, library, method, p,
-                                          signals=signals)
+                    sign = rotation_sign(window_data, entry_index)
+                    if sign < 0:    # the library is built forward: a reverse window is mirrored first
+                        vals.append(("image_rotation", "reverse (mirrored)"))
+                    idn = identify_window(mirrored(window_data) if sign < 0 else window_data, entry_index,
+                                          backlash_width_m, library, method, p, signals=signals)
                 except Exception as exc:
                     problems.append(f"image method: {type(exc).__name__}: {exc}")
     if idn is not None:
@@ -380,17 +387,45 @@ def _verdict_values(verdict: Verdict, classes) -> list:
             ("verdict_agree", "unknown" if verdict.agree is None else verdict.agree)]
 
 
+def rotation_sign(window_data: dict, entry_index: int) -> float:
+    """+1 forward, -1 reverse rotation: the sign of the motor speed before the entry (the median of omega1,
+    else the slope of alpha1, else the sign of m_el: the motor drives its load); +1 when none tells."""
+    pre = slice(0, max(int(entry_index), 2))
+    for name, stat in (("omega1", np.median), ("alpha1", lambda x: x[-1] - x[0]), ("m_el", np.median)):
+        if name in window_data:
+            v = float(stat(np.asarray(window_data[name], float)[pre]))
+            if v != 0 and math.isfinite(v):
+                return 1.0 if v > 0 else -1.0
+    return 1.0
+
+
+def mirrored(window_data: dict) -> dict:
+    """Every channel but t with its sign changed: a reverse window as the forward one the model is odd to
+    (docs/method.md, "Reverse rotation")."""
+    return {k: (v if k == "t" else -np.asarray(v, float)) for k, v in window_data.items()}
+
+
+#: The dynamics detector's entry row without a1 (from the motor angle) is known to +- this many samples
+#: (docs/results.md, "Entries from the dynamics": -5 ... +1 on our simulator, -9 ... -3 on the second drive).
+ENTRY_UNCERTAINTY_WITHOUT_A1 = 10
+
+
 def detector_arguments(window) -> dict:
     """diagnose_window's ``recontact_index`` and ``width_estimate`` for a captured
-    :class:`~jident_ros.stream.layout.Window`: a flank-detector window's own; none for the paper detector's."""
-    if getattr(window, "detector", "paper") != "flank":
+    :class:`~jident_ros.stream.layout.Window`: a flank- or dynamics-detector window's own (and, for a dynamics
+    window without a1, ``entry_uncertainty_samples``); none for the paper detector's."""
+    kind = getattr(window, "detector", "paper")
+    if kind not in ("flank", "dynamics"):
         return {}
     est = None
     if math.isfinite(window.backlash_width_estimate_m):
         est = WidthEstimate(float(window.backlash_width_estimate_m), float(window.backlash_width_se_m),
                             int(window.recontact_index), "flank")
-    return {"recontact_index": window.recontact_index if window.recontact_index >= 0 else None,
-            "width_estimate": est}
+    out = {"recontact_index": window.recontact_index if window.recontact_index >= 0 else None,
+           "width_estimate": est}
+    if kind == "dynamics" and "a1" not in window.channels:
+        out["entry_uncertainty_samples"] = ENTRY_UNCERTAINTY_WITHOUT_A1
+    return out
 
 
 __all__ = ["GAP_METHODS", "WindowDiagnosis", "detector_arguments", "diagnose_window"]

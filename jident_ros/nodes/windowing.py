@@ -39,6 +39,7 @@ from jident_ros.nodes.ros_io import (
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import WINDOWING, WINDOWING_PARAMS
 from jident_ros.stream.detector import REASONS, BacklashDetector
+from jident_ros.stream.dynamics import DynamicsDetector
 from jident_ros.stream.flank import FlankDetector
 from jident_ros.stream.inputs import IMU_AXES, JointStateAdapter
 from jident_ros.stream.layout import KNOWN_CHANNELS
@@ -61,7 +62,11 @@ def validate(values: dict):
         require("channels", ch, c in KNOWN_CHANNELS and c != "t",
                 f"a list of channel names from {', '.join(k for k in KNOWN_CHANNELS if k != 't')}")
     require("channels", ch, len(set(ch)) == len(ch), "a list without repeated names")
-    require("channels", ch, "alpha1" in ch and "alpha2" in ch, "a list holding alpha1 and alpha2 (inequality 1)")
+    if detector_kind(cfg) == "dynamics":
+        require("channels", ch, "m_el" in ch and ("a1" in ch or "alpha1" in ch),
+                "a list holding m_el and a1 or alpha1 (the dynamics detector's load torque)")
+    else:
+        require("channels", ch, "alpha1" in ch and "alpha2" in ch, "a list holding alpha1 and alpha2 (inequality 1)")
     require("gap_tolerance", cfg["gap_tolerance"], 1 < cfg["gap_tolerance"] <= 1000, "a number > 1 and <= 1000")
     for n in ("signals_queue_depth", "window_queue_depth"):
         require(n, cfg[n], 1 <= cfg[n] <= WINDOWING_PARAMS[n].max, f"an integer >= 1 and <= {WINDOWING_PARAMS[n].max}")
@@ -70,7 +75,8 @@ def validate(values: dict):
     require("progress_every_batches", cfg["progress_every_batches"], cfg["progress_every_batches"] >= 0,
             "an integer >= 0 (0 = off)")
     require("input", cfg["input"], cfg["input"] in ("signals", "joint_states"), "signals or joint_states")
-    require("detector", cfg["detector"], cfg["detector"] in ("auto", "flank", "paper"), "auto, flank or paper")
+    require("detector", cfg["detector"], cfg["detector"] in WINDOWING_PARAMS["detector"].choices,
+            "auto, flank, paper or dynamics")
     require("gear_ratio", cfg["gear_ratio"], 0 < cfg["gear_ratio"] <= 1000, "a finite number > 0 and <= 1000")
     require("motor_joint", cfg["motor_joint"], bool(cfg["motor_joint"]) and cfg["motor_joint"] != cfg["load_joint"],
             "a joint name other than load_joint")
@@ -79,6 +85,16 @@ def validate(values: dict):
             f"an integer >= 1 and <= {WINDOWING_PARAMS['batch_size'].max}")
     system = system_config(values)
     return cfg, system
+
+
+def detector_kind(cfg: dict) -> str:
+    """The detector a configuration runs: ``detector``, or for auto: flank for joint_states (dynamics when the
+    channels hold no alpha2: a drive without a load encoder), paper for signals."""
+    if cfg["detector"] != "auto":
+        return cfg["detector"]
+    if cfg["input"] != "joint_states":
+        return "paper"
+    return "flank" if "alpha2" in cfg["channels"] else "dynamics"
 
 
 def schema() -> dict:
@@ -95,15 +111,18 @@ class WindowingNode(Node):
         values = declare_parameters(self, self.schema, validate)
         self.cfg, self.system = validate(values)
         c, s = self.cfg, self.system
-        self.detector_kind = c["detector"] if c["detector"] != "auto" else (
-            "flank" if c["input"] == "joint_states" else "paper")
+        self.detector_kind = detector_kind(c)
         common = dict(samples_before_entry=s.sampling.samples_before_entry,
                       samples_from_entry=s.sampling.samples_from_entry, gap_tolerance=c["gap_tolerance"])
         chans = ("t",) + tuple(c["channels"])
         if c["input"] == "joint_states":   # JointState carries alpha1, omega1, m_el, alpha2, omega2 (+ a1 from Imu)
             chans = tuple(ch for ch in chans if ch in ("t", "alpha1", "omega1", "m_el", "alpha2", "omega2")
                           or (ch == "a1" and c["use_imu"]))
-        if self.detector_kind == "flank":
+        if self.detector_kind == "dynamics":
+            self.detector = DynamicsDetector(s.load.wheel_radius_m, s.sampling.sample_period_s, channels=chans,
+                                             gear_ratio=c["gear_ratio"],
+                                             nominal_inertia_kgm2=s.motor.nominal_inertia_kgm2, **common)
+        elif self.detector_kind == "flank":
             self.detector = FlankDetector(s.load.wheel_radius_m, s.sampling.sample_period_s, channels=chans,
                                           gear_ratio=c["gear_ratio"],
                                           nominal_inertia_kgm2=s.motor.nominal_inertia_kgm2, **common)

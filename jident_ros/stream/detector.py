@@ -93,10 +93,16 @@ class BacklashDetector:
     samples_from_entry : int       samples from the entry sample on (2000)
     gap_tolerance : float          a step of t above gap_tolerance x T_s is a gap (1.5)
 
+    Subclasses that need other channels set :attr:`required_channels` (and :attr:`required_reason`).
+
     :meth:`push` takes one batch (array (n, k) and its k channel names, in any order, any subset
     of :data:`KNOWN_CHANNELS` that holds ``channels``) and returns the list of events it caused.
     The result does not depend on how a stream is cut into batches.
     """
+
+    #: Channels every batch must carry, and why (one-line errors).
+    required_channels = REQUIRED_CHANNELS
+    required_reason = "inequality 1 uses t, alpha1, alpha2"
 
     def __init__(self, backlash_width_m: float, wheel_radius_m: float, sample_period_s: float,
                  channels: Sequence[str] = DEFAULT_CHANNELS, samples_before_entry: int = 48,
@@ -113,9 +119,9 @@ class BacklashDetector:
                 raise ValueError(f"channels: unknown channel {c!r} (known: {', '.join(KNOWN_CHANNELS)})")
         if len(set(channels)) != len(channels):
             raise ValueError(f"channels: repeated name in {list(channels)}")
-        missing = [c for c in REQUIRED_CHANNELS if c not in channels]
+        missing = [c for c in self.required_channels if c not in channels]
         if missing:
-            raise ValueError(f"channels: need {missing[0]!r} (inequality 1 uses t, alpha1, alpha2), got {list(channels)}")
+            raise ValueError(f"channels: need {missing[0]!r} ({self.required_reason}), got {list(channels)}")
         if int(samples_before_entry) != samples_before_entry or samples_before_entry < 1:
             raise ValueError(f"samples_before_entry: must be an integer >= 1, got {samples_before_entry!r}")
         if int(samples_from_entry) != samples_from_entry or samples_from_entry < 2:
@@ -128,8 +134,8 @@ class BacklashDetector:
         self.samples_from_entry = int(samples_from_entry)
         self.gap_tolerance = float(gap_tolerance)
         self._i_t = 0
-        self._i_a1 = self.channels.index("alpha1")
-        self._i_a2 = self.channels.index("alpha2")
+        self._i_a1 = self.channels.index("alpha1") if "alpha1" in self.channels else -1
+        self._i_a2 = self.channels.index("alpha2") if "alpha2" in self.channels else -1
         self.backlash_width_m = 0.0
         self.set_backlash_width(backlash_width_m)
         self.counts = {r: 0 for r in REASONS}
@@ -313,16 +319,20 @@ class BacklashDetector:
         self._capture = None
         if cap is None or cap.parts is None:
             return []
-        data = np.concatenate(cap.parts)
-        e = self.samples_before_entry
-        w = Window(data, self.channels, e, cap.entry_time_s, cap.backlash_width_m, self.wheel_radius_m,
-                   self.sample_period_s, 0, flags=FLAG_CUT_OFF)
+        return [self._cut_off(np.concatenate(cap.parts), self.samples_before_entry, cap.entry_time_s,
+                              cap.backlash_width_m, "paper")]
+
+    def _cut_off(self, data: np.ndarray, entry_index: int, entry_time_s: float, backlash_width_m: float,
+                 detector: str) -> Event:
+        """The ``cut_off`` drop (counted) of a partial window: the event carries it, FLAG_CUT_OFF set."""
+        w = Window(data, self.channels, entry_index, entry_time_s, backlash_width_m, self.wheel_radius_m,
+                   self.sample_period_s, 0, detector=detector, flags=FLAG_CUT_OFF)
         self.counts["cut_off"] += 1
-        ev = Event("drop", "cut_off", f"entry at t = {cap.entry_time_s:.6f} s: the data ended after "
-                                      f"{data.shape[0] - e} of {self.samples_from_entry} samples from the entry",
-                   window=w, window_dropped=True)
+        ev = Event("drop", "cut_off", f"entry at t = {entry_time_s:.6f} s: the data ended after "
+                                      f"{data.shape[0] - entry_index} of {self.samples_from_entry} samples from "
+                                      f"the entry", window=w, window_dropped=True)
         self.last_event = ev
-        return [ev]
+        return ev
 
     def _finish(self, cap: _Capture) -> Event:
         self._capture = None

@@ -62,10 +62,10 @@ import numpy as np
 from scipy.signal import lfilter, savgol_filter
 
 from jident_ros.stream.detector import BacklashDetector, Event, _positive
-from jident_ros.stream.layout import DEFAULT_CHANNELS, FLAG_CUT_OFF, FLAG_SECOND_ENTRY, Window
+from jident_ros.stream.layout import DEFAULT_CHANNELS, FLAG_SECOND_ENTRY, Window
 
 #: Detector names of the ``detector`` parameter.
-DETECTORS = ("flank", "paper")
+DETECTORS = ("flank", "paper", "dynamics")
 
 
 @dataclass
@@ -250,6 +250,11 @@ class FlankDetector(BacklashDetector):
     load_drop_fraction : float     ... while T_L keeps more than this share of the steady load (0.5)
     """
 
+    #: The window header's ``detector`` field.
+    detector_name = "flank"
+    #: History kept beyond samples_before_entry (the entry sample may move this far before the departure).
+    history_extra = 0
+
     def __init__(self, wheel_radius_m: float, sample_period_s: float,
                  channels: Sequence[str] = DEFAULT_CHANNELS, samples_before_entry: int = 48,
                  samples_from_entry: int = 2000, gap_tolerance: float = 1.5, gear_ratio: float = 1.0,
@@ -346,7 +351,7 @@ class FlankDetector(BacklashDetector):
                     self._recent = seq
                     return departures
                 runs = np.lib.stride_tricks.sliding_window_view(seq, L)
-                ok = np.ptp(runs, axis=1) <= self.contact_tolerance_rad
+                ok = self._contact_runs(runs)
                 if not ok.any():
                     self._recent = seq[-(L - 1):]
                     return departures
@@ -362,7 +367,7 @@ class FlankDetector(BacklashDetector):
             f = lfilter([self._alpha], [1.0, self._alpha - 1.0], seg,
                         zi=[(1.0 - self._alpha) * self._flank])[0]
             prev = np.concatenate([[self._flank], f[:-1]])
-            out = np.abs(seg - prev) > thr
+            out = self._departed(seg, prev, thr)
             if not out.any():
                 self._flank = float(f[-1])
                 return departures
@@ -373,12 +378,21 @@ class FlankDetector(BacklashDetector):
             i += k + 1      # the departure sample itself cannot be part of the next contact run
         return departures
 
+    def _contact_runs(self, runs: np.ndarray) -> np.ndarray:
+        """Which runs of contact_samples values are a contact: delta's spread within the tolerance."""
+        return np.ptp(runs, axis=1) <= self.contact_tolerance_rad
+
+    def _departed(self, seg: np.ndarray, prev: np.ndarray, thr: float) -> np.ndarray:
+        """Which samples left the flank: |delta - F| above the threshold."""
+        return np.abs(seg - prev) > thr
+
     def _consume(self, x: np.ndarray) -> list:
         events = []
         deps = self._track(self._delta(x))
         n = x.shape[0]
         pos = 0                                   # rows of x before pos are consumed
-        need = self.window_length + self.refine_samples
+        extra = self.history_extra
+        need = self.window_length + self.refine_samples + extra
         for k, flank, sigma in deps:
             cap = self._fcap
             if cap is not None:
@@ -392,16 +406,16 @@ class FlankDetector(BacklashDetector):
                     continue
                 events += self._close(cap)
             # a new entry at row k (no capture running now)
-            hist = np.concatenate([self._tail, x[:k]])[-self.samples_before_entry:]
+            hist = np.concatenate([self._tail, x[:k]])[-(self.samples_before_entry + extra):]
             t_k = float(x[k, self._i_t])
-            if hist.shape[0] < self.samples_before_entry:
+            if hist.shape[0] < self.samples_before_entry + extra:
                 ev = Event("drop", "short_history",
                            f"entry at t = {t_k!r} s with {hist.shape[0]} of "
-                           f"{self.samples_before_entry} history samples")
+                           f"{self.samples_before_entry + extra} history samples")
                 self.counts["short_history"] += 1
                 self.last_event = ev
                 events.append(ev)
-                self._fcap = _FlankCapture([], self.samples_before_entry, self.samples_before_entry,
+                self._fcap = _FlankCapture([], self.samples_before_entry + extra, self.samples_before_entry + extra,
                                            math.nan, math.nan, skip=True)
             else:
                 self._fcap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma)
@@ -413,7 +427,7 @@ class FlankDetector(BacklashDetector):
             pos += take
             if cap.count >= need:
                 events += self._close(cap)
-        self._tail = np.concatenate([self._tail, x])[-self.samples_before_entry:]
+        self._tail = np.concatenate([self._tail, x])[-(self.samples_before_entry + extra):]
         self._last_t = float(x[-1, self._i_t])
         return events
 
@@ -438,14 +452,7 @@ class FlankDetector(BacklashDetector):
         self._fcap = None
         data = np.concatenate(cap.rows)
         e = cap.departure_row
-        w = Window(data, self.channels, e, float(data[e, self._i_t]), math.nan, self.wheel_radius_m,
-                   self.sample_period_s, 0, detector="flank", flags=FLAG_CUT_OFF)
-        self.counts["cut_off"] += 1
-        ev = Event("drop", "cut_off", f"entry at t = {w.entry_time_s:.6f} s: the data ended after "
-                                      f"{data.shape[0] - e} of {self.samples_from_entry} samples from the entry",
-                   window=w, window_dropped=True)
-        self.last_event = ev
-        return [ev]
+        return [self._cut_off(data, e, float(data[e, self._i_t]), math.nan, self.detector_name)]
 
     def _finish_flank(self, cap: _FlankCapture) -> Event:
         data = np.concatenate(cap.rows)
@@ -470,8 +477,9 @@ class FlankDetector(BacklashDetector):
             self.backlash_width_m = res.width_m
         w = Window(np.ascontiguousarray(win), self.channels, e, float(win[e, self._i_t]), res.width_m,
                    self.wheel_radius_m, self.sample_period_s, self.windows_captured,
-                   backlash_width_estimate_m=res.width_m, backlash_width_se_m=res.se_m, detector="flank",
-                   flags=flags, recontact_index=res.recontact_index)
+                   backlash_width_estimate_m=res.width_m, backlash_width_se_m=res.se_m, detector=self.detector_name,
+                   flags=flags,
+                   recontact_index=res.recontact_index if res.recontact_index >= 0 or rc is None else rc)
         ev = Event("window", detail=f"window {w.window_id}: entry at t = {w.entry_time_s:.6f} s, K2 estimate "
                                     f"{res.width_m:.6g} m ({res.how})", window=w)
         self.last_event = ev

@@ -55,7 +55,7 @@ WINDOW_FORMAT = 2.0
 #: Formats this version reads, with their header lengths.
 WINDOW_FORMATS = {1.0: len(WINDOW_HEADER_1), 2.0: len(WINDOW_HEADER)}
 #: Header field ``detector``: which detector captured the window.
-DETECTOR_CODES = {"paper": 0, "flank": 1}
+DETECTOR_CODES = {"paper": 0, "flank": 1, "dynamics": 2}
 #: Header field ``flags`` (bits): another zone entry lies inside the window (information) ...
 FLAG_SECOND_ENTRY = 1
 #: ... the data ended before the window was complete (a partial window, reported, never published).
@@ -165,7 +165,8 @@ class Window:
     window_id : int                running number of captured windows (from 1)
     backlash_width_estimate_m : float   K2 estimated from this traversal (flank detector), m; NaN: none
     backlash_width_se_m : float    its standard uncertainty, m; NaN: none
-    detector : str                 "paper" (inequality 1 with a given K2) or "flank" (no K2 needed)
+    detector : str                 "paper" (inequality 1 with a given K2), "flank" (no K2 needed) or
+                                   "dynamics" (no angles needed: the load-torque step)
     flags : int                    FLAG_SECOND_ENTRY | FLAG_CUT_OFF bits
     recontact_index : int          row where the flanks meet again (the first contact sample), -1: unknown
     """
