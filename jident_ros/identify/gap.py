@@ -276,7 +276,10 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         # m_el is smooth through the gap (the fluxes are continuous) and constant before
         # the entry (steady state): anchor it with the pre-entry mean and a quadratic in
         # time over the gap, then fit a1 = (r/J1) m_el_hat through the origin.
+        # b1 ω1 comes off the pre-entry samples too: m0 anchors m_el − b1 ω1, the torque that accelerates J1
         mf = np.asarray(window["m_el"], float)
+        if bearing_friction_nms_per_rad and "omega1" in window:
+            mf = mf - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)
         a = np.asarray(window["a1"], float)[start:end]
         t = np.arange(n) * sample_period_s
         pre = mf[:start]
@@ -299,7 +302,9 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         cov = s2m * np.linalg.pinv(T.T @ T)
         var_mhat = var_m0 + np.einsum("ij,jk,ik->i", T, cov, T)
         rel_m = float(np.sqrt(np.mean(var_mhat))) / float(np.mean(m_hat))
-        se = float(np.sqrt(var_k * (wheel_radius_m / kappa ** 2) ** 2 + (j * rel_m) ** 2))
+        # var_k is the RELATIVE variance of kappa (res is a1's residual over kappa), and J1 = r/kappa has the same
+        # relative variance (delta method): var(J1) = J1^2 var_k, plus m_hat's relative error in quadrature
+        se = float(j * np.sqrt(var_k + rel_m ** 2))
     elif method == "angle":
         if "alpha1" not in window:
             raise NoGapError("method 'angle' needs alpha1 (use 'speed' with omega1)")
