@@ -68,7 +68,7 @@ MODULES = {
     "detector": "jident_ros/stream/detector.py",
 }
 TESTS = {
-    "gap": ["test/test_gap_precision.py", "test/test_gap.py"],
+    "gap": ["test/test_gap_rules.py", "test/test_gap_precision.py", "test/test_gap.py", "test/test_gap_second_drive.py"],
     "fusion": ["test/test_fusion_rules.py", "test/test_gap.py"],
     "khm": ["test/test_khm_rules.py", "test/test_khm.py", "test/test_method.py", "-k", "khm"],
     "detector": ["test/test_detector_rules.py", "test/test_windowing.py"],

@@ -1,0 +1,247 @@
+"""The gap estimator's fits against independent references (issue 11 part 5: tests that a wrong one-line change of
+gap.py fails).
+
+* the joint ('acceleration') fit: J1, its standard error (sandwich covariance with each block's residual variance,
+  the model error in quadrature) and the residual RMS equal a reference built on scipy.optimize.least_squares from
+  the documented model and noise weights, with 48 and with 3 pre-entry samples (the noise-level fallback);
+* the Deming slope through the origin against a numerical maximum-likelihood fit, the robust noise scale against
+  scipy.stats.median_abs_deviation, the steadiness F test against a direct F test with scipy.stats.f;
+* the gap-only fit's trimming on a window whose in-zone samples are known;
+* the rules around them: the quadratic torque model below GAP_CUBIC_MIN samples, b1 without omega1, the fitted span.
+
+Synthetic windows only; about a second.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from gap_windows import N_PRE, TS, R, exact_window, motor_angles
+from scipy import optimize, stats
+
+from jident_ros.identify.gap import (
+    GAP_ONLY_REL_SE_FLOOR,
+    _origin_slope,
+    _robust_noise,
+    estimate_inertia,
+    gap_only_fit,
+    pre_entry_steady,
+)
+
+JOINT_KEYS = ("alpha1", "alpha2", "a1", "m_el")
+
+
+def noisy_window(n_pre=N_PRE, torque_noise=0.8, acc_noise=0.15, seed=3, torque=(150.0, 0.0, -8000.0, 2.0e5)):
+    w, width = exact_window(1.16, n_pre=n_pre, torque=torque)
+    rng = np.random.default_rng(seed)
+    w["m_el"] = w["m_el"] + torque_noise * rng.standard_normal(len(w["m_el"]))
+    w["a1"] = w["a1"] + acc_noise * rng.standard_normal(len(w["a1"]))
+    return {k: w[k] for k in JOINT_KEYS}, width
+
+
+def joint_reference(m_el, a1, start, end, powers, noise=None):
+    """The joint fit from its documented model, solved by scipy's least squares: pre-entry m_el = m0, gap m_el =
+    m0 + sum c_p tau^p, gap a1 = kappa m_hat, tau = (k - start)/n; the m_el rows weighted by 1/sm, the a1 rows by
+    1/sa.  Noise levels: the pre-entry standard deviations (ddof 1), or with fewer than 5 pre-entry samples the
+    gap m_el's residual scale about its own model fit and sa = sm mean|a1|/mean|m_el|.  Returns kappa, its sandwich
+    standard error, the a1 residual, the noise levels and the t degrees of freedom."""
+    n = end - start
+    pre, mg, ag = m_el[:start], m_el[start:end], a1[start:end]
+    tau = np.arange(n) / n
+    G = np.column_stack([np.ones(n)] + [tau ** q for q in powers])
+    p = G.shape[1]
+    if noise is not None:
+        sm, sa = noise
+    elif pre.size >= 5:
+        sm, sa = np.std(pre, ddof=1), np.std(a1[:start], ddof=1)
+    else:
+        cm = np.linalg.lstsq(G, mg, rcond=None)[0]
+        sm = np.sqrt(np.sum((mg - G @ cm) ** 2) / (n - p))
+        sa = sm * np.abs(ag).mean() / np.abs(mg).mean()
+
+    def residual(theta):
+        kappa, beta = theta[0], theta[1:]
+        return np.concatenate([(pre - beta[0]) / sm, (mg - G @ beta) / sm, (ag - kappa * (G @ beta)) / sa])
+
+    beta0 = np.linalg.lstsq(G, mg, rcond=None)[0]
+    x0 = np.concatenate([[float(ag @ (G @ beta0)) / float((G @ beta0) @ (G @ beta0))], beta0])
+    sol = optimize.least_squares(residual, x0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    kappa, beta = sol.x[0], sol.x[1:]
+    J = -sol.jac
+    nm = pre.size + n
+    Fm, Fa = J[:nm].T @ J[:nm], J[nm:].T @ J[nm:]
+    f_inv = np.linalg.inv(Fm + Fa)
+    s2m = float(sol.fun[:nm] @ sol.fun[:nm]) / (nm - p)
+    s2a = float(sol.fun[nm:] @ sol.fun[nm:]) / (n - 1)
+    cov = f_inv @ (s2m * Fm + s2a * Fa) @ f_inv
+    dof = pre.size - 1 if pre.size >= 5 else pre.size + 2 * n - p - 1
+    return kappa, np.sqrt(cov[0, 0]), ag - kappa * (G @ beta), (sm, sa), dof
+
+
+@pytest.mark.parametrize("n_pre", [N_PRE, 3])
+def test_joint_fit_is_the_weighted_least_squares_solution(n_pre):
+    w, width = noisy_window(n_pre=n_pre)
+    g = estimate_inertia(w, n_pre, width, R, TS, "acceleration")
+    start, end = g.gap_start, g.gap_end
+    assert (start, end) == (n_pre, n_pre + 20)
+    kappa, se_kappa, res_a, noise, dof = joint_reference(w["m_el"], w["a1"], start, end, (2, 3))
+    kappa_lin = joint_reference(w["m_el"], w["a1"], start, end, (1, 2, 3), noise)[0]
+    j = R / kappa
+    model_error = abs(R / kappa_lin - j)
+    se = np.hypot(R / kappa ** 2 * se_kappa, model_error)
+    assert g.inertia_kgm2 == pytest.approx(j, rel=1e-9)
+    assert g.model_error_kgm2 == pytest.approx(model_error, abs=1e-8)        # a difference of two J1 (GN_TOL 1e-9)
+    assert g.std_error_kgm2 == pytest.approx(se, rel=1e-5)
+    assert g.residual_rms == pytest.approx(np.sqrt(np.mean((res_a / kappa) ** 2)), rel=1e-6)
+    assert g.ci95_kgm2[1] - g.inertia_kgm2 == pytest.approx(stats.t.ppf(0.975, dof) * se, rel=1e-6)
+
+
+def test_short_gaps_use_a_quadratic_torque():
+    """Below GAP_CUBIC_MIN (8) samples the gap torque is m0 + c2 tau^2: exact for such a torque."""
+    w, width = exact_window(1.16, n_gap=7, torque=(150.0, 0.0, -2.0e5, 0.0))
+    g = estimate_inertia({k: w[k] for k in JOINT_KEYS}, N_PRE, width, R, TS, "acceleration")
+    assert g.n_samples == 7 and g.inertia_kgm2 == pytest.approx(1.16, rel=1e-9)
+
+
+def test_bearing_friction_without_omega1_leaves_m_el_as_it_is():
+    """b1 omega1 needs omega1: without it every fit uses m_el as measured (no error, the same J1 as b1 = 0)."""
+    w, width = exact_window(1.16)
+    d = {k: w[k] for k in JOINT_KEYS}
+    for method in ("acceleration", "anchored", "gap_only"):
+        plain = estimate_inertia(d, N_PRE, width, R, TS, method)
+        assert estimate_inertia(d, N_PRE, width, R, TS, method, bearing_friction_nms_per_rad=0.05) == plain
+
+
+@pytest.mark.parametrize("method", ["acceleration", "anchored", "speed", "angle"])
+def test_fits_without_trimming_report_the_gap_interval_as_their_span(method):
+    w, width = exact_window(1.16)
+    g = estimate_inertia(motor_angles(w) if method == "angle" else w, N_PRE, width, R, TS, method)
+    assert (g.fit_start, g.fit_end) == (g.gap_start, g.gap_end) == (N_PRE, N_PRE + 20)
+
+
+# --------------------------------------------------------------------------- helpers against scipy
+def test_robust_noise_is_the_normal_mad_of_second_differences_over_sqrt_6():
+    rng = np.random.default_rng(5)
+    a, b = 3.0 + 0.5 * rng.standard_normal(200), -40.0 + 0.5 * rng.standard_normal(60)
+    d2 = np.concatenate([np.diff(a, 2), np.diff(b, 2)])          # per segment: no jump between them
+    want = stats.median_abs_deviation(d2, scale="normal") / np.sqrt(6.0)
+    assert _robust_noise(a, b) == pytest.approx(want, rel=1e-5)
+    assert _robust_noise(a, b) == pytest.approx(0.5, rel=0.1)    # white noise of sd 0.5
+    assert _robust_noise(a, b[:2]) == _robust_noise(a)           # a segment of < 3 samples has no 2nd difference
+    assert _robust_noise(np.arange(4.0)) == 0.0                  # < 3 second differences: no scale
+
+
+def _deming_reference(y, x, sy, sx):
+    """The maximum-likelihood slope of y = J x with noise sd sy on y and sx on x: the J minimising
+    sum (y - J x)^2 / (sy^2 + J^2 sx^2) (scipy.optimize.minimize_scalar), searched on the side of the OLS slope."""
+    ols = float(x @ y) / float(x @ x)
+    bracket = (0.0, 4.0 * ols) if ols > 0 else (4.0 * ols, 0.0)
+    got = optimize.minimize_scalar(lambda j: float(np.sum((y - j * x) ** 2)) / (sy ** 2 + j ** 2 * sx ** 2),
+                                   bounds=bracket, method="bounded", options={"xatol": 1e-12})
+    return got.x
+
+
+@pytest.mark.parametrize("slope, sy, sx", [
+    (1.7, 0.3, 0.2), (2.5, 1.0, 1.0),
+    pytest.param(-0.6, 0.05, 0.4, marks=pytest.mark.xfail(strict=True, reason=(
+        "gap._origin_slope: the sign(sxy) factor picks the other root of the Deming quadratic when x . y < 0, a "
+        "small POSITIVE slope (here +0.026 for -0.596), so a non-physical anti-correlated gap is not refused; "
+        "reported to the lead, not fixed here (gap.py beyond the anchored fit is out of this task)"))),
+])
+def test_deming_slope_through_the_origin_is_the_maximum_likelihood_one(slope, sy, sx):
+    """_origin_slope with both noise levels = the errors-in-variables (orthogonal-distance) slope through the
+    origin, found numerically."""
+    rng = np.random.default_rng(8)
+    x_true = rng.uniform(0.5, 3.0, 60)
+    x = x_true + sx * rng.standard_normal(60)
+    y = slope * x_true + sy * rng.standard_normal(60)
+    assert _origin_slope(y, x, sy, sx) == pytest.approx(_deming_reference(y, x, sy, sx), rel=1e-8)
+    assert _origin_slope(y, x, sy, 0.0) == pytest.approx(float(x @ y) / float(x @ x), rel=1e-14)   # OLS of y on x
+    assert _origin_slope(y, x, 0.0, sx) == pytest.approx(float(y @ y) / float(x @ y), rel=1e-14)   # exact y
+    assert np.isnan(_origin_slope(np.array([1.0, -1.0]), np.array([1.0, 1.0]), sy, sx))           # x . y = 0
+
+
+def test_steadiness_f_test_is_the_quadratic_against_the_constant():
+    rng = np.random.default_rng(9)
+    n = 40
+    x = 200.0 + 0.8 * rng.standard_normal(n) + np.linspace(0.0, 1.5, n) ** 2
+    t = np.arange(n)
+    rss0 = float(np.sum((x - x.mean()) ** 2))
+    rss2 = float(np.sum((x - np.polyval(np.polyfit(t, x, 2), t)) ** 2))
+    f = (rss0 - rss2) / 2.0 / (rss2 / (n - 3))
+    got = pre_entry_steady(x)
+    assert got.f_statistic == pytest.approx(f, rel=1e-9)
+    assert got.p_value == pytest.approx(stats.f.sf(f, 2, n - 3), rel=1e-9)
+    assert got.n_samples == n
+
+
+def test_steady_when_p_is_at_least_1e_3():
+    """Not steady when p < 1e-3 (docs: STEADY_P_VALUE) and the trend is practically significant: a noisy ramp's
+    amplitude bisected to p just below and just above 1e-3."""
+    rng = np.random.default_rng(10)
+    noise = 2.0 * rng.standard_normal(48)
+    ramp = np.linspace(-1.0, 1.0, 48)
+
+    def p_of(amp):
+        return pre_entry_steady(100.0 + amp * ramp + noise)
+
+    lo, hi = 0.0, 10.0                     # p(lo) > 1e-3 > p(hi)
+    assert p_of(lo).p_value > 1e-3 > p_of(hi).p_value
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if p_of(mid).p_value >= 1e-3 else (lo, mid)
+    above, below = p_of(lo), p_of(hi)
+    assert 1e-3 <= above.p_value < 1.004e-3 and above.steady
+    assert 0.996e-3 < below.p_value < 1e-3 and not below.steady
+    assert "p = 0.001 < 0.001" in below.reason or "< 0.001" in below.reason
+
+
+def test_a_trend_below_1e_4_of_the_level_is_steady_even_without_noise():
+    """STEADY_REL_TOL: a noise-free trend (F infinite) is steady when its slope and curvature move m_el by at most
+    1e-4 of its level, not steady above."""
+    ramp = np.linspace(0.0, 1.0, 48) ** 2
+    small = pre_entry_steady(1000.0 + 0.09 * ramp)
+    assert small.steady and small.f_statistic == np.inf
+    large = pre_entry_steady(1000.0 + 0.11 * ramp)
+    assert not large.steady and large.p_value == 0.0
+
+
+# --------------------------------------------------------------------------- gap_only trimming
+def trimmed_window(j1=1.2, n_pre=30, n_zone=24, n_post=20):
+    """torque = J1 acc exactly in the zone [n_pre, n_pre + n_zone); before it the coupling still carries load (acc
+    much smaller than torque/J1), after it the contact brakes the motor: end samples out of the zone are known."""
+    n = n_pre + n_zone + n_post
+    k = np.arange(n)
+    torque = 300.0 + 20.0 * np.sin(k / 7.0)
+    acc = torque / j1
+    acc[:n_pre] *= 0.3
+    acc[n_pre + n_zone:] = -150.0
+    return torque, acc, n_pre, n_pre + n_zone
+
+
+def test_gap_only_drops_the_out_of_zone_end_samples():
+    torque, acc, a, b = trimmed_window()
+    exact = gap_only_fit(torque, acc, a, b)
+    assert (exact["start"], exact["end"]) == (a, b) and exact["j1"] == pytest.approx(1.2, rel=1e-12)
+    assert exact["dof"] == b - a - 1
+    assert exact["se"] == pytest.approx(GAP_ONLY_REL_SE_FLOOR * 1.2, rel=1e-9)       # noise-free: the floor
+    moved = gap_only_fit(torque, acc, a - 3, b + 2)                                  # 3 early, 2 late samples
+    assert (moved["start"], moved["end"]) == (a, b) and moved["j1"] == pytest.approx(1.2, rel=1e-12)
+    capped = gap_only_fit(torque, acc, a - 3, b + 2, max_trim=(2, 1))                # at most 2 and 1 dropped
+    assert (capped["start"], capped["end"]) == (a - 1, b + 1)
+    assert abs(capped["j1"] / 1.2 - 1) > 1e-3
+
+
+def test_gap_only_model_error_is_the_change_with_one_more_sample_off_each_end():
+    torque, acc, a, b = trimmed_window()
+    rng = np.random.default_rng(12)
+    torque = torque + 0.5 * rng.standard_normal(torque.size)
+    acc = acc + 0.5 * rng.standard_normal(acc.size)
+    g = gap_only_fit(torque, acc, a, b)
+    lo, hi = g["start"], g["end"]
+    sy, sx = g["noise"]
+    inner = _origin_slope(torque[lo + 1:hi - 1], acc[lo + 1:hi - 1], sy, sx)
+    assert g["model_error"] == pytest.approx(abs(inner - g["j1"]), rel=1e-12)
+    res = torque[lo:hi] - g["j1"] * acc[lo:hi]
+    se_stat = np.sqrt(float(res @ res) / (hi - lo - 1) / float(acc[lo:hi] @ acc[lo:hi]))
+    assert g["se"] == pytest.approx(max(np.hypot(se_stat, g["model_error"]), GAP_ONLY_REL_SE_FLOOR * g["j1"]),
+                                    rel=1e-12)
