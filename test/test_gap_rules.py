@@ -38,14 +38,17 @@ def noisy_window(n_pre=N_PRE, torque_noise=0.8, acc_noise=0.15, seed=3, torque=(
     return {k: w[k] for k in JOINT_KEYS}, width
 
 
-def joint_reference(m_el, a1, start, end, powers, noise=None):
+def joint_reference(m_el, a1, start, end, powers, noise=None, friction=None):
     """The joint fit from its documented model, solved by scipy's least squares: pre-entry m_el = m0, gap m_el =
     m0 + sum c_p tau^p, gap a1 = kappa m_hat, tau = (k - start)/n; the m_el rows weighted by 1/sm, the a1 rows by
     1/sa.  Noise levels: the pre-entry standard deviations (ddof 1), or with fewer than 5 pre-entry samples the
-    gap m_el's residual scale about its own model fit and sa = sm mean|a1|/mean|m_el|.  Returns kappa, its sandwich
-    standard error, the a1 residual, the noise levels and the t degrees of freedom."""
+    gap m_el's residual scale about its own model fit and sa = sm mean|a1|/mean|m_el|; floored at 1e-9 of the
+    channel's largest gap value (noise-free windows: both channels weigh by their size).  ``friction``: b1 omega1 over
+    the gap, a1 = kappa (m_hat - b1 omega1).  Returns kappa, its sandwich standard error, the a1 residual, the noise
+    levels and the t degrees of freedom."""
     n = end - start
     pre, mg, ag = m_el[:start], m_el[start:end], a1[start:end]
+    fr = np.zeros(n) if friction is None else friction
     tau = np.arange(n) / n
     G = np.column_stack([np.ones(n)] + [tau ** q for q in powers])
     p = G.shape[1]
@@ -57,10 +60,11 @@ def joint_reference(m_el, a1, start, end, powers, noise=None):
         cm = np.linalg.lstsq(G, mg, rcond=None)[0]
         sm = np.sqrt(np.sum((mg - G @ cm) ** 2) / (n - p))
         sa = sm * np.abs(ag).mean() / np.abs(mg).mean()
+    sm, sa = max(sm, 1e-9 * np.abs(mg).max()), max(sa, 1e-9 * np.abs(ag).max())
 
     def residual(theta):
         kappa, beta = theta[0], theta[1:]
-        return np.concatenate([(pre - beta[0]) / sm, (mg - G @ beta) / sm, (ag - kappa * (G @ beta)) / sa])
+        return np.concatenate([(pre - beta[0]) / sm, (mg - G @ beta) / sm, (ag - kappa * (G @ beta - fr)) / sa])
 
     beta0 = np.linalg.lstsq(G, mg, rcond=None)[0]
     x0 = np.concatenate([[float(ag @ (G @ beta0)) / float((G @ beta0) @ (G @ beta0))], beta0])
@@ -74,21 +78,38 @@ def joint_reference(m_el, a1, start, end, powers, noise=None):
     s2a = float(sol.fun[nm:] @ sol.fun[nm:]) / (n - 1)
     cov = f_inv @ (s2m * Fm + s2a * Fa) @ f_inv
     dof = pre.size - 1 if pre.size >= 5 else pre.size + 2 * n - p - 1
-    return kappa, np.sqrt(cov[0, 0]), ag - kappa * (G @ beta), (sm, sa), dof
+    return kappa, np.sqrt(cov[0, 0]), ag - kappa * (G @ beta - fr), (sm, sa), dof
 
 
-@pytest.mark.parametrize("n_pre", [N_PRE, 3])
-def test_joint_fit_is_the_weighted_least_squares_solution(n_pre):
-    w, width = noisy_window(n_pre=n_pre)
-    g = estimate_inertia(w, n_pre, width, R, TS, "acceleration")
+@pytest.mark.parametrize("n_pre, noise, b1", [
+    (N_PRE, True, 0.0),
+    (3, True, 0.0),          # the noise levels from the gap's own m_el fit
+    (N_PRE, True, 0.05),     # bearing friction: a1 = kappa (m_hat - b1 omega1)
+    (N_PRE, False, 0.0),     # noise-free, a torque with a linear term (not the model): the floors set the weights
+])
+def test_joint_fit_is_the_weighted_least_squares_solution(n_pre, noise, b1):
+    if noise:
+        w, width = noisy_window(n_pre=n_pre)
+    else:
+        w, width = exact_window(1.16, n_pre=n_pre, torque=(150.0, 3000.0, -8000.0, 2.0e5))
+        w = {k: w[k] for k in JOINT_KEYS}
+    friction = None
+    if b1:
+        omega = exact_window(1.16, n_pre=n_pre)[0]["omega1"]
+        w["omega1"] = omega
+        w["m_el"] = w["m_el"] + b1 * omega
+    g = estimate_inertia(w, n_pre, width, R, TS, "acceleration", bearing_friction_nms_per_rad=b1)
     start, end = g.gap_start, g.gap_end
     assert (start, end) == (n_pre, n_pre + 20)
-    kappa, se_kappa, res_a, noise, dof = joint_reference(w["m_el"], w["a1"], start, end, (2, 3))
-    kappa_lin = joint_reference(w["m_el"], w["a1"], start, end, (1, 2, 3), noise)[0]
+    if b1:
+        friction = b1 * w["omega1"][start:end]
+    kappa, se_kappa, res_a, noise_levels, dof = joint_reference(w["m_el"], w["a1"], start, end, (2, 3),
+                                                                friction=friction)
+    kappa_lin = joint_reference(w["m_el"], w["a1"], start, end, (1, 2, 3), noise_levels, friction)[0]
     j = R / kappa
     model_error = abs(R / kappa_lin - j)
     se = np.hypot(R / kappa ** 2 * se_kappa, model_error)
-    assert g.inertia_kgm2 == pytest.approx(j, rel=1e-9)
+    assert g.inertia_kgm2 == pytest.approx(j, rel=1e-8)                          # GN_TOL 1e-9 per step
     assert g.model_error_kgm2 == pytest.approx(model_error, abs=1e-8)        # a difference of two J1 (GN_TOL 1e-9)
     assert g.std_error_kgm2 == pytest.approx(se, rel=1e-5)
     assert g.residual_rms == pytest.approx(np.sqrt(np.mean((res_a / kappa) ** 2)), rel=1e-6)
@@ -245,3 +266,86 @@ def test_gap_only_model_error_is_the_change_with_one_more_sample_off_each_end():
     se_stat = np.sqrt(float(res @ res) / (hi - lo - 1) / float(acc[lo:hi] @ acc[lo:hi]))
     assert g["se"] == pytest.approx(max(np.hypot(se_stat, g["model_error"]), GAP_ONLY_REL_SE_FLOOR * g["j1"]),
                                     rel=1e-12)
+
+
+def test_gap_only_with_an_exact_torque_regresses_the_acceleration_on_it():
+    """sy = 0 (the torque without noise, e.g. a drive's own reference torque): the Deming slope becomes the
+    regression of acc on torque through the origin, J1 = sum torque^2 / sum torque acc over the fitted samples."""
+    a, b = 30, 54
+    torque = 300.0 + 2.0 * np.arange(74)                        # no second differences: no torque noise
+    acc = torque / 1.2
+    acc[:a] *= 0.3
+    acc[b:] = -150.0
+    acc = acc + 0.4 * np.random.default_rng(13).standard_normal(acc.size)
+    g = gap_only_fit(torque, acc, a, b)
+    assert g["noise"][0] == 0.0 and g["noise"][1] > 0.3
+    y, x = torque[g["start"]:g["end"]], acc[g["start"]:g["end"]]
+    assert g["j1"] == pytest.approx(float(y @ y) / float(x @ y), rel=1e-12)
+
+
+def test_gap_only_trimming_keeps_at_least_three_samples():
+    """Every sample of a short candidate is off the line through the origin: the entry end is trimmed until three
+    samples remain, not further (max_trim allows four)."""
+    n_pre = 30
+    torque = np.concatenate([np.full(n_pre, 50.0), [10.0, 13.0, 10.0, 13.0, 10.0, 13.0], np.full(10, 80.0)])
+    acc = np.concatenate([np.zeros(n_pre), np.ones(6), np.full(10, -5.0)])
+    g = gap_only_fit(torque, acc, n_pre, n_pre + 6)
+    assert (g["start"], g["end"]) == (n_pre + 3, n_pre + 6)
+    assert g["j1"] == pytest.approx(12.0, rel=1e-12)
+
+
+def test_robust_noise_from_three_second_differences():
+    x = np.array([0.0, 1.0, 0.0, 2.0, 0.0])                      # second differences -2, 3, -4
+    want = 1.4826 * np.median(np.abs(np.array([-2.0, 3.0, -4.0]) + 2.0)) / np.sqrt(6.0)
+    assert _robust_noise(x) == pytest.approx(want, rel=1e-15) and want > 0
+
+
+def test_a_constant_to_rounding_has_f_0_and_p_1():
+    """SteadinessTest: f_statistic 0 for a constant to rounding (here a jitter of 3e-13 of the level)."""
+    x = 221.0 * (1.0 + 3e-13 * np.resize([1.0, -1.0], 48))
+    got = pre_entry_steady(x)
+    assert np.ptp(x) > 0 and got.steady and (got.f_statistic, got.p_value) == (0.0, 1.0)
+
+
+def _anchored_se_by_propagation(w, n_pre, n_gap, h=1e-4):
+    """The anchored fit's standard error by linear error propagation from the data: J1's sensitivity to each
+    pre-entry m_el sample (variance: their sample variance) and each gap m_el sample (variance: the residual
+    variance of the gap polynomial, n - its columns degrees of freedom), by central differences of the fit itself,
+    and the a1 part r/kappa^2 se(kappa) of ordinary least squares through the origin."""
+    def j_of(m):
+        return estimate_inertia(dict(w, m_el=m), n_pre, width, R, TS, "anchored").inertia_kgm2
+    width = w["_width"]
+    m = w["m_el"]
+    sens = np.empty(n_pre + n_gap)
+    for i in range(n_pre + n_gap):
+        up, down = m.copy(), m.copy()
+        up[i] += h
+        down[i] -= h
+        sens[i] = (j_of(up) - j_of(down)) / (2 * h)
+    gap = slice(n_pre, n_pre + n_gap)
+    t = np.arange(n_gap) * TS
+    T = t[:, None] if n_gap < 12 else np.column_stack([t, t * t])
+    m0 = m[:n_pre].mean()
+    coef = np.linalg.lstsq(T, m[gap] - m0, rcond=None)[0]
+    s2m = np.sum((m[gap] - m0 - T @ coef) ** 2) / (n_gap - T.shape[1])
+    var_pre = np.var(m[:n_pre], ddof=1) if n_pre > 1 else s2m * n_pre
+    m_hat = m0 + T @ coef
+    a = w["a1"][gap]
+    kappa = float(a @ m_hat) / float(m_hat @ m_hat)
+    se_kappa = np.sqrt(np.sum((a - kappa * m_hat) ** 2) / (n_gap - 1) / float(m_hat @ m_hat))
+    var_m = var_pre * np.sum(sens[:n_pre] ** 2) + s2m * np.sum(sens[n_pre:] ** 2)
+    return np.sqrt((R / kappa ** 2 * se_kappa) ** 2 + var_m)
+
+
+@pytest.mark.parametrize("n_pre", [N_PRE, 2])
+def test_anchored_standard_error_is_the_propagated_data_error(n_pre):
+    """'anchored' with noise on m_el and a1: the standard error equals linear error propagation of the pre-entry
+    and gap m_el noise (and the a1 part), computed from the fit's own sensitivities to the data."""
+    n_gap = 20
+    w, width = exact_window(1.16, n_pre=n_pre, n_gap=n_gap, torque=(150.0, -3000.0, 9.0e4, 0.0))
+    rng = np.random.default_rng(21)
+    w["m_el"] = w["m_el"] + 1.2 * rng.standard_normal(len(w["m_el"]))
+    w["a1"] = w["a1"] + 0.1 * rng.standard_normal(len(w["a1"]))
+    w = dict(w, _width=width)
+    g = estimate_inertia(w, n_pre, width, R, TS, "anchored")
+    assert g.std_error_kgm2 == pytest.approx(_anchored_se_by_propagation(w, n_pre, n_gap), rel=1e-6)
