@@ -15,17 +15,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from gap_windows import N_PRE, TS, R, exact_window, motor_angles
+from gap_windows import CFG, N_PRE, TS, R, exact_window, motor_angles
 from scipy import optimize, stats
 
 from jident_ros.identify.gap import (
     GAP_ONLY_REL_SE_FLOOR,
+    NoGapError,
     _origin_slope,
     _robust_noise,
+    estimate_backlash_width,
     estimate_inertia,
     gap_only_fit,
     pre_entry_steady,
 )
+from jident_ros.sim import Case, simulate_grid
 
 JOINT_KEYS = ("alpha1", "alpha2", "a1", "m_el")
 
@@ -349,3 +352,61 @@ def test_anchored_standard_error_is_the_propagated_data_error(n_pre):
     w = dict(w, _width=width)
     g = estimate_inertia(w, n_pre, width, R, TS, "anchored")
     assert g.std_error_kgm2 == pytest.approx(_anchored_se_by_propagation(w, n_pre, n_gap), rel=1e-6)
+
+
+def test_angle_fit_with_no_degree_of_freedom_is_refused():
+    """The angle fit has 3 parameters (alpha0, omega0, 1/J1): a gap from the first sample of the window with 3
+    samples leaves it no degree of freedom, which is a refusal (NoGapError), not a division by zero."""
+    w, width = exact_window(1.16, n_pre=0, n_gap=3, n_after=10)
+    d = {k: w[k] for k in ("alpha1", "alpha2", "m_el")}
+    d["alpha1"] = w["alpha_motor"]
+    d["alpha2"] = w["alpha_motor"] - w["alpha1"]
+    with pytest.raises(NoGapError):
+        estimate_inertia(d, 0, width, R, TS, "angle")
+
+
+# --------------------------------------------------------------------------- backlash width: the contact fit
+def contact_reference(w, gap_end, j1, h=1e-7):
+    """The contact-torque width fit from its docstring: (r/J1) m_el - a1 (times the flank's sign) regressed on
+    (d, d', 1) over the 6 samples after the first contact sample, d' by central differences; K2/r = -c/k; its
+    standard uncertainty by the delta method with a numerical gradient, floored at 1e-3 of K2/r in quadrature.
+    Returns (K2/r, its uncertainty)."""
+    signed = w["alpha1"] - w["alpha2"]
+    rel = np.abs(signed)
+    side = np.sign(signed[gap_end]) or 1.0
+    post = np.arange(gap_end + 1, gap_end + 7)
+    y = side * (R / j1 * w["m_el"][post] - w["a1"][post])
+    A = np.column_stack([rel[post], (rel[post + 1] - rel[post - 1]) / (2 * TS), np.ones(6)])
+    coef, rss, *_ = np.linalg.lstsq(A, y, rcond=None)
+    cov = float(rss[0]) / 3 * np.linalg.inv(A.T @ A)
+
+    def theta(c):
+        return -c[2] / c[0]
+
+    grad = np.array([(theta(coef + h * e) - theta(coef - h * e)) / (2 * h) for e in np.eye(3)])
+    return theta(coef), float(np.hypot(np.sqrt(grad @ cov @ grad), 1e-3 * theta(coef)))
+
+
+@pytest.mark.parametrize("torque_noise", [0.0, 0.5, 2.0])
+def test_contact_fit_width_and_uncertainty_are_the_delta_method_ones(torque_noise):
+    """On a simulated window with noise on m_el after the re-contact: the contact fit's width and standard
+    uncertainty equal the reference (0: the 0.1 % floor; 0.5 N m: about 5 times the floor), and the bracket is used
+    exactly when the reference says so (2 N m: the fit is not 3 times more precise than the bracket)."""
+    sim = simulate_grid(CFG, [Case(1.16, 0.005, 0.025)])
+    w = {k: np.array(v[0], float) for k, v in sim.signals.items()}
+    g = estimate_inertia(w, sim.entry_index, 0.005, R, sim.sample_period_s)
+    e = g.gap_end
+    w["m_el"][e + 1:e + 8] += torque_noise * np.random.default_rng(4).standard_normal(7)
+    got = estimate_backlash_width(w, e, R, sim.sample_period_s, g.inertia_kgm2)
+    theta, s_fit = contact_reference(w, e, g.inertia_kgm2)
+    rel = np.abs(w["alpha1"] - w["alpha2"])
+    a, b = rel[e - 1], rel[e]
+    if min(a, b) <= theta <= max(a, b) and 3.0 * s_fit < abs(b - a) / np.sqrt(12.0):
+        assert got.method == "contact"
+        assert got.width_m == pytest.approx(R * theta, rel=1e-9)
+        assert got.std_m == pytest.approx(R * s_fit, rel=1e-5)
+    else:
+        assert got.method == "bracket"
+    assert got.method == ("bracket" if torque_noise == 2.0 else "contact")
+    if torque_noise == 0.5:
+        assert s_fit > 3e-3 * theta                                   # the fit's own error, not the floor
