@@ -68,21 +68,22 @@ MODULES = {
     "detector": "jident_ros/stream/detector.py",
 }
 TESTS = {
-    "gap": ["test/test_gap_precision.py", "test/test_gap.py"],
+    "gap": ["test/test_gap_rules.py", "test/test_gap_precision.py", "test/test_gap.py", "test/test_gap_second_drive.py"],
     "fusion": ["test/test_fusion_rules.py", "test/test_gap.py"],
     "khm": ["test/test_khm_rules.py", "test/test_khm.py", "test/test_method.py", "-k", "khm"],
     "detector": ["test/test_detector_rules.py", "test/test_windowing.py"],
 }
 
-#: Targeted mutations (module, exact source text of the node, replacement, what it stands for): the four
-#: one-line changes of issue 11 that survived the whole suite on main.
+#: Targeted mutations (module, exact source text of the line, replacement, what it stands for, the function that
+#: holds it or "" for anywhere in the module; the line must occur once there): the four one-line changes of
+#: issue 11 that survived the whole suite on main.
 TARGETED = [
-    ("gap", "j = float(coef[0])", "j = float(coef[0]) * 1.002", "0.2 % bias of the speed fit"),
-    ("gap", "dof = n - 1", "dof = n - 2", "degrees of freedom of the anchored fit"),
+    ("gap", "j = float(coef[0])", "j = float(coef[0]) * 1.002", "0.2 % bias of the speed fit", ""),
+    ("gap", "dof = n - 1", "dof = n - 2", "degrees of freedom of the anchored fit", "estimate_inertia"),
     ("detector", "before[0] = True if self._prev_inside is None else self._prev_inside",
      "before[0] = False if self._prev_inside is None else self._prev_inside",
-     "first sample of a stream taken as an entry"),
-    ("fusion", "BETWEEN_Z = 3.0", "BETWEEN_Z = 2.0", "between-classes threshold at 2 standard errors"),
+     "first sample of a stream taken as an entry", ""),
+    ("fusion", "BETWEEN_Z = 3.0", "BETWEEN_Z = 2.0", "between-classes threshold at 2 standard errors", ""),
 ]
 
 EQUIVALENT_FILE = REPO / "scripts" / "mutation_equivalent.toml"
@@ -188,21 +189,20 @@ class _Sites(ast.NodeVisitor):
                 self._add(node, new, f"'{_SYMBOL[type(op)]}' -> '{_SYMBOL[swap]}'")
         self.generic_visit(node)
 
-    def visit_BinOp(self, node):
+    def _swap_arithmetic(self, node, suffix=""):
+        """+ <-> -, * <-> / of a BinOp, or of an AugAssign (``suffix`` "=" in the description)."""
         swap = _BIN_SWAP.get(type(node.op))
         if swap is not None:
             new = _copy(node)
             new.op = swap()
-            self._add(node, new, f"'{_SYMBOL[type(node.op)]}' -> '{_SYMBOL[swap]}'")
+            self._add(node, new, f"'{_SYMBOL[type(node.op)]}{suffix}' -> '{_SYMBOL[swap]}{suffix}'")
         self.generic_visit(node)
 
+    def visit_BinOp(self, node):
+        self._swap_arithmetic(node)
+
     def visit_AugAssign(self, node):
-        swap = _BIN_SWAP.get(type(node.op))
-        if swap is not None:
-            new = _copy(node)
-            new.op = swap()
-            self._add(node, new, f"'{_SYMBOL[type(node.op)]}=' -> '{_SYMBOL[swap]}='")
-        self.generic_visit(node)
+        self._swap_arithmetic(node, "=")
 
     def visit_BoolOp(self, node):
         swap = ast.Or if isinstance(node.op, ast.And) else ast.And
@@ -307,12 +307,20 @@ def find_mutants(module: str, root: Path = REPO) -> list:
         elif isinstance(node, ast.Constant) or (isinstance(node, ast.UnaryOp) and isinstance(new, ast.Constant)):
             text = f"({text})" if text.startswith("-") else text
         add(node, text, description)
-    for mod, original, replacement, description in TARGETED:
+    for mod, original, replacement, description, function in TARGETED:
         if mod != module:
             continue
-        hits = [i for i, ln in enumerate(lines) if ln.strip() == original]
+        span = range(len(lines))
+        if function:
+            defs = [f for f in ast.walk(tree) if isinstance(f, ast.FunctionDef) and f.name == function]
+            if len(defs) != 1:
+                raise SystemExit(f"targeted mutation {description!r}: function {function!r} found {len(defs)} "
+                                 f"times in {path}")
+            span = range(defs[0].lineno - 1, defs[0].end_lineno)
+        hits = [i for i in span if lines[i].strip() == original]
         if len(hits) != 1:
-            raise SystemExit(f"targeted mutation {description!r}: {original!r} found {len(hits)} times in {path}")
+            where = f"{path}:{function}" if function else path
+            raise SystemExit(f"targeted mutation {description!r}: {original!r} found {len(hits)} times in {where}")
         i = hits[0]
         col = lines[i].index(original)
         out.append(Mutant(module, path, i + 1, (i + 1, col), (i + 1, col + len(original)), original, replacement,

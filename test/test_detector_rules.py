@@ -223,6 +223,20 @@ def test_a_drop_loses_the_window_in_progress_and_an_empty_batch_does_not():
     assert d.counts["layout"] == 1 and d.dropped_total == 3
 
 
+def test_a_window_cut_off_by_the_end_of_the_data_is_a_counted_drop():
+    """finish(): a window in progress is reported as 'cut_off' (counted once, window_dropped), carrying the partial
+    window unnumbered (window_id 0: not a captured window); with nothing in progress finish() reports nothing."""
+    d = det()
+    feed(d, stream([OUT, OUT, OUT, IN, IN]))
+    assert d.capturing
+    (e,) = d.finish()
+    assert e.kind == "drop" and e.reason == "cut_off" and e.window_dropped is True and d.last_event is e
+    assert d.counts["cut_off"] == 1 and d.dropped_total == 1 and d.windows_captured == 0
+    assert e.window.window_id == 0 and e.window.data.shape[0] == 5 and not d.capturing
+    assert "2 of 4 samples from the entry" in e.detail
+    assert d.finish() == [] and d.counts["cut_off"] == 1
+
+
 def test_reject_needs_a_known_reason():
     d = det()
     with pytest.raises(ValueError, match="reason"):
@@ -339,5 +353,6 @@ def test_embed_windows_holds_the_first_sample_and_runs_the_clock_on():
             np.testing.assert_allclose(col[:3], ws.signals[a][i][0] + ws.signals[w][i][0] * np.array([-1.5, -1.0, -0.5]))
     out0, rows0 = embed_windows(ws, gap_samples=0, channels=channels)
     assert rows0 == [2, 7] and out0.shape == (10, 4)
+    assert out0[0, 0] == 1.0                                          # the drive clock starts at 1 s by default
     with pytest.raises(ValueError, match="gap_samples"):
         embed_windows(ws, gap_samples=-1)

@@ -126,6 +126,13 @@ def test_an_infinite_margin_is_a_confident_vote():
     assert image_vote({"a1": answer("a1", 5, math.inf)}, fused_class_index=2) == 5
 
 
+def test_an_infinite_margin_weighs_as_a_margin_of_11():
+    """fusion.py docstring: margin = inf votes with weight 10, as margin 11: it beats a single signal at 10.95
+    (weight 9.95) and loses to one at 11.05 (10.05)."""
+    assert image_vote({"a1": answer("a1", 5, math.inf), "m_el": answer("m_el", 1, 10.95)}) == 5
+    assert image_vote({"a1": answer("a1", 5, math.inf), "m_el": answer("m_el", 1, 11.05)}) == 1
+
+
 def test_a_verdict_is_immutable():
     v = fuse_verdict(CLASSES, {}, 1, gap(1.131, 0.002))
     with pytest.raises(dataclasses.FrozenInstanceError):

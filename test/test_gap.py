@@ -1,8 +1,8 @@
 """The gap estimator, the backlash-width estimate and the fused verdict."""
 import numpy as np
 import pytest
+from gap_windows import CFG, TS, R
 
-from jident_ros.config import load_system_config
 from jident_ros.identify.fusion import fuse_verdict, image_vote
 from jident_ros.identify.gap import (
     GapEstimate,
@@ -10,14 +10,9 @@ from jident_ros.identify.gap import (
     estimate_backlash_width,
     estimate_inertia,
     gap_interval,
-    nearest_class,
 )
 from jident_ros.method.patterns import SignalAnswer
 from jident_ros.sim import Case, simulate_grid
-
-CFG = load_system_config()
-R = CFG.load.wheel_radius_m
-TS = 5e-4
 
 
 def single_mass_window(j1, n_pre=48, n_gap=20, n_after=60, seed=None, torque_noise=0.0, acc_noise=0.0):
@@ -177,7 +172,6 @@ def test_verdict_prefers_the_gap_and_flags_between_classes():
     assert v.between_classes and v.class_index is None and v.inertia_kgm2 == 1.02
     v = fuse_verdict(classes, {"a1": _answer("a1", 3, 2.0)}, None, None, "no gap")
     assert v.source == "image" and v.inertia_kgm2 == 1.073 and v.reason == "no gap"
-    assert nearest_class(1.0, classes) == 4
 
 
 def test_steady_state_window_is_refused_not_fitted():

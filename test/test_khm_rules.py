@@ -192,3 +192,78 @@ def test_documented_defaults():
     m = KHarmonicMeans()
     assert (m.n_clusters, m.p, m.init, m.max_iter, m.tol, m.damping, m.duplicate_spread, m.compress) == \
         (7, 2.0, "paper", 3000, 1e-10, "auto", 1.0, "auto")
+
+
+# --------------------------------------------------------------------------- numerics and damping
+def test_scalar_data_is_one_sample():
+    """A scalar X is one sample (shape (1,)): the performance function of x = 1 and the labels of one value."""
+    assert khm_objective(1.0, np.array([0.5, 2.5]), 2.0) == pytest.approx(float(ref_objective([F(1)], S, 2)),
+                                                                          rel=1e-14)
+    m = fitted(2.0)
+    np.testing.assert_array_equal(m.predict(3.0), [1])
+    assert m.membership(0.0).shape == (1, 2)
+
+
+def test_convergence_threshold_is_relative_to_the_data_range():
+    """khm.py: converged when max |F(S) - S| <= tol x the data range R (not max(|x|, 1)): data of range 0.01 around
+    100 converge as tightly as the same data around 0 -- KHM is equivariant under a shift, and so is the fit -- and
+    the returned centres are a fixed point of eq. (30) to tol x R."""
+    rng = np.random.default_rng(2)
+    x = np.concatenate([rng.normal(0.002, 0.0005, 80), rng.normal(0.008, 0.0005, 80)])
+    r = float(x.max() - x.min())
+    tol = 1e-6
+    near0 = KHarmonicMeans(n_clusters=2, init=np.array([0.003, 0.006]), tol=tol, damping=None).fit(x)
+    near100 = KHarmonicMeans(n_clusters=2, init=np.array([100.003, 100.006]), tol=tol, damping=None).fit(x + 100.0)
+    assert near0.converged_ and near100.converged_
+    np.testing.assert_allclose(near100.cluster_centers_ - 100.0, near0.cluster_centers_, rtol=0, atol=1e-9)
+    for m, data in ((near0, x), (near100, x + 100.0)):
+        again = one_update(data, 2.0, m.cluster_centers_)                     # F(S) at the returned centres
+        assert np.max(np.abs(again.cluster_centers_ - m.cluster_centers_)) <= tol * r
+
+
+def test_auto_damping_halves_down_to_1_1024_and_no_further():
+    """damping='auto': each detected cycle halves lambda, never below 1/1024 (module docstring).  At p = 3000 the
+    update's Jacobian has an eigenvalue near -(p - 2), so even lambda = 1/1024 oscillates: lambda ends at the floor
+    after ten halvings."""
+    x = np.array([0.0, 0.1, 0.2, 0.5, 0.55, 0.9, 1.0, 0.3, 0.35, 0.75])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        m = KHarmonicMeans(n_clusters=3, p=3000.0, init="quantile", max_iter=400).fit(x)
+    assert m.cycle_detected_
+    assert [lam for _, lam in m.damping_history_][:11] == [0.5 ** k for k in range(1, 11)]
+    assert m.damping_used_ == 1.0 / 1024.0
+
+
+def test_batch_relaxation_starts_at_1_8_over_p_minus_1_capped_at_1():
+    """khm_fit_batch: relaxation lam = min(1, 1.8/(p - 1)); one plain update from the spread initialisation at
+    p = 2.5 (lam = 1, the cap) and p = 4 (lam = 0.6)."""
+    for p, lam in ((2.5, 1.0), (4.0, 0.6)):
+        centres, info = khm_fit_batch(np.array([0.0, 1.0, 3.0]), np.array([[1.0, 1.0, 1.0]]), [1.5], n_clusters=2,
+                                      p=p, max_iter=1, duplicate_spread=2.0 / 3.0, accelerate=False)
+        m = one_update([0.0, 1.0, 3.0], p, [0.5, 2.5])                        # F(S), eq. (30)
+        want = np.array([0.5, 2.5]) + lam * (m.cluster_centers_ - np.array([0.5, 2.5]))
+        np.testing.assert_allclose(centres[0], want, rtol=1e-13)
+        assert info["damping"][0] == lam
+
+
+def test_batch_with_no_iterations_returns_the_spread_initial_centres():
+    centres, info = khm_fit_batch(np.array([0.0, 1.0, 3.0]), np.array([[1.0, 1.0, 1.0]]), [1.5], n_clusters=2,
+                                  max_iter=0, duplicate_spread=2.0 / 3.0, accelerate=False)
+    np.testing.assert_allclose(centres[0], [0.5, 2.5], rtol=1e-14)
+    assert info["n_iter"] == 0 and not info["converged"][0]
+
+
+def test_batch_halves_the_relaxation_of_an_oscillating_histogram():
+    """khm_fit_batch (plain): a histogram whose iteration reverses its step without decaying at the starting
+    lam = 1.8/(p - 1) gets lam halved once (this seeded 64-level histogram at p = 9), then converges to a fixed
+    point of eq. (30)."""
+    levels = np.linspace(0.0, 1.0, 64)
+    rng = np.random.default_rng(64)
+    counts = rng.integers(0, 50, 64).astype(float) * (rng.random(64) < 0.5)
+    counts[0] += 1
+    init = rng.uniform(0.0, 1.0)
+    centres, info = khm_fit_batch(levels, counts[None], [init], p=9.0, accelerate=False)
+    assert info["converged"][0]
+    assert info["damping"][0] == pytest.approx(1.8 / 8.0 / 2.0, rel=1e-15)
+    again = one_update(levels, 9.0, centres[0], counts)
+    np.testing.assert_allclose(again.cluster_centers_, centres[0], rtol=0, atol=1e-7)

@@ -1,7 +1,8 @@
 """One verdict per window from the image method and the gap estimator.
 
 * image vote: each signal's class votes with weight (margin − 1) (a signal whose
-  two best classes tie has no say); the class with the largest total wins.  With
+  two best classes tie has no say; an infinite margin, the best class at H = 0,
+  weighs 10, as a margin of 11 would); the class with the largest total wins.  With
   every margin at 1 the paper's fused H decides (:func:`patterns.fuse`).
 * gap: the continuous J1 with its 95 % interval (:mod:`gap`) and its nearest class.
 * verdict: the best continuous J1 is the gap estimate when there is one (it is

@@ -51,8 +51,9 @@ Fits
   fit (``"acceleration"``); not steady (e.g. a speed controller swinging the torque just before
   the entry): ``"gap_only"``.  The estimate's ``model_choice`` says which and why.
 * ``"anchored"`` (the estimator of the first release, kept for comparison): m0 = the
-  pre-entry mean, m_el ≈ m0 + b t + c t^2 fitted over the gap, then a1 = (r/J1) m_hat
-  through the origin.
+  pre-entry mean (of m_el − b1 ω1, as in the gap), m_el ≈ m0 + b t + c t^2 fitted over the gap,
+  then a1 = (r/J1) m_hat through the origin.  Uncertainty: the least-squares one of r/J1 (its
+  relative variance is J1's), and in quadrature m_hat's error carried to J1 by the delta method.
 * ``"angle"`` (α1 and m_el measured: a motor encoder and the drive's torque, no
   accelerometer): double-integral form, no differentiation.  Before the entry the
   motor turns at a constant speed, inside the gap J1 dω1/dt = m_el, so over the
@@ -281,7 +282,10 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         # m_el is smooth through the gap (the fluxes are continuous) and constant before
         # the entry (steady state): anchor it with the pre-entry mean and a quadratic in
         # time over the gap, then fit a1 = (r/J1) m_el_hat through the origin.
+        # b1 ω1 comes off the pre-entry samples too: m0 anchors m_el − b1 ω1, the torque that accelerates J1
         mf = np.asarray(window["m_el"], float)
+        if bearing_friction_nms_per_rad and "omega1" in window:
+            mf = mf - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)
         a = np.asarray(window["a1"], float)[start:end]
         t = np.arange(n) * sample_period_s
         pre = mf[:start]
@@ -297,14 +301,19 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         res = (a - kappa * m_hat) / kappa
         dof = n - 1
         var_k = (res @ res) / dof / smm if dof > 0 else np.inf
-        # uncertainty of m_hat: pre-entry mean and the quadratic's coefficients
+        # uncertainty of m_hat = m0 (1 - P 1) + P m (P: projection on T's columns): the pre-entry mean's
+        # variance along u = 1 - P 1 and the gap m_el noise through P; its effect on J1 = r smm / (a . m_hat)
+        # by the delta method, gradient dJ1/dm_hat = J1 (2 m_hat/smm - a/(a . m_hat))
         res_m = (m - m0) - T @ coef
-        s2m = float(res_m @ res_m) / max(n - 2, 1)
+        s2m = float(res_m @ res_m) / max(n - T.shape[1], 1)
         var_m0 = float(pre.var(ddof=1)) / pre.size if pre.size > 1 else s2m
-        cov = s2m * np.linalg.pinv(T.T @ T)
-        var_mhat = var_m0 + np.einsum("ij,jk,ik->i", T, cov, T)
-        rel_m = float(np.sqrt(np.mean(var_mhat))) / float(np.mean(m_hat))
-        se = float(np.sqrt(var_k * (wheel_radius_m / kappa ** 2) ** 2 + (j * rel_m) ** 2))
+        P = T @ np.linalg.pinv(T)
+        u = 1.0 - P.sum(axis=1)
+        grad = 2.0 * m_hat / smm - a / float(a @ m_hat)                 # relative: dJ1/dm_hat / J1
+        rel_m2 = var_m0 * float(grad @ u) ** 2 + s2m * float(grad @ P @ grad)
+        # var_k is the RELATIVE variance of kappa (res is a1's residual over kappa), and J1 = r/kappa has the same
+        # relative variance (delta method): var(J1) = J1^2 var_k, plus m_hat's part in quadrature
+        se = float(j * np.sqrt(var_k + rel_m2))
     elif method == "angle":
         if "alpha1" not in window:
             raise NoGapError("method 'angle' needs alpha1 (use 'speed' with omega1)")

@@ -128,14 +128,20 @@ def _fmt(value):
         return repr(value)
 
 
-def _check_1d(X, name="X"):
+def _as_float_array(value, name):
+    """``value`` as a float64 array, an (n, 1) column as shape (n,); a ValueError naming ``name`` if not numeric."""
     try:
-        arr = np.asarray(X, dtype=np.float64)
+        arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be numeric, got {_fmt(X)}") from exc
+        raise ValueError(f"{name} must be numeric, got {_fmt(value)}") from exc
     if arr.ndim == 2 and arr.shape[1] == 1:
         arr = arr[:, 0]
-    elif arr.ndim == 0:
+    return arr
+
+
+def _check_1d(X, name="X"):
+    arr = _as_float_array(X, name)
+    if arr.ndim == 0:
         arr = arr.reshape(1)
     if arr.ndim != 1:
         raise ValueError(
@@ -153,12 +159,7 @@ def _check_1d(X, name="X"):
 def _check_weights(sample_weight, n, name="sample_weight"):
     if sample_weight is None:
         return np.ones(n)
-    try:
-        w = np.asarray(sample_weight, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be numeric, got {_fmt(sample_weight)}") from exc
-    if w.ndim == 2 and w.shape[1] == 1:
-        w = w[:, 0]
+    w = _as_float_array(sample_weight, name)
     if w.ndim != 1 or w.shape[0] != n:
         raise ValueError(f"{name} must have shape ({n},) to match X, got shape {w.shape}")
     if not np.all(np.isfinite(w)):

@@ -1,0 +1,412 @@
+"""The gap estimator's fits against independent references (issue 11 part 5: tests that a wrong one-line change of
+gap.py fails).
+
+* the joint ('acceleration') fit: J1, its standard error (sandwich covariance with each block's residual variance,
+  the model error in quadrature) and the residual RMS equal a reference built on scipy.optimize.least_squares from
+  the documented model and noise weights, with 48 and with 3 pre-entry samples (the noise-level fallback);
+* the Deming slope through the origin against a numerical maximum-likelihood fit, the robust noise scale against
+  scipy.stats.median_abs_deviation, the steadiness F test against a direct F test with scipy.stats.f;
+* the gap-only fit's trimming on a window whose in-zone samples are known;
+* the rules around them: the quadratic torque model below GAP_CUBIC_MIN samples, b1 without omega1, the fitted span.
+
+Synthetic windows only; about a second.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from gap_windows import CFG, N_PRE, TS, R, exact_window, motor_angles
+from scipy import optimize, stats
+
+from jident_ros.identify.gap import (
+    GAP_ONLY_REL_SE_FLOOR,
+    NoGapError,
+    _origin_slope,
+    _robust_noise,
+    estimate_backlash_width,
+    estimate_inertia,
+    gap_only_fit,
+    pre_entry_steady,
+)
+from jident_ros.sim import Case, simulate_grid
+
+JOINT_KEYS = ("alpha1", "alpha2", "a1", "m_el")
+
+
+def noisy_window(n_pre=N_PRE, torque_noise=0.8, acc_noise=0.15, seed=3, torque=(150.0, 0.0, -8000.0, 2.0e5)):
+    w, width = exact_window(1.16, n_pre=n_pre, torque=torque)
+    rng = np.random.default_rng(seed)
+    w["m_el"] = w["m_el"] + torque_noise * rng.standard_normal(len(w["m_el"]))
+    w["a1"] = w["a1"] + acc_noise * rng.standard_normal(len(w["a1"]))
+    return {k: w[k] for k in JOINT_KEYS}, width
+
+
+def joint_reference(m_el, a1, start, end, powers, noise=None, friction=None):
+    """The joint fit from its documented model, solved by scipy's least squares: pre-entry m_el = m0, gap m_el =
+    m0 + sum c_p tau^p, gap a1 = kappa m_hat, tau = (k - start)/n; the m_el rows weighted by 1/sm, the a1 rows by
+    1/sa.  Noise levels: the pre-entry standard deviations (ddof 1), or with fewer than 5 pre-entry samples the
+    gap m_el's residual scale about its own model fit and sa = sm mean|a1|/mean|m_el|; floored at 1e-9 of the
+    channel's largest gap value (noise-free windows: both channels weigh by their size).  ``friction``: b1 omega1 over
+    the gap, a1 = kappa (m_hat - b1 omega1).  Returns kappa, its sandwich standard error, the a1 residual, the noise
+    levels and the t degrees of freedom."""
+    n = end - start
+    pre, mg, ag = m_el[:start], m_el[start:end], a1[start:end]
+    fr = np.zeros(n) if friction is None else friction
+    tau = np.arange(n) / n
+    G = np.column_stack([np.ones(n)] + [tau ** q for q in powers])
+    p = G.shape[1]
+    if noise is not None:
+        sm, sa = noise
+    elif pre.size >= 5:
+        sm, sa = np.std(pre, ddof=1), np.std(a1[:start], ddof=1)
+    else:
+        cm = np.linalg.lstsq(G, mg, rcond=None)[0]
+        sm = np.sqrt(np.sum((mg - G @ cm) ** 2) / (n - p))
+        sa = sm * np.abs(ag).mean() / np.abs(mg).mean()
+    sm, sa = max(sm, 1e-9 * np.abs(mg).max()), max(sa, 1e-9 * np.abs(ag).max())
+
+    def residual(theta):
+        kappa, beta = theta[0], theta[1:]
+        return np.concatenate([(pre - beta[0]) / sm, (mg - G @ beta) / sm, (ag - kappa * (G @ beta - fr)) / sa])
+
+    beta0 = np.linalg.lstsq(G, mg, rcond=None)[0]
+    x0 = np.concatenate([[float(ag @ (G @ beta0)) / float((G @ beta0) @ (G @ beta0))], beta0])
+    sol = optimize.least_squares(residual, x0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    kappa, beta = sol.x[0], sol.x[1:]
+    J = -sol.jac
+    nm = pre.size + n
+    Fm, Fa = J[:nm].T @ J[:nm], J[nm:].T @ J[nm:]
+    f_inv = np.linalg.inv(Fm + Fa)
+    s2m = float(sol.fun[:nm] @ sol.fun[:nm]) / (nm - p)
+    s2a = float(sol.fun[nm:] @ sol.fun[nm:]) / (n - 1)
+    cov = f_inv @ (s2m * Fm + s2a * Fa) @ f_inv
+    dof = pre.size - 1 if pre.size >= 5 else pre.size + 2 * n - p - 1
+    return kappa, np.sqrt(cov[0, 0]), ag - kappa * (G @ beta - fr), (sm, sa), dof
+
+
+@pytest.mark.parametrize("n_pre, noise, b1", [
+    (N_PRE, True, 0.0),
+    (3, True, 0.0),          # the noise levels from the gap's own m_el fit
+    (N_PRE, True, 0.05),     # bearing friction: a1 = kappa (m_hat - b1 omega1)
+    (N_PRE, False, 0.0),     # noise-free, a torque with a linear term (not the model): the floors set the weights
+])
+def test_joint_fit_is_the_weighted_least_squares_solution(n_pre, noise, b1):
+    if noise:
+        w, width = noisy_window(n_pre=n_pre)
+    else:
+        w, width = exact_window(1.16, n_pre=n_pre, torque=(150.0, 3000.0, -8000.0, 2.0e5))
+        w = {k: w[k] for k in JOINT_KEYS}
+    friction = None
+    if b1:
+        omega = exact_window(1.16, n_pre=n_pre)[0]["omega1"]
+        w["omega1"] = omega
+        w["m_el"] = w["m_el"] + b1 * omega
+    g = estimate_inertia(w, n_pre, width, R, TS, "acceleration", bearing_friction_nms_per_rad=b1)
+    start, end = g.gap_start, g.gap_end
+    assert (start, end) == (n_pre, n_pre + 20)
+    if b1:
+        friction = b1 * w["omega1"][start:end]
+    kappa, se_kappa, res_a, noise_levels, dof = joint_reference(w["m_el"], w["a1"], start, end, (2, 3),
+                                                                friction=friction)
+    kappa_lin = joint_reference(w["m_el"], w["a1"], start, end, (1, 2, 3), noise_levels, friction)[0]
+    j = R / kappa
+    model_error = abs(R / kappa_lin - j)
+    se = np.hypot(R / kappa ** 2 * se_kappa, model_error)
+    assert g.inertia_kgm2 == pytest.approx(j, rel=1e-8)                          # GN_TOL 1e-9 per step
+    assert g.model_error_kgm2 == pytest.approx(model_error, abs=1e-8)        # a difference of two J1 (GN_TOL 1e-9)
+    assert g.std_error_kgm2 == pytest.approx(se, rel=1e-5)
+    assert g.residual_rms == pytest.approx(np.sqrt(np.mean((res_a / kappa) ** 2)), rel=1e-6)
+    assert g.ci95_kgm2[1] - g.inertia_kgm2 == pytest.approx(stats.t.ppf(0.975, dof) * se, rel=1e-6)
+
+
+def test_short_gaps_use_a_quadratic_torque():
+    """Below GAP_CUBIC_MIN (8) samples the gap torque is m0 + c2 tau^2: exact for such a torque."""
+    w, width = exact_window(1.16, n_gap=7, torque=(150.0, 0.0, -2.0e5, 0.0))
+    g = estimate_inertia({k: w[k] for k in JOINT_KEYS}, N_PRE, width, R, TS, "acceleration")
+    assert g.n_samples == 7 and g.inertia_kgm2 == pytest.approx(1.16, rel=1e-9)
+
+
+def test_bearing_friction_without_omega1_leaves_m_el_as_it_is():
+    """b1 omega1 needs omega1: without it every fit uses m_el as measured (no error, the same J1 as b1 = 0)."""
+    w, width = exact_window(1.16)
+    d = {k: w[k] for k in JOINT_KEYS}
+    for method in ("acceleration", "anchored", "gap_only"):
+        plain = estimate_inertia(d, N_PRE, width, R, TS, method)
+        assert estimate_inertia(d, N_PRE, width, R, TS, method, bearing_friction_nms_per_rad=0.05) == plain
+
+
+@pytest.mark.parametrize("method", ["acceleration", "anchored", "speed", "angle"])
+def test_fits_without_trimming_report_the_gap_interval_as_their_span(method):
+    w, width = exact_window(1.16)
+    g = estimate_inertia(motor_angles(w) if method == "angle" else w, N_PRE, width, R, TS, method)
+    assert (g.fit_start, g.fit_end) == (g.gap_start, g.gap_end) == (N_PRE, N_PRE + 20)
+
+
+# --------------------------------------------------------------------------- helpers against scipy
+def test_robust_noise_is_the_normal_mad_of_second_differences_over_sqrt_6():
+    rng = np.random.default_rng(5)
+    a, b = 3.0 + 0.5 * rng.standard_normal(200), -40.0 + 0.5 * rng.standard_normal(60)
+    d2 = np.concatenate([np.diff(a, 2), np.diff(b, 2)])          # per segment: no jump between them
+    want = stats.median_abs_deviation(d2, scale="normal") / np.sqrt(6.0)
+    assert _robust_noise(a, b) == pytest.approx(want, rel=1e-5)
+    assert _robust_noise(a, b) == pytest.approx(0.5, rel=0.1)    # white noise of sd 0.5
+    assert _robust_noise(a, b[:2]) == _robust_noise(a)           # a segment of < 3 samples has no 2nd difference
+    assert _robust_noise(np.arange(4.0)) == 0.0                  # < 3 second differences: no scale
+
+
+def _deming_reference(y, x, sy, sx):
+    """The maximum-likelihood slope of y = J x with noise sd sy on y and sx on x: the J minimising
+    sum (y - J x)^2 / (sy^2 + J^2 sx^2) (scipy.optimize.minimize_scalar), searched on the side of the OLS slope."""
+    ols = float(x @ y) / float(x @ x)
+    bracket = (0.0, 4.0 * ols) if ols > 0 else (4.0 * ols, 0.0)
+    got = optimize.minimize_scalar(lambda j: float(np.sum((y - j * x) ** 2)) / (sy ** 2 + j ** 2 * sx ** 2),
+                                   bounds=bracket, method="bounded", options={"xatol": 1e-12})
+    return got.x
+
+
+@pytest.mark.parametrize("slope, sy, sx", [
+    (1.7, 0.3, 0.2), (2.5, 1.0, 1.0),
+    pytest.param(-0.6, 0.05, 0.4, marks=pytest.mark.xfail(strict=True, reason=(
+        "gap._origin_slope: the sign(sxy) factor picks the other root of the Deming quadratic when x . y < 0, a "
+        "small POSITIVE slope (here +0.026 for -0.596), so a non-physical anti-correlated gap is not refused; "
+        "reported to the lead, not fixed here (gap.py beyond the anchored fit is out of this task)"))),
+])
+def test_deming_slope_through_the_origin_is_the_maximum_likelihood_one(slope, sy, sx):
+    """_origin_slope with both noise levels = the errors-in-variables (orthogonal-distance) slope through the
+    origin, found numerically."""
+    rng = np.random.default_rng(8)
+    x_true = rng.uniform(0.5, 3.0, 60)
+    x = x_true + sx * rng.standard_normal(60)
+    y = slope * x_true + sy * rng.standard_normal(60)
+    assert _origin_slope(y, x, sy, sx) == pytest.approx(_deming_reference(y, x, sy, sx), rel=1e-8)
+    assert _origin_slope(y, x, sy, 0.0) == pytest.approx(float(x @ y) / float(x @ x), rel=1e-14)   # OLS of y on x
+    assert _origin_slope(y, x, 0.0, sx) == pytest.approx(float(y @ y) / float(x @ y), rel=1e-14)   # exact y
+    assert np.isnan(_origin_slope(np.array([1.0, -1.0]), np.array([1.0, 1.0]), sy, sx))           # x . y = 0
+
+
+def test_steadiness_f_test_is_the_quadratic_against_the_constant():
+    rng = np.random.default_rng(9)
+    n = 40
+    x = 200.0 + 0.8 * rng.standard_normal(n) + np.linspace(0.0, 1.5, n) ** 2
+    t = np.arange(n)
+    rss0 = float(np.sum((x - x.mean()) ** 2))
+    rss2 = float(np.sum((x - np.polyval(np.polyfit(t, x, 2), t)) ** 2))
+    f = (rss0 - rss2) / 2.0 / (rss2 / (n - 3))
+    got = pre_entry_steady(x)
+    assert got.f_statistic == pytest.approx(f, rel=1e-9)
+    assert got.p_value == pytest.approx(stats.f.sf(f, 2, n - 3), rel=1e-9)
+    assert got.n_samples == n
+
+
+def test_steady_when_p_is_at_least_1e_3():
+    """Not steady when p < 1e-3 (docs: STEADY_P_VALUE) and the trend is practically significant: a noisy ramp's
+    amplitude bisected to p just below and just above 1e-3."""
+    rng = np.random.default_rng(10)
+    noise = 2.0 * rng.standard_normal(48)
+    ramp = np.linspace(-1.0, 1.0, 48)
+
+    def p_of(amp):
+        return pre_entry_steady(100.0 + amp * ramp + noise)
+
+    lo, hi = 0.0, 10.0                     # p(lo) > 1e-3 > p(hi)
+    assert p_of(lo).p_value > 1e-3 > p_of(hi).p_value
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if p_of(mid).p_value >= 1e-3 else (lo, mid)
+    above, below = p_of(lo), p_of(hi)
+    assert 1e-3 <= above.p_value < 1.004e-3 and above.steady
+    assert 0.996e-3 < below.p_value < 1e-3 and not below.steady
+    assert "p = 0.001 < 0.001" in below.reason or "< 0.001" in below.reason
+
+
+def test_a_trend_below_1e_4_of_the_level_is_steady_even_without_noise():
+    """STEADY_REL_TOL: a noise-free trend (F infinite) is steady when its slope and curvature move m_el by at most
+    1e-4 of its level, not steady above."""
+    ramp = np.linspace(0.0, 1.0, 48) ** 2
+    small = pre_entry_steady(1000.0 + 0.09 * ramp)
+    assert small.steady and small.f_statistic == np.inf
+    large = pre_entry_steady(1000.0 + 0.11 * ramp)
+    assert not large.steady and large.p_value == 0.0
+
+
+# --------------------------------------------------------------------------- gap_only trimming
+def trimmed_window(j1=1.2, n_pre=30, n_zone=24, n_post=20):
+    """torque = J1 acc exactly in the zone [n_pre, n_pre + n_zone); before it the coupling still carries load (acc
+    much smaller than torque/J1), after it the contact brakes the motor: end samples out of the zone are known."""
+    n = n_pre + n_zone + n_post
+    k = np.arange(n)
+    torque = 300.0 + 20.0 * np.sin(k / 7.0)
+    acc = torque / j1
+    acc[:n_pre] *= 0.3
+    acc[n_pre + n_zone:] = -150.0
+    return torque, acc, n_pre, n_pre + n_zone
+
+
+def test_gap_only_drops_the_out_of_zone_end_samples():
+    torque, acc, a, b = trimmed_window()
+    exact = gap_only_fit(torque, acc, a, b)
+    assert (exact["start"], exact["end"]) == (a, b) and exact["j1"] == pytest.approx(1.2, rel=1e-12)
+    assert exact["dof"] == b - a - 1
+    assert exact["se"] == pytest.approx(GAP_ONLY_REL_SE_FLOOR * 1.2, rel=1e-9)       # noise-free: the floor
+    moved = gap_only_fit(torque, acc, a - 3, b + 2)                                  # 3 early, 2 late samples
+    assert (moved["start"], moved["end"]) == (a, b) and moved["j1"] == pytest.approx(1.2, rel=1e-12)
+    capped = gap_only_fit(torque, acc, a - 3, b + 2, max_trim=(2, 1))                # at most 2 and 1 dropped
+    assert (capped["start"], capped["end"]) == (a - 1, b + 1)
+    assert abs(capped["j1"] / 1.2 - 1) > 1e-3
+
+
+def test_gap_only_model_error_is_the_change_with_one_more_sample_off_each_end():
+    torque, acc, a, b = trimmed_window()
+    rng = np.random.default_rng(12)
+    torque = torque + 0.5 * rng.standard_normal(torque.size)
+    acc = acc + 0.5 * rng.standard_normal(acc.size)
+    g = gap_only_fit(torque, acc, a, b)
+    lo, hi = g["start"], g["end"]
+    sy, sx = g["noise"]
+    inner = _origin_slope(torque[lo + 1:hi - 1], acc[lo + 1:hi - 1], sy, sx)
+    assert g["model_error"] == pytest.approx(abs(inner - g["j1"]), rel=1e-12)
+    res = torque[lo:hi] - g["j1"] * acc[lo:hi]
+    se_stat = np.sqrt(float(res @ res) / (hi - lo - 1) / float(acc[lo:hi] @ acc[lo:hi]))
+    assert g["se"] == pytest.approx(max(np.hypot(se_stat, g["model_error"]), GAP_ONLY_REL_SE_FLOOR * g["j1"]),
+                                    rel=1e-12)
+
+
+def test_gap_only_with_an_exact_torque_regresses_the_acceleration_on_it():
+    """sy = 0 (the torque without noise, e.g. a drive's own reference torque): the Deming slope becomes the
+    regression of acc on torque through the origin, J1 = sum torque^2 / sum torque acc over the fitted samples."""
+    a, b = 30, 54
+    torque = 300.0 + 2.0 * np.arange(74)                        # no second differences: no torque noise
+    acc = torque / 1.2
+    acc[:a] *= 0.3
+    acc[b:] = -150.0
+    acc = acc + 0.4 * np.random.default_rng(13).standard_normal(acc.size)
+    g = gap_only_fit(torque, acc, a, b)
+    assert g["noise"][0] == 0.0 and g["noise"][1] > 0.3
+    y, x = torque[g["start"]:g["end"]], acc[g["start"]:g["end"]]
+    assert g["j1"] == pytest.approx(float(y @ y) / float(x @ y), rel=1e-12)
+
+
+def test_gap_only_trimming_keeps_at_least_three_samples():
+    """Every sample of a short candidate is off the line through the origin: the entry end is trimmed until three
+    samples remain, not further (max_trim allows four)."""
+    n_pre = 30
+    torque = np.concatenate([np.full(n_pre, 50.0), [10.0, 13.0, 10.0, 13.0, 10.0, 13.0], np.full(10, 80.0)])
+    acc = np.concatenate([np.zeros(n_pre), np.ones(6), np.full(10, -5.0)])
+    g = gap_only_fit(torque, acc, n_pre, n_pre + 6)
+    assert (g["start"], g["end"]) == (n_pre + 3, n_pre + 6)
+    assert g["j1"] == pytest.approx(12.0, rel=1e-12)
+
+
+def test_robust_noise_from_three_second_differences():
+    x = np.array([0.0, 1.0, 0.0, 2.0, 0.0])                      # second differences -2, 3, -4
+    want = 1.4826 * np.median(np.abs(np.array([-2.0, 3.0, -4.0]) + 2.0)) / np.sqrt(6.0)
+    assert _robust_noise(x) == pytest.approx(want, rel=1e-15) and want > 0
+
+
+def test_a_constant_to_rounding_has_f_0_and_p_1():
+    """SteadinessTest: f_statistic 0 for a constant to rounding (here a jitter of 3e-13 of the level)."""
+    x = 221.0 * (1.0 + 3e-13 * np.resize([1.0, -1.0], 48))
+    got = pre_entry_steady(x)
+    assert np.ptp(x) > 0 and got.steady and (got.f_statistic, got.p_value) == (0.0, 1.0)
+
+
+def _anchored_se_by_propagation(w, n_pre, n_gap, h=1e-4):
+    """The anchored fit's standard error by linear error propagation from the data: J1's sensitivity to each
+    pre-entry m_el sample (variance: their sample variance) and each gap m_el sample (variance: the residual
+    variance of the gap polynomial, n - its columns degrees of freedom), by central differences of the fit itself,
+    and the a1 part r/kappa^2 se(kappa) of ordinary least squares through the origin."""
+    def j_of(m):
+        return estimate_inertia(dict(w, m_el=m), n_pre, width, R, TS, "anchored").inertia_kgm2
+    width = w["_width"]
+    m = w["m_el"]
+    sens = np.empty(n_pre + n_gap)
+    for i in range(n_pre + n_gap):
+        up, down = m.copy(), m.copy()
+        up[i] += h
+        down[i] -= h
+        sens[i] = (j_of(up) - j_of(down)) / (2 * h)
+    gap = slice(n_pre, n_pre + n_gap)
+    t = np.arange(n_gap) * TS
+    T = t[:, None] if n_gap < 12 else np.column_stack([t, t * t])
+    m0 = m[:n_pre].mean()
+    coef = np.linalg.lstsq(T, m[gap] - m0, rcond=None)[0]
+    s2m = np.sum((m[gap] - m0 - T @ coef) ** 2) / (n_gap - T.shape[1])
+    var_pre = np.var(m[:n_pre], ddof=1) if n_pre > 1 else s2m * n_pre
+    m_hat = m0 + T @ coef
+    a = w["a1"][gap]
+    kappa = float(a @ m_hat) / float(m_hat @ m_hat)
+    se_kappa = np.sqrt(np.sum((a - kappa * m_hat) ** 2) / (n_gap - 1) / float(m_hat @ m_hat))
+    var_m = var_pre * np.sum(sens[:n_pre] ** 2) + s2m * np.sum(sens[n_pre:] ** 2)
+    return np.sqrt((R / kappa ** 2 * se_kappa) ** 2 + var_m)
+
+
+@pytest.mark.parametrize("n_pre", [N_PRE, 2])
+def test_anchored_standard_error_is_the_propagated_data_error(n_pre):
+    """'anchored' with noise on m_el and a1: the standard error equals linear error propagation of the pre-entry
+    and gap m_el noise (and the a1 part), computed from the fit's own sensitivities to the data."""
+    n_gap = 20
+    w, width = exact_window(1.16, n_pre=n_pre, n_gap=n_gap, torque=(150.0, -3000.0, 9.0e4, 0.0))
+    rng = np.random.default_rng(21)
+    w["m_el"] = w["m_el"] + 1.2 * rng.standard_normal(len(w["m_el"]))
+    w["a1"] = w["a1"] + 0.1 * rng.standard_normal(len(w["a1"]))
+    w = dict(w, _width=width)
+    g = estimate_inertia(w, n_pre, width, R, TS, "anchored")
+    assert g.std_error_kgm2 == pytest.approx(_anchored_se_by_propagation(w, n_pre, n_gap), rel=1e-6)
+
+
+def test_angle_fit_with_no_degree_of_freedom_is_refused():
+    """The angle fit has 3 parameters (alpha0, omega0, 1/J1): a gap from the first sample of the window with 3
+    samples leaves it no degree of freedom, which is a refusal (NoGapError), not a division by zero."""
+    w, width = exact_window(1.16, n_pre=0, n_gap=3, n_after=10)
+    d = {k: w[k] for k in ("alpha1", "alpha2", "m_el")}
+    d["alpha1"] = w["alpha_motor"]
+    d["alpha2"] = w["alpha_motor"] - w["alpha1"]
+    with pytest.raises(NoGapError):
+        estimate_inertia(d, 0, width, R, TS, "angle")
+
+
+# --------------------------------------------------------------------------- backlash width: the contact fit
+def contact_reference(w, gap_end, j1, h=1e-7):
+    """The contact-torque width fit from its docstring: (r/J1) m_el - a1 (times the flank's sign) regressed on
+    (d, d', 1) over the 6 samples after the first contact sample, d' by central differences; K2/r = -c/k; its
+    standard uncertainty by the delta method with a numerical gradient, floored at 1e-3 of K2/r in quadrature.
+    Returns (K2/r, its uncertainty)."""
+    signed = w["alpha1"] - w["alpha2"]
+    rel = np.abs(signed)
+    side = np.sign(signed[gap_end]) or 1.0
+    post = np.arange(gap_end + 1, gap_end + 7)
+    y = side * (R / j1 * w["m_el"][post] - w["a1"][post])
+    A = np.column_stack([rel[post], (rel[post + 1] - rel[post - 1]) / (2 * TS), np.ones(6)])
+    coef, rss, *_ = np.linalg.lstsq(A, y, rcond=None)
+    cov = float(rss[0]) / 3 * np.linalg.inv(A.T @ A)
+
+    def theta(c):
+        return -c[2] / c[0]
+
+    grad = np.array([(theta(coef + h * e) - theta(coef - h * e)) / (2 * h) for e in np.eye(3)])
+    return theta(coef), float(np.hypot(np.sqrt(grad @ cov @ grad), 1e-3 * theta(coef)))
+
+
+@pytest.mark.parametrize("torque_noise", [0.0, 0.5, 2.0])
+def test_contact_fit_width_and_uncertainty_are_the_delta_method_ones(torque_noise):
+    """On a simulated window with noise on m_el after the re-contact: the contact fit's width and standard
+    uncertainty equal the reference (0: the 0.1 % floor; 0.5 N m: about 5 times the floor), and the bracket is used
+    exactly when the reference says so (2 N m: the fit is not 3 times more precise than the bracket)."""
+    sim = simulate_grid(CFG, [Case(1.16, 0.005, 0.025)])
+    w = {k: np.array(v[0], float) for k, v in sim.signals.items()}
+    g = estimate_inertia(w, sim.entry_index, 0.005, R, sim.sample_period_s)
+    e = g.gap_end
+    w["m_el"][e + 1:e + 8] += torque_noise * np.random.default_rng(4).standard_normal(7)
+    got = estimate_backlash_width(w, e, R, sim.sample_period_s, g.inertia_kgm2)
+    theta, s_fit = contact_reference(w, e, g.inertia_kgm2)
+    rel = np.abs(w["alpha1"] - w["alpha2"])
+    a, b = rel[e - 1], rel[e]
+    if min(a, b) <= theta <= max(a, b) and 3.0 * s_fit < abs(b - a) / np.sqrt(12.0):
+        assert got.method == "contact"
+        assert got.width_m == pytest.approx(R * theta, rel=1e-9)
+        assert got.std_m == pytest.approx(R * s_fit, rel=1e-5)
+    else:
+        assert got.method == "bracket"
+    assert got.method == ("bracket" if torque_noise == 2.0 else "contact")
+    if torque_noise == 0.5:
+        assert s_fit > 3e-3 * theta                                   # the fit's own error, not the floor
