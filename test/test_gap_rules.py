@@ -166,10 +166,7 @@ def _deming_reference(y, x, sy, sx):
 
 @pytest.mark.parametrize("slope, sy, sx", [
     (1.7, 0.3, 0.2), (2.5, 1.0, 1.0),
-    pytest.param(-0.6, 0.05, 0.4, marks=pytest.mark.xfail(strict=True, reason=(
-        "gap._origin_slope: the sign(sxy) factor picks the other root of the Deming quadratic when x . y < 0, a "
-        "small POSITIVE slope (here +0.026 for -0.596), so a non-physical anti-correlated gap is not refused; "
-        "reported to the lead, not fixed here (gap.py beyond the anchored fit is out of this task)"))),
+    (-0.6, 0.05, 0.4),   # anti-correlated: the negative root (was the wrong, positive one before the fix)
 ])
 def test_deming_slope_through_the_origin_is_the_maximum_likelihood_one(slope, sy, sx):
     """_origin_slope with both noise levels = the errors-in-variables (orthogonal-distance) slope through the

@@ -474,7 +474,9 @@ def _origin_slope(y: np.ndarray, x: np.ndarray, sy: float, sx: float) -> float:
         return syy / sxy
     d = (sy / sx) ** 2
     q = syy - d * sxx
-    return (q + np.sign(sxy) * np.sqrt(q * q + 4.0 * d * sxy * sxy)) / (2.0 * sxy)
+    # The maximum-likelihood root: the numerator is positive, so the slope has the sign of x . y (an
+    # anti-correlated gap gives a negative J1, which gap_only_fit refuses as non-physical).
+    return (q + np.sqrt(q * q + 4.0 * d * sxy * sxy)) / (2.0 * sxy)
 
 
 def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
