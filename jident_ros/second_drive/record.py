@@ -136,6 +136,17 @@ def _t(x):
     return round(float(x), 9)
 
 
+def _sensor_truth(sensors: SensorConfig, params: DriveParams, offsets, seed) -> dict:
+    """The truth file's ``encoder`` and ``noise`` entries: what the recording's sensors did to the states."""
+    return {"encoder": {"counts_per_rev": sensors.encoder_counts, "wrapped": sensors.wrap_encoders,
+                        "alpha1_offset_rad": offsets[0], "alpha2_offset_rad": offsets[1],
+                        "relative_offset_rad": offsets[0] - params.gear_ratio * offsets[1],
+                        "quantisation": "floor"},
+            "noise": {"snr_db": sensors.snr_db, "speed_noise_rad_s": sensors.speed_noise_rad_s,
+                      "torque_noise_pct_of_rated": sensors.torque_noise_pct,
+                      "rated_torque_nm": params.motor.rated_torque_nm, "seed": seed}}
+
+
 def _gap_list(res, c, gl):
     """Every gap of case c: where it starts and ends, which flank it leaves and which it meets
     (from_flank == to_flank: a bounce off one flank; otherwise a traversal of the zone)."""
@@ -188,13 +199,7 @@ def build_grid(params: DriveParams, cases, sensors: SensorConfig, steady_s=1.0, 
             "recontact_index": recontact,
             "recontact_time_s": _t(res.t[recontact]) if recontact < n else None,
             "gaps": _gap_list(res, c, gl),
-            "encoder": {"counts_per_rev": sensors.encoder_counts, "wrapped": sensors.wrap_encoders,
-                        "alpha1_offset_rad": offsets[0], "alpha2_offset_rad": offsets[1],
-                        "relative_offset_rad": offsets[0] - params.gear_ratio * offsets[1],
-                        "quantisation": "floor"},
-            "noise": {"snr_db": sensors.snr_db, "speed_noise_rad_s": sensors.speed_noise_rad_s,
-                      "torque_noise_pct_of_rated": sensors.torque_noise_pct,
-                      "rated_torque_nm": params.motor.rated_torque_nm, "seed": [seed, c]},
+            **_sensor_truth(sensors, params, offsets, [seed, c]),
             "sample_period_s": ts,
             "n_samples": int(n),
             "t0_s": _t(res.t[0]),
@@ -396,13 +401,7 @@ def build_wear(params: DriveParams, directions, inertias, sensors: SensorConfig,
                             "from_width_m": widths[k], "to_width_m": widths[k + 1]}
                            for k, (s_, d_, _) in enumerate(drive.ramps)],
             "events": events,
-            "encoder": {"counts_per_rev": sensors.encoder_counts, "wrapped": sensors.wrap_encoders,
-                        "alpha1_offset_rad": offsets[0], "alpha2_offset_rad": offsets[1],
-                        "relative_offset_rad": offsets[0] - params.gear_ratio * offsets[1],
-                        "quantisation": "floor"},
-            "noise": {"snr_db": sensors.snr_db, "speed_noise_rad_s": sensors.speed_noise_rad_s,
-                      "torque_noise_pct_of_rated": sensors.torque_noise_pct,
-                      "rated_torque_nm": params.motor.rated_torque_nm, "seed": [seed, 1000 + c]},
+            **_sensor_truth(sensors, params, offsets, [seed, 1000 + c]),
             "sample_period_s": ts, "n_samples": int(n), "t0_s": _t(res.t[0]), "steady_s": steady_s,
         }
         out.append(Recording(name, sig, truth))

@@ -294,12 +294,7 @@ class BacklashDetector:
             k = i + int(entries[0])
             hist = np.concatenate([tail, x[:k]])[-self.samples_before_entry:]
             if hist.shape[0] < self.samples_before_entry:
-                ev = Event("drop", "short_history",
-                           f"entry at t = {float(x[k, self._i_t])!r} s with {hist.shape[0]} of "
-                           f"{self.samples_before_entry} history samples")
-                self.counts["short_history"] += 1
-                self.last_event = ev
-                events.append(ev)
+                events.append(self._short_history(float(x[k, self._i_t]), hist.shape[0], self.samples_before_entry))
                 # the transient of this entry is not captured; it still owns its samples, so that
                 # a bounce back into the zone is not taken for a new entry
                 self._capture = _Capture(None, self.samples_before_entry, float(x[k, self._i_t]),
@@ -321,6 +316,13 @@ class BacklashDetector:
             return []
         return [self._cut_off(np.concatenate(cap.parts), self.samples_before_entry, cap.entry_time_s,
                               cap.backlash_width_m, "paper")]
+
+    def _short_history(self, entry_time_s: float, have: int, need: int) -> Event:
+        """The ``short_history`` drop (counted): an entry with fewer history samples than a window needs."""
+        ev = Event("drop", "short_history", f"entry at t = {entry_time_s!r} s with {have} of {need} history samples")
+        self.counts["short_history"] += 1
+        self.last_event = ev
+        return ev
 
     def _cut_off(self, data: np.ndarray, entry_index: int, entry_time_s: float, backlash_width_m: float,
                  detector: str) -> Event:

@@ -409,12 +409,7 @@ class FlankDetector(BacklashDetector):
             hist = np.concatenate([self._tail, x[:k]])[-(self.samples_before_entry + extra):]
             t_k = float(x[k, self._i_t])
             if hist.shape[0] < self.samples_before_entry + extra:
-                ev = Event("drop", "short_history",
-                           f"entry at t = {t_k!r} s with {hist.shape[0]} of "
-                           f"{self.samples_before_entry + extra} history samples")
-                self.counts["short_history"] += 1
-                self.last_event = ev
-                events.append(ev)
+                events.append(self._short_history(t_k, hist.shape[0], self.samples_before_entry + extra))
                 self._fcap = _FlankCapture([], self.samples_before_entry + extra, self.samples_before_entry + extra,
                                            math.nan, math.nan, skip=True)
             else:
