@@ -7,6 +7,7 @@
 """
 from __future__ import annotations
 
+import re
 import signal
 import subprocess
 import sys
@@ -48,14 +49,16 @@ def _run_until_mid_stream(node_env, library, tmp_path, ns, sig):
         ros.close()
 
 
-def _check_prefix(batches, reference):
-    """The recorded batches are gap-free from the first sample the test received on.  The recorder may hold
-    a few batches more than the test's own subscriber had received when it sent the signal (both listen to
-    the same stream; the test stops listening first), never a gap."""
+def _check_prefix(batches, reference, ahead_max: int | None = 5 * 50):
+    """The recorded batches are gap-free from the first sample the test received on and equal to what the
+    test received where both have samples.  ``ahead_max``: how many samples more than the test had received
+    when it sent the signal the recorder may hold (both listen to the same stream; the test stops listening
+    first); None: no bound (the test's own subscriber may lag behind under load)."""
     t = np.concatenate([b[:, 0] for b in batches])
     assert np.all(np.abs(np.diff(t) - TS) < 1e-9), "samples missing inside the recording"
     ref = np.concatenate([b[:, 0] for b in reference])
-    assert t[0] == ref[0] and t.size <= ref.size + 5 * 50, (t.size, ref.size)
+    assert t[0] == ref[0], (t[0], ref[0])
+    assert ahead_max is None or t.size <= ref.size + ahead_max, (t.size, ref.size)
     n = min(t.size, ref.size)
     assert np.array_equal(t[:n], ref[:n])
     return n, ref.size
@@ -74,10 +77,17 @@ def test_sigterm_mid_run_finalises_the_recording(node_env, library, tmp_path):
         conns = [c for c in reader.connections if c.topic == "/sigterm/drive/signals"]
         theirs = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(connections=conns)]
     assert len(theirs) == len(ours) > 0
-    n_rec, n_ref = _check_prefix([np.asarray(m.message.data).reshape(-1, 9) for m in ours], received)
-    # the node stopped about when the test did: at most a few batches apart (in flight)
-    print(f"SIGTERM: {n_rec} of {n_ref} samples recorded")
-    assert n_ref - n_rec <= 5 * 50, (n_rec, n_ref)
+    # nothing the node had taken in is missing: its own count (logged at close) is what the bag holds
+    (line,) = [x for x in log.splitlines() if "recording finalised: " in x]
+    written, dropped = map(int, re.search(r"(\d+) message\(s\) written, (\d+) dropped", line).groups())
+    assert dropped == 0 and written == len(list(read_bag(bag))), line
+    # gap-free from the start of the stream; how far the node and this test's own subscriber are apart at
+    # the signal depends on the load (a diagnosis callback holds the node's single thread; a busy machine
+    # starves this process), so it is printed, not bounded by a few batches as before
+    n_rec, n_ref = _check_prefix([np.asarray(m.message.data).reshape(-1, 9) for m in ours], received,
+                                 ahead_max=None)
+    print(f"SIGTERM: {n_rec} samples recorded; this test had received {n_ref} at the signal")
+    assert n_rec >= 10 * 50, (n_rec, n_ref)   # recorded while it streamed, not only at the end
 
 
 @pytest.mark.ros

@@ -9,6 +9,7 @@ from __future__ import annotations
 import errno
 import os
 import re
+import signal
 import subprocess
 import sys
 import textwrap
@@ -290,19 +291,28 @@ while True:
 """
 
 
-@pytest.mark.parametrize("sig", ["SIGTERM", pytest.param("SIGINT", marks=pytest.mark.xfail(
-    reason="known bug (stop 10 note): SIGINT finalisation of a plain-process recorder fails in fresh clones",
-    strict=False))])
-def test_signal_under_load_finalises_the_bag(tmp_path, sig):
-    import signal
+@pytest.mark.parametrize("sig, inherited", [("SIGTERM", "default"), ("SIGINT", "default"),
+                                            ("SIGINT", "ignored"), ("SIGTERM", "ignored")])
+def test_signal_under_load_finalises_the_bag(tmp_path, sig, inherited):
+    """The signal finalises the bag and ends the process, also when the child inherited it ignored
+    (before the fix, SIGINT then closed the bag and the write loop spun on, dropping every message)."""
     script = tmp_path / "child.py"
     script.write_text(CHILD.format(repo=str(REPO)))
     proc = subprocess.Popen([sys.executable, str(script), str(tmp_path / "root")], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True,
+                            # "ignored": inherited SIG_IGN, as SIGINT in a background job of a script
+                            preexec_fn=(lambda: signal.signal(getattr(signal, sig), signal.SIG_IGN))
+                            if inherited == "ignored" else None)
     assert proc.stdout.readline().startswith("ready"), proc.stderr.read()
     time.sleep(0.2)
     proc.send_signal(getattr(signal, sig))
-    proc.wait(timeout=20)
+    try:
+        rc = proc.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        raise AssertionError(f"{sig} ({inherited} before): the child did not stop") from None
+    assert rc == -getattr(signal, sig)   # SIGINT: an uncaught KeyboardInterrupt ends Python by SIGINT
+    assert sig != "SIGINT" or "KeyboardInterrupt" in proc.stderr.read()
     (bag,) = (tmp_path / "root").iterdir()
     info = R.read_metadata(bag)
     assert info["message_count"] >= 50

@@ -63,7 +63,8 @@ def anyreader_messages(bag: Path) -> tuple[dict, list]:
     return conns, msgs
 
 
-def run_child(tmp_path: Path, body: str) -> subprocess.Popen:
+def run_child(tmp_path: Path, body: str, ignored: int | None = None) -> subprocess.Popen:
+    """Run ``body`` in a child (``ignored``: a signal the child inherits as SIG_IGN)."""
     script = tmp_path / "child.py"
     script.write_text(textwrap.dedent(f"""\
         import sys, time
@@ -77,7 +78,8 @@ def run_child(tmp_path: Path, body: str) -> subprocess.Popen:
         """) + textwrap.dedent(body))
     return subprocess.Popen([sys.executable, str(script), str(tmp_path / "bag")],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                            preexec_fn=None if ignored is None else lambda: signal.signal(ignored, signal.SIG_IGN))
 
 
 def wait_for(proc: subprocess.Popen, word: str, timeout: float = 20.0) -> str:
@@ -414,9 +416,12 @@ def test_flush_puts_complete_chunks_on_disk(tmp_path):
     assert values == [i * 1000.0 for i in range(8)]
 
 
-@pytest.mark.parametrize("signum, exit_code", [(signal.SIGTERM, -signal.SIGTERM),
-                                               (signal.SIGINT, 130)])
-def test_signal_finalises_the_bag(tmp_path, signum, exit_code):
+@pytest.mark.parametrize("signum, exit_code, inherited", [
+    (signal.SIGTERM, -signal.SIGTERM, "default"), (signal.SIGINT, 130, "default"),
+    (signal.SIGINT, 130, "ignored"), (signal.SIGTERM, -signal.SIGTERM, "ignored")])
+def test_signal_finalises_the_bag(tmp_path, signum, exit_code, inherited):
+    """Also when the signal was ignored before install_signal_handlers (SIGINT of a background job of a
+    script): it still finalises the bag and stops the process."""
     proc = run_child(tmp_path, """
         bag = BagWriter(sys.argv[1], flush_age_s=None)
         install_signal_handlers(bag)
@@ -432,10 +437,14 @@ def test_signal_finalises_the_bag(tmp_path, signum, exit_code):
             time.sleep(60)
         except KeyboardInterrupt:
             sys.exit(130)
-        """)
+        """, ignored=signum if inherited == "ignored" else None)
     wait_for(proc, "ready")
     proc.send_signal(signum)
-    assert proc.wait(timeout=20) == exit_code
+    try:
+        assert proc.wait(timeout=20) == exit_code
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        raise AssertionError(f"signal {signum} ({inherited} before): the child did not stop") from None
     bag = tmp_path / "bag"
     info = R.read_metadata(bag)
     assert info["message_count"] == 111
@@ -505,14 +514,19 @@ def chunk_layout(mcap: Path):
     return sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
 
 
-def test_salvage_of_a_file_truncated_anywhere_recovers_the_complete_chunks(tmp_path):
-    bag = tmp_path / "full"
-    with R.BagWriter(bag, flush_age_s=None) as w:
+def write_in_chunks_of_ten(bag: Path, n: int, **writer_args) -> Path:
+    """A finalised bag of ``n`` batches (batch i at log time 1000 + i), ten per chunk."""
+    with R.BagWriter(bag, flush_age_s=None, **writer_args) as w:
         w.add_topic("/drive/signals", SIGNALS)
-        for i in range(100):
+        for i in range(n):
             w.write("/drive/signals", batch(i), 1000 + i)
             if i % 10 == 9:
                 w.flush()
+    return bag
+
+
+def test_salvage_of_a_file_truncated_anywhere_recovers_the_complete_chunks(tmp_path):
+    bag = write_in_chunks_of_ten(tmp_path / "full", 100)
     mcap = bag / "full_0.mcap"
     data = mcap.read_bytes()
     chunks = chunk_layout(mcap)
@@ -544,13 +558,7 @@ def test_salvage_of_a_file_truncated_anywhere_recovers_the_complete_chunks(tmp_p
 
 
 def test_salvage_stops_at_a_damaged_chunk(tmp_path):
-    bag = tmp_path / "full"
-    with R.BagWriter(bag, flush_age_s=None, compression=None) as w:
-        w.add_topic("/drive/signals", SIGNALS)
-        for i in range(60):
-            w.write("/drive/signals", batch(i), 1000 + i)
-            if i % 10 == 9:
-                w.flush()
+    bag = write_in_chunks_of_ten(tmp_path / "full", 60, compression=None)
     mcap = bag / "full_0.mcap"
     c3 = chunk_layout(mcap)[3]
     data = bytearray(mcap.read_bytes())

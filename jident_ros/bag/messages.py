@@ -15,6 +15,7 @@ Never imports rclpy.
 """
 from __future__ import annotations
 
+import functools
 from typing import Any, Mapping
 
 import numpy as np
@@ -46,10 +47,18 @@ _DTYPES = {"bool": "?", "byte": "u1", "char": "u1", "octet": "u1", "int8": "i1",
 
 def canonical_type(msg_type: str) -> str:
     """``pkg/Type`` or ``pkg/msg/Type`` -> ``pkg/msg/Type``."""
-    parts = str(msg_type).strip().split("/")
+    return _canonical(str(msg_type).strip())
+
+
+@functools.lru_cache(maxsize=1024)
+def _canonical(name: str) -> str:
+    """canonical_type of a stripped name, memoised: serialising a message looks up the name of every
+    nested type, and rosbags' normalize_msgtype (pathlib underneath) was a third of a dict's
+    serialisation time (cProfile of bench/bench_bag.py's writes).  An invalid name is not cached."""
+    parts = name.split("/")
     if len(parts) in (2, 3) and all(parts):
-        return normalize_msgtype(str(msg_type).strip())
-    raise ValueError(f"not a ROS 2 message type name: {msg_type!r} (expected pkg/msg/Type)")
+        return normalize_msgtype(name)
+    raise ValueError(f"not a ROS 2 message type name: {name!r} (expected pkg/msg/Type)")
 
 
 def _known(msg_type: str) -> str:

@@ -193,7 +193,16 @@ class Recording:
         self.recorder.maybe_flush()
 
     def close(self) -> None:
-        self.recorder.close()
+        """Finalise the bag and say in one line what it holds (also what was dropped, by reason)."""
+        if self.recorder.closed:
+            return
+        done = self.recorder.close()
+        st = self.recorder.status()
+        drops = ", ".join(f"{n} {why}" for why, n in sorted(st["drop_reasons"].items()))
+        self.node.get_logger().info(
+            f"recording {'finalised' if done else 'NOT finalised (recover it with `jident salvage`)'}: "
+            f"{st['bag']}: {st['messages_written']} message(s) written, {st['messages_dropped']} dropped"
+            + (f" ({drops})" if drops else ""))
 
     def status(self) -> dict:
         st = self.recorder.status()

@@ -185,9 +185,11 @@ class SimulatorNode(Node):
         if want > 0 and (have < want or missing_node):
             if time.monotonic() > self.wait_deadline:
                 topic = self.resolve_topic_name('drive/signals')
-                what = (f"no subscription of {topic} by a node named {c['wait_for_node']!r} ({have} other "
-                        "subscriber(s); parameter wait_for_node)" if missing_node
-                        else f"{have} of {want} subscriber(s) of {topic}")
+                if missing_node or (c["wait_for_node"] and not self._named_subscriber()):
+                    what = (f"no subscription of {topic} by a node named {c['wait_for_node']!r} ({have} "
+                            f"subscriber(s) of other nodes; parameters wait_for_node, wait_for_subscribers {want})")
+                else:
+                    what = f"{have} of {want} subscriber(s) of {topic}"
                 self.get_logger().error(f"{what} after {c['wait_timeout_s']:g} s; giving up")
                 self.exit_code = 1
                 self.state = "done"
