@@ -39,6 +39,7 @@ from jident_ros.evaluation.robustness import run_robustness
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.method.calibration import library_from_labelled_windows, parse_labels, pattern_grid, read_recordings
 from jident_ros.method.patterns import PatternLibrary
+from jident_ros.method.pipeline import VARIANTS
 from jident_ros.sim import Case, add_measurement_noise, paper_grid_cases, quantise_encoders, simulate_grid, steady_state
 from jident_ros.sim.model import Model
 from jident_ros.sim.motor import breakdown_slip, steady_state_phasors
@@ -325,7 +326,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="K2 of the recordings, m (default: their drive/backlash_width messages)")
     b.add_argument("--out", help="library file (default: ~/.cache/jident_ros/patterns-<hash>.npz)")
     b.add_argument("--p", type=_positive("--p"), action="append", help="KHM exponent p (repeatable; default: config)")
-    b.add_argument("--variant", choices=("paper", "load_scaled"), help="method variant (default: config)")
+    b.add_argument("--variant", choices=VARIANTS, help="method variant (default: config; docs/method.md)")
     b.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     b.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     b.add_argument("--quiet", action="store_true")

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from jident_ros.identify.gap import NoGapError, estimate_backlash_width, estimate_inertia, nearest_class
-from jident_ros.method.patterns import PatternLibrary, fuse
-from jident_ros.method.pipeline import SIGNALS, MethodConfig, batch_features, h_vector, margin, pre_entry_reference
+from jident_ros.method.patterns import PatternLibrary, fuse, matched_seeds, take_windows
+from jident_ros.method.pipeline import SIGNALS, MethodConfig, batch_features, margin, pre_entry_reference
 from jident_ros.sim import Case, SystemConfig, WindowSet, add_measurement_noise, paper_grid_cases, simulate_grid
 from jident_ros.sim.model import Model
 from jident_ros.sim.profiles import film_share, with_film_share
@@ -76,7 +76,10 @@ class GridResult:
         return np.argmin(self.h, axis=-1)
 
     def fused_predicted(self) -> np.ndarray:
-        """(n_p, n_cases) fused class indices over the five signals."""
+        """(n_p, n_cases) fused class indices over the five signals (the paper's :func:`fuse`; variant
+        'sensor_matched': the plain sum, as :meth:`PatternLibrary.fuse` with a scatter)."""
+        if self.method.variant == "sensor_matched":
+            return np.argmin(self.h.sum(axis=2), axis=-1)
         out = np.zeros(self.h.shape[:2], dtype=int)
         for k in range(self.h.shape[0]):
             for i in range(self.h.shape[1]):
@@ -139,8 +142,7 @@ def grid_result(system: SystemConfig, method: MethodConfig, library: PatternLibr
         w = c.backlash_width_m if widths_m is None else float(widths_m[i])
         for k in range(len(ps)):
             for s in range(len(SIGNALS)):
-                n2, h5 = library.patterns_at(k, s, w, width_mode)
-                h[k, i, s] = h_vector(n2, feats[k, i, s], h5)
+                h[k, i, s] = library.h_vector(k, s, w, feats[k, i, s], width_mode)
     true = np.array([classes.index(c.inertia_kgm2) for c in tested.cases])
     pmask = np.array([c.consistency_pa_sn == system.grid.pattern_consistency_pa_sn for c in tested.cases])
     res = GridResult(label, method, ps, list(tested.cases), true, h, pmask, seconds, library_seconds)
@@ -278,7 +280,8 @@ def _pattern_order(system: SystemConfig, windows: WindowSet) -> list:
 
 
 def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 30.0), seeds=(1, 2),
-                   readings=("dyadic", "linear", "swt"), variants=("paper", "load_scaled"), progress=None,
+                   readings=("dyadic", "linear", "swt"), variants=("paper", "load_scaled", "sensor_matched"),
+                   progress=None,
                    log=print, jobs: int | None = None, ablation: bool = True,
                    sensors: SensorSpec | None = DEFAULT_SENSORS, film_shares=VALIDITY_FILM_SHARES,
                    stress_system: SystemConfig | None = None, full_map: bool = False,
@@ -317,6 +320,8 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     # every configuration's first data set is the noise-free grid
     configs = []
     for variant in variants:
+        if variant == "sensor_matched":
+            continue   # below: its library comes from the pattern runs recorded through the sensors
         m = dataclasses.replace(method, variant=variant)
         data_sets = datasets if variant == "paper" else datasets[:1]   # load_scaled: noise-free only
         configs.append((m, [(f"{variant}, {name}", name, data, {"variant": variant, "data": name})
@@ -328,6 +333,8 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
             configs[-1][1].append(("paper, equal-load ablation, noise-free", "equal-load ablation", equal,
                                    {"ablation": "equal load", "data": "equal-load ablation",
                                     "process_force_n": equal.metadata["equal_load_process_force_n"]}))
+    if "sensor_matched" in variants and sensors is not None:
+        configs.append(sensor_matched_config(system, method, clean, datasets[-1]))
     paper_config = next((i for i, (m, _, _) in enumerate(configs) if m.variant == "paper"), None)
     if halfway and paper_config is not None:
         half = simulate_grid(system, halfway_width_cases(system))
@@ -381,7 +388,12 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     pattern = _pattern_order(system, clean)
     for c, (m, runs, sysx) in enumerate(configs):
         library = None
+        if m.variant == "sensor_matched":
+            library = libraries[c] = _seed_library(sysx, m, runs, [[outputs[(c, d, s)] for s in range(len(SIGNALS))]
+                                                                   for d in range(len(runs))])
         for d, (label, _, data, note) in enumerate(runs):
+            if "library_seed" in note:
+                continue
             parts = [outputs[(c, d, s)] for s in range(len(SIGNALS))]
             feats = np.stack([centres for centres, _, _ in parts], axis=2)   # (n_p, n_cases, n_signals, K)
             if library is None:   # runs[0] is the noise-free grid, which holds the pattern runs
@@ -445,6 +457,38 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     return ev
 
 
+def sensor_matched_config(system: SystemConfig, method: MethodConfig, clean: WindowSet, sensor_data) -> tuple:
+    """Configuration (method, runs, system) of variant 'sensor_matched' in :func:`run_evaluation`: the
+    library runs (the 42 noise-free pattern runs recorded through ``method.sensor_spec()`` with each of
+    ``method.matched_seeds`` seeds, as :meth:`PatternLibrary.sensor_matched` builds them), then the tested
+    data: the noise-free grid and ``sensor_data`` = (name, windows) (the default sensor set at SENSOR_SEED)."""
+    m = dataclasses.replace(method, variant="sensor_matched")
+    runs_42 = take_windows(clean, _pattern_order(system, clean))
+    spec = m.sensor_spec()
+    runs = [(f"sensor_matched library, seed {seed}", "library", apply_sensors(runs_42, spec, seed,
+                                                                               system.motor.base.torque_nm),
+             {"library_seed": seed}) for seed in matched_seeds(m)]
+    name, data = sensor_data
+    runs += [(f"sensor_matched, {n}", n, d, {"variant": "sensor_matched", "data": n})
+             for n, d in (("noise-free", clean), (name, data))]
+    return m, runs, system
+
+
+def _seed_library(system: SystemConfig, method: MethodConfig, runs: list, parts: list) -> PatternLibrary:
+    """The 'sensor_matched' library from the per-seed features of ``runs`` (``parts[d][s]`` = the
+    :func:`_feature_task` output of run d, signal s); equal to :meth:`PatternLibrary.sensor_matched`."""
+    cen, rng = [], []
+    for d, (_, _, data, note) in enumerate(runs):
+        if "library_seed" not in note:
+            continue
+        feats = np.stack([c for c, _, _ in parts[d]], axis=2)
+        ranges = np.stack([r for _, r, _ in parts[d]], axis=1)
+        lib = PatternLibrary.from_features(feats, ranges, range(len(data.cases)), system, method)
+        cen.append(lib.centres)
+        rng.append(lib.ranges)
+    return PatternLibrary.from_seed_libraries(np.array(cen), np.array(rng), system, method)
+
+
 def sensor_label(spec: SensorSpec) -> str:
     """Data-set label of a sensor set: 'sensors (default set, seed 3)' or 'sensors (custom, seed 3)'."""
     return f"sensors ({'default set' if spec == DEFAULT_SENSORS else 'custom'}, seed {SENSOR_SEED})"
@@ -503,9 +547,8 @@ def width_mismatch_map(system: SystemConfig, result: GridResult, library: Patter
         for e, w in enumerate(widths):
             mis = round(float(w / c.backlash_width_m - 1.0), 4)
             for k in range(len(result.p_values)):
-                hs = [h_vector(library.centres[k, e, s], feats[k, i, s], library.h5[k, e, s])
-                      for s in range(len(SIGNALS))]
-                ok = fuse(hs)[0] == result.true_class[i]
+                hs = [library.h_vector(k, s, float(w), feats[k, i, s]) for s in range(len(SIGNALS))]
+                ok = library.fuse(hs)[0] == result.true_class[i]
                 rows.setdefault(mis, np.zeros((len(result.p_values), 2), int))
                 rows[mis][k] += (int(ok), 1)
     mis = np.array(sorted(rows))

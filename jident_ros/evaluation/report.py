@@ -257,6 +257,30 @@ def sentence_variant(name: str, variant: tuple, paper: tuple) -> str:
     return f"variant `{name}`, noise-free: fused {_pct(lo)}–{_pct(hi)} — {how}."
 
 
+def sentence_sensor_matched(matched: tuple, paper: tuple, clean: tuple | None,
+                            threshold: float = TRUST_ACCURACY) -> str:
+    """What the variant 'sensor_matched' does with the default sensor set: its fused accuracy range over p
+    (``matched``) beside the paper-faithful mode's on the same windows (``paper``), and on noise-free windows
+    (``clean``, the library's noise not matching the data)."""
+    lo, hi = matched
+    plo, phi = paper
+    where = ("at every p" if lo >= threshold else
+             (f"below {_pct(threshold, 0)} at every p" if hi < threshold else f"below {_pct(threshold, 0)} at some p"))
+    if lo > phi:
+        how = "better than the paper-faithful mode at every p"
+    elif hi < plo:
+        how = "worse than the paper-faithful mode at every p"
+    else:
+        how = "overlapping the paper-faithful mode"
+    text = (f"variant `sensor_matched` (library from the pattern runs recorded through the same sensor model), "
+            f"default sensor set: fused {_pct(lo)}–{_pct(hi)} ({'≥ ' + _pct(threshold, 0) + ' ' if lo >= threshold else ''}"
+            f"{where}), {how} ({_pct(plo)}–{_pct(phi)})")
+    if clean is not None:
+        text += (f"; on noise-free windows, which its library's noise does not match, {_pct(clean[0])}–{_pct(clean[1])}"
+                 + (" (build its library with the sensors actually used)" if clean[0] < threshold else ""))
+    return text + "."
+
+
 def sentence_ablation(base: np.ndarray, ablated: np.ndarray, signals=SIGNALS, step: float = 0.10) -> str:
     """What equalising the load did, per signal (accuracies at p = 2 with the load differences and without):
     a change of at least ``step`` counts as recovered / worse."""
@@ -302,8 +326,11 @@ def trust_limits(validity: list, mismatch: dict, ps: tuple | None = None, thresh
 
 
 def trust_sentence(limits: dict, sensor_accuracy: float | None = None, sensors: str = "",
-                   threshold: float = TRUST_ACCURACY) -> str:
-    """ONE sentence a user can act on: when to trust the image method (from :func:`trust_limits`)."""
+                   threshold: float = TRUST_ACCURACY, matched_accuracy: float | None = None) -> str:
+    """ONE sentence a user can act on: when to trust the image method (from :func:`trust_limits`).
+
+    ``sensor_accuracy``: the paper-faithful fused accuracy with the default sensor set (lowest over p);
+    ``matched_accuracy``: variant 'sensor_matched''s on the same data (lowest over p), or None."""
     sh, wd = limits.get("share"), limits.get("width")
     if sh is None:
         cond = f"on no drive of the map (fused below {_pct(threshold, 0)} even at the smallest film share)"
@@ -318,9 +345,15 @@ def trust_sentence(limits: dict, sensor_accuracy: float | None = None, sensors: 
     if sensor_accuracy is not None:
         if sensor_accuracy >= threshold:
             cond += f", and with sensors as good as the default set ({_pct(sensor_accuracy)} there)"
+        elif matched_accuracy is not None and matched_accuracy >= threshold:
+            cond += (f"; with real sensors (the default set: paper-faithful {_pct(sensor_accuracy)}) use the variant "
+                     f"`sensor_matched`, a library recorded through the same sensor model ({_pct(matched_accuracy)} "
+                     "there at every p); otherwise use the gap estimate")
         else:
-            cond += (f", and with sensors far better than the default set (there it is {_pct(sensor_accuracy)}); "
-                     "otherwise use the gap estimate")
+            cond += (f", and with sensors far better than the default set (there it is {_pct(sensor_accuracy)}"
+                     + ("" if matched_accuracy is None else
+                        f", {_pct(matched_accuracy)} with the variant `sensor_matched`")
+                     + "); otherwise use the gap estimate")
     return f"**When to trust the image method:** {cond}."
 
 
@@ -347,6 +380,9 @@ def _summary_lines(ev: Evaluation) -> list[str]:
     ls = rng("load_scaled, noise-free")
     if ls and pc:
         out.append("* " + sentence_variant("load_scaled", ls[:2], pc[:2]))
+    matched = _matched_ranges(ev)
+    if matched is not None:
+        out.append("* " + sentence_sensor_matched(*matched))
     for g, b in zip(ev.gap, ev.best):
         err = np.abs(g["rel_error"])
         out.append(f"* gap estimator, {g['label']}: max |J1 error| {np.nanmax(err) * 100:.2f} %, nearest class right "
@@ -358,8 +394,22 @@ def _summary_lines(ev: Evaluation) -> list[str]:
         out.append("* " + trust_sentence(trust_limits(ev.validity + [{"share": ev.film_share, "examples": ev.examples,
                                                                     "result": ev.results[0]}], ev.width_mismatch,
                                                       ev.validity[0]["result"].p_values),
-                                         None if sens is None else sens[0], ev.sensors))
+                                         None if sens is None else sens[0], ev.sensors,
+                                         matched_accuracy=None if matched is None else matched[0][0]))
     return out
+
+
+def _matched_ranges(ev: Evaluation):
+    """(sensor_matched on the sensor data, paper on the same data, sensor_matched noise-free) as fused
+    (lowest, highest) over p, or None when the evaluation has no 'sensor_matched' row on sensor data."""
+    def fused(variant, sensors):
+        r = next((r for r in ev.results if r.notes.get("variant") == variant
+                  and r.notes.get("data", "").startswith("sensors") == sensors), None)
+        return None if r is None else (r.accuracy()["fused"].min(), r.accuracy()["fused"].max())
+    matched, paper = fused("sensor_matched", True), fused("paper", True)
+    if matched is None or paper is None:
+        return None
+    return matched, paper, fused("sensor_matched", False)
 
 
 def render_markdown(ev: Evaluation, figures: dict, robustness=None, total_seconds: float | None = None) -> str:
@@ -370,7 +420,8 @@ def render_markdown(ev: Evaluation, figures: dict, robustness=None, total_second
              f"method's grid evaluation) took {ev.seconds:.0f} s (simulation of the 168 cases {ev.simulate_seconds:.1f} s)"
              f"{total}. Headline accuracy counts the 126 cases "
              "at η_k ≠ 0.025; the 42 pattern runs (η_k = 0.025) are identified trivially (distance 0) and are "
-             "reported apart. Noisy windows are tested against the noise-free library; SNR as MATLAB's "
+             "reported apart. Noisy windows are tested against the noise-free library (except in the variant "
+             "`sensor_matched`, whose library is recorded through the default sensor set); SNR as MATLAB's "
              "`awgn(x, snr, 'measured')` on a1, m_el, ω1, a2, v2, ω2 (for comparison with MATLAB results); "
              f"'sensors' = the default sensor set (`sim.sensors.DEFAULT_SENSORS`: {ev.sensors})."
              f" The evaluated profile's film share at η_k = 0.025: {100 * ev.film_share:.3g} %.", ""]
@@ -486,10 +537,7 @@ def write_figures(ev: Evaluation, system, method, outdir: str | Path = "docs/fig
         ax.set_title(f"{row['signal']} J1={row['j1']:g} w={row['width']:g} η={row['eta']:g} p={row['p']}", fontsize=8)
     axes[0, 0].legend(fontsize=7)
     fig.suptitle("H / max H for the paper's 16 examples (dotted: true class; lowest bar wins)")
-    p = out / "h_paper_examples.png"
-    fig.savefig(p, dpi=90)
-    plt.close(fig)
-    figs["H vectors of the paper's 16 examples, paper vs ours"] = str(p.relative_to(out.parent))
+    _save_figure(fig, out, "h_paper_examples.png", "H vectors of the paper's 16 examples, paper vs ours", figs)
     if ev.validity:
         main = next((r for r in ev.results if r.label == "paper, noise-free"), None)
         pts = [(v["share"], v["result"], v["examples"], v.get("ablation")) for v in ev.validity]
@@ -521,10 +569,8 @@ def write_figures(ev: Evaluation, system, method, outdir: str | Path = "docs/fig
         ax2.set_ylabel("median margin (2nd smallest / smallest H)")
         ax2.legend(fontsize=8)
         fig.suptitle("Validity map: image method against the film share (noise-free)")
-        p = out / "validity_film_share.png"
-        fig.savefig(p, dpi=90)
-        plt.close(fig)
-        figs["Validity map: accuracy and margin against the film share"] = str(p.relative_to(out.parent))
+        _save_figure(fig, out, "validity_film_share.png", "Validity map: accuracy and margin against the film share",
+                     figs)
     if ev.width_mismatch:
         wm = ev.width_mismatch
         fig, ax = plt.subplots(figsize=(7, 4.2), constrained_layout=True)
@@ -541,8 +587,15 @@ def write_figures(ev: Evaluation, system, method, outdir: str | Path = "docs/fig
         ax.set_ylim(0, 102)
         ax.legend(fontsize=7)
         ax.set_title("Validity map: accuracy against the width mismatch (noise-free)")
-        p = out / "validity_width_mismatch.png"
-        fig.savefig(p, dpi=90)
-        plt.close(fig)
-        figs["Validity map: accuracy against the width mismatch"] = str(p.relative_to(out.parent))
+        _save_figure(fig, out, "validity_width_mismatch.png", "Validity map: accuracy against the width mismatch",
+                     figs)
     return figs
+
+
+def _save_figure(fig, outdir: Path, name: str, title: str, figs: dict) -> None:
+    """Save ``fig`` as ``outdir/name`` (90 dpi), close it, and record it in ``figs`` under ``title``."""
+    import matplotlib.pyplot as plt
+    path = outdir / name
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    figs[title] = str(path.relative_to(outdir.parent))
