@@ -84,3 +84,15 @@ def test_the_trust_sentence_names_the_matched_variant_only_when_it_meets_the_tar
     assert "use the variant `sensor_matched`" in s and "98.4 %" in s and "62.7 %" in s
     s = trust_sentence(lim, 0.627, matched_accuracy=0.90)
     assert "use the variant" not in s and "90.0 % with the variant `sensor_matched`" in s and "far better" in s
+
+
+def test_the_width_sentence_follows_each_variant():
+    from jident_ros.evaluation.report import sentence_width_variants
+    ps = (2.0, 3.0, 6.0, 9.0)
+    near = np.array([0.17, 0.2, 0.24, 0.23])
+    s = sentence_width_variants(near, {"width_interp": np.array([0.61, 0.9, 0.86, 0.8]),
+                                       "width_simulated": np.array([0.99, 0.98, 1.0, 1.0])}, ps)
+    assert "`width_interp` raises the fused accuracy from 17.0 %–24.0 % to 61.0 %–90.0 %" in s
+    assert "90 % is met at p = 3 only" in s and "met at every p" in s.split("width_simulated")[1]
+    s = sentence_width_variants(near, {"width_interp": np.array([0.1, 0.12, 0.1, 0.1])}, ps)
+    assert "lowers" in s and "met at no p" in s

@@ -151,3 +151,27 @@ def test_run_evaluation_reports_the_variant(system):
     assert "sensor_matched, noise-free" in labels and "sensor_matched, sensors (default set, seed 3)" in labels
     r = next(r for r in ev.results if r.label == "sensor_matched, sensors (default set, seed 3)")
     assert r.accuracy()["fused"][0] >= 0.95
+
+
+def test_width_simulated_simulates_the_patterns_at_the_window_width(system):
+    """Variant width_simulated: a window halfway between library widths is compared with pattern runs
+    simulated at its width (rounded to 5 significant digits), not with the library's."""
+    from jident_ros.method.patterns import rounded_width, simulated_width_library, with_widths
+    m = MethodConfig(p_values=(2.0,))
+    assert rounded_width(0.006250004) == 0.00625 and rounded_width(0.00875004) == 0.00875 and rounded_width(0.0087501) == 0.0087501
+    with pytest.raises(ValueError, match="backlash_width_m"):
+        rounded_width(float("nan"))
+    lib = simulated_width_library(system, m, 0.006250004)
+    assert lib.widths_m == (0.00625,) and simulated_width_library(system, m, 0.00625) is lib   # cached
+    assert lib.metadata["system"]["grid"]["backlash_widths_m"] == [0.00625]
+    ws = simulate_grid(system, [Case(1.131, 0.00625, 0.0375)])
+    idn = identify_window(ws.case(0), ws.entry_index, 0.00625, None, m, 2.0, width_mode="width_simulated",
+                          system=system)
+    want = identify_window(ws.case(0), ws.entry_index, 0.00625, lib, m, 2.0)
+    np.testing.assert_array_equal(idn.answers["a1"].h, want.answers["a1"].h)
+    assert idn.fused_inertia_kgm2 == 1.131
+    with pytest.raises(ValueError, match="system"):
+        identify_window(ws.case(0), ws.entry_index, 0.00625, lib, m, 2.0, width_mode="width_simulated")
+    with pytest.raises(ValueError, match="width_simulated"):
+        lib.patterns_at(0, 0, 0.00625, "width_simulated")
+    assert with_widths(system, (0.001,)).grid.backlash_widths_m == (0.001,)

@@ -19,7 +19,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from jident_ros.identify.gap import NoGapError, estimate_backlash_width, estimate_inertia, nearest_class
-from jident_ros.method.patterns import PatternLibrary, fuse, matched_seeds, take_windows
+from jident_ros.method.patterns import (
+    PatternLibrary,
+    fuse,
+    matched_seeds,
+    rounded_width,
+    take_windows,
+    with_widths,
+)
 from jident_ros.method.pipeline import SIGNALS, MethodConfig, batch_features, margin, pre_entry_reference
 from jident_ros.sim import Case, SystemConfig, WindowSet, add_measurement_noise, paper_grid_cases, simulate_grid
 from jident_ros.sim.model import Model
@@ -520,7 +527,8 @@ def estimated_widths(system: SystemConfig, windows: WindowSet) -> np.ndarray:
 
 def halfway_comparison(system: SystemConfig, nearest: GridResult, library: PatternLibrary) -> dict:
     """Windows at halfway widths: the paper's nearest-width patterns against ``width_interp`` patterns at
-    the gap estimator's width estimate (falls back to the nominal width where there is no estimate)."""
+    the gap estimator's width estimate and ``width_simulated`` patterns (the pattern runs simulated at that
+    estimate, :func:`patterns.simulated_width_library`); the nominal width where there is no estimate."""
     cases = nearest.cases
     sim = nearest.notes["windows"]
     est = estimated_widths(system, sim)
@@ -528,8 +536,18 @@ def halfway_comparison(system: SystemConfig, nearest: GridResult, library: Patte
     interp = grid_result(system, nearest.method, library, sim, nearest.notes["centres"],
                          "paper, halfway widths, noise-free, width_interp", widths_m=used, width_mode="width_interp")
     interp.pattern_mask[:] = False
+    # width_simulated: the pattern runs simulated at every (rounded) estimated width, one library holding them all
+    rounded = np.array([rounded_width(w) for w in used])
+    simulated_system = with_widths(system, sorted(set(rounded)))
+    t = time.perf_counter()
+    simulated_library = PatternLibrary.build(simulated_system, nearest.method)
+    simulated = grid_result(simulated_system, nearest.method, simulated_library, sim, nearest.notes["centres"],
+                            "paper, halfway widths, noise-free, width_simulated", time.perf_counter() - t,
+                            widths_m=rounded)
+    simulated.pattern_mask[:] = False
     true_w = np.array([c.backlash_width_m for c in cases])
-    return {"nearest": nearest, "width_interp": interp,
+    return {"nearest": nearest, "width_interp": interp, "width_simulated": simulated,
+            "simulated_widths": len(simulated_system.grid.backlash_widths_m),
             "width_error_max": float(np.nanmax(np.abs(est - true_w) / true_w)) if np.isfinite(est).any() else np.nan,
             "no_estimate": int((~np.isfinite(est)).sum())}
 

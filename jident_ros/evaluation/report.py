@@ -202,27 +202,41 @@ def _width_lines(ev: Evaluation, figures: dict) -> list[str]:
                 out += [f"![{title}]({path})", ""]
     hw = ev.halfway
     if hw:
-        a, b = hw["nearest"].accuracy(), hw["width_interp"].accuracy()
+        a = hw["nearest"].accuracy()
         ps = hw["nearest"].p_values
-        out += ["### Width-aware patterns (variant `width_interp`, beyond the paper)", "",
+        variants = {name: hw[name].accuracy() for name in ("width_interp", "width_simulated") if name in hw}
+        out += ["### Width-aware patterns (variants `width_interp` and `width_simulated`, beyond the paper)", "",
                 f"{a['n']} windows at the widths halfway between neighbouring library widths (every J1 class and η_k, "
                 "noise-free). `nearest`: the paper's patterns of the nearest library width. `width_interp`: the N2 "
                 "matrices (KHM centres of the seven pattern runs) and h5 interpolated linearly in width between "
                 "the two library widths around the gap estimator's width estimate of the window "
                 f"(`gap.estimate_backlash_width`; max error {100 * hw['width_error_max']:.3g} %, "
-                f"{hw['no_estimate']} windows without one).", "",
+                f"{hw['no_estimate']} windows without one)."
+                + ("" if "width_simulated" not in hw else
+                   " `width_simulated`: the seven pattern runs simulated at that estimate (rounded to 5 significant "
+                   f"digits; {hw['simulated_widths']} distinct widths here), `patterns.simulated_width_library`.")
+                + "", "",
                 "| patterns | p | " + " | ".join(SIGNALS) + " | fused |", "|---|---|" + "---|" * (len(SIGNALS) + 1)]
-        for name, acc in (("nearest", a), ("width_interp", b)):
+        for name, acc in [("nearest", a)] + list(variants.items()):
             for k, p in enumerate(ps):
                 out.append(f"| {name} | {p:g} | " + " | ".join(_pct(x) for x in acc["per_signal"][k])
                            + f" | **{_pct(acc['fused'][k])}** |")
-        target = 0.90
-        met = [p for k, p in enumerate(ps) if b["fused"][k] >= target]
-        out += ["", f"`width_interp` raises the fused accuracy from {_pct(a['fused'].min())}–{_pct(a['fused'].max())} "
-                f"to {_pct(b['fused'].min())}–{_pct(b['fused'].max())}; the issue's 90 % is "
-                + ("met at every p." if len(met) == len(ps) else
-                   ("met at p = " + ", ".join(f"{p:g}" for p in met) + " only." if met else "met at no p.")), ""]
+        out += ["", sentence_width_variants(a["fused"], {n: v["fused"] for n, v in variants.items()}, ps), ""]
     return out
+
+
+def sentence_width_variants(nearest: np.ndarray, variants: dict, ps: tuple, target: float = 0.90) -> str:
+    """What each width-aware variant does to the fused accuracy (per p) at halfway widths against the nearest
+    library width's patterns, and at which p it meets ``target`` (the issue's 90 %)."""
+    parts = []
+    for name, fused in variants.items():
+        met = [p for k, p in enumerate(ps) if fused[k] >= target]
+        verb = ("raises" if fused.min() > nearest.max() else "lowers" if fused.max() < nearest.min() else "changes")
+        parts.append(f"`{name}` {verb} the fused accuracy from {_pct(nearest.min())}–{_pct(nearest.max())} to "
+                     f"{_pct(fused.min())}–{_pct(fused.max())}; the issue's {_pct(target, 0)} is "
+                     + ("met at every p" if len(met) == len(ps) else
+                        ("met at p = " + ", ".join(f"{p:g}" for p in met) + " only" if met else "met at no p")))
+    return ". ".join(parts) + "." if parts else ""
 
 
 
@@ -577,10 +591,10 @@ def write_figures(ev: Evaluation, system, method, outdir: str | Path = "docs/fig
         for k, pv in enumerate(wm["p_values"]):
             ax.plot(100 * wm["mismatch"], 100 * wm["accuracy"][:, k], "o-", ms=3, label=f"fused, p = {pv:g}")
         if ev.halfway:
-            for name, mk in (("nearest", "x"), ("width_interp", "^")):
-                ax.axhline(100 * ev.halfway[name].accuracy()["fused"][0], ls="--" if name == "nearest" else "-.",
-                           lw=1, color="k" if name == "nearest" else "g",
-                           label=f"halfway widths, {name} (p = 2)")
+            for name, ls, color in (("nearest", "--", "k"), ("width_interp", "-.", "g"), ("width_simulated", ":", "b")):
+                if name in ev.halfway:
+                    ax.axhline(100 * ev.halfway[name].accuracy()["fused"][0], ls=ls, lw=1, color=color,
+                               label=f"halfway widths, {name} (p = 2)")
         ax.axhline(100 / 7, color="gray", lw=0.8, ls=":", label="chance (1/7)")
         ax.set_xlabel("width mismatch: library width / window width − 1 [%]")
         ax.set_ylabel("fused accuracy [%]")
