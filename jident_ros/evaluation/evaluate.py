@@ -292,7 +292,7 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
                    log=print, jobs: int | None = None, ablation: bool = True,
                    sensors: SensorSpec | None = DEFAULT_SENSORS, film_shares=VALIDITY_FILM_SHARES,
                    stress_system: SystemConfig | None = None, full_map: bool = False,
-                   halfway: bool = True) -> Evaluation:
+                   halfway: bool = True, matched_noise_free: bool = True) -> Evaluation:
     """The whole evaluation: every variant noise-free and noisy, the gap estimator, the level-10 readings.
 
     The work is split into one task per (method configuration, data set, signal):
@@ -310,8 +310,11 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     ``film_shares`` profile (:func:`sim.profiles.with_film_share`, own library each) and of ``stress_system``
     (the heavy-film profile), where the equal-load ablation runs (``full_map``: at every share, and the
     sensor set at every share too); ``halfway`` simulates windows at widths halfway between the library's
-    and identifies them with the nearest width's patterns and with ``width_interp`` at the gap estimator's
-    width estimate; the width mismatch map reuses the noise-free features against every library width.
+    and identifies them with the nearest width's patterns, with ``width_interp`` and ``width_simulated`` at
+    the gap estimator's width estimate (``full_map``: also the width-error sweep, :func:`width_error_sweep`);
+    the width mismatch map reuses the noise-free features against every library width.  The variant
+    'sensor_matched' (in ``variants``, with ``sensors``) runs on the sensor data set and, with
+    ``matched_noise_free``, on the noise-free grid.
     """
     t0 = time.perf_counter()
     cases = paper_grid_cases(system)
@@ -341,7 +344,7 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
                                    {"ablation": "equal load", "data": "equal-load ablation",
                                     "process_force_n": equal.metadata["equal_load_process_force_n"]}))
     if "sensor_matched" in variants and sensors is not None:
-        configs.append(sensor_matched_config(system, method, clean, datasets[-1]))
+        configs.append(sensor_matched_config(system, method, clean, datasets[-1], matched_noise_free))
     paper_config = next((i for i, (m, _, _) in enumerate(configs) if m.variant == "paper"), None)
     if halfway and paper_config is not None:
         half = simulate_grid(system, halfway_width_cases(system))
@@ -454,7 +457,7 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     half = {}
     hres = next((r for r in results if r.notes.get("halfway")), None)
     if hres is not None:
-        half = halfway_comparison(system, hres, libraries[paper_config])
+        half = halfway_comparison(system, hres, libraries[paper_config], error_sweep=full_map, sensors=sensors)
     ev = Evaluation(results, examples, system, time.perf_counter() - t0, t_sim, gaps, best,
                     ablation_examples=ablation_examples, validity=validity, width_mismatch=mismatch,
                     halfway=half, sensors="" if sensors is None else sensors.describe(
@@ -464,11 +467,13 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     return ev
 
 
-def sensor_matched_config(system: SystemConfig, method: MethodConfig, clean: WindowSet, sensor_data) -> tuple:
+def sensor_matched_config(system: SystemConfig, method: MethodConfig, clean: WindowSet, sensor_data,
+                          noise_free: bool = True) -> tuple:
     """Configuration (method, runs, system) of variant 'sensor_matched' in :func:`run_evaluation`: the
     library runs (the 42 noise-free pattern runs recorded through ``method.sensor_spec()`` with each of
     ``method.matched_seeds`` seeds, as :meth:`PatternLibrary.sensor_matched` builds them), then the tested
-    data: the noise-free grid and ``sensor_data`` = (name, windows) (the default sensor set at SENSOR_SEED)."""
+    data: the noise-free grid (with ``noise_free``) and ``sensor_data`` = (name, windows) (the default sensor
+    set at SENSOR_SEED)."""
     m = dataclasses.replace(method, variant="sensor_matched")
     runs_42 = take_windows(clean, _pattern_order(system, clean))
     spec = m.sensor_spec()
@@ -477,7 +482,7 @@ def sensor_matched_config(system: SystemConfig, method: MethodConfig, clean: Win
              {"library_seed": seed}) for seed in matched_seeds(m)]
     name, data = sensor_data
     runs += [(f"sensor_matched, {n}", n, d, {"variant": "sensor_matched", "data": n})
-             for n, d in (("noise-free", clean), (name, data))]
+             for n, d in ((("noise-free", clean),) if noise_free else ()) + ((name, data),)]
     return m, runs, system
 
 
@@ -525,13 +530,15 @@ def estimated_widths(system: SystemConfig, windows: WindowSet) -> np.ndarray:
     return out
 
 
-def halfway_comparison(system: SystemConfig, nearest: GridResult, library: PatternLibrary) -> dict:
+def halfway_comparison(system: SystemConfig, nearest: GridResult, library: PatternLibrary,
+                       error_sweep: bool = False, sensors: SensorSpec | None = None) -> dict:
     """Windows at halfway widths: the paper's nearest-width patterns against ``width_interp`` patterns at
     the gap estimator's width estimate and ``width_simulated`` patterns (the pattern runs simulated at that
     estimate, :func:`patterns.simulated_width_library`); the nominal width where there is no estimate."""
     cases = nearest.cases
     sim = nearest.notes["windows"]
     est = estimated_widths(system, sim)
+    true_w = np.array([c.backlash_width_m for c in cases])
     used = np.where(np.isfinite(est), est, [c.backlash_width_m for c in cases])
     interp = grid_result(system, nearest.method, library, sim, nearest.notes["centres"],
                          "paper, halfway widths, noise-free, width_interp", widths_m=used, width_mode="width_interp")
@@ -545,11 +552,36 @@ def halfway_comparison(system: SystemConfig, nearest: GridResult, library: Patte
                             "paper, halfway widths, noise-free, width_simulated", time.perf_counter() - t,
                             widths_m=rounded)
     simulated.pattern_mask[:] = False
-    true_w = np.array([c.backlash_width_m for c in cases])
-    return {"nearest": nearest, "width_interp": interp, "width_simulated": simulated,
+    out = {"width_error": width_error_sweep(system, nearest)} if error_sweep else {}
+    if sensors is not None:   # how well the width is known when the same windows come from real sensors
+        noisy = apply_sensors(sim, sensors, SENSOR_SEED, system.motor.base.torque_nm)
+        rel = np.abs(estimated_widths(system, noisy) / true_w - 1.0)
+        out["sensor_width_error"] = {"median": float(np.nanmedian(rel)), "max": float(np.nanmax(rel)),
+                                     "within_0.1%": float(np.mean(rel <= 0.001)), "label": sensor_label(sensors)}
+    return out | {"nearest": nearest, "width_interp": interp, "width_simulated": simulated,
             "simulated_widths": len(simulated_system.grid.backlash_widths_m),
             "width_error_max": float(np.nanmax(np.abs(est - true_w) / true_w)) if np.isfinite(est).any() else np.nan,
             "no_estimate": int((~np.isfinite(est)).sum())}
+
+
+#: Relative width errors of :func:`width_error_sweep`.
+WIDTH_ERRORS = (0.0, 0.001, 0.005, 0.01, 0.02)
+
+
+def width_error_sweep(system: SystemConfig, nearest: GridResult, errors=WIDTH_ERRORS) -> dict:
+    """How exactly ``width_simulated`` needs the window's width: the halfway windows of ``nearest`` against
+    pattern runs simulated at their true width times (1 + error).  Returns {error: fused accuracy per p}."""
+    true_w = np.array([c.backlash_width_m for c in nearest.cases])
+    out = {}
+    for err in errors:
+        widths = np.array([rounded_width(w * (1.0 + err)) for w in true_w])
+        sysx = with_widths(system, sorted(set(widths)))
+        lib = PatternLibrary.build(sysx, nearest.method)
+        res = grid_result(sysx, nearest.method, lib, nearest.notes["windows"], nearest.notes["centres"],
+                          f"halfway, patterns at width x {1 + err:g}", widths_m=widths)
+        res.pattern_mask[:] = False
+        out[err] = res.accuracy()["fused"]
+    return out
 
 
 def width_mismatch_map(system: SystemConfig, result: GridResult, library: PatternLibrary) -> dict:

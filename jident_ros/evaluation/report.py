@@ -222,6 +222,30 @@ def _width_lines(ev: Evaluation, figures: dict) -> list[str]:
                 out.append(f"| {name} | {p:g} | " + " | ".join(_pct(x) for x in acc["per_signal"][k])
                            + f" | **{_pct(acc['fused'][k])}** |")
         out += ["", sentence_width_variants(a["fused"], {n: v["fused"] for n, v in variants.items()}, ps), ""]
+        sw = hw.get("sensor_width_error")
+        if sw:
+            out += [f"With {sw['label']} the same windows' width estimates are off by {100 * sw['median']:.2g} % "
+                    f"(median), {100 * sw['max']:.2g} % at most, within 0.1 % in {_pct(sw['within_0.1%'])} of them"
+                    + ("; the width-aware variants need a width known to ≈ 0.1 % ("
+                       + ("the table below" if hw.get("width_error") else "`jident evaluate --full`: the width-error table")
+                       + "), so with these sensors they do not apply and the gap estimate is the answer."
+                       if sw["within_0.1%"] < 0.9 else "."), ""]
+        if hw.get("width_error"):
+            out += ["How exactly the width must be known (`evaluate.width_error_sweep`, `--full`): the same windows "
+                    "against pattern runs simulated at their true width × (1 + error).", "",
+                    "| width error | " + " | ".join(f"fused p = {p:g}" for p in ps) + " |", "|---|" + "---|" * len(ps)]
+            for err, fused in hw["width_error"].items():
+                out.append(f"| {100 * err:+.1f} % | " + " | ".join(_pct(x) for x in fused) + " |")
+            ok = []
+            for err in sorted(hw["width_error"]):   # the errors up to the first that fails
+                if hw["width_error"][err].min() < 0.90:
+                    break
+                ok.append(err)
+            worst = max(hw["width_error"])
+            out += ["", (f"Fused ≥ 90 % at every p up to a width error of {100 * max(ok):.1f} %" if ok else
+                         "Fused below 90 % at some p even at the exact width")
+                    + f"; at {100 * worst:.1f} % it is {_pct(hw['width_error'][worst].min())}–"
+                    f"{_pct(hw['width_error'][worst].max())}.", ""]
     return out
 
 
@@ -361,7 +385,7 @@ def trust_sentence(limits: dict, sensor_accuracy: float | None = None, sensors: 
             cond += f", and with sensors as good as the default set ({_pct(sensor_accuracy)} there)"
         elif matched_accuracy is not None and matched_accuracy >= threshold:
             cond += (f"; with real sensors (the default set: paper-faithful {_pct(sensor_accuracy)}) use the variant "
-                     f"`sensor_matched`, a library recorded through the same sensor model ({_pct(matched_accuracy)} "
+                     f"`sensor_matched`, a library recorded through the same sensor model (≥ {_pct(matched_accuracy)} "
                      "there at every p); otherwise use the gap estimate")
         else:
             cond += (f", and with sensors far better than the default set (there it is {_pct(sensor_accuracy)}"
