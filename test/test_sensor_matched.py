@@ -18,6 +18,7 @@ from jident_ros.method.patterns import (
     PatternLibrary,
     identify_window,
     matched_seeds,
+    pattern_run_cases,
     take_windows,
 )
 from jident_ros.method.pipeline import SIGNALS, MethodConfig
@@ -36,9 +37,7 @@ def system():
 
 @pytest.fixture(scope="module")
 def windows(system):
-    g = system.grid
-    pattern = [Case(j, w, g.pattern_consistency_pa_sn) for j in g.inertia_classes_kgm2 for w in g.backlash_widths_m]
-    return simulate_grid(system, pattern + TEST_CASES)
+    return simulate_grid(system, pattern_run_cases(system) + TEST_CASES)   # 42 pattern runs, then TEST_CASES
 
 
 @pytest.fixture(scope="module")

@@ -140,8 +140,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m jident_ros.evaluation.sensor_choice", description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[SENSOR_SEED], help="test seeds of the sensor noise")
     ap.add_argument("--config", help="system config or profile (default config/system.yaml)")
+    ap.add_argument("--matched-seeds", type=int, help="noise seeds of the matched libraries (default: method.yaml)")
     args = ap.parse_args(argv)
     system, method = load_system_config(args.config), load_method_config()
+    if args.matched_seeds:
+        method = method.replace(matched_seeds=args.matched_seeds)
     print("\n".join(diagnose(system, method)) + "\n")
     rows = compare(system, method, tuple(args.seeds), log=lambda *a: None)
     ps = method.p_values

@@ -94,9 +94,7 @@ class PatternLibrary:
         ``windows`` may be a precomputed WindowSet holding exactly those runs
         (any order); otherwise they are simulated.
         """
-        g = system.grid
-        eta = g.pattern_consistency_pa_sn
-        wanted = [Case(j, w, eta) for j in g.inertia_classes_kgm2 for w in g.backlash_widths_m]
+        wanted = pattern_run_cases(system)
         if windows is None:
             windows = simulate_grid(system, wanted)
         index = {c: i for i, c in enumerate(windows.cases)}
@@ -456,6 +454,12 @@ def fuse(h_vectors: Sequence[np.ndarray]) -> tuple[int, float]:
         sm = h.sum()
         total += h / sm if sm > 0 else h
     return int(np.argmin(total)), margin(total)
+
+
+def pattern_run_cases(system: SystemConfig) -> list[Case]:
+    """The library's pattern runs: every J1 class and width at the pattern eta_k, class-major, width-minor."""
+    g = system.grid
+    return [Case(j, w, g.pattern_consistency_pa_sn) for j in g.inertia_classes_kgm2 for w in g.backlash_widths_m]
 
 
 def rounded_width(width_m: float) -> float:
