@@ -2,7 +2,8 @@
 model, distances in units of the seed-to-seed scatter, fusion by the plain sum.
 
 Cost: the 42 pattern runs + 14 test runs simulated once; libraries at p = 2 only with 3 seeds (the
-shipped default is 16), so the whole file takes a few seconds.
+shipped default is 16), so the file takes ~10 s on an idle machine; the two tests with 16 seeds (the CLI, the
+evaluation) are marked slow.
 """
 from __future__ import annotations
 
@@ -174,3 +175,18 @@ def test_width_simulated_simulates_the_patterns_at_the_window_width(system):
     with pytest.raises(ValueError, match="width_simulated"):
         lib.patterns_at(0, 0, 0.00625, "width_simulated")
     assert with_widths(system, (0.001,)).grid.backlash_widths_m == (0.001,)
+
+
+@pytest.mark.slow
+def test_cli_builds_the_sensor_matched_library(system, tmp_path):
+    """`jident build-patterns --variant sensor_matched` (16 seeds, p = 2): a library with a scatter, loadable
+    with the variant's configuration only."""
+    from jident_ros.cli.main import main
+    from jident_ros.config import load_method_config
+    out = tmp_path / "matched.npz"
+    assert main(["build-patterns", "--variant", "sensor_matched", "--p", "2", "--out", str(out), "--quiet"]) == 0
+    method = load_method_config().replace(p_values=(2.0,), variant="sensor_matched")
+    lib = PatternLibrary.load(out, system, method)
+    assert lib.scatter is not None and lib.scatter.shape == (1, 6, 5, 7) and method.matched_seeds == 16
+    with pytest.raises(LibraryMismatch, match="variant"):
+        PatternLibrary.load(out, system, method.replace(variant="paper"))

@@ -192,7 +192,9 @@ def cmd_build_patterns(args) -> int:
         n_windows = sum(map(sum, lib.metadata["pattern_window_counts"]))
         source = f"from {n_windows} windows of {len(args.from_recordings)} recording(s)"
     else:
-        update, close = _progress(len(method.wavelets), "pattern signals", not args.quiet)
+        matched = method.variant == "sensor_matched"   # its progress counts noise seeds, not signals
+        update, close = _progress(method.matched_seeds if matched else len(method.wavelets),
+                                  "noise seeds" if matched else "pattern signals", not args.quiet)
         try:
             lib = PatternLibrary.build(system, method, progress=update)
         finally:
