@@ -224,6 +224,9 @@ def cmd_evaluate(args) -> int:
         shares, stress = (), None
     ev = run_evaluation(system, method, snr_db=snr, seeds=(2,) if snr == (30.0,) else (1, 2)[:len(snr)],
                         readings=readings, log=log,
+                        # the 2-minute budget: load_scaled and sensor_matched on noise-free windows with --full only
+                        variants=("paper", "load_scaled", "sensor_matched") if args.full else ("paper", "sensor_matched"),
+                        matched_noise_free=args.full,
                         film_shares=shares, stress_system=stress, full_map=args.validity_map == "full")
     ev.command = "jident evaluate" + (" --quick" if args.quick else "") + (" --full" if args.full else (
         f" --validity-map {args.validity_map}" if args.validity_map != "default" else "")) + (
@@ -338,7 +341,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--quick", action="store_true", help="noise-free only, no reading comparison (smoke run)")
     e.add_argument("--no-figures", action="store_true")
     e.add_argument("--full", action="store_true", help="also the sweeps beyond the 2-minute budget: SNR 40 dB, the "
-                   "'linear' and 'swt' readings of level 10 (~3 CPU minutes) and --validity-map full")
+                   "'linear' and 'swt' readings of level 10 (~3 CPU minutes), the variant load_scaled, the variant "
+                   "sensor_matched on noise-free windows, the width-error sweep and --validity-map full")
     e.add_argument("--validity-map", choices=("default", "full", "off"), default="default",
                    help="film-share validity map: default = noise-free at every share + the equal-load ablation on the "
                    "heavy-film profile, p = 2 and 3; full = every p, the ablation and the default sensor set at every share")
