@@ -81,7 +81,8 @@ def test_the_sensor_matched_sentence_follows_the_numbers():
 def test_the_trust_sentence_names_the_matched_variant_only_when_it_meets_the_target():
     lim = {"share": 0.003, "width": 0.0}
     s = trust_sentence(lim, 0.627, matched_accuracy=0.984)
-    assert "use the variant `sensor_matched`" in s and "98.4 %" in s and "62.7 %" in s
+    assert "use the variant `sensor_matched`" in s and "≥ 98.4 %" in s and "62.7 %" in s
+    assert "(100 % there at every p)" in trust_sentence(lim, 0.627, matched_accuracy=1.0)
     s = trust_sentence(lim, 0.627, matched_accuracy=0.90)
     assert "use the variant" not in s and "90.0 % with the variant `sensor_matched`" in s and "far better" in s
 
@@ -96,3 +97,13 @@ def test_the_width_sentence_follows_each_variant():
     assert "90 % is met at p = 3 only" in s and "met at every p" in s.split("width_simulated")[1]
     s = sentence_width_variants(near, {"width_interp": np.array([0.1, 0.12, 0.1, 0.1])}, ps)
     assert "lowers" in s and "met at no p" in s
+
+
+def test_the_trust_sentence_names_width_simulated_and_its_condition():
+    lim = {"share": 0.003, "width": 0.0}
+    s = trust_sentence(lim, 0.627, width_simulated={"accuracy": 0.979, "sensor_within": 0.079})
+    assert "`width_simulated` gets ≥ 97.9 %" in s and "in only 7.9 % of the windows" in s
+    assert "which the default sensors give)" in trust_sentence(lim, 0.627, width_simulated={"accuracy": 0.979,
+                                                                                              "sensor_within": 0.95})
+    assert "width_simulated" not in trust_sentence(lim, 0.627, width_simulated={"accuracy": 0.8, "sensor_within": 1})
+    assert "width_simulated" not in trust_sentence(lim, 0.627)

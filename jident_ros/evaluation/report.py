@@ -364,11 +364,14 @@ def trust_limits(validity: list, mismatch: dict, ps: tuple | None = None, thresh
 
 
 def trust_sentence(limits: dict, sensor_accuracy: float | None = None, sensors: str = "",
-                   threshold: float = TRUST_ACCURACY, matched_accuracy: float | None = None) -> str:
+                   threshold: float = TRUST_ACCURACY, matched_accuracy: float | None = None,
+                   width_simulated: dict | None = None) -> str:
     """ONE sentence a user can act on: when to trust the image method (from :func:`trust_limits`).
 
     ``sensor_accuracy``: the paper-faithful fused accuracy with the default sensor set (lowest over p);
-    ``matched_accuracy``: variant 'sensor_matched''s on the same data (lowest over p), or None."""
+    ``matched_accuracy``: variant 'sensor_matched''s on the same data (lowest over p), or None;
+    ``width_simulated``: {'accuracy': the variant's lowest fused accuracy over p at halfway widths, 'sensor_within':
+    the share of those windows whose width the default sensors give to 0.1 % (or None)}, or None."""
     sh, wd = limits.get("share"), limits.get("width")
     if sh is None:
         cond = f"on no drive of the map (fused below {_pct(threshold, 0)} even at the smallest film share)"
@@ -377,7 +380,17 @@ def trust_sentence(limits: dict, sensor_accuracy: float | None = None, sensors: 
                 f"(fused ≥ {_pct(threshold, 0)} at every p and every paper example right up to there)")
     if wd is None or wd == 0:
         cond += ", with a library built at the window's own backlash width (any width mismatch in the map drops it below"\
-                f" {_pct(threshold, 0)})"
+                f" {_pct(threshold, 0)}"
+        ws = width_simulated or {}
+        if ws.get("accuracy") is not None and ws["accuracy"] >= threshold:
+            within = ws.get("sensor_within")
+            got = "100 %" if ws["accuracy"] >= 1.0 else f"≥ {_pct(ws['accuracy'])}"
+            cond += (f"; between library widths the variant `width_simulated` gets {got} where the "
+                     "width is known to ≈ 0.1 %" + ("" if within is None else
+                                                     (", which the default sensors give" if within >= 0.9 else
+                                                      f", which the default sensors give in only {_pct(within)} of "
+                                                      "the windows")))
+        cond += ")"
     else:
         cond += f", with the window's width within ±{100 * wd:.3g} % of a library width"
     if sensor_accuracy is not None:
@@ -385,8 +398,9 @@ def trust_sentence(limits: dict, sensor_accuracy: float | None = None, sensors: 
             cond += f", and with sensors as good as the default set ({_pct(sensor_accuracy)} there)"
         elif matched_accuracy is not None and matched_accuracy >= threshold:
             cond += (f"; with real sensors (the default set: paper-faithful {_pct(sensor_accuracy)}) use the variant "
-                     f"`sensor_matched`, a library recorded through the same sensor model (≥ {_pct(matched_accuracy)} "
-                     "there at every p); otherwise use the gap estimate")
+                     "`sensor_matched`, a library recorded through the same sensor model ("
+                     + ("100 %" if matched_accuracy >= 1.0 else f"≥ {_pct(matched_accuracy)}")
+                     + " there at every p); otherwise use the gap estimate")
         else:
             cond += (f", and with sensors far better than the default set (there it is {_pct(sensor_accuracy)}"
                      + ("" if matched_accuracy is None else
@@ -433,8 +447,20 @@ def _summary_lines(ev: Evaluation) -> list[str]:
                                                                     "result": ev.results[0]}], ev.width_mismatch,
                                                       ev.validity[0]["result"].p_values),
                                          None if sens is None else sens[0], ev.sensors,
-                                         matched_accuracy=None if matched is None else matched[0][0]))
+                                         matched_accuracy=None if matched is None else matched[0][0],
+                                         width_simulated=_width_simulated_summary(ev)))
     return out
+
+
+def _width_simulated_summary(ev: Evaluation) -> dict | None:
+    """The variant width_simulated's lowest fused accuracy at halfway widths and how often the default sensors
+    give the width to 0.1 % (for :func:`trust_sentence`), or None."""
+    hw = ev.halfway or {}
+    if "width_simulated" not in hw:
+        return None
+    sw = hw.get("sensor_width_error")
+    return {"accuracy": float(hw["width_simulated"].accuracy()["fused"].min()),
+            "sensor_within": None if not sw else sw["within_0.1%"]}
 
 
 def _matched_ranges(ev: Evaluation):
