@@ -143,14 +143,23 @@ def test_the_evaluation_builds_the_same_library(system, windows, library):
 
 
 @pytest.mark.slow
-def test_run_evaluation_reports_the_variant(system):
-    ev = run_evaluation(system, MethodConfig(p_values=(2.0,), matched_seeds=4), snr_db=(), seeds=(), readings=(),
-                        variants=("paper", "sensor_matched"), film_shares=(), halfway=False, ablation=False,
-                        log=lambda *a: None, jobs=1)
+def test_run_evaluation_reports_the_variant_and_caches_its_library(system, tmp_path, monkeypatch):
+    monkeypatch.setenv("JIDENT_CACHE_DIR", str(tmp_path))
+    kw = dict(snr_db=(), seeds=(), readings=(), variants=("paper", "sensor_matched"), film_shares=(), halfway=False,
+              ablation=False, jobs=1, library_cache=True)
+    method = MethodConfig(p_values=(2.0,), matched_seeds=4)
+    logs = []
+    ev = run_evaluation(system, method, log=logs.append, **kw)
     labels = [r.label for r in ev.results]
     assert "sensor_matched, noise-free" in labels and "sensor_matched, sensors (default set, seed 3)" in labels
     r = next(r for r in ev.results if r.label == "sensor_matched, sensors (default set, seed 3)")
     assert r.accuracy()["fused"][0] >= 0.95
+    assert not any("from the cache" in line for line in logs) and len(list(tmp_path.glob("patterns-*.npz"))) == 1
+    again = run_evaluation(system, method, log=logs.append, matched_noise_free=False, **kw)
+    assert any("sensor_matched library from the cache" in line for line in logs)
+    r2 = next(r for r in again.results if r.label == "sensor_matched, sensors (default set, seed 3)")
+    np.testing.assert_array_equal(r2.h, r.h)                       # the same library either way
+    assert "sensor_matched, noise-free" not in [r.label for r in again.results]
 
 
 def test_width_simulated_simulates_the_patterns_at_the_window_width(system):

@@ -226,7 +226,7 @@ def cmd_evaluate(args) -> int:
                         readings=readings, log=log,
                         # the 2-minute budget: load_scaled and sensor_matched on noise-free windows with --full only
                         variants=("paper", "load_scaled", "sensor_matched") if args.full else ("paper", "sensor_matched"),
-                        matched_noise_free=args.full,
+                        matched_noise_free=args.full, library_cache=True,
                         film_shares=shares, stress_system=stress, full_map=args.validity_map == "full")
     ev.command = "jident evaluate" + (" --quick" if args.quick else "") + (" --full" if args.full else (
         f" --validity-map {args.validity_map}" if args.validity_map != "default" else "")) + (

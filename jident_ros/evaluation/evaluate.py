@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from jident_ros.identify.gap import NoGapError, estimate_backlash_width, estimate_inertia, nearest_class
+from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.method.patterns import (
     PatternLibrary,
     fuse,
@@ -292,7 +293,8 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
                    log=print, jobs: int | None = None, ablation: bool = True,
                    sensors: SensorSpec | None = DEFAULT_SENSORS, film_shares=VALIDITY_FILM_SHARES,
                    stress_system: SystemConfig | None = None, full_map: bool = False,
-                   halfway: bool = True, matched_noise_free: bool = True) -> Evaluation:
+                   halfway: bool = True, matched_noise_free: bool = True,
+                   library_cache: bool = False) -> Evaluation:
     """The whole evaluation: every variant noise-free and noisy, the gap estimator, the level-10 readings.
 
     The work is split into one task per (method configuration, data set, signal):
@@ -314,7 +316,10 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     the gap estimator's width estimate (``full_map``: also the width-error sweep, :func:`width_error_sweep`);
     the width mismatch map reuses the noise-free features against every library width.  The variant
     'sensor_matched' (in ``variants``, with ``sensors``) runs on the sensor data set and, with
-    ``matched_noise_free``, on the noise-free grid.
+    ``matched_noise_free``, on the noise-free grid; with ``library_cache`` its library is taken from the pattern
+    library cache (:func:`identify.library.default_library_path`, as the diagnostic node does; refused unless
+    built for this system and method configuration) and saved there when it is built (the same library either
+    way: it is a deterministic function of the two configurations).
     """
     t0 = time.perf_counter()
     cases = paper_grid_cases(system)
@@ -343,8 +348,15 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
             configs[-1][1].append(("paper, equal-load ablation, noise-free", "equal-load ablation", equal,
                                    {"ablation": "equal load", "data": "equal-load ablation",
                                     "process_force_n": equal.metadata["equal_load_process_force_n"]}))
+    cached = None   # the sensor_matched library, when the cache holds it
     if "sensor_matched" in variants and sensors is not None:
-        configs.append(sensor_matched_config(system, method, clean, datasets[-1], matched_noise_free))
+        mm = dataclasses.replace(method, variant="sensor_matched")
+        cached, _ = (load_pattern_library(default_library_path(system, mm), system, mm, build_if_missing=False)
+                     if library_cache else (None, None))
+        configs.append(sensor_matched_config(system, method, clean, datasets[-1], matched_noise_free,
+                                             with_library_runs=cached is None))
+        if cached is not None:
+            log(f"sensor_matched library from the cache {default_library_path(system, mm)}")
     paper_config = next((i for i, (m, _, _) in enumerate(configs) if m.variant == "paper"), None)
     if halfway and paper_config is not None:
         half = simulate_grid(system, halfway_width_cases(system))
@@ -398,9 +410,16 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     pattern = _pattern_order(system, clean)
     for c, (m, runs, sysx) in enumerate(configs):
         library = None
-        if m.variant == "sensor_matched":
+        if m.variant == "sensor_matched" and cached is not None:
+            library = libraries[c] = cached
+        elif m.variant == "sensor_matched":
             library = libraries[c] = _seed_library(sysx, m, runs, [[outputs[(c, d, s)] for s in range(len(SIGNALS))]
                                                                    for d in range(len(runs))])
+            if library_cache:
+                try:
+                    library.save(default_library_path(sysx, m))
+                except OSError as exc:
+                    log(f"sensor_matched library not saved to the cache: {exc}")
         for d, (label, _, data, note) in enumerate(runs):
             if "library_seed" in note:
                 continue
@@ -468,18 +487,18 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
 
 
 def sensor_matched_config(system: SystemConfig, method: MethodConfig, clean: WindowSet, sensor_data,
-                          noise_free: bool = True) -> tuple:
+                          noise_free: bool = True, with_library_runs: bool = True) -> tuple:
     """Configuration (method, runs, system) of variant 'sensor_matched' in :func:`run_evaluation`: the
     library runs (the 42 noise-free pattern runs recorded through ``method.sensor_spec()`` with each of
     ``method.matched_seeds`` seeds, as :meth:`PatternLibrary.sensor_matched` builds them), then the tested
     data: the noise-free grid (with ``noise_free``) and ``sensor_data`` = (name, windows) (the default sensor
-    set at SENSOR_SEED)."""
+    set at SENSOR_SEED).  Without ``with_library_runs`` only the tested data (the library comes from a cache)."""
     m = dataclasses.replace(method, variant="sensor_matched")
     runs_42 = take_windows(clean, _pattern_order(system, clean))
     spec = m.sensor_spec()
     runs = [(f"sensor_matched library, seed {seed}", "library", apply_sensors(runs_42, spec, seed,
                                                                                system.motor.base.torque_nm),
-             {"library_seed": seed}) for seed in matched_seeds(m)]
+             {"library_seed": seed}) for seed in (matched_seeds(m) if with_library_runs else ())]
     name, data = sensor_data
     runs += [(f"sensor_matched, {n}", n, d, {"variant": "sensor_matched", "data": n})
              for n, d in ((("noise-free", clean),) if noise_free else ()) + ((name, data),)]
