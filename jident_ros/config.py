@@ -244,6 +244,13 @@ def method_config_from_dict(data: Mapping | None):
                 if w not in pywt.wavelist(kind="discrete"):
                     raise ConfigError(f"method.wavelets.{sig}: unknown discrete wavelet {w!r}")
             values[k] = tuple((str(a), str(b)) for a, b in v.items())
+        elif k == "matched_sensors":
+            if not isinstance(v, Mapping):
+                raise ConfigError(f"method.matched_sensors: expected a mapping sensor field -> number, got {v!r}")
+            pairs = tuple((str(a), _yaml11_number(b)) for a, b in v.items())
+            for name, x in pairs:
+                _check_number(f"method.matched_sensors.{name}", x)
+            values[k] = tuple((a, float(b)) for a, b in pairs)
         elif isinstance(d, str):
             if not isinstance(v, str):
                 raise ConfigError(f"method.{k}: expected a string, got {v!r}")

@@ -111,3 +111,6 @@ def test_cli_evaluate_quick_renders_every_section(capsys):
         assert heading in md, heading
     # only the paper's examples at the evaluated p are listed (4 of the 16 are at p = 2)
     assert "of 4** of the paper's example cases" in md
+    # the variants beyond the paper for real sensors and other widths are reported beside the paper rows
+    assert "| sensor_matched, sensors (default set, seed 3) | 2 |" in md and "* variant `sensor_matched`" in md
+    assert "| width_simulated | 2 |" in md and "load_scaled" not in md.split("### Accuracy")[1].split("###")[0]

@@ -5,6 +5,7 @@ import numpy as np
 from jident_ros.evaluation.report import (
     sentence_ablation,
     sentence_paper_claim,
+    sentence_sensor_matched,
     sentence_variant,
     trust_limits,
     trust_sentence,
@@ -64,3 +65,45 @@ def test_the_trust_sentence_follows_the_map():
     assert trust_limits(vm, mismatch)["width"] == 0.0       # -20 % still fails
     mismatch["accuracy"][0, 0] = 0.99
     assert trust_limits(vm, mismatch)["width"] == 0.2
+
+
+def test_the_sensor_matched_sentence_follows_the_numbers():
+    s = sentence_sensor_matched((0.984, 1.0), (0.627, 0.786), (0.865, 0.921))
+    assert "98.4 %–100.0 % (≥ 95 % at every p)" in s and "better than the paper-faithful mode" in s
+    assert "62.7 %–78.6 %" in s and "86.5 %–92.1 %" in s and "sensors actually used" in s
+    s = sentence_sensor_matched((0.93, 0.99), (0.627, 0.786), None)
+    assert "below 95 % at some p" in s and "≥ 95 %" not in s and "noise-free" not in s
+    assert "below 95 % at every p" in sentence_sensor_matched((0.5, 0.6), (0.627, 0.786), None)
+    assert "worse" in sentence_sensor_matched((0.5, 0.6), (0.627, 0.786), None)
+    assert "sensors actually used" not in sentence_sensor_matched((0.99, 1.0), (0.6, 0.7), (0.97, 1.0))
+
+
+def test_the_trust_sentence_names_the_matched_variant_only_when_it_meets_the_target():
+    lim = {"share": 0.003, "width": 0.0}
+    s = trust_sentence(lim, 0.627, matched_accuracy=0.984)
+    assert "use the variant `sensor_matched`" in s and "≥ 98.4 %" in s and "62.7 %" in s
+    assert "(100 % there at every p)" in trust_sentence(lim, 0.627, matched_accuracy=1.0)
+    s = trust_sentence(lim, 0.627, matched_accuracy=0.90)
+    assert "use the variant" not in s and "90.0 % with the variant `sensor_matched`" in s and "far better" in s
+
+
+def test_the_width_sentence_follows_each_variant():
+    from jident_ros.evaluation.report import sentence_width_variants
+    ps = (2.0, 3.0, 6.0, 9.0)
+    near = np.array([0.17, 0.2, 0.24, 0.23])
+    s = sentence_width_variants(near, {"width_interp": np.array([0.61, 0.9, 0.86, 0.8]),
+                                       "width_simulated": np.array([0.99, 0.98, 1.0, 1.0])}, ps)
+    assert "`width_interp` raises the fused accuracy from 17.0 %–24.0 % to 61.0 %–90.0 %" in s
+    assert "90 % is met at p = 3 only" in s and "met at every p" in s.split("width_simulated")[1]
+    s = sentence_width_variants(near, {"width_interp": np.array([0.1, 0.12, 0.1, 0.1])}, ps)
+    assert "lowers" in s and "met at no p" in s
+
+
+def test_the_trust_sentence_names_width_simulated_and_its_condition():
+    lim = {"share": 0.003, "width": 0.0}
+    s = trust_sentence(lim, 0.627, width_simulated={"accuracy": 0.979, "sensor_within": 0.079})
+    assert "`width_simulated` gets ≥ 97.9 %" in s and "in only 7.9 % of the windows" in s
+    assert "which the default sensors give)" in trust_sentence(lim, 0.627, width_simulated={"accuracy": 0.979,
+                                                                                              "sensor_within": 0.95})
+    assert "width_simulated" not in trust_sentence(lim, 0.627, width_simulated={"accuracy": 0.8, "sensor_within": 1})
+    assert "width_simulated" not in trust_sentence(lim, 0.627)

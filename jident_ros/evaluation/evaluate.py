@@ -19,8 +19,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from jident_ros.identify.gap import NoGapError, estimate_backlash_width, estimate_inertia, nearest_class
-from jident_ros.method.patterns import PatternLibrary, fuse
-from jident_ros.method.pipeline import SIGNALS, MethodConfig, batch_features, h_vector, margin, pre_entry_reference
+from jident_ros.identify.library import default_library_path, load_pattern_library
+from jident_ros.method.patterns import (
+    PatternLibrary,
+    fuse,
+    matched_seeds,
+    rounded_width,
+    take_windows,
+    with_widths,
+)
+from jident_ros.method.pipeline import SIGNALS, MethodConfig, batch_features, margin, pre_entry_reference
 from jident_ros.sim import Case, SystemConfig, WindowSet, add_measurement_noise, paper_grid_cases, simulate_grid
 from jident_ros.sim.model import Model
 from jident_ros.sim.profiles import film_share, with_film_share
@@ -76,7 +84,10 @@ class GridResult:
         return np.argmin(self.h, axis=-1)
 
     def fused_predicted(self) -> np.ndarray:
-        """(n_p, n_cases) fused class indices over the five signals."""
+        """(n_p, n_cases) fused class indices over the five signals (the paper's :func:`fuse`; variant
+        'sensor_matched': the plain sum, as :meth:`PatternLibrary.fuse` with a scatter)."""
+        if self.method.variant == "sensor_matched":
+            return np.argmin(self.h.sum(axis=2), axis=-1)
         out = np.zeros(self.h.shape[:2], dtype=int)
         for k in range(self.h.shape[0]):
             for i in range(self.h.shape[1]):
@@ -139,8 +150,7 @@ def grid_result(system: SystemConfig, method: MethodConfig, library: PatternLibr
         w = c.backlash_width_m if widths_m is None else float(widths_m[i])
         for k in range(len(ps)):
             for s in range(len(SIGNALS)):
-                n2, h5 = library.patterns_at(k, s, w, width_mode)
-                h[k, i, s] = h_vector(n2, feats[k, i, s], h5)
+                h[k, i, s] = library.h_vector(k, s, w, feats[k, i, s], width_mode)
     true = np.array([classes.index(c.inertia_kgm2) for c in tested.cases])
     pmask = np.array([c.consistency_pa_sn == system.grid.pattern_consistency_pa_sn for c in tested.cases])
     res = GridResult(label, method, ps, list(tested.cases), true, h, pmask, seconds, library_seconds)
@@ -278,11 +288,13 @@ def _pattern_order(system: SystemConfig, windows: WindowSet) -> list:
 
 
 def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 30.0), seeds=(1, 2),
-                   readings=("dyadic", "linear", "swt"), variants=("paper", "load_scaled"), progress=None,
+                   readings=("dyadic", "linear", "swt"), variants=("paper", "load_scaled", "sensor_matched"),
+                   progress=None,
                    log=print, jobs: int | None = None, ablation: bool = True,
                    sensors: SensorSpec | None = DEFAULT_SENSORS, film_shares=VALIDITY_FILM_SHARES,
                    stress_system: SystemConfig | None = None, full_map: bool = False,
-                   halfway: bool = True) -> Evaluation:
+                   halfway: bool = True, matched_noise_free: bool = True,
+                   library_cache: bool = False) -> Evaluation:
     """The whole evaluation: every variant noise-free and noisy, the gap estimator, the level-10 readings.
 
     The work is split into one task per (method configuration, data set, signal):
@@ -300,8 +312,14 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     ``film_shares`` profile (:func:`sim.profiles.with_film_share`, own library each) and of ``stress_system``
     (the heavy-film profile), where the equal-load ablation runs (``full_map``: at every share, and the
     sensor set at every share too); ``halfway`` simulates windows at widths halfway between the library's
-    and identifies them with the nearest width's patterns and with ``width_interp`` at the gap estimator's
-    width estimate; the width mismatch map reuses the noise-free features against every library width.
+    and identifies them with the nearest width's patterns, with ``width_interp`` and ``width_simulated`` at
+    the gap estimator's width estimate (``full_map``: also the width-error sweep, :func:`width_error_sweep`);
+    the width mismatch map reuses the noise-free features against every library width.  The variant
+    'sensor_matched' (in ``variants``, with ``sensors``) runs on the sensor data set and, with
+    ``matched_noise_free``, on the noise-free grid; with ``library_cache`` its library is taken from the pattern
+    library cache (:func:`identify.library.default_library_path`, as the diagnostic node does; refused unless
+    built for this system and method configuration) and saved there when it is built (the same library either
+    way: it is a deterministic function of the two configurations).
     """
     t0 = time.perf_counter()
     cases = paper_grid_cases(system)
@@ -317,6 +335,8 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     # every configuration's first data set is the noise-free grid
     configs = []
     for variant in variants:
+        if variant == "sensor_matched":
+            continue   # below: its library comes from the pattern runs recorded through the sensors
         m = dataclasses.replace(method, variant=variant)
         data_sets = datasets if variant == "paper" else datasets[:1]   # load_scaled: noise-free only
         configs.append((m, [(f"{variant}, {name}", name, data, {"variant": variant, "data": name})
@@ -328,6 +348,15 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
             configs[-1][1].append(("paper, equal-load ablation, noise-free", "equal-load ablation", equal,
                                    {"ablation": "equal load", "data": "equal-load ablation",
                                     "process_force_n": equal.metadata["equal_load_process_force_n"]}))
+    cached = None   # the sensor_matched library, when the cache holds it
+    if "sensor_matched" in variants and sensors is not None:
+        mm = dataclasses.replace(method, variant="sensor_matched")
+        cached, _ = (load_pattern_library(default_library_path(system, mm), system, mm, build_if_missing=False)
+                     if library_cache else (None, None))
+        configs.append(sensor_matched_config(system, method, clean, datasets[-1], matched_noise_free,
+                                             with_library_runs=cached is None))
+        if cached is not None:
+            log(f"sensor_matched library from the cache {default_library_path(system, mm)}")
     paper_config = next((i for i, (m, _, _) in enumerate(configs) if m.variant == "paper"), None)
     if halfway and paper_config is not None:
         half = simulate_grid(system, halfway_width_cases(system))
@@ -381,7 +410,19 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     pattern = _pattern_order(system, clean)
     for c, (m, runs, sysx) in enumerate(configs):
         library = None
+        if m.variant == "sensor_matched" and cached is not None:
+            library = libraries[c] = cached
+        elif m.variant == "sensor_matched":
+            library = libraries[c] = _seed_library(sysx, m, runs, [[outputs[(c, d, s)] for s in range(len(SIGNALS))]
+                                                                   for d in range(len(runs))])
+            if library_cache:
+                try:
+                    library.save(default_library_path(sysx, m))
+                except OSError as exc:
+                    log(f"sensor_matched library not saved to the cache: {exc}")
         for d, (label, _, data, note) in enumerate(runs):
+            if "library_seed" in note:
+                continue
             parts = [outputs[(c, d, s)] for s in range(len(SIGNALS))]
             feats = np.stack([centres for centres, _, _ in parts], axis=2)   # (n_p, n_cases, n_signals, K)
             if library is None:   # runs[0] is the noise-free grid, which holds the pattern runs
@@ -435,7 +476,7 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
     half = {}
     hres = next((r for r in results if r.notes.get("halfway")), None)
     if hres is not None:
-        half = halfway_comparison(system, hres, libraries[paper_config])
+        half = halfway_comparison(system, hres, libraries[paper_config], error_sweep=full_map, sensors=sensors)
     ev = Evaluation(results, examples, system, time.perf_counter() - t0, t_sim, gaps, best,
                     ablation_examples=ablation_examples, validity=validity, width_mismatch=mismatch,
                     halfway=half, sensors="" if sensors is None else sensors.describe(
@@ -443,6 +484,40 @@ def run_evaluation(system: SystemConfig, method: MethodConfig, *, snr_db=(40.0, 
                     film_share=film_share(system))
     ev.ablation_share = stress["share"] if stress is not None else ev.film_share
     return ev
+
+
+def sensor_matched_config(system: SystemConfig, method: MethodConfig, clean: WindowSet, sensor_data,
+                          noise_free: bool = True, with_library_runs: bool = True) -> tuple:
+    """Configuration (method, runs, system) of variant 'sensor_matched' in :func:`run_evaluation`: the
+    library runs (the 42 noise-free pattern runs recorded through ``method.sensor_spec()`` with each of
+    ``method.matched_seeds`` seeds, as :meth:`PatternLibrary.sensor_matched` builds them), then the tested
+    data: the noise-free grid (with ``noise_free``) and ``sensor_data`` = (name, windows) (the default sensor
+    set at SENSOR_SEED).  Without ``with_library_runs`` only the tested data (the library comes from a cache)."""
+    m = dataclasses.replace(method, variant="sensor_matched")
+    runs_42 = take_windows(clean, _pattern_order(system, clean))
+    spec = m.sensor_spec()
+    runs = [(f"sensor_matched library, seed {seed}", "library", apply_sensors(runs_42, spec, seed,
+                                                                               system.motor.base.torque_nm),
+             {"library_seed": seed}) for seed in (matched_seeds(m) if with_library_runs else ())]
+    name, data = sensor_data
+    runs += [(f"sensor_matched, {n}", n, d, {"variant": "sensor_matched", "data": n})
+             for n, d in ((("noise-free", clean),) if noise_free else ()) + ((name, data),)]
+    return m, runs, system
+
+
+def _seed_library(system: SystemConfig, method: MethodConfig, runs: list, parts: list) -> PatternLibrary:
+    """The 'sensor_matched' library from the per-seed features of ``runs`` (``parts[d][s]`` = the
+    :func:`_feature_task` output of run d, signal s); equal to :meth:`PatternLibrary.sensor_matched`."""
+    cen, rng = [], []
+    for d, (_, _, data, note) in enumerate(runs):
+        if "library_seed" not in note:
+            continue
+        feats = np.stack([c for c, _, _ in parts[d]], axis=2)
+        ranges = np.stack([r for _, r, _ in parts[d]], axis=1)
+        lib = PatternLibrary.from_features(feats, ranges, range(len(data.cases)), system, method)
+        cen.append(lib.centres)
+        rng.append(lib.ranges)
+    return PatternLibrary.from_seed_libraries(np.array(cen), np.array(rng), system, method)
 
 
 def sensor_label(spec: SensorSpec) -> str:
@@ -474,20 +549,58 @@ def estimated_widths(system: SystemConfig, windows: WindowSet) -> np.ndarray:
     return out
 
 
-def halfway_comparison(system: SystemConfig, nearest: GridResult, library: PatternLibrary) -> dict:
+def halfway_comparison(system: SystemConfig, nearest: GridResult, library: PatternLibrary,
+                       error_sweep: bool = False, sensors: SensorSpec | None = None) -> dict:
     """Windows at halfway widths: the paper's nearest-width patterns against ``width_interp`` patterns at
-    the gap estimator's width estimate (falls back to the nominal width where there is no estimate)."""
+    the gap estimator's width estimate and ``width_simulated`` patterns (the pattern runs simulated at that
+    estimate, :func:`patterns.simulated_width_library`); the nominal width where there is no estimate."""
     cases = nearest.cases
     sim = nearest.notes["windows"]
     est = estimated_widths(system, sim)
+    true_w = np.array([c.backlash_width_m for c in cases])
     used = np.where(np.isfinite(est), est, [c.backlash_width_m for c in cases])
     interp = grid_result(system, nearest.method, library, sim, nearest.notes["centres"],
                          "paper, halfway widths, noise-free, width_interp", widths_m=used, width_mode="width_interp")
     interp.pattern_mask[:] = False
-    true_w = np.array([c.backlash_width_m for c in cases])
-    return {"nearest": nearest, "width_interp": interp,
+    # width_simulated: the pattern runs simulated at every (rounded) estimated width, one library holding them all
+    rounded = np.array([rounded_width(w) for w in used])
+    simulated_system = with_widths(system, sorted(set(rounded)))
+    t = time.perf_counter()
+    simulated_library = PatternLibrary.build(simulated_system, nearest.method)
+    simulated = grid_result(simulated_system, nearest.method, simulated_library, sim, nearest.notes["centres"],
+                            "paper, halfway widths, noise-free, width_simulated", time.perf_counter() - t,
+                            widths_m=rounded)
+    simulated.pattern_mask[:] = False
+    out = {"width_error": width_error_sweep(system, nearest)} if error_sweep else {}
+    if sensors is not None:   # how well the width is known when the same windows come from real sensors
+        noisy = apply_sensors(sim, sensors, SENSOR_SEED, system.motor.base.torque_nm)
+        rel = np.abs(estimated_widths(system, noisy) / true_w - 1.0)
+        out["sensor_width_error"] = {"median": float(np.nanmedian(rel)), "max": float(np.nanmax(rel)),
+                                     "within_0.1%": float(np.mean(rel <= 0.001)), "label": sensor_label(sensors)}
+    return out | {"nearest": nearest, "width_interp": interp, "width_simulated": simulated,
+            "simulated_widths": len(simulated_system.grid.backlash_widths_m),
             "width_error_max": float(np.nanmax(np.abs(est - true_w) / true_w)) if np.isfinite(est).any() else np.nan,
             "no_estimate": int((~np.isfinite(est)).sum())}
+
+
+#: Relative width errors of :func:`width_error_sweep`.
+WIDTH_ERRORS = (0.0, 0.001, 0.005, 0.01, 0.02)
+
+
+def width_error_sweep(system: SystemConfig, nearest: GridResult, errors=WIDTH_ERRORS) -> dict:
+    """How exactly ``width_simulated`` needs the window's width: the halfway windows of ``nearest`` against
+    pattern runs simulated at their true width times (1 + error).  Returns {error: fused accuracy per p}."""
+    true_w = np.array([c.backlash_width_m for c in nearest.cases])
+    out = {}
+    for err in errors:
+        widths = np.array([rounded_width(w * (1.0 + err)) for w in true_w])
+        sysx = with_widths(system, sorted(set(widths)))
+        lib = PatternLibrary.build(sysx, nearest.method)
+        res = grid_result(sysx, nearest.method, lib, nearest.notes["windows"], nearest.notes["centres"],
+                          f"halfway, patterns at width x {1 + err:g}", widths_m=widths)
+        res.pattern_mask[:] = False
+        out[err] = res.accuracy()["fused"]
+    return out
 
 
 def width_mismatch_map(system: SystemConfig, result: GridResult, library: PatternLibrary) -> dict:
@@ -503,9 +616,8 @@ def width_mismatch_map(system: SystemConfig, result: GridResult, library: Patter
         for e, w in enumerate(widths):
             mis = round(float(w / c.backlash_width_m - 1.0), 4)
             for k in range(len(result.p_values)):
-                hs = [h_vector(library.centres[k, e, s], feats[k, i, s], library.h5[k, e, s])
-                      for s in range(len(SIGNALS))]
-                ok = fuse(hs)[0] == result.true_class[i]
+                hs = [library.h_vector(k, s, float(w), feats[k, i, s]) for s in range(len(SIGNALS))]
+                ok = library.fuse(hs)[0] == result.true_class[i]
                 rows.setdefault(mis, np.zeros((len(result.p_values), 2), int))
                 rows[mis][k] += (int(ok), 1)
     mis = np.array(sorted(rows))

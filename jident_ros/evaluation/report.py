@@ -202,27 +202,65 @@ def _width_lines(ev: Evaluation, figures: dict) -> list[str]:
                 out += [f"![{title}]({path})", ""]
     hw = ev.halfway
     if hw:
-        a, b = hw["nearest"].accuracy(), hw["width_interp"].accuracy()
+        a = hw["nearest"].accuracy()
         ps = hw["nearest"].p_values
-        out += ["### Width-aware patterns (variant `width_interp`, beyond the paper)", "",
+        variants = {name: hw[name].accuracy() for name in ("width_interp", "width_simulated") if name in hw}
+        out += ["### Width-aware patterns (variants `width_interp` and `width_simulated`, beyond the paper)", "",
                 f"{a['n']} windows at the widths halfway between neighbouring library widths (every J1 class and η_k, "
                 "noise-free). `nearest`: the paper's patterns of the nearest library width. `width_interp`: the N2 "
                 "matrices (KHM centres of the seven pattern runs) and h5 interpolated linearly in width between "
                 "the two library widths around the gap estimator's width estimate of the window "
                 f"(`gap.estimate_backlash_width`; max error {100 * hw['width_error_max']:.3g} %, "
-                f"{hw['no_estimate']} windows without one).", "",
+                f"{hw['no_estimate']} windows without one)."
+                + ("" if "width_simulated" not in hw else
+                   " `width_simulated`: the seven pattern runs simulated at that estimate (rounded to 5 significant "
+                   f"digits; {hw['simulated_widths']} distinct widths here), `patterns.simulated_width_library`.")
+                + "", "",
                 "| patterns | p | " + " | ".join(SIGNALS) + " | fused |", "|---|---|" + "---|" * (len(SIGNALS) + 1)]
-        for name, acc in (("nearest", a), ("width_interp", b)):
+        for name, acc in [("nearest", a)] + list(variants.items()):
             for k, p in enumerate(ps):
                 out.append(f"| {name} | {p:g} | " + " | ".join(_pct(x) for x in acc["per_signal"][k])
                            + f" | **{_pct(acc['fused'][k])}** |")
-        target = 0.90
-        met = [p for k, p in enumerate(ps) if b["fused"][k] >= target]
-        out += ["", f"`width_interp` raises the fused accuracy from {_pct(a['fused'].min())}–{_pct(a['fused'].max())} "
-                f"to {_pct(b['fused'].min())}–{_pct(b['fused'].max())}; the issue's 90 % is "
-                + ("met at every p." if len(met) == len(ps) else
-                   ("met at p = " + ", ".join(f"{p:g}" for p in met) + " only." if met else "met at no p.")), ""]
+        out += ["", sentence_width_variants(a["fused"], {n: v["fused"] for n, v in variants.items()}, ps), ""]
+        sw = hw.get("sensor_width_error")
+        if sw:
+            out += [f"With {sw['label']} the same windows' width estimates are off by {100 * sw['median']:.2g} % "
+                    f"(median), {100 * sw['max']:.2g} % at most, within 0.1 % in {_pct(sw['within_0.1%'])} of them"
+                    + ("; the width-aware variants need a width known to ≈ 0.1 % ("
+                       + ("the table below" if hw.get("width_error") else "`jident evaluate --full`: the width-error table")
+                       + "), so with these sensors they do not apply and the gap estimate is the answer."
+                       if sw["within_0.1%"] < 0.9 else "."), ""]
+        if hw.get("width_error"):
+            out += ["How exactly the width must be known (`evaluate.width_error_sweep`, `--full`): the same windows "
+                    "against pattern runs simulated at their true width × (1 + error).", "",
+                    "| width error | " + " | ".join(f"fused p = {p:g}" for p in ps) + " |", "|---|" + "---|" * len(ps)]
+            for err, fused in hw["width_error"].items():
+                out.append(f"| {100 * err:+.1f} % | " + " | ".join(_pct(x) for x in fused) + " |")
+            ok = []
+            for err in sorted(hw["width_error"]):   # the errors up to the first that fails
+                if hw["width_error"][err].min() < 0.90:
+                    break
+                ok.append(err)
+            worst = max(hw["width_error"])
+            out += ["", (f"Fused ≥ 90 % at every p up to a width error of {100 * max(ok):.1f} %" if ok else
+                         "Fused below 90 % at some p even at the exact width")
+                    + f"; at {100 * worst:.1f} % it is {_pct(hw['width_error'][worst].min())}–"
+                    f"{_pct(hw['width_error'][worst].max())}.", ""]
     return out
+
+
+def sentence_width_variants(nearest: np.ndarray, variants: dict, ps: tuple, target: float = 0.90) -> str:
+    """What each width-aware variant does to the fused accuracy (per p) at halfway widths against the nearest
+    library width's patterns, and at which p it meets ``target`` (the issue's 90 %)."""
+    parts = []
+    for name, fused in variants.items():
+        met = [p for k, p in enumerate(ps) if fused[k] >= target]
+        verb = ("raises" if fused.min() > nearest.max() else "lowers" if fused.max() < nearest.min() else "changes")
+        parts.append(f"`{name}` {verb} the fused accuracy from {_pct(nearest.min())}–{_pct(nearest.max())} to "
+                     f"{_pct(fused.min())}–{_pct(fused.max())}; the issue's {_pct(target, 0)} is "
+                     + ("met at every p" if len(met) == len(ps) else
+                        ("met at p = " + ", ".join(f"{p:g}" for p in met) + " only" if met else "met at no p")))
+    return ". ".join(parts) + "." if parts else ""
 
 
 
@@ -255,6 +293,30 @@ def sentence_variant(name: str, variant: tuple, paper: tuple) -> str:
     else:
         how = f"overlapping the paper-faithful mode's {_pct(plo)}–{_pct(phi)}"
     return f"variant `{name}`, noise-free: fused {_pct(lo)}–{_pct(hi)} — {how}."
+
+
+def sentence_sensor_matched(matched: tuple, paper: tuple, clean: tuple | None,
+                            threshold: float = TRUST_ACCURACY) -> str:
+    """What the variant 'sensor_matched' does with the default sensor set: its fused accuracy range over p
+    (``matched``) beside the paper-faithful mode's on the same windows (``paper``), and on noise-free windows
+    (``clean``, the library's noise not matching the data)."""
+    lo, hi = matched
+    plo, phi = paper
+    where = ("at every p" if lo >= threshold else
+             (f"below {_pct(threshold, 0)} at every p" if hi < threshold else f"below {_pct(threshold, 0)} at some p"))
+    if lo > phi:
+        how = "better than the paper-faithful mode at every p"
+    elif hi < plo:
+        how = "worse than the paper-faithful mode at every p"
+    else:
+        how = "overlapping the paper-faithful mode"
+    text = (f"variant `sensor_matched` (library from the pattern runs recorded through the same sensor model), "
+            f"default sensor set: fused {_pct(lo)}–{_pct(hi)} ({'≥ ' + _pct(threshold, 0) + ' ' if lo >= threshold else ''}"
+            f"{where}), {how} ({_pct(plo)}–{_pct(phi)})")
+    if clean is not None:
+        text += (f"; on noise-free windows, which its library's noise does not match, {_pct(clean[0])}–{_pct(clean[1])}"
+                 + (" (build its library with the sensors actually used)" if clean[0] < threshold else ""))
+    return text + "."
 
 
 def sentence_ablation(base: np.ndarray, ablated: np.ndarray, signals=SIGNALS, step: float = 0.10) -> str:
@@ -302,8 +364,14 @@ def trust_limits(validity: list, mismatch: dict, ps: tuple | None = None, thresh
 
 
 def trust_sentence(limits: dict, sensor_accuracy: float | None = None, sensors: str = "",
-                   threshold: float = TRUST_ACCURACY) -> str:
-    """ONE sentence a user can act on: when to trust the image method (from :func:`trust_limits`)."""
+                   threshold: float = TRUST_ACCURACY, matched_accuracy: float | None = None,
+                   width_simulated: dict | None = None) -> str:
+    """ONE sentence a user can act on: when to trust the image method (from :func:`trust_limits`).
+
+    ``sensor_accuracy``: the paper-faithful fused accuracy with the default sensor set (lowest over p);
+    ``matched_accuracy``: variant 'sensor_matched''s on the same data (lowest over p), or None;
+    ``width_simulated``: {'accuracy': the variant's lowest fused accuracy over p at halfway widths, 'sensor_within':
+    the share of those windows whose width the default sensors give to 0.1 % (or None)}, or None."""
     sh, wd = limits.get("share"), limits.get("width")
     if sh is None:
         cond = f"on no drive of the map (fused below {_pct(threshold, 0)} even at the smallest film share)"
@@ -312,15 +380,32 @@ def trust_sentence(limits: dict, sensor_accuracy: float | None = None, sensors: 
                 f"(fused ≥ {_pct(threshold, 0)} at every p and every paper example right up to there)")
     if wd is None or wd == 0:
         cond += ", with a library built at the window's own backlash width (any width mismatch in the map drops it below"\
-                f" {_pct(threshold, 0)})"
+                f" {_pct(threshold, 0)}"
+        ws = width_simulated or {}
+        if ws.get("accuracy") is not None and ws["accuracy"] >= threshold:
+            within = ws.get("sensor_within")
+            got = "100 %" if ws["accuracy"] >= 1.0 else f"≥ {_pct(ws['accuracy'])}"
+            cond += (f"; between library widths the variant `width_simulated` gets {got} where the "
+                     "width is known to ≈ 0.1 %" + ("" if within is None else
+                                                     (", which the default sensors give" if within >= 0.9 else
+                                                      f", which the default sensors give in only {_pct(within)} of "
+                                                      "the windows")))
+        cond += ")"
     else:
         cond += f", with the window's width within ±{100 * wd:.3g} % of a library width"
     if sensor_accuracy is not None:
         if sensor_accuracy >= threshold:
             cond += f", and with sensors as good as the default set ({_pct(sensor_accuracy)} there)"
+        elif matched_accuracy is not None and matched_accuracy >= threshold:
+            cond += (f"; with real sensors (the default set: paper-faithful {_pct(sensor_accuracy)}) use the variant "
+                     "`sensor_matched`, a library recorded through the same sensor model ("
+                     + ("100 %" if matched_accuracy >= 1.0 else f"≥ {_pct(matched_accuracy)}")
+                     + " there at every p); otherwise use the gap estimate")
         else:
-            cond += (f", and with sensors far better than the default set (there it is {_pct(sensor_accuracy)}); "
-                     "otherwise use the gap estimate")
+            cond += (f", and with sensors far better than the default set (there it is {_pct(sensor_accuracy)}"
+                     + ("" if matched_accuracy is None else
+                        f", {_pct(matched_accuracy)} with the variant `sensor_matched`")
+                     + "); otherwise use the gap estimate")
     return f"**When to trust the image method:** {cond}."
 
 
@@ -347,6 +432,9 @@ def _summary_lines(ev: Evaluation) -> list[str]:
     ls = rng("load_scaled, noise-free")
     if ls and pc:
         out.append("* " + sentence_variant("load_scaled", ls[:2], pc[:2]))
+    matched = _matched_ranges(ev)
+    if matched is not None:
+        out.append("* " + sentence_sensor_matched(*matched))
     for g, b in zip(ev.gap, ev.best):
         err = np.abs(g["rel_error"])
         out.append(f"* gap estimator, {g['label']}: max |J1 error| {np.nanmax(err) * 100:.2f} %, nearest class right "
@@ -358,8 +446,34 @@ def _summary_lines(ev: Evaluation) -> list[str]:
         out.append("* " + trust_sentence(trust_limits(ev.validity + [{"share": ev.film_share, "examples": ev.examples,
                                                                     "result": ev.results[0]}], ev.width_mismatch,
                                                       ev.validity[0]["result"].p_values),
-                                         None if sens is None else sens[0], ev.sensors))
+                                         None if sens is None else sens[0], ev.sensors,
+                                         matched_accuracy=None if matched is None else matched[0][0],
+                                         width_simulated=_width_simulated_summary(ev)))
     return out
+
+
+def _width_simulated_summary(ev: Evaluation) -> dict | None:
+    """The variant width_simulated's lowest fused accuracy at halfway widths and how often the default sensors
+    give the width to 0.1 % (for :func:`trust_sentence`), or None."""
+    hw = ev.halfway or {}
+    if "width_simulated" not in hw:
+        return None
+    sw = hw.get("sensor_width_error")
+    return {"accuracy": float(hw["width_simulated"].accuracy()["fused"].min()),
+            "sensor_within": None if not sw else sw["within_0.1%"]}
+
+
+def _matched_ranges(ev: Evaluation):
+    """(sensor_matched on the sensor data, paper on the same data, sensor_matched noise-free) as fused
+    (lowest, highest) over p, or None when the evaluation has no 'sensor_matched' row on sensor data."""
+    def fused(variant, sensors):
+        r = next((r for r in ev.results if r.notes.get("variant") == variant
+                  and r.notes.get("data", "").startswith("sensors") == sensors), None)
+        return None if r is None else (r.accuracy()["fused"].min(), r.accuracy()["fused"].max())
+    matched, paper = fused("sensor_matched", True), fused("paper", True)
+    if matched is None or paper is None:
+        return None
+    return matched, paper, fused("sensor_matched", False)
 
 
 def render_markdown(ev: Evaluation, figures: dict, robustness=None, total_seconds: float | None = None) -> str:
@@ -370,7 +484,8 @@ def render_markdown(ev: Evaluation, figures: dict, robustness=None, total_second
              f"method's grid evaluation) took {ev.seconds:.0f} s (simulation of the 168 cases {ev.simulate_seconds:.1f} s)"
              f"{total}. Headline accuracy counts the 126 cases "
              "at η_k ≠ 0.025; the 42 pattern runs (η_k = 0.025) are identified trivially (distance 0) and are "
-             "reported apart. Noisy windows are tested against the noise-free library; SNR as MATLAB's "
+             "reported apart. Noisy windows are tested against the noise-free library (except in the variant "
+             "`sensor_matched`, whose library is recorded through the default sensor set); SNR as MATLAB's "
              "`awgn(x, snr, 'measured')` on a1, m_el, ω1, a2, v2, ω2 (for comparison with MATLAB results); "
              f"'sensors' = the default sensor set (`sim.sensors.DEFAULT_SENSORS`: {ev.sensors})."
              f" The evaluated profile's film share at η_k = 0.025: {100 * ev.film_share:.3g} %.", ""]
@@ -486,10 +601,7 @@ def write_figures(ev: Evaluation, system, method, outdir: str | Path = "docs/fig
         ax.set_title(f"{row['signal']} J1={row['j1']:g} w={row['width']:g} η={row['eta']:g} p={row['p']}", fontsize=8)
     axes[0, 0].legend(fontsize=7)
     fig.suptitle("H / max H for the paper's 16 examples (dotted: true class; lowest bar wins)")
-    p = out / "h_paper_examples.png"
-    fig.savefig(p, dpi=90)
-    plt.close(fig)
-    figs["H vectors of the paper's 16 examples, paper vs ours"] = str(p.relative_to(out.parent))
+    _save_figure(fig, out, "h_paper_examples.png", "H vectors of the paper's 16 examples, paper vs ours", figs)
     if ev.validity:
         main = next((r for r in ev.results if r.label == "paper, noise-free"), None)
         pts = [(v["share"], v["result"], v["examples"], v.get("ablation")) for v in ev.validity]
@@ -521,28 +633,33 @@ def write_figures(ev: Evaluation, system, method, outdir: str | Path = "docs/fig
         ax2.set_ylabel("median margin (2nd smallest / smallest H)")
         ax2.legend(fontsize=8)
         fig.suptitle("Validity map: image method against the film share (noise-free)")
-        p = out / "validity_film_share.png"
-        fig.savefig(p, dpi=90)
-        plt.close(fig)
-        figs["Validity map: accuracy and margin against the film share"] = str(p.relative_to(out.parent))
+        _save_figure(fig, out, "validity_film_share.png", "Validity map: accuracy and margin against the film share",
+                     figs)
     if ev.width_mismatch:
         wm = ev.width_mismatch
         fig, ax = plt.subplots(figsize=(7, 4.2), constrained_layout=True)
         for k, pv in enumerate(wm["p_values"]):
             ax.plot(100 * wm["mismatch"], 100 * wm["accuracy"][:, k], "o-", ms=3, label=f"fused, p = {pv:g}")
         if ev.halfway:
-            for name, mk in (("nearest", "x"), ("width_interp", "^")):
-                ax.axhline(100 * ev.halfway[name].accuracy()["fused"][0], ls="--" if name == "nearest" else "-.",
-                           lw=1, color="k" if name == "nearest" else "g",
-                           label=f"halfway widths, {name} (p = 2)")
+            for name, ls, color in (("nearest", "--", "k"), ("width_interp", "-.", "g"), ("width_simulated", ":", "b")):
+                if name in ev.halfway:
+                    ax.axhline(100 * ev.halfway[name].accuracy()["fused"][0], ls=ls, lw=1, color=color,
+                               label=f"halfway widths, {name} (p = 2)")
         ax.axhline(100 / 7, color="gray", lw=0.8, ls=":", label="chance (1/7)")
         ax.set_xlabel("width mismatch: library width / window width − 1 [%]")
         ax.set_ylabel("fused accuracy [%]")
         ax.set_ylim(0, 102)
         ax.legend(fontsize=7)
         ax.set_title("Validity map: accuracy against the width mismatch (noise-free)")
-        p = out / "validity_width_mismatch.png"
-        fig.savefig(p, dpi=90)
-        plt.close(fig)
-        figs["Validity map: accuracy against the width mismatch"] = str(p.relative_to(out.parent))
+        _save_figure(fig, out, "validity_width_mismatch.png", "Validity map: accuracy against the width mismatch",
+                     figs)
     return figs
+
+
+def _save_figure(fig, outdir: Path, name: str, title: str, figs: dict) -> None:
+    """Save ``fig`` as ``outdir/name`` (90 dpi), close it, and record it in ``figs`` under ``title``."""
+    import matplotlib.pyplot as plt
+    path = outdir / name
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    figs[title] = str(path.relative_to(outdir.parent))

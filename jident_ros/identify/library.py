@@ -44,7 +44,8 @@ def load_pattern_library(path, system, method, build_if_missing: bool = True,
     t0 = time.perf_counter()
 
     def progress(k, n):
-        log(f"building pattern library: signal {k}/{n} done ({time.perf_counter() - t0:.1f} s)")
+        step = "noise seed" if method.variant == "sensor_matched" else "signal"   # what PatternLibrary.build counts
+        log(f"building pattern library: {step} {k}/{n} done ({time.perf_counter() - t0:.1f} s)")
 
     try:
         lib = PatternLibrary.build(system, method, progress=progress)

@@ -10,6 +10,7 @@ configuration is refused with a message that names what differs.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import time
 from dataclasses import dataclass
@@ -29,13 +30,23 @@ from jident_ros.method.pipeline import (
     pre_entry_reference,
     window_features,
 )
-from jident_ros.sim import Case, simulate_grid
+from jident_ros.sim import Case, WindowSet, simulate_grid
 from jident_ros.sim.params import SystemConfig
+from jident_ros.sim.sensors import apply_sensors
 
 FORMAT_VERSION = 1
-#: How a window's backlash width picks its patterns: the paper's nearest library width, or (a variant
-#: beyond the paper, issue 13) the N2 matrices and h5 interpolated linearly in width to the window's width.
-WIDTH_MODES = ("nearest", "width_interp")
+#: Variant 'sensor_matched': the noise seeds of the library's pattern runs are MATCHED_SEED_BASE + 1, 2, ...
+#: (apart from the seeds the evaluation tests with, 1-5 and 1000-1100).
+MATCHED_SEED_BASE = 5000
+#: How a window's backlash width picks its patterns: the paper's nearest library width, or (variants
+#: beyond the paper, issue 13) the N2 matrices and h5 interpolated linearly in width to the window's width
+#: (``width_interp``), or the pattern runs simulated at the window's width (``width_simulated``,
+#: :func:`simulated_width_library`; needs the system configuration).
+WIDTH_MODES = ("nearest", "width_interp", "width_simulated")
+#: ``width_simulated``: the window's width is rounded to this many significant digits before the pattern runs
+#: are simulated (one library per rounded width, cached): a relative rounding of at most 0.005 %, well below
+#: the 0.1 % width error that already costs accuracy (docs/method.md, "Width-aware patterns").
+WIDTH_SIMULATED_DIGITS = 5
 
 
 class LibraryMismatch(ValueError):
@@ -59,6 +70,10 @@ class PatternLibrary:
         (h3, k3) of each pattern run.
     p_values, widths_m, classes_kgm2, signals : tuples indexing the axes
     metadata : dict (format, configs, hashes, created)
+    scatter : ndarray, shape (n_p, n_widths, n_signals, n_clusters), or None
+        Variant 'sensor_matched' only (beyond the paper): the seed-to-seed standard deviation of each
+        sorted centre of the pattern runs under the sensor noise, pooled over the J1 classes; H is then
+        measured in units of it (:func:`pipeline.h_vector`) and the signals are fused by the plain sum.
     """
 
     centres: np.ndarray
@@ -69,6 +84,7 @@ class PatternLibrary:
     classes_kgm2: tuple
     signals: tuple
     metadata: dict
+    scatter: np.ndarray | None = None
 
     # -------------------------------------------------------------- building
     @classmethod
@@ -78,16 +94,55 @@ class PatternLibrary:
         ``windows`` may be a precomputed WindowSet holding exactly those runs
         (any order); otherwise they are simulated.
         """
-        g = system.grid
-        eta = g.pattern_consistency_pa_sn
-        wanted = [Case(j, w, eta) for j in g.inertia_classes_kgm2 for w in g.backlash_widths_m]
+        wanted = pattern_run_cases(system)
         if windows is None:
             windows = simulate_grid(system, wanted)
         index = {c: i for i, c in enumerate(windows.cases)}
         missing = [c for c in wanted if c not in index]
         if missing:
             raise ValueError(f"windows: missing pattern runs, e.g. {missing[0]}")
-        return cls.from_windows(windows, [index[c] for c in wanted], system, method, progress)
+        order = [index[c] for c in wanted]
+        if method.variant == "sensor_matched":
+            return cls.sensor_matched(take_windows(windows, order), system, method, progress)
+        return cls.from_windows(windows, order, system, method, progress)
+
+    @classmethod
+    def sensor_matched(cls, windows: WindowSet, system: SystemConfig, method: MethodConfig,
+                       progress=None) -> "PatternLibrary":
+        """Variant 'sensor_matched' (beyond the paper): the library of the noise-free pattern runs
+        ``windows`` (class-major, width-minor) as recorded through ``method.sensor_spec()``, with
+        ``method.matched_seeds`` noise seeds (MATCHED_SEED_BASE + 1, ...).  N2 = the mean of the seeds' centres,
+        ``scatter`` = their standard deviation (docs/method.md, "Variant sensor_matched")."""
+        spec = method.sensor_spec()
+        feats, ranges = [], []
+        n = method.matched_seeds
+        for k, seed in enumerate(matched_seeds(method)):
+            noisy = apply_sensors(windows, spec, seed, system.motor.base.torque_nm)
+            lib = cls.from_windows(noisy, range(len(noisy.cases)), system, method.replace(variant="paper"))
+            feats.append(lib.centres)
+            ranges.append(lib.ranges)
+            if progress:
+                progress(k + 1, n)
+        return cls.from_seed_libraries(np.array(feats), np.array(ranges), system, method)
+
+    @classmethod
+    def from_seed_libraries(cls, centres: np.ndarray, ranges: np.ndarray, system: SystemConfig,
+                            method: MethodConfig) -> "PatternLibrary":
+        """Variant 'sensor_matched' library from per-seed pattern centres (n_seeds, n_p, n_widths, n_signals,
+        n_classes, K) and ranges (n_seeds, n_widths, n_signals, n_classes, 2): N2 = the seed mean of the
+        centres, scatter = their seed-to-seed standard deviation pooled (averaged) over the J1 classes."""
+        centres, ranges = np.asarray(centres, dtype=float), np.asarray(ranges, dtype=float)
+        if centres.shape[0] < 2:
+            raise ValueError(f"centres: need >= 2 seeds for the scatter, got {centres.shape[0]}")
+        mean = centres.mean(axis=0)
+        scatter = centres.std(axis=0, ddof=1).mean(axis=3)            # (n_p, n_widths, n_signals, K)
+        floor = 1e-9 * np.maximum(np.abs(mean).max(axis=3), 1e-300)   # a centre that never moves: tiny, not 0
+        scatter = np.maximum(scatter, floor)
+        rng = ranges.mean(axis=0)
+        g = system.grid
+        return cls(np.ascontiguousarray(mean), h5_table(mean, rng), rng, tuple(float(p) for p in method.p_values),
+                   tuple(g.backlash_widths_m), tuple(g.inertia_classes_kgm2), SIGNALS,
+                   library_metadata(system, method), np.ascontiguousarray(scatter))
 
     @classmethod
     def from_windows(cls, windows, order: Sequence[int], system: SystemConfig, method: MethodConfig,
@@ -151,7 +206,8 @@ class PatternLibrary:
             np.savez_compressed(f, centres=self.centres, h5=self.h5, ranges=self.ranges,
                                 p_values=np.array(self.p_values), widths_m=np.array(self.widths_m),
                                 classes_kgm2=np.array(self.classes_kgm2),
-                                signals=np.array(self.signals), metadata=np.array(json.dumps(self.metadata)))
+                                signals=np.array(self.signals), metadata=np.array(json.dumps(self.metadata)),
+                                **({} if self.scatter is None else {"scatter": self.scatter}))
         tmp.replace(path)  # atomic: a reader never sees half a library
         return path
 
@@ -169,7 +225,8 @@ class PatternLibrary:
                 meta = json.loads(str(z["metadata"]))
                 lib = cls(z["centres"], z["h5"], z["ranges"], tuple(float(p) for p in z["p_values"]),
                           tuple(float(w) for w in z["widths_m"]), tuple(float(c) for c in z["classes_kgm2"]),
-                          tuple(str(s) for s in z["signals"]), meta)
+                          tuple(str(s) for s in z["signals"]), meta,
+                          z["scatter"] if "scatter" in z.files else None)
         except KeyError as exc:  # a readable .npz without the library's arrays
             raise LibraryMismatch(f"{where}: not a jident pattern library ({exc})") from None
         except Exception as exc:  # zip (truncated, bad CRC), zlib, npy format, JSON: all "unreadable"
@@ -189,6 +246,10 @@ class PatternLibrary:
         non-finite values: a damaged or hand-edited file is never used."""
         n_p, n_w, n_s, n_c = len(self.p_values), len(self.widths_m), len(self.signals), len(self.classes_kgm2)
         want = {"centres": (n_p, n_w, n_s, n_c), "h5": (n_p, n_w, n_s), "ranges": (n_w, n_s, n_c, 2)}
+        if self.scatter is not None:
+            want["scatter"] = (n_p, n_w, n_s, np.asarray(self.centres).shape[-1])
+            if not np.all(np.asarray(self.scatter) > 0):
+                raise LibraryMismatch(f"{where}: scatter holds values <= 0; rebuild it")
         for name, shape in want.items():
             arr = np.asarray(getattr(self, name))
             got = arr.shape[:len(shape)] if name == "centres" else arr.shape
@@ -238,16 +299,36 @@ class PatternLibrary:
             raise ValueError(f"backlash_width_m: must be a finite number > 0, got {width_m!r}")
         return int(np.argmin(np.abs(np.array(self.widths_m) - width_m)))
 
-    def patterns_at(self, k: int, s: int, width_m: float, mode: str = "nearest") -> tuple[np.ndarray, float]:
-        """(N2, h5) of p index ``k`` and signal index ``s`` for a window of backlash width ``width_m``.
+    def h_vector(self, k: int, s: int, width_m: float, tested_centres: np.ndarray,
+                 mode: str = "nearest") -> np.ndarray:
+        """H of one signal's tested centres N3 against the patterns at ``width_m`` (``patterns_at``):
+        eq. (33), or with a scatter (variant 'sensor_matched') the distance in units of the scatter."""
+        n2, h5 = self.patterns_at(k, s, width_m, mode)
+        scatter = None if self.scatter is None else self.scatter_at(k, s, width_m, mode)
+        return h_vector(n2, tested_centres, h5, scatter)
 
-        ``nearest`` (the paper: patterns and tests at the same width e): the library width nearest to
-        ``width_m``.  ``width_interp`` (beyond the paper): N2 (the KHM centres of the seven pattern runs)
-        and h5 interpolated linearly in width between the two library widths around ``width_m``; outside
-        the library's widths the nearest end is used (no extrapolation)."""
+    def fuse(self, h_vectors: Sequence[np.ndarray]) -> tuple[int, float]:
+        """Fused class and margin over signals: the paper's :func:`fuse` (each H over its own sum), or with a
+        scatter (variant 'sensor_matched') the plain sum of the H vectors, each already in units of its
+        signal's noise scatter, so a signal the noise scrambles weighs less by itself."""
+        if self.scatter is None:
+            return fuse(h_vectors)
+        total = np.sum([np.asarray(h, dtype=float) for h in h_vectors], axis=0)
+        return int(np.argmin(total)), margin(total)
+
+    def scatter_at(self, k: int, s: int, width_m: float, mode: str = "nearest") -> np.ndarray:
+        """The scatter (variant 'sensor_matched') at ``width_m``, picked or interpolated as ``patterns_at``."""
+        if self.scatter is None:
+            raise ValueError("scatter: this library has none (variant 'sensor_matched' only)")
+        return self._at(self.scatter[k, :, s], width_m, mode)
+
+    def _at(self, per_width: np.ndarray, width_m: float, mode: str) -> np.ndarray:
+        """Row of ``per_width`` (indexed by library width) at ``width_m`` by ``mode`` (see patterns_at)."""
         if mode == "nearest":
-            e = self.width_index(width_m)
-            return self.centres[k, e, s], float(self.h5[k, e, s])
+            return per_width[self.width_index(width_m)]
+        if mode == "width_simulated":
+            raise ValueError("width mode 'width_simulated' simulates its patterns: identify_window(..., system=...) "
+                             "or simulated_width_library()")
         if mode != "width_interp":
             raise ValueError(f"width mode: one of {', '.join(WIDTH_MODES)}, got {mode!r}")
         self.width_index(width_m)  # validates width_m
@@ -255,13 +336,20 @@ class PatternLibrary:
         order = np.argsort(w)
         ws = w[order]
         if width_m <= ws[0] or width_m >= ws[-1] or ws.size == 1:
-            e = self.width_index(width_m)
-            return self.centres[k, e, s], float(self.h5[k, e, s])
-        j = int(np.searchsorted(ws, width_m))           # ws[j - 1] < width_m <= ws[j]
+            return per_width[self.width_index(width_m)]
+        j = int(np.searchsorted(ws, width_m))
         lo, hi = int(order[j - 1]), int(order[j])
         t = (width_m - ws[j - 1]) / (ws[j] - ws[j - 1])
-        n2 = (1.0 - t) * self.centres[k, lo, s] + t * self.centres[k, hi, s]
-        return n2, float((1.0 - t) * self.h5[k, lo, s] + t * self.h5[k, hi, s])
+        return (1.0 - t) * per_width[lo] + t * per_width[hi]
+
+    def patterns_at(self, k: int, s: int, width_m: float, mode: str = "nearest") -> tuple[np.ndarray, float]:
+        """(N2, h5) of p index ``k`` and signal index ``s`` for a window of backlash width ``width_m``.
+
+        ``nearest`` (the paper: patterns and tests at the same width e): the library width nearest to
+        ``width_m``.  ``width_interp`` (beyond the paper): N2 (the KHM centres of the seven pattern runs)
+        and h5 interpolated linearly in width between the two library widths around ``width_m``; outside
+        the library's widths the nearest end is used (no extrapolation)."""
+        return self._at(self.centres[k, :, s], width_m, mode), float(self._at(self.h5[k, :, s], width_m, mode))
 
     def p_index(self, p: float) -> int:
         for k, q in enumerate(self.p_values):
@@ -327,12 +415,19 @@ class Identification:
 
 def identify_window(window: dict, entry_index: int, backlash_width_m: float, library: PatternLibrary,
                     method: MethodConfig, p: float, signals: Sequence[str] = SIGNALS,
-                    width_mode: str = "nearest") -> Identification:
+                    width_mode: str = "nearest", system: SystemConfig | None = None) -> Identification:
     """Identify J1 from one window (dict of 1-D arrays per signal).
 
     ``width_mode`` (:data:`WIDTH_MODES`): ``nearest`` compares with the patterns of the library width
     nearest to ``backlash_width_m`` (the paper); ``width_interp`` with the patterns interpolated to it
-    (give the window's estimated width, e.g. :func:`jident_ros.identify.gap.estimate_backlash_width`)."""
+    (give the window's estimated width, e.g. :func:`jident_ros.identify.gap.estimate_backlash_width`);
+    ``width_simulated`` with pattern runs simulated at that width (``system`` needed;
+    :func:`simulated_width_library`, ``library`` is then not used)."""
+    if width_mode == "width_simulated":
+        if system is None:
+            raise ValueError("system: width_mode 'width_simulated' simulates the pattern runs, give the SystemConfig")
+        library = simulated_width_library(system, method, backlash_width_m)
+        width_mode = "nearest"
     e = library.width_index(backlash_width_m)
     k = library.p_index(p)
     ref = pre_entry_reference(window, entry_index) if "m_el" in window else None
@@ -340,11 +435,10 @@ def identify_window(window: dict, entry_index: int, backlash_width_m: float, lib
     centres, _ = window_features(window, method, [p], signals, ref, entry_index)
     for j, name in enumerate(signals):
         s = library.signals.index(name)
-        n2, h5 = library.patterns_at(k, s, backlash_width_m, width_mode)
-        h = h_vector(n2, centres[0, j], h5)
+        h = library.h_vector(k, s, backlash_width_m, centres[0, j], width_mode)
         c = int(np.argmin(h))
         answers[name] = SignalAnswer(name, float(p), h, c, library.classes_kgm2[c], margin(h))
-    fc, fm = fuse([a.h for a in answers.values()])
+    fc, fm = library.fuse([a.h for a in answers.values()])
     return Identification(answers, fc, library.classes_kgm2[fc], fm, e, float(p))
 
 
@@ -360,3 +454,47 @@ def fuse(h_vectors: Sequence[np.ndarray]) -> tuple[int, float]:
         sm = h.sum()
         total += h / sm if sm > 0 else h
     return int(np.argmin(total)), margin(total)
+
+
+def pattern_run_cases(system: SystemConfig) -> list[Case]:
+    """The library's pattern runs: every J1 class and width at the pattern eta_k, class-major, width-minor."""
+    g = system.grid
+    return [Case(j, w, g.pattern_consistency_pa_sn) for j in g.inertia_classes_kgm2 for w in g.backlash_widths_m]
+
+
+def rounded_width(width_m: float) -> float:
+    """A window's width rounded to WIDTH_SIMULATED_DIGITS significant digits."""
+    if not np.isfinite(width_m) or width_m <= 0:
+        raise ValueError(f"backlash_width_m: must be a finite number > 0, got {width_m!r}")
+    return float(f"{width_m:.{WIDTH_SIMULATED_DIGITS}g}")
+
+
+
+def simulated_width_library(system: SystemConfig, method: MethodConfig, width_m: float) -> "PatternLibrary":
+    """Variant ``width_simulated`` (beyond the paper): the library of the seven pattern runs (eta_k = 0.025)
+    simulated at the window's backlash width (:func:`rounded_width`), built as :meth:`PatternLibrary.build`
+    (so also with the variant 'sensor_matched'); cached per (system, method, rounded width)."""
+    return _simulated_width_library(system, method, rounded_width(width_m))
+
+
+@functools.lru_cache(maxsize=32)
+def _simulated_width_library(system: SystemConfig, method: MethodConfig, width_m: float) -> "PatternLibrary":
+    return PatternLibrary.build(with_widths(system, (width_m,)), method)
+
+
+def with_widths(system: SystemConfig, widths_m: Sequence[float]) -> SystemConfig:
+    """``system`` with the pattern library's backlash widths replaced by ``widths_m``."""
+    return dataclasses.replace(system, grid=dataclasses.replace(system.grid, backlash_widths_m=tuple(widths_m)))
+
+
+def matched_seeds(method: MethodConfig) -> list[int]:
+    """The noise seeds of variant 'sensor_matched''s pattern runs."""
+    return [MATCHED_SEED_BASE + 1 + k for k in range(method.matched_seeds)]
+
+
+def take_windows(windows: WindowSet, order: Sequence[int]) -> WindowSet:
+    """The windows ``order`` of a WindowSet, in that order."""
+    idx = np.asarray(list(order), dtype=int)
+    return WindowSet(windows.t, {k: v[idx] for k, v in windows.signals.items()}, [windows.cases[i] for i in idx],
+                     windows.entry_index, windows.sample_period_s, np.asarray(windows.initial_slip)[idx],
+                     dict(windows.metadata))

@@ -20,9 +20,12 @@ from jident_ros.method import normalise as nz
 from jident_ros.method.image import drawn_cells, level_histogram_from_cells
 from jident_ros.method.khm import khm_fit_batch
 from jident_ros.method.scalogram import READINGS, percentage_energy_cells, wavelet_coefficients
+from jident_ros.sim.sensors import DEFAULT_SENSORS, SensorSpec
 
 SIGNALS = ("a1", "m_el", "omega1", "a2", "v2")
-VARIANTS = ("paper", "load_scaled")
+VARIANTS = ("paper", "load_scaled", "sensor_matched")
+#: Fields of :class:`jident_ros.sim.sensors.SensorSpec` that ``MethodConfig.matched_sensors`` may override.
+MATCHED_SENSOR_FIELDS = tuple(f.name for f in dataclasses.fields(SensorSpec))
 
 
 @dataclass(frozen=True)
@@ -48,9 +51,15 @@ class MethodConfig:
     eq12 : str
         'corrected' or 'literal' reading of eq. (12).
     variant : str
-        'paper' (faithful) or 'load_scaled' (docs/method.md, section "variant").
+        'paper' (faithful), 'load_scaled' or 'sensor_matched' (docs/method.md, section "variant").
     khm_max_iter : int
     khm_tol : float
+    matched_seeds : int
+        Variant 'sensor_matched' (beyond the paper): how many noise realisations (seeds) of each pattern
+        run the library averages; N2 is their mean centres, the scatter their seed-to-seed spread.
+    matched_sensors : tuple of (SensorSpec field, value)
+        Variant 'sensor_matched': the sensor set the pattern runs are recorded through, as overrides of
+        the documented default set (:data:`jident_ros.sim.sensors.DEFAULT_SENSORS`); empty = that set.
     """
 
     wavelets: tuple = (("a1", "sym5"), ("m_el", "db6"), ("omega1", "sym5"), ("a2", "db6"), ("v2", "sym5"))
@@ -65,6 +74,8 @@ class MethodConfig:
     variant: str = "paper"
     khm_max_iter: int = 3000
     khm_tol: float = 1e-7
+    matched_seeds: int = 16
+    matched_sensors: tuple = ()
 
     def __post_init__(self):
         if self.scale_reading not in READINGS:
@@ -79,6 +90,32 @@ class MethodConfig:
         for p in self.p_values:
             if not p >= 2:
                 raise ValueError(f"method.p_values: every p must be >= 2, got {p!r}")
+        if isinstance(self.matched_seeds, bool) or not isinstance(self.matched_seeds, int) or self.matched_seeds < 2:
+            raise ValueError(f"method.matched_seeds: must be an integer >= 2 (the scatter needs two seeds), "
+                             f"got {self.matched_seeds!r}")
+        spec = self.sensor_spec()   # validates matched_sensors
+        # canonical form (one library hash per sensor set): the fields that differ from the default set, sorted
+        canonical = tuple((f, float(getattr(spec, f))) for f in MATCHED_SENSOR_FIELDS
+                          if float(getattr(spec, f)) != float(getattr(DEFAULT_SENSORS, f)))
+        object.__setattr__(self, "matched_sensors", canonical)
+
+    def sensor_spec(self) -> SensorSpec:
+        """The sensor set of variant 'sensor_matched': the default set with ``matched_sensors`` applied."""
+        try:
+            over = dict(self.matched_sensors)
+        except (TypeError, ValueError):
+            raise ValueError(f"method.matched_sensors: expected (sensor field, value) pairs, "
+                             f"got {self.matched_sensors!r}") from None
+        for name in over:
+            if name not in MATCHED_SENSOR_FIELDS:
+                raise ValueError(f"method.matched_sensors.{name}: unknown sensor field "
+                                 f"(known: {', '.join(MATCHED_SENSOR_FIELDS)})")
+        if "encoder_counts_per_rev" in over:
+            over["encoder_counts_per_rev"] = int(over["encoder_counts_per_rev"])
+        try:
+            return dataclasses.replace(DEFAULT_SENSORS, **over)
+        except ValueError as exc:
+            raise ValueError(f"method.matched_sensors: {exc}") from None
 
     @property
     def wavelet(self) -> dict:
@@ -105,12 +142,13 @@ def prepare_signal(x: np.ndarray, signal: str, reference: float | None, variant:
                    entry_index: int = 48) -> np.ndarray:
     """Variant hook: what enters the scalogram and the range statistics.
 
-    'paper' uses the window as recorded.  'load_scaled' takes the window's
+    'paper' and 'sensor_matched' (which changes only the library and the distance,
+    :mod:`jident_ros.method.patterns`) use the window as recorded.  'load_scaled' takes the window's
     deviation from its own pre-entry mean and divides it by the pre-entry load
     torque ``reference`` (N m), making the features per unit of load (see
     docs/method.md, "variant").
     """
-    if variant == "paper":
+    if variant in ("paper", "sensor_matched"):
         return x
     if reference is None or not np.isfinite(reference) or reference == 0:
         raise ValueError(f"reference: variant {variant!r} needs a finite non-zero pre-entry load torque, "
@@ -248,10 +286,15 @@ def pre_entry_reference(window: dict, entry_index: int) -> float:
     return float(np.mean(m[:entry_index]))
 
 
-def h_vector(pattern_centres: np.ndarray, tested_centres: np.ndarray, h5: float) -> np.ndarray:
-    """Eq. (33): H(f) = h5 * sum_i |N2(f, i) - N3(i)|, shape (n_classes,)."""
+def h_vector(pattern_centres: np.ndarray, tested_centres: np.ndarray, h5: float, scatter=None) -> np.ndarray:
+    """Eq. (33): H(f) = h5 * sum_i |N2(f, i) - N3(i)|, shape (n_classes,).
+
+    With ``scatter`` (variant 'sensor_matched', shape (n_clusters,)): H(f) = sum_i |N2(f, i) - N3(i)| / scatter(i),
+    each centre's distance in units of its seed-to-seed spread under the sensor noise (h5 is not used)."""
     n2 = np.asarray(pattern_centres, dtype=float)
     n3 = np.asarray(tested_centres, dtype=float)
+    if scatter is not None:
+        return (np.abs(n2 - n3[None, :]) / np.asarray(scatter, dtype=float)[None, :]).sum(axis=1)
     return h5 * np.abs(n2 - n3[None, :]).sum(axis=1)
 
 

@@ -21,6 +21,7 @@ from jident_ros.config import (
     method_config_from_dict,
     system_config_from_dict,
 )
+from jident_ros.method.pipeline import MATCHED_SENSOR_FIELDS
 from jident_ros.parameters import Param
 
 #: Sections of the shared configuration files (config/system.yaml, config/method.yaml).
@@ -72,7 +73,8 @@ def system_defaults() -> dict:
 
 
 def method_defaults() -> dict:
-    """Dotted parameters of config/method.yaml; ``method.wavelets`` becomes ``method.wavelets.<signal>``."""
+    """Dotted parameters of config/method.yaml; ``method.wavelets`` becomes ``method.wavelets.<signal>``,
+    ``method.matched_sensors`` ``method.matched_sensors.<SensorSpec field>`` (every field)."""
     cfg = load_method_config()
     out = {}
     for f in dataclasses.fields(cfg):
@@ -80,6 +82,10 @@ def method_defaults() -> dict:
         if f.name == "wavelets":
             for sig, w in v:
                 out[f"method.wavelets.{sig}"] = w
+        elif f.name == "matched_sensors":   # every sensor field, at the configured set's value
+            spec = cfg.sensor_spec()
+            for name in MATCHED_SENSOR_FIELDS:
+                out[f"method.matched_sensors.{name}"] = getattr(spec, name)
         else:
             out[f"method.{f.name}"] = _ros_value(v)
     return out
