@@ -89,19 +89,19 @@ def recording(system, j1: float, steady_s: float):
     return rec, data, stamps
 
 
-def batched_windows(system, data) -> list:
+def batched_windows(system, data, channels=CH) -> list:
     """The batched path: the detector the offline `jident diagnose` builds, fed batches of 50."""
-    det = _make_detector(system, None, None, CH, None, WINDOWING_DEFAULTS, "bench", "flank")
+    det = _make_detector(system, None, None, channels, None, WINDOWING_DEFAULTS, "bench", "flank")
     wins = []
     for b in stream_batches(data, 50):
-        wins += [e.window for e in det.push(b, CH) if e.kind == "window"]
+        wins += [e.window for e in det.push(b, channels) if e.kind == "window"]
     return wins
 
 
-def diagnose_csv(data, env, tmp: Path) -> list:
+def diagnose_csv(data, env, tmp: Path, channels=CH) -> list:
     """`jident diagnose --no-image --json` on the same samples written as CSV: its windows (JSON)."""
     csv_path, out = tmp / "recording.csv", tmp / "diagnose.json"
-    np.savetxt(csv_path, data, delimiter=",", header=",".join(CH), comments="", fmt="%.17g")
+    np.savetxt(csv_path, data, delimiter=",", header=",".join(channels), comments="", fmt="%.17g")
     subprocess.run([sys.executable, "-m", "jident_ros.cli", "diagnose", str(csv_path), "--no-image", "--json",
                     str(out), "--quiet"], env=env, check=True, stdout=subprocess.DEVNULL)
     return json.loads(out.read_text())["windows"]
@@ -153,16 +153,14 @@ class Bench:
 
     def on_diag(self, msg):
         for s in msg.status:
-            if s.name.endswith(": rate") and "windowing" in s.name:
+            if s.name.endswith(": rate") and "windowing" in s.name and s.hardware_id.startswith(NS + "/"):
                 self.status = {kv.key: kv.value for kv in s.values}
 
     def spin_until(self, cond, timeout_s: float) -> bool:
         end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            if cond():
-                return True
+        while not cond() and time.monotonic() < end:
             self.ex.spin_once(timeout_sec=0.05)
-        return cond()
+        return bool(cond())
 
     def reset(self):
         self.windows, self.progress, self.status = [], [], {}
@@ -269,9 +267,12 @@ def main_node(a) -> dict:
         for r in range(a.rounds):
             j1 = CASES[r % len(CASES)]
             rec, data, stamps = recording(system, j1, a.steady_s)
-            ref = batched_windows(system, data)
+            # what the node sees: without the Imu no a1 column
+            chans = tuple(c for c in CH if c != "a1" or not a.no_imu)
+            seen = data[:, [CH.index(c) for c in chans]]
+            ref = batched_windows(system, seen, chans)
             with tempfile.TemporaryDirectory(prefix="jident-jsbench-") as tmp:
-                js = diagnose_csv(data, env, Path(tmp))
+                js = diagnose_csv(seen, env, Path(tmp), chans)
                 msgs = bench.messages(data, stamps)
                 res = run_round(bench, env, Path(tmp), msgs, data, ts, not a.no_imu)
             got = res.pop("windows")
