@@ -52,3 +52,22 @@ def test_paper_mode_needs_k2_and_flank_mode_refuses_it(tmp_path, rec):
         diagnose_samples(p, image_method=False, detector="paper")
     with pytest.raises(OfflineError, match="only for --detector paper"):
         diagnose_samples(p, image_method=False, backlash_width_m=0.005)
+
+
+def test_csv_without_alpha2_gives_a_dynamics_window_only_with_detector_dynamics(tmp_path, rec, capsys):
+    """A drive without a load encoder (no alpha2, omega2, a2, v2 columns): ``--detector dynamics`` finds the entry
+    from m_el and a1 on the true sample and the gap fit gives J1; the default flank detector refuses it in one line
+    naming alpha2."""
+    from jident_ros.evaluation.raw_inputs import without
+    p = write(tmp_path / "motor_only.csv", without(rec, ("alpha2", "omega2", "a2", "v2")))
+    assert "alpha2" not in p.read_text().splitlines()[0].split(",")
+    out = tmp_path / "d.json"
+    assert jident(["diagnose", str(p), "--detector", "dynamics", "--no-image", "--json", str(out), "--quiet"]) == 0
+    (w,) = json.loads(out.read_text())["windows"]
+    assert w["detector"] == "dynamics"
+    assert w["entry_time_s"] == pytest.approx(rec.data[rec.entry_row, 0], abs=1e-9)
+    assert w["inertia_estimate_kgm2"] == pytest.approx(1.073, rel=0.01), w["message"]
+    capsys.readouterr()
+    assert jident(["diagnose", str(p), "--no-image", "--quiet"]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'alpha2' missing" in err[0], err

@@ -246,3 +246,25 @@ def test_the_default_image_min_margin_is_what_the_command_gives(configs, library
     s = image_evaluation_set(*configs, library)
     assert choose_image_threshold(s.margins, s.correct).parameter_value == pytest.approx(
         VerdictPolicy().image_min_margin, rel=1e-6)
+
+
+# ------------------------------------------------------------------------------------------------ reverse rotation
+
+
+def test_a_reverse_window_is_mirrored_before_the_image_method(configs, library, windows):
+    """A reverse window (every channel but t negated: the model is odd) gives the forward window's image class and
+    margin, and ``image_rotation`` says it was mirrored; the forward window carries no such key.  Without the mirror
+    the image method is not sign-invariant: the margin on the raw reverse window differs (checked here too)."""
+    from jident_ros.identify.diagnosis import mirrored
+    from jident_ros.method.patterns import identify_window
+    system, method = configs
+    for i in range(2):
+        fwd = windows.case(i)
+        rev = mirrored(fwd)
+        df, _ = _diagnose(configs, library, fwd)
+        dr, _ = _diagnose(configs, library, rev)
+        vf, vr = df.value_dict(), dr.value_dict()
+        assert "image_rotation" not in vf and vr["image_rotation"] == "reverse (mirrored)", (vf, vr)
+        assert vr["image_class_kgm2"] == vf["image_class_kgm2"] and vr["image_margin"] == vf["image_margin"]
+        raw = identify_window(rev, 48, 0.005, library, method, 2.0)
+        assert raw.fused_margin != pytest.approx(vf["image_margin"], rel=1e-6), "the raw reverse window is no test"

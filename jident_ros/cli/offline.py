@@ -100,7 +100,7 @@ class OfflineWindow:
     def to_json(self) -> dict:
         d = self.diagnosis
         return {"window_id": self.window_id, "entry_time_s": self.entry_time_s,
-                "backlash_width_m": self.backlash_width_m, "true_inertia_kgm2": self.true_inertia_kgm2,
+                "backlash_width_m": _json_value(self.backlash_width_m), "true_inertia_kgm2": self.true_inertia_kgm2,
                 "inertia_estimate_kgm2": d.inertia_kgm2, "estimate_source": d.source,
                 "identified_class_kgm2": d.class_kgm2, "error_percent": self.error_percent,
                 "level": d.level_name, "status": d.status, "refused_reason": d.refused_reason,

@@ -129,7 +129,7 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                     started_at: Optional[float] = None,
                     policy: Optional[VerdictPolicy] = None, recontact_index: Optional[int] = None,
                     width_estimate: Optional[WidthEstimate] = None,
-                    entry_uncertainty_samples: int = 0) -> WindowDiagnosis:
+                    entry_uncertainty_samples: int = 0, backlash_width_unknown: bool = False) -> WindowDiagnosis:
     """Diagnose one window (see the module docstring).
 
     Parameters
@@ -161,6 +161,9 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
         (:func:`detector_arguments`)
     entry_uncertainty_samples : the entry row is known to +- this many samples (a dynamics-detector window
         without a1, :func:`detector_arguments`): the gap fit's uncertainty takes it in
+    backlash_width_unknown : K2 is not known (a dynamics-detector window without a load encoder: no flanks to
+        measure, :func:`detector_arguments`): a NaN ``backlash_width_m`` is then accepted; the gap fit runs
+        without it, the image method (which picks its library width by K2) is not run and the status says so
     """
     t0 = time.perf_counter() if started_at is None else float(started_at)
     if gap_method not in GAP_METHODS:
@@ -194,8 +197,9 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                                status=status, refused_reason=refused, **kw)
 
     # 0. the input
+    k2_unknown = bool(backlash_width_unknown) and isinstance(backlash_width_m, float) and math.isnan(backlash_width_m)
     refusal = input_refusal(window_data, entry_index, backlash_width_m, wheel_radius_m, sample_period_s,
-                            system=system, policy=policy, nominal_kgm2=nominal)
+                            system=system, policy=policy, nominal_kgm2=nominal, width_unknown=k2_unknown)
     if entry_time_s is None and refusal is None and "t" in window_data:
         entry_time_s = float(np.asarray(window_data["t"], float)[entry_index])
     if entry_time_s is not None:
@@ -226,7 +230,7 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
         except NoGapError as exc:
             gap_reason = str(exc)
             problems.append(f"gap: {exc}")
-        if gap is None or gap.interval == "angles":   # K2 bounded the gap (or was blamed for its absence)
+        if not k2_unknown and (gap is None or gap.interval == "angles"):   # K2 bounded the gap (or was blamed)
             try:
                 recontact = recontact_check(window_data, entry_index, backlash_width_m, wheel_radius_m)
             except NoGapError as exc:
@@ -262,7 +266,9 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
         gap_reason = "gap method off"
     # 2. the image method, and whether its answer is trusted
     idn, image_cls, in_domain, domain_reason = None, None, False, ""
-    if image_method:
+    if image_method and k2_unknown:
+        vals.append(("image_method", "not run: K2 unknown (no load encoder), no library width to compare with"))
+    elif image_method:
         if library is None:
             problems.append(library_error or "no pattern library")
         else:
@@ -294,7 +300,7 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                  ("library_width_m", lib_width)]
         for s, a in idn.answers.items():
             vals += [(f"j1.{s}", a.inertia_kgm2), (f"h.{s}", a.h), (f"margin.{s}", a.margin)]
-    library_missing = image_method and library is None
+    library_missing = image_method and not k2_unknown and library is None
     lib_text = library_error or "no pattern library"
 
     def image_phrase(disagree_with: str) -> tuple:
@@ -425,6 +431,8 @@ def detector_arguments(window) -> dict:
            "width_estimate": est}
     if kind == "dynamics" and "a1" not in window.channels:
         out["entry_uncertainty_samples"] = ENTRY_UNCERTAINTY_WITHOUT_A1
+    if kind == "dynamics" and not math.isfinite(window.backlash_width_m):
+        out["backlash_width_unknown"] = True     # no load encoder: no flank-to-flank travel, no K2
     return out
 
 

@@ -142,14 +142,15 @@ def _positive(name: str, v) -> Optional[str]:
 
 
 def input_refusal(window: Mapping, entry_index, backlash_width_m, wheel_radius_m, sample_period_s, *,
-                  system, policy: VerdictPolicy, nominal_kgm2: float) -> Optional[str]:
+                  system, policy: VerdictPolicy, nominal_kgm2: float, width_unknown: bool = False) -> Optional[str]:
     """Why the window's header or content cannot support an estimate (one line naming the field and
     the value), or None.  Checks, in order: the header values (sample period, wheel radius, backlash
     width > 0 and finite), the channels (1-D, all of one length), the length (at least the configured
     ``sampling.samples_before_entry`` before the entry and ``samples_from_entry`` from it), every value
-    finite, and the magnitudes of :func:`input_bounds`."""
-    for name, v in (("sample_period_s", sample_period_s), ("wheel_radius_m", wheel_radius_m),
-                    ("backlash_width_m", backlash_width_m)):
+    finite, and the magnitudes of :func:`input_bounds`.  ``width_unknown``: K2 is not known (NaN, a
+    dynamics-detector window without a load encoder) and not checked."""
+    header = (("sample_period_s", sample_period_s), ("wheel_radius_m", wheel_radius_m))
+    for name, v in header + (() if width_unknown else (("backlash_width_m", backlash_width_m),)):
         why = _positive(name, v)
         if why:
             return why

@@ -177,9 +177,15 @@ def tick(state: str, handlers: Mapping[str, Callable[[], None]], fail: Callable[
 
 
 def spin(node, executor, stop: StopFlag, period_s: float = SPIN_PERIOD_S) -> None:
-    """Spin until a signal arrives, the node is ``done`` or the context is shut down."""
+    """Spin until a signal arrives, the node is ``done`` or the context is shut down.  A node whose
+    ``spin_in_periods`` is true is spun ``period_s`` at a time (every ready callback in that time, then the
+    checks) instead of one callback at a time: for many small messages (the windowing node on JointState)."""
+    pending = executor.create_future() if getattr(node, "spin_in_periods", False) else None
     while not stop.set and not getattr(node, "done", False) and node.context.ok():
-        executor.spin_once(timeout_sec=period_s)
+        if pending is not None:
+            executor.spin_until_future_complete(pending, timeout_sec=period_s)   # never completes: a period
+        else:
+            executor.spin_once(timeout_sec=period_s)
 
 
 def main(factory: Callable[..., Any], prog: str, args=None) -> int:
@@ -210,7 +216,8 @@ def main(factory: Callable[..., Any], prog: str, args=None) -> int:
             return EXIT_BAD_PARAMETER
         try:
             node = factory(args)
-            executor = SingleThreadedExecutor()
+            # a node may bring its own executor (the windowing node on JointState: one callback per sample)
+            executor = node.make_executor() if hasattr(node, "make_executor") else SingleThreadedExecutor()
             executor.add_node(node)
             if hasattr(node, "autostart"):
                 node.autostart()

@@ -14,6 +14,7 @@ import math
 import time
 
 from rclpy.node import Node
+from rosbags.typesys import Stores, get_typestore
 from std_msgs.msg import Float64, Float64MultiArray
 
 from jident_ros.identify.levels import ERROR, OK, STALE, WARN
@@ -138,10 +139,14 @@ class WindowingNode(Node):
             from sensor_msgs.msg import Imu, JointState  # only this input needs sensor_msgs (ros-sensor-msgs)
             self.adapter = JointStateAdapter(s.sampling.sample_period_s, c["motor_joint"], c["load_joint"],
                                              c["batch_size"], c["use_imu"], c["imu_axis"])
-            self.sub = self.create_subscription(JointState, "joint_states", self.on_joint_state,
-                                                qos_signals(c["signals_queue_depth"]))
+            # raw subscriptions, decoded by rosbags' CDR deserialiser: half the CPU of rclpy's message conversion
+            # (JointState 8 vs 14 us, Imu 8 vs 23 us; bench/bench_jointstate.py, docs/results.md)
+            self._cdr = get_typestore(Stores.ROS2_HUMBLE).deserialize_cdr
+            self.sub = self.create_subscription(JointState, "joint_states", self.on_joint_state_cdr,
+                                                qos_signals(c["signals_queue_depth"]), raw=True)
             if c["use_imu"]:
-                self.sub_imu = self.create_subscription(Imu, "imu", self.on_imu, qos_signals(c["signals_queue_depth"]))
+                self.sub_imu = self.create_subscription(Imu, "imu", self.on_imu_cdr,
+                                                        qos_signals(c["signals_queue_depth"]), raw=True)
         else:
             self.sub = self.create_subscription(Float64MultiArray, "drive/signals", self.on_signals,
                                                 qos_signals(c["signals_queue_depth"]))
@@ -170,6 +175,22 @@ class WindowingNode(Node):
             f"{', following drive/backlash_width' if c['backlash_width_from_topic'] else ''}); windows of "
             f"{self.detector.window_length} samples on {self.resolve_topic_name('drive/window')}")
 
+    def make_executor(self):
+        """The executor runtime.main spins this node with.  ``input: joint_states`` (one message per sample, 2
+        callbacks per sample with the Imu): rclpy's EventsExecutor -- SingleThreadedExecutor rebuilds its wait set
+        for every callback, which cost about 3/4 of the node's CPU at 2 kHz (bench/bench_jointstate.py --profile);
+        ``signals`` (one batch of 50 samples per message): SingleThreadedExecutor as every other node."""
+        if self.adapter is not None:
+            try:
+                from rclpy.experimental import EventsExecutor
+            except ImportError:   # an rclpy without it (before Jazzy): the default executor, slower
+                pass
+            else:
+                self.spin_in_periods = True     # runtime.spin: a period's callbacks per call, not one
+                return EventsExecutor(context=self.context)
+        from rclpy.executors import SingleThreadedExecutor
+        return SingleThreadedExecutor(context=self.context)
+
     # ----------------------------------------------------------------- parameters at run time
     def on_parameters(self, changed: dict) -> None:
         """Apply accepted changes (validated by RuntimeParameters): K2, the gap tolerance, hardware_id."""
@@ -197,17 +218,21 @@ class WindowingNode(Node):
         except Exception as exc:  # never die on input: report, reset, go on
             self._report_error("drive/signals callback", exc)
 
-    def on_joint_state(self, msg):
+    def on_joint_state_cdr(self, data: bytes):
+        """A serialized sensor_msgs/JointState (raw subscription)."""
         self._last_batch_wall = time.monotonic()
         try:
+            msg = self._cdr(data, "sensor_msgs/msg/JointState")
             st = msg.header.stamp
             self._batches(self.adapter.push(st.sec + 1e-9 * st.nanosec, msg.name, msg.position, msg.velocity,
                                             msg.effort))
         except Exception as exc:  # never die on input: report, reset, go on
             self._report_error("joint_states callback", exc)
 
-    def on_imu(self, msg):
+    def on_imu_cdr(self, data: bytes):
+        """A serialized sensor_msgs/Imu (raw subscription)."""
         try:
+            msg = self._cdr(data, "sensor_msgs/msg/Imu")
             st = msg.header.stamp
             self._batches(self.adapter.push_imu(st.sec + 1e-9 * st.nanosec, msg.linear_acceleration))
         except Exception as exc:
