@@ -131,3 +131,15 @@ def test_speed_fit_interval_covers_with_speed_noise():
             continue
         covered += abs(jj - j) <= 2.05 * se
     assert covered >= 0.9 * (200 - refused)
+
+
+def test_a_missing_load_channel_is_a_counted_drop_that_says_what_to_configure():
+    """Default channels (with alpha2) on a drive without a load encoder: every batch is dropped, counted, and the
+    reason names the channel and tells the user to leave it out of `channels`."""
+    det = detector(("t", "alpha1", "alpha2", "a1", "m_el", "omega1"))
+    t = np.arange(10) * TS
+    batch = np.column_stack([t, np.zeros(10), np.zeros(10), np.full(10, 5.0), np.zeros(10)])
+    events = det.push(batch, ("t", "alpha1", "a1", "m_el", "omega1"))
+    assert [e.reason for e in events] == ["missing_channel"]
+    assert "'alpha2' missing" in events[0].detail and "leave alpha2" in events[0].detail
+    assert det.counts["missing_channel"] == 1

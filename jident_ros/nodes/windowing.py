@@ -169,6 +169,11 @@ class WindowingNode(Node):
             self.get_logger().info(f"watching {self.resolve_topic_name(self.sub.topic_name)} for flank departures "
                                    f"(no K2); windows on {self.resolve_topic_name('drive/window')}")
             return
+        if self.detector_kind == "dynamics":
+            self.get_logger().info(f"watching {self.resolve_topic_name(self.sub.topic_name)} for the load-torque drop "
+                                   f"of contact loss (m_el - J1 dω1/dt; no angles, no K2); windows on "
+                                   f"{self.resolve_topic_name('drive/window')}")
+            return
         self.get_logger().info(
             f"watching {self.resolve_topic_name('drive/signals')} for |alpha1 - alpha2| < K2/r = "
             f"{self.detector.threshold_rad:.6g} rad (K2 = {c['backlash_width_m']:g} m"

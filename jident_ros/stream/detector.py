@@ -103,6 +103,8 @@ class BacklashDetector:
     #: Channels every batch must carry, and why (one-line errors).
     required_channels = REQUIRED_CHANNELS
     required_reason = "inequality 1 uses t, alpha1, alpha2"
+    #: appended to a ``missing_channel`` drop's reason (what to configure instead)
+    missing_channel_hint = ""
 
     def __init__(self, backlash_width_m: float, wheel_radius_m: float, sample_period_s: float,
                  channels: Sequence[str] = DEFAULT_CHANNELS, samples_before_entry: int = 48,
@@ -231,7 +233,8 @@ class BacklashDetector:
             return None, ("unknown_channel", f"unknown channel {unknown[0]!r} (known: {', '.join(KNOWN_CHANNELS)})")
         missing = [c for c in self.channels if c not in channels]
         if missing:
-            return None, ("missing_channel", f"channel {missing[0]!r} missing (batch has {','.join(channels)})")
+            return None, ("missing_channel", f"channel {missing[0]!r} missing (batch has {','.join(channels)})"
+                                             f"{self.missing_channel_hint}")
         cols = [channels.index(c) for c in self.channels]
         x = np.asarray(a[:, cols], dtype=np.float64)
         bad = ~np.isfinite(x)

@@ -68,6 +68,8 @@ class DynamicsDetector(FlankDetector):
     detector_name = "dynamics"
     required_channels = ("t", "m_el")
     required_reason = "the load torque m_el - J1 dω1/dt needs t and m_el"
+    missing_channel_hint = ("; the dynamics detector captures every channel in `channels`: on a drive without a load "
+                            "encoder leave alpha2 (and the other load-side channels) out of it")
 
     def __init__(self, wheel_radius_m: float, sample_period_s: float, channels: Sequence[str] = (),
                  nominal_inertia_kgm2: Optional[float] = None, samples_before_entry: int = 48,
