@@ -15,6 +15,7 @@ Never imports rclpy.
 """
 from __future__ import annotations
 
+import functools
 from typing import Any, Mapping
 
 import numpy as np
@@ -46,12 +47,20 @@ _DTYPES = {"bool": "?", "byte": "u1", "char": "u1", "octet": "u1", "int8": "i1",
 
 def canonical_type(msg_type: str) -> str:
     """``pkg/Type`` or ``pkg/msg/Type`` -> ``pkg/msg/Type``."""
+    return _canonical_type(str(msg_type))
+
+
+@functools.lru_cache(maxsize=256)
+def _canonical_type(msg_type: str) -> str:
+    # cached: a recording names a handful of types over ~10^5 messages (rosbags' normalisation was a sixth of
+    # ``jident trend``'s time, bench/bench_trend_cli.py --profile)
     parts = str(msg_type).strip().split("/")
     if len(parts) in (2, 3) and all(parts):
         return normalize_msgtype(str(msg_type).strip())
     raise ValueError(f"not a ROS 2 message type name: {msg_type!r} (expected pkg/msg/Type)")
 
 
+@functools.lru_cache(maxsize=256)
 def _known(msg_type: str) -> str:
     name = canonical_type(msg_type)
     if name not in TYPESTORE.fielddefs:
