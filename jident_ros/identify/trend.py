@@ -562,6 +562,17 @@ class _Channel:
                 and robust_scale ** 2 > chi2.ppf(SE_SCALE_TEST_LEVEL, dof) / dof:
             self.scale = min(robust_scale, self.cfg.se_scale_max)
 
+    def _commissioned(self, m: float, v: float, idx: int):
+        """End of commissioning at window ``idx``: the baseline (and the kept reference) m with variance
+        v x scale^2, the history's standard errors scaled, monitoring from the next window."""
+        self.baseline, self.baseline_var = m, v * self.scale ** 2
+        self.reference, self.reference_var = self.baseline, self.baseline_var
+        self.history = deque(((i, tt, yy, s * self.scale) for i, tt, yy, s in self.history),
+                             maxlen=self.history.maxlen)
+        self.comm = []
+        self.phase = MONITORING
+        self.cusum.reset(idx + 1)
+
     def _innovation(self, z: float) -> float:
         c = self.cfg.innovation_clip_sd
         return c if z > c else (-c if z < -c else z)
@@ -614,15 +625,8 @@ class _InertiaChannel(_Channel):
             if self._commissioning_done(t):
                 m, v, rs = _huber_mean(self.comm, estimate_scale=True)
                 self._set_scale(rs, len(self.comm) - 1)
-                self.x = m
-                self.baseline, self.baseline_var = m, v * self.scale ** 2
-                self.reference, self.reference_var = self.baseline, self.baseline_var
-                self.P = self.baseline_var
-                self.history = deque(((i, tt, yy, s * self.scale) for i, tt, yy, s in self.history),
-                                     maxlen=self.history.maxlen)
-                self.comm = []
-                self.phase = MONITORING
-                self.cusum.reset(idx + 1)
+                self._commissioned(m, v, idx)
+                self.x, self.P = m, self.baseline_var
             return None
         se = se * self.scale
         p = (idx, t, y, se)
@@ -793,16 +797,9 @@ class _WidthChannel(_Channel):
                 else:
                     dof = len(self.comm) - 1
                 self._set_scale(rs, dof)
-                s2 = self.scale ** 2
-                self.baseline, self.baseline_var = m, v * s2
-                self.reference, self.reference_var = self.baseline, self.baseline_var
-                self.w[:self.count] /= s2
+                self.w[:self.count] /= self.scale ** 2
                 self._refit()
-                self.history = deque(((i, tt, yy, s * self.scale) for i, tt, yy, s in self.history),
-                                     maxlen=self.history.maxlen)
-                self.comm = []
-                self.phase = MONITORING
-                self.cusum.reset(idx + 1)
+                self._commissioned(m, v, idx)
             return None
         se = se * self.scale
         p = (idx, t, y, se)
@@ -902,6 +899,11 @@ def _check_time(v) -> tuple[float | None, str | None]:
     if v is None:
         return None, "time_s: missing"
     return _parse_float("time_s", v)
+
+
+def _beyond(value: float, warn: float, alarm: float) -> int:
+    """OK, WARN (value above ``warn``) or ERROR (above ``alarm``)."""
+    return ERROR if value > alarm else (WARN if value > warn else OK)
 
 
 def _fmt_pm(v: float, se: float, digits: int = 2) -> str:
@@ -1065,7 +1067,6 @@ class TrendTracker:
     def _health(self, idx, jx, jb, jd, jdse, jdr, wx, wse, rate, rate_se, ttl, ttl_lo, ttl_hi, events):
         cfg = self.config
         J, Wd = self._inertia, self._width
-        hold = cfg.change_hold_windows
         parts, level = [], OK
         if J.n == 0 and Wd.n == 0:
             return OK, f"learning the baseline: 0 of {cfg.commissioning_windows} windows (no estimate yet)"
@@ -1079,21 +1080,14 @@ class TrendTracker:
             if J.reference != jb:
                 txt += f"; {jdr:+.2f} % of commissioned {J.reference:.5g}"
             txt += ")"
-            worst = max(abs(jd), abs(jdr))
-            if worst > cfg.drift_alarm_pct:
-                level = ERROR
-                txt += f" beyond the {cfg.drift_alarm_pct:g} % alarm"
-            elif worst > cfg.drift_warn_pct:
-                level = max(level, WARN)
-                txt += f" beyond the {cfg.drift_warn_pct:g} % warning"
+            lv = _beyond(max(abs(jd), abs(jdr)), cfg.drift_warn_pct, cfg.drift_alarm_pct)
+            level = max(level, lv)
+            txt += ("", f" beyond the {cfg.drift_warn_pct:g} % warning", f" beyond the {cfg.drift_alarm_pct:g} % alarm")[lv]
             if J.phase == RELEARNING:
                 txt += f", re-learning the baseline ({len(J.relearn)} of {cfg.relearn_windows})"
-            if J.last_change_index is not None and idx - J.last_change_index < hold:
-                level = max(level, WARN)
-                ev = next((e for e in reversed(self.changes) if e.quantity == "inertia"), None)
-                if ev is not None:
-                    txt += (f"; change {ev.size_pct:+.2f} % ({ev.size:+.4g} kg m^2) detected at window "
-                            f"{ev.window_index} (t = {ev.time_s:.0f} s)")
+            phrase = self._held_change(J, idx, lambda ev: f"; change {ev.size_pct:+.2f} % ({ev.size:+.4g} kg m^2)")
+            if phrase is not None:
+                level, txt = max(level, WARN), txt + phrase
             parts.append(txt)
         # width
         if Wd.n > 0:
@@ -1106,25 +1100,29 @@ class TrendTracker:
                 if ttl is not None:
                     txt += (f", limit {cfg.width_limit_m * 1e3:.4g} mm in {ttl / SECONDS_PER_DAY:.3g} d "
                             f"[{ttl_lo / SECONDS_PER_DAY:.3g}, {ttl_hi / SECONDS_PER_DAY:.3g}]")
-                if wx > cfg.width_limit_m:
-                    level = ERROR
-                    txt += f" beyond the {cfg.width_limit_m * 1e3:.4g} mm limit"
-                elif wx > cfg.width_warn_limit_m:
-                    level = max(level, WARN)
-                    txt += f" beyond the {cfg.width_warn_limit_m * 1e3:.4g} mm warning"
-                elif ttl is not None and cfg.time_to_limit_warn_s is not None and ttl < cfg.time_to_limit_warn_s:
-                    level = max(level, WARN)
+                lv = _beyond(wx, cfg.width_warn_limit_m, cfg.width_limit_m)
+                txt += ("", f" beyond the {cfg.width_warn_limit_m * 1e3:.4g} mm warning",
+                        f" beyond the {cfg.width_limit_m * 1e3:.4g} mm limit")[lv]
+                if lv == OK and ttl is not None and cfg.time_to_limit_warn_s is not None \
+                        and ttl < cfg.time_to_limit_warn_s:
+                    lv = WARN
                     txt += f" (< {cfg.time_to_limit_warn_s / SECONDS_PER_DAY:.3g} d)"
+                level = max(level, lv)
                 if Wd.phase == COMMISSIONING:
                     txt += f" (learning the baseline: {Wd.progress()})"
-                if Wd.last_change_index is not None and idx - Wd.last_change_index < hold:
-                    level = max(level, WARN)
-                    ev = next((e for e in reversed(self.changes) if e.quantity == "width"), None)
-                    if ev is not None:
-                        txt += (f"; width change {ev.size * 1e3:+.3g} mm detected at window {ev.window_index} "
-                                f"(t = {ev.time_s:.0f} s)")
+                phrase = self._held_change(Wd, idx, lambda ev: f"; width change {ev.size * 1e3:+.3g} mm")
+                if phrase is not None:
+                    level, txt = max(level, WARN), txt + phrase
                 parts.append(txt)
         return level, "; ".join(parts)
+
+    def _held_change(self, ch: _Channel, idx: int, what) -> str | None:
+        """None unless the channel's last change is within change_hold_windows of window ``idx`` (WARN);
+        then its phrase: ``what(event)`` + where it was detected ('' when the event was dropped)."""
+        if ch.last_change_index is None or idx - ch.last_change_index >= self.config.change_hold_windows:
+            return None
+        ev = next((e for e in reversed(self.changes) if e.quantity == ch.name), None)
+        return "" if ev is None else f"{what(ev)} detected at window {ev.window_index} (t = {ev.time_s:.0f} s)"
 
     # -- state --------------------------------------------------------------------------------------
     def to_dict(self) -> dict:
