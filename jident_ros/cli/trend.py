@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import os
 import sys
 import time
 from dataclasses import dataclass
@@ -132,16 +133,32 @@ class TrendRun:
     seconds: float = 0.0
 
 
+def _diagnose_for_trend(rec, floor: float, kwargs: dict) -> tuple:
+    """One recording for :func:`run_trend` (also in a worker process): (TrendWindows, summary row, log
+    lines, the OfflineError's text or None)."""
+    lines: list = []
+    try:
+        res = diagnose_recording(rec, log=lines.append, **kwargs)
+    except OfflineError as exc:
+        return [], None, lines, str(exc)
+    return ([trend_window(w, str(rec), floor) for w in res.windows],
+            (str(rec), len(res.windows), res.samples, dict(res.dropped), res.clock_jumps), lines, None)
+
+
 def run_trend(recordings: Sequence, *, system=None, method=None, config: Optional[TrendConfig] = None,
               tracker: Optional[TrendTracker] = None, p: float = 2.0, gap_method: str = "auto",
               image_method: bool = False, library_path=None, backlash_width_m: Optional[float] = None,
               detector: str = "flank", gear_ratio: float = 1.0, log: Callable[[str], Any] = lambda text: None,
               on_window: Optional[Callable[[Any], Any]] = None,
-              on_recording: Optional[Callable[[int, str], Any]] = None) -> TrendRun:
+              on_recording: Optional[Callable[[int, str], Any]] = None, jobs: int = 1) -> TrendRun:
     """Diagnose every recording (``diagnose_recording``, with ``detector``: 'flank' -- no K2 needed, every
     window carries the flank-to-flank K2 estimate the trend follows -- or 'paper', inequality (1) with the
     recording's K2, the width then from the gap estimator), sort all windows by drive time and run the
-    tracker (``tracker``, e.g. restored from a state, else a new one with ``config``) over them."""
+    tracker (``tracker``, e.g. restored from a state, else a new one with ``config``) over them.
+
+    ``jobs`` > 1 (without the image method): the recordings are diagnosed by that many worker processes
+    (recordings are independent; the order of the result does not change); ``on_window`` is then not
+    called and ``on_recording`` is called as each recording is done."""
     t0 = time.perf_counter()
     system = load_system_config() if system is None else system
     method = load_method_config() if method is None else method
@@ -154,16 +171,38 @@ def run_trend(recordings: Sequence, *, system=None, method=None, config: Optiona
     windows, summary = [], []
     tr = tracker if tracker is not None else TrendTracker(config)
     floor = tr.config.width_se_floor_m
-    for k, rec in enumerate(recordings):
-        if on_recording is not None:
-            on_recording(k, str(rec))
-        res = diagnose_recording(rec, system=system, method=method, p=p, library=library,
-                                 library_path=library_path, build_if_missing=False, gap_method=gap_method,
-                                 image_method=image_method and library is not None,
-                                 backlash_width_m=backlash_width_m, log=log, on_window=on_window,
-                                 detector=detector, gear_ratio=gear_ratio)
-        windows.extend(trend_window(w, str(rec), floor) for w in res.windows)
-        summary.append((str(rec), len(res.windows), res.samples, dict(res.dropped), res.clock_jumps))
+    kwargs = dict(system=system, method=method, p=p, library_path=library_path, build_if_missing=False,
+                  gap_method=gap_method, image_method=image_method and library is not None,
+                  backlash_width_m=backlash_width_m, detector=detector, gear_ratio=gear_ratio)
+    jobs = max(1, min(int(jobs), len(recordings)))
+    if jobs > 1 and not image_method:
+        from concurrent.futures import ProcessPoolExecutor
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            futures = [pool.submit(_diagnose_for_trend, rec, floor, kwargs) for rec in recordings]
+            results = []
+            for k, (rec, fut) in enumerate(zip(recordings, futures)):
+                results.append(fut.result())
+                if on_recording is not None:
+                    on_recording(k, str(rec))
+    else:
+        results = []
+        for k, rec in enumerate(recordings):
+            if on_recording is not None:
+                on_recording(k, str(rec))
+            try:
+                res = diagnose_recording(rec, library=library, log=log, on_window=on_window, **kwargs)
+            except OfflineError as exc:
+                results.append(([], None, [], str(exc)))
+                break
+            results.append(([trend_window(w, str(rec), floor) for w in res.windows],
+                             (str(rec), len(res.windows), res.samples, dict(res.dropped), res.clock_jumps), [], None))
+    for wins, row, lines, error in results:
+        for line in lines:
+            log(line)
+        if error is not None:
+            raise OfflineError(error)
+        windows.extend(wins)
+        summary.append(row)
     windows.sort(key=lambda w: w.time_s)          # stable: recording order breaks ties
     skipped_old = 0
     if tr.last_time_s is not None:
@@ -573,6 +612,9 @@ def add_trend_parser(sub) -> None:
                         "else 0.005)")
     g.add_argument("--config", help="system config YAML (default: config/system.yaml)")
     g.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
+    g.add_argument("--jobs", type=_count("--jobs", 0), default=0,
+                   help="worker processes diagnosing the recordings in parallel (0, default: one per core; 1: in "
+                        "this process, progress per window; the image method always runs in this process)")
     g.add_argument("--quiet", action="store_true", help="no progress bar")
     g.set_defaults(func=cmd_trend)
 
@@ -614,14 +656,19 @@ def cmd_trend(args) -> int:
         def log(text):
             bar.write(f"jident trend: {text}", file=sys.stderr)
     n_rec = len(args.recordings)
+    jobs = args.jobs or (os.cpu_count() or 1)
+    if bar is not None and jobs > 1 and n_rec > 1 and not args.image_method:
+        bar.unit, bar.total = "recording", n_rec
     try:
         run = run_trend(args.recordings, system=system, method=method, config=config, tracker=tracker, p=args.p,
+                        jobs=jobs,
                         gap_method=args.gap_method, image_method=args.image_method, library_path=args.library,
                         backlash_width_m=args.backlash_width_m, detector=args.detector,
                         gear_ratio=args.gear_ratio, log=log,
                         on_window=None if bar is None else (lambda w: bar.update(1)),
                         on_recording=None if bar is None else
-                        (lambda k, rec: bar.set_description(f"recording {k + 1}/{n_rec}")))
+                        (lambda k, rec: bar.update(1) if bar.unit == "recording" else
+                         bar.set_description(f"recording {k + 1}/{n_rec}")))
     finally:
         if bar is not None:
             bar.close()
