@@ -34,9 +34,12 @@ from pathlib import Path
 import numpy as np
 
 from jident_ros.bag.recording import read_bag
+from jident_ros.cli.offline import OfflineError
+from jident_ros.cli.trend import format_summary, plot_trend, run_trend, write_trend_csv
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.levels import LEVEL_NAMES
 from jident_ros.identify.library import default_library_path
+from jident_ros.identify.trend import TrendConfig
 from jident_ros.identify.trend_status import TREND_STATUS_NAME
 from jident_ros.method.patterns import LibraryMismatch, PatternLibrary
 from jident_ros.nodes.ros_io import array_from_multiarray, qos_diagnostics, qos_latched, status_level, status_values
@@ -458,10 +461,6 @@ def _show_trend(out: Path, bag: Path, scenario, status, commissioning_windows: i
     """The end of ``--scenario wear``: the node's last "jident_diagnostic: trend" status, then ``jident trend``
     on the node's recording (drive/signals and the true values) -> <out>/trend.csv, trend.png and its
     summary.  Returns the failures (names) for the exit status."""
-    from jident_ros.cli.offline import OfflineError
-    from jident_ros.cli.trend import format_summary, plot_trend, run_trend, write_trend_csv
-    from jident_ros.identify.trend import TrendConfig
-
     failed = []
     if status is None:
         print("[demo] FAILED: no 'jident_diagnostic: trend' status received", file=sys.stderr)

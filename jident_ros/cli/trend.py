@@ -38,6 +38,7 @@ import math
 import os
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
@@ -176,7 +177,6 @@ def run_trend(recordings: Sequence, *, system=None, method=None, config: Optiona
                   backlash_width_m=backlash_width_m, detector=detector, gear_ratio=gear_ratio)
     jobs = max(1, min(int(jobs), len(recordings)))
     if jobs > 1 and not image_method:
-        from concurrent.futures import ProcessPoolExecutor
         with ProcessPoolExecutor(max_workers=jobs) as pool:
             futures = [pool.submit(_diagnose_for_trend, rec, floor, kwargs) for rec in recordings]
             results = []
