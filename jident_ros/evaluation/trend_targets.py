@@ -18,10 +18,14 @@ of :func:`jident_ros.identify.trend.simulate_series`).
 3. **Detection delay of a 2.5 % step.**  20 commissioning + 30 steady windows from the steady pool,
    then windows from the stepped pool (up or down, alternating) until the first J1 change of the
    right sign; delay 1 = detected at the first stepped window.
-4. **Wear rate after 20 windows.**  Per trial 20 cases with K2 growing linearly (start uniform in
-   2.5-3.0 mm so that the sample grid falls differently each trial), simulated, 30 dB noise, diagnosed:
-   J1 and K2 (:func:`jident_ros.identify.gap.estimate_backlash_width`, with the gap's end); the
-   tracker's wear rate after the 20th window against the truth.
+4. **Wear rate after 20 windows.**  Per trial 20 entries with K2 growing linearly (start uniform in
+   2.5-3.0 mm so that the sample grid falls differently each trial).  ``source="flank"`` (the path of the
+   node, of ``jident trend`` and of a real drive, :func:`flank_windows`): raw recordings (2^16-count encoders,
+   arbitrary offsets, 30 dB), the flank detector, each window diagnosed and turned into the tracker's inputs
+   by :func:`jident_ros.identify.trend_status.trend_inputs` (the flank detector's K2 with its se, no made-up
+   noise); ``source="gap"`` (the fallback, for comparison): paper-detector windows with the given K2 and
+   :func:`jident_ros.identify.gap.estimate_backlash_width`.  The tracker's wear rate after the 20th window
+   against the truth, and the calibration of the width estimates (error, se, 95 % coverage).
 5. **Tracker update time** on the real windows (median of 10,000 updates; the reference benchmark is
    bench/bench_trend.py, the ``jident trend`` time bench/bench_trend_cli.py).
 """
@@ -277,7 +281,7 @@ def format_table(r: dict) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description="issue 14's trend targets on real diagnosed simulator windows")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--quick", action="store_true", help="smaller pools and fewer trials (~15 s)")
+    ap.add_argument("--quick", action="store_true", help="smaller pools and fewer trials (~30 s)")
     a = ap.parse_args(argv)
     print(format_table(measure(a.seed, a.quick)))
     return 0
