@@ -48,3 +48,35 @@ def test_demo_rejects_a_bad_case(tmp_path):
                        env=dict(os.environ, PYTHONPATH=str(REPO)))
     assert r.returncode == 2
     assert "--case '1.1,abc,0.05'" in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_demo_wear_scenario_shows_the_trend(ros_env, tmp_path):
+    """`jident demo --scenario wear` on 10 entries: the three nodes with the flank detector and the trend; the
+    node's trend status, the J1 step found, the width from the flank detector, the trend plot written."""
+    env = dict(ros_env, JIDENT_CACHE_DIR=str(tmp_path / "cache"))
+    out = tmp_path / "demo"
+    cmd = [sys.executable, "-m", "jident_ros.cli", "demo", "--out", str(out), "--scenario", "wear", "--windows", "10",
+           "--commissioning-windows", "3", "--timeout", "150"]
+    r = subprocess.run(cmd, env=env, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    text = r.stdout
+    # the node's trend: every window's width from the flank detector, the +2.5 % step at entry 5 detected
+    node = next(line for line in text.splitlines() if "the diagnostic node's trend" in line)
+    assert "10 windows, width from the flank detector in 10, from the gap estimator in 0" in node, node
+    assert "change +2.50 %" in node, node
+    # jident trend on the node's recording: the same step, the plot
+    assert "inertia: +0.029" in text and "(+2.50 %)" in text, text
+    assert (out / "trend.png").stat().st_size > 10_000
+    summary = json.loads((out / "summary.json").read_text())
+    assert len(summary["cases"]) == 10 and all(c["class_correct"] for c in summary["cases"]), summary["cases"]
+    assert summary["recorded_topics"]["/demo/inertia_trend"] >= 10
+
+
+def test_demo_scenario_rejects_bad_arguments(tmp_path):
+    for args, field in ((["--windows", "4"], "--windows"), (["--case", "1.1,0.005,0.05"], "--case")):
+        r = subprocess.run([sys.executable, "-m", "jident_ros.cli", "demo", "--scenario", "wear", *args],
+                           cwd=tmp_path, capture_output=True, text=True, timeout=60,
+                           env=dict(os.environ, PYTHONPATH=str(REPO)))
+        assert r.returncode == 2 and field in r.stderr and "Traceback" not in r.stderr, r.stderr

@@ -86,3 +86,46 @@ def test_bad_trend_parameter_is_one_line(node_env, tmp_path):
     rc = p.wait(TIMEOUT)
     out = p.text().strip().splitlines()
     assert rc == 2 and len(out) == 1 and "trend_drift_alarm_pct" in out[0] and "Traceback" not in out[0], logs(p)
+
+
+@pytest.mark.ros
+def test_trend_parameters_set_at_run_time_and_the_flank_width(node_env, ros, procs, tmp_path):
+    """Settable trend_* parameters are validated (a bad one refused with the reason, the read-only ones
+    refused) and take effect with the next window, the tracker's state kept; a flank-detector window's K2
+    estimate is what the trend follows (width_source flank)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from std_msgs.msg import Float64, Float64MultiArray
+    from test_node_params import _set
+
+    from jident_ros.nodes.ros_io import qos_diagnostics, qos_latched, status_values, window_to_msg
+    diags = ros.collect(DiagnosticArray, "/diagnostics", qos_diagnostics())
+    w_trend = ros.collect(Float64, "/trs/backlash_width_trend", qos_latched())
+    pub = ros.node.create_publisher(Float64MultiArray, "/trs/drive/window", qos_latched(N_WINDOWS))
+    p = _start(node_env, tmp_path, "trs", tmp_path / "trs.json")
+    procs.append(p)
+    node = "/trs/jident_diagnostic"
+    assert ros.spin_until(lambda: pub.get_subscription_count() >= 1), logs(p)
+    for name, value, reason in (("trend_drift_alarm_pct", 1.0, "trend_drift_alarm_pct"),   # below the 2 % warning
+                                ("trend_innovation_clip_sd", 1.0, "trend_innovation_clip_sd"),   # not above k
+                                ("trend_width_regression_windows", 10, "read-only"),
+                                ("trend_inertia_baseline_kgm2", 1.2, "read-only"),
+                                ("trend_state_file", "/tmp/x.json", "read-only")):
+        r = _set(ros, node, name, value)
+        assert not r.successful and reason in r.reason, (name, value, r.reason)
+    r = _set(ros, node, "trend_commissioning_windows", 2)    # started with 3
+    assert r.successful, r.reason
+    base = _window()
+    for k in (1, 2):
+        w = dataclasses.replace(base, window_id=k, entry_time_s=base.entry_time_s + 10.0 * k, detector="flank",
+                                backlash_width_estimate_m=0.0041 + 1e-5 * k, backlash_width_se_m=2e-6)
+        pub.publish(window_to_msg(w))
+    trend = lambda: [s for s in statuses(diags, "jident_diagnostic: trend", "/trs/drive")  # noqa: E731
+                     if status_values(s).get("windows_updated") == "2"]
+    assert ros.spin_until(trend, 2 * TIMEOUT), logs(p)
+    v = status_values(trend()[-1])
+    assert v["commissioning"] == "false", v           # 2 windows commissioned: the run-time value took effect
+    assert v["width_source"] == "flank" and v["width_from_flank_detector"] == "2" and \
+        v["width_from_gap_estimator"] == "0", v
+    assert ros.spin_until(lambda: len(w_trend) >= 2, 10), logs(p)
+    assert abs(w_trend[-1].data - 0.00412) < 2e-6, w_trend[-1].data     # the flank estimate, not the window's 5 mm
+    assert "parameters changed: trend_commissioning_windows = 2" in p.text(), logs(p)

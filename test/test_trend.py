@@ -55,7 +55,7 @@ def test_cusum_arl_matches_published_values_and_simulation():
     # an under-reported se (coverage 92 %) shortens the in-control run length as the integral equation predicts
     r = siegmund_check(2000.0, runs=400, seed=4, se_scale=coverage_to_se_scale(0.92))
     assert r["simulated_arl"] == pytest.approx(r["predicted_arl"], abs=3 * r["simulated_arl_se"])
-    assert TrendConfig().threshold_sd == pytest.approx(cusum_threshold_for_arl(1e6, 2.0))
+    assert TrendConfig().threshold_sd == pytest.approx(cusum_threshold_for_arl(3e5, 1.5))
 
 
 def test_coverage_to_se_scale():

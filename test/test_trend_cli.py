@@ -230,3 +230,61 @@ def test_trend_targets_quick_run():
     assert r["false"]["per_10k"] <= 1.0
     assert 0.9 <= r["steady"]["coverage95"] <= 0.99
     assert "| tracker update" in format_table(r)
+
+
+# --------------------------------------------------------------------------- what the trend takes of a window
+
+def _diagnosis(status, source, width_method="contact"):
+    from types import SimpleNamespace
+
+    from jident_ros.identify.gap import WidthEstimate
+    gap = SimpleNamespace(inertia_kgm2=1.3, std_error_kgm2=0.01, ci95_kgm2=(1.28, 1.32))
+    return SimpleNamespace(gap=gap, source=source, inertia_kgm2=1.3 if source == "gap" else None, status=status,
+                           refused_reason=None if source else "J1 1.3 outside the plausible band", problems=[],
+                           message=status, width=WidthEstimate(0.0051, 1e-4, 1500, width_method))
+
+
+def _offline_window(d, detector="paper", estimate=None):
+    from types import SimpleNamespace
+    return SimpleNamespace(diagnosis=d, entry_time_s=7.0, window_id=3, true_inertia_kgm2=None, detector=detector,
+                           backlash_width_estimate_m=estimate, backlash_width_se_m=None if estimate is None else 3e-6)
+
+
+def test_a_refused_or_ambiguous_gap_j1_is_not_fed_and_the_width_source_is_named():
+    from jident_ros.cli.trend import trend_window
+    from jident_ros.identify.trend_status import trend_inputs
+    for status in ("refused", "ambiguous"):
+        tw = trend_window(_offline_window(_diagnosis(status, None)), "rec")
+        assert tw.inertia_kgm2 is None and tw.inertia_se_kgm2 is None, tw
+        assert tw.skip_reason.startswith(f"gap J1 1.3 kg m^2 not published ({status}") and "plausible" in tw.skip_reason
+        assert (tw.width_m, tw.width_source) == (0.0051, "gap")          # the width is still followed
+    tw = trend_window(_offline_window(_diagnosis("deviating", "gap")), "rec")
+    assert (tw.inertia_kgm2, tw.inertia_se_kgm2, tw.inertia_ci_low_kgm2, tw.skip_reason) == (1.3, 0.01, 1.28, None)
+    # a flank-detector window: its flank-to-flank K2 wins over the gap estimator's width, with its se (floored)
+    tw = trend_window(_offline_window(_diagnosis("deviating", "gap"), "flank", 0.00482), "rec", width_se_floor_m=5e-6)
+    assert (tw.width_m, tw.width_se_m, tw.width_source) == (0.00482, 5e-6, "flank")
+    # no flank estimate in a flank window (NaN): the gap width, said so
+    from types import SimpleNamespace
+    win = SimpleNamespace(detector="flank", backlash_width_estimate_m=math.nan, backlash_width_se_m=math.nan)
+    assert trend_inputs(_diagnosis("deviating", "gap"), 0.0, win).width_source == "gap"
+    # the diagnosis' own flank width (diagnose_window with the detector's estimate) counts as flank
+    assert trend_inputs(_diagnosis("deviating", "gap", "flank")).width_source == "flank"
+
+
+def test_jident_trend_flank_and_paper_detectors_and_parallel_jobs(wear40, system):
+    from jident_ros.cli.trend import run_trend
+    one = run_trend([wear40, wear40], system=system, jobs=1)
+    two = run_trend([wear40, wear40], system=system, jobs=2)
+    assert [(w.time_s, w.inertia_kgm2, w.width_m) for w in one.windows] == \
+        [(w.time_s, w.inertia_kgm2, w.width_m) for w in two.windows]
+    assert len(one.windows) == 80 and one.recordings == two.recordings
+    flank = run_trend([wear40], system=system)
+    truth = 0.0025 + 0.001 * np.arange(40) / 39
+    w = np.array([x.width_m for x in flank.windows])
+    assert {x.width_source for x in flank.windows} == {"flank"}
+    assert np.max(np.abs(w / truth - 1)) < 0.005                     # the flank estimate: < 0.5 % off
+    paper = run_trend([wear40], system=system, detector="paper")
+    wp = np.array([x.width_m for x in paper.windows])
+    assert {x.width_source for x in paper.windows} == {"gap"} and np.max(np.abs(wp / truth - 1)) > 0.01
+    # the wear rate (1 mm in 39 h) from the flank estimates within 2 %
+    assert flank.updates[-1].wear_rate_m_per_s == pytest.approx(0.001 / 39 / 3600, rel=0.02)

@@ -61,6 +61,7 @@ def _canonical(name: str) -> str:
     raise ValueError(f"not a ROS 2 message type name: {name!r} (expected pkg/msg/Type)")
 
 
+@functools.lru_cache(maxsize=256)
 def _known(msg_type: str) -> str:
     name = canonical_type(msg_type)
     if name not in TYPESTORE.fielddefs:

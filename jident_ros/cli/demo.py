@@ -34,12 +34,17 @@ from pathlib import Path
 import numpy as np
 
 from jident_ros.bag.recording import read_bag
+from jident_ros.cli.offline import OfflineError
+from jident_ros.cli.trend import format_summary, plot_trend, run_trend, write_trend_csv
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.levels import LEVEL_NAMES
 from jident_ros.identify.library import default_library_path
+from jident_ros.identify.trend import TrendConfig
+from jident_ros.identify.trend_status import TREND_STATUS_NAME
 from jident_ros.method.patterns import LibraryMismatch, PatternLibrary
 from jident_ros.nodes.ros_io import array_from_multiarray, qos_diagnostics, qos_latched, status_level, status_values
 from jident_ros.resources import node_command, stop_process
+from jident_ros.sim.scenarios import wear_scenario
 
 #: Default cases (J1 kg m^2, backlash width m, eta_k Pa s^n): five of the paper's seven classes, five
 #: widths, and every eta_k but the pattern runs' 0.025 -- none is a pattern run.
@@ -81,7 +86,7 @@ class CaseResult:
 
     @property
     def class_correct(self) -> bool:
-        return self.identified_class_kgm2 == self.true_inertia_kgm2
+        return math.isclose(self.identified_class_kgm2, self.true_inertia_kgm2, rel_tol=1e-9)
 
     @property
     def image_agrees(self) -> bool:
@@ -132,6 +137,15 @@ def build_parser() -> argparse.ArgumentParser:
                         "(fast_sleep_s per batch, back-pressure from drive/progress)")
     p.add_argument("--p", type=float, default=2.0, help="KHM exponent of the image method (default 2)")
     p.add_argument("--timeout", type=float, default=180.0, help="give up after this many seconds (default 180)")
+    p.add_argument("--scenario", choices=("wear",),
+                   help="wear: instead of --case, a drive whose backlash K2 grows 2.5 -> 3.5 mm over --windows "
+                        "entries and whose J1 steps +2.5 %% half-way, through the same three nodes (windowing with "
+                        "the flank detector, the diagnostic node's trend on); at the end the trend plot "
+                        "(<out>/trend.png, jident trend on the node's recording) and the node's last trend status")
+    p.add_argument("--windows", type=int, default=30,
+                   help="--scenario wear: number of backlash entries (default 30, >= 8)")
+    p.add_argument("--commissioning-windows", type=int, default=10,
+                   help="--scenario wear: windows that learn the trend's baseline (default 10, >= 2)")
     return p
 
 
@@ -185,7 +199,7 @@ def _ensure_library(p: float) -> Path:
 # --------------------------------------------------------------------------- listening
 
 
-def _listen(cases, procs, timeout, start_simulator):
+def _listen(cases, procs, timeout, start_simulator, trend: bool = False):
     """Listen like a user: subscribe, wait until the diagnostic node's outputs are matched (they are not
     latched on /diagnostics, so a late listener would miss statuses), then ``start_simulator()`` and
     spin until every case has a diagnosis (or a node died / timeout)."""
@@ -202,6 +216,7 @@ def _listen(cases, procs, timeout, start_simulator):
     ex.add_node(node)
     results: dict[float, CaseResult] = {}
     statuses = []
+    trend_statuses = []
     estimates = []
 
     def on_case(msg):
@@ -215,6 +230,8 @@ def _listen(cases, procs, timeout, start_simulator):
         for s in arr.status:
             if s.name == STATUS_NAME and s.hardware_id == f"{NAMESPACE}/drive":
                 statuses.append(s)
+            elif s.name == TREND_STATUS_NAME and s.hardware_id == f"{NAMESPACE}/drive":
+                trend_statuses.append(s)
 
     node.create_subscription(Float64MultiArray, "drive/case", on_case, qos_latched(100))
     sub_est = node.create_subscription(Float64, "inertia_estimate", lambda m: estimates.append(m.data),
@@ -239,11 +256,12 @@ def _listen(cases, procs, timeout, start_simulator):
             r.image_class_kgm2 = float(v.get("fused_class_kgm2", "nan"))
             if "gap_ci95_kgm2" in v:
                 r.ci95_kgm2 = tuple(float(x) for x in v["gap_ci95_kgm2"].split())
-            print(f"[demo] case {r.case_index + 1}: true J1 = {r.true_inertia_kgm2:.4f} kg m^2 "
-                  f"(K2 = {r.backlash_width_m * 1e3:g} mm, eta_k = {r.consistency_pa_sn:g})  ->  identified "
-                  f"{r.estimate_kgm2:.4f} kg m^2 ({r.error_percent:+.2f} %), class {r.identified_class_kgm2:g} "
-                  f"[{'right' if r.class_correct else 'WRONG'}], image method {r.image_class_kgm2:g}, "
-                  f"status {r.level}", flush=True)
+            if r.case_index < len(cases):   # not the closing case of --scenario
+                print(f"[demo] case {r.case_index + 1}: true J1 = {r.true_inertia_kgm2:.4f} kg m^2 "
+                      f"(K2 = {r.backlash_width_m * 1e3:g} mm, eta_k = {r.consistency_pa_sn:g})  ->  identified "
+                      f"{r.estimate_kgm2:.4f} kg m^2 ({r.error_percent:+.2f} %), class {r.identified_class_kgm2:g} "
+                      f"[{'right' if r.class_correct else 'WRONG'}], image method {r.image_class_kgm2:g}, "
+                      f"status {r.level}", flush=True)
         statuses[:] = pending
 
     deadline = time.monotonic() + timeout
@@ -258,12 +276,12 @@ def _listen(cases, procs, timeout, start_simulator):
         while time.monotonic() < deadline:
             ex.spin_once(timeout_sec=0.05)
             assign()
-            if len(results) == len(cases) and all(r.level for r in results.values()):
+            if len(results) >= len(cases) and all(results[k].level for k in sorted(results)[:len(cases)]):
                 break
             if not all(p.alive() for name, p in procs.items() if name != "simulator"):
                 break
-        # a little longer for the last messages
-        end = time.monotonic() + 0.5
+        # a little longer for the last messages (the trend status is periodic: one more period)
+        end = time.monotonic() + (1.5 if trend else 0.5)
         while time.monotonic() < end:
             ex.spin_once(timeout_sec=0.05)
         assign()
@@ -271,7 +289,8 @@ def _listen(cases, procs, timeout, start_simulator):
         ex.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
-    return [results[k] for k in sorted(results)], estimates
+    ordered = [results[k] for k in sorted(results)][:len(cases)]   # a closing case (--scenario) is not shown
+    return ordered, estimates, (trend_statuses[-1] if trend_statuses else None)
 
 
 # --------------------------------------------------------------------------- summary
@@ -344,14 +363,19 @@ def run(args) -> int:
         print(f"jident demo: error: rclpy is not importable ({exc}); run `bash scripts/setup.sh` "
               "or source a ROS 2 distribution", file=sys.stderr)
         return 2
-    cases = args.cases or list(DEFAULT_CASES)
+    scenario = None
+    if args.scenario == "wear":
+        scenario = wear_scenario(load_system_config(), args.windows, j1_step_at_window=args.windows // 2)
+        cases = [(c.inertia_kgm2, c.backlash_width_m, c.consistency_pa_sn) for c in scenario.cases]
+    else:
+        cases = args.cases or list(DEFAULT_CASES)
     out = Path(args.out)
     bag = out / "recording"
     logs = out / "logs"
     if bag.exists():
         shutil.rmtree(bag)
     logs.mkdir(parents=True, exist_ok=True)
-    library = _ensure_library(args.p)
+    library = _ensure_library(args.p) if scenario is None else None
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     env.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 100 + 1))
     os.environ.setdefault("ROS_DOMAIN_ID", env["ROS_DOMAIN_ID"])
@@ -359,11 +383,22 @@ def run(args) -> int:
     t0 = time.monotonic()
     procs: dict[str, NodeProcess] = {}
     try:
-        procs["diagnostic"] = NodeProcess("diagnostic", logs, [*sim_time, "-p", f"pattern_library:={library}",
-                                                              "-p", f"record_dir:={bag}", "-p", f"p:={args.p}",
+        if scenario is None:
+            diag_args = ["-p", f"pattern_library:={library}", "-p", f"p:={args.p}"]
+            win_args = ["-p", "backlash_width_from_topic:=true"]
+        else:   # the trend follows the gap J1 and the flank detector's K2: no image method, no K2 given
+            state = out / "trend_state.json"
+            if state.exists():
+                state.unlink()
+            diag_args = ["-p", "image_method:=false", "-p", f"trend_commissioning_windows:={args.commissioning_windows}",
+                         "-p", f"trend_state_file:={state}"]
+            win_args = ["-p", "detector:=flank"]
+        procs["diagnostic"] = NodeProcess("diagnostic", logs, [*sim_time, *diag_args, "-p", f"record_dir:={bag}",
                                                               "-p", "stale_after_s:=0.0"], env)
-        procs["windowing"] = NodeProcess("windowing", logs, [*sim_time, "-p", "backlash_width_from_topic:=true"], env)
-        lists = [[c[i] for c in cases] for i in range(3)]
+        procs["windowing"] = NodeProcess("windowing", logs, [*sim_time, *win_args], env)
+        # --scenario: one closing case after the last entry (not counted, not waited for): the simulator's stream
+        # ends with the last window, and the flank detector needs up to 16 samples more to close it
+        lists = [[c[i] for c in cases + ([cases[-1]] if scenario is not None else [])] for i in range(3)]
 
         def start_simulator():
             procs["simulator"] = NodeProcess("simulator", logs, [
@@ -374,7 +409,7 @@ def run(args) -> int:
             print(f"[demo] started {', '.join(f'{n} ({p.cmd[0]})' for n, p in procs.items())} in namespace "
                   f"{NAMESPACE}, ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}; {len(cases)} case(s)", flush=True)
 
-        results, estimates = _listen(cases, procs, args.timeout, start_simulator)
+        results, estimates, trend_status = _listen(cases, procs, args.timeout, start_simulator, scenario is not None)
     finally:
         exited_early = {name: p.proc.poll() for name, p in procs.items()}  # None: still running, as it should
         codes = {name: p.stop(signal.SIGINT) for name, p in reversed(procs.items())}
@@ -397,6 +432,10 @@ def run(args) -> int:
                 wall_s=wall, recording=str(bag), recorded_messages=sum(counts.values()), recorded_topics=counts,
                 estimates_published=len(estimates), node_exit_codes=codes)
     missing = len(cases) - sum(r.diagnosed for r in results)
+    if scenario is not None:
+        # a gap J1 refused by the verdict policy is an answer (ERROR, said why), not a lost case
+        missing = len(cases) - sum(bool(r.level) for r in results)
+        failed += _show_trend(out, bag, scenario, trend_status, args.commissioning_windows)
     if results:
         _write_summary(out, results, meta)
     n_right = sum(r.class_correct for r in results)
@@ -412,8 +451,44 @@ def run(args) -> int:
     return 0
 
 
+def _show_trend(out: Path, bag: Path, scenario, status, commissioning_windows: int) -> list:
+    """The end of ``--scenario wear``: the node's last "jident_diagnostic: trend" status, then ``jident trend``
+    on the node's recording (drive/signals and the true values) -> <out>/trend.csv, trend.png and its
+    summary.  Returns the failures (names) for the exit status."""
+    failed = []
+    if status is None:
+        print("[demo] FAILED: no 'jident_diagnostic: trend' status received", file=sys.stderr)
+        failed.append("trend status")
+    else:
+        v = status_values(status)
+        print(f"[demo] the diagnostic node's trend ({LEVEL_NAMES[status_level(status)]}, "
+              f"{v.get('windows_updated', '?')} windows, width from the flank detector in "
+              f"{v.get('width_from_flank_detector', '?')}, from the gap estimator in "
+              f"{v.get('width_from_gap_estimator', '?')}): {status.message}", flush=True)
+    config = TrendConfig(commissioning_windows=commissioning_windows)
+    try:
+        run = run_trend([bag], config=config)
+    except OfflineError as exc:
+        print(f"[demo] FAILED: jident trend on {bag}: {exc}", file=sys.stderr)
+        return failed + ["trend"]
+    write_trend_csv(run, out / "trend.csv")
+    png = plot_trend(run, out / "trend.png", config)
+    print(f"[demo] truth: K2 {scenario.true_width_m[0] * 1e3:.4g} -> {scenario.true_width_m[-1] * 1e3:.4g} mm, "
+          f"J1 +2.5 % at entry {scenario.j1_step_at_window}; jident trend on the recording:")
+    print("\n".join("[demo]   " + line for line in format_summary(run, config).splitlines()))
+    print(f"[demo] trend plot {png}", flush=True)
+    return failed
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    if args.scenario is not None and args.cases:
+        print("jident demo: error: --case: not with --scenario (the scenario sets the cases)", file=sys.stderr)
+        return 2
+    if args.windows < 8 or args.commissioning_windows < 2 or args.commissioning_windows >= args.windows // 2:
+        print(f"jident demo: error: --windows must be >= 8 and --commissioning-windows >= 2 and below the J1 step "
+              f"at --windows / 2, got {args.windows} and {args.commissioning_windows}", file=sys.stderr)
+        return 2
     if args.real_time_factor < 0 or not math.isfinite(args.real_time_factor):
         print(f"jident demo: error: --real-time-factor must be >= 0, got {args.real_time_factor}", file=sys.stderr)
         return 2

@@ -232,7 +232,8 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
         topic = found[0]
     prefix = topic[:-len(SIGNALS_TOPIC)]
     names = {rel: prefix + rel for rel in DRIVE_TOPICS}
-    messages = in_sample_time_order([m for m in messages if m[0] in names.values()], topic)
+    unpacked: dict = {}
+    messages = in_sample_time_order([m for m in messages if m[0] in names.values()], topic, unpacked)
 
     def decode(topic_name, msg_type, raw):
         try:
@@ -269,7 +270,7 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
 
     replay = DriveReplay(names, width, follow_width, decode=decode, read_width=_float_data,
                          read_truth=lambda msg, topic_name: float(msg.data), make_detector=make_detector,
-                         log=log)
+                         log=log, unpacked=unpacked)
     diag = _window_diagnoser(system, method, p, library, gap_method, image_method, result, policy)
     for win in replay.windows(messages):
         _add_window(result, win, diag(win), replay.true_inertia(win.entry_time_s, ts)[0], on_window)

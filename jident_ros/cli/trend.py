@@ -4,14 +4,17 @@
 Trend
 -----
 Every recording is diagnosed window by window exactly as ``jident diagnose`` does
-(:func:`jident_ros.cli.offline.diagnose_recording`; by default the gap estimator only, no image method).
+(:func:`jident_ros.cli.offline.diagnose_recording`; by default the gap estimator only, no image method, and the
+flank detector, ``--detector flank``, which needs no K2).
 Each window becomes a :class:`TrendWindow` (time, J1 with its standard error and 95 % interval, width
-with its standard error, or the reason why it has none).  The windows of all recordings are sorted by
+with its standard error and its source, or the reason why it has no J1) by the diagnostic node's rule
+(:func:`jident_ros.identify.trend_status.trend_inputs`: the published gap J1 only -- a refused or ambiguous gap
+estimate is not used -- and the flank detector's flank-to-flank K2 of the window, else the gap estimator's width
+at re-contact).  The windows of all recordings are sorted by
 their **drive time**: ``entry_time_s``, the ``t`` column (drive clock, s) of the window's entry sample,
 as the drive publishes it on ``drive/signals`` (recordings are assumed to share one drive clock; the bag's
 receive time is not used).  They then go through one :class:`jident_ros.identify.trend.TrendTracker`
-in that order (J1 from the gap fit and its standard error; the width from
-:func:`jident_ros.identify.gap.estimate_backlash_width`).  Outputs: ``DIR/trend.csv`` (one row per window),
+in that order.  Outputs: ``DIR/trend.csv`` (one row per window),
 ``DIR/trend.png`` (J1 and K2 against time with their bands, the baseline and the detected changes) and a
 summary on stdout.  ``--state FILE`` resumes from a saved tracker (windows at or before its last time are
 left out: already in the state) and saves it back (atomically).
@@ -32,8 +35,10 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import os
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
@@ -45,14 +50,13 @@ from jident_ros.cli.offline import OfflineError, diagnose_recording, multiarray_
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.identify.trend import SECONDS_PER_DAY, TrendConfig, TrendStateError, TrendTracker
+from jident_ros.identify.trend_status import WIDTH_SOURCES, Z95, trend_inputs
 from jident_ros.nodes.simulator import CASE_LABEL
 from jident_ros.sim import PAPER_SIGNALS, add_measurement_noise, simulate_grid
 from jident_ros.sim.scenarios import SCENARIOS, Scenario, wear_scenario
 from jident_ros.stream.detector import embed_windows
+from jident_ros.stream.flank import DETECTORS
 from jident_ros.stream.layout import DEFAULT_CHANNELS
-
-#: z of the 95 % interval, to turn an interval into a standard error when only the interval is known
-Z95 = 1.959963984540054
 
 #: Channels add_measurement_noise perturbs by default (the angles are left to the encoder model).
 NOISY_CHANNELS = PAPER_SIGNALS + ("omega2",)
@@ -61,7 +65,8 @@ CSV_COLUMNS = ("time_s", "recording", "window_id", "inertia_kgm2", "inertia_se_k
                "inertia_ci_high_kgm2", "backlash_width_m", "backlash_width_se_m", "true_inertia_kgm2",
                "inertia_smoothed_kgm2", "inertia_smoothed_se_kgm2", "inertia_baseline_kgm2", "inertia_drift_pct",
                "backlash_width_smoothed_m", "backlash_width_smoothed_se_m", "wear_rate_m_per_day",
-               "wear_rate_se_m_per_day", "time_to_limit_s", "change", "change_quantity", "level", "skip_reason")
+               "wear_rate_se_m_per_day", "time_to_limit_s", "change", "change_quantity", "level", "skip_reason",
+               "width_source")
 
 
 # --------------------------------------------------------------------------- per-window input
@@ -71,9 +76,12 @@ class TrendWindow:
     """What the trend needs of one diagnosed window.
 
     time_s : drive clock t of the entry sample, s
-    inertia_kgm2, inertia_se_kgm2 : J1 from the gap fit and its standard error, kg m^2 (None: no gap J1)
+    inertia_kgm2, inertia_se_kgm2 : the published gap J1 and its standard error, kg m^2 (None: no published
+        gap J1 -- refused, ambiguous, image method only or no gap; ``skip_reason`` says why)
     inertia_ci_low_kgm2, inertia_ci_high_kgm2 : its 95 % interval, kg m^2
-    width_m, width_se_m : backlash width K2 estimated at re-contact and its standard uncertainty, m
+    width_m, width_se_m : backlash width K2 of the window and its standard uncertainty, m
+    width_source : 'flank' (the flank detector's flank-to-flank estimate), 'gap' (the gap estimator's width
+        at re-contact: the fallback when the window has no flank estimate) or None
     skip_reason : why there is no J1 (None when there is one)
     true_inertia_kgm2 : from drive/case or drive/true_inertia when the recording has it
     """
@@ -89,29 +97,27 @@ class TrendWindow:
     width_se_m: Optional[float]
     skip_reason: Optional[str]
     true_inertia_kgm2: Optional[float] = None
+    width_source: Optional[str] = None
 
 
-def trend_window(ow, recording: str) -> TrendWindow:
-    """An :class:`jident_ros.cli.offline.OfflineWindow` -> :class:`TrendWindow`.  The trend uses the gap
-    estimate (it has a standard error); a J1 of the image method alone has none and is skipped with
-    that reason.  A standard error missing where the 95 % interval is known is (high - low) / (2 x 1.96)."""
+def trend_window(ow, recording: str, width_se_floor_m: float = 0.0) -> TrendWindow:
+    """An :class:`jident_ros.cli.offline.OfflineWindow` -> :class:`TrendWindow`, with the diagnostic node's
+    rule (:func:`jident_ros.identify.trend_status.trend_inputs`): J1 only when the published J1 is the gap
+    estimate (a refused or ambiguous gap J1 and an image class alone are skipped, with the reason); the
+    width from the flank detector when the window has its estimate, else from the gap estimator."""
     d = ow.diagnosis
-    g, w = d.gap, d.width
-    j = se = lo = hi = None
-    reason = None
-    if g is not None:
-        j = float(g.inertia_kgm2)
-        lo, hi = (float(v) for v in g.ci95_kgm2)
-        se = float(g.std_error_kgm2) if g.std_error_kgm2 is not None else (hi - lo) / (2 * Z95)
+    j, se, wm, wse, source = trend_inputs(d, width_se_floor_m, ow)
+    lo = hi = reason = None
+    if j is not None:
+        lo, hi = (float(v) for v in d.gap.ci95_kgm2)
     elif d.inertia_kgm2 is not None:
         reason = f"J1 {d.inertia_kgm2:.5g} kg m^2 from the {d.source} method has no standard error"
+    elif d.gap is not None:
+        reason = f"gap J1 {d.gap.inertia_kgm2:.5g} kg m^2 not published ({d.status}: {d.refused_reason or d.message})"
     else:
         reason = "; ".join(d.problems) or d.message
-    wm = wse = None
-    if w is not None and g is not None:
-        wm, wse = float(w.width_m), float(w.std_m)
     return TrendWindow(float(ow.entry_time_s), recording, int(ow.window_id), j, se, lo, hi, wm, wse, reason,
-                       ow.true_inertia_kgm2)
+                       ow.true_inertia_kgm2, source)
 
 
 # --------------------------------------------------------------------------- the run
@@ -128,14 +134,32 @@ class TrendRun:
     seconds: float = 0.0
 
 
+def _diagnose_for_trend(rec, floor: float, kwargs: dict) -> tuple:
+    """One recording for :func:`run_trend` (also in a worker process): (TrendWindows, summary row, log
+    lines, the OfflineError's text or None)."""
+    lines: list = []
+    try:
+        res = diagnose_recording(rec, log=lines.append, **kwargs)
+    except OfflineError as exc:
+        return [], None, lines, str(exc)
+    return ([trend_window(w, str(rec), floor) for w in res.windows],
+            (str(rec), len(res.windows), res.samples, dict(res.dropped), res.clock_jumps), lines, None)
+
+
 def run_trend(recordings: Sequence, *, system=None, method=None, config: Optional[TrendConfig] = None,
               tracker: Optional[TrendTracker] = None, p: float = 2.0, gap_method: str = "auto",
               image_method: bool = False, library_path=None, backlash_width_m: Optional[float] = None,
-              log: Callable[[str], Any] = lambda text: None,
+              detector: str = "flank", gear_ratio: float = 1.0, log: Callable[[str], Any] = lambda text: None,
               on_window: Optional[Callable[[Any], Any]] = None,
-              on_recording: Optional[Callable[[int, str], Any]] = None) -> TrendRun:
-    """Diagnose every recording (``diagnose_recording``), sort all windows by drive time and run the
-    tracker (``tracker``, e.g. restored from a state, else a new one with ``config``) over them."""
+              on_recording: Optional[Callable[[int, str], Any]] = None, jobs: int = 1) -> TrendRun:
+    """Diagnose every recording (``diagnose_recording``, with ``detector``: 'flank' -- no K2 needed, every
+    window carries the flank-to-flank K2 estimate the trend follows -- or 'paper', inequality (1) with the
+    recording's K2, the width then from the gap estimator), sort all windows by drive time and run the
+    tracker (``tracker``, e.g. restored from a state, else a new one with ``config``) over them.
+
+    ``jobs`` > 1 (without the image method): the recordings are diagnosed by that many worker processes
+    (recordings are independent; the order of the result does not change); ``on_window`` is then not
+    called and ``on_recording`` is called as each recording is done."""
     t0 = time.perf_counter()
     system = load_system_config() if system is None else system
     method = load_method_config() if method is None else method
@@ -146,17 +170,40 @@ def run_trend(recordings: Sequence, *, system=None, method=None, config: Optiona
         if err:
             log(f"{err}; windows are diagnosed from the gap only")
     windows, summary = [], []
-    for k, rec in enumerate(recordings):
-        if on_recording is not None:
-            on_recording(k, str(rec))
-        res = diagnose_recording(rec, system=system, method=method, p=p, library=library,
-                                 library_path=library_path, build_if_missing=False, gap_method=gap_method,
-                                 image_method=image_method and library is not None,
-                                 backlash_width_m=backlash_width_m, log=log, on_window=on_window)
-        windows.extend(trend_window(w, str(rec)) for w in res.windows)
-        summary.append((str(rec), len(res.windows), res.samples, dict(res.dropped), res.clock_jumps))
-    windows.sort(key=lambda w: w.time_s)          # stable: recording order breaks ties
     tr = tracker if tracker is not None else TrendTracker(config)
+    floor = tr.config.width_se_floor_m
+    kwargs = dict(system=system, method=method, p=p, library_path=library_path, build_if_missing=False,
+                  gap_method=gap_method, image_method=image_method and library is not None,
+                  backlash_width_m=backlash_width_m, detector=detector, gear_ratio=gear_ratio)
+    jobs = max(1, min(int(jobs), len(recordings)))
+    if jobs > 1 and not image_method:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            futures = [pool.submit(_diagnose_for_trend, rec, floor, kwargs) for rec in recordings]
+            results = []
+            for k, (rec, fut) in enumerate(zip(recordings, futures)):
+                results.append(fut.result())
+                if on_recording is not None:
+                    on_recording(k, str(rec))
+    else:
+        results = []
+        for k, rec in enumerate(recordings):
+            if on_recording is not None:
+                on_recording(k, str(rec))
+            try:
+                res = diagnose_recording(rec, library=library, log=log, on_window=on_window, **kwargs)
+            except OfflineError as exc:
+                results.append(([], None, [], str(exc)))
+                break
+            results.append(([trend_window(w, str(rec), floor) for w in res.windows],
+                             (str(rec), len(res.windows), res.samples, dict(res.dropped), res.clock_jumps), [], None))
+    for wins, row, lines, error in results:
+        for line in lines:
+            log(line)
+        if error is not None:
+            raise OfflineError(error)
+        windows.extend(wins)
+        summary.append(row)
+    windows.sort(key=lambda w: w.time_s)          # stable: recording order breaks ties
     skipped_old = 0
     if tr.last_time_s is not None:
         n0 = len(windows)
@@ -187,7 +234,7 @@ def write_trend_csv(run: TrendRun, path) -> Path:
                          _num(u.inertia_se_kgm2), _num(u.inertia_baseline_kgm2), _num(u.inertia_drift_pct),
                          _num(u.width_m), _num(u.width_se_m), _num(u.wear_rate_m_per_day),
                          _num(u.wear_rate_se_m_per_day), _num(u.time_to_limit_s), int(u.change),
-                         "+".join(c.quantity for c in u.changes), u.level_name, reason or ""])
+                         "+".join(c.quantity for c in u.changes), u.level_name, reason or "", w.width_source or ""])
     return path
 
 
@@ -300,6 +347,10 @@ def format_summary(run: TrendRun, config: TrendConfig) -> str:
     if run.already_in_state:
         text += f"; {run.already_in_state} already in the state (at or before its last time) left out"
     lines.append(text)
+    sources = {src: sum(1 for w in ws if w.width_source == src) for src in WIDTH_SOURCES}
+    lines.append(f"width: the flank detector's flank-to-flank estimate in {sources['flank']} window(s), the gap "
+                 f"estimator's width (fallback: no flank estimate) in {sources['gap']}, none in "
+                 f"{len(ws) - sum(sources.values())}")
     if dropped or jumps:
         lines.append("detector: " + ", ".join([f"{r} {n}" for r, n in dropped.items()] +
                                               ([f"{jumps} clock jump(s) between windows"] if jumps else [])))
@@ -353,13 +404,19 @@ def format_summary(run: TrendRun, config: TrendConfig) -> str:
 
 def write_scenario_recording(out, system, scenario: Scenario, *, snr_db: Optional[float] = None, seed: int = 0,
                              gap_samples: int = 100, batch_size: int = 50, namespace: str = "",
-                             chunk_cases: int = 200, progress: Optional[Callable[[int], Any]] = None) -> Path:
+                             chunk_cases: int = 200, progress: Optional[Callable[[int], Any]] = None,
+                             tail_samples: int = 32) -> Path:
     """Simulate ``scenario`` (``chunk_cases`` events at a time) and write it as an MCAP bag directory
     ``out`` in the simulator node's topics (see the module docstring).  ``snr_db``: white noise as
     ``jident simulate --snr-db`` (add_measurement_noise, per event, seed ``seed`` + chunk).
-    ``progress(n)`` is called after every n events written."""
+    ``progress(n)`` is called after every n events written.  ``tail_samples`` steady samples follow each
+    event's window (its last sample held, both angles advanced at the motor's last speed; noise as the steady
+    stretch before it): the flank detector refines the entry by up to 16 samples and needs them to close
+    its window before the clock jumps to the next event."""
     if int(gap_samples) != gap_samples or gap_samples < 0:
         raise ValueError(f"gap_samples: must be an integer >= 0, got {gap_samples!r}")
+    if int(tail_samples) != tail_samples or tail_samples < 0:
+        raise ValueError(f"tail_samples: must be an integer >= 0, got {tail_samples!r}")
     if int(batch_size) != batch_size or batch_size < 1:
         raise ValueError(f"batch_size: must be an integer >= 1, got {batch_size!r}")
     out = Path(out)
@@ -395,16 +452,31 @@ def write_scenario_recording(out, system, scenario: Scenario, *, snr_db: Optiona
                     block = stream[:, j].reshape(len(cases), per)
                     block[:, ~lead] = noisy.signals[name]
                     block[:, lead] += sd[:, None] * rng.standard_normal((len(cases), int(gap_samples)))
+            n_tail = int(tail_samples)
+            i1, i2 = DEFAULT_CHANNELS.index("alpha1"), DEFAULT_CHANNELS.index("alpha2")
+            w1 = DEFAULT_CHANNELS.index("omega1")
+            steps = np.arange(1, n_tail + 1) * ts
             for i, c in enumerate(cases):
                 rows = stream[i * per:(i + 1) * per]
+                if n_tail:
+                    tail = np.repeat(rows[-1:], n_tail, axis=0)
+                    tail[:, i1] += rows[-1, w1] * steps
+                    tail[:, i2] += rows[-1, w1] * steps     # one speed: the clutch stays where it is
+                    if snr_db is not None:
+                        for j, name in enumerate(DEFAULT_CHANNELS):
+                            if name in NOISY_CHANNELS:
+                                x = clean.signals[name][i]
+                                tail[:, j] = x[-1] + np.sqrt(np.mean(x * x) / 10.0 ** (snr_db / 10.0)) * \
+                                    rng.standard_normal(n_tail)
+                    rows = np.vstack([rows, tail])
                 t_entry = float(scenario.entry_times_s[c0 + i])
-                rows[:, 0] = t_entry + (np.arange(per) - (entry_rows[i] - i * per)) * ts
+                rows[:, 0] = t_entry + (np.arange(per + n_tail) - (entry_rows[i] - i * per)) * ts
                 t_case = int(round((rows[0, 0] - ts / 2) * 1e9))
                 bag.write(topic("drive/true_inertia"), {"data": c.inertia_kgm2}, t_case)
                 bag.write(topic("drive/backlash_width"), {"data": c.backlash_width_m}, t_case)
                 row = np.array([[c0 + i, c.inertia_kgm2, c.backlash_width_m, c.consistency_pa_sn, t_entry]])
                 bag.write(topic("drive/case"), multiarray_message(row, case_cols), t_case)
-                for s in range(0, per, int(batch_size)):
+                for s in range(0, per + n_tail, int(batch_size)):
                     b = rows[s:s + int(batch_size)]
                     bag.write(topic("drive/signals"), multiarray_message(b, DEFAULT_CHANNELS),
                               int(round(b[-1, 0] * 1e9)))
@@ -529,10 +601,20 @@ def add_trend_parser(sub) -> None:
                    help="also run the paper's image method on every window (slow; the trend uses the gap "
                         "estimate either way; default: off)")
     g.add_argument("--library", help="pattern library .npz for --image-method")
+    g.add_argument("--detector", choices=DETECTORS, default="flank",
+                   help="entry detector: flank (default: no K2 needed; every window carries the flank-to-flank K2 "
+                        "estimate the width trend follows) or paper (inequality (1) with the recording's K2; the "
+                        "width then comes from the gap estimator, ~25x noisier)")
+    g.add_argument("--gear-ratio", type=_finite_float("--gear-ratio"), default=1.0,
+                   help="flank detector: N in delta = alpha1 - N alpha2 (default 1)")
     g.add_argument("--backlash-width-m", type=_finite_float("--backlash-width-m"),
-                   help="K2 of inequality (1), m (default: the recording's drive/backlash_width, else 0.005)")
+                   help="--detector paper: K2 of inequality (1), m (default: the recording's drive/backlash_width, "
+                        "else 0.005)")
     g.add_argument("--config", help="system config YAML (default: config/system.yaml)")
     g.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
+    g.add_argument("--jobs", type=_count("--jobs", 0), default=0,
+                   help="worker processes diagnosing the recordings in parallel (0, default: one per core; 1: in "
+                        "this process, progress per window; the image method always runs in this process)")
     g.add_argument("--quiet", action="store_true", help="no progress bar")
     g.set_defaults(func=cmd_trend)
 
@@ -574,13 +656,19 @@ def cmd_trend(args) -> int:
         def log(text):
             bar.write(f"jident trend: {text}", file=sys.stderr)
     n_rec = len(args.recordings)
+    jobs = args.jobs or (os.cpu_count() or 1)
+    if bar is not None and jobs > 1 and n_rec > 1 and not args.image_method:
+        bar.unit, bar.total = "recording", n_rec
     try:
         run = run_trend(args.recordings, system=system, method=method, config=config, tracker=tracker, p=args.p,
+                        jobs=jobs,
                         gap_method=args.gap_method, image_method=args.image_method, library_path=args.library,
-                        backlash_width_m=args.backlash_width_m, log=log,
+                        backlash_width_m=args.backlash_width_m, detector=args.detector,
+                        gear_ratio=args.gear_ratio, log=log,
                         on_window=None if bar is None else (lambda w: bar.update(1)),
                         on_recording=None if bar is None else
-                        (lambda k, rec: bar.set_description(f"recording {k + 1}/{n_rec}")))
+                        (lambda k, rec: bar.update(1) if bar.unit == "recording" else
+                         bar.set_description(f"recording {k + 1}/{n_rec}")))
     finally:
         if bar is not None:
             bar.close()

@@ -158,14 +158,20 @@ class TrendConfig:
     inertia_baseline_se_kgm2: float = 0.0
     width_baseline_m: float | None = None
     width_baseline_se_m: float = 0.0
-    #: in-control two-sided average run length (windows) the CUSUM threshold is designed for (Siegmund)
-    target_arl_windows: float = 1.0e6
-    #: CUSUM reference value k (half the standardised shift it is tuned to)
-    cusum_reference_sd: float = 2.0
+    #: in-control two-sided average run length (windows) the CUSUM threshold is designed for (the ARL
+    #: integral equation, :func:`cusum_arl`): the designed false-change rate is 1 / this per window, i.e.
+    #: 1e4 / this per 10,000 steady windows (default 0.033 with calibrated standard errors, 0.38 when they are
+    #: 12 % too small -- a 92 % coverage of the 95 % interval; the target is <= 1)
+    target_arl_windows: float = 3.0e5
+    #: CUSUM reference value k (half the standardised shift it is tuned to).  1.5 rather than the 2.5
+    #: half of a 2.5 % step at se 0.5 %: the gap estimator's se varies 0.4-1.3 % between windows, and a
+    #: window with a large se (z ~ 2 after the step) must still add to the sum (docs/results.md)
+    cusum_reference_sd: float = 1.5
     #: CUSUM threshold h; None: from target_arl_windows and cusum_reference_sd
     cusum_threshold_sd: float | None = None
-    #: standardised innovations are clipped to +-this (outlier robustness, CUSUM and J1 smoother)
-    innovation_clip_sd: float = 4.0
+    #: standardised innovations are clipped to +-this (outlier robustness, CUSUM and J1 smoother);
+    #: innovation_clip_sd - cusum_reference_sd < h keeps a single outlier from firing (3 < 3.83 by default)
+    innovation_clip_sd: float = 4.5
     #: learn a factor s >= 1 for the reported standard errors from the commissioning scatter
     se_scale_from_commissioning: bool = False
     se_scale_max: float = 3.0
@@ -556,6 +562,17 @@ class _Channel:
                 and robust_scale ** 2 > chi2.ppf(SE_SCALE_TEST_LEVEL, dof) / dof:
             self.scale = min(robust_scale, self.cfg.se_scale_max)
 
+    def _commissioned(self, m: float, v: float, idx: int):
+        """End of commissioning at window ``idx``: the baseline (and the kept reference) m with variance
+        v x scale^2, the history's standard errors scaled, monitoring from the next window."""
+        self.baseline, self.baseline_var = m, v * self.scale ** 2
+        self.reference, self.reference_var = self.baseline, self.baseline_var
+        self.history = deque(((i, tt, yy, s * self.scale) for i, tt, yy, s in self.history),
+                             maxlen=self.history.maxlen)
+        self.comm = []
+        self.phase = MONITORING
+        self.cusum.reset(idx + 1)
+
     def _innovation(self, z: float) -> float:
         c = self.cfg.innovation_clip_sd
         return c if z > c else (-c if z < -c else z)
@@ -608,15 +625,8 @@ class _InertiaChannel(_Channel):
             if self._commissioning_done(t):
                 m, v, rs = _huber_mean(self.comm, estimate_scale=True)
                 self._set_scale(rs, len(self.comm) - 1)
-                self.x = m
-                self.baseline, self.baseline_var = m, v * self.scale ** 2
-                self.reference, self.reference_var = self.baseline, self.baseline_var
-                self.P = self.baseline_var
-                self.history = deque(((i, tt, yy, s * self.scale) for i, tt, yy, s in self.history),
-                                     maxlen=self.history.maxlen)
-                self.comm = []
-                self.phase = MONITORING
-                self.cusum.reset(idx + 1)
+                self._commissioned(m, v, idx)
+                self.x, self.P = m, self.baseline_var
             return None
         se = se * self.scale
         p = (idx, t, y, se)
@@ -787,16 +797,9 @@ class _WidthChannel(_Channel):
                 else:
                     dof = len(self.comm) - 1
                 self._set_scale(rs, dof)
-                s2 = self.scale ** 2
-                self.baseline, self.baseline_var = m, v * s2
-                self.reference, self.reference_var = self.baseline, self.baseline_var
-                self.w[:self.count] /= s2
+                self.w[:self.count] /= self.scale ** 2
                 self._refit()
-                self.history = deque(((i, tt, yy, s * self.scale) for i, tt, yy, s in self.history),
-                                     maxlen=self.history.maxlen)
-                self.comm = []
-                self.phase = MONITORING
-                self.cusum.reset(idx + 1)
+                self._commissioned(m, v, idx)
             return None
         se = se * self.scale
         p = (idx, t, y, se)
@@ -870,7 +873,8 @@ class _WidthChannel(_Channel):
 # Tracker
 # --------------------------------------------------------------------------------------------------
 
-def _check_value(name: str, v) -> tuple[float | None, str | None]:
+def _parse_float(name: str, v) -> tuple[float | None, str | None]:
+    """(finite float, None) or (None, the reason naming ``name``); None stays (None, None)."""
     if v is None:
         return None, None
     if isinstance(v, bool):
@@ -881,23 +885,25 @@ def _check_value(name: str, v) -> tuple[float | None, str | None]:
         return None, f"{name}: not a number ({v!r})"
     if not math.isfinite(f):
         return None, f"{name}: not finite ({f!r})"
-    if f <= 0.0:
-        return None, f"{name}: must be > 0, got {f!r}"
     return f, None
+
+
+def _check_value(name: str, v) -> tuple[float | None, str | None]:
+    f, reason = _parse_float(name, v)
+    if f is not None and f <= 0.0:
+        return None, f"{name}: must be > 0, got {f!r}"
+    return f, reason
 
 
 def _check_time(v) -> tuple[float | None, str | None]:
     if v is None:
         return None, "time_s: missing"
-    if isinstance(v, bool):
-        return None, f"time_s: not a number ({v!r})"
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        return None, f"time_s: not a number ({v!r})"
-    if not math.isfinite(f):
-        return None, f"time_s: not finite ({f!r})"
-    return f, None
+    return _parse_float("time_s", v)
+
+
+def _beyond(value: float, warn: float, alarm: float) -> int:
+    """OK, WARN (value above ``warn``) or ERROR (above ``alarm``)."""
+    return ERROR if value > alarm else (WARN if value > warn else OK)
 
 
 def _fmt_pm(v: float, se: float, digits: int = 2) -> str:
@@ -921,6 +927,13 @@ class TrendTracker:
     @property
     def threshold_sd(self) -> float:
         return self._h
+
+    def reconfigure(self, config: TrendConfig) -> "TrendTracker":
+        """The same state under another configuration (a parameter changed at run time): thresholds,
+        limits, the CUSUM design, the smoothing and the commissioning length take effect with the next
+        window.  A given baseline (``*_baseline_*``) acts only on a fresh tracker and is kept as it was;
+        ``width_regression_windows`` cannot change (the regression buffer): TrendStateError."""
+        return TrendTracker.from_dict(self.to_dict(), config)
 
     def recommission(self):
         """Forget the baselines and learn them again (e.g. after maintenance); keeps the window count."""
@@ -1054,7 +1067,6 @@ class TrendTracker:
     def _health(self, idx, jx, jb, jd, jdse, jdr, wx, wse, rate, rate_se, ttl, ttl_lo, ttl_hi, events):
         cfg = self.config
         J, Wd = self._inertia, self._width
-        hold = cfg.change_hold_windows
         parts, level = [], OK
         if J.n == 0 and Wd.n == 0:
             return OK, f"learning the baseline: 0 of {cfg.commissioning_windows} windows (no estimate yet)"
@@ -1068,21 +1080,14 @@ class TrendTracker:
             if J.reference != jb:
                 txt += f"; {jdr:+.2f} % of commissioned {J.reference:.5g}"
             txt += ")"
-            worst = max(abs(jd), abs(jdr))
-            if worst > cfg.drift_alarm_pct:
-                level = ERROR
-                txt += f" beyond the {cfg.drift_alarm_pct:g} % alarm"
-            elif worst > cfg.drift_warn_pct:
-                level = max(level, WARN)
-                txt += f" beyond the {cfg.drift_warn_pct:g} % warning"
+            lv = _beyond(max(abs(jd), abs(jdr)), cfg.drift_warn_pct, cfg.drift_alarm_pct)
+            level = max(level, lv)
+            txt += ("", f" beyond the {cfg.drift_warn_pct:g} % warning", f" beyond the {cfg.drift_alarm_pct:g} % alarm")[lv]
             if J.phase == RELEARNING:
                 txt += f", re-learning the baseline ({len(J.relearn)} of {cfg.relearn_windows})"
-            if J.last_change_index is not None and idx - J.last_change_index < hold:
-                level = max(level, WARN)
-                ev = next((e for e in reversed(self.changes) if e.quantity == "inertia"), None)
-                if ev is not None:
-                    txt += (f"; change {ev.size_pct:+.2f} % ({ev.size:+.4g} kg m^2) detected at window "
-                            f"{ev.window_index} (t = {ev.time_s:.0f} s)")
+            phrase = self._held_change(J, idx, lambda ev: f"; change {ev.size_pct:+.2f} % ({ev.size:+.4g} kg m^2)")
+            if phrase is not None:
+                level, txt = max(level, WARN), txt + phrase
             parts.append(txt)
         # width
         if Wd.n > 0:
@@ -1095,25 +1100,29 @@ class TrendTracker:
                 if ttl is not None:
                     txt += (f", limit {cfg.width_limit_m * 1e3:.4g} mm in {ttl / SECONDS_PER_DAY:.3g} d "
                             f"[{ttl_lo / SECONDS_PER_DAY:.3g}, {ttl_hi / SECONDS_PER_DAY:.3g}]")
-                if wx > cfg.width_limit_m:
-                    level = ERROR
-                    txt += f" beyond the {cfg.width_limit_m * 1e3:.4g} mm limit"
-                elif wx > cfg.width_warn_limit_m:
-                    level = max(level, WARN)
-                    txt += f" beyond the {cfg.width_warn_limit_m * 1e3:.4g} mm warning"
-                elif ttl is not None and cfg.time_to_limit_warn_s is not None and ttl < cfg.time_to_limit_warn_s:
-                    level = max(level, WARN)
+                lv = _beyond(wx, cfg.width_warn_limit_m, cfg.width_limit_m)
+                txt += ("", f" beyond the {cfg.width_warn_limit_m * 1e3:.4g} mm warning",
+                        f" beyond the {cfg.width_limit_m * 1e3:.4g} mm limit")[lv]
+                if lv == OK and ttl is not None and cfg.time_to_limit_warn_s is not None \
+                        and ttl < cfg.time_to_limit_warn_s:
+                    lv = WARN
                     txt += f" (< {cfg.time_to_limit_warn_s / SECONDS_PER_DAY:.3g} d)"
+                level = max(level, lv)
                 if Wd.phase == COMMISSIONING:
                     txt += f" (learning the baseline: {Wd.progress()})"
-                if Wd.last_change_index is not None and idx - Wd.last_change_index < hold:
-                    level = max(level, WARN)
-                    ev = next((e for e in reversed(self.changes) if e.quantity == "width"), None)
-                    if ev is not None:
-                        txt += (f"; width change {ev.size * 1e3:+.3g} mm detected at window {ev.window_index} "
-                                f"(t = {ev.time_s:.0f} s)")
+                phrase = self._held_change(Wd, idx, lambda ev: f"; width change {ev.size * 1e3:+.3g} mm")
+                if phrase is not None:
+                    level, txt = max(level, WARN), txt + phrase
                 parts.append(txt)
         return level, "; ".join(parts)
+
+    def _held_change(self, ch: _Channel, idx: int, what) -> str | None:
+        """None unless the channel's last change is within change_hold_windows of window ``idx`` (WARN);
+        then its phrase: ``what(event)`` + where it was detected ('' when the event was dropped)."""
+        if ch.last_change_index is None or idx - ch.last_change_index >= self.config.change_hold_windows:
+            return None
+        ev = next((e for e in reversed(self.changes) if e.quantity == ch.name), None)
+        return "" if ev is None else f"{what(ev)} detected at window {ev.window_index} (t = {ev.time_s:.0f} s)"
 
     # -- state --------------------------------------------------------------------------------------
     def to_dict(self) -> dict:
@@ -1279,26 +1288,39 @@ def detection_delays(trials: int = 200, seed: int = 0, config: TrendConfig | Non
     step_at = cfg.commissioning_windows + pre_windows
     delays, missed, false_before = [], 0, 0
     for trial in range(trials):
-        sign = 1.0 if trial % 2 == 0 else -1.0
+        sign = 1 if trial % 2 == 0 else -1
         s = simulate_series(step_at + post_windows, step_at=step_at, step_pct=sign * step_pct,
                             j1_se_pct=float(rng.uniform(0.4, 0.6)), seed=int(rng.integers(2 ** 63)))
-        tr = TrendTracker(cfg)
-        found = None
-        for i in range(len(s.time_s)):
-            u = tr.update(s.time_s[i], s.inertia_kgm2[i], s.inertia_se_kgm2[i])
-            for ev in u.changes:
-                if ev.quantity != "inertia":
-                    continue
-                if i < step_at:
-                    false_before += 1
-                elif found is None and ev.sign == int(sign):
-                    found = i - step_at + 1
-            if found is not None:
-                break
+        found, false = step_delay(TrendTracker(cfg), s.time_s, s.inertia_kgm2, s.inertia_se_kgm2, step_at, sign)
+        false_before += false
         if found is None:
             missed += 1
         else:
             delays.append(found)
+    return delay_summary(trials, delays, missed, false_before)
+
+
+def step_delay(tracker: "TrendTracker", time_s, inertia_kgm2, inertia_se_kgm2, step_at: int,
+               sign: int) -> tuple[int | None, int]:
+    """Feed J1 windows to ``tracker`` until the first J1 change of ``sign`` at or after window ``step_at``:
+    (delay in windows, 1 = detected at the step window, or None; J1 changes detected before the step)."""
+    false_before = 0
+    for i in range(len(time_s)):
+        u = tracker.update(time_s[i], inertia_kgm2[i], inertia_se_kgm2[i])
+        for ev in u.changes:
+            if ev.quantity != "inertia":
+                continue
+            if i < step_at:
+                false_before += 1
+            elif ev.sign == sign:
+                return i - step_at + 1, false_before
+    return None, false_before
+
+
+def delay_summary(trials: int, delays: Sequence[int], missed: int, false_before: int) -> dict:
+    """The detection-delay statistics of :func:`detection_delays` (and of the evaluation on real windows):
+    trials, detected, missed, false changes before the step, median / p95 / max delay (inf when none was
+    detected) and the histogram {delay: trials}."""
     d = np.array(delays, dtype=float)
     return {"trials": trials, "detected": len(delays), "missed": missed, "false_before_step": false_before,
             "median": float(np.median(d)) if d.size else math.inf,

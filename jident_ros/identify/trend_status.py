@@ -4,7 +4,8 @@
   :data:`jident_ros.parameters.TREND`) -> :class:`~jident_ros.identify.trend.TrendConfig`.  ROS
   parameters cannot be None, so 0 (or "") stands for "not set" where the config takes None.
 * :func:`trend_inputs`: one window's diagnosis -> what the tracker takes of it (the published J1 of
-  the gap estimate with its standard error, the backlash width estimate with its standard uncertainty).
+  the gap estimate with its standard error, the backlash width estimate with its standard uncertainty:
+  the flank detector's when the window has one, else the gap estimator's, and which).
 * :func:`trend_status`: a :class:`~jident_ros.identify.trend.TrendUpdate` -> the content of the
   diagnostic node's periodic "jident_diagnostic: trend" DiagnosticStatus: (level, message,
   [(key, value), ...]) with the levels of diagnostic_msgs (OK 0, WARN 1, ERROR 2), the tracker's one-line
@@ -14,7 +15,7 @@
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping, Optional
+from typing import Any, Mapping, NamedTuple, Optional
 
 from jident_ros.identify.trend import SECONDS_PER_DAY, TrendConfig, TrendUpdate
 
@@ -31,16 +32,43 @@ TREND_STATUS_NAME = "jident_diagnostic: trend"
 Z95 = 1.959963984540054
 
 
-def trend_inputs(diagnosis, width_se_floor_m: float = 0.0) -> tuple:
-    """(inertia_kgm2, inertia_se_kgm2, width_m, width_se_m) for :meth:`TrendTracker.update` from one
-    window's :class:`~jident_ros.identify.diagnosis.WindowDiagnosis`.
+class TrendInputs(NamedTuple):
+    """What :meth:`TrendTracker.update` takes of one window (None where a quantity is not known) and where
+    the width came from: ``width_source`` 'flank' (the flank detector's flank-to-flank K2 of the window,
+    window format 2's ``backlash_width_estimate_m``), 'gap' (the gap estimator's width at re-contact: the
+    fallback when the window has no flank estimate) or None (no width)."""
 
-    J1 only when the published J1 is the gap estimate (``source == 'gap'``: the policy accepted it): its
-    standard error is the fit's, else (high - low) / (2 x 1.96) of its 95 % interval; a J1 of the image
-    method alone has no standard error and is not used.  The width K2 whenever the window has a width
-    estimate (re-contact), its standard uncertainty at least ``width_se_floor_m`` (the tracker's floor).
-    None where a quantity is not known."""
-    j = jse = w = wse = None
+    inertia_kgm2: Optional[float]
+    inertia_se_kgm2: Optional[float]
+    width_m: Optional[float]
+    width_se_m: Optional[float]
+    width_source: Optional[str]
+
+
+#: the width sources of :class:`TrendInputs`
+WIDTH_SOURCES = ("flank", "gap")
+
+
+def _finite(*v) -> bool:
+    return all(x is not None and math.isfinite(float(x)) for x in v)
+
+
+def trend_inputs(diagnosis, width_se_floor_m: float = 0.0, window=None) -> TrendInputs:
+    """The tracker's inputs from one window's :class:`~jident_ros.identify.diagnosis.WindowDiagnosis`
+    (and the :class:`~jident_ros.stream.layout.Window` it was diagnosed from, when at hand).
+
+    J1 only when the published J1 is the gap estimate (``source == 'gap'``: the policy accepted it; a
+    refused or ambiguous gap estimate is not used): its standard error is the fit's, else
+    (high - low) / (2 x 1.96) of its 95 % interval; a J1 of the image method alone has no standard error
+    and is not used.  The width K2, in this order of preference (``width_source``):
+
+    * 'flank': the flank detector's flank-to-flank estimate of the window (``window``'s
+      ``backlash_width_estimate_m`` / ``backlash_width_se_m``, or the diagnosis' width when it came from
+      the window: method 'flank'), whether or not the gap fit succeeded;
+    * 'gap': the gap estimator's width at re-contact (paper-detector windows, zone-centred angles);
+
+    its standard uncertainty at least ``width_se_floor_m`` (the tracker's floor)."""
+    j = jse = w = wse = src = None
     g = getattr(diagnosis, "gap", None)
     if g is not None and getattr(diagnosis, "source", None) == "gap" and diagnosis.inertia_kgm2 is not None:
         j = float(g.inertia_kgm2)
@@ -49,10 +77,18 @@ def trend_inputs(diagnosis, width_se_floor_m: float = 0.0) -> tuple:
             lo, hi = (float(v) for v in g.ci95_kgm2)
             se = (hi - lo) / (2 * Z95)
         jse = float(se)
+    est = getattr(window, "backlash_width_estimate_m", None)
+    est_se = getattr(window, "backlash_width_se_m", None)
     width = getattr(diagnosis, "width", None)
-    if width is not None and math.isfinite(float(width.width_m)) and math.isfinite(float(width.std_m)):
-        w, wse = float(width.width_m), max(float(width.std_m), float(width_se_floor_m))
-    return j, jse, w, wse
+    if getattr(window, "detector", None) == "flank" and _finite(est, est_se):
+        w, wse, src = float(est), float(est_se), "flank"
+    elif width is not None and _finite(width.width_m, width.std_m):
+        w, wse = float(width.width_m), float(width.std_m)
+        src = "flank" if getattr(width, "method", "") == "flank" else "gap"
+    if w is not None:
+        wse = max(wse, float(width_se_floor_m))
+    return TrendInputs(j, jse, w, wse, src)
+
 
 def _v(x: Optional[float]) -> Any:
     return "" if x is None or (isinstance(x, float) and not math.isfinite(x)) else float(x)
@@ -95,4 +131,5 @@ def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
     return int(u.level), u.message, vals
 
 
-__all__ = ["TREND_STATUS_NAME", "trend_config_from_parameters", "trend_inputs", "trend_status"]
+__all__ = ["TREND_STATUS_NAME", "TrendInputs", "WIDTH_SOURCES", "trend_config_from_parameters", "trend_inputs",
+           "trend_status"]

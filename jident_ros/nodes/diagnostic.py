@@ -24,7 +24,10 @@ dropped by reason; ERROR with the reason when recording failed), "jident_diagnos
 
 The trend: every diagnosed window updates a :class:`~jident_ros.identify.trend.TrendTracker` with its entry
 time, the published J1 when it is the gap estimate (with its standard error) and the backlash width estimate
-(with its standard uncertainty) (:func:`jident_ros.identify.trend_status.trend_inputs`); the smoothed J1 goes
+(with its standard uncertainty): the flank detector's flank-to-flank K2 when the window carries one (window
+format 2, ``detector: flank`` in the windowing node), else the gap estimator's width at re-contact; the status
+says which (``width_source``, and the counts of each) (:func:`jident_ros.identify.trend_status.trend_inputs`).
+The smoothed J1 goes
 out on ``inertia_trend`` and the width's regression line on ``backlash_width_trend`` (std_msgs/Float64,
 kg m^2 and m, transient local) once known.  With ``trend_state_file`` the tracker's state is written
 atomically after each update and read at start (a corrupt file: ERROR status, moved aside, a fresh start).
@@ -56,7 +59,7 @@ from jident_ros.identify.diagnosis import GAP_METHODS, detector_arguments, diagn
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES, OK, STALE, WARN
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.identify.trend import TrendConfig, TrendStateError, TrendTracker
-from jident_ros.identify.trend_status import trend_inputs, trend_status
+from jident_ros.identify.trend_status import WIDTH_SOURCES, trend_inputs, trend_status
 from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater
 from jident_ros.nodes.params import (
@@ -249,6 +252,8 @@ class DiagnosticNode(LifecycleNode):
         self.trend_error = None            # why the trend's state file was not used (ERROR), one line
         self.trend_save_error = None       # the last failure to write the state file (ERROR), one line
         self.trend_windows_without_estimate = 0
+        self.trend_width_source = ""        # where the last window's width came from: flank, gap or none
+        self.trend_width_sources = dict.fromkeys(WIDTH_SOURCES, 0)
         self.trend_saves = 0
         self.pub_inertia_trend = self.pub_width_trend = None
         # /diagnostics: event statuses and the periodic tasks
@@ -338,7 +343,8 @@ class DiagnosticNode(LifecycleNode):
     # ----------------------------------------------------------------- parameters at run time
     def on_parameters(self, changed: dict) -> None:
         """Apply accepted changes: p, gap_method, image_method (loads the library when switched on),
-        stale_after_s, hardware_id take effect with the next window / status."""
+        stale_after_s, hardware_id and the settable trend_* parameters (the tracker keeps its state under
+        the new configuration: :meth:`TrendTracker.reconfigure`) take effect with the next window / status."""
         self.cfg.update(changed)
         self.policy = VerdictPolicy.from_params(self.cfg)
         if "hardware_id" in changed:
@@ -346,6 +352,9 @@ class DiagnosticNode(LifecycleNode):
             self.updater.setHardwareID(self.hardware_id)
         if changed.get("image_method") and self.library is None and self.library_error is None:
             self._load_library()
+        if self.trend is not None and any(k.startswith("trend_") for k in changed):
+            # the read-only trend parameters (given baselines, regression length, file) never get here
+            self.trend = self.trend.reconfigure(TrendConfig.from_parameters(self.cfg))
         self.get_logger().info("parameters changed: " + ", ".join(f"{k} = {v!r}" for k, v in sorted(changed.items())))
 
     # ----------------------------------------------------------------- library
@@ -568,10 +577,13 @@ class DiagnosticNode(LifecycleNode):
 
     def _update_trend(self, win, d):
         """One diagnosed window into the tracker; publish the smoothed J1 and width; save the state."""
-        j, jse, w, wse = trend_inputs(d, self.trend.config.width_se_floor_m)
+        j, jse, w, wse, source = trend_inputs(d, self.trend.config.width_se_floor_m, win)
         if j is None and w is None:   # nothing to follow in this window (its status says why)
             self.trend_windows_without_estimate += 1
             return
+        self.trend_width_source = source or "none"
+        if source is not None:
+            self.trend_width_sources[source] += 1
         u = self.trend.update(win.entry_time_s, j, jse, w, wse)
         self.trend_update = u
         if u.skipped:
@@ -620,6 +632,9 @@ class DiagnosticNode(LifecycleNode):
             stat.add(k, v)
         for k, v in (("windows_updated", self.trend.n_windows),
                      ("windows_without_estimate", self.trend_windows_without_estimate),
+                     ("width_source", self.trend_width_source),
+                     ("width_from_flank_detector", self.trend_width_sources["flank"]),
+                     ("width_from_gap_estimator", self.trend_width_sources["gap"]),
                      ("state_file", self.cfg["trend_state_file"]), ("state_saves", self.trend_saves)):
             stat.add(k, v)
         return stat
