@@ -42,7 +42,7 @@ from jident_ros.config import load_system_config
 from jident_ros.evaluation.raw_inputs import event_window, flank_detector, raw_recordings, run_detector
 from jident_ros.identify.diagnosis import detector_arguments, diagnose_window
 from jident_ros.identify.gap import NoGapError, estimate_backlash_width, estimate_inertia
-from jident_ros.identify.trend import TrendConfig, TrendTracker, delay_summary, step_delay
+from jident_ros.identify.trend import TrendConfig, TrendTracker, step_trials
 from jident_ros.identify.trend_status import trend_inputs
 from jident_ros.sim import Case, WindowSet, add_measurement_noise, simulate_grid
 
@@ -123,20 +123,15 @@ def detection(steady: dict, up: dict, down: dict, trials: int, seed: int, config
               pre: int = 30, post: int = 20) -> dict:
     rng = np.random.default_rng(seed)
     comm = config.commissioning_windows
-    delays, missed, false_before = [], 0, 0
-    for k in range(trials):
+
+    def series(k):
         after, sign = (up, 1) if k % 2 == 0 else (down, -1)
         i0 = rng.integers(0, steady["j1"].size, comm + pre)
         i1 = rng.integers(0, after["j1"].size, post)
         j = np.concatenate([steady["j1"][i0], after["j1"][i1]])
         se = np.concatenate([steady["se"][i0], after["se"][i1]])
-        found, false = step_delay(TrendTracker(config), WINDOW_PERIOD_S * np.arange(j.size), j, se, comm + pre, sign)
-        false_before += false
-        if found is None:
-            missed += 1
-        else:
-            delays.append(found)
-    return delay_summary(trials, delays, missed, false_before)
+        return WINDOW_PERIOD_S * np.arange(j.size), j, se, sign
+    return step_trials(trials, series, config, comm + pre)
 
 
 def flank_windows(system, cases: list, seed: int, steady_s: float = 0.2) -> list:

@@ -906,6 +906,11 @@ def _beyond(value: float, warn: float, alarm: float) -> int:
     return ERROR if value > alarm else (WARN if value > warn else OK)
 
 
+def _beyond_text(level: int, warn: str, alarm: str) -> str:
+    """The status phrase of a :func:`_beyond` level: nothing, "beyond the <warn>" or "beyond the <alarm>"."""
+    return ("", f" beyond the {warn}", f" beyond the {alarm}")[level]
+
+
 def _fmt_pm(v: float, se: float, digits: int = 2) -> str:
     return f"{v:+.{digits}f} ± {se:.{digits}f}"
 
@@ -1082,12 +1087,11 @@ class TrendTracker:
             txt += ")"
             lv = _beyond(max(abs(jd), abs(jdr)), cfg.drift_warn_pct, cfg.drift_alarm_pct)
             level = max(level, lv)
-            txt += ("", f" beyond the {cfg.drift_warn_pct:g} % warning", f" beyond the {cfg.drift_alarm_pct:g} % alarm")[lv]
+            txt += _beyond_text(lv, f"{cfg.drift_warn_pct:g} % warning", f"{cfg.drift_alarm_pct:g} % alarm")
             if J.phase == RELEARNING:
                 txt += f", re-learning the baseline ({len(J.relearn)} of {cfg.relearn_windows})"
-            phrase = self._held_change(J, idx, lambda ev: f"; change {ev.size_pct:+.2f} % ({ev.size:+.4g} kg m^2)")
-            if phrase is not None:
-                level, txt = max(level, WARN), txt + phrase
+            level, txt = self._with_change(level, txt, J, idx,
+                                           lambda ev: f"; change {ev.size_pct:+.2f} % ({ev.size:+.4g} kg m^2)")
             parts.append(txt)
         # width
         if Wd.n > 0:
@@ -1101,8 +1105,8 @@ class TrendTracker:
                     txt += (f", limit {cfg.width_limit_m * 1e3:.4g} mm in {ttl / SECONDS_PER_DAY:.3g} d "
                             f"[{ttl_lo / SECONDS_PER_DAY:.3g}, {ttl_hi / SECONDS_PER_DAY:.3g}]")
                 lv = _beyond(wx, cfg.width_warn_limit_m, cfg.width_limit_m)
-                txt += ("", f" beyond the {cfg.width_warn_limit_m * 1e3:.4g} mm warning",
-                        f" beyond the {cfg.width_limit_m * 1e3:.4g} mm limit")[lv]
+                txt += _beyond_text(lv, f"{cfg.width_warn_limit_m * 1e3:.4g} mm warning",
+                                    f"{cfg.width_limit_m * 1e3:.4g} mm limit")
                 if lv == OK and ttl is not None and cfg.time_to_limit_warn_s is not None \
                         and ttl < cfg.time_to_limit_warn_s:
                     lv = WARN
@@ -1110,11 +1114,14 @@ class TrendTracker:
                 level = max(level, lv)
                 if Wd.phase == COMMISSIONING:
                     txt += f" (learning the baseline: {Wd.progress()})"
-                phrase = self._held_change(Wd, idx, lambda ev: f"; width change {ev.size * 1e3:+.3g} mm")
-                if phrase is not None:
-                    level, txt = max(level, WARN), txt + phrase
+                level, txt = self._with_change(level, txt, Wd, idx, lambda ev: f"; width change {ev.size * 1e3:+.3g} mm")
                 parts.append(txt)
         return level, "; ".join(parts)
+
+    def _with_change(self, level: int, txt: str, ch: _Channel, idx: int, what) -> tuple[int, str]:
+        """(level, txt) with the channel's held change (:meth:`_held_change`) appended and WARN raised."""
+        phrase = self._held_change(ch, idx, what)
+        return (level, txt) if phrase is None else (max(level, WARN), txt + phrase)
 
     def _held_change(self, ch: _Channel, idx: int, what) -> str | None:
         """None unless the channel's last change is within change_hold_windows of window ``idx`` (WARN);
@@ -1286,12 +1293,22 @@ def detection_delays(trials: int = 200, seed: int = 0, config: TrendConfig | Non
     cfg = config if config is not None else TrendConfig()
     rng = np.random.default_rng(seed)
     step_at = cfg.commissioning_windows + pre_windows
-    delays, missed, false_before = [], 0, 0
-    for trial in range(trials):
+
+    def series(trial):
         sign = 1 if trial % 2 == 0 else -1
         s = simulate_series(step_at + post_windows, step_at=step_at, step_pct=sign * step_pct,
                             j1_se_pct=float(rng.uniform(0.4, 0.6)), seed=int(rng.integers(2 ** 63)))
-        found, false = step_delay(TrendTracker(cfg), s.time_s, s.inertia_kgm2, s.inertia_se_kgm2, step_at, sign)
+        return s.time_s, s.inertia_kgm2, s.inertia_se_kgm2, sign
+    return step_trials(trials, series, cfg, step_at)
+
+
+def step_trials(trials: int, make_series, config: TrendConfig, step_at: int) -> dict:
+    """:func:`delay_summary` over ``trials`` series, each from ``make_series(trial)`` -> (time_s, inertia_kgm2,
+    inertia_se_kgm2, sign of the step at window ``step_at``), each through a fresh tracker."""
+    delays, missed, false_before = [], 0, 0
+    for trial in range(trials):
+        t, j, se, sign = make_series(trial)
+        found, false = step_delay(TrendTracker(config), t, j, se, step_at, sign)
         false_before += false
         if found is None:
             missed += 1
