@@ -268,3 +268,14 @@ def test_a_reverse_window_is_mirrored_before_the_image_method(configs, library, 
         assert vr["image_class_kgm2"] == vf["image_class_kgm2"] and vr["image_margin"] == vf["image_margin"]
         raw = identify_window(rev, 48, 0.005, library, method, 2.0)
         assert raw.fused_margin != pytest.approx(vf["image_margin"], rel=1e-6), "the raw reverse window is no test"
+
+
+def test_image_min_margin_applies_only_to_the_variant_it_was_chosen_for():
+    """The margin threshold was chosen on the paper-faithful distances: a sensor_matched answer with the same margin
+    is outside the trusted domain (information only, never published alone), with the reason."""
+    from jident_ros.identify.verdict import VerdictPolicy, image_domain
+    policy = VerdictPolicy()
+    args = (5.0, 0.005, 0.005, 5e-4, 5e-4, policy)
+    assert image_domain(*args) == (True, "")
+    inside, reason = image_domain(*args, variant="sensor_matched")
+    assert not inside and "'sensor_matched'" in reason and "image_min_margin" in reason

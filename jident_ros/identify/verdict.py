@@ -290,13 +290,24 @@ def width_disagreement(rc: RecontactCheck, backlash_width_m: float) -> str:
 # --------------------------------------------------------------------------- image method
 
 
+#: The method variants whose margins ``image_min_margin`` was chosen on (``python -m
+#: jident_ros.evaluation.verdicts threshold`` runs the paper-faithful distances, eq. 33).  Another variant's
+#: margins are on another scale (sensor_matched: distances in units of the seed-to-seed scatter), so its class
+#: is information only until a threshold is chosen for it.
+MARGIN_CALIBRATED_VARIANTS = ("paper",)
+
+
 def image_domain(fused_margin: float, library_width_m: float, backlash_width_m: float, sample_period_s: float,
-                 library_sample_period_s: float, policy: VerdictPolicy) -> tuple:
+                 library_sample_period_s: float, policy: VerdictPolicy, variant: str = "paper") -> tuple:
     """(inside, reason): is the image method's answer trusted (publishable alone; its disagreement a
-    WARN)?  Inside when image_min_margin > 0, the fused margin >= it, the library width within
-    library_width_tolerance of the window's K2, and the window's sample period the library's."""
+    WARN)?  Inside when image_min_margin > 0 and was chosen for this method ``variant``, the fused margin >=
+    it, the library width within library_width_tolerance of the window's K2, and the window's sample period
+    the library's."""
     if policy.image_min_margin <= 0:
         return False, "image_min_margin 0: the image method never answers alone"
+    if variant not in MARGIN_CALIBRATED_VARIANTS:
+        return False, (f"image_min_margin was chosen for variant(s) {', '.join(MARGIN_CALIBRATED_VARIANTS)}, not "
+                       f"'{variant}' (its margins are on another scale)")
     if not fused_margin >= policy.image_min_margin:
         return False, f"its margin {fused_margin:.4g} is below image_min_margin {policy.image_min_margin:g}"
     if abs(library_width_m - backlash_width_m) > policy.library_width_tolerance * backlash_width_m:
@@ -308,6 +319,6 @@ def image_domain(fused_margin: float, library_width_m: float, backlash_width_m: 
     return True, ""
 
 
-__all__ = ["BOUNDED", "RECONTACT_SLACK_SAMPLES", "STATUSES", "GapDecision", "RecontactCheck", "VerdictPolicy",
+__all__ = ["BOUNDED", "MARGIN_CALIBRATED_VARIANTS", "RECONTACT_SLACK_SAMPLES", "STATUSES", "GapDecision", "RecontactCheck", "VerdictPolicy",
            "classes_in_interval", "decide_gap", "fmt_classes", "image_domain", "input_bounds", "input_refusal",
            "recontact_check", "width_disagreement"]
