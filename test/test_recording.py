@@ -597,3 +597,21 @@ def test_salvage_errors_are_one_line_naming_the_file(tmp_path, capsys):
     assert "0 of" in line and "complete data section" in line
     with pytest.raises(R.RecordingError, match="not an MCAP file"):
         list(R.read_bag(garbage))
+
+
+@pytest.mark.parametrize("split", [False, True])
+def test_metadata_yaml_is_the_dump_of_the_bag_metadata(tmp_path, split):
+    """metadata.yaml reuses the YAML of the last file's rosbag2 record when the content is the same (one file);
+    either way its text is what dumping the bag's metadata under rosbag2_bagfile_information gives, also with
+    multi-line and quoted custom data."""
+    w = R.BagWriter(tmp_path / "b", custom_data={"note": "two\nlines", "empty": "", "k": "a: b"})
+    w.add_topic("/drive/signals", SIGNALS)
+    w.write("/drive/signals", batch(0), 10**18)
+    if split:
+        w.split()
+        w.write("/drive/signals", batch(1), 10**18 + 25_000_000)
+    w.close()
+    text = (tmp_path / "b" / "metadata.yaml").read_text(encoding="utf-8")
+    assert text == R._dump_yaml({"rosbag2_bagfile_information": w.bag_metadata()})
+    info = yaml.safe_load(text)["rosbag2_bagfile_information"]
+    assert info["custom_data"]["note"] == "two\nlines" and len(info["relative_file_paths"]) == (2 if split else 1)

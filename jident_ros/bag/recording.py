@@ -105,6 +105,19 @@ def _dump_yaml(data: Any) -> str:
                      width=1 << 16)
 
 
+def _wrapped_metadata_yaml(metadata: dict, record: tuple | None = None) -> str:
+    """metadata.yaml's text: ``metadata`` under ``rosbag2_bagfile_information``.  When ``record`` = (the same
+    metadata, its YAML) -- the rosbag2 record just written to the last file, which for a one-file bag holds the
+    same content -- that text is indented instead of dumped again (PyYAML's pure-Python emitter was most of the
+    cost of closing a bag; block style nests by indenting every line by 2, the _Dumper's indent)."""
+    if record is not None and record[0] == metadata:
+        body = record[1]
+    else:
+        body = _dump_yaml(metadata)
+    return "rosbag2_bagfile_information:\n" + "".join("  " + line if line.strip() else line
+                                                       for line in body.splitlines(keepends=True))
+
+
 # ------------------------------------------------------------------------------------------ writing
 class _ChunkFile:
     """The mcap Writer's output stream: what the Writer writes is collected and handed to the OS by
@@ -285,6 +298,7 @@ class BagWriter:
         self.disk_full = False
         self.messages_lost = 0             # messages of a chunk whose write failed
         self._reserve_fd, self._reserved = -1, 0
+        self._last_record = None           # (metadata, its YAML) of the last file's rosbag2 record
         self._file = self._open_file()
         self._ensure_reserve()
         ref = weakref.ref(self)
@@ -562,7 +576,7 @@ class BagWriter:
     def _write_metadata(self) -> None:
         tmp = self.metadata_path.with_suffix(".yaml.tmp")
         try:
-            tmp.write_text(_dump_yaml({"rosbag2_bagfile_information": self.bag_metadata()}), encoding="utf-8")
+            tmp.write_text(_wrapped_metadata_yaml(self.bag_metadata(), self._last_record), encoding="utf-8")
             os.replace(tmp, self.metadata_path)
         except OSError as exc:
             tmp.unlink(missing_ok=True)
@@ -611,7 +625,9 @@ class BagWriter:
             if self.error is None:
                 f.w.flush()
                 f.out.commit()
-            f.w.add_metadata("rosbag2", {"serialized_metadata": _dump_yaml(self.bag_metadata(f))})
+            md = self.bag_metadata(f)
+            self._last_record = (md, _dump_yaml(md))
+            f.w.add_metadata("rosbag2", {"serialized_metadata": self._last_record[1]})
             f.w.finish()
             f.out.commit()
             if self._fsync:
