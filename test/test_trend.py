@@ -227,6 +227,18 @@ def test_time_going_backwards_is_skipped():
     assert u.skipped and "before the previous" in u.reason
 
 
+def test_the_same_window_again_is_skipped_and_leaves_the_state():
+    """A window at the previous window's time (a latched drive/window re-delivered after a restart) is not fed
+    to the tracker a second time."""
+    tr = TrendTracker()
+    tr.update(100.0, J1, 0.005)
+    before = tr.to_dict()
+    u = tr.update(100.0, J1 * 1.1, 0.005)
+    assert u.skipped and "the same window again" in u.reason
+    after = tr.to_dict()
+    assert after.pop("n_windows") == before.pop("n_windows") + 1 and after == before
+
+
 def test_given_baseline_skips_commissioning():
     tr = TrendTracker(TrendConfig(inertia_baseline_kgm2=1.16, inertia_baseline_se_kgm2=0.001))
     u = tr.update(0.0, 1.161, 0.005)

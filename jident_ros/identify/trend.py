@@ -949,13 +949,15 @@ class TrendTracker:
                width_m: float | None = None, width_se_m: float | None = None) -> TrendUpdate:
         """One window.  A quantity whose value and standard error are both None is not updated;
         a non-finite or non-positive input (or a value without its standard error, or a time
-        before the previous window's) refuses the whole window: the returned update has
+        not after the previous window's) refuses the whole window: the returned update has
         ``skipped=True`` and the reason, and the state is unchanged (the window is still counted)."""
         idx = self.n_windows
         self.n_windows += 1
         t, reason = _check_time(time_s)
-        if reason is None and self.last_time_s is not None and t < self.last_time_s:
-            reason = f"time_s: {t!r} is before the previous window's {self.last_time_s!r}"
+        if reason is None and self.last_time_s is not None and t <= self.last_time_s:
+            # equal: the same window again (e.g. re-delivered by a latched drive/window after a restart)
+            reason = (f"time_s: {t!r} is before the previous window's {self.last_time_s!r}" if t < self.last_time_s
+                      else f"time_s: {t!r} is the previous window's (the same window again)")
         vals = {}
         if reason is None:
             for name, v, sename, se in (("inertia_kgm2", inertia_kgm2, "inertia_se_kgm2", inertia_se_kgm2),
