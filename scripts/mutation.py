@@ -78,7 +78,7 @@ TESTS = {
 #: holds it or "" for anywhere in the module; the line must occur once there): the four one-line changes of
 #: issue 11 that survived the whole suite on main.
 TARGETED = [
-    ("gap", "j = float(coef[0])", "j = float(coef[0]) * 1.002", "0.2 % bias of the speed fit", ""),
+    ("gap", "j = 1.0 / kappa", "j = 1.002 / kappa", "0.2 % bias of the speed fit", "speed_fit"),
     ("gap", "dof = n - 1", "dof = n - 2", "degrees of freedom of the anchored fit", "estimate_inertia"),
     ("detector", "before[0] = True if self._prev_inside is None else self._prev_inside",
      "before[0] = False if self._prev_inside is None else self._prev_inside",
