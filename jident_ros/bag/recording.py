@@ -446,7 +446,7 @@ class BagWriter:
             if t is None:
                 raise RecordingError(f"{topic}: not added; call add_topic({topic!r}, <type>) first")
             if isinstance(message, (bytes, bytearray, memoryview)):
-                data = bytes(message)
+                data = message if type(message) is bytes else bytes(message)
                 if t.fmt == "cdr" and (len(data) < 4 or data[0] != 0 or data[1] not in (0, 1)):
                     raise ValueError(f"{topic}: bytes given but not a CDR payload")
             elif not t.encodable:
@@ -670,6 +670,8 @@ class BagWriter:
 
 
 def _as_time(value: Any, name: str) -> int:
+    if type(value) is int and 0 <= value < 18446744073709551616:   # the common case first (2**64)
+        return value
     if isinstance(value, (bool, float)) or not hasattr(value, "__index__"):
         raise TypeError(f"{name} must be an integer number of nanoseconds, got {value!r}")
     v = int(value)
