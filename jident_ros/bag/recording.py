@@ -670,14 +670,13 @@ class BagWriter:
 
 
 def _as_time(value: Any, name: str) -> int:
-    if type(value) is int and 0 <= value < 18446744073709551616:   # the common case first (2**64)
-        return value
-    if isinstance(value, (bool, float)) or not hasattr(value, "__index__"):
-        raise TypeError(f"{name} must be an integer number of nanoseconds, got {value!r}")
-    v = int(value)
-    if not 0 <= v < 2**64:
-        raise ValueError(f"{name}={v} is outside 0 .. 2**64-1")
-    return v
+    if type(value) is not int:      # a plain int (the common case) needs no conversion
+        if isinstance(value, (bool, float)) or not hasattr(value, "__index__"):
+            raise TypeError(f"{name} must be an integer number of nanoseconds, got {value!r}")
+        value = int(value)
+    if not 0 <= value < 2**64:
+        raise ValueError(f"{name}={value} is outside 0 .. 2**64-1")
+    return value
 
 
 def _chain_signal(signum: int | None, previous: Any) -> None:

@@ -289,7 +289,7 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
         lib_width = float(library.widths_m[idn.width_index])
         in_domain, domain_reason = image_domain(idn.fused_margin, lib_width, float(backlash_width_m),
                                                 float(sample_period_s), float(system.sampling.sample_period_s),
-                                                policy, variant=str(getattr(method, "variant", "paper")))
+                                                policy, variant=method.variant)
         if in_domain and recontact is not None and not recontact.consistent:
             in_domain, domain_reason = False, "the window's K2 disagrees with the re-contact"
         vals += [("image_class_kgm2", image_cls), ("image_margin", idn.fused_margin),
