@@ -27,7 +27,6 @@ from typing import Any, Mapping
 import pywt
 import yaml
 
-from jident_ros.method.pipeline import MethodConfig
 from jident_ros.resources import default_config_path
 from jident_ros.sim.params import GridParams, LoadParams, MotorParams, SamplingParams, SystemConfig
 
@@ -226,6 +225,9 @@ def config_hash(obj: Any) -> str:
 
 def method_config_from_dict(data: Mapping | None):
     """Build and validate a MethodConfig from the ``method`` section."""
+    # imported here, not at the top: the method pipeline imports scipy.fft & co. (~0.4 s), and `jident
+    # simulate`/`info` read the system config only (issue 23; test_layers.LAZY)
+    from jident_ros.method.pipeline import MethodConfig
     data = strip_ros_wrapper(data or {})
     sec = data.get("method", data) if isinstance(data, Mapping) else data
     if not isinstance(sec, Mapping):

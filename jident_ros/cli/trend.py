@@ -51,12 +51,11 @@ from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.identify.trend import SECONDS_PER_DAY, TrendConfig, TrendStateError, TrendTracker
 from jident_ros.identify.trend_status import WIDTH_SOURCES, Z95, trend_inputs
-from jident_ros.nodes.simulator import CASE_LABEL
 from jident_ros.sim import PAPER_SIGNALS, add_measurement_noise, simulate_grid
 from jident_ros.sim.scenarios import SCENARIOS, Scenario, wear_scenario
 from jident_ros.stream.detector import embed_windows
 from jident_ros.stream.flank import DETECTORS
-from jident_ros.stream.layout import DEFAULT_CHANNELS
+from jident_ros.stream.layout import CASE_LABEL, DEFAULT_CHANNELS
 
 #: Channels add_measurement_noise perturbs by default (the angles are left to the encoder model).
 NOISY_CHANNELS = PAPER_SIGNALS + ("omega2",)
