@@ -29,7 +29,8 @@ ALLOWED = {
     "stream": {"sim"},
     "method": {"sim", "stream", "bag", "config", "resources"},
     "identify": {"sim", "stream", "method", "config", "resources"},
-    "evaluation": {"sim", "stream", "method", "identify", "config", "resources", "second_drive", "vector_drive"},
+    "evaluation": {"sim", "stream", "method", "identify", "config", "resources", "second_drive", "vector_drive",
+                   "cli"},   # cli: evaluation/zoo.py diagnoses through jident diagnose's own function
     "bag": {"sim", "stream"},
     "second_drive": set(),
     "vector_drive": {"second_drive"},   # its writers
