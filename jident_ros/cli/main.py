@@ -64,8 +64,8 @@ def _progress(total, desc, enabled):
 
 
 def cmd_simulate(args) -> int:
-    if getattr(args, "scenario", None):     # parsed only when given (main: the scenario options live in cli.trend)
-        from jident_ros.cli.trend import cmd_simulate_scenario
+    if getattr(args, "scenario", None):     # parsed only when given (main: the scenario options live in cli.scenario)
+        from jident_ros.cli.scenario import cmd_simulate_scenario
         return cmd_simulate_scenario(args)
     from jident_ros.config import load_system_config
     from jident_ros.sim import Case, add_measurement_noise, paper_grid_cases, quantise_encoders, simulate_grid
@@ -323,7 +323,7 @@ def cmd_diagnose(args) -> int:
 def build_parser(command: str | None = None, scenario: bool = True) -> argparse.ArgumentParser:
     """The ``jident`` parser.  ``command`` given: only that subcommand gets its arguments (the others, all of
     them for "", are listed with their one-line help), so that a run imports only what it needs; ``scenario=False`` leaves out
-    ``simulate --scenario ...`` (its options come from cli.trend, which imports the offline diagnosis)."""
+    ``simulate --scenario ...`` (its options come from cli.scenario, which imports the offline diagnosis)."""
     def wanted(name):
         return command is None or command == name
 
@@ -377,7 +377,7 @@ def _simulate_arguments(s, scenario: bool) -> None:
     s.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     s.add_argument("--quiet", action="store_true")
     if scenario:
-        from jident_ros.cli.trend import add_scenario_arguments
+        from jident_ros.cli.scenario import add_scenario_arguments
         add_scenario_arguments(s)
     s.set_defaults(func=cmd_simulate)
 
@@ -458,7 +458,7 @@ def _diagnose_arguments(g) -> None:
 
 def _parse(argv: list, command: str) -> argparse.Namespace:
     """Parse with the parser of ``command`` alone.  ``jident simulate`` first without the scenario options
-    (they import cli.trend and with it the offline diagnosis): only when something is left over (or help is
+    (they import cli.scenario and with it the offline diagnosis): only when something is left over (or help is
     asked for) is it parsed again with them, so every error and the help text are the full parser's."""
     if command == "simulate" and not {"-h", "--help"} & set(argv):
         args, rest = build_parser(command, scenario=False).parse_known_args(argv)
@@ -472,8 +472,8 @@ def main(argv=None) -> int:
     if argv[:1] == ["demo"]:  # `jident demo [...]`: demo.py owns its arguments (the only command with rclpy)
         from jident_ros.cli.demo import main as demo_main
         return demo_main(argv[1:])
-    if argv[:1] == ["salvage"]:  # `jident salvage <truncated.mcap> <out_dir>`: recording.py owns its arguments
-        from jident_ros.bag.recording import salvage_main
+    if argv[:1] == ["salvage"]:  # `jident salvage <truncated.mcap> <out_dir>`: cli/salvage.py owns its arguments
+        from jident_ros.cli.salvage import salvage_main
         return salvage_main(argv[1:])
     # the subcommand (""  for `jident`, `jident --help`, `jident --version`: the command list only)
     command = argv[0] if argv and not argv[0].startswith("-") else ""
