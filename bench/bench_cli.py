@@ -51,10 +51,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeats", type=int, default=5, help="runs of each command (>= 5; default 5)")
     ap.add_argument("--json", help="also write the results to this JSON file")
+    ap.add_argument("--jident", help="the command to time instead of the installed jident, e.g. "
+                    "\"python -m jident_ros.cli.main\" with PYTHONPATH set to another checkout (before/after)")
     args = ap.parse_args(argv)
     if args.repeats < 5:
         ap.error(f"--repeats must be >= 5, got {args.repeats}")
-    jident = jident_command()
+    jident = args.jident.split() if args.jident else jident_command()
     work = tempfile.mkdtemp(prefix="bench_cli_")
     commands = {
         "help": jident + ["--help"],
