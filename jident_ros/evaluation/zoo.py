@@ -469,9 +469,10 @@ def main(argv=None) -> int:
         if m not in MODELS:
             sys.stderr.write(f"zoo: error: argument --models: not one of {', '.join(MODELS)}: {m!r}\n")
             return 2
+    commit = _commit()      # the code measured: read before the run
     res = run(Path(a.out), a.quick, log=lambda t: print(t, file=sys.stderr, flush=True), models=models)
     cmd = "python -m jident_ros.evaluation.zoo --report" + (" --quick" if a.quick else "")
-    md = markdown(res, cmd, _commit())
+    md = markdown(res, cmd, commit)
     if a.json:
         Path(a.json).write_text(json.dumps({"rows": {" | ".join(k): v for k, v in res["rows"].items()},
                                             "totals": {" | ".join(k): v for k, v in res["totals"].items()}},
