@@ -91,7 +91,7 @@ def simulate_cached(p: DriveParams, event: str, direction: str, duration_s: floa
                     cache_dir: Optional[Path] = None) -> dict:
     """Decimated states of one run (dict of arrays), from ``cache_dir`` when there (npz keyed by every
     parameter), else simulated (and saved there)."""
-    key = params_key(p, event, direction, duration_s, event_time_s)
+    key = params_key(p, event, direction, duration_s, event_time_s, asdict(scenario(p, event, direction, event_time_s)))
     path = None if cache_dir is None else Path(cache_dir) / f"vector_drive_{event}_{direction}_{key}.npz"
     if path is not None and path.exists():
         with np.load(path) as z:
