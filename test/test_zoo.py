@@ -18,8 +18,8 @@ GAPS = [{"entry_index": 200, "recontact_index": 250, "traversal": True},
         {"entry_index": 400, "recontact_index": None, "traversal": True}]
 
 
-@pytest.mark.parametrize("idx, expected", [(195, None), (196, 0), (200, 0), (249, 0), (250, None), (296, 1),
-                                           (396, 2), (404, 2), (405, None)])
+@pytest.mark.parametrize("idx, expected", [(179, None), (180, 0), (200, 0), (249, 0), (250, None), (280, 1),
+                                           (380, 2), (419, 2), (421, None)])
 def test_match_early_window_and_recontact(idx, expected):
     assert match(GAPS, idx) == expected
 
