@@ -138,3 +138,15 @@ def test_reversals_traverse(event):
     delta = run.data["theta_M"] - m.gear_ratio * run.data["theta_L"]
     gl = gaps(delta, m.half_zone_rad)
     assert gl and delta[gl[0][0] - 1] < 0 < delta[gl[0][1]], "reverse: from the - flank to the + flank"
+
+
+@pytest.mark.slow
+def test_the_small_drive_traverses_its_backlash():
+    from jident_ros.vector_drive.model import small_drive
+    p = replace(small_drive(), preroll_s=0.05)
+    run = simulate(p, scenario(p, "speed_step_down", "forward", event_time_s=0.1), 0.3)
+    m = p.mechanics
+    delta = run.data["theta_M"] - m.gear_ratio * run.data["theta_L"]
+    gl = gaps(delta, m.half_zone_rad)
+    assert gl and delta[gl[0][0] - 1] > 0 > delta[gl[0][1]]
+    assert delta[gl[0][0] - 1] - delta[gl[0][1]] == pytest.approx(2 * m.half_zone_rad, rel=0.15)

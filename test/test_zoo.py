@@ -85,3 +85,14 @@ def test_quick_report_on_the_vector_drive(tmp_path):
     assert tot["recordings"] == 2 and tot["traversals"] >= 1 and tot["found"] >= 1
     md = zoo.markdown(res, "cmd", "abc")
     assert md.startswith("## The zoo") and "| vector drive | CSV 2^16 |" in md
+
+
+def test_oracle_fit_recovers_j1_with_free_initial_angle_and_speed():
+    import numpy as np
+    t = np.arange(60) * 5e-4
+    m = -300.0 + 2000.0 * t                       # a ramping torque
+    j1 = 1.073
+    alpha = 0.7 + 95.0 * t + (-150.0 * t ** 2 + 2000.0 / 6 * t ** 3) / j1
+    assert zoo.oracle_fit(t, alpha, m, 10, 50) == pytest.approx(j1, rel=1e-3)
+    assert zoo.oracle_fit(t, alpha, -m, 10, 50) is None          # the torque's sign flipped: non-physical
+    assert zoo.oracle_fit(t, alpha, m, 10, 10 + zoo.ORACLE_MIN_SAMPLES - 1) is None
