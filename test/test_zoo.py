@@ -96,3 +96,14 @@ def test_oracle_fit_recovers_j1_with_free_initial_angle_and_speed():
     assert zoo.oracle_fit(t, alpha, m, 10, 50) == pytest.approx(j1, rel=1e-3)
     assert zoo.oracle_fit(t, alpha, -m, 10, 50) is None          # the torque's sign flipped: non-physical
     assert zoo.oracle_fit(t, alpha, m, 10, 10 + zoo.ORACLE_MIN_SAMPLES - 1) is None
+
+
+def test_oracle_fit_with_a_constant_friction_torque():
+    import numpy as np
+    t = np.arange(80) * 5e-4
+    m = 100.0 - 6000.0 * t                        # the torque crosses zero in the gap (a load reversal)
+    j1, tf = 1.16, 4.0
+    net = lambda x: 100.0 * x ** 2 / 2 - 6000.0 * x ** 3 / 6 - tf * x ** 2 / 2      # noqa: E731
+    alpha = 0.3 + 100.0 * t + net(t) / j1
+    assert zoo.oracle_fit(t, alpha, m, 0, 80, friction=True) == pytest.approx(j1, rel=1e-3)
+    assert abs(zoo.oracle_fit(t, alpha, m, 0, 80) / j1 - 1) > 0.05       # friction ignored: biased

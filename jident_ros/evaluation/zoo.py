@@ -257,22 +257,23 @@ def diagnose_one(zr: ZooRecording, fmt: str, system) -> dict:
 ORACLE_MIN_SAMPLES = 8
 
 
-def oracle_fit(t, alpha1, m_el, first: int, end: int) -> Optional[float]:
+def oracle_fit(t, alpha1, m_el, first: int, end: int, friction: bool = False) -> Optional[float]:
     """J1 from the recorded motor angle over the TRUE gap samples first..end-1 (the truth's, not a detector's):
     alpha1(t) = a + v (t - t_first) + (1/J1) double integral of m_el (trapezoidal), a, v free; friction
-    ignored. What the data hold; None for a gap of fewer than ORACLE_MIN_SAMPLES samples."""
+    ignored, or (``friction``) a constant friction torque T_f fitted too (+ T_f/J1 t^2/2: separable from J1 only
+    where m_el varies in the gap). What the data hold; None for a gap of fewer than ORACLE_MIN_SAMPLES samples."""
     if end - first < ORACLE_MIN_SAMPLES:
         return None
     tt = np.asarray(t[first:end], float) - float(t[first])
     m = np.asarray(m_el[first:end], float)
     i1 = np.concatenate([[0.0], np.cumsum(0.5 * (m[1:] + m[:-1]) * np.diff(tt))])
     i2 = np.concatenate([[0.0], np.cumsum(0.5 * (i1[1:] + i1[:-1]) * np.diff(tt))])
-    a = np.column_stack([np.ones_like(tt), tt, i2])
-    coef, *_ = np.linalg.lstsq(a, np.asarray(alpha1[first:end], float), rcond=None)
+    cols = [np.ones_like(tt), tt, i2] + ([0.5 * tt * tt] if friction else [])
+    coef, *_ = np.linalg.lstsq(np.column_stack(cols), np.asarray(alpha1[first:end], float), rcond=None)
     return float(1.0 / coef[2]) if coef[2] > 0 else None
 
 
-def oracle_errors(zr: ZooRecording) -> list:
+def oracle_errors(zr: ZooRecording, friction: bool = False) -> list:
     """|J1 error| of :func:`oracle_fit` on each traversal of a recording with a CSV file and known re-contacts."""
     path = zr.files.get("csv")
     if not path:
@@ -285,7 +286,7 @@ def oracle_errors(zr: ZooRecording) -> list:
     data = np.loadtxt(path, delimiter=",", skiprows=1, usecols=[header.index(c) for c in ("t", "alpha1", "m_el")])
     out = []
     for g in gaps:
-        j = oracle_fit(data[:, 0], data[:, 1], data[:, 2], g["entry_index"], g["recontact_index"])
+        j = oracle_fit(data[:, 0], data[:, 1], data[:, 2], g["entry_index"], g["recontact_index"], friction)
         if j is not None:
             out.append(abs(j / zr.inertia_kgm2 - 1.0))
     return out
@@ -312,7 +313,7 @@ def _first_time(zr: ZooRecording, fmt: str) -> float:
 def summarise(items: list) -> dict:
     """Counts over (ZooRecording, diagnose_one result) pairs of one group."""
     s = Counter()
-    offsets, errs, k2errs, oracle = [], [], [], []
+    offsets, errs, k2errs, oracle, oracle_f = [], [], [], [], []
     reasons = Counter()
     covered = []
     for zr, res in items:
@@ -323,6 +324,7 @@ def summarise(items: list) -> dict:
         trav = [k for k, g in enumerate(zr.gaps) if g["traversal"]]
         s["traversals"] += len(trav)
         oracle += res.get("oracle", [])
+        oracle_f += res.get("oracle_friction", [])
         hits = {w["gap"] for w in res["windows"] + res["cut_off"] if w["gap"] is not None}
         s["found"] += sum(1 for k in trav if k in hits)
         first = {}
@@ -373,6 +375,7 @@ def summarise(items: list) -> dict:
     out["k2_median"] = float(np.median(k2errs)) if k2errs else None
     out["reasons"] = dict(reasons.most_common())
     out["oracle"] = oracle
+    out["oracle_friction"] = oracle_f
     return out
 
 
@@ -390,6 +393,7 @@ def run(out: Path, quick: bool = False, log=print, models=MODELS) -> dict:
             res = diagnose_one(zr, fmt, system)
             if zr.files.get("csv"):
                 res["oracle"] = oracle_errors(zr) if fmt != "jointstate_imu" else []
+                res["oracle_friction"] = oracle_errors(zr, True) if fmt != "jointstate_imu" else []
             n += 1
             noise = "clean" if zr.snr_db is None else f"{zr.snr_db:g} dB"
             groups[(zr.model, label, zr.event, noise)].append((zr, res))
@@ -424,7 +428,7 @@ def _row(key, s, first_cols):
             f"| {_offsets(s['offsets'])} | {s.get('trav_published', 0)}/{tw} ({_pct(s.get('trav_published', 0), tw)}) "
             f"| {s.get('bounce_published', 0)}/{s.get('bounce_windows', 0)} | {_e(s['err_median'])} | {_e(s['err_max'])} "
             f"| {s.get('published_off', 0)} | {s['covered']}/{s['with_interval']} | {false} | {_e(s['k2_median'])} "
-            f"| {_oracle(s['oracle'])} |")
+            f"| {_oracle(s['oracle'])} | {_oracle(s['oracle_friction'])} |")
 
 
 def _oracle(errs):
@@ -433,7 +437,7 @@ def _oracle(errs):
 
 HEAD = ("| found | entry ±2 | entry offset | published (traversal windows) | published (bounce windows) "
         "| median abs err | max abs err | > 10 % off | 95 % CI covers | false: steady / same-flank / other | K2 median err "
-        "| oracle J1 abs err median / max |")
+        "| oracle J1 abs err median / max | oracle with friction |")
 
 
 def markdown(res: dict, command: str, commit: str) -> str:
@@ -457,16 +461,17 @@ def markdown(res: dict, command: str, commit: str) -> str:
              "before the event (steady running), after an event that opens no gap (same-flank torque change), or "
              "elsewhere. The oracle column: J1 from the recorded alpha1 and m_el over the TRUE gap samples of each traversal "
              "(alpha1 = a + v t + (1/J1) double integral of m_el, a and v free, friction ignored; CSV and JointState rows, "
-             "drives with a re-contact in their truth): what the data hold. No threshold was chosen for this "
+             "drives with a re-contact in their truth): what the data hold; 'with friction' fits a constant friction "
+             "torque too (separable from J1 only where m_el varies in the gap). No threshold was chosen for this "
              "table: today's thresholds were all chosen on our simulator.", ""]
     lines += targets(res)
     lines += ["### Totals per model × input × noise (all events)", "",
-              "| model | input | noise " + HEAD, "|" + "---|" * 15]
+              "| model | input | noise " + HEAD, "|" + "---|" * 16]
     for (model, label, noise), s in sorted(res["totals"].items(), key=lambda kv: (MODELS.index(kv[0][0]),
                                                                                  [i[0] for i in INPUTS].index(kv[0][1]),
                                                                                  kv[0][2])):
         lines.append(_row(None, s, [model, label, noise]))
-    lines += ["", "### Per event type", "", "| model | input | event | noise " + HEAD, "|" + "---|" * 16]
+    lines += ["", "### Per event type", "", "| model | input | event | noise " + HEAD, "|" + "---|" * 17]
     for (model, label, event, noise), s in sorted(res["rows"].items(), key=lambda kv: (
             MODELS.index(kv[0][0]), [i[0] for i in INPUTS].index(kv[0][1]), kv[0][2], kv[0][3])):
         lines.append(_row(None, s, [model, label, event, noise]))
