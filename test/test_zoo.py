@@ -107,3 +107,8 @@ def test_oracle_fit_with_a_constant_friction_torque():
     alpha = 0.3 + 100.0 * t + net(t) / j1
     assert zoo.oracle_fit(t, alpha, m, 0, 80, friction=True) == pytest.approx(j1, rel=1e-3)
     assert abs(zoo.oracle_fit(t, alpha, m, 0, 80) / j1 - 1) > 0.05       # friction ignored: biased
+
+
+def test_oracle_column_counts_non_physical_fits():
+    assert zoo._oracle([0.01, 0.03, float("inf")]) == "2.0 % / 3.0 % (1 non-physical)"
+    assert zoo._oracle([]) == "–"

@@ -289,6 +289,8 @@ def oracle_errors(zr: ZooRecording, friction: bool = False) -> list:
         j = oracle_fit(data[:, 0], data[:, 1], data[:, 2], g["entry_index"], g["recontact_index"], friction)
         if j is not None:
             out.append(abs(j / zr.inertia_kgm2 - 1.0))
+        elif g["recontact_index"] - g["entry_index"] >= ORACLE_MIN_SAMPLES:
+            out.append(math.inf)            # a non-physical (negative) 1/J1
     return out
 
 
@@ -432,7 +434,10 @@ def _row(key, s, first_cols):
 
 
 def _oracle(errs):
-    return "–" if not errs else f"{_e(float(np.median(errs)))} / {_e(float(np.max(errs)))}"
+    fin = [e for e in errs if math.isfinite(e)]
+    bad = len(errs) - len(fin)
+    text = "–" if not fin else f"{_e(float(np.median(fin)))} / {_e(float(np.max(fin)))}"
+    return text + (f" ({bad} non-physical)" if bad else "")
 
 
 HEAD = ("| found | entry ±2 | entry offset | published (traversal windows) | published (bounce windows) "
