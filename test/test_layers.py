@@ -26,7 +26,7 @@ ROS = OPTIONAL - {"ament_index_python", "matplotlib", "tqdm",
 ALLOWED = {
     "sim": set(),
     "stream": {"sim"},
-    "method": {"sim", "stream", "bag", "config", "resources"},
+    "method": {"sim", "stream", "resources"},
     "identify": {"sim", "stream", "method", "config", "resources"},
     "evaluation": {"sim", "stream", "method", "identify", "config", "resources", "second_drive"},
     "bag": {"sim", "stream"},

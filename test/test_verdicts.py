@@ -32,7 +32,7 @@ def windows(configs):
 
 
 def _diagnose(configs, library, data, *, k2=0.005, r=None, ts=None, entry=48, **kw):
-    from jident_ros.identify.diagnosis import diagnose_window
+    from test_offline import diagnose_window
     system, method = configs
     published = []
     d = diagnose_window(data, entry, k2, system.load.wheel_radius_m if r is None else r,

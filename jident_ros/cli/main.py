@@ -19,6 +19,7 @@ import numpy as np
 
 from jident_ros import __version__
 from jident_ros.bag.recording import salvage_main
+from jident_ros.cli.calibration import library_from_labelled_windows, parse_labels, pattern_grid, read_recordings
 from jident_ros.cli.demo import main as demo_main
 from jident_ros.cli.offline import (
     TABLE_HEADER,
@@ -38,7 +39,6 @@ from jident_ros.evaluation.report import render_markdown, write_figures, write_r
 from jident_ros.evaluation.report_robustness import write_robustness_figures
 from jident_ros.evaluation.robustness import run_robustness
 from jident_ros.identify.library import default_library_path, load_pattern_library
-from jident_ros.method.calibration import library_from_labelled_windows, parse_labels, pattern_grid, read_recordings
 from jident_ros.method.patterns import PatternLibrary
 from jident_ros.method.pipeline import VARIANTS
 from jident_ros.sim import Case, add_measurement_noise, paper_grid_cases, quantise_encoders, simulate_grid, steady_state

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
@@ -30,17 +30,18 @@ import numpy as np
 from jident_ros.bag.recorded import DriveReplay, in_sample_time_order, read_drive_messages
 from jident_ros.bag.recording import deserialize
 from jident_ros.config import load_method_config, load_system_config
-from jident_ros.identify.diagnosis import GAP_METHODS, WindowDiagnosis, detector_arguments, diagnose_window
+from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig, WindowDiagnosis
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES
 from jident_ros.identify.library import default_library_path, load_pattern_library
+from jident_ros.identify.monitor import DetectorConfig, DriveMonitor, make_detector, required_channels
 from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.parameters import DIAGNOSTIC as DIAGNOSTIC_DEFAULTS
 from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
-from jident_ros.stream.detector import BacklashDetector, stream_batches
-from jident_ros.stream.dynamics import DynamicsDetector
-from jident_ros.stream.flank import DETECTORS, FlankDetector
+from jident_ros.parameters import gap_method_problem
+from jident_ros.stream.detector import stream_batches
+from jident_ros.stream.flank import DETECTORS
 from jident_ros.stream.inputs import InputError, JointStateAdapter, read_csv
-from jident_ros.stream.layout import DRIVE_TOPICS, REQUIRED_CHANNELS, SIGNALS_TOPIC, WIDTH_TOPIC, pack
+from jident_ros.stream.layout import DRIVE_TOPICS, SIGNALS_TOPIC, WIDTH_TOPIC, pack
 from jident_ros.stream.layout import topic_matches as _matches
 
 try:  # reading a `ros2 bag record` of /joint_states (any storage, any distro) needs rosbags
@@ -188,7 +189,7 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
     p : KHM exponent of the image method, one of ``method.p_values``
     library : a loaded PatternLibrary (else loaded from ``library_path``, default the CLI's cache path,
         built and saved there when missing and ``build_if_missing``, as the diagnostic node does)
-    gap_method : one of :data:`jident_ros.identify.diagnosis.GAP_METHODS`
+    gap_method : one of :data:`jident_ros.parameters.GAP_METHODS`
     image_method : run the paper's image method
     backlash_width_m : K2, m; None: from drive/backlash_width messages, else the windowing node's default
     signals_topic : the drive/signals topic to read; None: the recording's only topic ending in drive/signals
@@ -204,15 +205,7 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
     """
     system = load_system_config() if system is None else system
     method = load_method_config() if method is None else method
-    if gap_method not in GAP_METHODS:
-        raise OfflineError(f"gap_method: expected one of {', '.join(GAP_METHODS)}, got {gap_method!r}")
-    if not image_method and gap_method in ("none", "off"):
-        raise OfflineError("image_method: must be on when gap_method is none (nothing would be identified)")
-    if float(p) not in [float(q) for q in method.p_values]:
-        raise OfflineError(f"p: must be one of method.p_values {[float(q) for q in method.p_values]}, got {p!r}")
-    policy = default_policy() if policy is None else policy
-    for name, what in policy.problems():
-        raise OfflineError(f"{name}: must be {what}, got {getattr(policy, name)!r}")
+    config, policy = _diagnosis_config(method, p, gap_method, image_method, policy)
     if backlash_width_m is not None and not (math.isfinite(backlash_width_m) and backlash_width_m > 0):
         raise OfflineError(f"backlash_width_m: must be a finite number > 0, got {backlash_width_m!r}")
     notes: list = []
@@ -265,15 +258,16 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
     ts = float(system.sampling.sample_period_s)
 
     def make_detector(batch_channels, topic_name, k2):
-        return _make_detector(system, k2, channels, batch_channels, gap_tolerance, WINDOWING_DEFAULTS, topic_name,
-                              detector, gear_ratio)
+        return _make_detector(system, DetectorConfig(detector, k2, channels, gap_tolerance, gear_ratio),
+                              batch_channels, topic_name)
 
     replay = DriveReplay(names, width, follow_width, decode=decode, read_width=_float_data,
                          read_truth=lambda msg, topic_name: float(msg.data), make_detector=make_detector,
                          log=log, unpacked=unpacked)
-    diag = _window_diagnoser(system, method, p, library, gap_method, image_method, result, policy)
+    monitor = _monitor(None, system, method, config, policy, library, result)
     for win in replay.windows(messages):
-        _add_window(result, win, diag(win), replay.true_inertia(win.entry_time_s, ts)[0], on_window)
+        _add_window(result, win, monitor.window(win).diagnosis, replay.true_inertia(win.entry_time_s, ts)[0],
+                    on_window)
     detector = replay.detector
     if detector is None:
         if replay.dropped_before_start:
@@ -294,18 +288,27 @@ def default_policy(**overrides) -> VerdictPolicy:
     return VerdictPolicy.from_params(dict(DIAGNOSTIC_DEFAULTS, **overrides))
 
 
-def _window_diagnoser(system, method, p, library, gap_method, image_method, result, policy=None):
-    def diag(win):
-        try:
-            return diagnose_window(win.as_dict(), win.entry_index, win.backlash_width_m, win.wheel_radius_m,
-                                   win.sample_period_s, library=library, system=system, method=method, p=float(p),
-                                   gap_method=gap_method, image_method=image_method,
-                                   library_error=result.library_error or "", window_id=win.window_id,
-                                   entry_time_s=win.entry_time_s, policy=policy, **detector_arguments(win))
-        except Exception as exc:  # as the node: report the window, go on
-            return WindowDiagnosis(ERROR, f"window could not be diagnosed: internal error "
-                                          f"{type(exc).__name__}: {exc}", [])
-    return diag
+def _diagnosis_config(method, p, gap_method, image_method, policy) -> tuple:
+    """(DiagnosisConfig, VerdictPolicy) of the options; OfflineError naming the field on a bad one."""
+    problem = gap_method_problem(gap_method, image_method)
+    if problem is not None:
+        raise OfflineError(f"{problem[0]}: {problem[1]}")
+    if float(p) not in [float(q) for q in method.p_values]:
+        raise OfflineError(f"p: must be one of method.p_values {[float(q) for q in method.p_values]}, got {p!r}")
+    policy = default_policy() if policy is None else policy
+    for name, what in policy.problems():
+        raise OfflineError(f"{name}: must be {what}, got {getattr(policy, name)!r}")
+    return DiagnosisConfig(float(p), gap_method, image_method), policy
+
+
+def _internal_error(win, exc) -> WindowDiagnosis:
+    """As the node: a window whose diagnosis raised is reported, the run goes on."""
+    return WindowDiagnosis(ERROR, f"window could not be diagnosed: internal error {type(exc).__name__}: {exc}", [])
+
+
+def _monitor(detector, system, method, config, policy, library, result) -> DriveMonitor:
+    diagnoser = Diagnoser(system, method, config, policy, library, result.library_error or "")
+    return DriveMonitor(detector, diagnoser, on_error=_internal_error)
 
 
 def _add_window(result, win, d, true_j1, on_window):
@@ -329,29 +332,21 @@ def _finish(result, detector, log):
     result.dropped = {r: n for r, n in detector.counts.items() if n}
 
 
-def _make_detector(system, width, channels, batch_channels, gap_tolerance, defaults, topic_name,
-                   detector: str = "paper", gear_ratio: float = 1.0):
-    sampling = system.sampling
-    if channels is None:
-        channels = [c for c in defaults["channels"] if c in batch_channels]
-    needed = REQUIRED_CHANNELS if detector != "dynamics" else ("t", "m_el")
+def _make_detector(system, config: DetectorConfig, batch_channels, topic_name):
+    """:func:`~jident_ros.identify.monitor.make_detector` with ``config.channels`` None: the windowing node's
+    default channels that the data carry; OfflineError naming the topic and channel when a needed one is missing."""
+    if config.channels is None:
+        config = replace(config, channels=[c for c in WINDOWING_DEFAULTS["channels"] if c in batch_channels])
+    needed = required_channels(config.kind)
     missing = [c for c in needed if c not in batch_channels]
     if missing:
         raise OfflineError(f"{topic_name}: channel {missing[0]!r} missing (the data carry "
-                           f"{','.join(batch_channels)}; the {detector} detector needs {', '.join(needed)})")
-    common = dict(channels=("t",) + tuple(c for c in channels if c != "t"),
-                  samples_before_entry=sampling.samples_before_entry, samples_from_entry=sampling.samples_from_entry,
-                  gap_tolerance=defaults["gap_tolerance"] if gap_tolerance is None else gap_tolerance)
+                           f"{','.join(batch_channels)}; the {config.kind} detector needs {', '.join(needed)})")
+    config = replace(config, channels=("t",) + tuple(c for c in config.channels if c != "t"),
+                     gap_tolerance=WINDOWING_DEFAULTS["gap_tolerance"] if config.gap_tolerance is None
+                     else config.gap_tolerance)
     try:
-        if detector == "dynamics":
-            return DynamicsDetector(system.load.wheel_radius_m, sampling.sample_period_s, gear_ratio=gear_ratio,
-                                    nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2, **common)
-        if detector == "flank":
-            return FlankDetector(system.load.wheel_radius_m, sampling.sample_period_s, gear_ratio=gear_ratio,
-                                 nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2, **common)
-        if detector != "paper":
-            raise ValueError(f"detector: expected one of {', '.join(DETECTORS)}, got {detector!r}")
-        return BacklashDetector(width, system.load.wheel_radius_m, sampling.sample_period_s, **common)
+        return make_detector(system, config)
     except ValueError as exc:
         raise OfflineError(str(exc)) from None
 
@@ -416,7 +411,6 @@ def diagnose_samples(path, *, system=None, method=None, p: float = 2.0, library=
     (inequality 1 with ``backlash_width_m``, zone-centred angles).  Raises OfflineError on bad input."""
     system = load_system_config() if system is None else system
     method = load_method_config() if method is None else method
-    policy = default_policy() if policy is None else policy
     if detector not in DETECTORS:
         raise OfflineError(f"detector: expected one of {', '.join(DETECTORS)}, got {detector!r}")
     if detector == "paper" and backlash_width_m is None:
@@ -425,8 +419,7 @@ def diagnose_samples(path, *, system=None, method=None, p: float = 2.0, library=
         raise OfflineError("backlash_width_m: only for --detector paper (the flank and dynamics detectors need no K2)")
     if not (math.isfinite(gear_ratio) and gear_ratio > 0):
         raise OfflineError(f"gear_ratio: must be a finite number > 0, got {gear_ratio!r}")
-    if float(p) not in [float(q) for q in method.p_values]:
-        raise OfflineError(f"p: must be one of method.p_values {[float(q) for q in method.p_values]}, got {p!r}")
+    config, policy = _diagnosis_config(method, p, gap_method, image_method, policy)
     ts = float(system.sampling.sample_period_s)
     path = Path(path)
     adapter = None
@@ -446,18 +439,16 @@ def diagnose_samples(path, *, system=None, method=None, p: float = 2.0, library=
         result.library_path = str(lib_path)
         library, result.library_error = load_pattern_library(lib_path, system, method, build_if_missing,
                                                              log=log, warn=log)
-    diag = _window_diagnoser(system, method, p, library, gap_method, image_method, result, policy)
-    det = None
+    monitor = _monitor(None, system, method, config, policy, library, result)
     for arr, channels in batches:
-        if det is None:
-            det = _make_detector(system, backlash_width_m, None, channels, None, WINDOWING_DEFAULTS, source,
-                                 detector, gear_ratio)
-        for ev in det.push(arr, channels):
-            if ev.kind == "window":
-                _add_window(result, ev.window, diag(ev.window), None, on_window)
-    if det is None:
+        if monitor.detector is None:
+            monitor.detector = _make_detector(system, DetectorConfig(detector, backlash_width_m, None, None,
+                                                                     gear_ratio), channels, source)
+        for r in monitor.feed(arr, channels):
+            _add_window(result, r.window, r.diagnosis, None, on_window)
+    if monitor.detector is None:
         raise OfflineError(f"recording {path}: no sample")
-    _finish(result, det, log)
+    _finish(result, monitor.detector, log)
     if adapter is not None:
         result.jitter = adapter.jitter()
         result.dropped.update({f"jointstate.{k}": v for k, v in adapter.counts.items()

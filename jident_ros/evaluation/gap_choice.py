@@ -35,9 +35,9 @@ from jident_ros.identify.gap import (
     nearest_class,
     pre_entry_steady,
 )
+from jident_ros.identify.monitor import DetectorConfig, make_detector
 from jident_ros.identify.verdict import classes_in_interval
 from jident_ros.sim import SystemConfig, add_measurement_noise, paper_grid_cases, simulate_grid
-from jident_ros.stream.flank import FlankDetector
 from jident_ros.stream.inputs import read_csv
 
 #: The fits compared on our simulator: label -> estimate_inertia's method.
@@ -103,11 +103,9 @@ def second_drive(system: SystemConfig, directory, early: int = 3, late: int = 2,
     for tr in truth["recordings"]:
         data, channels, _ = read_csv(directory / tr["file"])
         ts = float(tr["sample_period_s"])
-        det = FlankDetector(float(tr["reference_radius_m"]), ts, channels=channels, gear_ratio=float(tr["gear_ratio"]),
-                            encoder_counts_per_rev=int(tr["encoder"]["counts_per_rev"] or 0),
-                            nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2,
-                            samples_before_entry=system.sampling.samples_before_entry,
-                            samples_from_entry=system.sampling.samples_from_entry)
+        det = make_detector(system, DetectorConfig("flank", channels=channels, gear_ratio=float(tr["gear_ratio"]),
+                                                   encoder_counts_per_rev=int(tr["encoder"]["counts_per_rev"] or 0)),
+                            float(tr["reference_radius_m"]), ts)
         rec = RawRecording(data, channels, int(tr["entry_index"]), float(tr["inertia_kgm2"]),
                            float(tr["backlash_width_m"]), tr["direction"], int(tr["event"]["index"]))
         wins = [e.window for e in run_detector(det, rec) if e.kind == "window"]

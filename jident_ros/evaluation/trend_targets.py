@@ -40,7 +40,7 @@ from scipy.stats import chi2
 
 from jident_ros.config import load_system_config
 from jident_ros.evaluation.raw_inputs import event_window, flank_detector, raw_recordings, run_detector
-from jident_ros.identify.diagnosis import detector_arguments, diagnose_window
+from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig
 from jident_ros.identify.gap import NoGapError, estimate_backlash_width, estimate_inertia
 from jident_ros.identify.trend import TrendConfig, TrendTracker, step_trials
 from jident_ros.identify.trend_status import trend_inputs
@@ -60,7 +60,7 @@ def _tile(ws: WindowSet, n: int) -> WindowSet:
 
 
 def diagnose_gap(ws: WindowSet, system, width: bool = False) -> dict:
-    """J1, se (and the width, its se) of every window by the gap estimator, as diagnose_window runs it
+    """J1, se (and the width, its se) of every window by the gap estimator, as the diagnosis runs it
     (K2 of each case given, as the detector would have it); NaN where there is no gap."""
     n = len(ws)
     out = {k: np.full(n, np.nan) for k in ("j1", "se", "width", "width_se")}
@@ -148,6 +148,7 @@ def flank_windows(system, cases: list, seed: int, steady_s: float = 0.2) -> list
     recs = raw_recordings(system, [j1], [c.backlash_width_m for c in cases], eta, snr_db=SNR_DB, steady_s=steady_s,
                           seed=seed)
     ts = system.sampling.sample_period_s
+    diagnoser = Diagnoser(system, None, DiagnosisConfig(2.0, "auto", image_method=False))
     out = []
     for rec in recs:
         wins = [e.window for e in run_detector(flank_detector(system), rec) if e.kind == "window"]
@@ -156,9 +157,7 @@ def flank_windows(system, cases: list, seed: int, steady_s: float = 0.2) -> list
         if win is None:
             out.append(None)
             continue
-        d = diagnose_window(win.as_dict(), win.entry_index, win.backlash_width_m, win.wheel_radius_m,
-                            win.sample_period_s, library=None, system=system, method=None, p=2.0,
-                            image_method=False, **detector_arguments(win))
+        d = diagnoser.diagnose(win)
         out.append(trend_inputs(d, 0.0, win))
     return out
 
