@@ -57,7 +57,7 @@ def _jident(argv) -> str:
 
 def write_demo_recording(bag_dir: Path, system, namespace: str = "/demo", batch: int = 50, gap: int = 400) -> Path:
     """The demo's default cases as the diagnostic node records the simulator's topics."""
-    from jident_ros.bag.recording import BagWriter
+    from jident_ros.bag.writer import BagWriter
     from jident_ros.cli.demo import DEFAULT_CASES
     from jident_ros.cli.offline import multiarray_message
     from jident_ros.sim import Case, simulate_grid
