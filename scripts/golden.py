@@ -55,36 +55,14 @@ def _jident(argv) -> str:
     return out.getvalue()
 
 
-def write_demo_recording(bag_dir: Path, system, namespace: str = "/demo", batch: int = 50, gap: int = 400) -> Path:
-    """The demo's default cases as the diagnostic node records the simulator's topics."""
-    from jident_ros.bag.writer import BagWriter
-    from jident_ros.cli.demo import DEFAULT_CASES
-    from jident_ros.cli.offline import multiarray_message
-    from jident_ros.sim import Case, simulate_grid
-    from jident_ros.stream.detector import embed_windows
-    from jident_ros.stream.layout import CASE_LABEL, DEFAULT_CHANNELS
-    cases = [Case(*c) for c in DEFAULT_CASES]
-    ws = simulate_grid(system, cases)
-    stream, entry_rows = embed_windows(ws, gap, 1.0, DEFAULT_CHANNELS)
-    per, ts = gap + len(ws.t), ws.sample_period_s
+def write_demo_recording(bag_dir: Path, system) -> Path:
+    """The demo's default cases as the diagnostic node records the simulator's topics (the offline test's writer)."""
+    sys.path.insert(0, str(REPO / "test"))
+    from test_offline import write_recording
 
-    def topic(rel):
-        return f"{namespace}/{rel}"
-    with BagWriter(bag_dir) as bag:
-        bag.add_topic(topic("drive/signals"), "std_msgs/msg/Float64MultiArray")
-        for rel in ("drive/true_inertia", "drive/backlash_width"):
-            bag.add_topic(topic(rel), "std_msgs/msg/Float64", qos="transient_local")
-        bag.add_topic(topic("drive/case"), "std_msgs/msg/Float64MultiArray", qos="transient_local")
-        for i, c in enumerate(cases):
-            t_case = int((stream[i * per, 0] - ts / 2) * 1e9)
-            bag.write(topic("drive/true_inertia"), {"data": c.inertia_kgm2}, t_case)
-            bag.write(topic("drive/backlash_width"), {"data": c.backlash_width_m}, t_case)
-            row = np.array([[i, c.inertia_kgm2, c.backlash_width_m, c.consistency_pa_sn, stream[entry_rows[i], 0]]])
-            bag.write(topic("drive/case"), multiarray_message(row, CASE_LABEL.split(",")), t_case)
-            for s in range(i * per, (i + 1) * per, batch):
-                b = stream[s:min(s + batch, (i + 1) * per)]
-                bag.write(topic("drive/signals"), multiarray_message(b, DEFAULT_CHANNELS), int(b[-1, 0] * 1e9))
-    return bag_dir
+    from jident_ros.cli.demo import DEFAULT_CASES
+    from jident_ros.sim import Case
+    return write_recording(bag_dir, system, namespace="/demo", cases=[Case(*c) for c in DEFAULT_CASES])
 
 
 def _write_csv(path: Path, data, channels) -> Path:

@@ -19,9 +19,10 @@ from jident_ros.config import ConfigError, load_method_config, load_system_confi
 from jident_ros.method import khm as khm_module
 from jident_ros.method import normalise as nz
 from jident_ros.method import pipeline as pl
-from jident_ros.method.khm import ConvergenceWarning, KHarmonicMeans, khm_fit_batch
+from jident_ros.method.khm import khm_fit_batch
 from jident_ros.method.patterns import LibraryMismatch, PatternLibrary, identify_window
 from jident_ros.method.pipeline import SIGNALS, MethodConfig
+from jident_ros.research.khm_reference import ConvergenceWarning, KHarmonicMeans
 from jident_ros.sim import Case, simulate_grid
 
 REPO = Path(__file__).resolve().parents[1]

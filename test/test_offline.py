@@ -54,14 +54,15 @@ def windows(configs):
 
 
 def write_recording(bag_dir: Path, system, inertias=TRUE_J1, eta=0.0375, namespace="/t", batch=50, gap=400,
-                    start_time_s=1.0):
-    """Simulate the cases and write them as the diagnostic node records the simulator's topics."""
+                    start_time_s=1.0, cases=None):
+    """Simulate the cases (``cases``, else J1 ``inertias`` at K2 5 mm and ``eta``) and write them as the
+    diagnostic node records the simulator's topics (also scripts/golden.py's demo recording)."""
     from jident_ros.bag.writer import BagWriter
     from jident_ros.cli.offline import multiarray_message
     from jident_ros.sim import Case, simulate_grid
     from jident_ros.stream.detector import embed_windows
     from jident_ros.stream.layout import CASE_LABEL, DEFAULT_CHANNELS
-    cases = [Case(j, 0.005, eta) for j in inertias]
+    cases = [Case(j, 0.005, eta) for j in inertias] if cases is None else list(cases)
     ws = simulate_grid(system, cases)
     stream, entry_rows = embed_windows(ws, gap, start_time_s, DEFAULT_CHANNELS)
     per, ts = gap + len(ws.t), ws.sample_period_s

@@ -75,6 +75,7 @@ from jident_ros.nodes.params import (
     system_config,
 )
 from jident_ros.nodes.ros_io import LayoutError, make_status, qos_latched, qos_signals, window_from_msg
+from jident_ros.nodes.runtime import RunnableNode
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, gap_method_problem
 
@@ -214,7 +215,7 @@ class Recording:
         return out
 
 
-class DiagnosticNode(LifecycleNode):
+class DiagnosticNode(RunnableNode, LifecycleNode):
     """The diagnostic node (composable: keyword arguments go to rclpy's LifecycleNode)."""
 
     def __init__(self, **kwargs):

@@ -38,6 +38,7 @@ from jident_ros.nodes.ros_io import (
     qos_signals,
     window_to_msg,
 )
+from jident_ros.nodes.runtime import RunnableNode
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import WINDOWING, WINDOWING_PARAMS
 from jident_ros.stream.detector import REASONS
@@ -102,7 +103,7 @@ def schema() -> dict:
     return node_schema(WINDOWING_PARAMS)
 
 
-class WindowingNode(Node):
+class WindowingNode(RunnableNode, Node):
     """The windowing node (composable: keyword arguments go to rclpy's Node)."""
 
     def __init__(self, **kwargs):
