@@ -51,8 +51,8 @@ from bench_ros import Proc, machine, ros_environment  # noqa: E402
 
 from jident_ros.cli.offline import _make_detector  # noqa: E402
 from jident_ros.config import load_system_config  # noqa: E402
-from jident_ros.evaluation.raw_inputs import flank_detector, raw_recordings, run_detector  # noqa: E402
 from jident_ros.identify.monitor import DetectorConfig  # noqa: E402
+from jident_ros.research.evaluation.raw_inputs import flank_detector, raw_recordings, run_detector  # noqa: E402
 from jident_ros.stream.detector import stream_batches  # noqa: E402
 from jident_ros.stream.inputs import JointStateAdapter  # noqa: E402
 

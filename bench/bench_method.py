@@ -78,7 +78,7 @@ def main(argv=None):
            "gap_stage_s": statistics.median(stage_times),
            "library_build_s": statistics.median(lib_times)}
     if args.full_eval:
-        from jident_ros.evaluation.evaluate import run_evaluation
+        from jident_ros.research.evaluation.evaluate import run_evaluation
         t = time.perf_counter()
         run_evaluation(system, method, log=lambda *a: None)
         res["full_evaluation_s"] = time.perf_counter() - t

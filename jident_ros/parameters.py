@@ -214,7 +214,7 @@ DIAGNOSTIC_PARAMS = {
     "plausible_max_ratio": Param(1.5, "J1 above this x the nominal is refused, not published", min=1.0, max=100.0,
                                  read_only=False),
     "image_min_margin": Param(1.401117, "the image method's class alone, and its disagreement as a WARN, only at "
-                              "a fused margin >= this; 0 = never (from `python -m jident_ros.evaluation.verdicts "
+                              "a fused margin >= this; 0 = never (from `python -m jident_ros.research.evaluation.verdicts "
                               "threshold`)", min=0.0, max=1e12, read_only=False),
     "library_width_tolerance": Param(0.05, "the image method is valid only with a library width within this "
                                      "fraction of the window's K2", min=0.0, max=1.0, read_only=False),

@@ -71,7 +71,7 @@ def _write_csv(path: Path, data, channels) -> Path:
 
 
 def _raw_csvs(work: Path, system) -> tuple:
-    from jident_ros.evaluation.raw_inputs import raw_recordings
+    from jident_ros.research.evaluation.raw_inputs import raw_recordings
     (rec,) = raw_recordings(system, (1.073,), (0.0075,), snr_db=30.0, steady_s=0.5, seed=9)
     flank = _write_csv(work / "raw_flank.csv", rec.data, rec.channels)
     keep = [i for i, c in enumerate(rec.channels) if c != "alpha2"]
@@ -81,8 +81,8 @@ def _raw_csvs(work: Path, system) -> tuple:
 
 def _second_drive(work: Path, fmt: str, directions=("forward", "reverse")) -> list:
     """One recording per direction of the second drive (J1 1.16, K2 5 mm, 30 dB) in ``fmt``."""
-    from jident_ros.second_drive.model import DriveParams
-    from jident_ros.second_drive.record import SensorConfig, build_grid, grid_cases, write_recording
+    from jident_ros.research.second_drive.model import DriveParams
+    from jident_ros.research.second_drive.record import SensorConfig, build_grid, grid_cases, write_recording
     recs = build_grid(DriveParams(), grid_cases(directions, (1.16,), (0.005,)), SensorConfig(snr_db=30.0),
                       steady_s=0.5, post_s=1.3, seed=3)
     out = work / f"second_{fmt}"

@@ -18,8 +18,8 @@ of the publishing policy (:mod:`jident_ros.identify.verdict`).
 
 Commands (print a table; numbers in the report and docs/interfaces.md come from them)::
 
-    python -m jident_ros.evaluation.verdicts threshold     # image_min_margin for config/nodes.yaml
-    python -m jident_ros.evaluation.verdicts stress        # the stress table
+    python -m jident_ros.research.evaluation.verdicts threshold     # image_min_margin for config/nodes.yaml
+    python -m jident_ros.research.evaluation.verdicts stress        # the stress table
 
 Plain numpy; never imports rclpy.
 """
@@ -37,11 +37,11 @@ from typing import Optional, Sequence
 import numpy as np
 
 from jident_ros.config import load_method_config, load_system_config
-from jident_ros.evaluation.robustness import OFFGRID_J1, noise_seed, offgrid_j1_cases
 from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig, WindowInput, mirrored, rotation_sign
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.method.patterns import identify_window
+from jident_ros.research.evaluation.robustness import OFFGRID_J1, noise_seed, offgrid_j1_cases
 from jident_ros.sim import add_measurement_noise, paper_grid_cases, simulate_grid
 
 #: Largest error rate of the image method's published class.
@@ -305,7 +305,7 @@ def reverse_evaluation(system, method, library, p: float = 2.0) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m jident_ros.evaluation.verdicts", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m jident_ros.research.evaluation.verdicts", description=__doc__.split("\n\n")[0])
     ap.add_argument("what", choices=("threshold", "stress", "reverse"),
                     help="threshold: image_min_margin; stress: the table; reverse: the image method on mirrored windows")
     ap.add_argument("--p", type=float, default=2.0, help="KHM exponent (default 2, the diagnostic node's p)")

@@ -1,7 +1,7 @@
 """Issue 14's targets measured on REAL diagnosed windows of the simulator (not on the synthetic series
-of :func:`jident_ros.evaluation.trend_simulation.simulate_series`).
+of :func:`jident_ros.research.evaluation.trend_simulation.simulate_series`).
 
-    python -m jident_ros.evaluation.trend_targets [--quick] [--seed 0]
+    python -m jident_ros.research.evaluation.trend_targets [--quick] [--seed 0]
 
 1. **Pools of diagnosed windows.**  One case (J1, K2 = 3 mm, eta_k = 0.025) is simulated once
    (:func:`jident_ros.sim.simulate_grid`), repeated, and every copy gets its own white noise at 30 dB
@@ -39,12 +39,12 @@ import numpy as np
 from scipy.stats import chi2
 
 from jident_ros.config import load_system_config
-from jident_ros.evaluation.raw_inputs import event_window, flank_detector, raw_recordings, run_detector
-from jident_ros.evaluation.trend_simulation import step_trials
 from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig
 from jident_ros.identify.gap import NoGapError, estimate_backlash_width, estimate_inertia
 from jident_ros.identify.trend import TrendConfig, TrendTracker
 from jident_ros.identify.trend_status import trend_inputs
+from jident_ros.research.evaluation.raw_inputs import event_window, flank_detector, raw_recordings, run_detector
+from jident_ros.research.evaluation.trend_simulation import step_trials
 from jident_ros.sim import Case, WindowSet, add_measurement_noise, simulate_grid
 
 SNR_DB = 30.0
@@ -137,7 +137,7 @@ def detection(steady: dict, up: dict, down: dict, trials: int, seed: int, config
 
 def flank_windows(system, cases: list, seed: int, steady_s: float = 0.2) -> list:
     """The path of a real drive and of ``jident trend``: one raw recording per case
-    (:func:`jident_ros.evaluation.raw_inputs.raw_recordings`: 2^16-count encoders with arbitrary offsets,
+    (:func:`jident_ros.research.evaluation.raw_inputs.raw_recordings`: 2^16-count encoders with arbitrary offsets,
     the slip moving the load encoder's, 30 dB white noise on the other channels), the flank detector
     (no K2), each event's window diagnosed as the diagnostic node does (gap only) and turned into the
     tracker's inputs by :func:`jident_ros.identify.trend_status.trend_inputs` (J1 when published; the

@@ -16,7 +16,7 @@ signals:
   recording **mirrors the signs** of every channel but t (the model is odd in every state: the motor's
   torque under the swapped phase sequence, the film friction sign(v2) |v2|^n, the clutch law).
 
-``python -m jident_ros.evaluation.raw_inputs --report`` runs the targets of issue 12 on the grid (7 J1 x 6
+``python -m jident_ros.research.evaluation.raw_inputs --report`` runs the targets of issue 12 on the grid (7 J1 x 6
 K2, eta_k of the pattern group) with the flank detector (no K2 given), clean and at 30 dB, both directions,
 2^16-count encoders, 10 s steady stretches: entries found and false, the entry sample against the truth
 (and against inequality 1 with zone-centred angles and the true K2), K2 error, and the default gap fit (the
@@ -288,7 +288,7 @@ def paper_consistency(system: SystemConfig, counts: int = 0) -> dict:
 def evaluate_second_drive(system: SystemConfig, directory, batch_size: int = 50, detector: str = "flank",
                           absent: Sequence[str] = ()) -> dict:
     """The flank detector and the gap estimator on a directory of the second drive's CSV recordings
-    (``python -m jident_ros.second_drive --format csv``, ground truth in its truth.json, read only here):
+    (``python -m jident_ros.research.second_drive --format csv``, ground truth in its truth.json, read only here):
     r = the truth's reference radius and N its gear ratio (what a user configures), no K2.  ``absent``: channels
     taken out (a drive without those sensors)."""
     directory = Path(directory)
@@ -392,13 +392,13 @@ def _pct(x):
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m jident_ros.evaluation.raw_inputs", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m jident_ros.research.evaluation.raw_inputs", description=__doc__.split("\n\n")[0])
     p.add_argument("--report", action="store_true", help="run the issue-12 detector targets on our simulator")
     p.add_argument("--steady-s", type=float, default=10.0)
     p.add_argument("--counts", type=int, default=65536)
     p.add_argument("--second-drive", nargs="*", default=(), metavar="DIR",
                    help="also evaluate these directories of the second drive's CSV recordings "
-                        "(python -m jident_ros.second_drive --format csv --out DIR)")
+                        "(python -m jident_ros.research.second_drive --format csv --out DIR)")
     p.add_argument("--detector", choices=("flank", "dynamics"), default="flank",
                    help="flank (raw angles, no K2) or dynamics (the load-torque step; run without the load encoder, "
                         "and without it and a1)")
