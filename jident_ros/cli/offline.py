@@ -172,115 +172,173 @@ def _float_data(msg, topic: str) -> float:
     return v
 
 
-def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, library=None, library_path=None,
-                       build_if_missing: bool = True, gap_method: str = "auto", image_method: bool = True,
-                       backlash_width_m: Optional[float] = None, signals_topic: Optional[str] = None,
-                       channels: Optional[Sequence[str]] = None, gap_tolerance: Optional[float] = None,
-                       log: Callable[[str], Any] = lambda text: None,
-                       on_window: Optional[Callable[[OfflineWindow], Any]] = None,
-                       policy: Optional[VerdictPolicy] = None,
-                       detector: str = "paper", gear_ratio: float = 1.0) -> OfflineResult:
-    """Diagnose every backlash entry of a recording as the windowing + diagnostic nodes do.
+@dataclass(frozen=True)
+class OfflineOptions:
+    """How ``jident diagnose`` reads and diagnoses a recording (the keyword arguments of :func:`diagnose_recording`
+    and :func:`diagnose_samples`).
 
-    Parameters
-    ----------
-    path : bag directory or .mcap file
     system, method : SystemConfig / MethodConfig (default: the package's config/system.yaml, method.yaml)
     p : KHM exponent of the image method, one of ``method.p_values``
     library : a loaded PatternLibrary (else loaded from ``library_path``, default the CLI's cache path,
         built and saved there when missing and ``build_if_missing``, as the diagnostic node does)
     gap_method : one of :data:`jident_ros.parameters.GAP_METHODS`
     image_method : run the paper's image method
-    backlash_width_m : K2, m; None: from drive/backlash_width messages, else the windowing node's default
-    signals_topic : the drive/signals topic to read; None: the recording's only topic ending in drive/signals
-    channels : window channels besides t (default: the windowing node's ``channels`` that the first
-        batch carries; alpha1 and alpha2 are required)
-    gap_tolerance : the detector's gap tolerance in sample periods (default: the windowing node's)
-    log : gets progress lines (library loading/building, warnings)
-    on_window : called with each :class:`OfflineWindow` as soon as it is diagnosed
-    policy : the publishing policy (default: the diagnostic node's default parameters,
-        :func:`default_policy`)
+    policy : the publishing policy (default: the diagnostic node's default parameters, :func:`default_policy`)
+    backlash_width_m : K2, m.  A drive/signals recording: None = from drive/backlash_width messages, else the
+        windowing node's default.  JointState/CSV: only (and needed) with the paper detector
+    detector : 'paper', 'flank' or 'dynamics' (None: 'paper' for drive/signals, 'flank' for JointState/CSV)
+    gear_ratio : N of the flank and dynamics detectors
+    signals_topic : drive/signals: the topic to read (None: the recording's only topic ending in drive/signals)
+    channels : drive/signals: window channels besides t (default: the windowing node's ``channels`` that the
+        first batch carries; alpha1 and alpha2 are required)
+    gap_tolerance : drive/signals: the detector's gap tolerance in sample periods (default: the windowing node's)
+    motor_joint, load_joint, imu_axis, topic : JointState: the joints, the Imu axis that is a1, the topic
+    maps : CSV: column maps (:func:`jident_ros.stream.inputs.read_csv`)
+    """
+
+    system: Any = None
+    method: Any = None
+    p: float = 2.0
+    library: Any = None
+    library_path: Any = None
+    build_if_missing: bool = True
+    gap_method: str = "auto"
+    image_method: bool = True
+    policy: Optional[VerdictPolicy] = None
+    backlash_width_m: Optional[float] = None
+    detector: Optional[str] = None
+    gear_ratio: float = 1.0
+    signals_topic: Optional[str] = None
+    channels: Optional[Sequence[str]] = None
+    gap_tolerance: Optional[float] = None
+    motor_joint: str = "motor"
+    load_joint: str = "load"
+    imu_axis: str = "x"
+    topic: Optional[str] = None
+    maps: Optional[dict] = None
+
+
+@dataclass
+class _Setup:
+    """The resolved options: configurations loaded, the diagnosis configured and checked."""
+
+    options: OfflineOptions
+    system: Any
+    method: Any
+    config: DiagnosisConfig
+    policy: VerdictPolicy
+
+    @classmethod
+    def of(cls, options: Optional[OfflineOptions], fields: dict, detector: str) -> "_Setup":
+        o = replace(options or OfflineOptions(), **fields)
+        if o.detector is None:
+            o = replace(o, detector=detector)
+        system = load_system_config() if o.system is None else o.system
+        method = load_method_config() if o.method is None else o.method
+        config, policy = _diagnosis_config(method, o.p, o.gap_method, o.image_method, o.policy)
+        return cls(o, system, method, config, policy)
+
+    def monitor(self, result: "OfflineResult", log: Callable[[str], Any], say_gap_only: bool) -> DriveMonitor:
+        """The chain without its detector (made at the first batch): the library loaded (or built) when the
+        image method is on and none was given; ``result`` gets its path and error."""
+        o, library = self.options, self.options.library
+        if o.image_method and library is None:
+            lib_path = (Path(o.library_path).expanduser() if o.library_path
+                        else default_library_path(self.system, self.method))
+            result.library_path = str(lib_path)
+            library, result.library_error = load_pattern_library(lib_path, self.system, self.method,
+                                                                 o.build_if_missing, log=log, warn=log)
+            if result.library_error and say_gap_only:
+                log(f"{result.library_error}; windows are diagnosed from the gap only (level ERROR)")
+        diagnoser = Diagnoser(self.system, self.method, self.config, self.policy, library,
+                              result.library_error or "")
+        return DriveMonitor(None, diagnoser, on_error=_internal_error)
+
+
+def diagnose_recording(path, options: Optional[OfflineOptions] = None, *,
+                       log: Callable[[str], Any] = lambda text: None,
+                       on_window: Optional[Callable[[OfflineWindow], Any]] = None, **fields) -> OfflineResult:
+    """Diagnose every backlash entry of a drive/signals recording (bag directory or .mcap file) as the
+    windowing + diagnostic nodes do.  ``options`` (:class:`OfflineOptions`), or its fields as keyword
+    arguments; ``log`` gets progress lines (library loading/building, warnings), ``on_window`` each
+    :class:`OfflineWindow` as soon as it is diagnosed.
 
     Raises :class:`OfflineError` (one line naming the field and value) on bad input.
     """
-    system = load_system_config() if system is None else system
-    method = load_method_config() if method is None else method
-    config, policy = _diagnosis_config(method, p, gap_method, image_method, policy)
-    if backlash_width_m is not None and not (math.isfinite(backlash_width_m) and backlash_width_m > 0):
-        raise OfflineError(f"backlash_width_m: must be a finite number > 0, got {backlash_width_m!r}")
+    setup = _Setup.of(options, fields, "paper")
+    o = setup.options
+    if o.backlash_width_m is not None and not (math.isfinite(o.backlash_width_m) and o.backlash_width_m > 0):
+        raise OfflineError(f"backlash_width_m: must be a finite number > 0, got {o.backlash_width_m!r}")
     notes: list = []
     messages, all_topics = read_drive_messages(path, OfflineError, note=notes.append)
-    found = sorted({t for t, _, _ in messages if _matches(t, SIGNALS_TOPIC)})
-    if signals_topic is not None:
-        if signals_topic not in found:
-            raise OfflineError(f"signals topic {signals_topic!r}: not in recording {path} "
-                               f"(drive/signals topics: {', '.join(found) or 'none'})")
-        topic = signals_topic
-    elif not found:
-        raise OfflineError(f"recording {path}: no drive/signals topic (topics: {', '.join(all_topics) or 'none'})")
-    elif len(found) > 1:
-        raise OfflineError(f"recording {path}: several drive/signals topics ({', '.join(found)}); "
-                           f"choose one with --topic")
-    else:
-        topic = found[0]
-    prefix = topic[:-len(SIGNALS_TOPIC)]
-    names = {rel: prefix + rel for rel in DRIVE_TOPICS}
+    topic = _signals_topic(path, messages, all_topics, o.signals_topic)
+    names = {rel: topic[:-len(SIGNALS_TOPIC)] + rel for rel in DRIVE_TOPICS}
     unpacked: dict = {}
     messages = in_sample_time_order([m for m in messages if m[0] in names.values()], topic, unpacked)
-
-    def decode(topic_name, msg_type, raw):
-        try:
-            return deserialize(msg_type, raw)
-        except ValueError as exc:
-            raise OfflineError(f"{topic_name}: undecodable {msg_type} message ({exc})") from None
-
-    # K2: the option, else the recording's drive/backlash_width, else the windowing node's default
-    widths = [m for m in messages if m[0] == names[WIDTH_TOPIC]]
-    if backlash_width_m is not None:
-        width, width_source = float(backlash_width_m), "option"
-    elif widths:
-        width, width_source = _float_data(decode(*widths[0]), widths[0][0]), widths[0][0]
-    else:
-        width, width_source = float(WINDOWING_DEFAULTS["backlash_width_m"]), "default"
-    follow_width = width_source not in ("option", "default")
-
+    width, width_source = _backlash_width(messages, names[WIDTH_TOPIC], o.backlash_width_m)
     result = OfflineResult(str(path), topic, width_source, notes=notes)
     for text in notes:
         log(text)
-    if image_method and library is None:
-        lib_path = Path(library_path).expanduser() if library_path else default_library_path(system, method)
-        result.library_path = str(lib_path)
-        library, result.library_error = load_pattern_library(lib_path, system, method, build_if_missing,
-                                                             log=log, warn=log)
-        if result.library_error:
-            log(f"{result.library_error}; windows are diagnosed from the gap only (level ERROR)")
-
-    ts = float(system.sampling.sample_period_s)
+    monitor = setup.monitor(result, log, say_gap_only=True)
 
     def make_detector(batch_channels, topic_name, k2):
-        return _make_detector(system, DetectorConfig(detector, k2, channels, gap_tolerance, gear_ratio),
-                              batch_channels, topic_name)
+        config = DetectorConfig(o.detector, k2, o.channels, o.gap_tolerance, o.gear_ratio)
+        return _make_detector(setup.system, config, batch_channels, topic_name)
 
-    replay = DriveReplay(names, width, follow_width, decode=decode, read_width=_float_data,
-                         read_truth=lambda msg, topic_name: float(msg.data), make_detector=make_detector,
-                         log=log, unpacked=unpacked)
-    monitor = _monitor(None, system, method, config, policy, library, result)
+    replay = DriveReplay(names, width, width_source not in ("option", "default"), decode=_decode,
+                         read_width=_float_data, read_truth=lambda msg, topic_name: float(msg.data),
+                         make_detector=make_detector, log=log, unpacked=unpacked)
+    ts = float(setup.system.sampling.sample_period_s)
     for win in replay.windows(messages):
         _add_window(result, win, monitor.window(win).diagnosis, replay.true_inertia(win.entry_time_s, ts)[0],
                     on_window)
-    detector = replay.detector
-    if detector is None:
-        if replay.dropped_before_start:
+    dropped = replay.dropped_before_start
+    if replay.detector is None:
+        if dropped:
             raise OfflineError(f"recording {path}: topic {topic} holds no readable batch "
-                               f"({len(replay.dropped_before_start)} dropped: {replay.dropped_before_start[0]})")
+                               f"({len(dropped)} dropped: {dropped[0]})")
         raise OfflineError(f"recording {path}: topic {topic} holds no message")
-    if replay.dropped_before_start:
-        notes.append(f"{topic}: {len(replay.dropped_before_start)} unreadable batch(es) before the first readable "
-                     f"one dropped and counted (layout): {replay.dropped_before_start[0]}")
+    if dropped:
+        notes.append(f"{topic}: {len(dropped)} unreadable batch(es) before the first readable "
+                     f"one dropped and counted (layout): {dropped[0]}")
         log(notes[-1])
-    _finish(result, detector, log)
+    _finish(result, replay.detector, log)
     result.clock_jumps = replay.clock_jumps
     return result
+
+
+def _signals_topic(path, messages, all_topics, wanted: Optional[str]) -> str:
+    """The drive/signals topic to read: ``wanted``, else the recording's only one (OfflineError otherwise)."""
+    found = sorted({t for t, _, _ in messages if _matches(t, SIGNALS_TOPIC)})
+    if wanted is not None:
+        if wanted not in found:
+            raise OfflineError(f"signals topic {wanted!r}: not in recording {path} "
+                               f"(drive/signals topics: {', '.join(found) or 'none'})")
+        return wanted
+    if not found:
+        raise OfflineError(f"recording {path}: no drive/signals topic (topics: {', '.join(all_topics) or 'none'})")
+    if len(found) > 1:
+        raise OfflineError(f"recording {path}: several drive/signals topics ({', '.join(found)}); "
+                           f"choose one with --topic")
+    return found[0]
+
+
+def _decode(topic_name, msg_type, raw):
+    try:
+        return deserialize(msg_type, raw)
+    except ValueError as exc:
+        raise OfflineError(f"{topic_name}: undecodable {msg_type} message ({exc})") from None
+
+
+def _backlash_width(messages, width_topic: str, option: Optional[float]) -> tuple:
+    """(K2 m, its source): the option, else the recording's first drive/backlash_width (then followed), else
+    the windowing node's default."""
+    if option is not None:
+        return float(option), "option"
+    first = next((m for m in messages if m[0] == width_topic), None)
+    if first is not None:
+        return _float_data(_decode(*first), first[0]), first[0]
+    return float(WINDOWING_DEFAULTS["backlash_width_m"]), "default"
 
 
 def default_policy(**overrides) -> VerdictPolicy:
@@ -304,11 +362,6 @@ def _diagnosis_config(method, p, gap_method, image_method, policy) -> tuple:
 def _internal_error(win, exc) -> WindowDiagnosis:
     """As the node: a window whose diagnosis raised is reported, the run goes on."""
     return WindowDiagnosis(ERROR, f"window could not be diagnosed: internal error {type(exc).__name__}: {exc}", [])
-
-
-def _monitor(detector, system, method, config, policy, library, result) -> DriveMonitor:
-    diagnoser = Diagnoser(system, method, config, policy, library, result.library_error or "")
-    return DriveMonitor(detector, diagnoser, on_error=_internal_error)
 
 
 def _add_window(result, win, d, true_j1, on_window):
@@ -398,65 +451,64 @@ def jointstate_batches(path, sample_period_s: float, motor_joint: str = "motor",
     return adapter, batches(), js[0].topic
 
 
-def diagnose_samples(path, *, system=None, method=None, p: float = 2.0, library=None, library_path=None,
-                     build_if_missing: bool = True, gap_method: str = "auto", image_method: bool = True,
-                     detector: str = "flank", backlash_width_m: Optional[float] = None, gear_ratio: float = 1.0,
-                     motor_joint: str = "motor", load_joint: str = "load", imu_axis: str = "x",
-                     topic: Optional[str] = None, maps: Optional[dict] = None,
+def diagnose_samples(path, options: Optional[OfflineOptions] = None, *,
                      log: Callable[[str], Any] = lambda text: None,
-                     on_window: Optional[Callable[[OfflineWindow], Any]] = None,
-                     policy: Optional[VerdictPolicy] = None) -> OfflineResult:
+                     on_window: Optional[Callable[[OfflineWindow], Any]] = None, **fields) -> OfflineResult:
     """Diagnose a JointState bag or a CSV file (``.csv``) as the windowing (``input: joint_states``) and
-    diagnostic nodes do.  ``detector``: "flank" (no K2; the default for real drives) or "paper"
+    diagnostic nodes do.  ``options`` (:class:`OfflineOptions`) or its fields as keyword arguments;
+    ``detector``: "flank" (no K2; the default for real drives), "dynamics" (no load encoder) or "paper"
     (inequality 1 with ``backlash_width_m``, zone-centred angles).  Raises OfflineError on bad input."""
-    system = load_system_config() if system is None else system
-    method = load_method_config() if method is None else method
-    if detector not in DETECTORS:
-        raise OfflineError(f"detector: expected one of {', '.join(DETECTORS)}, got {detector!r}")
-    if detector == "paper" and backlash_width_m is None:
-        raise OfflineError("backlash_width_m: the paper detector (inequality 1) needs K2 (--backlash-width-m)")
-    if detector in ("flank", "dynamics") and backlash_width_m is not None:
-        raise OfflineError("backlash_width_m: only for --detector paper (the flank and dynamics detectors need no K2)")
-    if not (math.isfinite(gear_ratio) and gear_ratio > 0):
-        raise OfflineError(f"gear_ratio: must be a finite number > 0, got {gear_ratio!r}")
-    config, policy = _diagnosis_config(method, p, gap_method, image_method, policy)
-    ts = float(system.sampling.sample_period_s)
+    setup = _Setup.of(options, fields, "flank")
+    o = setup.options
+    _check_sample_options(o)
+    ts = float(setup.system.sampling.sample_period_s)
     path = Path(path)
     adapter = None
     try:
         if path.suffix.lower() == ".csv":
-            data, channels, ignored = read_csv(path, maps)
+            data, channels, ignored = read_csv(path, o.maps)
             if ignored:
                 log(f"{path}: columns ignored (not channels): {', '.join(ignored)}")
             source, batches = str(path), ((b, channels) for b in stream_batches(data, 50))
         else:
-            adapter, batches, source = jointstate_batches(path, ts, motor_joint, load_joint, imu_axis, topic)
+            adapter, batches, source = jointstate_batches(path, ts, o.motor_joint, o.load_joint, o.imu_axis, o.topic)
     except InputError as exc:
         raise OfflineError(str(exc)) from None
-    result = OfflineResult(str(path), source, "estimated" if detector != "paper" else "option")
-    if image_method and library is None:
-        lib_path = Path(library_path).expanduser() if library_path else default_library_path(system, method)
-        result.library_path = str(lib_path)
-        library, result.library_error = load_pattern_library(lib_path, system, method, build_if_missing,
-                                                             log=log, warn=log)
-    monitor = _monitor(None, system, method, config, policy, library, result)
+    result = OfflineResult(str(path), source, "estimated" if o.detector != "paper" else "option")
+    monitor = setup.monitor(result, log, say_gap_only=False)
     for arr, channels in batches:
         if monitor.detector is None:
-            monitor.detector = _make_detector(system, DetectorConfig(detector, backlash_width_m, None, None,
-                                                                     gear_ratio), channels, source)
+            config = DetectorConfig(o.detector, o.backlash_width_m, None, None, o.gear_ratio)
+            monitor.detector = _make_detector(setup.system, config, channels, source)
         for r in monitor.feed(arr, channels):
             _add_window(result, r.window, r.diagnosis, None, on_window)
     if monitor.detector is None:
         raise OfflineError(f"recording {path}: no sample")
     _finish(result, monitor.detector, log)
     if adapter is not None:
-        result.jitter = adapter.jitter()
-        result.dropped.update({f"jointstate.{k}": v for k, v in adapter.counts.items()
-                               if v and k in ("missing_joint", "imu_unmatched")})
-        if result.jitter.get("periods") and not result.jitter["period_matches"]:
-            log(f"{source}: stamp period {result.jitter['median_period_s']:.6g} s (median) does not match "
-                f"sampling.sample_period_s {ts:g} s")
+        _jointstate_counts(result, adapter, source, ts, log)
     return result
+
+
+def _check_sample_options(o: OfflineOptions) -> None:
+    if o.detector not in DETECTORS:
+        raise OfflineError(f"detector: expected one of {', '.join(DETECTORS)}, got {o.detector!r}")
+    if o.detector == "paper" and o.backlash_width_m is None:
+        raise OfflineError("backlash_width_m: the paper detector (inequality 1) needs K2 (--backlash-width-m)")
+    if o.detector in ("flank", "dynamics") and o.backlash_width_m is not None:
+        raise OfflineError("backlash_width_m: only for --detector paper (the flank and dynamics detectors need no K2)")
+    if not (math.isfinite(o.gear_ratio) and o.gear_ratio > 0):
+        raise OfflineError(f"gear_ratio: must be a finite number > 0, got {o.gear_ratio!r}")
+
+
+def _jointstate_counts(result, adapter, source, ts, log) -> None:
+    """The JointState adapter's stamp jitter and drops into the result (a stamp period off T_s is said)."""
+    result.jitter = adapter.jitter()
+    result.dropped.update({f"jointstate.{k}": v for k, v in adapter.counts.items()
+                           if v and k in ("missing_joint", "imu_unmatched")})
+    if result.jitter.get("periods") and not result.jitter["period_matches"]:
+        log(f"{source}: stamp period {result.jitter['median_period_s']:.6g} s (median) does not match "
+            f"sampling.sample_period_s {ts:g} s")
 
 
 # --------------------------------------------------------------------------- output
@@ -506,6 +558,6 @@ def write_json(result: OfflineResult, out) -> Path:
     return out
 
 
-__all__ = ["OfflineError", "OfflineResult", "OfflineWindow", "default_policy", "diagnose_recording",
+__all__ = ["OfflineError", "OfflineOptions", "OfflineResult", "OfflineWindow", "default_policy", "diagnose_recording",
            "diagnose_samples", "format_window_line", "jointstate_batches",
            "multiarray_message", "summary_line", "write_json", "TABLE_HEADER"]
