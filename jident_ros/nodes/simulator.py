@@ -75,14 +75,7 @@ def build_cases(cfg: dict, system) -> list:
 
 def validate(values: dict):
     cfg = checked(values, DEFAULTS, DEFAULTS)
-    P = SIMULATOR_PARAMS
-    require("cases", cfg["cases"], cfg["cases"] in ("product", "zip", "grid"), "one of product, zip, grid")
-    for name in ("gap_samples", "batch_size", "real_time_factor", "fast_sleep_s", "max_lead_s", "progress_timeout_s",
-                 "start_time_s", "repeat", "wait_for_subscribers", "wait_timeout_s", "signals_queue_depth"):
-        p, v = P[name], cfg[name]
-        ok = ((p.min is None or (v > p.min if p.min_exclusive else v >= p.min))
-              and (p.max is None or v <= p.max))
-        require(name, v, ok, ("an integer " if isinstance(p.default, int) else "a number ") + p.range_text())
+    # each parameter's type, range and choices are the schema's, checked before (nodes.params.coerce)
     system = system_config(values)
     cases = build_cases(cfg, system)
     try:  # inputs the simulation cannot integrate (an overload, a step too coarse for J1): one line, not NaN batches
