@@ -117,9 +117,24 @@ WINDOWING_PARAMS = {
     "batch_size": Param(50, "joint_states: samples per batch handed to the detector", min=1, max=MAX_DEPTH),
 }
 
-#: The gap method values of the diagnostic node; ``none`` is the preferred spelling of "no gap estimate",
-#: ``off`` (which a command line reads as YAML false) is still accepted.
-GAP_METHOD_CHOICES = ("auto", "acceleration", "gap_only", "anchored", "angle", "speed", "none", "off")
+#: The gap methods (the one list: the diagnostic node's ``gap_method``, ``jident diagnose --gap-method``, the
+#: diagnosis; :func:`jident_ros.identify.gap.estimate_inertia`): ``auto`` (acceleration fit when a1 is there,
+#: else angle, else speed), ``acceleration``, ``gap_only``, ``anchored``, ``angle``, ``speed``; ``none`` is the
+#: preferred spelling of "no gap estimate", ``off`` (which a command line reads as YAML false) is still accepted.
+GAP_METHODS = ("auto", "acceleration", "gap_only", "anchored", "angle", "speed", "none", "off")
+GAP_METHOD_CHOICES = GAP_METHODS
+#: The gap_method values that mean: no gap estimate.
+NO_GAP = ("none", "off")
+
+
+def gap_method_problem(gap_method, image_method: bool):
+    """The rules of the gap method, in one wording: None, or (field, "what is wrong") -- the field's value is
+    not one of :data:`GAP_METHODS`, or there is neither a gap estimate nor the image method."""
+    if gap_method not in GAP_METHODS:
+        return "gap_method", f"expected one of {', '.join(GAP_METHODS)}, got {gap_method!r}"
+    if not image_method and gap_method in NO_GAP:
+        return "image_method", "must be true when gap_method is none (nothing would be identified)"
+    return None
 
 #: Trend of J1 and the backlash width (issue 14; jident_ros.identify.trend.TrendConfig.from_parameters),
 #: parameters of the diagnostic node.  0 means "not set" where TrendConfig takes None.
@@ -199,7 +214,7 @@ DIAGNOSTIC_PARAMS = {
     "plausible_max_ratio": Param(1.5, "J1 above this x the nominal is refused, not published", min=1.0, max=100.0,
                                  read_only=False),
     "image_min_margin": Param(1.401117, "the image method's class alone, and its disagreement as a WARN, only at "
-                              "a fused margin >= this; 0 = never (from `python -m jident_ros.evaluation.verdicts "
+                              "a fused margin >= this; 0 = never (from `python -m jident_ros.research.evaluation.verdicts "
                               "threshold`)", min=0.0, max=1e12, read_only=False),
     "library_width_tolerance": Param(0.05, "the image method is valid only with a library width within this "
                                      "fraction of the window's K2", min=0.0, max=1.0, read_only=False),

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from jident_ros import __version__
+from jident_ros.cli.calibration import library_from_labelled_windows, parse_labels, pattern_grid, read_recordings
 from jident_ros.cli.demo import main as demo_main
 from jident_ros.cli.offline import (
     TABLE_HEADER,
@@ -32,15 +33,14 @@ from jident_ros.cli.offline import (
 from jident_ros.cli.salvage import salvage_main
 from jident_ros.cli.trend import add_scenario_arguments, add_trend_parser, cmd_simulate_scenario
 from jident_ros.config import ConfigError, load_method_config, load_system_config
-from jident_ros.evaluation.evaluate import VALIDITY_FILM_SHARES, run_evaluation
-from jident_ros.evaluation.plotting import plot_case
-from jident_ros.evaluation.report import render_markdown, write_figures, write_results_section
-from jident_ros.evaluation.report_robustness import write_robustness_figures
-from jident_ros.evaluation.robustness import run_robustness
 from jident_ros.identify.library import default_library_path, load_pattern_library
-from jident_ros.method.calibration import library_from_labelled_windows, parse_labels, pattern_grid, read_recordings
 from jident_ros.method.patterns import PatternLibrary
 from jident_ros.method.pipeline import VARIANTS
+from jident_ros.research.evaluation.evaluate import VALIDITY_FILM_SHARES, run_evaluation
+from jident_ros.research.evaluation.plotting import plot_case
+from jident_ros.research.evaluation.report import render_markdown, write_figures, write_results_section
+from jident_ros.research.evaluation.report_robustness import write_robustness_figures
+from jident_ros.research.evaluation.robustness import run_robustness
 from jident_ros.sim import Case, add_measurement_noise, paper_grid_cases, quantise_encoders, simulate_grid, steady_state
 from jident_ros.sim.model import Model
 from jident_ros.sim.motor import breakdown_slip, steady_state_phasors

@@ -22,7 +22,7 @@ This module reproduces that picture deterministically:
   the drawn cells' levels weighted by how many pixels show each cell
   (:func:`drawn_cells`, :func:`level_histogram_from_cells`).
 
-PNG files of X1 are written with matplotlib (``jident_ros.evaluation.report.save_intensity_png``).
+PNG files of X1 are written with matplotlib (``jident_ros.research.evaluation.report.save_intensity_png``).
 
 Only numpy and the standard library are used.
 """

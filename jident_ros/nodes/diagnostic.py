@@ -55,11 +55,12 @@ from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from std_msgs.msg import Float64, Float64MultiArray
 
-from jident_ros.identify.diagnosis import GAP_METHODS, detector_arguments, diagnose_window
+from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES, OK, STALE, WARN
 from jident_ros.identify.library import default_library_path, load_pattern_library
+from jident_ros.identify.monitor import DriveMonitor
 from jident_ros.identify.trend import TrendConfig, TrendStateError, TrendTracker
-from jident_ros.identify.trend_status import WIDTH_SOURCES, trend_inputs, trend_status
+from jident_ros.identify.trend_status import WIDTH_SOURCES, trend_status
 from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater
 from jident_ros.nodes.params import (
@@ -74,8 +75,9 @@ from jident_ros.nodes.params import (
     system_config,
 )
 from jident_ros.nodes.ros_io import LayoutError, make_status, qos_latched, qos_signals, window_from_msg
+from jident_ros.nodes.runtime import RunnableNode
 from jident_ros.nodes.runtime import main as run_main
-from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, GAP_METHOD_CHOICES
+from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, gap_method_problem
 
 try:  # the recorder needs mcap and rosbags: without them the node runs on and says so
     from jident_ros.bag.rotating_recorder import Recorder, RecorderError
@@ -107,15 +109,13 @@ def validate(values: dict):
     method = method_config(values)
     require("p", cfg["p"], cfg["p"] in [float(p) for p in method.p_values],
             f"one of method.p_values {list(method.p_values)}")
-    require("gap_method", cfg["gap_method"], cfg["gap_method"] in GAP_METHOD_CHOICES,
-            "one of " + ", ".join(GAP_METHOD_CHOICES[:-1]) + " (off is accepted for none)")
-    assert gap_method_of(cfg["gap_method"]) in GAP_METHODS
+    problem = gap_method_problem(cfg["gap_method"], cfg["image_method"])
+    if problem is not None:
+        require(problem[0], cfg[problem[0]], False, problem[1])
     require("stale_after_s", cfg["stale_after_s"], 0 <= cfg["stale_after_s"] <= 86400,
             "a number >= 0 and <= 86400 (0 = never)")
     for n in ("window_queue_depth", "signals_queue_depth"):
         require(n, cfg[n], 1 <= cfg[n] <= DIAGNOSTIC_PARAMS[n].max, f"an integer >= 1 and <= {DIAGNOSTIC_PARAMS[n].max}")
-    require("image_method", cfg["image_method"], cfg["image_method"] or gap_method_of(cfg["gap_method"]) != "off",
-            "true when gap_method is none (nothing would be identified)")
     for n in ("max_bag_size_bytes", "max_bag_duration_s", "retention_max_total_bytes", "retention_max_age_s"):
         require(n, cfg[n], cfg[n] >= 0, "a number >= 0 (0 = no limit)")
     for name, what in VerdictPolicy.from_params(cfg).problems():
@@ -215,7 +215,7 @@ class Recording:
         return out
 
 
-class DiagnosticNode(LifecycleNode):
+class DiagnosticNode(RunnableNode, LifecycleNode):
     """The diagnostic node (composable: keyword arguments go to rclpy's LifecycleNode)."""
 
     def __init__(self, **kwargs):
@@ -247,7 +247,8 @@ class DiagnosticNode(LifecycleNode):
         self.last_message = ""
         self.last_input = None             # steady time (s) of the last drive/window or drive/progress
         self.started = time.monotonic()
-        self.trend = None                  # TrendTracker (trend_enabled, configured)
+        # the chain: the diagnosis (rebuilt when a parameter or the library changes) and the trend's tracker
+        self.monitor = DriveMonitor(None, self._diagnoser())   # .tracker: TrendTracker (trend_enabled, configured)
         self.trend_update = None           # its last TrendUpdate
         self.trend_error = None            # why the trend's state file was not used (ERROR), one line
         self.trend_save_error = None       # the last failure to write the state file (ERROR), one line
@@ -347,6 +348,7 @@ class DiagnosticNode(LifecycleNode):
         the new configuration: :meth:`TrendTracker.reconfigure`) take effect with the next window / status."""
         self.cfg.update(changed)
         self.policy = VerdictPolicy.from_params(self.cfg)
+        self.monitor.diagnoser = self._diagnoser()
         if "hardware_id" in changed:
             self.hardware_id = drive_hardware_id(self, changed["hardware_id"])
             self.updater.setHardwareID(self.hardware_id)
@@ -366,6 +368,23 @@ class DiagnosticNode(LifecycleNode):
             self.library_path, self.system, self.method, c["build_if_missing"], log=log.info, warn=log.warning)
         if self.library_error:
             log.error(self.library_error)
+        self.monitor.diagnoser = self._diagnoser()
+
+    def _diagnoser(self) -> Diagnoser:
+        """The per-window diagnosis of the current parameters and library."""
+        c = self.cfg
+        config = DiagnosisConfig(c["p"], gap_method_of(c["gap_method"]), c["image_method"], self.nominal)
+        return Diagnoser(self.system, self.method, config, self.policy,
+                         self.library if c["image_method"] else None, self.library_error or "")
+
+    @property
+    def trend(self):
+        """The trend's :class:`~jident_ros.identify.trend.TrendTracker` (None: trend off or not configured)."""
+        return self.monitor.tracker
+
+    @trend.setter
+    def trend(self, tracker) -> None:
+        self.monitor.tracker = tracker
 
     def library_status(self, stat):
         if not self.cfg["image_method"]:
@@ -503,7 +522,6 @@ class DiagnosticNode(LifecycleNode):
         return errors, warnings
 
     def _diagnose(self, msg, t_recv):
-        c = self.cfg
         try:
             win = window_from_msg(msg)
         except LayoutError as exc:
@@ -523,14 +541,8 @@ class DiagnosticNode(LifecycleNode):
                                            ("mismatch", "; ".join(errors))]))
             return
         # the gap estimate goes out on inertia_estimate (on_estimate) before the image method runs
-        d = diagnose_window(win.as_dict(), win.entry_index, win.backlash_width_m, win.wheel_radius_m,
-                            win.sample_period_s, library=self.library if c["image_method"] else None,
-                            system=self.system, method=self.method, p=c["p"],
-                            gap_method=gap_method_of(c["gap_method"]), image_method=c["image_method"],
-                            nominal_kgm2=self.nominal, library_error=self.library_error or "",
-                            window_id=win.window_id, entry_time_s=win.entry_time_s,
-                            on_estimate=self._publish_estimate, started_at=t_recv, policy=self.policy,
-                            **detector_arguments(win))
+        result = self.monitor.window(win, on_estimate=self._publish_estimate, started_at=t_recv)
+        d = result.diagnosis
         level, message, values = d.level, d.message, list(d.values)
         if warnings:
             self.windows_mismatched += 1
@@ -546,7 +558,7 @@ class DiagnosticNode(LifecycleNode):
         self.last_message = message
         self.diag.publish(make_status(STATUS_NAME, level, message, self.hardware_id, values))
         if self.trend is not None:
-            self._update_trend(win, d)
+            self._update_trend(win, result)
 
     # ----------------------------------------------------------------- trend
     def _start_trend(self):
@@ -575,16 +587,16 @@ class DiagnosticNode(LifecycleNode):
             self.trend_error = f"trend state unusable: {exc}; {kept}; the trend started fresh"
             self.get_logger().error(self.trend_error)
 
-    def _update_trend(self, win, d):
-        """One diagnosed window into the tracker; publish the smoothed J1 and width; save the state."""
-        j, jse, w, wse, source = trend_inputs(d, self.trend.config.width_se_floor_m, win)
-        if j is None and w is None:   # nothing to follow in this window (its status says why)
+    def _update_trend(self, win, result):
+        """The tracker's update of one diagnosed window (the monitor made it): publish the smoothed J1 and
+        width; save the state."""
+        u, source = result.trend, result.trend_source
+        if u is None:   # nothing to follow in this window (its status says why)
             self.trend_windows_without_estimate += 1
             return
         self.trend_width_source = source or "none"
         if source is not None:
             self.trend_width_sources[source] += 1
-        u = self.trend.update(win.entry_time_s, j, jse, w, wse)
         self.trend_update = u
         if u.skipped:
             self.get_logger().warning(f"trend: window {win.window_id} skipped: {u.reason}",

@@ -40,7 +40,7 @@ from jident_ros.nodes.ros_io import (
     qos_latched,
     qos_signals,
 )
-from jident_ros.nodes.runtime import ProgressGate, tick
+from jident_ros.nodes.runtime import ProgressGate, RunnableNode, tick
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import REPLAY, REPLAY_PARAMS
 
@@ -83,7 +83,7 @@ def schema() -> dict:
     return dict(REPLAY_PARAMS)
 
 
-class ReplayNode(Node):
+class ReplayNode(RunnableNode, Node):
     """The replay node (composable: keyword arguments go to rclpy's Node; ``bag`` may be given as
     ``argv_bag``).  Replays from a timer: a state machine WAITING -> REPLAYING -> DONE; at rate > 0
     every tick publishes the messages due by the wall clock, at 0 one message per tick of

@@ -39,7 +39,7 @@ from jident_ros.nodes.params import (
     system_config,
 )
 from jident_ros.nodes.ros_io import clock_msg, multiarray_from_array, qos_clock, qos_latched, qos_signals
-from jident_ros.nodes.runtime import ProgressGate, tick
+from jident_ros.nodes.runtime import ProgressGate, RunnableNode, tick
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import SIMULATOR, SIMULATOR_PARAMS
 from jident_ros.sim import Case, check_stable, paper_grid_cases, simulate_grid
@@ -98,7 +98,7 @@ def schema() -> dict:
     return node_schema(SIMULATOR_PARAMS)
 
 
-class SimulatorNode(Node):
+class SimulatorNode(RunnableNode, Node):
     """The simulator node (composable: keyword arguments go to rclpy's Node).
 
     Streams from a timer (never a blocking loop: parameter requests are answered while it streams): a

@@ -18,6 +18,7 @@ from rosbags.typesys import Stores, get_typestore
 from std_msgs.msg import Float64, Float64MultiArray
 
 from jident_ros.identify.levels import ERROR, OK, STALE, WARN
+from jident_ros.identify.monitor import DetectorConfig, make_detector
 from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater
 from jident_ros.nodes.params import (
     RuntimeParameters,
@@ -37,11 +38,10 @@ from jident_ros.nodes.ros_io import (
     qos_signals,
     window_to_msg,
 )
+from jident_ros.nodes.runtime import RunnableNode
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import WINDOWING, WINDOWING_PARAMS
-from jident_ros.stream.detector import REASONS, BacklashDetector
-from jident_ros.stream.dynamics import DynamicsDetector
-from jident_ros.stream.flank import FlankDetector
+from jident_ros.stream.detector import REASONS
 from jident_ros.stream.inputs import IMU_AXES, JointStateAdapter
 from jident_ros.stream.layout import KNOWN_CHANNELS
 
@@ -103,7 +103,7 @@ def schema() -> dict:
     return node_schema(WINDOWING_PARAMS)
 
 
-class WindowingNode(Node):
+class WindowingNode(RunnableNode, Node):
     """The windowing node (composable: keyword arguments go to rclpy's Node)."""
 
     def __init__(self, **kwargs):
@@ -113,23 +113,12 @@ class WindowingNode(Node):
         self.cfg, self.system = validate(values)
         c, s = self.cfg, self.system
         self.detector_kind = detector_kind(c)
-        common = dict(samples_before_entry=s.sampling.samples_before_entry,
-                      samples_from_entry=s.sampling.samples_from_entry, gap_tolerance=c["gap_tolerance"])
         chans = ("t",) + tuple(c["channels"])
         if c["input"] == "joint_states":   # JointState carries alpha1, omega1, m_el, alpha2, omega2 (+ a1 from Imu)
             chans = tuple(ch for ch in chans if ch in ("t", "alpha1", "omega1", "m_el", "alpha2", "omega2")
                           or (ch == "a1" and c["use_imu"]))
-        if self.detector_kind == "dynamics":
-            self.detector = DynamicsDetector(s.load.wheel_radius_m, s.sampling.sample_period_s, channels=chans,
-                                             gear_ratio=c["gear_ratio"],
-                                             nominal_inertia_kgm2=s.motor.nominal_inertia_kgm2, **common)
-        elif self.detector_kind == "flank":
-            self.detector = FlankDetector(s.load.wheel_radius_m, s.sampling.sample_period_s, channels=chans,
-                                          gear_ratio=c["gear_ratio"],
-                                          nominal_inertia_kgm2=s.motor.nominal_inertia_kgm2, **common)
-        else:
-            self.detector = BacklashDetector(c["backlash_width_m"], s.load.wheel_radius_m,
-                                             s.sampling.sample_period_s, channels=chans, **common)
+        self.detector = make_detector(s, DetectorConfig(self.detector_kind, c["backlash_width_m"], chans,
+                                                        c["gap_tolerance"], c["gear_ratio"]))
         self.hardware_id = drive_hardware_id(self, c["hardware_id"])
         self.diag = DiagnosticsPublisher(self)
         self.pub_window = self.create_publisher(Float64MultiArray, "drive/window",

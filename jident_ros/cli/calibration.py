@@ -42,10 +42,10 @@ import numpy as np
 
 from jident_ros.bag.drive_replay import DriveReplay, in_sample_time_order, read_drive_messages
 from jident_ros.bag.messages import deserialize
+from jident_ros.identify.monitor import DetectorConfig, make_detector
 from jident_ros.method.patterns import PatternLibrary, h5_table, library_metadata
 from jident_ros.method.pipeline import SIGNALS, MethodConfig, batch_features, pre_entry_reference
 from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
-from jident_ros.stream.detector import BacklashDetector
 from jident_ros.stream.layout import DRIVE_TOPICS, SIGNALS_TOPIC, TRUE_INERTIA_TOPIC, WIDTH_TOPIC
 from jident_ros.stream.layout import topic_matches as _matches
 
@@ -213,20 +213,18 @@ def read_calibration_windows(path, system, *, inertia_kgm2: Optional[float] = No
     sampling = system.sampling
     ts = float(sampling.sample_period_s)
 
-    def make_detector(channels, topic, k2):
+    def detector_of(channels, topic, k2):
         missing = [c for c in ("t", "alpha1", "alpha2") + SIGNALS if c not in channels]
         if missing:
             raise CalibrationError(f"recording {name}: {topic} lacks channel {missing[0]!r} (it carries "
                                    f"{','.join(channels)}; inequality 1 needs t, alpha1, alpha2 and the "
                                    f"patterns need {','.join(SIGNALS)})")
         wanted = [c for c in WINDOWING_DEFAULTS["channels"] if c in channels]
-        return BacklashDetector(k2, system.load.wheel_radius_m, ts, channels=("t",) + tuple(wanted),
-                                samples_before_entry=sampling.samples_before_entry,
-                                samples_from_entry=sampling.samples_from_entry,
-                                gap_tolerance=WINDOWING_DEFAULTS["gap_tolerance"])
+        return make_detector(system, DetectorConfig("paper", k2, ("t",) + tuple(wanted),
+                                                    WINDOWING_DEFAULTS["gap_tolerance"]))
 
     replay = DriveReplay(names, width, follow_width, decode=decode, read_width=positive_data,
-                         read_truth=positive_data, make_detector=make_detector,
+                         read_truth=positive_data, make_detector=detector_of,
                          log=lambda text: log(f"{name}: {text}"))
     windows: list = []
     unlabelled = None
