@@ -163,12 +163,12 @@ class WindowInput:
     backlash_width_m: float
     wheel_radius_m: float
     sample_period_s: float
+    entry_uncertainty_samples: int = 0
     window_id: Optional[int] = None
+    backlash_width_unknown: bool = False
     entry_time_s: Optional[float] = None
     recontact_index: Optional[int] = None
     width_estimate: Optional[WidthEstimate] = None
-    entry_uncertainty_samples: int = 0
-    backlash_width_unknown: bool = False
 
     @classmethod
     def from_window(cls, window) -> "WindowInput":

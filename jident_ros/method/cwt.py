@@ -29,16 +29,7 @@ and one inverse FFT, then a gather of the kept samples; no loop over scales.
 :func:`cwt_classic_direct` is the literal per-scale transcription kept as the
 reference for the tests.
 
-Readings of "decomposition level 10" (see :func:`scales_for_reading`):
-
-``"dyadic"`` (default)
-    10 CWT scales ``2**1 ... 2**10``; one row per scale.
-``"linear"``
-    1024 CWT scales ``1, 2, ..., 2**10`` (MATLAB's usual ``cwt(x, 1:N, ...)``
-    call with N = 2^10).
-``"swt"``
-    the 10 detail bands of the stationary (undecimated) wavelet transform at
-    level 10 (:func:`swt_scalogram`); 2048 = 2^11 samples allow level 10.
+The readings of "decomposition level 10" (which scales): :mod:`jident_ros.method.scalogram`.
 
 Symbols: ``signal`` is one row of the paper's N1 (2048 samples of one
 physical quantity), ``coefs`` are the CWT coefficients C(a, b) at scale a and

@@ -1,7 +1,7 @@
 """Wavelet scalograms computed the way MATLAB's classic ``cwt`` / ``wscalogram`` do (paper section 3).
 
 The transform itself (the classic MATLAB ``cwt`` for discrete wavelets, evaluated with FFTs): :mod:`jident_ros.
-method.cwt` (its names are re-exported here).  Here: the percentage-energy scalogram (``wscalogram``), its cells
+method.cwt`.  Here: the percentage-energy scalogram (``wscalogram``), its cells
 for the image, the scales of each reading of "decomposition level 10" and the stationary-wavelet alternative.
 
 Readings of "decomposition level 10" (see :func:`scales_for_reading`):
@@ -24,28 +24,10 @@ import numpy as np
 import pywt
 
 from jident_ros.method.checks import int_at_least, short
-from jident_ros.method.cwt import (
-    DEFAULT_PRECISION,
-    READINGS,
-    CwtFilterBank,
-    FftGroup,
-    _check_signal,
-    _check_wavelet_name,
-    cwt_classic,
-    cwt_classic_direct,
-    integrated_wavelet,
-    wavelet_filter_bank,
-)
+from jident_ros.method.cwt import DEFAULT_PRECISION, READINGS, _check_signal, _check_wavelet_name, cwt_classic
 
 __all__ = [
-    "DEFAULT_PRECISION",
     "READINGS",
-    "CwtFilterBank",
-    "FftGroup",
-    "integrated_wavelet",
-    "wavelet_filter_bank",
-    "cwt_classic",
-    "cwt_classic_direct",
     "scalogram",
     "percentage_energy_cells",
     "scales_for_reading",
@@ -233,12 +215,7 @@ def swt_scalogram(signal, wavelet: str, level: int = 10) -> np.ndarray:
     return scalogram(swt_details(signal, wavelet, level))
 
 
-def wavelet_scalogram(
-    signal,
-    wavelet: str,
-    reading: str = "dyadic",
-    precision: int = DEFAULT_PRECISION,
-) -> np.ndarray:
+def wavelet_scalogram(signal, wavelet: str, reading: str = "dyadic", precision: int = DEFAULT_PRECISION) -> np.ndarray:
     """Scalogram of one or many signals under a reading of "level 10".
 
     Parameters
@@ -260,12 +237,7 @@ def wavelet_scalogram(
     return scalogram(wavelet_coefficients(signal, wavelet, reading, precision))
 
 
-def wavelet_coefficients(
-    signal,
-    wavelet: str,
-    reading: str = "dyadic",
-    precision: int = DEFAULT_PRECISION,
-) -> np.ndarray:
+def wavelet_coefficients(signal, wavelet: str, reading: str = "dyadic", precision: int = DEFAULT_PRECISION) -> np.ndarray:
     """The coefficients whose percentage energy :func:`wavelet_scalogram` returns.
 
     Parameters
