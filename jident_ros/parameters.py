@@ -154,7 +154,6 @@ WINDOWING_PARAMS = {
 #: else angle, else speed), ``acceleration``, ``gap_only``, ``anchored``, ``angle``, ``speed``; ``none`` is the
 #: preferred spelling of "no gap estimate", ``off`` (which a command line reads as YAML false) is still accepted.
 GAP_METHODS = ("auto", "acceleration", "gap_only", "anchored", "angle", "speed", "none", "off")
-GAP_METHOD_CHOICES = GAP_METHODS
 #: The gap_method values that mean: no gap estimate.
 NO_GAP = ("none", "off")
 
@@ -226,7 +225,7 @@ DIAGNOSTIC_PARAMS = {
                read_only=False),
     "image_method": Param(True, "run the paper's image method on every window", read_only=False),
     "gap_method": Param("auto", "J1 from the backlash gap: auto | acceleration | gap_only | anchored | angle | speed | "
-                        "none (off is accepted)", choices=GAP_METHOD_CHOICES, read_only=False),
+                        "none (off is accepted)", choices=GAP_METHODS, read_only=False),
     "hardware_id": Param("", "hardware_id of the /diagnostics statuses; empty = the resolved drive namespace",
                          read_only=False),
     "stale_after_s": Param(5.0, "STALE when no drive/window arrived for this long (steady clock), s; "

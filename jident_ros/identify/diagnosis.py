@@ -524,7 +524,7 @@ ENTRY_UNCERTAINTY_WITHOUT_A1 = 10
 
 
 def detector_arguments(window) -> dict:
-    """diagnose_window's ``recontact_index`` and ``width_estimate`` for a captured
+    """:class:`WindowInput`'s ``recontact_index`` and ``width_estimate`` for a captured
     :class:`~jident_ros.stream.layout.Window`: a flank- or dynamics-detector window's own (and, for a dynamics
     window without a1, ``entry_uncertainty_samples``); none for the paper detector's."""
     kind = getattr(window, "detector", "paper")

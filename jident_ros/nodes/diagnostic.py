@@ -1,6 +1,7 @@
 """diagnostic node: identifies J1 from every window on ``drive/window``.
 
-A thin ROS adapter over :func:`jident_ros.identify.diagnosis.diagnose_window` (the same per-window diagnosis
+A thin ROS adapter over :class:`jident_ros.identify.monitor.DriveMonitor` and
+:class:`jident_ros.identify.diagnosis.Diagnoser` (the same per-window diagnosis
 ``jident diagnose`` runs offline on a recording).  For each window:
 
 1. the gap estimate (:func:`jident_ros.identify.gap.estimate_inertia`: J1 by least squares over the
@@ -440,7 +441,7 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         widths = self.system.grid.backlash_widths_m
         k2 = win.backlash_width_m
         if win.detector == "dynamics" and math.isnan(k2):
-            pass   # no load encoder: K2 unknown (diagnose_window runs the gap fit without it, no image method)
+            pass   # no load encoder: K2 unknown (the Diagnoser runs the gap fit without it, no image method)
         elif not (math.isfinite(k2) and k2 > 0):
             errors.append(f"backlash width K2 {k2!r} m: not a width")
         elif self.cfg["image_method"] and not (min(widths) * (1 - 1e-9) <= k2 <= max(widths) * (1 + 1e-9)):
