@@ -405,3 +405,23 @@ def test_trend_parameters_and_units_come_from_the_schema():
     assert ZERO_IS_NONE == {P.TREND_FIELDS[n] for n, p in P.TREND_PARAMS.items() if p.zero_is_none}
     assert P.unit_of("trend_width_limit_m") == "m" and P.unit_of("max_bag_size_bytes") == "bytes"
     assert P.unit_of("stale_after_s") == "s" and P.unit_of("p") == "" and P.unit_of("trend_drift_warn_pct") == "%"
+
+
+def test_the_chain_config_fields_are_described_by_the_node_schema():
+    """Each field of the monitor's frozen configs (DiagnosisConfig, DetectorConfig) is a node parameter of the one
+    schema (description, unit, range, choices, run-time), or says why not; from_parameters maps them."""
+    import dataclasses
+
+    from jident_ros import parameters as P
+    from jident_ros.identify.diagnosis import DiagnosisConfig
+    from jident_ros.identify.monitor import DetectorConfig
+    for cls, schema in ((DiagnosisConfig, P.DIAGNOSTIC_PARAMS), (DetectorConfig, P.WINDOWING_PARAMS)):
+        fields = {f.name for f in dataclasses.fields(cls)}
+        assert set(cls.PARAMETERS) == fields, cls.__name__
+        for field, name in cls.PARAMETERS.items():
+            assert name is None or name in schema, (cls.__name__, field)
+    d = DiagnosisConfig.from_parameters(dict(P.DIAGNOSTIC, gap_method="none", p=3.0, image_method=True))
+    assert (d.p, d.gap_method, d.image_method) == (3.0, "off", True)
+    assert DiagnosisConfig.from_parameters(P.DIAGNOSTIC) == DiagnosisConfig()
+    w = DetectorConfig.from_parameters(dict(P.WINDOWING, gap_tolerance=2.0), "flank", ("t", "alpha1", "alpha2"))
+    assert (w.kind, w.gap_tolerance, w.channels, w.backlash_width_m) == ("flank", 2.0, ("t", "alpha1", "alpha2"), 0.005)

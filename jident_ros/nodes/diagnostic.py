@@ -94,11 +94,6 @@ LOST_IDS_SHOWN = 20
 DEFAULTS = DIAGNOSTIC
 
 
-def gap_method_of(value: str) -> str:
-    """The diagnosis' name of a gap_method parameter value (``none`` and ``off`` mean no gap estimate)."""
-    return "off" if value in ("none", "off") else value
-
-
 def validate(values: dict):
     """The rules across parameters (each parameter's type, range and choices are the schema's, checked before:
     :func:`jident_ros.nodes.params.coerce`)."""
@@ -301,7 +296,7 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
     def _diagnoser(self) -> Diagnoser:
         """The per-window diagnosis of the current parameters and library."""
         c = self.cfg
-        config = DiagnosisConfig(c["p"], gap_method_of(c["gap_method"]), c["image_method"], self.nominal)
+        config = DiagnosisConfig.from_parameters(c, self.nominal)
         return Diagnoser(self.system, self.method, config, self.policy,
                          self.library if c["image_method"] else None, self.library_error or "")
 

@@ -103,8 +103,7 @@ class WindowingNode(RunnableNode, Node):
         if c["input"] == "joint_states":   # JointState carries alpha1, omega1, m_el, alpha2, omega2 (+ a1 from Imu)
             chans = tuple(ch for ch in chans if ch in ("t", "alpha1", "omega1", "m_el", "alpha2", "omega2")
                           or (ch == "a1" and c["use_imu"]))
-        self.detector = make_detector(s, DetectorConfig(self.detector_kind, c["backlash_width_m"], chans,
-                                                        c["gap_tolerance"], c["gear_ratio"]))
+        self.detector = make_detector(s, DetectorConfig.from_parameters(c, self.detector_kind, chans))
         self.hardware_id = drive_hardware_id(self, c["hardware_id"])
         self.diag = DiagnosticsPublisher(self)
         self.pub_window = self.create_publisher(Float64MultiArray, "drive/window",
