@@ -131,6 +131,17 @@ class DiagnosisConfig:
     image_method: bool = True
     nominal_kgm2: Optional[float] = None
 
+    #: The node parameter (jident_ros/parameters.py, DIAGNOSTIC_PARAMS) that describes each field -- its
+    #: description, unit, range, choices and whether it changes at run time; None: not a node parameter.
+    PARAMETERS = {"p": "p", "gap_method": "gap_method", "image_method": "image_method",
+                  "nominal_kgm2": None}     # nominal_kgm2: system.motor.nominal_inertia_kgm2 (config/system.yaml)
+
+    @classmethod
+    def from_parameters(cls, params, nominal_kgm2: Optional[float] = None) -> "DiagnosisConfig":
+        """From the diagnostic node's parameters (``gap_method`` ``off`` and ``none`` both mean no gap)."""
+        gap_method = "off" if params["gap_method"] in NO_GAP else params["gap_method"]
+        return cls(float(params["p"]), gap_method, bool(params["image_method"]), nominal_kgm2)
+
     def check(self) -> None:
         """ValueError naming the field (the rules of :func:`jident_ros.parameters.gap_method_problem`)."""
         problem = gap_method_problem(self.gap_method, self.image_method)
@@ -163,12 +174,12 @@ class WindowInput:
     backlash_width_m: float
     wheel_radius_m: float
     sample_period_s: float
+    entry_uncertainty_samples: int = 0
     window_id: Optional[int] = None
+    backlash_width_unknown: bool = False
     entry_time_s: Optional[float] = None
     recontact_index: Optional[int] = None
     width_estimate: Optional[WidthEstimate] = None
-    entry_uncertainty_samples: int = 0
-    backlash_width_unknown: bool = False
 
     @classmethod
     def from_window(cls, window) -> "WindowInput":
@@ -524,7 +535,7 @@ ENTRY_UNCERTAINTY_WITHOUT_A1 = 10
 
 
 def detector_arguments(window) -> dict:
-    """diagnose_window's ``recontact_index`` and ``width_estimate`` for a captured
+    """:class:`WindowInput`'s ``recontact_index`` and ``width_estimate`` for a captured
     :class:`~jident_ros.stream.layout.Window`: a flank- or dynamics-detector window's own (and, for a dynamics
     window without a1, ``entry_uncertainty_samples``); none for the paper detector's."""
     kind = getattr(window, "detector", "paper")

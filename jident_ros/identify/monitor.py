@@ -48,6 +48,18 @@ class DetectorConfig:
     gear_ratio: float = 1.0
     encoder_counts_per_rev: int = 0
 
+    #: The windowing node parameter (jident_ros/parameters.py, WINDOWING_PARAMS) that describes each field -- its
+    #: description, unit, range, choices and whether it changes at run time; None: not a node parameter.
+    PARAMETERS = {"kind": "detector", "backlash_width_m": "backlash_width_m", "channels": "channels",
+                  "gap_tolerance": "gap_tolerance", "gear_ratio": "gear_ratio",
+                  "encoder_counts_per_rev": None}   # known from the recording's truth file only (evaluation)
+
+    @classmethod
+    def from_parameters(cls, params, kind: str, channels: Sequence[str]) -> "DetectorConfig":
+        """From the windowing node's parameters, with its resolved detector ``kind`` (``auto`` decided) and the
+        captured ``channels`` (``t`` first)."""
+        return cls(kind, params["backlash_width_m"], tuple(channels), params["gap_tolerance"], params["gear_ratio"])
+
 
 def make_detector(system, config: DetectorConfig, wheel_radius_m: Optional[float] = None,
                   sample_period_s: Optional[float] = None):

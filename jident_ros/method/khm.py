@@ -148,6 +148,20 @@ def khm_fit_batch(levels, counts, init_values, n_clusters=7, p=2.0, max_iter=300
     centres : ndarray (B, n_clusters), sorted ascending
     info : dict with ``n_iter`` (int), ``converged`` (B,) bool, ``damping`` (B,) final lam
     """
+    xn, c, s, lo, scale = _normalised(levels, counts, init_values, p, int(n_clusters), duplicate_spread)
+    p = float(p)
+    lam = np.full(xn.shape[0], min(1.0, 1.8 / (p - 1.0)) if p > 2 else 1.0)
+    if accelerate:
+        s, it, converged = _squarem(xn, c, s, p, lam, tol, max_iter)
+    else:
+        s, it, converged, lam = _relaxed_iteration(xn, c, s, p, lam, tol, max_iter)
+    centres = np.sort(s * scale[:, None] + lo[:, None], axis=1)
+    return centres, {"n_iter": it, "converged": converged, "damping": lam}
+
+
+def _normalised(levels, counts, init_values, p, K, duplicate_spread):
+    """The checked histograms mapped to [0, 1]: (levels xn (B, L), weights c summing to 1 per row, the spread
+    initial centres s (B, K), the offsets lo (B,) and scales (B,) that map back)."""
     counts = np.asarray(counts, dtype=np.float64)
     if counts.ndim == 1:
         counts = counts[None, :]
@@ -160,7 +174,6 @@ def khm_fit_batch(levels, counts, init_values, n_clusters=7, p=2.0, max_iter=300
     if not float(p) >= 2:
         raise ValueError(f"p must be >= 2 (paper eqs. 26-30 require p >= 2), got p={p!r}")
     init = np.broadcast_to(np.asarray(init_values, dtype=np.float64), (B,))
-    K = int(n_clusters)
     pos = counts > 0
     if not np.all(pos.any(axis=1)):
         raise ValueError("counts: every histogram needs a positive count")
@@ -175,12 +188,12 @@ def khm_fit_batch(levels, counts, init_values, n_clusters=7, p=2.0, max_iter=300
     # the class spreads duplicates over duplicate_spread x data range, i.e. over
     # duplicate_spread in the normalised units used here
     s = v[:, None] + float(duplicate_spread) * (np.arange(K) / max(K - 1, 1) - 0.5)[None, :]
-    p = float(p)
-    lam = np.full(B, min(1.0, 1.8 / (p - 1.0)) if p > 2 else 1.0)
-    if accelerate:
-        s, it, converged = _squarem(xn, c, s, p, lam, tol, max_iter)
-        centres = np.sort(s * scale[:, None] + lo[:, None], axis=1)
-        return centres, {"n_iter": it, "converged": converged, "damping": lam}
+    return xn, c, s, lo, scale
+
+
+def _relaxed_iteration(xn, c, s, p, lam, tol, max_iter):
+    """The plain relaxed fixed-point iteration (``accelerate=False``): (s, iterations, converged, final lam)."""
+    B, K = s.shape
     prev_step = np.zeros((B, K))
     warn = np.zeros(B, dtype=int)
     converged = np.zeros(B, dtype=bool)
@@ -216,8 +229,7 @@ def khm_fit_batch(levels, counts, init_values, n_clusters=7, p=2.0, max_iter=300
         upd = ~converged
         s = np.where(upd[:, None], s + lam[:, None] * step, np.where(newly[:, None], f, s))
         prev_step = step
-    centres = np.sort(s * scale[:, None] + lo[:, None], axis=1)
-    return centres, {"n_iter": it, "converged": converged, "damping": lam}
+    return s, it, converged, lam
 
 
 def _khm_update(xn, c, s, p, levels1=None, tiny=1e-150):

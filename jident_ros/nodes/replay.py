@@ -55,20 +55,16 @@ TYPES = {
 
 
 def validate(values: dict, argv_bag: str | None):
+    """The bag (also from the command line) and the topics (each parameter's type, range and choices are the
+    schema's, checked before: :func:`jident_ros.nodes.params.coerce`)."""
     cfg = checked(values, DEFAULTS, DEFAULTS)
     if argv_bag:
         cfg["bag"] = argv_bag
     require("bag", cfg["bag"], bool(cfg["bag"]), "a recording (bag directory or .mcap file; "
             "give it as the first argument)")
     require("bag", cfg["bag"], Path(cfg["bag"]).expanduser().exists(), "an existing bag directory or .mcap file")
-    require("rate", cfg["rate"], cfg["rate"] >= 0, "a number >= 0 (0 = as fast as possible)")
-    require("fast_sleep_s", cfg["fast_sleep_s"], 0 <= cfg["fast_sleep_s"] <= 1, "a number in [0, 1]")
-    require("max_lead_s", cfg["max_lead_s"], cfg["max_lead_s"] >= 0, "a number >= 0 (0 = no back-pressure)")
-    require("progress_timeout_s", cfg["progress_timeout_s"], cfg["progress_timeout_s"] > 0, "a number > 0")
     require("topics", cfg["topics"], bool(cfg["topics"]) and all(t and not t.startswith("/") for t in cfg["topics"]),
             "a non-empty list of relative topic names")
-    require("wait_for_subscribers", cfg["wait_for_subscribers"], cfg["wait_for_subscribers"] >= 0, "an integer >= 0")
-    require("wait_timeout_s", cfg["wait_timeout_s"], cfg["wait_timeout_s"] > 0, "a number > 0")
     return cfg
 
 
