@@ -1,11 +1,11 @@
-"""The zoo report's bookkeeping (jident_ros.evaluation.zoo): window-to-gap matching, the counts, the
+"""The zoo report's bookkeeping (jident_ros.research.evaluation.zoo): window-to-gap matching, the counts, the
 refusal-reason grouping and the results section.  The report itself runs for minutes (slow test)."""
 from __future__ import annotations
 
 import pytest
 
-from jident_ros.evaluation import zoo
-from jident_ros.evaluation.zoo import ZooRecording, match, replace_section, summarise
+from jident_ros.research.evaluation import zoo
+from jident_ros.research.evaluation.zoo import ZooRecording, match, replace_section, summarise
 
 
 def _rec(gaps, traversing=True, event_index=100, j1=1.16, k2=0.005):
@@ -77,7 +77,7 @@ def test_replace_section_keeps_the_others():
 
 @pytest.mark.slow
 def test_quick_report_on_the_vector_drive(tmp_path):
-    from jident_ros.vector_drive.model import motulator_available
+    from jident_ros.research.vector_drive.model import motulator_available
     if motulator_available():
         pytest.skip(motulator_available())
     res = zoo.run(tmp_path, quick=True, log=lambda t: None, models=("vector drive",))
