@@ -118,6 +118,9 @@ def test_recording_quantisation_offsets_and_truth(step_down, tmp_path):
     assert rec.signals["t"][1] - rec.signals["t"][0] == pytest.approx(5e-4)
     tr = rec.truth
     assert tr["event"]["type"] == "speed_step_down" and tr["gaps"][0]["traversal"]
+    g = tr["gaps"][0]      # the gap's torques: braking at the limit, the estimate a few % off, friction on
+    assert g["true_torque_mean_nm"] < -200 and 0 < abs(g["torque_estimate_error_mean_nm"]) < 0.05 * 360
+    assert g["bearing_friction_mean_nm"] > 1.0
     assert tr["entry_index"] > tr["steady_rows"]
     # the torque channel is the drive's estimate, not the truth
     assert not np.allclose(rec.signals["m_el"], st["tau_M"])
