@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import dataclasses
 import dataclasses as dc
-import hashlib
-import json
 import math
 from pathlib import Path
 from typing import Any, Mapping
@@ -210,17 +208,14 @@ def _is_profile(path: Path) -> bool:
     return path.parent.name == PROFILES_DIR
 
 
-def config_to_dict(cfg: SystemConfig) -> dict:
-    """Plain nested dict (tuples as lists) of a SystemConfig."""
-    return json.loads(json.dumps(dataclasses.asdict(cfg)))
-
-
-def config_hash(obj: Any) -> str:
-    """SHA-256 of a canonical JSON form of a (dataclass) configuration."""
-    if dataclasses.is_dataclass(obj):
-        obj = dataclasses.asdict(obj)
-    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
-    return hashlib.sha256(text.encode()).hexdigest()
+def __getattr__(name: str):
+    """``config_hash``/``config_to_dict`` (now in method.patterns) stay importable from here, loaded on first
+    use: method.patterns imports the method pipeline and scipy.fft (~0.4 s), which `jident simulate`/`info`
+    do not need (issue 23; test_layers.LAZY)."""
+    if name in ("config_hash", "config_to_dict"):
+        from jident_ros.method import patterns
+        return getattr(patterns, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def method_config_from_dict(data: Mapping | None):

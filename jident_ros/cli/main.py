@@ -15,14 +15,15 @@ import time
 from pathlib import Path
 
 from jident_ros import __version__
+from jident_ros.parameters import GAP_METHODS, cli_help  # light: dataclasses only
 
 # Every subcommand imports what it runs inside its cmd_* function (issue 23): `jident --help` and
 # `jident simulate` do not pay for scipy.stats, the offline diagnosis, the bag layer or rclpy
 # (test_cli_imports.py checks which modules each one loads).
 
-#: diagnosis.GAP_METHODS, spelled out so that `jident --help` does not import the method (test_config_cli)
-CLI_GAP_METHODS = ("auto", "acceleration", "gap_only", "anchored", "angle", "speed", "none", "off")
-#: method.pipeline.VARIANTS, spelled out for the same reason (test_cli_imports)
+#: The one list of gap methods (jident_ros/parameters.py, light: `jident --help` does not import the method)
+CLI_GAP_METHODS = GAP_METHODS
+#: method.pipeline.VARIANTS, spelled out so that `jident --help` does not import the method (test_cli_imports)
 CLI_VARIANTS = ("paper", "load_scaled", "sensor_matched")
 #: `jident trend`'s one-line help in the command list (cli.trend.add_trend_parser registers the same text;
 #: test_cli_imports compares the two listings)
@@ -95,7 +96,7 @@ def cmd_simulate(args) -> int:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         ws.save_npz(args.out)
     if args.plot:
-        from jident_ros.evaluation.plotting import plot_case
+        from jident_ros.research.evaluation.plotting import plot_case
         plot_case(ws, 0, args.plot)
     if not args.quiet:
         print(f"simulated {len(cases)} case(s), {cfg.sampling.window_length} samples each "
@@ -163,9 +164,9 @@ def cmd_build_patterns(args) -> int:
     """Build the pattern library from simulations (default) or from calibration recordings with known J1."""
     if not args.from_recordings and (args.label or args.backlash_width_m is not None):
         raise CliError("--label and --backlash-width-m need --from-recordings")
+    from jident_ros.cli.calibration import library_from_labelled_windows, parse_labels, pattern_grid, read_recordings
     from jident_ros.config import load_system_config
     from jident_ros.identify.library import default_library_path
-    from jident_ros.method.calibration import library_from_labelled_windows, parse_labels, pattern_grid, read_recordings
     from jident_ros.method.patterns import PatternLibrary
     system = load_system_config(args.config)
     method = _method_config(args)
@@ -209,10 +210,10 @@ def cmd_evaluate(args) -> int:
     from concurrent.futures import ProcessPoolExecutor
 
     from jident_ros.config import load_system_config
-    from jident_ros.evaluation.evaluate import VALIDITY_FILM_SHARES, run_evaluation
-    from jident_ros.evaluation.report import render_markdown, write_figures, write_results_section
-    from jident_ros.evaluation.report_robustness import write_robustness_figures
-    from jident_ros.evaluation.robustness import run_robustness
+    from jident_ros.research.evaluation.evaluate import VALIDITY_FILM_SHARES, run_evaluation
+    from jident_ros.research.evaluation.report import render_markdown, write_figures, write_results_section
+    from jident_ros.research.evaluation.report_robustness import write_robustness_figures
+    from jident_ros.research.evaluation.robustness import run_robustness
     system = load_system_config(args.config)
     method = _method_config(args)
     log = (lambda *a: None) if args.quiet else (lambda msg: print(msg, flush=True))
@@ -442,13 +443,8 @@ def _diagnose_arguments(g) -> None:
     g.add_argument("--map", metavar="CH=COL[:SCALE],...",
                    help="CSV: other column names and scale factors to SI, e.g. alpha1=enc_motor:0.0000958738,t=time_ms:0.001")
     g.add_argument("--topic", help="the drive/signals or joint_states topic (default: the recording's only one)")
-    g.add_argument("--image-min-margin", type=float,
-                   help="publish the image method's class alone (and warn on its disagreement) only at a fused "
-                        "margin >= this; 0 = never (default: the diagnostic node's image_min_margin)")
-    g.add_argument("--plausible-min-ratio", type=float,
-                   help="J1 below this x the nominal is refused (default: the diagnostic node's, 0.5)")
-    g.add_argument("--plausible-max-ratio", type=float,
-                   help="J1 above this x the nominal is refused (default: the diagnostic node's, 1.5)")
+    for name in ("image_min_margin", "plausible_min_ratio", "plausible_max_ratio"):   # the node's, mirrored
+        g.add_argument("--" + name.replace("_", "-"), type=float, help=cli_help(name))
     g.add_argument("--json", metavar="OUT", help="also write every window's diagnosis to this JSON file")
     g.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     g.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
