@@ -79,3 +79,110 @@ def test_sigint_while_a_node_is_starting_ends_quietly(node_env, tmp_path, delay_
     p.p.send_signal(signal.SIGINT)
     rc = p.wait()
     assert rc == 0 and "Traceback" not in p.text() and "KeyboardInterrupt" not in p.text(), logs(p)
+
+
+# --------------------------------------------------------------------------- replay = live
+def write_two_k2_recording(bag_dir: Path, misordered: bool) -> Path:
+    """Two cases with different K2 as the diagnostic node records them.  ``misordered``: case 2's
+    drive/backlash_width (and case row) is *received* before the batches that hold case 1's entry -- the
+    race of the demo recording -- but carries the publish time the drive sent it at (after case 1's batches)."""
+    import numpy as np
+
+    from jident_ros.bag.writer import BagWriter
+    from jident_ros.cli.offline import multiarray_message
+    from jident_ros.config import load_system_config
+    from jident_ros.sim import Case, simulate_grid
+    from jident_ros.stream.detector import embed_windows
+    from jident_ros.stream.layout import CASE_LABEL, DEFAULT_CHANNELS
+
+    cases = [Case(1.16, 0.0075, 0.025), Case(1.073, 0.01, 0.025)]
+    ws = simulate_grid(load_system_config(), cases)
+    gap = 400
+    stream, entry_rows = embed_windows(ws, gap, 1.0, DEFAULT_CHANNELS)
+    per, batch = gap + len(ws.t), 50
+    ns = lambda t: int(round(t * 1e9))  # noqa: E731
+    items = []          # (log time, publish time, topic, message)
+    for i, c in enumerate(cases):
+        t_pub = ns(stream[i * per, 0] - 0.5 * ws.sample_period_s)
+        row = np.array([[i, c.inertia_kgm2, c.backlash_width_m, c.consistency_pa_sn, stream[entry_rows[i], 0]]])
+        t_log = ns(stream[entry_rows[0] - 100, 0]) if (misordered and i == 1) else t_pub
+        items += [(t_log, t_pub, "/m/drive/backlash_width", {"data": c.backlash_width_m}),
+                  (t_log, t_pub, "/m/drive/case", multiarray_message(row, CASE_LABEL.split(",")))]
+        for s in range(i * per, (i + 1) * per, batch):
+            b = stream[s:min(s + batch, (i + 1) * per)]
+            items.append((ns(b[-1, 0]) + 1000, ns(b[-1, 0]), "/m/drive/signals", multiarray_message(b, DEFAULT_CHANNELS)))
+    with BagWriter(bag_dir) as bag:
+        bag.add_topic("/m/drive/signals", "std_msgs/msg/Float64MultiArray")
+        bag.add_topic("/m/drive/backlash_width", "std_msgs/msg/Float64", qos="transient_local")
+        bag.add_topic("/m/drive/case", "std_msgs/msg/Float64MultiArray", qos="transient_local")
+        for t_log, t_pub, topic, msg in sorted(items, key=lambda x: x[0]):
+            bag.write(topic, msg, t_log, t_pub)
+    return bag_dir
+
+
+def _windows(path):
+    from jident_ros.cli.offline import diagnose_recording
+    r = diagnose_recording(path, image_method=False)
+    return [(w.window_id, w.entry_time_s, w.backlash_width_m, w.inertia_kgm2) for w in r.windows]
+
+
+def test_a_k2_message_received_early_is_applied_in_publish_order(tmp_path):
+    from jident_ros.bag.reader import in_publish_order, read_bag
+    bad = write_two_k2_recording(tmp_path / "bad", misordered=True)
+    good = write_two_k2_recording(tmp_path / "good", misordered=False)
+    # the bag really holds the race: case 2's K2 logged before the batches of case 1's entry
+    topics = [m.topic for m in read_bag(bad, raw=True)]
+    first_k2 = [i for i, t in enumerate(topics) if t.endswith("backlash_width")]
+    assert first_k2[1] < len(topics) // 4
+    assert [m.topic for m in in_publish_order(read_bag(bad, raw=True))] == \
+        [m.topic for m in read_bag(good, raw=True)]
+    live = _windows(good)
+    assert [w[2] for w in live] == [0.0075, 0.01] and all(w[3] is not None for w in live)
+    assert _windows(bad) == live                            # bit for bit: same entries, K2 and J1
+
+
+def test_in_publish_order_holds_back_no_longer_than_its_horizon():
+    from jident_ros.bag.reader import BagMessage, in_publish_order
+    msgs = [BagMessage("a", "", 10, b"", 10), BagMessage("k2", "", 11, b"", 30), BagMessage("b", "", 20, b"", 20),
+            BagMessage("c", "", 40, b"", 40), BagMessage("d", "", 100, b"", 100)]
+    out = in_publish_order(iter(msgs), horizon_ns=15)
+    assert [m.topic for m in out] == ["a", "b", "k2", "c", "d"]
+    assert [m.topic for m in in_publish_order(msgs[:1])] == ["a"] and msgs[0].publish_time_ns == 10
+    assert BagMessage("x", "", 5, b"").publish_time_ns == 5     # no publish time: the receive time
+
+
+def live_windows(recording) -> list:
+    """(window_id, entry t, K2, J1) as the live nodes gave them: the recorded drive/window headers and the
+    recorded inertia_estimate values (one per diagnosed window, in order)."""
+    from jident_ros.bag.reader import read_bag
+    from jident_ros.stream.layout import Window
+
+    wins, estimates = [], []
+    for m in read_bag(recording):
+        if m.topic.endswith("drive/window"):
+            w = Window.unpack(m.message.data, m.message.layout.dim, m.message.layout.data_offset)
+            wins.append((int(w.window_id), float(w.entry_time_s), float(w.backlash_width_m)))
+        elif m.topic.endswith("/inertia_estimate"):
+            estimates.append(float(m.message.data))
+    assert len(estimates) == len(wins), (wins, estimates)
+    return [w + (j,) for w, j in zip(wins, estimates)]
+
+
+def assert_replay_equals_live(recording, n_windows: int) -> None:
+    live = live_windows(recording)
+    assert len(live) == n_windows, live
+    assert _windows(recording) == live
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_diagnose_on_the_demo_recording_equals_live(ros_env, tmp_path):
+    """`jident demo` (five cases, four K2 changes) then `jident diagnose` on its recording: 5/5 windows with
+    the entry time, K2 and J1 the live nodes gave."""
+    import subprocess
+    import sys
+    env = dict(ros_env, JIDENT_CACHE_DIR=str(tmp_path / "cache"))
+    r = subprocess.run([sys.executable, "-m", "jident_ros.cli", "demo", "--out", str(tmp_path / "demo")], env=env,
+                       cwd=tmp_path, capture_output=True, text=True, timeout=400)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert_replay_equals_live(tmp_path / "demo" / "recording", 5)

@@ -7,6 +7,7 @@ scanning it (:class:`StreamScan`, also what :mod:`jident_ros.bag.salvage` recove
 """
 from __future__ import annotations
 
+import heapq
 import os
 from collections import namedtuple
 from pathlib import Path
@@ -22,12 +23,33 @@ from jident_ros.bag.errors import RecordingError
 from jident_ros.bag.messages import canonical_type, deserialize_with
 from jident_ros.bag.metadata_yaml import read_metadata
 
-__all__ = ["BagMessage", "StreamScan", "bag_files", "check_magic", "describe_error", "is_finalised", "read_bag",
-           "read_metadata"]
+__all__ = ["BagMessage", "StreamScan", "bag_files", "check_magic", "describe_error", "in_publish_order", "is_finalised",
+           "read_bag", "read_metadata"]
 
-BagMessage = namedtuple("BagMessage", "topic msg_type log_time_ns message")
-BagMessage.__doc__ = """One recorded message: topic, type name, receive time (ns) and the message (decoded
-by rosbags: fields are attributes, numeric arrays numpy; or CDR ``bytes`` with ``raw=True``)."""
+class BagMessage(namedtuple("BagMessage", "topic msg_type log_time_ns message")):
+    """One recorded message: topic, type name, receive time (ns) and the message (decoded by rosbags: fields
+    are attributes, numeric arrays numpy; or CDR ``bytes`` with ``raw=True``).  ``publish_time_ns``: the
+    MCAP publish time -- the publisher's send time (DDS source timestamp) in bags that rosbag2 (Iron on) or our
+    recorder wrote, else the receive time."""
+
+    def __new__(cls, topic, msg_type, log_time_ns, message, publish_time_ns=None):
+        self = super().__new__(cls, topic, msg_type, log_time_ns, message)
+        self.publish_time_ns = log_time_ns if publish_time_ns is None else publish_time_ns
+        return self
+
+
+def in_publish_order(messages: Iterable[BagMessage], horizon_ns: int = 10_000_000_000) -> Iterator[BagMessage]:
+    """``messages`` (in receive-time order) in the order they were published (stable), e.g. a drive's
+    K2 message after the signal batches the drive sent before it, although a recorder received it earlier.
+    A message is held until one received ``horizon_ns`` later arrives: nothing is sent longer than that after
+    it was published (a bag without publish times comes out unchanged)."""
+    heap: list = []
+    for k, m in enumerate(messages):
+        heapq.heappush(heap, (m.publish_time_ns, k, m))
+        while heap and heap[0][0] < m.log_time_ns - horizon_ns:
+            yield heapq.heappop(heap)[2]
+    while heap:
+        yield heapq.heappop(heap)[2]
 
 
 def _split_index(p: Path) -> tuple:
@@ -146,7 +168,7 @@ def _decoded(path, schema, channel, message, raw) -> BagMessage:
     except ValueError:
         pass  # not a ROS type name; reported as found
     if raw:
-        return BagMessage(channel.topic, msg_type, message.log_time, message.data)
+        return BagMessage(channel.topic, msg_type, message.log_time, message.data, message.publish_time)
     if schema is None or channel.message_encoding != "cdr":
         raise RecordingError(f"{path}: topic {channel.topic}: cannot decode {channel.message_encoding!r} "
                              f"messages (read with raw=True or select other topics)")
@@ -155,7 +177,7 @@ def _decoded(path, schema, channel, message, raw) -> BagMessage:
     except Exception as exc:  # rosbags: SerdeError, TypesysError, parse errors
         raise RecordingError(f"{path}: topic {channel.topic} at {message.log_time}: cannot decode "
                              f"{schema.name} ({type(exc).__name__}: {exc})") from None
-    return BagMessage(channel.topic, msg_type, message.log_time, decoded)
+    return BagMessage(channel.topic, msg_type, message.log_time, decoded, message.publish_time)
 
 
 def _iter_finalised(path: Path, selected, raw: bool) -> Iterator[BagMessage]:

@@ -188,9 +188,9 @@ class Recording:
         st = self.recorder.status()
         return st["error"] or None
 
-    def write(self, name: str, msg) -> None:
-        if name in self.topics:
-            self.recorder.write(*self.topics[name], msg)   # never raises: drops are counted by reason
+    def write(self, name: str, msg, publish_time_ns: int | None = None) -> None:
+        if name in self.topics:   # never raises: drops are counted by reason
+            self.recorder.write(*self.topics[name], msg, publish_time_ns=publish_time_ns)
 
     def flush(self) -> None:
         self.recorder.maybe_flush()
@@ -290,13 +290,16 @@ class DiagnosticNode(LifecycleNode):
         if self.recorder is not None and c["record_signals"]:
             sq = qos_signals(c["signals_queue_depth"])
             # raw: the CDR bytes go to the recording as received, never decoded here
+            # each callback also takes the message info: its source timestamp is recorded as the publish time
+            # (as rosbag2 does), so a reader can restore the order the drive sent its topics in (replay = live)
             self.subs.append(self.create_subscription(Float64MultiArray, "drive/signals",
-                                                      lambda m: self._record("drive/signals", m), sq, raw=True))
+                                                      lambda m, i: self._record("drive/signals", m, i), sq, raw=True))
             deep = qos_latched(100)  # keep every case message while a window is being diagnosed
             for name in ("drive/backlash_width", "drive/true_inertia"):
-                self.subs.append(self.create_subscription(Float64, name, lambda m, n=name: self._record(n, m), deep))
+                self.subs.append(self.create_subscription(Float64, name, lambda m, i, n=name: self._record(n, m, i),
+                                                          deep))
             self.subs.append(self.create_subscription(Float64MultiArray, "drive/case",
-                                                      lambda m: self._record("drive/case", m), deep))
+                                                      lambda m, i: self._record("drive/case", m, i), deep))
         if self.recorder is not None:  # a chunk never waits long in memory (flush age 0.5 s), even when messages pause
             self.flush_timer = self.create_timer(0.25, self._flush_bag, clock=self.steady)
         self.updater.force_update()
@@ -407,9 +410,10 @@ class DiagnosticNode(LifecycleNode):
             self.recorder_error = f"not recording: {exc}"
             self.get_logger().error(self.recorder_error)
 
-    def _record(self, name, msg):
+    def _record(self, name, msg, info=None):
         if self.recorder is not None:
-            self.recorder.write(name, msg)
+            sent = (info or {}).get("source_timestamp") or None    # rclpy's MessageInfo; 0: not known
+            self.recorder.write(name, msg, sent if sent is None or 0 < sent < 2**63 else None)
             if self.recorder.error:
                 self.close()
 
