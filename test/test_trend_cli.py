@@ -199,7 +199,8 @@ def test_trend_parameters_map_to_the_config():
 
 
 def test_trend_status_levels_messages_and_values():
-    from jident_ros.identify.trend import TrendConfig, TrendTracker, simulate_series
+    from jident_ros.evaluation.trend_simulation import simulate_series
+    from jident_ros.identify.trend import TrendConfig, TrendTracker
     from jident_ros.identify.trend_status import TREND_STATUS_NAME, trend_status
     assert TREND_STATUS_NAME == "jident_diagnostic: trend"
     s = simulate_series(60, step_at=40, step_pct=6.0, seed=3, width_growth_m_per_window=2e-6)
