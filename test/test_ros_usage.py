@@ -186,3 +186,80 @@ def test_diagnose_on_the_demo_recording_equals_live(ros_env, tmp_path):
                        cwd=tmp_path, capture_output=True, text=True, timeout=400)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     assert_replay_equals_live(tmp_path / "demo" / "recording", 5)
+
+
+# --------------------------------------------------------------------------- foreign bags
+#: A service-event schema as `ros2 bag record -a` writes one on Jazzy with service introspection on: the
+#: .srv text (request --- response); rosbags cannot parse it ("Could not parse: ...").
+SERVICE_EVENT_SCHEMA = """string[] names
+
+---
+ParameterValue[] values
+================================================================================
+MSG: rcl_interfaces/ParameterValue
+uint8 type
+float64 double_value
+"""
+
+
+def write_jointstate_bag(bag_dir: Path, with_service_events: bool) -> Path:
+    """Two simulated backlash entries as sensor_msgs/JointState per sample on /arm/joint_states (+ a
+    `_service_event` topic of a type nobody can parse, written before and between the samples)."""
+    import numpy as np
+
+    from jident_ros.bag.writer import BagWriter
+    from jident_ros.config import load_system_config
+    from jident_ros.sim import Case, simulate_grid
+    from jident_ros.stream.detector import embed_windows
+    from jident_ros.stream.layout import DEFAULT_CHANNELS
+
+    ws = simulate_grid(load_system_config(), [Case(1.16, 0.005, 0.025), Case(1.16, 0.005, 0.025)])
+    stream, _ = embed_windows(ws, 400, 1.0, DEFAULT_CHANNELS)   # the second entry: data after the first window
+    col = {c: i for i, c in enumerate(DEFAULT_CHANNELS)}
+    with BagWriter(bag_dir) as bag:
+        if with_service_events:
+            bag.add_topic("/arm/sim/get_parameters/_service_event", "rcl_interfaces/srv/GetParameters_Event",
+                          msgdef=SERVICE_EVENT_SCHEMA, type_hash="RIHS01_" + "0" * 64)
+        bag.add_topic("/arm/joint_states", "sensor_msgs/msg/JointState")
+        for k, row in enumerate(stream):
+            t_ns = int(round(row[0] * 1e9))
+            if with_service_events and k % 500 == 0:
+                bag.write("/arm/sim/get_parameters/_service_event", b"\x00\x01\x00\x00" + bytes(12), t_ns)
+            bag.write("/arm/joint_states", {
+                "header": {"stamp": {"sec": t_ns // 10**9, "nanosec": t_ns % 10**9}, "frame_id": ""},
+                "name": ["motor", "load"],
+                "position": np.array([row[col["alpha1"]], row[col["alpha2"]]]),
+                "velocity": np.array([row[col["omega1"]], row[col["omega2"]]]),
+                "effort": np.array([row[col["m_el"]], np.nan])}, t_ns)
+    return bag_dir
+
+
+def test_a_bag_with_service_event_topics_is_diagnosed(tmp_path):
+    from rosbags.highlevel import AnyReader
+
+    from jident_ros.cli.offline import diagnose_samples
+    foreign = write_jointstate_bag(tmp_path / "record_a", with_service_events=True)
+    plain = write_jointstate_bag(tmp_path / "plain", with_service_events=False)
+    with pytest.raises(Exception, match="Could not parse"):    # what failed before: rosbags' AnyReader
+        AnyReader([foreign]).open()
+    notes = []
+    r = diagnose_samples(foreign, image_method=False, log=notes.append)
+    skipped = [n for n in notes if "skipped" in n]
+    assert len(skipped) == 1 and "/arm/sim/get_parameters/_service_event (rcl_interfaces/srv/GetParameters_Event)" \
+        in skipped[0], notes
+    ref = diagnose_samples(plain, image_method=False)
+    got = [(w.entry_time_s, w.inertia_kgm2) for w in r.windows]
+    assert len(got) >= 1 and got == [(w.entry_time_s, w.inertia_kgm2) for w in ref.windows]
+    assert abs(got[0][1] - 1.16) < 0.05
+
+
+def test_jident_diagnose_on_a_foreign_bag_says_one_line_and_exits_0(tmp_path):
+    import subprocess
+    import sys
+    foreign = write_jointstate_bag(tmp_path / "record_a", with_service_events=True)
+    r = subprocess.run([sys.executable, "-m", "jident_ros.cli", "diagnose", str(foreign), "--no-image"],
+                       capture_output=True, text=True, timeout=300, env=dict(os.environ, PYTHONPATH=str(REPO)))
+    out = r.stdout + r.stderr
+    assert r.returncode == 0, out
+    assert "Traceback" not in out and "Could not parse" not in out
+    assert sum("_service_event" in line for line in out.splitlines()) == 1, out

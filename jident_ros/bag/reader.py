@@ -24,7 +24,7 @@ from jident_ros.bag.messages import canonical_type, deserialize_with
 from jident_ros.bag.metadata_yaml import read_metadata
 
 __all__ = ["BagMessage", "StreamScan", "bag_files", "check_magic", "describe_error", "in_publish_order", "is_finalised",
-           "read_bag", "read_metadata"]
+           "read_bag", "read_metadata", "recorded_topics", "schema_problem", "skipped_topics_line", "TopicInfo"]
 
 class BagMessage(namedtuple("BagMessage", "topic msg_type log_time_ns message")):
     """One recorded message: topic, type name, receive time (ns) and the message (decoded by rosbags: fields
@@ -122,6 +122,59 @@ def _store_for(schema) -> Typestore:
         store.register(types)
         _STORES[key] = store
     return store
+
+
+TopicInfo = namedtuple("TopicInfo", "topic msg_type problem")
+TopicInfo.__doc__ = """A recorded topic: name, type name and why its schema cannot be parsed ("" when it can)."""
+
+
+def _schemas_and_channels(path: Path) -> tuple[dict, dict]:
+    """({schema id: Schema}, {channel id: Channel}) of one MCAP file: from its summary, or by scanning it."""
+    if is_finalised(path):
+        with open(path, "rb") as f:
+            summary = make_reader(f).get_summary()
+        return dict(summary.schemas), dict(summary.channels)
+    scan = StreamScan(path)
+    for _ in scan.records():
+        pass
+    return scan.schemas, scan.channels
+
+
+def schema_problem(schema) -> str:
+    """Why rosbags cannot build a type from a recorded schema ("" when it can)."""
+    if schema is None:
+        return "no schema"
+    try:
+        _store_for(schema)
+    except Exception as exc:  # rosbags' parse errors (TypesysError, lark's), a bad encoding, bad UTF-8
+        return f"{type(exc).__name__}: {' '.join(str(exc).split())[:120]}"
+    return ""
+
+
+def recorded_topics(path: str | os.PathLike) -> list[TopicInfo]:
+    """Every topic of a recording (an .mcap file or a bag directory) with its type, and whether its schema
+    can be parsed -- read from the MCAP summaries without decoding a message, so a bag that also holds types
+    nobody here can parse (``ros2 bag record -a`` on Jazzy: the ``_service_event`` topics of service
+    introspection) can still be read for the topics it is asked for."""
+    seen: dict[str, TopicInfo] = {}
+    for p in bag_files(path):
+        check_magic(p)
+        schemas, channels = _schemas_and_channels(p)
+        for ch in channels.values():
+            if ch.topic not in seen:
+                schema = schemas.get(ch.schema_id)
+                seen[ch.topic] = TopicInfo(ch.topic, schema.name if schema is not None else "", schema_problem(schema))
+    return [seen[t] for t in sorted(seen)]
+
+
+def skipped_topics_line(path, topics: Iterable[TopicInfo]) -> str:
+    """One line naming the topics of a recording whose types cannot be parsed ("" when there are none)."""
+    bad = [t for t in topics if t.problem]
+    if not bad:
+        return ""
+    names = ", ".join(f"{t.topic} ({t.msg_type or 'no type'})" for t in bad[:6])
+    more = f" and {len(bad) - 6} more" if len(bad) > 6 else ""
+    return f"{path}: skipped {len(bad)} topic(s) whose type cannot be parsed: {names}{more}"
 
 
 def describe_error(exc: BaseException) -> str:
