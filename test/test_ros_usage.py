@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from test_nodes import Proc, logs, node_env  # noqa: F401
+from test_nodes import Proc, logs, node_env, ros  # noqa: F401
 
 from jident_ros.nodes.params import ParameterError
 from jident_ros.nodes.runtime import check_params_files, load_params_file
@@ -263,3 +263,110 @@ def test_jident_diagnose_on_a_foreign_bag_says_one_line_and_exits_0(tmp_path):
     assert r.returncode == 0, out
     assert "Traceback" not in out and "Could not parse" not in out
     assert sum("_service_event" in line for line in out.splitlines()) == 1, out
+
+
+# --------------------------------------------------------------------------- status names, diagnostic_aggregator
+class _GenericAnalyzer:
+    """diagnostic_aggregator's GenericAnalyzer as far as naming goes (ros/diagnostics,
+    generic_analyzer.cpp ``match``: regex_match / startswith / contains; generic_analyzer_base.hpp: items are
+    kept in a map keyed by the status name)."""
+
+    def __init__(self, path: str, cfg: dict):
+        import re
+        self.path = path
+        self.regex = [re.compile(r) for r in cfg.get("regex", [])]
+        self.startswith, self.contains = cfg.get("startswith", []), cfg.get("contains", [])
+        self.items: dict = {}
+
+    def match(self, name: str) -> bool:
+        return (any(r.fullmatch(name) for r in self.regex) or any(name.startswith(s) for s in self.startswith)
+                or any(c in name for c in self.contains))
+
+    def analyze(self, status) -> None:
+        self.items[status.name] = status
+
+
+def aggregator(analyzers_yaml: Path) -> list:
+    """The GenericAnalyzers of an analyzers file (AnalyzerGroups flattened, paths joined)."""
+    doc = yaml.safe_load(analyzers_yaml.read_text())["analyzers"]["ros__parameters"]
+    out = []
+
+    def walk(section: dict, base: str):
+        for key, cfg in section.items():
+            if not isinstance(cfg, dict):
+                continue
+            path = f"{base}/{cfg['path']}"
+            if cfg["type"] == "diagnostic_aggregator/AnalyzerGroup":
+                walk(cfg["analyzers"], path)
+            else:
+                assert cfg["type"] == "diagnostic_aggregator/GenericAnalyzer", cfg["type"]
+                out.append(_GenericAnalyzer(path, cfg))
+    walk(doc, "/" + doc["path"])
+    return out
+
+
+def aggregate(analyzers: list, statuses) -> set:
+    """The aggregator's output keys ("<analyzer path>/<status name>") of ``statuses``."""
+    for s in statuses:
+        for a in analyzers:
+            if a.match(s.name):
+                a.analyze(s)
+    return {f"{a.path}/{name}" for a in analyzers for name in a.items}
+
+
+class _FakeNode:
+    def __init__(self, fqn):
+        self.fqn = fqn
+
+    def get_fully_qualified_name(self):
+        return self.fqn
+
+
+def test_status_names_carry_namespace_node_and_task():
+    from jident_ros.nodes.diagnostics import status_name, status_task
+    assert status_name(_FakeNode("/press3/jident_diagnostic"), "inertia") == "press3/jident_diagnostic: inertia"
+    assert status_name(_FakeNode("/jident_windowing"), "rate") == "jident_windowing: rate"
+    assert status_name(_FakeNode("/plant/a/jident_diagnostic"), "trend") == "plant/a/jident_diagnostic: trend"
+    assert status_task("plant/a/jident_diagnostic: trend") == "jident_diagnostic: trend"
+    assert status_task("jident_windowing: rate") == "jident_windowing: rate"
+
+
+def test_analyzers_file_groups_every_status_of_every_drive():
+    from types import SimpleNamespace as S
+
+    from jident_ros.nodes.diagnostic import TASKS
+    from jident_ros.nodes.diagnostics import status_name
+    names = [status_name(_FakeNode(f"{ns}/jident_diagnostic"), t) for ns in ("/a", "/b", "") for t in ("inertia",) + TASKS]
+    names += [status_name(_FakeNode(f"{ns}/jident_windowing"), t) for ns in ("/a", "/b", "") for t in ("rate", "windows")]
+    keys = aggregate(aggregator(REPO / "config" / "analyzers.yaml"), [S(name=n) for n in names])
+    assert len(keys) == len(names)                                  # each status: one item, none shared
+    assert "/Aggregation/J1 identification/Inertia estimates/a/jident_diagnostic: inertia" in keys
+    assert "/Aggregation/J1 identification/Windowing node/b/jident_windowing: rate" in keys
+    assert not aggregate(aggregator(REPO / "config" / "analyzers.yaml"), [S(name="other_node: inertia")])
+
+
+@pytest.mark.ros
+def test_two_drives_in_two_namespaces_give_distinct_aggregator_keys(node_env, tmp_path, ros):  # noqa: F811
+    """Two diagnostic nodes (namespaces /agg1, /agg2): their periodic statuses reach /diagnostics with names
+    that differ by drive, and the shipped analyzers file keeps one aggregator item per drive and task."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from jident_ros.nodes.diagnostic import TASKS
+    from jident_ros.nodes.ros_io import qos_diagnostics
+    diags = ros.collect(DiagnosticArray, "/diagnostics", qos_diagnostics())
+    procs = [Proc(node_env, tmp_path, "diagnostic", "-r", f"__ns:=/agg{k}", "-p", "record:=false",
+                  "-p", "image_method:=false") for k in (1, 2)]
+    try:
+        def names():
+            return {s.name for a in diags for s in a.status if s.hardware_id in ("/agg1/drive", "/agg2/drive")}
+        want = {f"agg{k}/jident_diagnostic: {t}" for k in (1, 2) for t in TASKS}
+        assert ros.spin_until(lambda: want <= names()), (names(), logs(*procs))
+        statuses = [s for a in diags for s in a.status if s.name in want]
+        keys = aggregate(aggregator(REPO / "config" / "analyzers.yaml"), statuses)
+        for t in TASKS:
+            drive_keys = {k for k in keys if k.endswith(f"jident_diagnostic: {t}")}
+            assert drive_keys == {f"/Aggregation/J1 identification/Diagnostic node/agg{k}/jident_diagnostic: {t}"
+                                  for k in (1, 2)}, keys
+    finally:
+        for p in procs:
+            p.stop()

@@ -10,7 +10,7 @@ A thin ROS adapter over :func:`jident_ros.identify.diagnosis.diagnose_window` (t
    against the pattern library; when the window has no usable gap, the fused verdict's class J1
    (the margin-weighted vote of the five signals, :mod:`jident_ros.identify.fusion`) is what goes
    out on ``inertia_estimate``;
-3. one DiagnosticStatus "jident: inertia" on ``/diagnostics`` (REP 107) per window: OK when the verdict's
+3. one DiagnosticStatus "<ns>/jident_diagnostic: inertia" on ``/diagnostics`` (REP 107) per window: OK when the verdict's
    class is the nominal J1; WARN when it deviates, lies between classes, or the image method's vote
    disagrees with the gap; ERROR when the window could not be diagnosed (unreadable, or its length, sample
    period or wheel radius differ from the configuration).
@@ -61,7 +61,7 @@ from jident_ros.identify.library import default_library_path, load_pattern_libra
 from jident_ros.identify.trend import TrendConfig, TrendStateError, TrendTracker
 from jident_ros.identify.trend_status import WIDTH_SOURCES, trend_inputs, trend_status
 from jident_ros.identify.verdict import VerdictPolicy
-from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater
+from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater, status_name
 from jident_ros.nodes.params import (
     ParameterError,
     RuntimeParameters,
@@ -85,7 +85,7 @@ except ImportError as _exc:  # pragma: no cover - both are install requirements
 
 NODE_NAME = "jident_diagnostic"
 #: Each window's result.
-STATUS_NAME = "jident: inertia"
+STATUS_TASK = "inertia"   # event status "<ns>/jident_diagnostic: inertia", one per window
 #: Periodic tasks (status names "jident_diagnostic: <task>").
 TASKS = ("diagnosis", "library", "recorder", "trend")
 #: Period of the task statuses, s (steady clock).
@@ -456,7 +456,7 @@ class DiagnosticNode(LifecycleNode):
             text = f"window could not be diagnosed: internal error {type(exc).__name__}: {exc}"
             self.get_logger().error(text)
             try:
-                self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id))
+                self.diag.publish(make_status(status_name(self, STATUS_TASK), ERROR, text, self.hardware_id))
             except Exception:
                 pass
 
@@ -513,7 +513,7 @@ class DiagnosticNode(LifecycleNode):
         except LayoutError as exc:
             text = f"window could not be diagnosed: unreadable drive/window message: {exc}"
             self.get_logger().error(text)
-            self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id))
+            self.diag.publish(make_status(status_name(self, STATUS_TASK), ERROR, text, self.hardware_id))
             return
         self._count_window_id(int(win.window_id))
         errors, warnings = self.check_window(win)
@@ -522,7 +522,7 @@ class DiagnosticNode(LifecycleNode):
             text = f"window {win.window_id} not diagnosed: it does not match the configuration: " + "; ".join(errors)
             self.get_logger().error(text, throttle_duration_sec=1.0)
             self.last_message = text
-            self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id,
+            self.diag.publish(make_status(status_name(self, STATUS_TASK), ERROR, text, self.hardware_id,
                                           [("window_id", win.window_id), ("entry_time_s", win.entry_time_s),
                                            ("mismatch", "; ".join(errors))]))
             return
@@ -548,7 +548,7 @@ class DiagnosticNode(LifecycleNode):
         else:
             self.get_logger().error(message)
         self.last_message = message
-        self.diag.publish(make_status(STATUS_NAME, level, message, self.hardware_id, values))
+        self.diag.publish(make_status(status_name(self, STATUS_TASK), level, message, self.hardware_id, values))
         if self.trend is not None:
             self._update_trend(win, d)
 

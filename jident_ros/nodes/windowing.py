@@ -18,7 +18,7 @@ from rosbags.typesys import Stores, get_typestore
 from std_msgs.msg import Float64, Float64MultiArray
 
 from jident_ros.identify.levels import ERROR, OK, STALE, WARN
-from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater
+from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater, status_name
 from jident_ros.nodes.params import (
     RuntimeParameters,
     checked,
@@ -47,7 +47,7 @@ from jident_ros.stream.layout import KNOWN_CHANNELS
 
 NODE_NAME = "jident_windowing"
 #: Event statuses (a dropped window or batch, an internal error).
-STATUS_NAME = "jident: windowing"
+STATUS_TASK = "windows"   # event status "<ns>/jident_windowing: windows": a dropped window or batch
 #: Periodic task (diagnostics_period_s, steady clock): "jident_windowing: rate".
 RATE_TASK = "rate"
 
@@ -338,7 +338,7 @@ class WindowingNode(Node):
                                                           else "batch dropped")
         text = f"{what}: {ev.reason}: {ev.detail}"
         self.get_logger().warning(text, throttle_duration_sec=1.0)
-        self.diag.publish(make_status(STATUS_NAME, WARN, text, self.hardware_id, self._values(
+        self.diag.publish(make_status(status_name(self, STATUS_TASK), WARN, text, self.hardware_id, self._values(
             [("reason", ev.reason), ("detail", ev.detail), ("window_dropped", ev.window_dropped)])))
 
     def _report_error(self, where, exc, reset=True):
@@ -348,7 +348,7 @@ class WindowingNode(Node):
         text = f"internal error in {where}: {type(exc).__name__}: {exc}"
         self.get_logger().error(text, throttle_duration_sec=1.0)
         try:
-            self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id,
+            self.diag.publish(make_status(status_name(self, STATUS_TASK), ERROR, text, self.hardware_id,
                                           self._values([("reason", "internal_error")])))
         except Exception:
             pass
