@@ -370,3 +370,47 @@ def test_two_drives_in_two_namespaces_give_distinct_aggregator_keys(node_env, tm
     finally:
         for p in procs:
             p.stop()
+
+
+# --------------------------------------------------------------------------- stamped estimate
+def test_drive_time_and_std_error_helpers():
+    import math
+
+    from jident_ros.nodes.estimate_out import drive_time, std_error_of
+    assert drive_time(3.672) == (3, 672_000_000) and drive_time(-1.0) == (0, 0)
+    assert drive_time(1.0000000004) == (1, 0) and drive_time(2.9999999996) == (3, 0)
+    assert std_error_of([("gap_std_error_kgm2", 8e-5)]) == 8e-5
+    assert math.isnan(std_error_of([("gap_std_error_kgm2", None)])) and math.isnan(std_error_of([]))
+
+
+@pytest.mark.ros
+def test_the_estimate_goes_out_stamped_with_its_window_and_uncertainty(node_env, tmp_path, ros):  # noqa: F811
+    from geometry_msgs.msg import InertiaStamped
+    from std_msgs.msg import Float64, Float64MultiArray
+    from test_nodes import _good_stream
+
+    from jident_ros.nodes.ros_io import array_from_multiarray, qos_latched, window_to_msg
+    from jident_ros.stream.detector import BacklashDetector
+    from jident_ros.stream.layout import DEFAULT_CHANNELS
+    plain = ros.collect(Float64, "/st/inertia_estimate", qos_latched(10))
+    stamped = ros.collect(InertiaStamped, "/st/inertia_estimate/stamped", qos_latched(10))
+    detail = ros.collect(Float64MultiArray, "/st/inertia_estimate/detail", qos_latched(10))
+    pub = ros.node.create_publisher(Float64MultiArray, "/st/drive/window", qos_latched(10))
+    p = Proc(node_env, tmp_path, "diagnostic", "-r", "__ns:=/st", "-p", "record:=false", "-p", "image_method:=false")
+    try:
+        _, (stream, _) = _good_stream()
+        (ev,) = BacklashDetector(0.005, 0.1, 5e-4).push(stream, DEFAULT_CHANNELS)
+        ev.window.window_id = 7
+        assert ros.spin_until(lambda: pub.get_subscription_count() >= 1), logs(p)
+        pub.publish(window_to_msg(ev.window))
+        assert ros.spin_until(lambda: plain and stamped and detail), logs(p)
+    finally:
+        p.stop()
+    s, (row,) = stamped[0], array_from_multiarray(detail[0])[0]
+    t = ev.window.entry_time_s
+    assert (s.header.stamp.sec, s.header.stamp.nanosec) == (int(t), round((t - int(t)) * 1e9))
+    assert s.inertia.izz == plain[0].data and s.inertia.m == 0.0
+    cols = array_from_multiarray(detail[0])[1]
+    d = dict(zip(cols, row))
+    assert d["window_id"] == 7 and d["entry_time_s"] == t and d["inertia_kgm2"] == plain[0].data
+    assert 0 < d["inertia_std_error_kgm2"] < 0.01 * d["inertia_kgm2"]

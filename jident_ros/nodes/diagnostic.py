@@ -62,6 +62,8 @@ from jident_ros.identify.trend import TrendConfig, TrendStateError, TrendTracker
 from jident_ros.identify.trend_status import WIDTH_SOURCES, trend_inputs, trend_status
 from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater, status_name
+from jident_ros.nodes.estimate_out import TOPICS as STAMPED_TOPIC_TYPES
+from jident_ros.nodes.estimate_out import StampedEstimate
 from jident_ros.nodes.params import (
     ParameterError,
     RuntimeParameters,
@@ -85,6 +87,7 @@ except ImportError as _exc:  # pragma: no cover - both are install requirements
 
 NODE_NAME = "jident_diagnostic"
 #: Each window's result.
+STAMPED_TOPICS = tuple(topic for topic, _ in STAMPED_TOPIC_TYPES)
 STATUS_TASK = "inertia"   # event status "<ns>/jident_diagnostic: inertia", one per window
 #: Periodic tasks (status names "jident_diagnostic: <task>").
 TASKS = ("diagnosis", "library", "recorder", "trend")
@@ -244,6 +247,7 @@ class DiagnosticNode(LifecycleNode):
         self.last_window_id = None
         self.window_id_restarts = 0
         self.last_estimate = None
+        self.published_j1 = None       # J1 sent on inertia_estimate for the window being diagnosed
         self.last_message = ""
         self.last_input = None             # steady time (s) of the last drive/window or drive/progress
         self.started = time.monotonic()
@@ -279,6 +283,7 @@ class DiagnosticNode(LifecycleNode):
         if c["image_method"]:
             self._load_library()
         self.pub_estimate = self.create_lifecycle_publisher(Float64, "inertia_estimate", qos_latched())
+        self.stamped = StampedEstimate(self, qos_latched())      # inertia_estimate/stamped and /detail
         if c["trend_enabled"]:
             self._start_trend()
             self.pub_inertia_trend = self.create_lifecycle_publisher(Float64, "inertia_trend", qos_latched())
@@ -394,6 +399,7 @@ class DiagnosticNode(LifecycleNode):
             self.get_logger().warning("record_dir is deprecated: use record_root (bags get rosbag2 names under it)")
         topics = [("drive/window", "std_msgs/msg/Float64MultiArray", qos_latched(self.cfg["window_queue_depth"])),
                   ("inertia_estimate", "std_msgs/msg/Float64", qos_latched()),
+                  *((topic, typ, qos_latched()) for topic, typ in STAMPED_TOPIC_TYPES),
                   ("inertia_trend", "std_msgs/msg/Float64", qos_latched()),
                   ("backlash_width_trend", "std_msgs/msg/Float64", qos_latched()),
                   ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", self.diag.pub.qos_profile)]
@@ -461,6 +467,7 @@ class DiagnosticNode(LifecycleNode):
                 pass
 
     def _publish_estimate(self, j1):
+        self.published_j1 = float(j1)
         m = Float64(data=float(j1))
         self.pub_estimate.publish(m)
         self._record("inertia_estimate", m)
@@ -527,6 +534,7 @@ class DiagnosticNode(LifecycleNode):
                                            ("mismatch", "; ".join(errors))]))
             return
         # the gap estimate goes out on inertia_estimate (on_estimate) before the image method runs
+        self.published_j1 = None
         d = diagnose_window(win.as_dict(), win.entry_index, win.backlash_width_m, win.wheel_radius_m,
                             win.sample_period_s, library=self.library if c["image_method"] else None,
                             system=self.system, method=self.method, p=c["p"],
@@ -549,6 +557,10 @@ class DiagnosticNode(LifecycleNode):
             self.get_logger().error(message)
         self.last_message = message
         self.diag.publish(make_status(status_name(self, STATUS_TASK), level, message, self.hardware_id, values))
+        if self.published_j1 is not None:
+            for topic, msg in zip(STAMPED_TOPICS, self.stamped.publish(win.window_id, win.entry_time_s,
+                                                                        self.published_j1, values, level)):
+                self._record(topic, msg)
         if self.trend is not None:
             self._update_trend(win, d)
 
