@@ -414,3 +414,48 @@ def test_the_estimate_goes_out_stamped_with_its_window_and_uncertainty(node_env,
     d = dict(zip(cols, row))
     assert d["window_id"] == 7 and d["entry_time_s"] == t and d["inertia_kgm2"] == plain[0].data
     assert 0 < d["inertia_std_error_kgm2"] < 0.01 * d["inertia_kgm2"]
+
+
+# --------------------------------------------------------------------------- recorded QoS
+@pytest.mark.ros
+def test_recorded_qos_is_what_the_publishers_offer(node_env, tmp_path, ros):  # noqa: F811
+    """drive/case from a latched publisher is recorded transient local with the depth the recorder kept
+    (100: every case message), drive/signals from a publisher that offers transient local and a lifespan is
+    recorded so -- before, both were recorded with the recorder's own assumptions (depth 1; volatile)."""
+    import numpy as np
+    from rclpy.duration import Duration
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import Float64MultiArray
+    from test_nodes import _msg
+
+    from jident_ros.bag.reader import read_metadata
+    from jident_ros.nodes.ros_io import multiarray_from_array
+    from jident_ros.stream.layout import CASE_LABEL
+    case_qos = QoSProfile(depth=3, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    sig_qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                         lifespan=Duration(seconds=5))
+    pub_case = ros.node.create_publisher(Float64MultiArray, "/rq/drive/case", case_qos)
+    pub_sig = ros.node.create_publisher(Float64MultiArray, "/rq/drive/signals", sig_qos)
+    root = tmp_path / "bags"
+    p = Proc(node_env, tmp_path, "diagnostic", "-r", "__ns:=/rq", "-p", f"record_root:={root}",
+             "-p", "image_method:=false")
+    try:
+        assert ros.spin_until(lambda: pub_case.get_subscription_count() >= 1 and pub_sig.get_subscription_count() >= 1), \
+            logs(p)
+        for i in range(3):
+            pub_case.publish(multiarray_from_array(np.array([[i, 1.16, 0.005, 0.025, 1.0 + i]]), CASE_LABEL.split(",")))
+        t = 1.0 + np.arange(50) * 5e-4
+        pub_sig.publish(_msg(np.column_stack([t] + [np.zeros(50)] * 8),
+                             ("t", "alpha1", "alpha2", "omega2", "a1", "m_el", "omega1", "a2", "v2")))
+        ros.spin_until(lambda: False, 2.0)
+    finally:
+        assert p.stop() == 0, logs(p)
+    (bag,) = list(root.iterdir())
+    topics = {t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"]
+              for t in read_metadata(bag)["topics_with_message_count"]}
+    (case,) = topics["/rq/drive/case"]
+    assert case["durability"] == "transient_local" and case["depth"] == 100 and case["history"] == "keep_last", case
+    (sig,) = topics["/rq/drive/signals"]
+    assert sig["durability"] == "transient_local" and sig["lifespan"] == {"sec": 5, "nsec": 0}, sig
+    (est,) = topics["/rq/inertia_estimate"]          # our own publisher: its own profile
+    assert est["durability"] == "transient_local"

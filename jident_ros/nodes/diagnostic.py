@@ -75,6 +75,7 @@ from jident_ros.nodes.params import (
     require,
     system_config,
 )
+from jident_ros.nodes.recorded_qos import offered_qos
 from jident_ros.nodes.ros_io import LayoutError, make_status, qos_latched, qos_signals, window_from_msg
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, GAP_METHOD_CHOICES
@@ -88,6 +89,7 @@ except ImportError as _exc:  # pragma: no cover - both are install requirements
 NODE_NAME = "jident_diagnostic"
 #: Each window's result.
 STAMPED_TOPICS = tuple(topic for topic, _ in STAMPED_TOPIC_TYPES)
+CASE_QUEUE_DEPTH = 100   # drive/case, drive/true_inertia, drive/backlash_width: subscribed and recorded with it
 STATUS_TASK = "inertia"   # event status "<ns>/jident_diagnostic: inertia", one per window
 #: Periodic tasks (status names "jident_diagnostic: <task>").
 TASKS = ("diagnosis", "library", "recorder", "trend")
@@ -173,10 +175,14 @@ class Recording:
             custom_data={"node": node.get_fully_qualified_name()}, log=node.get_logger().info)
         self.bag_dir = str(self.recorder.bag_dir)
         self.topics = {}
+        self.offered = {}   # topics of other nodes: added at their first message, with the QoS their publishers offer
         try:
-            for name, typ, qos in topics:
+            for name, typ, qos, *subscribed in topics:
                 full = node.resolve_topic_name(name)
-                self.recorder.add_topic(full, typ, qos)
+                if subscribed and subscribed[0]:
+                    self.offered[name] = qos
+                else:
+                    self.recorder.add_topic(full, typ, qos)
                 self.topics[name] = (full, typ)
         except Exception:
             self.close()
@@ -193,6 +199,12 @@ class Recording:
 
     def write(self, name: str, msg, publish_time_ns: int | None = None) -> None:
         if name in self.topics:   # never raises: drops are counted by reason
+            if name in self.offered:
+                full, typ = self.topics[name]
+                try:
+                    self.recorder.add_topic(full, typ, offered_qos(self.node, full, self.offered.pop(name)))
+                except ValueError:
+                    pass   # a QoS the bag cannot hold: the recorder adds the topic with the default one
             self.recorder.write(*self.topics[name], msg, publish_time_ns=publish_time_ns)
 
     def flush(self) -> None:
@@ -299,7 +311,7 @@ class DiagnosticNode(LifecycleNode):
             # (as rosbag2 does), so a reader can restore the order the drive sent its topics in (replay = live)
             self.subs.append(self.create_subscription(Float64MultiArray, "drive/signals",
                                                       lambda m, i: self._record("drive/signals", m, i), sq, raw=True))
-            deep = qos_latched(100)  # keep every case message while a window is being diagnosed
+            deep = qos_latched(CASE_QUEUE_DEPTH)  # keep every case message while a window is being diagnosed
             for name in ("drive/backlash_width", "drive/true_inertia"):
                 self.subs.append(self.create_subscription(Float64, name, lambda m, i, n=name: self._record(n, m, i),
                                                           deep))
@@ -397,7 +409,8 @@ class DiagnosticNode(LifecycleNode):
             return
         if c["record_dir"]:
             self.get_logger().warning("record_dir is deprecated: use record_root (bags get rosbag2 names under it)")
-        topics = [("drive/window", "std_msgs/msg/Float64MultiArray", qos_latched(self.cfg["window_queue_depth"])),
+        # True: another node's topic, recorded with the QoS its publishers offer (nodes/recorded_qos.py)
+        topics = [("drive/window", "std_msgs/msg/Float64MultiArray", qos_latched(self.cfg["window_queue_depth"]), True),
                   ("inertia_estimate", "std_msgs/msg/Float64", qos_latched()),
                   *((topic, typ, qos_latched()) for topic, typ in STAMPED_TOPIC_TYPES),
                   ("inertia_trend", "std_msgs/msg/Float64", qos_latched()),
@@ -405,10 +418,10 @@ class DiagnosticNode(LifecycleNode):
                   ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", self.diag.pub.qos_profile)]
         if self.cfg["record_signals"]:
             topics += [("drive/signals", "std_msgs/msg/Float64MultiArray",
-                        qos_signals(self.cfg["signals_queue_depth"])),
-                       ("drive/backlash_width", "std_msgs/msg/Float64", qos_latched()),
-                       ("drive/true_inertia", "std_msgs/msg/Float64", qos_latched()),
-                       ("drive/case", "std_msgs/msg/Float64MultiArray", qos_latched())]
+                        qos_signals(self.cfg["signals_queue_depth"]), True),
+                       ("drive/backlash_width", "std_msgs/msg/Float64", qos_latched(CASE_QUEUE_DEPTH), True),
+                       ("drive/true_inertia", "std_msgs/msg/Float64", qos_latched(CASE_QUEUE_DEPTH), True),
+                       ("drive/case", "std_msgs/msg/Float64MultiArray", qos_latched(CASE_QUEUE_DEPTH), True)]
         try:
             self.recorder = Recording(self, c, topics)
             self.get_logger().info(f"recording to {self.recorder.bag_dir}")
