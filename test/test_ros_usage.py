@@ -459,3 +459,43 @@ def test_recorded_qos_is_what_the_publishers_offer(node_env, tmp_path, ros):  # 
     assert sig["durability"] == "transient_local" and sig["lifespan"] == {"sec": 5, "nsec": 0}, sig
     (est,) = topics["/rq/inertia_estimate"]          # our own publisher: its own profile
     assert est["durability"] == "transient_local"
+
+
+# --------------------------------------------------------------------------- best-effort input
+@pytest.mark.ros
+def test_best_effort_input_is_selectable_and_a_mismatch_is_an_error_status(node_env, tmp_path, ros):  # noqa: F811
+    """A best-effort drive/signals publisher (SensorDataQoS): the default (reliable) windowing node says in one
+    ERROR status what cannot match and which parameter to change; with input_reliability:=best_effort it reads
+    the batches."""
+    import numpy as np
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.qos import qos_profile_sensor_data
+    from std_msgs.msg import Float64MultiArray
+    from test_nodes import _msg, statuses
+
+    from jident_ros.nodes.ros_io import qos_diagnostics, status_level, status_values
+    diags = ros.collect(DiagnosticArray, "/diagnostics", qos_diagnostics())
+    pubs = {ns: ros.node.create_publisher(Float64MultiArray, f"/{ns}/drive/signals", qos_profile_sensor_data)
+            for ns in ("ber", "bee")}
+    procs = [Proc(node_env, tmp_path, "windowing", "-r", "__ns:=/ber", "-p", "diagnostics_period_s:=0.5"),
+             Proc(node_env, tmp_path, "windowing", "-r", "__ns:=/bee", "-p", "diagnostics_period_s:=0.5",
+                  "-p", "input_reliability:=best_effort")]
+    try:
+        err = lambda: statuses(diags, "jident_windowing: input", "/ber/drive")  # noqa: E731
+        assert ros.spin_until(lambda: err()), logs(*procs)
+        assert "RELIABILITY" in err()[0].message and "input_reliability:=best_effort" in err()[0].message
+        assert status_level(err()[0]) == 2 and err()[0].name == "ber/jident_windowing: input"
+        channels = ("t", "alpha1", "alpha2", "omega2", "a1", "m_el", "omega1", "a2", "v2")
+        rate = lambda: [status_values(s) for s in statuses(diags, "jident_windowing: rate", "/bee/drive")]  # noqa: E731
+
+        def seen():
+            t0 = 1.0 + 50 * 5e-4 * seen.k
+            seen.k += 1
+            pubs["bee"].publish(_msg(np.column_stack([t0 + np.arange(50) * 5e-4] + [np.full(50, 1.0)] * 8), channels))
+            return any(int(v["batches_seen"]) > 0 for v in rate())
+        seen.k = 0
+        assert ros.spin_until(seen), logs(*procs)
+        assert not statuses(diags, "jident_windowing: input", "/bee/drive")
+    finally:
+        for p in procs:
+            p.stop()
