@@ -499,3 +499,47 @@ def test_best_effort_input_is_selectable_and_a_mismatch_is_an_error_status(node_
     finally:
         for p in procs:
             p.stop()
+
+
+# --------------------------------------------------------------------------- per-sample view
+def test_per_sample_bag_plots_every_sample_at_its_drive_time(tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    import numpy as np
+
+    from jident_ros.bag.reader import read_bag
+    from jident_ros.stream.layout import unpack
+    rec = write_two_k2_recording(tmp_path / "rec", misordered=True)
+    batches = [m.message for m in read_bag(rec) if m.topic.endswith("drive/signals")]
+    t_all = np.concatenate([unpack(b.data, b.layout.dim, b.layout.data_offset)[0][:, 0] for b in batches])
+    r = subprocess.run([sys.executable, "-m", "jident_ros.cli", "samples", str(rec), str(tmp_path / "out")],
+                       capture_output=True, text=True, timeout=300, env=dict(os.environ, PYTHONPATH=str(REPO)))
+    assert r.returncode == 0, r.stderr
+    out = list(read_bag(tmp_path / "out"))
+    samples = [m for m in out if m.topic == "/drive/sample"]
+    assert len(samples) == len(t_all)
+    rows = [unpack(m.message.data, m.message.layout.dim, m.message.layout.data_offset) for m in samples]
+    assert all(a.shape[0] == 1 for a, _, _ in rows)
+    t = np.array([a[0, ch.index("t")] for a, ch, _ in rows])
+    assert np.array_equal(np.sort(t), np.sort(t_all))
+    assert [m.log_time_ns for m in samples] == [int(round(x * 1e9)) for x in t]      # log time = drive time
+    # case 2's K2 goes along at the drive time of the batch after it (publish order), not where it was logged
+    (k2_second,) = [m for m in out if m.topic == "/drive/backlash_width" and m.message.data == 0.01]
+    assert k2_second.log_time_ns > samples[len(samples) // 2 - 1].log_time_ns
+    channels = rows[0][1]
+    layout = json.loads((REPO / "config" / "foxglove_layout.json").read_text())
+    paths = [p for c in layout["configById"].values() for p in c.get("paths", [])]
+    assert paths
+    for p in paths:   # every plotted path indexes the channel it is labelled with
+        i = int(p["value"].split("data[")[1].rstrip("]"))
+        assert p["value"].startswith("/drive/sample.data[") and channels[i] == p["label"], p
+
+
+def test_samples_of_a_missing_recording_is_one_line(tmp_path):
+    import subprocess
+    import sys
+    r = subprocess.run([sys.executable, "-m", "jident_ros.cli", "samples", str(tmp_path / "nope"), str(tmp_path / "o")],
+                       capture_output=True, text=True, timeout=120, env=dict(os.environ, PYTHONPATH=str(REPO)))
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "nope" in r.stderr, r.stderr
