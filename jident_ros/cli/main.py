@@ -31,6 +31,7 @@ from jident_ros.cli.offline import (
     write_json,
 )
 from jident_ros.cli.salvage import salvage_main
+from jident_ros.cli.samples import samples_main
 from jident_ros.cli.trend import add_scenario_arguments, add_trend_parser, cmd_simulate_scenario
 from jident_ros.config import ConfigError, load_method_config, load_system_config
 from jident_ros.identify.library import default_library_path, load_pattern_library
@@ -412,7 +413,6 @@ def main(argv=None) -> int:
     if argv[:1] == ["salvage"]:  # `jident salvage <truncated.mcap> <out_dir>`: cli/salvage.py owns its arguments
         return salvage_main(argv[1:])
     if argv[:1] == ["samples"]:  # `jident samples <recording> <out_dir>`: cli/samples.py owns its arguments
-        from jident_ros.cli.samples import samples_main
         return samples_main(argv[1:])
     parser = build_parser()
     try:

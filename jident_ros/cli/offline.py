@@ -28,9 +28,8 @@ from typing import Any, Callable, Optional, Sequence
 import numpy as np
 
 from jident_ros.bag.drive_replay import DriveReplay, in_sample_time_order, read_drive_messages
-from jident_ros.bag.errors import RecordingError
 from jident_ros.bag.messages import deserialize
-from jident_ros.bag.reader import read_bag, recorded_topics, skipped_topics_line
+from jident_ros.cli.jointstate_bag import jointstate_batches
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig, WindowDiagnosis
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES
@@ -42,15 +41,9 @@ from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
 from jident_ros.parameters import gap_method_problem
 from jident_ros.stream.detector import stream_batches
 from jident_ros.stream.flank import DETECTORS
-from jident_ros.stream.inputs import InputError, JointStateAdapter, read_csv
+from jident_ros.stream.inputs import InputError, read_csv
 from jident_ros.stream.layout import DRIVE_TOPICS, SIGNALS_TOPIC, WIDTH_TOPIC, pack
 from jident_ros.stream.layout import topic_matches as _matches
-
-try:  # reading a `ros2 bag record` of /joint_states (any storage, any distro) needs rosbags
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
-except ImportError:  # pragma: no cover - the drive/signals path does not need it
-    AnyReader = None
 
 
 class OfflineError(ValueError):
@@ -407,90 +400,6 @@ def _make_detector(system, config: DetectorConfig, batch_channels, topic_name):
 
 
 # --------------------------------------------------------------------------- JointState bags, CSV files
-
-def jointstate_batches(path, sample_period_s: float, motor_joint: str = "motor", load_joint: str = "load",
-                       imu_axis: str = "x", topic: Optional[str] = None, batch_size: int = 50,
-                       log: Callable[[str], Any] = lambda text: None):
-    """(adapter, batch iterator, joint_states topic) of a `ros2 bag record` bag holding sensor_msgs/JointState
-    (topic ending in ``joint_states``, any namespace) and optionally sensor_msgs/Imu (ending in ``imu``); the
-    header stamps give t.  An MCAP bag is read with :mod:`jident_ros.bag.reader`, which decodes only these
-    topics: topics of types that cannot be parsed (``_service_event`` topics of ``ros2 bag record -a`` on
-    Jazzy) are skipped, and ``log`` gets one line naming them.  Other storage (sqlite3) is read with
-    rosbags' AnyReader."""
-    path = Path(path)
-    try:
-        infos = recorded_topics(path)
-    except RecordingError:
-        infos = None                       # not an MCAP recording: rosbags' AnyReader (sqlite3 bags)
-    if infos is None:
-        return _jointstate_batches_anyreader(path, sample_period_s, motor_joint, load_joint, imu_axis, topic,
-                                             batch_size)
-    conns = [(t.topic, t.msg_type) for t in infos if not t.problem]
-    js, imu = _jointstate_topics(path, conns, topic)
-    line = skipped_topics_line(path, infos)
-    if line:
-        log(line)
-    adapter = JointStateAdapter(sample_period_s, motor_joint, load_joint, batch_size=batch_size,
-                                use_imu=bool(imu), imu_axis=imu_axis)
-
-    def batches():
-        try:
-            for m in read_bag(path, [t for t, _ in js + imu]):
-                yield from _push_jointstate(adapter, m.msg_type, m.message)
-        except RecordingError as exc:
-            raise OfflineError(f"recording {exc}") from None
-        yield from adapter.flush()
-    return adapter, batches(), js[0][0]
-
-
-def _jointstate_topics(path, conns, topic):
-    """([(joint_states topic, type)], [(imu topic, type)]) among ``conns`` (topic, type), or OfflineError."""
-    js = [c for c in conns if c[1] == "sensor_msgs/msg/JointState" and _matches(c[0], "joint_states")]
-    topics = sorted({c[0] for c in js})
-    if topic is not None:
-        js = [c for c in js if c[0] == topic]
-        if not js:
-            raise OfflineError(f"joint_states topic {topic!r}: not in recording {path} (found: {', '.join(topics) or 'none'})")
-    elif len(topics) > 1:
-        raise OfflineError(f"recording {path}: several joint_states topics ({', '.join(topics)}); choose one with --topic")
-    if not js:
-        raise OfflineError(f"recording {path}: no drive/signals topic and no sensor_msgs/JointState topic ending in "
-                           f"joint_states "
-                           f"(topics: {', '.join(sorted({c[0] for c in conns})) or 'none'})")
-    prefix = js[0][0][:-len("joint_states")]
-    imu = [c for c in conns if c[1] == "sensor_msgs/msg/Imu" and c[0] == prefix + "imu"]
-    return js, imu
-
-
-def _push_jointstate(adapter, msg_type: str, msg):
-    stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-    if msg_type.endswith("Imu"):
-        return adapter.push_imu(stamp, msg.linear_acceleration)
-    return adapter.push(stamp, msg.name, msg.position, msg.velocity, msg.effort)
-
-
-def _jointstate_batches_anyreader(path, sample_period_s, motor_joint, load_joint, imu_axis, topic, batch_size):
-    if AnyReader is None:
-        raise OfflineError("reading JointState bags needs the rosbags package (pip install rosbags)")
-    reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-    try:
-        reader.open()
-    except Exception as exc:
-        raise OfflineError(f"recording {path}: cannot be read as a rosbag2 bag ({type(exc).__name__}: {exc})") from None
-    js, imu = _jointstate_topics(path, [(c.topic, c.msgtype) for c in reader.connections], topic)
-    wanted = {t for t, _ in js + imu}
-    adapter = JointStateAdapter(sample_period_s, motor_joint, load_joint, batch_size=batch_size,
-                                use_imu=bool(imu), imu_axis=imu_axis)
-
-    def batches():
-        try:
-            for conn, _, raw in reader.messages(connections=[c for c in reader.connections if c.topic in wanted]):
-                yield from _push_jointstate(adapter, conn.msgtype, reader.deserialize(raw, conn.msgtype))
-            yield from adapter.flush()
-        finally:
-            reader.close()
-    return adapter, batches(), js[0][0]
-
 
 def diagnose_samples(path, options: Optional[OfflineOptions] = None, *,
                      log: Callable[[str], Any] = lambda text: None,

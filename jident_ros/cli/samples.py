@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from jident_ros.bag.errors import RecordingError
+from jident_ros.bag.per_sample import write_per_sample
 
 __all__ = ["samples_main"]
 
@@ -24,7 +25,6 @@ def samples_main(argv: list[str] | None = None) -> int:
     parser.add_argument("out_dir", help="new bag directory to write (must not exist)")
     try:
         args = parser.parse_args(argv)
-        from jident_ros.bag.per_sample import write_per_sample
         counts = write_per_sample(args.recording, args.out_dir,
                                   note=lambda text: print(f"jident samples: {text}", file=sys.stderr))
     except (RecordingError, OSError, ValueError) as exc:

@@ -17,6 +17,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from geometry_msgs.msg import InertiaStamped
+from std_msgs.msg import Float64MultiArray
+
+from jident_ros.nodes.ros_io import multiarray_from_array
 
 DETAIL_LABEL = "window_id,entry_time_s,inertia_kgm2,inertia_std_error_kgm2,level"
 STAMPED_TOPIC = "inertia_estimate/stamped"
@@ -46,15 +50,12 @@ class StampedEstimate:
     messages (for the recorder)."""
 
     def __init__(self, node, qos, frame_id: str = ""):
-        from geometry_msgs.msg import InertiaStamped
-        from std_msgs.msg import Float64MultiArray
         self.frame_id = frame_id
         self._Inertia = InertiaStamped
         self.pub_stamped = node.create_lifecycle_publisher(InertiaStamped, STAMPED_TOPIC, qos)
         self.pub_detail = node.create_lifecycle_publisher(Float64MultiArray, DETAIL_TOPIC, qos)
 
     def publish(self, window_id: int, entry_time_s: float, inertia_kgm2: float, values, level: int) -> tuple:
-        from jident_ros.nodes.ros_io import multiarray_from_array
         msg = self._Inertia()
         msg.header.stamp.sec, msg.header.stamp.nanosec = drive_time(entry_time_s)
         msg.header.frame_id = self.frame_id
