@@ -388,7 +388,7 @@ def test_cli_flags_that_mirror_node_parameters_take_their_help_from_the_schema()
     from jident_ros.cli.main import build_parser
     from jident_ros.cli.trend import MIRRORED_FLAGS
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
-    mirrored = {"diagnose": ["--image-min-margin", "--plausible-min-ratio", "--plausible-max-ratio"],
+    mirrored = {"diagnose": ["--image-min-margin", "--plausible-min-ratio", "--plausible-max-ratio", "--p"],
                 "trend": list(MIRRORED_FLAGS)}
     for command, flags in mirrored.items():
         actions = {o: a for a in sub.choices[command]._actions for o in a.option_strings}
@@ -396,6 +396,8 @@ def test_cli_flags_that_mirror_node_parameters_take_their_help_from_the_schema()
             name = ("trend_" if command == "trend" else "") + flag[2:].replace("-", "_")
             assert actions[flag].help == P.cli_help(name), flag
             assert P.DIAGNOSTIC_PARAMS[name].description.replace("%", "%%") in actions[flag].help
+    gap = {o: a for a in sub.choices["diagnose"]._actions for o in a.option_strings}["--gap-method"]
+    assert gap.help.startswith(P.cli_help("gap_method")) and tuple(gap.choices) == P.GAP_METHODS
 
 
 def test_trend_parameters_and_units_come_from_the_schema():
