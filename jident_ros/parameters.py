@@ -147,6 +147,9 @@ WINDOWING_PARAMS = {
     "use_imu": Param(False, "joint_states: a1 from sensor_msgs/Imu on imu (matched by stamp)"),
     "imu_axis": Param("x", "joint_states: the Imu linear_acceleration axis that is a1", choices=("x", "y", "z")),
     "batch_size": Param(50, "joint_states: samples per batch handed to the detector", min=1, max=MAX_DEPTH),
+    "input_reliability": Param("reliable", "QoS reliability of the input subscriptions (drive/signals, joint_states, "
+                               "imu): reliable | best_effort (drivers that publish with SensorDataQoS)",
+                               choices=("reliable", "best_effort")),
 }
 
 #: The gap methods (the one list: the diagnostic node's ``gap_method``, ``jident diagnose --gap-method``, the
