@@ -80,6 +80,8 @@ import numpy as np
 from scipy import stats
 from scipy.signal import savgol_filter
 
+from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, FreeFitError, GapModel, free_angle_fit
+
 #: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
 GAP_QUADRATIC_MIN = 12
 
@@ -149,6 +151,11 @@ class GapEstimate:
                                     dynamics show to be out of the zone; -1: the gap interval itself)
     model_choice : str              how the fit was chosen: '' when the caller named it, else the
                                     pre-entry steadiness test's verdict (:func:`pre_entry_steady`)
+    change_point_error_kgm2 : float 'angle': the change of J1 when the estimated gap interval loses 1 or 2
+                                    samples at an end (included in std_error_kgm2)
+    friction : str                  'angle': how the motor's bearing friction was treated (fitted or bounded)
+    std_error_terms : tuple         ((term, kg m^2), ...): the parts of std_error_kgm2, in quadrature
+                                    (statistical, torque noise, change points, friction band, torque accuracy)
     """
 
     inertia_kgm2: float
@@ -163,6 +170,9 @@ class GapEstimate:
     model_choice: str = ""
     fit_start: int = -1
     fit_end: int = -1
+    change_point_error_kgm2: float = 0.0
+    friction: str = ""
+    std_error_terms: tuple = ()
 
     @property
     def n_samples(self) -> int:
@@ -224,14 +234,17 @@ def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_
 def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
                      sample_period_s: float, method: str | None = None,
                      bearing_friction_nms_per_rad: float = 0.0, recontact_index: int | None = None,
-                     entry_uncertainty_samples: int = 0) -> GapEstimate:
+                     entry_uncertainty_samples: int = 0, model: GapModel | None = None) -> GapEstimate:
     """Least-squares J1 over the gap; raises :class:`NoGapError` with a reason.  ``recontact_index``: see
     :func:`gap_interval`.  ``entry_uncertainty_samples`` k > 0: the entry row is known only to +-k samples
     (the dynamics detector without a1); J1 is refitted with the entry moved by -k and +k and the larger change
     is added to the standard error in quadrature (as a model error), so that a fit that depends on the entry
     row is refused or its interval widened, never published narrow.  ``method``: one of :data:`FITS`, or None /
     'auto' for the model choice (the module docstring): with a1, the joint fit when the pre-entry m_el is steady
-    (:func:`pre_entry_steady`), else 'gap_only'; without a1, 'angle' (α1) or 'speed'."""
+    (:func:`pre_entry_steady`), else 'gap_only'; without a1, 'angle' (α1) or 'speed'.  ``model``: the
+    drive's torque accuracy and friction band (:class:`~jident_ros.identify.gap_free.GapModel`; default: exact
+    torque, no friction band): the torque-accuracy term J1 a/sqrt(3) goes into every fit's standard error."""
+    model = GapModel() if model is None else model
     if "m_el" not in window:
         raise NoGapError("no electromagnetic torque: the gap fit needs m_el")
     start, end, how = gap_interval(window, entry_index, backlash_width_m, wheel_radius_m,
@@ -241,6 +254,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         m = m - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)[start:end]
     choice = ""
     fit_span = (start, end)
+    free_extra: dict = {}
     if method is None or method == "auto":
         method = None
         if "a1" in window:
@@ -317,11 +331,19 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     elif method == "angle":
         if "alpha1" not in window:
             raise NoGapError("method 'angle' needs alpha1 (use 'speed' with omega1)")
-        torque = np.asarray(window["m_el"], float)[:end]
+        torque = np.asarray(window["m_el"], float)
         if bearing_friction_nms_per_rad and "omega1" in window:
-            torque = torque - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)[:end]
-        j, se, res, dof, model_error = _angle_fit(np.asarray(window["alpha1"], float), torque, start, end,
-                                                  sample_period_s)
+            torque = torque - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)
+        try:
+            ff = free_angle_fit(np.asarray(window["alpha1"], float), torque, sample_period_s, start, end, model)
+        except FreeFitError as exc:
+            raise NoGapError(str(exc)) from None
+        j, se, res, dof = ff["j1"], ff["se_stat"], ff["residual"], ff["dof"]
+        model_error = ff["change_point_error"]
+        fit_span = (ff["start"], ff["end"])
+        free_extra = {"change_point_error_kgm2": ff["change_point_error"], "friction": ff["friction"],
+                      "std_error_terms": tuple((k, float(v)) for k, v in ff["terms"].items())}
+        entry_uncertainty_samples = 0        # the change-point search has taken the entry's uncertainty
     elif method == "speed":
         if "omega1" not in window:
             raise NoGapError("method 'speed' needs omega1")
@@ -342,12 +364,20 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         entry_error = max(abs(x - j) for x in moved)
         model_error = float(np.hypot(model_error, entry_error))
         se = float(np.hypot(se, entry_error))
+    # every fit: the model's own error as a floor, then the drive's torque accuracy (a scale error of m_el
+    # is one of J1: all fits of m_el share it)
+    se = max(float(se), FREE_REL_SE_FLOOR * j)
+    if model.torque_accuracy:
+        terms = dict(free_extra.get("std_error_terms", ()))
+        terms["torque_accuracy"] = j * model.torque_rel_se()
+        free_extra["std_error_terms"] = tuple(terms.items())
+        se = float(np.hypot(se, j * model.torque_rel_se()))
     if not se <= MAX_RELATIVE_STD_ERROR * j:
         raise NoGapError(f"gap fit undetermined: J1 = {j:.4g} kg m^2 with standard error {se:.3g} kg m^2 "
                          f"(> {MAX_RELATIVE_STD_ERROR:.0%}); the window shows no free acceleration of the motor")
     half = _t975(max(int(dof), 1)) * se
     return GapEstimate(j, se, (j - half, j + half), float(np.sqrt(np.mean(res ** 2))), start, end, method, how,
-                       float(model_error), choice, int(fit_span[0]), int(fit_span[1]))
+                       float(model_error), choice, int(fit_span[0]), int(fit_span[1]), **free_extra)
 
 
 #: The speed fit's model error: J1 refitted with this many samples dropped at each end of the interval.

@@ -1,0 +1,324 @@
+"""The gap as an estimated interval, with free initial conditions (issue 20, items 1-3).
+
+Inside the backlash gap the motor is a single mass,
+
+    J1 dω1/dt = m_el − f(ω1),        f = F_c sgn(ω1) + b ω1   (bearing friction; b1 ω1 known, taken off first)
+
+and in contact it is not (the coupling torque is unknown).  Nothing is assumed about the time before the
+entry: over the gap's own samples [s, e) the motor angle is, in double-integral form,
+
+    α1(t) = θ0 + ω0 (t − t_s) + (1/J1) Φ(t) − (F_c/J1) C(t) − (b/J1) V(t)
+
+with Φ = ∬ m_el dt dt, C = ∬ sgn(ω1) dt dt, V = ∫ (α1 − α1(t_s)) dt (= ∬ ω1), all from any origin: a change
+of origin adds a linear function of t, which the free θ0 and ω0 absorb.  So the regressors do not depend on
+the interval and every candidate interval is a row range of one design matrix: linear least squares in
+(θ0, ω0, 1/J1[, F_c/J1]) (:func:`free_angle_fit`).
+
+Change points (entry s, re-contact e): around the detector's coarse rows (± ``search`` samples) the interval
+is the longest one whose residual is consistent with the noise (χ² test at CHANGEPOINT_P of the residual sum
+of squares against σ̂², σ̂ from the coarse gap's core fit and the encoder quantum), grown from the inside:
+e first (the re-contact is the sharp end), then s, then e again.  The detector only localises.  Their
+uncertainty goes into J1's: the change of J1 when the interval loses 1 or 2 samples at either end.
+
+Standard error of J1 (all in quadrature, docs/method.md "Free-initial-condition gap fit"):
+
+* the least-squares one of 1/J1 from the angle residual (AR(1) inflation for a correlated residual);
+* the torque noise through Φ (errors in the regressor): κ σ_m ‖Wᵀ r_κ‖ (W the double integration);
+* the change points (above);
+* friction: fitted (a free F_c column) when that gives the smaller total; else the Coulomb term is taken at
+  the middle of its band [0, F_c,max] with ± half the band as a uniform term, and the viscous band ± b_max
+  as a uniform term;
+* the drive's torque-estimate accuracy a (a relative scale error bound, uniform): J1 a/√3;
+* a floor, FREE_REL_SE_FLOOR J1: the model's own error (trapezoid double integral, sampled torque).
+
+Plain numpy; never imports rclpy.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+#: Change-point search: rows around the detector's entry and re-contact rows that may be the gap's ends.
+CHANGEPOINT_SEARCH_SAMPLES = 25
+#: Fewest samples of a candidate gap interval.
+FREE_MIN_SAMPLES = 8
+#: A candidate interval is consistent when its residual sum of squares is below the (1 - this) χ² quantile.
+CHANGEPOINT_P = 1e-3
+#: Relative floor of the standard error (the model's own error: trapezoid double integral of a sampled torque).
+FREE_REL_SE_FLOOR = 5e-4
+#: Samples taken off an end for the change-point term of the standard error.
+CHANGEPOINT_TRIMS = (1, 2)
+
+
+class FreeFitError(ValueError):
+    """No gap interval the free fit can use (the caller turns it into NoGapError)."""
+
+
+@dataclass(frozen=True)
+class GapModel:
+    """What the gap fits take as given about the drive (the diagnostic node's parameters of the same names).
+
+    torque_accuracy : relative bound of the drive's torque-estimate scale error (0.02 = 2 %), uniform
+    coulomb_friction_max_nm : band [0, this] of the motor's Coulomb (bearing) friction, N m, when it is not
+        fitted
+    viscous_friction_band_nms_per_rad : ± band of the viscous friction around the configured b1, N m s/rad
+    changepoint_search_samples : rows around the detector's entry and re-contact searched for the change points
+    """
+
+    torque_accuracy: float = 0.0
+    coulomb_friction_max_nm: float = 0.0
+    viscous_friction_band_nms_per_rad: float = 0.0
+    changepoint_search_samples: int = CHANGEPOINT_SEARCH_SAMPLES
+
+    def problems(self) -> list:
+        out = []
+        for name in ("torque_accuracy", "coulomb_friction_max_nm", "viscous_friction_band_nms_per_rad"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
+                out.append((name, "a finite number >= 0"))
+        if not 0 <= self.torque_accuracy < 0.5:
+            out.append(("torque_accuracy", "a fraction in [0, 0.5)"))
+        c = self.changepoint_search_samples
+        if isinstance(c, bool) or not isinstance(c, (int, np.integer)) or not 0 <= c <= 1000:
+            out.append(("changepoint_search_samples", "an integer in [0, 1000]"))
+        return out
+
+    def torque_rel_se(self) -> float:
+        """Relative standard uncertainty of J1 from the torque accuracy (a uniform scale error)."""
+        return float(self.torque_accuracy) / np.sqrt(3.0)
+
+
+def _cumtrapz(x: np.ndarray, ts: float) -> np.ndarray:
+    out = np.empty(x.size)
+    out[0] = 0.0
+    np.cumsum(0.5 * (x[1:] + x[:-1]), out=out[1:])
+    return out * ts
+
+
+def _solve_rss(X: np.ndarray, y: np.ndarray, lo_rows: np.ndarray, hi_rows: np.ndarray) -> np.ndarray:
+    """RSS of the least-squares fit of y on X over rows [lo, hi) for every pair (batched normal equations on
+    cumulative sums; y should be a residual already, so that the differences do not cancel)."""
+    p = X.shape[1]
+    outer = np.einsum("ki,kj->kij", X, X)
+    C = np.concatenate([np.zeros((1, p, p)), np.cumsum(outer, axis=0)])
+    b = np.concatenate([np.zeros((1, p)), np.cumsum(X * y[:, None], axis=0)])
+    yy = np.concatenate([[0.0], np.cumsum(y * y)])
+    A = C[hi_rows] - C[lo_rows]
+    bb = b[hi_rows] - b[lo_rows]
+    A = A + np.eye(p) * (1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] / p)
+    beta = np.linalg.solve(A, bb[..., None])[..., 0]
+    return yy[hi_rows] - yy[lo_rows] - np.einsum("ki,ki->k", bb, beta)
+
+
+def _quantum(alpha: np.ndarray) -> float:
+    """The encoder's count (smallest non-zero step between samples), 0 when the angle looks continuous."""
+    d = np.abs(np.diff(alpha))
+    d = d[d > 0]
+    if d.size < 5:
+        return 0.0
+    q = float(d.min())
+    # a quantised angle moves by whole counts: most steps are near integer multiples of q
+    k = d / q
+    return q if float(np.median(np.abs(k - np.round(k)))) < 0.05 else 0.0
+
+
+def _robust_noise(x: np.ndarray) -> float:
+    d2 = np.diff(np.asarray(x, float), 2)
+    if d2.size < 3:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+
+
+def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, start: int, end: int,
+                   model: GapModel | None = None, fixed: bool = False) -> dict:
+    """J1 from the motor angle over the gap with free initial angle and speed (module docstring).
+
+    ``alpha1``: motor angle over the window, rad (any offset); ``torque``: m_el − b1 ω1 over the window, N m;
+    [start, end): the detector's coarse gap (entry row, re-contact row).  ``fixed``: no change-point search
+    (the interval as given).  Returns a dict: j1, se (kg m^2, all terms), se_stat (without the torque
+    accuracy term: what a cross-check with another fit on the same torque compares), terms (each term of the
+    standard error, kg m^2), start, end (the estimated interval), friction ('fitted F_c = ..' or 'bounded'),
+    coulomb_nm (the fitted or assumed F_c), residual (rad), dof.  Raises FreeFitError."""
+    model = GapModel() if model is None else model
+    a = np.asarray(alpha1, float)
+    m_all = np.asarray(torque, float)
+    n_all = a.size
+    ts = float(sample_period_s)
+    W = 0 if fixed else int(model.changepoint_search_samples)
+    L, R = max(0, start - W), min(n_all, end + W)
+    if end - start < FREE_MIN_SAMPLES and (fixed or R - L < FREE_MIN_SAMPLES):
+        raise FreeFitError(f"gap too short: {end - start} samples, the free angle fit needs >= {FREE_MIN_SAMPLES}")
+    y = a[L:R] - a[start]
+    m = m_all[L:R]
+    rows = np.arange(L, R)
+    tau = (rows - start) * ts
+    D = max((end - start) * ts, ts)
+    Phi = _cumtrapz(_cumtrapz(m, ts), ts)
+    vel = np.gradient(a[L:R])
+    sg = np.sign(vel)
+    Cc = _cumtrapz(_cumtrapz(sg, ts), ts)
+    Vv = _cumtrapz(y, ts)
+    phi_scale = max(float(np.max(np.abs(Phi))), 1e-300)
+    # the scan's design: 1, τ, τ², Φ (τ² takes a constant friction or torque offset: the scan only locates)
+    u = tau / D
+    Xs = np.column_stack([np.ones(R - L), u, u * u, Phi / phi_scale])
+    q = _quantum(a[L:R])
+    s_est, e_est = start, end
+    if not fixed:
+        lo_c, hi_c = start - L, end - L
+        k_in = min(W // 2, max((hi_c - lo_c) // 4, 0))
+        core = (lo_c + k_in, hi_c - k_in) if hi_c - lo_c - 2 * k_in >= FREE_MIN_SAMPLES else (lo_c, hi_c)
+        if core[1] - core[0] < FREE_MIN_SAMPLES:
+            core = (max(0, min(lo_c, R - L - FREE_MIN_SAMPLES)), max(0, min(lo_c, R - L - FREE_MIN_SAMPLES))
+                    + FREE_MIN_SAMPLES)
+        c0, *_ = np.linalg.lstsq(Xs[core[0]:core[1]], y[core[0]:core[1]], rcond=None)
+        r = y - Xs @ c0
+        rc = r[core[0]:core[1]]
+        s2 = max(float(rc @ rc) / max(rc.size - Xs.shape[1], 1), q * q / 12.0, 1e-30)
+        p = Xs.shape[1]
+
+        def accepted(lo_rows, hi_rows):
+            rss = _solve_rss(Xs, r, lo_rows, hi_rows)
+            nn = hi_rows - lo_rows
+            return rss <= s2 * stats.chi2.ppf(1.0 - CHANGEPOINT_P, np.maximum(nn - p, 1))
+
+        def grow_end(s_row, e_from):
+            cand = np.arange(max(s_row + FREE_MIN_SAMPLES, e_from), min(hi_c + W, R - L) + 1)
+            if cand.size == 0:
+                return e_from
+            ok = accepted(np.full(cand.size, s_row), cand)
+            if not ok[0]:
+                return int(cand[0])
+            bad = np.flatnonzero(~ok)
+            return int(cand[bad[0] - 1]) if bad.size else int(cand[-1])
+
+        def grow_start(e_row, s_from):
+            cand = np.arange(min(e_row - FREE_MIN_SAMPLES, s_from), max(lo_c - W, 0) - 1, -1)
+            if cand.size == 0:
+                return s_from
+            ok = accepted(cand, np.full(cand.size, e_row))
+            if not ok[0]:
+                return int(cand[0])
+            bad = np.flatnonzero(~ok)
+            return int(cand[bad[0] - 1]) if bad.size else int(cand[-1])
+
+        e_row = grow_end(core[0], core[1])
+        s_row = grow_start(e_row, core[0])
+        e_row = grow_end(s_row, core[1] if core[1] <= e_row else e_row)
+        s_est, e_est = L + s_row, L + e_row
+    if e_est - s_est < FREE_MIN_SAMPLES:
+        raise FreeFitError(f"gap too short: {e_est - s_est} samples consistent with a free motor, need >= "
+                           f"{FREE_MIN_SAMPLES}")
+
+    coulomb_mid = 0.5 * float(model.coulomb_friction_max_nm)
+
+    def fit(s_row: int, e_row: int, with_coulomb: bool) -> dict:
+        i, j = s_row - L, e_row - L
+        cols = [np.ones(j - i), u[i:j], Phi[i:j] / phi_scale]
+        c_scale = max(float(np.max(np.abs(Cc[i:j]))), 1e-300)
+        if with_coulomb:
+            cols.append(Cc[i:j] / c_scale)
+        X = np.column_stack(cols)
+        pinv = np.linalg.pinv(X)
+        yy = y[i:j]
+        coef = pinv @ yy
+        kappa = float(coef[2]) / phi_scale            # 1/J1
+        if with_coulomb:
+            fc = -float(coef[3]) / c_scale / kappa if kappa else np.nan
+        else:
+            # the assumed Coulomb term (middle of its band) taken off: α1 + κ F_mid C = θ0 + ω0 t + κ Φ
+            fc = coulomb_mid
+            if coulomb_mid:
+                for _ in range(2):
+                    yy = y[i:j] + kappa * coulomb_mid * Cc[i:j]
+                    coef = pinv @ yy
+                    kappa = float(coef[2]) / phi_scale
+        return {"kappa": kappa, "coef": coef, "pinv": pinv, "res": yy - X @ coef, "X": X, "fc": fc, "i": i, "j": j}
+
+    def se_terms(f: dict) -> dict:
+        kappa, res, X = f["kappa"], f["res"], f["X"]
+        n, p = X.shape
+        dof = n - p
+        if dof < 1 or not kappa > 0:
+            return {}
+        row = f["pinv"][2] / phi_scale                 # 1/J1 = row · y
+        s2r = float(res @ res) / dof
+        rr = float(res @ res)
+        rho = float(res[1:] @ res[:-1]) / rr if rr > 0 else 0.0
+        infl = (1.0 + max(rho, 0.0)) / max(1.0 - max(rho, 0.0), 1e-6)
+        var_stat = s2r * float(row @ row) * infl
+        # torque noise through Φ: δκ = −κ row·(W n_m), W the double trapezoid from the interval's first row
+        mm = m[f["i"]:f["j"]]
+        sm = _robust_noise(mm)
+        g = _double_trapz_adjoint(row, ts)
+        var_eiv = (kappa * sm) ** 2 * float(g @ g)
+        j1 = 1.0 / kappa
+        terms = {"statistical": j1 * j1 * np.sqrt(var_stat), "torque_noise": j1 * j1 * np.sqrt(var_eiv)}
+        if X.shape[1] == 3:
+            # bounded friction: sensitivity of J1 to F_c and b (J1 rel. change = +F rowκ·C / κ ... per unit)
+            cs = float(row @ Cc[f["i"]:f["j"]])
+            vs = float(row @ Vv[f["i"]:f["j"]])
+            terms["coulomb_band"] = j1 * abs(cs) * coulomb_mid / np.sqrt(3.0)
+            terms["viscous_band"] = j1 * abs(vs) * float(model.viscous_friction_band_nms_per_rad) / np.sqrt(3.0)
+        return terms
+
+    def j_of(s_row, e_row, with_coulomb):
+        f = fit(s_row, e_row, with_coulomb)
+        return 1.0 / f["kappa"] if f["kappa"] > 0 else np.inf
+
+    best = None
+    for with_coulomb in (False, True):
+        if with_coulomb and e_est - s_est < FREE_MIN_SAMPLES + 2:
+            continue
+        f = fit(s_est, e_est, with_coulomb)
+        if not f["kappa"] > 0:
+            continue
+        j1 = 1.0 / f["kappa"]
+        terms = se_terms(f)
+        if not terms:
+            continue
+        cp = 0.0
+        n = e_est - s_est
+        for k in CHANGEPOINT_TRIMS:
+            if n - k >= FREE_MIN_SAMPLES + (1 if with_coulomb else 0):
+                cp = max(cp, abs(j_of(s_est + k, e_est, with_coulomb) - j1), abs(j_of(s_est, e_est - k, with_coulomb) - j1))
+        terms["change_points"] = cp
+        se_stat = float(np.sqrt(sum(v * v for v in terms.values())))
+        se_stat = max(se_stat, FREE_REL_SE_FLOOR * j1)
+        cand = {"j1": j1, "se_stat": se_stat, "terms": terms, "fit": f, "coulomb": with_coulomb}
+        if best is None or se_stat < best["se_stat"]:
+            best = cand
+    if best is None:
+        raise FreeFitError("gap fit gave a non-physical 1/J1 from alpha1 (the angle does not curve with the "
+                           "torque's double integral over the gap)")
+    j1 = best["j1"]
+    terms = dict(best["terms"])
+    terms["torque_accuracy"] = j1 * model.torque_rel_se()
+    se = float(np.hypot(best["se_stat"], terms["torque_accuracy"]))
+    f = best["fit"]
+    friction = (f"fitted F_c = {f['fc']:.3g} N m" if best["coulomb"] else
+                f"bounded (F_c = {coulomb_mid:.3g} ± {coulomb_mid:.3g} N m, b ± "
+                f"{model.viscous_friction_band_nms_per_rad:.3g} N m s/rad)")
+    return {"j1": j1, "se": se, "se_stat": best["se_stat"], "terms": terms, "start": int(s_est), "end": int(e_est),
+            "friction": friction, "coulomb_nm": float(f["fc"]), "residual": f["res"], "dof": f["X"].shape[0] - f["X"].shape[1],
+            "change_point_error": float(terms["change_points"])}
+
+
+def _double_trapz_adjoint(row: np.ndarray, ts: float) -> np.ndarray:
+    """g = Wᵀ row with (W x)_k = the double trapezoid integral of x from the first row to row k."""
+    n = row.size
+    # single trapezoid T: (T x)_k = ts (x_0/2 + x_1 + ... + x_{k-1} + x_k/2) for k >= 1, 0 for k = 0
+    def t_adj(v):
+        # (Tᵀ v)_i = ts Σ_k v_k w_ki ; w_ki = 1/2 at i = 0 or i = k (k>=1), 1 for 0 < i < k
+        out = np.zeros(n)
+        if n < 2:
+            return out
+        rev = np.cumsum(v[::-1])[::-1]          # Σ_{k >= i} v_k
+        out[0] = 0.5 * float(rev[1])
+        inner = np.zeros(n)
+        inner[1:n - 1] = rev[2:]                 # Σ_{k > i} v_k
+        out[1:] += inner[1:] + 0.5 * v[1:]
+        return out * ts
+    return t_adj(t_adj(row))
