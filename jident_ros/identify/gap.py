@@ -73,7 +73,7 @@ residual RMS.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -245,6 +245,9 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     drive's torque accuracy and friction band (:class:`~jident_ros.identify.gap_free.GapModel`; default: exact
     torque, no friction band): the torque-accuracy term J1 a/sqrt(3) goes into every fit's standard error."""
     model = GapModel() if model is None else model
+    if (method is None or method == "auto") and "a1" in window and "alpha1" in window:
+        return _cross_checked(window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s,
+                              bearing_friction_nms_per_rad, recontact_index, entry_uncertainty_samples, model)
     if "m_el" not in window:
         raise NoGapError("no electromagnetic torque: the gap fit needs m_el")
     start, end, how = gap_interval(window, entry_index, backlash_width_m, wheel_radius_m,
@@ -378,6 +381,52 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     half = _t975(max(int(dof), 1)) * se
     return GapEstimate(j, se, (j - half, j + half), float(np.sqrt(np.mean(res ** 2))), start, end, method, how,
                        float(model_error), choice, int(fit_span[0]), int(fit_span[1]), **free_extra)
+
+
+#: Cross-check of two fits of one window (a1 and the motor angle): they disagree when their J1 differ by more
+#: than this many combined standard errors (without the torque-accuracy term, which both share).
+CROSS_CHECK_Z = 3.0
+
+
+def _stat_se(g: GapEstimate, model: GapModel) -> float:
+    return float(np.sqrt(max(g.std_error_kgm2 ** 2 - (g.inertia_kgm2 * model.torque_rel_se()) ** 2, 0.0)))
+
+
+def _cross_checked(window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s, b1, recontact_index,
+                   entry_uncertainty_samples, model: GapModel) -> GapEstimate:
+    """The model choice when the window has a1 and alpha1 (an Imu beside the encoder): the a1 fit (the joint
+    or gap_only fit, :func:`pre_entry_steady`) and the free angle fit, cross-checked; the one with the smaller
+    standard error is returned when they agree within CROSS_CHECK_Z combined standard errors, else NoGapError
+    names both.  One that fails alone leaves the other, with the failure in its model_choice."""
+    args = (window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s)
+    kw = dict(bearing_friction_nms_per_rad=b1, recontact_index=recontact_index, model=model)
+    fits, why = {}, {}
+    for name, method in (("a1", None), ("angle", "angle")):
+        w = {k: v for k, v in window.items() if k != "alpha1"} if name == "a1" else window
+        try:
+            fits[name] = estimate_inertia(w, *args[1:], method=method,
+                                          entry_uncertainty_samples=entry_uncertainty_samples, **kw) \
+                if name == "a1" else estimate_inertia(*args, method=method, **kw)
+        except NoGapError as exc:
+            why[name] = str(exc)
+    if not fits:
+        raise NoGapError(f"a1 fit: {why['a1']}; angle fit: {why['angle']}")
+    if len(fits) == 1:
+        (name, g), = fits.items()
+        other = "angle" if name == "a1" else "a1"
+        return replace(g, model_choice=f"{g.model_choice or g.method}; no cross-check: the {other} fit failed "
+                                       f"({why[other]})")
+    a, b = fits["a1"], fits["angle"]
+    z = abs(a.inertia_kgm2 - b.inertia_kgm2) / max(float(np.hypot(_stat_se(a, model), _stat_se(b, model))), 1e-300)
+    if z > CROSS_CHECK_Z:
+        raise NoGapError(f"the a1 fit ({a.method}: J1 = {a.inertia_kgm2:.4g} ± {a.std_error_kgm2:.2g} kg m^2) and "
+                         f"the angle fit (J1 = {b.inertia_kgm2:.4g} ± {b.std_error_kgm2:.2g} kg m^2) disagree by "
+                         f"{z:.1f} standard errors (> {CROSS_CHECK_Z:g}): friction, a wrong gap interval or a "
+                         f"lagging signal")
+    best = a if a.std_error_kgm2 <= b.std_error_kgm2 else b
+    other = b if best is a else a
+    return replace(best, model_choice=f"{best.model_choice or best.method}; cross-checked with the "
+                                      f"{other.method} fit (J1 = {other.inertia_kgm2:.4g}, {z:.1f} standard errors)")
 
 
 #: The speed fit's model error: J1 refitted with this many samples dropped at each end of the interval.

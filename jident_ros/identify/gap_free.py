@@ -113,15 +113,16 @@ def _solve_rss(X: np.ndarray, y: np.ndarray, lo_rows: np.ndarray, hi_rows: np.nd
 
 
 def _quantum(alpha: np.ndarray) -> float:
-    """The encoder's count (smallest non-zero step between samples), 0 when the angle looks continuous."""
-    d = np.abs(np.diff(alpha))
+    """The encoder's count (the smallest non-zero second difference: whole counts on a quantised angle), 0
+    when the angle looks continuous."""
+    d = np.abs(np.diff(alpha, 2))
     d = d[d > 0]
     if d.size < 5:
         return 0.0
     q = float(d.min())
-    # a quantised angle moves by whole counts: most steps are near integer multiples of q
+    # a quantised angle moves by whole counts: the second differences are near integer multiples of q
     k = d / q
-    return q if float(np.median(np.abs(k - np.round(k)))) < 0.05 else 0.0
+    return q if float(np.median(np.abs(k - np.round(k)))) < 0.02 else 0.0
 
 
 def _robust_noise(x: np.ndarray) -> float:
@@ -161,9 +162,12 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     Cc = _cumtrapz(_cumtrapz(sg, ts), ts)
     Vv = _cumtrapz(y, ts)
     phi_scale = max(float(np.max(np.abs(Phi))), 1e-300)
-    # the scan's design: 1, τ, τ², Φ (τ² takes a constant friction or torque offset: the scan only locates)
+    coulomb_mid = 0.5 * float(model.coulomb_friction_max_nm)
+    # the scan's design: the physics alone, 1, τ and Φ of the torque less the assumed friction (a free
+    # offset torque would let the fit take a slowly changing coupling torque for friction)
     u = tau / D
-    Xs = np.column_stack([np.ones(R - L), u, u * u, Phi / phi_scale])
+    phi_mid = Phi - coulomb_mid * Cc
+    Xs = np.column_stack([np.ones(R - L), u, phi_mid / max(float(np.max(np.abs(phi_mid))), 1e-300)])
     q = _quantum(a[L:R])
     s_est, e_est = start, end
     if not fixed:
@@ -211,8 +215,6 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     if e_est - s_est < FREE_MIN_SAMPLES:
         raise FreeFitError(f"gap too short: {e_est - s_est} samples consistent with a free motor, need >= "
                            f"{FREE_MIN_SAMPLES}")
-
-    coulomb_mid = 0.5 * float(model.coulomb_friction_max_nm)
 
     def fit(s_row: int, e_row: int, with_coulomb: bool) -> dict:
         i, j = s_row - L, e_row - L
@@ -270,7 +272,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
 
     best = None
     for with_coulomb in (False, True):
-        if with_coulomb and e_est - s_est < FREE_MIN_SAMPLES + 2:
+        if with_coulomb and (e_est - s_est < FREE_MIN_SAMPLES + 2 or not model.coulomb_friction_max_nm):
             continue
         f = fit(s_est, e_est, with_coulomb)
         if not f["kappa"] > 0:
@@ -279,6 +281,16 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         terms = se_terms(f)
         if not terms:
             continue
+        if with_coulomb:
+            # fitted friction only inside its band (within 3 of its standard errors): else it is taking a
+            # coupling torque, a wrong interval, for friction
+            X = f["X"]
+            res = f["res"]
+            cov = float(res @ res) / max(X.shape[0] - X.shape[1], 1) * np.linalg.pinv(X.T @ X)
+            c_scale = max(float(np.max(np.abs(Cc[f["i"]:f["j"]]))), 1e-300)
+            se_fc = np.sqrt(max(cov[3, 3], 0.0)) / c_scale / f["kappa"]
+            if not (-3 * se_fc <= f["fc"] <= model.coulomb_friction_max_nm + 3 * se_fc):
+                continue
         cp = 0.0
         n = e_est - s_est
         for k in CHANGEPOINT_TRIMS:
