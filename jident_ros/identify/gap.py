@@ -367,6 +367,15 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         entry_error = max(abs(x - j) for x in moved)
         model_error = float(np.hypot(model_error, entry_error))
         se = float(np.hypot(se, entry_error))
+    if method in ("gap_only", "acceleration", "anchored") and model.coulomb_friction_max_nm and "a1" in window:
+        # the a1 fits take no Coulomb friction: a friction F in [0, F_max] moves J1 (the slope of the torque on
+        # dω1/dt) by F Σx/Σx² over the fitted samples; a uniform term of half-width F_max, in quadrature
+        x = np.asarray(window["a1"], float)[fit_span[0]:fit_span[1]] / wheel_radius_m
+        fr = model.coulomb_friction_max_nm / np.sqrt(3.0) * abs(float(x.sum())) / max(float(x @ x), 1e-300)
+        terms = dict(free_extra.get("std_error_terms", ()))
+        terms["coulomb_band"] = fr
+        free_extra["std_error_terms"] = tuple(terms.items())
+        se = float(np.hypot(se, fr))
     # every fit: the model's own error as a floor, then the drive's torque accuracy (a scale error of m_el
     # is one of J1: all fits of m_el share it)
     se = max(float(se), FREE_REL_SE_FLOOR * j)
