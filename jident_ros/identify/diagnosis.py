@@ -226,7 +226,8 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                                    method=None if gap_method == "auto" else gap_method,
                                    bearing_friction_nms_per_rad=system.motor.bearing_friction_nms_per_rad,
                                    recontact_index=recontact_index,
-                                   entry_uncertainty_samples=entry_uncertainty_samples)
+                                   entry_uncertainty_samples=entry_uncertainty_samples,
+                                   model=policy.gap_model())   # estimator (issue 20): torque accuracy, friction
         except NoGapError as exc:
             gap_reason = str(exc)
             problems.append(f"gap: {exc}")

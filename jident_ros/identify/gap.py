@@ -234,7 +234,8 @@ def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_
 def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
                      sample_period_s: float, method: str | None = None,
                      bearing_friction_nms_per_rad: float = 0.0, recontact_index: int | None = None,
-                     entry_uncertainty_samples: int = 0, model: GapModel | None = None) -> GapEstimate:
+                     entry_uncertainty_samples: int = 0, model: GapModel | None = None,
+                     _single: bool = False) -> GapEstimate:
     """Least-squares J1 over the gap; raises :class:`NoGapError` with a reason.  ``recontact_index``: see
     :func:`gap_interval`.  ``entry_uncertainty_samples`` k > 0: the entry row is known only to +-k samples
     (the dynamics detector without a1); J1 is refitted with the entry moved by -k and +k and the larger change
@@ -245,7 +246,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     drive's torque accuracy and friction band (:class:`~jident_ros.identify.gap_free.GapModel`; default: exact
     torque, no friction band): the torque-accuracy term J1 a/sqrt(3) goes into every fit's standard error."""
     model = GapModel() if model is None else model
-    if (method is None or method == "auto") and "a1" in window and "alpha1" in window:
+    if (method is None or method == "auto") and "a1" in window and "alpha1" in window and not _single:
         return _cross_checked(window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s,
                               bearing_friction_nms_per_rad, recontact_index, entry_uncertainty_samples, model)
     if "m_el" not in window:
@@ -411,11 +412,9 @@ def _cross_checked(window, entry_index, backlash_width_m, wheel_radius_m, sample
     kw = dict(bearing_friction_nms_per_rad=b1, recontact_index=recontact_index, model=model)
     fits, why = {}, {}
     for name, method in (("a1", None), ("angle", "angle")):
-        w = {k: v for k, v in window.items() if k != "alpha1"} if name == "a1" else window
         try:
-            fits[name] = estimate_inertia(w, *args[1:], method=method,
-                                          entry_uncertainty_samples=entry_uncertainty_samples, **kw) \
-                if name == "a1" else estimate_inertia(*args, method=method, **kw)
+            fits[name] = estimate_inertia(*args, method=method, entry_uncertainty_samples=entry_uncertainty_samples,
+                                          _single=True, **kw)
         except NoGapError as exc:
             why[name] = str(exc)
     if not fits:
