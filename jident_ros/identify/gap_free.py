@@ -269,8 +269,19 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         return terms
 
     def j_of(s_row, e_row, with_coulomb):
-        f = fit(s_row, e_row, with_coulomb)
-        return 1.0 / f["kappa"] if f["kappa"] > 0 else np.inf
+        """J1 alone over [s_row, e_row) (normal equations: the trims of the change-point term)."""
+        i, j = s_row - L, e_row - L
+        cols = [np.ones(j - i), u[i:j], Phi[i:j] / phi_scale]
+        if with_coulomb:
+            cols.append(Cc[i:j] / max(float(np.max(np.abs(Cc[i:j]))), 1e-300))
+        X = np.column_stack(cols)
+        A, Xt = X.T @ X, X.T
+        yy = y[i:j]
+        kappa = float(np.linalg.solve(A, Xt @ yy)[2]) / phi_scale
+        if not with_coulomb and coulomb_mid:
+            for _ in range(2):
+                kappa = float(np.linalg.solve(A, Xt @ (y[i:j] + kappa * coulomb_mid * Cc[i:j]))[2]) / phi_scale
+        return 1.0 / kappa if kappa > 0 else np.inf
 
     best = None
     for with_coulomb in (False, True):
