@@ -118,13 +118,18 @@ def _quantum(alpha: np.ndarray) -> float:
     """The encoder's count (the smallest non-zero second difference: whole counts on a quantised angle), 0
     when the angle looks continuous."""
     d = np.abs(np.diff(alpha, 2))
-    d = d[d > 0]
+    d = d[d > 1e-10 * max(1.0, float(np.max(np.abs(alpha))))]     # a zero second difference, to rounding
     if d.size < 5:
         return 0.0
-    q = float(d.min())
-    # a quantised angle moves by whole counts: the second differences are near integer multiples of q
-    k = d / q
-    return q if float(np.median(np.abs(k - np.round(k)))) < 0.02 else 0.0
+    # a quantised angle moves by whole counts: the second differences are integer multiples of the count; the
+    # smallest one may be several counts (try its 1/1 .. 1/4, the largest that divides them all)
+    q0 = float(d.min())
+    for div in (1, 2, 3, 4):
+        q = q0 / div
+        k = d / q
+        if float(np.max(np.abs(k - np.round(k)))) < 0.01:
+            return q
+    return 0.0
 
 
 def _robust_noise(x: np.ndarray) -> float:
