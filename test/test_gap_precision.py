@@ -193,8 +193,9 @@ def test_anchored_standard_error_matches_the_spread_over_noise_draws(torque_nois
     assert 0.92 <= covered / 300 <= 0.99, covered
 
 
-def test_speed_interval_uses_t_with_gap_samples_minus_two_dof():
-    """'speed': ω1 = ω1_0 + ∫m_el dt / J1, ω1 regressed on the integral (n - 2 dof), the slope's variance
+def test_speed_interval_uses_t_with_gap_samples_minus_three_dof():
+    """'speed': ω1 = ω1_0 + ∫m_el dt / J1 - (τ/J1) m_el (the feedback's lag τ), ω1 regressed on the integral and
+    the torque (n - 3 dof), the slope's variance
     inflated by the residual's lag-1 autocorrelation (1 + rho)/(1 - rho), rho >= 0, and the larger change of J1 when
     one or two samples are dropped at each end added in quadrature (gap.speed_fit)."""
     n_gap = 20
@@ -204,17 +205,17 @@ def test_speed_interval_uses_t_with_gap_samples_minus_two_dof():
     gap = slice(N_PRE, N_PRE + n_gap)
     m, om = w["m_el"][gap], w["omega1"][gap]
     y = np.concatenate([[0.0], np.cumsum((m[1:] + m[:-1]) / 2) * TS])
-    A = np.column_stack([np.ones(n_gap), y])
+    A = np.column_stack([np.ones(n_gap), y, m])       # the speed feedback's lag: the torque is a regressor
     coef, rss, *_ = np.linalg.lstsq(A, om, rcond=None)
     res = om - A @ coef
     rho = max(float(res[1:] @ res[:-1]) / float(res @ res), 0.0)
-    se_k = np.sqrt(rss[0] / (n_gap - 2) * np.linalg.inv(A.T @ A)[1, 1] * (1 + rho) / (1 - rho))
-    trims = [np.linalg.lstsq(A[k:-k] - [0, y[k]], om[k:-k], rcond=None)[0] for k in (1, 2)]
+    se_k = np.sqrt(rss[0] / (n_gap - 3) * np.linalg.inv(A.T @ A)[1, 1] * (1 + rho) / (1 - rho))
+    trims = [np.linalg.lstsq(A[k:-k] - [0, y[k], 0], om[k:-k], rcond=None)[0] for k in (1, 2)]
     se = np.hypot(se_k / coef[1] ** 2, max(abs(1 / c[1] - 1 / coef[1]) for c in trims))
     se = max(se, 5e-4 / coef[1])                       # FREE_REL_SE_FLOOR: every fit's floor
     assert g.inertia_kgm2 == pytest.approx(1 / coef[1], rel=1e-12)
-    assert g.std_error_kgm2 == pytest.approx(se, rel=1e-9)
-    assert _half_width(g) == pytest.approx(stats.t.ppf(0.975, n_gap - 2) * se, rel=1e-9)
+    assert g.std_error_kgm2 == pytest.approx(se, rel=1e-7)
+    assert _half_width(g) == pytest.approx(stats.t.ppf(0.975, n_gap - 3) * se, rel=1e-7)
     assert g.residual_rms == pytest.approx(np.sqrt(rss[0] / n_gap) / coef[1], rel=1e-9)
 
 

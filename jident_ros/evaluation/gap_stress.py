@@ -26,9 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from jident_ros.identify.fusion import fuse_verdict
 from jident_ros.identify.gap import NoGapError, estimate_inertia, nearest_class
 from jident_ros.identify.gap_free import GapModel
-from jident_ros.identify.fusion import fuse_verdict
 from jident_ros.identify.verdict import VerdictPolicy, decide_gap
 
 CLASSES = (1.16, 1.131, 1.102, 1.073, 0.957, 1.189, 1.218)

@@ -351,7 +351,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     elif method == "speed":
         if "omega1" not in window:
             raise NoGapError("method 'speed' needs omega1")
-        j, se, res, dof = speed_fit(np.asarray(window["omega1"], float)[start:end], m, sample_period_s)
+        j, se, res, dof = speed_fit(np.asarray(window["omega1"], float)[start:end], m, sample_period_s, lag=True)
     else:
         raise ValueError(f"method: expected one of {', '.join(FITS)} (or None: the model choice), got {method!r}")
     if not np.isfinite(j) or j <= 0:
@@ -368,6 +368,18 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         entry_error = max(abs(x - j) for x in moved)
         model_error = float(np.hypot(model_error, entry_error))
         se = float(np.hypot(se, entry_error))
+    if method == "speed" and model.coulomb_friction_max_nm:
+        # the speed fit takes no Coulomb friction: a constant torque F in [0, F_max] is −F t in ∫m_el dt, which
+        # moves J1 by J1 F (r_κ · t) (r_κ: the least-squares row of 1/J1); a uniform term of half-width F_max
+        tq = np.asarray(window["m_el"], float)[start:end]
+        yint = np.concatenate([[0.0], np.cumsum(0.5 * (tq[1:] + tq[:-1])) * sample_period_s])
+        A = np.column_stack([np.ones(n), yint, tq])
+        row = np.linalg.pinv(A)[1]
+        fr = j * abs(float(row @ (np.arange(n) * sample_period_s))) * model.coulomb_friction_max_nm / np.sqrt(3.0)
+        terms = dict(free_extra.get("std_error_terms", ()))
+        terms["coulomb_band"] = fr
+        free_extra["std_error_terms"] = tuple(terms.items())
+        se = float(np.hypot(se, fr))
     if method in ("gap_only", "acceleration", "anchored") and model.coulomb_friction_max_nm and "a1" in window:
         # the a1 fits take no Coulomb friction: a friction F in [0, F_max] moves J1 (the slope of the torque on
         # dω1/dt) by F Σx/Σx² over the fitted samples; a uniform term of half-width F_max, in quadrature
@@ -441,7 +453,7 @@ def _cross_checked(window, entry_index, backlash_width_m, wheel_radius_m, sample
 SPEED_TRIM_SAMPLES = (1, 2)
 
 
-def speed_fit(omega1: np.ndarray, torque: np.ndarray, sample_period_s: float) -> tuple:
+def speed_fit(omega1: np.ndarray, torque: np.ndarray, sample_period_s: float, lag: bool = False) -> tuple:
     """(J1, standard error, residual, degrees of freedom) of the ``"speed"`` fit over the gap samples.
 
     In the gap ω1(t_k) = ω1(t_0) + Y_k / J1 with Y_k = ∫_{t0}^{tk} m_el dt (trapezoid).  The measured speed
@@ -452,33 +464,38 @@ def speed_fit(omega1: np.ndarray, torque: np.ndarray, sample_period_s: float) ->
     J1 when one or two samples are dropped at each end of the interval (the larger) is added in quadrature (the
     interval's end rows: an entry found early, a re-contact row late).
     Regressing Y on ω1 instead (the first release) put the speed noise in the regressor: on the second drive at
-    30 dB its interval was far too narrow and 52 of 84 published J1 were more than 10 % off (docs/results.md)."""
+    30 dB its interval was far too narrow and 52 of 84 published J1 were more than 10 % off (docs/results.md).
+
+    ``lag`` (estimate_inertia's 'speed' fit): the drive's speed feedback lags the shaft (a filter, a
+    differenced encoder): ω1_meas(t) ≈ ω1(t − τ) ≈ ω1(t) − τ dω1/dt = ω1_0 + Y/J1 − (τ/J1) m_el, so the torque
+    itself is a third regressor and τ is fitted with J1 (issue 20: −3 … −7 % with a 0.4 ms lag unmodelled)."""
     n = omega1.size
     y = np.concatenate([[0.0], np.cumsum(0.5 * (torque[1:] + torque[:-1])) * sample_period_s])
 
-    def slope(w, yy):
-        A = np.column_stack([np.ones(w.size), yy])
+    def slope(w, yy, mm=None):
+        A = np.column_stack([np.ones(w.size), yy] + ([] if mm is None else [mm]))
         coef, *_ = np.linalg.lstsq(A, w, rcond=None)
         return coef, A
 
     if n < 6:
         raise NoGapError(f"speed fit: {n} gap samples, at least 6 are needed")
-    coef, A = slope(omega1, y)
+    tq = np.asarray(torque, float) if lag else None
+    coef, A = slope(omega1, y, tq)
     kappa = float(coef[1])
     if not kappa > 0:
         raise NoGapError(f"gap fit gave a non-physical J1 = 1/{kappa!r} (dω1 against ∫m_el dt)")
     res = omega1 - A @ coef
-    dof = n - 2
+    dof = n - A.shape[1]
     rho = float(res[1:] @ res[:-1]) / float(res @ res) if float(res @ res) > 0 else 0.0
     inflation = (1.0 + max(rho, 0.0)) / max(1.0 - max(rho, 0.0), 1e-6)
-    cov = (res @ res) / dof * np.linalg.inv(A.T @ A) * inflation
+    cov = (res @ res) / dof * np.linalg.pinv(A.T @ A) * inflation
     j = 1.0 / kappa
     se_stat = float(np.sqrt(cov[1, 1])) / kappa ** 2
     model_error = 0.0
     for k in SPEED_TRIM_SAMPLES:
         if n - 2 * k < 6:
             break
-        trimmed, _ = slope(omega1[k:n - k], y[k:n - k] - y[k])
+        trimmed, _ = slope(omega1[k:n - k], y[k:n - k] - y[k], None if tq is None else tq[k:n - k])
         model_error = max(model_error, abs(1.0 / trimmed[1] - j) if trimmed[1] > 0 else np.inf)
     return j, float(np.hypot(se_stat, model_error)), res * j, dof
 

@@ -355,7 +355,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
 
 
 def _double_trapz_adjoint(row: np.ndarray, ts: float) -> np.ndarray:
-    """g = Wᵀ row with (W x)_k = the double trapezoid integral of x from the first row to row k."""
+    """G = Wᵀ row with (W x)_k = the double trapezoid integral of x from the first row to row k."""
     n = row.size
     # single trapezoid T: (T x)_k = ts (x_0/2 + x_1 + ... + x_{k-1} + x_k/2) for k >= 1, 0 for k = 0
     def t_adj(v):
