@@ -46,6 +46,8 @@ CHANGEPOINT_SEARCH_SAMPLES = 25
 FREE_MIN_SAMPLES = 8
 #: A candidate interval is consistent when its residual sum of squares is below the (1 - this) χ² quantile.
 CHANGEPOINT_P = 1e-3
+#: Chow forecast test of a candidate's end rows: this many rows predicted by the fit without them.
+CHANGEPOINT_FORECAST_SAMPLES = 3
 #: Relative floor of the standard error (the model's own error: trapezoid double integral of a sampled torque).
 FREE_REL_SE_FLOOR = 5e-4
 #: Samples taken off an end for the change-point term of the standard error (while at least half the interval
@@ -201,16 +203,37 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         s2 = max(float(rc @ rc) / max(rc.size - Xs.shape[1], 1), q * q / 12.0, 1e-30)
         p = Xs.shape[1]
 
-        def accepted(lo_rows, hi_rows):
+        k_f = CHANGEPOINT_FORECAST_SAMPLES
+        outer = np.einsum("ki,kj->kij", Xs, Xs)
+        Cx = np.concatenate([np.zeros((1, p, p)), np.cumsum(outer, axis=0)])
+        bx = np.concatenate([np.zeros((1, p)), np.cumsum(Xs * r[:, None], axis=0)])
+        chi_f = float(_chi2_upper(np.array([k_f]))[0])
+
+        def accepted(lo_rows, hi_rows, side):
+            """The whole interval's residual is noise (χ² test) and its k_f end rows on ``side`` are predicted by
+            the fit without them (Chow's forecast test: a contaminated end shows in the extrapolation first)."""
             rss = _solve_rss(Xs, r, lo_rows, hi_rows)
             nn = hi_rows - lo_rows
-            return rss <= s2 * _chi2_upper(np.maximum(nn - p, 1))
+            ok = rss <= s2 * _chi2_upper(np.maximum(nn - p, 1))
+            if side == "end":
+                ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + np.arange(k_f)
+            else:
+                ilo, ihi, test = lo_rows + k_f, hi_rows, lo_rows[:, None] + np.arange(k_f)
+            A = Cx[ihi] - Cx[ilo]
+            A = A + np.eye(p) * (1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] / p)
+            beta = np.linalg.solve(A, (bx[ihi] - bx[ilo])[..., None])[..., 0]
+            Ainv = np.linalg.inv(A)
+            xt = Xs[test]                                             # (cand, k_f, p)
+            pred = np.einsum("ckp,cp->ck", xt, beta)
+            lev = np.einsum("ckp,cpq,ckq->ck", xt, Ainv, xt)
+            stat = np.sum((r[test] - pred) ** 2 / (s2 * (1.0 + lev)), axis=1)
+            return ok & ((ihi - ilo < p + 2) | (stat <= chi_f))
 
         def grow_end(s_row, e_from):
             cand = np.arange(max(s_row + FREE_MIN_SAMPLES, e_from), min(hi_c + W, R - L) + 1)
             if cand.size == 0:
                 return e_from
-            ok = accepted(np.full(cand.size, s_row), cand)
+            ok = accepted(np.full(cand.size, s_row), cand, "end")
             if not ok[0]:
                 return int(cand[0])
             bad = np.flatnonzero(~ok)
@@ -220,7 +243,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             cand = np.arange(min(e_row - FREE_MIN_SAMPLES, s_from), max(lo_c - W, 0) - 1, -1)
             if cand.size == 0:
                 return s_from
-            ok = accepted(cand, np.full(cand.size, e_row))
+            ok = accepted(cand, np.full(cand.size, e_row), "start")
             if not ok[0]:
                 return int(cand[0])
             bad = np.flatnonzero(~ok)
