@@ -194,13 +194,48 @@ def summarise(rows: list) -> dict:
             "refusals": reasons, "rows": rows}
 
 
+JOINTSTATE_ABSENT = ("a1", "a2", "v2")
+IMU_ABSENT = ("a2", "v2")
+
+
+def _line(label: str, res: dict) -> str:
+    n = res["gap_windows"]
+    return (f"{label}: event windows {n}, published {res['published']} ({res['published_off']} > 10 % off), "
+            f"class {res['class_correct']}/{n}, 95 % CI covers {res['ci_covers']}/{res['gap_fitted']} fitted, "
+            f"ambiguous {res['ambiguous']}, |err| median {100 * (res['j1_median_abs_error'] or 0):.2f} % max "
+            f"{100 * (res['j1_max_abs_error'] or 0):.2f} %, fits {res['fits']}")
+
+
+def other_models(second_drive_dirs=(), ours: bool = False) -> None:
+    """The default gap fit (the diagnostic node's model choice, default GapModel: the drives' torque is exact)
+    through the flank detector on the second drive's CSV directories and on our simulator's raw recordings."""
+    from jident_ros.config import load_system_config
+    from jident_ros.evaluation.raw_inputs import evaluate_condition, evaluate_second_drive, raw_recordings, without
+    system = load_system_config()
+    for d in second_drive_dirs:
+        for label, absent in (("JointState", JOINTSTATE_ABSENT), ("with a1", IMU_ABSENT)):
+            print(_line(f"second drive {d} {label}", evaluate_second_drive(system, d, absent=absent)))
+    if ours:
+        for snr in (None, 30.0):
+            recs = raw_recordings(system, snr_db=snr, steady_s=1.0, seed=12 + (0 if snr is None else 1))
+            for label, absent in (("JointState", JOINTSTATE_ABSENT), ("with a1", IMU_ABSENT)):
+                res = evaluate_condition(system, [without(r, absent) for r in recs], 65536, "flank")
+                print(_line(f"ours {'clean' if snr is None else '30 dB'} {label}", res))
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m jident_ros.evaluation.gap_stress", description=__doc__.split("\n\n")[0])
     p.add_argument("--torque-accuracy", type=float, default=0.02)
     p.add_argument("--coulomb-max-nm", type=float, default=1.5)
     p.add_argument("--verbose", action="store_true")
+    p.add_argument("--second-drive", nargs="*", default=(), metavar="DIR",
+                   help="also the second drive's CSV recordings (python -m jident_ros.second_drive --format csv): as "
+                        "JointState (motor angle, speed, torque; load angle, speed) and with a1 (an Imu)")
+    p.add_argument("--ours", action="store_true", help="also our simulator's raw recordings (raw_inputs), clean and "
+                                                       "30 dB, as JointState and with a1")
     a = p.parse_args(argv)
     model = GapModel(torque_accuracy=a.torque_accuracy, coulomb_friction_max_nm=a.coulomb_max_nm)
+    other_models(a.second_drive, a.ours)
     for imu in (False, True):
         for snr in (None, 30.0):
             s = run(model, snr_db=snr, with_imu=imu)

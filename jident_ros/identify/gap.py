@@ -80,7 +80,14 @@ import numpy as np
 from scipy import stats
 from scipy.signal import savgol_filter
 
-from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, FreeFitError, GapModel, free_angle_fit
+from jident_ros.identify.gap_free import (
+    FREE_REL_SE_FLOOR,
+    KINK_SEARCH,
+    FreeFitError,
+    GapModel,
+    free_angle_fit,
+    kink_fit,
+)
 
 #: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
 GAP_QUADRATIC_MIN = 12
@@ -423,25 +430,31 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     and its standard error (with a change-point term: the largest change of J1 with s or e moved in by 1 or 2) is the
     smaller: the free fit is its check.  Returns {} and a 'choice' phrase otherwise."""
     s, e = coarse
-    test = pre_entry_steady(torque[:min(s, ff["start"])])
+    lo, hi = min(s, ff["start"]), max(s, ff["start"])
+    test = pre_entry_steady(torque[:max(lo - KINK_SEARCH, 0)])
     if not test.steady:
         return {"choice": f"angle (free): {test.reason}"}
+    end = min(e, ff["end"])
     try:
-        j, se, res, dof, model_error = _angle_fit(alpha1, torque, s, e, sample_period_s)
-        cp = max(abs(_angle_fit(alpha1, torque, s + ds, e + de, sample_period_s)[0] - j)
-                 for ds, de in ((1, 0), (2, 0), (0, -1), (0, -2))) if e - s >= 8 else 0.0
-    except (NoGapError, np.linalg.LinAlgError) as exc:
-        return {"choice": f"angle (free): the anchored fit failed ({exc})"}
-    se = float(np.hypot(se, cp))
+        kf = kink_fit(alpha1, torque, sample_period_s, range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1), end)
+        # the re-contact row: moved in by 1 and 2 (contact after it is not modelled)
+        trims = [kink_fit(alpha1, torque, sample_period_s, kf["plausible_entries"], end - k)["j1"] for k in (1, 2)]
+    except (FreeFitError, np.linalg.LinAlgError) as exc:
+        return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
+    j, res, dof = kf["j1"], kf["residual"], kf["dof"]
+    cp_end = max(abs(x - j) for x in trims)
+    terms = dict(kf["terms"])
+    terms["change_points"] = float(np.hypot(terms["change_points"], cp_end))
+    model_error = terms["change_points"]
+    se = max(float(np.sqrt(sum(v * v for v in terms.values()))), FREE_REL_SE_FLOOR * j)
     z = abs(j - ff["j1"]) / max(float(np.hypot(se, ff["se_stat"])), 1e-300)
     if z > CROSS_CHECK_Z:
-        return {"choice": f"angle (free): the anchored fit (J1 = {j:.4g}) disagrees by {z:.1f} standard errors"}
+        return {"choice": f"angle (free): the steady-entry fit (J1 = {j:.4g}) disagrees by {z:.1f} standard errors"}
     if se >= ff["se_stat"]:
-        return {"choice": f"angle (free): the anchored fit is no more precise (J1 = {j:.4g} ± {se:.2g})"}
-    terms = {"statistical_anchored": float(np.hypot(se, 0.0)), "change_points": cp, "model_error": model_error}
-    return {"choice": f"angle (anchored): pre-entry steady, agrees with the free fit (J1 = {ff['j1']:.4g}, "
-                      f"{z:.1f} standard errors)", "j1": j, "se": se, "res": res, "dof": dof,
-            "model_error": float(np.hypot(model_error, cp)), "terms": terms}
+        return {"choice": f"angle (free): the steady-entry fit is no more precise (J1 = {j:.4g} ± {se:.2g})"}
+    return {"choice": f"angle (steady entry): the entry a change point of a steady drive at row {kf['start']}, "
+                      f"agrees with the free fit (J1 = {ff['j1']:.4g}, {z:.1f} standard errors)", "j1": j, "se": se,
+            "res": res, "dof": dof, "model_error": model_error, "terms": terms}
 
 
 #: Cross-check of two fits of one window (a1 and the motor angle): they disagree when their J1 differ by more

@@ -393,3 +393,70 @@ def _double_trapz_adjoint(row: np.ndarray, ts: float) -> np.ndarray:
         out[1:] += inner[1:] + 0.5 * v[1:]
         return out * ts
     return t_adj(t_adj(row))
+
+
+#: Kink fit: steady pre-entry samples used before the earliest candidate entry row, and the candidate rows
+#: searched around the free fit's and the detector's entry rows.
+KINK_PRE_SAMPLES = 40
+KINK_SEARCH = 4
+#: Kink fit: fewest gap samples after a candidate entry (the steady samples before it carry ω0).
+KINK_MIN_GAP_SAMPLES = 6
+#: Kink fit: entry rows whose profile residual is within this χ²₁ quantile (95 %) of the best one are plausible.
+KINK_CHI2_1 = 3.841
+
+
+def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int) -> dict:
+    """J1 with the entry row as a change point of a steady drive (profile likelihood).
+
+    Before the entry the drive turns at constant speed (steady, in contact); from the entry row s on it is free:
+    α1(t) = θ0 + ω0 (t − t_s) + [t ≥ t_s] Φ_s(t)/J1, Φ_s the double integral of the torque from t_s (zero value
+    and slope at t_s: angle and speed are continuous).  The same rows [P, end) for every candidate s in
+    ``entries``, so the residual sums compare: s* minimises it; the plausible entries are those within
+    KINK_CHI2_1 σ̂² of it, and the largest change of J1 over them is the change-point term.  Returns j1, se_stat
+    (statistical, torque noise and change points in quadrature), terms, start (s*), end, residual, dof; raises
+    FreeFitError."""
+    a = np.asarray(alpha1, float)
+    m = np.asarray(torque, float)
+    ts = float(sample_period_s)
+    entries = sorted(int(x) for x in entries if end - int(x) >= KINK_MIN_GAP_SAMPLES)
+    if not entries:
+        raise FreeFitError(f"kink fit: fewer than {KINK_MIN_GAP_SAMPLES} samples after every candidate entry")
+    P = max(0, entries[0] - KINK_PRE_SAMPLES)
+    if entries[0] - P < 10:
+        raise FreeFitError("kink fit: fewer than 10 steady samples before the entry")
+    rows = np.arange(P, end)
+    y = a[P:end] - a[entries[0]]
+    out = []
+    for s_row in entries:
+        i = s_row - P
+        phi = np.zeros(end - P)
+        phi[i:] = _cumtrapz(_cumtrapz(m[s_row:end], ts), ts)
+        scale = max(float(np.max(np.abs(phi))), 1e-300)
+        X = np.column_stack([np.ones(end - P), (rows - s_row) * ts / max((end - s_row) * ts, ts), phi / scale])
+        pinv = np.linalg.solve(X.T @ X, X.T)
+        coef = pinv @ y
+        res = y - X @ coef
+        out.append((float(res @ res), float(coef[2]) / scale, res, pinv[2] / scale, s_row))
+    rss = np.array([o[0] for o in out])
+    k = int(np.argmin(rss))
+    rss_min, kappa, res, row, s_best = out[k]
+    if not kappa > 0:
+        raise FreeFitError(f"kink fit: non-physical 1/J1 = {kappa!r}")
+    dof = end - P - 3
+    q = _quantum(a[P:end])
+    s2 = max(rss_min / max(dof, 1), q * q / 12.0, 1e-30)
+    j1 = 1.0 / kappa
+    plausible = [o for o in out if o[0] - rss_min <= KINK_CHI2_1 * s2 and o[1] > 0]
+    cp = max(abs(1.0 / o[1] - j1) for o in plausible)
+    rr = float(res @ res)
+    rho = float(res[1:] @ res[:-1]) / rr if rr > 0 else 0.0
+    infl = (1.0 + max(rho, 0.0)) / max(1.0 - max(rho, 0.0), 1e-6)
+    var_stat = s2 * float(row @ row) * infl
+    i = s_best - P
+    g = _double_trapz_adjoint(row[i:], ts)
+    sm = _robust_noise(m[s_best:end])
+    terms = {"statistical": j1 * j1 * float(np.sqrt(var_stat)),
+             "torque_noise": j1 * j1 * kappa * sm * float(np.sqrt(g @ g)), "change_points": float(cp)}
+    se = float(np.sqrt(sum(v * v for v in terms.values())))
+    return {"j1": j1, "se_stat": max(se, FREE_REL_SE_FLOOR * j1), "terms": terms, "start": int(s_best),
+            "end": int(end), "residual": res, "dof": dof, "plausible_entries": [o[4] for o in plausible]}
