@@ -82,6 +82,7 @@ from scipy.signal import savgol_filter
 
 from jident_ros.identify.gap_free import (
     FREE_REL_SE_FLOOR,
+    KINK_PRE_SAMPLES,
     KINK_SEARCH,
     FreeFitError,
     GapModel,
@@ -441,6 +442,16 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
         trims = [kink_fit(alpha1, torque, sample_period_s, kf["plausible_entries"], end - k)["j1"] for k in (1, 2)]
     except (FreeFitError, np.linalg.LinAlgError) as exc:
         return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
+    # the torque steady right up to the estimated entry (a speed controller acting just before it is not): its
+    # last KINK_SEARCH samples within 5 robust noise levels (or 1e-3 of the level) of the steady stretch's median
+    sb = kf["start"]
+    ref = torque[max(0, sb - KINK_PRE_SAMPLES):sb - KINK_SEARCH]
+    last = torque[sb - KINK_SEARCH:sb]
+    level = float(np.median(ref))
+    tol = max(5.0 * _robust_noise(ref), 1e-3 * abs(level))
+    if float(np.max(np.abs(last - level))) > tol:
+        return {"choice": f"angle (free): the torque changes in the {KINK_SEARCH} samples before the entry row {sb} "
+                          f"(by {float(np.max(np.abs(last - level))):.3g} N m): not a steady drive's entry"}
     j, res, dof = kf["j1"], kf["residual"], kf["dof"]
     cp_end = max(abs(x - j) for x in trims)
     terms = dict(kf["terms"])

@@ -401,6 +401,8 @@ KINK_PRE_SAMPLES = 40
 KINK_SEARCH = 4
 #: Kink fit: fewest gap samples after a candidate entry (the steady samples before it carry ω0).
 KINK_MIN_GAP_SAMPLES = 6
+#: Kink fit: the pre-entry angle's t² term must not be significant beyond this t statistic.
+KINK_STEADY_T = 3.0
 #: Kink fit: entry rows whose profile residual is within this χ²₁ quantile (95 %) of the best one are plausible.
 KINK_CHI2_1 = 3.841
 
@@ -445,6 +447,18 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
     dof = end - P - 3
     q = _quantum(a[P:end])
     s2 = max(rss_min / max(dof, 1), q * q / 12.0, 1e-30)
+    # the model's premise: constant speed before the entry (a speed controller's drive is not): the pre-entry
+    # angle gets a t² term, refused when it is significant (t statistic > KINK_STEADY_T)
+    n_pre = s_best - P
+    tt = (np.arange(n_pre) - n_pre / 2.0) / max(n_pre, 1)
+    Xp = np.column_stack([np.ones(n_pre), tt, tt * tt])
+    cp_, *_ = np.linalg.lstsq(Xp, a[P:s_best], rcond=None)
+    rp = a[P:s_best] - Xp @ cp_
+    s2p = max(float(rp @ rp) / max(n_pre - 3, 1), q * q / 12.0, 1e-30)
+    t_quad = abs(float(cp_[2])) / float(np.sqrt(s2p * np.linalg.inv(Xp.T @ Xp)[2, 2]))
+    if t_quad > KINK_STEADY_T:
+        raise FreeFitError(f"kink fit: the speed before the entry is not constant (t = {t_quad:.3g} for a t² term "
+                           f"over {n_pre} samples)")
     j1 = 1.0 / kappa
     plausible = [o for o in out if o[0] - rss_min <= KINK_CHI2_1 * s2 and o[1] > 0]
     cp = max(abs(1.0 / o[1] - j1) for o in plausible)
