@@ -95,3 +95,57 @@ def test_double_trapezoid_adjoint_matches_the_matrix():
     T *= TS
     row = rng.standard_normal(n)
     assert _double_trapz_adjoint(row, TS) == pytest.approx((T @ T).T @ row, rel=1e-12)
+
+
+@pytest.fixture(scope="module")
+def ours_window():
+    """Our simulator's window as a JointState drive records it (raw 2^16 encoder, no a1), entry from the flank
+    detector."""
+    from jident_ros.config import load_system_config
+    from jident_ros.evaluation.raw_inputs import make_detector, raw_recordings, run_detector, without
+    system = load_system_config()
+    rec = without(raw_recordings(system, [1.131], [0.0075], steady_s=0.2, seed=12)[0], ("a1", "a2", "v2"))
+    det = make_detector("flank", system, system.load.wheel_radius_m, TS, rec.channels, counts=65536)
+    return [e.window for e in run_detector(det, rec) if e.kind == "window"][0]
+
+
+def test_a_steady_drive_entry_is_a_change_point(ours_window):
+    """A drive steady before the entry (our simulator, on line): the entry row is estimated by profile
+    likelihood (constant speed before, free after), far more precise than the free fit on a 22-sample gap."""
+    w = ours_window
+    g = estimate_inertia(w.as_dict(), w.entry_index, w.backlash_width_m, w.wheel_radius_m, TS,
+                         recontact_index=w.recontact_index)
+    assert "steady entry" in g.model_choice, g.model_choice
+    assert abs(g.fit_start - w.entry_index) <= 1
+    assert abs(g.inertia_kgm2 / 1.131 - 1) < 0.01 and g.ci95_kgm2[0] <= 1.131 <= g.ci95_kgm2[1], g
+    assert g.std_error_kgm2 < 0.01
+
+
+def test_a_speed_controller_ramp_before_the_entry_is_not_a_steady_entry():
+    """The speed reversal's torque ramps 2 samples before the entry: the steady-entry fit is not used (it took the
+    start of the ramp for the entry: J1 -5 %)."""
+    rec = simulate(StressDrive(j1_kgm2=1.073), "speed_reversal", seed=1073)
+    g = _fit(rec, -14, -3, GapModel(torque_accuracy=0.01, coulomb_friction_max_nm=1.5))
+    assert "steady entry" not in g.model_choice and "torque changes" in g.model_choice, g.model_choice
+    assert g.ci95_kgm2[0] <= 1.073 <= g.ci95_kgm2[1]
+
+
+def test_a1_and_angle_fits_that_disagree_are_refused(step):
+    """With an Imu: a1 10 % off (a wrong radius, a lagging sensor): the cross-check refuses, naming both fits."""
+    w = dict(step["window"])
+    w["a1"] = w["a1"] * 1.1
+    with pytest.raises(NoGapError, match="disagree by"):
+        estimate_inertia(w, step["entry"], 0.005, R, TS, recontact_index=step["recontact"],
+                         model=GapModel(coulomb_friction_max_nm=1.5))
+    w["a1"] = step["window"]["a1"]
+    g = estimate_inertia(w, step["entry"], 0.005, R, TS, recontact_index=step["recontact"],
+                         model=GapModel(coulomb_friction_max_nm=1.5))
+    assert "cross-checked" in g.model_choice and abs(g.inertia_kgm2 / 1.16 - 1) < 0.01
+
+
+def test_speed_fit_models_the_feedback_lag(step):
+    """The speed feedback lags 0.4 ms: the speed fit with the lag as a regressor is within 1 % and covers."""
+    w = {k: step["window"][k] for k in ("t", "omega1", "m_el")}
+    g = estimate_inertia(w, step["entry"], 0.005, R, TS, method="speed", recontact_index=step["recontact"],
+                         model=GapModel(coulomb_friction_max_nm=1.5))
+    assert abs(g.inertia_kgm2 / 1.16 - 1) < 0.01 and g.ci95_kgm2[0] <= 1.16 <= g.ci95_kgm2[1], g

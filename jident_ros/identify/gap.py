@@ -362,6 +362,10 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         if anchored:
             j, se, res, dof, model_error = (anchored[k] for k in ("j1", "se", "res", "dof", "model_error"))
             free_extra["std_error_terms"] = tuple(anchored["terms"].items())
+            free_extra["change_point_error_kgm2"] = float(anchored["terms"]["change_points"])
+            free_extra["friction"] = (f"bounded (F_c in [0, {model.coulomb_friction_max_nm:.3g}] N m, a term)"
+                                      if model.coulomb_friction_max_nm else "none declared")
+            fit_span = anchored["span"]
     elif method == "speed":
         if "omega1" not in window:
             raise NoGapError("method 'speed' needs omega1")
@@ -437,7 +441,8 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
         return {"choice": f"angle (free): {test.reason}"}
     end = min(e, ff["end"])
     try:
-        kf = kink_fit(alpha1, torque, sample_period_s, range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1), end)
+        kf = kink_fit(alpha1, torque, sample_period_s, range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1), end,
+                      model.coulomb_friction_max_nm)
         # the re-contact row: moved in by 1 and 2 (contact after it is not modelled)
         trims = [kink_fit(alpha1, torque, sample_period_s, kf["plausible_entries"], end - k)["j1"] for k in (1, 2)]
     except (FreeFitError, np.linalg.LinAlgError) as exc:
@@ -465,7 +470,7 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
         return {"choice": f"angle (free): the steady-entry fit is no more precise (J1 = {j:.4g} ± {se:.2g})"}
     return {"choice": f"angle (steady entry): the entry a change point of a steady drive at row {kf['start']}, "
                       f"agrees with the free fit (J1 = {ff['j1']:.4g}, {z:.1f} standard errors)", "j1": j, "se": se,
-            "res": res, "dof": dof, "model_error": model_error, "terms": terms}
+            "res": res, "dof": dof, "model_error": model_error, "terms": terms, "span": (kf["start"], kf["end"])}
 
 
 #: Cross-check of two fits of one window (a1 and the motor angle): they disagree when their J1 differ by more

@@ -407,7 +407,8 @@ KINK_STEADY_T = 3.0
 KINK_CHI2_1 = 3.841
 
 
-def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int) -> dict:
+def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int,
+             coulomb_max_nm: float = 0.0) -> dict:
     """J1 with the entry row as a change point of a steady drive (profile likelihood).
 
     Before the entry the drive turns at constant speed (steady, in contact); from the entry row s on it is free:
@@ -471,6 +472,13 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
     sm = _robust_noise(m[s_best:end])
     terms = {"statistical": j1 * j1 * float(np.sqrt(var_stat)),
              "torque_noise": j1 * j1 * kappa * sm * float(np.sqrt(g @ g)), "change_points": float(cp)}
+    if coulomb_max_nm:
+        # an unmodelled Coulomb friction F in [0, F_max] is a torque offset in the gap: C = (t − t_s)²/2 after
+        # the entry; J1 moves by J1 F (r_κ · C); a uniform term of half-width F_max (not centred: a drive without
+        # friction is not biased)
+        c_col = np.zeros(end - P)
+        c_col[i:] = 0.5 * ((np.arange(end - s_best)) * ts) ** 2
+        terms["coulomb_band"] = j1 * abs(float(row @ c_col)) * float(coulomb_max_nm) / np.sqrt(3.0)
     se = float(np.sqrt(sum(v * v for v in terms.values())))
     return {"j1": j1, "se_stat": max(se, FREE_REL_SE_FLOOR * j1), "terms": terms, "start": int(s_best),
             "end": int(end), "residual": res, "dof": dof, "plausible_entries": [o[4] for o in plausible]}
