@@ -197,6 +197,19 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         if core[1] - core[0] < FREE_MIN_SAMPLES:
             core = (max(0, min(lo_c, R - L - FREE_MIN_SAMPLES)), max(0, min(lo_c, R - L - FREE_MIN_SAMPLES))
                     + FREE_MIN_SAMPLES)
+        # a long coarse interval may hold contact (a re-contact row that is a later flank's): the core is the
+        # third of it whose fit is the tightest, when that is long enough
+        third = (core[1] - core[0]) // 3
+        if third >= 2 * FREE_MIN_SAMPLES:
+            best_var = np.inf
+            for k in range(3):
+                sub = (core[0] + k * third, core[0] + (k + 1) * third)
+                cs, *_ = np.linalg.lstsq(Xs[sub[0]:sub[1]], y[sub[0]:sub[1]], rcond=None)
+                rs = y[sub[0]:sub[1]] - Xs[sub[0]:sub[1]] @ cs
+                v = float(rs @ rs) / (third - Xs.shape[1])
+                if v < best_var:
+                    best_var, best_sub = v, sub
+            core = best_sub
         c0, *_ = np.linalg.lstsq(Xs[core[0]:core[1]], y[core[0]:core[1]], rcond=None)
         r = y - Xs @ c0
         rc = r[core[0]:core[1]]
