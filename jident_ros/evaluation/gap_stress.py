@@ -245,6 +245,14 @@ def main(argv=None) -> int:
                   f"{s['published_off_3pct']}, |err| median {100 * (s['median_abs_error'] or 0):.2f} % max "
                   f"{100 * (s['max_abs_error'] or 0):.2f} %, 95 % coverage {cov[0]}/{cov[1]}, 'between classes' on "
                   f"class {s['between_classes_on_class']}, refusals {s['refusals']}")
+            per = {}
+            for r in s["rows"]:
+                d = per.setdefault(r["event"], [0, 0, 0])
+                d[0] += 1
+                d[1] += bool(r.get("published"))
+                d[2] += bool(r.get("published")) and abs(r["rel_error"]) <= 0.03
+            print("    per event (windows, published, published within 3 %): " + ", ".join(
+                f"{k} {v[0]}/{v[1]}/{v[2]}" for k, v in per.items()))
             if a.verbose:
                 for r in s["rows"]:
                     print("   ", {k: (round(v, 4) if isinstance(v, float) else v) for k, v in r.items()})
