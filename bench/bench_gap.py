@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from jident_ros.evaluation.gap_stress import StressDrive, simulate
+from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
 from jident_ros.identify.gap import estimate_inertia
 from jident_ros.identify.gap_free import GapModel
 

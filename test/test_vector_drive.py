@@ -1,4 +1,4 @@
-"""The third validation drive (jident_ros.vector_drive, motulator): physics sanity and the recorder.
+"""The third validation drive (jident_ros.research.vector_drive, motulator): physics sanity and the recorder.
 
 Skipped, with the reason, when motulator (0.5.x API) is not installed (``pip install -e '.[zoo]'``).
 """
@@ -11,7 +11,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from jident_ros.vector_drive.model import DriveParams, coupling_torque, gaps, motor_friction, motulator_available, scenario, simulate
+from jident_ros.research.vector_drive.model import (
+    DriveParams,
+    coupling_torque,
+    gaps,
+    motor_friction,
+    motulator_available,
+    scenario,
+    simulate,
+)
 
 REASON = motulator_available()
 pytestmark = pytest.mark.skipif(REASON is not None, reason=REASON or "")
@@ -87,12 +95,12 @@ def test_torque_estimate_error_is_nonzero_but_small(step_down):
 
 
 def test_recording_quantisation_offsets_and_truth(step_down, tmp_path):
-    from jident_ros.vector_drive.record import CHANNELS, Sensors, build, decimate, write
+    from jident_ros.research.vector_drive.record import CHANNELS, Sensors, build, decimate, write
 
     # build() on the fixture's run (no second simulation): patch the cache with the decimated run
     st = decimate(step_down)
     st["motulator_version"] = step_down.motulator_version
-    import jident_ros.vector_drive.record as rec_mod
+    import jident_ros.research.vector_drive.record as rec_mod
     orig = rec_mod.simulate_cached
     rec_mod.simulate_cached = lambda *a, **k: st
     try:
@@ -110,6 +118,9 @@ def test_recording_quantisation_offsets_and_truth(step_down, tmp_path):
     assert rec.signals["t"][1] - rec.signals["t"][0] == pytest.approx(5e-4)
     tr = rec.truth
     assert tr["event"]["type"] == "speed_step_down" and tr["gaps"][0]["traversal"]
+    g = tr["gaps"][0]      # the gap's torques: braking at the limit, the estimate a few % off, friction on
+    assert g["true_torque_mean_nm"] < -200 and 0 < abs(g["torque_estimate_error_mean_nm"]) < 0.05 * 360
+    assert g["bearing_friction_mean_nm"] > 1.0
     assert tr["entry_index"] > tr["steady_rows"]
     # the torque channel is the drive's estimate, not the truth
     assert not np.allclose(rec.signals["m_el"], st["tau_M"])
@@ -138,3 +149,15 @@ def test_reversals_traverse(event):
     delta = run.data["theta_M"] - m.gear_ratio * run.data["theta_L"]
     gl = gaps(delta, m.half_zone_rad)
     assert gl and delta[gl[0][0] - 1] < 0 < delta[gl[0][1]], "reverse: from the - flank to the + flank"
+
+
+@pytest.mark.slow
+def test_the_small_drive_traverses_its_backlash():
+    from jident_ros.research.vector_drive.model import small_drive
+    p = replace(small_drive(), preroll_s=0.05)
+    run = simulate(p, scenario(p, "speed_step_down", "forward", event_time_s=0.1), 0.3)
+    m = p.mechanics
+    delta = run.data["theta_M"] - m.gear_ratio * run.data["theta_L"]
+    gl = gaps(delta, m.half_zone_rad)
+    assert gl and delta[gl[0][0] - 1] > 0 > delta[gl[0][1]]
+    assert delta[gl[0][0] - 1] - delta[gl[0][1]] == pytest.approx(2 * m.half_zone_rad, rel=0.15)

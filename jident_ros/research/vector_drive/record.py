@@ -13,7 +13,7 @@
 * noise: white, 'measured' SNR (noise power = mean(x^2)/10^(SNR/10)) on omega1, omega2, m_el, a1;
   the angles are only quantised.
 
-Writers: the second drive's (``jident_ros.second_drive.record``: rosbags JointState/Imu MCAP bags,
+Writers: the second drive's (``jident_ros.research.second_drive.record``: rosbags JointState/Imu MCAP bags,
 CSV with the documented header), so the files are what ``jident diagnose`` reads.  Ground truth goes
 only to ``<name>.truth.json`` and the directory's ``truth.json``.
 """
@@ -28,7 +28,7 @@ from typing import Optional
 
 import numpy as np
 
-from jident_ros.second_drive.record import write_csv, write_jointstate
+from jident_ros.research.second_drive.record import write_csv, write_jointstate
 
 from .model import TRAVERSING_EVENTS, DriveParams, Run, gaps, scenario, simulate
 
@@ -91,7 +91,7 @@ def simulate_cached(p: DriveParams, event: str, direction: str, duration_s: floa
                     cache_dir: Optional[Path] = None) -> dict:
     """Decimated states of one run (dict of arrays), from ``cache_dir`` when there (npz keyed by every
     parameter), else simulated (and saved there)."""
-    key = params_key(p, event, direction, duration_s, event_time_s)
+    key = params_key(p, event, direction, duration_s, event_time_s, asdict(scenario(p, event, direction, event_time_s)))
     path = None if cache_dir is None else Path(cache_dir) / f"vector_drive_{event}_{direction}_{key}.npz"
     if path is not None and path.exists():
         with np.load(path) as z:
@@ -110,6 +110,18 @@ def simulate_cached(p: DriveParams, event: str, direction: str, duration_s: floa
 
 def _t(x):
     return round(float(x), 9)
+
+
+def _gap_torques(st: dict, b: int, e: int) -> dict:
+    """What the gap's samples hold: the true air-gap torque, the drive's estimate's error against it and the
+    motor's bearing friction (means over the gap, N m)."""
+    sl = slice(b, e)
+    tau, est, fr = st["tau_M"][sl], st["tau_est"][sl], st["tau_f1"][sl]
+    if tau.size == 0:
+        return {}
+    return {"true_torque_mean_nm": float(np.mean(tau)),
+            "torque_estimate_error_mean_nm": float(np.mean(est - tau)),
+            "bearing_friction_mean_nm": float(np.mean(fr))}
 
 
 def case_name(event: str, direction: str, j1: float, k2: float, sensors: Sensors) -> str:
@@ -145,7 +157,7 @@ def build(p: DriveParams, event: str, direction: str, sensors: Sensors, seed: in
                  "from_flank": int(np.sign(delta[b - 1])) if b > 0 else 0,
                  "to_flank": int(np.sign(delta[e])) if e < n else 0,
                  "traversal": bool(b > 0 and e < n and np.sign(delta[b - 1]) != np.sign(delta[e])),
-                 "samples": e - b} for b, e in gl]
+                 "samples": e - b, **_gap_torques(st, b, e)} for b, e in gl]
     steady = slice(min(int(0.1 / ts), k_ev // 2), k_ev)   # the start of the log is the pre-roll's end
     tau = st["tau_M"]
     err = st["tau_est"] - tau
@@ -153,7 +165,7 @@ def build(p: DriveParams, event: str, direction: str, sensors: Sensors, seed: in
     name = case_name(event, direction, mech.motor_inertia_kgm2, mech.backlash_width_m, sensors)
     first = gap_list[0] if gap_list else None
     truth = {
-        "name": name, "model": "jident_ros.vector_drive", "event": {"type": event, "index": k_ev,
+        "name": name, "model": "jident_ros.research.vector_drive", "event": {"type": event, "index": k_ev,
                                                                      "time_s": _t(k_ev * ts),
                                                                      "traversing": event in TRAVERSING_EVENTS},
         "direction": direction, "inertia_kgm2": mech.motor_inertia_kgm2,

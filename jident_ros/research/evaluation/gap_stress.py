@@ -15,7 +15,7 @@ estimator alone, with what the issue names:
 * the detector's coarse entry and re-contact rows offset from the truth by ``entry_offset`` and
   ``recontact_offset`` samples (the issue's -14 .. +23).
 
-``python -m jident_ros.evaluation.gap_stress`` prints the table of docs/results.md ("Gap estimator: stress
+``python -m jident_ros.research.evaluation.gap_stress`` prints the table of docs/results.md ("Gap estimator: stress
 cases").  Research code (evaluation): the runtime path never imports it.
 """
 from __future__ import annotations
@@ -210,7 +210,7 @@ def other_models(second_drive_dirs=(), ours: bool = False) -> None:
     """The default gap fit (the diagnostic node's model choice, default GapModel: the drives' torque is exact)
     through the flank detector on the second drive's CSV directories and on our simulator's raw recordings."""
     from jident_ros.config import load_system_config
-    from jident_ros.evaluation.raw_inputs import evaluate_condition, evaluate_second_drive, raw_recordings, without
+    from jident_ros.research.evaluation.raw_inputs import evaluate_condition, evaluate_second_drive, raw_recordings, without
     system = load_system_config()
     for d in second_drive_dirs:
         for label, absent in (("JointState", JOINTSTATE_ABSENT), ("with a1", IMU_ABSENT)):
@@ -224,7 +224,7 @@ def other_models(second_drive_dirs=(), ours: bool = False) -> None:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m jident_ros.evaluation.gap_stress", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m jident_ros.research.evaluation.gap_stress", description=__doc__.split("\n\n")[0])
     p.add_argument("--torque-accuracy", type=float, default=0.02)
     p.add_argument("--coulomb-max-nm", type=float, default=1.5)
     p.add_argument("--verbose", action="store_true")
