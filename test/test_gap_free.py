@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
 from jident_ros.identify.gap import NoGapError, estimate_inertia
 from jident_ros.identify.gap_free import GapModel, _double_trapz_adjoint, free_angle_fit
+from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
 
 TS, R = 5e-4, 0.08
 
