@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from jident_ros import __version__
-from jident_ros.parameters import GAP_METHODS, cli_help  # light: dataclasses only
+from jident_ros.parameters import DIAGNOSTIC_PARAMS, GAP_METHODS, cli_help  # light: dataclasses only
 
 # Every subcommand imports what it runs inside its cmd_* function (issue 23): `jident --help` and
 # `jident simulate` do not pay for scipy.stats, the offline diagnosis, the bag layer or rclpy
@@ -354,6 +354,8 @@ def build_parser(command: str | None = None, scenario: bool = True) -> argparse.
         sub.add_parser("trend", help=TREND_HELP)
     sub.add_parser("salvage", help="recover every complete chunk of a truncated MCAP recording "
                    "(jident salvage <truncated.mcap> <out_dir>)", add_help=False)
+    sub.add_parser("samples", help="one message per sample, stamped with drive time, for plotting in Foxglove "
+                   "(jident samples <recording> <out_dir>)", add_help=False)
     sub.add_parser("demo", help="end-to-end demo: simulator, windowing and diagnostic nodes over DDS on a few "
                    "cases (jident demo --help)", add_help=False)
     i = sub.add_parser("info", help="print base values and the steady state of the model")
@@ -421,11 +423,11 @@ def _evaluate_arguments(e) -> None:
 def _diagnose_arguments(g) -> None:
     g.add_argument("recording", help="bag directory or .mcap file (a diagnostic node's record_dir, or a "
                    "`ros2 bag record` of joint_states [+ imu]), or a .csv file")
-    g.add_argument("--p", type=_positive("--p"), default=2.0, help="KHM exponent p, one of method.p_values (default 2)")
+    g.add_argument("--p", type=_positive("--p"), default=DIAGNOSTIC_PARAMS["p"].default, help=cli_help("p"))
     g.add_argument("--library", help="pattern library .npz (default: build-patterns' default path; built when missing)")
-    g.add_argument("--gap-method", choices=CLI_GAP_METHODS, default="auto",
-                   help="gap estimator (default auto: acceleration fit when a1 is recorded, else the angle fit "
-                        "when alpha1 is, else speed)")
+    g.add_argument("--gap-method", choices=CLI_GAP_METHODS, default=DIAGNOSTIC_PARAMS["gap_method"].default,
+                   help=cli_help("gap_method") + "; auto: the acceleration fit when a1 is recorded, else the angle "
+                        "fit when alpha1 is, else speed")
     g.add_argument("--no-image", action="store_true", help="skip the paper's image method (gap estimate only)")
     g.add_argument("--backlash-width-m", type=_positive("--backlash-width-m"),
                    help="K2 of inequality (1), m, paper detector only (default for drive/signals recordings: their "
@@ -471,6 +473,9 @@ def main(argv=None) -> int:
     if argv[:1] == ["salvage"]:  # `jident salvage <truncated.mcap> <out_dir>`: cli/salvage.py owns its arguments
         from jident_ros.cli.salvage import salvage_main
         return salvage_main(argv[1:])
+    if argv[:1] == ["samples"]:  # `jident samples <recording> <out_dir>`: cli/samples.py owns its arguments
+        from jident_ros.cli.samples import samples_main
+        return samples_main(argv[1:])
     # the subcommand (""  for `jident`, `jident --help`, `jident --version`: the command list only)
     command = argv[0] if argv and not argv[0].startswith("-") else ""
     try:
