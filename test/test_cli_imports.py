@@ -1,7 +1,7 @@
 """`jident` without ROS, and each subcommand imports only what it runs (issues 19 and 23).
 
 * With rclpy (and every ROS message package) blocked by a meta-path finder, every non-ROS subcommand runs:
-  --help, simulate (one case and a scenario recording), info, diagnose, trend, salvage.
+  --help, simulate (one case and a scenario recording), info, diagnose, trend, salvage, samples.
 * `jident --help` loads neither numpy nor scipy; `jident simulate` loads no scipy.stats, no offline diagnosis,
   no method pipeline, no bag layer.
 * The parser built for one command lists the same commands, with the same help, as the full parser.
@@ -72,6 +72,7 @@ def test_every_offline_subcommand_runs_without_ros(tmp_path):
         ["trend", str(rec), "--out", str(out), "--commissioning-windows", "2", "--jobs", "1", "--quiet"],
         ["salvage", str(rec), str(tmp_path / "salvaged")],
         ["diagnose", str(tmp_path / "salvaged"), "--no-image", "--quiet"],
+        ["samples", str(rec), str(tmp_path / "per_sample")],
     ]
     code = BLOCKER + textwrap.dedent(f"""
         from jident_ros.cli.main import main
