@@ -219,14 +219,37 @@ def test_bad_inputs_are_skipped_with_reason(args, field):
     assert u.skipped and field in u.reason and "skipped" in u.message
     after = tr.to_dict()
     assert after.pop("n_windows") == before.pop("n_windows") + 1
-    assert after == before
+    inputs = after.pop("inputs")
+    before.pop("inputs")
+    assert after == before                       # the estimates' state is unchanged; the skip is counted
+    if field == "no estimate":                   # no estimate: not a skip (counted as refused when a reason is given)
+        assert inputs["windows_skipped"] == {} and u.level == OK
+    else:
+        assert inputs["windows_skipped"] == {field: 1} and u.level == WARN
 
 
-def test_time_going_backwards_is_skipped():
-    tr = TrendTracker()
-    tr.update(100.0, J1, 0.005)
-    u = tr.update(50.0, J1, 0.005)
-    assert u.skipped and "before the previous" in u.reason
+def test_time_going_backwards_starts_a_reported_segment_not_a_skip_for_ever():
+    """Issue 24: a drive restart (its clock back to 1 s) or a stretch stamped far ahead is a reported time
+    segment; every later window is used (before: every later window was skipped for good)."""
+    tr = TrendTracker(TrendConfig(commissioning_windows=3))
+    for i in range(6):
+        tr.update(100.0 + 10 * i, J1, 0.005, 0.003, 3e-6)
+    u = tr.update(1.0, J1, 0.005, 0.003, 3e-6)                      # restart: the clock goes back
+    assert not u.skipped and u.time_segment == 1 and u.level == WARN and "went back by 149" in u.message
+    us = [tr.update(11.0 + 10 * i, J1, 0.005, 0.003, 3e-6) for i in range(5)]
+    assert not any(x.skipped for x in us) and us[-1].inertia_windows_fed == 12
+    assert us[-1].wear_rate_m_per_s is not None                      # the wear line restarted on the new segment
+    u = tr.update(1.0e6, J1, 0.005, 0.003, 3e-6)                     # far ahead (> 7 days)
+    assert u.time_segment == 2 and "jumped ahead" in u.message
+    u = tr.update(61.0, J1, 0.005, 0.003, 3e-6)                      # and back: a third segment, used
+    assert not u.skipped and u.time_segment == 3 and u.inertia_windows_fed == 14
+    later = [tr.update(71.0 + 10 * i, J1, 0.005, 0.003, 3e-6) for i in range(30)]
+    assert later[-1].level == OK and not later[-1].changes           # the WARN is held, then the drive is OK again
+    TrendTracker.from_dict(tr.to_dict())                             # the state after a clock going back loads
+    small = TrendTracker(TrendConfig(commissioning_windows=3))
+    for i in range(6):
+        small.update(100.0 + 10 * i, J1, 0.005)
+    assert small.update(150.0 + 6 * 86400.0, J1, 0.005).time_segment == 0   # a 6-day pause is no discontinuity
 
 
 def test_the_same_window_again_is_skipped_and_leaves_the_state():
@@ -236,8 +259,10 @@ def test_the_same_window_again_is_skipped_and_leaves_the_state():
     tr.update(100.0, J1, 0.005)
     before = tr.to_dict()
     u = tr.update(100.0, J1 * 1.1, 0.005)
-    assert u.skipped and "the same window again" in u.reason
+    assert u.skipped and "the same window again" in u.reason and u.level == OK   # benign: counted, no WARN
     after = tr.to_dict()
+    assert after.pop("inputs")["windows_skipped"] == {"duplicate": 1}
+    before.pop("inputs")
     assert after.pop("n_windows") == before.pop("n_windows") + 1 and after == before
 
 

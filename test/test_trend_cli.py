@@ -62,7 +62,7 @@ def test_one_entry_an_hour_loses_nothing(system, tmp_path):
     """Each entry's stream starts 48 samples before it (the first 50-sample batch holds the entry):
     without the clock-jump handling the detector dropped that batch as a 'gap' and lost the window."""
     from jident_ros.cli.offline import diagnose_recording
-    from jident_ros.cli.trend import write_scenario_recording
+    from jident_ros.cli.scenario import write_scenario_recording
     from jident_ros.sim.scenarios import wear_scenario
     sc = wear_scenario(system, 6, 3600.0, 0.0025, 0.003, j1_step_at_window=3)
     rec = write_scenario_recording(tmp_path / "rec", system, sc, gap_samples=0)
@@ -133,7 +133,7 @@ def test_jident_trend_end_to_end(wear40, tmp_path, capsys):
 
 
 def test_trend_state_resumes_where_it_stopped(system, tmp_path, capsys):
-    from jident_ros.cli.trend import write_scenario_recording
+    from jident_ros.cli.scenario import write_scenario_recording
     from jident_ros.identify.trend import TrendTracker
     from jident_ros.sim.scenarios import wear_scenario
     sc = wear_scenario(system, 16, 3600.0, j1_step_at_window=12)
@@ -181,9 +181,10 @@ def test_trend_bad_input_is_one_line(wear40, tmp_path, capsys):
 
 def test_trend_parameters_map_to_the_config():
     from jident_ros.identify.trend import PARAMETER_FIELDS, TrendConfig
+    from jident_ros.identify.trend_config import NOT_PARAMETERS
     from jident_ros.parameters import DIAGNOSTIC, TREND
     assert TrendConfig.from_parameters(TREND) == TrendConfig()       # the defaults agree
-    assert set(PARAMETER_FIELDS.values()) == {f.name for f in dataclasses.fields(TrendConfig)}
+    assert set(PARAMETER_FIELDS.values()) == {f.name for f in dataclasses.fields(TrendConfig)} - NOT_PARAMETERS
     assert set(TREND) - set(PARAMETER_FIELDS) == {"trend_enabled", "trend_state_file"}
     assert all(DIAGNOSTIC[k] == v for k, v in TREND.items())
     cfg = TrendConfig.from_parameters({"trend_commissioning_windows": 10, "trend_width_warn_m": 0.01,
@@ -251,14 +252,25 @@ def _offline_window(d, detector="paper", estimate=None):
                            backlash_width_estimate_m=estimate, backlash_width_se_m=None if estimate is None else 3e-6)
 
 
-def test_a_refused_or_ambiguous_gap_j1_is_not_fed_and_the_width_source_is_named():
+def test_an_ambiguous_gap_j1_is_fed_a_refused_one_is_not_and_the_width_source_is_named():
+    """Issue 21: the class verdict (one window) does not decide what the trend sees; physics does."""
     from jident_ros.cli.trend import trend_window
-    from jident_ros.identify.trend_status import trend_inputs
-    for status in ("refused", "ambiguous"):
-        tw = trend_window(_offline_window(_diagnosis(status, None)), "rec")
-        assert tw.inertia_kgm2 is None and tw.inertia_se_kgm2 is None, tw
-        assert tw.skip_reason.startswith(f"gap J1 1.3 kg m^2 not published ({status}") and "plausible" in tw.skip_reason
-        assert (tw.width_m, tw.width_source) == (0.0051, "gap")          # the width is still followed
+    from jident_ros.identify.trend_status import refusal_kind, trend_inputs
+    tw = trend_window(_offline_window(_diagnosis("ambiguous", None)), "rec")
+    assert (tw.inertia_kgm2, tw.inertia_se_kgm2, tw.skip_reason, tw.refused_kind) == (1.3, 0.01, None, None)
+    assert (tw.width_m, tw.width_source) == (0.0051, "gap")
+    # refused as implausible: neither its J1 nor its width (likely a false entry), the reason kept and counted
+    tw = trend_window(_offline_window(_diagnosis("refused", None)), "rec")
+    assert tw.inertia_kgm2 is None and tw.inertia_se_kgm2 is None and tw.width_m is None, tw
+    assert tw.skip_reason.startswith("gap J1 1.3 kg m^2 refused (refused") and "plausible" in tw.skip_reason
+    assert tw.refused_kind == "outside_band"
+    d = _diagnosis("refused", None)
+    d.refused_reason = "backlash_width_m: the window's K2 = 0.005 m disagrees with the re-contact"
+    assert refusal_kind(d) == "inconsistent"
+    d.gap = None
+    assert refusal_kind(d) == "input"
+    d.status = "undiagnosed"
+    assert refusal_kind(d) == "no_gap" and trend_inputs(d).width_m == 0.0051   # no gap: the width still counts
     tw = trend_window(_offline_window(_diagnosis("deviating", "gap")), "rec")
     assert (tw.inertia_kgm2, tw.inertia_se_kgm2, tw.inertia_ci_low_kgm2, tw.skip_reason) == (1.3, 0.01, 1.28, None)
     # a flank-detector window: its flank-to-flank K2 wins over the gap estimator's width, with its se (floored)

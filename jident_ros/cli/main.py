@@ -30,7 +30,8 @@ from jident_ros.cli.offline import (
     summary_line,
     write_json,
 )
-from jident_ros.cli.trend import add_scenario_arguments, add_trend_parser, cmd_simulate_scenario
+from jident_ros.cli.scenario import add_scenario_arguments, cmd_simulate_scenario
+from jident_ros.cli.trend import add_trend_parser
 from jident_ros.config import ConfigError, load_method_config, load_system_config
 from jident_ros.evaluation.evaluate import VALIDITY_FILM_SHARES, run_evaluation
 from jident_ros.evaluation.plotting import plot_case

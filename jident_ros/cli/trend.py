@@ -9,9 +9,9 @@ Every recording is diagnosed window by window exactly as ``jident diagnose`` doe
 flank detector, ``--detector flank``, which needs no K2).
 Each window becomes a :class:`TrendWindow` (time, J1 with its standard error and 95 % interval, width
 with its standard error and its source, or the reason why it has no J1) by the diagnostic node's rule
-(:func:`jident_ros.identify.trend_status.trend_inputs`: the published gap J1 only -- a refused or ambiguous gap
-estimate is not used -- and the flank detector's flank-to-flank K2 of the window, else the gap estimator's width
-at re-contact).  The windows of all recordings are sorted by
+(:func:`jident_ros.identify.trend_status.trend_inputs`: the gap J1 whenever physics allows it -- published or
+ambiguous, not refused as implausible or inconsistent -- and the flank detector's flank-to-flank K2 of the window,
+else the gap estimator's width at re-contact).  The windows of all recordings are sorted by
 their **drive time**: ``entry_time_s``, the ``t`` column (drive clock, s) of the window's entry sample,
 as the drive publishes it on ``drive/signals`` (recordings are assumed to share one drive clock; the bag's
 receive time is not used).  They then go through one :class:`jident_ros.identify.trend.TrendTracker`
@@ -38,11 +38,6 @@ import numpy as np
 from jident_ros.cli.argtypes import count_arg as _count
 from jident_ros.cli.argtypes import finite_float_arg as _finite_float
 from jident_ros.cli.offline import OfflineError, diagnose_recording
-from jident_ros.cli.scenario import (  # noqa: F401  (re-exported: cli/main.py and the tests import them from here)
-    add_scenario_arguments,
-    cmd_simulate_scenario,
-    write_scenario_recording,
-)
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.identify.trend import SECONDS_PER_DAY, TrendConfig, TrendStateError, TrendTracker
@@ -64,8 +59,8 @@ class TrendWindow:
     """What the trend needs of one diagnosed window.
 
     time_s : drive clock t of the entry sample, s
-    inertia_kgm2, inertia_se_kgm2 : the published gap J1 and its standard error, kg m^2 (None: no published
-        gap J1 -- refused, ambiguous, image method only or no gap; ``skip_reason`` says why)
+    inertia_kgm2, inertia_se_kgm2 : the gap J1 and its standard error, kg m^2, published or not (None: refused
+        for a physical reason, image method only or no gap; ``skip_reason`` and ``refused_kind`` say why)
     inertia_ci_low_kgm2, inertia_ci_high_kgm2 : its 95 % interval, kg m^2
     width_m, width_se_m : backlash width K2 of the window and its standard uncertainty, m
     width_source : 'flank' (the flank detector's flank-to-flank estimate), 'gap' (the gap estimator's width
@@ -86,26 +81,29 @@ class TrendWindow:
     skip_reason: Optional[str]
     true_inertia_kgm2: Optional[float] = None
     width_source: Optional[str] = None
+    refused_kind: Optional[str] = None       # why there is no J1 (trend_status.REFUSAL_KINDS), None when there is one
 
 
 def trend_window(ow, recording: str, width_se_floor_m: float = 0.0) -> TrendWindow:
     """An :class:`jident_ros.cli.offline.OfflineWindow` -> :class:`TrendWindow`, with the diagnostic node's
-    rule (:func:`jident_ros.identify.trend_status.trend_inputs`): J1 only when the published J1 is the gap
-    estimate (a refused or ambiguous gap J1 and an image class alone are skipped, with the reason); the
-    width from the flank detector when the window has its estimate, else from the gap estimator."""
+    rule (:func:`jident_ros.identify.trend_status.trend_inputs`): the gap J1 whenever physics allows it,
+    published or not (an ambiguous class verdict does not keep it from the trend); none, with the reason, when
+    it was refused as implausible or inconsistent, or the window has no gap estimate; the width from the flank
+    detector when the window has its estimate, else from the gap estimator (none when the gap was refused)."""
     d = ow.diagnosis
-    j, se, wm, wse, source = trend_inputs(d, width_se_floor_m, ow)
+    ti = trend_inputs(d, width_se_floor_m, ow)
     lo = hi = reason = None
-    if j is not None:
+    if ti.inertia_kgm2 is not None:
         lo, hi = (float(v) for v in d.gap.ci95_kgm2)
     elif d.inertia_kgm2 is not None:
         reason = f"J1 {d.inertia_kgm2:.5g} kg m^2 from the {d.source} method has no standard error"
     elif d.gap is not None:
-        reason = f"gap J1 {d.gap.inertia_kgm2:.5g} kg m^2 not published ({d.status}: {d.refused_reason or d.message})"
+        reason = f"gap J1 {d.gap.inertia_kgm2:.5g} kg m^2 refused ({d.status}: {d.refused_reason or d.message})"
     else:
         reason = "; ".join(d.problems) or d.message
-    return TrendWindow(float(ow.entry_time_s), recording, int(ow.window_id), j, se, lo, hi, wm, wse, reason,
-                       ow.true_inertia_kgm2, source)
+    return TrendWindow(float(ow.entry_time_s), recording, int(ow.window_id), ti.inertia_kgm2, ti.inertia_se_kgm2,
+                       lo, hi, ti.width_m, ti.width_se_m, reason, ow.true_inertia_kgm2, ti.width_source,
+                       ti.inertia_refused)
 
 
 # --------------------------------------------------------------------------- the run
@@ -197,7 +195,8 @@ def run_trend(recordings: Sequence, *, system=None, method=None, config: Optiona
         n0 = len(windows)
         windows = [w for w in windows if w.time_s > tr.last_time_s]
         skipped_old = n0 - len(windows)
-    updates = [tr.update(w.time_s, w.inertia_kgm2, w.inertia_se_kgm2, w.width_m, w.width_se_m) for w in windows]
+    updates = [tr.update(w.time_s, w.inertia_kgm2, w.inertia_se_kgm2, w.width_m, w.width_se_m,
+                         inertia_refused=w.refused_kind) for w in windows]
     return TrendRun(windows, updates, tr, summary, skipped_old, time.perf_counter() - t0)
 
 
@@ -323,15 +322,16 @@ def format_summary(run: TrendRun, config: TrendConfig) -> str:
     jumps = sum(r[4] for r in run.recordings)
     used = sum(1 for u in us if not u.skipped)
     skipped = len(us) - used
-    text = (f"windows: {len(ws)} from {n_rec} recording(s) in drive-time order; {used} used by the trend, "
-            f"{skipped} skipped")
-    if skipped:
-        reasons: dict = {}
-        for w, u in zip(ws, us):
-            if u.skipped:
-                r = (w.skip_reason or u.reason or "?").split(":")[0]
-                reasons[r] = reasons.get(r, 0) + 1
-        text += " (" + ", ".join(f"{r}: {n}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1])) + ")"
+    fed = sum(1 for w, u in zip(ws, us) if w.inertia_kgm2 is not None and not u.skipped)
+    text = (f"windows: {len(ws)} from {n_rec} recording(s) in drive-time order; {used} used by the trend "
+            f"(J1 fed from {fed}), {skipped} skipped")
+    reasons: dict = {}
+    for w, u in zip(ws, us):
+        if w.inertia_kgm2 is None or u.skipped:
+            r = w.refused_kind or (u.reason or w.skip_reason or "?").split(":")[0]
+            reasons[r] = reasons.get(r, 0) + 1
+    if reasons:
+        text += "; without J1: " + ", ".join(f"{r} {n}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1]))
     if run.already_in_state:
         text += f"; {run.already_in_state} already in the state (at or before its last time) left out"
     lines.append(text)
@@ -492,6 +492,5 @@ def cmd_trend(args) -> int:
     return 0 if run.windows else 1
 
 
-__all__ = ["CSV_COLUMNS", "TrendRun", "TrendWindow", "add_scenario_arguments", "add_trend_parser",
-           "cmd_simulate_scenario", "cmd_trend", "format_summary", "plot_trend", "run_trend", "trend_window",
-           "write_scenario_recording", "write_trend_csv"]
+__all__ = ["CSV_COLUMNS", "TrendRun", "TrendWindow", "add_trend_parser", "cmd_trend", "format_summary", "plot_trend",
+           "run_trend", "trend_window", "write_trend_csv"]

@@ -36,6 +36,7 @@ class ChangeEvent:
     size_se: float
     size_pct: float             # per cent of the old baseline
     sign: int                   # +1 increase, -1 decrease
+    class_pct: float | None = None   # J1: the nearest of the paper's relative classes (TrendConfig.change_classes_pct)
 
 
 
@@ -145,9 +146,11 @@ class InertiaChannel(Channel):
             self.x, self.P, _ = weighted_mean(self.comm)
             if self._commissioning_done(t):
                 m, v, rs = huber_mean(self.comm, estimate_scale=True)
-                self._set_scale(rs, len(self.comm) - 1)
+                n_comm = len(self.comm)
+                self._set_scale(rs, n_comm - 1)
                 self._commissioned(m, v, idx)
                 self.x, self.P = m, self.baseline_var
+                self._start_refining(n_comm)
             return None
         se = se * self.scale
         p = (idx, t, y, se)
@@ -184,7 +187,7 @@ class InertiaChannel(Channel):
             self.seg_swy += w * (self.baseline + z * sd if z != zraw else y)
             self.seg_n += 1
             self.baseline, self.baseline_var = self.seg_swy / self.seg_sw, 1.0 / self.seg_sw
-            if self.seg_n >= cfg.commissioning_windows:
+            if self.seg_n >= cfg.baseline_refine_windows:
                 self.seg_n = 0
         sign = self.cusum.step(z, k, h, idx)
         if not sign:
@@ -206,12 +209,23 @@ class InertiaChannel(Channel):
             self._rebaseline(idx)
         return ev
 
+    def _start_refining(self, n: int):
+        """The baseline (on ``n`` windows) keeps being refined by the next windows up to baseline_refine_windows."""
+        v = self.baseline_var
+        if v is not None and v > 0.0 and n < self.cfg.baseline_refine_windows:
+            self.seg_sw, self.seg_swy, self.seg_n = 1.0 / v, self.baseline / v, n
+        else:
+            self.seg_n = 0
+
+    @property
+    def baseline_windows(self) -> int:
+        """Windows the current baseline rests on while it is still being refined (0: refined or given)."""
+        return self.seg_n
+
     def _rebaseline(self, idx: int):
         m, v, _ = huber_mean(self.relearn)
         self.baseline, self.baseline_var = m, v
-        self.seg_sw, self.seg_swy, self.seg_n = 1.0 / v, m / v, len(self.relearn)
-        if self.seg_n >= self.cfg.commissioning_windows:
-            self.seg_n = 0
+        self._start_refining(len(self.relearn))
         self.relearn = []
         self.phase = MONITORING
         self.cusum.reset(idx + 1)
@@ -242,6 +256,12 @@ class WidthChannel(Channel):
         self.pos = 0
         self.t0 = 0.0
         self.fit = None      # (t_mean_rel, y_mean, slope, s2, sum_w, sxx) or None
+
+    def new_segment(self, idx: int):
+        """A time discontinuity at window ``idx``: the regression line restarts (its slope never spans the
+        jump) and so does the CUSUM (it compares with that line); the baseline and the phase carry on."""
+        self._reset_segment(0.0)
+        self.cusum.reset(idx)
 
     def _reset_segment(self, t0: float):
         self.count = self.pos = 0

@@ -3,9 +3,10 @@
 * :func:`trend_config_from_parameters`: node parameters (``trend_*`` names, defaults in
   :data:`jident_ros.parameters.TREND`) -> :class:`~jident_ros.identify.trend.TrendConfig`.  ROS
   parameters cannot be None, so 0 (or "") stands for "not set" where the config takes None.
-* :func:`trend_inputs`: one window's diagnosis -> what the tracker takes of it (the published J1 of
-  the gap estimate with its standard error, the backlash width estimate with its standard uncertainty:
-  the flank detector's when the window has one, else the gap estimator's, and which).
+* :func:`trend_inputs`: one window's diagnosis -> what the tracker takes of it (the gap estimate's J1
+  with its standard error whenever physics allows it, published or not; the backlash width estimate with its
+  standard uncertainty: the flank detector's when the window has one, else the gap estimator's, and which;
+  and why there is no J1).
 * :func:`trend_status`: a :class:`~jident_ros.identify.trend.TrendUpdate` -> the content of the
   diagnostic node's periodic "jident_diagnostic: trend" DiagnosticStatus: (level, message,
   [(key, value), ...]) with the levels of diagnostic_msgs (OK 0, WARN 1, ERROR 2), the tracker's one-line
@@ -33,50 +34,90 @@ Z95 = 1.959963984540054
 
 
 class TrendInputs(NamedTuple):
-    """What :meth:`TrendTracker.update` takes of one window (None where a quantity is not known) and where
-    the width came from: ``width_source`` 'flank' (the flank detector's flank-to-flank K2 of the window,
-    window format 2's ``backlash_width_estimate_m``), 'gap' (the gap estimator's width at re-contact: the
-    fallback when the window has no flank estimate) or None (no width)."""
+    """What :meth:`TrendTracker.update` takes of one window (None where a quantity is not known), where the
+    width came from, and why the window has no J1: ``width_source`` 'flank' (the flank detector's
+    flank-to-flank K2 of the window, window format 2's ``backlash_width_estimate_m``), 'gap' (the gap
+    estimator's width at re-contact: the fallback when the window has no flank estimate) or None (no width);
+    ``inertia_refused`` one of :data:`REFUSAL_KINDS` when the window has no J1 for the trend, else None."""
 
     inertia_kgm2: Optional[float]
     inertia_se_kgm2: Optional[float]
     width_m: Optional[float]
     width_se_m: Optional[float]
     width_source: Optional[str]
+    inertia_refused: Optional[str] = None
 
 
 #: the width sources of :class:`TrendInputs`
 WIDTH_SOURCES = ("flank", "gap")
+
+#: Why a window gives the trend no J1 (issue 21: only physics refuses an estimate; the class verdict does not):
+#: the key counted by the tracker -> what it means.
+REFUSAL_KINDS = {
+    "outside_band": "the gap J1 is outside the plausible band (a false entry, a wrong K2, radius or torque scale)",
+    "inconsistent": "the gap fit is inconsistent with the window (the K2 disagrees with the re-contact)",
+    "no_gap": "no gap estimate (undetermined, too short, no usable fit)",
+    "input": "the window's input was refused",
+    "no_std_error": "a J1 without a standard error (the image method's class alone)",
+}
 
 
 def _finite(*v) -> bool:
     return all(x is not None and math.isfinite(float(x)) for x in v)
 
 
+def _gap_se(g) -> float:
+    se = g.std_error_kgm2
+    if se is None or not math.isfinite(float(se)):
+        lo, hi = (float(v) for v in g.ci95_kgm2)
+        se = (hi - lo) / (2 * Z95)
+    return float(se)
+
+
+def refusal_kind(diagnosis) -> Optional[str]:
+    """None when the window's gap estimate goes to the trend, else the :data:`REFUSAL_KINDS` key.  A gap
+    estimate goes to the trend whatever its class verdict ('ambiguous': an interval over two classes, or
+    'between classes'), unless the publishing policy refused it for a physical reason ('refused': outside the
+    plausible band, K2 inconsistent with the re-contact), or it is not finite."""
+    g = getattr(diagnosis, "gap", None)
+    status = getattr(diagnosis, "status", None)
+    if g is None:
+        if getattr(diagnosis, "inertia_kgm2", None) is not None:
+            return "no_std_error"
+        return "input" if status == "refused" else "no_gap"
+    if status == "refused":
+        return "outside_band" if "plausible band" in (getattr(diagnosis, "refused_reason", "") or "") \
+            else "inconsistent"
+    if not _finite(g.inertia_kgm2) or not _finite(_gap_se(g)) or not _gap_se(g) > 0.0:
+        return "no_gap"
+    return None
+
+
 def trend_inputs(diagnosis, width_se_floor_m: float = 0.0, window=None) -> TrendInputs:
     """The tracker's inputs from one window's :class:`~jident_ros.identify.diagnosis.WindowDiagnosis`
     (and the :class:`~jident_ros.stream.layout.Window` it was diagnosed from, when at hand).
 
-    J1 only when the published J1 is the gap estimate (``source == 'gap'``: the policy accepted it; a
-    refused or ambiguous gap estimate is not used): its standard error is the fit's, else
-    (high - low) / (2 x 1.96) of its 95 % interval; a J1 of the image method alone has no standard error
-    and is not used.  The width K2, in this order of preference (``width_source``):
+    J1: the gap estimate whenever physics allows it (:func:`refusal_kind`), published or not (an 'ambiguous'
+    window, whose interval holds two classes, still carries its J1 and standard error: twenty such windows
+    can name a change that one cannot); its standard error is the fit's, else (high - low) / (2 x 1.96) of its
+    95 % interval; a J1 of the image method alone has no standard error and is not used.  The width K2, in
+    this order of preference (``width_source``):
 
     * 'flank': the flank detector's flank-to-flank estimate of the window (``window``'s
       ``backlash_width_estimate_m`` / ``backlash_width_se_m``, or the diagnosis' width when it came from
       the window: method 'flank'), whether or not the gap fit succeeded;
     * 'gap': the gap estimator's width at re-contact (paper-detector windows, zone-centred angles);
 
-    its standard uncertainty at least ``width_se_floor_m`` (the tracker's floor)."""
+    none when the gap estimate was refused as physically implausible or inconsistent (the window is then
+    likely a false entry: its width is not trusted either); its standard uncertainty at least
+    ``width_se_floor_m`` (the tracker's floor)."""
     j = jse = w = wse = src = None
+    kind = refusal_kind(diagnosis)
     g = getattr(diagnosis, "gap", None)
-    if g is not None and getattr(diagnosis, "source", None) == "gap" and diagnosis.inertia_kgm2 is not None:
-        j = float(g.inertia_kgm2)
-        se = g.std_error_kgm2
-        if se is None or not math.isfinite(float(se)):
-            lo, hi = (float(v) for v in g.ci95_kgm2)
-            se = (hi - lo) / (2 * Z95)
-        jse = float(se)
+    if kind is None:
+        j, jse = float(g.inertia_kgm2), _gap_se(g)
+    if kind in ("outside_band", "inconsistent"):
+        return TrendInputs(None, None, None, None, None, kind)
     est = getattr(window, "backlash_width_estimate_m", None)
     est_se = getattr(window, "backlash_width_se_m", None)
     width = getattr(diagnosis, "width", None)
@@ -87,7 +128,7 @@ def trend_inputs(diagnosis, width_se_floor_m: float = 0.0, window=None) -> Trend
         src = "flank" if getattr(width, "method", "") == "flank" else "gap"
     if w is not None:
         wse = max(wse, float(width_se_floor_m))
-    return TrendInputs(j, jse, w, wse, src)
+    return TrendInputs(j, jse, w, wse, src, kind)
 
 
 def _v(x: Optional[float]) -> Any:
@@ -131,5 +172,5 @@ def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
     return int(u.level), u.message, vals
 
 
-__all__ = ["TREND_STATUS_NAME", "TrendInputs", "WIDTH_SOURCES", "trend_config_from_parameters", "trend_inputs",
-           "trend_status"]
+__all__ = ["REFUSAL_KINDS", "TREND_STATUS_NAME", "TrendInputs", "WIDTH_SOURCES", "refusal_kind",
+           "trend_config_from_parameters", "trend_inputs", "trend_status"]

@@ -561,7 +561,9 @@ class DiagnosticNode(LifecycleNode):
             return
         path = os.path.expanduser(path)
         try:
-            self.trend = TrendTracker.load(path, config)
+            # checked on load (identify/trend_state.py): J1 within the policy's plausible band of the nominal
+            plausible = {"inertia_kgm2": self.policy.band_kgm2(self.nominal)}
+            self.trend = TrendTracker.load(path, config, plausible)
             self.get_logger().info(f"trend state read from {path} ({self.trend.n_windows} window(s) so far)")
         except FileNotFoundError:
             self.get_logger().info(f"trend state file {path} does not exist yet: the trend starts fresh")
@@ -577,14 +579,16 @@ class DiagnosticNode(LifecycleNode):
 
     def _update_trend(self, win, d):
         """One diagnosed window into the tracker; publish the smoothed J1 and width; save the state."""
-        j, jse, w, wse, source = trend_inputs(d, self.trend.config.width_se_floor_m, win)
+        j, jse, w, wse, source, refused = trend_inputs(d, self.trend.config.width_se_floor_m, win)
         if j is None and w is None:   # nothing to follow in this window (its status says why)
             self.trend_windows_without_estimate += 1
+            if refused is not None:   # counted by the tracker, by reason (the trend status says how many and why)
+                self.trend.count_refused(refused)
             return
         self.trend_width_source = source or "none"
         if source is not None:
             self.trend_width_sources[source] += 1
-        u = self.trend.update(win.entry_time_s, j, jse, w, wse)
+        u = self.trend.update(win.entry_time_s, j, jse, w, wse, inertia_refused=refused)
         self.trend_update = u
         if u.skipped:
             self.get_logger().warning(f"trend: window {win.window_id} skipped: {u.reason}",
