@@ -5,7 +5,7 @@ with ``drive/true_inertia``, ``drive/backlash_width`` and a ``drive/case`` row b
 clock jumps between events: event i's stream starts ``gap_samples + 48`` samples before its entry time
 ``scenario.entry_times_s[i]`` (a steady stretch), runs 2000 samples from the entry and stops; the next
 event's stream starts an interval later.  ``jident diagnose`` restarts the detector's history at such a
-jump (:class:`jident_ros.bag.recorded.DriveReplay`, ``clock_jumps``), so no window is lost and no entry is
+jump (:class:`jident_ros.bag.drive_replay.DriveReplay`, ``clock_jumps``), so no window is lost and no entry is
 faked.
 """
 from __future__ import annotations
@@ -17,7 +17,7 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-from jident_ros.bag.recording import BagWriter
+from jident_ros.bag.writer import BagWriter
 from jident_ros.cli.argtypes import count_arg as _count
 from jident_ros.cli.argtypes import finite_float_arg as _finite_float
 from jident_ros.cli.offline import OfflineError, multiarray_message
