@@ -186,7 +186,7 @@ def add_scenario_arguments(s) -> None:
     s.add_argument("--channels", default=",".join(DRIVE_CHANNELS),
                    help="scenario --raw: the recorded channels (default: what a drive measures, "
                         f"{','.join(DRIVE_CHANNELS)}; add a1 for an accelerometer)")
-    s.add_argument("--namespace", default="", help="scenario --raw: the drive's namespace (e.g. /drive_07)")
+    s.add_argument("--namespace", default="", help="scenario: the drive's namespace (e.g. /drive_07)")
 
 
 def cmd_simulate_scenario(args) -> int:
@@ -220,7 +220,7 @@ def cmd_simulate_scenario(args) -> int:
                                channels=_channels(args.channels),
                                encoder_counts=2 ** 16 if args.encoder_counts is None else args.encoder_counts)
         else:
-            write_scenario_recording(out, system, sc, snr_db=args.snr_db, seed=args.seed,
+            write_scenario_recording(out, system, sc, snr_db=args.snr_db, seed=args.seed, namespace=args.namespace,
                                      gap_samples=args.gap_samples, progress=None if bar is None else bar.update)
     finally:
         if bar is not None:
