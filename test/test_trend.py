@@ -6,6 +6,7 @@ The 100,000-window false-alarm run and the full target measurement are marked sl
 from __future__ import annotations
 
 import json
+import math
 import os
 
 import numpy as np
@@ -355,3 +356,81 @@ def test_save_replaces_existing_file(tmp_path):
     tr.save(path)
     assert TrendTracker.load(path).n_windows == 1
     assert sorted(os.listdir(tmp_path)) == ["t.json"]
+
+
+# --------------------------------------------------------------------------- issue 24: a state checked on load
+
+def _monitored_state(tmp_path):
+    tr = TrendTracker(TrendConfig(commissioning_windows=3))
+    for i in range(12):
+        tr.update(100.0 + 10 * i, J1 * (1 + 0.001 * (-1) ** i), 0.005, 0.003 + 1e-6 * i, 3e-6)
+    path = tmp_path / "state.json"
+    tr.save(path)
+    return tr, path, json.loads(path.read_text())
+
+
+@pytest.mark.parametrize("tamper, field", [
+    (lambda d: d["inertia"].update(x=50.0), "inertia.x"),                       # the attack: 49.999 was published
+    (lambda d: d["inertia"].update(P=-1.0), "inertia.P"),                       # the attack: math domain error
+    (lambda d: d["inertia"].update(baseline=1.16 * 1.6), "inertia.baseline"),   # beyond 1.5x its reference
+    (lambda d: d["inertia"].update(baseline_var=-1e-6), "inertia.baseline_var"),
+    (lambda d: d["inertia"].update(x="1.16"), "inertia.x"),                     # a string is not a number
+    (lambda d: d["inertia"].update(scale=0.5), "inertia.scale"),
+    (lambda d: d["inertia"]["history"][-1].__setitem__(3, 0.0), "inertia.history"),    # se 0
+    (lambda d: d["inertia"]["history"][-1].__setitem__(1, 1e9), "inertia.history"),    # a time in the future
+    (lambda d: d["width"]["y"].__setitem__(0, 5.0), "width.y[0]"),              # a 5 m backlash
+    (lambda d: d["width"]["cusum"].__setitem__(0, -3.0), "width.cusum.pos"),
+    (lambda d: d.update(n_windows=True), "n_windows"),
+])
+def test_a_tampered_state_is_refused_naming_the_field(tmp_path, tamper, field):
+    tr, path, d = _monitored_state(tmp_path)
+    tamper(d)
+    path.write_text(json.dumps(d))
+    with pytest.raises(TrendStateError) as exc:
+        TrendTracker.load(path)
+    assert field in str(exc.value) and str(path) in str(exc.value), str(exc.value)
+
+
+def test_a_valid_state_loads_and_a_plausible_band_is_applied(tmp_path):
+    tr, path, d = _monitored_state(tmp_path)
+    again = TrendTracker.load(path)
+    assert again.to_dict() == tr.to_dict()
+    with pytest.raises(TrendStateError, match="inertia.baseline"):    # a band of another drive: refused
+        TrendTracker.load(path, plausible={"inertia_kgm2": (2.0, 3.0)})
+    TrendTracker.load(path, plausible={"inertia_kgm2": (0.58, 1.74)})
+
+
+# --------------------------------------------------------------------------- issue 21
+
+def test_short_commissioning_relative_drift_interval_and_the_class_of_the_change():
+    cfg = TrendConfig()
+    assert cfg.commissioning_windows == 5 and cfg.baseline_refine_windows == 20
+    s = steady(40, step_at=25, step_pct=-2.5, j1_se_pct=0.5, seed=5)
+    us = TrendTracker(cfg).batch(s.time_s, s.inertia_kgm2, s.inertia_se_kgm2)
+    assert us[3].commissioning and not us[4].commissioning                  # the baseline from 5 windows
+    assert us[5].inertia_baseline_windows == 6 and us[22].inertia_baseline_windows == 0   # refined up to 20
+    assert us[4].inertia_baseline_se_kgm2 > us[19].inertia_baseline_se_kgm2  # its uncertainty shrinks
+    u = us[10]
+    lo, hi = u.inertia_drift_ci95_pct
+    assert lo < u.inertia_drift_pct < hi and hi - lo == pytest.approx(2 * 1.959964 * u.inertia_drift_se_pct)
+    fired = [x for x in us if x.changes]
+    assert fired and 25 <= fired[0].window_index <= 29
+    ev = fired[0].changes[0]
+    assert ev.sign == -1 and ev.class_pct == -2.5 and "nearest class -2.5 %" in fired[0].message
+    # the torque accuracy widens the absolute J1 only (it cancels in the drift)
+    t = TrendTracker(TrendConfig(torque_accuracy_pct=3.0)).batch(s.time_s, s.inertia_kgm2, s.inertia_se_kgm2)
+    assert t[20].inertia_drift_se_pct == us[20].inertia_drift_se_pct
+    assert t[20].inertia_abs_se_kgm2 == pytest.approx(math.hypot(us[20].inertia_se_kgm2, 0.03 * us[20].inertia_kgm2))
+    assert us[20].inertia_abs_se_kgm2 == pytest.approx(us[20].inertia_se_kgm2)
+
+
+def test_refused_windows_are_counted_by_reason_and_said():
+    tr = TrendTracker(TrendConfig(commissioning_windows=3))
+    for i in range(6):
+        tr.update(100.0 + i, J1, 0.005)
+    u = tr.update(106.0, None, None, 0.003, 3e-6, inertia_refused="outside_band")
+    tr.count_refused("no_gap")
+    u = tr.update(107.0, J1, 0.005)
+    assert u.inertia_windows_fed == 7 and u.inertia_windows_refused == {"outside_band": 1, "no_gap": 1}
+    assert "J1 fed 7 of 8 windows, 2 without J1 (1 outside_band, 1 no_gap)" in u.message
+    assert TrendTracker.from_dict(tr.to_dict()).inertia_refused == {"outside_band": 1, "no_gap": 1}

@@ -301,3 +301,43 @@ def test_jident_trend_flank_and_paper_detectors_and_parallel_jobs(wear40, system
     assert {x.width_source for x in paper.windows} == {"gap"} and np.max(np.abs(wp / truth - 1)) > 0.01
     # the wear rate (1 mm in 39 h) from the flank estimates within 2 %
     assert flank.updates[-1].wear_rate_m_per_s == pytest.approx(0.001 / 39 / 3600, rel=0.02)
+
+
+# --------------------------------------------------------------------------- fleet (issue 21)
+
+def test_fleet_groups_by_namespace_and_by_mapping_one_trend_per_drive(tmp_path, system, capsys):
+    """Three recordings of two drives (namespaces /press1 and /press2; press1's split in two recordings, the
+    second one's J1 stepped): one trend per drive, one row each, the grouping by a --drive-id file equal to it."""
+    from jident_ros.cli.fleet import FLEET_COLUMNS, group_by_drive, recording_namespaces
+    from jident_ros.cli.scenario import write_scenario_recording
+    from jident_ros.sim.scenarios import wear_scenario
+    sc = wear_scenario(system, 16, 3600.0, 0.0025, 0.0030, None, None, 10, -5.0, None)
+    first = dataclasses.replace(sc, cases=sc.cases[:8], entry_times_s=sc.entry_times_s[:8])
+    second = dataclasses.replace(sc, cases=sc.cases[8:], entry_times_s=sc.entry_times_s[8:])
+    steady = wear_scenario(system, 8, 3600.0, 0.0025, 0.0030, None, None, None, 0.0, None)
+    fleet = tmp_path / "fleet"
+    write_scenario_recording(fleet / "a" / "r1", system, first, snr_db=30.0, namespace="/press1")
+    write_scenario_recording(fleet / "b" / "r2", system, second, snr_db=30.0, seed=1, namespace="/press1")
+    write_scenario_recording(fleet / "a" / "r3", system, steady, snr_db=30.0, seed=2, namespace="/press2")
+    assert recording_namespaces(fleet / "a" / "r3") == {"press2": "/press2/drive/signals"}
+    out = tmp_path / "out"
+    assert jident(["trend", str(fleet), "--fleet", "--out", str(out), "--jobs", "2", "--quiet"]) == 0
+    rows = list(csv.DictReader(open(out / "fleet.csv")))
+    assert list(rows[0]) == list(FLEET_COLUMNS)
+    by = {r["drive"]: r for r in rows}
+    assert set(by) == {"press1", "press2"}
+    assert (by["press1"]["recordings"], by["press1"]["windows"], by["press2"]["windows"]) == ("2", "16", "8")
+    assert int(by["press1"]["changes"]) >= 1 and by["press1"]["last_change"].startswith("-")   # the -5 % step
+    assert by["press2"]["changes"] == "0" and "change" not in by["press2"]["message"]   # (WARN: the wear)
+    assert float(by["press1"]["inertia_drift_pct"]) < -3.0 < float(by["press2"]["inertia_drift_pct"])
+    assert (out / "fleet.png").stat().st_size > 0 and (out / "drives" / "press2" / "trend.csv").exists()
+    assert "press1" in capsys.readouterr().out
+    # the same grouping from a mapping file; a recording it does not name is one clear line
+    mapping = tmp_path / "drives.csv"
+    mapping.write_text("# recording,drive\nfleet/a/r1,press1\nfleet/b/r2,press1\nfleet/a/r3,press2\n")
+    recs = [fleet / "a" / "r1", fleet / "b" / "r2", fleet / "a" / "r3"]
+    assert {k: [r for r, _ in v] for k, v in group_by_drive(recs, str(mapping)).items()} == \
+        {k: [r for r, _ in v] for k, v in group_by_drive(recs).items()}
+    mapping.write_text("fleet/a/r1,press1\n")
+    assert jident(["trend", str(fleet), "--fleet", "--drive-id", str(mapping), "--out", str(out), "--quiet"]) == 2
+    assert "no drive for recording" in capsys.readouterr().err
