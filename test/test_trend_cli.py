@@ -341,3 +341,25 @@ def test_fleet_groups_by_namespace_and_by_mapping_one_trend_per_drive(tmp_path, 
     mapping.write_text("fleet/a/r1,press1\n")
     assert jident(["trend", str(fleet), "--fleet", "--drive-id", str(mapping), "--out", str(out), "--quiet"]) == 2
     assert "no drive for recording" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_hidden_scenario_rebuilt_step_flagged_within_5_recordings_none_before(tmp_path, system):
+    """Issue 21's scenario rebuilt with our writers: one drive recorded hourly for 40 h (one bag each), raw 2^16
+    encoder angles, the drive/signals topic only (no truth topics), 30 dB, K2 2.5 -> 5 mm, J1 -2.5 % from
+    recording 25 (index 24).  ~3 min."""
+    from jident_ros.cli.scenario import write_raw_scenario
+    from jident_ros.cli.trend_run import run_trend
+    from jident_ros.sim.scenarios import wear_scenario
+    from jident_ros.stream.layout import DEFAULT_CHANNELS
+    sc = wear_scenario(system, 40, 3600.0, 0.0025, 0.005, None, None, 24, -2.5, None)
+    paths = write_raw_scenario(tmp_path / "rec", system, sc, snr_db=30.0, channels=DEFAULT_CHANNELS)
+    run = run_trend(paths, system=system, jobs=2)
+    changes = [c for c in run.tracker.changes if c.quantity == "inertia"]
+    step_t = sc.entry_times_s[24]
+    assert changes and all(c.time_s >= step_t for c in changes), changes               # none before the step
+    first = changes[0]
+    assert first.sign == -1 and first.class_pct == -2.5
+    assert sum(1 for w in run.windows if step_t <= w.time_s <= first.time_s) <= 5       # within 5 recordings
+    widths = [u.width_m for u in run.updates if u.width_m is not None]
+    assert widths[-1] / widths[0] == pytest.approx(2.0, rel=0.1)                        # the width trend as before
