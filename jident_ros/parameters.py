@@ -164,6 +164,9 @@ TREND_PARAMS = {
                                            min=0, max=10**9, read_only=False),
     "trend_torque_accuracy_pct": Param(0.0, "the drive's torque accuracy, % (1 sd): widens the absolute J1 only",
                                        min=0.0, max=100.0, read_only=False),
+    "trend_se_scale_down": Param(True, "scale the errors down to the refined baseline's scatter when it is "
+                                 'significantly smaller (over-reported errors)', read_only=False),
+    "trend_se_scale_min": Param(0.25, 'smallest such scale', min=0.0, max=1.0, read_only=False),
     "trend_time_discontinuity_s": Param(604800.0, 'a window this long after the previous one (or before it) starts '
                                         'a new time segment, s', min=0.0, max=1e12, read_only=False),
 }

@@ -84,6 +84,29 @@ class Channel:
                 and robust_scale ** 2 > chi2.ppf(SE_SCALE_TEST_LEVEL, dof) / dof:
             self.scale = min(robust_scale, self.cfg.se_scale_max)
 
+    def _scale_down(self):
+        """The baseline is refined (it rests on baseline_refine_windows windows): when their scatter about it is
+        significantly below what their standard errors say -- the 99 % upper confidence bound of the robust
+        scale below 1 -- the later standard errors (and the baseline's) are scaled by that bound (never below
+        se_scale_min; once).  An estimator whose errors are over-reported (e.g. a torque-accuracy floor the
+        drive's own scatter does not show) then sees a change as large as it is; calibrated or under-reported
+        errors are left alone."""
+        cfg = self.cfg
+        if not cfg.se_scale_down or self.scale != 1.0:
+            return
+        pts = list(self.history)[-cfg.baseline_refine_windows:]
+        n = len(pts)
+        if n < 10:
+            return
+        r = np.array([(p[2] - self.baseline) / p[3] for p in pts])
+        upper = m_scale(r, n / (n - 1.0)) * math.sqrt((n - 1) / chi2.ppf(1.0 - SE_SCALE_TEST_LEVEL, n - 1))
+        if upper < 1.0:
+            self.scale = max(upper, cfg.se_scale_min)
+            self.baseline_var *= self.scale ** 2
+            self.reference_var = min(self.reference_var, self.baseline_var) if self.reference_var else self.baseline_var
+            self.history = deque(((i, tt, yy, sd * self.scale) for i, tt, yy, sd in self.history),
+                                 maxlen=self.history.maxlen)
+
     def _commissioned(self, m: float, v: float, idx: int):
         """End of commissioning at window ``idx``: the baseline (and the kept reference) m with variance
         v x scale^2, the history's standard errors scaled, monitoring from the next window."""
@@ -189,6 +212,7 @@ class InertiaChannel(Channel):
             self.baseline, self.baseline_var = self.seg_swy / self.seg_sw, 1.0 / self.seg_sw
             if self.seg_n >= cfg.baseline_refine_windows:
                 self.seg_n = 0
+                self._scale_down()
         sign = self.cusum.step(z, k, h, idx)
         if not sign:
             return None

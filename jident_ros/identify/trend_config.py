@@ -47,6 +47,11 @@ class TrendConfig:
     #: learn a factor s >= 1 for the reported standard errors from the commissioning scatter
     se_scale_from_commissioning: bool = False
     se_scale_max: float = 3.0
+    #: when the J1 baseline is refined (baseline_refine_windows), scale the later standard errors DOWN to the
+    #: 99 % upper bound of the baseline windows' scatter when that is below 1 (over-reported errors), not below
+    #: se_scale_min
+    se_scale_down: bool = True
+    se_scale_min: float = 0.25
     #: J1 local-level random walk, per cent of the baseline per window (1 sd)
     inertia_process_sd_pct_per_window: float = 0.02
     #: windows (since the estimated onset) averaged into the new baseline after a change
@@ -124,6 +129,9 @@ class TrendConfig:
         pos("se_scale_max")
         if self.se_scale_max < 1:
             bad("se_scale_max", ">= 1")
+        pos("se_scale_min")
+        if self.se_scale_min > 1:
+            bad("se_scale_min", "<= 1")
         if self.innovation_clip_sd <= self.cusum_reference_sd:
             bad("innovation_clip_sd", f"> cusum_reference_sd ({self.cusum_reference_sd})")
         if self.drift_alarm_pct < self.drift_warn_pct:
@@ -193,6 +201,8 @@ PARAMETER_FIELDS = {
     "trend_baseline_refine_windows": "baseline_refine_windows",
     "trend_torque_accuracy_pct": "torque_accuracy_pct",
     "trend_time_discontinuity_s": "time_discontinuity_s",
+    "trend_se_scale_down": "se_scale_down",
+    "trend_se_scale_min": "se_scale_min",
 }
 #: TrendConfig fields that are not node parameters.
 NOT_PARAMETERS = {"change_classes_pct"}
@@ -203,7 +213,7 @@ ZERO_IS_NONE = {"commissioning_duration_s", "inertia_baseline_kgm2", "width_base
 NODE_ONLY = {"trend_enabled", "trend_state_file"}
 _INT_FIELDS = {"commissioning_windows", "relearn_windows", "change_hold_windows", "width_regression_windows",
                "max_changes_kept", "baseline_refine_windows"}
-_BOOL_FIELDS = {"se_scale_from_commissioning", "width_change_detection"}
+_BOOL_FIELDS = {"se_scale_from_commissioning", "width_change_detection", "se_scale_down"}
 
 
 def _config_from_parameters(cls, params) -> "TrendConfig":

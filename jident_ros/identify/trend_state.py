@@ -172,7 +172,10 @@ def _segment_start(tr) -> int:
 def _check_channel(name: str, ch, tr, band):
     last = tr.last_time_s
     seg_start = _segment_start(tr)
-    _finite(f"{name}.scale", ch.scale, 1.0)
+    _finite(f"{name}.scale", ch.scale, 0.0, strict=True)
+    if not min(tr.config.se_scale_min, 1.0) <= ch.scale <= max(tr.config.se_scale_max, 1.0):
+        _bad(f"{name}.scale", ch.scale, f"outside se_scale_min..se_scale_max ({tr.config.se_scale_min:g}.."
+                                        f"{tr.config.se_scale_max:g})")
     for f in ("baseline", "reference"):
         _finite(f"{name}.{f}", getattr(ch, f), 0.0, strict=True)
         _in_band(f"{name}.{f}", getattr(ch, f), band)
