@@ -200,9 +200,9 @@ def test_trend_parameters_map_to_the_config():
 
 
 def test_trend_status_levels_messages_and_values():
-    from jident_ros.evaluation.trend_simulation import simulate_series
     from jident_ros.identify.trend import TrendConfig, TrendTracker
     from jident_ros.identify.trend_status import TREND_STATUS_NAME, trend_status
+    from jident_ros.research.evaluation.trend_simulation import simulate_series
     assert TREND_STATUS_NAME == "jident_diagnostic: trend"
     s = simulate_series(60, step_at=40, step_pct=6.0, seed=3, width_growth_m_per_window=2e-6)
     tr = TrendTracker(TrendConfig(commissioning_windows=20))
@@ -225,8 +225,8 @@ def test_trend_status_levels_messages_and_values():
 
 @pytest.mark.slow
 def test_trend_targets_quick_run():
-    """python -m jident_ros.evaluation.trend_targets --quick (about 20 s)."""
-    from jident_ros.evaluation.trend_targets import format_table, measure
+    """python -m jident_ros.research.evaluation.trend_targets --quick (about 20 s)."""
+    from jident_ros.research.evaluation.trend_targets import format_table, measure
     r = measure(seed=0, quick=True)
     assert r["detection"]["missed"] == 0 and r["detection"]["median"] <= 3
     assert r["false"]["per_10k"] <= 1.0
@@ -348,8 +348,8 @@ def test_hidden_scenario_rebuilt_step_flagged_within_5_recordings_none_before(tm
     """Issue 21's scenario rebuilt with our writers: one drive recorded hourly for 40 h (one bag each), raw 2^16
     encoder angles, the drive/signals topic only (no truth topics), 30 dB, K2 2.5 -> 5 mm, J1 -2.5 % from
     recording 25 (index 24).  ~3 min."""
-    from jident_ros.cli.scenario import write_raw_scenario
     from jident_ros.cli.trend_run import run_trend
+    from jident_ros.research.evaluation.raw_scenario import write_raw_scenario
     from jident_ros.sim.scenarios import wear_scenario
     from jident_ros.stream.layout import DEFAULT_CHANNELS
     sc = wear_scenario(system, 40, 3600.0, 0.0025, 0.005, None, None, 24, -2.5, None)

@@ -22,11 +22,10 @@ from jident_ros.cli.argtypes import count_arg as _count
 from jident_ros.cli.argtypes import finite_float_arg as _finite_float
 from jident_ros.cli.offline import OfflineError, multiarray_message
 from jident_ros.config import load_system_config
-from jident_ros.evaluation.raw_inputs import raw_recordings
 from jident_ros.sim import PAPER_SIGNALS, add_measurement_noise, simulate_grid
 from jident_ros.sim.scenarios import SCENARIOS, Scenario, wear_scenario
 from jident_ros.stream.detector import embed_windows
-from jident_ros.stream.layout import CASE_LABEL, DEFAULT_CHANNELS, KNOWN_CHANNELS
+from jident_ros.stream.layout import CASE_LABEL, DEFAULT_CHANNELS
 
 #: Channels add_measurement_noise perturbs by default (the angles are left to the encoder model).
 NOISY_CHANNELS = PAPER_SIGNALS + ("omega2",)
@@ -115,48 +114,19 @@ def write_scenario_recording(out, system, scenario: Scenario, *, snr_db: Optiona
     return out
 
 
-#: What a drive itself measures (the JointState of a motor and a load joint: positions, velocities, the motor's
-#: torque estimate); no accelerometer, no load-side torque or line speed.
-DRIVE_CHANNELS = ("t", "alpha1", "omega1", "m_el", "alpha2", "omega2")
-#: Steady drive recorded before each event of a raw scenario recording, s.
-RAW_STEADY_S = 1.0
-
-
-def write_raw_scenario(out, system, scenario: Scenario, *, snr_db: Optional[float] = None, seed: int = 0,
-                       encoder_counts: int = 2 ** 16, namespace: str = "", channels=DRIVE_CHANNELS) -> list:
-    """``scenario`` as a real drive records it: one bag per entry (``out/rec_000``, ...), each the drive's
-    ``drive/signals`` only (no truth topics), raw encoder angles (arbitrary offsets, a slip at the entry,
-    ``encoder_counts`` per revolution; :func:`jident_ros.evaluation.raw_inputs.raw_recordings`), white noise at
-    ``snr_db`` on the other channels, :data:`RAW_STEADY_S` of steady drive before the event, the drive clock at the
-    entry equal to the scenario's entry time; ``channels`` (default :data:`DRIVE_CHANNELS`, what a drive
-    measures).  Returns the bag directories."""
-    out = Path(out)
-    paths = []
-    for i, c in enumerate(scenario.cases):
-        rec = raw_recordings(system, [c.inertia_kgm2], [c.backlash_width_m], c.consistency_pa_sn, snr_db=snr_db,
-                             counts=int(encoder_counts), steady_s=RAW_STEADY_S, seed=int(seed) * 100003 + i,
-                             channels=tuple(channels))[0]
-        data = rec.data.copy()
-        ti = rec.channels.index("t")
-        data[:, ti] += float(scenario.entry_times_s[i]) - data[rec.entry_row, ti]
-        path = out / f"rec_{i:03d}"
-        with BagWriter(path, flush_every_s=None) as bag:
-            topic = f"{namespace.rstrip('/')}/drive/signals"
-            bag.add_topic(topic, "std_msgs/msg/Float64MultiArray")
-            for s0 in range(0, len(data), 50):
-                b = data[s0:s0 + 50]
-                bag.write(topic, multiarray_message(b, rec.channels), int(round(b[-1, ti] * 1e9)))
-        paths.append(path)
-    return paths
-
-
-def _channels(text: str) -> tuple:
-    names = tuple(c.strip() for c in text.split(",") if c.strip())
-    bad = [c for c in names if c not in KNOWN_CHANNELS]
-    if bad or "t" not in names or "alpha1" not in names:
-        raise OfflineError(f"--channels: {bad[0] if bad else text!r} is not a channel list with t and alpha1 "
-                           f"(known: {','.join(KNOWN_CHANNELS)})")
-    return names
+def write_signals_bag(path, data: np.ndarray, channels, namespace: str = "", batch_size: int = 50) -> Path:
+    """A bag directory ``path`` holding only ``<namespace>/drive/signals``: ``data`` ((n, c) samples, columns
+    ``channels`` with ``t`` among them) in batches of ``batch_size``, each logged at its last sample's time
+    (what a drive records: no truth topics)."""
+    path = Path(path)
+    ti = list(channels).index("t")
+    topic = f"{namespace.rstrip('/')}/drive/signals"
+    with BagWriter(path, flush_every_s=None) as bag:
+        bag.add_topic(topic, "std_msgs/msg/Float64MultiArray")
+        for s0 in range(0, len(data), int(batch_size)):
+            b = data[s0:s0 + int(batch_size)]
+            bag.write(topic, multiarray_message(b, channels), int(round(b[-1, ti] * 1e9)))
+    return path
 
 
 def add_scenario_arguments(s) -> None:
@@ -180,12 +150,6 @@ def add_scenario_arguments(s) -> None:
                    help="scenario: J1 step, %% (default 2.5; 0: no step)")
     s.add_argument("--gap-samples", type=_count("--gap-samples", 0), default=100,
                    help="scenario: steady samples before each entry's 48 pre-entry samples (default 100)")
-    s.add_argument("--raw", action="store_true",
-                   help="scenario: as a real drive records it: one bag per entry (DIR/rec_000 ...), drive/signals "
-                        "only, raw encoder angles (--encoder-counts, default 2^16; offsets, slip), no truth topics")
-    s.add_argument("--channels", default=",".join(DRIVE_CHANNELS),
-                   help="scenario --raw: the recorded channels (default: what a drive measures, "
-                        f"{','.join(DRIVE_CHANNELS)}; add a1 for an accelerometer)")
     s.add_argument("--namespace", default="", help="scenario: the drive's namespace (e.g. /drive_07)")
 
 
@@ -195,8 +159,9 @@ def cmd_simulate_scenario(args) -> int:
         raise OfflineError("--out: the scenario needs a bag directory to write")
     if args.grid or args.backlash is not None or args.plot:
         raise OfflineError("--scenario: drop --grid/--backlash/--plot (the scenario sets K2 per entry)")
-    if args.encoder_counts is not None and not args.raw:
-        raise OfflineError("--encoder-counts: only with --scenario ... --raw")
+    if args.encoder_counts is not None:
+        raise OfflineError("--encoder-counts: not supported with --scenario (raw encoders, one bag per entry: "
+                           "python -m jident_ros.research.evaluation.raw_scenario)")
     out = Path(args.out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise OfflineError(f"--out {out}: already exists and is not an empty directory")
@@ -215,13 +180,8 @@ def cmd_simulate_scenario(args) -> int:
         bar = tqdm(total=n, desc="simulating + writing", unit="window", file=sys.stderr, leave=False)
     t0 = time.perf_counter()
     try:
-        if args.raw:
-            write_raw_scenario(out, system, sc, snr_db=args.snr_db, seed=args.seed, namespace=args.namespace,
-                               channels=_channels(args.channels),
-                               encoder_counts=2 ** 16 if args.encoder_counts is None else args.encoder_counts)
-        else:
-            write_scenario_recording(out, system, sc, snr_db=args.snr_db, seed=args.seed, namespace=args.namespace,
-                                     gap_samples=args.gap_samples, progress=None if bar is None else bar.update)
+        write_scenario_recording(out, system, sc, snr_db=args.snr_db, seed=args.seed, namespace=args.namespace,
+                                 gap_samples=args.gap_samples, progress=None if bar is None else bar.update)
     finally:
         if bar is not None:
             bar.close()
@@ -238,5 +198,5 @@ def cmd_simulate_scenario(args) -> int:
     return 0
 
 
-__all__ = ["NOISY_CHANNELS", "add_scenario_arguments", "cmd_simulate_scenario", "write_raw_scenario",
-           "write_scenario_recording"]
+__all__ = ["NOISY_CHANNELS", "add_scenario_arguments", "cmd_simulate_scenario", "write_scenario_recording",
+           "write_signals_bag"]

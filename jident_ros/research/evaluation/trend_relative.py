@@ -1,17 +1,17 @@
 """Issue 21's targets on real diagnosed windows of each drive model of the validation zoo.
 
-    python -m jident_ros.evaluation.trend_relative [--models ours,second_drive,vector_drive] [--trials 400]
+    python -m jident_ros.research.evaluation.trend_relative [--models ours,second_drive,vector_drive] [--trials 400]
                                                    [--recordings 40] [--work DIR] [--seed 0]
 
 1. **Windows as a drive records them**: per model, single-event recordings at 30 dB with 2^16-count encoders
    and raw angles, every channel the model records (with ``--drive-only`` the drive's own signals only:
-   ``t, alpha1, omega1, m_el, alpha2, omega2``, no accelerometer -- :data:`jident_ros.cli.scenario.DRIVE_CHANNELS`;
+   ``t, alpha1, omega1, m_el, alpha2, omega2``, no accelerometer -- :data:`jident_ros.research.evaluation.raw_scenario.DRIVE_CHANNELS`;
    today's gap estimator gives almost no usable window then, docs/results.md), K2 spread over 2.5-6 mm,
    J1 = 1.16 (the baseline) and 1.131 (-2.5 %, the next paper class):
 
-   * ``ours``: :func:`jident_ros.evaluation.raw_inputs.raw_recordings` (our simulator);
-   * ``second_drive``: ``python -m jident_ros.second_drive --format csv --scenario grid`` (docs/second_drive.md);
-   * ``vector_drive``: ``python -m jident_ros.vector_drive --formats csv`` (motulator; skipped when missing).
+   * ``ours``: :func:`jident_ros.research.evaluation.raw_inputs.raw_recordings` (our simulator);
+   * ``second_drive``: ``python -m jident_ros.research.second_drive --format csv --scenario grid`` (docs/second_drive.md);
+   * ``vector_drive``: ``python -m jident_ros.research.vector_drive --formats csv`` (motulator; skipped when missing).
 
    Every recording is diagnosed by ``jident diagnose``'s path (:func:`jident_ros.cli.offline.diagnose_samples`,
    flank detector, gap estimator, no image method) and each window turned into the tracker's inputs by the
@@ -40,12 +40,12 @@ import numpy as np
 from scipy.stats import chi2
 
 from jident_ros.cli.offline import OfflineError, diagnose_samples
-from jident_ros.cli.scenario import DRIVE_CHANNELS
 from jident_ros.cli.trend_run import trend_window
 from jident_ros.config import load_system_config
-from jident_ros.evaluation.raw_inputs import raw_recordings
-from jident_ros.evaluation.trend_simulation import step_trials
 from jident_ros.identify.trend import TrendConfig, TrendTracker
+from jident_ros.research.evaluation.raw_inputs import raw_recordings
+from jident_ros.research.evaluation.raw_scenario import DRIVE_CHANNELS
+from jident_ros.research.evaluation.trend_simulation import step_trials
 
 MODELS = ("ours", "second_drive", "vector_drive")
 SNR_DB = 30.0
@@ -78,7 +78,7 @@ def _drive_only(src: Path, dst: Path) -> Path:
 
 def recordings(model: str, work: Path, n_per_j1: int, seed: int, system, drive_only: bool = False) -> list:
     """[(CSV path, true J1)] of ``model`` (module docstring): every channel the model records, or with
-    ``drive_only`` the drive's own (:data:`~jident_ros.cli.scenario.DRIVE_CHANNELS`)."""
+    ``drive_only`` the drive's own (:data:`~jident_ros.research.evaluation.raw_scenario.DRIVE_CHANNELS`)."""
     work.mkdir(parents=True, exist_ok=True)
     widths = np.linspace(0.0025, 0.006, 8)
     out = []
@@ -91,7 +91,8 @@ def recordings(model: str, work: Path, n_per_j1: int, seed: int, system, drive_o
                     out.append((_write_csv(p, rec.data, list(rec.channels), DRIVE_CHANNELS if drive_only else None),
                                 j1))
         return out
-    module = {"second_drive": "jident_ros.second_drive", "vector_drive": "jident_ros.vector_drive"}[model]
+    module = {"second_drive": "jident_ros.research.second_drive",
+              "vector_drive": "jident_ros.research.vector_drive"}[model]
     for k in range(math.ceil(n_per_j1 / len(widths))):
         d = work / f"{model}_{k}"
         if model == "second_drive":
