@@ -221,6 +221,15 @@ def test_trend_status_levels_messages_and_values():
     skipped = tr.update(float(s.time_s[-1]) + 1.0, float("nan"), 0.01)
     level, msg, vals = trend_status(skipped)
     assert dict(vals)["skipped"] is True and "inertia_kgm2" in dict(vals)["skip_reason"] and "skipped" in msg
+    assert level == 2                                    # a skip is at least WARN (here the held change's ERROR)
+    tr.count_refused("outside_band")
+    u = tr.update(float(s.time_s[-1]) + 2.0, None, None, float(s.width_m[-1]), float(s.width_se_m[-1]),
+                  inertia_refused="no_gap")
+    d = dict(trend_status(u)[2])
+    assert d["inertia_windows_fed"] == 60 and d["inertia_windows_refused"] in ("outside_band 1, no_gap 1",
+                                                                               "no_gap 1, outside_band 1")
+    assert d["windows_skipped"] == "inertia_kgm2 1" and d["time_segment"] == 0
+    assert d["inertia_drift_ci95_low_pct"] < d["inertia_drift_pct"] < d["inertia_drift_ci95_high_pct"]
 
 
 @pytest.mark.slow

@@ -126,6 +126,11 @@ def _v(x: Optional[float]) -> Any:
     return "" if x is None or (isinstance(x, float) and not math.isfinite(x)) else float(x)
 
 
+def _counts(d: dict) -> str:
+    """{reason: n} -> 'reason n, reason n' (largest first); '' when empty."""
+    return ", ".join(f"{k} {n}" for k, n in sorted(d.items(), key=lambda kv: -kv[1]))
+
+
 def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
     """(level, message, key/values) of the trend status after update ``u``.
 
@@ -135,7 +140,10 @@ def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
     inertia_se_kgm2, inertia_baseline_kgm2, inertia_reference_kgm2, inertia_drift_pct,
     inertia_drift_se_pct, inertia_drift_from_reference_pct, backlash_width_m (regression line),
     backlash_width_se_m, backlash_width_baseline_m, wear_rate_m_per_day, wear_rate_se_m_per_day,
-    time_to_limit_days (+ _low, _high), changes_detected (at this window), and for the last change
+    time_to_limit_days (+ _low, _high), changes_detected (at this window), inertia_drift_ci95_low_pct /
+    _high_pct, inertia_abs_se_kgm2 (with the torque-accuracy term), inertia_baseline_windows_refining (0: refined),
+    inertia_windows_fed, inertia_windows_refused and windows_skipped (by reason, 'reason n, ...'), time_segment,
+    and for the last change
     of this window: last_change_quantity, last_change_time_s, last_change_onset_time_s,
     last_change_size, last_change_size_pct."""
     def days(s):
@@ -155,6 +163,13 @@ def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
             ("time_to_limit_low_days", _v(days(u.time_to_limit_low_s))),
             ("time_to_limit_high_days", _v(days(u.time_to_limit_high_s))),
             ("changes_detected", len(u.changes))]
+    lo_hi = u.inertia_drift_ci95_pct or (None, None)
+    vals += [("inertia_drift_ci95_low_pct", _v(lo_hi[0])), ("inertia_drift_ci95_high_pct", _v(lo_hi[1])),
+             ("inertia_abs_se_kgm2", _v(u.inertia_abs_se_kgm2)),
+             ("inertia_baseline_windows_refining", int(u.inertia_baseline_windows)),
+             ("inertia_windows_fed", int(u.inertia_windows_fed)),
+             ("inertia_windows_refused", _counts(u.inertia_windows_refused)),
+             ("windows_skipped", _counts(u.windows_skipped)), ("time_segment", int(u.time_segment))]
     if u.changes:
         c = u.changes[-1]
         vals += [("last_change_quantity", c.quantity), ("last_change_time_s", c.time_s),
