@@ -372,3 +372,21 @@ def test_hidden_scenario_rebuilt_step_flagged_within_5_recordings_none_before(tm
     assert sum(1 for w in run.windows if step_t <= w.time_s <= first.time_s) <= 5       # within 5 recordings
     widths = [u.width_m for u in run.updates if u.width_m is not None]
     assert widths[-1] / widths[0] == pytest.approx(2.0, rel=0.1)                        # the width trend as before
+
+
+def test_the_drive_monitor_feeds_an_ambiguous_j1_and_counts_a_refused_one():
+    """The nodes' path (identify.monitor.DriveMonitor): an ambiguous window's J1 reaches the tracker; a window
+    refused as implausible gives no update and is counted by its reason."""
+    from types import SimpleNamespace
+
+    from jident_ros.identify.monitor import DriveMonitor
+    from jident_ros.identify.trend import TrendConfig, TrendTracker
+    diagnoses = iter([_diagnosis("ambiguous", None), _diagnosis("refused", None)])
+    diagnoser = SimpleNamespace(diagnose=lambda win, **kw: next(diagnoses))
+    mon = DriveMonitor(None, diagnoser, TrendTracker(TrendConfig(commissioning_windows=3)))
+    win = SimpleNamespace(entry_time_s=10.0, detector="paper", backlash_width_estimate_m=None,
+                          backlash_width_se_m=None)
+    r = mon.window(win)
+    assert r.trend is not None and r.trend.inertia_kgm2 == 1.3 and r.trend.inertia_windows_fed == 1
+    r = mon.window(SimpleNamespace(**{**vars(win), "entry_time_s": 20.0}))
+    assert r.trend is None and mon.tracker.inertia_refused == {"outside_band": 1}
