@@ -390,3 +390,23 @@ def test_the_drive_monitor_feeds_an_ambiguous_j1_and_counts_a_refused_one():
     assert r.trend is not None and r.trend.inertia_kgm2 == 1.3 and r.trend.inertia_windows_fed == 1
     r = mon.window(SimpleNamespace(**{**vars(win), "entry_time_s": 20.0}))
     assert r.trend is None and mon.tracker.inertia_refused == {"outside_band": 1}
+
+
+def test_the_torque_accuracy_term_is_left_out_of_the_relative_test_and_given_to_the_absolute_j1():
+    """A scale error of the drive's torque estimate moves every J1 alike: the gap's 'torque_accuracy' term is
+    taken out of the se the trend tests the drift with; the drive's declared torque_accuracy (a uniform bound)
+    becomes the absolute J1's term."""
+    import math as m
+
+    from jident_ros.identify.trend import TrendConfig
+    from jident_ros.identify.trend_status import trend_inputs
+    d = _diagnosis("ambiguous", None)
+    d.gap.std_error_terms = (("fit", 0.006), ("torque_accuracy", 0.008))
+    d.gap.std_error_kgm2 = 0.01
+    assert trend_inputs(d).inertia_se_kgm2 == pytest.approx(0.006)
+    d.gap.std_error_terms = ()
+    assert trend_inputs(d).inertia_se_kgm2 == pytest.approx(0.01)
+    cfg = TrendConfig.from_parameters({"torque_accuracy": 0.02})
+    assert cfg.torque_accuracy_pct == pytest.approx(2.0 / m.sqrt(3.0))
+    assert TrendConfig.from_parameters({"torque_accuracy": 0.02, "trend_torque_accuracy_pct": 1.5}).torque_accuracy_pct \
+        == 1.5

@@ -184,6 +184,10 @@ _BOOL_FIELDS = {f for n, f in TREND_FIELDS.items() if isinstance(TREND_PARAMS[n]
 NOT_PARAMETERS = {"change_classes_pct"}
 
 
+def _positive_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
+
+
 def _config_from_parameters(cls, params) -> "TrendConfig":
     kw = {}
     for pname, fname in PARAMETER_FIELDS.items():
@@ -204,6 +208,11 @@ def _config_from_parameters(cls, params) -> "TrendConfig":
         else:
             v = float(v)
         kw[fname] = v
+    if not kw.get("torque_accuracy_pct") and _positive_number(params.get("torque_accuracy") if hasattr(params, "get")
+                                                              else None):
+        # the drive's declared torque accuracy (the gap estimator's ``torque_accuracy``: a uniform bound, fraction)
+        # as the absolute J1's 1-sd term, unless trend_torque_accuracy_pct sets its own
+        kw["torque_accuracy_pct"] = 100.0 * float(params["torque_accuracy"]) / math.sqrt(3.0)
     try:
         return cls(**kw)
     except ValueError as exc:

@@ -58,10 +58,17 @@ def _finite(*v) -> bool:
 
 
 def _gap_se(g) -> float:
+    """The gap J1's standard error for the trend: the fit's (else from its 95 % interval) WITHOUT the drive's
+    torque-accuracy term (``std_error_terms``' 'torque_accuracy'): a scale error of m_el moves every J1 of the
+    drive alike and cancels in J1 relative to its own baseline, which is what the trend tests; the absolute J1
+    gets it back (TrendConfig.torque_accuracy_pct)."""
     se = g.std_error_kgm2
     if se is None or not math.isfinite(float(se)):
         lo, hi = (float(v) for v in g.ci95_kgm2)
         se = (hi - lo) / (2 * Z95)
+    common = dict(getattr(g, "std_error_terms", ()) or ()).get("torque_accuracy", 0.0)
+    if common and math.isfinite(float(common)) and 0.0 < float(common) < float(se):
+        se = math.sqrt(float(se) ** 2 - float(common) ** 2)
     return float(se)
 
 
