@@ -12,9 +12,9 @@ import time
 
 import numpy as np
 
-from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
 from jident_ros.identify.gap import estimate_inertia
 from jident_ros.identify.gap_free import GapModel
+from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
 
 
 def main(argv=None):
