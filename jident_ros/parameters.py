@@ -188,6 +188,8 @@ DIAGNOSTIC_PARAMS = {
                                        "0 = no limit", min=0, max=2**62),
     "retention_max_age_s": Param(604800.0, "delete complete bags older than this, s; 0 = no limit",
                                  min=0.0, max=1e10),
+    "retention_delete_unfinalised": Param(False, "let retention delete this node's bags that were not finalised "
+                                          "(a crash cut them); default: kept for jident salvage"),
     "record_signals": Param(True, "also record drive/signals, drive/backlash_width, drive/true_inertia, "
                             "drive/case (replayable)"),
     "window_queue_depth": Param(50, "keep-last depth of the drive/window subscription", min=1, max=MAX_DEPTH),

@@ -7,14 +7,21 @@ JointState (:class:`JointStateAdapter`)
 * the motor joint (``motor_joint``, default ``motor``) gives alpha1 (position, rad), omega1 (velocity, rad/s)
   and m_el (effort, N m); the load joint (``load_joint``, default ``load``) gives alpha2 and omega2;
 * ``t`` is the header stamp (s);
-* NaN means "this joint has no such interface": a channel NaN in the **first** message is absent throughout
-  (not provided); a NaN later in a present channel is carried into the batch, where the detector drops it
-  with reason ``nonfinite`` (counted, reported);
+* the channel set comes from the configuration (``channels``: which of the five, default all; ``use_imu`` adds
+  a1), never from the first message: a bad first message cannot disable the input;
+* a message whose configured value is NaN/Inf, or whose field array is empty or shorter than its names, is
+  dropped and counted (``nonfinite``, ``empty_field``), naming the joint and the field; the next good message is
+  used (the detector sees one missing sample as a ``gap``);
+* a message without one of the two joints is counted (``missing_joint``) and skipped, naming the joint and the
+  names the message has (a renamed joint); :meth:`JointStateAdapter.problems` lists every kind of problem with
+  its count, most frequent first;
 * optional a1 from sensor_msgs/Imu ``linear_acceleration.<imu_axis>`` (default x), matched to a sample by
   stamp (nearest within T_s/2); a sample waits for its IMU message (at most ``imu_wait_samples`` samples),
-  else its a1 is NaN (a ``nonfinite`` drop);
-* a message without one of the two joints is counted (``missing_joint``) and skipped, which the detector then
-  sees as a ``gap`` in t;
+  else it is dropped (``imu_unmatched``); an Imu message with a NaN/Inf value is dropped (``imu_nonfinite``);
+* the stamps of the two clocks can agree while the data do not (an IMU whose stamp is taken late):
+  :func:`imu_skew` estimates the skew of a window's a1 against the motor encoder (the second difference of
+  alpha1, or the first of omega1) and :func:`check_imu_skew` leaves a1 out of a window whose skew is beyond
+  the tolerance (:data:`IMU_SKEW_TOLERANCE_SAMPLES` samples), so that no J1 comes from a skewed a1;
 * the period between stamps is checked against ``sample_period_s``: :meth:`JointStateAdapter.jitter` reports
   its median, standard deviation and largest deviation, and whether the median matches (within 1 %);
 * samples are batched inside (``batch_size``); :meth:`JointStateAdapter.flush` hands out the rest.
@@ -28,6 +35,7 @@ A header row of the documented channel names in SI units (``t,alpha1,alpha2,m_el
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 from collections import deque
 from pathlib import Path
@@ -47,6 +55,16 @@ class InputError(ValueError):
     """Input that cannot be read at all (one line naming the field and value)."""
 
 
+#: The channels a JointState message can carry.
+JOINTSTATE_CHANNELS = tuple(c for c, _, _ in JOINT_CHANNELS)
+#: Imu a1 may be this many sample periods out of step with the encoder before a1 is left out of a window.
+IMU_SKEW_TOLERANCE_SAMPLES = 0.5
+#: The smallest correlation of a1 with the encoder's acceleration at which a skew estimate is trusted.
+IMU_SKEW_MIN_CORRELATION = 0.5
+#: How many problem kinds :meth:`JointStateAdapter.problems` keeps (the first ones; the rest are counted).
+MAX_PROBLEM_KINDS = 32
+
+
 class JointStateAdapter:
     """sensor_msgs/JointState (+ sensor_msgs/Imu) -> sample batches (module docstring).
 
@@ -58,10 +76,13 @@ class JointStateAdapter:
     use_imu : expect sensor_msgs/Imu for a1
     imu_axis : "x" | "y" | "z"
     imu_wait_samples : how many samples a sample waits for its IMU message
+    channels : the JointState channels to take (of alpha1, omega1, m_el, alpha2, omega2; default all five);
+        ``t`` first and ``a1`` last (with ``use_imu``) are added
     """
 
     def __init__(self, sample_period_s: float, motor_joint: str = "motor", load_joint: str = "load",
-                 batch_size: int = 50, use_imu: bool = False, imu_axis: str = "x", imu_wait_samples: int = 20):
+                 batch_size: int = 50, use_imu: bool = False, imu_axis: str = "x", imu_wait_samples: int = 20,
+                 channels: Optional[Sequence[str]] = None):
         if not (isinstance(sample_period_s, (int, float)) and math.isfinite(sample_period_s) and sample_period_s > 0):
             raise ValueError(f"sample_period_s: must be a finite number > 0, got {sample_period_s!r}")
         if not motor_joint or not load_joint or motor_joint == load_joint:
@@ -70,21 +91,38 @@ class JointStateAdapter:
             raise ValueError(f"batch_size: must be an integer >= 1, got {batch_size!r}")
         if imu_axis not in IMU_AXES:
             raise ValueError(f"imu_axis: expected one of {', '.join(IMU_AXES)}, got {imu_axis!r}")
+        wanted = JOINTSTATE_CHANNELS if channels is None else tuple(c for c in channels if c not in ("t", "a1"))
+        unknown = [c for c in wanted if c not in JOINTSTATE_CHANNELS]
+        if unknown or not wanted:
+            raise ValueError(f"channels: JointState carries {', '.join(JOINTSTATE_CHANNELS)}, got {list(wanted)!r}")
         self.sample_period_s = float(sample_period_s)
         self.joints = {"motor": str(motor_joint), "load": str(load_joint)}
         self.batch_size = int(batch_size)
         self.use_imu = bool(use_imu)
         self.imu_axis = imu_axis
         self.imu_wait_samples = int(imu_wait_samples)
-        self.channels: Optional[tuple] = None      # decided by the first usable message
-        self._sources: list = []
+        self._sources = [(c, role, fld) for c, role, fld in JOINT_CHANNELS if c in wanted]
+        self.channels: tuple = ("t",) + tuple(c for c, _, _ in self._sources) + (("a1",) if self.use_imu else ())
         self._rows: list = []                      # ready rows
         self._pending: deque = deque()             # rows waiting for their IMU sample
         self._imu: deque = deque()                 # (stamp, a) not yet matched
         self._imu_last = -math.inf
         self._last_stamp: Optional[float] = None
         self._periods: list = []
-        self.counts = {"messages": 0, "missing_joint": 0, "imu_messages": 0, "imu_unmatched": 0}
+        self.counts = {"messages": 0, "samples": 0, "missing_joint": 0, "empty_field": 0, "nonfinite": 0,
+                       "imu_messages": 0, "imu_nonfinite": 0, "imu_unmatched": 0}
+        self._problems: dict = {}                  # one line -> count
+        self.last_problem = ""
+
+    def _problem(self, reason: str, text: str) -> None:
+        self.counts[reason] += 1
+        self.last_problem = text
+        if text in self._problems or len(self._problems) < MAX_PROBLEM_KINDS:
+            self._problems[text] = self._problems.get(text, 0) + 1
+
+    def problems(self) -> list:
+        """[(one line, count)] of the input's problems so far, most frequent first."""
+        return sorted(self._problems.items(), key=lambda kv: -kv[1])
 
     # ------------------------------------------------------------- input
     def push(self, stamp_s: float, names: Sequence[str], position: Sequence[float] = (),
@@ -95,25 +133,32 @@ class JointStateAdapter:
         idx = {}
         for role, joint in self.joints.items():
             if joint not in names:
-                self.counts["missing_joint"] += 1
-                self.last_problem = f"joint {joint!r} ({role}) not in the message's names {names}"
+                shown = names if len(names) <= 8 else names[:8] + ["..."]
+                self._problem("missing_joint", f"joint {joint!r} ({role}_joint) not in the JointState names {shown}")
                 return self._ready()
             idx[role] = names.index(joint)
         fields = {"position": position, "velocity": velocity, "effort": effort}
-
-        def value(role, fld):
-            arr = fields[fld]
-            i = idx[role]
-            return float(arr[i]) if i < len(arr) else math.nan   # an empty array: the interface is absent
-
-        if self.channels is None:
-            present = [(c, role, fld) for c, role, fld in JOINT_CHANNELS if math.isfinite(value(role, fld))]
-            self._sources = present
-            self.channels = ("t",) + tuple(c for c, _, _ in present) + (("a1",) if self.use_imu else ())
-        row = [float(stamp_s)] + [value(role, fld) for _, role, fld in self._sources]
+        row = [float(stamp_s)]
+        for _, role, fld in self._sources:
+            arr, i = fields[fld], idx[role]
+            if i >= len(arr):
+                what = "an empty array" if len(arr) == 0 else f"{len(arr)} value(s) for {len(names)} names"
+                self._problem("empty_field", f"joint {self.joints[role]!r} {fld}: {what}")
+                return self._ready()
+            v = float(arr[i])
+            if not math.isfinite(v):
+                self._problem("nonfinite", f"joint {self.joints[role]!r} {fld}: {v}")
+                return self._ready()
+            row.append(v)
+        if not math.isfinite(row[0]):
+            self._problem("nonfinite", f"header stamp: {row[0]}")
+            return self._ready()
+        self.counts["samples"] += 1
         if self._last_stamp is not None:
-            self._periods.append(float(stamp_s) - self._last_stamp)
-        self._last_stamp = float(stamp_s)
+            self._periods.append(row[0] - self._last_stamp)
+            if len(self._periods) > 200_000:
+                del self._periods[:100_000]
+        self._last_stamp = row[0]
         if self.use_imu:
             row.append(math.nan)
             self._pending.append(row)
@@ -126,7 +171,14 @@ class JointStateAdapter:
         """One Imu message (linear_acceleration as an object with x, y, z or a 3-sequence)."""
         self.counts["imu_messages"] += 1
         la = linear_acceleration
-        a = float(getattr(la, self.imu_axis)) if hasattr(la, self.imu_axis) else float(la[IMU_AXES.index(self.imu_axis)])
+        try:
+            a = float(getattr(la, self.imu_axis)) if hasattr(la, self.imu_axis) \
+                else float(la[IMU_AXES.index(self.imu_axis)])
+        except (TypeError, ValueError, IndexError):
+            a = math.nan
+        if not (math.isfinite(a) and math.isfinite(float(stamp_s))):
+            self._problem("imu_nonfinite", f"Imu linear_acceleration.{self.imu_axis}: {a} (stamp {float(stamp_s)})")
+            return self._ready()
         self._imu.append((float(stamp_s), a))
         self._imu_last = max(self._imu_last, float(stamp_s))
         self._match()
@@ -141,11 +193,12 @@ class JointStateAdapter:
                 self._imu.popleft()
             if self._imu and abs(self._imu[0][0] - t) <= tol:
                 row[-1] = self._imu.popleft()[1]
+                self._rows.append(self._pending.popleft())
             elif self._imu_last > t + tol or len(self._pending) > self.imu_wait_samples:
-                self.counts["imu_unmatched"] += 1                 # stays NaN: a nonfinite drop downstream
+                self._pending.popleft()                           # no a1 for this sample: dropped, counted
+                self._problem("imu_unmatched", f"no Imu message within {tol:g} s of the JointState stamp")
             else:
                 return
-            self._rows.append(self._pending.popleft())
 
     def _ready(self) -> list:
         out = []
@@ -157,8 +210,8 @@ class JointStateAdapter:
     def flush(self) -> list:
         """The samples left (pending IMU matches given up): at most one short batch."""
         while self._pending:
-            self.counts["imu_unmatched"] += 1
-            self._rows.append(self._pending.popleft())
+            self._pending.popleft()
+            self._problem("imu_unmatched", "no Imu message for the last sample(s) of the input")
         out = self._ready()
         if self._rows:
             out.append((np.array(self._rows), self.channels))
@@ -175,6 +228,77 @@ class JointStateAdapter:
         return {"periods": int(p.size), "median_period_s": med, "std_s": float(p.std()),
                 "max_abs_deviation_s": float(np.max(np.abs(p - self.sample_period_s))),
                 "period_matches": bool(abs(med - self.sample_period_s) <= 0.01 * self.sample_period_s)}
+
+
+# --------------------------------------------------------------------------- Imu skew
+
+def imu_skew(a1, sample_period_s: float, alpha1=None, omega1=None, max_lag_samples: int = 40) -> Optional[dict]:
+    """How far a1 lags the motor encoder, estimated from the data (the stamps may agree while the data do
+    not): the lag maximising the correlation of a1 with the encoder's acceleration (first difference of
+    omega1, else second difference of alpha1), refined by a parabola through the peak.  Returns
+    ``{"skew_s": ..., "skew_samples": ..., "correlation": ..., "reference": "omega1"|"alpha1"}`` (skew > 0:
+    a1 comes late) or None when no encoder channel is given, the data are too short or flat, or the peak
+    correlation is below :data:`IMU_SKEW_MIN_CORRELATION` (no estimate)."""
+    a = np.asarray(a1, dtype=float)
+    if omega1 is not None:
+        ref, name = np.diff(np.asarray(omega1, dtype=float)) / sample_period_s, "omega1"
+        a = 0.5 * (a[1:] + a[:-1])                 # the difference sits between two samples
+    elif alpha1 is not None:
+        ref, name = np.diff(np.asarray(alpha1, dtype=float), 2) / sample_period_s ** 2, "alpha1"
+        a = a[1:-1]
+    else:
+        return None
+    n = min(a.size, ref.size)
+    a, ref = a[:n], ref[:n]
+    if n < 4 * max_lag_samples or not (np.isfinite(a).all() and np.isfinite(ref).all()):
+        return None
+    a = a - a.mean()
+    ref = ref - ref.mean()
+    if not (a.std() > 0 and ref.std() > 0):
+        return None
+    m = max_lag_samples
+    core = slice(m, n - m)
+    rc = ref[core]
+    lags = np.arange(-m, m + 1)
+    corr = np.empty(lags.size)
+    for k, lag in enumerate(lags):        # a1[i + lag] against ref[i]: lag > 0 means a1 comes late
+        ak = a[m + lag:n - m + lag]
+        den = np.sqrt(np.dot(ak, ak) * np.dot(rc, rc))
+        corr[k] = np.dot(ak, rc) / den if den > 0 else 0.0
+    k = int(np.argmax(corr))
+    best = float(corr[k])
+    if not best >= IMU_SKEW_MIN_CORRELATION:
+        return None
+    frac = 0.0
+    if 0 < k < lags.size - 1:
+        y0, y1, y2 = corr[k - 1], corr[k], corr[k + 1]
+        den = y0 - 2 * y1 + y2
+        frac = float(np.clip(0.5 * (y0 - y2) / den, -0.5, 0.5)) if den < 0 else 0.0
+    samples = float(lags[k]) + frac
+    return {"skew_s": samples * sample_period_s, "skew_samples": samples, "correlation": best, "reference": name}
+
+
+def check_imu_skew(window, tolerance_samples: float = IMU_SKEW_TOLERANCE_SAMPLES):
+    """(window, report) for a captured window holding a1: ``report`` is None without a1, else a dict with the
+    skew estimate (:func:`imu_skew`; ``skew_s`` None when none was possible), the tolerance and whether a1
+    was kept.  Beyond the tolerance a1 is left out of the returned window (the gap estimator then uses the
+    encoder), so no J1 comes from a skewed a1.  Without an estimate a1 is kept (stamps matched within T_s/2)."""
+    chans = tuple(window.channels)
+    if "a1" not in chans:
+        return window, None
+    ts = float(window.sample_period_s)
+    est = imu_skew(window.column("a1"), ts, alpha1=window.column("alpha1") if "alpha1" in chans else None,
+                   omega1=window.column("omega1") if "omega1" in chans else None)
+    tol_s = tolerance_samples * ts
+    report = {"skew_s": None if est is None else est["skew_s"], "tolerance_s": tol_s,
+              "correlation": None if est is None else est["correlation"],
+              "reference": None if est is None else est["reference"], "a1_kept": True}
+    if est is None or abs(est["skew_s"]) <= tol_s:
+        return window, report
+    keep = [i for i, c in enumerate(chans) if c != "a1"]
+    report["a1_kept"] = False
+    return dataclasses.replace(window, data=np.ascontiguousarray(window.data[:, keep]),
+                               channels=tuple(chans[i] for i in keep)), report
 
 
 # --------------------------------------------------------------------------- CSV
@@ -242,4 +366,5 @@ def read_csv(path, maps: Optional[dict] = None) -> tuple:
     return data, channels, ignored
 
 
-__all__ = ["InputError", "JOINT_CHANNELS", "JointStateAdapter", "parse_map", "read_csv"]
+__all__ = ["IMU_SKEW_TOLERANCE_SAMPLES", "InputError", "JOINT_CHANNELS", "JOINTSTATE_CHANNELS", "JointStateAdapter",
+           "check_imu_skew", "imu_skew", "parse_map", "read_csv"]
