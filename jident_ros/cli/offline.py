@@ -39,7 +39,14 @@ from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
 from jident_ros.stream.detector import BacklashDetector, stream_batches
 from jident_ros.stream.dynamics import DynamicsDetector
 from jident_ros.stream.flank import DETECTORS, FlankDetector
-from jident_ros.stream.inputs import InputError, JointStateAdapter, read_csv
+from jident_ros.stream.inputs import (
+    InputError,
+    JointStateAdapter,
+    carry_counts,
+    check_imu_skew,
+    read_csv,
+    skew_line,
+)
 from jident_ros.stream.layout import DRIVE_TOPICS, REQUIRED_CHANNELS, SIGNALS_TOPIC, WIDTH_TOPIC, pack
 from jident_ros.stream.layout import topic_matches as _matches
 
@@ -386,7 +393,7 @@ def jointstate_batches(path, sample_period_s: float, motor_joint: str = "motor",
     prefix = js[0].topic[:-len("joint_states")]
     imu = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/Imu" and c.topic == prefix + "imu"]
     adapter = JointStateAdapter(sample_period_s, motor_joint, load_joint, batch_size=batch_size,
-                                use_imu=bool(imu), imu_axis=imu_axis)
+                                use_imu=bool(imu), imu_axis=imu_axis, channels="auto")
 
     def batches():
         try:
@@ -448,20 +455,41 @@ def diagnose_samples(path, *, system=None, method=None, p: float = 2.0, library=
                                                              log=log, warn=log)
     diag = _window_diagnoser(system, method, p, library, gap_method, image_method, result, policy)
     det = None
+    imu_skew_dropped = 0
+    retired = []                     # a detector replaced when a1 was left out (its counts still count)
     for arr, channels in batches:
+        if adapter is not None and adapter.a1_dropped and "a1" in channels:   # batched before a1 was left out
+            keep = [j for j, c in enumerate(channels) if c != "a1"]
+            arr, channels = arr[:, keep], tuple(channels[j] for j in keep)
         if det is None:
             det = _make_detector(system, backlash_width_m, None, channels, None, WINDOWING_DEFAULTS, source,
                                  detector, gear_ratio)
+            if retired:          # the window ids and counts go on
+                det = carry_counts(retired[-1], det)
         for ev in det.push(arr, channels):
             if ev.kind == "window":
-                _add_window(result, ev.window, diag(ev.window), None, on_window)
-    if det is None:
+                win = ev.window
+                if adapter is not None and adapter.use_imu:   # no J1 from an Imu out of step with the encoder
+                    skew = check_imu_skew(win)
+                    if skew is not None and not skew["within"]:
+                        imu_skew_dropped += 1
+                        log(skew_line(skew, win.window_id))
+                        adapter.drop_a1()
+                        retired.append(det)
+                        det = None       # a new detector from the next batch, on the encoder's acceleration
+                        break
+                _add_window(result, win, diag(win), None, on_window)
+    if det is None and not retired:
         raise OfflineError(f"recording {path}: no sample")
-    _finish(result, det, log)
+    _finish(result, det if det is not None else retired[-1], log)
+    if imu_skew_dropped:
+        result.dropped["imu_skew"] = imu_skew_dropped
     if adapter is not None:
         result.jitter = adapter.jitter()
         result.dropped.update({f"jointstate.{k}": v for k, v in adapter.counts.items()
-                               if v and k in ("missing_joint", "imu_unmatched")})
+                               if v and k not in ("messages", "samples", "imu_messages")})
+        for text, n in adapter.problems()[:3]:
+            log(f"{source}: {n} message(s) dropped: {text}")
         if result.jitter.get("periods") and not result.jitter["period_matches"]:
             log(f"{source}: stamp period {result.jitter['median_period_s']:.6g} s (median) does not match "
                 f"sampling.sample_period_s {ts:g} s")

@@ -20,8 +20,10 @@ JointState (:class:`JointStateAdapter`)
   else it is dropped (``imu_unmatched``); an Imu message with a NaN/Inf value is dropped (``imu_nonfinite``);
 * the stamps of the two clocks can agree while the data do not (an IMU whose stamp is taken late):
   :func:`imu_skew` estimates the skew of a window's a1 against the motor encoder (the second difference of
-  alpha1, or the first of omega1) and :func:`check_imu_skew` leaves a1 out of a window whose skew is beyond
-  the tolerance (:data:`IMU_SKEW_TOLERANCE_SAMPLES` samples), so that no J1 comes from a skewed a1;
+  alpha1, or the first of omega1) and :func:`check_imu_skew` says whether a window's skew is within the
+  tolerance (:data:`IMU_SKEW_TOLERANCE_SAMPLES` samples); beyond it the window is not diagnosed (its entry and
+  re-contact were placed with the skewed a1) and the input goes on without a1 (:meth:`JointStateAdapter.drop_a1`),
+  so that no J1 comes from a skewed a1;
 * the period between stamps is checked against ``sample_period_s``: :meth:`JointStateAdapter.jitter` reports
   its median, standard deviation and largest deviation, and whether the median matches (within 1 %);
 * samples are batched inside (``batch_size``); :meth:`JointStateAdapter.flush` hands out the rest.
@@ -35,7 +37,6 @@ A header row of the documented channel names in SI units (``t,alpha1,alpha2,m_el
 from __future__ import annotations
 
 import csv
-import dataclasses
 import math
 from collections import deque
 from pathlib import Path
@@ -61,6 +62,8 @@ JOINTSTATE_CHANNELS = tuple(c for c, _, _ in JOINT_CHANNELS)
 IMU_SKEW_TOLERANCE_SAMPLES = 0.5
 #: The smallest correlation of a1 with the encoder's acceleration at which a skew estimate is trusted.
 IMU_SKEW_MIN_CORRELATION = 0.5
+#: How many messages decide the channel set with ``channels="auto"``.
+PROBE_MESSAGES = 200
 #: How many problem kinds :meth:`JointStateAdapter.problems` keeps (the first ones; the rest are counted).
 MAX_PROBLEM_KINDS = 32
 
@@ -77,7 +80,8 @@ class JointStateAdapter:
     imu_axis : "x" | "y" | "z"
     imu_wait_samples : how many samples a sample waits for its IMU message
     channels : the JointState channels to take (of alpha1, omega1, m_el, alpha2, omega2; default all five);
-        ``t`` first and ``a1`` last (with ``use_imu``) are added
+        ``t`` first and ``a1`` last (with ``use_imu``) are added.  ``"auto"`` (offline, a recording of an
+        unknown drive): the channels finite in most of the first :data:`PROBE_MESSAGES` messages
     """
 
     def __init__(self, sample_period_s: float, motor_joint: str = "motor", load_joint: str = "load",
@@ -91,7 +95,11 @@ class JointStateAdapter:
             raise ValueError(f"batch_size: must be an integer >= 1, got {batch_size!r}")
         if imu_axis not in IMU_AXES:
             raise ValueError(f"imu_axis: expected one of {', '.join(IMU_AXES)}, got {imu_axis!r}")
-        wanted = JOINTSTATE_CHANNELS if channels is None else tuple(c for c in channels if c not in ("t", "a1"))
+        self._probe: Optional[list] = None
+        if channels == "auto":                     # offline: decided by the majority of the first messages
+            self._probe, wanted = [], JOINTSTATE_CHANNELS
+        else:
+            wanted = JOINTSTATE_CHANNELS if channels is None else tuple(c for c in channels if c not in ("t", "a1"))
         unknown = [c for c in wanted if c not in JOINTSTATE_CHANNELS]
         if unknown or not wanted:
             raise ValueError(f"channels: JointState carries {', '.join(JOINTSTATE_CHANNELS)}, got {list(wanted)!r}")
@@ -110,7 +118,8 @@ class JointStateAdapter:
         self._last_stamp: Optional[float] = None
         self._periods: list = []
         self.counts = {"messages": 0, "samples": 0, "missing_joint": 0, "empty_field": 0, "nonfinite": 0,
-                       "imu_messages": 0, "imu_nonfinite": 0, "imu_unmatched": 0}
+                       "imu_messages": 0, "imu_nonfinite": 0, "imu_unmatched": 0, "imu_ignored": 0}
+        self.a1_dropped = False
         self._problems: dict = {}                  # one line -> count
         self.last_problem = ""
 
@@ -125,9 +134,41 @@ class JointStateAdapter:
         return sorted(self._problems.items(), key=lambda kv: -kv[1])
 
     # ------------------------------------------------------------- input
+    def _decide(self) -> list:
+        """``channels="auto"``: the channels finite in more than half of the probed messages that hold both
+        joints; then the probed messages go through as any other."""
+        probe, self._probe = self._probe, None
+        seen = dict.fromkeys(JOINTSTATE_CHANNELS, 0)
+        usable = 0
+        for _, names, pos, vel, eff in probe:
+            names = list(names)
+            if not all(j in names for j in self.joints.values()):
+                continue
+            usable += 1
+            fields = {"position": pos, "velocity": vel, "effort": eff}
+            for c, role, fld in JOINT_CHANNELS:
+                i = names.index(self.joints[role])
+                arr = fields[fld]
+                if i < len(arr) and math.isfinite(float(arr[i])):
+                    seen[c] += 1
+        if usable:
+            keep = [c for c in JOINTSTATE_CHANNELS if seen[c] > usable / 2] or list(JOINTSTATE_CHANNELS)
+            self._sources = [(c, role, fld) for c, role, fld in JOINT_CHANNELS if c in keep]
+            self.channels = ("t",) + tuple(keep) + (("a1",) if self.use_imu else ())
+        out = []
+        for msg in probe:
+            self.counts["messages"] -= 1
+            out += self.push(*msg)
+        return out
+
     def push(self, stamp_s: float, names: Sequence[str], position: Sequence[float] = (),
              velocity: Sequence[float] = (), effort: Sequence[float] = ()) -> list:
         """One JointState message; returns the batches [(array (n, c), channels)] now complete."""
+        if self._probe is not None:
+            self._probe.append((stamp_s, list(names), list(position), list(velocity), list(effort)))
+            if len(self._probe) < PROBE_MESSAGES:
+                return []
+            return self._decide()
         self.counts["messages"] += 1
         names = list(names)
         idx = {}
@@ -170,6 +211,9 @@ class JointStateAdapter:
     def push_imu(self, stamp_s: float, linear_acceleration) -> list:
         """One Imu message (linear_acceleration as an object with x, y, z or a 3-sequence)."""
         self.counts["imu_messages"] += 1
+        if self.a1_dropped:
+            self.counts["imu_ignored"] += 1
+            return self._ready()
         la = linear_acceleration
         try:
             a = float(getattr(la, self.imu_axis)) if hasattr(la, self.imu_axis) \
@@ -209,14 +253,27 @@ class JointStateAdapter:
 
     def flush(self) -> list:
         """The samples left (pending IMU matches given up): at most one short batch."""
+        early = self._decide() if self._probe is not None else []
         while self._pending:
             self._pending.popleft()
             self._problem("imu_unmatched", "no Imu message for the last sample(s) of the input")
-        out = self._ready()
+        out = early + self._ready()
         if self._rows:
             out.append((np.array(self._rows), self.channels))
             self._rows = []
         return out
+
+    def drop_a1(self) -> None:
+        """Go on without a1 (an Imu out of step with the encoder, :func:`check_imu_skew`): the channel set loses
+        a1, rows waiting for their Imu sample go out without it, later Imu messages are counted and ignored."""
+        if not self.use_imu:
+            return
+        self.use_imu = False
+        self.a1_dropped = True
+        self.channels = tuple(c for c in self.channels if c != "a1")
+        self._rows = [r[:-1] for r in self._rows] + [r[:-1] for r in self._pending]
+        self._pending.clear()
+        self._imu.clear()
 
     # ------------------------------------------------------------- checks
     def jitter(self) -> dict:
@@ -232,33 +289,51 @@ class JointStateAdapter:
 
 # --------------------------------------------------------------------------- Imu skew
 
-def imu_skew(a1, sample_period_s: float, alpha1=None, omega1=None, max_lag_samples: int = 40) -> Optional[dict]:
+def imu_skew(a1, sample_period_s: float, alpha1=None, omega1=None, max_lag_samples: int = 40,
+             smooth_samples: int = 15) -> Optional[dict]:
     """How far a1 lags the motor encoder, estimated from the data (the stamps may agree while the data do
-    not): the lag maximising the correlation of a1 with the encoder's acceleration (first difference of
-    omega1, else second difference of alpha1), refined by a parabola through the peak.  Returns
-    ``{"skew_s": ..., "skew_samples": ..., "correlation": ..., "reference": "omega1"|"alpha1"}`` (skew > 0:
+    not): the lag maximising the correlation of a1 with the encoder's acceleration (the first difference of
+    omega1 and the second difference of alpha1, each tried, both signals smoothed alike by a
+    ``smooth_samples`` moving average; the better correlated reference wins), refined by a parabola through
+    the peak.  Returns ``{"skew_s", "skew_samples", "correlation", "reference": "omega1"|"alpha1"}`` (skew > 0:
     a1 comes late) or None when no encoder channel is given, the data are too short or flat, or the peak
     correlation is below :data:`IMU_SKEW_MIN_CORRELATION` (no estimate)."""
     a = np.asarray(a1, dtype=float)
+    found = []
     if omega1 is not None:
-        ref, name = np.diff(np.asarray(omega1, dtype=float)) / sample_period_s, "omega1"
-        a = 0.5 * (a[1:] + a[:-1])                 # the difference sits between two samples
-    elif alpha1 is not None:
-        ref, name = np.diff(np.asarray(alpha1, dtype=float), 2) / sample_period_s ** 2, "alpha1"
-        a = a[1:-1]
-    else:
+        ref = np.diff(np.asarray(omega1, dtype=float)) / sample_period_s
+        found.append(_lag(0.5 * (a[1:] + a[:-1]), ref, "omega1", 1, max_lag_samples, smooth_samples))
+    if alpha1 is not None:
+        ref = np.diff(np.asarray(alpha1, dtype=float), 2) / sample_period_s ** 2
+        found.append(_lag(a[1:-1], ref, "alpha1", 2, max_lag_samples, smooth_samples))
+    found = [f for f in found if f is not None]
+    if not found:
         return None
+    best = max(found, key=lambda f: f[1])
+    samples, corr, name = best
+    return {"skew_s": samples * sample_period_s, "skew_samples": samples, "correlation": corr, "reference": name}
+
+
+def _lag(a, ref, name, passes, m, smooth):
+    """(lag in samples, peak correlation, name) of ``a`` against ``ref`` (module docstring), or None."""
     n = min(a.size, ref.size)
     a, ref = a[:n], ref[:n]
-    if n < 4 * max_lag_samples or not (np.isfinite(a).all() and np.isfinite(ref).all()):
+    if not (np.isfinite(a).all() and np.isfinite(ref).all()):
+        return None
+    if smooth > 1:
+        kernel = np.ones(int(smooth)) / int(smooth)
+        for _ in range(passes):
+            if a.size < kernel.size:
+                return None
+            a, ref = np.convolve(a, kernel, "valid"), np.convolve(ref, kernel, "valid")
+    n = a.size
+    if n < 4 * m:
         return None
     a = a - a.mean()
     ref = ref - ref.mean()
     if not (a.std() > 0 and ref.std() > 0):
         return None
-    m = max_lag_samples
-    core = slice(m, n - m)
-    rc = ref[core]
+    rc = ref[m:n - m]
     lags = np.arange(-m, m + 1)
     corr = np.empty(lags.size)
     for k, lag in enumerate(lags):        # a1[i + lag] against ref[i]: lag > 0 means a1 comes late
@@ -274,31 +349,48 @@ def imu_skew(a1, sample_period_s: float, alpha1=None, omega1=None, max_lag_sampl
         y0, y1, y2 = corr[k - 1], corr[k], corr[k + 1]
         den = y0 - 2 * y1 + y2
         frac = float(np.clip(0.5 * (y0 - y2) / den, -0.5, 0.5)) if den < 0 else 0.0
-    samples = float(lags[k]) + frac
-    return {"skew_s": samples * sample_period_s, "skew_samples": samples, "correlation": best, "reference": name}
+    return float(lags[k]) + frac, best, name
 
 
-def check_imu_skew(window, tolerance_samples: float = IMU_SKEW_TOLERANCE_SAMPLES):
-    """(window, report) for a captured window holding a1: ``report`` is None without a1, else a dict with the
-    skew estimate (:func:`imu_skew`; ``skew_s`` None when none was possible), the tolerance and whether a1
-    was kept.  Beyond the tolerance a1 is left out of the returned window (the gap estimator then uses the
-    encoder), so no J1 comes from a skewed a1.  Without an estimate a1 is kept (stamps matched within T_s/2)."""
+def check_imu_skew(window, tolerance_samples: float = IMU_SKEW_TOLERANCE_SAMPLES) -> Optional[dict]:
+    """The Imu skew of a captured window holding a1: None without a1, else ``{"skew_s"`` (None when no
+    estimate was possible: :func:`imu_skew`), ``"tolerance_s"``, ``"correlation"``, ``"reference"``,
+    ``"within"`` (False only for an estimate beyond the tolerance)}.  A window beyond the tolerance must not
+    give a J1: its a1 is out of step, and the detector placed the entry and the re-contact with it -- drop it
+    and go on without a1 (:meth:`JointStateAdapter.drop_a1`).  Without an estimate a1 is kept (the stamps
+    matched within T_s/2)."""
     chans = tuple(window.channels)
     if "a1" not in chans:
-        return window, None
+        return None
     ts = float(window.sample_period_s)
     est = imu_skew(window.column("a1"), ts, alpha1=window.column("alpha1") if "alpha1" in chans else None,
                    omega1=window.column("omega1") if "omega1" in chans else None)
     tol_s = tolerance_samples * ts
-    report = {"skew_s": None if est is None else est["skew_s"], "tolerance_s": tol_s,
-              "correlation": None if est is None else est["correlation"],
-              "reference": None if est is None else est["reference"], "a1_kept": True}
-    if est is None or abs(est["skew_s"]) <= tol_s:
-        return window, report
-    keep = [i for i, c in enumerate(chans) if c != "a1"]
-    report["a1_kept"] = False
-    return dataclasses.replace(window, data=np.ascontiguousarray(window.data[:, keep]),
-                               channels=tuple(chans[i] for i in keep)), report
+    return {"skew_s": None if est is None else est["skew_s"], "tolerance_s": tol_s,
+            "correlation": None if est is None else est["correlation"],
+            "reference": None if est is None else est["reference"],
+            "within": est is None or abs(est["skew_s"]) <= tol_s}
+
+
+def carry_counts(old, new):
+    """``new`` detector goes on where ``old`` stopped: window ids, samples, batches and drop counts carried
+    over (a detector replaced mid-stream, e.g. without a1).  Returns ``new``."""
+    for name in ("windows_captured", "samples_seen", "batches_seen"):
+        if hasattr(old, name) and hasattr(new, name):
+            setattr(new, name, getattr(old, name))
+    for r, n in getattr(old, "counts", {}).items():
+        if r in getattr(new, "counts", {}):
+            new.counts[r] += n
+    return new
+
+
+def skew_line(report: dict, window_id) -> str:
+    """One line for a window whose Imu skew is beyond the tolerance (:func:`check_imu_skew`)."""
+    late = "late" if report["skew_s"] > 0 else "early"
+    return (f"window {window_id} not diagnosed: Imu a1 is {1e3 * abs(report['skew_s']):.2f} ms {late} against the "
+            f"encoder (a1 against the derivative of {report['reference']}, correlation {report['correlation']:.2f}); "
+            f"beyond the tolerance {1e3 * report['tolerance_s']:.2f} ms: no J1 from a1, a1 left out from now on "
+            "(the encoder gives the acceleration)")
 
 
 # --------------------------------------------------------------------------- CSV
@@ -367,4 +459,4 @@ def read_csv(path, maps: Optional[dict] = None) -> tuple:
 
 
 __all__ = ["IMU_SKEW_TOLERANCE_SAMPLES", "InputError", "JOINT_CHANNELS", "JOINTSTATE_CHANNELS", "JointStateAdapter",
-           "check_imu_skew", "imu_skew", "parse_map", "read_csv"]
+           "carry_counts", "check_imu_skew", "imu_skew", "parse_map", "read_csv", "skew_line"]
