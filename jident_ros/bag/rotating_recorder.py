@@ -9,7 +9,7 @@ old bags deleted by a retention limit, every failure counted and reported.  No R
 
 * **Where**: ``<root>/rosbag2_YYYY_MM_DD-HH_MM_SS/`` (local time at start, as ``ros2 bag record`` names
   its bags; ``_1``, ``_2`` ... appended when two recorders start in the same second), holding
-  ``<name>_0.mcap``, ``<name>_1.mcap`` ... and ``metadata.yaml`` (:class:`~jident_ros.bag.recording.BagWriter`).
+  ``<name>_0.mcap``, ``<name>_1.mcap`` ... and ``metadata.yaml`` (:class:`~jident_ros.bag.writer.BagWriter`).
   The root: the argument, else ``$JIDENT_DATA_DIR/bags``, else ``$XDG_DATA_HOME/jident_ros/bags``, else
   ``~/.local/share/jident_ros/bags`` (:func:`default_record_root`).
 * **Time stamps**: a message's log and publish time is the wall clock (``time.time_ns()``, system time)
@@ -22,7 +22,7 @@ old bags deleted by a retention limit, every failure counted and reported.  No R
   deleted while they together exceed ``retention_max_total_bytes`` or a bag's newest file is older than
   ``retention_max_age_s`` (0: no limit).  Ours = named in the root's manifest ``.jident_ros_bags`` (a line
   appended, under an ``flock``, when a recorder claims a bag directory) **and** marked in its metadata.yaml
-  (``custom_data: recorded_by: jident_ros.bag.recorder``).  The root is never scanned: a directory that
+  (``custom_data: recorded_by: jident_ros.bag.rotating_recorder``).  The root is never scanned: a directory that
   is not in the manifest (a user's own bag, another tool's) is never looked at, never counted, never
   deleted.  Never deleted either: the open bag, a bag another recorder is writing (the writer keeps an
   ``flock`` on its open file), and a bag that was not finalised (a crash or kill cut it: a file without
@@ -45,21 +45,17 @@ import weakref
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from jident_ros.bag.recording import (
-    DEFAULT_CHUNK_SIZE,
-    DEFAULT_FLUSH_AGE_S,
-    BagWriter,
-    RecordingError,
-    is_finalised,
-    read_metadata,
-)
+from jident_ros.bag.errors import RecordingError
+from jident_ros.bag.metadata_yaml import read_metadata
+from jident_ros.bag.reader import is_finalised
+from jident_ros.bag.writer import DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_AGE_S, BagWriter
 
 __all__ = ["MANIFEST", "RECORDED_BY", "Recorder", "RecorderError", "bag_name", "default_record_root", "our_bags"]
 
 #: The root's manifest: the names of the bag directories the recorders claimed under it, one a line.
 MANIFEST = ".jident_ros_bags"
 #: The marker in each bag's metadata.yaml (``custom_data``): retention deletes only bags that carry it.
-RECORDED_BY = ("recorded_by", "jident_ros.bag.recorder")
+RECORDED_BY = ("recorded_by", "jident_ros.bag.rotating_recorder")
 
 
 class RecorderError(RecordingError):
@@ -206,8 +202,8 @@ class Recorder:
         root (0: none)
     retention_delete_unfinalised : let retention delete our bags that were not finalised (default: kept
         for ``jident salvage``)
-    chunk_size, flush_age_s, compression : of the :class:`~jident_ros.bag.recording.BagWriter`
-    custom_data : str -> str for metadata.yaml (e.g. the node's namespace)
+    chunk_size, flush_age_s, compression : of the :class:`~jident_ros.bag.writer.BagWriter`
+    custom_data : str -> str for metadata.yaml (e.g. the node's namespace; the marker ``recorded_by`` is added)
     clock : ns since the epoch for a message's time stamp when :meth:`write` gets none (default: wall clock)
     log : gets one line for each split, retention deletion and failure
 
