@@ -248,3 +248,105 @@ def test_imu_skew_estimate_sign_and_size():
         assert est is not None and abs(est["skew_samples"] - lag) < 0.2, (lag, est)
     assert imu_skew(np.random.default_rng(0).normal(size=4000), 5e-4, omega1=omega1) is None   # uncorrelated
     assert imu_skew(acc, 5e-4) is None                                                           # no encoder
+
+
+# ------------------------------------------------------------------ the CSV reader (item 5)
+def _csv_rows(n=300):
+    t = np.arange(n) * 5e-4
+    return [f"{a:.6f},{b:.6f},{c:.6f}" for a, b, c in zip(t, np.sin(t), np.cos(t))]
+
+
+def _write(path, text, encoding="utf-8"):
+    path.write_bytes(text.encode(encoding))
+    return path
+
+
+def test_csv_bom_utf16_and_latin1_headers_are_read(tmp_path):
+    from jident_ros.stream.inputs import read_csv
+    body = "\n".join(_csv_rows()) + "\n"
+    for name, enc, header in (("bom.csv", "utf-8-sig", "t,alpha1,alpha2"), ("u16.csv", "utf-16", "t,alpha1,alpha2"),
+                              ("latin1.csv", "latin-1", "t,alpha1,alpha2,Zeit_µs")):
+        text = header + "\n" + (body if "Zeit" not in header else body.replace("\n", ",0\n"))
+        data, ch, ignored = read_csv(_write(tmp_path / name, text, enc))
+        assert ch == ("t", "alpha1", "alpha2") and data.shape == (300, 3), name
+        assert ignored == (["Zeit_µs"] if "Zeit" in header else [])
+
+
+@pytest.mark.parametrize("case", ["long field", "long field in an ignored column", "not a number", "NUL byte",
+                                  "bad UTF-8 late", "too few fields", "header only", "empty", "a directory"])
+def test_malformed_csv_gives_one_line_naming_file_and_line(tmp_path, case):
+    from jident_ros.stream.inputs import InputError, read_csv
+    rows = _csv_rows(3000)
+    path = tmp_path / "trace.csv"
+    header = "t,alpha1,alpha2,note" if "ignored" in case else "t,alpha1,alpha2"
+    if "ignored" in case:
+        rows = [r + ",x" for r in rows]
+    k = 2900 if case == "bad UTF-8 late" else 2000     # the bad row (line k + 2)
+    if case == "long field":
+        rows[k] = "1.5" + "x" * 199_997 + ",0,0"
+    elif case == "long field in an ignored column":
+        rows[k] = rows[k][:-1] + "y" * 200_000         # fine: an ignored column may hold anything
+    elif case == "not a number":
+        rows[k] = "0.1,abc,0"
+    elif case == "too few fields":
+        rows[k] = "0.1,0"
+    text = header + "\n" + "\n".join(rows) + "\n"
+    if case == "NUL byte":
+        text = text.replace(rows[k], rows[k][:3] + "\0" + rows[k][3:])
+    if case == "header only":
+        text = header + "\n"
+    raw = text.encode()
+    if case == "bad UTF-8 late":                       # past the first 64 kB that chose UTF-8
+        pos = raw.index(rows[k].encode())
+        raw = raw[:pos] + b"\xff" + raw[pos:]
+    if case == "empty":
+        raw = b""
+    if case == "a directory":
+        path = tmp_path / "dir.csv"
+        path.mkdir()
+    else:
+        path.write_bytes(raw)
+    if case == "long field in an ignored column":
+        data, ch, ignored = read_csv(path)
+        assert data.shape == (3000, 3) and ignored == ["note"]
+        return
+    with pytest.raises(InputError) as err:
+        read_csv(path)
+    text = str(err.value)
+    assert "\n" not in text and len(text) < 300 and str(path) in text, text
+    if case in ("long field", "not a number", "NUL byte", "too few fields"):
+        assert f"line {k + 2}" in text, text
+    if case == "long field":
+        assert "(200000 characters)" in text
+    if case == "bad UTF-8 late":
+        assert f"line {k + 2}: column 't' value " in text and "bytes that are not utf-8-sig text" in text
+
+
+def test_csv_blocks_are_bounded_and_the_same_as_reading_it_whole(tmp_path):
+    from jident_ros.stream.inputs import CSV_BLOCK_ROWS, CsvStream
+    path = _write(tmp_path / "x.csv", "t,alpha1,alpha2\n" + "\n".join(_csv_rows(12_345)) + "\n")
+    blocks = list(CsvStream(path).blocks())
+    assert max(b.shape[0] for b in blocks) == CSV_BLOCK_ROWS and sum(b.shape[0] for b in blocks) == 12_345
+    assert all(b.shape[0] == CSV_BLOCK_ROWS for b in blocks[:-1])      # the detectors' 50-batches line up
+    ref = np.loadtxt(path, delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(np.concatenate(blocks), ref)
+
+
+def test_map_given_twice_is_refused_in_one_line():
+    from jident_ros.stream.inputs import InputError, parse_map
+    with pytest.raises(InputError, match=r"^--map: channel 't' mapped twice \('t=a:0.001' and 't=b'\); give one mapping$"):
+        parse_map("t=a:0.001,alpha1=x,t=b")
+
+
+def test_jident_diagnose_on_a_malformed_csv_is_one_line_no_traceback(tmp_path):
+    import subprocess
+    import sys
+    path = tmp_path / "bad.csv"
+    rows = _csv_rows(100)
+    rows[50] = "2" + "y" * 139_999 + ",0,0"
+    path.write_text("t,alpha1,alpha2\n" + "\n".join(rows) + "\n")
+    r = subprocess.run([sys.executable, "-m", "jident_ros.cli", "diagnose", str(path), "--no-image"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    (line,) = [x for x in r.stderr.splitlines() if x.strip()]
+    assert str(path) in line and "line 52" in line and "(140000 characters)" in line

@@ -40,11 +40,11 @@ from jident_ros.stream.detector import BacklashDetector, stream_batches
 from jident_ros.stream.dynamics import DynamicsDetector
 from jident_ros.stream.flank import DETECTORS, FlankDetector
 from jident_ros.stream.inputs import (
+    CsvStream,
     InputError,
     JointStateAdapter,
     carry_counts,
     check_imu_skew,
-    read_csv,
     skew_line,
 )
 from jident_ros.stream.layout import DRIVE_TOPICS, REQUIRED_CHANNELS, SIGNALS_TOPIC, WIDTH_TOPIC, pack
@@ -439,10 +439,12 @@ def diagnose_samples(path, *, system=None, method=None, p: float = 2.0, library=
     adapter = None
     try:
         if path.suffix.lower() == ".csv":
-            data, channels, ignored = read_csv(path, maps)
-            if ignored:
-                log(f"{path}: columns ignored (not channels): {', '.join(ignored)}")
-            source, batches = str(path), ((b, channels) for b in stream_batches(data, 50))
+            csv_stream = CsvStream(path, maps)     # block by block: bounded memory for any file size
+            if csv_stream.ignored:
+                log(f"{path}: columns ignored (not channels): {', '.join(csv_stream.ignored)}")
+            channels = csv_stream.channels
+            source = str(path)
+            batches = ((b, channels) for block in csv_stream.blocks() for b in stream_batches(block, 50))
         else:
             adapter, batches, source = jointstate_batches(path, ts, motor_joint, load_joint, imu_axis, topic)
     except InputError as exc:
@@ -457,28 +459,31 @@ def diagnose_samples(path, *, system=None, method=None, p: float = 2.0, library=
     det = None
     imu_skew_dropped = 0
     retired = []                     # a detector replaced when a1 was left out (its counts still count)
-    for arr, channels in batches:
-        if adapter is not None and adapter.a1_dropped and "a1" in channels:   # batched before a1 was left out
-            keep = [j for j, c in enumerate(channels) if c != "a1"]
-            arr, channels = arr[:, keep], tuple(channels[j] for j in keep)
-        if det is None:
-            det = _make_detector(system, backlash_width_m, None, channels, None, WINDOWING_DEFAULTS, source,
-                                 detector, gear_ratio)
-            if retired:          # the window ids and counts go on
-                det = carry_counts(retired[-1], det)
-        for ev in det.push(arr, channels):
-            if ev.kind == "window":
-                win = ev.window
-                if adapter is not None and adapter.use_imu:   # no J1 from an Imu out of step with the encoder
-                    skew = check_imu_skew(win)
-                    if skew is not None and not skew["within"]:
-                        imu_skew_dropped += 1
-                        log(skew_line(skew, win.window_id))
-                        adapter.drop_a1()
-                        retired.append(det)
-                        det = None       # a new detector from the next batch, on the encoder's acceleration
-                        break
-                _add_window(result, win, diag(win), None, on_window)
+    try:
+        for arr, channels in batches:
+            if adapter is not None and adapter.a1_dropped and "a1" in channels:   # batched before a1 was left out
+                keep = [j for j, c in enumerate(channels) if c != "a1"]
+                arr, channels = arr[:, keep], tuple(channels[j] for j in keep)
+            if det is None:
+                det = _make_detector(system, backlash_width_m, None, channels, None, WINDOWING_DEFAULTS, source,
+                                     detector, gear_ratio)
+                if retired:          # the window ids and counts go on
+                    det = carry_counts(retired[-1], det)
+            for ev in det.push(arr, channels):
+                if ev.kind == "window":
+                    win = ev.window
+                    if adapter is not None and adapter.use_imu:   # no J1 from an Imu out of step with the encoder
+                        skew = check_imu_skew(win)
+                        if skew is not None and not skew["within"]:
+                            imu_skew_dropped += 1
+                            log(skew_line(skew, win.window_id))
+                            adapter.drop_a1()
+                            retired.append(det)
+                            det = None       # a new detector from the next batch, on the encoder's acceleration
+                            break
+                    _add_window(result, win, diag(win), None, on_window)
+    except InputError as exc:   # a CSV read block by block: its errors come while streaming
+        raise OfflineError(str(exc)) from None
     if det is None and not retired:
         raise OfflineError(f"recording {path}: no sample")
     _finish(result, det if det is not None else retired[-1], log)

@@ -28,8 +28,10 @@ JointState (:class:`JointStateAdapter`)
   its median, standard deviation and largest deviation, and whether the median matches (within 1 %);
 * samples are batched inside (``batch_size``); :meth:`JointStateAdapter.flush` hands out the rest.
 
-CSV (:func:`read_csv`)
-----------------------
+CSV (:class:`CsvStream`, :func:`read_csv`)
+------------------------------------------
+Read block by block (bounded memory, any file size, any field length); UTF-8 with or without a byte-order
+mark, UTF-16 with one, else Latin-1; every error names the file and the line (one line, never a traceback).
 A header row of the documented channel names in SI units (``t,alpha1,alpha2,m_el,...``, docs/interfaces.md);
 ``maps`` ({channel: (column, scale)}, e.g. from ``--map alpha1=enc_motor:0.0000958738,t=time_ms:0.001``,
 :func:`parse_map`) takes other column names and scale factors.  Other columns are ignored (and listed).
@@ -38,6 +40,7 @@ from __future__ import annotations
 
 import csv
 import math
+import sys
 from collections import deque
 from pathlib import Path
 from typing import Optional, Sequence
@@ -396,14 +399,17 @@ def skew_line(report: dict, window_id) -> str:
 # --------------------------------------------------------------------------- CSV
 
 def parse_map(text: str) -> dict:
-    """``alpha1=enc_motor:0.0000958738,t=time_ms:0.001`` -> {channel: (column, scale)} (scale 1 when left out)."""
-    out = {}
+    """``alpha1=enc_motor:0.0000958738,t=time_ms:0.001`` -> {channel: (column, scale)} (scale 1 when left out).
+    A channel mapped twice is refused (one line naming both mappings)."""
+    out, given = {}, {}
     for item in [s.strip() for s in str(text).split(",") if s.strip()]:
         if "=" not in item:
             raise InputError(f"--map {item!r}: expected channel=column[:scale]")
         ch, rhs = (s.strip() for s in item.split("=", 1))
         if ch not in KNOWN_CHANNELS:
             raise InputError(f"--map {item!r}: unknown channel {ch!r} (known: {', '.join(KNOWN_CHANNELS)})")
+        if ch in out:
+            raise InputError(f"--map: channel {ch!r} mapped twice ({given[ch]!r} and {item!r}); give one mapping")
         col, _, scale = rhs.partition(":")
         try:
             k = float(scale) if scale else 1.0
@@ -411,52 +417,175 @@ def parse_map(text: str) -> dict:
             raise InputError(f"--map {item!r}: scale {scale!r} is not a number") from None
         if not col or not math.isfinite(k) or k == 0:
             raise InputError(f"--map {item!r}: need a column name and a finite non-zero scale")
-        out[ch] = (col, k)
+        out[ch], given[ch] = (col, k), item
     return out
 
 
-def read_csv(path, maps: Optional[dict] = None) -> tuple:
-    """(array (n, c), channels, ignored columns) of a CSV file (module docstring)."""
-    path = Path(path)
-    maps = dict(maps or {})
+#: Rows per array the CSV stream hands out (a multiple of the detectors' 50-sample batches).
+CSV_BLOCK_ROWS = 5000
+#: Rows that decide which channels a CSV provides (a channel empty in all of them is not provided).
+CSV_PROBE_ROWS = 1000
+_SHOWN_CHARS = 40
+
+
+def _shown(text: str) -> str:
+    """A field's text for a one-line error: at most ``_SHOWN_CHARS`` characters, with its length when cut."""
+    return repr(text) if len(text) <= _SHOWN_CHARS else f"{text[:_SHOWN_CHARS]!r}... ({len(text)} characters)"
+
+
+def _undecoded(text: str) -> bool:
+    """True when ``text`` holds bytes the file's encoding could not decode (surrogateescape)."""
+    return any("\udc80" <= ch <= "\udcff" for ch in text)
+
+
+def _encoding(path: Path) -> str:
+    """The text encoding of a CSV file from its first 64 kB: UTF-16 / UTF-8 with their byte-order marks,
+    UTF-8, else Latin-1 (any byte is a character: a header in a legacy code page still reads; the numbers
+    are ASCII in all of them)."""
+    with open(path, "rb") as f:
+        head = f.read(65536)
+    if head.startswith((b"\xff\xfe", b"\xfe\xff")):
+        return "utf-16"
     try:
-        with open(path, newline="") as f:
-            rows = list(csv.reader(f))
-    except OSError as exc:
-        raise InputError(f"CSV {path}: {exc.strerror or exc}") from None
-    if not rows:
-        raise InputError(f"CSV {path}: empty file")
-    header = [h.strip() for h in rows[0]]
-    source = {}                       # channel -> (column index, scale)
-    for ch, (col, k) in maps.items():
-        if col not in header:
-            raise InputError(f"--map {ch}={col}: column {col!r} not in the CSV header {header}")
-        source[ch] = (header.index(col), k)
-    mapped_cols = {col for col, _ in maps.values()}
-    for i, h in enumerate(header):
-        if h in KNOWN_CHANNELS and h not in source and h not in mapped_cols:
-            source[h] = (i, 1.0)
-    if "t" not in source:
-        raise InputError(f"CSV {path}: no time column 't' (header {header}; use --map t=<column>:<scale to s>)")
-    ignored = [h for h in header if h not in KNOWN_CHANNELS and h not in mapped_cols]
-    channels = ("t",) + tuple(c for c in KNOWN_CHANNELS if c in source and c != "t")
-    data = np.empty((len(rows) - 1, len(channels)))
-    for r, row in enumerate(rows[1:], start=2):
-        if len(row) != len(header):
-            raise InputError(f"CSV {path} line {r}: {len(row)} fields, the header has {len(header)}")
-        for j, ch in enumerate(channels):
-            i, k = source[ch]
-            text = row[i].strip()
-            try:
-                data[r - 2, j] = k * float(text) if text else math.nan
-            except ValueError:
-                raise InputError(f"CSV {path} line {r}: column {header[i]!r} value {text!r} is not a number") from None
-    absent = [j for j, ch in enumerate(channels) if ch != "t" and data.size and np.isnan(data[:, j]).all()]
-    if absent:                        # a channel absent throughout is simply not provided
-        keep = [j for j in range(len(channels)) if j not in absent]
-        data, channels = data[:, keep], tuple(channels[j] for j in keep)
-    return data, channels, ignored
+        head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        if exc.start < len(head) - 4:       # not just a character cut at the 64 kB boundary
+            return "latin-1"
+    return "utf-8-sig"                      # the BOM, when there is one, is not part of the first name
 
 
-__all__ = ["IMU_SKEW_TOLERANCE_SAMPLES", "InputError", "JOINT_CHANNELS", "JOINTSTATE_CHANNELS", "JointStateAdapter",
+class CsvStream:
+    """A CSV file of a drive's trace read block by block (bounded memory, any size): :attr:`channels`,
+    :attr:`ignored` (columns that are not channels) and :meth:`blocks` (arrays of at most
+    :data:`CSV_BLOCK_ROWS` rows).  The header and the first :data:`CSV_PROBE_ROWS` rows are read when it is
+    made: a channel whose column is empty in all of them is not provided.  Every error is an
+    :class:`InputError` naming the file and the line."""
+
+    def __init__(self, path, maps: Optional[dict] = None, block_rows: int = CSV_BLOCK_ROWS):
+        self.path = Path(path)
+        self.block_rows = int(block_rows)
+        self.rows_read = 0
+        if csv.field_size_limit() < _FIELD_LIMIT:
+            csv.field_size_limit(_FIELD_LIMIT)  # any field length: a long field is an error of its own, later
+        try:
+            if not self.path.is_file():
+                raise InputError(f"CSV {self.path}: " + ("not a regular file" if self.path.exists()
+                                                         else "no such file"))
+            self.encoding = _encoding(self.path)
+            # undecodable bytes are kept as lone surrogates: an error names its exact line when a used column
+            # holds them, an ignored column may hold anything
+            self._file = open(self.path, newline="", encoding=self.encoding, errors="surrogateescape")
+        except OSError as exc:
+            raise InputError(f"CSV {self.path}: {exc.strerror or exc}") from None
+        self._reader = csv.reader(self._file)
+        try:
+            header = self._next_row()
+            if header is None:
+                raise InputError(f"CSV {self.path}: empty file")
+            header = [h.strip() for h in header]
+            maps = dict(maps or {})
+            source = {}                       # channel -> (column index, scale)
+            for ch, (col, k) in maps.items():
+                if col not in header:
+                    raise InputError(f"--map {ch}={col}: column {col!r} not in the header of CSV {self.path} "
+                                     f"{header[:20]}")
+                source[ch] = (header.index(col), k)
+            mapped_cols = {col for col, _ in maps.values()}
+            for i, h in enumerate(header):
+                if h in KNOWN_CHANNELS and h not in source and h not in mapped_cols:
+                    source[h] = (i, 1.0)
+            if "t" not in source:
+                raise InputError(f"CSV {self.path}: no time column 't' (header {header[:20]}; use "
+                                 "--map t=<column>:<scale to s>)")
+            self.header = header
+            self.ignored = [h for h in header if h not in KNOWN_CHANNELS and h not in mapped_cols]
+            channels = ("t",) + tuple(c for c in KNOWN_CHANNELS if c in source and c != "t")
+            self._source = [source[c] for c in channels]
+            self.channels = channels
+            probe = self._read(CSV_PROBE_ROWS)
+            if probe.shape[0] == 0:
+                raise InputError(f"CSV {self.path}: a header and no data rows")
+            absent = [j for j, ch in enumerate(channels) if ch != "t" and np.isnan(probe[:, j]).all()]
+            keep = [j for j in range(len(channels)) if j not in absent]
+            self.channels = tuple(channels[j] for j in keep)
+            self._source = [self._source[j] for j in keep]
+            self._probe = probe[:, keep]
+        except BaseException:
+            self._file.close()
+            raise
+
+    def _next_row(self):
+        try:
+            return next(self._reader)
+        except StopIteration:
+            return None
+        except csv.Error as exc:
+            raise InputError(f"CSV {self.path} line {self._reader.line_num + 1}: {exc}") from None
+        except UnicodeError as exc:
+            raise InputError(f"CSV {self.path} after line {self._reader.line_num}: not {self.encoding} text "
+                             f"({exc})") from None
+
+    def _read(self, n: int) -> np.ndarray:
+        """Up to ``n`` rows as an array (fewer at the end of the file)."""
+        out = np.empty((n, len(self._source)))
+        width = len(self.header)
+        r = 0
+        while r < n:
+            row = self._next_row()
+            if row is None:
+                break
+            line = self._reader.line_num
+            if len(row) != width:
+                if not row or (len(row) == 1 and not row[0].strip()):
+                    continue                  # a blank line
+                raise InputError(f"CSV {self.path} line {line}: {len(row)} fields, the header has {width}")
+            for j, (i, k) in enumerate(self._source):
+                text = row[i].strip()
+                try:
+                    out[r, j] = k * float(text) if text else math.nan
+                except ValueError:
+                    what = (f"holds bytes that are not {self.encoding} text" if _undecoded(text)
+                            else "is not a number")
+                    raise InputError(f"CSV {self.path} line {line}: column {self.header[i]!r} value "
+                                     f"{_shown(text)} {what}") from None
+            r += 1
+        self.rows_read += r
+        return out[:r]
+
+    def blocks(self):
+        """The rows as arrays (n <= block_rows, channels); closes the file at the end."""
+        try:
+            probe, self._probe = self._probe, None
+            if probe is not None and probe.shape[0]:
+                # keep the block boundaries on multiples of block_rows from the first row
+                rest = self._read(self.block_rows - probe.shape[0] % self.block_rows) \
+                    if probe.shape[0] % self.block_rows else np.empty((0, probe.shape[1]))
+                first = np.concatenate([probe, rest])
+                for s in range(0, first.shape[0], self.block_rows):
+                    yield first[s:s + self.block_rows]
+            while True:
+                block = self._read(self.block_rows)
+                if block.shape[0] == 0:
+                    return
+                yield block
+        finally:
+            self._file.close()
+
+    def close(self) -> None:
+        self._file.close()
+
+
+_FIELD_LIMIT = min(sys.maxsize, 2**31 - 1)
+
+
+def read_csv(path, maps: Optional[dict] = None) -> tuple:
+    """(array (n, c), channels, ignored columns) of a whole CSV file (module docstring; :class:`CsvStream`
+    reads one of any size block by block)."""
+    stream = CsvStream(path, maps)
+    blocks = list(stream.blocks())
+    data = np.concatenate(blocks) if blocks else np.empty((0, len(stream.channels)))
+    return data, stream.channels, stream.ignored
+
+
+__all__ = ["IMU_SKEW_TOLERANCE_SAMPLES", "CsvStream", "InputError", "JOINT_CHANNELS", "JOINTSTATE_CHANNELS", "JointStateAdapter",
            "carry_counts", "check_imu_skew", "imu_skew", "parse_map", "read_csv", "skew_line"]
