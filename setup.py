@@ -63,10 +63,10 @@ setup(
     entry_points={
         'console_scripts': [
             'jident = jident_ros.cli.main:main',
-            'simulator = jident_ros.nodes.simulator:main',
-            'windowing = jident_ros.nodes.windowing:main',
-            'diagnostic = jident_ros.nodes.diagnostic:main',
-            'replay = jident_ros.nodes.replay:main',
+            'simulator = jident_ros.nodes.entry:simulator',
+            'windowing = jident_ros.nodes.entry:windowing',
+            'diagnostic = jident_ros.nodes.entry:diagnostic',
+            'replay = jident_ros.nodes.entry:replay',
         ],
     },
 )

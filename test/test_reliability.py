@@ -11,6 +11,7 @@ import types
 
 import numpy as np
 import pytest
+from test_nodes import node_env  # noqa: F401  (fixture)
 
 SIGNALS = "std_msgs/msg/Float64MultiArray"
 
@@ -350,3 +351,162 @@ def test_jident_diagnose_on_a_malformed_csv_is_one_line_no_traceback(tmp_path):
     assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
     (line,) = [x for x in r.stderr.splitlines() if x.strip()]
     assert str(path) in line and "line 52" in line and "(140000 characters)" in line
+
+
+# ------------------------------------------------------------------ the misc items (item 6)
+def test_numbers_in_messages_are_plain():
+    pytest.importorskip("diagnostic_msgs")
+    from jident_ros.nodes.ros_io import format_value, make_status
+    from jident_ros.stream.text import plain_numbers
+    text = "t np.float64(1.0005) -> np.float64(0.9995) s; K2 np.float32(nan) m; np.int64(3) windows; np.True_"
+    assert plain_numbers(text) == "t 1.0005 -> 0.9995 s; K2 nan m; 3 windows; True"
+    assert make_status("x", 1, text).message == plain_numbers(text)
+    assert format_value(f"{np.float64(2.3985)!r}") == "2.3985"
+    assert plain_numbers("np.float64 is a type; 2.0") == "np.float64 is a type; 2.0"
+
+
+def test_a_zero_byte_trailing_mcap_leaves_a_split_bag_readable(tmp_path):
+    from jident_ros.bag.reader import read_bag
+    from jident_ros.bag.rotating_recorder import Recorder
+    from jident_ros.bag.salvage import salvage
+    rec = Recorder(tmp_path, max_bag_size_bytes=20_000, chunk_size=8_000, compression=None)
+    for i in range(30):
+        rec.write("/x", "std_msgs/msg/UInt8MultiArray", {"data": np.full(3_000, i, dtype=np.uint8)})
+    rec.close()
+    files = sorted(rec.bag_dir.glob("*.mcap"))
+    assert len(files) >= 3
+    (rec.bag_dir / f"{rec.bag_dir.name}_{len(files)}.mcap").write_bytes(b"")    # a split begun, then killed
+    assert sum(1 for _ in read_bag(rec.bag_dir)) == 30
+    (rec.bag_dir / "metadata.yaml").unlink()                                    # and without metadata.yaml
+    assert sum(1 for _ in read_bag(rec.bag_dir, on_salvage=lambda text: None)) == 30
+    assert salvage(rec.bag_dir, tmp_path / "out")["messages_recovered"] == 30
+
+
+def test_windows_ignored_while_inactive_are_not_counted_as_lost():
+    pytest.importorskip("rclpy")
+    from jident_ros.nodes.diagnostic import DiagnosticNode
+    from jident_ros.nodes.ros_io import window_to_msg
+    from jident_ros.stream.layout import Window
+    data = np.zeros((10, 3))
+    data[:, 0] = np.arange(10) * 5e-4
+
+    def msg(i):
+        return window_to_msg(Window(data, ("t", "alpha1", "alpha2"), 2, 0.001, 0.005, 0.1, 5e-4, i))
+
+    host = types.SimpleNamespace(active=True, windows_inactive=0, windows_seen=0, windows_lost=0, lost_in_period=0,
+                                 lost_ids=[], last_window_id=None, window_id_restarts=0, last_input=None,
+                                 _record=lambda *a: None, get_logger=lambda: _FakeLogger())
+    host._count_window_id = lambda i: DiagnosticNode._count_window_id(host, i)
+    host._diagnose = lambda m, t: host._count_window_id(int(__import__(
+        "jident_ros.nodes.ros_io", fromlist=["x"]).window_from_msg(m).window_id))
+    DiagnosticNode.on_window(host, msg(1))
+    host.active = False                       # deactivated: windows 2..5 are ignored, and counted so
+    for i in range(2, 6):
+        DiagnosticNode.on_window(host, msg(i))
+    host.active = True
+    DiagnosticNode.on_window(host, msg(6))
+    assert host.windows_inactive == 4 and host.windows_lost == 0 and host.windows_seen == 2
+    DiagnosticNode.on_window(host, msg(8))    # a real loss is still counted
+    assert host.windows_lost == 1 and host.lost_ids == [7]
+
+
+# ------------------------------------------------------------------ live nodes: signals, a FIFO (item 6, item 7)
+def _start_and_signal(node_env, tmp_path, node, delay_s, sig, *ros_args):
+    """Start ``node``, send ``sig`` ``delay_s`` after the spawn (during the imports, rcl's start, the node's
+    construction or the spin), wait; (returncode, output)."""
+    import subprocess
+    import time
+
+    from jident_ros.resources import node_command, stop_process
+    log = tmp_path / f"{node}-{time.monotonic_ns()}.log"
+    with open(log, "w") as out:
+        p = subprocess.Popen([*node_command(node), "--ros-args", *ros_args], env=node_env, cwd=tmp_path,
+                             stdout=out, stderr=subprocess.STDOUT)
+        time.sleep(delay_s)
+        rc = stop_process(p, sig, 30.0)
+    return rc, log.read_text()
+
+
+_STOP_ARGS = {
+    "windowing": ("-p", "diagnostics_period_s:=0.0"),
+    "diagnostic": ("-p", "record:=false", "-p", "image_method:=false", "-p", "stale_after_s:=0.0"),
+    "simulator": ("-p", "real_time_factor:=0.0", "-p", "wait_timeout_s:=60.0"),
+}
+
+
+def _stops(node_env, tmp_path, n, seed):
+    import random
+    import signal
+    rng = random.Random(seed)
+    out = []
+    nodes = sorted(_STOP_ARGS)
+    for k in range(n):
+        node = nodes[k % len(nodes)]
+        sig = signal.SIGINT if k % 2 == 0 else signal.SIGTERM
+        delay = rng.uniform(0.0, 2.5) if k >= 3 else (0.25, 0.5, 0.9)[k]   # the first three inside the imports
+        rc, text = _start_and_signal(node_env, tmp_path / f"s{k}", node, delay, sig, "-r", f"__ns:=/stop{k}",
+                                     *_STOP_ARGS[node])
+        out.append((node, sig.name, round(delay, 3), rc, text))
+    return out
+
+
+def _before_python(sig, rc, text) -> bool:
+    """Killed by the signal's default action before the interpreter had started (no output at all): nothing
+    ran, nothing to finalise, no traceback -- the one moment no Python code can catch a signal."""
+    import signal
+    return rc == -getattr(signal, sig) and not text.strip()
+
+
+def _bad_stops(results):
+    return [(node, sig, delay, rc, text[-800:]) for node, sig, delay, rc, text in results
+            if (rc != 0 and not _before_python(sig, rc, text)) or "Traceback" in text or "KeyboardInterrupt" in text]
+
+
+@pytest.mark.ros
+def test_signals_at_any_moment_of_a_nodes_life_end_it_cleanly(node_env, tmp_path):
+    """Issue 24: Ctrl-C in a node's first ~1.2 s gave rc -2 and a traceback.  6 stops (SIGINT, SIGTERM) of the
+    three node kinds, three of them inside the imports; -m slow runs 200."""
+    for k in range(6):
+        (tmp_path / f"s{k}").mkdir()
+    results = _stops(node_env, tmp_path, 6, seed=3)
+    bad = _bad_stops(results)
+    assert not bad, bad[:2]
+    assert sum(rc == 0 for _, _, _, rc, _ in results) >= 5, [r[:4] for r in results]
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_200_stops_at_any_moment_no_traceback(node_env, tmp_path):
+    for k in range(200):
+        (tmp_path / f"s{k}").mkdir()
+    results = _stops(node_env, tmp_path, 200, seed=24)
+    bad = _bad_stops(results)
+    early = sum(_before_python(sig, rc, text) for _, sig, _, rc, text in results)
+    print(f"200 stops at random moments (0-2.5 s after the spawn): {200 - len(bad)} clean ({early} of them "
+          f"before the interpreter started: killed by the signal, no output), {len(bad)} not: "
+          f"{[b[:4] for b in bad[:10]]}")
+    assert not bad, bad[:2]
+
+
+@pytest.mark.ros
+def test_a_fifo_as_trend_state_file_does_not_hang_configure(node_env, tmp_path):
+    import signal
+    import subprocess
+    import time
+
+    from jident_ros.resources import node_command, stop_process
+    fifo = tmp_path / "state.fifo"
+    os.mkfifo(fifo)
+    log = tmp_path / "diag.log"
+    with open(log, "w") as out:
+        p = subprocess.Popen([*node_command("diagnostic"), "--ros-args", "-r", "__ns:=/fifo", "-p", "record:=false",
+                              "-p", "image_method:=false", "-p", f"trend_state_file:={fifo}"],
+                             env=node_env, cwd=tmp_path, stdout=out, stderr=subprocess.STDOUT)
+        end = time.monotonic() + 60
+        while time.monotonic() < end and "ready:" not in log.read_text() and p.poll() is None:
+            time.sleep(0.1)
+        text = log.read_text()
+        rc = stop_process(p, signal.SIGINT, 20.0)
+    assert "ready:" in text, text[-1500:]
+    assert f"trend_state_file {fifo}: a FIFO, not a regular file: not read, not written" in text
+    assert rc == 0 and fifo.exists() and fifo.is_fifo()

@@ -49,6 +49,7 @@ from jident_ros.stream.inputs import (
 )
 from jident_ros.stream.layout import DRIVE_TOPICS, REQUIRED_CHANNELS, SIGNALS_TOPIC, WIDTH_TOPIC, pack
 from jident_ros.stream.layout import topic_matches as _matches
+from jident_ros.stream.text import plain_numbers
 
 try:  # reading a `ros2 bag record` of /joint_states (any storage, any distro) needs rosbags
     from rosbags.highlevel import AnyReader
@@ -209,6 +210,7 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
 
     Raises :class:`OfflineError` (one line naming the field and value) on bad input.
     """
+    log = _plain_log(log)
     system = load_system_config() if system is None else system
     method = load_method_config() if method is None else method
     if gap_method not in GAP_METHODS:
@@ -294,6 +296,11 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
     _finish(result, detector, log)
     result.clock_jumps = replay.clock_jumps
     return result
+
+
+def _plain_log(log: Callable[[str], Any]) -> Callable[[str], Any]:
+    """``log`` with plain numbers (no numpy reprs) in every line."""
+    return lambda text: log(plain_numbers(str(text)))
 
 
 def default_policy(**overrides) -> VerdictPolicy:
@@ -421,6 +428,7 @@ def diagnose_samples(path, *, system=None, method=None, p: float = 2.0, library=
     """Diagnose a JointState bag or a CSV file (``.csv``) as the windowing (``input: joint_states``) and
     diagnostic nodes do.  ``detector``: "flank" (no K2; the default for real drives) or "paper"
     (inequality 1 with ``backlash_width_m``, zone-centred angles).  Raises OfflineError on bad input."""
+    log = _plain_log(log)
     system = load_system_config() if system is None else system
     method = load_method_config() if method is None else method
     policy = default_policy() if policy is None else policy
@@ -515,7 +523,7 @@ def format_window_line(w: OfflineWindow) -> str:
         return "-" if v is None else format(v, fmt)
     return (f"{w.window_id:>6}  {w.entry_time_s:>10.4f}  {num(w.true_inertia_kgm2, '>8.5g')}  "
             f"{num(d.inertia_kgm2, '>11.6g')}  {d.source or '-':>6}  {num(d.class_kgm2, '>6.5g')}  "
-            f"{num(w.error_percent, '>+7.3f')}  {LEVEL_NAMES[d.level]:<5}  {d.message}")
+            f"{num(w.error_percent, '>+7.3f')}  {LEVEL_NAMES[d.level]:<5}  {plain_numbers(d.message)}")
 
 
 def summary_line(result: OfflineResult) -> str:
@@ -537,7 +545,7 @@ def summary_line(result: OfflineResult) -> str:
     errs = [abs(w.error_percent) for w in result.windows if w.error_percent is not None]
     if errs:
         text += f"; largest |J1 error| against the true J1 {max(errs):.3f} %"
-    return text
+    return plain_numbers(text)
 
 
 def write_json(result: OfflineResult, out) -> Path:

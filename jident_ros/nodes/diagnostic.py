@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import math
 import os
+import stat
 import time
 from pathlib import Path
 
@@ -76,6 +77,7 @@ from jident_ros.nodes.params import (
 from jident_ros.nodes.ros_io import LayoutError, make_status, qos_latched, qos_signals, window_from_msg
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, GAP_METHOD_CHOICES
+from jident_ros.stream.text import plain_numbers
 
 try:  # the recorder needs mcap and rosbags: without them the node runs on and says so
     from jident_ros.bag.rotating_recorder import Recorder, RecorderError
@@ -130,6 +132,18 @@ def validate(values: dict):
 def schema() -> dict:
     """Every parameter of the node: its own, the model's (system.yaml) and the method's (method.yaml)."""
     return node_schema(DIAGNOSTIC_PARAMS, method=True)
+
+
+def _not_regular(path: str) -> str:
+    """What ``path`` is when it exists and is not a regular file ("a FIFO", "a directory", ...), else ""."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return ""
+    if stat.S_ISREG(mode):
+        return ""
+    return {stat.S_IFIFO: "a FIFO", stat.S_IFDIR: "a directory", stat.S_IFCHR: "a character device",
+            stat.S_IFBLK: "a block device", stat.S_IFSOCK: "a socket"}.get(stat.S_IFMT(mode), "not a file")
 
 
 def library_path(cfg, system, method) -> Path:
@@ -266,6 +280,7 @@ class DiagnosticNode(LifecycleNode):
         self.trend = None                  # TrendTracker (trend_enabled, configured)
         self.trend_update = None           # its last TrendUpdate
         self.trend_error = None            # why the trend's state file was not used (ERROR), one line
+        self.trend_state_refused = False   # trend_state_file is not a regular file: never read nor written
         self.trend_save_error = None       # the last failure to write the state file (ERROR), one line
         self.trend_windows_without_estimate = 0
         self.trend_width_source = ""        # where the last window's width came from: flank, gap or none
@@ -464,12 +479,17 @@ class DiagnosticNode(LifecycleNode):
         try:
             self._record("drive/window", msg)
             if not self.active:
+                # ignored, not lost: its id moves on, so the next diagnosed window sees no gap
                 self.windows_inactive += 1
+                try:
+                    self.last_window_id = int(window_from_msg(msg).window_id)
+                except (LayoutError, ValueError):
+                    pass
                 return
             self.windows_seen += 1
             self._diagnose(msg, t_recv)
         except Exception as exc:  # never die on a window: report, go on
-            text = f"window could not be diagnosed: internal error {type(exc).__name__}: {exc}"
+            text = plain_numbers(f"window could not be diagnosed: internal error {type(exc).__name__}: {exc}")
             self.get_logger().error(text)
             try:
                 self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id))
@@ -535,7 +555,8 @@ class DiagnosticNode(LifecycleNode):
         errors, warnings = self.check_window(win)
         if errors:
             self.windows_mismatched += 1
-            text = f"window {win.window_id} not diagnosed: it does not match the configuration: " + "; ".join(errors)
+            text = plain_numbers(f"window {win.window_id} not diagnosed: it does not match the configuration: "
+                                 + "; ".join(errors))
             self.get_logger().error(text, throttle_duration_sec=1.0)
             self.last_message = text
             self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id,
@@ -551,7 +572,7 @@ class DiagnosticNode(LifecycleNode):
                             window_id=win.window_id, entry_time_s=win.entry_time_s,
                             on_estimate=self._publish_estimate, started_at=t_recv, policy=self.policy,
                             **detector_arguments(win))
-        level, message, values = d.level, d.message, list(d.values)
+        level, message, values = d.level, plain_numbers(d.message), list(d.values)
         if warnings:
             self.windows_mismatched += 1
             level = max(level, WARN)
@@ -580,6 +601,13 @@ class DiagnosticNode(LifecycleNode):
         if not path:
             return
         path = os.path.expanduser(path)
+        kind = _not_regular(path)
+        if kind:   # a FIFO would block the read (and configure with it), a device or directory is not a state file
+            self.trend_state_refused = True
+            self.trend_error = (f"trend_state_file {path}: {kind}, not a regular file: not read, not written; "
+                                "the trend runs without a state file")
+            self.get_logger().error(self.trend_error)
+            return
         try:
             self.trend = TrendTracker.load(path, config)
             self.get_logger().info(f"trend state read from {path} ({self.trend.n_windows} window(s) so far)")
@@ -619,7 +647,7 @@ class DiagnosticNode(LifecycleNode):
         for ev in u.changes:
             self.get_logger().warning(f"trend: change of {ev.quantity} detected at window {win.window_id}: "
                                       f"{ev.size_pct:+.2f} % (onset t = {ev.onset_time_s:.3f} s)")
-        if self.cfg["trend_state_file"]:
+        if self.cfg["trend_state_file"] and not self.trend_state_refused:
             path = os.path.expanduser(self.cfg["trend_state_file"])
             try:
                 self.trend.save(path)

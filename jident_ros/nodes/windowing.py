@@ -51,6 +51,7 @@ from jident_ros.stream.inputs import (
     skew_line,
 )
 from jident_ros.stream.layout import KNOWN_CHANNELS
+from jident_ros.stream.text import plain_numbers
 
 NODE_NAME = "jident_windowing"
 #: Event statuses (a dropped window or batch, an internal error).
@@ -398,7 +399,7 @@ class WindowingNode(Node):
             self.drops_since_summary += 1
         what = "window dropped" if ev.window_dropped else ("batch reported" if ev.reason == "empty"
                                                           else "batch dropped")
-        text = f"{what}: {ev.reason}: {ev.detail}"
+        text = plain_numbers(f"{what}: {ev.reason}: {ev.detail}")
         self.get_logger().warning(text, throttle_duration_sec=1.0)
         self.diag.publish(make_status(STATUS_NAME, WARN, text, self.hardware_id, self._values(
             [("reason", ev.reason), ("detail", ev.detail), ("window_dropped", ev.window_dropped)])))
@@ -407,7 +408,7 @@ class WindowingNode(Node):
         self.errors += 1
         if reset:
             self.detector.reset()
-        text = f"internal error in {where}: {type(exc).__name__}: {exc}"
+        text = plain_numbers(f"internal error in {where}: {type(exc).__name__}: {exc}")
         self.get_logger().error(text, throttle_duration_sec=1.0)
         try:
             self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id,
