@@ -18,7 +18,8 @@ from typing import Any
 
 @dataclass(frozen=True)
 class Param:
-    """One node parameter: default, description, inclusive range [min, max], choices, read_only."""
+    """One node parameter: default, description, range [min, max] (each end inclusive unless ``min_exclusive`` /
+    ``max_exclusive``), choices, read_only."""
 
     default: Any
     description: str
@@ -27,13 +28,14 @@ class Param:
     read_only: bool = True
     choices: tuple = ()
     min_exclusive: bool = False   # the range is (min, max]: min itself is refused
+    max_exclusive: bool = False   # the range is [min, max): max itself is refused
 
     def range_text(self) -> str:
         """The range as the docs and the one-line errors say it ("" when there is none)."""
         if self.choices:
             return "one of " + ", ".join(str(c) for c in self.choices)
         lo = "" if self.min is None else (f"> {self.min:g}" if self.min_exclusive else f">= {self.min:g}")
-        hi = "" if self.max is None else f"<= {self.max:g}"
+        hi = "" if self.max is None else (f"< {self.max:g}" if self.max_exclusive else f"<= {self.max:g}")
         return " and ".join(x for x in (lo, hi) if x)
 
 
@@ -128,7 +130,7 @@ TREND_PARAMS = {
                            '"jident_diagnostic: trend" status'),
     "trend_state_file": Param("", 'tracker state file (JSON, written atomically after each window, read at start) so the '
                               'trend survives a restart; "" = not kept'),
-    "trend_commissioning_windows": Param(20, 'windows that learn the baseline', min=0, max=10**9, read_only=False),
+    "trend_commissioning_windows": Param(20, 'windows that learn the baseline', min=2, max=10**9, read_only=False),
     "trend_commissioning_duration_s": Param(0.0, 'instead: learn over this drive time, s (0 = by windows)',
                                             min=0.0, max=1e12, read_only=False),
     "trend_inertia_baseline_kgm2": Param(0.0, 'given J1 baseline, kg m^2 (0 = learn it)', min=0.0, max=1e12),
@@ -137,29 +139,30 @@ TREND_PARAMS = {
     "trend_width_baseline_se_m": Param(0.0, 'standard error of the given width baseline, m', min=0.0, max=1e12),
     "trend_target_arl_windows": Param(300000.0, 'in-control average run length (windows) the two-sided CUSUM threshold is '
                                       'designed for: 1e4 / this = false changes per 10,000 steady windows',
-                                      min=0.0, max=1e12, read_only=False),
-    "trend_cusum_reference_sd": Param(1.5, 'CUSUM k, standard deviations', min=0.0, max=1e12, read_only=False),
+                                      min=1.0, min_exclusive=True, max=1e12, read_only=False),
+    "trend_cusum_reference_sd": Param(1.5, 'CUSUM k, standard deviations', min=0.0, min_exclusive=True, max=1e12, read_only=False),
     "trend_cusum_threshold_sd": Param(0.0, 'CUSUM h (0 = from trend_target_arl_windows)', min=0.0, max=1e12, read_only=False),
     "trend_innovation_clip_sd": Param(4.5, 'standardised innovations clipped at +- this many standard deviations',
-                                      min=0.0, max=1e12, read_only=False),
+                                      min=0.0, min_exclusive=True, max=1e12, read_only=False),
     "trend_se_scale_from_commissioning": Param(False, 'scale the reported errors by the commissioning scatter', read_only=False),
     "trend_se_scale_max": Param(3.0, 'largest scale of the reported standard errors from the commissioning '
-                                'scatter', min=0.0, max=1e12, read_only=False),
+                                'scatter', min=1.0, max=1e12, read_only=False),
     "trend_inertia_process_sd_pct_per_window": Param(0.02, 'J1 random walk, % of the baseline per window',
                                                      min=0.0, max=1e12, read_only=False),
-    "trend_relearn_windows": Param(5, 'windows after a change forming the new baseline', min=0, max=10**9, read_only=False),
+    "trend_relearn_windows": Param(5, 'windows after a change forming the new baseline', min=1, max=10**9, read_only=False),
     "trend_change_hold_windows": Param(24, 'WARN for this many windows after a change', min=0, max=10**9, read_only=False),
-    "trend_drift_warn_pct": Param(2.0, 'J1 drift giving WARN, %', min=0.0, max=1e12, read_only=False),
-    "trend_drift_alarm_pct": Param(5.0, 'J1 drift giving ERROR, %', min=0.0, max=1e12, read_only=False),
-    "trend_width_limit_m": Param(0.012, 'backlash width limit (ERROR), m', min=0.0, max=1e12, read_only=False),
+    "trend_drift_warn_pct": Param(2.0, 'J1 drift giving WARN, %', min=0.0, min_exclusive=True, max=1e12, read_only=False),
+    "trend_drift_alarm_pct": Param(5.0, 'J1 drift giving ERROR, %', min=0.0, min_exclusive=True, max=1e12, read_only=False),
+    "trend_width_limit_m": Param(0.012, 'backlash width limit (ERROR), m', min=0.0, min_exclusive=True, max=1e12, read_only=False),
     "trend_width_warn_m": Param(0.0, 'WARN width, m (0 = 90 % of the limit)', min=0.0, max=1e12, read_only=False),
     "trend_time_to_limit_warn_s": Param(2592000.0, 'WARN when the limit is projected sooner, s (30 days; 0 = off)',
                                         min=0.0, max=1e12, read_only=False),
-    "trend_width_regression_windows": Param(50, 'windows of the wear-rate regression', min=0, max=10**9),
+    "trend_width_regression_windows": Param(50, 'windows of the wear-rate regression', min=3, max=10**9),
     "trend_width_se_floor_m": Param(1.0e-6, 'floor of the width standard error, m', min=0.0, max=1e12, read_only=False),
     "trend_width_change_detection": Param(True, 'change detection (CUSUM) on the width too', read_only=False),
-    "trend_wear_significance_sd": Param(1.96, 'wear rate significant above this many standard errors', min=0.0, max=1e12, read_only=False),
-    "trend_max_changes_kept": Param(100, 'change events kept in the state', min=0, max=10**9, read_only=False),
+    "trend_wear_significance_sd": Param(1.96, 'wear rate significant above this many standard errors',
+                                       min=0.0, min_exclusive=True, max=1e12, read_only=False),
+    "trend_max_changes_kept": Param(100, 'change events kept in the state', min=1, max=10**9, read_only=False),
 }
 
 #: The diagnostic node (besides config/system.yaml and config/method.yaml).
@@ -197,14 +200,14 @@ DIAGNOSTIC_PARAMS = {
                                  min=1, max=MAX_DEPTH),
     # the publishing policy (jident_ros.identify.verdict.VerdictPolicy; docs/interfaces.md "/diagnostics")
     "plausible_min_ratio": Param(0.5, "J1 below this x the nominal is refused, not published", min=0.0,
-                                 max=1.0, min_exclusive=True, read_only=False),
-    "plausible_max_ratio": Param(1.5, "J1 above this x the nominal is refused, not published", min=1.0, max=100.0,
+                                 max=1.0, min_exclusive=True, max_exclusive=True, read_only=False),
+    "plausible_max_ratio": Param(1.5, "J1 above this x the nominal is refused, not published", min=1.0, min_exclusive=True, max=100.0,
                                  read_only=False),
     "image_min_margin": Param(1.401117, "the image method's class alone, and its disagreement as a WARN, only at "
                               "a fused margin >= this; 0 = never (from `python -m jident_ros.evaluation.verdicts "
                               "threshold`)", min=0.0, max=1e12, read_only=False),
     "library_width_tolerance": Param(0.05, "the image method is valid only with a library width within this "
-                                     "fraction of the window's K2", min=0.0, max=1.0, read_only=False),
+                                     "fraction of the window's K2", min=0.0, min_exclusive=True, max=1.0, read_only=False),
     "max_torque_factor": Param(100.0, "|m_el| above this x the base torque M_b is absurd: window refused",
                                min=1.0, max=1e6, read_only=False),
     "max_speed_factor": Param(10.0, "|omega1|, |omega2| above this x the synchronous speed is absurd: window "

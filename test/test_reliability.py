@@ -510,3 +510,59 @@ def test_a_fifo_as_trend_state_file_does_not_hang_configure(node_env, tmp_path):
     assert "ready:" in text, text[-1500:]
     assert f"trend_state_file {fifo}: a FIFO, not a regular file: not read, not written" in text
     assert rc == 0 and fifo.exists() and fifo.is_fifo()
+
+
+# ------------------------------------------------------------------ parameter ranges (item 6)
+#: Bounds that depend on another parameter or on the configuration (a range cannot say it; the one-line
+#: refusal names both): p must be one of method.p_values; the CUSUM k below the clip; warn <= alarm; the
+#: simulated cases must give a finite steady state of the model.
+CROSS_CONSTRAINED = {("diagnostic", "trend_cusum_reference_sd", "hi"), ("diagnostic", "trend_drift_warn_pct", "hi"),
+                     ("diagnostic", "trend_innovation_clip_sd", "lo"), ("diagnostic", "trend_drift_alarm_pct", "lo"),
+                     ("diagnostic", "p", "lo"), ("diagnostic", "p", "hi"), ("simulator", "p", "lo"),
+                     ("simulator", "p", "hi"), ("simulator", "inertias_kgm2", "lo")}
+
+
+@pytest.mark.parametrize("node", ["windowing", "diagnostic", "simulator", "replay"])
+def test_the_described_ranges_are_what_the_validation_accepts(node, tmp_path):
+    """For every numeric parameter: the ends of the range `ros2 param describe` shows (the descriptor) are
+    accepted by the node's checks (coerce + validate), the nearest values outside are refused."""
+    pytest.importorskip("rcl_interfaces")
+    import importlib
+    import inspect
+
+    from jident_ros.nodes.params import ParameterError, coerce, descriptor
+    mod = importlib.import_module(f"jident_ros.nodes.{node}")
+    schema = mod.schema()
+    base = {k: p.default for k, p in schema.items()}
+    extra = [str(tmp_path)] * (len(inspect.signature(mod.validate).parameters) - 1)   # replay: the bag argument
+
+    def accepted(name, v):
+        p = schema[name]
+        vals = dict(base)
+        try:
+            vals[name] = coerce(name, [v] if isinstance(p.default, list) else v, p)
+            mod.validate(vals, *extra)
+            return True
+        except (ParameterError, ValueError) as exc:
+            return str(exc)
+
+    bad, checked = [], 0
+    for name, p in schema.items():
+        if isinstance(p.default, (bool, str)):
+            continue
+        d = descriptor(name, p)
+        rng = d.floating_point_range or d.integer_range
+        if not rng:
+            continue
+        lo, hi = rng[0].from_value, rng[0].to_value
+        isint = bool(d.integer_range)
+        for end, v, want in (("lo", lo, True), ("hi", hi, True),
+                             ("below", lo - 1 if isint else math.nextafter(lo, -math.inf), False),
+                             ("above", hi + 1 if isint else math.nextafter(hi, math.inf), False)):
+            if not math.isfinite(v) or abs(v) >= 2**62 or (node, name, end) in CROSS_CONSTRAINED:
+                continue
+            got = accepted(name, v)
+            checked += 1
+            if (got is True) != want:
+                bad.append(f"{name} {end} {v!r}: {'accepted' if got is True else got}")
+    assert checked > 10 and not bad, "\n".join(bad)
