@@ -59,7 +59,7 @@ def _event() -> np.ndarray:
     """alpha1, alpha2, m_el, omega1 of one simulated backlash entry at 30 dB (jident_ros.evaluation)."""
     sys.path.insert(0, str(REPO))
     from jident_ros.config import load_system_config
-    from jident_ros.evaluation.raw_inputs import raw_recordings
+    from jident_ros.research.evaluation.raw_inputs import raw_recordings
     ch = ("t", "alpha1", "alpha2", "m_el", "omega1")
     rec = raw_recordings(load_system_config(), (1.16,), (0.005,), snr_db=30.0, steady_s=0.5, seed=1, channels=ch)[0]
     return rec.data[:, 1:]

@@ -95,7 +95,7 @@ FIELDS = [("motor", "position"), ("motor", "velocity"), ("motor", "effort"), ("l
 @pytest.fixture(scope="module")
 def drive():
     from jident_ros.config import load_system_config
-    from jident_ros.evaluation.raw_inputs import raw_recordings
+    from jident_ros.research.evaluation.raw_inputs import raw_recordings
     system = load_system_config()
     rec = raw_recordings(system, (1.16,), (0.005,), snr_db=30.0, steady_s=0.5, seed=4, channels=IMU_CH)[0]
     return system, rec
@@ -114,7 +114,7 @@ def _messages(rec, a1_shift: int = 0):
 
 
 def _windows(system, rec, spoil=lambda k, js, imu: (js, imu), use_imu=False):
-    from jident_ros.evaluation.raw_inputs import flank_detector
+    from jident_ros.research.evaluation.raw_inputs import flank_detector
     from jident_ros.stream.inputs import JointStateAdapter
     ch = IMU_CH if use_imu else JS_CH
     ad = JointStateAdapter(system.sampling.sample_period_s, use_imu=use_imu, channels=ch)
@@ -220,7 +220,7 @@ def test_a_skewed_imu_gives_no_wrong_j1_and_is_reported(tmp_path, three_entries,
     off by 2.5 %.  Beyond the tolerance (half a sample) the window is not diagnosed, the skew is reported,
     and the next entries are diagnosed from the encoder."""
     from jident_ros.cli.offline import diagnose_samples
-    from jident_ros.second_drive.record import write_jointstate
+    from jident_ros.research.second_drive.record import write_jointstate
     system, sig = three_entries
     sig = dict(sig, a1=np.roll(sig["a1"], shift))
     write_jointstate(tmp_path / "bag", sig, imu=True)
@@ -240,7 +240,7 @@ def test_a_skewed_imu_gives_no_wrong_j1_and_is_reported(tmp_path, three_entries,
 
 
 def test_imu_skew_estimate_sign_and_size():
-    from jident_ros.stream.inputs import imu_skew
+    from jident_ros.stream.imu_skew import imu_skew
     t = np.arange(4000) * 5e-4
     omega1 = np.cumsum(np.sin(2 * np.pi * 3 * t) * (t > 0.5)) * 5e-4 * 50
     acc = np.gradient(omega1, 5e-4)

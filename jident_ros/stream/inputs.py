@@ -19,11 +19,9 @@ JointState (:class:`JointStateAdapter`)
   stamp (nearest within T_s/2); a sample waits for its IMU message (at most ``imu_wait_samples`` samples),
   else it is dropped (``imu_unmatched``); an Imu message with a NaN/Inf value is dropped (``imu_nonfinite``);
 * the stamps of the two clocks can agree while the data do not (an IMU whose stamp is taken late):
-  :func:`imu_skew` estimates the skew of a window's a1 against the motor encoder (the second difference of
-  alpha1, or the first of omega1) and :func:`check_imu_skew` says whether a window's skew is within the
-  tolerance (:data:`IMU_SKEW_TOLERANCE_SAMPLES` samples); beyond it the window is not diagnosed (its entry and
-  re-contact were placed with the skewed a1) and the input goes on without a1 (:meth:`JointStateAdapter.drop_a1`),
-  so that no J1 comes from a skewed a1;
+  :mod:`jident_ros.stream.imu_skew` estimates a window's skew of a1 against the motor encoder; beyond half a
+  sample the window is not diagnosed and the input goes on without a1 (:meth:`JointStateAdapter.drop_a1`), so
+  that no J1 comes from a skewed a1;
 * the period between stamps is checked against ``sample_period_s``: :meth:`JointStateAdapter.jitter` reports
   its median, standard deviation and largest deviation, and whether the median matches (within 1 %);
 * samples are batched inside (``batch_size``); :meth:`JointStateAdapter.flush` hands out the rest.
@@ -61,10 +59,6 @@ class InputError(ValueError):
 
 #: The channels a JointState message can carry.
 JOINTSTATE_CHANNELS = tuple(c for c, _, _ in JOINT_CHANNELS)
-#: Imu a1 may be this many sample periods out of step with the encoder before a1 is left out of a window.
-IMU_SKEW_TOLERANCE_SAMPLES = 0.5
-#: The smallest correlation of a1 with the encoder's acceleration at which a skew estimate is trusted.
-IMU_SKEW_MIN_CORRELATION = 0.5
 #: How many messages decide the channel set with ``channels="auto"``.
 PROBE_MESSAGES = 200
 #: How many problem kinds :meth:`JointStateAdapter.problems` keeps (the first ones; the rest are counted).
@@ -290,112 +284,6 @@ class JointStateAdapter:
                 "period_matches": bool(abs(med - self.sample_period_s) <= 0.01 * self.sample_period_s)}
 
 
-# --------------------------------------------------------------------------- Imu skew
-
-def imu_skew(a1, sample_period_s: float, alpha1=None, omega1=None, max_lag_samples: int = 40,
-             smooth_samples: int = 15) -> Optional[dict]:
-    """How far a1 lags the motor encoder, estimated from the data (the stamps may agree while the data do
-    not): the lag maximising the correlation of a1 with the encoder's acceleration (the first difference of
-    omega1 and the second difference of alpha1, each tried, both signals smoothed alike by a
-    ``smooth_samples`` moving average; the better correlated reference wins), refined by a parabola through
-    the peak.  Returns ``{"skew_s", "skew_samples", "correlation", "reference": "omega1"|"alpha1"}`` (skew > 0:
-    a1 comes late) or None when no encoder channel is given, the data are too short or flat, or the peak
-    correlation is below :data:`IMU_SKEW_MIN_CORRELATION` (no estimate)."""
-    a = np.asarray(a1, dtype=float)
-    found = []
-    if omega1 is not None:
-        ref = np.diff(np.asarray(omega1, dtype=float)) / sample_period_s
-        found.append(_lag(0.5 * (a[1:] + a[:-1]), ref, "omega1", 1, max_lag_samples, smooth_samples))
-    if alpha1 is not None:
-        ref = np.diff(np.asarray(alpha1, dtype=float), 2) / sample_period_s ** 2
-        found.append(_lag(a[1:-1], ref, "alpha1", 2, max_lag_samples, smooth_samples))
-    found = [f for f in found if f is not None]
-    if not found:
-        return None
-    best = max(found, key=lambda f: f[1])
-    samples, corr, name = best
-    return {"skew_s": samples * sample_period_s, "skew_samples": samples, "correlation": corr, "reference": name}
-
-
-def _lag(a, ref, name, passes, m, smooth):
-    """(lag in samples, peak correlation, name) of ``a`` against ``ref`` (module docstring), or None."""
-    n = min(a.size, ref.size)
-    a, ref = a[:n], ref[:n]
-    if not (np.isfinite(a).all() and np.isfinite(ref).all()):
-        return None
-    if smooth > 1:
-        kernel = np.ones(int(smooth)) / int(smooth)
-        for _ in range(passes):
-            if a.size < kernel.size:
-                return None
-            a, ref = np.convolve(a, kernel, "valid"), np.convolve(ref, kernel, "valid")
-    n = a.size
-    if n < 4 * m:
-        return None
-    a = a - a.mean()
-    ref = ref - ref.mean()
-    if not (a.std() > 0 and ref.std() > 0):
-        return None
-    rc = ref[m:n - m]
-    lags = np.arange(-m, m + 1)
-    corr = np.empty(lags.size)
-    for k, lag in enumerate(lags):        # a1[i + lag] against ref[i]: lag > 0 means a1 comes late
-        ak = a[m + lag:n - m + lag]
-        den = np.sqrt(np.dot(ak, ak) * np.dot(rc, rc))
-        corr[k] = np.dot(ak, rc) / den if den > 0 else 0.0
-    k = int(np.argmax(corr))
-    best = float(corr[k])
-    if not best >= IMU_SKEW_MIN_CORRELATION:
-        return None
-    frac = 0.0
-    if 0 < k < lags.size - 1:
-        y0, y1, y2 = corr[k - 1], corr[k], corr[k + 1]
-        den = y0 - 2 * y1 + y2
-        frac = float(np.clip(0.5 * (y0 - y2) / den, -0.5, 0.5)) if den < 0 else 0.0
-    return float(lags[k]) + frac, best, name
-
-
-def check_imu_skew(window, tolerance_samples: float = IMU_SKEW_TOLERANCE_SAMPLES) -> Optional[dict]:
-    """The Imu skew of a captured window holding a1: None without a1, else ``{"skew_s"`` (None when no
-    estimate was possible: :func:`imu_skew`), ``"tolerance_s"``, ``"correlation"``, ``"reference"``,
-    ``"within"`` (False only for an estimate beyond the tolerance)}.  A window beyond the tolerance must not
-    give a J1: its a1 is out of step, and the detector placed the entry and the re-contact with it -- drop it
-    and go on without a1 (:meth:`JointStateAdapter.drop_a1`).  Without an estimate a1 is kept (the stamps
-    matched within T_s/2)."""
-    chans = tuple(window.channels)
-    if "a1" not in chans:
-        return None
-    ts = float(window.sample_period_s)
-    est = imu_skew(window.column("a1"), ts, alpha1=window.column("alpha1") if "alpha1" in chans else None,
-                   omega1=window.column("omega1") if "omega1" in chans else None)
-    tol_s = tolerance_samples * ts
-    return {"skew_s": None if est is None else est["skew_s"], "tolerance_s": tol_s,
-            "correlation": None if est is None else est["correlation"],
-            "reference": None if est is None else est["reference"],
-            "within": est is None or abs(est["skew_s"]) <= tol_s}
-
-
-def carry_counts(old, new):
-    """``new`` detector goes on where ``old`` stopped: window ids, samples, batches and drop counts carried
-    over (a detector replaced mid-stream, e.g. without a1).  Returns ``new``."""
-    for name in ("windows_captured", "samples_seen", "batches_seen"):
-        if hasattr(old, name) and hasattr(new, name):
-            setattr(new, name, getattr(old, name))
-    for r, n in getattr(old, "counts", {}).items():
-        if r in getattr(new, "counts", {}):
-            new.counts[r] += n
-    return new
-
-
-def skew_line(report: dict, window_id) -> str:
-    """One line for a window whose Imu skew is beyond the tolerance (:func:`check_imu_skew`)."""
-    late = "late" if report["skew_s"] > 0 else "early"
-    return (f"window {window_id} not diagnosed: Imu a1 is {1e3 * abs(report['skew_s']):.2f} ms {late} against the "
-            f"encoder (a1 against the derivative of {report['reference']}, correlation {report['correlation']:.2f}); "
-            f"beyond the tolerance {1e3 * report['tolerance_s']:.2f} ms: no J1 from a1, a1 left out from now on "
-            "(the encoder gives the acceleration)")
-
-
 # --------------------------------------------------------------------------- CSV
 
 def parse_map(text: str) -> dict:
@@ -587,5 +475,5 @@ def read_csv(path, maps: Optional[dict] = None) -> tuple:
     return data, stream.channels, stream.ignored
 
 
-__all__ = ["IMU_SKEW_TOLERANCE_SAMPLES", "CsvStream", "InputError", "JOINT_CHANNELS", "JOINTSTATE_CHANNELS", "JointStateAdapter",
-           "carry_counts", "check_imu_skew", "imu_skew", "parse_map", "read_csv", "skew_line"]
+__all__ = ["CsvStream", "InputError", "JOINT_CHANNELS", "JOINTSTATE_CHANNELS", "JointStateAdapter",
+           "parse_map", "read_csv"]
