@@ -11,7 +11,7 @@ import types
 
 import numpy as np
 import pytest
-from test_nodes import node_env  # noqa: F401  (fixture)
+from test_nodes import node_env, ros  # noqa: F401  (fixtures)
 
 SIGNALS = "std_msgs/msg/Float64MultiArray"
 
@@ -566,3 +566,93 @@ def test_the_described_ranges_are_what_the_validation_accepts(node, tmp_path):
             if (got is True) != want:
                 bad.append(f"{name} {end} {v!r}: {'accepted' if got is True else got}")
     assert checked > 10 and not bad, "\n".join(bad)
+
+
+@pytest.mark.ros
+def test_a_renamed_joint_is_named_in_the_windowing_status_live(node_env, ros, tmp_path):
+    """Issue 24: renamed joints showed STALE 'no drive/signals for 0.0 s' while JointStates arrived; now the
+    rate status is ERROR naming the joint and the names the messages have."""
+    import time
+
+    from builtin_interfaces.msg import Time
+    from diagnostic_msgs.msg import DiagnosticArray
+    from sensor_msgs.msg import JointState
+    from test_nodes import Proc, logs
+
+    from jident_ros.nodes.ros_io import qos_diagnostics, qos_signals, status_level
+    diags = ros.collect(DiagnosticArray, "/diagnostics", qos_diagnostics())
+    pub = ros.node.create_publisher(JointState, "/ren/joint_states", qos_signals(1000))
+    win = Proc(node_env, tmp_path, "windowing", "-r", "__ns:=/ren", "-p", "input:=joint_states",
+               "-p", "diagnostics_period_s:=0.5")
+    try:
+        assert ros.spin_until(lambda: pub.get_subscription_count() >= 1, 60), logs(win)
+        k, end = 0, time.monotonic() + 30
+
+        def named():
+            return [s for a in diags for s in a.status if s.name.endswith("rate") and status_level(s) == 2
+                    and "joint 'motor' (motor_joint) not in the JointState names ['motor_1', 'load']" in s.message]
+        while time.monotonic() < end and not named():
+            for _ in range(20):
+                t = 1.0 + k * 5e-4
+                m = JointState(name=["motor_1", "load"], position=[0.1, 0.2], velocity=[1.0, 1.0], effort=[0.5, 0.0])
+                m.header.stamp = Time(sec=int(t), nanosec=int(round((t - int(t)) * 1e9)))
+                pub.publish(m)
+                k += 1
+            ros.ex.spin_once(timeout_sec=0.01)
+        found = named()
+        assert found, [s.message for a in diags for s in a.status if s.name.endswith("rate")][-3:]
+        assert "JointState message(s) in the last" in found[-1].message and "none usable" in found[-1].message
+        assert win.alive(), logs(win)
+    finally:
+        win.stop()
+
+
+@pytest.mark.ros
+def test_a_skewed_imu_live_no_wrong_j1(node_env, ros, tmp_path, three_entries):
+    """The windowing node on JointState + a 2 ms late Imu: the first window is not published (WARN naming the
+    skew), the next entries go out from the encoder; every J1 the diagnostic node publishes is right."""
+    from builtin_interfaces.msg import Time
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import Vector3
+    from sensor_msgs.msg import Imu, JointState
+    from std_msgs.msg import Float64
+    from test_nodes import Proc, logs
+
+    from jident_ros.nodes.ros_io import qos_diagnostics, qos_latched, qos_signals
+    system, sig = three_entries
+    a1 = np.roll(sig["a1"], 4)
+    diags = ros.collect(DiagnosticArray, "/diagnostics", qos_diagnostics())
+    est = ros.collect(Float64, "/skew/inertia_estimate", qos_latched(10))
+    pub = ros.node.create_publisher(JointState, "/skew/joint_states", qos_signals(20000))
+    pub_imu = ros.node.create_publisher(Imu, "/skew/imu", qos_signals(20000))
+    ns = ["-r", "__ns:=/skew"]
+    diag = Proc(node_env, tmp_path, "diagnostic", *ns, "-p", "record:=false", "-p", "image_method:=false",
+                "-p", "stale_after_s:=0.0")
+    win = Proc(node_env, tmp_path, "windowing", *ns, "-p", "input:=joint_states", "-p", "use_imu:=true",
+               "-p", "signals_queue_depth:=20000")
+    try:
+        assert ros.spin_until(lambda: pub.get_subscription_count() >= 1 and pub_imu.get_subscription_count() >= 1
+                              and est.matched(), 60), logs(win, diag)
+        for k in range(len(sig["t"])):
+            t = float(sig["t"][k])
+            stamp = Time(sec=int(t), nanosec=int(round((t - int(t)) * 1e9)))
+            m = JointState(name=["motor", "load"], position=[float(sig["alpha1"][k]), float(sig["alpha2"][k])],
+                           velocity=[float(sig["omega1"][k]), float(sig["omega2"][k])],
+                           effort=[float(sig["m_el"][k]), math.nan])
+            m.header.stamp = stamp
+            pub.publish(m)
+            i = Imu(linear_acceleration=Vector3(x=float(a1[k]), y=0.0, z=9.81))
+            i.header.stamp = stamp
+            pub_imu.publish(i)
+            if k % 200 == 199:
+                ros.ex.spin_once(timeout_sec=0.01)
+
+        def warned():
+            return [s for a in diags for s in a.status if "Imu a1 is 2.00 ms late" in s.message]
+        assert ros.spin_until(lambda: warned() and len(est) >= 1, 60), (logs(win, diag), [m.data for m in est])
+        ros.spin_until(lambda: False, 2.0)
+        assert all(abs(m.data - 1.16) / 1.16 < 0.002 for m in est), [m.data for m in est]
+        assert len(warned()) >= 1 and win.alive() and diag.alive()
+    finally:
+        win.stop()
+        diag.stop()
