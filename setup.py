@@ -17,7 +17,7 @@ package_name = 'jident_ros'
 data_files = [
     ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
     ('share/' + package_name, ['package.xml']),
-    ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+    ('share/' + package_name + '/config', sorted(glob('config/*.yaml') + glob('config/*.json'))),
     ('share/' + package_name + '/config/profiles', sorted(glob('config/profiles/*.yaml'))),
 ]
 if os.path.isdir('launch'):

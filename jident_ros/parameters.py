@@ -148,6 +148,9 @@ WINDOWING_PARAMS = {
     "use_imu": Param(False, "joint_states: a1 from sensor_msgs/Imu on imu (matched by stamp)"),
     "imu_axis": Param("x", "joint_states: the Imu linear_acceleration axis that is a1", choices=("x", "y", "z")),
     "batch_size": Param(50, "joint_states: samples per batch handed to the detector", min=1, max=MAX_DEPTH),
+    "input_reliability": Param("reliable", "QoS reliability of the input subscriptions (drive/signals, joint_states, "
+                               "imu): reliable | best_effort (drivers that publish with SensorDataQoS)",
+                               choices=("reliable", "best_effort")),
 }
 
 #: The gap methods (the one list: the diagnostic node's ``gap_method``, ``jident diagnose --gap-method``, the
@@ -267,6 +270,16 @@ DIAGNOSTIC_PARAMS = {
                                min=1.0, max=1e6, read_only=False),
     "max_speed_factor": Param(10.0, "|omega1|, |omega2| above this x the synchronous speed is absurd: window "
                               "refused", min=1.0, max=1e6, read_only=False),
+    # the gap fits' drive model (jident_ros.identify.gap_free.GapModel via VerdictPolicy; issue 20)
+    "torque_accuracy": Param(0.0, "the drive's torque estimate m_el: bound of its scale error, fraction (0.02 = 2 %; "
+                             "0 = exact, the simulator); J1 x this/sqrt(3) goes into the gap interval and the class "
+                             "verdict", min=0.0, max=0.5, max_exclusive=True, read_only=False, unit="1 (fraction)"),
+    "coulomb_friction_max_nm": Param(0.0, "the motor's Coulomb (bearing) friction lies in [0, this], N m: fitted in "
+                                     "the gap inside the band when the torque varies enough, else a bounded term "
+                                     "of the gap interval", min=0.0, max=1e6, read_only=False, unit="N m"),
+    "viscous_friction_band_nms_per_rad": Param(0.0, "viscous friction = motor.bearing_friction_nms_per_rad +- this, "
+                                               "N m s/rad (a bounded term of the gap interval)", min=0.0, max=1e6,
+                                               read_only=False, unit="N m s/rad"),
     **TREND_PARAMS,
 }
 

@@ -31,12 +31,13 @@ from jident_ros.cli.offline import (
     write_json,
 )
 from jident_ros.cli.salvage import salvage_main
+from jident_ros.cli.samples import samples_main
 from jident_ros.cli.trend import add_scenario_arguments, add_trend_parser, cmd_simulate_scenario
 from jident_ros.config import ConfigError, load_method_config, load_system_config
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.method.patterns import PatternLibrary
 from jident_ros.method.pipeline import VARIANTS
-from jident_ros.parameters import GAP_METHODS, cli_help
+from jident_ros.parameters import DIAGNOSTIC_PARAMS, GAP_METHODS, cli_help
 from jident_ros.research.evaluation.evaluate import VALIDITY_FILM_SHARES, run_evaluation
 from jident_ros.research.evaluation.plotting import plot_case
 from jident_ros.research.evaluation.report import render_markdown, write_figures, write_results_section
@@ -363,11 +364,11 @@ def build_parser() -> argparse.ArgumentParser:
                        "windowing and diagnostic nodes do, without ROS")
     g.add_argument("recording", help="bag directory or .mcap file (a diagnostic node's record_dir, or a "
                    "`ros2 bag record` of joint_states [+ imu]), or a .csv file")
-    g.add_argument("--p", type=_positive("--p"), default=2.0, help="KHM exponent p, one of method.p_values (default 2)")
+    g.add_argument("--p", type=_positive("--p"), default=DIAGNOSTIC_PARAMS["p"].default, help=cli_help("p"))
     g.add_argument("--library", help="pattern library .npz (default: build-patterns' default path; built when missing)")
-    g.add_argument("--gap-method", choices=CLI_GAP_METHODS, default="auto",
-                   help="gap estimator (default auto: acceleration fit when a1 is recorded, else the angle fit "
-                        "when alpha1 is, else speed)")
+    g.add_argument("--gap-method", choices=CLI_GAP_METHODS, default=DIAGNOSTIC_PARAMS["gap_method"].default,
+                   help=cli_help("gap_method") + "; auto: the acceleration fit when a1 is recorded, else the angle "
+                        "fit when alpha1 is, else speed")
     g.add_argument("--no-image", action="store_true", help="skip the paper's image method (gap estimate only)")
     g.add_argument("--backlash-width-m", type=_positive("--backlash-width-m"),
                    help="K2 of inequality (1), m, paper detector only (default for drive/signals recordings: their "
@@ -395,6 +396,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_trend_parser(sub)
     sub.add_parser("salvage", help="recover every complete chunk of a truncated MCAP recording "
                    "(jident salvage <truncated.mcap> <out_dir>)", add_help=False)
+    sub.add_parser("samples", help="one message per sample, stamped with drive time, for plotting in Foxglove "
+                   "(jident samples <recording> <out_dir>)", add_help=False)
     sub.add_parser("demo", help="end-to-end demo: simulator, windowing and diagnostic nodes over DDS on a few "
                    "cases (jident demo --help)", add_help=False)
     i = sub.add_parser("info", help="print base values and the steady state of the model")
@@ -409,6 +412,8 @@ def main(argv=None) -> int:
         return demo_main(argv[1:])
     if argv[:1] == ["salvage"]:  # `jident salvage <truncated.mcap> <out_dir>`: cli/salvage.py owns its arguments
         return salvage_main(argv[1:])
+    if argv[:1] == ["samples"]:  # `jident samples <recording> <out_dir>`: cli/samples.py owns its arguments
+        return samples_main(argv[1:])
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

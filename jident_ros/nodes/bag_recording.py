@@ -2,6 +2,8 @@
 (docs/recording.md).  Used by :mod:`jident_ros.nodes.diagnostic`."""
 from __future__ import annotations
 
+from jident_ros.nodes.recorded_qos import offered_qos
+
 try:  # the recorder needs mcap and rosbags: without them the node runs on and says so
     from jident_ros.bag.rotating_recorder import Recorder, RecorderError
     _BAG_IMPORT_ERROR = None
@@ -30,10 +32,14 @@ class Recording:
         self.bag_dir = str(self.recorder.bag_dir)
         self._summarised = False
         self.topics = {}
+        self.offered = {}   # topics of other nodes: added at their first message, with the QoS their publishers offer
         try:
-            for name, typ, qos in topics:
+            for name, typ, qos, *subscribed in topics:
                 full = node.resolve_topic_name(name)
-                self.recorder.add_topic(full, typ, qos)
+                if subscribed and subscribed[0]:
+                    self.offered[name] = qos
+                else:
+                    self.recorder.add_topic(full, typ, qos)
                 self.topics[name] = (full, typ)
         except Exception:
             self.close()
@@ -48,9 +54,15 @@ class Recording:
         st = self.recorder.status()
         return st["error"] or None
 
-    def write(self, name: str, msg) -> None:
-        if name in self.topics:
-            self.recorder.write(*self.topics[name], msg)   # never raises: drops are counted by reason
+    def write(self, name: str, msg, publish_time_ns: int | None = None) -> None:
+        if name in self.topics:   # never raises: drops are counted by reason
+            if name in self.offered:
+                full, typ = self.topics[name]
+                try:
+                    self.recorder.add_topic(full, typ, offered_qos(self.node, full, self.offered.pop(name)))
+                except ValueError:
+                    pass   # a QoS the bag cannot hold: the recorder adds the topic with the default one
+            self.recorder.write(*self.topics[name], msg, publish_time_ns=publish_time_ns)
 
     def flush(self) -> None:
         self.recorder.maybe_flush()

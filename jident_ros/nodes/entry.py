@@ -3,7 +3,8 @@
 
 Importing a node module takes about a second (rclpy, numpy, scipy, the message packages); with the handlers
 installed only in :func:`jident_ros.nodes.runtime.main`, a Ctrl-C in that second ended the process with a
-KeyboardInterrupt traceback and status -2 (issue 24).  Here this light module (standard library only)
+KeyboardInterrupt traceback and status -2 (issue 24; ``ros2 launch`` sends SIGINT to every node as soon as one
+exits, also to those still importing: issue 22).  Here this light module (standard library only)
 installs a :class:`StopFlag` first, then imports the node module, and :func:`jident_ros.nodes.runtime.main`
 takes that flag over (:func:`take_early_flag`): a signal at any moment of a node's life -- the imports, rcl's
 start, the node's construction, the spin, the teardown -- ends it by the one shutdown path, status 0, no
