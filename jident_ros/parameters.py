@@ -181,7 +181,7 @@ TREND_PARAMS = {
                            '"jident_diagnostic: trend" status'),
     "trend_state_file": Param("", 'tracker state file (JSON, written atomically after each window, read at start) so the '
                               'trend survives a restart; "" = not kept'),
-    "trend_commissioning_windows": Param(20, 'windows that learn the baseline', min=2, max=10**9, read_only=False),
+    "trend_commissioning_windows": Param(5, 'windows that give the first baseline', min=2, max=10**9, read_only=False),
     "trend_commissioning_duration_s": Param(0.0, 'instead: learn over this drive time, s (0 = by windows)',
                                             min=0.0, max=1e12, read_only=False, zero_is_none=True),
     "trend_inertia_baseline_kgm2": Param(0.0, 'given J1 baseline, kg m^2 (0 = learn it)', min=0.0, max=1e12, zero_is_none=True),
@@ -217,6 +217,15 @@ TREND_PARAMS = {
     "trend_wear_significance_sd": Param(1.96, 'wear rate significant above this many standard errors',
                                        min=0.0, min_exclusive=True, max=1e12, read_only=False),
     "trend_max_changes_kept": Param(100, 'change events kept in the state', min=1, max=10**9, read_only=False),
+    "trend_baseline_refine_windows": Param(20, 'J1 baseline refined by the monitored windows up to this many windows',
+                                           min=0, max=10**9, read_only=False),
+    "trend_torque_accuracy_pct": Param(0.0, "the drive's torque accuracy, % (1 sd): widens the absolute J1 only",
+                                       min=0.0, max=100.0, read_only=False),
+    "trend_se_scale_down": Param(True, "scale the errors down to the refined baseline's scatter when it is "
+                                 'significantly smaller (over-reported errors)', read_only=False),
+    "trend_se_scale_min": Param(0.25, 'smallest such scale', min=0.0, min_exclusive=True, max=1.0, read_only=False),
+    "trend_time_discontinuity_s": Param(604800.0, 'a window this long after the previous one (or before it) starts '
+                                        'a new time segment, s', min=0.0, min_exclusive=True, max=1e12, read_only=False),
 }
 #: The trend parameters that are the node's own, not TrendConfig fields.
 TREND_NODE_ONLY = ("trend_enabled", "trend_state_file")

@@ -32,7 +32,8 @@ from jident_ros.cli.offline import (
 )
 from jident_ros.cli.salvage import salvage_main
 from jident_ros.cli.samples import samples_main
-from jident_ros.cli.trend import add_scenario_arguments, add_trend_parser, cmd_simulate_scenario
+from jident_ros.cli.scenario import add_scenario_arguments, cmd_simulate_scenario
+from jident_ros.cli.trend import add_trend_parser
 from jident_ros.config import ConfigError, load_method_config, load_system_config
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.method.patterns import PatternLibrary
