@@ -27,8 +27,10 @@ class Recording:
             max_bag_size_bytes=cfg["max_bag_size_bytes"], max_bag_duration_s=cfg["max_bag_duration_s"],
             retention_max_total_bytes=cfg["retention_max_total_bytes"],
             retention_max_age_s=cfg["retention_max_age_s"],
+            retention_delete_unfinalised=cfg["retention_delete_unfinalised"],
             custom_data={"node": node.get_fully_qualified_name()}, log=node.get_logger().info)
         self.bag_dir = str(self.recorder.bag_dir)
+        self._summarised = False
         self.topics = {}
         self.offered = {}   # topics of other nodes: added at their first message, with the QoS their publishers offer
         try:
@@ -66,10 +68,23 @@ class Recording:
         self.recorder.maybe_flush()
 
     def close(self) -> None:
-        """Finalise the bag and say in one line what it holds (also what was dropped, by reason)."""
+        """Finalise the bag and say in one line what it holds (also what was dropped, by reason).  After a
+        failure (:meth:`finalise_failed`) it only says the final counts."""
         if self.recorder.closed:
+            if not self._summarised:
+                self._summarised = True
+                self._summary(True)
             return
-        done = self.recorder.close()
+        self._summarised = True
+        self._summary(self.recorder.close())
+
+    def finalise_failed(self) -> None:
+        """After a failure (disk full): finalise what was written now, but stay the node's recorder, so that
+        every later message is still counted as dropped with the failure's reason (issue 24 item 5)."""
+        if not self.recorder.closed:
+            self.recorder.close()
+
+    def _summary(self, done: bool) -> None:
         st = self.recorder.status()
         drops = ", ".join(f"{n} {why}" for why, n in sorted(st["drop_reasons"].items()))
         self.node.get_logger().info(
@@ -80,7 +95,8 @@ class Recording:
     def status(self) -> dict:
         st = self.recorder.status()
         out = {k: st[k] for k in ("state", "bag", "file", "files", "bytes_written", "messages_written",
-                                  "messages_dropped", "splits", "bags_deleted", "bytes_deleted")}
+                                  "messages_dropped", "splits", "bags_deleted", "bytes_deleted",
+                                  "bags_kept_unfinalised")}
         out.update({f"dropped: {k}": v for k, v in st["drop_reasons"].items()})
         return out
 
