@@ -139,9 +139,13 @@ def pattern_library(path: str | None) -> tuple[Path, float]:
 class Proc:
     """A node process with its output in a log file."""
 
-    def __init__(self, env, logdir: Path, node: str, *ros_args: str):
+    def __init__(self, env, logdir: Path, node: str, *ros_args: str, profile: Path | None = None):
         self.name = node
-        self.cmd = [*node_command(node), "--ros-args", *ros_args]
+        cmd = node_command(node)
+        if profile is not None:  # cProfile writes its file when the node returns (SIGINT: the node's shutdown path)
+            cmd = [sys.executable, "-m", "cProfile", "-o", str(profile / f"{node}.prof"), "-m",
+                   f"jident_ros.nodes.{node}"]
+        self.cmd = [*cmd, "--ros-args", *ros_args]
         self.log = logdir / f"{node}.log"
         self.out = open(self.log, "w")
         self.p = subprocess.Popen(self.cmd, env=env, cwd=logdir, stdout=self.out, stderr=subprocess.STDOUT)
@@ -346,10 +350,14 @@ def run_level(k: int, rtf: float, args, env, library: Path, logroot: Path) -> di
     t_start = time.monotonic()
     try:
         nsarg = ["-r", f"__ns:={ns}"]
+        prof = None
+        if args.profile:
+            prof = Path(args.profile) / f"rtf{rtf:g}"
+            prof.mkdir(parents=True, exist_ok=True)
         procs["diagnostic"] = Proc(env, logdir, "diagnostic", *nsarg, "-p", f"pattern_library:={library}",
-                                   "-p", f"use_sim_time:={str(args.sim_time).lower()}", "-p", "stale_after_s:=0.0")
+                                   "-p", f"use_sim_time:={str(args.sim_time).lower()}", "-p", "stale_after_s:=0.0", profile=prof)
         procs["windowing"] = Proc(env, logdir, "windowing", *nsarg, "-p", f"backlash_width_m:={WIDTH_M}",
-                                  "-p", f"use_sim_time:={str(args.sim_time).lower()}")
+                                  "-p", f"use_sim_time:={str(args.sim_time).lower()}", profile=prof)
         # ready: windowing listens to drive/signals, diagnostic (library loaded) to drive/window
         ready = lst.spin_until(lambda: lst.subscribers(f"{ns}/drive/signals") >= 2
                                and lst.subscribers(f"{ns}/drive/window") >= 2
@@ -364,7 +372,7 @@ def run_level(k: int, rtf: float, args, env, library: Path, logroot: Path) -> di
             "-p", f"real_time_factor:={float(rtf)}", "-p", f"repeat:={args.repeat}",
             "-p", f"gap_samples:={GAP_SAMPLES}", "-p", f"batch_size:={BATCH}", "-p", f"start_time_s:={SIM_START_S}",
             "-p", "wait_for_subscribers:=2", "-p", "wait_timeout_s:=120.0", "-p", "exit_when_done:=false",
-            "-p", f"fast_sleep_s:={args.fast_sleep}", "-p", f"max_lead_s:={args.max_lead}")
+            "-p", f"fast_sleep_s:={args.fast_sleep}", "-p", f"max_lead_s:={args.max_lead}", profile=prof)
         sim = procs["simulator"]
         cpu0 = {}
 
@@ -401,9 +409,14 @@ def run_level(k: int, rtf: float, args, env, library: Path, logroot: Path) -> di
             res["cpu"] = {"wall_s": wall, **{n: {"cpu_s": (cpu1[n] - cpu0[n]) if cpu1.get(n) is not None
                                                  and cpu0.get(n) is not None else None}
                                              for n in (*procs, "bench")}}
+            # drive seconds streamed while the CPU was counted (first batch received -> end of the run)
+            res["cpu"]["drive_s"] = drive_s * (1.0 - lst.batch_first[0] / total) if lst.batch_first else drive_s
             for n in (*procs, "bench"):
                 c = res["cpu"][n]["cpu_s"]
                 res["cpu"][n]["percent_of_one_core"] = None if c is None else 100.0 * c / wall
+                # CPU seconds per drive second: valid under load (the wall clock is not), the 1/x of the node's
+                # CPU-bound limit on rate factor
+                res["cpu"][n]["cpu_s_per_drive_s"] = None if c is None else c / max(res["cpu"]["drive_s"], 1e-9)
     finally:
         for name in ("simulator", "windowing", "diagnostic"):
             if name in procs:
@@ -536,12 +549,15 @@ def label(rtf) -> str:
 def table(levels) -> str:
     rows = ["| rtf asked | stream rate | end-to-end rate | batches rx / exp | samples lost | windows rx / exp "
             "| estimates ok / exp | latency median / p90 / max [ms] | batch→window / window→estimate median [ms] "
-            "| node est. latency / processing median [ms] | CPU sim / win / diag / bench [% of a core] | sustained |",
-            "|" + "---|" * 12]
+            "| node est. latency / processing median [ms] | CPU sim / win / diag / bench [% of a core] "
+            "| CPU per drive s sim / win / diag [ms] | sustained |",
+            "|" + "---|" * 13]
     for r in levels:
         cpu = r.get("cpu", {})
         c = " / ".join(f((cpu.get(n) or {}).get("percent_of_one_core"), "{:.0f}")
                        for n in ("simulator", "windowing", "diagnostic", "bench"))
+        per_drive = [(cpu.get(n) or {}).get("cpu_s_per_drive_s") for n in ("simulator", "windowing", "diagnostic")]
+        cd = " / ".join(f(None if x is None else 1e3 * x, "{:.0f}") for x in per_drive)
         ok = r["cases"] - r["estimates_missing"] - r["estimates_wrong"]
         L = r["latency_ms"]
         why = [] if r["sustained"] else [w for w, bad in (
@@ -554,7 +570,7 @@ def table(levels) -> str:
             f"| {f(L['median'])} / {f(L['p90'])} / {f(L['max'])} "
             f"| {f(r['latency_batch_to_window_ms']['median'])} / {f(r['latency_window_to_estimate_ms']['median'])} "
             f"| {f(r['node_estimate_latency_ms']['median'])} / {f(r['node_processing_ms']['median'])} "
-            f"| {c} | {'yes' if r['sustained'] else 'no (' + ', '.join(why) + ')'} |")
+            f"| {c} | {cd} | {'yes' if r['sustained'] else 'no (' + ', '.join(why) + ')'} |")
     return "\n".join(rows)
 
 
@@ -585,6 +601,56 @@ def targets(levels) -> dict:
     }
 
 
+def find_limit(run, bounds, tol: float, max_probes: int) -> dict:
+    """The highest rate factor the node set sustains (``run(rtf)["sustained"]``) between ``bounds`` = (lo, hi),
+    by bisection on a log scale: lo is probed first (when it fails, the limit is below lo: reported as such),
+    then hi (when it passes, the limit is at least hi), then the geometric mean of the bracket until
+    hi / lo - 1 < ``tol`` or ``max_probes`` probes ran.  Returns {"lossless_rtf": the highest sustained factor
+    probed (None: none), "failed_rtf": the lowest failing one above it (None: none), "probes": [(rtf,
+    sustained, why-not)]}."""
+    lo, hi = sorted(float(b) for b in bounds)
+    if lo <= 0:
+        raise ValueError("--bisect LO HI: both > 0 (rate 0 is the back-pressured level of --rtf)")
+    probes = []
+
+    def probe(rtf):
+        r = run(rtf)
+        why = [w for w, bad in (("loss", not r["lossless"]), ("estimates", not r["correct"]),
+                                ("pace", not r["paced"]), ("backlog", not r["kept_up"]),
+                                ("timeout", r["timed_out"]), ("died", bool(r["died"]))) if bad]
+        probes.append((rtf, bool(r["sustained"]), why))
+        return bool(r["sustained"])
+
+    good = bad = None
+    if probe(lo):
+        good = lo
+        if probe(hi):
+            good = hi
+        else:
+            bad = hi
+            while len(probes) < max_probes and bad / good - 1 > tol:
+                mid = round(math.sqrt(good * bad), 2)
+                if probe(mid):
+                    good = mid
+                else:
+                    bad = mid
+    else:
+        bad = lo
+    return {"lossless_rtf": good, "failed_rtf": bad, "probes": probes, "tolerance": tol}
+
+
+def limit_line(limit: dict) -> str:
+    good, bad = limit["lossless_rtf"], limit["failed_rtf"]
+    probes = ", ".join(f"{r:g}× {'ok' if ok else 'no (' + ', '.join(why) + ')'}" for r, ok, why in limit["probes"])
+    if good is None:
+        head = f"highest lossless rate factor: below {bad:g}× (the lowest probe failed)"
+    elif bad is None:
+        head = f"highest lossless rate factor: at least {good:g}× (the highest probe passed)"
+    else:
+        head = f"highest lossless rate factor: {good:g}× (fails at {bad:g}×)"
+    return f"{head}; probes: {probes}"
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=140,
@@ -602,6 +668,14 @@ def main(argv=None) -> int:
                     help="simulator fast_sleep_s at rtf 0 (default 0.001; 0: only back-pressure paces the stream)")
     ap.add_argument("--max-lead", type=float, default=2.0,
                     help="simulator max_lead_s at rtf 0, drive s ahead of drive/progress (default 2; 0 = off)")
+    ap.add_argument("--profile", metavar="DIR",
+                    help="run every node under cProfile; DIR/rtf<level>/<node>.prof (pstats), slower: not a result")
+    ap.add_argument("--bisect", type=float, nargs=2, metavar=("LO", "HI"),
+                    help="after the --rtf levels, find the highest sustained (lossless, every estimate right, paced, "
+                         "no backlog) rate factor between LO and HI by bisection, a fresh node set per probe")
+    ap.add_argument("--bisect-tol", type=float, default=0.05,
+                    help="stop when HI/LO - 1 is below this (default 0.05)")
+    ap.add_argument("--bisect-max", type=int, default=8, help="at most this many probes (default 8)")
     ap.add_argument("--out", help="write the results as JSON here")
     ap.add_argument("--logs", help="folder for the node logs (default: a temporary folder)")
     ap.add_argument("--quick", action="store_true", help="smoke run: 7 cases, rtf 10 and 0 (not a result)")
@@ -609,6 +683,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.quick:
         args.cases, args.rtf, args.repeat = 7, [10.0, 0.0], 1
+        if args.bisect:
+            args.bisect_max = min(args.bisect_max, 2)
     if args.cases < 1 or args.repeat < 1 or any(r < 0 for r in args.rtf):
         ap.error("--cases and --repeat must be >= 1, --rtf >= 0")
     env = ros_environment()
@@ -621,7 +697,9 @@ def main(argv=None) -> int:
     print(f"pattern library: {library}" + (f" (built in {build_s:.1f} s)" if build_s else " (cached)"), flush=True)
     logroot = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="jident-bench-ros-"))
     levels = []
-    for k, rtf in enumerate(args.rtf):
+
+    def level(rtf):
+        k = len(levels)
         print(f"--- real_time_factor {rtf:g}: {args.cases} cases x {args.repeat} pass(es) ...", flush=True)
         r = run_level(k, rtf, args, env, library, logroot)
         levels.append(r)
@@ -629,7 +707,13 @@ def main(argv=None) -> int:
               f"{r['samples_lost']}, windows {r['windows_received']}/{r['windows_expected']}, estimates missing "
               f"{r['estimates_missing']} wrong {r['estimates_wrong']}, latency median {f(r['latency_ms']['median'])} ms, "
               f"diagnostic VmHWM {f(r['memory_mib'].get('diagnostic', {}).get('VmHWM'), '{:.0f}')} MiB, "
-              f"{r['wall_s']:.1f} s, load {os.getloadavg()[0]:.2f}", flush=True)
+              f"{r['wall_s']:.1f} s, load {os.getloadavg()[0]:.2f}, sustained {'yes' if r['sustained'] else 'no'}",
+              flush=True)
+        return r
+
+    for rtf in args.rtf:
+        level(rtf)
+    limit = find_limit(level, args.bisect, args.bisect_tol, args.bisect_max) if args.bisect else None
     tg = targets(levels)
     total_s = time.monotonic() - t0
     print()
@@ -645,11 +729,15 @@ def main(argv=None) -> int:
           f"{f(l['value'])} ms | {'met' if l['met'] else 'missed'} (≤ 50 ms) |")
     print(f"| diagnostic node peak resident memory (VmHWM) | {f(m['value'], '{:.0f}')} MiB | "
           f"{'met' if m['met'] else 'missed'} (≤ 250 MB) |")
+    if limit is not None:
+        print()
+        print(limit_line(limit))
     print(f"bench run time {total_s:.0f} s, load average at end {os.getloadavg()[0]:.2f}; node logs in {logroot}")
     if args.out:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(json.dumps({"machine": mach, "args": vars(args), "library": str(library),
-                                              "levels": levels, "targets": tg, "run_time_s": total_s},
+                                              "levels": levels, "targets": tg, "limit": limit,
+                                              "run_time_s": total_s},
                                              indent=2, default=str))
     if args.check and not all(t["met"] for t in tg.values()):
         return 1
