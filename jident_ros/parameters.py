@@ -269,7 +269,8 @@ REPLAY_PARAMS = {
     "bag": Param("", "bag directory or .mcap file (or the first command-line argument)"),
     "rate": Param(1.0, "playback speed factor; 0 = as fast as the windowing node reads", min=0.0, max=1000.0),
     "fast_sleep_s": Param(0.001, "timer period per message when rate = 0, s", min=0.0, max=1.0),
-    "max_lead_s": Param(2.0, "rate 0: at most this many drive seconds ahead of drive/progress; 0 = off",
+    "max_lead_s": Param(2.0, "at most this many drive seconds ahead of drive/progress, at any rate (a downstream "
+                        "that falls behind pauses the replay, WARN with the count); 0 = off",
                         min=0.0, max=3600.0),
     "progress_timeout_s": Param(2.0, "no drive/progress for this long while waiting: back-pressure off, s",
                                 min=0.0, max=3600.0, min_exclusive=True),
