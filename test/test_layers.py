@@ -1,6 +1,8 @@
-"""The package's layers (DEVELOPERS.md, issue 11): no import cycles, nothing outside ``nodes`` and ``cli``
-imports them, the core never imports rclpy, and imports stand at the top of a module except where an
-optional dependency (rclpy and the ROS message packages, matplotlib) must stay optional.
+"""The package's layers (DEVELOPERS.md, issue 11, 19): no import cycles, an acyclic layer table, the runtime (nodes,
+``jident diagnose``/``trend``/``salvage``/``build-patterns``) imports no research code (jident_ros/research/),
+nothing but ``cli`` and research imports the nodes or cli, the core never imports rclpy, and imports stand at
+the top of a module except where an optional dependency (rclpy and the ROS message packages, matplotlib) must
+stay optional.
 
 The import graph is read from the source with ``ast`` (nothing is imported), so a violation is named
 with its file and line.

@@ -388,7 +388,7 @@ def test_cli_flags_that_mirror_node_parameters_take_their_help_from_the_schema()
     from jident_ros.cli.main import build_parser
     from jident_ros.cli.trend import MIRRORED_FLAGS
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
-    mirrored = {"diagnose": ["--image-min-margin", "--plausible-min-ratio", "--plausible-max-ratio"],
+    mirrored = {"diagnose": ["--image-min-margin", "--plausible-min-ratio", "--plausible-max-ratio", "--p"],
                 "trend": list(MIRRORED_FLAGS)}
     for command, flags in mirrored.items():
         actions = {o: a for a in sub.choices[command]._actions for o in a.option_strings}
@@ -396,6 +396,8 @@ def test_cli_flags_that_mirror_node_parameters_take_their_help_from_the_schema()
             name = ("trend_" if command == "trend" else "") + flag[2:].replace("-", "_")
             assert actions[flag].help == P.cli_help(name), flag
             assert P.DIAGNOSTIC_PARAMS[name].description.replace("%", "%%") in actions[flag].help
+    gap = {o: a for a in sub.choices["diagnose"]._actions for o in a.option_strings}["--gap-method"]
+    assert gap.help.startswith(P.cli_help("gap_method")) and tuple(gap.choices) == P.GAP_METHODS
 
 
 def test_trend_parameters_and_units_come_from_the_schema():
@@ -425,3 +427,15 @@ def test_the_chain_config_fields_are_described_by_the_node_schema():
     assert DiagnosisConfig.from_parameters(P.DIAGNOSTIC) == DiagnosisConfig()
     w = DetectorConfig.from_parameters(dict(P.WINDOWING, gap_tolerance=2.0), "flank", ("t", "alpha1", "alpha2"))
     assert (w.kind, w.gap_tolerance, w.channels, w.backlash_width_m) == ("flank", 2.0, ("t", "alpha1", "alpha2"), 0.005)
+
+
+def test_model_parameters_are_described_by_their_dataclass_docstrings():
+    """The dotted model parameters (config/system.yaml) take their description from the Attributes of the config
+    dataclass (one place), with the unit; the method's fall back to the field name where it has none."""
+    from jident_ros.nodes.params import describe_field, field_docs, method_defaults, system_defaults
+    docs = field_docs()
+    assert all(name in docs for name in system_defaults()), [n for n in system_defaults() if n not in docs]
+    assert describe_field("load.wheel_radius_m") == "load: Radius of the drive wheel [r], m (config/system.yaml; fixed at start)"
+    for name in list(system_defaults()) + list(method_defaults()):
+        text = describe_field(name)
+        assert text and "\n" not in text and text.endswith("fixed at start)"), name

@@ -27,7 +27,6 @@ EXCEPTIONS = {
     # numerics kernels
     "method/khm.py:khm_fit_batch": "9: the histograms (3) + the KHM options of MethodConfig (n_clusters, p, max_iter, "
                                    "tol) + the two numerics switches, all keywords with defaults",
-    "method/khm.py:_squarem": "85 lines: one SQUAREM loop whose 8 state arrays change together",
     "method/patterns.py:identify_window": "9: the window (3), library, method, p + the research variants "
                                           "(signals, width_mode, system) as keywords with defaults",
     "sim/simulate.py:_rk4_window": "10: the integrator's state arrays; speed helper's file (single-case fast path)",

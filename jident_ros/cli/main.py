@@ -36,7 +36,7 @@ from jident_ros.config import ConfigError, load_method_config, load_system_confi
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.method.patterns import PatternLibrary
 from jident_ros.method.pipeline import VARIANTS
-from jident_ros.parameters import GAP_METHODS, cli_help
+from jident_ros.parameters import DIAGNOSTIC_PARAMS, GAP_METHODS, cli_help
 from jident_ros.research.evaluation.evaluate import VALIDITY_FILM_SHARES, run_evaluation
 from jident_ros.research.evaluation.plotting import plot_case
 from jident_ros.research.evaluation.report import render_markdown, write_figures, write_results_section
@@ -363,11 +363,11 @@ def build_parser() -> argparse.ArgumentParser:
                        "windowing and diagnostic nodes do, without ROS")
     g.add_argument("recording", help="bag directory or .mcap file (a diagnostic node's record_dir, or a "
                    "`ros2 bag record` of joint_states [+ imu]), or a .csv file")
-    g.add_argument("--p", type=_positive("--p"), default=2.0, help="KHM exponent p, one of method.p_values (default 2)")
+    g.add_argument("--p", type=_positive("--p"), default=DIAGNOSTIC_PARAMS["p"].default, help=cli_help("p"))
     g.add_argument("--library", help="pattern library .npz (default: build-patterns' default path; built when missing)")
-    g.add_argument("--gap-method", choices=CLI_GAP_METHODS, default="auto",
-                   help="gap estimator (default auto: acceleration fit when a1 is recorded, else the angle fit "
-                        "when alpha1 is, else speed)")
+    g.add_argument("--gap-method", choices=CLI_GAP_METHODS, default=DIAGNOSTIC_PARAMS["gap_method"].default,
+                   help=cli_help("gap_method") + "; auto: the acceleration fit when a1 is recorded, else the angle "
+                        "fit when alpha1 is, else speed")
     g.add_argument("--no-image", action="store_true", help="skip the paper's image method (gap estimate only)")
     g.add_argument("--backlash-width-m", type=_positive("--backlash-width-m"),
                    help="K2 of inequality (1), m, paper detector only (default for drive/signals recordings: their "
