@@ -16,6 +16,7 @@ class ScriptedGate:
     def __init__(self):
         self.open = True
         self.progress_t = 1.0
+        self.progress_wall = 0.0     # a windowing node has reported progress
         self.max_lead_s = 2.0
         self.waited_s = 0.0
         self.asked = []
@@ -95,3 +96,14 @@ def test_no_gate_paces_by_the_clock_only():
     clock.now += 0.5
     assert p.due(1_000_000_000, 2.0)
     assert p.summary() == ""
+
+
+def test_no_windowing_node_yet_is_counted_not_warned_here():
+    """No drive/progress ever: the pause is counted; the gate's own WARN (back-pressure off after
+    progress_timeout_s) explains it, not 'downstream behind'."""
+    gate, warnings = ScriptedGate(), []
+    gate.progress_wall = None
+    gate.open = False
+    p = RatePacer(10.0, gate, warnings.append, Clock())
+    assert not p.due(0, 5.0)
+    assert p.pauses == 1 and warnings == []

@@ -100,7 +100,8 @@ class RatePacer:
             if self.rate > 0:
                 if not self.behind:
                     self.pauses += 1
-                    if self.warn is not None:
+                    # no progress ever (no windowing node): the gate itself says so when it gives up waiting
+                    if self.warn is not None and getattr(self.gate, "progress_wall", 0.0) is not None:
                         self.warn(self.behind_text(t_last))
                 self.behind = True
                 self.wall0 = None              # restart the schedule after the pause
@@ -210,7 +211,9 @@ class ReplayNode(RunnableNode, Node):
         self.state = "replaying"
         if c["max_lead_s"] > 0:   # any rate: a downstream that falls behind slows the replay, never loses batches
             self.gate = ProgressGate(self, c["max_lead_s"], c["progress_timeout_s"])
-            self.pacer = RatePacer(c["rate"], self.gate, lambda text: self.get_logger().warning(text))
+            # one WARN per episode of falling behind, at most every 5 s (with the count so far); the total at the end
+            self.pacer = RatePacer(c["rate"], self.gate,
+                                   lambda text: self.get_logger().warning(text, throttle_duration_sec=5.0))
 
     def _next(self):
         """The next message to replay: (rel, pub, log_ns, raw, t_last) or None at the end."""
