@@ -45,6 +45,9 @@ from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import REPLAY, REPLAY_PARAMS
 
 NODE_NAME = "jident_replay"
+#: At rate 0, at most this many messages per tick of ``fast_sleep_s`` (while the windowing node's progress allows
+#: them): one per tick capped the replay at 1 batch / fast_sleep_s (issue 25).
+RATE0_MESSAGES_PER_TICK = 4
 
 DEFAULTS = REPLAY
 
@@ -236,6 +239,7 @@ class ReplayNode(RunnableNode, Node):
         now = time.monotonic()
         if now < self.settle_until:
             return
+        burst = 0
         while True:
             if self.pending is None:
                 self.pending = self._next()
@@ -251,7 +255,9 @@ class ReplayNode(RunnableNode, Node):
                 self.pub_clock.publish(clock_msg(t_last))
             self.pending = None
             if c["rate"] == 0:
-                return                                  # one message per tick of fast_sleep_s
+                burst += 1
+                if burst >= RATE0_MESSAGES_PER_TICK:
+                    return                              # at most this many messages per tick of fast_sleep_s
 
     def _failed(self, exc: Exception) -> None:
         """A failure while replaying: one line, stop."""
