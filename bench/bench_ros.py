@@ -278,13 +278,15 @@ class Listener:
     def on_diagnostics(self, msg):
         recv = time.monotonic()
         self.last_recv = recv
+        from jident_ros.nodes.diagnostics import status_task
         from jident_ros.nodes.ros_io import status_level, status_values
         for s in msg.status:
             if s.hardware_id != self.hw:
                 continue
-            if s.name == "jident: inertia":
+            task = status_task(s.name)   # "<ns>/jident_diagnostic: inertia" -> "jident_diagnostic: inertia"
+            if task == "jident_diagnostic: inertia":
                 self.inertia.append((recv, status_values(s), status_level(s)))
-            elif s.name in ("jident: windowing", "jident_windowing: rate"):
+            elif task in ("jident_windowing: windows", "jident_windowing: rate"):
                 self.windowing.append((recv, status_values(s), status_level(s), s.message))
 
     def spin_until(self, pred, timeout: float, every=None) -> bool:

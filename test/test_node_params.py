@@ -176,7 +176,7 @@ def test_diagnostic_parameters_described_validated_and_applied(diag_node, librar
     diags = ros.collect(DiagnosticArray, "/diagnostics", qos_diagnostics())
     pub = ros.node.create_publisher(Float64MultiArray, "/pd/drive/window", qos_latched(10))
     assert ros.spin_until(lambda: pub.get_subscription_count() >= 1)
-    results = lambda: statuses(diags, "jident: inertia", "/pd/drive")  # noqa: E731
+    results = lambda: statuses(diags, "jident_diagnostic: inertia", "/pd/drive")  # noqa: E731
     # each accepted change takes effect on the next window
     for k, (changes, check) in enumerate([
             ({"p": 3.0}, lambda v: float(v["p"]) == 3.0 and "gap_j1_kgm2" not in v),
@@ -224,7 +224,7 @@ def test_diagnostic_reports_lost_and_mismatched_windows(node_env, library, ros, 
              "-p", "stale_after_s:=0.0")
     procs.append(p)
     assert ros.spin_until(lambda: pub.get_subscription_count() >= 1), logs(p)
-    results = lambda: statuses(diags, "jident: inertia", "/lost/drive")  # noqa: E731
+    results = lambda: statuses(diags, "jident_diagnostic: inertia", "/lost/drive")  # noqa: E731
     task = lambda: statuses(diags, "jident_diagnostic: diagnosis", "/lost/drive")  # noqa: E731
     base = _window()
     for k in (1, 2, 3, 7, 8):

@@ -205,9 +205,11 @@ class Recorder:
             if self.bag_writer is not None and self.bag_writer.error is None and not self._closed:
                 self.bag_writer.add_topic(topic, msg_type, qos)
 
-    def write(self, topic: str, msg_type: str, message: Any, t_ns: int | None = None) -> bool:
+    def write(self, topic: str, msg_type: str, message: Any, t_ns: int | None = None,
+              publish_time_ns: int | None = None) -> bool:
         """Record one message (CDR bytes, an rclpy or rosbags message, or a dict of fields) stamped with
-        ``t_ns`` (default: the wall clock now).  Never raises: a message that cannot be recorded is
+        ``t_ns`` (default: the wall clock now); ``publish_time_ns``: the publisher's send time (the DDS source
+        timestamp, as rosbag2 records it; default ``t_ns``).  Never raises: a message that cannot be recorded is
         counted in :attr:`messages_dropped` under its reason.  Returns True when it was recorded."""
         t = self._clock() if t_ns is None else t_ns
         with self._lock:
@@ -223,7 +225,7 @@ class Recorder:
                 if topic not in self._topics:
                     self.add_topic(topic, msg_type)
                 self._maybe_split(bag)
-                bag.write(topic, message, t)
+                bag.write(topic, message, t, publish_time_ns)
             except (ValueError, TypeError) as exc:  # this message only
                 self.last_error = f"{topic}: {exc}"
                 return self._drop("unrecordable message")

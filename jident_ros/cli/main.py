@@ -31,7 +31,9 @@ from jident_ros.cli.offline import (
     write_json,
 )
 from jident_ros.cli.salvage import salvage_main
-from jident_ros.cli.trend import add_scenario_arguments, add_trend_parser, cmd_simulate_scenario
+from jident_ros.cli.samples import samples_main
+from jident_ros.cli.scenario import add_scenario_arguments, cmd_simulate_scenario
+from jident_ros.cli.trend import add_trend_parser
 from jident_ros.config import ConfigError, load_method_config, load_system_config
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.method.patterns import PatternLibrary
@@ -395,6 +397,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_trend_parser(sub)
     sub.add_parser("salvage", help="recover every complete chunk of a truncated MCAP recording "
                    "(jident salvage <truncated.mcap> <out_dir>)", add_help=False)
+    sub.add_parser("samples", help="one message per sample, stamped with drive time, for plotting in Foxglove "
+                   "(jident samples <recording> <out_dir>)", add_help=False)
     sub.add_parser("demo", help="end-to-end demo: simulator, windowing and diagnostic nodes over DDS on a few "
                    "cases (jident demo --help)", add_help=False)
     i = sub.add_parser("info", help="print base values and the steady state of the model")
@@ -409,6 +413,8 @@ def main(argv=None) -> int:
         return demo_main(argv[1:])
     if argv[:1] == ["salvage"]:  # `jident salvage <truncated.mcap> <out_dir>`: cli/salvage.py owns its arguments
         return salvage_main(argv[1:])
+    if argv[:1] == ["samples"]:  # `jident samples <recording> <out_dir>`: cli/samples.py owns its arguments
+        return samples_main(argv[1:])
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

@@ -29,6 +29,7 @@ import numpy as np
 
 from jident_ros.bag.drive_replay import DriveReplay, in_sample_time_order, read_drive_messages
 from jident_ros.bag.messages import deserialize
+from jident_ros.cli.jointstate_bag import jointstate_batches
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig, WindowDiagnosis
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES
@@ -40,15 +41,9 @@ from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
 from jident_ros.parameters import gap_method_problem
 from jident_ros.stream.detector import stream_batches
 from jident_ros.stream.flank import DETECTORS
-from jident_ros.stream.inputs import InputError, JointStateAdapter, read_csv
+from jident_ros.stream.inputs import InputError, read_csv
 from jident_ros.stream.layout import DRIVE_TOPICS, SIGNALS_TOPIC, WIDTH_TOPIC, pack
 from jident_ros.stream.layout import topic_matches as _matches
-
-try:  # reading a `ros2 bag record` of /joint_states (any storage, any distro) needs rosbags
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
-except ImportError:  # pragma: no cover - the drive/signals path does not need it
-    AnyReader = None
 
 
 class OfflineError(ValueError):
@@ -406,51 +401,6 @@ def _make_detector(system, config: DetectorConfig, batch_channels, topic_name):
 
 # --------------------------------------------------------------------------- JointState bags, CSV files
 
-def jointstate_batches(path, sample_period_s: float, motor_joint: str = "motor", load_joint: str = "load",
-                       imu_axis: str = "x", topic: Optional[str] = None, batch_size: int = 50):
-    """(adapter, batch iterator, joint_states topic) of a `ros2 bag record` bag holding sensor_msgs/JointState
-    (topic ending in ``joint_states``, any namespace) and optionally sensor_msgs/Imu (ending in ``imu``),
-    read with rosbags' AnyReader; the header stamps give t."""
-    if AnyReader is None:
-        raise OfflineError("reading JointState bags needs the rosbags package (pip install rosbags)")
-    path = Path(path)
-    reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-    try:
-        reader.open()
-    except Exception as exc:
-        raise OfflineError(f"recording {path}: cannot be read as a rosbag2 bag ({type(exc).__name__}: {exc})") from None
-    js = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/JointState" and _matches(c.topic, "joint_states")]
-    topics = sorted({c.topic for c in js})
-    if topic is not None:
-        js = [c for c in js if c.topic == topic]
-        if not js:
-            raise OfflineError(f"joint_states topic {topic!r}: not in recording {path} (found: {', '.join(topics) or 'none'})")
-    elif len(topics) > 1:
-        raise OfflineError(f"recording {path}: several joint_states topics ({', '.join(topics)}); choose one with --topic")
-    if not js:
-        raise OfflineError(f"recording {path}: no drive/signals topic and no sensor_msgs/JointState topic ending in "
-                           f"joint_states "
-                           f"(topics: {', '.join(sorted({c.topic for c in reader.connections})) or 'none'})")
-    prefix = js[0].topic[:-len("joint_states")]
-    imu = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/Imu" and c.topic == prefix + "imu"]
-    adapter = JointStateAdapter(sample_period_s, motor_joint, load_joint, batch_size=batch_size,
-                                use_imu=bool(imu), imu_axis=imu_axis)
-
-    def batches():
-        try:
-            for conn, _, raw in reader.messages(connections=js + imu):
-                msg = reader.deserialize(raw, conn.msgtype)
-                stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-                if conn.msgtype.endswith("Imu"):
-                    yield from adapter.push_imu(stamp, msg.linear_acceleration)
-                else:
-                    yield from adapter.push(stamp, msg.name, msg.position, msg.velocity, msg.effort)
-            yield from adapter.flush()
-        finally:
-            reader.close()
-    return adapter, batches(), js[0].topic
-
-
 def diagnose_samples(path, options: Optional[OfflineOptions] = None, *,
                      log: Callable[[str], Any] = lambda text: None,
                      on_window: Optional[Callable[[OfflineWindow], Any]] = None, **fields) -> OfflineResult:
@@ -471,7 +421,8 @@ def diagnose_samples(path, options: Optional[OfflineOptions] = None, *,
                 log(f"{path}: columns ignored (not channels): {', '.join(ignored)}")
             source, batches = str(path), ((b, channels) for b in stream_batches(data, 50))
         else:
-            adapter, batches, source = jointstate_batches(path, ts, o.motor_joint, o.load_joint, o.imu_axis, o.topic)
+            adapter, batches, source = jointstate_batches(path, ts, o.motor_joint, o.load_joint, o.imu_axis, o.topic,
+                                                           log=log)
     except InputError as exc:
         raise OfflineError(str(exc)) from None
     result = OfflineResult(str(path), source, "estimated" if o.detector != "paper" else "option")

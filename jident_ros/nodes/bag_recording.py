@@ -2,6 +2,8 @@
 (docs/recording.md).  Used by :mod:`jident_ros.nodes.diagnostic`."""
 from __future__ import annotations
 
+from jident_ros.nodes.recorded_qos import offered_qos
+
 try:  # the recorder needs mcap and rosbags: without them the node runs on and says so
     from jident_ros.bag.rotating_recorder import Recorder, RecorderError
     _BAG_IMPORT_ERROR = None
@@ -33,10 +35,14 @@ class Recording:
             custom_data={"node": node.get_fully_qualified_name()}, log=node.get_logger().info)
         self.bag_dir = str(self.recorder.bag_dir)
         self.topics = {}
+        self.offered = {}   # topics of other nodes: added at their first message, with the QoS their publishers offer
         try:
-            for name, typ, qos in topics:
+            for name, typ, qos, *subscribed in topics:
                 full = node.resolve_topic_name(name)
-                self.recorder.add_topic(full, typ, qos)
+                if subscribed and subscribed[0]:
+                    self.offered[name] = qos
+                else:
+                    self.recorder.add_topic(full, typ, qos)
                 self.topics[name] = (full, typ)
         except Exception:
             self.close()
@@ -54,8 +60,14 @@ class Recording:
         bag = rec.bag_writer
         return (bag.error if bag is not None and bag.error else None) or rec.last_error or None
 
-    def write(self, name: str, msg) -> None:
-        if name in self.topics:
+    def write(self, name: str, msg, publish_time_ns: int | None = None) -> None:
+        if name in self.topics:   # never raises: drops are counted by reason
+            if name in self.offered:
+                full, typ = self.topics[name]
+                try:
+                    self.recorder.add_topic(full, typ, offered_qos(self.node, full, self.offered.pop(name)))
+                except ValueError:
+                    pass   # a QoS the bag cannot hold: the recorder adds the topic with the default one
             if hasattr(msg, "get_fields_and_field_types"):
                 # an rclpy message: rclpy's C serialiser, 20-50x faster than converting it for rosbags' (a
                 # DiagnosticArray 2 ms -> 0.05 ms; bench/bench_ros.py --profile, issue 25); same CDR
@@ -63,7 +75,7 @@ class Recording:
                     msg = serialize_message(msg)
                 except Exception:  # the recorder's own path then counts it as unrecordable (never raises)
                     pass
-            self.recorder.write(*self.topics[name], msg)   # never raises: drops are counted by reason
+            self.recorder.write(*self.topics[name], msg, publish_time_ns=publish_time_ns)
 
     def flush(self) -> None:
         self.recorder.maybe_flush()

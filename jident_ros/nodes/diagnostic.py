@@ -11,7 +11,7 @@ A thin ROS adapter over :class:`jident_ros.identify.monitor.DriveMonitor` and
    against the pattern library; when the window has no usable gap, the fused verdict's class J1
    (the margin-weighted vote of the five signals, :mod:`jident_ros.identify.fusion`) is what goes
    out on ``inertia_estimate``;
-3. one DiagnosticStatus "jident: inertia" on ``/diagnostics`` (REP 107) per window: OK when the verdict's
+3. one DiagnosticStatus "<ns>/jident_diagnostic: inertia" on ``/diagnostics`` (REP 107) per window: OK when the verdict's
    class is the nominal J1; WARN when it deviates, lies between classes, or the image method's vote
    disagrees with the gap; ERROR when the window could not be diagnosed (unreadable, or its length, sample
    period or wheel radius differ from the configuration).
@@ -64,7 +64,9 @@ from jident_ros.identify.trend_status import WIDTH_SOURCES
 from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.nodes.bag_recording import RecorderError, Recording
 from jident_ros.nodes.diagnostic_trend import TrendTask
-from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater
+from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater, status_name
+from jident_ros.nodes.estimate_out import TOPICS as STAMPED_TOPIC_TYPES
+from jident_ros.nodes.estimate_out import StampedEstimate
 from jident_ros.nodes.params import (
     ParameterError,
     RuntimeParameters,
@@ -83,7 +85,9 @@ from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, gap_method_prob
 
 NODE_NAME = "jident_diagnostic"
 #: Each window's result.
-STATUS_NAME = "jident: inertia"
+STAMPED_TOPICS = tuple(topic for topic, _ in STAMPED_TOPIC_TYPES)
+CASE_QUEUE_DEPTH = 100   # drive/case, drive/true_inertia, drive/backlash_width: subscribed and recorded with it
+STATUS_TASK = "inertia"   # event status "<ns>/jident_diagnostic: inertia", one per window
 #: Periodic tasks (status names "jident_diagnostic: <task>").
 TASKS = ("diagnosis", "library", "recorder", "trend")
 #: Period of the task statuses, s (steady clock).
@@ -167,6 +171,7 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         self.last_window_id = None
         self.window_id_restarts = 0
         self.last_estimate = None
+        self.published_j1 = None       # J1 sent on inertia_estimate for the window being diagnosed
         self.last_message = ""
         self.last_input = None             # steady time (s) of the last drive/window or drive/progress
         self.started = time.monotonic()
@@ -203,6 +208,7 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         if c["image_method"]:
             self._load_library()
         self.pub_estimate = self.create_lifecycle_publisher(Float64, "inertia_estimate", qos_latched())
+        self.stamped = StampedEstimate(self, qos_latched())      # inertia_estimate/stamped and /detail
         if c["trend_enabled"]:
             self._start_trend()
             self.pub_inertia_trend = self.create_lifecycle_publisher(Float64, "inertia_trend", qos_latched())
@@ -214,13 +220,16 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         if self.recorder is not None and c["record_signals"]:
             sq = qos_signals(c["signals_queue_depth"])
             # raw: the CDR bytes go to the recording as received, never decoded here
+            # each callback also takes the message info: its source timestamp is recorded as the publish time
+            # (as rosbag2 does), so a reader can restore the order the drive sent its topics in (replay = live)
             self.subs.append(self.create_subscription(Float64MultiArray, "drive/signals",
-                                                      lambda m: self._record("drive/signals", m), sq, raw=True))
-            deep = qos_latched(100)  # keep every case message while a window is being diagnosed
+                                                      lambda m, i: self._record("drive/signals", m, i), sq, raw=True))
+            deep = qos_latched(CASE_QUEUE_DEPTH)  # keep every case message while a window is being diagnosed
             for name in ("drive/backlash_width", "drive/true_inertia"):
-                self.subs.append(self.create_subscription(Float64, name, lambda m, n=name: self._record(n, m), deep))
+                self.subs.append(self.create_subscription(Float64, name, lambda m, i, n=name: self._record(n, m, i),
+                                                          deep))
             self.subs.append(self.create_subscription(Float64MultiArray, "drive/case",
-                                                      lambda m: self._record("drive/case", m), deep))
+                                                      lambda m, i: self._record("drive/case", m, i), deep))
         if self.recorder is not None:  # a chunk never waits long in memory (flush age 0.5 s), even when messages pause
             self.flush_timer = self.create_timer(0.25, self._flush_bag, clock=self.steady)
         self.updater.force_update()
@@ -331,17 +340,19 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
             return
         if c["record_dir"]:
             self.get_logger().warning("record_dir is deprecated: use record_root (bags get rosbag2 names under it)")
-        topics = [("drive/window", "std_msgs/msg/Float64MultiArray", qos_latched(self.cfg["window_queue_depth"])),
+        # True: another node's topic, recorded with the QoS its publishers offer (nodes/recorded_qos.py)
+        topics = [("drive/window", "std_msgs/msg/Float64MultiArray", qos_latched(self.cfg["window_queue_depth"]), True),
                   ("inertia_estimate", "std_msgs/msg/Float64", qos_latched()),
+                  *((topic, typ, qos_latched()) for topic, typ in STAMPED_TOPIC_TYPES),
                   ("inertia_trend", "std_msgs/msg/Float64", qos_latched()),
                   ("backlash_width_trend", "std_msgs/msg/Float64", qos_latched()),
                   ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", self.diag.pub.qos_profile)]
         if self.cfg["record_signals"]:
             topics += [("drive/signals", "std_msgs/msg/Float64MultiArray",
-                        qos_signals(self.cfg["signals_queue_depth"])),
-                       ("drive/backlash_width", "std_msgs/msg/Float64", qos_latched()),
-                       ("drive/true_inertia", "std_msgs/msg/Float64", qos_latched()),
-                       ("drive/case", "std_msgs/msg/Float64MultiArray", qos_latched())]
+                        qos_signals(self.cfg["signals_queue_depth"]), True),
+                       ("drive/backlash_width", "std_msgs/msg/Float64", qos_latched(CASE_QUEUE_DEPTH), True),
+                       ("drive/true_inertia", "std_msgs/msg/Float64", qos_latched(CASE_QUEUE_DEPTH), True),
+                       ("drive/case", "std_msgs/msg/Float64MultiArray", qos_latched(CASE_QUEUE_DEPTH), True)]
         try:
             self.recorder = Recording(self, c, topics)
             self.get_logger().info(f"recording to {self.recorder.bag_dir}")
@@ -349,9 +360,10 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
             self.recorder_error = f"not recording: {exc}"
             self.get_logger().error(self.recorder_error)
 
-    def _record(self, name, msg):
+    def _record(self, name, msg, info=None):
         if self.recorder is not None:
-            self.recorder.write(name, msg)
+            sent = (info or {}).get("source_timestamp") or None    # rclpy's MessageInfo; 0: not known
+            self.recorder.write(name, msg, sent if sent is None or 0 < sent < 2**63 else None)
             if self.recorder.error:
                 self.close()
 
@@ -394,11 +406,12 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
             text = f"window could not be diagnosed: internal error {type(exc).__name__}: {exc}"
             self.get_logger().error(text)
             try:
-                self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id))
+                self.diag.publish(make_status(status_name(self, STATUS_TASK), ERROR, text, self.hardware_id))
             except Exception:
                 pass
 
     def _publish_estimate(self, j1):
+        self.published_j1 = float(j1)
         m = Float64(data=float(j1))
         self.pub_estimate.publish(m)
         self._record("inertia_estimate", m)
@@ -450,7 +463,7 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         except LayoutError as exc:
             text = f"window could not be diagnosed: unreadable drive/window message: {exc}"
             self.get_logger().error(text)
-            self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id))
+            self.diag.publish(make_status(status_name(self, STATUS_TASK), ERROR, text, self.hardware_id))
             return
         self._count_window_id(int(win.window_id))
         errors, warnings = self.check_window(win)
@@ -459,11 +472,12 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
             text = f"window {win.window_id} not diagnosed: it does not match the configuration: " + "; ".join(errors)
             self.get_logger().error(text, throttle_duration_sec=1.0)
             self.last_message = text
-            self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id,
+            self.diag.publish(make_status(status_name(self, STATUS_TASK), ERROR, text, self.hardware_id,
                                           [("window_id", win.window_id), ("entry_time_s", win.entry_time_s),
                                            ("mismatch", "; ".join(errors))]))
             return
         # the gap estimate goes out on inertia_estimate (on_estimate) before the image method runs
+        self.published_j1 = None
         result = self.monitor.window(win, on_estimate=self._publish_estimate, started_at=t_recv)
         d = result.diagnosis
         level, message, values = d.level, d.message, list(d.values)
@@ -479,7 +493,11 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         else:
             self.get_logger().error(message)
         self.last_message = message
-        self.diag.publish(make_status(STATUS_NAME, level, message, self.hardware_id, values))
+        self.diag.publish(make_status(status_name(self, STATUS_TASK), level, message, self.hardware_id, values))
+        if self.published_j1 is not None:
+            for topic, msg in zip(STAMPED_TOPICS, self.stamped.publish(win.window_id, win.entry_time_s,
+                                                                        self.published_j1, values, level)):
+                self._record(topic, msg)
         if self.trend is not None:
             self._update_trend(win, result)
 

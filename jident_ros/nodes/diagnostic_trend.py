@@ -32,7 +32,9 @@ class TrendTask:
             return
         path = os.path.expanduser(path)
         try:
-            self.trend = TrendTracker.load(path, config)
+            # checked on load (identify/trend_state.py): J1 within the policy's plausible band of the nominal
+            plausible = {"inertia_kgm2": self.policy.band_kgm2(self.nominal)}
+            self.trend = TrendTracker.load(path, config, plausible)
             self.get_logger().info(f"trend state read from {path} ({self.trend.n_windows} window(s) so far)")
         except FileNotFoundError:
             self.get_logger().info(f"trend state file {path} does not exist yet: the trend starts fresh")

@@ -147,7 +147,7 @@ class ReplayNode(RunnableNode, Node):
         self.done = False
         try:
             from jident_ros.bag.errors import RecordingError  # the bag layer: optional mcap dependency
-            from jident_ros.bag.reader import read_bag  # the bag layer: optional mcap dependency
+            from jident_ros.bag.reader import in_publish_order, read_bag  # the bag layer: optional mcap dependency
         except ImportError as exc:
             raise ParameterError(f"parameter bag: cannot read recordings here (jident_ros.bag.reader: {exc})")
         self.RecordingError = RecordingError
@@ -161,7 +161,9 @@ class ReplayNode(RunnableNode, Node):
             raise ParameterError(f"recording {exc}") from None
         except Exception as exc:
             raise ParameterError(f"parameter bag: {self.bag}: {exc}") from None
-        self.messages = itertools.chain([] if first is None else [first], messages)
+        # in the order the drive published them: a K2 or case message after the batches sent before it, although
+        # the recorder may have received it first (replay = live)
+        self.messages = in_publish_order(itertools.chain([] if first is None else [first], messages))
         self.pubs = {}
         self.pub_clock = (self.create_publisher(Clock, "/clock", qos_clock())
                           if self.cfg["publish_clock"] else None)

@@ -124,6 +124,31 @@ class ProgressGate:
 _RCL_LOCATION = re.compile(r",? at /[^,]*\.c:\d+")
 
 
+class _ParamsFileLoader(yaml.SafeLoader):
+    """YAML as rcl's params-file parser reads it: a node's tag does not change what it holds.  launch_ros
+    writes the list parameters of a launch file as ``!!python/tuple`` sequences (it dumps tuples with
+    ``yaml.dump``) and rcl reads them as arrays; ``yaml.safe_load`` refused them.  Any tag other than
+    YAML's own is read by the node's kind (sequence -> list, mapping -> dict, scalar -> its text); nothing
+    is ever constructed from a tag."""
+
+
+def _untagged(loader: yaml.SafeLoader, tag_suffix: str, node: yaml.Node):
+    if isinstance(node, yaml.SequenceNode):
+        return loader.construct_sequence(node, deep=True)
+    if isinstance(node, yaml.MappingNode):
+        return loader.construct_mapping(node, deep=True)
+    return loader.construct_scalar(node)
+
+
+_ParamsFileLoader.add_multi_constructor("tag:yaml.org,2002:python/", _untagged)
+_ParamsFileLoader.add_multi_constructor("!", _untagged)
+
+
+def load_params_file(text: str):
+    """A params file's YAML as rcl accepts it (``!!python/tuple`` lists included); yaml.YAMLError if not YAML."""
+    return yaml.load(text, Loader=_ParamsFileLoader)  # noqa: S506 - a SafeLoader subclass
+
+
 def check_params_files(args) -> None:
     """ParameterError (one line naming the file and the problem) for a ``--params-file`` that rcl
     would refuse with a multi-line error before any of our code runs: missing, unreadable, not YAML,
@@ -133,7 +158,7 @@ def check_params_files(args) -> None:
     for f in files:
         path = Path(f)
         try:
-            doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+            doc = load_params_file(path.read_text(encoding="utf-8"))
         except OSError as exc:
             raise ParameterError(f"--params-file {f}: cannot read it ({exc.strerror or exc})") from None
         except yaml.YAMLError as exc:

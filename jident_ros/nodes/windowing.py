@@ -13,13 +13,14 @@ from __future__ import annotations
 import math
 import time
 
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rosbags.typesys import Stores, get_typestore
 from std_msgs.msg import Float64, Float64MultiArray
 
 from jident_ros.identify.levels import ERROR, OK, STALE, WARN
 from jident_ros.identify.monitor import DetectorConfig, make_detector
-from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater
+from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater, status_name
 from jident_ros.nodes.params import (
     RuntimeParameters,
     checked,
@@ -47,7 +48,8 @@ from jident_ros.stream.layout import KNOWN_CHANNELS
 
 NODE_NAME = "jident_windowing"
 #: Event statuses (a dropped window or batch, an internal error).
-STATUS_NAME = "jident: windowing"
+INPUT_TASK = "input"      # event status "<ns>/jident_windowing: input": a publisher whose QoS cannot match
+STATUS_TASK = "windows"   # event status "<ns>/jident_windowing: windows": a dropped window or batch
 #: Periodic task (diagnostics_period_s, steady clock): "jident_windowing: rate".
 RATE_TASK = "rate"
 
@@ -89,6 +91,14 @@ def schema() -> dict:
     return node_schema(WINDOWING_PARAMS)
 
 
+def input_qos(depth: int, reliability: str):
+    """The input subscriptions' QoS: drive/signals' (keep last ``depth``, volatile), reliable or best effort."""
+    from rclpy.qos import ReliabilityPolicy
+    qos = qos_signals(depth)
+    qos.reliability = ReliabilityPolicy.BEST_EFFORT if reliability == "best_effort" else ReliabilityPolicy.RELIABLE
+    return qos
+
+
 class WindowingNode(RunnableNode, Node):
     """The windowing node (composable: keyword arguments go to rclpy's Node)."""
 
@@ -109,6 +119,9 @@ class WindowingNode(RunnableNode, Node):
         self.pub_window = self.create_publisher(Float64MultiArray, "drive/window",
                                                 qos_latched(c["window_queue_depth"]))
         self.adapter = None
+        qos_in = input_qos(c["signals_queue_depth"], c["input_reliability"])
+        events = SubscriptionEventCallbacks(incompatible_qos=self.on_incompatible_qos)
+        self.incompatible_qos = 0
         if c["input"] == "joint_states":
             from sensor_msgs.msg import Imu, JointState  # only this input needs sensor_msgs (ros-sensor-msgs)
             self.adapter = JointStateAdapter(s.sampling.sample_period_s, c["motor_joint"], c["load_joint"],
@@ -116,14 +129,14 @@ class WindowingNode(RunnableNode, Node):
             # raw subscriptions, decoded by rosbags' CDR deserialiser: half the CPU of rclpy's message conversion
             # (JointState 8 vs 14 us, Imu 8 vs 23 us; bench/bench_jointstate.py, docs/results.md)
             self._cdr = get_typestore(Stores.ROS2_HUMBLE).deserialize_cdr
-            self.sub = self.create_subscription(JointState, "joint_states", self.on_joint_state_cdr,
-                                                qos_signals(c["signals_queue_depth"]), raw=True)
+            self.sub = self.create_subscription(JointState, "joint_states", self.on_joint_state_cdr, qos_in, raw=True,
+                                                event_callbacks=events)
             if c["use_imu"]:
-                self.sub_imu = self.create_subscription(Imu, "imu", self.on_imu_cdr,
-                                                        qos_signals(c["signals_queue_depth"]), raw=True)
+                self.sub_imu = self.create_subscription(Imu, "imu", self.on_imu_cdr, qos_in, raw=True,
+                                                        event_callbacks=events)
         else:
-            self.sub = self.create_subscription(Float64MultiArray, "drive/signals", self.on_signals,
-                                                qos_signals(c["signals_queue_depth"]))
+            self.sub = self.create_subscription(Float64MultiArray, "drive/signals", self.on_signals, qos_in,
+                                                event_callbacks=events)
         # the simulator's back-pressure at real_time_factor 0 (and anyone's progress bar)
         self.pub_progress = (self.create_publisher(Float64, "drive/progress", qos_signals(10))
                              if c["progress_every_batches"] > 0 else None)
@@ -255,6 +268,23 @@ class WindowingNode(RunnableNode, Node):
         except Exception as exc:
             self._report_error("drive/backlash_width callback", exc, reset=False)
 
+    def on_incompatible_qos(self, info) -> None:
+        """A publisher of the input topic offers a QoS this subscription cannot match (no sample of it will
+        arrive): one ERROR status and one log line naming the topic, the policy and what to change."""
+        self.incompatible_qos = int(getattr(info, "total_count", self.incompatible_qos + 1))
+        policy = getattr(getattr(info, "last_policy_kind", None), "name", "unknown").replace("_QOS_POLICY", "")
+        topic = self.resolve_topic_name(self.sub.topic_name)
+        hint = (f"the publisher is best effort and input_reliability is {self.cfg['input_reliability']}: set "
+                "input_reliability:=best_effort" if policy.endswith("RELIABILITY") and
+                self.cfg["input_reliability"] == "reliable" else "compare its QoS with docs/interfaces.md")
+        text = (f"{topic}: {self.incompatible_qos} publisher(s) offer a QoS this subscription cannot match "
+                f"(policy {policy}; {hint}); no sample arrives from them")
+        self.get_logger().error(text)
+        self.diag.publish(make_status(status_name(self, INPUT_TASK), ERROR, text, self.hardware_id,
+                                      [("topic", topic), ("policy", policy),
+                                       ("incompatible_qos_publishers", self.incompatible_qos),
+                                       ("input_reliability", self.cfg["input_reliability"])]))
+
     def rate_status(self, stat):
         """Periodic task "jident_windowing: rate" (steady clock): samples, batches and windows per second
         since the last status; WARN when something was dropped in the period; STALE when no drive/signals
@@ -291,7 +321,9 @@ class WindowingNode(RunnableNode, Node):
             ("empty_batches", d.counts["empty"]), ("samples_seen", d.samples_seen),
             ("batches_seen", d.batches_seen), ("callback_errors", self.errors),
             ("backlash_width_m", d.backlash_width_m), ("threshold_rad", d.threshold_rad),
-            ("capturing", d.capturing), ("detector", self.detector_kind), ("input", self.cfg["input"])]
+            ("capturing", d.capturing), ("detector", self.detector_kind), ("input", self.cfg["input"]),
+            ("input_reliability", self.cfg["input_reliability"]),
+            ("incompatible_qos_publishers", getattr(self, "incompatible_qos", 0))]
         if self.adapter is not None:
             vals += [(f"jointstate.{k}", v) for k, v in self.adapter.counts.items()]
             vals += [(f"jitter.{k}", v) for k, v in self.adapter.jitter().items()]
@@ -305,7 +337,7 @@ class WindowingNode(RunnableNode, Node):
                                                           else "batch dropped")
         text = f"{what}: {ev.reason}: {ev.detail}"
         self.get_logger().warning(text, throttle_duration_sec=1.0)
-        self.diag.publish(make_status(STATUS_NAME, WARN, text, self.hardware_id, self._values(
+        self.diag.publish(make_status(status_name(self, STATUS_TASK), WARN, text, self.hardware_id, self._values(
             [("reason", ev.reason), ("detail", ev.detail), ("window_dropped", ev.window_dropped)])))
 
     def _report_error(self, where, exc, reset=True):
@@ -315,7 +347,7 @@ class WindowingNode(RunnableNode, Node):
         text = f"internal error in {where}: {type(exc).__name__}: {exc}"
         self.get_logger().error(text, throttle_duration_sec=1.0)
         try:
-            self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id,
+            self.diag.publish(make_status(status_name(self, STATUS_TASK), ERROR, text, self.hardware_id,
                                           self._values([("reason", "internal_error")])))
         except Exception:
             pass
