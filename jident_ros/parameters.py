@@ -93,7 +93,7 @@ SIMULATOR_PARAMS = {
     "batch_size": Param(50, "samples per drive/signals message", min=1, max=MAX_DEPTH),
     "real_time_factor": Param(1.0, "drive seconds per wall second; 0 = as fast as the windowing node reads "
                               "(back-pressure by drive/progress)", min=0.0, max=1000.0),
-    "fast_sleep_s": Param(0.001, "timer period per batch when real_time_factor = 0, s", min=0.0, max=1.0),
+    "fast_sleep_s": Param(0.001, "timer period when real_time_factor = 0 (at most 4 batches per tick), s", min=0.0, max=1.0),
     "max_lead_s": Param(2.0, "real_time_factor 0: at most this many drive seconds ahead of the windowing "
                         "node's drive/progress; 0 = no back-pressure", min=0.0, max=3600.0),
     "progress_timeout_s": Param(2.0, "no drive/progress for this long while waiting: back-pressure off "
@@ -296,8 +296,9 @@ DIAGNOSTIC_PARAMS = {
 REPLAY_PARAMS = {
     "bag": Param("", "bag directory or .mcap file (or the first command-line argument)"),
     "rate": Param(1.0, "playback speed factor; 0 = as fast as the windowing node reads", min=0.0, max=1000.0),
-    "fast_sleep_s": Param(0.001, "timer period per message when rate = 0, s", min=0.0, max=1.0),
-    "max_lead_s": Param(2.0, "rate 0: at most this many drive seconds ahead of drive/progress; 0 = off",
+    "fast_sleep_s": Param(0.001, "timer period when rate = 0 (at most 4 messages per tick), s", min=0.0, max=1.0),
+    "max_lead_s": Param(2.0, "at most this many drive seconds ahead of drive/progress, at any rate (a downstream "
+                        "that falls behind pauses the replay, WARN with the count); 0 = off",
                         min=0.0, max=3600.0),
     "progress_timeout_s": Param(2.0, "no drive/progress for this long while waiting: back-pressure off, s",
                                 min=0.0, max=3600.0, min_exclusive=True),

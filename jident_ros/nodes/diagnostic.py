@@ -199,6 +199,14 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         self.parameters = RuntimeParameters(self, self.schema, values, validate, self.on_parameters)
 
     # ----------------------------------------------------------------- lifecycle
+    def make_executor(self):
+        """SingleThreadedExecutor, not the EventsExecutor of the other nodes: the recorder's subscriptions take
+        ``(msg, MessageInfo)`` (the publish time), and rclpy 9.1's EventsExecutor fails on such callbacks
+        ("SystemError: null argument to internal routine" from spin_until_future_complete; issue 25).  It costs
+        this node the executor overhead the others shed (bench/bench_ros.py --profile)."""
+        from rclpy.executors import SingleThreadedExecutor
+        return SingleThreadedExecutor(context=self.context)
+
     def autostart(self) -> None:
         """Configure + activate (``ros2 run``, the launch file): the node works as an unmanaged one."""
         self.trigger_configure()

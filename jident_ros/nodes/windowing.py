@@ -39,7 +39,7 @@ from jident_ros.nodes.ros_io import (
     qos_signals,
     window_to_msg,
 )
-from jident_ros.nodes.runtime import RunnableNode
+from jident_ros.nodes.runtime import RunnableNode, events_executor
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import WINDOWING, WINDOWING_PARAMS
 from jident_ros.stream.detector import REASONS
@@ -177,20 +177,13 @@ class WindowingNode(RunnableNode, Node):
         return make_detector(self.system, DetectorConfig.from_parameters(self.cfg, self.detector_kind, chans))
 
     def make_executor(self):
-        """The executor runtime.main spins this node with.  ``input: joint_states`` (one message per sample, 2
-        callbacks per sample with the Imu): rclpy's EventsExecutor -- SingleThreadedExecutor rebuilds its wait set
-        for every callback, which cost about 3/4 of the node's CPU at 2 kHz (bench/bench_jointstate.py --profile);
-        ``signals`` (one batch of 50 samples per message): SingleThreadedExecutor as every other node."""
-        if self.adapter is not None:
-            try:
-                from rclpy.experimental import EventsExecutor
-            except ImportError:   # an rclpy without it (before Jazzy): the default executor, slower
-                pass
-            else:
-                self.spin_in_periods = True     # runtime.spin: a period's callbacks per call, not one
-                return EventsExecutor(context=self.context)
+        """The executor runtime.main spins this node with: rclpy's EventsExecutor (:func:`events_executor`), for
+        ``input: joint_states`` (one message per sample, 2 callbacks per sample with the Imu: SingleThreadedExecutor
+        rebuilds its wait set for every callback, about 3/4 of the node's CPU at 2 kHz, bench/bench_jointstate.py
+        --profile) and for ``signals`` alike (one batch of 50 samples per message: the executor cost 4-5x the
+        batch's own work, bench/bench_ros.py --profile, issue 25).  Before Jazzy: SingleThreadedExecutor."""
         from rclpy.executors import SingleThreadedExecutor
-        return SingleThreadedExecutor(context=self.context)
+        return events_executor(self) or SingleThreadedExecutor(context=self.context)
 
     # ----------------------------------------------------------------- parameters at run time
     def on_parameters(self, changed: dict) -> None:
