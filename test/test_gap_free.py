@@ -102,10 +102,11 @@ def ours_window():
     """Our simulator's window as a JointState drive records it (raw 2^16 encoder, no a1), entry from the flank
     detector."""
     from jident_ros.config import load_system_config
-    from jident_ros.research.evaluation.raw_inputs import make_detector, raw_recordings, run_detector, without
+    from jident_ros.identify.monitor import DetectorConfig, make_detector
+    from jident_ros.research.evaluation.raw_inputs import raw_recordings, run_detector, without
     system = load_system_config()
     rec = without(raw_recordings(system, [1.131], [0.0075], steady_s=0.2, seed=12)[0], ("a1", "a2", "v2"))
-    det = make_detector("flank", system, system.load.wheel_radius_m, TS, rec.channels, counts=65536)
+    det = make_detector(system, DetectorConfig("flank", channels=rec.channels, encoder_counts_per_rev=65536))
     return [e.window for e in run_detector(det, rec) if e.kind == "window"][0]
 
 

@@ -243,7 +243,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
                      sample_period_s: float, method: str | None = None,
                      bearing_friction_nms_per_rad: float = 0.0, recontact_index: int | None = None,
                      entry_uncertainty_samples: int = 0, model: GapModel | None = None,
-                     _single: bool = False) -> GapEstimate:
+                     cross_check: bool = True) -> GapEstimate:
     """Least-squares J1 over the gap; raises :class:`NoGapError` with a reason.  ``recontact_index``: see
     :func:`gap_interval`.  ``entry_uncertainty_samples`` k > 0: the entry row is known only to +-k samples
     (the dynamics detector without a1); J1 is refitted with the entry moved by -k and +k and the larger change
@@ -252,10 +252,12 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     'auto' for the model choice (the module docstring): with a1, the joint fit when the pre-entry m_el is steady
     (:func:`pre_entry_steady`), else 'gap_only'; without a1, 'angle' (α1) or 'speed'.  ``model``: the
     drive's torque accuracy and friction band (:class:`~jident_ros.identify.gap_free.GapModel`; default: exact
-    torque, no friction band): the torque-accuracy term J1 a/sqrt(3) goes into every fit's standard error."""
+    torque, no friction band): the torque-accuracy term J1 a/sqrt(3) goes into every fit's standard error.
+    ``cross_check`` (the model choice with a1 and alpha1): the a1 fit and the free angle fit, cross-checked
+    (:func:`_cross_checked`); False: the a1 fit's model choice alone."""
     model = GapModel() if model is None else model
-    if (method is None or method == "auto") and "a1" in window and "alpha1" in window and not _single:
-        return _cross_checked(window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s,
+    if (method is None or method == "auto") and "a1" in window and "alpha1" in window and cross_check:
+        return _cross_checked((window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s),
                               bearing_friction_nms_per_rad, recontact_index, entry_uncertainty_samples, model)
     if "m_el" not in window:
         raise NoGapError("no electromagnetic torque: the gap fit needs m_el")
@@ -493,13 +495,13 @@ def _stat_se(g: GapEstimate, model: GapModel) -> float:
     return float(np.sqrt(max(g.std_error_kgm2 ** 2 - (g.inertia_kgm2 * model.torque_rel_se()) ** 2, 0.0)))
 
 
-def _cross_checked(window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s, b1, recontact_index,
-                   entry_uncertainty_samples, model: GapModel) -> GapEstimate:
+def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_samples: int,
+                   model: GapModel) -> GapEstimate:
     """The model choice when the window has a1 and alpha1 (an Imu beside the encoder): the a1 fit (the joint
     or gap_only fit, :func:`pre_entry_steady`) and the free angle fit, cross-checked; the one with the smaller
     standard error is returned when they agree within CROSS_CHECK_Z combined standard errors, else NoGapError
-    names both.  One that fails alone leaves the other, with the failure in its model_choice."""
-    args = (window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s)
+    names both.  One that fails alone leaves the other, with the failure in its model_choice.  ``args``: the
+    window, entry index, K2, r and T_s of :func:`estimate_inertia`."""
     kw = dict(bearing_friction_nms_per_rad=b1, recontact_index=recontact_index, model=model)
     fits, why = {}, {}
     for name, method in (("angle", "angle"), ("a1", None)):
@@ -507,7 +509,7 @@ def _cross_checked(window, entry_index, backlash_width_m, wheel_radius_m, sample
         # interval would make their errors common and the check weaker
         try:
             fits[name] = estimate_inertia(*args, method=method, entry_uncertainty_samples=entry_uncertainty_samples,
-                                          _single=True, **kw)
+                                          cross_check=False, **kw)
         except NoGapError as exc:
             why[name] = str(exc)
     if not fits:

@@ -26,10 +26,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from jident_ros.config import load_system_config
 from jident_ros.identify.fusion import fuse_verdict
 from jident_ros.identify.gap import NoGapError, estimate_inertia, nearest_class
 from jident_ros.identify.gap_free import GapModel
 from jident_ros.identify.verdict import VerdictPolicy, decide_gap
+from jident_ros.research.evaluation.raw_inputs import evaluate_condition, evaluate_second_drive, raw_recordings, without
 
 CLASSES = (1.16, 1.131, 1.102, 1.073, 0.957, 1.189, 1.218)
 EVENTS = ("speed_step", "speed_reversal", "load_reversal")
@@ -209,8 +211,6 @@ def _line(label: str, res: dict) -> str:
 def other_models(second_drive_dirs=(), ours: bool = False) -> None:
     """The default gap fit (the diagnostic node's model choice, default GapModel: the drives' torque is exact)
     through the flank detector on the second drive's CSV directories and on our simulator's raw recordings."""
-    from jident_ros.config import load_system_config
-    from jident_ros.research.evaluation.raw_inputs import evaluate_condition, evaluate_second_drive, raw_recordings, without
     system = load_system_config()
     for d in second_drive_dirs:
         for label, absent in (("JointState", JOINTSTATE_ABSENT), ("with a1", IMU_ABSENT)):
