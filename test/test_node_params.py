@@ -79,11 +79,14 @@ def _check_descriptors(descs, schema):
         assert d.description == p.description and d.read_only == p.read_only, name
         if d.type == T.PARAMETER_DOUBLE and (p.min is not None or p.max is not None):
             (r,) = d.floating_point_range
-            assert r.from_value == (p.min if p.min is not None else -math.inf), name
-            assert r.to_value == (p.max if p.max is not None else math.inf), name
+            # an exclusive end is shown as the nearest value inside (issue 24: describe = validation)
+            lo = -math.inf if p.min is None else (math.nextafter(p.min, math.inf) if p.min_exclusive else p.min)
+            hi = math.inf if p.max is None else (math.nextafter(p.max, -math.inf) if p.max_exclusive else p.max)
+            assert r.from_value == lo and r.to_value == hi, name
         elif d.type == T.PARAMETER_INTEGER and (p.min is not None or p.max is not None):
             (r,) = d.integer_range
-            assert r.from_value == p.min and r.to_value == p.max and r.step == 1, name
+            assert r.from_value == p.min + p.min_exclusive and r.to_value == p.max - p.max_exclusive, name
+            assert r.step == 1, name
         else:
             assert not d.floating_point_range and not d.integer_range, name
         if p.choices:

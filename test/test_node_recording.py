@@ -61,7 +61,7 @@ def test_default_parameters_leave_a_bag_that_rosbags_reads(node_env, library, tm
     finally:
         node.stop()
         ros.close()
-    (bag,) = (tmp_path / "data" / "bags").iterdir()
+    (bag,) = [p for p in (tmp_path / "data" / "bags").iterdir() if p.is_dir()]   # and the manifest
     assert re.fullmatch(r"rosbag2_\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d", bag.name)
     assert (bag / "metadata.yaml").is_file() and not (bag / ".jident_reserve").exists()
     with AnyReader([bag]) as reader:

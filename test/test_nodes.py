@@ -170,13 +170,9 @@ def node_env(ros_env):
 
 
 @pytest.fixture(scope="session")
-def library(tmp_path_factory):
-    """Pattern library of the default configuration, built once (1-2 s)."""
-    from jident_ros.config import load_method_config, load_system_config
-    from jident_ros.method.patterns import PatternLibrary
-    path = tmp_path_factory.mktemp("patterns") / "patterns.npz"
-    PatternLibrary.build(load_system_config(), load_method_config()).save(path)
-    return path
+def library(default_library_file):
+    """Pattern library of the default configuration (conftest: built once per run)."""
+    return default_library_file
 
 
 @pytest.fixture

@@ -450,7 +450,7 @@ def test_recorded_qos_is_what_the_publishers_offer(node_env, tmp_path, ros):  # 
         ros.spin_until(lambda: False, 2.0)
     finally:
         assert p.stop() == 0, logs(p)
-    (bag,) = list(root.iterdir())
+    (bag,) = [p for p in root.iterdir() if p.is_dir()]   # beside it: the manifest .jident_ros_bags
     topics = {t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"]
               for t in read_metadata(bag)["topics_with_message_count"]}
     (case,) = topics["/rq/drive/case"]

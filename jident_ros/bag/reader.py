@@ -61,7 +61,8 @@ def _split_index(p: Path) -> tuple:
 def bag_files(path: str | os.PathLike) -> list[Path]:
     """The MCAP files of a recording in order: the file itself, or a bag directory's files (those named in
     metadata.yaml, then any other ``*.mcap`` of the directory -- a file still open when the recorder
-    died -- by split index)."""
+    died -- by split index; such a file shorter than the MCAP magic, e.g. zero bytes, holds nothing and is
+    left out)."""
     path = Path(path)
     if path.is_file():
         return [path]
@@ -77,10 +78,18 @@ def bag_files(path: str | os.PathLike) -> list[Path]:
         if missing:
             raise RecordingError(f"{path}: files named in metadata.yaml are missing: {missing}")
     listed = {p.name for p in files}
-    files += sorted((p for p in path.glob("*.mcap") if p.name not in listed), key=_split_index)
+    # an unlisted file shorter than the MCAP magic holds nothing: a split begun when the recorder died
+    files += sorted((p for p in path.glob("*.mcap") if p.name not in listed and _holds_data(p)), key=_split_index)
     if not files:
         raise RecordingError(f"{path}: no metadata.yaml and no .mcap file")
     return files
+
+
+def _holds_data(path: Path) -> bool:
+    try:
+        return path.stat().st_size >= 8
+    except OSError:
+        return False
 
 
 def check_magic(path: Path) -> None:

@@ -45,7 +45,7 @@ def jointstate_batches(path, sample_period_s: float, motor_joint: str = "motor",
     if line:
         log(line)
     adapter = JointStateAdapter(sample_period_s, motor_joint, load_joint, batch_size=batch_size,
-                                use_imu=bool(imu), imu_axis=imu_axis)
+                                use_imu=bool(imu), imu_axis=imu_axis, channels="auto")
 
     def batches():
         try:
@@ -94,7 +94,7 @@ def _jointstate_batches_anyreader(path, sample_period_s, motor_joint, load_joint
     js, imu = _jointstate_topics(path, [(c.topic, c.msgtype) for c in reader.connections], topic)
     wanted = {t for t, _ in js + imu}
     adapter = JointStateAdapter(sample_period_s, motor_joint, load_joint, batch_size=batch_size,
-                                use_imu=bool(imu), imu_axis=imu_axis)
+                                use_imu=bool(imu), imu_axis=imu_axis, channels="auto")
 
     def batches():
         try:

@@ -77,9 +77,9 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
-from scipy import stats
 from scipy.signal import savgol_filter
 
+from jident_ros.identify.distributions import f_survival, t_quantile
 from jident_ros.identify.gap_free import (
     FREE_REL_SE_FLOOR,
     KINK_PRE_SAMPLES,
@@ -630,7 +630,7 @@ def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTes
         f, p = (0.0, 1.0) if rss0 <= (1e-12 * scale) ** 2 * n else (np.inf, 0.0)
     else:
         f = max((rss0 - rss2) / 2.0 / (rss2 / (n - 3)), 0.0)
-        p = float(stats.f.sf(f, 2, n - 3))
+        p = f_survival(f, 2, n - 3)
     if np.ptp(A[:, 1:] @ coef[1:]) <= STEADY_REL_TOL * scale:    # slope and curvature move it by next to nothing
         return SteadinessTest(True, float(f), p, n)
     if p < p_value:
@@ -885,7 +885,7 @@ def _angle_fit(alpha1: np.ndarray, m_el: np.ndarray, start: int, end: int, sampl
 @lru_cache(maxsize=256)
 def _t975(dof: int) -> float:
     """Student t 97.5 % quantile (cached: scipy's ppf costs ~0.3 ms a call)."""
-    return float(stats.t.ppf(0.975, dof))
+    return t_quantile(0.975, dof)
 
 
 def nearest_class(inertia_kgm2: float, classes_kgm2) -> int:

@@ -82,6 +82,7 @@ from jident_ros.nodes.ros_io import LayoutError, make_status, qos_latched, qos_s
 from jident_ros.nodes.runtime import RunnableNode
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, gap_method_problem
+from jident_ros.stream.text import plain_numbers
 
 NODE_NAME = "jident_diagnostic"
 #: Each window's result.
@@ -179,6 +180,7 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         self.monitor = DriveMonitor(None, self._diagnoser())   # .tracker: TrendTracker (trend_enabled, configured)
         self.trend_update = None           # its last TrendUpdate
         self.trend_error = None            # why the trend's state file was not used (ERROR), one line
+        self.trend_state_refused = False   # trend_state_file is not a regular file: never read nor written
         self.trend_save_error = None       # the last failure to write the state file (ERROR), one line
         self.trend_windows_without_estimate = 0
         self.trend_width_source = ""        # where the last window's width came from: flank, gap or none
@@ -197,6 +199,14 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         self.parameters = RuntimeParameters(self, self.schema, values, validate, self.on_parameters)
 
     # ----------------------------------------------------------------- lifecycle
+    def make_executor(self):
+        """SingleThreadedExecutor, not the EventsExecutor of the other nodes: the recorder's subscriptions take
+        ``(msg, MessageInfo)`` (the publish time), and rclpy 9.1's EventsExecutor fails on such callbacks
+        ("SystemError: null argument to internal routine" from spin_until_future_complete; issue 25).  It costs
+        this node the executor overhead the others shed (bench/bench_ros.py --profile)."""
+        from rclpy.executors import SingleThreadedExecutor
+        return SingleThreadedExecutor(context=self.context)
+
     def autostart(self) -> None:
         """Configure + activate (``ros2 run``, the launch file): the node works as an unmanaged one."""
         self.trigger_configure()
@@ -363,15 +373,16 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
     def _record(self, name, msg, info=None):
         if self.recorder is not None:
             sent = (info or {}).get("source_timestamp") or None    # rclpy's MessageInfo; 0: not known
+            # after a failure: counted as dropped, by reason
             self.recorder.write(name, msg, sent if sent is None or 0 < sent < 2**63 else None)
             if self.recorder.error:
-                self.close()
+                self.recorder.finalise_failed()
 
     def _flush_bag(self):
-        if self.recorder is not None:
+        if self.recorder is not None and self.recorder.open:
             self.recorder.flush()
             if self.recorder.error:
-                self.close()
+                self.recorder.finalise_failed()
 
     def recorder_status(self, stat):
         rec = self.recorder or getattr(self, "_closed_recorder", None)
@@ -379,6 +390,10 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
             stat.summary(ERROR, self.recorder_error)
         elif not self.cfg["record"]:
             stat.summary(OK, "not recording (record is false)")
+        elif self.recorder is not None and self.recorder.error:
+            st = self.recorder.status()
+            stat.summary(ERROR, f"recording stopped: {self.recorder.error}; {st['messages_dropped']} message(s) "
+                         "dropped since (by reason in the values)")
         elif self.recorder is not None:
             stat.summary(OK, f"recording to {self.recorder.bag_dir}")
         else:
@@ -398,12 +413,17 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         try:
             self._record("drive/window", msg)
             if not self.active:
+                # ignored, not lost: its id moves on, so the next diagnosed window sees no gap
                 self.windows_inactive += 1
+                try:
+                    self.last_window_id = int(window_from_msg(msg).window_id)
+                except (LayoutError, ValueError):
+                    pass
                 return
             self.windows_seen += 1
             self._diagnose(msg, t_recv)
         except Exception as exc:  # never die on a window: report, go on
-            text = f"window could not be diagnosed: internal error {type(exc).__name__}: {exc}"
+            text = plain_numbers(f"window could not be diagnosed: internal error {type(exc).__name__}: {exc}")
             self.get_logger().error(text)
             try:
                 self.diag.publish(make_status(status_name(self, STATUS_TASK), ERROR, text, self.hardware_id))
@@ -469,7 +489,8 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         errors, warnings = self.check_window(win)
         if errors:
             self.windows_mismatched += 1
-            text = f"window {win.window_id} not diagnosed: it does not match the configuration: " + "; ".join(errors)
+            text = plain_numbers(f"window {win.window_id} not diagnosed: it does not match the configuration: "
+                                 + "; ".join(errors))
             self.get_logger().error(text, throttle_duration_sec=1.0)
             self.last_message = text
             self.diag.publish(make_status(status_name(self, STATUS_TASK), ERROR, text, self.hardware_id,
@@ -480,7 +501,7 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         self.published_j1 = None
         result = self.monitor.window(win, on_estimate=self._publish_estimate, started_at=t_recv)
         d = result.diagnosis
-        level, message, values = d.level, d.message, list(d.values)
+        level, message, values = d.level, plain_numbers(d.message), list(d.values)
         if warnings:
             self.windows_mismatched += 1
             level = max(level, WARN)

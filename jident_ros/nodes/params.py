@@ -187,10 +187,16 @@ def descriptor(name: str, param: Param):
     if param.min is not None or param.max is not None:
         lo = -math.inf if param.min is None else param.min
         hi = math.inf if param.max is None else param.max
+        # an exclusive end as the nearest value inside: the range `ros2 param describe` shows is exactly the
+        # values the validation accepts, at both ends (issue 24)
         if typ == T.PARAMETER_DOUBLE:
+            lo = math.nextafter(lo, math.inf) if param.min_exclusive else lo
+            hi = math.nextafter(hi, -math.inf) if param.max_exclusive else hi
             d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
         elif typ == T.PARAMETER_INTEGER:
             big = 2 ** 63 - 1
+            lo = lo + 1 if param.min_exclusive else lo
+            hi = hi - 1 if param.max_exclusive else hi
             d.integer_range = [IntegerRange(from_value=int(max(lo, -big)), to_value=int(min(hi, big)), step=1)]
     return d
 
@@ -224,7 +230,7 @@ def coerce(name: str, value: Any, param: Param) -> Any:
     if param.min is not None or param.max is not None:
         for i, x in enumerate(value if isinstance(value, list) else [value]):
             low = param.min is not None and (x <= param.min if param.min_exclusive else x < param.min)
-            high = param.max is not None and x > param.max
+            high = param.max is not None and (x >= param.max if param.max_exclusive else x > param.max)
             if low or high:
                 where = f"{name}[{i}]" if isinstance(value, list) else name
                 raise ParameterError(f"parameter {where}: must be {what}, got {x!r}")
