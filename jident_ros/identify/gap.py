@@ -256,11 +256,11 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     ``cross_check`` (the model choice with a1 and alpha1): the a1 fit and the free angle fit, cross-checked
     (:func:`_cross_checked`); False: the a1 fit's model choice alone."""
     model = GapModel() if model is None else model
+    if "m_el" not in window:
+        raise NoGapError("no electromagnetic torque: the gap fit needs m_el")
     if (method is None or method == "auto") and "a1" in window and "alpha1" in window and cross_check:
         return _cross_checked((window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s),
                               bearing_friction_nms_per_rad, recontact_index, entry_uncertainty_samples, model)
-    if "m_el" not in window:
-        raise NoGapError("no electromagnetic torque: the gap fit needs m_el")
     start, end, how = gap_interval(window, entry_index, backlash_width_m, wheel_radius_m,
                                    recontact_index=recontact_index)
     m = np.asarray(window["m_el"], float)[start:end]
