@@ -112,3 +112,13 @@ def test_oracle_fit_with_a_constant_friction_torque():
 def test_oracle_column_counts_non_physical_fits():
     assert zoo._oracle([0.01, 0.03, float("inf")]) == "2.0 % / 3.0 % (1 non-physical)"
     assert zoo._oracle([]) == "–"
+
+
+def test_missing_results_file_is_one_line_before_any_work(tmp_path, capsys):
+    """A --results path that does not exist is refused at once (exit 2, one line), not after the run."""
+    from jident_ros.research.evaluation import zoo
+    rc = zoo.main(["--report", "--out", str(tmp_path / "zoo"), "--results", str(tmp_path / "none.md")])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert "none.md" in err and err.count("\n") == 1
+    assert not (tmp_path / "zoo").exists()

@@ -578,6 +578,9 @@ def main(argv=None) -> int:
         if m not in MODELS:
             sys.stderr.write(f"zoo: error: argument --models: not one of {', '.join(MODELS)}: {m!r}\n")
             return 2
+    if a.results != "-" and not Path(a.results).is_file():
+        sys.stderr.write(f"zoo: error: argument --results: no such file: {a.results} (give '-' to print)\n")
+        return 2
     commit = _commit()      # the code measured: read before the run
     res = run(Path(a.out), a.quick, log=lambda t: print(t, file=sys.stderr, flush=True), models=models)
     cmd = "python -m jident_ros.research.evaluation.zoo --report" + (" --quick" if a.quick else "")
