@@ -261,7 +261,7 @@ class FlankDetector(BacklashDetector):
                  nominal_inertia_kgm2: Optional[float] = None, contact_samples: int = 32,
                  contact_tolerance_rad: float = 2e-3, k_sigma: float = 8.0, min_departure_rad: float = 1.5e-3,
                  flank_time_constant_s: float = 0.05, encoder_counts_per_rev: int = 0,
-                 refine_samples: int = 16, load_drop_fraction: float = 0.5):
+                 refine_samples: int = 16, load_drop_fraction: float = 0.5, unwrap_angles: bool = True):
         for name, v in (("gear_ratio", gear_ratio), ("contact_tolerance_rad", contact_tolerance_rad),
                         ("k_sigma", k_sigma), ("min_departure_rad", min_departure_rad),
                         ("flank_time_constant_s", flank_time_constant_s),
@@ -276,7 +276,7 @@ class FlankDetector(BacklashDetector):
                 raise ValueError(f"{name}: must be an integer >= {lo}, got {v!r}")
         # the base class validates the rest; its K2 is a placeholder the flank detector never uses
         super().__init__(1.0, wheel_radius_m, sample_period_s, channels, samples_before_entry,
-                         samples_from_entry, gap_tolerance)
+                         samples_from_entry, gap_tolerance, unwrap_angles)
         self.gear_ratio = float(gear_ratio)
         self.nominal_inertia_kgm2 = None if nominal_inertia_kgm2 is None else float(nominal_inertia_kgm2)
         self.contact_samples = int(contact_samples)
@@ -322,6 +322,7 @@ class FlankDetector(BacklashDetector):
         """Forget the history, the flank and the window in progress (continuity lost)."""
         if not hasattr(self, "gear_ratio"):     # called by the base __init__ before ours has run
             return
+        self._wrap = {}
         self._tail = np.empty((0, len(self.channels)))
         self._last_t = None
         self._recent = np.empty(0)              # the last contact_samples - 1 delta values
