@@ -80,3 +80,87 @@ def test_unwrap_continues_across_batches_and_restarts_after_a_reset():
     det.reset()                                                         # continuity lost: start again
     z, _ = det._validate(data[2000:2010], ("t", "alpha1", "alpha2"))
     np.testing.assert_allclose(z[0, 1], wrap(a[2000]), atol=1e-9)
+
+
+def _steady_then_entry(spikes=(), n=3000, ts=5e-4, w=150.0, entry=1500, jump=0.03):
+    """t, alpha1, alpha2 turning steadily on a flank, the load encoder jumping by ``jump`` at ``entry`` (a
+    slip: the clutch leaves its flank), spikes {(row, length): rad} added to alpha1."""
+    t = 1.0 + np.arange(n) * ts
+    a1 = 3.0 + w * (t - 1.0)
+    a2 = 1.0 + w * (t - 1.0)
+    a2[entry:] += jump
+    for (row, length), size in dict(spikes).items():
+        a1[row:row + length] += size
+    return np.column_stack([t, a1, a2]), ("t", "alpha1", "alpha2")
+
+
+@pytest.mark.parametrize("batch_size", [50, 1, 2, 7])
+@pytest.mark.parametrize("length", [1, 2])
+def test_an_encoder_spike_is_not_an_entry_and_does_not_swallow_the_real_one(batch_size, length):
+    """issue 24: a spike 0.25 s before the real entry opened a window that swallowed it.  A spike of 1 or 2
+    samples (either sign) is counted, no window; the real entry gets its window on its own sample."""
+    for size in (0.2, -0.05):
+        data, ch = _steady_then_entry({(1000, length): size})
+        det = FlankDetector(0.1, 5e-4, channels=ch)
+        evs = [e for b in stream_batches(data, batch_size) for e in det.push(b, ch)] + det.finish()
+        starts = [e.window.entry_time_s for e in evs if e.window is not None]
+        assert starts == [data[1500, 0]], (size, starts)
+        assert det.spikes == 1 and det.flank_shifts == 0
+
+
+def test_three_samples_beyond_the_threshold_are_a_departure():
+    """The spike rule's bound: confirm_samples (3) samples in a row off the flank are an entry."""
+    data, ch = _steady_then_entry({(1000, 3): 0.2})
+    det = FlankDetector(0.1, 5e-4, channels=ch, min_travel_rad=0.0)
+    evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)] + det.finish()
+    assert [e.window.entry_time_s for e in evs if e.window is not None][0] == data[1000, 0]
+    assert det.spikes == 0
+
+
+def _twist_change(size, n=3000, ts=5e-4, w=150.0, at=1000, tau_samples=6.0):
+    """The coupling twisting by ``size`` rad more (a torque step on the same flank: a speed step up, a load
+    change), exponentially over ``tau_samples``."""
+    t = 1.0 + np.arange(n) * ts
+    a1 = 3.0 + w * (t - 1.0)
+    a2 = 1.0 + w * (t - 1.0)
+    k = np.arange(n) - at
+    a1 += np.where(k >= 0, size * (1.0 - np.exp(-np.maximum(k, 0) / tau_samples)), 0.0)
+    return np.column_stack([t, a1, a2]), ("t", "alpha1", "alpha2")
+
+
+@pytest.mark.parametrize("size", [0.0035, -0.0035, 0.0045])
+def test_a_same_flank_torque_change_is_not_an_entry(size):
+    """More (or less) torque on the same flank moves delta by the coupling's twist change (3.4 mrad on the second
+    drive's speed step up 100 -> 120 rad/s): no window, counted as a flank shift; the detector then follows the
+    new flank level and still finds the next real entry."""
+    data, ch = _twist_change(size)
+    data[2000:, 2] += 0.03                        # a real entry later
+    det = FlankDetector(0.1, 5e-4, channels=ch)
+    evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)] + det.finish()
+    starts = [e.window.entry_time_s for e in evs if e.window is not None]
+    assert starts == [data[2000, 0]] and det.flank_shifts == 1
+
+
+def test_a_twist_change_beyond_min_travel_is_an_entry():
+    """The bound of the rule: an excursion of more than min_travel_rad (5 mrad) is a backlash entry."""
+    data, ch = _twist_change(0.006)
+    det = FlankDetector(0.1, 5e-4, channels=ch)
+    evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)] + det.finish()
+    assert len([e for e in evs if e.window is not None]) == 1 and det.flank_shifts == 0
+
+
+def test_speed_step_up_on_the_second_drive_is_not_an_entry():
+    """The second drive model (docs/second_drive.md) under a speed step up, 100 -> 120 rad/s: the PI drives the
+    torque to its limit on the same flank; raw 2^16 encoders with offsets: no window."""
+    from jident_ros.second_drive.model import Drive, DriveParams, simulate
+    p = DriveParams()
+    r = simulate(Drive(p, [1.16], 100.0, [0.0625], steps=[(0.25, 20.0)]), 1.2)
+    q = 2 * math.pi / 65536
+    a1 = np.floor((r.alpha1[:, 0] + 1.3) / q) * q
+    a2 = np.floor((r.alpha2[:, 0] + 0.4) / q) * q
+    ts = 5e-4
+    data = np.column_stack([1.0 + np.arange(a1.size) * ts, a1, a2, r.m_el[:, 0]])
+    ch = ("t", "alpha1", "alpha2", "m_el")
+    det = FlankDetector(0.08, ts, channels=ch, nominal_inertia_kgm2=1.16, encoder_counts_per_rev=65536)
+    evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)] + det.finish()
+    assert evs == [] and det.flank_shifts >= 1

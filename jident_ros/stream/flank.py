@@ -248,6 +248,15 @@ class FlankDetector(BacklashDetector):
     encoder_counts_per_rev : int   for the width uncertainty (quantisation), 0 = ideal angles
     refine_samples : int           the entry sample may move this far past the departure (16)
     load_drop_fraction : float     ... while T_L keeps more than this share of the steady load (0.5)
+    unwrap_angles : bool           undo the wraps of positions reported in [-pi, pi) (BacklashDetector), True
+    confirm_samples : int          a departure is an entry only when this many samples in a row (it and the next
+                                   ones) are beyond the threshold on the same side (3): a spike of 1 or 2 samples
+                                   of one encoder is not an entry (counted in ``spikes``); the detector hands
+                                   samples on confirm_samples - 1 samples late
+    min_travel_rad : float         an entry whose excursion ends in a new contact less than this far from the
+                                   flank it left was a same-flank torque change (the coupling twisting more or
+                                   less), not a backlash entry: its window is dropped and counted in
+                                   ``flank_shifts`` (5 mrad; below the smallest half-zone K2/r you expect; 0: off)
     """
 
     #: The window header's ``detector`` field.
@@ -261,7 +270,8 @@ class FlankDetector(BacklashDetector):
                  nominal_inertia_kgm2: Optional[float] = None, contact_samples: int = 32,
                  contact_tolerance_rad: float = 2e-3, k_sigma: float = 8.0, min_departure_rad: float = 1.5e-3,
                  flank_time_constant_s: float = 0.05, encoder_counts_per_rev: int = 0,
-                 refine_samples: int = 16, load_drop_fraction: float = 0.5, unwrap_angles: bool = True):
+                 refine_samples: int = 16, load_drop_fraction: float = 0.5, unwrap_angles: bool = True,
+                 confirm_samples: int = 3, min_travel_rad: float = 5e-3):
         for name, v in (("gear_ratio", gear_ratio), ("contact_tolerance_rad", contact_tolerance_rad),
                         ("k_sigma", k_sigma), ("min_departure_rad", min_departure_rad),
                         ("flank_time_constant_s", flank_time_constant_s),
@@ -270,8 +280,10 @@ class FlankDetector(BacklashDetector):
                 raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
         if nominal_inertia_kgm2 is not None and not _positive(nominal_inertia_kgm2):
             raise ValueError(f"nominal_inertia_kgm2: must be a finite number > 0 or None, got {nominal_inertia_kgm2!r}")
+        if isinstance(min_travel_rad, bool) or not (math.isfinite(float(min_travel_rad)) and min_travel_rad >= 0):
+            raise ValueError(f"min_travel_rad: must be a finite number >= 0, got {min_travel_rad!r}")
         for name, v, lo in (("contact_samples", contact_samples, 4), ("encoder_counts_per_rev", encoder_counts_per_rev, 0),
-                            ("refine_samples", refine_samples, 0)):
+                            ("refine_samples", refine_samples, 0), ("confirm_samples", confirm_samples, 1)):
             if isinstance(v, bool) or int(v) != v or v < lo:
                 raise ValueError(f"{name}: must be an integer >= {lo}, got {v!r}")
         # the base class validates the rest; its K2 is a placeholder the flank detector never uses
@@ -287,6 +299,13 @@ class FlankDetector(BacklashDetector):
         self.encoder_counts_per_rev = int(encoder_counts_per_rev)
         self.refine_samples = int(refine_samples)
         self.load_drop_fraction = float(load_drop_fraction)
+        self.confirm_samples = int(confirm_samples)
+        self.min_travel_rad = float(min_travel_rad)
+        #: departures back on their flank within confirm_samples (an encoder spike; not entries, counted)
+        self.spikes = 0
+        #: entries whose excursion found a new contact within min_travel_rad of the flank left (a same-flank
+        #: torque change; their windows are dropped, counted)
+        self.flank_shifts = 0
         self._alpha = 1.0 - math.exp(-self.sample_period_s / self.flank_time_constant_s)
         self.backlash_width_m = math.nan
         self.last_width: Optional[WidthResult] = None
@@ -329,6 +348,12 @@ class FlankDetector(BacklashDetector):
         self._flank: Optional[float] = None
         self._sigma = 0.0
         self._fcap: Optional[_FlankCapture] = None
+        self._held_x = np.empty((0, len(self.channels)))     # rows waiting for their confirmation rows
+        self._held_d = np.empty(0)
+        self._skip = 0                          # samples of a spike still to skip
+        self._tent: Optional[float] = None      # the flank the last entry left, until its next contact
+        self._travelled = False
+        self._last_entry_captured = False
 
     def set_backlash_width(self, backlash_width_m: float) -> None:
         """The flank detector needs no K2; a given width is ignored (kept for the node's interface)."""
@@ -339,24 +364,36 @@ class FlankDetector(BacklashDetector):
     def _delta(self, x: np.ndarray) -> np.ndarray:
         return x[:, self._i_a1] - self.gear_ratio * x[:, self._i_a2]
 
-    def _track(self, d: np.ndarray) -> list:
-        """Run the contact tracker over the delta values ``d`` of one batch; returns the departures
-        (entries) in order as (batch row, flank level it left, contact sigma).  Vectorised per stretch."""
-        departures = []
+    def _track(self, d: np.ndarray, look: np.ndarray) -> list:
+        """Run the contact tracker over the delta values ``d`` of the rows handed on (``look``: the next
+        ``confirm_samples - 1`` values, to confirm a departure); returns in order ("entry", row, flank level it
+        left, contact sigma) and ("cancel", row): the excursion of the last entry ended in a new contact at
+        that row without ever reaching ``min_travel_rad`` from the flank it left (a same-flank torque change,
+        not a backlash entry).  Vectorised per stretch."""
+        events = []
         i, n, L = 0, d.size, self.contact_samples
+        if self._skip:                              # the rest of a spike that began in the previous rows
+            i = min(self._skip, n)
+            self._skip -= i
         while i < n:
             if self._flank is None:                 # learning: the first run of L steady samples
                 carried = self._recent.size
                 seq = np.concatenate([self._recent, d[i:]])
                 if seq.size < L:
+                    self._note_travel(seq)
                     self._recent = seq
-                    return departures
+                    return events
                 runs = np.lib.stride_tricks.sliding_window_view(seq, L)
                 ok = self._contact_runs(runs)
                 if not ok.any():
+                    self._note_travel(seq)
                     self._recent = seq[-(L - 1):]
-                    return departures
+                    return events
                 k = int(np.argmax(ok))
+                if self._tent is not None:
+                    if not self._note_travel(seq[:k + L]):
+                        events.append(("cancel", i + k + L - carried - 1))
+                    self._tent = None
                 self._flank = float(runs[k].mean())
                 self._sigma = float(runs[k].std(ddof=1))
                 self._recent = np.empty(0)
@@ -371,13 +408,35 @@ class FlankDetector(BacklashDetector):
             out = self._departed(seg, prev, thr)
             if not out.any():
                 self._flank = float(f[-1])
-                return departures
+                return events
             k = int(np.argmax(out))
-            departures.append((i + k, float(prev[k]), self._sigma))
+            # confirmed when the next confirm_samples - 1 values stay beyond the threshold on the same side
+            side = 1.0 if seg[k] >= prev[k] else -1.0
+            after = np.concatenate([seg[k + 1:], look])[:self.confirm_samples - 1]
+            beyond = self._departed(after, np.full(after.size, prev[k]), thr) & (side * (after - prev[k]) > 0)
+            if not beyond.all():                    # a spike: back on the flank within confirm_samples
+                m = int(np.argmin(beyond))          # samples k .. k + m are the spike, skipped
+                self.spikes += 1
+                self._flank = float(prev[k])
+                nxt = i + k + m + 1
+                if nxt > n:
+                    self._skip = nxt - n
+                    return events
+                i = nxt
+                continue
+            events.append(("entry", i + k, float(prev[k]), self._sigma))
+            self._tent = float(prev[k]) if self.min_travel_rad > 0 else None
+            self._travelled = False
             self._flank = None
             self._recent = np.empty(0)
             i += k + 1      # the departure sample itself cannot be part of the next contact run
-        return departures
+        return events
+
+    def _note_travel(self, seq: np.ndarray) -> bool:
+        """Whether the excursion of the last entry has reached min_travel_rad from its flank (so far)."""
+        if self._tent is not None and not self._travelled and seq.size:
+            self._travelled = bool(np.max(np.abs(seq - self._tent)) >= self.min_travel_rad)
+        return self._travelled
 
     def _contact_runs(self, runs: np.ndarray) -> np.ndarray:
         """Which runs of contact_samples values are a contact: delta's spread within the tolerance."""
@@ -388,14 +447,48 @@ class FlankDetector(BacklashDetector):
         return np.abs(seg - prev) > thr
 
     def _consume(self, x: np.ndarray) -> list:
+        """Hands the rows on to the tracker ``confirm_samples - 1`` rows late (a departure is confirmed by the
+        rows after it)."""
+        d = self._delta(x)
+        h = self.confirm_samples - 1
+        rows = np.concatenate([self._held_x, x]) if self._held_x.shape[0] else x
+        dd = np.concatenate([self._held_d, d]) if self._held_d.size else d
+        ready = rows.shape[0] - h
         events = []
-        deps = self._track(self._delta(x))
+        if ready > 0:
+            events = self._consume_rows(rows[:ready], dd[:ready], dd[ready:])
+            self._held_x, self._held_d = rows[ready:], dd[ready:]
+        else:
+            self._held_x, self._held_d = rows, dd
+        self._last_t = float(x[-1, self._i_t])
+        return events
+
+    def _consume_rows(self, x: np.ndarray, d: np.ndarray, look: np.ndarray) -> list:
+        events = []
+        found = self._track(d, look)
         n = x.shape[0]
         pos = 0                                   # rows of x before pos are consumed
         extra = self.history_extra
         need = self.window_length + self.refine_samples + extra
-        for k, flank, sigma in deps:
+        for kind, k, *rest in found:
             cap = self._fcap
+            if kind == "cancel":
+                # the last entry was a same-flank torque change: its capture is dropped (counted), a second
+                # entry it made inside another window is no longer one
+                self.flank_shifts += 1
+                if cap is not None and self._last_entry_captured:
+                    take = min(need - cap.count, k + 1 - pos)
+                    if take > 0:
+                        self._append(cap, x[pos:pos + take])
+                        pos += take
+                    if cap.count >= need:
+                        events += self._close(cap)
+                    else:
+                        self._fcap = None
+                elif cap is not None and cap.second_entry_rows:
+                    cap.second_entry_rows.pop()
+                continue
+            flank, sigma = rest
             if cap is not None:
                 take = min(need - cap.count, k - pos)     # rows before k belong to the running capture
                 if take > 0:
@@ -404,10 +497,11 @@ class FlankDetector(BacklashDetector):
                 if cap.count < need:
                     if not cap.skip:
                         cap.second_entry_rows.append(cap.count + (k - pos))
+                    self._last_entry_captured = False
                     continue
                 events += self._close(cap)
             # a new entry at row k (no capture running now)
-            hist = np.concatenate([self._tail, x[:k]])[-(self.samples_before_entry + extra):]
+            hist = np.concatenate([self._tail, x[:pos], x[pos:k]])[-(self.samples_before_entry + extra):]
             t_k = float(x[k, self._i_t])
             if hist.shape[0] < self.samples_before_entry + extra:
                 events.append(self._short_history(t_k, hist.shape[0], self.samples_before_entry + extra))
@@ -415,6 +509,7 @@ class FlankDetector(BacklashDetector):
                                            math.nan, math.nan, skip=True)
             else:
                 self._fcap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma)
+            self._last_entry_captured = True
             pos = k
         cap = self._fcap
         if cap is not None and pos < n:
@@ -424,7 +519,6 @@ class FlankDetector(BacklashDetector):
             if cap.count >= need:
                 events += self._close(cap)
         self._tail = np.concatenate([self._tail, x])[-(self.samples_before_entry + extra):]
-        self._last_t = float(x[-1, self._i_t])
         return events
 
     def _append(self, cap: _FlankCapture, rows: np.ndarray) -> None:
@@ -441,6 +535,14 @@ class FlankDetector(BacklashDetector):
     def finish(self) -> list:
         """The data ended: a window in progress is reported as ``cut_off`` (a drop, counted); the event
         carries the partial window (FLAG_CUT_OFF set) for an offline report."""
+        events = []
+        if self._held_x.shape[0]:
+            held_x, held_d = self._held_x, self._held_d
+            self._held_x, self._held_d = held_x[:0], held_d[:0]
+            events = self._consume_rows(held_x, held_d, held_d[:0])
+        return events + self._finish_capture()
+
+    def _finish_capture(self) -> list:
         cap = self._fcap
         if cap is None or cap.skip:
             self._fcap = None
