@@ -164,3 +164,18 @@ def test_speed_step_up_on_the_second_drive_is_not_an_entry():
     det = FlankDetector(0.08, ts, channels=ch, nominal_inertia_kgm2=1.16, encoder_counts_per_rev=65536)
     evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)] + det.finish()
     assert evs == [] and det.flank_shifts >= 1
+
+
+def test_a_glitch_that_swallows_a_real_entry_is_counted():
+    """A glitch longer than confirm_samples (5 samples) is taken for an entry; the real entry 100 samples later
+    lies inside its window: the window goes out flagged, and the lost entry is counted (swallowed_entry)."""
+    data, ch = _steady_then_entry({(1400, 5): 0.2}, n=4000)
+    det = FlankDetector(0.1, 5e-4, channels=ch)
+    evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)] + det.finish()
+    wins = [e for e in evs if e.kind == "window"]
+    assert len(wins) == 1 and wins[0].window.entry_time_s == data[1400, 0]
+    assert det.counts["swallowed_entry"] == 1 and "swallowed" in wins[0].detail
+    data, ch = _steady_then_entry({})                          # a real entry alone: nothing counted
+    det = FlankDetector(0.1, 5e-4, channels=ch)
+    evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)] + det.finish()
+    assert det.counts["swallowed_entry"] == 0

@@ -48,6 +48,8 @@ REASONS = {
     "irregular_stamp": "t advanced by less than half the sample period",
     "short_history": "a backlash entry with fewer than samples_before_entry samples of history",
     "cut_off": "the data ended before the window was complete (finish(); the event carries the partial window)",
+    "swallowed_entry": "an entry inside a window whose own entry shows no traversal (flank detector): the window "
+                       "goes out, flagged; the entry inside it gets no window of its own",
 }
 
 

@@ -567,9 +567,22 @@ class FlankDetector(BacklashDetector):
                              contact_tolerance_rad=self.contact_tolerance_rad)
         self.last_width = res
         flags = 0
-        if any(dep + shift < r < e0 + self.window_length for r in cap.second_entry_rows):
+        inside = [r for r in cap.second_entry_rows if dep + shift < r < e0 + self.window_length]
+        swallowed = ""
+        if inside:
             flags |= FLAG_SECOND_ENTRY
             self.second_entries += 1
+            d = self._delta(win)
+            back = np.abs(d[e:e + self.contact_samples // 2] - cap.flank_rad) <= self.threshold_for(cap)
+            if not math.isfinite(res.width_m) or back.any():
+                # the window's own entry shows no traversal, or delta was back on the flank it left within
+                # contact_samples / 2 samples (a glitch longer than confirm_samples, not a gap: the shortest gap
+                # on our models is 11 samples, and it never ends on the flank it left); the entry inside it gets
+                # no window of its own: a loss, counted
+                self.counts["swallowed_entry"] += len(inside)
+                why = "delta back on its flank at once" if back.any() else f"no traversal: {res.how}"
+                swallowed = (f"; its own entry looks false ({why}) and it holds {len(inside)} later "
+                             f"entr{'y' if len(inside) == 1 else 'ies'} (swallowed, counted)")
         self.windows_captured += 1
         if math.isfinite(res.width_m):
             self.backlash_width_m = res.width_m
@@ -579,9 +592,13 @@ class FlankDetector(BacklashDetector):
                    flags=flags,
                    recontact_index=res.recontact_index if res.recontact_index >= 0 or rc is None else rc)
         ev = Event("window", detail=f"window {w.window_id}: entry at t = {w.entry_time_s:.6f} s, K2 estimate "
-                                    f"{res.width_m:.6g} m ({res.how})", window=w)
+                                    f"{res.width_m:.6g} m ({res.how}){swallowed}", window=w)
         self.last_event = ev
         return ev
+
+    def threshold_for(self, cap: _FlankCapture) -> float:
+        """The departure threshold of the contact a capture's entry left."""
+        return max(self.k_sigma * cap.flank_sigma_rad, self.min_departure_rad)
 
     def _refine(self, data: np.ndarray, dep: int):
         """(samples from the departure to the entry sample, re-contact row or None) from the dynamics
