@@ -179,3 +179,39 @@ def test_a_glitch_that_swallows_a_real_entry_is_counted():
     det = FlankDetector(0.1, 5e-4, channels=ch)
     evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)] + det.finish()
     assert det.counts["swallowed_entry"] == 0
+
+
+def _diagnose(system, w, **kw):
+    from jident_ros.config import load_method_config
+    from jident_ros.identify.diagnosis import detector_arguments, diagnose_window
+    return diagnose_window(w.as_dict(), w.entry_index, w.backlash_width_m, w.wheel_radius_m, w.sample_period_s,
+                           library=None, system=system, method=load_method_config(), p=2.0, image_method=False,
+                           **{**detector_arguments(w), **kw})
+
+
+def test_a_missing_k2_never_blocks_the_gap_j1(system):
+    """A flank window without a K2 estimate (a one-sided excursion: the motor left its flank and came back)
+    is diagnosed from its gap like any other: not refused 'backlash_width_m: ... got nan'."""
+    import dataclasses
+    rec = raw_recordings(system, (1.16,), (0.005,), steady_s=0.3, seed=4)[0]
+    w = [e.window for e in run_detector(flank_detector(system), rec) if e.kind == "window"][0]
+    ref = _diagnose(system, w)
+    assert ref.diagnosed and ref.inertia_kgm2 == pytest.approx(1.16, rel=0.02)
+    no_k2 = dataclasses.replace(w, backlash_width_m=math.nan, backlash_width_estimate_m=math.nan,
+                                backlash_width_se_m=math.nan)
+    d = _diagnose(system, no_k2)
+    assert d.diagnosed and d.inertia_kgm2 == ref.inertia_kgm2, d.message
+    assert "backlash_width_estimate_m" not in d.value_dict()          # no K2 read off raw angles instead
+
+
+def test_raw_angles_are_never_read_as_zone_centred(system):
+    """A flank window's K2 is its detector's (offset-free relative angle with N); the diagnosis does not read
+    r|alpha1 - alpha2| off raw encoder angles (issue 20: 'r|alpha1 - alpha2| = 25.15 m', 133 of 210 windows)."""
+    import dataclasses
+    rec = raw_recordings(system, (1.16,), (0.005,), steady_s=0.3, seed=4)[0]
+    w = [e.window for e in run_detector(flank_detector(system), rec) if e.kind == "window"][0]
+    for win in (w, dataclasses.replace(w, recontact_index=-1)):      # also when the gap fit cannot start
+        d = _diagnose(system, win)
+        vals = d.value_dict()
+        assert "recontact_width_m" not in vals and "width_consistent" not in vals
+        assert "alpha1 - alpha2|" not in d.message + "; ".join(d.problems)

@@ -222,7 +222,11 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
     gap, gap_reason, width, recontact, decision = None, "", None, None, None
     if gap_method not in NO_GAP:
         try:
-            gap = estimate_inertia(window_data, entry_index, backlash_width_m, wheel_radius_m, sample_period_s,
+            # a detector window (its own K2, or none) holds raw encoder angles: the gap interval comes from the
+            # detector's re-contact row or the dynamics, never from |alpha1 - alpha2| < K2/r
+            raw_angles = width_estimate is not None or k2_unknown
+            gap_window = {k: v for k, v in window_data.items() if k != "alpha2"} if raw_angles else window_data
+            gap = estimate_inertia(gap_window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s,
                                    method=None if gap_method == "auto" else gap_method,
                                    bearing_friction_nms_per_rad=system.motor.bearing_friction_nms_per_rad,
                                    recontact_index=recontact_index,
@@ -230,7 +234,11 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
         except NoGapError as exc:
             gap_reason = str(exc)
             problems.append(f"gap: {exc}")
-        if not k2_unknown and (gap is None or gap.interval == "angles"):   # K2 bounded the gap (or was blamed)
+        # K2 bounded the gap (or was blamed): checked against zone-centred angles only for a window whose K2 was
+        # given (paper detector); a flank window's K2 was measured by its detector on the offset-free relative
+        # angle alpha1 - N alpha2 at its re-contact row (issue 20: raw angles read here gave 'r|alpha1 - alpha2|
+        # = 25 m')
+        if not k2_unknown and width_estimate is None and (gap is None or gap.interval == "angles"):
             try:
                 recontact = recontact_check(window_data, entry_index, backlash_width_m, wheel_radius_m)
             except NoGapError as exc:
@@ -252,7 +260,7 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                      ("gap_classes_in_ci95_kgm2", list(decision.classes_in_ci)), ("gap_decision", decision.status)]
             if width_estimate is not None:
                 width = width_estimate
-            elif "alpha1" in window_data and "alpha2" in window_data:
+            elif "alpha1" in window_data and "alpha2" in window_data and not k2_unknown:
                 try:
                     width = estimate_backlash_width(window_data, gap.gap_end, wheel_radius_m, sample_period_s,
                                                     gap.inertia_kgm2)
@@ -267,7 +275,8 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
     # 2. the image method, and whether its answer is trusted
     idn, image_cls, in_domain, domain_reason = None, None, False, ""
     if image_method and k2_unknown:
-        vals.append(("image_method", "not run: K2 unknown (no load encoder), no library width to compare with"))
+        vals.append(("image_method", "not run: K2 unknown (no load encoder, or no traversal in this window), no "
+                                     "library width to compare with"))
     elif image_method:
         if library is None:
             problems.append(library_error or "no pattern library")
@@ -431,8 +440,10 @@ def detector_arguments(window) -> dict:
            "width_estimate": est}
     if kind == "dynamics" and "a1" not in window.channels:
         out["entry_uncertainty_samples"] = ENTRY_UNCERTAINTY_WITHOUT_A1
-    if kind == "dynamics" and not math.isfinite(window.backlash_width_m):
-        out["backlash_width_unknown"] = True     # no load encoder: no flank-to-flank travel, no K2
+    if not math.isfinite(window.backlash_width_m):
+        # no load encoder (dynamics), or no traversal in this window (a one-sided excursion): no K2, and a
+        # missing K2 never blocks the gap's J1 (issue 20)
+        out["backlash_width_unknown"] = True
     return out
 
 
