@@ -5,7 +5,7 @@ and the disk budget of a day of drive/signals at 2 kHz.
 
 * **Old**: ``jident_ros/recording.py`` at commit cd6a2ee (the hand-written CDR codec and BagWriter),
   checked out with ``git show`` into a temporary directory and imported from there.
-* **New**: :mod:`jident_ros.bag.messages` (rosbags' typestore) and :class:`jident_ros.bag.recording.BagWriter`.
+* **New**: :mod:`jident_ros.bag.messages` (rosbags' typestore) and :class:`jident_ros.bag.writer.BagWriter`.
 * Per round (interleaved old/new, ``--rounds`` rounds, medians reported): serialise and deserialise a
   1000 x 9 ``std_msgs/Float64MultiArray`` (best of 200 calls, per call); write ``--batches`` drive/signals
   batches (50 samples x 9 channels, from an already decoded message as the node's dict path does, and as
@@ -13,7 +13,7 @@ and the disk budget of a day of drive/signals at 2 kHz.
   alone (close writes the summary and metadata.yaml once per file; the new one also frees its reserve).
 * **Disk budget**: ``--budget-s`` drive seconds of a simulated drive (the simulator's cases between
   steady-state gaps, the node's batch of 50 samples, the default 8 channels + t) written by the
-  :class:`~jident_ros.bag.recorder.Recorder` with its defaults, a chunk every 0.5 s of drive time (what
+  :class:`~jident_ros.bag.rotating_recorder.Recorder` with its defaults, a chunk every 0.5 s of drive time (what
   flush_age_s gives at real time); bytes per sample and per day at 2 kHz.  Also for white-noise samples
   (incompressible: the upper bound for a real drive's noisy signals).
 """
@@ -35,8 +35,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from jident_ros.bag import messages as M  # noqa: E402
-from jident_ros.bag.recorder import Recorder  # noqa: E402
-from jident_ros.bag.recording import BagWriter  # noqa: E402
+from jident_ros.bag.rotating_recorder import Recorder  # noqa: E402
+from jident_ros.bag.writer import BagWriter  # noqa: E402
 
 SIGNALS = "std_msgs/msg/Float64MultiArray"
 CHANNELS = "t,alpha1,alpha2,omega2,a1,m_el,omega1,a2,v2"

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 from test_offline import TRUE_J1, configs, write_recording  # noqa: F401  (fixture)
 
-from jident_ros.bag import recording as R
+from jident_ros.bag.reader import read_bag
+from jident_ros.bag.writer import BagWriter
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -59,15 +60,15 @@ def kill_copy(src: Path, dst_dir: Path) -> Path:
 
 def small_chunks_recording(path: Path, configs):  # noqa: F811
     """write_recording with a chunk every 20 batches (as flush_age_s gives at real time)."""
-    real = R.BagWriter.__init__
+    real = BagWriter.__init__
 
     def init(self, *a, **k):
         real(self, *a, **{**k, "chunk_size": 64 * 1024})
-    R.BagWriter.__init__ = init
+    BagWriter.__init__ = init
     try:
         return write_recording(path, configs[0])
     finally:
-        R.BagWriter.__init__ = real
+        BagWriter.__init__ = real
 
 
 def test_diagnose_and_salvage_of_a_bit_flipped_chunk(configs, tmp_path):  # noqa: F811
@@ -82,7 +83,7 @@ def test_diagnose_and_salvage_of_a_bit_flipped_chunk(configs, tmp_path):  # noqa
     assert r.returncode == 0 and r.stderr == "" and "Traceback" not in r.stdout, r
     (line,) = r.stdout.strip().splitlines()
     assert str(bad) in line and "damaged record at offset" in line, line
-    assert 0 < sum(1 for _ in R.read_bag(tmp_path / "out")) < sum(1 for _ in R.read_bag(run))
+    assert 0 < sum(1 for _ in read_bag(tmp_path / "out")) < sum(1 for _ in read_bag(run))
 
 
 def test_diagnose_reads_a_killed_bag_by_salvaging_it(configs, run, tmp_path):  # noqa: F811
@@ -97,8 +98,8 @@ def test_diagnose_accepts_a_split_bag(configs, run, tmp_path):  # noqa: F811
     from jident_ros.cli.offline import diagnose_recording
     whole = diagnose_recording(run, image_method=False)
     split = tmp_path / "split"
-    with R.BagWriter(split, chunk_size=64 * 1024) as w:
-        msgs = list(R.read_bag(run, raw=True))
+    with BagWriter(split, chunk_size=64 * 1024) as w:
+        msgs = list(read_bag(run, raw=True))
         for topic in dict.fromkeys(m.topic for m in msgs):
             w.add_topic(topic, next(m.msg_type for m in msgs if m.topic == topic))
         for i, m in enumerate(msgs):
@@ -115,16 +116,16 @@ def test_diagnose_orders_by_the_t_column_not_by_receive_time(configs, run, tmp_p
     The windows are those of the drive's own time line."""
     from jident_ros.cli.offline import diagnose_recording
     whole = diagnose_recording(run, image_method=False)
-    msgs = list(R.read_bag(run, raw=True))
+    msgs = list(read_bag(run, raw=True))
     rng = np.random.default_rng(3)
     jumps = rng.integers(0, 2, len(msgs)) * 10**12   # half the messages stamped 1000 s later
     scrambled = tmp_path / "scrambled"
-    with R.BagWriter(scrambled) as w:
+    with BagWriter(scrambled) as w:
         for topic in dict.fromkeys(m.topic for m in msgs):
             w.add_topic(topic, next(m.msg_type for m in msgs if m.topic == topic))
         for m, j in zip(msgs, jumps):
             w.write(m.topic, m.message, m.log_time_ns + int(j))
-    order = [m.topic for m in R.read_bag(scrambled, raw=True)]
+    order = [m.topic for m in read_bag(scrambled, raw=True)]
     assert order != [m.topic for m in msgs]
     got = diagnose_recording(scrambled, image_method=False)
     assert got.estimates == whole.estimates and len(got.estimates) == len(TRUE_J1)
@@ -133,10 +134,10 @@ def test_diagnose_orders_by_the_t_column_not_by_receive_time(configs, run, tmp_p
 def test_diagnose_drops_a_malformed_first_batch_and_goes_on(configs, run, tmp_path):  # noqa: F811
     from jident_ros.cli.offline import diagnose_recording
     whole = diagnose_recording(run, image_method=False)
-    msgs = list(R.read_bag(run, raw=True))
+    msgs = list(read_bag(run, raw=True))
     first = next(i for i, m in enumerate(msgs) if m.topic.endswith("drive/signals"))
     bad = tmp_path / "badfirst"
-    with R.BagWriter(bad) as w:
+    with BagWriter(bad) as w:
         for topic in dict.fromkeys(m.topic for m in msgs):
             w.add_topic(topic, next(m.msg_type for m in msgs if m.topic == topic))
         for i, m in enumerate(msgs):

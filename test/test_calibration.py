@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jident_ros.bag.recording import BagWriter
+from jident_ros.bag.writer import BagWriter
 from jident_ros.cli.main import main
 from jident_ros.config import load_method_config
 from jident_ros.method import normalise as nz

@@ -14,7 +14,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 @pytest.mark.ros
 def test_demo_runs_end_to_end(ros_env, tmp_path):
-    pytest.importorskip("jident_ros.bag.recording")
+    pytest.importorskip("jident_ros.bag.reader")
     env = dict(ros_env, JIDENT_CACHE_DIR=str(tmp_path / "cache"))
     out = tmp_path / "demo"
     cmd = [sys.executable, "-m", "jident_ros.cli", "demo", "--out", str(out),

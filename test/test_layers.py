@@ -18,19 +18,22 @@ PKG = Path(__file__).resolve().parents[1] / "jident_ros"
 OPTIONAL = {"rclpy", "rcl_interfaces", "std_msgs", "sensor_msgs", "diagnostic_msgs", "rosgraph_msgs",
             "builtin_interfaces", "lifecycle_msgs", "diagnostic_updater", "launch", "launch_ros",
             "ament_index_python", "matplotlib", "tqdm",
-            "zstandard", "lz4"}  # the last two: compression codecs of the optional mcap extra
+            "zstandard", "lz4",  # compression codecs of the optional mcap extra
+            "motulator"}  # the vector drive's simulator (optional extra 'zoo')
 #: Of those, the ROS client library and messages: never imported below nodes and cli.
 ROS = OPTIONAL - {"ament_index_python", "matplotlib", "tqdm",
-            "zstandard", "lz4"}  # the last two: compression codecs of the optional mcap extra
+            "zstandard", "lz4", "motulator"}  # the last two: compression codecs of the optional mcap extra
 #: Layers (first package part below jident_ros). A module may import its own layer and those listed.
 ALLOWED = {
     "sim": set(),
     "stream": {"sim"},
     "method": {"sim", "stream", "bag", "config", "resources"},
     "identify": {"sim", "stream", "method", "config", "resources"},
-    "evaluation": {"sim", "stream", "method", "identify", "config", "resources", "second_drive"},
+    "evaluation": {"sim", "stream", "method", "identify", "config", "resources", "second_drive", "vector_drive",
+                   "cli"},   # cli: evaluation/zoo.py diagnoses through jident diagnose's own function
     "bag": {"sim", "stream"},
     "second_drive": set(),
+    "vector_drive": {"second_drive"},   # its writers
     "nodes": {"sim", "stream", "method", "identify", "bag", "config", "resources", "parameters"},
     "cli": {"sim", "stream", "method", "identify", "evaluation", "bag", "nodes", "config", "resources",
             "parameters", "second_drive"},

@@ -68,7 +68,7 @@ def _check_prefix(batches, reference, ahead_max: int | None = 5 * 50):
 def test_sigterm_mid_run_finalises_the_recording(node_env, library, tmp_path):
     from rosbags.highlevel import AnyReader
 
-    from jident_ros.bag.recording import read_bag
+    from jident_ros.bag.reader import read_bag
     bag, rc, received, log = _run_until_mid_stream(node_env, library, tmp_path, "sigterm", signal.SIGTERM)
     assert rc == 0, log
     assert (bag / "metadata.yaml").is_file(), log
@@ -92,7 +92,8 @@ def test_sigterm_mid_run_finalises_the_recording(node_env, library, tmp_path):
 
 @pytest.mark.ros
 def test_sigkill_mid_run_then_salvage_recovers_the_complete_chunks(node_env, library, tmp_path):
-    from jident_ros.bag.recording import RecordingError, read_bag
+    from jident_ros.bag.errors import RecordingError
+    from jident_ros.bag.reader import read_bag
     bag, rc, received, log = _run_until_mid_stream(node_env, library, tmp_path, "sigkill", signal.SIGKILL)
     assert rc == -signal.SIGKILL
     mcap = next(bag.glob("*.mcap"))
@@ -125,7 +126,7 @@ def _stop_many(node_env, library, tmp_path, n_stops: int, concurrency: int, seed
     from std_msgs.msg import Float64MultiArray
     from test_nodes import _good_stream
 
-    from jident_ros.bag.recording import read_bag
+    from jident_ros.bag.reader import read_bag
     from jident_ros.nodes.ros_io import multiarray_from_array, qos_latched, qos_signals, window_to_msg
     from jident_ros.stream.detector import BacklashDetector
     from jident_ros.stream.layout import DEFAULT_CHANNELS

@@ -309,7 +309,7 @@ def test_pipeline_diagnostics(pipeline):
 
 @pytest.mark.ros
 def test_pipeline_recording_holds_every_message(pipeline):
-    recording = pytest.importorskip("jident_ros.bag.recording")
+    recording = pytest.importorskip("jident_ros.bag.reader")
     counts = {}
     for m in recording.read_bag(pipeline["bag"]):
         counts[m.topic] = counts.get(m.topic, 0) + 1
@@ -323,7 +323,7 @@ def test_pipeline_recording_holds_every_message(pipeline):
 
 @pytest.mark.ros
 def test_replay_gives_the_same_estimates(pipeline, node_env, library, ros, procs, tmp_path):
-    pytest.importorskip("jident_ros.bag.recording")
+    pytest.importorskip("jident_ros.bag.reader")
     from std_msgs.msg import Float64
 
     from jident_ros.nodes.ros_io import qos_latched
@@ -346,7 +346,7 @@ def test_replay_gives_the_same_estimates(pipeline, node_env, library, ros, procs
 def test_offline_diagnosis_gives_the_same_estimates(pipeline, library):
     """`jident diagnose` on the pipeline's recording: the windowing node's detector and the diagnostic
     node's diagnose_window, without ROS -> the live estimates exactly (live == replay == offline)."""
-    pytest.importorskip("jident_ros.bag.recording")
+    pytest.importorskip("jident_ros.bag.reader")
     from jident_ros.cli.offline import diagnose_recording
     from jident_ros.nodes.ros_io import status_level
     result = diagnose_recording(pipeline["bag"], library_path=library)

@@ -56,7 +56,7 @@ def windows(configs):
 def write_recording(bag_dir: Path, system, inertias=TRUE_J1, eta=0.0375, namespace="/t", batch=50, gap=400,
                     start_time_s=1.0):
     """Simulate the cases and write them as the diagnostic node records the simulator's topics."""
-    from jident_ros.bag.recording import BagWriter
+    from jident_ros.bag.writer import BagWriter
     from jident_ros.cli.offline import multiarray_message
     from jident_ros.sim import Case, simulate_grid
     from jident_ros.stream.detector import embed_windows
@@ -323,7 +323,7 @@ def _one_line_error(capsys, argv) -> str:
 
 
 def test_recording_without_signals_is_one_line_error(tmp_path, capsys):
-    from jident_ros.bag.recording import BagWriter
+    from jident_ros.bag.writer import BagWriter
     with BagWriter(tmp_path / "nosig") as bag:
         bag.add_topic("/t/drive/true_inertia", "std_msgs/msg/Float64")
         bag.write("/t/drive/true_inertia", {"data": 1.16}, 1_000_000_000)

@@ -1,4 +1,4 @@
-"""The recorder (jident_ros.bag.recorder): rosbag2-named bags under a root, split, retention, failures.
+"""The recorder (jident_ros.bag.rotating_recorder): rosbag2-named bags under a root, split, retention, failures.
 
 Issue 11 part 4 (recording by default: split by size and duration, retention) and issue 15 items 1, 2, 5
 (close idempotent and signal-safe, an unfinalised bag always recoverable, wall-clock stamps, unusable
@@ -20,8 +20,11 @@ import numpy as np
 import pytest
 import yaml
 
-from jident_ros.bag import recording as R
-from jident_ros.bag.recorder import Recorder, RecorderError, bag_name, default_record_root
+from jident_ros.bag.errors import RecordingError
+from jident_ros.bag.reader import is_finalised, read_bag, read_metadata
+from jident_ros.bag.rotating_recorder import Recorder, RecorderError, bag_name, default_record_root
+from jident_ros.bag.writer import BagWriter
+from jident_ros.cli.salvage import salvage_main
 
 REPO = Path(__file__).resolve().parents[1]
 SIGNALS = "std_msgs/msg/Float64MultiArray"
@@ -114,14 +117,14 @@ def test_split_by_size_keeps_one_bag_with_several_files(tmp_path):
     files = sorted(bag.glob("*.mcap"), key=lambda p: int(p.stem.rsplit("_", 1)[1]))
     assert len(files) >= 3 and rec.status()["splits"] == len(files) - 1
     assert [p.name for p in files] == [f"{bag.name}_{k}.mcap" for k in range(len(files))]
-    info = R.read_metadata(bag)
+    info = read_metadata(bag)
     assert info["relative_file_paths"] == [p.name for p in files]
     assert [f["path"] for f in info["files"]] == [p.name for p in files]
     assert sum(f["message_count"] for f in info["files"]) == info["message_count"] == 40
     for p in files[:-1]:   # a split happens at a chunk boundary once the file holds the limit
         assert 20_000 <= p.stat().st_size < 20_000 + 2 * 8_000 + 4_000
     assert rosbags_count(bag) == 40
-    t = [m.message.data[0] for m in R.read_bag(bag)]
+    t = [m.message.data[0] for m in read_bag(bag)]
     assert t == [batch(i)["data"][0] for i in range(40)]
 
 
@@ -133,12 +136,12 @@ def test_split_by_duration_also_without_messages(tmp_path):
     rec.write("/drive/signals", SIGNALS, batch(1))
     rec.close()
     assert len(list(rec.bag_dir.glob("*.mcap"))) == 2
-    assert [f["message_count"] for f in R.read_metadata(rec.bag_dir)["files"]] == [1, 1]
+    assert [f["message_count"] for f in read_metadata(rec.bag_dir)["files"]] == [1, 1]
     assert rosbags_count(rec.bag_dir) == 2
 
 
 def _old_bag(root: Path, name: str, size: int, age_s: float) -> Path:
-    with R.BagWriter(root / name, compression=None) as w:
+    with BagWriter(root / name, compression=None) as w:
         w.add_topic("/x", "std_msgs/msg/UInt8MultiArray")
         w.write("/x", {"data": np.zeros(size, dtype=np.uint8)}, 1)
     t = time.time() - age_s
@@ -152,14 +155,14 @@ def test_retention_deletes_the_oldest_complete_bags_never_the_open_one(tmp_path)
     crashed = tmp_path / "rosbag2_2019_01_01-00_00_00"    # no metadata.yaml: left for salvage
     crashed.mkdir()
     (crashed / "crashed_0.mcap").write_bytes(b"\x89MCAP0\r\n" + bytes(100))
-    other = R.BagWriter(tmp_path / "rosbag2_2020_01_01-00_00_01")   # another recorder's open bag
+    other = BagWriter(tmp_path / "rosbag2_2020_01_01-00_00_01")   # another recorder's open bag
     other.add_topic("/x", "std_msgs/msg/UInt8MultiArray")
     other.flush_age_s = None
     t = time.time() - 10 * 3600
     os.utime(tmp_path / "rosbag2_2020_01_01-00_00_01", (t, t))
     (other.bag_dir / "metadata.yaml").write_text("written at a split")
     logs = []
-    from jident_ros.bag.recorder import _bag_size
+    from jident_ros.bag.rotating_recorder import _bag_size
     existing = sum(_bag_size(p) for p in tmp_path.iterdir())
     # the new recorder's bag: its 64 KiB reserve (room to finalise on a full disk) and a few records;
     # a limit that the two oldest complete bags must go for, at start already
@@ -220,9 +223,9 @@ def test_enospc_finalises_what_was_written_and_counts_the_drops(tmp_path, monkey
     rec.close()   # idempotent
     assert rec.status()["state"] == "error"
     # the part already written is a finalised bag: summary, metadata.yaml, read by rosbags
-    info = R.read_metadata(rec.bag_dir)
+    info = read_metadata(rec.bag_dir)
     assert info["message_count"] == st["messages_written"] >= 10
-    assert R.is_finalised(next(rec.bag_dir.glob("*.mcap")))
+    assert is_finalised(next(rec.bag_dir.glob("*.mcap")))
     assert rosbags_count(rec.bag_dir) == st["messages_written"]
 
 
@@ -240,9 +243,9 @@ def test_disk_full_on_a_real_tiny_filesystem(tmp_path):
         assert "disk full" in st["error"] and st["messages_dropped"] > 0
         assert st["messages_written"] + st["messages_dropped"] == 200 and sum(results) >= st["messages_written"]
         bag = rec.bag_dir
-        assert R.is_finalised(next(bag.glob("*.mcap"))), "the written part was not finalised"
+        assert is_finalised(next(bag.glob("*.mcap"))), "the written part was not finalised"
         assert rosbags_count(bag) == st["messages_written"] > 0
-        assert R.read_metadata(bag)["message_count"] == st["messages_written"]
+        assert read_metadata(bag)["message_count"] == st["messages_written"]
     finally:
         subprocess.run(["umount", str(mnt)], capture_output=True)
 
@@ -267,7 +270,7 @@ def test_messages_are_stamped_with_the_wall_clock(tmp_path):
     rec.write("/drive/signals", SIGNALS, batch(1), t_ns=5)   # an explicit stamp is kept
     rec.close()
     after = time.time_ns()
-    stamps = [m.log_time_ns for m in R.read_bag(rec.bag_dir)]
+    stamps = [m.log_time_ns for m in read_bag(rec.bag_dir)]
     assert stamps[0] == 5 and before <= stamps[1] <= after
 
 
@@ -276,8 +279,8 @@ CHILD = """
 import sys, time, signal
 sys.path.insert(0, {repo!r})
 import numpy as np
-from jident_ros.bag.recorder import Recorder
-from jident_ros.bag.recording import install_signal_handlers
+from jident_ros.bag.rotating_recorder import Recorder
+from jident_ros.bag.close_on_signal import install_signal_handlers
 rec = Recorder(sys.argv[1], flush_age_s=None)
 install_signal_handlers(rec)
 msg = {{"layout": {{"dim": [{{"label": "sample", "size": 2, "stride": 18}}, {{"label": "t", "size": 9, "stride": 9}}]}},
@@ -314,7 +317,7 @@ def test_signal_under_load_finalises_the_bag(tmp_path, sig, inherited):
     assert rc == -getattr(signal, sig)   # SIGINT: an uncaught KeyboardInterrupt ends Python by SIGINT
     assert sig != "SIGINT" or "KeyboardInterrupt" in proc.stderr.read()
     (bag,) = (tmp_path / "root").iterdir()
-    info = R.read_metadata(bag)
+    info = read_metadata(bag)
     assert info["message_count"] >= 50
     assert rosbags_count(bag) == info["message_count"]
 
@@ -323,13 +326,13 @@ def test_close_from_atexit_finalises(tmp_path):
     code = textwrap.dedent(f"""
         import sys
         sys.path.insert(0, {str(REPO)!r})
-        from jident_ros.bag.recorder import Recorder
+        from jident_ros.bag.rotating_recorder import Recorder
         rec = Recorder({str(tmp_path / 'root')!r}, flush_age_s=None)
         rec.write("/x", "std_msgs/msg/Float64", {{"data": 1.5}})
         """)   # no close: the interpreter's exit does it
     subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
     (bag,) = (tmp_path / "root").iterdir()
-    assert [m.message.data for m in R.read_bag(bag)] == [1.5]
+    assert [m.message.data for m in read_bag(bag)] == [1.5]
 
 
 def test_an_unfinalised_split_bag_is_read_by_salvaging_it(tmp_path):
@@ -339,7 +342,7 @@ def test_an_unfinalised_split_bag_is_read_by_salvaging_it(tmp_path):
     code = textwrap.dedent(f"""
         import sys, os, signal
         sys.path.insert(0, {str(REPO)!r})
-        from jident_ros.bag.recorder import Recorder
+        from jident_ros.bag.rotating_recorder import Recorder
         rec = Recorder({str(tmp_path / 'root')!r}, max_bag_size_bytes=1500, chunk_size=1000, flush_age_s=None)
         for i in range(40):
             rec.write("/x", "std_msgs/msg/Float64", {{"data": float(i)}})
@@ -351,15 +354,15 @@ def test_an_unfinalised_split_bag_is_read_by_salvaging_it(tmp_path):
     (bag,) = (tmp_path / "root").iterdir()
     files = sorted(bag.glob("*.mcap"))
     assert len(files) >= 2
-    listed = R.read_metadata(bag)["relative_file_paths"]
+    listed = read_metadata(bag)["relative_file_paths"]
     assert len(listed) == len(files) - 1        # the open file was not listed yet
-    with pytest.raises(R.RecordingError, match="jident salvage"):
-        list(R.read_bag(bag))
+    with pytest.raises(RecordingError, match="jident salvage"):
+        list(read_bag(bag))
     notes = []
-    values = [m.message.data for m in R.read_bag(bag, on_salvage=notes.append)]
+    values = [m.message.data for m in read_bag(bag, on_salvage=notes.append)]
     assert values == [float(i) for i in range(40)]
     assert len(notes) == 1 and "not finalised" in notes[0] and "salvaging" in notes[0]
-    assert R.salvage_main([str(bag), str(tmp_path / "copy")]) == 0
+    assert salvage_main([str(bag), str(tmp_path / "copy")]) == 0
     assert rosbags_count(tmp_path / "copy") == 40
     assert len(yaml.safe_load((tmp_path / "copy" / "metadata.yaml").read_text())[
         "rosbag2_bagfile_information"]["relative_file_paths"]) == len(files)
@@ -370,7 +373,7 @@ def test_memory_of_a_huge_message_is_given_back(tmp_path):
     code = textwrap.dedent(f"""
         import sys, numpy as np
         sys.path.insert(0, {str(REPO)!r})
-        from jident_ros.bag.recorder import Recorder
+        from jident_ros.bag.rotating_recorder import Recorder
         def rss():
             return int(open("/proc/self/statm").read().split()[1]) * 4096
         rec = Recorder({str(tmp_path / 'root')!r}, compression=None)

@@ -1,4 +1,4 @@
-"""MCAP recording (jident_ros.bag.recording): rosbag2 compatibility, crash behaviour, salvage.
+"""MCAP recording (jident_ros.bag.writer, .reader, .salvage): rosbag2 compatibility, crash behaviour, salvage.
 
 Independent checks: the ``rosbags`` library (its own MCAP reader, .msg parser, CDR
 codec and RIHS01 hash; AnyReader refuses a bag whose type hashes do not match the
@@ -20,8 +20,15 @@ import numpy as np
 import pytest
 import yaml
 
-from jident_ros.bag import recording as R
+from jident_ros.bag.close_on_signal import install_signal_handlers
+from jident_ros.bag.errors import RecordingError
 from jident_ros.bag.messages import _QOS_KEYS as QOS_KEYS
+from jident_ros.bag.messages import deserialize, message_definition, message_to_dict, qos_profiles, serialize, type_hash
+from jident_ros.bag.metadata_yaml import dump_yaml
+from jident_ros.bag.reader import read_bag, read_metadata
+from jident_ros.bag.salvage import salvage
+from jident_ros.bag.writer import BagWriter
+from jident_ros.cli.salvage import salvage_main
 
 REPO = Path(__file__).resolve().parents[1]
 CHANNELS = "t,alpha1,alpha2,omega2,a1,m_el,omega1,a2,v2"
@@ -70,7 +77,8 @@ def run_child(tmp_path: Path, body: str, ignored: int | None = None) -> subproce
         import sys, time
         sys.path.insert(0, {str(REPO)!r})
         import numpy as np
-        from jident_ros.bag.recording import BagWriter, install_signal_handlers
+        from jident_ros.bag.writer import BagWriter
+        from jident_ros.bag.close_on_signal import install_signal_handlers
         def data(i):
             return {{"layout": {{"dim": [{{"label": "sample", "size": 2, "stride": 18}},
                                        {{"label": {CHANNELS!r}, "size": 9, "stride": 9}}]}},
@@ -100,7 +108,8 @@ RECORDED_TYPES = ("std_msgs/msg/Float64", "std_msgs/msg/Float64MultiArray", "ros
 
 
 def test_module_does_not_import_rclpy():
-    code = ("import sys, jident_ros.bag.recording as r, jident_ros.bag.recorder; "
+    code = ("import sys, jident_ros.bag.writer, jident_ros.bag.reader, jident_ros.bag.salvage, "
+            "jident_ros.bag.rotating_recorder, jident_ros.bag.messages as r; "
             "r.serialize('std_msgs/msg/Float64', {'data': 1.0}); "
             "print('rclpy' in sys.modules, 'mcap_ros2' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True,
@@ -124,8 +133,8 @@ def test_type_hashes_are_the_installed_ones():
     for name in RECORDED_TYPES:
         info = json.loads((share / f"{name}.json").read_text())
         want = {h["type_name"]: h["hash_string"] for h in info["type_hashes"]}[name]
-        assert R.type_hash(name) == want, name
-    assert R.type_hash("std_msgs/Float64") == R.type_hash("std_msgs/msg/Float64")
+        assert type_hash(name) == want, name
+    assert type_hash("std_msgs/Float64") == type_hash("std_msgs/msg/Float64")
 
 
 def test_written_definitions_give_the_same_hash_to_an_independent_parser():
@@ -134,9 +143,9 @@ def test_written_definitions_give_the_same_hash_to_an_independent_parser():
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
     for name in RECORDED_TYPES:
         store = get_typestore(Stores.EMPTY)
-        store.register(get_types_from_msg(R.message_definition(name), name))
-        assert store.hash_rihs01(name) == R.type_hash(name), name
-    text = R.message_definition("diagnostic_msgs/msg/DiagnosticArray")
+        store.register(get_types_from_msg(message_definition(name), name))
+        assert store.hash_rihs01(name) == type_hash(name), name
+    text = message_definition("diagnostic_msgs/msg/DiagnosticArray")
     assert "MSG: diagnostic_msgs/KeyValue" in text and "MSG: builtin_interfaces/Time" in text
 
 
@@ -154,11 +163,11 @@ def test_cdr_bytes_equal_mcap_ros2_and_round_trip():
     hand-written codec matched too: recordings stay byte-compatible."""
     from mcap_ros2._dynamic import serialize_dynamic
     for name, msg in _samples():
-        ours = R.serialize(name, msg)
-        plain = R.message_to_dict(R.deserialize(name, ours))
-        assert serialize_dynamic(name, R.message_definition(name))[name](plain) == ours, name
-        assert R.serialize(name, R.deserialize(name, ours)) == ours
-        assert R.serialize(name, plain) == ours
+        ours = serialize(name, msg)
+        plain = message_to_dict(deserialize(name, ours))
+        assert serialize_dynamic(name, message_definition(name))[name](plain) == ours, name
+        assert serialize(name, deserialize(name, ours)) == ours
+        assert serialize(name, plain) == ours
 
 
 @pytest.mark.ros
@@ -171,12 +180,12 @@ def test_cdr_interoperates_with_rclpy():
     classes = {SIGNALS: Float64MultiArray, "std_msgs/msg/Float64": Float64,
                "rosgraph_msgs/msg/Clock": Clock, "diagnostic_msgs/msg/DiagnosticArray": DiagnosticArray}
     for name, msg in _samples():
-        ros_msg = deserialize_message(R.serialize(name, msg), classes[name])
-        ours_from_rclpy = R.deserialize(name, serialize_message(ros_msg))   # also an empty float64[]
-        assert R.message_to_dict(ours_from_rclpy) == R.message_to_dict(R.deserialize(
-            name, R.serialize(name, msg))), name
+        ros_msg = deserialize_message(serialize(name, msg), classes[name])
+        ours_from_rclpy = deserialize(name, serialize_message(ros_msg))   # also an empty float64[]
+        assert message_to_dict(ours_from_rclpy) == message_to_dict(deserialize(
+            name, serialize(name, msg))), name
         # an rclpy message object is accepted by the writer's encoder as well
-        assert R.serialize(name, ros_msg) == R.serialize(name, ours_from_rclpy), name
+        assert serialize(name, ros_msg) == serialize(name, ours_from_rclpy), name
         if name == "diagnostic_msgs/msg/DiagnosticArray" and msg["status"][0]["level"]:
             assert ros_msg.status[0].level == bytes([msg["status"][0]["level"]])
 
@@ -189,7 +198,7 @@ def test_qos_from_an_rclpy_profile():
     from jident_ros.bag.messages import qos_dicts
     q = QoSProfile(depth=3, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                    reliability=ReliabilityPolicy.BEST_EFFORT, deadline=Duration(seconds=1.5))
-    (p,) = qos_dicts(R.qos_profiles(q))
+    (p,) = qos_dicts(qos_profiles(q))
     assert (p["history"], p["depth"], p["reliability"], p["durability"], p["deadline"],
             p["liveliness"]) == ("keep_last", 3, "best_effort", "transient_local",
                                  {"sec": 1, "nsec": 500_000_000}, "system_default")
@@ -197,32 +206,32 @@ def test_qos_from_an_rclpy_profile():
 
 def test_encoder_rejects_bad_messages():
     with pytest.raises(ValueError, match="unknown field"):
-        R.serialize("std_msgs/msg/Float64", {"dat": 1.0})
+        serialize("std_msgs/msg/Float64", {"dat": 1.0})
     with pytest.raises(ValueError, match=r"status\[0\]\.values\[0\].*unknown field"):
-        R.serialize("diagnostic_msgs/msg/DiagnosticArray",
+        serialize("diagnostic_msgs/msg/DiagnosticArray",
                     {"status": [{"values": [{"key": "a", "val": "b"}]}]})
     with pytest.raises(ValueError, match="Float64.data: expected a number"):
-        R.serialize("std_msgs/msg/Float64", {"data": "1.0"})
+        serialize("std_msgs/msg/Float64", {"data": "1.0"})
     with pytest.raises(ValueError, match=r"clock\.sec: 2147483648 is outside"):
-        R.serialize("rosgraph_msgs/msg/Clock", {"clock": {"sec": 2**31}})
+        serialize("rosgraph_msgs/msg/Clock", {"clock": {"sec": 2**31}})
     with pytest.raises(ValueError, match=r"dim\[0\]\.label: expected str"):
-        R.serialize(SIGNALS, {"layout": {"dim": [{"label": 3}]}})
+        serialize(SIGNALS, {"layout": {"dim": [{"label": 3}]}})
     with pytest.raises(ValueError, match="float values for uint8"):
-        R.serialize("std_msgs/msg/UInt8MultiArray", {"data": [1.5]})
-    clock = R.deserialize("rosgraph_msgs/msg/Clock", R.serialize("rosgraph_msgs/msg/Clock", {}))
+        serialize("std_msgs/msg/UInt8MultiArray", {"data": [1.5]})
+    clock = deserialize("rosgraph_msgs/msg/Clock", serialize("rosgraph_msgs/msg/Clock", {}))
     with pytest.raises(TypeError, match="Clock message where std_msgs/msg/Float64 is expected"):
-        R.serialize("std_msgs/msg/Float64", clock)
+        serialize("std_msgs/msg/Float64", clock)
     with pytest.raises(ValueError, match="no definition of my_msgs/msg/Thing"):
-        R.serialize("my_msgs/msg/Thing", {})
+        serialize("my_msgs/msg/Thing", {})
     with pytest.raises(ValueError, match="undecodable"):
-        R.deserialize(SIGNALS, R.serialize(SIGNALS, batch(1))[:-3])
+        deserialize(SIGNALS, serialize(SIGNALS, batch(1))[:-3])
 
 
 # ---------------------------------------------------------------- write / read
 def write_reference_bag(path: Path, *, compression="zstd", flush_every=7, n=30) -> dict:
     """All four types; returns what was written per topic as (log_time, message)."""
     written = {"/drive/signals": [], "/clock": [], "/inertia_estimate": [], "/diagnostics": []}
-    with R.BagWriter(path, chunk_size=64 * 1024, flush_age_s=None,
+    with BagWriter(path, chunk_size=64 * 1024, flush_age_s=None,
                      compression=compression) as bag:
         bag.add_topic("/drive/signals", SIGNALS)
         bag.add_topic("/clock", "rosgraph_msgs/msg/Clock", qos="best_effort")
@@ -274,7 +283,7 @@ def test_every_message_reads_back_with_ours_rosbags_and_mcap_ros2(tmp_path, comp
     written = write_reference_bag(bag, compression=compression)
     total = sum(len(v) for v in written.values())
 
-    ours = list(R.read_bag(bag))
+    ours = list(read_bag(bag))
     assert len(ours) == total
     assert [m.log_time_ns for m in ours] == sorted(m.log_time_ns for m in ours)
     conns, theirs = anyreader_messages(bag)
@@ -297,7 +306,7 @@ def test_every_message_reads_back_with_ours_rosbags_and_mcap_ros2(tmp_path, comp
             assert_same(topic, a.message, want)
             assert_same(topic, b, want)
             assert_same(topic, c.decoded_message, want)
-        assert conns[topic].digest == R.type_hash(conns[topic].msgtype)
+        assert conns[topic].digest == type_hash(conns[topic].msgtype)
     assert conns["/inertia_estimate"].ext.offered_qos_profiles[0].durability.name == "TRANSIENT_LOCAL"
     assert conns["/clock"].ext.offered_qos_profiles[0].reliability.name == "BEST_EFFORT"
     assert conns["/diagnostics"].ext.offered_qos_profiles[0].depth == 5
@@ -305,8 +314,8 @@ def test_every_message_reads_back_with_ours_rosbags_and_mcap_ros2(tmp_path, comp
     assert (default.history.name, default.depth, default.reliability.name,
             default.durability.name) == ("KEEP_LAST", 10, "RELIABLE", "VOLATILE")
 
-    raw = list(R.read_bag(bag / "run_0.mcap", topics="/inertia_estimate", raw=True))
-    assert [m.message for m in raw] == [R.serialize("std_msgs/msg/Float64", w)
+    raw = list(read_bag(bag / "run_0.mcap", topics="/inertia_estimate", raw=True))
+    assert [m.message for m in raw] == [serialize("std_msgs/msg/Float64", w)
                                         for _, w in written["/inertia_estimate"]]
 
 
@@ -330,12 +339,12 @@ def test_metadata_yaml_and_mcap_records_as_rosbag2_writes_them(tmp_path):
     for t in topics.values():
         md = t["topic_metadata"]
         assert md["serialization_format"] == "cdr"
-        assert md["type_description_hash"] == R.type_hash(md["type"])
+        assert md["type_description_hash"] == type_hash(md["type"])
         q = md["offered_qos_profiles"]
         assert isinstance(q, list) and len(q) == 1 and set(q[0]) == set(QOS_KEYS)
     assert topics["/inertia_estimate"]["topic_metadata"]["offered_qos_profiles"][0][
         "durability"] == "transient_local"
-    assert R.read_metadata(bag) == info
+    assert read_metadata(bag) == info
 
     from mcap.reader import make_reader
     with open(bag / "run_0.mcap", "rb") as f:
@@ -348,8 +357,8 @@ def test_metadata_yaml_and_mcap_records_as_rosbag2_writes_them(tmp_path):
         for ch in summary.channels.values():
             schema = summary.schemas[ch.schema_id]
             assert ch.message_encoding == "cdr" and schema.encoding == "ros2msg"
-            assert schema.data.decode() == R.message_definition(schema.name)
-            assert ch.metadata["topic_type_hash"] == R.type_hash(schema.name)
+            assert schema.data.decode() == message_definition(schema.name)
+            assert ch.metadata["topic_type_hash"] == type_hash(schema.name)
             assert yaml.safe_load(ch.metadata["offered_qos_profiles"]) == \
                 topics[ch.topic]["topic_metadata"]["offered_qos_profiles"]
         (meta,) = [m for m in reader.iter_metadata() if m.name == "rosbag2"]
@@ -361,15 +370,15 @@ def test_writer_rejects_misuse(tmp_path):
     (tmp_path / "full").mkdir()
     (tmp_path / "full" / "x").write_text("x")
     with pytest.raises(FileExistsError, match="full"):
-        R.BagWriter(tmp_path / "full")
+        BagWriter(tmp_path / "full")
     with pytest.raises(ValueError, match="compression"):
-        R.BagWriter(tmp_path / "c", compression="gzip")
-    bag = R.BagWriter(tmp_path / "ok")
+        BagWriter(tmp_path / "c", compression="gzip")
+    bag = BagWriter(tmp_path / "ok")
     bag.add_topic("/x", "std_msgs/Float64")
     bag.add_topic("/x", "std_msgs/msg/Float64")  # same again: fine
     with pytest.raises(ValueError, match="already added"):
         bag.add_topic("/x", SIGNALS)
-    with pytest.raises(R.RecordingError, match="add_topic"):
+    with pytest.raises(RecordingError, match="add_topic"):
         bag.write("/y", {"data": 1.0}, 1)
     with pytest.raises(TypeError, match="nanoseconds"):
         bag.write("/x", {"data": 1.0}, 1.5)
@@ -380,9 +389,9 @@ def test_writer_rejects_misuse(tmp_path):
     bag.write("/x", {"data": 2.0}, 5)
     bag.close()
     bag.close()  # idempotent
-    with pytest.raises(R.RecordingError, match="closed"):
+    with pytest.raises(RecordingError, match="closed"):
         bag.write("/x", {"data": 1.0}, 6)
-    assert [m.message.data for m in R.read_bag(tmp_path / "ok")] == [2.0]
+    assert [m.message.data for m in read_bag(tmp_path / "ok")] == [2.0]
 
 
 # ---------------------------------------------------------------- crash behaviour
@@ -390,12 +399,12 @@ def salvage_count(mcap: Path, out: Path) -> tuple[int, dict]:
     """Salvage a copy of a file that may still be open for writing."""
     copy = out.with_suffix(".mcap")
     copy.write_bytes(mcap.read_bytes())
-    report = R.salvage(copy, out)
+    report = salvage(copy, out)
     return report["messages_recovered"], report
 
 
 def test_flush_puts_complete_chunks_on_disk(tmp_path):
-    bag = R.BagWriter(tmp_path / "live", flush_age_s=0.2, chunk_size=1 << 20)
+    bag = BagWriter(tmp_path / "live", flush_age_s=0.2, chunk_size=1 << 20)
     bag.add_topic("/drive/signals", SIGNALS)
     for i in range(5):
         bag.write("/drive/signals", batch(i), i)
@@ -412,7 +421,7 @@ def test_flush_puts_complete_chunks_on_disk(tmp_path):
     n, report = salvage_count(bag.mcap_path, tmp_path / "s3")
     assert n == 8 and report["chunks_recovered"] == 3 and not report["data_section_complete"]
     bag.close()
-    values = [m.message.data[0] for m in R.read_bag(tmp_path / "s3")]
+    values = [m.message.data[0] for m in read_bag(tmp_path / "s3")]
     assert values == [i * 1000.0 for i in range(8)]
 
 
@@ -446,12 +455,12 @@ def test_signal_finalises_the_bag(tmp_path, signum, exit_code, inherited):
         proc.kill()
         raise AssertionError(f"signal {signum} ({inherited} before): the child did not stop") from None
     bag = tmp_path / "bag"
-    info = R.read_metadata(bag)
+    info = read_metadata(bag)
     assert info["message_count"] == 111
     conns, msgs = anyreader_messages(bag)
     assert [float(m.data[0]) for tp, _, m in msgs if tp == "/drive/signals"] == list(range(110))
     assert [m.data for tp, _, m in msgs if tp == "/inertia_estimate"] == [1.073]
-    assert len(list(R.read_bag(bag))) == 111
+    assert len(list(read_bag(bag))) == 111
 
 
 def test_sigkill_loses_only_the_open_chunk_and_salvage_recovers_the_rest(tmp_path):
@@ -470,22 +479,22 @@ def test_sigkill_loses_only_the_open_chunk_and_salvage_recovers_the_rest(tmp_pat
     proc.wait(timeout=20)
     mcap = tmp_path / "bag" / "bag_0.mcap"
     assert not (tmp_path / "bag" / "metadata.yaml").exists()
-    with pytest.raises(R.RecordingError, match="jident salvage"):
-        list(R.read_bag(mcap))
-    assert R.salvage_main([str(mcap), str(tmp_path / "rec")]) == 0
-    info = R.read_metadata(tmp_path / "rec")
+    with pytest.raises(RecordingError, match="jident salvage"):
+        list(read_bag(mcap))
+    assert salvage_main([str(mcap), str(tmp_path / "rec")]) == 0
+    info = read_metadata(tmp_path / "rec")
     assert info["message_count"] == 100
     conns, msgs = anyreader_messages(tmp_path / "rec")
     assert [float(m.data[0]) for _, _, m in msgs] == list(range(100))
-    assert conns["/drive/signals"].digest == R.type_hash(SIGNALS)
+    assert conns["/drive/signals"].digest == type_hash(SIGNALS)
 
 
 def test_signal_during_a_write_closes_after_that_write(tmp_path):
     calls = []
     previous = signal.signal(signal.SIGUSR1, lambda s, f: calls.append(s))
     try:
-        bag = R.BagWriter(tmp_path / "b")
-        handlers = R.install_signal_handlers(bag, signals=[signal.SIGUSR1])
+        bag = BagWriter(tmp_path / "b")
+        handlers = install_signal_handlers(bag, signals=[signal.SIGUSR1])
         bag.add_topic("/inertia_estimate", "std_msgs/msg/Float64")
         bag.write("/inertia_estimate", {"data": 1.0}, 1)
 
@@ -500,7 +509,7 @@ def test_signal_during_a_write_closes_after_that_write(tmp_path):
 
         bag.write("/inertia_estimate", Interrupting(), 2)
         assert bag.closed and calls == [signal.SIGUSR1]   # closed after, then chained
-        assert [m.message.data for m in R.read_bag(tmp_path / "b")] == [1.0, 2.0]
+        assert [m.message.data for m in read_bag(tmp_path / "b")] == [1.0, 2.0]
         signal.signal(signal.SIGUSR1, handlers[signal.SIGUSR1])
     finally:
         signal.signal(signal.SIGUSR1, previous)
@@ -516,7 +525,7 @@ def chunk_layout(mcap: Path):
 
 def write_in_chunks_of_ten(bag: Path, n: int, **writer_args) -> Path:
     """A finalised bag of ``n`` batches (batch i at log time 1000 + i), ten per chunk."""
-    with R.BagWriter(bag, flush_age_s=None, **writer_args) as w:
+    with BagWriter(bag, flush_age_s=None, **writer_args) as w:
         w.add_topic("/drive/signals", SIGNALS)
         for i in range(n):
             w.write("/drive/signals", batch(i), 1000 + i)
@@ -544,7 +553,7 @@ def test_salvage_of_a_file_truncated_anywhere_recovers_the_complete_chunks(tmp_p
     for k, (cut, expected) in enumerate(sorted(cases.items())):
         src = tmp_path / f"cut{k}.mcap"
         src.write_bytes(data[:cut])
-        report = R.salvage(src, tmp_path / f"out{k}")
+        report = salvage(src, tmp_path / f"out{k}")
         assert report["messages_recovered"] == expected, (cut, report)
         assert report["chunks_recovered"] == expected // 10
         if expected == 40:
@@ -552,7 +561,7 @@ def test_salvage_of_a_file_truncated_anywhere_recovers_the_complete_chunks(tmp_p
             assert report["bytes_recovered"] == c4.chunk_start_offset
             assert report["stop_reason"] == (
                 f"file ends inside the record at offset {c4.chunk_start_offset}")
-        values = [m.message.data[0] for m in R.read_bag(tmp_path / f"out{k}")]
+        values = [m.message.data[0] for m in read_bag(tmp_path / f"out{k}")]
         assert values == [i * 1000.0 for i in range(expected)]
         assert len(anyreader_messages(tmp_path / f"out{k}")[1]) == expected
 
@@ -565,7 +574,7 @@ def test_salvage_stops_at_a_damaged_chunk(tmp_path):
     data[c3.chunk_start_offset + c3.chunk_length - 100] ^= 0xFF   # a float of one message
     damaged = tmp_path / "damaged.mcap"
     damaged.write_bytes(bytes(data))
-    report = R.salvage(damaged, tmp_path / "out")
+    report = salvage(damaged, tmp_path / "out")
     assert report["messages_recovered"] == 30 and "CRC" in report["stop_reason"]
     assert report["bytes_recovered"] == c3.chunk_start_offset
 
@@ -580,23 +589,23 @@ def test_salvage_errors_are_one_line_naming_the_file(tmp_path, capsys):
     for src, why in ((garbage, "not an MCAP file"), (empty, "not an MCAP file"),
                      (tmp_path / "missing.mcap", "no such file"),
                      (nodir, "no metadata.yaml and no .mcap file")):
-        assert R.salvage_main([str(src), str(tmp_path / "out")]) == 2
+        assert salvage_main([str(src), str(tmp_path / "out")]) == 2
         out, err = capsys.readouterr()
         assert out == "" and err.count("\n") == 1
         assert err.startswith("jident salvage: error: ") and str(src) in err and why in err
         assert not (tmp_path / "out").exists()
     bag = tmp_path / "ok"
-    with R.BagWriter(bag) as w:
+    with BagWriter(bag) as w:
         w.add_topic("/clock", "rosgraph_msgs/msg/Clock")
         w.write("/clock", {"clock": {"sec": 1}}, 1)
-    assert R.salvage_main([str(bag), str(nodir.parent / "ok")]) == 2      # output exists
+    assert salvage_main([str(bag), str(nodir.parent / "ok")]) == 2      # output exists
     assert "already exists" in capsys.readouterr().err
-    assert R.salvage_main([str(bag), str(tmp_path / "copy")]) == 0          # complete file
+    assert salvage_main([str(bag), str(tmp_path / "copy")]) == 0          # complete file
     line = capsys.readouterr().out
     assert line.count("\n") == 1 and "1 messages in 1 complete chunks" in line
     assert "0 of" in line and "complete data section" in line
-    with pytest.raises(R.RecordingError, match="not an MCAP file"):
-        list(R.read_bag(garbage))
+    with pytest.raises(RecordingError, match="not an MCAP file"):
+        list(read_bag(garbage))
 
 
 @pytest.mark.parametrize("split", [False, True])
@@ -604,7 +613,7 @@ def test_metadata_yaml_is_the_dump_of_the_bag_metadata(tmp_path, split):
     """metadata.yaml reuses the YAML of the last file's rosbag2 record when the content is the same (one file);
     either way its text is what dumping the bag's metadata under rosbag2_bagfile_information gives, also with
     multi-line and quoted custom data."""
-    w = R.BagWriter(tmp_path / "b", custom_data={"note": "two\nlines", "empty": "", "k": "a: b"})
+    w = BagWriter(tmp_path / "b", custom_data={"note": "two\nlines", "empty": "", "k": "a: b"})
     w.add_topic("/drive/signals", SIGNALS)
     w.write("/drive/signals", batch(0), 10**18)
     if split:
@@ -612,6 +621,6 @@ def test_metadata_yaml_is_the_dump_of_the_bag_metadata(tmp_path, split):
         w.write("/drive/signals", batch(1), 10**18 + 25_000_000)
     w.close()
     text = (tmp_path / "b" / "metadata.yaml").read_text(encoding="utf-8")
-    assert text == R._dump_yaml({"rosbag2_bagfile_information": w.bag_metadata()})
+    assert text == dump_yaml({"rosbag2_bagfile_information": w.bag_metadata()})
     info = yaml.safe_load(text)["rosbag2_bagfile_information"]
     assert info["custom_data"]["note"] == "two\nlines" and len(info["relative_file_paths"]) == (2 if split else 1)

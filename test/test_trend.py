@@ -1,4 +1,4 @@
-"""Trend tracker of J1 and the backlash width (jident_ros/identify/trend.py, issue 14).  No ROS.
+"""Trend tracker of J1 and the backlash width (identify/trend*.py, issue 14; harness: evaluation/trend_simulation.py).  No ROS.
 
 Cost: ~10 s (200 detection trials, 20,000 steady windows, each twice for the sensitivity checks).
 The 100,000-window false-alarm run and the full target measurement are marked slow.
@@ -11,6 +11,16 @@ import os
 import numpy as np
 import pytest
 
+from jident_ros.evaluation.trend_simulation import (
+    detection_delays,
+    false_alarms,
+    format_targets,
+    measure_targets,
+    run_series,
+    siegmund_check,
+    simulate_series,
+    wear_rate_accuracy,
+)
 from jident_ros.identify.trend import (
     ERROR,
     OK,
@@ -22,15 +32,7 @@ from jident_ros.identify.trend import (
     coverage_to_se_scale,
     cusum_arl,
     cusum_threshold_for_arl,
-    detection_delays,
-    false_alarms,
-    format_targets,
-    measure_targets,
-    run_series,
     siegmund_arl,
-    siegmund_check,
-    simulate_series,
-    wear_rate_accuracy,
 )
 
 J1 = 1.16

@@ -1,5 +1,5 @@
 """`jident trend`, `jident simulate --scenario wear` (jident_ros/cli/trend.py, sim/scenarios.py), the offline
-replay across clock jumps and joined batches (bag/recorded.py), and the node's pure trend pieces
+replay across clock jumps and joined batches (bag/drive_replay.py), and the node's pure trend pieces
 (identify/trend_status.py, TrendConfig.from_parameters)."""
 from __future__ import annotations
 
@@ -78,8 +78,8 @@ def test_one_entry_an_hour_loses_nothing(system, tmp_path):
 def test_joined_batches_give_the_same_windows_and_drops(system, tmp_path, monkeypatch):
     """A NaN batch in the steady stretch is dropped ('nonfinite', counted once) whether the clean batches
     around it go to the detector joined or one by one; the windows are the same."""
-    from jident_ros.bag.recorded import DriveReplay
-    from jident_ros.bag.recording import BagWriter
+    from jident_ros.bag.drive_replay import DriveReplay
+    from jident_ros.bag.writer import BagWriter
     from jident_ros.cli.offline import diagnose_recording, multiarray_message
     from jident_ros.sim import Case, simulate_grid
     from jident_ros.stream.detector import embed_windows
@@ -199,7 +199,8 @@ def test_trend_parameters_map_to_the_config():
 
 
 def test_trend_status_levels_messages_and_values():
-    from jident_ros.identify.trend import TrendConfig, TrendTracker, simulate_series
+    from jident_ros.evaluation.trend_simulation import simulate_series
+    from jident_ros.identify.trend import TrendConfig, TrendTracker
     from jident_ros.identify.trend_status import TREND_STATUS_NAME, trend_status
     assert TREND_STATUS_NAME == "jident_diagnostic: trend"
     s = simulate_series(60, step_at=40, step_pct=6.0, seed=3, width_growth_m_per_window=2e-6)

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jident_ros.bag.recording import read_bag
+from jident_ros.bag.reader import read_bag
 from jident_ros.cli.offline import OfflineError
 from jident_ros.cli.trend import format_summary, plot_trend, run_trend, write_trend_csv
 from jident_ros.config import load_method_config, load_system_config

@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 
 from jident_ros import __version__
-from jident_ros.bag.recording import salvage_main
 from jident_ros.cli.demo import main as demo_main
 from jident_ros.cli.offline import (
     TABLE_HEADER,
@@ -30,6 +29,7 @@ from jident_ros.cli.offline import (
     summary_line,
     write_json,
 )
+from jident_ros.cli.salvage import salvage_main
 from jident_ros.cli.trend import add_scenario_arguments, add_trend_parser, cmd_simulate_scenario
 from jident_ros.config import ConfigError, load_method_config, load_system_config
 from jident_ros.evaluation.evaluate import VALIDITY_FILM_SHARES, run_evaluation
@@ -411,7 +411,7 @@ def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["demo"]:  # `jident demo [...]`: demo.py owns its arguments
         return demo_main(argv[1:])
-    if argv[:1] == ["salvage"]:  # `jident salvage <truncated.mcap> <out_dir>`: recording.py owns its arguments
+    if argv[:1] == ["salvage"]:  # `jident salvage <truncated.mcap> <out_dir>`: cli/salvage.py owns its arguments
         return salvage_main(argv[1:])
     parser = build_parser()
     try:

@@ -1,6 +1,6 @@
 """``jident diagnose``: the diagnostic node's per-window diagnosis on a recording, without ROS.
 
-Reads the ``drive/signals`` batches of an MCAP recording (:func:`jident_ros.bag.recording.read_bag`; topic
+Reads the ``drive/signals`` batches of an MCAP recording (:func:`jident_ros.bag.reader.read_bag`; topic
 name ending in ``drive/signals``, any namespace; std_msgs/Float64MultiArray in the 2-D sample x channel
 layout of docs/interfaces.md), feeds them in the order of their samples' drive time ``t`` (not the
 recorder's receive time) through the windowing node's
@@ -27,8 +27,8 @@ from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
-from jident_ros.bag.recorded import DriveReplay, in_sample_time_order, read_drive_messages
-from jident_ros.bag.recording import deserialize
+from jident_ros.bag.drive_replay import DriveReplay, in_sample_time_order, read_drive_messages
+from jident_ros.bag.messages import deserialize
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.diagnosis import GAP_METHODS, WindowDiagnosis, detector_arguments, diagnose_window
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES
@@ -57,7 +57,7 @@ class OfflineError(ValueError):
 def multiarray_message(array, channels: Sequence[str], header: Sequence[float] = ()) -> dict:
     """(n, c) samples + channel names -> std_msgs/Float64MultiArray as a dict of fields in the
     drive/signals layout (``header`` values in front, data_offset = len(header)), e.g. for
-    :meth:`jident_ros.bag.recording.BagWriter.write` without ROS."""
+    :meth:`jident_ros.bag.writer.BagWriter.write` without ROS."""
     data, dims, offset = pack(array, channels, header)
     return {"layout": {"dim": [{"label": label, "size": int(size), "stride": int(stride)}
                                for label, size, stride in dims], "data_offset": int(offset)},

@@ -1,5 +1,5 @@
 """Issue 14's targets measured on REAL diagnosed windows of the simulator (not on the synthetic series
-of :func:`jident_ros.identify.trend.simulate_series`).
+of :func:`jident_ros.evaluation.trend_simulation.simulate_series`).
 
     python -m jident_ros.evaluation.trend_targets [--quick] [--seed 0]
 
@@ -40,9 +40,10 @@ from scipy.stats import chi2
 
 from jident_ros.config import load_system_config
 from jident_ros.evaluation.raw_inputs import event_window, flank_detector, raw_recordings, run_detector
+from jident_ros.evaluation.trend_simulation import step_trials
 from jident_ros.identify.diagnosis import detector_arguments, diagnose_window
 from jident_ros.identify.gap import NoGapError, estimate_backlash_width, estimate_inertia
-from jident_ros.identify.trend import TrendConfig, TrendTracker, step_trials
+from jident_ros.identify.trend import TrendConfig, TrendTracker
 from jident_ros.identify.trend_status import trend_inputs
 from jident_ros.sim import Case, WindowSet, add_measurement_noise, simulate_grid
 

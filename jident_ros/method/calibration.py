@@ -40,8 +40,8 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
-from jident_ros.bag.recorded import DriveReplay, in_sample_time_order, read_drive_messages
-from jident_ros.bag.recording import deserialize
+from jident_ros.bag.drive_replay import DriveReplay, in_sample_time_order, read_drive_messages
+from jident_ros.bag.messages import deserialize
 from jident_ros.method.patterns import PatternLibrary, h5_table, library_metadata
 from jident_ros.method.pipeline import SIGNALS, MethodConfig, batch_features, pre_entry_reference
 from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS

@@ -39,7 +39,7 @@ diagnostic`` configures and activates it at once (autostart).
 
 With ``record`` (the default), the windows (and with ``record_signals`` the drive's signals), the
 estimates, the trend and the statuses are logged to a rosbag2 MCAP bag under ``record_root``
-(``self.recorder``, :class:`Recording` over :class:`jident_ros.bag.recorder.Recorder`) finalised on
+(``self.recorder``, :class:`Recording` over :class:`jident_ros.bag.rotating_recorder.Recorder`) finalised on
 shutdown before the ROS context goes down (:mod:`jident_ros.nodes.runtime`).
 
     ros2 run jident_ros diagnostic --ros-args -p record_root:=out/bags
@@ -78,7 +78,7 @@ from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, GAP_METHOD_CHOICES
 
 try:  # the recorder needs mcap and rosbags: without them the node runs on and says so
-    from jident_ros.bag.recorder import Recorder, RecorderError
+    from jident_ros.bag.rotating_recorder import Recorder, RecorderError
     _BAG_IMPORT_ERROR = None
 except ImportError as _exc:  # pragma: no cover - both are install requirements
     Recorder, RecorderError, _BAG_IMPORT_ERROR = None, RuntimeError, _exc
@@ -153,14 +153,14 @@ def id_ranges(ids) -> str:
 
 class Recording:
     """The node's recorder behind one seam: ``write(name, msg)``, ``flush()``, ``close()`` (idempotent,
-    finalises the bag), ``status()``, over :class:`jident_ros.bag.recorder.Recorder` (rosbag2-named bags
+    finalises the bag), ``status()``, over :class:`jident_ros.bag.rotating_recorder.Recorder` (rosbag2-named bags
     under ``record_root``, split by size / duration, retention, wall-clock stamps that no /clock can move).
     A failure (disk full) finalises what was written; ``error`` says it and further writes are counted as
     dropped."""
 
     def __init__(self, node, cfg: dict, topics):
         if Recorder is None:
-            raise RuntimeError(f"MCAP recording is unavailable here (jident_ros.bag.recorder: {_BAG_IMPORT_ERROR})")
+            raise RuntimeError(f"MCAP recording is unavailable here (jident_ros.bag.rotating_recorder: {_BAG_IMPORT_ERROR})")
         self.node = node
         self.recorder = Recorder(
             cfg["record_root"] or None, bag_dir=cfg["record_dir"] or None,

@@ -3,7 +3,7 @@
     ros2 run jident_ros replay out/run1 --ros-args -p rate:=10.0
 
 Reads the bag directory (also one split into several .mcap files) or .mcap file with
-:func:`jident_ros.bag.recording.read_bag` and republishes,
+:func:`jident_ros.bag.reader.read_bag` and republishes,
 in receive-time order, every recorded topic whose name ends with one of ``topics`` (default
 drive/signals, drive/backlash_width, drive/true_inertia, drive/case) on the corresponding *relative*
 name, so ``-r __ns:=/press3`` replays into another namespace.  The messages go out as recorded
@@ -96,9 +96,10 @@ class ReplayNode(Node):
         self.exit_code = 0
         self.done = False
         try:
-            from jident_ros.bag.recording import RecordingError, read_bag  # the bag layer: optional mcap dependency
+            from jident_ros.bag.errors import RecordingError  # the bag layer: optional mcap dependency
+            from jident_ros.bag.reader import read_bag  # the bag layer: optional mcap dependency
         except ImportError as exc:
-            raise ParameterError(f"parameter bag: cannot read recordings here (jident_ros.bag.recording: {exc})")
+            raise ParameterError(f"parameter bag: cannot read recordings here (jident_ros.bag.reader: {exc})")
         self.RecordingError = RecordingError
         self.bag = str(Path(self.cfg["bag"]).expanduser())
         try:

@@ -5,7 +5,7 @@ drive time; the backlash width K2 grows linearly in time (wear) and J1 steps by 
 given window (e.g. a coupling or a mass added to the shaft).  It returns the :class:`~jident_ros.sim.Case`
 of every event (simulated with :func:`jident_ros.sim.simulate_grid`) and the drive time of each entry
 sample; turning them into a recording is the CLI's job (``jident simulate --scenario wear``,
-:func:`jident_ros.cli.trend.write_scenario_recording`).
+:func:`jident_ros.cli.scenario.write_scenario_recording`).
 """
 from __future__ import annotations
 

@@ -20,8 +20,9 @@ from typing import Any, Callable, Iterator, Optional
 
 import numpy as np
 
+from jident_ros.bag.errors import RecordingError
 from jident_ros.bag.messages import deserialize
-from jident_ros.bag.recording import RecordingError, read_bag
+from jident_ros.bag.reader import read_bag
 from jident_ros.stream.layout import (
     CASE_TOPIC,
     DRIVE_TOPICS,

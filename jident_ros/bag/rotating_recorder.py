@@ -9,7 +9,7 @@ old bags deleted by a retention limit, every failure counted and reported.  No R
 
 * **Where**: ``<root>/rosbag2_YYYY_MM_DD-HH_MM_SS/`` (local time at start, as ``ros2 bag record`` names
   its bags; ``_1``, ``_2`` ... appended when two recorders start in the same second), holding
-  ``<name>_0.mcap``, ``<name>_1.mcap`` ... and ``metadata.yaml`` (:class:`~jident_ros.bag.recording.BagWriter`).
+  ``<name>_0.mcap``, ``<name>_1.mcap`` ... and ``metadata.yaml`` (:class:`~jident_ros.bag.writer.BagWriter`).
   The root: the argument, else ``$JIDENT_DATA_DIR/bags``, else ``$XDG_DATA_HOME/jident_ros/bags``, else
   ``~/.local/share/jident_ros/bags`` (:func:`default_record_root`).
 * **Time stamps**: a message's log and publish time is the wall clock (``time.time_ns()``, system time)
@@ -39,7 +39,8 @@ import weakref
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from jident_ros.bag.recording import DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_AGE_S, BagWriter, RecordingError
+from jident_ros.bag.errors import RecordingError
+from jident_ros.bag.writer import DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_AGE_S, BagWriter
 
 __all__ = ["Recorder", "RecorderError", "bag_name", "default_record_root"]
 
@@ -124,7 +125,7 @@ class Recorder:
         deprecated ``record_dir``); retention then looks at its parent
     max_bag_size_bytes, max_bag_duration_s : split limits of one .mcap file (0: none)
     retention_max_total_bytes, retention_max_age_s : retention limits over the root (0: none)
-    chunk_size, flush_age_s, compression : of the :class:`~jident_ros.bag.recording.BagWriter`
+    chunk_size, flush_age_s, compression : of the :class:`~jident_ros.bag.writer.BagWriter`
     custom_data : str -> str for metadata.yaml (e.g. the node's namespace)
     clock : ns since the epoch for a message's time stamp when :meth:`write` gets none (default: wall clock)
     log : gets one line for each split, retention deletion and failure

@@ -1,0 +1,211 @@
+"""Recordings of the vector drive as a real drive records them, and their truth files.
+
+* sampled at ``sample_period_s`` (2 kHz) from the control-period log of :func:`model.simulate`;
+* ``alpha1``, ``alpha2``: motor and load encoders, ``encoder_counts`` per revolution (floor), each
+  with an arbitrary offset (uniform in [0, 2 pi), redrawn while the zone centre in the recorded
+  alpha1 - N alpha2 lies within 0.5 rad of 0);
+* ``omega1``: the drive's speed feedback as its speed PI sees it (encoder difference over the
+  control period, first-order filter: it lags); ``omega2`` the same on the load encoder;
+* ``m_el``: the drive's torque estimate 1.5 n_p |psi_R,est| i_sq from its flux observer and
+  measured current (its own error against the true air-gap torque, in the truth file);
+* ``a1``: r dw_M/dt of the true motor (an accelerometer on the coupling hub; JointState bags carry it
+  as sensor_msgs/Imu linear_acceleration.x only with ``imu``);
+* noise: white, 'measured' SNR (noise power = mean(x^2)/10^(SNR/10)) on omega1, omega2, m_el, a1;
+  the angles are only quantised.
+
+Writers: the second drive's (``jident_ros.second_drive.record``: rosbags JointState/Imu MCAP bags,
+CSV with the documented header), so the files are what ``jident diagnose`` reads.  Ground truth goes
+only to ``<name>.truth.json`` and the directory's ``truth.json``.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from jident_ros.second_drive.record import write_csv, write_jointstate
+
+from .model import TRAVERSING_EVENTS, DriveParams, Run, gaps, scenario, simulate
+
+NOISY_CHANNELS = ("omega1", "omega2", "m_el", "a1")
+CHANNELS = ("t", "alpha1", "alpha2", "omega1", "omega2", "m_el", "a1")
+#: recording formats: JointState bag without / with Imu, CSV
+INPUTS = ("jointstate", "jointstate_imu", "csv")
+
+
+@dataclass(frozen=True)
+class Sensors:
+    encoder_counts: int = 65536
+    snr_db: Optional[float] = None
+    min_off_centre_rad: float = 0.5
+
+
+@dataclass
+class Recording:
+    name: str
+    signals: dict
+    truth: dict
+
+
+def _wrap_pi(x):
+    return (x + math.pi) % (2 * math.pi) - math.pi
+
+
+def draw_offsets(rng, gear_ratio: float, min_off_centre_rad: float = 0.5):
+    while True:
+        o1, o2 = (float(x) for x in rng.uniform(0.0, 2 * math.pi, 2))
+        if abs(_wrap_pi(o1 - gear_ratio * o2)) >= min_off_centre_rad:
+            return o1, o2
+
+
+def encoder(angle, offset, counts):
+    x = np.asarray(angle, float) + offset
+    if not counts:
+        return x
+    q = 2 * math.pi / counts
+    return np.floor(x / q) * q
+
+
+def awgn_measured(x, snr_db, rng):
+    p = float(np.mean(x * x)) / 10.0 ** (snr_db / 10.0)
+    return x + rng.standard_normal(x.shape) * math.sqrt(p)
+
+
+def decimate(run: Run) -> dict:
+    """The control-period log at the recording's sample period (every d-th control sample)."""
+    d = run.params.decimation
+    return {k: v[::d].copy() for k, v in run.data.items()}
+
+
+def params_key(p: DriveParams, *extra) -> str:
+    text = json.dumps([asdict(p), list(extra)], sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def simulate_cached(p: DriveParams, event: str, direction: str, duration_s: float, event_time_s: float,
+                    cache_dir: Optional[Path] = None) -> dict:
+    """Decimated states of one run (dict of arrays), from ``cache_dir`` when there (npz keyed by every
+    parameter), else simulated (and saved there)."""
+    key = params_key(p, event, direction, duration_s, event_time_s)
+    path = None if cache_dir is None else Path(cache_dir) / f"vector_drive_{event}_{direction}_{key}.npz"
+    if path is not None and path.exists():
+        with np.load(path) as z:
+            return {k: z[k] for k in z.files if k != "motulator_version"} | \
+                {"motulator_version": str(z["motulator_version"])}
+    run = simulate(p, scenario(p, event, direction, event_time_s), duration_s)
+    out = decimate(run)
+    out["motulator_version"] = run.motulator_version
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez(tmp, **{k: v for k, v in out.items()})
+        tmp.replace(path)
+    return out
+
+
+def _t(x):
+    return round(float(x), 9)
+
+
+def case_name(event: str, direction: str, j1: float, k2: float, sensors: Sensors) -> str:
+    noise = "clean" if sensors.snr_db is None else f"{sensors.snr_db:g}dB"
+    return (f"vd_{event}_{'fwd' if direction == 'forward' else 'rev'}_J{j1:.3f}_K{k2 * 1e3:.2f}mm_"
+            f"{sensors.encoder_counts}c_{noise}")
+
+
+def build(p: DriveParams, event: str, direction: str, sensors: Sensors, seed: int = 0, duration_s: float = 2.2,
+          event_time_s: float = 0.6, cache_dir: Optional[Path] = None) -> Recording:
+    """One recording (signals + truth) of ``event`` in ``direction``."""
+    st = simulate_cached(p, event, direction, duration_s, event_time_s, cache_dir)
+    ts = p.sample_period_s
+    mech = p.mechanics
+    n = st["t"].size
+    rng = np.random.default_rng([seed, sensors.encoder_counts, 0 if sensors.snr_db is None else int(sensors.snr_db)])
+    o1, o2 = draw_offsets(rng, mech.gear_ratio, sensors.min_off_centre_rad)
+    r = mech.reference_radius_m
+    sig = {"t": np.arange(n) * ts,
+           "alpha1": encoder(st["theta_M"], o1, sensors.encoder_counts),
+           "alpha2": encoder(st["theta_L"], o2, sensors.encoder_counts),
+           "omega1": st["w_fbk"].copy(), "omega2": st["w_L_fbk"].copy(),
+           "m_el": st["tau_est"].copy(), "a1": r * st["dw_M"]}
+    if sensors.snr_db is not None:
+        for k in NOISY_CHANNELS:
+            sig[k] = awgn_measured(sig[k], sensors.snr_db, rng)
+    delta = st["theta_M"] - mech.gear_ratio * st["theta_L"]
+    th = mech.half_zone_rad
+    k_ev = int(round(event_time_s / ts))
+    gl = gaps(delta, th)
+    gap_list = [{"entry_index": b, "entry_time_s": _t(sig["t"][b]),
+                 "recontact_index": e if e < n else None, "recontact_time_s": _t(sig["t"][e]) if e < n else None,
+                 "from_flank": int(np.sign(delta[b - 1])) if b > 0 else 0,
+                 "to_flank": int(np.sign(delta[e])) if e < n else 0,
+                 "traversal": bool(b > 0 and e < n and np.sign(delta[b - 1]) != np.sign(delta[e])),
+                 "samples": e - b} for b, e in gl]
+    steady = slice(min(int(0.1 / ts), k_ev // 2), k_ev)   # the start of the log is the pre-roll's end
+    tau = st["tau_M"]
+    err = st["tau_est"] - tau
+    big = np.abs(tau) > 0.2 * p.machine.rated_torque_nm
+    name = case_name(event, direction, mech.motor_inertia_kgm2, mech.backlash_width_m, sensors)
+    first = gap_list[0] if gap_list else None
+    truth = {
+        "name": name, "model": "jident_ros.vector_drive", "event": {"type": event, "index": k_ev,
+                                                                     "time_s": _t(k_ev * ts),
+                                                                     "traversing": event in TRAVERSING_EVENTS},
+        "direction": direction, "inertia_kgm2": mech.motor_inertia_kgm2,
+        "load_inertia_kgm2": mech.load_inertia_kgm2, "backlash_width_m": mech.backlash_width_m,
+        "reference_radius_m": r, "half_zone_rad": th, "flank_to_flank_rad": 2 * th, "gear_ratio": mech.gear_ratio,
+        "bearing_friction": {"coulomb_nm": mech.motor_coulomb_nm, "viscous_nms_per_rad": mech.motor_viscous_nms_per_rad,
+                             "smoothing_rad_s": mech.friction_smoothing_rad_s},
+        "entry_index": first["entry_index"] if first else None,
+        "entry_time_s": first["entry_time_s"] if first else None,
+        "recontact_index": first["recontact_index"] if first else None,
+        "recontact_time_s": first["recontact_time_s"] if first else None,
+        "gaps": gap_list, "steady_rows": k_ev,
+        "torque_estimate_error": {
+            "steady_relative": float(np.mean(err[steady]) / np.mean(tau[steady])) if np.mean(np.abs(tau[steady])) > 0
+            else None,
+            "median_abs_relative_where_loaded": float(np.median(np.abs(err[big] / tau[big]))) if big.any() else None,
+            "max_abs_nm": float(np.max(np.abs(err)))},
+        "speed_feedback": {"filter_s": p.controller.speed_filter_s, "control_period_s": p.controller.control_period_s},
+        "encoder": {"counts_per_rev": sensors.encoder_counts, "alpha1_offset_rad": o1, "alpha2_offset_rad": o2,
+                    "relative_offset_rad": o1 - mech.gear_ratio * o2, "quantisation": "floor"},
+        "noise": {"snr_db": sensors.snr_db, "channels": list(NOISY_CHANNELS), "seed": seed},
+        "sample_period_s": ts, "n_samples": int(n), "t0_s": 0.0,
+        "motulator_version": st.get("motulator_version", "?"),
+    }
+    return Recording(name, sig, truth)
+
+
+def write(out_dir: Path, rec: Recording, fmt: str) -> str:
+    """Write one recording in ``fmt`` (:data:`INPUTS`); returns its path relative to out_dir."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if fmt == "csv":
+        rel = f"{rec.name}.csv"
+        if not (out_dir / rel).exists():
+            write_csv(out_dir / rel, {k: rec.signals[k] for k in CHANNELS})
+    elif fmt in ("jointstate", "jointstate_imu"):
+        rel = rec.name + ("_imu" if fmt == "jointstate_imu" else "")
+        if not (out_dir / rel).exists():
+            sig = dict(rec.signals)
+            sig["omega2"] = rec.signals["omega2"]
+            write_jointstate(out_dir / rel, sig, imu=fmt == "jointstate_imu")
+    else:
+        raise ValueError(f"format: expected one of {', '.join(INPUTS)}, got {fmt!r}")
+    tr = out_dir / f"{rec.name}.truth.json"
+    if not tr.exists():
+        tr.write_text(json.dumps(rec.truth, indent=1, allow_nan=False) + "\n")
+    return rel
+
+
+def with_inertia(p: DriveParams, j1: float) -> DriveParams:
+    return replace(p, mechanics=replace(p.mechanics, motor_inertia_kgm2=float(j1)))
+
+
+def with_width(p: DriveParams, k2: float) -> DriveParams:
+    return replace(p, mechanics=replace(p.mechanics, backlash_width_m=float(k2)))

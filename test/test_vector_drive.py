@@ -1,0 +1,140 @@
+"""The third validation drive (jident_ros.vector_drive, motulator): physics sanity and the recorder.
+
+Skipped, with the reason, when motulator (0.5.x API) is not installed (``pip install -e '.[zoo]'``).
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from jident_ros.vector_drive.model import DriveParams, coupling_torque, gaps, motor_friction, motulator_available, scenario, simulate
+
+REASON = motulator_available()
+pytestmark = pytest.mark.skipif(REASON is not None, reason=REASON or "")
+
+#: a short run: 50 ms pre-roll, the speed step at 0.1 s, 0.16 s after it (the first traversal takes ~25 ms)
+SHORT = replace(DriveParams(), preroll_s=0.05)
+
+
+@pytest.fixture(scope="module")
+def step_down():
+    return simulate(SHORT, scenario(SHORT, "speed_step_down", "forward", event_time_s=0.1), 0.26)
+
+
+def _first_traversal(run):
+    m = run.params.mechanics
+    d = run.data
+    delta = d["theta_M"] - m.gear_ratio * d["theta_L"]
+    gl = gaps(delta, m.half_zone_rad)
+    assert gl, "no gap after the speed step down"
+    return delta, gl
+
+
+def test_steady_before_the_event_and_a_gap_after(step_down):
+    d = step_down.data
+    delta, gl = _first_traversal(step_down)
+    ts = step_down.params.controller.control_period_s
+    k_ev = int(round(0.1 / ts))
+    assert all(b > k_ev for b, _ in gl), "a gap before the event (the steady stretch is not steady)"
+    assert np.all(d["tau_c"][:k_ev] > 0), "forward motoring must load the + flank"
+    b, e = gl[0]
+    assert delta[b - 1] > 0 > delta[e], "the first gap must traverse the zone from the + to the - flank"
+
+
+def test_the_gap_is_free_motion(step_down):
+    d = step_down.data
+    m = step_down.params.mechanics
+    _, gl = _first_traversal(step_down)
+    b, e = gl[0]
+    assert np.all(d["tau_c"][b:e] == 0.0)
+    # J1 dw/dt = tau_M - friction inside the gap (finite differences of the true speed, trapezoidal torque)
+    ts = step_down.params.controller.control_period_s
+    acc = np.diff(d["w_M"][b:e]) / ts
+    rhs = 0.5 * ((d["tau_M"] - d["tau_f1"])[b:e - 1] + (d["tau_M"] - d["tau_f1"])[b + 1:e])
+    j1 = np.sum(rhs * acc) / np.sum(acc * acc)
+    assert j1 == pytest.approx(m.motor_inertia_kgm2, rel=0.01)
+    # the friction is the configured law (Coulomb + viscous), and it is on
+    assert d["tau_f1"][b] == pytest.approx(float(motor_friction(m, d["w_M"][b])))
+    assert abs(d["tau_f1"][b]) > m.motor_coulomb_nm * 0.9
+
+
+def test_the_backlash_is_traversed_flank_to_flank(step_down):
+    m = step_down.params.mechanics
+    delta, gl = _first_traversal(step_down)
+    b, e = gl[0]
+    th = m.half_zone_rad
+    # from the + flank to the - flank: 2 K2/r of free travel (the contact penetration is small)
+    assert delta[b - 1] - delta[e] == pytest.approx(2 * th, rel=0.1)
+    assert delta[b - 1] >= th and delta[e] <= -th
+    # the coupling law: zero in the zone, k pen outside
+    assert coupling_torque(m, 0.9 * th, 1.0) == 0.0
+    assert coupling_torque(m, th + 1e-3, 0.0) == pytest.approx(m.stiffness_nm_per_rad * 1e-3)
+    assert coupling_torque(m, -th - 1e-3, 0.0) == pytest.approx(-m.stiffness_nm_per_rad * 1e-3)
+
+
+def test_torque_estimate_error_is_nonzero_but_small(step_down):
+    d = step_down.data
+    k_ev = int(round(0.1 / step_down.params.controller.control_period_s))
+    rel = np.mean(d["tau_est"][40:k_ev] - d["tau_M"][40:k_ev]) / np.mean(d["tau_M"][40:k_ev])
+    assert 0.002 < abs(rel) < 0.05, rel
+    # the speed feedback lags the true speed in the deceleration (filter + difference)
+    i = int(np.argmin(d["w_ref"] > 99.0)) + 40
+    assert d["w_fbk"][i] > d["w_M"][i]
+
+
+def test_recording_quantisation_offsets_and_truth(step_down, tmp_path):
+    from jident_ros.vector_drive.record import CHANNELS, Sensors, build, decimate, write
+
+    # build() on the fixture's run (no second simulation): patch the cache with the decimated run
+    st = decimate(step_down)
+    st["motulator_version"] = step_down.motulator_version
+    import jident_ros.vector_drive.record as rec_mod
+    orig = rec_mod.simulate_cached
+    rec_mod.simulate_cached = lambda *a, **k: st
+    try:
+        rec = build(SHORT, "speed_step_down", "forward", Sensors(encoder_counts=8192), seed=3, duration_s=0.26,
+                    event_time_s=0.1)
+    finally:
+        rec_mod.simulate_cached = orig
+    q = 2 * math.pi / 8192
+    a1 = rec.signals["alpha1"]
+    assert np.allclose(a1 / q, np.round(a1 / q), atol=1e-6), "alpha1 is not on the 2^13 grid"
+    o1 = rec.truth["encoder"]["alpha1_offset_rad"]
+    assert np.all((a1 - st["theta_M"] - o1 <= 1e-9) & (a1 - st["theta_M"] - o1 > -q - 1e-9))
+    rel = rec.truth["encoder"]["relative_offset_rad"]
+    assert abs((rel + math.pi) % (2 * math.pi) - math.pi) >= 0.5
+    assert rec.signals["t"][1] - rec.signals["t"][0] == pytest.approx(5e-4)
+    tr = rec.truth
+    assert tr["event"]["type"] == "speed_step_down" and tr["gaps"][0]["traversal"]
+    assert tr["entry_index"] > tr["steady_rows"]
+    # the torque channel is the drive's estimate, not the truth
+    assert not np.allclose(rec.signals["m_el"], st["tau_M"])
+    rel_csv = write(tmp_path, rec, "csv")
+    header = (tmp_path / rel_csv).read_text().splitlines()[0].split(",")
+    assert tuple(header) == CHANNELS
+    assert json.loads((tmp_path / f"{rec.name}.truth.json").read_text())["inertia_kgm2"] == 1.16
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("event", ["speed_step_up", "load_step_same_flank", "steady"])
+def test_same_flank_events_open_no_gap(event):
+    p = SHORT
+    run = simulate(p, scenario(p, event, "forward", event_time_s=0.1), 0.6)
+    m = p.mechanics
+    delta = run.data["theta_M"] - m.gear_ratio * run.data["theta_L"]
+    assert gaps(delta, m.half_zone_rad) == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("event", ["speed_reversal", "load_reversal_light", "load_reversal_heavy"])
+def test_reversals_traverse(event):
+    p = SHORT
+    run = simulate(p, scenario(p, event, "reverse", event_time_s=0.1), 0.7)
+    m = p.mechanics
+    delta = run.data["theta_M"] - m.gear_ratio * run.data["theta_L"]
+    gl = gaps(delta, m.half_zone_rad)
+    assert gl and delta[gl[0][0] - 1] < 0 < delta[gl[0][1]], "reverse: from the - flank to the + flank"
