@@ -215,3 +215,41 @@ def test_raw_angles_are_never_read_as_zone_centred(system):
         vals = d.value_dict()
         assert "recontact_width_m" not in vals and "width_consistent" not in vals
         assert "alpha1 - alpha2|" not in d.message + "; ".join(d.problems)
+
+
+def _signals_bag(tmp_path, rec, name="raw"):
+    from jident_ros.second_drive.record import write_signals
+    sig = {c: rec.data[:, j] for j, c in enumerate(rec.channels)}
+    path = tmp_path / name
+    write_signals(path, sig, channels=rec.channels)
+    return path
+
+
+def test_the_default_detector_finds_entries_in_drive_signals_with_raw_angles(system, tmp_path):
+    """issue 20: on drive/signals bags with raw encoder angles (no K2 topic) the default detector found nothing,
+    'no backlash entry found' with no hint.  Now auto runs the flank detector there; the paper detector, when
+    asked for, says why it finds nothing and what to set; a wrong gear ratio is named."""
+    from jident_ros.cli.offline import diagnose_recording
+    rec = raw_recordings(system, (1.16,), (0.005,), steady_s=0.5, seed=6)[0]
+    bag = _signals_bag(tmp_path, rec)
+    res = diagnose_recording(bag, system=system, image_method=False)
+    assert res.detector == "flank" and len(res.windows) == 1 and res.backlash_width_source == "estimated"
+    assert res.windows[0].entry_time_s == rec.data[rec.entry_row, 0]
+    paper = diagnose_recording(bag, system=system, image_method=False, detector="paper")
+    assert not paper.windows and "never inside the zone" in paper.no_entry_hint
+    assert "--detector flank" in paper.no_entry_hint
+    wrong = diagnose_recording(bag, system=system, image_method=False, gear_ratio=2.0)
+    assert not wrong.windows and "gear_ratio" in wrong.no_entry_hint and "N = 2" in wrong.no_entry_hint
+
+
+def test_the_flank_detector_says_why_it_found_nothing():
+    data, ch = _steady_then_entry({}, entry=10**6)                  # steady running only
+    det = FlankDetector(0.1, 5e-4, channels=ch)
+    for b in stream_batches(data, 50):
+        det.push(b, ch)
+    assert "never left it" in det.no_entry_reason()
+    data, ch = _twist_change(0.0035)
+    det = FlankDetector(0.1, 5e-4, channels=ch)
+    for b in stream_batches(data, 50):
+        det.push(b, ch)
+    assert "1 same-flank torque change" in det.no_entry_reason()

@@ -287,7 +287,7 @@ def cmd_diagnose(args) -> int:
     else:
         try:
             result = diagnose_recording(args.recording, backlash_width_m=args.backlash_width_m,
-                                        signals_topic=args.topic, detector=args.detector or "paper",
+                                        signals_topic=args.topic, detector=args.detector or "auto",
                                         gear_ratio=args.gear_ratio, **common)
         except OfflineError as exc:
             if "no drive/signals topic" not in str(exc):
@@ -300,7 +300,8 @@ def cmd_diagnose(args) -> int:
         write_json(result, args.json)
     print(summary_line(result) + (f"; JSON: {args.json}" if args.json else ""))
     if not result.windows:
-        print(f"jident diagnose: no backlash entry found in {result.signals_topic}", file=sys.stderr)
+        print(f"jident diagnose: no backlash entry found in {result.signals_topic}"
+              + (f": {result.no_entry_hint}" if result.no_entry_hint else ""), file=sys.stderr)
         return 1
     return 0
 
@@ -373,7 +374,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "drive/backlash_width, else 0.005)")
     g.add_argument("--detector", choices=("flank", "paper", "dynamics"),
                    help="entry detector: flank (no K2, raw encoder angles; the default for JointState bags and CSV), "
-                        "paper (inequality 1 with K2, zone-centred angles; the default for drive/signals) or dynamics "
+                        "paper (inequality 1 with K2, zone-centred angles; the default for drive/signals recordings "
+                        "whose K2 is known: --backlash-width-m or their drive/backlash_width; flank otherwise) or dynamics "
                         "(no angles needed: the load-torque step from m_el and a1 or the alpha1 encoder)")
     g.add_argument("--gear-ratio", type=_positive("--gear-ratio"), default=1.0,
                    help="N in delta = alpha1 - N alpha2 (motor turns per load-encoder turn; default 1)")

@@ -127,6 +127,8 @@ class OfflineResult:
     cut_off: list = field(default_factory=list)    # windows cut off by the end of the data: {entry_time_s, samples}
     jitter: Optional[dict] = None                  # JointState stamp period statistics
     notes: list = field(default_factory=list)      # one line each: a file read by salvaging it, dropped batches
+    no_entry_hint: str = ""            # no window: why not, and what to set (the detector's no_entry_reason)
+    detector: str = ""                 # the entry detector that ran (flank, paper, dynamics)
 
     @property
     def estimates(self) -> list:
@@ -178,7 +180,7 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
                        log: Callable[[str], Any] = lambda text: None,
                        on_window: Optional[Callable[[OfflineWindow], Any]] = None,
                        policy: Optional[VerdictPolicy] = None,
-                       detector: str = "paper", gear_ratio: float = 1.0) -> OfflineResult:
+                       detector: str = "auto", gear_ratio: float = 1.0) -> OfflineResult:
     """Diagnose every backlash entry of a recording as the windowing + diagnostic nodes do.
 
     Parameters
@@ -265,8 +267,17 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
     ts = float(system.sampling.sample_period_s)
 
     def make_detector(batch_channels, topic_name, k2):
+        kind = detector
+        if kind == "auto":
+            # the paper detector only where K2 is known (given, or the drive publishes it: zone-centred angles, our
+            # simulator); any other drive/signals recording is read as raw encoder angles (issue 20)
+            kind = ("paper" if width_source != "default" else "flank" if "alpha2" in batch_channels
+                    else "dynamics")
+        result.detector = kind
+        if kind != "paper":
+            result.backlash_width_source = "estimated"
         return _make_detector(system, k2, channels, batch_channels, gap_tolerance, WINDOWING_DEFAULTS, topic_name,
-                              detector, gear_ratio)
+                              kind, gear_ratio)
 
     replay = DriveReplay(names, width, follow_width, decode=decode, read_width=_float_data,
                          read_truth=lambda msg, topic_name: float(msg.data), make_detector=make_detector,
@@ -320,11 +331,14 @@ def _add_window(result, win, d, true_j1, on_window):
 
 
 def _finish(result, detector, log):
-    """The end of the data: a window in progress is reported (cut_off), the counts collected."""
+    """The end of the data: a window in progress is reported (cut_off), the counts collected; without a window,
+    why (the detector's no_entry_reason, in result.no_entry_hint)."""
     for ev in detector.finish():
         w = ev.window
         result.cut_off.append({"entry_time_s": w.entry_time_s, "samples_from_entry": len(w) - w.entry_index})
         log(f"window cut off by the end of the data: {ev.detail}")
+    if not result.windows and not result.cut_off and hasattr(detector, "no_entry_reason"):
+        result.no_entry_hint = f"the {result.detector} detector: {detector.no_entry_reason()}"
     result.samples, result.batches = detector.samples_seen, detector.batches_seen
     result.dropped = {r: n for r, n in detector.counts.items() if n}
 
@@ -440,7 +454,7 @@ def diagnose_samples(path, *, system=None, method=None, p: float = 2.0, library=
             adapter, batches, source = jointstate_batches(path, ts, motor_joint, load_joint, imu_axis, topic)
     except InputError as exc:
         raise OfflineError(str(exc)) from None
-    result = OfflineResult(str(path), source, "estimated" if detector != "paper" else "option")
+    result = OfflineResult(str(path), source, "estimated" if detector != "paper" else "option", detector=detector)
     if image_method and library is None:
         lib_path = Path(library_path).expanduser() if library_path else default_library_path(system, method)
         result.library_path = str(lib_path)

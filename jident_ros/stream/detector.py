@@ -177,6 +177,8 @@ class BacklashDetector:
     def reset(self) -> None:
         """Forget the history and the window in progress (continuity lost)."""
         self._wrap = {}
+        if not hasattr(self, "_rel_range"):
+            self._rel_range = (math.inf, -math.inf)
         self._tail = np.empty((0, len(self.channels)))
         self._last_t: float | None = None
         self._prev_inside: bool | None = None
@@ -302,7 +304,29 @@ class BacklashDetector:
 
     # ------------------------------------------------------------- detection
     def _inside(self, x: np.ndarray) -> np.ndarray:
-        return np.abs(x[:, self._i_a1] - x[:, self._i_a2]) < self.threshold_rad
+        rel = np.abs(x[:, self._i_a1] - x[:, self._i_a2])
+        if rel.size:
+            lo, hi = float(rel.min()), float(rel.max())
+            self._rel_range = (min(self._rel_range[0], lo), max(self._rel_range[1], hi))
+        return rel < self.threshold_rad
+
+    def no_entry_reason(self) -> str:
+        """Why no entry was found so far, and what to set (one line; '' when a window was captured)."""
+        if self.windows_captured or not self.samples_seen:
+            return ""
+        lo, hi = self._rel_range
+        thr = self.threshold_rad
+        if lo >= thr:
+            return (f"|alpha1 - alpha2| stayed between {lo:.4g} and {hi:.4g} rad, never inside the zone K2/r = "
+                    f"{thr:.4g} rad (paper inequality 1 needs zone-centred angles): raw encoder angles with offsets "
+                    f"or a gear ratio? use the flank detector (--detector flank / detector: flank, with gear_ratio), "
+                    f"which needs no K2 and no zone-centred angles")
+        if hi < thr:
+            return (f"|alpha1 - alpha2| stayed inside the zone K2/r = {thr:.4g} rad (at most {hi:.4g} rad) and never "
+                    f"entered it from outside: K2 = {self.backlash_width_m:g} m too large for wheel_radius_m "
+                    f"{self.wheel_radius_m:g}? or use the flank detector (--detector flank), which needs no K2")
+        return (f"|alpha1 - alpha2| ranged {lo:.4g}..{hi:.4g} rad around K2/r = {thr:.4g} rad but never entered the "
+                f"zone after {self.samples_before_entry} samples outside it")
 
     def _consume(self, x: np.ndarray) -> list:
         events = []

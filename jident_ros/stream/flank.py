@@ -348,6 +348,8 @@ class FlankDetector(BacklashDetector):
         self._flank: Optional[float] = None
         self._sigma = 0.0
         self._fcap: Optional[_FlankCapture] = None
+        if not hasattr(self, "_seen"):          # what the stream showed, for no_entry_reason (kept over resets)
+            self._seen = {"contacts": 0, "spread_min": math.inf, "departure_max": 0.0, "threshold": math.nan}
         self._held_x = np.empty((0, len(self.channels)))     # rows waiting for their confirmation rows
         self._held_d = np.empty(0)
         self._skip = 0                          # samples of a spike still to skip
@@ -385,6 +387,8 @@ class FlankDetector(BacklashDetector):
                     return events
                 runs = np.lib.stride_tricks.sliding_window_view(seq, L)
                 ok = self._contact_runs(runs)
+                if not self._seen["contacts"]:
+                    self._seen["spread_min"] = min(self._seen["spread_min"], float(np.ptp(runs, axis=1).min()))
                 if not ok.any():
                     self._note_travel(seq)
                     self._recent = seq[-(L - 1):]
@@ -396,6 +400,7 @@ class FlankDetector(BacklashDetector):
                     self._tent = None
                 self._flank = float(runs[k].mean())
                 self._sigma = float(runs[k].std(ddof=1))
+                self._seen["contacts"] += 1
                 self._recent = np.empty(0)
                 i += k + L - carried               # the first sample after the contact run
                 continue
@@ -406,6 +411,9 @@ class FlankDetector(BacklashDetector):
                         zi=[(1.0 - self._alpha) * self._flank])[0]
             prev = np.concatenate([[self._flank], f[:-1]])
             out = self._departed(seg, prev, thr)
+            if not self.windows_captured:
+                self._seen["departure_max"] = max(self._seen["departure_max"], float(np.max(np.abs(seg - prev))))
+                self._seen["threshold"] = thr
             if not out.any():
                 self._flank = float(f[-1])
                 return events
@@ -595,6 +603,29 @@ class FlankDetector(BacklashDetector):
                                     f"{res.width_m:.6g} m ({res.how}){swallowed}", window=w)
         self.last_event = ev
         return ev
+
+    def no_entry_reason(self) -> str:
+        """Why no entry was found so far, and what to set (one line; '' when a window was captured)."""
+        if self.windows_captured or not self.samples_seen:
+            return ""
+        seen = self._seen
+        what = "delta = alpha1 - N alpha2" if self.detector_name == "flank" else "the load torque m_el - J1_nom dω1/dt"
+        extra = ""
+        if self.spikes or self.flank_shifts:
+            extra = (f"; {self.spikes} encoder spike(s) and {self.flank_shifts} same-flank torque change(s) "
+                     f"(excursion below min_travel_rad {self.min_travel_rad:g} rad) were not taken for entries")
+        if not seen["contacts"]:
+            if self.detector_name != "flank":
+                return (f"{what} never showed a steady load over contact_samples {self.contact_samples} samples: a "
+                        f"drive that carries no load has no contact to lose (nominal J1 {self.nominal_inertia_kgm2:g} "
+                        f"kg m^2 wrong?){extra}")
+            return (f"{what} (gear_ratio N = {self.gear_ratio:g}) never stayed within contact_tolerance_rad "
+                    f"{self.contact_tolerance_rad:g} rad over contact_samples {self.contact_samples} samples (its "
+                    f"smallest spread: {seen['spread_min']:.4g} rad): a wrong gear_ratio (motor turns per load-encoder "
+                    f"turn), angles not in rad (--map SCALE), or a drive that never rests on a flank{extra}")
+        return (f"{what} rested on a flank but never left it by more than the departure threshold "
+                f"{seen['threshold']:.4g} (largest move {seen['departure_max']:.4g}): no backlash entry in these data "
+                f"(k_sigma, min_departure_rad set the threshold){extra}")
 
     def threshold_for(self, cap: _FlankCapture) -> float:
         """The departure threshold of the contact a capture's entry left."""
