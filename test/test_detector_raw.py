@@ -253,3 +253,28 @@ def test_the_flank_detector_says_why_it_found_nothing():
     for b in stream_batches(data, 50):
         det.push(b, ch)
     assert "1 same-flank torque change" in det.no_entry_reason()
+
+
+def test_more_torque_on_the_same_flank_and_back_is_not_an_entry_with_m_el():
+    """The vector drive's speed step up: the torque limit twists the coupling 5.8 mrad deeper (more than
+    min_travel_rad), then back.  With m_el the detector knows which way is deeper into the flank (with the torque
+    it carries): that move needs 4 x min_travel_rad, and the move back counts its travel beyond the level before
+    the step: no window, 2 flank shifts; a real entry later is still found, and so is a real entry in the
+    'deeper' direction (a traversal is far longer than 20 mrad)."""
+    data, ch = _twist_change(0.008, n=6000, at=1000)
+    data[3000:, 1] -= 0.008 * (1.0 - np.exp(-np.arange(3000) / 6.0))     # back to the first level
+    m_el = np.where((np.arange(6000) >= 1000) & (np.arange(6000) < 3000), 300.0, 100.0)
+    data = np.column_stack([data, m_el])
+    ch = ch + ("m_el",)
+    data[5000:, 2] += 0.05                                                  # a real entry (delta decreases)
+    det = FlankDetector(0.1, 5e-4, channels=ch)
+    evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)] + det.finish()
+    assert [e.window.entry_time_s for e in evs if e.window is not None] == [data[5000, 0]]
+    assert det.flank_shifts == 2
+    data[5000:, 2] -= 0.1                                                   # the entry the other way instead
+    det = FlankDetector(0.1, 5e-4, channels=ch)
+    evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)] + det.finish()
+    assert [e.window.entry_time_s for e in evs if e.window is not None] == [data[5000, 0]]
+    without = FlankDetector(0.1, 5e-4, channels=ch[:3])                   # without m_el: 8 mrad is an entry
+    evs = [e for b in stream_batches(data[:, :3], 50) for e in without.push(b, ch[:3])] + without.finish()
+    assert len([e for e in evs if e.window is not None or e.reason == "cut_off"]) >= 2

@@ -256,7 +256,12 @@ class FlankDetector(BacklashDetector):
     min_travel_rad : float         an entry whose excursion ends in a new contact less than this far from the
                                    flank it left was a same-flank torque change (the coupling twisting more or
                                    less), not a backlash entry: its window is dropped and counted in
-                                   ``flank_shifts`` (5 mrad; below the smallest half-zone K2/r you expect; 0: off)
+                                   ``flank_shifts`` (5 mrad; below the smallest half-zone K2/r you expect; 0: off);
+                                   the travel counts beyond the flank level before any same-flank move, in the
+                                   direction delta left
+    deeper_travel_factor : float   with m_el: delta moving *with* the torque the contact carries (sign of m_el
+                                   over the contact, when significant) goes deeper into the flank (more torque,
+                                   more twist): an entry only after this many min_travel_rad (4: 20 mrad)
     """
 
     #: The window header's ``detector`` field.
@@ -271,7 +276,7 @@ class FlankDetector(BacklashDetector):
                  contact_tolerance_rad: float = 2e-3, k_sigma: float = 8.0, min_departure_rad: float = 1.5e-3,
                  flank_time_constant_s: float = 0.05, encoder_counts_per_rev: int = 0,
                  refine_samples: int = 16, load_drop_fraction: float = 0.5, unwrap_angles: bool = True,
-                 confirm_samples: int = 3, min_travel_rad: float = 5e-3):
+                 confirm_samples: int = 3, min_travel_rad: float = 5e-3, deeper_travel_factor: float = 4.0):
         for name, v in (("gear_ratio", gear_ratio), ("contact_tolerance_rad", contact_tolerance_rad),
                         ("k_sigma", k_sigma), ("min_departure_rad", min_departure_rad),
                         ("flank_time_constant_s", flank_time_constant_s),
@@ -300,6 +305,8 @@ class FlankDetector(BacklashDetector):
         self.refine_samples = int(refine_samples)
         self.load_drop_fraction = float(load_drop_fraction)
         self.confirm_samples = int(confirm_samples)
+        self.deeper_travel_factor = float(deeper_travel_factor)
+        self._i_m_el = self.channels.index("m_el") if "m_el" in self.channels and self.detector_name == "flank" else -1
         self.min_travel_rad = float(min_travel_rad)
         #: departures back on their flank within confirm_samples (an encoder spike; not entries, counted)
         self.spikes = 0
@@ -353,8 +360,11 @@ class FlankDetector(BacklashDetector):
         self._held_x = np.empty((0, len(self.channels)))     # rows waiting for their confirmation rows
         self._held_d = np.empty(0)
         self._skip = 0                          # samples of a spike still to skip
-        self._tent: Optional[float] = None      # the flank the last entry left, until its next contact
+        self._tent: Optional[tuple] = None      # (reference level, side, travel needed) of the last entry
         self._travelled = False
+        self._recent_aux = np.empty(0)          # m_el of the _recent rows (the contact's torque sign)
+        self._torque_sign = 0.0                 # sign of m_el over the current contact (0: not significant)
+        self._ref_flank: Optional[float] = None  # the flank level before a same-flank move deeper into the flank
         self._last_entry_captured = False
 
     def set_backlash_width(self, backlash_width_m: float) -> None:
@@ -366,7 +376,7 @@ class FlankDetector(BacklashDetector):
     def _delta(self, x: np.ndarray) -> np.ndarray:
         return x[:, self._i_a1] - self.gear_ratio * x[:, self._i_a2]
 
-    def _track(self, d: np.ndarray, look: np.ndarray) -> list:
+    def _track(self, d: np.ndarray, look: np.ndarray, aux: Optional[np.ndarray] = None) -> list:
         """Run the contact tracker over the delta values ``d`` of the rows handed on (``look``: the next
         ``confirm_samples - 1`` values, to confirm a departure); returns in order ("entry", row, flank level it
         left, contact sigma) and ("cancel", row): the excursion of the last entry ended in a new contact at
@@ -381,9 +391,12 @@ class FlankDetector(BacklashDetector):
             if self._flank is None:                 # learning: the first run of L steady samples
                 carried = self._recent.size
                 seq = np.concatenate([self._recent, d[i:]])
+                seq_aux = None if aux is None else np.concatenate([self._recent_aux, aux[i:]])
                 if seq.size < L:
                     self._note_travel(seq)
                     self._recent = seq
+                    if seq_aux is not None:
+                        self._recent_aux = seq_aux
                     return events
                 runs = np.lib.stride_tricks.sliding_window_view(seq, L)
                 ok = self._contact_runs(runs)
@@ -392,12 +405,25 @@ class FlankDetector(BacklashDetector):
                 if not ok.any():
                     self._note_travel(seq)
                     self._recent = seq[-(L - 1):]
+                    if seq_aux is not None:
+                        self._recent_aux = seq_aux[-(L - 1):]
                     return events
                 k = int(np.argmax(ok))
                 if self._tent is not None:
                     if not self._note_travel(seq[:k + L]):
                         events.append(("cancel", i + k + L - carried - 1))
+                        if self._tent[1] != self._torque_sign:     # back from a deeper move: reference done
+                            self._ref_flank = None
+                    else:
+                        self._ref_flank = None
                     self._tent = None
+                self._torque_sign = 0.0
+                if seq_aux is not None:
+                    ra = seq_aux[k:k + L]
+                    mu = float(ra.mean())
+                    if abs(mu) > self.k_sigma * float(ra.std(ddof=1)) / math.sqrt(L):
+                        self._torque_sign = 1.0 if mu > 0 else -1.0
+                self._recent_aux = np.empty(0)
                 self._flank = float(runs[k].mean())
                 self._sigma = float(runs[k].std(ddof=1))
                 self._seen["contacts"] += 1
@@ -433,7 +459,19 @@ class FlankDetector(BacklashDetector):
                 i = nxt
                 continue
             events.append(("entry", i + k, float(prev[k]), self._sigma))
-            self._tent = float(prev[k]) if self.min_travel_rad > 0 else None
+            if self.min_travel_rad > 0:
+                if side == self._torque_sign:
+                    # deeper into the flank (delta moves with the torque it carries: more torque, the coupling
+                    # twists more): an entry only after deeper_travel_factor x min_travel_rad; the level before
+                    # it stays the reference of the move back
+                    if self._ref_flank is None:
+                        self._ref_flank = float(prev[k])
+                    self._tent = (float(prev[k]), side, self.deeper_travel_factor * self.min_travel_rad)
+                else:
+                    ref = float(prev[k]) if self._ref_flank is None else self._ref_flank
+                    self._tent = (ref, side, self.min_travel_rad)
+            else:
+                self._tent = None
             self._travelled = False
             self._flank = None
             self._recent = np.empty(0)
@@ -441,9 +479,11 @@ class FlankDetector(BacklashDetector):
         return events
 
     def _note_travel(self, seq: np.ndarray) -> bool:
-        """Whether the excursion of the last entry has reached min_travel_rad from its flank (so far)."""
+        """Whether the excursion of the last entry has gone the travel it needs beyond its reference level, in
+        the direction it left (so far)."""
         if self._tent is not None and not self._travelled and seq.size:
-            self._travelled = bool(np.max(np.abs(seq - self._tent)) >= self.min_travel_rad)
+            ref, side, need = self._tent
+            self._travelled = bool(np.max(side * (seq - ref)) >= need)
         return self._travelled
 
     def _contact_runs(self, runs: np.ndarray) -> np.ndarray:
@@ -473,7 +513,7 @@ class FlankDetector(BacklashDetector):
 
     def _consume_rows(self, x: np.ndarray, d: np.ndarray, look: np.ndarray) -> list:
         events = []
-        found = self._track(d, look)
+        found = self._track(d, look, x[:, self._i_m_el] if self._i_m_el >= 0 else None)
         n = x.shape[0]
         pos = 0                                   # rows of x before pos are consumed
         extra = self.history_extra
