@@ -278,3 +278,18 @@ def test_more_torque_on_the_same_flank_and_back_is_not_an_entry_with_m_el():
     without = FlankDetector(0.1, 5e-4, channels=ch[:3])                   # without m_el: 8 mrad is an entry
     evs = [e for b in stream_batches(data[:, :3], 50) for e in without.push(b, ch[:3])] + without.finish()
     assert len([e for e in evs if e.window is not None or e.reason == "cut_off"]) >= 2
+
+
+def test_one_count_of_a_coarse_encoder_at_the_entry_is_not_a_slip():
+    """2^13 counts: around a slow departure the steps of delta are 0 and the entry's is one count; that is not
+    the slip scenario's jump (the vector drive's K2 was 96 % off): the traversal's K2 is measured."""
+    from jident_ros.stream.flank import estimate_width
+    q = 2 * math.pi / 8192
+    n, e, g, theta, r = 400, 48, 148, 0.05, 0.1
+    k = np.arange(n) - e
+    delta = np.where(k < 0, theta, theta - 2 * theta * np.clip(k / (g - e), 0, 1) ** 2)
+    a2 = 1.0 + 0.01 * np.arange(n)
+    a1 = np.floor((a2 + delta + 0.3) / q) * q
+    a2q = np.floor(a2 / q) * q
+    res = estimate_width({"alpha1": a1, "alpha2": a2q}, e + 1, r, 5e-4, recontact=g, angle_quantum_rad=q)
+    assert res.how == "traversal" and res.width_m == pytest.approx(theta * r, rel=0.05)

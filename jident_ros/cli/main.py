@@ -19,6 +19,7 @@ import numpy as np
 
 from jident_ros import __version__
 from jident_ros.cli.demo import main as demo_main
+from jident_ros.cli.drive_info import identification_lines, library_line, model_problem
 from jident_ros.cli.offline import (
     TABLE_HEADER,
     OfflineError,
@@ -141,6 +142,15 @@ def cmd_info(args) -> int:
           f"U_b = {b.voltage_peak_v:.1f} V peak, I_b = {b.current_peak_a:.1f} A peak, Z_b = {b.impedance_ohm:.3f} ohm")
     print(f"  w = x_s x_w - x_m^2 = {m.sigma_determinant_pu:.4f}; pull-out torque "
           f"{steady_state_phasors(m, s_bd)['torque_pu']:.3f} p.u. at slip {s_bd * 100:.1f} %")
+    for line in identification_lines(cfg):
+        print(line)
+    problem = model_problem(cfg)
+    method = load_method_config()
+    lib = default_library_path(cfg, method)
+    print(library_line(cfg, method, lib, lib.exists(), problem))
+    if problem:
+        print(f"Loaded steady state: not available: {problem}")
+        return 0
     cases = [Case(m.nominal_inertia_kgm2, cfg.grid.backlash_widths_m[0], e)
              for e in cfg.grid.consistency_indices_pa_sn]
     y, slip = steady_state(cfg, cases, 0.0)

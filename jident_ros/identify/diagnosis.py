@@ -42,6 +42,7 @@ from jident_ros.identify.gap import (
     nearest_class,
 )
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES, OK, WARN
+from jident_ros.identify.library import IMAGE_METHOD_OFF
 from jident_ros.identify.verdict import (
     VerdictPolicy,
     decide_gap,
@@ -278,7 +279,9 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
         vals.append(("image_method", "not run: K2 unknown (no load encoder, or no traversal in this window), no "
                                      "library width to compare with"))
     elif image_method:
-        if library is None:
+        if library is None and (library_error or "").startswith(IMAGE_METHOD_OFF):
+            vals.append(("image_method", "off: no pattern library for this drive"))   # said once per run, not here
+        elif library is None:
             problems.append(library_error or "no pattern library")
         else:
             signals = [s for s in SIGNALS if s in window_data]
@@ -309,7 +312,8 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                  ("library_width_m", lib_width)]
         for s, a in idn.answers.items():
             vals += [(f"j1.{s}", a.inertia_kgm2), (f"h.{s}", a.h), (f"margin.{s}", a.margin)]
-    library_missing = image_method and not k2_unknown and library is None
+    library_missing = (image_method and not k2_unknown and library is None
+                       and not (library_error or "").startswith(IMAGE_METHOD_OFF))
     lib_text = library_error or "no pattern library"
 
     def image_phrase(disagree_with: str) -> tuple:

@@ -228,7 +228,10 @@ def estimate_width(window: dict, entry_index: int, wheel_radius_m: float, sample
     r = float(wheel_radius_m)
     q2 = angle_quantum_rad ** 2 / 6.0               # two encoders, uniform quantisation error each
     step_in, step_before, step_after = d[e] - d[e - 1], d[e - 1] - d[e - 2], d[e + 1] - d[e]
-    slip = abs(step_in) > 4.0 * max(abs(step_before), abs(step_after), 1e-12)
+    # a jump of delta at the entry (the slip scenario), not one quantisation step of a coarse encoder (2^13: the
+    # steps around it are 0 and the entry's one count looked like a slip; the vector drive's K2 was 96 % off)
+    slip = abs(step_in) > max(4.0 * max(abs(step_before), abs(step_after)), 10.0 * angle_quantum_rad,
+                              contact_tolerance_rad, 1e-12)
     if slip:
         # the slip scenario: delta jumped off the flank and the motor turns back to the same flank; the
         # excursion, measured against the settled flank level after re-contact (an offset moved by the
