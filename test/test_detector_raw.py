@@ -288,8 +288,11 @@ def test_one_count_of_a_coarse_encoder_at_the_entry_is_not_a_slip():
     n, e, g, theta, r = 400, 48, 148, 0.05, 0.1
     k = np.arange(n) - e
     delta = np.where(k < 0, theta, theta - 2 * theta * np.clip(k / (g - e), 0, 1) ** 2)
-    a2 = 1.0 + 0.01 * np.arange(n)
+    a2 = np.full(n, 1.0)                                             # the load at rest: delta moves by counts
     a1 = np.floor((a2 + delta + 0.3) / q) * q
     a2q = np.floor(a2 / q) * q
-    res = estimate_width({"alpha1": a1, "alpha2": a2q}, e + 1, r, 5e-4, recontact=g, angle_quantum_rad=q)
+    d = a1 - a2q
+    first = e + int(np.argmax(np.abs(d[e:] - d[e - 1]) > 0.5 * q))        # the first sample a count off the flank
+    assert abs(abs(d[first] - d[first - 1]) - q) < 1e-9 and abs(d[first + 1] - d[first]) < 1e-12  # 1 count, still
+    res = estimate_width({"alpha1": a1, "alpha2": a2q}, first, r, 5e-4, recontact=g, angle_quantum_rad=q)
     assert res.how == "traversal" and res.width_m == pytest.approx(theta * r, rel=0.05)
