@@ -48,7 +48,7 @@ setup(
         'test': ['pytest', 'rosbags'],
         # byte-compatibility tests against mcap-ros2-support's writer/reader
         'mcap': ['mcap-ros2-support'],
-        # the third validation drive (jident_ros.vector_drive, the zoo report): written for motulator's 0.5 API
+        # the third validation drive (jident_ros.research.vector_drive, the zoo report): written for motulator's 0.5 API
         'zoo': ['motulator==0.5.0; python_version < "3.12"'],
     },
     zip_safe=True,

@@ -49,9 +49,10 @@ import bench_ros  # noqa: E402
 import numpy as np  # noqa: E402
 from bench_ros import Proc, machine, ros_environment  # noqa: E402
 
-from jident_ros.cli.offline import WINDOWING_DEFAULTS, _make_detector  # noqa: E402
+from jident_ros.cli.offline import _make_detector  # noqa: E402
 from jident_ros.config import load_system_config  # noqa: E402
-from jident_ros.evaluation.raw_inputs import flank_detector, raw_recordings, run_detector  # noqa: E402
+from jident_ros.identify.monitor import DetectorConfig  # noqa: E402
+from jident_ros.research.evaluation.raw_inputs import flank_detector, raw_recordings, run_detector  # noqa: E402
 from jident_ros.stream.detector import stream_batches  # noqa: E402
 from jident_ros.stream.inputs import JointStateAdapter  # noqa: E402
 
@@ -91,7 +92,7 @@ def recording(system, j1: float, steady_s: float):
 
 def batched_windows(system, data, channels=CH) -> list:
     """The batched path: the detector the offline `jident diagnose` builds, fed batches of 50."""
-    det = _make_detector(system, None, None, channels, None, WINDOWING_DEFAULTS, "bench", "flank")
+    det = _make_detector(system, DetectorConfig("flank", None, None, None), channels, "bench")
     wins = []
     for b in stream_batches(data, 50):
         wins += [e.window for e in det.push(b, channels) if e.kind == "window"]

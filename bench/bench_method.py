@@ -66,11 +66,11 @@ def main(argv=None):
     angle_times = timed(lambda: estimate_inertia(no_a1, win.entry_index, case.backlash_width_m,
                                                  system.load.wheel_radius_m, win.sample_period_s, "angle"),
                         args.repeats)
-    from jident_ros.identify.diagnosis import diagnose_window
+    from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig, WindowInput
     # what the diagnostic node adds per window besides the image method: gap fit + width + verdict + status values
-    stage_times = timed(lambda: diagnose_window(w, win.entry_index, case.backlash_width_m,
-                                                system.load.wheel_radius_m, win.sample_period_s, library=lib,
-                                                system=system, method=method, p=2.0, image_method=False),
+    diagnoser = Diagnoser(system, method, DiagnosisConfig(2.0, image_method=False), library=lib)
+    stage_times = timed(lambda: diagnoser.diagnose(WindowInput(w, win.entry_index, case.backlash_width_m,
+                                                               system.load.wheel_radius_m, win.sample_period_s)),
                         args.repeats)
     res = {"window_all_signals_p2_s": statistics.median(window_times),
            "gap_estimate_s": statistics.median(gap_times),
@@ -78,7 +78,7 @@ def main(argv=None):
            "gap_stage_s": statistics.median(stage_times),
            "library_build_s": statistics.median(lib_times)}
     if args.full_eval:
-        from jident_ros.evaluation.evaluate import run_evaluation
+        from jident_ros.research.evaluation.evaluate import run_evaluation
         t = time.perf_counter()
         run_evaluation(system, method, log=lambda *a: None)
         res["full_evaluation_s"] = time.perf_counter() - t

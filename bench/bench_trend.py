@@ -21,8 +21,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from jident_ros.evaluation.trend_simulation import simulate_series  # noqa: E402
 from jident_ros.identify.trend import TrendConfig, TrendTracker  # noqa: E402
+from jident_ros.research.evaluation.trend_simulation import simulate_series  # noqa: E402
 
 TARGET_MS = 0.1
 

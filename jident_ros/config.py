@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import dataclasses
 import dataclasses as dc
-import hashlib
-import json
 import math
 from pathlib import Path
 from typing import Any, Mapping
@@ -27,6 +25,7 @@ from typing import Any, Mapping
 import pywt
 import yaml
 
+from jident_ros.method.patterns import config_hash, config_to_dict  # noqa: F401  (re-exported)
 from jident_ros.method.pipeline import MethodConfig
 from jident_ros.resources import default_config_path
 from jident_ros.sim.params import GridParams, LoadParams, MotorParams, SamplingParams, SystemConfig
@@ -209,19 +208,6 @@ def load_system_config(path: str | Path | None = None) -> SystemConfig:
 
 def _is_profile(path: Path) -> bool:
     return path.parent.name == PROFILES_DIR
-
-
-def config_to_dict(cfg: SystemConfig) -> dict:
-    """Plain nested dict (tuples as lists) of a SystemConfig."""
-    return json.loads(json.dumps(dataclasses.asdict(cfg)))
-
-
-def config_hash(obj: Any) -> str:
-    """SHA-256 of a canonical JSON form of a (dataclass) configuration."""
-    if dataclasses.is_dataclass(obj):
-        obj = dataclasses.asdict(obj)
-    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
-    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def method_config_from_dict(data: Mapping | None):

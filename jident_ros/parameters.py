@@ -18,7 +18,10 @@ from typing import Any
 
 @dataclass(frozen=True)
 class Param:
-    """One node parameter: default, description, inclusive range [min, max], choices, read_only."""
+    """One node parameter: default, description, inclusive range [min, max], choices, read_only (False: a change
+    at run time takes effect), unit ("" = from the name's suffix, :func:`unit_of`), and for a parameter that sets a
+    field of a config dataclass that takes None, whether 0 stands for that None (``zero_is_none``: ROS parameters
+    cannot be None)."""
 
     default: Any
     description: str
@@ -27,6 +30,8 @@ class Param:
     read_only: bool = True
     choices: tuple = ()
     min_exclusive: bool = False   # the range is (min, max]: min itself is refused
+    unit: str = ""
+    zero_is_none: bool = False
 
     def range_text(self) -> str:
         """The range as the docs and the one-line errors say it ("" when there is none)."""
@@ -35,6 +40,33 @@ class Param:
         lo = "" if self.min is None else (f"> {self.min:g}" if self.min_exclusive else f">= {self.min:g}")
         hi = "" if self.max is None else f"<= {self.max:g}"
         return " and ".join(x for x in (lo, hi) if x)
+
+
+#: Units of parameter and field names (suffix -> unit, SI, REP 103), longest suffix first.
+UNIT_SUFFIXES = (("_nms_per_rad", "N m s/rad"), ("_nm_per_rad", "N m/rad"), ("_ns_per_m", "N s/m"),
+                 ("_n_per_m", "N/m"), ("_pa_sn", "Pa s^n"), ("_kgm2", "kg m^2"), ("_m_s", "m/s"), ("_m2", "m^2"),
+                 ("_pct_per_window", "% per window"), ("_bytes", "bytes"), ("_rad", "rad"), ("_hz", "Hz"),
+                 ("_pu", "per unit"), ("_pct", "%"), ("_sd", "standard deviations"), ("_kg", "kg"), ("_m", "m"),
+                 ("_s", "s"), ("_v", "V"), ("_n", "N"))
+
+
+def unit_of(name: str, param: "Param | None" = None) -> str:
+    """The unit of a parameter: its own ``unit``, else the one its name's suffix says ("" when none)."""
+    if param is not None and param.unit:
+        return param.unit
+    for suffix, unit in UNIT_SUFFIXES:
+        if name.endswith(suffix):
+            return unit
+    return ""
+
+
+def cli_help(name: str, schema: "dict | None" = None, node: str = "diagnostic") -> str:
+    """The --help of a CLI flag that mirrors the node parameter ``name``: its description, unit, range and
+    default from the schema (argparse's % escaped)."""
+    p = (DIAGNOSTIC_PARAMS if schema is None else schema)[name]
+    unit, rng = unit_of(name, p), p.range_text()
+    facts = "; ".join(x for x in (unit and f"unit {unit}", rng, f"default {p.default!r}") if x)
+    return f"{p.description} ({facts}; the {node} node's parameter {name})".replace("%", "%%")
 
 
 def defaults(schema: dict) -> dict:
@@ -117,12 +149,29 @@ WINDOWING_PARAMS = {
     "batch_size": Param(50, "joint_states: samples per batch handed to the detector", min=1, max=MAX_DEPTH),
 }
 
-#: The gap method values of the diagnostic node; ``none`` is the preferred spelling of "no gap estimate",
-#: ``off`` (which a command line reads as YAML false) is still accepted.
-GAP_METHOD_CHOICES = ("auto", "acceleration", "gap_only", "anchored", "angle", "speed", "none", "off")
+#: The gap methods (the one list: the diagnostic node's ``gap_method``, ``jident diagnose --gap-method``, the
+#: diagnosis; :func:`jident_ros.identify.gap.estimate_inertia`): ``auto`` (acceleration fit when a1 is there,
+#: else angle, else speed), ``acceleration``, ``gap_only``, ``anchored``, ``angle``, ``speed``; ``none`` is the
+#: preferred spelling of "no gap estimate", ``off`` (which a command line reads as YAML false) is still accepted.
+GAP_METHODS = ("auto", "acceleration", "gap_only", "anchored", "angle", "speed", "none", "off")
+#: The gap_method values that mean: no gap estimate.
+NO_GAP = ("none", "off")
 
-#: Trend of J1 and the backlash width (issue 14; jident_ros.identify.trend.TrendConfig.from_parameters),
-#: parameters of the diagnostic node.  0 means "not set" where TrendConfig takes None.
+
+def gap_method_problem(gap_method, image_method: bool):
+    """The rules of the gap method, in one wording: None, or (field, "what is wrong") -- the field's value is
+    not one of :data:`GAP_METHODS`, or there is neither a gap estimate nor the image method."""
+    if gap_method not in GAP_METHODS:
+        return "gap_method", f"expected one of {', '.join(GAP_METHODS)}, got {gap_method!r}"
+    if not image_method and gap_method in NO_GAP:
+        return "image_method", "must be true when gap_method is none (nothing would be identified)"
+    return None
+
+#: Trend of J1 and the backlash width (issue 14), parameters of the diagnostic node: the one schema of the
+#: trend's parameters.  ``trend_<field>`` sets the TrendConfig field ``<field>`` (:data:`TREND_FIELDS`;
+#: TrendConfig.from_parameters maps them from here), but for :data:`TREND_NODE_ONLY`; ``zero_is_none``: 0 means
+#: "not set" where TrendConfig takes None.  A new trend parameter: one entry here and its field in TrendConfig;
+#: config/nodes.yaml and docs/interfaces.md follow (tests).
 TREND_PARAMS = {
     "trend_enabled": Param(True, 'follow the trend of J1 and K2: inertia_trend, backlash_width_trend and the '
                            '"jident_diagnostic: trend" status'),
@@ -130,16 +179,17 @@ TREND_PARAMS = {
                               'trend survives a restart; "" = not kept'),
     "trend_commissioning_windows": Param(20, 'windows that learn the baseline', min=0, max=10**9, read_only=False),
     "trend_commissioning_duration_s": Param(0.0, 'instead: learn over this drive time, s (0 = by windows)',
-                                            min=0.0, max=1e12, read_only=False),
-    "trend_inertia_baseline_kgm2": Param(0.0, 'given J1 baseline, kg m^2 (0 = learn it)', min=0.0, max=1e12),
+                                            min=0.0, max=1e12, read_only=False, zero_is_none=True),
+    "trend_inertia_baseline_kgm2": Param(0.0, 'given J1 baseline, kg m^2 (0 = learn it)', min=0.0, max=1e12, zero_is_none=True),
     "trend_inertia_baseline_se_kgm2": Param(0.0, 'standard error of the given J1 baseline, kg m^2', min=0.0, max=1e12),
-    "trend_width_baseline_m": Param(0.0, 'given width baseline, m (0 = learn it)', min=0.0, max=1e12),
+    "trend_width_baseline_m": Param(0.0, 'given width baseline, m (0 = learn it)', min=0.0, max=1e12, zero_is_none=True),
     "trend_width_baseline_se_m": Param(0.0, 'standard error of the given width baseline, m', min=0.0, max=1e12),
     "trend_target_arl_windows": Param(300000.0, 'in-control average run length (windows) the two-sided CUSUM threshold is '
                                       'designed for: 1e4 / this = false changes per 10,000 steady windows',
                                       min=0.0, max=1e12, read_only=False),
     "trend_cusum_reference_sd": Param(1.5, 'CUSUM k, standard deviations', min=0.0, max=1e12, read_only=False),
-    "trend_cusum_threshold_sd": Param(0.0, 'CUSUM h (0 = from trend_target_arl_windows)', min=0.0, max=1e12, read_only=False),
+    "trend_cusum_threshold_sd": Param(0.0, 'CUSUM h (0 = from trend_target_arl_windows)',
+                                      min=0.0, max=1e12, read_only=False, zero_is_none=True),
     "trend_innovation_clip_sd": Param(4.5, 'standardised innovations clipped at +- this many standard deviations',
                                       min=0.0, max=1e12, read_only=False),
     "trend_se_scale_from_commissioning": Param(False, 'scale the reported errors by the commissioning scatter', read_only=False),
@@ -152,15 +202,19 @@ TREND_PARAMS = {
     "trend_drift_warn_pct": Param(2.0, 'J1 drift giving WARN, %', min=0.0, max=1e12, read_only=False),
     "trend_drift_alarm_pct": Param(5.0, 'J1 drift giving ERROR, %', min=0.0, max=1e12, read_only=False),
     "trend_width_limit_m": Param(0.012, 'backlash width limit (ERROR), m', min=0.0, max=1e12, read_only=False),
-    "trend_width_warn_m": Param(0.0, 'WARN width, m (0 = 90 % of the limit)', min=0.0, max=1e12, read_only=False),
+    "trend_width_warn_m": Param(0.0, 'WARN width, m (0 = 90 % of the limit)', min=0.0, max=1e12, read_only=False, zero_is_none=True),
     "trend_time_to_limit_warn_s": Param(2592000.0, 'WARN when the limit is projected sooner, s (30 days; 0 = off)',
-                                        min=0.0, max=1e12, read_only=False),
+                                        min=0.0, max=1e12, read_only=False, zero_is_none=True),
     "trend_width_regression_windows": Param(50, 'windows of the wear-rate regression', min=0, max=10**9),
     "trend_width_se_floor_m": Param(1.0e-6, 'floor of the width standard error, m', min=0.0, max=1e12, read_only=False),
     "trend_width_change_detection": Param(True, 'change detection (CUSUM) on the width too', read_only=False),
     "trend_wear_significance_sd": Param(1.96, 'wear rate significant above this many standard errors', min=0.0, max=1e12, read_only=False),
     "trend_max_changes_kept": Param(100, 'change events kept in the state', min=0, max=10**9, read_only=False),
 }
+#: The trend parameters that are the node's own, not TrendConfig fields.
+TREND_NODE_ONLY = ("trend_enabled", "trend_state_file")
+#: parameter name -> the TrendConfig field it sets.
+TREND_FIELDS = {name: name[len("trend_"):] for name in TREND_PARAMS if name not in TREND_NODE_ONLY}
 
 #: The diagnostic node (besides config/system.yaml and config/method.yaml).
 DIAGNOSTIC_PARAMS = {
@@ -171,7 +225,7 @@ DIAGNOSTIC_PARAMS = {
                read_only=False),
     "image_method": Param(True, "run the paper's image method on every window", read_only=False),
     "gap_method": Param("auto", "J1 from the backlash gap: auto | acceleration | gap_only | anchored | angle | speed | "
-                        "none (off is accepted)", choices=GAP_METHOD_CHOICES, read_only=False),
+                        "none (off is accepted)", choices=GAP_METHODS, read_only=False),
     "hardware_id": Param("", "hardware_id of the /diagnostics statuses; empty = the resolved drive namespace",
                          read_only=False),
     "stale_after_s": Param(5.0, "STALE when no drive/window arrived for this long (steady clock), s; "
@@ -199,7 +253,7 @@ DIAGNOSTIC_PARAMS = {
     "plausible_max_ratio": Param(1.5, "J1 above this x the nominal is refused, not published", min=1.0, max=100.0,
                                  read_only=False),
     "image_min_margin": Param(1.401117, "the image method's class alone, and its disagreement as a WARN, only at "
-                              "a fused margin >= this; 0 = never (from `python -m jident_ros.evaluation.verdicts "
+                              "a fused margin >= this; 0 = never (from `python -m jident_ros.research.evaluation.verdicts "
                               "threshold`)", min=0.0, max=1e12, read_only=False),
     "library_width_tolerance": Param(0.05, "the image method is valid only with a library width within this "
                                      "fraction of the window's K2", min=0.0, max=1.0, read_only=False),
@@ -246,9 +300,10 @@ def _type_name(default) -> str:
 def markdown_table(schema: dict) -> str:
     """The declared parameters of a node as a Markdown table (docs/interfaces.md holds these, a test
     keeps them equal): name, type, default, range, whether a change at run time takes effect, description."""
-    rows = ["| parameter | type | default | range | at run time | description |", "|---|---|---|---|---|---|"]
+    rows = ["| parameter | type | default | unit | range | at run time | description |",
+            "|---|---|---|---|---|---|---|"]
     for name, p in schema.items():
         default = f"`{p.default!r}`" if p.default != "" else '`""`'
-        rows.append(f"| `{name}` | {_type_name(p.default)} | {default} | {p.range_text() or '—'} | "
-                    f"{'read-only' if p.read_only else 'settable'} | {p.description} |")
+        rows.append(f"| `{name}` | {_type_name(p.default)} | {default} | {unit_of(name, p) or '—'} | "
+                    f"{p.range_text() or '—'} | {'read-only' if p.read_only else 'settable'} | {p.description} |")
     return "\n".join(rows)

@@ -4,7 +4,7 @@
 The check of the two fixes of issue 11's mutation work (docs/mutation.md): the anchored fit's standard error was
 1/kappa ~ 11.6 times too wide, and b1 omega1 was not taken off its pre-entry anchor.  On the paper's grid (168
 cases) with white measurement noise at ``--snr`` dB (``add_measurement_noise``, seeds ``--seeds``), for the fits
-in ``--keys`` (:data:`jident_ros.evaluation.robustness.CHANNEL_SETS`, with omega1 added): the median and max |J1 error|, the median
+in ``--keys`` (:data:`jident_ros.research.evaluation.robustness.CHANNEL_SETS`, with omega1 added): the median and max |J1 error|, the median
 reported standard error, the spread (sd) of the relative error, the ratio of the two, and the share of 95 %
 intervals that cover the true J1 (a failed fit counts as not covering).
 
@@ -26,8 +26,8 @@ import time
 import numpy as np
 
 from jident_ros.config import load_system_config
-from jident_ros.evaluation.robustness import CHANNEL_SETS
 from jident_ros.identify.gap import NoGapError, estimate_inertia
+from jident_ros.research.evaluation.robustness import CHANNEL_SETS
 from jident_ros.sim import add_measurement_noise, paper_grid_cases, simulate_grid
 
 

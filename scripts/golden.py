@@ -55,36 +55,14 @@ def _jident(argv) -> str:
     return out.getvalue()
 
 
-def write_demo_recording(bag_dir: Path, system, namespace: str = "/demo", batch: int = 50, gap: int = 400) -> Path:
-    """The demo's default cases as the diagnostic node records the simulator's topics."""
-    from jident_ros.bag.writer import BagWriter
-    from jident_ros.cli.demo import DEFAULT_CASES
-    from jident_ros.cli.offline import multiarray_message
-    from jident_ros.sim import Case, simulate_grid
-    from jident_ros.stream.detector import embed_windows
-    from jident_ros.stream.layout import CASE_LABEL, DEFAULT_CHANNELS
-    cases = [Case(*c) for c in DEFAULT_CASES]
-    ws = simulate_grid(system, cases)
-    stream, entry_rows = embed_windows(ws, gap, 1.0, DEFAULT_CHANNELS)
-    per, ts = gap + len(ws.t), ws.sample_period_s
+def write_demo_recording(bag_dir: Path, system) -> Path:
+    """The demo's default cases as the diagnostic node records the simulator's topics (the offline test's writer)."""
+    sys.path.insert(0, str(REPO / "test"))
+    from test_offline import write_recording
 
-    def topic(rel):
-        return f"{namespace}/{rel}"
-    with BagWriter(bag_dir) as bag:
-        bag.add_topic(topic("drive/signals"), "std_msgs/msg/Float64MultiArray")
-        for rel in ("drive/true_inertia", "drive/backlash_width"):
-            bag.add_topic(topic(rel), "std_msgs/msg/Float64", qos="transient_local")
-        bag.add_topic(topic("drive/case"), "std_msgs/msg/Float64MultiArray", qos="transient_local")
-        for i, c in enumerate(cases):
-            t_case = int((stream[i * per, 0] - ts / 2) * 1e9)
-            bag.write(topic("drive/true_inertia"), {"data": c.inertia_kgm2}, t_case)
-            bag.write(topic("drive/backlash_width"), {"data": c.backlash_width_m}, t_case)
-            row = np.array([[i, c.inertia_kgm2, c.backlash_width_m, c.consistency_pa_sn, stream[entry_rows[i], 0]]])
-            bag.write(topic("drive/case"), multiarray_message(row, CASE_LABEL.split(",")), t_case)
-            for s in range(i * per, (i + 1) * per, batch):
-                b = stream[s:min(s + batch, (i + 1) * per)]
-                bag.write(topic("drive/signals"), multiarray_message(b, DEFAULT_CHANNELS), int(b[-1, 0] * 1e9))
-    return bag_dir
+    from jident_ros.cli.demo import DEFAULT_CASES
+    from jident_ros.sim import Case
+    return write_recording(bag_dir, system, namespace="/demo", cases=[Case(*c) for c in DEFAULT_CASES])
 
 
 def _write_csv(path: Path, data, channels) -> Path:
@@ -93,7 +71,7 @@ def _write_csv(path: Path, data, channels) -> Path:
 
 
 def _raw_csvs(work: Path, system) -> tuple:
-    from jident_ros.evaluation.raw_inputs import raw_recordings
+    from jident_ros.research.evaluation.raw_inputs import raw_recordings
     (rec,) = raw_recordings(system, (1.073,), (0.0075,), snr_db=30.0, steady_s=0.5, seed=9)
     flank = _write_csv(work / "raw_flank.csv", rec.data, rec.channels)
     keep = [i for i, c in enumerate(rec.channels) if c != "alpha2"]
@@ -103,8 +81,8 @@ def _raw_csvs(work: Path, system) -> tuple:
 
 def _second_drive(work: Path, fmt: str, directions=("forward", "reverse")) -> list:
     """One recording per direction of the second drive (J1 1.16, K2 5 mm, 30 dB) in ``fmt``."""
-    from jident_ros.second_drive.model import DriveParams
-    from jident_ros.second_drive.record import SensorConfig, build_grid, grid_cases, write_recording
+    from jident_ros.research.second_drive.model import DriveParams
+    from jident_ros.research.second_drive.record import SensorConfig, build_grid, grid_cases, write_recording
     recs = build_grid(DriveParams(), grid_cases(directions, (1.16,), (0.005,)), SensorConfig(snr_db=30.0),
                       steady_s=0.5, post_s=1.3, seed=3)
     out = work / f"second_{fmt}"

@@ -65,12 +65,14 @@ MODULES = {
     "gap": "jident_ros/identify/gap.py",
     "fusion": "jident_ros/identify/fusion.py",
     "khm": "jident_ros/method/khm.py",
+    "khm_reference": "jident_ros/research/khm_reference.py",
     "detector": "jident_ros/stream/detector.py",
 }
 TESTS = {
     "gap": ["test/test_gap_rules.py", "test/test_gap_precision.py", "test/test_gap.py", "test/test_gap_second_drive.py"],
     "fusion": ["test/test_fusion_rules.py", "test/test_gap.py"],
     "khm": ["test/test_khm_rules.py", "test/test_khm.py", "test/test_method.py", "-k", "khm"],
+    "khm_reference": ["test/test_khm_rules.py", "test/test_khm.py", "test/test_method.py", "-k", "khm"],
     "detector": ["test/test_detector_rules.py", "test/test_windowing.py"],
 }
 

@@ -1,4 +1,4 @@
-"""Pattern library from calibration recordings (jident_ros/method/calibration.py, `jident build-patterns
+"""Pattern library from calibration recordings (jident_ros/cli/calibration.py, `jident build-patterns
 --from-recordings`).  No ROS: the recordings are written with BagWriter from simulated cases, the way the
 simulator node publishes them (drive/signals batches; drive/true_inertia, drive/backlash_width, drive/case).
 
@@ -12,10 +12,7 @@ import numpy as np
 import pytest
 
 from jident_ros.bag.writer import BagWriter
-from jident_ros.cli.main import main
-from jident_ros.config import load_method_config
-from jident_ros.method import normalise as nz
-from jident_ros.method.calibration import (
+from jident_ros.cli.calibration import (
     CalibrationError,
     LabelledWindow,
     build_library_from_recordings,
@@ -24,6 +21,9 @@ from jident_ros.method.calibration import (
     pattern_window_counts,
     read_calibration_windows,
 )
+from jident_ros.cli.main import main
+from jident_ros.config import load_method_config
+from jident_ros.method import normalise as nz
 from jident_ros.method.patterns import LibraryMismatch, PatternLibrary, identify_window
 from jident_ros.method.pipeline import SIGNALS, batch_features
 from jident_ros.sim import Case

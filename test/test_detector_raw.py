@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from jident_ros.config import load_system_config
-from jident_ros.evaluation.raw_inputs import flank_detector, raw_recordings, run_detector
+from jident_ros.research.evaluation.raw_inputs import flank_detector, raw_recordings, run_detector
 from jident_ros.stream.detector import BacklashDetector, stream_batches
 from jident_ros.stream.flank import FlankDetector
 
@@ -152,7 +152,7 @@ def test_a_twist_change_beyond_min_travel_is_an_entry():
 def test_speed_step_up_on_the_second_drive_is_not_an_entry():
     """The second drive model (docs/second_drive.md) under a speed step up, 100 -> 120 rad/s: the PI drives the
     torque to its limit on the same flank; raw 2^16 encoders with offsets: no window."""
-    from jident_ros.second_drive.model import Drive, DriveParams, simulate
+    from jident_ros.research.second_drive.model import Drive, DriveParams, simulate
     p = DriveParams()
     r = simulate(Drive(p, [1.16], 100.0, [0.0625], steps=[(0.25, 20.0)]), 1.2)
     q = 2 * math.pi / 65536
@@ -181,12 +181,10 @@ def test_a_glitch_that_swallows_a_real_entry_is_counted():
     assert det.counts["swallowed_entry"] == 0
 
 
-def _diagnose(system, w, **kw):
+def _diagnose(system, w):
     from jident_ros.config import load_method_config
-    from jident_ros.identify.diagnosis import detector_arguments, diagnose_window
-    return diagnose_window(w.as_dict(), w.entry_index, w.backlash_width_m, w.wheel_radius_m, w.sample_period_s,
-                           library=None, system=system, method=load_method_config(), p=2.0, image_method=False,
-                           **{**detector_arguments(w), **kw})
+    from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig
+    return Diagnoser(system, load_method_config(), DiagnosisConfig(image_method=False)).diagnose(w)
 
 
 def test_a_missing_k2_never_blocks_the_gap_j1(system):
@@ -218,7 +216,7 @@ def test_raw_angles_are_never_read_as_zone_centred(system):
 
 
 def _signals_bag(tmp_path, rec, name="raw"):
-    from jident_ros.second_drive.record import write_signals
+    from jident_ros.research.second_drive.record import write_signals
     sig = {c: rec.data[:, j] for j, c in enumerate(rec.channels)}
     path = tmp_path / name
     write_signals(path, sig, channels=rec.channels)

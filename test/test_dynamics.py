@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 
 from jident_ros.config import load_system_config
-from jident_ros.evaluation.raw_inputs import raw_recordings, run_detector, without
 from jident_ros.identify.diagnosis import ENTRY_UNCERTAINTY_WITHOUT_A1, detector_arguments
 from jident_ros.identify.gap import NoGapError, estimate_inertia, speed_fit
+from jident_ros.research.evaluation.raw_inputs import raw_recordings, run_detector, without
 from jident_ros.stream.dynamics import DynamicsDetector, angle_entry
 from jident_ros.stream.layout import Window
 

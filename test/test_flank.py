@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from jident_ros.config import load_system_config
-from jident_ros.evaluation.raw_inputs import evaluate_condition, flank_detector, raw_recordings, run_detector
+from jident_ros.research.evaluation.raw_inputs import evaluate_condition, flank_detector, raw_recordings, run_detector
 from jident_ros.stream.detector import BacklashDetector, stream_batches
 from jident_ros.stream.flank import FlankDetector
 from jident_ros.stream.layout import FLAG_CUT_OFF, FLAG_SECOND_ENTRY, WINDOW_HEADER_1, Window, pack

@@ -1,6 +1,6 @@
 """The gap estimator on a drive we did not write (issue 12): the 'gap_only' fit and the model choice.
 
-The second drive (jident_ros.second_drive, docs/second_drive.md) leaves its flank because its speed controller
+The second drive (jident_ros.research.second_drive, docs/second_drive.md) leaves its flank because its speed controller
 swings the torque, so the joint fit's steady pre-entry torque does not hold there.  A few recordings are simulated
 in-process, clean and at 30 dB, with raw 2^16-count encoders and no K2; the flank detector cuts the windows.
 """
@@ -20,8 +20,8 @@ from jident_ros.identify.gap import (
     pre_entry_steady,
 )
 from jident_ros.identify.verdict import classes_in_interval
-from jident_ros.second_drive import record as R
-from jident_ros.second_drive.model import DriveParams
+from jident_ros.research.second_drive import record as R
+from jident_ros.research.second_drive.model import DriveParams
 from jident_ros.sim import Case, add_measurement_noise, simulate_grid
 from jident_ros.stream.detector import stream_batches
 from jident_ros.stream.flank import FlankDetector

@@ -137,7 +137,7 @@ def test_x1_png_through_matplotlib(tmp_path, scalogram):
     """The report writes X1 with matplotlib's imsave (the hand-written PNG writer is gone)."""
     from matplotlib.image import imread
 
-    from jident_ros.evaluation.report import save_intensity_png
+    from jident_ros.research.evaluation.report import save_intensity_png
     x1 = im.render_intensity(scalogram)
     path = save_intensity_png(tmp_path / "x1.png", x1, "gray")
     pixels = imread(path)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from jident_ros.config import load_system_config
-from jident_ros.evaluation.raw_inputs import flank_detector, raw_recordings, run_detector
+from jident_ros.research.evaluation.raw_inputs import flank_detector, raw_recordings, run_detector
 from jident_ros.stream.detector import stream_batches
 from jident_ros.stream.inputs import InputError, JointStateAdapter, parse_map, read_csv
 

@@ -6,8 +6,8 @@ import warnings
 import numpy as np
 import pytest
 
-from jident_ros.method import khm
-from jident_ros.method.khm import ConvergenceWarning, KHarmonicMeans, khm_objective
+from jident_ros.research import khm_reference as khm
+from jident_ros.research.khm_reference import ConvergenceWarning, KHarmonicMeans, khm_objective
 
 
 # ----------------------------------------------------------------- helpers

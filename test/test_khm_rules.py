@@ -21,7 +21,8 @@ from fractions import Fraction as F
 import numpy as np
 import pytest
 
-from jident_ros.method.khm import ConvergenceWarning, KHarmonicMeans, khm_fit_batch, khm_objective
+from jident_ros.method.khm import khm_fit_batch
+from jident_ros.research.khm_reference import ConvergenceWarning, KHarmonicMeans, khm_objective
 
 X = (F(0), F(1), F(3))
 S = (F(1, 2), F(5, 2))

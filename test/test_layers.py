@@ -27,21 +27,29 @@ ROS = OPTIONAL - {"ament_index_python", "matplotlib", "tqdm",
 ALLOWED = {
     "sim": set(),
     "stream": {"sim"},
-    "method": {"sim", "stream", "bag", "config", "resources"},
+    "method": {"sim", "stream", "resources"},
     "identify": {"sim", "stream", "method", "config", "resources"},
     "evaluation": {"sim", "stream", "method", "identify", "config", "resources", "second_drive", "vector_drive",
                    "cli"},   # cli: evaluation/zoo.py diagnoses through jident diagnose's own function
     "bag": {"sim", "stream"},
     "second_drive": set(),
+    "research": set(),          # jident_ros/research/__init__.py
+    "khm_reference": set(),
     "vector_drive": {"second_drive"},   # its writers
     "nodes": {"sim", "stream", "method", "identify", "bag", "config", "resources", "parameters"},
-    "cli": {"sim", "stream", "method", "identify", "evaluation", "bag", "nodes", "config", "resources",
-            "parameters", "second_drive"},
+    "cli": {"sim", "stream", "method", "identify", "bag", "nodes", "config", "resources", "parameters"},
+    # the `jident` command's dispatcher: every subcommand, the research ones (evaluate) too
+    "entry": {"sim", "stream", "method", "identify", "evaluation", "bag", "nodes", "config", "resources",
+              "parameters", "second_drive", "cli"},
     "config": {"sim", "method", "resources"},
     "parameters": set(),
     "resources": set(),
     "__init__": set(),
 }
+
+
+#: Modules that are a layer of their own: the `jident` entry point (dispatches every subcommand).
+ENTRY = {"jident_ros.cli.main", "jident_ros.cli.__main__"}
 
 
 def module_name(path: Path) -> str:
@@ -94,7 +102,13 @@ def _modules():
 
 
 def _layer(mod: str) -> str:
+    """The first package part below jident_ros; below jident_ros.research, the part below that (research's own
+    packages are layers of their own: evaluation, second_drive, vector_drive, khm_reference)."""
+    if mod in ENTRY:
+        return "entry"
     parts = mod.split(".")
+    if len(parts) > 2 and parts[1] == "research":
+        return parts[2]
     return parts[1] if len(parts) > 1 else "__init__"
 
 
@@ -151,5 +165,79 @@ def test_imports_at_the_top_unless_optional():
 @pytest.mark.parametrize("layer", sorted(ALLOWED))
 def test_layer_table_names_real_packages(layer):
     # a typo in ALLOWED would silently allow nothing or everything
-    assert layer == "__init__" or (PKG / layer).is_dir() or (PKG / f"{layer}.py").exists() \
-        or layer == "second_drive", layer
+    assert layer in ("__init__", "entry") or any((base / layer).is_dir() or (base / f"{layer}.py").exists()
+                                      for base in (PKG, PKG / "research")), layer
+
+
+def test_layer_table_is_acyclic():
+    # no pair of layers may import each other, directly or through others: the table is an order, no exceptions
+    seen, stack, cycles = {}, [], []
+
+    def dfs(layer):
+        seen[layer] = 1
+        stack.append(layer)
+        for other in sorted(ALLOWED.get(layer, ())):
+            if seen.get(other) == 1:
+                cycles.append(" -> ".join(stack[stack.index(other):] + [other]))
+            elif other not in seen:
+                dfs(other)
+        stack.pop()
+        seen[layer] = 2
+
+    for layer in sorted(ALLOWED):
+        if layer not in seen:
+            dfs(layer)
+    assert not cycles, "layers that import each other: " + "; ".join(cycles)
+
+
+#: What runs beside a drive: the nodes and `jident diagnose` / `trend` / `salvage` / `build-patterns`.
+#: (cli.main, the one `jident` entry point, also runs `jident evaluate`: its research imports are its own.)
+RUNTIME_ROOTS = ("jident_ros.nodes", "jident_ros.cli.offline", "jident_ros.cli.trend", "jident_ros.cli.salvage",
+                 "jident_ros.cli.calibration")
+#: Research: the evaluation, the validation drive models, the reference implementations.
+RESEARCH = "jident_ros.research"
+
+
+def runtime_closure() -> dict:
+    """{module: the module that imported it first} of every jident_ros module the runtime roots import,
+    directly or not, at the top or inside a function."""
+    mods = _modules()
+    seen = {m: None for m in mods if m == RUNTIME_ROOTS[0] or m.startswith(RUNTIME_ROOTS[0] + ".")
+            or m in RUNTIME_ROOTS[1:]}
+    todo = list(seen)
+    while todo:
+        m = todo.pop()
+        for imp, _, _ in _imports(mods[m]):
+            while imp not in mods and "." in imp:      # "from package import name": the package
+                imp = imp.rsplit(".", 1)[0]
+            if imp in mods and imp not in seen:
+                seen[imp] = m
+                todo.append(imp)
+    return seen
+
+
+def test_the_runtime_imports_no_research_code():
+    closure = runtime_closure()
+    assert set(RUNTIME_ROOTS[1:]) <= set(closure) and "jident_ros.nodes.diagnostic" in closure
+    bad = []
+    for m in closure:
+        if m == RESEARCH or m.startswith(RESEARCH + "."):
+            chain, cur = [m], closure[m]
+            while cur is not None:
+                chain.append(cur)
+                cur = closure[cur]
+            bad.append(" <- ".join(chain))
+    assert not bad, "the runtime imports research code:\n" + "\n".join(bad)
+
+
+def test_the_runtime_check_sees_a_research_import(monkeypatch):
+    # the check itself: a runtime module that imported the evaluation would be caught
+    real = _imports
+
+    def with_research(path):
+        out = real(path)
+        if path.name == "offline.py" and path.parent.name == "cli":
+            out.append(("jident_ros.research.evaluation.verdicts", 1, True))
+        return out
+    monkeypatch.setitem(globals(), "_imports", with_research)
+    assert "jident_ros.research.evaluation.verdicts" in runtime_closure()

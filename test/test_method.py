@@ -19,9 +19,10 @@ from jident_ros.config import ConfigError, load_method_config, load_system_confi
 from jident_ros.method import khm as khm_module
 from jident_ros.method import normalise as nz
 from jident_ros.method import pipeline as pl
-from jident_ros.method.khm import ConvergenceWarning, KHarmonicMeans, khm_fit_batch
+from jident_ros.method.khm import khm_fit_batch
 from jident_ros.method.patterns import LibraryMismatch, PatternLibrary, identify_window
 from jident_ros.method.pipeline import SIGNALS, MethodConfig
+from jident_ros.research.khm_reference import ConvergenceWarning, KHarmonicMeans
 from jident_ros.sim import Case, simulate_grid
 
 REPO = Path(__file__).resolve().parents[1]
@@ -656,7 +657,7 @@ def test_identify_window_load_scaled_uses_entry_index(library, windows):
 
 
 def test_library_from_features_equals_from_windows(library, windows, system, method):
-    from jident_ros.evaluation.evaluate import _pattern_order
+    from jident_ros.research.evaluation.evaluate import _pattern_order
     ps = method.p_values
     n = len(windows.cases)
     refs = np.array([pl.pre_entry_reference(windows.case(i), windows.entry_index) for i in range(n)])
@@ -676,7 +677,7 @@ def test_library_from_features_equals_from_windows(library, windows, system, met
 
 
 def test_evaluation_feature_tasks_equal_evaluate_grid(library, windows, system, method):
-    from jident_ros.evaluation.evaluate import _feature_task, evaluate_grid, grid_result
+    from jident_ros.research.evaluation.evaluate import _feature_task, evaluate_grid, grid_result
     n = len(windows.cases)
     refs = np.array([pl.pre_entry_reference(windows.case(i), windows.entry_index) for i in range(n)])
     parts = [_feature_task((windows.signals[sig], sig, method, refs, windows.entry_index)) for sig in SIGNALS]
@@ -787,7 +788,7 @@ def test_load_method_config_file(tmp_path):
 def test_equal_load_grid_equalises_the_load_and_keeps_the_pattern_runs(windows):
     """The ablation of docs/method.md: every eta_k group at the pattern group's steady load.  On the heavy-film
     profile, where the groups' loads differ by ~15 % (on the default drive by 0.015 %)."""
-    from jident_ros.evaluation.evaluate import equal_load_grid
+    from jident_ros.research.evaluation.evaluate import equal_load_grid
     system = load_system_config("heavy_film")
     g = system.grid
     # two pattern runs (they fix the line speed) and the EXTRA_CASES, at eta_k 0.0375 and 0.0125

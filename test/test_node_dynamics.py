@@ -26,8 +26,8 @@ def test_dynamics_detector_on_joint_states_without_a_load_encoder(node_env, libr
     from std_msgs.msg import Float64, Float64MultiArray
 
     from jident_ros.config import load_system_config
-    from jident_ros.evaluation.raw_inputs import raw_recordings, without
     from jident_ros.nodes.ros_io import qos_diagnostics, qos_latched, qos_signals, status_values, window_from_msg
+    from jident_ros.research.evaluation.raw_inputs import raw_recordings, without
     from jident_ros.stream.detector import stream_batches
     from jident_ros.stream.dynamics import DynamicsDetector
     system = load_system_config()

@@ -377,3 +377,51 @@ def test_interfaces_doc_holds_the_generated_parameter_tables(which):
     from jident_ros import parameters as P
     doc = (REPO / "docs" / "interfaces.md").read_text()
     assert P.markdown_table(getattr(P, which)) in doc, f"regenerate the {which} table (parameters.markdown_table)"
+
+
+def test_cli_flags_that_mirror_node_parameters_take_their_help_from_the_schema():
+    """`jident diagnose --image-min-margin ...` and `jident trend --drift-warn-pct ...`: the --help is the
+    schema's description, unit, range and default (parameters.cli_help), not a second wording."""
+    import argparse
+
+    from jident_ros import parameters as P
+    from jident_ros.cli.main import build_parser
+    from jident_ros.cli.trend import MIRRORED_FLAGS
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    mirrored = {"diagnose": ["--image-min-margin", "--plausible-min-ratio", "--plausible-max-ratio"],
+                "trend": list(MIRRORED_FLAGS)}
+    for command, flags in mirrored.items():
+        actions = {o: a for a in sub.choices[command]._actions for o in a.option_strings}
+        for flag in flags:
+            name = ("trend_" if command == "trend" else "") + flag[2:].replace("-", "_")
+            assert actions[flag].help == P.cli_help(name), flag
+            assert P.DIAGNOSTIC_PARAMS[name].description.replace("%", "%%") in actions[flag].help
+
+
+def test_trend_parameters_and_units_come_from_the_schema():
+    from jident_ros import parameters as P
+    from jident_ros.identify.trend_config import NODE_ONLY, PARAMETER_FIELDS, ZERO_IS_NONE
+    assert PARAMETER_FIELDS == P.TREND_FIELDS and NODE_ONLY == set(P.TREND_NODE_ONLY)
+    assert ZERO_IS_NONE == {P.TREND_FIELDS[n] for n, p in P.TREND_PARAMS.items() if p.zero_is_none}
+    assert P.unit_of("trend_width_limit_m") == "m" and P.unit_of("max_bag_size_bytes") == "bytes"
+    assert P.unit_of("stale_after_s") == "s" and P.unit_of("p") == "" and P.unit_of("trend_drift_warn_pct") == "%"
+
+
+def test_the_chain_config_fields_are_described_by_the_node_schema():
+    """Each field of the monitor's frozen configs (DiagnosisConfig, DetectorConfig) is a node parameter of the one
+    schema (description, unit, range, choices, run-time), or says why not; from_parameters maps them."""
+    import dataclasses
+
+    from jident_ros import parameters as P
+    from jident_ros.identify.diagnosis import DiagnosisConfig
+    from jident_ros.identify.monitor import DetectorConfig
+    for cls, schema in ((DiagnosisConfig, P.DIAGNOSTIC_PARAMS), (DetectorConfig, P.WINDOWING_PARAMS)):
+        fields = {f.name for f in dataclasses.fields(cls)}
+        assert set(cls.PARAMETERS) == fields, cls.__name__
+        for field, name in cls.PARAMETERS.items():
+            assert name is None or name in schema, (cls.__name__, field)
+    d = DiagnosisConfig.from_parameters(dict(P.DIAGNOSTIC, gap_method="none", p=3.0, image_method=True))
+    assert (d.p, d.gap_method, d.image_method) == (3.0, "off", True)
+    assert DiagnosisConfig.from_parameters(P.DIAGNOSTIC) == DiagnosisConfig()
+    w = DetectorConfig.from_parameters(dict(P.WINDOWING, gap_tolerance=2.0), "flank", ("t", "alpha1", "alpha2"))
+    assert (w.kind, w.gap_tolerance, w.channels, w.backlash_width_m) == ("flank", 2.0, ("t", "alpha1", "alpha2"), 0.005)

@@ -54,14 +54,15 @@ def windows(configs):
 
 
 def write_recording(bag_dir: Path, system, inertias=TRUE_J1, eta=0.0375, namespace="/t", batch=50, gap=400,
-                    start_time_s=1.0):
-    """Simulate the cases and write them as the diagnostic node records the simulator's topics."""
+                    start_time_s=1.0, cases=None):
+    """Simulate the cases (``cases``, else J1 ``inertias`` at K2 5 mm and ``eta``) and write them as the
+    diagnostic node records the simulator's topics (also scripts/golden.py's demo recording)."""
     from jident_ros.bag.writer import BagWriter
     from jident_ros.cli.offline import multiarray_message
     from jident_ros.sim import Case, simulate_grid
     from jident_ros.stream.detector import embed_windows
     from jident_ros.stream.layout import CASE_LABEL, DEFAULT_CHANNELS
-    cases = [Case(j, 0.005, eta) for j in inertias]
+    cases = [Case(j, 0.005, eta) for j in inertias] if cases is None else list(cases)
     ws = simulate_grid(system, cases)
     stream, entry_rows = embed_windows(ws, gap, start_time_s, DEFAULT_CHANNELS)
     per, ts = gap + len(ws.t), ws.sample_period_s
@@ -88,8 +89,18 @@ def recording(configs, tmp_path_factory):
     return write_recording(tmp_path_factory.mktemp("rec") / "run", configs[0])
 
 
+def diagnose_window(data, entry_index, backlash_width_m, wheel_radius_m, sample_period_s, *, library, system,
+                    method, p, gap_method="auto", image_method=True, policy=None, library_error="",
+                    on_estimate=None, **window):
+    """One window through a Diagnoser built for it (the former diagnose_window's arguments)."""
+    from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig, WindowInput
+    diagnoser = Diagnoser(system, method, DiagnosisConfig(p, gap_method, image_method), policy, library,
+                          library_error)
+    return diagnoser.diagnose(WindowInput(data, entry_index, backlash_width_m, wheel_radius_m, sample_period_s,
+                                          **window), on_estimate=on_estimate)
+
+
 def _diagnose(windows, i, configs, library, **kw):
-    from jident_ros.identify.diagnosis import diagnose_window
     system, method = configs
     data = kw.pop("data", None) or windows.case(i)
     return diagnose_window(data, windows.entry_index, windows.cases[i].backlash_width_m,
@@ -212,7 +223,6 @@ def test_no_gap_publishes_the_image_class_only_above_its_margin(windows, configs
     assert d.source == "image" and d.inertia_kgm2 == d.value_dict()["image_class_kgm2"] == 1.16 and d.level == OK
     assert published == [1.16] and "image method, margin inf >= image_min_margin 1.5" in d.message, d.message
     # a K2 whose nearest library width (0.005) is 10 % off: outside the domain, nothing published
-    from jident_ros.identify.diagnosis import diagnose_window
     system, method = configs
     d = diagnose_window(windows.case(0), windows.entry_index, 0.0045, system.load.wheel_radius_m,
                         windows.sample_period_s, library=library, system=system, method=method, p=2.0,
@@ -263,7 +273,6 @@ def test_diagnose_recording_finds_the_true_inertia(recording, configs, library):
         assert abs(w.inertia_kgm2 - true) / true < 0.01, (w.inertia_kgm2, true)
         assert w.diagnosis.class_kgm2 == true and w.diagnosis.source == "gap"
     # the same numbers as diagnose_window on the simulator's windows (the detector's window is the simulator's)
-    from jident_ros.identify.diagnosis import diagnose_window
     from jident_ros.sim import Case, simulate_grid
     ws = simulate_grid(configs[0], [Case(j, 0.005, 0.0375) for j in TRUE_J1])
     direct = [diagnose_window(ws.case(i), ws.entry_index, 0.005, configs[0].load.wheel_radius_m, ws.sample_period_s,

@@ -10,7 +10,7 @@ import pytest
 from jident_ros.cli.main import main as jident
 from jident_ros.cli.offline import OfflineError, diagnose_samples
 from jident_ros.config import load_system_config
-from jident_ros.evaluation.raw_inputs import raw_recordings
+from jident_ros.research.evaluation.raw_inputs import raw_recordings
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +58,7 @@ def test_csv_without_alpha2_gives_a_dynamics_window_only_with_detector_dynamics(
     """A drive without a load encoder (no alpha2, omega2, a2, v2 columns): ``--detector dynamics`` finds the entry
     from m_el and a1 on the true sample and the gap fit gives J1; the default flank detector refuses it in one line
     naming alpha2."""
-    from jident_ros.evaluation.raw_inputs import without
+    from jident_ros.research.evaluation.raw_inputs import without
     p = write(tmp_path / "motor_only.csv", without(rec, ("alpha2", "omega2", "a2", "v2")))
     assert "alpha2" not in p.read_text().splitlines()[0].split(",")
     out = tmp_path / "d.json"

@@ -2,7 +2,7 @@
 sentence changes."""
 import numpy as np
 
-from jident_ros.evaluation.report import (
+from jident_ros.research.evaluation.report import (
     sentence_ablation,
     sentence_paper_claim,
     sentence_sensor_matched,
@@ -88,7 +88,7 @@ def test_the_trust_sentence_names_the_matched_variant_only_when_it_meets_the_tar
 
 
 def test_the_width_sentence_follows_each_variant():
-    from jident_ros.evaluation.report import sentence_width_variants
+    from jident_ros.research.evaluation.report import sentence_width_variants
     ps = (2.0, 3.0, 6.0, 9.0)
     near = np.array([0.17, 0.2, 0.24, 0.23])
     s = sentence_width_variants(near, {"width_interp": np.array([0.61, 0.9, 0.86, 0.8]),

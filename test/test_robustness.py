@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from jident_ros.config import load_method_config, load_system_config
-from jident_ros.evaluation.robustness import (
+from jident_ros.method.patterns import PatternLibrary
+from jident_ros.research.evaluation.robustness import (
     CHANNEL_SETS,
     PRIMARY,
     Sweep,
@@ -12,7 +13,6 @@ from jident_ros.evaluation.robustness import (
     run_robustness,
     width_on_windows,
 )
-from jident_ros.method.patterns import PatternLibrary
 from jident_ros.sim import Case, add_measurement_noise, quantise_encoders, simulate_grid
 
 CFG = load_system_config()
@@ -106,7 +106,7 @@ def test_summaries_count_what_they_claim():
 
 
 def test_targets_fail_when_the_numbers_miss():
-    from jident_ros.evaluation.robustness import RobustnessResult
+    from jident_ros.research.evaluation.robustness import RobustnessResult
     good = _fake_sweep([0.001, 0.002], [1.16, 1.16])
     bad = _fake_sweep([0.001, 0.006], [1.16, 1.131])
     for sweep, expect in ((good, True), (bad, False)):
@@ -141,7 +141,7 @@ def test_run_robustness_tiny_and_report(library, tmp_path):
     assert "gap |J1 error|, noise-free" in names and "fused class accuracy, 30 dB grid" in names
     assert any("robustness evaluation" in m for m in log)
 
-    from jident_ros.evaluation.report_robustness import render_robustness, write_robustness_figures
+    from jident_ros.research.evaluation.report_robustness import render_robustness, write_robustness_figures
     figs = write_robustness_figures(res, tmp_path / "figures")
     assert len(figs) == 4
     for path in figs.values():

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import pywt
 
+from jident_ros.method import cwt
 from jident_ros.method import scalogram as sc
 
 N_SAMPLES = 2048  # 2**11, the paper's window
@@ -29,8 +30,8 @@ EDGE_SCALES = [0.1, 1.0, 1.5, 2.0, 3.7, 8.0, 33.3, 256.0, 1024.0]
 
 @pytest.mark.parametrize("wavelet", ["sym5", "db6"])
 def test_fft_transform_equals_direct_convolution(signals, wavelet):
-    fast = sc.cwt_classic(signals[0], EDGE_SCALES, wavelet)
-    direct = sc.cwt_classic_direct(signals[0], EDGE_SCALES, wavelet)
+    fast = cwt.cwt_classic(signals[0], EDGE_SCALES, wavelet)
+    direct = cwt.cwt_classic_direct(signals[0], EDGE_SCALES, wavelet)
     assert fast.shape == (len(EDGE_SCALES), N_SAMPLES)
     assert relative_error(fast, direct) < 1e-10
     # per scale too, so that small-scale rows are not hidden by large ones
@@ -41,22 +42,22 @@ def test_fft_transform_equals_direct_convolution(signals, wavelet):
 def test_fft_transform_equals_direct_for_odd_length_and_dyadic_scales(signals):
     x = signals[1, :1001]
     scales = sc.scales_for_reading("dyadic")
-    fast = sc.cwt_classic(x, scales, "db6")
-    assert relative_error(fast, sc.cwt_classic_direct(x, scales, "db6")) < 1e-10
+    fast = cwt.cwt_classic(x, scales, "db6")
+    assert relative_error(fast, cwt.cwt_classic_direct(x, scales, "db6")) < 1e-10
 
 
 def test_single_tap_scale_uses_matlab_two_tap_filter():
     # When a * xmax < 1, MATLAB's j has one element and is replaced by [1 1]:
     # the filter is psi_integ[0] * [1, 1] and the kept diff of the full
     # convolution is -sqrt(a) * p0 * (y[k+1] - y[k-1]) (zero outside y).
-    psi_integ, xval = sc.integrated_wavelet("mexh")  # psi_integ[0] != 0 for mexh
+    psi_integ, xval = cwt.integrated_wavelet("mexh")  # psi_integ[0] != 0 for mexh
     scale = 0.5 / xval[-1]
     y = np.random.default_rng(3).standard_normal(64)
     padded = np.concatenate([[0.0], y, [0.0]])
     expected = -np.sqrt(scale) * psi_integ[0] * (padded[2:] - padded[:-2])
     assert psi_integ[0] != 0
     tolerance = 1e-9 * np.abs(expected).max()
-    for transform in (sc.cwt_classic_direct, sc.cwt_classic):
+    for transform in (cwt.cwt_classic_direct, cwt.cwt_classic):
         coefs = transform(y, [scale], "mexh")
         assert coefs.shape == (1, y.size)
         np.testing.assert_allclose(coefs[0], expected, rtol=0, atol=tolerance)
@@ -66,34 +67,34 @@ def test_matches_pywt_cwt_for_a_continuous_wavelet(signals):
     # pywt.cwt implements the same classic algorithm for continuous wavelets:
     # an independent check of signs, filter sampling and the kept centre.
     scales = np.arange(1, 80, 3.5)
-    ours = sc.cwt_classic(signals[2], scales, "mexh", precision=10)
+    ours = cwt.cwt_classic(signals[2], scales, "mexh", precision=10)
     theirs, _ = pywt.cwt(signals[2], scales, "mexh", precision=10, method="conv")
     assert relative_error(ours, theirs) < 1e-10
 
 
 def test_batch_equals_per_signal(signals):
     scales = [1.0, 1.5, 4.0, 16.0, 512.0]
-    batch = sc.cwt_classic(signals, scales, "sym5")
+    batch = cwt.cwt_classic(signals, scales, "sym5")
     assert batch.shape == (signals.shape[0], len(scales), N_SAMPLES)
     for signal, coefs in zip(signals, batch):
-        expected = sc.cwt_classic(signal, scales, "sym5")
+        expected = cwt.cwt_classic(signal, scales, "sym5")
         np.testing.assert_allclose(coefs, expected, rtol=0, atol=1e-12)
 
 
 def test_batch_larger_than_one_chunk_equals_per_signal(signals):
     many = np.concatenate([signals] * 3)  # 15 signals: several FFT chunks
     scales = sc.scales_for_reading("dyadic")
-    batch = sc.cwt_classic(many, scales, "db6")
+    batch = cwt.cwt_classic(many, scales, "db6")
     for signal, coefs in zip(many, batch):
-        expected = sc.cwt_classic(signal, scales, "db6")
+        expected = cwt.cwt_classic(signal, scales, "db6")
         np.testing.assert_allclose(coefs, expected, rtol=0, atol=1e-12)
 
 
 def test_filter_bank_is_cached_and_read_only():
     scales = sc.scales_for_reading("dyadic")
-    bank = sc.wavelet_filter_bank("sym5", scales, n_samples=N_SAMPLES)
-    assert sc.wavelet_filter_bank("sym5", list(scales), 10, N_SAMPLES) is bank
-    assert sc.wavelet_filter_bank("sym5", scales, 12, N_SAMPLES) is not bank
+    bank = cwt.wavelet_filter_bank("sym5", scales, n_samples=N_SAMPLES)
+    assert cwt.wavelet_filter_bank("sym5", list(scales), 10, N_SAMPLES) is bank
+    assert cwt.wavelet_filter_bank("sym5", scales, 12, N_SAMPLES) is not bank
     # MATLAB: numel(0:a*xmax) taps, xmax = 9 for sym5 (support 0..2N-1)
     np.testing.assert_array_equal(bank.filter_lengths, np.floor(scales * 9) + 1)
     # every scale is in exactly one FFT group, long enough for its kept samples
@@ -110,14 +111,14 @@ def test_filter_bank_is_cached_and_read_only():
 
 def test_unsorted_and_repeated_scales_keep_their_order(signals):
     scales = [64.0, 1.0, 1024.0, 1.5, 64.0, 3.0]
-    fast = sc.cwt_classic(signals[:2], scales, "db6")
-    direct = sc.cwt_classic_direct(signals[:2], scales, "db6")
+    fast = cwt.cwt_classic(signals[:2], scales, "db6")
+    direct = cwt.cwt_classic_direct(signals[:2], scales, "db6")
     assert relative_error(fast, direct) < 1e-10
     np.testing.assert_array_equal(fast[:, 0], fast[:, 4])
 
 
 def test_scalogram_is_percentage_energy(signals):
-    coefs = sc.cwt_classic(signals, sc.scales_for_reading("dyadic"), "sym5")
+    coefs = cwt.cwt_classic(signals, sc.scales_for_reading("dyadic"), "sym5")
     energy = sc.scalogram(coefs)
     assert energy.shape == coefs.shape
     assert np.all(energy >= 0)
@@ -130,10 +131,10 @@ def test_precision_10_differs_from_pywt_default_12(signals):
     # cascade-algorithm psi differs, so the coefficients move by about 1-2 %:
     # this is why precision=10 is the default here.
     scales = sc.scales_for_reading("dyadic")
-    c10 = sc.cwt_classic(signals[0], scales, "sym5")
-    c12 = sc.cwt_classic(signals[0], scales, "sym5", precision=12)
-    assert sc.DEFAULT_PRECISION == 10
-    assert np.array_equal(sc.cwt_classic(signals[0], scales, "sym5", precision=10), c10)
+    c10 = cwt.cwt_classic(signals[0], scales, "sym5")
+    c12 = cwt.cwt_classic(signals[0], scales, "sym5", precision=12)
+    assert cwt.DEFAULT_PRECISION == 10
+    assert np.array_equal(cwt.cwt_classic(signals[0], scales, "sym5", precision=10), c10)
     assert relative_error(c12, c10) > 2e-3
 
 
@@ -143,7 +144,7 @@ def test_sinusoid_energy_peaks_at_its_pseudo_frequency_scale(wavelet, period):
     t = np.arange(N_SAMPLES)
     x = np.sin(2 * np.pi * t / period)
     scales = np.arange(1.0, 4 * period, 0.25)
-    energy = sc.scalogram(sc.cwt_classic(x, scales, wavelet))
+    energy = sc.scalogram(cwt.cwt_classic(x, scales, wavelet))
     per_scale = energy[:, 400:-400].sum(axis=1)  # away from the edges
     expected = period * pywt.central_frequency(wavelet, precision=10)
     # |C(a)|^2 = a * |Psi(a * w)|^2 * const: without the factor a the peak is
@@ -206,7 +207,7 @@ def test_wavelet_scalogram_all_readings(signals, reading, n_rows):
         (dict(precision=2.5), "precision"),
     ],
 )
-@pytest.mark.parametrize("transform", [sc.cwt_classic, sc.cwt_classic_direct])
+@pytest.mark.parametrize("transform", [cwt.cwt_classic, cwt.cwt_classic_direct])
 def test_bad_input_raises_value_error_naming_argument(transform, kwargs, argument):
     arguments = dict(signal=np.ones(16), scales=[1.0, 2.0], wavelet="sym5")
     arguments.update(kwargs)
@@ -233,7 +234,7 @@ def test_wavelet_coefficients_are_what_wavelet_scalogram_squares(signals, readin
 
 @pytest.mark.parametrize("batch", [False, True])
 def test_percentage_energy_cells_equal_the_scalogram_bit_for_bit(signals, batch):
-    coefs = sc.cwt_classic(signals if batch else signals[0], sc.scales_for_reading("dyadic"), "sym5")
+    coefs = cwt.cwt_classic(signals if batch else signals[0], sc.scales_for_reading("dyadic"), "sym5")
     full = sc.scalogram(coefs)
     rows, columns = np.array([0, 3, 9]), np.array([2, 7, 100, 2045])
     for overwrite in (False, True):
@@ -260,7 +261,7 @@ def test_percentage_energy_cells_bad_input(coefs):
 
 
 def test_kept_starts_match_the_gather_index():
-    bank = sc.wavelet_filter_bank("sym5", sc.scales_for_reading("linear"), n_samples=N_SAMPLES)
+    bank = cwt.wavelet_filter_bank("sym5", sc.scales_for_reading("linear"), n_samples=N_SAMPLES)
     for group in bank.groups:
         starts = np.array(group.kept_starts)
         expected = (np.arange(group.rows.size)[:, None] * group.fft_length + starts[:, None]

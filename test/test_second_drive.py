@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jident_ros.second_drive import model as M
-from jident_ros.second_drive import record as R
+from jident_ros.research.second_drive import model as M
+from jident_ros.research.second_drive import record as R
 
 PKG = Path(M.__file__).resolve().parent
 P = M.DriveParams()
@@ -61,7 +61,7 @@ def test_no_module_imports_our_simulator():
                 continue
             for n in names:
                 assert not (n == "jident_ros.sim" or n.startswith("jident_ros.sim.")), f"{f.name} imports {n}"
-                assert not n.startswith("jident_ros.") or n.startswith("jident_ros.second_drive"), \
+                assert not n.startswith("jident_ros.") or n.startswith("jident_ros.research.second_drive"), \
                     f"{f.name} imports product code {n}"
 
 
@@ -250,7 +250,7 @@ def test_csv_round_trips(tmp_path, recs):
 
 # ---------------------------------------------------------------------------------------------- CLI
 def test_cli_writes_recordings_and_truth(tmp_path, capsys):
-    from jident_ros.second_drive.__main__ import main
+    from jident_ros.research.second_drive.__main__ import main
     out = tmp_path / "grid"
     assert main(["--out", str(out), "--format", "csv", "--quick", "--direction", "reverse",
                  "--steady-s", "0.2", "--snr-db", "30", "--seed", "5"]) == 0
@@ -277,7 +277,7 @@ def test_cli_writes_recordings_and_truth(tmp_path, capsys):
                                        (["--encoder-counts", "-4"], "--encoder-counts"),
                                        (["--widths", "0.005,x"], "--widths"), (["--format", "hdf5"], "--format")])
 def test_cli_bad_input_one_line_exit_2(tmp_path, capsys, args, name):
-    from jident_ros.second_drive.__main__ import main
+    from jident_ros.research.second_drive.__main__ import main
     with pytest.raises(SystemExit) as e:
         main(["--out", str(tmp_path / "x")] + args)
     assert e.value.code == 2
@@ -287,7 +287,7 @@ def test_cli_bad_input_one_line_exit_2(tmp_path, capsys, args, name):
 
 
 def test_cli_bad_input_in_a_real_process_has_no_traceback(tmp_path):
-    p = subprocess.run([sys.executable, "-m", "jident_ros.second_drive", "--out", str(tmp_path / "o"),
+    p = subprocess.run([sys.executable, "-m", "jident_ros.research.second_drive", "--out", str(tmp_path / "o"),
                         "--steady-s", "-1"], capture_output=True, text=True, timeout=60)
     assert p.returncode == 2 and "Traceback" not in p.stderr
     assert p.stderr.strip().splitlines() == [p.stderr.strip()] and "--steady-s" in p.stderr and "-1" in p.stderr

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from jident_ros.config import ConfigError, load_system_config, method_config_from_dict
-from jident_ros.evaluation.evaluate import _feature_task, _pattern_order, _seed_library, run_evaluation, sensor_matched_config
 from jident_ros.method import pipeline as pl
 from jident_ros.method.patterns import (
     MATCHED_SEED_BASE,
@@ -23,6 +22,7 @@ from jident_ros.method.patterns import (
     take_windows,
 )
 from jident_ros.method.pipeline import SIGNALS, MethodConfig
+from jident_ros.research.evaluation.evaluate import _feature_task, _pattern_order, _seed_library, run_evaluation, sensor_matched_config
 from jident_ros.sim import Case, simulate_grid
 from jident_ros.sim.sensors import DEFAULT_SENSORS, apply_sensors
 

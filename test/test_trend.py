@@ -11,16 +11,6 @@ import os
 import numpy as np
 import pytest
 
-from jident_ros.evaluation.trend_simulation import (
-    detection_delays,
-    false_alarms,
-    format_targets,
-    measure_targets,
-    run_series,
-    siegmund_check,
-    simulate_series,
-    wear_rate_accuracy,
-)
 from jident_ros.identify.trend import (
     ERROR,
     OK,
@@ -33,6 +23,16 @@ from jident_ros.identify.trend import (
     cusum_arl,
     cusum_threshold_for_arl,
     siegmund_arl,
+)
+from jident_ros.research.evaluation.trend_simulation import (
+    detection_delays,
+    false_alarms,
+    format_targets,
+    measure_targets,
+    run_series,
+    siegmund_check,
+    simulate_series,
+    wear_rate_accuracy,
 )
 
 J1 = 1.16

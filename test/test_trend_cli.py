@@ -199,9 +199,9 @@ def test_trend_parameters_map_to_the_config():
 
 
 def test_trend_status_levels_messages_and_values():
-    from jident_ros.evaluation.trend_simulation import simulate_series
     from jident_ros.identify.trend import TrendConfig, TrendTracker
     from jident_ros.identify.trend_status import TREND_STATUS_NAME, trend_status
+    from jident_ros.research.evaluation.trend_simulation import simulate_series
     assert TREND_STATUS_NAME == "jident_diagnostic: trend"
     s = simulate_series(60, step_at=40, step_pct=6.0, seed=3, width_growth_m_per_window=2e-6)
     tr = TrendTracker(TrendConfig(commissioning_windows=20))
@@ -224,8 +224,8 @@ def test_trend_status_levels_messages_and_values():
 
 @pytest.mark.slow
 def test_trend_targets_quick_run():
-    """python -m jident_ros.evaluation.trend_targets --quick (about 20 s)."""
-    from jident_ros.evaluation.trend_targets import format_table, measure
+    """python -m jident_ros.research.evaluation.trend_targets --quick (about 20 s)."""
+    from jident_ros.research.evaluation.trend_targets import format_table, measure
     r = measure(seed=0, quick=True)
     assert r["detection"]["missed"] == 0 and r["detection"]["median"] <= 3
     assert r["false"]["per_10k"] <= 1.0

@@ -1,4 +1,4 @@
-"""The third validation drive (jident_ros.vector_drive, motulator): physics sanity and the recorder.
+"""The third validation drive (jident_ros.research.vector_drive, motulator): physics sanity and the recorder.
 
 Skipped, with the reason, when motulator (0.5.x API) is not installed (``pip install -e '.[zoo]'``).
 """
@@ -11,7 +11,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from jident_ros.vector_drive.model import DriveParams, coupling_torque, gaps, motor_friction, motulator_available, scenario, simulate
+from jident_ros.research.vector_drive.model import (
+    DriveParams,
+    coupling_torque,
+    gaps,
+    motor_friction,
+    motulator_available,
+    scenario,
+    simulate,
+)
 
 REASON = motulator_available()
 pytestmark = pytest.mark.skipif(REASON is not None, reason=REASON or "")
@@ -87,12 +95,12 @@ def test_torque_estimate_error_is_nonzero_but_small(step_down):
 
 
 def test_recording_quantisation_offsets_and_truth(step_down, tmp_path):
-    from jident_ros.vector_drive.record import CHANNELS, Sensors, build, decimate, write
+    from jident_ros.research.vector_drive.record import CHANNELS, Sensors, build, decimate, write
 
     # build() on the fixture's run (no second simulation): patch the cache with the decimated run
     st = decimate(step_down)
     st["motulator_version"] = step_down.motulator_version
-    import jident_ros.vector_drive.record as rec_mod
+    import jident_ros.research.vector_drive.record as rec_mod
     orig = rec_mod.simulate_cached
     rec_mod.simulate_cached = lambda *a, **k: st
     try:

@@ -1,5 +1,5 @@
 """Verdicts that never mislead (issue 12 part 2): jident_ros/identify/verdict.py through diagnose_window, and the
-threshold choice of jident_ros/evaluation/verdicts.py.  Every test that publishes nothing also checks that
+threshold choice of jident_ros/research/evaluation/verdicts.py.  Every test that publishes nothing also checks that
 ``on_estimate`` (what the diagnostic node publishes on inertia_estimate) was never called."""
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ def windows(configs):
 
 
 def _diagnose(configs, library, data, *, k2=0.005, r=None, ts=None, entry=48, **kw):
-    from jident_ros.identify.diagnosis import diagnose_window
+    from test_offline import diagnose_window
     system, method = configs
     published = []
     d = diagnose_window(data, entry, k2, system.load.wheel_radius_m if r is None else r,
@@ -119,7 +119,7 @@ def test_short_and_ragged_windows_are_refused(configs, library, windows):
 
 @pytest.mark.parametrize("seed", range(6))
 def test_random_data_publishes_nothing(configs, library, seed):
-    from jident_ros.evaluation.verdicts import random_window
+    from jident_ros.research.evaluation.verdicts import random_window
     rng = np.random.default_rng(seed)
     data, entry = random_window(rng, seed)
     d, published = _diagnose(configs, library, data, entry=entry)
@@ -213,7 +213,7 @@ def test_bad_policy_values_name_the_field(name, value, what):
 
 
 def test_threshold_is_the_smallest_margin_meeting_the_error_target():
-    from jident_ros.evaluation.verdicts import choose_image_threshold
+    from jident_ros.research.evaluation.verdicts import choose_image_threshold
     # 200 windows, margins 1.01 .. 3.0; wrong below 2.0 every other window, above 2.0 one in 150
     m = np.linspace(1.01, 3.0, 200)
     ok = np.ones(200, bool)
@@ -239,10 +239,10 @@ def test_threshold_is_the_smallest_margin_meeting_the_error_target():
 
 @pytest.mark.slow
 def test_the_default_image_min_margin_is_what_the_command_gives(configs, library):
-    """The default of image_min_margin comes from `python -m jident_ros.evaluation.verdicts threshold`
+    """The default of image_min_margin comes from `python -m jident_ros.research.evaluation.verdicts threshold`
     (rerun it after changing the drive and put its value in parameters.py, nodes.yaml, VerdictPolicy)."""
-    from jident_ros.evaluation.verdicts import choose_image_threshold, image_evaluation_set
     from jident_ros.identify.verdict import VerdictPolicy
+    from jident_ros.research.evaluation.verdicts import choose_image_threshold, image_evaluation_set
     s = image_evaluation_set(*configs, library)
     assert choose_image_threshold(s.margins, s.correct).parameter_value == pytest.approx(
         VerdictPolicy().image_min_margin, rel=1e-6)

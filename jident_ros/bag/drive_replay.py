@@ -1,7 +1,7 @@
 """A drive recording -> its backlash-entry windows, cut the way the windowing node cuts them.
 
 Shared by ``jident diagnose`` (:mod:`jident_ros.cli.offline`) and ``jident build-patterns
---from-recordings`` (:mod:`jident_ros.method.calibration`): both read the drive topics of a recording
+--from-recordings`` (:mod:`jident_ros.cli.calibration`): both read the drive topics of a recording
 (docs/interfaces.md), feed ``drive/signals`` batch after batch through the windowing node's own
 :class:`~jident_ros.stream.detector.BacklashDetector`, follow ``drive/backlash_width`` when asked, and
 look up each window's true J1 in ``drive/case`` / ``drive/true_inertia``.  The callers keep their

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from jident_ros import __version__
+from jident_ros.cli.calibration import library_from_labelled_windows, parse_labels, pattern_grid, read_recordings
 from jident_ros.cli.demo import main as demo_main
 from jident_ros.cli.drive_info import identification_lines, library_line, model_problem
 from jident_ros.cli.offline import (
@@ -33,22 +34,22 @@ from jident_ros.cli.offline import (
 from jident_ros.cli.salvage import salvage_main
 from jident_ros.cli.trend import add_scenario_arguments, add_trend_parser, cmd_simulate_scenario
 from jident_ros.config import ConfigError, load_method_config, load_system_config
-from jident_ros.evaluation.evaluate import VALIDITY_FILM_SHARES, run_evaluation
-from jident_ros.evaluation.plotting import plot_case
-from jident_ros.evaluation.report import render_markdown, write_figures, write_results_section
-from jident_ros.evaluation.report_robustness import write_robustness_figures
-from jident_ros.evaluation.robustness import run_robustness
 from jident_ros.identify.library import default_library_path, load_pattern_library
-from jident_ros.method.calibration import library_from_labelled_windows, parse_labels, pattern_grid, read_recordings
 from jident_ros.method.patterns import PatternLibrary
 from jident_ros.method.pipeline import VARIANTS
+from jident_ros.parameters import GAP_METHODS, cli_help
+from jident_ros.research.evaluation.evaluate import VALIDITY_FILM_SHARES, run_evaluation
+from jident_ros.research.evaluation.plotting import plot_case
+from jident_ros.research.evaluation.report import render_markdown, write_figures, write_results_section
+from jident_ros.research.evaluation.report_robustness import write_robustness_figures
+from jident_ros.research.evaluation.robustness import run_robustness
 from jident_ros.sim import Case, add_measurement_noise, paper_grid_cases, quantise_encoders, simulate_grid, steady_state
 from jident_ros.sim.model import Model
 from jident_ros.sim.motor import breakdown_slip, steady_state_phasors
 from jident_ros.stream.inputs import parse_map
 
-#: diagnosis.GAP_METHODS, spelled out so that `jident --help` does not import the method (test_config_cli)
-CLI_GAP_METHODS = ("auto", "acceleration", "gap_only", "anchored", "angle", "speed", "none", "off")
+#: The one list of gap methods (jident_ros/parameters.py, light: `jident --help` does not import the method)
+CLI_GAP_METHODS = GAP_METHODS
 
 
 class CliError(Exception):
@@ -396,13 +397,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--map", metavar="CH=COL[:SCALE],...",
                    help="CSV: other column names and scale factors to SI, e.g. alpha1=enc_motor:0.0000958738,t=time_ms:0.001")
     g.add_argument("--topic", help="the drive/signals or joint_states topic (default: the recording's only one)")
-    g.add_argument("--image-min-margin", type=float,
-                   help="publish the image method's class alone (and warn on its disagreement) only at a fused "
-                        "margin >= this; 0 = never (default: the diagnostic node's image_min_margin)")
-    g.add_argument("--plausible-min-ratio", type=float,
-                   help="J1 below this x the nominal is refused (default: the diagnostic node's, 0.5)")
-    g.add_argument("--plausible-max-ratio", type=float,
-                   help="J1 above this x the nominal is refused (default: the diagnostic node's, 1.5)")
+    for name in ("image_min_margin", "plausible_min_ratio", "plausible_max_ratio"):   # the node's, mirrored
+        g.add_argument("--" + name.replace("_", "-"), type=float, help=cli_help(name))
     g.add_argument("--json", metavar="OUT", help="also write every window's diagnosis to this JSON file")
     g.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     g.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")

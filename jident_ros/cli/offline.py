@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
@@ -30,17 +30,18 @@ import numpy as np
 from jident_ros.bag.drive_replay import DriveReplay, in_sample_time_order, read_drive_messages
 from jident_ros.bag.messages import deserialize
 from jident_ros.config import load_method_config, load_system_config
-from jident_ros.identify.diagnosis import GAP_METHODS, WindowDiagnosis, detector_arguments, diagnose_window
+from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig, WindowDiagnosis
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES
 from jident_ros.identify.library import default_library_path, load_pattern_library
+from jident_ros.identify.monitor import DetectorConfig, DriveMonitor, make_detector, required_channels
 from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.parameters import DIAGNOSTIC as DIAGNOSTIC_DEFAULTS
 from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
-from jident_ros.stream.detector import BacklashDetector, stream_batches
-from jident_ros.stream.dynamics import DynamicsDetector
-from jident_ros.stream.flank import DETECTORS, FlankDetector
+from jident_ros.parameters import gap_method_problem
+from jident_ros.stream.detector import stream_batches
+from jident_ros.stream.flank import DETECTORS
 from jident_ros.stream.inputs import InputError, JointStateAdapter, read_csv
-from jident_ros.stream.layout import DRIVE_TOPICS, REQUIRED_CHANNELS, SIGNALS_TOPIC, WIDTH_TOPIC, pack
+from jident_ros.stream.layout import DRIVE_TOPICS, SIGNALS_TOPIC, WIDTH_TOPIC, pack
 from jident_ros.stream.layout import topic_matches as _matches
 
 try:  # reading a `ros2 bag record` of /joint_states (any storage, any distro) needs rosbags
@@ -173,101 +174,119 @@ def _float_data(msg, topic: str) -> float:
     return v
 
 
-def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, library=None, library_path=None,
-                       build_if_missing: bool = True, gap_method: str = "auto", image_method: bool = True,
-                       backlash_width_m: Optional[float] = None, signals_topic: Optional[str] = None,
-                       channels: Optional[Sequence[str]] = None, gap_tolerance: Optional[float] = None,
-                       log: Callable[[str], Any] = lambda text: None,
-                       on_window: Optional[Callable[[OfflineWindow], Any]] = None,
-                       policy: Optional[VerdictPolicy] = None,
-                       detector: str = "auto", gear_ratio: float = 1.0) -> OfflineResult:
-    """Diagnose every backlash entry of a recording as the windowing + diagnostic nodes do.
+@dataclass(frozen=True)
+class OfflineOptions:
+    """How ``jident diagnose`` reads and diagnoses a recording (the keyword arguments of :func:`diagnose_recording`
+    and :func:`diagnose_samples`).
 
-    Parameters
-    ----------
-    path : bag directory or .mcap file
     system, method : SystemConfig / MethodConfig (default: the package's config/system.yaml, method.yaml)
     p : KHM exponent of the image method, one of ``method.p_values``
     library : a loaded PatternLibrary (else loaded from ``library_path``, default the CLI's cache path,
         built and saved there when missing and ``build_if_missing``, as the diagnostic node does)
-    gap_method : one of :data:`jident_ros.identify.diagnosis.GAP_METHODS`
+    gap_method : one of :data:`jident_ros.parameters.GAP_METHODS`
     image_method : run the paper's image method
-    backlash_width_m : K2, m; None: from drive/backlash_width messages, else the windowing node's default
-    signals_topic : the drive/signals topic to read; None: the recording's only topic ending in drive/signals
-    channels : window channels besides t (default: the windowing node's ``channels`` that the first
-        batch carries; alpha1 and alpha2 are required)
-    gap_tolerance : the detector's gap tolerance in sample periods (default: the windowing node's)
-    log : gets progress lines (library loading/building, warnings)
-    on_window : called with each :class:`OfflineWindow` as soon as it is diagnosed
-    policy : the publishing policy (default: the diagnostic node's default parameters,
-        :func:`default_policy`)
+    policy : the publishing policy (default: the diagnostic node's default parameters, :func:`default_policy`)
+    backlash_width_m : K2, m.  A drive/signals recording: None = from drive/backlash_width messages, else the
+        windowing node's default.  JointState/CSV: only (and needed) with the paper detector
+    detector : 'paper', 'flank', 'dynamics' or 'auto' (None: 'auto' for drive/signals: paper where K2 is known --
+        backlash_width_m or the recording's drive/backlash_width --, else flank, dynamics without alpha2; 'flank'
+        for JointState/CSV)
+    gear_ratio : N of the flank and dynamics detectors
+    signals_topic : drive/signals: the topic to read (None: the recording's only topic ending in drive/signals)
+    channels : drive/signals: window channels besides t (default: the windowing node's ``channels`` that the
+        first batch carries; alpha1 and alpha2 are required)
+    gap_tolerance : drive/signals: the detector's gap tolerance in sample periods (default: the windowing node's)
+    motor_joint, load_joint, imu_axis, topic : JointState: the joints, the Imu axis that is a1, the topic
+    maps : CSV: column maps (:func:`jident_ros.stream.inputs.read_csv`)
+    """
+
+    system: Any = None
+    method: Any = None
+    p: float = 2.0
+    library: Any = None
+    library_path: Any = None
+    build_if_missing: bool = True
+    gap_method: str = "auto"
+    image_method: bool = True
+    policy: Optional[VerdictPolicy] = None
+    backlash_width_m: Optional[float] = None
+    detector: Optional[str] = None
+    gear_ratio: float = 1.0
+    signals_topic: Optional[str] = None
+    channels: Optional[Sequence[str]] = None
+    gap_tolerance: Optional[float] = None
+    motor_joint: str = "motor"
+    load_joint: str = "load"
+    imu_axis: str = "x"
+    topic: Optional[str] = None
+    maps: Optional[dict] = None
+
+
+@dataclass
+class _Setup:
+    """The resolved options: configurations loaded, the diagnosis configured and checked."""
+
+    options: OfflineOptions
+    system: Any
+    method: Any
+    config: DiagnosisConfig
+    policy: VerdictPolicy
+
+    @classmethod
+    def of(cls, options: Optional[OfflineOptions], fields: dict, detector: str) -> "_Setup":
+        o = replace(options or OfflineOptions(), **fields)
+        if o.detector is None:
+            o = replace(o, detector=detector)
+        system = load_system_config() if o.system is None else o.system
+        method = load_method_config() if o.method is None else o.method
+        config, policy = _diagnosis_config(method, o.p, o.gap_method, o.image_method, o.policy)
+        return cls(o, system, method, config, policy)
+
+    def monitor(self, result: "OfflineResult", log: Callable[[str], Any], say_gap_only: bool) -> DriveMonitor:
+        """The chain without its detector (made at the first batch): the library loaded (or built) when the
+        image method is on and none was given; ``result`` gets its path and error."""
+        o, library = self.options, self.options.library
+        if o.image_method and library is None:
+            lib_path = (Path(o.library_path).expanduser() if o.library_path
+                        else default_library_path(self.system, self.method))
+            result.library_path = str(lib_path)
+            library, result.library_error = load_pattern_library(lib_path, self.system, self.method,
+                                                                 o.build_if_missing, log=log, warn=log)
+            if result.library_error and say_gap_only:
+                log(f"{result.library_error}; windows are diagnosed from the gap only (level ERROR)")
+        diagnoser = Diagnoser(self.system, self.method, self.config, self.policy, library,
+                              result.library_error or "")
+        return DriveMonitor(None, diagnoser, on_error=_internal_error)
+
+
+def diagnose_recording(path, options: Optional[OfflineOptions] = None, *,
+                       log: Callable[[str], Any] = lambda text: None,
+                       on_window: Optional[Callable[[OfflineWindow], Any]] = None, **fields) -> OfflineResult:
+    """Diagnose every backlash entry of a drive/signals recording (bag directory or .mcap file) as the
+    windowing + diagnostic nodes do.  ``options`` (:class:`OfflineOptions`), or its fields as keyword
+    arguments; ``log`` gets progress lines (library loading/building, warnings), ``on_window`` each
+    :class:`OfflineWindow` as soon as it is diagnosed.
 
     Raises :class:`OfflineError` (one line naming the field and value) on bad input.
     """
-    system = load_system_config() if system is None else system
-    method = load_method_config() if method is None else method
-    if gap_method not in GAP_METHODS:
-        raise OfflineError(f"gap_method: expected one of {', '.join(GAP_METHODS)}, got {gap_method!r}")
-    if not image_method and gap_method in ("none", "off"):
-        raise OfflineError("image_method: must be on when gap_method is none (nothing would be identified)")
-    if float(p) not in [float(q) for q in method.p_values]:
-        raise OfflineError(f"p: must be one of method.p_values {[float(q) for q in method.p_values]}, got {p!r}")
-    policy = default_policy() if policy is None else policy
-    for name, what in policy.problems():
-        raise OfflineError(f"{name}: must be {what}, got {getattr(policy, name)!r}")
-    if backlash_width_m is not None and not (math.isfinite(backlash_width_m) and backlash_width_m > 0):
-        raise OfflineError(f"backlash_width_m: must be a finite number > 0, got {backlash_width_m!r}")
+    setup = _Setup.of(options, fields, "auto")
+    o = setup.options
+    if o.backlash_width_m is not None and not (math.isfinite(o.backlash_width_m) and o.backlash_width_m > 0):
+        raise OfflineError(f"backlash_width_m: must be a finite number > 0, got {o.backlash_width_m!r}")
     notes: list = []
     messages, all_topics = read_drive_messages(path, OfflineError, note=notes.append)
-    found = sorted({t for t, _, _ in messages if _matches(t, SIGNALS_TOPIC)})
-    if signals_topic is not None:
-        if signals_topic not in found:
-            raise OfflineError(f"signals topic {signals_topic!r}: not in recording {path} "
-                               f"(drive/signals topics: {', '.join(found) or 'none'})")
-        topic = signals_topic
-    elif not found:
-        raise OfflineError(f"recording {path}: no drive/signals topic (topics: {', '.join(all_topics) or 'none'})")
-    elif len(found) > 1:
-        raise OfflineError(f"recording {path}: several drive/signals topics ({', '.join(found)}); "
-                           f"choose one with --topic")
-    else:
-        topic = found[0]
-    prefix = topic[:-len(SIGNALS_TOPIC)]
-    names = {rel: prefix + rel for rel in DRIVE_TOPICS}
+    topic = _signals_topic(path, messages, all_topics, o.signals_topic)
+    names = {rel: topic[:-len(SIGNALS_TOPIC)] + rel for rel in DRIVE_TOPICS}
     unpacked: dict = {}
     messages = in_sample_time_order([m for m in messages if m[0] in names.values()], topic, unpacked)
-
-    def decode(topic_name, msg_type, raw):
-        try:
-            return deserialize(msg_type, raw)
-        except ValueError as exc:
-            raise OfflineError(f"{topic_name}: undecodable {msg_type} message ({exc})") from None
-
-    # K2: the option, else the recording's drive/backlash_width, else the windowing node's default
-    widths = [m for m in messages if m[0] == names[WIDTH_TOPIC]]
-    if backlash_width_m is not None:
-        width, width_source = float(backlash_width_m), "option"
-    elif widths:
-        width, width_source = _float_data(decode(*widths[0]), widths[0][0]), widths[0][0]
-    else:
-        width, width_source = float(WINDOWING_DEFAULTS["backlash_width_m"]), "default"
-    follow_width = width_source not in ("option", "default")
-
+    width, width_source = _backlash_width(messages, names[WIDTH_TOPIC], o.backlash_width_m)
     result = OfflineResult(str(path), topic, width_source, notes=notes)
     for text in notes:
         log(text)
-    if image_method and library is None:
-        lib_path = Path(library_path).expanduser() if library_path else default_library_path(system, method)
-        result.library_path = str(lib_path)
-        library, result.library_error = load_pattern_library(lib_path, system, method, build_if_missing,
-                                                             log=log, warn=log)
-        if result.library_error:
-            log(f"{result.library_error}; windows are diagnosed from the gap only (level ERROR)")
-
-    ts = float(system.sampling.sample_period_s)
+    monitor = setup.monitor(result, log, say_gap_only=True)
 
     def make_detector(batch_channels, topic_name, k2):
-        kind = detector
+        kind = o.detector
         if kind == "auto":
             # the paper detector only where K2 is known (given, or the drive publishes it: zone-centred angles, our
             # simulator); any other drive/signals recording is read as raw encoder angles (issue 20)
@@ -276,28 +295,63 @@ def diagnose_recording(path, *, system=None, method=None, p: float = 2.0, librar
         result.detector = kind
         if kind != "paper":
             result.backlash_width_source = "estimated"
-        return _make_detector(system, k2, channels, batch_channels, gap_tolerance, WINDOWING_DEFAULTS, topic_name,
-                              kind, gear_ratio)
+        config = DetectorConfig(kind, k2, o.channels, o.gap_tolerance, o.gear_ratio)
+        return _make_detector(setup.system, config, batch_channels, topic_name)
 
-    replay = DriveReplay(names, width, follow_width, decode=decode, read_width=_float_data,
-                         read_truth=lambda msg, topic_name: float(msg.data), make_detector=make_detector,
-                         log=log, unpacked=unpacked)
-    diag = _window_diagnoser(system, method, p, library, gap_method, image_method, result, policy)
+    replay = DriveReplay(names, width, width_source not in ("option", "default"), decode=_decode,
+                         read_width=_float_data, read_truth=lambda msg, topic_name: float(msg.data),
+                         make_detector=make_detector, log=log, unpacked=unpacked)
+    ts = float(setup.system.sampling.sample_period_s)
     for win in replay.windows(messages):
-        _add_window(result, win, diag(win), replay.true_inertia(win.entry_time_s, ts)[0], on_window)
-    detector = replay.detector
-    if detector is None:
-        if replay.dropped_before_start:
+        _add_window(result, win, monitor.window(win).diagnosis, replay.true_inertia(win.entry_time_s, ts)[0],
+                    on_window)
+    dropped = replay.dropped_before_start
+    if replay.detector is None:
+        if dropped:
             raise OfflineError(f"recording {path}: topic {topic} holds no readable batch "
-                               f"({len(replay.dropped_before_start)} dropped: {replay.dropped_before_start[0]})")
+                               f"({len(dropped)} dropped: {dropped[0]})")
         raise OfflineError(f"recording {path}: topic {topic} holds no message")
-    if replay.dropped_before_start:
-        notes.append(f"{topic}: {len(replay.dropped_before_start)} unreadable batch(es) before the first readable "
-                     f"one dropped and counted (layout): {replay.dropped_before_start[0]}")
+    if dropped:
+        notes.append(f"{topic}: {len(dropped)} unreadable batch(es) before the first readable "
+                     f"one dropped and counted (layout): {dropped[0]}")
         log(notes[-1])
-    _finish(result, detector, log)
+    _finish(result, replay.detector, log)
     result.clock_jumps = replay.clock_jumps
     return result
+
+
+def _signals_topic(path, messages, all_topics, wanted: Optional[str]) -> str:
+    """The drive/signals topic to read: ``wanted``, else the recording's only one (OfflineError otherwise)."""
+    found = sorted({t for t, _, _ in messages if _matches(t, SIGNALS_TOPIC)})
+    if wanted is not None:
+        if wanted not in found:
+            raise OfflineError(f"signals topic {wanted!r}: not in recording {path} "
+                               f"(drive/signals topics: {', '.join(found) or 'none'})")
+        return wanted
+    if not found:
+        raise OfflineError(f"recording {path}: no drive/signals topic (topics: {', '.join(all_topics) or 'none'})")
+    if len(found) > 1:
+        raise OfflineError(f"recording {path}: several drive/signals topics ({', '.join(found)}); "
+                           f"choose one with --topic")
+    return found[0]
+
+
+def _decode(topic_name, msg_type, raw):
+    try:
+        return deserialize(msg_type, raw)
+    except ValueError as exc:
+        raise OfflineError(f"{topic_name}: undecodable {msg_type} message ({exc})") from None
+
+
+def _backlash_width(messages, width_topic: str, option: Optional[float]) -> tuple:
+    """(K2 m, its source): the option, else the recording's first drive/backlash_width (then followed), else
+    the windowing node's default."""
+    if option is not None:
+        return float(option), "option"
+    first = next((m for m in messages if m[0] == width_topic), None)
+    if first is not None:
+        return _float_data(_decode(*first), first[0]), first[0]
+    return float(WINDOWING_DEFAULTS["backlash_width_m"]), "default"
 
 
 def default_policy(**overrides) -> VerdictPolicy:
@@ -305,18 +359,22 @@ def default_policy(**overrides) -> VerdictPolicy:
     return VerdictPolicy.from_params(dict(DIAGNOSTIC_DEFAULTS, **overrides))
 
 
-def _window_diagnoser(system, method, p, library, gap_method, image_method, result, policy=None):
-    def diag(win):
-        try:
-            return diagnose_window(win.as_dict(), win.entry_index, win.backlash_width_m, win.wheel_radius_m,
-                                   win.sample_period_s, library=library, system=system, method=method, p=float(p),
-                                   gap_method=gap_method, image_method=image_method,
-                                   library_error=result.library_error or "", window_id=win.window_id,
-                                   entry_time_s=win.entry_time_s, policy=policy, **detector_arguments(win))
-        except Exception as exc:  # as the node: report the window, go on
-            return WindowDiagnosis(ERROR, f"window could not be diagnosed: internal error "
-                                          f"{type(exc).__name__}: {exc}", [])
-    return diag
+def _diagnosis_config(method, p, gap_method, image_method, policy) -> tuple:
+    """(DiagnosisConfig, VerdictPolicy) of the options; OfflineError naming the field on a bad one."""
+    problem = gap_method_problem(gap_method, image_method)
+    if problem is not None:
+        raise OfflineError(f"{problem[0]}: {problem[1]}")
+    if float(p) not in [float(q) for q in method.p_values]:
+        raise OfflineError(f"p: must be one of method.p_values {[float(q) for q in method.p_values]}, got {p!r}")
+    policy = default_policy() if policy is None else policy
+    for name, what in policy.problems():
+        raise OfflineError(f"{name}: must be {what}, got {getattr(policy, name)!r}")
+    return DiagnosisConfig(float(p), gap_method, image_method), policy
+
+
+def _internal_error(win, exc) -> WindowDiagnosis:
+    """As the node: a window whose diagnosis raised is reported, the run goes on."""
+    return WindowDiagnosis(ERROR, f"window could not be diagnosed: internal error {type(exc).__name__}: {exc}", [])
 
 
 def _add_window(result, win, d, true_j1, on_window):
@@ -343,29 +401,21 @@ def _finish(result, detector, log):
     result.dropped = {r: n for r, n in detector.counts.items() if n}
 
 
-def _make_detector(system, width, channels, batch_channels, gap_tolerance, defaults, topic_name,
-                   detector: str = "paper", gear_ratio: float = 1.0):
-    sampling = system.sampling
-    if channels is None:
-        channels = [c for c in defaults["channels"] if c in batch_channels]
-    needed = REQUIRED_CHANNELS if detector != "dynamics" else ("t", "m_el")
+def _make_detector(system, config: DetectorConfig, batch_channels, topic_name):
+    """:func:`~jident_ros.identify.monitor.make_detector` with ``config.channels`` None: the windowing node's
+    default channels that the data carry; OfflineError naming the topic and channel when a needed one is missing."""
+    if config.channels is None:
+        config = replace(config, channels=[c for c in WINDOWING_DEFAULTS["channels"] if c in batch_channels])
+    needed = required_channels(config.kind)
     missing = [c for c in needed if c not in batch_channels]
     if missing:
         raise OfflineError(f"{topic_name}: channel {missing[0]!r} missing (the data carry "
-                           f"{','.join(batch_channels)}; the {detector} detector needs {', '.join(needed)})")
-    common = dict(channels=("t",) + tuple(c for c in channels if c != "t"),
-                  samples_before_entry=sampling.samples_before_entry, samples_from_entry=sampling.samples_from_entry,
-                  gap_tolerance=defaults["gap_tolerance"] if gap_tolerance is None else gap_tolerance)
+                           f"{','.join(batch_channels)}; the {config.kind} detector needs {', '.join(needed)})")
+    config = replace(config, channels=("t",) + tuple(c for c in config.channels if c != "t"),
+                     gap_tolerance=WINDOWING_DEFAULTS["gap_tolerance"] if config.gap_tolerance is None
+                     else config.gap_tolerance)
     try:
-        if detector == "dynamics":
-            return DynamicsDetector(system.load.wheel_radius_m, sampling.sample_period_s, gear_ratio=gear_ratio,
-                                    nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2, **common)
-        if detector == "flank":
-            return FlankDetector(system.load.wheel_radius_m, sampling.sample_period_s, gear_ratio=gear_ratio,
-                                 nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2, **common)
-        if detector != "paper":
-            raise ValueError(f"detector: expected one of {', '.join(DETECTORS)}, got {detector!r}")
-        return BacklashDetector(width, system.load.wheel_radius_m, sampling.sample_period_s, **common)
+        return make_detector(system, config)
     except ValueError as exc:
         raise OfflineError(str(exc)) from None
 
@@ -417,69 +467,65 @@ def jointstate_batches(path, sample_period_s: float, motor_joint: str = "motor",
     return adapter, batches(), js[0].topic
 
 
-def diagnose_samples(path, *, system=None, method=None, p: float = 2.0, library=None, library_path=None,
-                     build_if_missing: bool = True, gap_method: str = "auto", image_method: bool = True,
-                     detector: str = "flank", backlash_width_m: Optional[float] = None, gear_ratio: float = 1.0,
-                     motor_joint: str = "motor", load_joint: str = "load", imu_axis: str = "x",
-                     topic: Optional[str] = None, maps: Optional[dict] = None,
+def diagnose_samples(path, options: Optional[OfflineOptions] = None, *,
                      log: Callable[[str], Any] = lambda text: None,
-                     on_window: Optional[Callable[[OfflineWindow], Any]] = None,
-                     policy: Optional[VerdictPolicy] = None) -> OfflineResult:
+                     on_window: Optional[Callable[[OfflineWindow], Any]] = None, **fields) -> OfflineResult:
     """Diagnose a JointState bag or a CSV file (``.csv``) as the windowing (``input: joint_states``) and
-    diagnostic nodes do.  ``detector``: "flank" (no K2; the default for real drives) or "paper"
+    diagnostic nodes do.  ``options`` (:class:`OfflineOptions`) or its fields as keyword arguments;
+    ``detector``: "flank" (no K2; the default for real drives), "dynamics" (no load encoder) or "paper"
     (inequality 1 with ``backlash_width_m``, zone-centred angles).  Raises OfflineError on bad input."""
-    system = load_system_config() if system is None else system
-    method = load_method_config() if method is None else method
-    policy = default_policy() if policy is None else policy
-    if detector not in DETECTORS:
-        raise OfflineError(f"detector: expected one of {', '.join(DETECTORS)}, got {detector!r}")
-    if detector == "paper" and backlash_width_m is None:
-        raise OfflineError("backlash_width_m: the paper detector (inequality 1) needs K2 (--backlash-width-m)")
-    if detector in ("flank", "dynamics") and backlash_width_m is not None:
-        raise OfflineError("backlash_width_m: only for --detector paper (the flank and dynamics detectors need no K2)")
-    if not (math.isfinite(gear_ratio) and gear_ratio > 0):
-        raise OfflineError(f"gear_ratio: must be a finite number > 0, got {gear_ratio!r}")
-    if float(p) not in [float(q) for q in method.p_values]:
-        raise OfflineError(f"p: must be one of method.p_values {[float(q) for q in method.p_values]}, got {p!r}")
-    ts = float(system.sampling.sample_period_s)
+    setup = _Setup.of(options, fields, "flank")
+    o = setup.options
+    _check_sample_options(o)
+    ts = float(setup.system.sampling.sample_period_s)
     path = Path(path)
     adapter = None
     try:
         if path.suffix.lower() == ".csv":
-            data, channels, ignored = read_csv(path, maps)
+            data, channels, ignored = read_csv(path, o.maps)
             if ignored:
                 log(f"{path}: columns ignored (not channels): {', '.join(ignored)}")
             source, batches = str(path), ((b, channels) for b in stream_batches(data, 50))
         else:
-            adapter, batches, source = jointstate_batches(path, ts, motor_joint, load_joint, imu_axis, topic)
+            adapter, batches, source = jointstate_batches(path, ts, o.motor_joint, o.load_joint, o.imu_axis, o.topic)
     except InputError as exc:
         raise OfflineError(str(exc)) from None
-    result = OfflineResult(str(path), source, "estimated" if detector != "paper" else "option", detector=detector)
-    if image_method and library is None:
-        lib_path = Path(library_path).expanduser() if library_path else default_library_path(system, method)
-        result.library_path = str(lib_path)
-        library, result.library_error = load_pattern_library(lib_path, system, method, build_if_missing,
-                                                             log=log, warn=log)
-    diag = _window_diagnoser(system, method, p, library, gap_method, image_method, result, policy)
-    det = None
+    result = OfflineResult(str(path), source, "estimated" if o.detector != "paper" else "option",
+                           detector=o.detector)
+    monitor = setup.monitor(result, log, say_gap_only=False)
     for arr, channels in batches:
-        if det is None:
-            det = _make_detector(system, backlash_width_m, None, channels, None, WINDOWING_DEFAULTS, source,
-                                 detector, gear_ratio)
-        for ev in det.push(arr, channels):
-            if ev.kind == "window":
-                _add_window(result, ev.window, diag(ev.window), None, on_window)
-    if det is None:
+        if monitor.detector is None:
+            config = DetectorConfig(o.detector, o.backlash_width_m, None, None, o.gear_ratio)
+            monitor.detector = _make_detector(setup.system, config, channels, source)
+        for r in monitor.feed(arr, channels):
+            _add_window(result, r.window, r.diagnosis, None, on_window)
+    if monitor.detector is None:
         raise OfflineError(f"recording {path}: no sample")
-    _finish(result, det, log)
+    _finish(result, monitor.detector, log)
     if adapter is not None:
-        result.jitter = adapter.jitter()
-        result.dropped.update({f"jointstate.{k}": v for k, v in adapter.counts.items()
-                               if v and k in ("missing_joint", "imu_unmatched")})
-        if result.jitter.get("periods") and not result.jitter["period_matches"]:
-            log(f"{source}: stamp period {result.jitter['median_period_s']:.6g} s (median) does not match "
-                f"sampling.sample_period_s {ts:g} s")
+        _jointstate_counts(result, adapter, source, ts, log)
     return result
+
+
+def _check_sample_options(o: OfflineOptions) -> None:
+    if o.detector not in DETECTORS:
+        raise OfflineError(f"detector: expected one of {', '.join(DETECTORS)}, got {o.detector!r}")
+    if o.detector == "paper" and o.backlash_width_m is None:
+        raise OfflineError("backlash_width_m: the paper detector (inequality 1) needs K2 (--backlash-width-m)")
+    if o.detector in ("flank", "dynamics") and o.backlash_width_m is not None:
+        raise OfflineError("backlash_width_m: only for --detector paper (the flank and dynamics detectors need no K2)")
+    if not (math.isfinite(o.gear_ratio) and o.gear_ratio > 0):
+        raise OfflineError(f"gear_ratio: must be a finite number > 0, got {o.gear_ratio!r}")
+
+
+def _jointstate_counts(result, adapter, source, ts, log) -> None:
+    """The JointState adapter's stamp jitter and drops into the result (a stamp period off T_s is said)."""
+    result.jitter = adapter.jitter()
+    result.dropped.update({f"jointstate.{k}": v for k, v in adapter.counts.items()
+                           if v and k in ("missing_joint", "imu_unmatched")})
+    if result.jitter.get("periods") and not result.jitter["period_matches"]:
+        log(f"{source}: stamp period {result.jitter['median_period_s']:.6g} s (median) does not match "
+            f"sampling.sample_period_s {ts:g} s")
 
 
 # --------------------------------------------------------------------------- output
@@ -529,6 +575,6 @@ def write_json(result: OfflineResult, out) -> Path:
     return out
 
 
-__all__ = ["OfflineError", "OfflineResult", "OfflineWindow", "default_policy", "diagnose_recording",
+__all__ = ["OfflineError", "OfflineOptions", "OfflineResult", "OfflineWindow", "default_policy", "diagnose_recording",
            "diagnose_samples", "format_window_line", "jointstate_batches",
            "multiarray_message", "summary_line", "write_json", "TABLE_HEADER"]

@@ -47,6 +47,7 @@ from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.identify.trend import SECONDS_PER_DAY, TrendConfig, TrendStateError, TrendTracker
 from jident_ros.identify.trend_status import WIDTH_SOURCES, Z95, trend_inputs
+from jident_ros.parameters import cli_help
 from jident_ros.stream.flank import DETECTORS
 
 CSV_COLUMNS = ("time_s", "recording", "window_id", "inertia_kgm2", "inertia_se_kgm2", "inertia_ci_low_kgm2",
@@ -388,6 +389,10 @@ def format_summary(run: TrendRun, config: TrendConfig) -> str:
     return "\n".join(lines)
 
 
+#: The flags of `jident trend` that mirror the diagnostic node's trend_* parameters (their --help from the schema).
+MIRRORED_FLAGS = ("--commissioning-windows", "--drift-warn-pct", "--drift-alarm-pct", "--width-limit-m")
+
+
 def add_trend_parser(sub) -> None:
     """Register ``jident trend`` on the main parser's subparsers."""
     g = sub.add_parser("trend", help="trend of J1 and the backlash width over many recordings (diagnose every "
@@ -396,14 +401,9 @@ def add_trend_parser(sub) -> None:
     g.add_argument("--out", required=True, metavar="DIR", help="directory for trend.csv and trend.png")
     g.add_argument("--state", metavar="FILE", help="resume from this tracker state when it exists and save the "
                    "state to it at the end (atomic write)")
-    g.add_argument("--commissioning-windows", type=_count("--commissioning-windows", 2),
-                   help="windows that learn the baseline (default 20)")
-    g.add_argument("--drift-warn-pct", type=_finite_float("--drift-warn-pct"),
-                   help="J1 drift from the baseline giving WARN, %% (default 2)")
-    g.add_argument("--drift-alarm-pct", type=_finite_float("--drift-alarm-pct"),
-                   help="J1 drift giving ERROR, %% (default 5)")
-    g.add_argument("--width-limit-m", type=_finite_float("--width-limit-m"),
-                   help="backlash width limit (ERROR beyond; time to it projected), m (default 0.012)")
+    for flag, parse in ((MIRRORED_FLAGS[0], _count("--commissioning-windows", 2)),
+                        *((f, _finite_float(f)) for f in MIRRORED_FLAGS[1:])):    # the node's trend_*, mirrored
+        g.add_argument(flag, type=parse, help=cli_help("trend_" + flag[2:].replace("-", "_")))
     g.add_argument("--p", type=_finite_float("--p"), default=2.0, help="KHM exponent of the image method (default 2)")
     g.add_argument("--gap-method", choices=("auto", "acceleration", "anchored", "angle", "speed"), default="auto",
                    help="gap estimator (default auto, as jident diagnose)")

@@ -54,11 +54,7 @@ from jident_ros.identify.verdict import (
 )
 from jident_ros.method.patterns import Identification, PatternLibrary, identify_window
 from jident_ros.method.pipeline import SIGNALS
-
-#: Gap estimators: ``auto`` (acceleration fit when a1 is there, else speed), ``acceleration``, ``speed``, ``off``.
-#: ``none`` (preferred) and ``off`` both mean: no gap estimate.
-GAP_METHODS = ("auto", "acceleration", "gap_only", "anchored", "angle", "speed", "none", "off")
-NO_GAP = ("none", "off")
+from jident_ros.parameters import GAP_METHODS, NO_GAP, gap_method_problem
 
 
 @dataclass
@@ -121,68 +117,138 @@ def _finite_or_nan(v) -> float:
     return x
 
 
-def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
-                    sample_period_s: float, *, library: Optional[PatternLibrary], system, method, p: float,
-                    gap_method: str = "auto", image_method: bool = True, nominal_kgm2: Optional[float] = None,
-                    library_error: str = "", window_id: Optional[int] = None,
-                    entry_time_s: Optional[float] = None,
-                    on_estimate: Optional[Callable[[float], Any]] = None,
-                    started_at: Optional[float] = None,
-                    policy: Optional[VerdictPolicy] = None, recontact_index: Optional[int] = None,
-                    width_estimate: Optional[WidthEstimate] = None,
-                    entry_uncertainty_samples: int = 0, backlash_width_unknown: bool = False) -> WindowDiagnosis:
-    """Diagnose one window (see the module docstring).
+@dataclass(frozen=True)
+class DiagnosisConfig:
+    """How every window is diagnosed (the diagnostic node's ``p``, ``gap_method``, ``image_method``).
 
-    Parameters
-    ----------
-    window_data : dict of 1-D arrays, one per channel (``t``, ``alpha1``, ``alpha2`` rad, ``a1`` m/s^2,
-        ``m_el`` N m, ``omega1`` rad/s, ``a2`` m/s^2, ``v2`` m/s, ...), all of the window's length
+    p : KHM exponent of the image method, one of the library's p values
+    gap_method : one of :data:`GAP_METHODS` (``none``/``off``: no gap estimate)
+    image_method : run the paper's image method
+    nominal_kgm2 : nominal J1, kg m^2 (None: ``system.motor.nominal_inertia_kgm2``)
+    """
+
+    p: float = 2.0
+    gap_method: str = "auto"
+    image_method: bool = True
+    nominal_kgm2: Optional[float] = None
+
+    #: The node parameter (jident_ros/parameters.py, DIAGNOSTIC_PARAMS) that describes each field -- its
+    #: description, unit, range, choices and whether it changes at run time; None: not a node parameter.
+    PARAMETERS = {"p": "p", "gap_method": "gap_method", "image_method": "image_method",
+                  "nominal_kgm2": None}     # nominal_kgm2: system.motor.nominal_inertia_kgm2 (config/system.yaml)
+
+    @classmethod
+    def from_parameters(cls, params, nominal_kgm2: Optional[float] = None) -> "DiagnosisConfig":
+        """From the diagnostic node's parameters (``gap_method`` ``off`` and ``none`` both mean no gap)."""
+        gap_method = "off" if params["gap_method"] in NO_GAP else params["gap_method"]
+        return cls(float(params["p"]), gap_method, bool(params["image_method"]), nominal_kgm2)
+
+    def check(self) -> None:
+        """ValueError naming the field (the rules of :func:`jident_ros.parameters.gap_method_problem`)."""
+        problem = gap_method_problem(self.gap_method, self.image_method)
+        if problem is not None:
+            raise ValueError(f"{problem[0]}: {problem[1]}")
+
+
+@dataclass(frozen=True)
+class WindowInput:
+    """One window as the diagnosis reads it.
+
+    data : dict of 1-D arrays, one per channel (``t``, ``alpha1``, ``alpha2`` rad, ``a1`` m/s^2, ``m_el`` N m,
+        ``omega1`` rad/s, ``a2`` m/s^2, ``v2`` m/s, ...), all of the window's length
     entry_index : row of the backlash-zone entry sample (48)
     backlash_width_m : K2 the detector used, m (picks the library width, bounds the gap)
     wheel_radius_m : r of inequality (1), m
     sample_period_s : T_s, s
-    library : the pattern library, or None (no image method; ``library_error`` says why)
-    system, method : SystemConfig and MethodConfig (``system.motor.bearing_friction_nms_per_rad`` = b1
-        of the gap fit; classes K1 from the library, else ``system.grid.inertia_classes_kgm2``)
-    p : KHM exponent of the image method, one of the library's p values
-    gap_method : one of :data:`GAP_METHODS`
-    image_method : run the paper's image method
-    nominal_kgm2 : nominal J1, kg m^2 (default ``system.motor.nominal_inertia_kgm2``)
-    library_error : why ``library`` is None, for the status (default "no pattern library")
     window_id, entry_time_s : reported in the status (entry_time_s defaults to t at the entry sample)
-    on_estimate : called with the published J1 (kg m^2) as soon as it is known: right after the gap
-        fit when its estimate is accepted, else after the image method when its class is trusted;
-        never when nothing is published
-    started_at : ``time.perf_counter()`` when the window arrived (default: now); ``estimate_latency_ms``
-        and ``processing_ms`` are measured from it
+    recontact_index, width_estimate : from a flank-detector window (raw encoder angles, no K2): the gap ends at
+        its re-contact row and its K2 estimate is reported instead of one from zone-centred angles
+    entry_uncertainty_samples : the entry row is known to +- this many samples (a dynamics-detector window
+        without a1): the gap fit's uncertainty takes it in
+    backlash_width_unknown : K2 is not known (a dynamics-detector window without a load encoder: no flanks to
+        measure): a NaN ``backlash_width_m`` is then accepted; the gap fit runs without it, the image method
+        (which picks its library width by K2) is not run and the status says so
+    """
+
+    data: dict
+    entry_index: int
+    backlash_width_m: float
+    wheel_radius_m: float
+    sample_period_s: float
+    entry_uncertainty_samples: int = 0
+    window_id: Optional[int] = None
+    backlash_width_unknown: bool = False
+    entry_time_s: Optional[float] = None
+    recontact_index: Optional[int] = None
+    width_estimate: Optional[WidthEstimate] = None
+
+    @classmethod
+    def from_window(cls, window) -> "WindowInput":
+        """A captured :class:`~jident_ros.stream.layout.Window` (any detector: :func:`detector_arguments`)."""
+        return cls(window.as_dict(), window.entry_index, window.backlash_width_m, window.wheel_radius_m,
+                   window.sample_period_s, window_id=window.window_id, entry_time_s=window.entry_time_s,
+                   **detector_arguments(window))
+
+
+class Diagnoser:
+    """The per-window diagnosis, configured once (module docstring): ``diagnose(window) -> WindowDiagnosis``.
+
+    Parameters
+    ----------
+    system, method : SystemConfig and MethodConfig (``system.motor.bearing_friction_nms_per_rad`` = b1 of the
+        gap fit; classes K1 from the library, else ``system.grid.inertia_classes_kgm2``)
+    config : :class:`DiagnosisConfig` (p, gap method, image method, nominal J1)
     policy : the publishing policy (default :class:`~jident_ros.identify.verdict.VerdictPolicy()`, the
         diagnostic node's default parameters)
-    recontact_index, width_estimate : from a flank-detector window (raw encoder angles, no K2): the gap
-        ends at its re-contact row and its K2 estimate is reported instead of one from zone-centred angles
-        (:func:`detector_arguments`)
-    entry_uncertainty_samples : the entry row is known to +- this many samples (a dynamics-detector window
-        without a1, :func:`detector_arguments`): the gap fit's uncertainty takes it in
-    backlash_width_unknown : K2 is not known (a dynamics-detector window without a load encoder: no flanks to
-        measure, :func:`detector_arguments`): a NaN ``backlash_width_m`` is then accepted; the gap fit runs
-        without it, the image method (which picks its library width by K2) is not run and the status says so
+    library : the pattern library, or None (no image method; ``library_error`` says why)
+    library_error : why ``library`` is None, for the status (default "no pattern library")
     """
-    t0 = time.perf_counter() if started_at is None else float(started_at)
-    if gap_method not in GAP_METHODS:
-        raise ValueError(f"gap_method: expected one of {', '.join(GAP_METHODS)}, got {gap_method!r}")
-    if not image_method and gap_method in NO_GAP:
-        raise ValueError("image_method: must be true when gap_method is off (nothing would be identified)")
-    policy = VerdictPolicy() if policy is None else policy
-    policy.check()
-    nominal = float(system.motor.nominal_inertia_kgm2 if nominal_kgm2 is None else nominal_kgm2)
-    classes = tuple(float(c) for c in (library.classes_kgm2 if library is not None
-                                       else system.grid.inertia_classes_kgm2))
-    vals: list = []
-    if window_id is not None:
-        vals.append(("window_id", int(window_id)))
-    problems: list = []
 
-    def finish(level, status, text, j1=None, source=None, cls=None, **kw):
+    def __init__(self, system, method, config: DiagnosisConfig = DiagnosisConfig(),
+                 policy: Optional[VerdictPolicy] = None, library: Optional[PatternLibrary] = None,
+                 library_error: str = ""):
+        config.check()
+        self.policy = VerdictPolicy() if policy is None else policy
+        self.policy.check()
+        self.system, self.method, self.config = system, method, config
+        self.library, self.library_error = library, library_error
+        self.nominal = float(system.motor.nominal_inertia_kgm2 if config.nominal_kgm2 is None
+                             else config.nominal_kgm2)
+        self.classes = tuple(float(c) for c in (library.classes_kgm2 if library is not None
+                                                else system.grid.inertia_classes_kgm2))
+
+    def diagnose(self, window, *, on_estimate: Optional[Callable[[float], Any]] = None,
+                 started_at: Optional[float] = None) -> WindowDiagnosis:
+        """Diagnose one window: a :class:`WindowInput` or a captured :class:`~jident_ros.stream.layout.Window`.
+
+        on_estimate : called with the published J1 (kg m^2) as soon as it is known: right after the gap fit when
+            its estimate is accepted, else after the image method when its class is trusted; never when nothing
+            is published
+        started_at : ``time.perf_counter()`` when the window arrived (default: now); ``estimate_latency_ms``
+            and ``processing_ms`` are measured from it
+        """
+        win = window if isinstance(window, WindowInput) else WindowInput.from_window(window)
+        return _WindowRun(self, win, on_estimate, started_at).run()
+
+
+class _WindowRun:
+    """One window through the steps 0-3 of the module docstring (the state they share)."""
+
+    def __init__(self, diagnoser: Diagnoser, win: WindowInput, on_estimate, started_at):
+        self.t0 = time.perf_counter() if started_at is None else float(started_at)
+        self.dg, self.win, self.on_estimate = diagnoser, win, on_estimate
+        self.vals: list = [] if win.window_id is None else [("window_id", int(win.window_id))]
+        self.problems: list = []
+        self.latency_ms = None
+        self.gap, self.gap_reason, self.width, self.recontact, self.decision = None, "", None, None, None
+        self.idn, self.image_cls, self.in_domain, self.domain_reason = None, None, False, ""
+        k2 = win.backlash_width_m
+        self.k2_unknown = bool(win.backlash_width_unknown) and isinstance(k2, float) and math.isnan(k2)
+
+    # ------------------------------------------------------------------ helpers
+    def finish(self, level, status, text, j1=None, source=None, cls=None, **kw):
         """The WindowDiagnosis with the head key/values in front."""
+        nominal = self.dg.nominal
         refused = kw.pop("refused_reason", None)
         head = [("status", status)]
         if refused:
@@ -192,147 +258,210 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
                  ("estimate_source", source or "none"), ("nominal_kgm2", nominal),
                  ("deviation_percent", math.nan if cls is None else (cls - nominal) / nominal * 100.0)]
         tail = list(kw.pop("tail", []))
-        if problems:
-            tail.append(("problems", "; ".join(problems)))
-        return WindowDiagnosis(level, text, head + vals + tail, j1, source, cls, problems=problems,
+        if self.problems:
+            tail.append(("problems", "; ".join(self.problems)))
+        return WindowDiagnosis(level, text, head + self.vals + tail, j1, source, cls, problems=self.problems,
                                status=status, refused_reason=refused, **kw)
 
-    # 0. the input
-    k2_unknown = bool(backlash_width_unknown) and isinstance(backlash_width_m, float) and math.isnan(backlash_width_m)
-    refusal = input_refusal(window_data, entry_index, backlash_width_m, wheel_radius_m, sample_period_s,
-                            system=system, policy=policy, nominal_kgm2=nominal, width_unknown=k2_unknown)
-    if entry_time_s is None and refusal is None and "t" in window_data:
-        entry_time_s = float(np.asarray(window_data["t"], float)[entry_index])
-    if entry_time_s is not None:
-        vals.append(("entry_time_s", _finite_or_nan(entry_time_s)))
-    vals += [("backlash_width_m", _finite_or_nan(backlash_width_m)), ("p", float(p))]
-    if refusal is not None:
-        problems.append(refusal)
-        return finish(ERROR, "refused", f"window refused: {refusal}", refused_reason=refusal)
-    band = policy.band_kgm2(nominal)
-    vals.append(("plausible_band_kgm2", list(band)))
-    latency_ms = None
+    def publish(self, j1):
+        if self.on_estimate is not None:
+            self.on_estimate(j1)
+        self.latency_ms = (time.perf_counter() - self.t0) * 1e3
 
-    def publish(j1):
-        nonlocal latency_ms
-        if on_estimate is not None:
-            on_estimate(j1)
-        latency_ms = (time.perf_counter() - t0) * 1e3
+    def timing(self):
+        return [("estimate_latency_ms", math.nan if self.latency_ms is None else self.latency_ms),
+                ("processing_ms", (time.perf_counter() - self.t0) * 1e3)]
 
-    # 1. the gap: fast; published first when the policy accepts it
-    gap, gap_reason, width, recontact, decision = None, "", None, None, None
-    if gap_method not in NO_GAP:
+    # ------------------------------------------------------------------ the steps
+    def run(self) -> WindowDiagnosis:
+        refusal = self.check_input()
+        if refusal is not None:
+            self.problems.append(refusal)
+            return self.finish(ERROR, "refused", f"window refused: {refusal}", refused_reason=refusal)
+        self.vals.append(("plausible_band_kgm2", list(self.dg.policy.band_kgm2(self.dg.nominal))))
+        if self.dg.config.gap_method not in NO_GAP:
+            self.gap_step()
+        else:
+            self.gap_reason = "gap method off"
+        self.image_step()
+        return self.verdict_step()
+
+    def check_input(self):
+        """0. the input: the refusal (one line) or None; the entry time, K2 and p go to the values."""
+        w, dg = self.win, self.dg
+        refusal = input_refusal(w.data, w.entry_index, w.backlash_width_m, w.wheel_radius_m, w.sample_period_s,
+                                system=dg.system, policy=dg.policy, nominal_kgm2=dg.nominal,
+                                width_unknown=self.k2_unknown)
+        entry_time_s = w.entry_time_s
+        if entry_time_s is None and refusal is None and "t" in w.data:
+            entry_time_s = float(np.asarray(w.data["t"], float)[w.entry_index])
+        if entry_time_s is not None:
+            self.vals.append(("entry_time_s", _finite_or_nan(entry_time_s)))
+        self.vals += [("backlash_width_m", _finite_or_nan(w.backlash_width_m)), ("p", float(dg.config.p))]
+        return refusal
+
+    def gap_step(self):
+        """1. the gap: fast; published first when the policy accepts it."""
+        w, dg = self.win, self.dg
+        method = dg.config.gap_method
+        # a detector window (its own K2, or none) holds raw encoder angles: the gap interval comes from the
+        # detector's re-contact row or the dynamics, never from |alpha1 - alpha2| < K2/r (issue 20)
+        raw_angles = w.width_estimate is not None or self.k2_unknown
+        data = {k: v for k, v in w.data.items() if k != "alpha2"} if raw_angles else w.data
         try:
-            # a detector window (its own K2, or none) holds raw encoder angles: the gap interval comes from the
-            # detector's re-contact row or the dynamics, never from |alpha1 - alpha2| < K2/r
-            raw_angles = width_estimate is not None or k2_unknown
-            gap_window = {k: v for k, v in window_data.items() if k != "alpha2"} if raw_angles else window_data
-            gap = estimate_inertia(gap_window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s,
-                                   method=None if gap_method == "auto" else gap_method,
-                                   bearing_friction_nms_per_rad=system.motor.bearing_friction_nms_per_rad,
-                                   recontact_index=recontact_index,
-                                   entry_uncertainty_samples=entry_uncertainty_samples)
+            self.gap = estimate_inertia(data, w.entry_index, w.backlash_width_m, w.wheel_radius_m,
+                                        w.sample_period_s, method=None if method == "auto" else method,
+                                        bearing_friction_nms_per_rad=dg.system.motor.bearing_friction_nms_per_rad,
+                                        recontact_index=w.recontact_index,
+                                        entry_uncertainty_samples=w.entry_uncertainty_samples)
         except NoGapError as exc:
-            gap_reason = str(exc)
-            problems.append(f"gap: {exc}")
+            self.gap_reason = str(exc)
+            self.problems.append(f"gap: {exc}")
+        self.recontact_step()
+        if self.gap is not None:
+            self.decide_gap()
+
+    def recontact_step(self):
+        w, gap = self.win, self.gap
         # K2 bounded the gap (or was blamed): checked against zone-centred angles only for a window whose K2 was
         # given (paper detector); a flank window's K2 was measured by its detector on the offset-free relative
         # angle alpha1 - N alpha2 at its re-contact row (issue 20: raw angles read here gave 'r|alpha1 - alpha2|
         # = 25 m')
-        if not k2_unknown and width_estimate is None and (gap is None or gap.interval == "angles"):
+        if not self.k2_unknown and w.width_estimate is None and (gap is None or gap.interval == "angles"):
             try:
-                recontact = recontact_check(window_data, entry_index, backlash_width_m, wheel_radius_m)
+                self.recontact = recontact_check(w.data, w.entry_index, w.backlash_width_m, w.wheel_radius_m)
             except NoGapError as exc:
-                vals.append(("width_consistent", f"unknown: {exc}"))
-        if recontact is not None:
-            vals += [("width_consistent", recontact.consistent), ("recontact_width_m", recontact.width_m),
-                     ("recontact_width_range_m", list(recontact.range_m)), ("recontact_signal", recontact.signal)]
-            if gap is None and not recontact.consistent:
-                problems.append(width_disagreement(recontact, backlash_width_m))
-        if gap is not None:
-            decision = decide_gap(gap, classes, nominal, policy, recontact, backlash_width_m)
-            if decision.status == "accepted":
-                publish(gap.inertia_kgm2)
-            vals += [("gap_j1_kgm2", gap.inertia_kgm2), ("gap_ci95_kgm2", list(gap.ci95_kgm2)),
-                     ("gap_std_error_kgm2", gap.std_error_kgm2), ("gap_samples", gap.n_samples),
-                     ("gap_fit", gap.method), ("gap_model_choice", gap.model_choice or "given"),
-                     ("gap_interval", gap.interval),
-                     ("gap_residual_rms", gap.residual_rms), ("gap_model_error_kgm2", gap.model_error_kgm2),
-                     ("gap_classes_in_ci95_kgm2", list(decision.classes_in_ci)), ("gap_decision", decision.status)]
-            if width_estimate is not None:
-                width = width_estimate
-            elif "alpha1" in window_data and "alpha2" in window_data and not k2_unknown:
-                try:
-                    width = estimate_backlash_width(window_data, gap.gap_end, wheel_radius_m, sample_period_s,
-                                                    gap.inertia_kgm2)
-                except NoGapError as exc:
-                    problems.append(f"backlash width estimate: {exc}")
-            if width is not None:
-                vals += [("backlash_width_estimate_m", width.width_m),
-                         ("backlash_width_estimate_std_m", width.std_m),
-                         ("backlash_width_estimate_method", width.method)]
-    else:
-        gap_reason = "gap method off"
-    # 2. the image method, and whether its answer is trusted
-    idn, image_cls, in_domain, domain_reason = None, None, False, ""
-    if image_method and k2_unknown:
-        vals.append(("image_method", "not run: K2 unknown (no load encoder, or no traversal in this window), no "
-                                     "library width to compare with"))
-    elif image_method:
-        if library is None and (library_error or "").startswith(IMAGE_METHOD_OFF):
-            vals.append(("image_method", "off: no pattern library for this drive"))   # said once per run, not here
-        elif library is None:
-            problems.append(library_error or "no pattern library")
-        else:
-            signals = [s for s in SIGNALS if s in window_data]
-            if not signals:
-                problems.append(f"image method: the window has none of {', '.join(SIGNALS)}")
-            else:
-                try:
-                    sign = rotation_sign(window_data, entry_index)
-                    if sign < 0:    # the library is built forward: a reverse window is mirrored first
-                        vals.append(("image_rotation", "reverse (mirrored)"))
-                    idn = identify_window(mirrored(window_data) if sign < 0 else window_data, entry_index,
-                                          backlash_width_m, library, method, p, signals=signals)
-                except Exception as exc:
-                    problems.append(f"image method: {type(exc).__name__}: {exc}")
-    if idn is not None:
-        image_cls = classes[idn.fused_class_index]
-        lib_width = float(library.widths_m[idn.width_index])
-        in_domain, domain_reason = image_domain(idn.fused_margin, lib_width, float(backlash_width_m),
-                                                float(sample_period_s), float(system.sampling.sample_period_s),
-                                                policy, variant=method.variant)
-        if in_domain and recontact is not None and not recontact.consistent:
-            in_domain, domain_reason = False, "the window's K2 disagrees with the re-contact"
-        vals += [("image_class_kgm2", image_cls), ("image_margin", idn.fused_margin),
-                 ("image_in_domain", in_domain), ("image_min_margin", policy.image_min_margin)]
-        if not in_domain:
-            vals.append(("image_domain_reason", domain_reason))
-        vals += [("fused_class_kgm2", idn.fused_inertia_kgm2), ("fused_margin", idn.fused_margin),
-                 ("library_width_m", lib_width)]
+                self.vals.append(("width_consistent", f"unknown: {exc}"))
+        rc = self.recontact
+        if rc is not None:
+            self.vals += [("width_consistent", rc.consistent), ("recontact_width_m", rc.width_m),
+                          ("recontact_width_range_m", list(rc.range_m)), ("recontact_signal", rc.signal)]
+            if gap is None and not rc.consistent:
+                self.problems.append(width_disagreement(rc, w.backlash_width_m))
+
+    def decide_gap(self):
+        w, dg, gap = self.win, self.dg, self.gap
+        self.decision = decision = decide_gap(gap, dg.classes, dg.nominal, dg.policy, self.recontact,
+                                              w.backlash_width_m)
+        if decision.status == "accepted":
+            self.publish(gap.inertia_kgm2)
+        self.vals += [("gap_j1_kgm2", gap.inertia_kgm2), ("gap_ci95_kgm2", list(gap.ci95_kgm2)),
+                      ("gap_std_error_kgm2", gap.std_error_kgm2), ("gap_samples", gap.n_samples),
+                      ("gap_fit", gap.method), ("gap_model_choice", gap.model_choice or "given"),
+                      ("gap_interval", gap.interval),
+                      ("gap_residual_rms", gap.residual_rms), ("gap_model_error_kgm2", gap.model_error_kgm2),
+                      ("gap_classes_in_ci95_kgm2", list(decision.classes_in_ci)), ("gap_decision", decision.status)]
+        if w.width_estimate is not None:
+            self.width = w.width_estimate
+        elif "alpha1" in w.data and "alpha2" in w.data and not self.k2_unknown:
+            try:
+                self.width = estimate_backlash_width(w.data, gap.gap_end, w.wheel_radius_m, w.sample_period_s,
+                                                     gap.inertia_kgm2)
+            except NoGapError as exc:
+                self.problems.append(f"backlash width estimate: {exc}")
+        if self.width is not None:
+            self.vals += [("backlash_width_estimate_m", self.width.width_m),
+                          ("backlash_width_estimate_std_m", self.width.std_m),
+                          ("backlash_width_estimate_method", self.width.method)]
+
+    def image_step(self):
+        """2. the image method, and whether its answer is trusted."""
+        if not self.dg.config.image_method:
+            return
+        if self.k2_unknown:
+            self.vals.append(("image_method", "not run: K2 unknown (no load encoder, or no traversal in this window), "
+                                             "no library width to compare with"))
+            return
+        self.identify()
+        if self.idn is not None:
+            self.image_domain()
+
+    def identify(self):
+        w, dg = self.win, self.dg
+        if dg.library is None and (dg.library_error or "").startswith(IMAGE_METHOD_OFF):
+            self.vals.append(("image_method", "off: no pattern library for this drive"))   # said once per run
+            return
+        if dg.library is None:
+            self.problems.append(dg.library_error or "no pattern library")
+            return
+        signals = [s for s in SIGNALS if s in w.data]
+        if not signals:
+            self.problems.append(f"image method: the window has none of {', '.join(SIGNALS)}")
+            return
+        try:
+            sign = rotation_sign(w.data, w.entry_index)
+            if sign < 0:    # the library is built forward: a reverse window is mirrored first
+                self.vals.append(("image_rotation", "reverse (mirrored)"))
+            self.idn = identify_window(mirrored(w.data) if sign < 0 else w.data, w.entry_index,
+                                       w.backlash_width_m, dg.library, dg.method, dg.config.p, signals=signals)
+        except Exception as exc:
+            self.problems.append(f"image method: {type(exc).__name__}: {exc}")
+
+    def image_domain(self):
+        w, dg, idn = self.win, self.dg, self.idn
+        policy = dg.policy
+        self.image_cls = dg.classes[idn.fused_class_index]
+        lib_width = float(dg.library.widths_m[idn.width_index])
+        self.in_domain, self.domain_reason = image_domain(
+            idn.fused_margin, lib_width, float(w.backlash_width_m), float(w.sample_period_s),
+            float(dg.system.sampling.sample_period_s), policy, variant=dg.method.variant)
+        if self.in_domain and self.recontact is not None and not self.recontact.consistent:
+            self.in_domain, self.domain_reason = False, "the window's K2 disagrees with the re-contact"
+        self.vals += [("image_class_kgm2", self.image_cls), ("image_margin", idn.fused_margin),
+                      ("image_in_domain", self.in_domain), ("image_min_margin", policy.image_min_margin)]
+        if not self.in_domain:
+            self.vals.append(("image_domain_reason", self.domain_reason))
+        self.vals += [("fused_class_kgm2", idn.fused_inertia_kgm2), ("fused_margin", idn.fused_margin),
+                      ("library_width_m", lib_width)]
         for s, a in idn.answers.items():
-            vals += [(f"j1.{s}", a.inertia_kgm2), (f"h.{s}", a.h), (f"margin.{s}", a.margin)]
-    library_missing = (image_method and not k2_unknown and library is None
-                       and not (library_error or "").startswith(IMAGE_METHOD_OFF))
-    lib_text = library_error or "no pattern library"
+            self.vals += [(f"j1.{s}", a.inertia_kgm2), (f"h.{s}", a.h), (f"margin.{s}", a.margin)]
 
-    def image_phrase(disagree_with: str) -> tuple:
+    @property
+    def library_missing(self) -> bool:
+        return (self.dg.config.image_method and not self.k2_unknown and self.dg.library is None
+                and not (self.dg.library_error or "").startswith(IMAGE_METHOD_OFF))
+
+    @property
+    def lib_text(self) -> str:
+        return self.dg.library_error or "no pattern library"
+
+    def image_phrase(self, disagree_with: str) -> tuple:
         """(level bump, text) for the image answer next to a gap class."""
-        if idn is None:
+        if self.idn is None:
             return OK, ""
-        if in_domain:
-            return WARN, (f"; the image method disagrees: its class {image_cls:g} (margin {idn.fused_margin:.3g}), "
-                          f"{disagree_with}")
-        return OK, (f"; information: the image method answers class {image_cls:g}, outside its validity domain "
-                    f"({domain_reason}): not a warning")
+        if self.in_domain:
+            return WARN, (f"; the image method disagrees: its class {self.image_cls:g} (margin "
+                          f"{self.idn.fused_margin:.3g}), {disagree_with}")
+        return OK, (f"; information: the image method answers class {self.image_cls:g}, outside its validity "
+                    f"domain ({self.domain_reason}): not a warning")
 
-    def timing():
-        return [("estimate_latency_ms", math.nan if latency_ms is None else latency_ms),
-                ("processing_ms", (time.perf_counter() - t0) * 1e3)]
+    def verdict_step(self) -> WindowDiagnosis:
+        """3. the verdict and the level."""
+        gap, decision = self.gap, self.decision
+        if gap is not None and decision.status == "accepted":
+            return self.accepted()
+        if gap is not None and decision.status == "ambiguous":
+            return self.ambiguous()
+        if gap is not None:  # refused by the policy
+            text = f"estimate refused: {decision.reason}; nothing published"
+            if self.idn is not None:
+                text += (f"; the image method answers class {self.image_cls:g} (margin {self.idn.fused_margin:.3g}), "
+                         "not published")
+            if self.library_missing:
+                text += f"; {self.lib_text}"
+            return self.finish(ERROR, "refused", text, gap=gap, identification=self.idn, width=self.width,
+                               refused_reason=decision.reason, tail=self.timing())
+        if self.idn is not None and self.in_domain:  # no gap: the image method's class, trusted
+            return self.image_only()
+        if self.idn is not None:
+            self.problems.append(f"image method: class {self.image_cls:g} not published: {self.domain_reason}")
+        reason = "; ".join(self.problems) or "nothing identified"
+        return self.finish(ERROR, "undiagnosed", f"window could not be diagnosed: {reason}", identification=self.idn,
+                           width=self.width, refused_reason=reason, tail=self.timing())
 
-    # 3. the verdict and the level
-    if gap is not None and decision.status == "accepted":
-        verdict = fuse_verdict(classes, None, idn.fused_class_index if idn is not None else None, gap, gap_reason)
+    def accepted(self) -> WindowDiagnosis:
+        gap, idn, classes, nominal = self.gap, self.idn, self.dg.classes, self.dg.nominal
+        verdict = fuse_verdict(classes, None, idn.fused_class_index if idn is not None else None, gap, self.gap_reason)
         j1 = float(gap.inertia_kgm2)
         nearest = classes[nearest_class(j1, classes)]
         deviation = (j1 - nominal) / nominal * 100.0
@@ -348,56 +477,46 @@ def diagnose_window(window_data: dict, entry_index: int, backlash_width_m: float
             text = (f"J1 = {j1:.5g} kg m^2: class {nearest:g} deviates from the nominal {nominal:g} by "
                     f"{(nearest - nominal) / nominal * 100.0:+.1f} %")
         if verdict.agree is False:
-            bump, phrase = image_phrase(f"the gap's nearest class {nearest:g}")
+            bump, phrase = self.image_phrase(f"the gap's nearest class {nearest:g}")
             level, text = max(level, bump), text + phrase
-        if library_missing:
-            level, text = ERROR, text.replace(" kg m^2:", " kg m^2 (from the gap only):", 1) + f"; {lib_text}"
-        tail = _verdict_values(verdict, classes) + timing()
-        return finish(level, status, text, j1, "gap", cls, verdict=verdict, gap=gap, identification=idn,
-                      width=width, tail=tail)
-    if gap is not None and decision.status == "ambiguous":
+        if self.library_missing:
+            level, text = ERROR, text.replace(" kg m^2:", " kg m^2 (from the gap only):", 1) + f"; {self.lib_text}"
+        tail = _verdict_values(verdict, classes) + self.timing()
+        return self.finish(level, status, text, j1, "gap", cls, verdict=verdict, gap=gap, identification=idn,
+                           width=self.width, tail=tail)
+
+    def ambiguous(self) -> WindowDiagnosis:
+        gap, nominal = self.gap, self.dg.nominal
         j1, se = float(gap.inertia_kgm2), float(gap.std_error_kgm2)
-        held = decision.classes_in_ci
-        reason = decision.reason
+        held = self.decision.classes_in_ci
+        reason = self.decision.reason
         if nominal in held or abs(j1 - nominal) <= BETWEEN_Z * se:
             level, note = OK, f"consistent with the nominal {nominal:g}"
         else:
             level, note = WARN, (f"the nominal {nominal:g} is excluded (more than {BETWEEN_Z:g} standard errors "
                                  f"from J1 = {j1:.4g} ± {se:.2g})")
         text = f"{reason}: no class named, nothing published; {note}"
-        if idn is not None and image_cls not in held:
-            bump, phrase = image_phrase(f"outside the interval's classes {fmt_classes(held)}")
+        if self.idn is not None and self.image_cls not in held:
+            bump, phrase = self.image_phrase(f"outside the interval's classes {fmt_classes(held)}")
             level, text = max(level, bump), text + phrase
-        if library_missing:
-            level, text = ERROR, text + f"; {lib_text}"
-        return finish(level, "ambiguous", text, gap=gap, identification=idn, width=width, refused_reason=reason,
-                      tail=timing())
-    if gap is not None:  # refused by the policy
-        reason = decision.reason
-        text = f"estimate refused: {reason}; nothing published"
-        if idn is not None:
-            text += f"; the image method answers class {image_cls:g} (margin {idn.fused_margin:.3g}), not published"
-        if library_missing:
-            text += f"; {lib_text}"
-        return finish(ERROR, "refused", text, gap=gap, identification=idn, width=width, refused_reason=reason,
-                      tail=timing())
-    if idn is not None and in_domain:  # no gap: the image method's class, trusted
-        j1 = float(image_cls)
-        publish(j1)
-        verdict = fuse_verdict(classes, None, idn.fused_class_index, None, gap_reason)
+        if self.library_missing:
+            level, text = ERROR, text + f"; {self.lib_text}"
+        return self.finish(level, "ambiguous", text, gap=gap, identification=self.idn, width=self.width,
+                           refused_reason=reason, tail=self.timing())
+
+    def image_only(self) -> WindowDiagnosis:
+        idn, classes, nominal, policy = self.idn, self.dg.classes, self.dg.nominal, self.dg.policy
+        j1 = float(self.image_cls)
+        self.publish(j1)
+        verdict = fuse_verdict(classes, None, idn.fused_class_index, None, self.gap_reason)
         status, level = ("nominal", OK) if j1 == nominal else ("deviating", WARN)
         what = "nominal class" if j1 == nominal else (
             f"class {j1:g} deviates from the nominal {nominal:g} by {(j1 - nominal) / nominal * 100.0:+.1f} %; class")
         text = (f"J1 = {j1:g} kg m^2 (image method, margin {idn.fused_margin:.3g} >= image_min_margin "
-                f"{policy.image_min_margin:g}; no gap estimate: {gap_reason}): {what} {j1:g}")
-        tail = _verdict_values(verdict, classes) + timing()
-        return finish(level, status, text, j1, "image", j1, verdict=verdict, identification=idn, width=width,
-                      tail=tail)
-    if idn is not None:
-        problems.append(f"image method: class {image_cls:g} not published: {domain_reason}")
-    reason = "; ".join(problems) or "nothing identified"
-    return finish(ERROR, "undiagnosed", f"window could not be diagnosed: {reason}", identification=idn,
-                  width=width, refused_reason=reason, tail=timing())
+                f"{policy.image_min_margin:g}; no gap estimate: {self.gap_reason}): {what} {j1:g}")
+        tail = _verdict_values(verdict, classes) + self.timing()
+        return self.finish(level, status, text, j1, "image", j1, verdict=verdict, identification=idn,
+                           width=self.width, tail=tail)
 
 
 def _verdict_values(verdict: Verdict, classes) -> list:
@@ -430,7 +549,7 @@ ENTRY_UNCERTAINTY_WITHOUT_A1 = 10
 
 
 def detector_arguments(window) -> dict:
-    """diagnose_window's ``recontact_index`` and ``width_estimate`` for a captured
+    """:class:`WindowInput`'s ``recontact_index`` and ``width_estimate`` for a captured
     :class:`~jident_ros.stream.layout.Window`: a flank- or dynamics-detector window's own (and, for a dynamics
     window without a1, ``entry_uncertainty_samples``); none for the paper detector's."""
     kind = getattr(window, "detector", "paper")
@@ -451,4 +570,4 @@ def detector_arguments(window) -> dict:
     return out
 
 
-__all__ = ["GAP_METHODS", "WindowDiagnosis", "detector_arguments", "diagnose_window"]
+__all__ = ["GAP_METHODS", "Diagnoser", "DiagnosisConfig", "WindowDiagnosis", "WindowInput", "detector_arguments"]

@@ -35,7 +35,7 @@ Where each piece lives: the CUSUM design and the robust means in :mod:`jident_ro
 configuration and the ``trend_*`` parameter mapping in :mod:`jident_ros.identify.trend_config`, the J1 and width
 channels in :mod:`jident_ros.identify.trend_channels`; this module holds the tracker, its update/status and its
 state file (the names of the others are re-exported here).  The simulation harness (:func:`simulate_series`,
-:func:`measure_targets`) is research, in :mod:`jident_ros.evaluation.trend_simulation`.
+:func:`measure_targets`) is research, in :mod:`jident_ros.research.evaluation.trend_simulation`.
 """
 from __future__ import annotations
 

@@ -7,6 +7,7 @@ import math
 from dataclasses import asdict, dataclass, fields
 
 from jident_ros.identify.trend_maths import cusum_threshold_for_arl
+from jident_ros.parameters import TREND_FIELDS, TREND_NODE_ONLY, TREND_PARAMS
 
 SECONDS_PER_DAY = 86400.0
 
@@ -140,42 +141,14 @@ class TrendConfig:
         return cls(**d)
 
 
-#: parameter name -> TrendConfig field, for the parameters that map one to one.
-PARAMETER_FIELDS = {
-    "trend_commissioning_windows": "commissioning_windows",
-    "trend_commissioning_duration_s": "commissioning_duration_s",
-    "trend_inertia_baseline_kgm2": "inertia_baseline_kgm2",
-    "trend_inertia_baseline_se_kgm2": "inertia_baseline_se_kgm2",
-    "trend_width_baseline_m": "width_baseline_m",
-    "trend_width_baseline_se_m": "width_baseline_se_m",
-    "trend_target_arl_windows": "target_arl_windows",
-    "trend_cusum_reference_sd": "cusum_reference_sd",
-    "trend_cusum_threshold_sd": "cusum_threshold_sd",
-    "trend_innovation_clip_sd": "innovation_clip_sd",
-    "trend_se_scale_from_commissioning": "se_scale_from_commissioning",
-    "trend_se_scale_max": "se_scale_max",
-    "trend_inertia_process_sd_pct_per_window": "inertia_process_sd_pct_per_window",
-    "trend_relearn_windows": "relearn_windows",
-    "trend_change_hold_windows": "change_hold_windows",
-    "trend_drift_warn_pct": "drift_warn_pct",
-    "trend_drift_alarm_pct": "drift_alarm_pct",
-    "trend_width_limit_m": "width_limit_m",
-    "trend_width_warn_m": "width_warn_m",
-    "trend_time_to_limit_warn_s": "time_to_limit_warn_s",
-    "trend_width_regression_windows": "width_regression_windows",
-    "trend_width_se_floor_m": "width_se_floor_m",
-    "trend_width_change_detection": "width_change_detection",
-    "trend_wear_significance_sd": "wear_significance_sd",
-    "trend_max_changes_kept": "max_changes_kept",
-}
-#: Fields whose "not set" (None) is given as 0 in the parameters.
-ZERO_IS_NONE = {"commissioning_duration_s", "inertia_baseline_kgm2", "width_baseline_m", "cusum_threshold_sd",
-                "width_warn_m", "time_to_limit_warn_s"}
-#: Node parameters of the trend that are not TrendConfig fields.
-NODE_ONLY = {"trend_enabled", "trend_state_file"}
-_INT_FIELDS = {"commissioning_windows", "relearn_windows", "change_hold_windows", "width_regression_windows",
-               "max_changes_kept"}
-_BOOL_FIELDS = {"se_scale_from_commissioning", "width_change_detection"}
+#: parameter name -> TrendConfig field; the fields whose None is 0 in the parameters; the node's own trend
+#: parameters; the integer and boolean fields: all from the one schema (jident_ros.parameters.TREND_PARAMS).
+PARAMETER_FIELDS = dict(TREND_FIELDS)
+ZERO_IS_NONE = {TREND_FIELDS[n] for n, p in TREND_PARAMS.items() if p.zero_is_none}
+NODE_ONLY = set(TREND_NODE_ONLY)
+_INT_FIELDS = {f for n, f in TREND_FIELDS.items()
+               if isinstance(TREND_PARAMS[n].default, int) and not isinstance(TREND_PARAMS[n].default, bool)}
+_BOOL_FIELDS = {f for n, f in TREND_FIELDS.items() if isinstance(TREND_PARAMS[n].default, bool)}
 
 
 def _config_from_parameters(cls, params) -> "TrendConfig":

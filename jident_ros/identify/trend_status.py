@@ -1,8 +1,5 @@
 """The pure pieces the diagnostic node needs for the trend (issue 14 part 2); no ROS.
 
-* :func:`trend_config_from_parameters`: node parameters (``trend_*`` names, defaults in
-  :data:`jident_ros.parameters.TREND`) -> :class:`~jident_ros.identify.trend.TrendConfig`.  ROS
-  parameters cannot be None, so 0 (or "") stands for "not set" where the config takes None.
 * :func:`trend_inputs`: one window's diagnosis -> what the tracker takes of it (the published J1 of
   the gap estimate with its standard error, the backlash width estimate with its standard uncertainty:
   the flank detector's when the window has one, else the gap estimator's, and which).
@@ -15,15 +12,9 @@
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping, NamedTuple, Optional
+from typing import Any, NamedTuple, Optional
 
-from jident_ros.identify.trend import SECONDS_PER_DAY, TrendConfig, TrendUpdate
-
-
-def trend_config_from_parameters(params: Mapping[str, Any]) -> TrendConfig:
-    """:meth:`TrendConfig.from_parameters` (node parameters ``trend_*`` -> TrendConfig)."""
-    return TrendConfig.from_parameters(params)
-
+from jident_ros.identify.trend import SECONDS_PER_DAY, TrendUpdate
 
 #: Name of the DiagnosticStatus (the diagnostic node's periodic task "trend").
 TREND_STATUS_NAME = "jident_diagnostic: trend"
@@ -131,5 +122,5 @@ def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
     return int(u.level), u.message, vals
 
 
-__all__ = ["TREND_STATUS_NAME", "TrendInputs", "WIDTH_SOURCES", "trend_config_from_parameters", "trend_inputs",
+__all__ = ["TREND_STATUS_NAME", "TrendInputs", "WIDTH_SOURCES", "trend_inputs",
            "trend_status"]

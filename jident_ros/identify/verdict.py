@@ -13,7 +13,7 @@ Principle: a J1 is published on ``inertia_estimate`` only when the data support 
 * not with a 95 % interval that holds two or more classes ("ambiguous": no class is named);
 * not from a guess: the image method's class alone only when its margin clears
   :attr:`VerdictPolicy.image_min_margin` (chosen from an evaluation set by
-  :mod:`jident_ros.evaluation.verdicts` so that it is wrong in <= 1 % of the windows it answers) and
+  :mod:`jident_ros.research.evaluation.verdicts` so that it is wrong in <= 1 % of the windows it answers) and
   the window lies in its validity domain (a library width within
   :attr:`VerdictPolicy.library_width_tolerance` of the window's K2, the library's sample period).
 
@@ -43,7 +43,7 @@ BOUNDED = ("m_el", "omega1", "omega2", "a1", "a2", "v2")
 #: a1 signature's end, -1..2 after the alpha1 one.  A gap that ends later holds loaded samples (a
 #: biased J1), so no margin after: a1 (2, 1), alpha1 (3, 2); one sample of margin before.  With K2
 #: x1.1 the angle gap ends 1..4 samples after the a1 signature's end, with x0.9 -2..0
-#: (`python -m jident_ros.evaluation.verdicts stress` shows what this lets through).
+#: (`python -m jident_ros.research.evaluation.verdicts stress` shows what this lets through).
 RECONTACT_SLACK_SAMPLES = {"a1": (2, 1), "alpha1": (3, 2)}
 
 #: Statuses of a window (``WindowDiagnosis.status``).
@@ -61,7 +61,7 @@ class VerdictPolicy:
     image_min_margin : the image method's class is published alone, and its disagreement with the
         gap is a WARN, only at a fused margin (second-smallest over smallest fused H, eq. 33) >= this;
         0 = never (no margin met the 1 % error target on the evaluation set).  Chosen by
-        ``python -m jident_ros.evaluation.verdicts threshold``
+        ``python -m jident_ros.research.evaluation.verdicts threshold``
     library_width_tolerance : the image method is in its validity domain only when the library width
         it used is within this fraction of the window's K2
     max_torque_factor : |m_el| above this many base torques M_b is absurd (refused)
@@ -71,7 +71,7 @@ class VerdictPolicy:
 
     plausible_min_ratio: float = 0.5
     plausible_max_ratio: float = 1.5
-    image_min_margin: float = 1.401117   # python -m jident_ros.evaluation.verdicts threshold
+    image_min_margin: float = 1.401117   # python -m jident_ros.research.evaluation.verdicts threshold
     library_width_tolerance: float = 0.05
     max_torque_factor: float = 100.0
     max_speed_factor: float = 10.0
@@ -291,7 +291,7 @@ def width_disagreement(rc: RecontactCheck, backlash_width_m: float) -> str:
 
 
 #: The method variants whose margins ``image_min_margin`` was chosen on (``python -m
-#: jident_ros.evaluation.verdicts threshold`` runs the paper-faithful distances, eq. 33).  Another variant's
+#: jident_ros.research.evaluation.verdicts threshold`` runs the paper-faithful distances, eq. 33).  Another variant's
 #: margins are on another scale (sensor_matched: distances in units of the seed-to-seed scatter), so its class
 #: is information only until a threshold is chosen for it.
 MARGIN_CALIBRATED_VARIANTS = ("paper",)

@@ -22,7 +22,7 @@ This module reproduces that picture deterministically:
   the drawn cells' levels weighted by how many pixels show each cell
   (:func:`drawn_cells`, :func:`level_histogram_from_cells`).
 
-PNG files of X1 are written with matplotlib (``jident_ros.evaluation.report.save_intensity_png``).
+PNG files of X1 are written with matplotlib (``jident_ros.research.evaluation.report.save_intensity_png``).
 
 Only numpy and the standard library are used.
 """
@@ -187,13 +187,7 @@ def drawn_cells(data_shape, shape=X1_SHAPE, origin: str = "upper"):
     return _drawn_cells_cached(n_rows, n_columns, height, width, origin)
 
 
-def render_intensity(
-    scalogram,
-    shape=X1_SHAPE,
-    n_colors: int = DEFAULT_N_COLORS,
-    clim=None,
-    origin: str = "upper",
-) -> np.ndarray:
+def render_intensity(scalogram, shape=X1_SHAPE, n_colors: int = DEFAULT_N_COLORS, clim=None, origin: str = "upper") -> np.ndarray:
     """Grey intensity image X1 of a scalogram, as a MATLAB figure's plot area.
 
     Parameters
@@ -387,13 +381,7 @@ def level_histogram_from_cells(cells, cmin, cmax, row_pixels, column_pixels,
     return level_values, counts, image_min, image_max
 
 
-def render_level_histogram(
-    scalogram,
-    shape=X1_SHAPE,
-    n_colors: int = DEFAULT_N_COLORS,
-    clim=None,
-    origin: str = "upper",
-):
+def render_level_histogram(scalogram, shape=X1_SHAPE, n_colors: int = DEFAULT_N_COLORS, clim=None, origin: str = "upper"):
     """Level histogram and extreme intensities of :func:`render_intensity`'s image, without rendering it.
 
     Parameters

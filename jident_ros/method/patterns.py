@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import json
 import time
 from dataclasses import dataclass
@@ -19,7 +20,6 @@ from typing import Sequence
 
 import numpy as np
 
-from jident_ros.config import config_hash, config_to_dict
 from jident_ros.method import normalise as nz
 from jident_ros.method.pipeline import (
     SIGNALS,
@@ -55,6 +55,20 @@ class LibraryMismatch(ValueError):
 
 def method_config_to_dict(cfg: MethodConfig) -> dict:
     return json.loads(json.dumps(dataclasses.asdict(cfg)))
+
+
+def config_to_dict(cfg: SystemConfig) -> dict:
+    """Plain nested dict (tuples as lists) of a SystemConfig."""
+    return json.loads(json.dumps(dataclasses.asdict(cfg)))
+
+
+def config_hash(obj) -> str:
+    """SHA-256 of a canonical JSON form of a (dataclass) configuration (the library's metadata; also
+    :func:`jident_ros.identify.library.default_library_path`)."""
+    if dataclasses.is_dataclass(obj):
+        obj = dataclasses.asdict(obj)
+    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 @dataclass

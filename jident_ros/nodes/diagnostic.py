@@ -1,6 +1,7 @@
 """diagnostic node: identifies J1 from every window on ``drive/window``.
 
-A thin ROS adapter over :func:`jident_ros.identify.diagnosis.diagnose_window` (the same per-window diagnosis
+A thin ROS adapter over :class:`jident_ros.identify.monitor.DriveMonitor` and
+:class:`jident_ros.identify.diagnosis.Diagnoser` (the same per-window diagnosis
 ``jident diagnose`` runs offline on a recording).  For each window:
 
 1. the gap estimate (:func:`jident_ros.identify.gap.estimate_inertia`: J1 by least squares over the
@@ -47,7 +48,6 @@ shutdown before the ROS context goes down (:mod:`jident_ros.nodes.runtime`).
 from __future__ import annotations
 
 import math
-import os
 import time
 from pathlib import Path
 
@@ -55,12 +55,15 @@ from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from std_msgs.msg import Float64, Float64MultiArray
 
-from jident_ros.identify.diagnosis import GAP_METHODS, detector_arguments, diagnose_window
+from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES, OK, STALE, WARN
 from jident_ros.identify.library import default_library_path, load_pattern_library
-from jident_ros.identify.trend import TrendConfig, TrendStateError, TrendTracker
-from jident_ros.identify.trend_status import WIDTH_SOURCES, trend_inputs, trend_status
+from jident_ros.identify.monitor import DriveMonitor
+from jident_ros.identify.trend import TrendConfig
+from jident_ros.identify.trend_status import WIDTH_SOURCES
 from jident_ros.identify.verdict import VerdictPolicy
+from jident_ros.nodes.bag_recording import RecorderError, Recording
+from jident_ros.nodes.diagnostic_trend import TrendTask
 from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater
 from jident_ros.nodes.params import (
     ParameterError,
@@ -74,14 +77,9 @@ from jident_ros.nodes.params import (
     system_config,
 )
 from jident_ros.nodes.ros_io import LayoutError, make_status, qos_latched, qos_signals, window_from_msg
+from jident_ros.nodes.runtime import RunnableNode
 from jident_ros.nodes.runtime import main as run_main
-from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, GAP_METHOD_CHOICES
-
-try:  # the recorder needs mcap and rosbags: without them the node runs on and says so
-    from jident_ros.bag.rotating_recorder import Recorder, RecorderError
-    _BAG_IMPORT_ERROR = None
-except ImportError as _exc:  # pragma: no cover - both are install requirements
-    Recorder, RecorderError, _BAG_IMPORT_ERROR = None, RuntimeError, _exc
+from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, gap_method_problem
 
 NODE_NAME = "jident_diagnostic"
 #: Each window's result.
@@ -96,28 +94,17 @@ LOST_IDS_SHOWN = 20
 DEFAULTS = DIAGNOSTIC
 
 
-def gap_method_of(value: str) -> str:
-    """The diagnosis' name of a gap_method parameter value (``none`` and ``off`` mean no gap estimate)."""
-    return "off" if value in ("none", "off") else value
-
-
 def validate(values: dict):
+    """The rules across parameters (each parameter's type, range and choices are the schema's, checked before:
+    :func:`jident_ros.nodes.params.coerce`)."""
     cfg = checked(values, DEFAULTS, DEFAULTS)
     system = system_config(values)
     method = method_config(values)
     require("p", cfg["p"], cfg["p"] in [float(p) for p in method.p_values],
             f"one of method.p_values {list(method.p_values)}")
-    require("gap_method", cfg["gap_method"], cfg["gap_method"] in GAP_METHOD_CHOICES,
-            "one of " + ", ".join(GAP_METHOD_CHOICES[:-1]) + " (off is accepted for none)")
-    assert gap_method_of(cfg["gap_method"]) in GAP_METHODS
-    require("stale_after_s", cfg["stale_after_s"], 0 <= cfg["stale_after_s"] <= 86400,
-            "a number >= 0 and <= 86400 (0 = never)")
-    for n in ("window_queue_depth", "signals_queue_depth"):
-        require(n, cfg[n], 1 <= cfg[n] <= DIAGNOSTIC_PARAMS[n].max, f"an integer >= 1 and <= {DIAGNOSTIC_PARAMS[n].max}")
-    require("image_method", cfg["image_method"], cfg["image_method"] or gap_method_of(cfg["gap_method"]) != "off",
-            "true when gap_method is none (nothing would be identified)")
-    for n in ("max_bag_size_bytes", "max_bag_duration_s", "retention_max_total_bytes", "retention_max_age_s"):
-        require(n, cfg[n], cfg[n] >= 0, "a number >= 0 (0 = no limit)")
+    problem = gap_method_problem(cfg["gap_method"], cfg["image_method"])
+    if problem is not None:
+        require(problem[0], cfg[problem[0]], False, problem[1])
     for name, what in VerdictPolicy.from_params(cfg).problems():
         require(name, cfg[name], False, what)
     try:
@@ -151,71 +138,7 @@ def id_ranges(ids) -> str:
     return " ".join(out)
 
 
-class Recording:
-    """The node's recorder behind one seam: ``write(name, msg)``, ``flush()``, ``close()`` (idempotent,
-    finalises the bag), ``status()``, over :class:`jident_ros.bag.rotating_recorder.Recorder` (rosbag2-named bags
-    under ``record_root``, split by size / duration, retention, wall-clock stamps that no /clock can move).
-    A failure (disk full) finalises what was written; ``error`` says it and further writes are counted as
-    dropped."""
-
-    def __init__(self, node, cfg: dict, topics):
-        if Recorder is None:
-            raise RuntimeError(f"MCAP recording is unavailable here (jident_ros.bag.rotating_recorder: {_BAG_IMPORT_ERROR})")
-        self.node = node
-        self.recorder = Recorder(
-            cfg["record_root"] or None, bag_dir=cfg["record_dir"] or None,
-            max_bag_size_bytes=cfg["max_bag_size_bytes"], max_bag_duration_s=cfg["max_bag_duration_s"],
-            retention_max_total_bytes=cfg["retention_max_total_bytes"],
-            retention_max_age_s=cfg["retention_max_age_s"],
-            custom_data={"node": node.get_fully_qualified_name()}, log=node.get_logger().info)
-        self.bag_dir = str(self.recorder.bag_dir)
-        self.topics = {}
-        try:
-            for name, typ, qos in topics:
-                full = node.resolve_topic_name(name)
-                self.recorder.add_topic(full, typ, qos)
-                self.topics[name] = (full, typ)
-        except Exception:
-            self.close()
-            raise
-
-    @property
-    def open(self) -> bool:
-        return not self.recorder.closed
-
-    @property
-    def error(self):
-        st = self.recorder.status()
-        return st["error"] or None
-
-    def write(self, name: str, msg) -> None:
-        if name in self.topics:
-            self.recorder.write(*self.topics[name], msg)   # never raises: drops are counted by reason
-
-    def flush(self) -> None:
-        self.recorder.maybe_flush()
-
-    def close(self) -> None:
-        """Finalise the bag and say in one line what it holds (also what was dropped, by reason)."""
-        if self.recorder.closed:
-            return
-        done = self.recorder.close()
-        st = self.recorder.status()
-        drops = ", ".join(f"{n} {why}" for why, n in sorted(st["drop_reasons"].items()))
-        self.node.get_logger().info(
-            f"recording {'finalised' if done else 'NOT finalised (recover it with `jident salvage`)'}: "
-            f"{st['bag']}: {st['messages_written']} message(s) written, {st['messages_dropped']} dropped"
-            + (f" ({drops})" if drops else ""))
-
-    def status(self) -> dict:
-        st = self.recorder.status()
-        out = {k: st[k] for k in ("state", "bag", "file", "files", "bytes_written", "messages_written",
-                                  "messages_dropped", "splits", "bags_deleted", "bytes_deleted")}
-        out.update({f"dropped: {k}": v for k, v in st["drop_reasons"].items()})
-        return out
-
-
-class DiagnosticNode(LifecycleNode):
+class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
     """The diagnostic node (composable: keyword arguments go to rclpy's LifecycleNode)."""
 
     def __init__(self, **kwargs):
@@ -247,7 +170,8 @@ class DiagnosticNode(LifecycleNode):
         self.last_message = ""
         self.last_input = None             # steady time (s) of the last drive/window or drive/progress
         self.started = time.monotonic()
-        self.trend = None                  # TrendTracker (trend_enabled, configured)
+        # the chain: the diagnosis (rebuilt when a parameter or the library changes) and the trend's tracker
+        self.monitor = DriveMonitor(None, self._diagnoser())   # .tracker: TrendTracker (trend_enabled, configured)
         self.trend_update = None           # its last TrendUpdate
         self.trend_error = None            # why the trend's state file was not used (ERROR), one line
         self.trend_save_error = None       # the last failure to write the state file (ERROR), one line
@@ -347,6 +271,7 @@ class DiagnosticNode(LifecycleNode):
         the new configuration: :meth:`TrendTracker.reconfigure`) take effect with the next window / status."""
         self.cfg.update(changed)
         self.policy = VerdictPolicy.from_params(self.cfg)
+        self.monitor.diagnoser = self._diagnoser()
         if "hardware_id" in changed:
             self.hardware_id = drive_hardware_id(self, changed["hardware_id"])
             self.updater.setHardwareID(self.hardware_id)
@@ -366,6 +291,23 @@ class DiagnosticNode(LifecycleNode):
             self.library_path, self.system, self.method, c["build_if_missing"], log=log.info, warn=log.warning)
         if self.library_error:
             log.error(self.library_error)
+        self.monitor.diagnoser = self._diagnoser()
+
+    def _diagnoser(self) -> Diagnoser:
+        """The per-window diagnosis of the current parameters and library."""
+        c = self.cfg
+        config = DiagnosisConfig.from_parameters(c, self.nominal)
+        return Diagnoser(self.system, self.method, config, self.policy,
+                         self.library if c["image_method"] else None, self.library_error or "")
+
+    @property
+    def trend(self):
+        """The trend's :class:`~jident_ros.identify.trend.TrendTracker` (None: trend off or not configured)."""
+        return self.monitor.tracker
+
+    @trend.setter
+    def trend(self, tracker) -> None:
+        self.monitor.tracker = tracker
 
     def library_status(self, stat):
         if not self.cfg["image_method"]:
@@ -494,7 +436,7 @@ class DiagnosticNode(LifecycleNode):
         widths = self.system.grid.backlash_widths_m
         k2 = win.backlash_width_m
         if win.detector == "dynamics" and math.isnan(k2):
-            pass   # no load encoder: K2 unknown (diagnose_window runs the gap fit without it, no image method)
+            pass   # no load encoder: K2 unknown (the Diagnoser runs the gap fit without it, no image method)
         elif not (math.isfinite(k2) and k2 > 0):
             errors.append(f"backlash width K2 {k2!r} m: not a width")
         elif self.cfg["image_method"] and not (min(widths) * (1 - 1e-9) <= k2 <= max(widths) * (1 + 1e-9)):
@@ -503,7 +445,6 @@ class DiagnosticNode(LifecycleNode):
         return errors, warnings
 
     def _diagnose(self, msg, t_recv):
-        c = self.cfg
         try:
             win = window_from_msg(msg)
         except LayoutError as exc:
@@ -523,14 +464,8 @@ class DiagnosticNode(LifecycleNode):
                                            ("mismatch", "; ".join(errors))]))
             return
         # the gap estimate goes out on inertia_estimate (on_estimate) before the image method runs
-        d = diagnose_window(win.as_dict(), win.entry_index, win.backlash_width_m, win.wheel_radius_m,
-                            win.sample_period_s, library=self.library if c["image_method"] else None,
-                            system=self.system, method=self.method, p=c["p"],
-                            gap_method=gap_method_of(c["gap_method"]), image_method=c["image_method"],
-                            nominal_kgm2=self.nominal, library_error=self.library_error or "",
-                            window_id=win.window_id, entry_time_s=win.entry_time_s,
-                            on_estimate=self._publish_estimate, started_at=t_recv, policy=self.policy,
-                            **detector_arguments(win))
+        result = self.monitor.window(win, on_estimate=self._publish_estimate, started_at=t_recv)
+        d = result.diagnosis
         level, message, values = d.level, d.message, list(d.values)
         if warnings:
             self.windows_mismatched += 1
@@ -546,98 +481,7 @@ class DiagnosticNode(LifecycleNode):
         self.last_message = message
         self.diag.publish(make_status(STATUS_NAME, level, message, self.hardware_id, values))
         if self.trend is not None:
-            self._update_trend(win, d)
-
-    # ----------------------------------------------------------------- trend
-    def _start_trend(self):
-        """A TrendTracker from the trend_* parameters; with trend_state_file, the saved state when there is
-        one (a file that cannot be read is moved aside to <file>.corrupt-<UTC time> and the trend starts
-        fresh: ERROR on the trend status, nothing overwritten)."""
-        c = self.cfg
-        config = TrendConfig.from_parameters(c)   # checked by validate()
-        self.trend = TrendTracker(config)
-        path = c["trend_state_file"]
-        if not path:
-            return
-        path = os.path.expanduser(path)
-        try:
-            self.trend = TrendTracker.load(path, config)
-            self.get_logger().info(f"trend state read from {path} ({self.trend.n_windows} window(s) so far)")
-        except FileNotFoundError:
-            self.get_logger().info(f"trend state file {path} does not exist yet: the trend starts fresh")
-        except (TrendStateError, OSError) as exc:
-            aside = f"{path}.corrupt-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}"
-            try:
-                os.replace(path, aside)
-                kept = f"moved to {aside}"
-            except OSError as mv:
-                kept = f"could not be moved aside ({mv}); it will be overwritten"
-            self.trend_error = f"trend state unusable: {exc}; {kept}; the trend started fresh"
-            self.get_logger().error(self.trend_error)
-
-    def _update_trend(self, win, d):
-        """One diagnosed window into the tracker; publish the smoothed J1 and width; save the state."""
-        j, jse, w, wse, source = trend_inputs(d, self.trend.config.width_se_floor_m, win)
-        if j is None and w is None:   # nothing to follow in this window (its status says why)
-            self.trend_windows_without_estimate += 1
-            return
-        self.trend_width_source = source or "none"
-        if source is not None:
-            self.trend_width_sources[source] += 1
-        u = self.trend.update(win.entry_time_s, j, jse, w, wse)
-        self.trend_update = u
-        if u.skipped:
-            self.get_logger().warning(f"trend: window {win.window_id} skipped: {u.reason}",
-                                      throttle_duration_sec=1.0)
-            return
-        for pub, name, value in ((self.pub_inertia_trend, "inertia_trend", u.inertia_kgm2),
-                                 (self.pub_width_trend, "backlash_width_trend", u.width_m)):
-            if pub is not None and value is not None and math.isfinite(value):
-                m = Float64(data=float(value))
-                pub.publish(m)
-                self._record(name, m)
-        for ev in u.changes:
-            self.get_logger().warning(f"trend: change of {ev.quantity} detected at window {win.window_id}: "
-                                      f"{ev.size_pct:+.2f} % (onset t = {ev.onset_time_s:.3f} s)")
-        if self.cfg["trend_state_file"]:
-            path = os.path.expanduser(self.cfg["trend_state_file"])
-            try:
-                self.trend.save(path)
-                self.trend_saves += 1
-                self.trend_save_error = None
-            except (OSError, ValueError) as exc:
-                self.trend_save_error = f"trend state not written to {path}: {exc}"
-                self.get_logger().error(self.trend_save_error, throttle_duration_sec=10.0)
-
-    def trend_task_status(self, stat):
-        """"jident_diagnostic: trend": the tracker's level and one line with its numbers
-        (:func:`jident_ros.identify.trend_status.trend_status`); ERROR when its state file was unusable
-        (a fresh start) or cannot be written."""
-        if not self.cfg["trend_enabled"]:
-            stat.summary(OK, "trend off (trend_enabled is false)")
-            return stat
-        if self.trend is None:
-            stat.summary(OK, "trend not started yet (node not configured)")
-            return stat
-        u = self.trend_update
-        if u is None:
-            level, message, values = OK, "no window with a J1 or width estimate yet", []
-        else:
-            level, message, values = trend_status(u)
-        problems = [p for p in (self.trend_error, self.trend_save_error) if p]
-        if problems:
-            level, message = ERROR, "; ".join(problems) + f"; {message}"
-        stat.summary(level, message)
-        for k, v in values:
-            stat.add(k, v)
-        for k, v in (("windows_updated", self.trend.n_windows),
-                     ("windows_without_estimate", self.trend_windows_without_estimate),
-                     ("width_source", self.trend_width_source),
-                     ("width_from_flank_detector", self.trend_width_sources["flank"]),
-                     ("width_from_gap_estimator", self.trend_width_sources["gap"]),
-                     ("state_file", self.cfg["trend_state_file"]), ("state_saves", self.trend_saves)):
-            stat.add(k, v)
-        return stat
+            self._update_trend(win, result)
 
     # ----------------------------------------------------------------- periodic status
     def diagnosis_status(self, stat):

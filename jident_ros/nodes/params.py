@@ -22,7 +22,7 @@ from jident_ros.config import (
     system_config_from_dict,
 )
 from jident_ros.method.pipeline import MATCHED_SENSOR_FIELDS
-from jident_ros.parameters import Param
+from jident_ros.parameters import UNIT_SUFFIXES, Param
 
 #: Sections of the shared configuration files (config/system.yaml, config/method.yaml).
 SYSTEM_SECTIONS = ("motor", "load", "sampling", "grid")
@@ -93,19 +93,12 @@ def method_defaults() -> dict:
 
 # --------------------------------------------------------------------------- schema
 
-#: Units of the model's and the method's field names (suffix -> unit), longest suffix first.
-_UNITS = (("_nms_per_rad", "N m s/rad"), ("_nm_per_rad", "N m/rad"), ("_ns_per_m", "N s/m"),
-          ("_n_per_m", "N/m"), ("_pa_sn", "Pa s^n"), ("_kgm2", "kg m^2"), ("_m_s", "m/s"), ("_m2", "m^2"),
-          ("_rad", "rad"), ("_hz", "Hz"), ("_pu", "per unit"), ("_kg", "kg"), ("_m", "m"), ("_s", "s"),
-          ("_v", "V"), ("_n", "N"))
-
-
 def describe_field(name: str) -> str:
     """One-line description of a dotted model/method parameter from its field name and unit suffix:
     ``load.wheel_radius_m`` -> ``load: wheel radius, m (config/system.yaml; fixed at start)``."""
     section, _, field = name.partition(".")
     unit = ""
-    for suffix, u in _UNITS:
+    for suffix, u in UNIT_SUFFIXES:
         if field.endswith(suffix):
             field, unit = field[: -len(suffix)], u
             break

@@ -40,7 +40,7 @@ from jident_ros.nodes.ros_io import (
     qos_latched,
     qos_signals,
 )
-from jident_ros.nodes.runtime import ProgressGate, tick
+from jident_ros.nodes.runtime import ProgressGate, RunnableNode, tick
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import REPLAY, REPLAY_PARAMS
 
@@ -55,20 +55,16 @@ TYPES = {
 
 
 def validate(values: dict, argv_bag: str | None):
+    """The bag (also from the command line) and the topics (each parameter's type, range and choices are the
+    schema's, checked before: :func:`jident_ros.nodes.params.coerce`)."""
     cfg = checked(values, DEFAULTS, DEFAULTS)
     if argv_bag:
         cfg["bag"] = argv_bag
     require("bag", cfg["bag"], bool(cfg["bag"]), "a recording (bag directory or .mcap file; "
             "give it as the first argument)")
     require("bag", cfg["bag"], Path(cfg["bag"]).expanduser().exists(), "an existing bag directory or .mcap file")
-    require("rate", cfg["rate"], cfg["rate"] >= 0, "a number >= 0 (0 = as fast as possible)")
-    require("fast_sleep_s", cfg["fast_sleep_s"], 0 <= cfg["fast_sleep_s"] <= 1, "a number in [0, 1]")
-    require("max_lead_s", cfg["max_lead_s"], cfg["max_lead_s"] >= 0, "a number >= 0 (0 = no back-pressure)")
-    require("progress_timeout_s", cfg["progress_timeout_s"], cfg["progress_timeout_s"] > 0, "a number > 0")
     require("topics", cfg["topics"], bool(cfg["topics"]) and all(t and not t.startswith("/") for t in cfg["topics"]),
             "a non-empty list of relative topic names")
-    require("wait_for_subscribers", cfg["wait_for_subscribers"], cfg["wait_for_subscribers"] >= 0, "an integer >= 0")
-    require("wait_timeout_s", cfg["wait_timeout_s"], cfg["wait_timeout_s"] > 0, "a number > 0")
     return cfg
 
 
@@ -83,7 +79,7 @@ def schema() -> dict:
     return dict(REPLAY_PARAMS)
 
 
-class ReplayNode(Node):
+class ReplayNode(RunnableNode, Node):
     """The replay node (composable: keyword arguments go to rclpy's Node; ``bag`` may be given as
     ``argv_bag``).  Replays from a timer: a state machine WAITING -> REPLAYING -> DONE; at rate > 0
     every tick publishes the messages due by the wall clock, at 0 one message per tick of

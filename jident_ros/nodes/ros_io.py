@@ -104,12 +104,6 @@ def qos_diagnostics():
     return qos_signals(100)
 
 
-def qos_to_dict(qos) -> dict:
-    """Plain description of a QoS profile (logs, docs, bag metadata)."""
-    return {"history": qos.history.name.lower(), "depth": int(qos.depth),
-            "reliability": qos.reliability.name.lower(), "durability": qos.durability.name.lower()}
-
-
 # --------------------------------------------------------------------------- diagnostics
 
 
@@ -165,5 +159,5 @@ def status_values(status) -> dict:
 
 __all__ = ["OK", "WARN", "ERROR", "STALE", "LEVEL_NAMES", "LayoutError", "multiarray_from_array",
            "array_from_multiarray", "last_sample_time", "clock_msg", "window_to_msg", "window_from_msg", "float64", "qos_signals",
-           "qos_latched", "qos_clock", "qos_diagnostics", "qos_to_dict", "format_value", "make_status",
+           "qos_latched", "qos_clock", "qos_diagnostics", "format_value", "make_status",
            "make_diagnostic_array", "status_level", "status_values"]

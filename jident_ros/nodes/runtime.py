@@ -176,12 +176,42 @@ def tick(state: str, handlers: Mapping[str, Callable[[], None]], fail: Callable[
 # --------------------------------------------------------------------------- main
 
 
+class RunnableNode:
+    """What :func:`main` and :func:`spin` call on a node, declared (a node class lists it first among its bases,
+    e.g. ``class WindowingNode(RunnableNode, Node)``); the defaults do nothing.
+
+    done : the node has ended by itself: the spin stops (simulator, replay at the end of their stream)
+    exit_code : the exit status of the process after the spin
+    spin_in_periods : spin ``SPIN_PERIOD_S`` at a time instead of one callback at a time (many small messages)
+    """
+
+    done: bool = False
+    exit_code: int = 0
+    spin_in_periods: bool = False
+
+    def make_executor(self):
+        """The executor to spin the node with; None: a SingleThreadedExecutor."""
+        return None
+
+    def autostart(self) -> None:
+        """Called once after the node is built and added to the executor (a lifecycle node configures and
+        activates itself here)."""
+
+    def finish(self, stopping: Callable[[], bool]) -> None:
+        """Called after the spin when the node ended by itself (``done``), not after a signal; ``stopping()``
+        becomes true when a signal arrives meanwhile (e.g. while waiting for the last batches' acknowledgement)."""
+
+    def close(self) -> None:
+        """Called first on the way down (always, also after a signal): finalise what must be (the recording);
+        idempotent."""
+
+
 def spin(node, executor, stop: StopFlag, period_s: float = SPIN_PERIOD_S) -> None:
     """Spin until a signal arrives, the node is ``done`` or the context is shut down.  A node whose
     ``spin_in_periods`` is true is spun ``period_s`` at a time (every ready callback in that time, then the
     checks) instead of one callback at a time: for many small messages (the windowing node on JointState)."""
-    pending = executor.create_future() if getattr(node, "spin_in_periods", False) else None
-    while not stop.set and not getattr(node, "done", False) and node.context.ok():
+    pending = executor.create_future() if node.spin_in_periods else None
+    while not stop.set and not node.done and node.context.ok():
         if pending is not None:
             executor.spin_until_future_complete(pending, timeout_sec=period_s)   # never completes: a period
         else:
@@ -193,8 +223,8 @@ def main(factory: Callable[..., Any], prog: str, args=None) -> int:
 
     * a bad ``--params-file``, a bad argument of rcl, or a ParameterError -> one line on stderr, status 2;
     * SIGINT / SIGTERM at any moment -> the shutdown path of the module docstring, status 0;
-    * the node may set ``done`` (the spin ends) and ``exit_code``; ``finish()`` runs after the spin
-      when the node ended by itself (e.g. waiting for the last batches to be acknowledged).
+    * the node (a :class:`RunnableNode`) may set ``done`` (the spin ends) and ``exit_code``; ``finish()`` runs
+      after the spin when the node ended by itself (e.g. waiting for the last batches to be acknowledged).
     """
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -217,14 +247,13 @@ def main(factory: Callable[..., Any], prog: str, args=None) -> int:
         try:
             node = factory(args)
             # a node may bring its own executor (the windowing node on JointState: one callback per sample)
-            executor = node.make_executor() if hasattr(node, "make_executor") else SingleThreadedExecutor()
+            executor = node.make_executor() or SingleThreadedExecutor()
             executor.add_node(node)
-            if hasattr(node, "autostart"):
-                node.autostart()
+            node.autostart()
             spin(node, executor, stop)
-            if not stop.set and hasattr(node, "finish"):
+            if not stop.set:
                 node.finish(lambda: stop.set)
-            code = int(getattr(node, "exit_code", 0) or 0)
+            code = int(node.exit_code or 0)
         except ParameterError as exc:
             print(f"{prog}: {exc}", file=sys.stderr, flush=True)
             code = EXIT_BAD_PARAMETER
@@ -236,7 +265,7 @@ def main(factory: Callable[..., Any], prog: str, args=None) -> int:
                 raise
     finally:
         try:
-            if node is not None and hasattr(node, "close"):
+            if node is not None:
                 node.close()                # the recording is finalised here, the context still up
         finally:
             if executor is not None:

@@ -29,17 +29,10 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64, Float64MultiArray
 
-from jident_ros.nodes.params import (
-    ParameterError,
-    checked,
-    declare_parameters,
-    node_options,
-    node_schema,
-    require,
-    system_config,
-)
+from jident_ros.nodes import params as node_params
+from jident_ros.nodes.params import ParameterError
 from jident_ros.nodes.ros_io import clock_msg, multiarray_from_array, qos_clock, qos_latched, qos_signals
-from jident_ros.nodes.runtime import ProgressGate, tick
+from jident_ros.nodes.runtime import ProgressGate, RunnableNode, tick
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import SIMULATOR, SIMULATOR_PARAMS
 from jident_ros.sim import Case, check_stable, paper_grid_cases, simulate_grid
@@ -61,29 +54,22 @@ def build_cases(cfg: dict, system) -> list:
         return paper_grid_cases(system)
     for name in ("inertias_kgm2", "backlash_widths_m", "consistencies_pa_sn"):
         vals = cfg[name]
-        require(name, vals, len(vals) > 0, "a non-empty list")
+        node_params.require(name, vals, len(vals) > 0, "a non-empty list")
         for i, v in enumerate(vals):
-            require(f"{name}[{i}]", v, v > 0, "a number > 0")
+            node_params.require(f"{name}[{i}]", v, v > 0, "a number > 0")
     if mode == "product":
         return [Case(a, b, c) for a in j for b in w for c in e]
     n = max(len(j), len(w), len(e))
     for name, vals in (("inertias_kgm2", j), ("backlash_widths_m", w), ("consistencies_pa_sn", e)):
-        require(name, vals, len(vals) in (1, n), f"of length 1 or {n} (cases: zip)")
+        node_params.require(name, vals, len(vals) in (1, n), f"of length 1 or {n} (cases: zip)")
     pick = lambda vals, i: vals[0] if len(vals) == 1 else vals[i]  # noqa: E731
     return [Case(pick(j, i), pick(w, i), pick(e, i)) for i in range(n)]
 
 
 def validate(values: dict):
-    cfg = checked(values, DEFAULTS, DEFAULTS)
-    P = SIMULATOR_PARAMS
-    require("cases", cfg["cases"], cfg["cases"] in ("product", "zip", "grid"), "one of product, zip, grid")
-    for name in ("gap_samples", "batch_size", "real_time_factor", "fast_sleep_s", "max_lead_s", "progress_timeout_s",
-                 "start_time_s", "repeat", "wait_for_subscribers", "wait_timeout_s", "signals_queue_depth"):
-        p, v = P[name], cfg[name]
-        ok = ((p.min is None or (v > p.min if p.min_exclusive else v >= p.min))
-              and (p.max is None or v <= p.max))
-        require(name, v, ok, ("an integer " if isinstance(p.default, int) else "a number ") + p.range_text())
-    system = system_config(values)
+    cfg = node_params.checked(values, DEFAULTS, DEFAULTS)
+    # each parameter's type, range and choices are the schema's, checked before (nodes.params.coerce)
+    system = node_params.system_config(values)
     cases = build_cases(cfg, system)
     try:  # inputs the simulation cannot integrate (an overload, a step too coarse for J1): one line, not NaN batches
         check_stable(system, cases)
@@ -95,10 +81,10 @@ def validate(values: dict):
 
 def schema() -> dict:
     """Every parameter of the node: its own (jident_ros/parameters.py) and the model's (system.yaml)."""
-    return node_schema(SIMULATOR_PARAMS)
+    return node_params.node_schema(SIMULATOR_PARAMS)
 
 
-class SimulatorNode(Node):
+class SimulatorNode(RunnableNode, Node):
     """The simulator node (composable: keyword arguments go to rclpy's Node).
 
     Streams from a timer (never a blocking loop: parameter requests are answered while it streams): a
@@ -107,9 +93,9 @@ class SimulatorNode(Node):
     when the windowing node's progress allows it (:class:`ProgressGate`)."""
 
     def __init__(self, **kwargs):
-        super().__init__(kwargs.pop("node_name", NODE_NAME), **node_options(kwargs))
+        super().__init__(kwargs.pop("node_name", NODE_NAME), **node_params.node_options(kwargs))
         self.schema = schema()
-        values = declare_parameters(self, self.schema, validate)
+        values = node_params.declare_parameters(self, self.schema, validate)
         self.cfg, self.system, self.cases = validate(values)
         self.exit_code = 0
         self.done = False

@@ -18,6 +18,7 @@ from rosbags.typesys import Stores, get_typestore
 from std_msgs.msg import Float64, Float64MultiArray
 
 from jident_ros.identify.levels import ERROR, OK, STALE, WARN
+from jident_ros.identify.monitor import DetectorConfig, make_detector
 from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater
 from jident_ros.nodes.params import (
     RuntimeParameters,
@@ -37,12 +38,11 @@ from jident_ros.nodes.ros_io import (
     qos_signals,
     window_to_msg,
 )
+from jident_ros.nodes.runtime import RunnableNode
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import WINDOWING, WINDOWING_PARAMS
-from jident_ros.stream.detector import REASONS, BacklashDetector
-from jident_ros.stream.dynamics import DynamicsDetector
-from jident_ros.stream.flank import FlankDetector
-from jident_ros.stream.inputs import IMU_AXES, JointStateAdapter
+from jident_ros.stream.detector import REASONS
+from jident_ros.stream.inputs import JointStateAdapter
 from jident_ros.stream.layout import KNOWN_CHANNELS
 
 NODE_NAME = "jident_windowing"
@@ -55,9 +55,9 @@ DEFAULTS = WINDOWING
 
 
 def validate(values: dict):
+    """The rules across parameters and inside lists (each parameter's type, range and choices are the schema's,
+    checked before: :func:`jident_ros.nodes.params.coerce`)."""
     cfg = checked(values, DEFAULTS, DEFAULTS)
-    w = cfg["backlash_width_m"]
-    require("backlash_width_m", w, 0 < w <= 1.0, "a finite number > 0 and <= 1 m")
     ch = cfg["channels"]
     for c in ch:
         require("channels", ch, c in KNOWN_CHANNELS and c != "t",
@@ -68,22 +68,8 @@ def validate(values: dict):
                 "a list holding m_el and a1 or alpha1 (the dynamics detector's load torque)")
     else:
         require("channels", ch, "alpha1" in ch and "alpha2" in ch, "a list holding alpha1 and alpha2 (inequality 1)")
-    require("gap_tolerance", cfg["gap_tolerance"], 1 < cfg["gap_tolerance"] <= 1000, "a number > 1 and <= 1000")
-    for n in ("signals_queue_depth", "window_queue_depth"):
-        require(n, cfg[n], 1 <= cfg[n] <= WINDOWING_PARAMS[n].max, f"an integer >= 1 and <= {WINDOWING_PARAMS[n].max}")
-    require("diagnostics_period_s", cfg["diagnostics_period_s"], 0 <= cfg["diagnostics_period_s"] <= 3600,
-            "a number >= 0 and <= 3600")
-    require("progress_every_batches", cfg["progress_every_batches"], cfg["progress_every_batches"] >= 0,
-            "an integer >= 0 (0 = off)")
-    require("input", cfg["input"], cfg["input"] in ("signals", "joint_states"), "signals or joint_states")
-    require("detector", cfg["detector"], cfg["detector"] in WINDOWING_PARAMS["detector"].choices,
-            "auto, flank, paper or dynamics")
-    require("gear_ratio", cfg["gear_ratio"], 0 < cfg["gear_ratio"] <= 1000, "a finite number > 0 and <= 1000")
     require("motor_joint", cfg["motor_joint"], bool(cfg["motor_joint"]) and cfg["motor_joint"] != cfg["load_joint"],
             "a joint name other than load_joint")
-    require("imu_axis", cfg["imu_axis"], cfg["imu_axis"] in IMU_AXES, "x, y or z")
-    require("batch_size", cfg["batch_size"], 1 <= cfg["batch_size"] <= WINDOWING_PARAMS["batch_size"].max,
-            f"an integer >= 1 and <= {WINDOWING_PARAMS['batch_size'].max}")
     system = system_config(values)
     return cfg, system
 
@@ -103,7 +89,7 @@ def schema() -> dict:
     return node_schema(WINDOWING_PARAMS)
 
 
-class WindowingNode(Node):
+class WindowingNode(RunnableNode, Node):
     """The windowing node (composable: keyword arguments go to rclpy's Node)."""
 
     def __init__(self, **kwargs):
@@ -113,23 +99,11 @@ class WindowingNode(Node):
         self.cfg, self.system = validate(values)
         c, s = self.cfg, self.system
         self.detector_kind = detector_kind(c)
-        common = dict(samples_before_entry=s.sampling.samples_before_entry,
-                      samples_from_entry=s.sampling.samples_from_entry, gap_tolerance=c["gap_tolerance"])
         chans = ("t",) + tuple(c["channels"])
         if c["input"] == "joint_states":   # JointState carries alpha1, omega1, m_el, alpha2, omega2 (+ a1 from Imu)
             chans = tuple(ch for ch in chans if ch in ("t", "alpha1", "omega1", "m_el", "alpha2", "omega2")
                           or (ch == "a1" and c["use_imu"]))
-        if self.detector_kind == "dynamics":
-            self.detector = DynamicsDetector(s.load.wheel_radius_m, s.sampling.sample_period_s, channels=chans,
-                                             gear_ratio=c["gear_ratio"],
-                                             nominal_inertia_kgm2=s.motor.nominal_inertia_kgm2, **common)
-        elif self.detector_kind == "flank":
-            self.detector = FlankDetector(s.load.wheel_radius_m, s.sampling.sample_period_s, channels=chans,
-                                          gear_ratio=c["gear_ratio"],
-                                          nominal_inertia_kgm2=s.motor.nominal_inertia_kgm2, **common)
-        else:
-            self.detector = BacklashDetector(c["backlash_width_m"], s.load.wheel_radius_m,
-                                             s.sampling.sample_period_s, channels=chans, **common)
+        self.detector = make_detector(s, DetectorConfig.from_parameters(c, self.detector_kind, chans))
         self.hardware_id = drive_hardware_id(self, c["hardware_id"])
         self.diag = DiagnosticsPublisher(self)
         self.pub_window = self.create_publisher(Float64MultiArray, "drive/window",

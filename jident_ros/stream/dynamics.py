@@ -31,7 +31,7 @@ relative angle δ:
   angles (``no angles`` otherwise: the window's K2 fields are NaN).
 
 False entries over steady stretches and the entries found on both drives: docs/results.md ("Entries from the
-dynamics"), ``python -m jident_ros.evaluation.raw_inputs --report --detector dynamics``.
+dynamics"), ``python -m jident_ros.research.evaluation.raw_inputs --report --detector dynamics``.
 """
 from __future__ import annotations
 

@@ -13,7 +13,7 @@
 * noise: white, 'measured' SNR (noise power = mean(x^2)/10^(SNR/10)) on omega1, omega2, m_el, a1;
   the angles are only quantised.
 
-Writers: the second drive's (``jident_ros.second_drive.record``: rosbags JointState/Imu MCAP bags,
+Writers: the second drive's (``jident_ros.research.second_drive.record``: rosbags JointState/Imu MCAP bags,
 CSV with the documented header), so the files are what ``jident diagnose`` reads.  Ground truth goes
 only to ``<name>.truth.json`` and the directory's ``truth.json``.
 """
@@ -28,7 +28,7 @@ from typing import Optional
 
 import numpy as np
 
-from jident_ros.second_drive.record import write_csv, write_jointstate
+from jident_ros.research.second_drive.record import write_csv, write_jointstate
 
 from .model import TRAVERSING_EVENTS, DriveParams, Run, gaps, scenario, simulate
 
@@ -153,7 +153,7 @@ def build(p: DriveParams, event: str, direction: str, sensors: Sensors, seed: in
     name = case_name(event, direction, mech.motor_inertia_kgm2, mech.backlash_width_m, sensors)
     first = gap_list[0] if gap_list else None
     truth = {
-        "name": name, "model": "jident_ros.vector_drive", "event": {"type": event, "index": k_ev,
+        "name": name, "model": "jident_ros.research.vector_drive", "event": {"type": event, "index": k_ev,
                                                                      "time_s": _t(k_ev * ts),
                                                                      "traversing": event in TRAVERSING_EVENTS},
         "direction": direction, "inertia_kgm2": mech.motor_inertia_kgm2,

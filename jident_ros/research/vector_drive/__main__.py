@@ -1,4 +1,4 @@
-"""python -m jident_ros.vector_drive --out DIR [options]: simulate the vector drive's events and write
+"""python -m jident_ros.research.vector_drive --out DIR [options]: simulate the vector drive's events and write
 their recordings (JointState MCAP bags with and without Imu, CSV), one truth file per recording
 (<name>.truth.json) and an index truth.json.
 
@@ -16,7 +16,7 @@ from pathlib import Path
 from .model import EVENTS, DriveParams, motulator_available, small_drive
 from .record import INPUTS, Sensors, build, with_inertia, with_width, write
 
-PROG = "python -m jident_ros.vector_drive"
+PROG = "python -m jident_ros.research.vector_drive"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -109,7 +109,7 @@ def main(argv=None) -> int:
                                   f"torque estimate {100 * (tr['torque_estimate_error']['steady_relative'] or 0):+.2f} "
                                   f"% (steady)", flush=True)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "truth.json").write_text(json.dumps({"schema": "jident_ros.vector_drive/truth/1",
+    (out / "truth.json").write_text(json.dumps({"schema": "jident_ros.research.vector_drive/truth/1",
                                                 "command": [PROG] + list(sys.argv[1:] if argv is None else argv),
                                                 "recordings": index}, indent=1, allow_nan=False) + "\n")
     print(f"{len(index)} recordings + truth files in {out} ({time.perf_counter() - t0:.1f} s)")

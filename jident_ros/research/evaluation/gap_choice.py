@@ -1,12 +1,12 @@
 """The gap fit's model choice on both drives (docs/method.md, "Gap-only fit and the model choice").
 
-``python -m jident_ros.evaluation.gap_choice [--second-drive DIR ...]`` prints
+``python -m jident_ros.research.evaluation.gap_choice [--second-drive DIR ...]`` prints
 
 * on our simulator's 168 grid windows, noise-free and at 60/40/30/20 dB (the seeds of ``jident evaluate``'s
   robustness sweep (a), 5 per level): how often the steadiness test (:func:`gap.pre_entry_steady`) keeps the
   joint fit, and the class, 95 % interval coverage, 'ambiguous' share and |J1 error| of the default (the model
   choice), the joint fit and the gap-only fit on the same windows;
-* on the second drive's CSV recordings (``python -m jident_ros.second_drive --format csv``; the flank detector's
+* on the second drive's CSV recordings (``python -m jident_ros.research.second_drive --format csv``; the flank detector's
   event windows, as ``raw_inputs --report``): the steadiness test's largest p and smallest F, and the gap-only fit
   with the candidate interval moved (entry ``--early`` samples early, re-contact ``--late`` samples late) with and
   without the trimming of the in-zone set by the dynamics.
@@ -24,8 +24,6 @@ import numpy as np
 from scipy import stats
 
 from jident_ros.config import load_system_config
-from jident_ros.evaluation.raw_inputs import RawRecording, event_window, run_detector
-from jident_ros.evaluation.robustness import SNR_LEVELS_DB, noise_seed
 from jident_ros.identify.gap import (
     GAP_ONLY_TRIM_REL,
     GAP_ONLY_TRIM_SIGMA,
@@ -35,9 +33,11 @@ from jident_ros.identify.gap import (
     nearest_class,
     pre_entry_steady,
 )
+from jident_ros.identify.monitor import DetectorConfig, make_detector
 from jident_ros.identify.verdict import classes_in_interval
+from jident_ros.research.evaluation.raw_inputs import RawRecording, event_window, run_detector
+from jident_ros.research.evaluation.robustness import SNR_LEVELS_DB, noise_seed
 from jident_ros.sim import SystemConfig, add_measurement_noise, paper_grid_cases, simulate_grid
-from jident_ros.stream.flank import FlankDetector
 from jident_ros.stream.inputs import read_csv
 
 #: The fits compared on our simulator: label -> estimate_inertia's method.
@@ -103,11 +103,9 @@ def second_drive(system: SystemConfig, directory, early: int = 3, late: int = 2,
     for tr in truth["recordings"]:
         data, channels, _ = read_csv(directory / tr["file"])
         ts = float(tr["sample_period_s"])
-        det = FlankDetector(float(tr["reference_radius_m"]), ts, channels=channels, gear_ratio=float(tr["gear_ratio"]),
-                            encoder_counts_per_rev=int(tr["encoder"]["counts_per_rev"] or 0),
-                            nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2,
-                            samples_before_entry=system.sampling.samples_before_entry,
-                            samples_from_entry=system.sampling.samples_from_entry)
+        det = make_detector(system, DetectorConfig("flank", channels=channels, gear_ratio=float(tr["gear_ratio"]),
+                                                   encoder_counts_per_rev=int(tr["encoder"]["counts_per_rev"] or 0)),
+                            float(tr["reference_radius_m"]), ts)
         rec = RawRecording(data, channels, int(tr["entry_index"]), float(tr["inertia_kgm2"]),
                            float(tr["backlash_width_m"]), tr["direction"], int(tr["event"]["index"]))
         wins = [e.window for e in run_detector(det, rec) if e.kind == "window"]
@@ -139,7 +137,7 @@ def second_drive(system: SystemConfig, directory, early: int = 3, late: int = 2,
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m jident_ros.evaluation.gap_choice", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m jident_ros.research.evaluation.gap_choice", description=__doc__.split("\n\n")[0])
     p.add_argument("--second-drive", nargs="*", default=(), metavar="DIR")
     p.add_argument("--no-simulator", action="store_true", help="skip our simulator's grid")
     p.add_argument("--early", type=int, default=3, help="entry moved this many samples early (second drive)")

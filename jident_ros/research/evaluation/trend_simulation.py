@@ -1,7 +1,7 @@
 """Simulation harness of the trend tracker (research, not runtime): synthetic per-window estimate series
 (:func:`simulate_series`, miscalibrated standard errors and occasional outliers) and the measurement of the
 tracker's targets (:func:`measure_targets`: detection delay, false-alarm rate, wear-rate accuracy, the CUSUM
-design check).  ``python -m jident_ros.evaluation.trend_simulation [--quick]`` prints them.
+design check).  ``python -m jident_ros.research.evaluation.trend_simulation [--quick]`` prints them.
 """
 from __future__ import annotations
 

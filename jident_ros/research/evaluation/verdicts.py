@@ -9,7 +9,7 @@ of the publishing policy (:mod:`jident_ros.identify.verdict`).
   at 40 and 30 dB (two noise seeds each), without the noise-free eta_k = 0.025 pattern runs (the
   library itself: distance 0, margin infinite); the image method with the true K2's library width.
 * :func:`stress_evaluation`: every window diagnosed by
-  :func:`jident_ros.identify.diagnosis.diagnose_window` as the diagnostic node does, on the grid with
+  :class:`jident_ros.identify.diagnosis.Diagnoser` as the diagnostic node does, on the grid with
   K2 given right and x0.5, x0.8, x0.9, x1.1, x1.25, x2 (the paper mode's detector cuts a window at the same entry
   with a too-small K2 and never enters with x2 in this model, so the windows are diagnosed directly
   with the wrong ``backlash_width_m``), off-grid J1, clean and at 30 dB; plus random-data and 10-sample
@@ -18,8 +18,8 @@ of the publishing policy (:mod:`jident_ros.identify.verdict`).
 
 Commands (print a table; numbers in the report and docs/interfaces.md come from them)::
 
-    python -m jident_ros.evaluation.verdicts threshold     # image_min_margin for config/nodes.yaml
-    python -m jident_ros.evaluation.verdicts stress        # the stress table
+    python -m jident_ros.research.evaluation.verdicts threshold     # image_min_margin for config/nodes.yaml
+    python -m jident_ros.research.evaluation.verdicts stress        # the stress table
 
 Plain numpy; never imports rclpy.
 """
@@ -37,11 +37,11 @@ from typing import Optional, Sequence
 import numpy as np
 
 from jident_ros.config import load_method_config, load_system_config
-from jident_ros.evaluation.robustness import OFFGRID_J1, noise_seed, offgrid_j1_cases
-from jident_ros.identify.diagnosis import diagnose_window, mirrored, rotation_sign
+from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig, WindowInput, mirrored, rotation_sign
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.method.patterns import identify_window
+from jident_ros.research.evaluation.robustness import OFFGRID_J1, noise_seed, offgrid_j1_cases
 from jident_ros.sim import add_measurement_noise, paper_grid_cases, simulate_grid
 
 #: Largest error rate of the image method's published class.
@@ -169,9 +169,10 @@ def _diagnose_set(label, ws, k2_factor, system, method, library, policy, p, trut
     row = StressRow(label)
     classes = [float(c) for c in library.classes_kgm2]
     errs, gap_errs = [], []
+    diagnoser = Diagnoser(system, method, DiagnosisConfig(p), policy, library)
     for i, c in enumerate(ws.cases):
-        d = diagnose_window(ws.case(i), ws.entry_index, c.backlash_width_m * k2_factor, system.load.wheel_radius_m,
-                            ws.sample_period_s, library=library, system=system, method=method, p=p, policy=policy)
+        d = diagnoser.diagnose(WindowInput(ws.case(i), ws.entry_index, c.backlash_width_m * k2_factor,
+                                           system.load.wheel_radius_m, ws.sample_period_s))
         row.windows += 1
         row.statuses[d.status] += 1
         row.levels[d.level_name] += 1
@@ -197,10 +198,10 @@ def _junk_row(label, make, n, system, method, library, policy, p, seed=0) -> Str
     rng = np.random.default_rng(seed)
     row = StressRow(label)
     r, ts = system.load.wheel_radius_m, system.sampling.sample_period_s
+    diagnoser = Diagnoser(system, method, DiagnosisConfig(p), policy, library)
     for k in range(n):
         data, entry = make(rng, k)
-        d = diagnose_window(data, entry, 0.005, r, ts, library=library, system=system, method=method, p=p,
-                            policy=policy)
+        d = diagnoser.diagnose(WindowInput(data, entry, 0.005, r, ts))
         row.windows += 1
         row.statuses[d.status] += 1
         row.levels[d.level_name] += 1
@@ -280,7 +281,7 @@ def _load(p: float):
 def reverse_evaluation(system, method, library, p: float = 2.0) -> dict:
     """The image method on reversed windows (every channel but t mirrored) of the grid, noise-free: its fused class
     on the forward window, on the mirrored window as it is (what it did before the mirror), and on the mirrored
-    window through diagnosis.rotation_sign + mirrored (what diagnose_window does now), and the margins."""
+    window through diagnosis.rotation_sign + mirrored (what the Diagnoser does now), and the margins."""
     cases = paper_grid_cases(system)
     ws = simulate_grid(system, cases)
     out = {"windows": 0, "forward_correct": 0, "reverse_raw_correct": 0, "reverse_raw_same": 0,
@@ -304,7 +305,7 @@ def reverse_evaluation(system, method, library, p: float = 2.0) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m jident_ros.evaluation.verdicts", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m jident_ros.research.evaluation.verdicts", description=__doc__.split("\n\n")[0])
     ap.add_argument("what", choices=("threshold", "stress", "reverse"),
                     help="threshold: image_min_margin; stress: the table; reverse: the image method on mirrored windows")
     ap.add_argument("--p", type=float, default=2.0, help="KHM exponent (default 2, the diagnostic node's p)")

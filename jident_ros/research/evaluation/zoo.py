@@ -1,14 +1,14 @@
 """The zoo report (issue 20 item 6): today's diagnosis on three drive models, per model x input x event
 type x noise.
 
-``python -m jident_ros.evaluation.zoo --report`` (``--results -`` prints instead of writing docs/results.md)
+``python -m jident_ros.research.evaluation.zoo --report`` (``--results -`` prints instead of writing docs/results.md)
 
 1. generates (or reuses, from ``--out``, default out/zoo) single-event recordings of
-   * **ours**: jident_ros/sim through :func:`jident_ros.evaluation.raw_inputs.raw_recordings` (raw encoder
+   * **ours**: jident_ros/sim through :func:`jident_ros.research.evaluation.raw_inputs.raw_recordings` (raw encoder
      angles with offsets, the line's slip at the entry), J1 1.16 and 1.073, K2 2.5 and 7.5 mm, both directions;
-   * **second drive**: jident_ros/second_drive (:func:`~jident_ros.second_drive.record.build_grid`, speed
+   * **second drive**: jident_ros/research/second_drive (:func:`~jident_ros.research.second_drive.record.build_grid`, speed
      reference steps), the same J1 and K2, both directions;
-   * **vector drive**: jident_ros/vector_drive (motulator; docs/vector_drive.md), every event type both
+   * **vector drive**: jident_ros/research/vector_drive (motulator; docs/vector_drive.md), every event type both
      directions at J1 1.16, the traversing events forward at J1 1.073;
 
    each at 2^16 counts as a JointState bag, a JointState + Imu bag and a CSV file, and at 2^13 counts as a
@@ -44,13 +44,13 @@ import numpy as np
 
 from jident_ros.cli.offline import OfflineError, default_policy, diagnose_samples
 from jident_ros.config import load_system_config
-from jident_ros.evaluation.raw_inputs import raw_recordings
-from jident_ros.second_drive import record as sd_record
-from jident_ros.second_drive.model import DriveParams as SecondParams
-from jident_ros.vector_drive import record as vd_record
-from jident_ros.vector_drive.model import EVENTS as VD_EVENTS
-from jident_ros.vector_drive.model import TRAVERSING_EVENTS, motulator_available
-from jident_ros.vector_drive.model import DriveParams as VectorParams
+from jident_ros.research.evaluation.raw_inputs import raw_recordings
+from jident_ros.research.second_drive import record as sd_record
+from jident_ros.research.second_drive.model import DriveParams as SecondParams
+from jident_ros.research.vector_drive import record as vd_record
+from jident_ros.research.vector_drive.model import EVENTS as VD_EVENTS
+from jident_ros.research.vector_drive.model import TRAVERSING_EVENTS, motulator_available
+from jident_ros.research.vector_drive.model import DriveParams as VectorParams
 
 MODELS = ("ours", "second drive", "vector drive")
 #: (label, format, encoder counts)
@@ -395,8 +395,8 @@ def markdown(res: dict, command: str, commit: str) -> str:
              "detector, no K2, the drive's r and N configured, default policy) with `--no-image` (the pattern "
              "library is of our simulator only: the gap estimate is what is measured). Models: **ours** "
              "(jident_ros/sim, raw angles, the line's slip at the entry; J1 1.16/1.073, K2 2.5/7.5 mm, both "
-             "directions), **second drive** (jident_ros/second_drive, speed steps down; same J1, K2), **vector drive** "
-             "(jident_ros/vector_drive on motulator, docs/vector_drive.md: every event both directions at J1 1.16, the "
+             "directions), **second drive** (jident_ros/research/second_drive, speed steps down; same J1, K2), **vector drive** "
+             "(jident_ros/research/vector_drive on motulator, docs/vector_drive.md: every event both directions at J1 1.16, the "
              "traversing ones forward at 1.073; K2 5 mm; the drive's own lagging speed feedback and torque estimate, "
              "+1.7 % off the true torque). A window matches a true gap when its entry lies from 4 samples before the "
              "gap's first sample up to its re-contact (ours: up to 4 after); 'found' counts traversals (flank to "
@@ -453,7 +453,7 @@ def _commit() -> str:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m jident_ros.evaluation.zoo", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m jident_ros.research.evaluation.zoo", description=__doc__.split("\n\n")[0])
     p.add_argument("--report", action="store_true", help="generate/reuse the recordings, diagnose, write the section")
     p.add_argument("--out", default="out/zoo", help="recordings and their cache (default out/zoo)")
     p.add_argument("--results", default="docs/results.md", help="results file to update ('-' prints)")
@@ -470,7 +470,7 @@ def main(argv=None) -> int:
             sys.stderr.write(f"zoo: error: argument --models: not one of {', '.join(MODELS)}: {m!r}\n")
             return 2
     res = run(Path(a.out), a.quick, log=lambda t: print(t, file=sys.stderr, flush=True), models=models)
-    cmd = "python -m jident_ros.evaluation.zoo --report" + (" --quick" if a.quick else "")
+    cmd = "python -m jident_ros.research.evaluation.zoo --report" + (" --quick" if a.quick else "")
     md = markdown(res, cmd, _commit())
     if a.json:
         Path(a.json).write_text(json.dumps({"rows": {" | ".join(k): v for k, v in res["rows"].items()},

@@ -1,7 +1,7 @@
 """Issue 14's targets measured on REAL diagnosed windows of the simulator (not on the synthetic series
-of :func:`jident_ros.evaluation.trend_simulation.simulate_series`).
+of :func:`jident_ros.research.evaluation.trend_simulation.simulate_series`).
 
-    python -m jident_ros.evaluation.trend_targets [--quick] [--seed 0]
+    python -m jident_ros.research.evaluation.trend_targets [--quick] [--seed 0]
 
 1. **Pools of diagnosed windows.**  One case (J1, K2 = 3 mm, eta_k = 0.025) is simulated once
    (:func:`jident_ros.sim.simulate_grid`), repeated, and every copy gets its own white noise at 30 dB
@@ -39,12 +39,12 @@ import numpy as np
 from scipy.stats import chi2
 
 from jident_ros.config import load_system_config
-from jident_ros.evaluation.raw_inputs import event_window, flank_detector, raw_recordings, run_detector
-from jident_ros.evaluation.trend_simulation import step_trials
-from jident_ros.identify.diagnosis import detector_arguments, diagnose_window
+from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig
 from jident_ros.identify.gap import NoGapError, estimate_backlash_width, estimate_inertia
 from jident_ros.identify.trend import TrendConfig, TrendTracker
 from jident_ros.identify.trend_status import trend_inputs
+from jident_ros.research.evaluation.raw_inputs import event_window, flank_detector, raw_recordings, run_detector
+from jident_ros.research.evaluation.trend_simulation import step_trials
 from jident_ros.sim import Case, WindowSet, add_measurement_noise, simulate_grid
 
 SNR_DB = 30.0
@@ -61,7 +61,7 @@ def _tile(ws: WindowSet, n: int) -> WindowSet:
 
 
 def diagnose_gap(ws: WindowSet, system, width: bool = False) -> dict:
-    """J1, se (and the width, its se) of every window by the gap estimator, as diagnose_window runs it
+    """J1, se (and the width, its se) of every window by the gap estimator, as the diagnosis runs it
     (K2 of each case given, as the detector would have it); NaN where there is no gap."""
     n = len(ws)
     out = {k: np.full(n, np.nan) for k in ("j1", "se", "width", "width_se")}
@@ -137,7 +137,7 @@ def detection(steady: dict, up: dict, down: dict, trials: int, seed: int, config
 
 def flank_windows(system, cases: list, seed: int, steady_s: float = 0.2) -> list:
     """The path of a real drive and of ``jident trend``: one raw recording per case
-    (:func:`jident_ros.evaluation.raw_inputs.raw_recordings`: 2^16-count encoders with arbitrary offsets,
+    (:func:`jident_ros.research.evaluation.raw_inputs.raw_recordings`: 2^16-count encoders with arbitrary offsets,
     the slip moving the load encoder's, 30 dB white noise on the other channels), the flank detector
     (no K2), each event's window diagnosed as the diagnostic node does (gap only) and turned into the
     tracker's inputs by :func:`jident_ros.identify.trend_status.trend_inputs` (J1 when published; the
@@ -149,6 +149,7 @@ def flank_windows(system, cases: list, seed: int, steady_s: float = 0.2) -> list
     recs = raw_recordings(system, [j1], [c.backlash_width_m for c in cases], eta, snr_db=SNR_DB, steady_s=steady_s,
                           seed=seed)
     ts = system.sampling.sample_period_s
+    diagnoser = Diagnoser(system, None, DiagnosisConfig(2.0, "auto", image_method=False))
     out = []
     for rec in recs:
         wins = [e.window for e in run_detector(flank_detector(system), rec) if e.kind == "window"]
@@ -157,9 +158,7 @@ def flank_windows(system, cases: list, seed: int, steady_s: float = 0.2) -> list
         if win is None:
             out.append(None)
             continue
-        d = diagnose_window(win.as_dict(), win.entry_index, win.backlash_width_m, win.wheel_radius_m,
-                            win.sample_period_s, library=None, system=system, method=None, p=2.0,
-                            image_method=False, **detector_arguments(win))
+        d = diagnoser.diagnose(win)
         out.append(trend_inputs(d, 0.0, win))
     return out
 

@@ -1,6 +1,6 @@
 """Why the variant 'sensor_matched' (docs/method.md): the candidates measured side by side on the default sensor set.
 
-``python -m jident_ros.evaluation.sensor_choice`` prints one markdown table: the fused accuracy of the image
+``python -m jident_ros.research.evaluation.sensor_choice`` prints one markdown table: the fused accuracy of the image
 method (126 headline cases, every p) on the 168 grid windows recorded by the default sensor set
 (:data:`jident_ros.sim.sensors.DEFAULT_SENSORS`, seed 3 as in ``jident evaluate``; ``--seeds`` for more), for
 
@@ -23,7 +23,10 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
 from jident_ros.config import load_method_config, load_system_config
-from jident_ros.evaluation.evaluate import (
+from jident_ros.method import normalise as nz
+from jident_ros.method.patterns import PatternLibrary, take_windows
+from jident_ros.method.pipeline import SIGNALS, pre_entry_reference
+from jident_ros.research.evaluation.evaluate import (
     SENSOR_SEED,
     _feature_task,
     _pattern_order,
@@ -31,9 +34,6 @@ from jident_ros.evaluation.evaluate import (
     sensor_matched_config,
     window_features,
 )
-from jident_ros.method import normalise as nz
-from jident_ros.method.patterns import PatternLibrary, take_windows
-from jident_ros.method.pipeline import SIGNALS, pre_entry_reference
 from jident_ros.sim import WindowSet, paper_grid_cases, simulate_grid
 from jident_ros.sim.sensors import DEFAULT_SENSORS, apply_sensors
 
@@ -137,7 +137,7 @@ def diagnose(system, method, case_index: int = 5) -> list[str]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m jident_ros.evaluation.sensor_choice", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m jident_ros.research.evaluation.sensor_choice", description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[SENSOR_SEED], help="test seeds of the sensor noise")
     ap.add_argument("--config", help="system config or profile (default config/system.yaml)")
     ap.add_argument("--matched-seeds", type=int, help="noise seeds of the matched libraries (default: method.yaml)")

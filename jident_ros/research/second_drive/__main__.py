@@ -1,4 +1,4 @@
-"""python -m jident_ros.second_drive --out DIR [options]: write the grid of
+"""python -m jident_ros.research.second_drive --out DIR [options]: write the grid of
 single-event recordings of the second drive and their truth.json.
 
 Bad input: one line naming the argument and its value on stderr, exit status 2.
@@ -15,7 +15,7 @@ from pathlib import Path
 from .model import PAPER_INERTIAS_KGM2, PAPER_WIDTHS_M, DriveParams
 from .record import FORMATS, WEAR_WIDTHS_M, SensorConfig, build_grid, build_wear, grid_cases, truth_document, write_recording, write_truth
 
-PROG = "python -m jident_ros.second_drive"
+PROG = "python -m jident_ros.research.second_drive"
 
 
 class _Parser(argparse.ArgumentParser):

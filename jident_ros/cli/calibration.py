@@ -42,10 +42,10 @@ import numpy as np
 
 from jident_ros.bag.drive_replay import DriveReplay, in_sample_time_order, read_drive_messages
 from jident_ros.bag.messages import deserialize
+from jident_ros.identify.monitor import DetectorConfig, make_detector
 from jident_ros.method.patterns import PatternLibrary, h5_table, library_metadata
 from jident_ros.method.pipeline import SIGNALS, MethodConfig, batch_features, pre_entry_reference
 from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
-from jident_ros.stream.detector import BacklashDetector
 from jident_ros.stream.layout import DRIVE_TOPICS, SIGNALS_TOPIC, TRUE_INERTIA_TOPIC, WIDTH_TOPIC
 from jident_ros.stream.layout import topic_matches as _matches
 
@@ -176,60 +176,23 @@ def read_calibration_windows(path, system, *, inertia_kgm2: Optional[float] = No
         raise CalibrationError(f"backlash_width_m: must be a finite number > 0, got {backlash_width_m!r}")
     if not Path(path).exists():
         raise CalibrationError(f"recording {name}: no such file or directory")
-    messages, topics = read_drive_messages(path, CalibrationError, note=log)
-    found = sorted({t for t, _, _ in messages if _matches(t, SIGNALS_TOPIC)})
-    if not found:
-        raise CalibrationError(f"recording {name}: no drive/signals topic "
-                               f"(topics: {', '.join(topics) or 'none'})")
-    if len(found) > 1:
-        raise CalibrationError(f"recording {name}: several drive/signals topics ({', '.join(found)}); "
-                               f"record one drive per calibration recording")
-    prefix = found[0][:-len(SIGNALS_TOPIC)]
-    names = {rel: prefix + rel for rel in DRIVE_TOPICS}
-    messages = in_sample_time_order([m for m in messages if m[0] in names.values()], found[0])
-
-    def decode(topic, msg_type, raw):
-        try:
-            return deserialize(msg_type, raw)
-        except ValueError as exc:
-            raise CalibrationError(f"recording {name}: undecodable {msg_type} message on {topic} ({exc})") from None
-
-    def positive_data(msg, topic):
-        v = float(msg.data)
-        if not _positive_number(v):
-            raise CalibrationError(f"recording {name}: {topic} must carry a finite number > 0, got {v!r}")
-        return v
-
+    rec = _CalibrationRecording(name)
+    topic, names, messages = rec.drive_messages(path, log)
     follow_width = backlash_width_m is None
     if follow_width:
         first = next((m for m in messages if m[0] == names[WIDTH_TOPIC]), None)
         if first is None:
             raise CalibrationError(f"recording {name}: no backlash width (no {WIDTH_TOPIC} message); "
                                    f"give --backlash-width-m")
-        width = positive_data(decode(*first), first[0])
+        width = rec.positive_data(rec.decode(*first), first[0])
     else:
         width = float(backlash_width_m)
-
-    sampling = system.sampling
-    ts = float(sampling.sample_period_s)
-
-    def make_detector(channels, topic, k2):
-        missing = [c for c in ("t", "alpha1", "alpha2") + SIGNALS if c not in channels]
-        if missing:
-            raise CalibrationError(f"recording {name}: {topic} lacks channel {missing[0]!r} (it carries "
-                                   f"{','.join(channels)}; inequality 1 needs t, alpha1, alpha2 and the "
-                                   f"patterns need {','.join(SIGNALS)})")
-        wanted = [c for c in WINDOWING_DEFAULTS["channels"] if c in channels]
-        return BacklashDetector(k2, system.load.wheel_radius_m, ts, channels=("t",) + tuple(wanted),
-                                samples_before_entry=sampling.samples_before_entry,
-                                samples_from_entry=sampling.samples_from_entry,
-                                gap_tolerance=WINDOWING_DEFAULTS["gap_tolerance"])
-
-    replay = DriveReplay(names, width, follow_width, decode=decode, read_width=positive_data,
-                         read_truth=positive_data, make_detector=make_detector,
+    replay = DriveReplay(names, width, follow_width, decode=rec.decode, read_width=rec.positive_data,
+                         read_truth=rec.positive_data, make_detector=lambda c, t, k2: rec.detector(system, c, t, k2),
                          log=lambda text: log(f"{name}: {text}"))
     windows: list = []
     unlabelled = None
+    ts = float(system.sampling.sample_period_s)
     for win in replay.windows(messages):
         if inertia_kgm2 is not None:
             j1, source = float(inertia_kgm2), "label"
@@ -240,23 +203,73 @@ def read_calibration_windows(path, system, *, inertia_kgm2: Optional[float] = No
             continue
         windows.append(LabelledWindow(win.as_dict(), win.entry_index, j1, win.backlash_width_m, name,
                                       win.entry_time_s, source))
-    detector, widths_used = replay.detector, replay.widths_used
-    if detector is None:
-        raise CalibrationError(f"recording {name}: topic {found[0]} holds no readable message"
-                               + (f" ({replay.dropped_before_start[0]})" if replay.dropped_before_start else ""))
-    drops = ", ".join([f"{r} {n}" for r, n in detector.counts.items() if n] +
-                      ([f"clock jumps {replay.clock_jumps}"] if replay.clock_jumps else []))
-    if drops:
-        log(f"{name}: windowing drops: {drops}")
-    if unlabelled is not None:
-        raise CalibrationError(f"recording {name}: no J1 label for window {unlabelled.window_id} (entry at "
-                               f"t = {unlabelled.entry_time_s:.4f} s): give --label {name}=J1 (kg m^2) or "
-                               f"record {TRUE_INERTIA_TOPIC}")
-    if not windows:
-        raise CalibrationError(f"recording {name}: no backlash entry found in {found[0]} "
-                               f"({detector.samples_seen} samples, K2 = {', '.join(f'{w:g}' for w in widths_used)} m"
-                               + (f"; windowing drops: {drops})" if drops else ")"))
+    rec.check_windows(replay, topic, windows, unlabelled, log)
     return windows
+
+
+class _CalibrationRecording:
+    """One calibration recording's reading: its errors name the file (CalibrationError)."""
+
+    def __init__(self, name: str):
+        self.name = name
+
+    def drive_messages(self, path, log) -> tuple:
+        """(the drive/signals topic, {relative drive topic: its name}, the drive messages in sample-time order)."""
+        name = self.name
+        messages, topics = read_drive_messages(path, CalibrationError, note=log)
+        found = sorted({t for t, _, _ in messages if _matches(t, SIGNALS_TOPIC)})
+        if not found:
+            raise CalibrationError(f"recording {name}: no drive/signals topic "
+                                   f"(topics: {', '.join(topics) or 'none'})")
+        if len(found) > 1:
+            raise CalibrationError(f"recording {name}: several drive/signals topics ({', '.join(found)}); "
+                                   f"record one drive per calibration recording")
+        prefix = found[0][:-len(SIGNALS_TOPIC)]
+        names = {rel: prefix + rel for rel in DRIVE_TOPICS}
+        return found[0], names, in_sample_time_order([m for m in messages if m[0] in names.values()], found[0])
+
+    def decode(self, topic, msg_type, raw):
+        try:
+            return deserialize(msg_type, raw)
+        except ValueError as exc:
+            raise CalibrationError(f"recording {self.name}: undecodable {msg_type} message on {topic} "
+                                   f"({exc})") from None
+
+    def positive_data(self, msg, topic):
+        v = float(msg.data)
+        if not _positive_number(v):
+            raise CalibrationError(f"recording {self.name}: {topic} must carry a finite number > 0, got {v!r}")
+        return v
+
+    def detector(self, system, channels, topic, k2):
+        """The windowing node's paper detector (inequality 1) for the channels the recording carries."""
+        missing = [c for c in ("t", "alpha1", "alpha2") + SIGNALS if c not in channels]
+        if missing:
+            raise CalibrationError(f"recording {self.name}: {topic} lacks channel {missing[0]!r} (it carries "
+                                   f"{','.join(channels)}; inequality 1 needs t, alpha1, alpha2 and the "
+                                   f"patterns need {','.join(SIGNALS)})")
+        wanted = [c for c in WINDOWING_DEFAULTS["channels"] if c in channels]
+        return make_detector(system, DetectorConfig("paper", k2, ("t",) + tuple(wanted),
+                                                    WINDOWING_DEFAULTS["gap_tolerance"]))
+
+    def check_windows(self, replay, topic, windows, unlabelled, log) -> None:
+        """The drops said; CalibrationError when no batch was readable, a window has no J1 or none was found."""
+        name, detector = self.name, replay.detector
+        if detector is None:
+            raise CalibrationError(f"recording {name}: topic {topic} holds no readable message"
+                                   + (f" ({replay.dropped_before_start[0]})" if replay.dropped_before_start else ""))
+        drops = ", ".join([f"{r} {n}" for r, n in detector.counts.items() if n] +
+                          ([f"clock jumps {replay.clock_jumps}"] if replay.clock_jumps else []))
+        if drops:
+            log(f"{name}: windowing drops: {drops}")
+        if unlabelled is not None:
+            raise CalibrationError(f"recording {name}: no J1 label for window {unlabelled.window_id} (entry at "
+                                   f"t = {unlabelled.entry_time_s:.4f} s): give --label {name}=J1 (kg m^2) or "
+                                   f"record {TRUE_INERTIA_TOPIC}")
+        if not windows:
+            raise CalibrationError(f"recording {name}: no backlash entry found in {topic} ({detector.samples_seen} "
+                                   f"samples, K2 = {', '.join(f'{w:g}' for w in replay.widths_used)} m"
+                                   + (f"; windowing drops: {drops})" if drops else ")"))
 
 
 # --------------------------------------------------------------------------- building

@@ -14,7 +14,7 @@ What is ours (motulator has no backlash): the mechanics, :class:`BacklashTwoMass
 motulator's controller that sees quantised encoder angles, computes the lagging speed feedback the
 speed PI acts on, and logs the drive's own torque estimate and the true states every period).
 
-Width convention (the same as jident_ros.sim and jident_ros.second_drive): K2 is the backlash
+Width convention (the same as jident_ros.sim and jident_ros.research.second_drive): K2 is the backlash
 width in metres at the reference radius r; the half zone is theta_b = K2/r; the zone is
 |delta| < theta_b with delta = theta_M - N theta_L, measured from the zone centre; the
 flank-to-flank travel is 2 K2/r.

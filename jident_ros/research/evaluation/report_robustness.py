@@ -1,4 +1,4 @@
-"""Markdown and PNG figures of the robustness evaluation (:mod:`jident_ros.evaluation.robustness`).
+"""Markdown and PNG figures of the robustness evaluation (:mod:`jident_ros.research.evaluation.robustness`).
 
 ``render_robustness(rob, figures)`` returns a markdown block for docs/results.md's generated
 section; ``write_robustness_figures(rob, outdir)`` writes the PNGs (matplotlib, Agg; imported
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from jident_ros.evaluation.robustness import CHANNEL_SETS, PRIMARY, RobustnessResult, Sweep
 from jident_ros.identify.fusion import BETWEEN_Z
+from jident_ros.research.evaluation.robustness import CHANNEL_SETS, PRIMARY, RobustnessResult, Sweep
 
 
 def _pct(x, nd=1) -> str:

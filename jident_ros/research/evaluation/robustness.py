@@ -17,7 +17,7 @@ Sweeps (:func:`run_robustness`):
 
 Noise is :func:`jident_ros.sim.add_measurement_noise` (MATLAB's awgn 'measured'
 SNR over the window, on a1, m_el, omega1, a2, v2, omega2; angles are not noised).
-Plain numpy/scipy: no rclpy, no matplotlib (figures: ``jident_ros.evaluation.report_robustness``).
+Plain numpy/scipy: no rclpy, no matplotlib (figures: ``jident_ros.research.evaluation.report_robustness``).
 """
 from __future__ import annotations
 

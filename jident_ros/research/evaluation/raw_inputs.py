@@ -16,7 +16,7 @@ signals:
   recording **mirrors the signs** of every channel but t (the model is odd in every state: the motor's
   torque under the swapped phase sequence, the film friction sign(v2) |v2|^n, the clutch law).
 
-``python -m jident_ros.evaluation.raw_inputs --report`` runs the targets of issue 12 on the grid (7 J1 x 6
+``python -m jident_ros.research.evaluation.raw_inputs --report`` runs the targets of issue 12 on the grid (7 J1 x 6
 K2, eta_k of the pattern group) with the flank detector (no K2 given), clean and at 30 dB, both directions,
 2^16-count encoders, 10 s steady stretches: entries found and false, the entry sample against the truth
 (and against inequality 1 with zone-centred angles and the true K2), K2 error, and the default gap fit (the
@@ -41,10 +41,10 @@ import numpy as np
 from jident_ros.config import load_system_config
 from jident_ros.identify.diagnosis import detector_arguments
 from jident_ros.identify.gap import NoGapError, estimate_inertia, nearest_class
+from jident_ros.identify.monitor import DetectorConfig, make_detector
 from jident_ros.identify.verdict import VerdictPolicy, decide_gap
 from jident_ros.sim import Case, SystemConfig, simulate_grid
-from jident_ros.stream.detector import BacklashDetector, stream_batches
-from jident_ros.stream.dynamics import DynamicsDetector
+from jident_ros.stream.detector import stream_batches
 from jident_ros.stream.flank import FlankDetector
 from jident_ros.stream.inputs import read_csv
 from jident_ros.stream.layout import DEFAULT_CHANNELS
@@ -206,10 +206,8 @@ def run_detector(det, rec: RawRecording, batch_size: int = 50) -> list:
 
 
 def flank_detector(system: SystemConfig, counts: int = 65536, **kw) -> FlankDetector:
-    s = system.sampling
-    return FlankDetector(system.load.wheel_radius_m, s.sample_period_s, samples_before_entry=s.samples_before_entry,
-                         samples_from_entry=s.samples_from_entry, encoder_counts_per_rev=counts,
-                         nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2, **kw)
+    """The flank detector of our simulator's recordings (``kw``: :class:`DetectorConfig` fields)."""
+    return make_detector(system, DetectorConfig("flank", encoder_counts_per_rev=counts, **kw))
 
 
 #: The inputs the dynamics detector is measured on: the channels a drive without them lacks.
@@ -225,27 +223,13 @@ def without(rec: RawRecording, absent: Sequence[str]) -> RawRecording:
                         rec.direction, rec.steady_rows)
 
 
-def make_detector(kind: str, system: SystemConfig, wheel_radius_m: float, sample_period_s: float, channels,
-                  gear_ratio: float = 1.0, counts: int = 65536):
-    """The flank (:class:`FlankDetector`) or dynamics (:class:`DynamicsDetector`) detector of a recording."""
-    s = system.sampling
-    common = dict(channels=channels, gear_ratio=gear_ratio, encoder_counts_per_rev=counts,
-                  nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2,
-                  samples_before_entry=s.samples_before_entry, samples_from_entry=s.samples_from_entry)
-    if kind == "dynamics":
-        return DynamicsDetector(wheel_radius_m, sample_period_s, **common)
-    if kind == "flank":
-        return FlankDetector(wheel_radius_m, sample_period_s, **common)
-    raise ValueError(f"detector: expected flank or dynamics, got {kind!r}")
-
-
 def evaluate_condition(system: SystemConfig, recs: list, counts: int, detector: str = "flank") -> dict:
     """Per recording: windows, entry offset (samples), K2 relative error, gap J1 and its class."""
     classes = tuple(system.grid.inertia_classes_kgm2)
     ts = system.sampling.sample_period_s
     rows = []
     for rec in recs:
-        det = make_detector(detector, system, system.load.wheel_radius_m, ts, rec.channels, counts=counts)
+        det = make_detector(system, DetectorConfig(detector, channels=rec.channels, encoder_counts_per_rev=counts))
         evs = run_detector(det, rec)
         wins = [e.window for e in evs if e.kind == "window"]
         t_entry = float(rec.data[rec.entry_row, 0])
@@ -289,8 +273,7 @@ def paper_consistency(system: SystemConfig, counts: int = 0) -> dict:
     s = system.sampling
     diffs = []
     for rec in recs:
-        paper = BacklashDetector(rec.backlash_width_m, system.load.wheel_radius_m, s.sample_period_s,
-                                 samples_before_entry=s.samples_before_entry, samples_from_entry=s.samples_from_entry)
+        paper = make_detector(system, DetectorConfig("paper", rec.backlash_width_m))
         pw = [e.window for e in run_detector(paper, rec) if e.kind == "window"]
         fw = [e.window for e in run_detector(flank_detector(system, counts), rec) if e.kind == "window"]
         if not pw or not fw:
@@ -305,7 +288,7 @@ def paper_consistency(system: SystemConfig, counts: int = 0) -> dict:
 def evaluate_second_drive(system: SystemConfig, directory, batch_size: int = 50, detector: str = "flank",
                           absent: Sequence[str] = ()) -> dict:
     """The flank detector and the gap estimator on a directory of the second drive's CSV recordings
-    (``python -m jident_ros.second_drive --format csv``, ground truth in its truth.json, read only here):
+    (``python -m jident_ros.research.second_drive --format csv``, ground truth in its truth.json, read only here):
     r = the truth's reference radius and N its gear ratio (what a user configures), no K2.  ``absent``: channels
     taken out (a drive without those sensors)."""
     directory = Path(directory)
@@ -319,8 +302,9 @@ def evaluate_second_drive(system: SystemConfig, directory, batch_size: int = 50,
         rec = without(RawRecording(data, channels, int(tr["entry_index"]), float(tr["inertia_kgm2"]),
                                    float(tr["backlash_width_m"]), tr["direction"], int(tr["event"]["index"])), absent)
         data, channels = rec.data, rec.channels
-        det = make_detector(detector, system, float(tr["reference_radius_m"]), ts, channels, float(tr["gear_ratio"]),
-                            int(tr["encoder"]["counts_per_rev"] or 0))
+        det = make_detector(system, DetectorConfig(detector, channels=channels, gear_ratio=float(tr["gear_ratio"]),
+                                                   encoder_counts_per_rev=int(tr["encoder"]["counts_per_rev"] or 0)),
+                            float(tr["reference_radius_m"]), ts)
         evs = run_detector(det, rec, batch_size)
         wins = [e.window for e in evs if e.kind == "window"]
         t_entry = float(data[rec.entry_row, 0])
@@ -408,13 +392,13 @@ def _pct(x):
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m jident_ros.evaluation.raw_inputs", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m jident_ros.research.evaluation.raw_inputs", description=__doc__.split("\n\n")[0])
     p.add_argument("--report", action="store_true", help="run the issue-12 detector targets on our simulator")
     p.add_argument("--steady-s", type=float, default=10.0)
     p.add_argument("--counts", type=int, default=65536)
     p.add_argument("--second-drive", nargs="*", default=(), metavar="DIR",
                    help="also evaluate these directories of the second drive's CSV recordings "
-                        "(python -m jident_ros.second_drive --format csv --out DIR)")
+                        "(python -m jident_ros.research.second_drive --format csv --out DIR)")
     p.add_argument("--detector", choices=("flank", "dynamics"), default="flank",
                    help="flank (raw angles, no K2) or dynamics (the load-torque step; run without the load encoder, "
                         "and without it and a1)")

@@ -24,7 +24,7 @@ import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from jident_ros.second_drive import __doc__ as pkg_doc
+from jident_ros.research.second_drive import __doc__ as pkg_doc
 
 from .model import PAPER_INERTIAS_KGM2, PAPER_WIDTHS_M, Drive, DriveParams, gaps, simulate
 
@@ -317,8 +317,8 @@ def write_recording(out_dir: Path, rec: Recording, fmt: str, namespace="", imu=F
 def truth_document(params: DriveParams, sensors: SensorConfig, recordings, fmt, files, command=None,
                    namespace="", scenario="grid"):
     return {
-        "schema": "jident_ros.second_drive/truth/1",
-        "model": "jident_ros.second_drive (vector-controlled IM, Hertz/Hunt-Crossley backlash, belt conveyor)",
+        "schema": "jident_ros.research.second_drive/truth/1",
+        "model": "jident_ros.research.second_drive (vector-controlled IM, Hertz/Hunt-Crossley backlash, belt conveyor)",
         "description": (pkg_doc or "").strip().splitlines()[0],
         "convention": ("K2 = backlash width in m at reference_radius_m r; half_zone_rad = K2/r; the zone is "
                        "|alpha1 - N*alpha2 - relative_offset_rad| < K2/r (angles as recorded, before "
