@@ -294,3 +294,30 @@ def test_one_count_of_a_coarse_encoder_at_the_entry_is_not_a_slip():
     assert abs(abs(d[first] - d[first - 1]) - q) < 1e-9 and abs(d[first + 1] - d[first]) < 1e-12  # 1 count, still
     res = estimate_width({"alpha1": a1, "alpha2": a2q}, first, r, 5e-4, recontact=g, angle_quantum_rad=q)
     assert res.how == "traversal" and res.width_m == pytest.approx(theta * r, rel=0.05)
+
+
+def test_jident_info_and_diagnose_on_a_drive_of_another_size(system, tmp_path, capsys):
+    """issue 20 item 5: `jident info` with another nominal J1 failed ('load torque of case 0 exceeds the motor's
+    pull-out torque'); every window repeated 'pattern library could not be built'.  Now info works (rc 0, says
+    why the simulator cannot run the drive), and a drive without a library says once that the image method is
+    off and how to build one; the windows carry no library error."""
+    from pathlib import Path
+
+    from jident_ros.cli.main import main
+    from jident_ros.cli.offline import diagnose_samples
+    from jident_ros.config import load_system_config
+    from jident_ros.research.second_drive.record import write_csv
+    profile = Path(__file__).resolve().parents[1] / "docs" / "examples" / "profiles" / "small_drive.yaml"
+    assert main(["info", "--config", str(profile)]) == 0
+    out = capsys.readouterr().out
+    assert "nominal_inertia_kgm2 = 0.03" in out and "image method is off" in out and "cannot run this drive" in out
+    small = load_system_config(profile)
+    rec = raw_recordings(system, (1.16,), (0.005,), steady_s=0.3, seed=7)[0]
+    path = tmp_path / "small.csv"
+    write_csv(path, {c: rec.data[:, j] for j, c in enumerate(rec.channels)})
+    lines = []
+    res = diagnose_samples(path, system=small, log=lines.append, library_path=str(tmp_path / "none.npz"))
+    assert len(res.windows) == 1
+    assert sum("image method off" in t for t in lines) == 1 and sum("image method off" in t for t in res.notes) == 1
+    d = res.windows[0].diagnosis
+    assert "pattern library" not in d.message and d.value_dict()["image_method"].startswith("off")

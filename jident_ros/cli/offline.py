@@ -32,7 +32,7 @@ from jident_ros.bag.messages import deserialize
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig, WindowDiagnosis
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES
-from jident_ros.identify.library import default_library_path, load_pattern_library
+from jident_ros.identify.library import IMAGE_METHOD_OFF, default_library_path, load_pattern_library
 from jident_ros.identify.monitor import DetectorConfig, DriveMonitor, make_detector, required_channels
 from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.parameters import DIAGNOSTIC as DIAGNOSTIC_DEFAULTS
@@ -252,7 +252,10 @@ class _Setup:
             result.library_path = str(lib_path)
             library, result.library_error = load_pattern_library(lib_path, self.system, self.method,
                                                                  o.build_if_missing, log=log, warn=log)
-            if result.library_error and say_gap_only:
+            if result.library_error and result.library_error.startswith(IMAGE_METHOD_OFF):
+                result.notes.append(result.library_error)     # a drive without a library: said once, here
+                log(result.library_error)
+            elif result.library_error and say_gap_only:
                 log(f"{result.library_error}; windows are diagnosed from the gap only (level ERROR)")
         diagnoser = Diagnoser(self.system, self.method, self.config, self.policy, library,
                               result.library_error or "")
