@@ -128,7 +128,8 @@ def recontact_index(acc: np.ndarray, entry_index: int, drop: float = 0.6, min_sa
 
 #: single_mass_run fits m_el = J acc + c (True) or m_el = J acc (False).
 SINGLE_MASS_OFFSET = True
-#: ... with |c| at most this share of the run's median |m_el| (friction and a torque estimate's offset).
+#: ... with |c| at most this share of the run's median |m_el| or of the steady |m_el| before the departure, the
+#: larger (friction and a torque estimate's offset; a light gap torque does not shrink the bound).
 SINGLE_MASS_OFFSET_MAX = 0.15
 
 
@@ -150,6 +151,7 @@ def single_mass_run(m_el: np.ndarray, acc: np.ndarray, departure: int, inertia_s
     lo = max(departure - pre_samples, 0)
     pre = slice(lo, max(departure - 1, lo + 2))
     sm, sa = _noise(m_el[pre]), _noise(acc[pre])
+    pre_load = abs(float(np.median(m_el[pre])))      # the steady torque before the departure, N m
     j = float(inertia_seed_kgm2)
     c = 0.0
     tol_rel = 0.25
@@ -176,7 +178,7 @@ def single_mass_run(m_el: np.ndarray, acc: np.ndarray, departure: int, inertia_s
             # 1.2 N m Coulomb + 2 N m viscous, torque estimate +1.7 %); without it a 1 % tolerance broke the run
             (j_new, c_new), *_ = np.linalg.lstsq(np.column_stack([aa, np.ones_like(aa)]), m_el[a:b], rcond=None)
             j_new, c_new = float(j_new), float(c_new)
-            c_max = SINGLE_MASS_OFFSET_MAX * float(np.median(np.abs(m_el[a:b])))
+            c_max = SINGLE_MASS_OFFSET_MAX * max(float(np.median(np.abs(m_el[a:b]))), pre_load)
             if abs(c_new) > c_max:          # more than friction: a contact torque left in the run, not an offset
                 c_new = math.copysign(c_max, c_new)
                 den = float(aa @ aa)
