@@ -4,7 +4,7 @@ x noise, entries found, false entries, the coarse entry offset, the flank detect
 ``python -m jident_ros.research.evaluation.detector_zoo DIR [DIR ...] [--wrap] [--spike-s S]`` reads directories of
 CSV recordings with a ``truth.json`` (the second drive's ``python -m jident_ros.research.second_drive --format csv``
 or the vector drive's ``python -m jident_ros.research.vector_drive --formats csv``) and runs the flank detector as
-``jident diagnose`` would (r and N from the truth, as a user configures them; no K2).
+``jident diagnose`` would (r, N and the nominal J1 from the truth, as a user configures them; no K2).
 
 * **found**: the first gap of the recording has a window whose entry lies within +-6 samples of its entry;
 * **false**: a window whose entry lies more than 6 samples from every gap's entry (in steady running, at a
@@ -19,6 +19,7 @@ Research code: the runtime never imports it.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -57,7 +58,10 @@ def evaluate_dir(directory, system=None, wrap: bool = False, spike_s: float = 0.
             for c in ("alpha1", "alpha2"):
                 data[:, ch.index(c)] = _wrap(data[:, ch.index(c)])
         counts = int((tr.get("encoder") or {}).get("counts_per_rev") or 0)
-        det = make_detector(system, DetectorConfig("flank", channels=ch, gear_ratio=float(tr["gear_ratio"]),
+        # the user configures the drive's nominal J1 (the refinement's J1_nom): the truth's J1 here
+        drive = dataclasses.replace(system, motor=dataclasses.replace(system.motor,
+                                                                      nominal_inertia_kgm2=float(tr["inertia_kgm2"])))
+        det = make_detector(drive, DetectorConfig("flank", channels=ch, gear_ratio=float(tr["gear_ratio"]),
                                                    encoder_counts_per_rev=counts), float(tr["reference_radius_m"]), ts)
         wins = [e.window for e in run_detector(det, RawRecording(data, ch, 0, 0.0, 0.0, tr["direction"], 0))
                 if e.kind == "window"]
