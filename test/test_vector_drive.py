@@ -118,6 +118,9 @@ def test_recording_quantisation_offsets_and_truth(step_down, tmp_path):
     assert rec.signals["t"][1] - rec.signals["t"][0] == pytest.approx(5e-4)
     tr = rec.truth
     assert tr["event"]["type"] == "speed_step_down" and tr["gaps"][0]["traversal"]
+    g = tr["gaps"][0]      # the gap's torques: braking at the limit, the estimate a few % off, friction on
+    assert g["true_torque_mean_nm"] < -200 and 0 < abs(g["torque_estimate_error_mean_nm"]) < 0.05 * 360
+    assert g["bearing_friction_mean_nm"] > 1.0
     assert tr["entry_index"] > tr["steady_rows"]
     # the torque channel is the drive's estimate, not the truth
     assert not np.allclose(rec.signals["m_el"], st["tau_M"])
@@ -146,3 +149,15 @@ def test_reversals_traverse(event):
     delta = run.data["theta_M"] - m.gear_ratio * run.data["theta_L"]
     gl = gaps(delta, m.half_zone_rad)
     assert gl and delta[gl[0][0] - 1] < 0 < delta[gl[0][1]], "reverse: from the - flank to the + flank"
+
+
+@pytest.mark.slow
+def test_the_small_drive_traverses_its_backlash():
+    from jident_ros.research.vector_drive.model import small_drive
+    p = replace(small_drive(), preroll_s=0.05)
+    run = simulate(p, scenario(p, "speed_step_down", "forward", event_time_s=0.1), 0.3)
+    m = p.mechanics
+    delta = run.data["theta_M"] - m.gear_ratio * run.data["theta_L"]
+    gl = gaps(delta, m.half_zone_rad)
+    assert gl and delta[gl[0][0] - 1] > 0 > delta[gl[0][1]]
+    assert delta[gl[0][0] - 1] - delta[gl[0][1]] == pytest.approx(2 * m.half_zone_rad, rel=0.15)

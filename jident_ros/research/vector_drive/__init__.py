@@ -4,17 +4,17 @@ recordings as a real drive makes them (docs/vector_drive.md).  Research/validati
 imports it.  motulator is an optional dependency (``pip install -e '.[zoo]'``).
 """
 from .model import (
-                    EVENTS,
-                    TRAVERSING_EVENTS,
-                    Controller,
-                    DriveParams,
-                    Machine,
-                    Mechanics,
-                    Scenario,
-                    motulator_available,
-                    scenario,
-                    simulate,
-                    small_drive,
+           EVENTS,
+           TRAVERSING_EVENTS,
+           Controller,
+           DriveParams,
+           Machine,
+           Mechanics,
+           Scenario,
+           motulator_available,
+           scenario,
+           simulate,
+           small_drive,
 )
 
 __all__ = ["EVENTS", "TRAVERSING_EVENTS", "Controller", "DriveParams", "Machine", "Mechanics", "Scenario",

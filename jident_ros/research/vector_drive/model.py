@@ -148,8 +148,8 @@ class DriveParams:
     sample_period_s: float = 5.0e-4             # recording period (a multiple of the control period)
     speed_rad_s: float = 100.0                  # |w_ref| before the event
     base_load_ratio: float = 0.3                # external load torque in steady running, x rated
-    light_load_ratio: float = 0.1               # load reversal at light load: +-this x rated
-    heavy_load_ratio: float = 0.8               # load reversal at heavy load
+    light_load_ratio: float = 0.1               # load reversal at light load: coupling torque +-this x rated
+    heavy_load_ratio: float = 0.8               # load reversal at heavy load (coupling torque +-this x rated)
     load_ramp_s: float = 0.01                   # load torque changes ramp over this time
     speed_step_ratio: float = 0.2               # speed steps: |w_ref| changes by this fraction
     reversal_ramp_s: float = 0.3                # speed reversal: w_ref ramps to -w_ref over this time
@@ -225,11 +225,14 @@ def scenario(p: DriveParams, event: str, direction: str = "forward", event_time_
         return Scenario(**common, load_before_nm=base, speed_after_rad_s=w0 * (1 - p.speed_step_ratio))
     if event == "speed_step_up":
         return Scenario(**common, load_before_nm=base, speed_after_rad_s=w0 * (1 + p.speed_step_ratio))
-    if event == "speed_reversal":
-        return Scenario(**common, load_before_nm=base, speed_after_rad_s=-w0, ramp_s=p.reversal_ramp_s)
+    if event == "speed_reversal":      # a passive load (its friction only): one traversal, braking
+        return Scenario(**common, load_before_nm=0.0, speed_after_rad_s=-w0, ramp_s=p.reversal_ramp_s)
     if event in ("load_reversal_light", "load_reversal_heavy"):
+        # an active load whose torque reverses: the coupling torque goes from +x rated to -x rated
         x = (p.light_load_ratio if event.endswith("light") else p.heavy_load_ratio) * rated * s
-        return Scenario(**common, load_before_nm=x, load_after_nm=-x, ramp_s=p.load_ramp_s)
+        n = p.mechanics.gear_ratio
+        f = float(load_friction(p.mechanics, w0 / n))
+        return Scenario(**common, load_before_nm=n * x - f, load_after_nm=-n * x - f, ramp_s=p.load_ramp_s)
     if event == "load_step_same_flank":
         return Scenario(**common, load_before_nm=base, load_after_nm=s * p.heavy_load_ratio * rated,
                         ramp_s=p.load_ramp_s)

@@ -91,7 +91,7 @@ def simulate_cached(p: DriveParams, event: str, direction: str, duration_s: floa
                     cache_dir: Optional[Path] = None) -> dict:
     """Decimated states of one run (dict of arrays), from ``cache_dir`` when there (npz keyed by every
     parameter), else simulated (and saved there)."""
-    key = params_key(p, event, direction, duration_s, event_time_s)
+    key = params_key(p, event, direction, duration_s, event_time_s, asdict(scenario(p, event, direction, event_time_s)))
     path = None if cache_dir is None else Path(cache_dir) / f"vector_drive_{event}_{direction}_{key}.npz"
     if path is not None and path.exists():
         with np.load(path) as z:
@@ -110,6 +110,18 @@ def simulate_cached(p: DriveParams, event: str, direction: str, duration_s: floa
 
 def _t(x):
     return round(float(x), 9)
+
+
+def _gap_torques(st: dict, b: int, e: int) -> dict:
+    """What the gap's samples hold: the true air-gap torque, the drive's estimate's error against it and the
+    motor's bearing friction (means over the gap, N m)."""
+    sl = slice(b, e)
+    tau, est, fr = st["tau_M"][sl], st["tau_est"][sl], st["tau_f1"][sl]
+    if tau.size == 0:
+        return {}
+    return {"true_torque_mean_nm": float(np.mean(tau)),
+            "torque_estimate_error_mean_nm": float(np.mean(est - tau)),
+            "bearing_friction_mean_nm": float(np.mean(fr))}
 
 
 def case_name(event: str, direction: str, j1: float, k2: float, sensors: Sensors) -> str:
@@ -145,7 +157,7 @@ def build(p: DriveParams, event: str, direction: str, sensors: Sensors, seed: in
                  "from_flank": int(np.sign(delta[b - 1])) if b > 0 else 0,
                  "to_flank": int(np.sign(delta[e])) if e < n else 0,
                  "traversal": bool(b > 0 and e < n and np.sign(delta[b - 1]) != np.sign(delta[e])),
-                 "samples": e - b} for b, e in gl]
+                 "samples": e - b, **_gap_torques(st, b, e)} for b, e in gl]
     steady = slice(min(int(0.1 / ts), k_ev // 2), k_ev)   # the start of the log is the pre-roll's end
     tau = st["tau_M"]
     err = st["tau_est"] - tau

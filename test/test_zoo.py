@@ -1,0 +1,114 @@
+"""The zoo report's bookkeeping (jident_ros.research.evaluation.zoo): window-to-gap matching, the counts, the
+refusal-reason grouping and the results section.  The report itself runs for minutes (slow test)."""
+from __future__ import annotations
+
+import pytest
+
+from jident_ros.research.evaluation import zoo
+from jident_ros.research.evaluation.zoo import ZooRecording, match, replace_section, summarise
+
+
+def _rec(gaps, traversing=True, event_index=100, j1=1.16, k2=0.005):
+    return ZooRecording("vector drive", "x", "speed step down", traversing, "forward", j1, k2, 0.1, 1.0, 65536,
+                        None, 5e-4, event_index, gaps)
+
+
+GAPS = [{"entry_index": 200, "recontact_index": 250, "traversal": True},
+        {"entry_index": 300, "recontact_index": 340, "traversal": False},
+        {"entry_index": 400, "recontact_index": None, "traversal": True}]
+
+
+@pytest.mark.parametrize("idx, expected", [(179, None), (180, 0), (200, 0), (249, 0), (250, None), (280, 1),
+                                           (380, 2), (419, 2), (421, None)])
+def test_match_early_window_and_recontact(idx, expected):
+    assert match(GAPS, idx) == expected
+
+
+def _win(idx, gap, published=True, j1=1.16, ci=(1.1, 1.2), k2=0.005, reason=None):
+    return {"index": idx, "gap": gap, "published": published, "j1": j1 if published else None, "source": "gap",
+            "ci95": list(ci) if published else None, "reason": reason, "status": "", "k2": k2}
+
+
+def test_summarise_counts_each_kind_once():
+    r = _rec(GAPS)
+    res = {"windows": [_win(202, 0, j1=1.16 * 1.2, ci=(1.3, 1.5)),           # traversal, +20 %, CI misses
+                       _win(210, 0),                                         # a second window on the same gap
+                       _win(301, 1, j1=1.16 * 0.99),                         # bounce, published
+                       _win(50, None, published=False, reason="r"),          # false, in steady running
+                       _win(600, None, published=True)],                     # false, elsewhere, published
+           "cut_off": [{"index": 399, "gap": 2}]}
+    s = summarise([(r, res)])
+    assert s["traversals"] == 2 and s["found"] == 2
+    assert s["offsets"] == [2, -1] and s["within2"] == 2
+    assert s["trav_windows"] == 1 and s["trav_published"] == 1 and s["repeat_windows"] == 1
+    assert s["bounce_windows"] == 1 and s["bounce_published"] == 1
+    assert s["published_off"] == 1
+    assert s["err_max"] == pytest.approx(0.2) and s["err_median"] == pytest.approx(0.105)
+    assert s["covered"] == 1 and s["with_interval"] == 2
+    assert s["false_steady"] == 1 and s["false_other"] == 1 and s.get("false_same_flank", 0) == 0
+    assert s["published_on_false"] == 1
+
+
+def test_false_entry_after_a_same_flank_event():
+    r = _rec([], traversing=False)
+    s = summarise([(r, {"windows": [_win(150, None, published=False, reason="x")], "cut_off": []})])
+    assert s["false_same_flank"] == 1 and s["traversals"] == 0 and s.get("false_other", 0) == 0
+
+
+def test_refused_traversal_counts_its_reason():
+    r = _rec(GAPS[:1])
+    s = summarise([(r, {"windows": [_win(200, 0, published=False, reason="gap too short")], "cut_off": []})])
+    assert s["reasons"] == {"gap too short": 1} and s.get("trav_published", 0) == 0
+
+
+def test_reason_masks_numbers_but_not_names():
+    a = zoo._reason("gap: gap fit undetermined: J1 = 0.5946 kg m^2 with standard error 0.264 (> 25%); more")
+    b = zoo._reason("gap: gap fit undetermined: J1 = 0.7 kg m^2 with standard error 1e-3 (> 25%)")
+    assert a == b == "gap: gap fit undetermined: J1 = # kg m^2 with standard error # (> #%)"
+
+
+def test_replace_section_keeps_the_others():
+    text = "# R\n\n## A (x)\nold\n\n## The zoo: three (`cmd`)\nold zoo\n\n## B\nb\n"
+    new = replace_section(text, "## The zoo: three (`cmd2`)\nnew\n")
+    assert "old zoo" not in new and "new" in new and "## A (x)\nold" in new and new.endswith("## B\nb\n")
+    appended = replace_section("# R\n", "## The zoo: three (`c`)\nz\n")
+    assert appended == "# R\n\n## The zoo: three (`c`)\nz\n"
+
+
+@pytest.mark.slow
+def test_quick_report_on_the_vector_drive(tmp_path):
+    from jident_ros.research.vector_drive.model import motulator_available
+    if motulator_available():
+        pytest.skip(motulator_available())
+    res = zoo.run(tmp_path, quick=True, log=lambda t: None, models=("vector drive",))
+    tot = res["totals"][("vector drive", "JointState+Imu 2^16", "clean")]
+    assert tot["recordings"] == 2 and tot["traversals"] >= 1 and tot["found"] >= 1
+    md = zoo.markdown(res, "cmd", "abc")
+    assert md.startswith("## The zoo") and "| vector drive | CSV 2^16 |" in md
+
+
+def test_oracle_fit_recovers_j1_with_free_initial_angle_and_speed():
+    import numpy as np
+    t = np.arange(60) * 5e-4
+    m = -300.0 + 2000.0 * t                       # a ramping torque
+    j1 = 1.073
+    alpha = 0.7 + 95.0 * t + (-150.0 * t ** 2 + 2000.0 / 6 * t ** 3) / j1
+    assert zoo.oracle_fit(t, alpha, m, 10, 50) == pytest.approx(j1, rel=1e-3)
+    assert zoo.oracle_fit(t, alpha, -m, 10, 50) is None          # the torque's sign flipped: non-physical
+    assert zoo.oracle_fit(t, alpha, m, 10, 10 + zoo.ORACLE_MIN_SAMPLES - 1) is None
+
+
+def test_oracle_fit_with_a_constant_friction_torque():
+    import numpy as np
+    t = np.arange(80) * 5e-4
+    m = 100.0 - 6000.0 * t                        # the torque crosses zero in the gap (a load reversal)
+    j1, tf = 1.16, 4.0
+    net = lambda x: 100.0 * x ** 2 / 2 - 6000.0 * x ** 3 / 6 - tf * x ** 2 / 2      # noqa: E731
+    alpha = 0.3 + 100.0 * t + net(t) / j1
+    assert zoo.oracle_fit(t, alpha, m, 0, 80, friction=True) == pytest.approx(j1, rel=1e-3)
+    assert abs(zoo.oracle_fit(t, alpha, m, 0, 80) / j1 - 1) > 0.05       # friction ignored: biased
+
+
+def test_oracle_column_counts_non_physical_fits():
+    assert zoo._oracle([0.01, 0.03, float("inf")]) == "2.0 % / 3.0 % (1 non-physical)"
+    assert zoo._oracle([]) == "–"
