@@ -4,7 +4,8 @@ x noise, entries found, false entries, the coarse entry offset, the flank detect
 ``python -m jident_ros.research.evaluation.detector_zoo DIR [DIR ...] [--wrap] [--spike-s S]`` reads directories of
 CSV recordings with a ``truth.json`` (the second drive's ``python -m jident_ros.research.second_drive --format csv``
 or the vector drive's ``python -m jident_ros.research.vector_drive --formats csv``) and runs the flank detector as
-``jident diagnose`` would (r, N and the nominal J1 from the truth, as a user configures them; no K2).
+``jident diagnose`` would (r and N from the truth, the nominal J1 of the configuration or ``--nominal-kgm2``, as a
+user configures them; no K2).
 
 * **found**: the first gap of the recording has a window whose entry lies within +-6 samples of its entry;
 * **false**: a window whose entry lies more than 6 samples from every gap's entry (in steady running, at a
@@ -24,6 +25,7 @@ import json
 import math
 import sys
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 
@@ -40,7 +42,8 @@ def _wrap(x):
     return (np.asarray(x) + math.pi) % (2 * math.pi) - math.pi
 
 
-def evaluate_dir(directory, system=None, wrap: bool = False, spike_s: float = 0.0) -> list:
+def evaluate_dir(directory, system=None, wrap: bool = False, spike_s: float = 0.0,
+                 nominal_kgm2: Optional[float] = None) -> list:
     """One row per window and one per recording (``rec``: True) of a directory of CSV recordings."""
     system = load_system_config() if system is None else system
     directory = Path(directory)
@@ -58,9 +61,10 @@ def evaluate_dir(directory, system=None, wrap: bool = False, spike_s: float = 0.
             for c in ("alpha1", "alpha2"):
                 data[:, ch.index(c)] = _wrap(data[:, ch.index(c)])
         counts = int((tr.get("encoder") or {}).get("counts_per_rev") or 0)
-        # the user configures the drive's nominal J1 (the refinement's J1_nom): the truth's J1 here
-        drive = dataclasses.replace(system, motor=dataclasses.replace(system.motor,
-                                                                      nominal_inertia_kgm2=float(tr["inertia_kgm2"])))
+        # the user configures the drive's nominal J1 (the refinement's J1_nom), one value for the drive, not each
+        # recording's true J1: ``nominal_kgm2`` (default the configuration's, 1.16)
+        drive = system if nominal_kgm2 is None else dataclasses.replace(
+            system, motor=dataclasses.replace(system.motor, nominal_inertia_kgm2=float(nominal_kgm2)))
         det = make_detector(drive, DetectorConfig("flank", channels=ch, gear_ratio=float(tr["gear_ratio"]),
                                                    encoder_counts_per_rev=counts), float(tr["reference_radius_m"]), ts)
         wins = [e.window for e in run_detector(det, RawRecording(data, ch, 0, 0.0, 0.0, tr["direction"], 0))
@@ -132,9 +136,11 @@ def main(argv=None) -> int:
     p.add_argument("--wrap", action="store_true", help="positions reported in [-pi, pi)")
     p.add_argument("--spike-s", type=float, default=0.0, help="a one-sample 0.2 rad alpha1 spike this long before "
                    "the first gap (0: none)")
+    p.add_argument("--nominal-kgm2", type=float, default=None, help="the drive's nominal J1 as configured "
+                   "(motor.nominal_inertia_kgm2; default config/system.yaml's 1.16)")
     a = p.parse_args(argv)
     for d in a.dirs:
-        rows = evaluate_dir(d, wrap=a.wrap, spike_s=a.spike_s)
+        rows = evaluate_dir(d, wrap=a.wrap, spike_s=a.spike_s, nominal_kgm2=a.nominal_kgm2)
         print(f"\n{d}{' (wrapped)' if a.wrap else ''}{f' (spike {a.spike_s:g} s before)' if a.spike_s else ''}:")
         print("\n".join(table("event noise counts", rows)))
     return 0
