@@ -548,6 +548,14 @@ def mirrored(window_data: dict) -> dict:
 ENTRY_UNCERTAINTY_WITHOUT_A1 = 10
 
 
+#: A flank window without a K2 estimate is diagnosed from its gap (True) or refused (False, today).  The switch
+#: works (test_detector_raw), but on our simulator's JointState 30 dB recordings (no a1) it published two such
+#: windows 36 % and 19 % off (0.688 for 1.073, 0.938 for 1.16: the angle fit over 17 samples), which the refusal
+#: had hidden (zoo report on the detector branch).  Turn it on once the gap fit's intervals are honest there
+#: (issue 20 items 1-3, the estimator's branch).
+FLANK_WINDOWS_WITHOUT_K2 = False
+
+
 def detector_arguments(window) -> dict:
     """:class:`WindowInput`'s ``recontact_index`` and ``width_estimate`` for a captured
     :class:`~jident_ros.stream.layout.Window`: a flank- or dynamics-detector window's own (and, for a dynamics
@@ -563,9 +571,9 @@ def detector_arguments(window) -> dict:
            "width_estimate": est}
     if kind == "dynamics" and "a1" not in window.channels:
         out["entry_uncertainty_samples"] = ENTRY_UNCERTAINTY_WITHOUT_A1
-    if not math.isfinite(window.backlash_width_m):
+    if not math.isfinite(window.backlash_width_m) and (kind == "dynamics" or FLANK_WINDOWS_WITHOUT_K2):
         # no load encoder (dynamics), or no traversal in this window (a one-sided excursion): no K2, and a
-        # missing K2 never blocks the gap's J1 (issue 20)
+        # missing K2 does not block the gap's J1 (issue 20)
         out["backlash_width_unknown"] = True
     return out
 
