@@ -17,7 +17,7 @@ package_name = 'jident_ros'
 data_files = [
     ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
     ('share/' + package_name, ['package.xml']),
-    ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+    ('share/' + package_name + '/config', sorted(glob('config/*.yaml') + glob('config/*.json'))),
     ('share/' + package_name + '/config/profiles', sorted(glob('config/profiles/*.yaml'))),
 ]
 if os.path.isdir('launch'):
@@ -63,10 +63,10 @@ setup(
     entry_points={
         'console_scripts': [
             'jident = jident_ros.cli.main:main',
-            'simulator = jident_ros.nodes.simulator:main',
-            'windowing = jident_ros.nodes.windowing:main',
-            'diagnostic = jident_ros.nodes.diagnostic:main',
-            'replay = jident_ros.nodes.replay:main',
+            'simulator = jident_ros.nodes.entry:simulator',
+            'windowing = jident_ros.nodes.entry:windowing',
+            'diagnostic = jident_ros.nodes.entry:diagnostic',
+            'replay = jident_ros.nodes.entry:replay',
         ],
     },
 )

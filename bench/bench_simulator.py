@@ -107,6 +107,8 @@ from jident_ros.sim.motor import steady_state_phasors
 SINGLE_CASE = (1.16, 0.005, 0.025)  # J1 kg m^2, K2 m, eta_k Pa s^n1
 TARGET_GRID_S = 1.0
 TARGET_RATIO = 100.0
+#: issue 23: one case (the scalar path) >= this many times faster than the faster peer, in the same run
+TARGET_SINGLE_RATIO = 5.0
 GEM_DC_V = 700.0        # B6 bridge: phase amplitude <= u_dc / 2
 MOTULATOR_DC_V = 650.0  # SVPWM: amplitude <= u_dc / sqrt(3)
 
@@ -447,7 +449,9 @@ def main(argv=None) -> int:
                lambda: ours_result(simulate_grid(cfg, cases)), sc.sim_s, len(cases), own_version)
     one = Job("ours_single", "jident_ros", "1 case", lambda: ours_result(simulate_grid(cfg, single)),
               sc.sim_s, 1, own_version)
-    jobs, peers = [grid, one], {}
+    one_vec = Job("ours_single_vectorised", "jident_ros", "1 case, vectorised numpy path (vectorised=True)",
+                  lambda: ours_result(simulate_grid(cfg, single, vectorised=True)), sc.sim_s, 1, own_version)
+    jobs, peers = [grid, one, one_vec], {}
     print(f"ours: {len(cases)}-case grid and 1 case (J1, K2, eta_k = {SINGLE_CASE}), {n_samples} samples at "
           f"Ts = {s.sample_period_s * 1e3:g} ms ({sc.sim_s:.4f} s simulated), {s.integration_substeps} RK4 "
           f"steps/sample; 1 warm-up + {rounds} timed runs each", flush=True)
@@ -507,7 +511,11 @@ def main(argv=None) -> int:
         print(f"  round {r + 1}/{rounds} done", flush=True)
 
     res = {j.key: dict(j.summary(), **(j.result or {})) for j in jobs if j.wall and j.status == "ok"}
-    g, o = res["ours_grid"], res["ours_single"]
+    g, o, ov = res["ours_grid"], res["ours_single"], res["ours_single_vectorised"]
+    # the single-case path equals the vectorised one (issue 23): largest |difference| / largest |signal|
+    a, b = simulate_grid(cfg, single), simulate_grid(cfg, single, vectorised=True)
+    same = {k: float(np.max(np.abs(a.signals[k] - b.signals[k])) / np.max(np.abs(b.signals[k])))
+            for k in ("a1", "m_el", "omega1", "a2", "v2")}
     per_case = dict(g, median_s=g["median_s"] / g["n_cases"], min_s=g["min_s"] / g["n_cases"],
                     max_s=g["max_s"] / g["n_cases"], median_cpu_s=g["median_cpu_s"] / g["n_cases"],
                     wall_per_sim_s=g["wall_per_case_per_sim_s"], cpu_per_sim_s=g["cpu_per_case_per_sim_s"],
@@ -543,6 +551,7 @@ def main(argv=None) -> int:
 
     row(g)
     row(o)
+    row(ov)
     row(per_case)
     for name, p in peer_res.items():
         if "wall_per_sim_s" in p:
@@ -572,6 +581,22 @@ def main(argv=None) -> int:
               f"single case {r1:.3g}x (CPU {p['ratio_cpu_vs_ours_single']:.3g}x) -> "
               f"{'PASS' if r1 >= TARGET_RATIO else 'MISS'}")
 
+    fastest = min((p for p in peer_res.values() if "wall_per_sim_s" in p), key=lambda p: p["wall_per_sim_s"],
+                  default=None)
+    print(f"- one case, max |scalar - vectorised| / max |signal| over a1, m_el, omega1, a2, v2: "
+          f"{max(same.values()):.2g} (<= 1e-12: {'PASS' if max(same.values()) <= 1e-12 else 'MISS'}); "
+          f"the scalar path is {ov['median_s'] / o['median_s']:.3g}x faster than the vectorised one on one case")
+    if fastest is None:
+        print(f"- one case >= {TARGET_SINGLE_RATIO:g}x faster than the faster peer: not measured (no peer ran)")
+    else:
+        r1 = fastest["ratio_wall_vs_ours_single"]
+        targets["single_vs_faster_peer"] = {"peer": fastest["label"], "ratio_wall": r1,
+                                            "ratio_cpu": fastest["ratio_cpu_vs_ours_single"],
+                                            "target": TARGET_SINGLE_RATIO, "pass": r1 >= TARGET_SINGLE_RATIO,
+                                            "max_rel_difference_to_vectorised": same}
+        print(f"- one case >= {TARGET_SINGLE_RATIO:g}x faster than the faster peer ({fastest['label']}): {r1:.3g}x "
+              f"(CPU {fastest['ratio_cpu_vs_ours_single']:.3g}x) -> {'PASS' if r1 >= TARGET_SINGLE_RATIO else 'MISS'}")
+
     if "error" not in diag:
         print(f"\nours, diagnostics: one Model.rhs call = {diag['rhs_us_1_cases']:.1f} µs (1 case) / "
               f"{diag['rhs_us_168_cases']:.1f} µs (168 cases); {diag['rhs_calls_per_run']} calls per run "
@@ -595,7 +620,8 @@ def main(argv=None) -> int:
                             "sample_period_s": s.sample_period_s, "substeps": s.integration_substeps,
                             "peer_intervals": peer_intervals},
                "scenario": sc.describe(),
-               "ours": {"grid": g, "single": o, "grid_per_case": per_case, "diagnostics": diag},
+               "ours": {"grid": g, "single": o, "single_vectorised": ov, "grid_per_case": per_case,
+                        "diagnostics": diag, "single_max_rel_difference_to_vectorised": same},
                "peers": peer_res, "targets": targets, "preempted_wall_over_cpu": preempted}
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         with open(args.json, "w") as f:

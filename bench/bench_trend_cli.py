@@ -27,7 +27,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from jident_ros.cli.main import main as jident  # noqa: E402
-from jident_ros.cli.trend import write_scenario_recording  # noqa: E402
+from jident_ros.cli.scenario import write_scenario_recording  # noqa: E402
 from jident_ros.config import load_system_config  # noqa: E402
 from jident_ros.sim.scenarios import wear_scenario  # noqa: E402
 

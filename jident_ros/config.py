@@ -25,8 +25,6 @@ from typing import Any, Mapping
 import pywt
 import yaml
 
-from jident_ros.method.patterns import config_hash, config_to_dict  # noqa: F401  (re-exported)
-from jident_ros.method.pipeline import MethodConfig
 from jident_ros.resources import default_config_path
 from jident_ros.sim.params import GridParams, LoadParams, MotorParams, SamplingParams, SystemConfig
 
@@ -210,8 +208,21 @@ def _is_profile(path: Path) -> bool:
     return path.parent.name == PROFILES_DIR
 
 
+def __getattr__(name: str):
+    """``config_hash``/``config_to_dict`` (now in method.patterns) stay importable from here, loaded on first
+    use: method.patterns imports the method pipeline and scipy.fft (~0.4 s), which `jident simulate`/`info`
+    do not need (issue 23; test_layers.LAZY)."""
+    if name in ("config_hash", "config_to_dict"):
+        from jident_ros.method import patterns
+        return getattr(patterns, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 def method_config_from_dict(data: Mapping | None):
     """Build and validate a MethodConfig from the ``method`` section."""
+    # imported here, not at the top: the method pipeline imports scipy.fft & co. (~0.4 s), and `jident
+    # simulate`/`info` read the system config only (issue 23; test_layers.LAZY)
+    from jident_ros.method.pipeline import MethodConfig
     data = strip_ros_wrapper(data or {})
     sec = data.get("method", data) if isinstance(data, Mapping) else data
     if not isinstance(sec, Mapping):

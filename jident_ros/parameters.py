@@ -18,10 +18,10 @@ from typing import Any
 
 @dataclass(frozen=True)
 class Param:
-    """One node parameter: default, description, inclusive range [min, max], choices, read_only (False: a change
-    at run time takes effect), unit ("" = from the name's suffix, :func:`unit_of`), and for a parameter that sets a
-    field of a config dataclass that takes None, whether 0 stands for that None (``zero_is_none``: ROS parameters
-    cannot be None)."""
+    """One node parameter: default, description, range [min, max] (each end inclusive unless ``min_exclusive`` /
+    ``max_exclusive``), choices, read_only (False: a change at run time takes effect), unit ("" = from the name's
+    suffix, :func:`unit_of`), and for a parameter that sets a field of a config dataclass that takes None, whether 0
+    stands for that None (``zero_is_none``: ROS parameters cannot be None)."""
 
     default: Any
     description: str
@@ -30,6 +30,7 @@ class Param:
     read_only: bool = True
     choices: tuple = ()
     min_exclusive: bool = False   # the range is (min, max]: min itself is refused
+    max_exclusive: bool = False   # the range is [min, max): max itself is refused
     unit: str = ""
     zero_is_none: bool = False
 
@@ -38,7 +39,7 @@ class Param:
         if self.choices:
             return "one of " + ", ".join(str(c) for c in self.choices)
         lo = "" if self.min is None else (f"> {self.min:g}" if self.min_exclusive else f">= {self.min:g}")
-        hi = "" if self.max is None else f"<= {self.max:g}"
+        hi = "" if self.max is None else (f"< {self.max:g}" if self.max_exclusive else f"<= {self.max:g}")
         return " and ".join(x for x in (lo, hi) if x)
 
 
@@ -92,7 +93,7 @@ SIMULATOR_PARAMS = {
     "batch_size": Param(50, "samples per drive/signals message", min=1, max=MAX_DEPTH),
     "real_time_factor": Param(1.0, "drive seconds per wall second; 0 = as fast as the windowing node reads "
                               "(back-pressure by drive/progress)", min=0.0, max=1000.0),
-    "fast_sleep_s": Param(0.001, "timer period per batch when real_time_factor = 0, s", min=0.0, max=1.0),
+    "fast_sleep_s": Param(0.001, "timer period when real_time_factor = 0 (at most 4 batches per tick), s", min=0.0, max=1.0),
     "max_lead_s": Param(2.0, "real_time_factor 0: at most this many drive seconds ahead of the windowing "
                         "node's drive/progress; 0 = no back-pressure", min=0.0, max=3600.0),
     "progress_timeout_s": Param(2.0, "no drive/progress for this long while waiting: back-pressure off "
@@ -147,6 +148,9 @@ WINDOWING_PARAMS = {
     "use_imu": Param(False, "joint_states: a1 from sensor_msgs/Imu on imu (matched by stamp)"),
     "imu_axis": Param("x", "joint_states: the Imu linear_acceleration axis that is a1", choices=("x", "y", "z")),
     "batch_size": Param(50, "joint_states: samples per batch handed to the detector", min=1, max=MAX_DEPTH),
+    "input_reliability": Param("reliable", "QoS reliability of the input subscriptions (drive/signals, joint_states, "
+                               "imu): reliable | best_effort (drivers that publish with SensorDataQoS)",
+                               choices=("reliable", "best_effort")),
 }
 
 #: The gap methods (the one list: the diagnostic node's ``gap_method``, ``jident diagnose --gap-method``, the
@@ -177,7 +181,7 @@ TREND_PARAMS = {
                            '"jident_diagnostic: trend" status'),
     "trend_state_file": Param("", 'tracker state file (JSON, written atomically after each window, read at start) so the '
                               'trend survives a restart; "" = not kept'),
-    "trend_commissioning_windows": Param(20, 'windows that learn the baseline', min=0, max=10**9, read_only=False),
+    "trend_commissioning_windows": Param(5, 'windows that give the first baseline', min=2, max=10**9, read_only=False),
     "trend_commissioning_duration_s": Param(0.0, 'instead: learn over this drive time, s (0 = by windows)',
                                             min=0.0, max=1e12, read_only=False, zero_is_none=True),
     "trend_inertia_baseline_kgm2": Param(0.0, 'given J1 baseline, kg m^2 (0 = learn it)', min=0.0, max=1e12, zero_is_none=True),
@@ -186,30 +190,42 @@ TREND_PARAMS = {
     "trend_width_baseline_se_m": Param(0.0, 'standard error of the given width baseline, m', min=0.0, max=1e12),
     "trend_target_arl_windows": Param(300000.0, 'in-control average run length (windows) the two-sided CUSUM threshold is '
                                       'designed for: 1e4 / this = false changes per 10,000 steady windows',
-                                      min=0.0, max=1e12, read_only=False),
-    "trend_cusum_reference_sd": Param(1.5, 'CUSUM k, standard deviations', min=0.0, max=1e12, read_only=False),
+                                      min=1.0, min_exclusive=True, max=1e12, read_only=False),
+    "trend_cusum_reference_sd": Param(1.5, 'CUSUM k, standard deviations', min=0.0, min_exclusive=True, max=1e12,
+                                      read_only=False),
     "trend_cusum_threshold_sd": Param(0.0, 'CUSUM h (0 = from trend_target_arl_windows)',
                                       min=0.0, max=1e12, read_only=False, zero_is_none=True),
     "trend_innovation_clip_sd": Param(4.5, 'standardised innovations clipped at +- this many standard deviations',
-                                      min=0.0, max=1e12, read_only=False),
+                                      min=0.0, min_exclusive=True, max=1e12, read_only=False),
     "trend_se_scale_from_commissioning": Param(False, 'scale the reported errors by the commissioning scatter', read_only=False),
     "trend_se_scale_max": Param(3.0, 'largest scale of the reported standard errors from the commissioning '
-                                'scatter', min=0.0, max=1e12, read_only=False),
+                                'scatter', min=1.0, max=1e12, read_only=False),
     "trend_inertia_process_sd_pct_per_window": Param(0.02, 'J1 random walk, % of the baseline per window',
                                                      min=0.0, max=1e12, read_only=False),
-    "trend_relearn_windows": Param(5, 'windows after a change forming the new baseline', min=0, max=10**9, read_only=False),
+    "trend_relearn_windows": Param(5, 'windows after a change forming the new baseline', min=1, max=10**9, read_only=False),
     "trend_change_hold_windows": Param(24, 'WARN for this many windows after a change', min=0, max=10**9, read_only=False),
-    "trend_drift_warn_pct": Param(2.0, 'J1 drift giving WARN, %', min=0.0, max=1e12, read_only=False),
-    "trend_drift_alarm_pct": Param(5.0, 'J1 drift giving ERROR, %', min=0.0, max=1e12, read_only=False),
-    "trend_width_limit_m": Param(0.012, 'backlash width limit (ERROR), m', min=0.0, max=1e12, read_only=False),
+    "trend_drift_warn_pct": Param(2.0, 'J1 drift giving WARN, %', min=0.0, min_exclusive=True, max=1e12, read_only=False),
+    "trend_drift_alarm_pct": Param(5.0, 'J1 drift giving ERROR, %', min=0.0, min_exclusive=True, max=1e12, read_only=False),
+    "trend_width_limit_m": Param(0.012, 'backlash width limit (ERROR), m', min=0.0, min_exclusive=True, max=1e12,
+                                 read_only=False),
     "trend_width_warn_m": Param(0.0, 'WARN width, m (0 = 90 % of the limit)', min=0.0, max=1e12, read_only=False, zero_is_none=True),
     "trend_time_to_limit_warn_s": Param(2592000.0, 'WARN when the limit is projected sooner, s (30 days; 0 = off)',
                                         min=0.0, max=1e12, read_only=False, zero_is_none=True),
-    "trend_width_regression_windows": Param(50, 'windows of the wear-rate regression', min=0, max=10**9),
+    "trend_width_regression_windows": Param(50, 'windows of the wear-rate regression', min=3, max=10**9),
     "trend_width_se_floor_m": Param(1.0e-6, 'floor of the width standard error, m', min=0.0, max=1e12, read_only=False),
     "trend_width_change_detection": Param(True, 'change detection (CUSUM) on the width too', read_only=False),
-    "trend_wear_significance_sd": Param(1.96, 'wear rate significant above this many standard errors', min=0.0, max=1e12, read_only=False),
-    "trend_max_changes_kept": Param(100, 'change events kept in the state', min=0, max=10**9, read_only=False),
+    "trend_wear_significance_sd": Param(1.96, 'wear rate significant above this many standard errors',
+                                       min=0.0, min_exclusive=True, max=1e12, read_only=False),
+    "trend_max_changes_kept": Param(100, 'change events kept in the state', min=1, max=10**9, read_only=False),
+    "trend_baseline_refine_windows": Param(20, 'J1 baseline refined by the monitored windows up to this many windows',
+                                           min=0, max=10**9, read_only=False),
+    "trend_torque_accuracy_pct": Param(0.0, "the drive's torque accuracy, % (1 sd): widens the absolute J1 only",
+                                       min=0.0, max=100.0, read_only=False),
+    "trend_se_scale_down": Param(True, "scale the errors down to the refined baseline's scatter when it is "
+                                 'significantly smaller (over-reported errors)', read_only=False),
+    "trend_se_scale_min": Param(0.25, 'smallest such scale', min=0.0, min_exclusive=True, max=1.0, read_only=False),
+    "trend_time_discontinuity_s": Param(604800.0, 'a window this long after the previous one (or before it) starts '
+                                        'a new time segment, s', min=0.0, min_exclusive=True, max=1e12, read_only=False),
 }
 #: The trend parameters that are the node's own, not TrendConfig fields.
 TREND_NODE_ONLY = ("trend_enabled", "trend_state_file")
@@ -242,6 +258,8 @@ DIAGNOSTIC_PARAMS = {
                                        "0 = no limit", min=0, max=2**62),
     "retention_max_age_s": Param(604800.0, "delete complete bags older than this, s; 0 = no limit",
                                  min=0.0, max=1e10),
+    "retention_delete_unfinalised": Param(False, "let retention delete this node's bags that were not finalised "
+                                          "(a crash cut them); default: kept for jident salvage"),
     "record_signals": Param(True, "also record drive/signals, drive/backlash_width, drive/true_inertia, "
                             "drive/case (replayable)"),
     "window_queue_depth": Param(50, "keep-last depth of the drive/window subscription", min=1, max=MAX_DEPTH),
@@ -249,18 +267,28 @@ DIAGNOSTIC_PARAMS = {
                                  min=1, max=MAX_DEPTH),
     # the publishing policy (jident_ros.identify.verdict.VerdictPolicy; docs/interfaces.md "/diagnostics")
     "plausible_min_ratio": Param(0.5, "J1 below this x the nominal is refused, not published", min=0.0,
-                                 max=1.0, min_exclusive=True, read_only=False),
-    "plausible_max_ratio": Param(1.5, "J1 above this x the nominal is refused, not published", min=1.0, max=100.0,
+                                 max=1.0, min_exclusive=True, max_exclusive=True, read_only=False),
+    "plausible_max_ratio": Param(1.5, "J1 above this x the nominal is refused, not published", min=1.0, min_exclusive=True, max=100.0,
                                  read_only=False),
     "image_min_margin": Param(1.401117, "the image method's class alone, and its disagreement as a WARN, only at "
                               "a fused margin >= this; 0 = never (from `python -m jident_ros.research.evaluation.verdicts "
                               "threshold`)", min=0.0, max=1e12, read_only=False),
     "library_width_tolerance": Param(0.05, "the image method is valid only with a library width within this "
-                                     "fraction of the window's K2", min=0.0, max=1.0, read_only=False),
+                                     "fraction of the window's K2", min=0.0, min_exclusive=True, max=1.0, read_only=False),
     "max_torque_factor": Param(100.0, "|m_el| above this x the base torque M_b is absurd: window refused",
                                min=1.0, max=1e6, read_only=False),
     "max_speed_factor": Param(10.0, "|omega1|, |omega2| above this x the synchronous speed is absurd: window "
                               "refused", min=1.0, max=1e6, read_only=False),
+    # the gap fits' drive model (jident_ros.identify.gap_free.GapModel via VerdictPolicy; issue 20)
+    "torque_accuracy": Param(0.0, "the drive's torque estimate m_el: bound of its scale error, fraction (0.02 = 2 %; "
+                             "0 = exact, the simulator); J1 x this/sqrt(3) goes into the gap interval and the class "
+                             "verdict", min=0.0, max=0.5, max_exclusive=True, read_only=False, unit="1 (fraction)"),
+    "coulomb_friction_max_nm": Param(0.0, "the motor's Coulomb (bearing) friction lies in [0, this], N m: fitted in "
+                                     "the gap inside the band when the torque varies enough, else a bounded term "
+                                     "of the gap interval", min=0.0, max=1e6, read_only=False, unit="N m"),
+    "viscous_friction_band_nms_per_rad": Param(0.0, "viscous friction = motor.bearing_friction_nms_per_rad +- this, "
+                                               "N m s/rad (a bounded term of the gap interval)", min=0.0, max=1e6,
+                                               read_only=False, unit="N m s/rad"),
     **TREND_PARAMS,
 }
 
@@ -268,8 +296,9 @@ DIAGNOSTIC_PARAMS = {
 REPLAY_PARAMS = {
     "bag": Param("", "bag directory or .mcap file (or the first command-line argument)"),
     "rate": Param(1.0, "playback speed factor; 0 = as fast as the windowing node reads", min=0.0, max=1000.0),
-    "fast_sleep_s": Param(0.001, "timer period per message when rate = 0, s", min=0.0, max=1.0),
-    "max_lead_s": Param(2.0, "rate 0: at most this many drive seconds ahead of drive/progress; 0 = off",
+    "fast_sleep_s": Param(0.001, "timer period when rate = 0 (at most 4 messages per tick), s", min=0.0, max=1.0),
+    "max_lead_s": Param(2.0, "at most this many drive seconds ahead of drive/progress, at any rate (a downstream "
+                        "that falls behind pauses the replay, WARN with the count); 0 = off",
                         min=0.0, max=3600.0),
     "progress_timeout_s": Param(2.0, "no drive/progress for this long while waiting: back-pressure off, s",
                                 min=0.0, max=3600.0, min_exclusive=True),

@@ -119,7 +119,7 @@ def find_executable(name: str) -> Path | None:
 
 def node_command(name: str, *, require_index: bool = False) -> list[str]:
     """Command line that starts node executable ``name`` (simulator, windowing, diagnostic, replay):
-    the ``ros2 run`` executable when the package is indexed, else ``python -m jident_ros.nodes.<name>``
+    the ``ros2 run`` executable when the package is indexed, else ``python -m jident_ros.nodes.entry <name>``
     with this interpreter (a checkout without install).  ``require_index``: FileNotFoundError instead
     of the fallback."""
     exe = find_executable(name)
@@ -130,7 +130,7 @@ def node_command(name: str, *, require_index: bool = False) -> list[str]:
         raise FileNotFoundError(f"executable {name!r} of {PACKAGE_NAME} not found the way `ros2 run` looks "
                                 f"(<ament prefix>/lib/{PACKAGE_NAME}/{name}; AMENT_PREFIX_PATH={prefixes!r}); "
                                 f"run `bash scripts/setup.sh` or `colcon build` and source install/setup.bash")
-    return [sys.executable, "-m", f"{PACKAGE_NAME}.nodes.{name}"]
+    return [sys.executable, "-m", f"{PACKAGE_NAME}.nodes.entry", name]   # signal handlers before the imports
 
 
 def stop_process(proc: subprocess.Popen, sig: int = signal.SIGINT, timeout_s: float = 20.0) -> int:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from jident_ros.config import load_system_config
+from jident_ros.config import load_method_config, load_system_config
 from jident_ros.method.patterns import PatternLibrary
 from jident_ros.sim import paper_grid_cases, simulate_grid
 
@@ -59,6 +59,15 @@ def library(windows, pattern_cases, system, method):
     """The pattern library of the simulated pattern runs (the first ``len(pattern_cases)`` windows)
     under the test module's ``method`` fixture."""
     return PatternLibrary.from_windows(windows, list(range(len(pattern_cases))), system, method)
+
+
+@pytest.fixture(scope="session")
+def default_library_file(tmp_path_factory):
+    """The pattern library of the default configuration (config/system.yaml + config/method.yaml), built once
+    per test run and saved (test_offline, test_verdicts and test_nodes each built the same one: issue 23)."""
+    path = tmp_path_factory.mktemp("default_patterns") / "patterns.npz"
+    PatternLibrary.build(load_system_config(), load_method_config()).save(path)
+    return path
 
 
 def _unique_domain_id() -> str:

@@ -40,6 +40,8 @@ def test_demo_runs_end_to_end(ros_env, tmp_path):
     assert summary["estimates_published"] == 2
     assert (out / "summary.png").stat().st_size > 10_000
     assert (out / "recording" / "metadata.yaml").is_file()
+    from test_ros_usage import assert_replay_equals_live
+    assert_replay_equals_live(out / "recording", 2)     # jident diagnose gives the live windows and estimates
 
 
 def test_demo_rejects_a_bad_case(tmp_path):

@@ -57,20 +57,25 @@ def test_jointstate_per_sample_gives_the_batched_paths_windows(recording):
     assert ad.counts["imu_unmatched"] == 0
 
 
-def test_nan_interfaces_absent_missing_joint_and_late_nan(recording):
+def test_channels_from_the_configuration_bad_messages_dropped_missing_joint_named(recording):
     system, rec = recording
-    ad = JointStateAdapter(5e-4, motor_joint="m", load_joint="l", batch_size=2)
-    assert ad.push(1.0, ["m", "l"], [1.0, 2.0], [3.0, math.nan], [4.0, 5.0]) == []
-    assert ad.channels == ("t", "alpha1", "omega1", "m_el", "alpha2")     # load velocity absent throughout
-    out = ad.push(1.0005, ["m", "l"], [1.1, math.nan], [3.0, 0.0], [4.0, 5.0])
-    assert len(out) == 1 and math.isnan(out[0][0][1, 4])                   # a late NaN is carried: a drop later
+    ad = JointStateAdapter(5e-4, motor_joint="m", load_joint="l", batch_size=2,
+                           channels=("alpha1", "omega1", "m_el", "alpha2"))
+    assert ad.channels == ("t", "alpha1", "omega1", "m_el", "alpha2")     # from the configuration, not a message
+    assert ad.push(1.0, ["m", "l"], [1.0, 2.0], [3.0, math.nan], [4.0, 5.0]) == []   # load velocity not used
+    out = ad.push(1.0005, ["m", "l"], [1.1, math.nan], [3.0, 0.0], [4.0, 5.0])      # a NaN in a used field
+    assert out == [] and ad.counts["nonfinite"] == 1 and "joint 'l' position: nan" in ad.last_problem
     assert ad.push(1.001, ["m"], [1.0], [1.0], [1.0]) == [] and ad.counts["missing_joint"] == 1
-    ad.push(1.0025, ["m", "l"], [1.0, 2.0], [1.0, 1.0], [1.0, 1.0])
+    assert "joint 'l' (load_joint) not in the JointState names ['m']" in ad.problems()[-1][0]
+    out = ad.push(1.0025, ["m", "l"], [1.0, 2.0], [1.0, 1.0], [1.0, 1.0])
+    assert len(out) == 1 and out[0][0].shape == (2, 5) and np.isfinite(out[0][0]).all()
     assert not ad.jitter()["period_matches"] or ad.jitter()["max_abs_deviation_s"] > 1e-4
     with pytest.raises(ValueError, match="imu_axis"):
         JointStateAdapter(5e-4, imu_axis="w")
     with pytest.raises(ValueError, match="motor_joint"):
         JointStateAdapter(5e-4, motor_joint="a", load_joint="a")
+    with pytest.raises(ValueError, match="channels"):
+        JointStateAdapter(5e-4, channels=("a2",))
 
 
 def test_csv_with_and_without_map(tmp_path, recording):

@@ -81,7 +81,7 @@ def test_dynamics_detector_on_joint_states_without_a_load_encoder(node_env, libr
     ref = [e.window for b in stream_batches(data[:, idx], 50) for e in det.push(b, w.channels) if e.kind == "window"]
     assert len(ref) == 1 and np.array_equal(ref[0].data, w.data) and len(chans) == 5
     # the diagnostic node: the gap fit without K2, J1 published
-    results = lambda: statuses(diags, "jident: inertia", "/dyn/drive")  # noqa: E731
+    results = lambda: statuses(diags, "jident_diagnostic: inertia", "/dyn/drive")  # noqa: E731
     assert ros.spin_until(lambda: len(results()) >= 1 and len(est) >= 1, TIMEOUT), logs(win, diag)
     v = status_values(results()[0])
     assert v["status"] in ("nominal", "deviating") and v["estimate_source"] == "gap", results()[0].message

@@ -50,7 +50,7 @@ def test_joint_states_input_windows_and_j1(node_env, library, ros, procs, tmp_pa
         pub.publish(m)
         if k % 200 == 199:
             ros.ex.spin_once(timeout_sec=0.01)
-    results = lambda: statuses(diags, "jident: inertia", "/js/drive")  # noqa: E731
+    results = lambda: statuses(diags, "jident_diagnostic: inertia", "/js/drive")  # noqa: E731
     # two cases: the second one's samples close the first window (the last one waits for more data)
     assert ros.spin_until(lambda: len(results()) >= 1, 2 * TIMEOUT), logs(win, diag)
     for s in results():

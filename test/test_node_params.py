@@ -79,11 +79,14 @@ def _check_descriptors(descs, schema):
         assert d.description == p.description and d.read_only == p.read_only, name
         if d.type == T.PARAMETER_DOUBLE and (p.min is not None or p.max is not None):
             (r,) = d.floating_point_range
-            assert r.from_value == (p.min if p.min is not None else -math.inf), name
-            assert r.to_value == (p.max if p.max is not None else math.inf), name
+            # an exclusive end is shown as the nearest value inside (issue 24: describe = validation)
+            lo = -math.inf if p.min is None else (math.nextafter(p.min, math.inf) if p.min_exclusive else p.min)
+            hi = math.inf if p.max is None else (math.nextafter(p.max, -math.inf) if p.max_exclusive else p.max)
+            assert r.from_value == lo and r.to_value == hi, name
         elif d.type == T.PARAMETER_INTEGER and (p.min is not None or p.max is not None):
             (r,) = d.integer_range
-            assert r.from_value == p.min and r.to_value == p.max and r.step == 1, name
+            assert r.from_value == p.min + p.min_exclusive and r.to_value == p.max - p.max_exclusive, name
+            assert r.step == 1, name
         else:
             assert not d.floating_point_range and not d.integer_range, name
         if p.choices:
@@ -176,7 +179,7 @@ def test_diagnostic_parameters_described_validated_and_applied(diag_node, librar
     diags = ros.collect(DiagnosticArray, "/diagnostics", qos_diagnostics())
     pub = ros.node.create_publisher(Float64MultiArray, "/pd/drive/window", qos_latched(10))
     assert ros.spin_until(lambda: pub.get_subscription_count() >= 1)
-    results = lambda: statuses(diags, "jident: inertia", "/pd/drive")  # noqa: E731
+    results = lambda: statuses(diags, "jident_diagnostic: inertia", "/pd/drive")  # noqa: E731
     # each accepted change takes effect on the next window
     for k, (changes, check) in enumerate([
             ({"p": 3.0}, lambda v: float(v["p"]) == 3.0 and "gap_j1_kgm2" not in v),
@@ -224,7 +227,7 @@ def test_diagnostic_reports_lost_and_mismatched_windows(node_env, library, ros, 
              "-p", "stale_after_s:=0.0")
     procs.append(p)
     assert ros.spin_until(lambda: pub.get_subscription_count() >= 1), logs(p)
-    results = lambda: statuses(diags, "jident: inertia", "/lost/drive")  # noqa: E731
+    results = lambda: statuses(diags, "jident_diagnostic: inertia", "/lost/drive")  # noqa: E731
     task = lambda: statuses(diags, "jident_diagnostic: diagnosis", "/lost/drive")  # noqa: E731
     base = _window()
     for k in (1, 2, 3, 7, 8):
@@ -388,7 +391,7 @@ def test_cli_flags_that_mirror_node_parameters_take_their_help_from_the_schema()
     from jident_ros.cli.main import build_parser
     from jident_ros.cli.trend import MIRRORED_FLAGS
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
-    mirrored = {"diagnose": ["--image-min-margin", "--plausible-min-ratio", "--plausible-max-ratio"],
+    mirrored = {"diagnose": ["--image-min-margin", "--plausible-min-ratio", "--plausible-max-ratio", "--p"],
                 "trend": list(MIRRORED_FLAGS)}
     for command, flags in mirrored.items():
         actions = {o: a for a in sub.choices[command]._actions for o in a.option_strings}
@@ -396,6 +399,8 @@ def test_cli_flags_that_mirror_node_parameters_take_their_help_from_the_schema()
             name = ("trend_" if command == "trend" else "") + flag[2:].replace("-", "_")
             assert actions[flag].help == P.cli_help(name), flag
             assert P.DIAGNOSTIC_PARAMS[name].description.replace("%", "%%") in actions[flag].help
+    gap = {o: a for a in sub.choices["diagnose"]._actions for o in a.option_strings}["--gap-method"]
+    assert gap.help.startswith(P.cli_help("gap_method")) and tuple(gap.choices) == P.GAP_METHODS
 
 
 def test_trend_parameters_and_units_come_from_the_schema():
@@ -425,3 +430,15 @@ def test_the_chain_config_fields_are_described_by_the_node_schema():
     assert DiagnosisConfig.from_parameters(P.DIAGNOSTIC) == DiagnosisConfig()
     w = DetectorConfig.from_parameters(dict(P.WINDOWING, gap_tolerance=2.0), "flank", ("t", "alpha1", "alpha2"))
     assert (w.kind, w.gap_tolerance, w.channels, w.backlash_width_m) == ("flank", 2.0, ("t", "alpha1", "alpha2"), 0.005)
+
+
+def test_model_parameters_are_described_by_their_dataclass_docstrings():
+    """The dotted model parameters (config/system.yaml) take their description from the Attributes of the config
+    dataclass (one place), with the unit; the method's fall back to the field name where it has none."""
+    from jident_ros.nodes.params import describe_field, field_docs, method_defaults, system_defaults
+    docs = field_docs()
+    assert all(name in docs for name in system_defaults()), [n for n in system_defaults() if n not in docs]
+    assert describe_field("load.wheel_radius_m") == "load: Radius of the drive wheel [r], m (config/system.yaml; fixed at start)"
+    for name in list(system_defaults()) + list(method_defaults()):
+        text = describe_field(name)
+        assert text and "\n" not in text and text.endswith("fixed at start)"), name

@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 from test_nodes import Proc, Ros, library, logs, node_env  # noqa: F401  (fixtures)
 
+from jident_ros.nodes.diagnostics import status_task
+
 pytestmark = pytest.mark.ros
 
 
@@ -30,7 +32,7 @@ def _batch(i: int):
 
 
 def _recorder_statuses(arrays, hw):
-    return [s for a in arrays for s in a.status if s.name == "jident_diagnostic: recorder" and s.hardware_id == hw]
+    return [s for a in arrays for s in a.status if status_task(s.name) == "jident_diagnostic: recorder" and s.hardware_id == hw]
 
 
 def test_default_parameters_leave_a_bag_that_rosbags_reads(node_env, library, tmp_path):
@@ -59,7 +61,7 @@ def test_default_parameters_leave_a_bag_that_rosbags_reads(node_env, library, tm
     finally:
         node.stop()
         ros.close()
-    (bag,) = (tmp_path / "data" / "bags").iterdir()
+    (bag,) = [p for p in (tmp_path / "data" / "bags").iterdir() if p.is_dir()]   # and the manifest
     assert re.fullmatch(r"rosbag2_\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d", bag.name)
     assert (bag / "metadata.yaml").is_file() and not (bag / ".jident_reserve").exists()
     with AnyReader([bag]) as reader:
@@ -69,7 +71,7 @@ def test_default_parameters_leave_a_bag_that_rosbags_reads(node_env, library, tm
     assert [float(m.data[0]) for _, m in signals] == [1.0 + i * 50 * 5e-4 for i in range(5)]
     assert all(t0 <= t <= t1 for t, _ in signals)          # wall clock, not a ROS clock
     recorder_status = [s for topic, _, m in rows if topic == "/diagnostics" for s in m.status
-                       if s.name == "jident_diagnostic: recorder"]
+                       if status_task(s.name) == "jident_diagnostic: recorder"]
     assert recorder_status and recorder_status[0].level == 0
 
 

@@ -156,7 +156,10 @@ class Ros:
 
 
 def statuses(arrays, name, hardware_id):
-    return [s for a in arrays for s in a.status if s.name == name and s.hardware_id == hardware_id]
+    """The statuses of one drive (hardware_id) whose name without the namespace is ``name``
+    ("jident_diagnostic: inertia"; the full name is "<ns>/jident_diagnostic: inertia")."""
+    from jident_ros.nodes.diagnostics import status_task
+    return [s for a in arrays for s in a.status if status_task(s.name) == name and s.hardware_id == hardware_id]
 
 
 @pytest.fixture(scope="session")
@@ -167,13 +170,9 @@ def node_env(ros_env):
 
 
 @pytest.fixture(scope="session")
-def library(tmp_path_factory):
-    """Pattern library of the default configuration, built once (1-2 s)."""
-    from jident_ros.config import load_method_config, load_system_config
-    from jident_ros.method.patterns import PatternLibrary
-    path = tmp_path_factory.mktemp("patterns") / "patterns.npz"
-    PatternLibrary.build(load_system_config(), load_method_config()).save(path)
-    return path
+def library(default_library_file):
+    """Pattern library of the default configuration (conftest: built once per run)."""
+    return default_library_file
 
 
 @pytest.fixture
@@ -229,7 +228,7 @@ def pipeline(ros_env, node_env, library, tmp_path_factory):
         elapsed = time.monotonic() - t0
         assert ok and len(est) >= 2, logs(sim, win, diag)
         assert sim.wait() == 0, logs(sim)
-        ros.spin_until(lambda: len(statuses(diags, "jident: inertia", "/e2e/drive")) >= 2, 10)
+        ros.spin_until(lambda: len(statuses(diags, "jident_diagnostic: inertia", "/e2e/drive")) >= 2, 10)
         assert diag.alive() and win.alive(), logs(win, diag)
         rc_diag = diag.stop(signal.SIGTERM)
         rc_win = win.stop(signal.SIGINT)
@@ -267,7 +266,7 @@ def test_pipeline_back_pressure_from_the_windowing_node(pipeline):
 def test_pipeline_diagnostics(pipeline):
     from jident_ros.identify.levels import OK, WARN
     from jident_ros.nodes.ros_io import status_level, status_values
-    sts = statuses(pipeline["diags"], "jident: inertia", "/e2e/drive")
+    sts = statuses(pipeline["diags"], "jident_diagnostic: inertia", "/e2e/drive")
     # the verdict (jident_ros.identify.verdict) on the paper-consistent default drive: the first window is the
     # nominal class by the gap and by the image method (eta_k = 0.0375, off the pattern runs): OK. The second
     # deviates (1.073): WARN.  (On the heavy-film profile the image method disagrees: test_offline.)
@@ -295,7 +294,7 @@ def test_pipeline_diagnostics(pipeline):
         assert 0 < width_std < 0.0005 and abs(width - 0.005) < 0.0005, (width, width_std)
     # use_sim_time: the windows' statuses are stamped with the drive clock (simulation starts at t = 1 s);
     # the periodic task statuses (steady timer) may go out before the first /clock (stamp 0)
-    arrays = [a for a in pipeline["diags"] if any(s.hardware_id == "/e2e/drive" and s.name == "jident: inertia"
+    arrays = [a for a in pipeline["diags"] if any(s.hardware_id == "/e2e/drive" and s.name == "e2e/jident_diagnostic: inertia"
                                                   for s in a.status)]
     stamps = [a.header.stamp.sec + 1e-9 * a.header.stamp.nanosec for a in arrays]
     assert all(1.0 < t < 10.0 for t in stamps), stamps
@@ -352,7 +351,7 @@ def test_offline_diagnosis_gives_the_same_estimates(pipeline, library):
     result = diagnose_recording(pipeline["bag"], library_path=library)
     assert result.signals_topic == "/e2e/drive/signals" and not result.dropped
     assert result.estimates == pipeline["estimates"]  # same samples, same code, same numbers
-    live = statuses(pipeline["diags"], "jident: inertia", "/e2e/drive")
+    live = statuses(pipeline["diags"], "jident_diagnostic: inertia", "/e2e/drive")
     assert [w.diagnosis.message for w in result.windows] == [s.message for s in live]
     assert [w.diagnosis.level for w in result.windows] == [status_level(s) for s in live]
     assert [w.true_inertia_kgm2 for w in result.windows] == [1.16, 1.073]
@@ -450,10 +449,10 @@ def test_bad_messages_are_reported_and_the_windowing_node_keeps_running(node_env
     for _, m in bad:
         pub.publish(m)
     want = [r for r, _ in bad if r]
-    reported = lambda: [status_values(s).get("reason") for s in statuses(diags, "jident: windowing", "/bad/drive")]  # noqa: E731
+    reported = lambda: [status_values(s).get("reason") for s in statuses(diags, "jident_windowing: windows", "/bad/drive")]  # noqa: E731
     assert ros.spin_until(lambda: len(reported()) >= len(want)), (reported(), logs(win))
     assert reported() == want
-    sts = statuses(diags, "jident: windowing", "/bad/drive")
+    sts = statuses(diags, "jident_windowing: windows", "/bad/drive")
     assert all(status_level(s) == WARN for s in sts)
     assert status_values(sts[-1])["dropped.layout"] == "2"
     assert win.alive(), logs(win)
@@ -572,8 +571,8 @@ def test_diagnostic_with_a_bad_or_missing_library_reports_error_and_keeps_runnin
     assert ros.spin_until(lambda: all(est.values())), logs(*running.values())
     for ns in cases:
         assert ros.spin_until(lambda: any("estimate_source" in status_values(s)
-                                          for s in statuses(diags, "jident: inertia", f"/{ns}/drive")))
-        (s,) = [s for s in statuses(diags, "jident: inertia", f"/{ns}/drive") if "estimate_source" in status_values(s)]
+                                          for s in statuses(diags, "jident_diagnostic: inertia", f"/{ns}/drive")))
+        (s,) = [s for s in statuses(diags, "jident_diagnostic: inertia", f"/{ns}/drive") if "estimate_source" in status_values(s)]
         assert status_level(s) == ERROR and abs(est[ns][0].data - 1.16) < 0.01, (ns, s.message)
         assert status_values(s)["estimate_source"] == "gap"
     for ns, p in running.items():

@@ -29,12 +29,9 @@ def configs():
 
 
 @pytest.fixture(scope="module")
-def library_file(configs, tmp_path_factory):
-    """Pattern library of the default configuration (about 5 s)."""
-    from jident_ros.method.patterns import PatternLibrary
-    path = tmp_path_factory.mktemp("patterns") / "patterns.npz"
-    PatternLibrary.build(*configs).save(path)
-    return path
+def library_file(default_library_file):
+    """Pattern library of the default configuration (conftest: built once per run)."""
+    return default_library_file
 
 
 @pytest.fixture(scope="module")

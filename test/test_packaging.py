@@ -31,7 +31,7 @@ REQUIRED_EXEC_DEPENDS = {
     "rosgraph_msgs",
     "python3-numpy",
     "python3-scipy",
-    "python3-pywavelets",
+    "python3-pywt",
     "python3-yaml",
     "python3-matplotlib",
 }
@@ -92,6 +92,65 @@ def test_package_xml_valid_for_ros_tools(repo_root):
     assert pkg.package_format == 3
     assert pkg.get_build_type() == "ament_python"
     assert {d.name for d in pkg.exec_depends} >= REQUIRED_EXEC_DEPENDS
+
+
+def _rosdep_keys(repo_root):
+    """(package.xml's dependency keys, the rosdistro keys kept in test data, our own rosdep YAML's keys)."""
+    import yaml
+
+    root = ET.parse(repo_root / "package.xml").getroot()
+    deps = {e.text.strip() for e in root if e.tag.endswith("depend") and e.text}
+    kept = yaml.safe_load((repo_root / "test" / "data" / "rosdistro_keys.yaml").read_text())
+    ours = yaml.safe_load((repo_root / "rosdep" / "jident_ros.yaml").read_text())
+    return deps, kept, ours
+
+
+def test_every_package_xml_key_resolves_with_rosdep(repo_root):
+    """Each dependency key is a rosdistro key (rosdep YAML or a released Jazzy package, kept in
+    test/data/rosdistro_keys.yaml with its commit and date) or one of our rosdep/jident_ros.yaml --
+    never both, and never a key rosdistro does not have (python3-pywavelets was one)."""
+    deps, kept, ours = _rosdep_keys(repo_root)
+    assert kept["commit"] and kept["date"]
+    known = set(kept["rosdep_keys"]) | set(kept["jazzy_packages"])
+    unresolved = deps - known - set(ours)
+    assert not unresolved, f"package.xml keys with no rosdep definition: {sorted(unresolved)}"
+    assert not set(ours) & known, "our rosdep YAML redefines a rosdistro key"
+    assert set(ours) <= set(kept["keys_not_in_rosdistro"]), "an own key not checked as absent from rosdistro"
+    assert "python3-pywavelets" not in deps
+
+
+def test_own_rosdep_keys_install_on_ubuntu_and_debian(repo_root):
+    deps, _, ours = _rosdep_keys(repo_root)
+    assert set(ours) <= deps, f"own rosdep keys nobody depends on: {sorted(set(ours) - deps)}"
+    for key, rule in ours.items():
+        for os_name in ("ubuntu", "debian"):
+            how = rule.get(os_name)
+            assert how, f"{key}: no rule for {os_name}"
+            assert isinstance(how, list) or how.get("pip", {}).get("packages"), f"{key}/{os_name}: {how}"
+
+
+def test_every_imported_third_party_module_is_declared(repo_root):
+    """The runtime's third-party imports each have a key in package.xml (no rosbags.typesys surprise)."""
+    deps, _, _ = _rosdep_keys(repo_root)
+    key_of = {"numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-yaml",
+              "matplotlib": "python3-matplotlib", "tqdm": "python3-tqdm", "rosbags": "python3-rosbags-pip",
+              "pywt": "python3-pywt", "mcap": "python3-mcap-pip", "zstandard": "python3-zstandard",
+              "lz4": "python3-lz4"}
+    import ast
+
+    imported = set()
+    for path in (repo_root / "jident_ros").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                imported |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                imported.add(node.module.split(".")[0])
+    for module, key in key_of.items():
+        if module in imported or module in ("zstandard", "lz4"):  # mcap's chunk compressions (zstd, lz4)
+            assert key in deps, f"{module} is imported but {key} is not in package.xml"
+    ros_modules = {m for m in imported if m.endswith("_msgs") or m in ("rclpy", "launch", "launch_ros",
+                                                                      "ament_index_python", "rcl_interfaces")}
+    assert ros_modules <= deps, f"ROS packages imported but not declared: {sorted(ros_modules - deps)}"
 
 
 def test_versions_agree(repo_root):

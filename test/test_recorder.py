@@ -50,7 +50,8 @@ def test_bag_named_as_rosbag2_names_it_under_the_root(tmp_path):
     rec = Recorder(tmp_path / "root")
     rec.write("/drive/signals", SIGNALS, batch(0))
     rec.close()
-    (bag,) = (tmp_path / "root").iterdir()
+    (bag,) = [p for p in (tmp_path / "root").iterdir() if p.is_dir()]
+    assert (tmp_path / "root" / ".jident_ros_bags").read_text() == bag.name + "\n"   # the manifest
     assert re.fullmatch(r"rosbag2_\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d", bag.name), bag.name
     assert sorted(p.name for p in bag.iterdir()) == ["metadata.yaml", f"{bag.name}_0.mcap"]
     assert rosbags_count(bag) == 1
@@ -140,38 +141,51 @@ def test_split_by_duration_also_without_messages(tmp_path):
     assert rosbags_count(rec.bag_dir) == 2
 
 
+def _age(bag: Path, age_s: float) -> Path:
+    t = time.time() - age_s
+    for p in [bag, *bag.iterdir()]:
+        os.utime(p, (t, t))
+    return bag
+
+
 def _old_bag(root: Path, name: str, size: int, age_s: float) -> Path:
+    """A foreign bag (BagWriter directly, not a Recorder): never ours to delete."""
     with BagWriter(root / name, compression=None) as w:
         w.add_topic("/x", "std_msgs/msg/UInt8MultiArray")
         w.write("/x", {"data": np.zeros(size, dtype=np.uint8)}, 1)
-    t = time.time() - age_s
-    for p in [root / name, *(root / name).iterdir()]:
-        os.utime(p, (t, t))
-    return root / name
+    return _age(root / name, age_s)
+
+
+def _our_old_bag(root: Path, size: int, age_s: float) -> Path:
+    """A bag a Recorder made under ``root`` (in the manifest, marked), then aged."""
+    rec = Recorder(root, compression=None)
+    rec.write("/x", "std_msgs/msg/UInt8MultiArray", {"data": np.zeros(size, dtype=np.uint8)})
+    rec.close()
+    return _age(rec.bag_dir, age_s)
 
 
 def test_retention_deletes_the_oldest_complete_bags_never_the_open_one(tmp_path):
-    old = [_old_bag(tmp_path, f"rosbag2_2020_01_0{k}-00_00_00", 30_000, 3600 * (9 - k)) for k in range(1, 5)]
+    old = [_our_old_bag(tmp_path, 30_000, 3600 * (9 - k)) for k in range(1, 5)]
     crashed = tmp_path / "rosbag2_2019_01_01-00_00_00"    # no metadata.yaml: left for salvage
     crashed.mkdir()
     (crashed / "crashed_0.mcap").write_bytes(b"\x89MCAP0\r\n" + bytes(100))
-    other = BagWriter(tmp_path / "rosbag2_2020_01_01-00_00_01")   # another recorder's open bag
+    other = Recorder(tmp_path, compression=None)         # another recorder's open bag
     other.add_topic("/x", "std_msgs/msg/UInt8MultiArray")
-    other.flush_age_s = None
+    other.bag_writer.flush_age_s = None
     t = time.time() - 10 * 3600
-    os.utime(tmp_path / "rosbag2_2020_01_01-00_00_01", (t, t))
-    (other.bag_dir / "metadata.yaml").write_text("written at a split")
+    os.utime(other.bag_dir, (t, t))
     logs = []
     from jident_ros.bag.rotating_recorder import _bag_size
-    existing = sum(_bag_size(p) for p in tmp_path.iterdir())
+    ours = sum(_bag_size(p) for p in [*old, other.bag_dir])
     # the new recorder's bag: its 64 KiB reserve (room to finalise on a full disk) and a few records;
     # a limit that the two oldest complete bags must go for, at start already
-    limit = existing + 64 * 1024 + 4096 - _bag_size(old[0]) - _bag_size(old[1])
+    limit = ours + 64 * 1024 + 4096 - _bag_size(old[0]) - _bag_size(old[1])
     rec = Recorder(tmp_path, retention_max_total_bytes=limit, compression=None, chunk_size=20_000, log=logs.append)
     assert [p.name for p in old if not p.exists()] == [old[0].name, old[1].name]
     assert crashed.exists() and other.bag_dir.exists() and rec.bag_dir.exists()
     assert rec.status()["bags_deleted"] == 2 and rec.status()["bytes_deleted"] > 60_000
     assert any("retention: deleted" in line for line in logs)
+    assert old[0].name not in (tmp_path / ".jident_ros_bags").read_text().split()   # the manifest follows
     # while recording (after a split) the open bag is never deleted, even when it alone is over the limit
     rec.max_bag_size_bytes = 30_000
     for i in range(60):
@@ -184,13 +198,97 @@ def test_retention_deletes_the_oldest_complete_bags_never_the_open_one(tmp_path)
 
 
 def test_retention_by_age(tmp_path):
-    young = _old_bag(tmp_path, "rosbag2_2020_01_02-00_00_00", 100, 60)
-    old = _old_bag(tmp_path, "rosbag2_2020_01_01-00_00_00", 100, 7200)
+    young = _our_old_bag(tmp_path, 100, 60)
+    old = _our_old_bag(tmp_path, 100, 7200)
     unrelated = tmp_path / "notes"
     unrelated.mkdir()
     rec = Recorder(tmp_path, retention_max_age_s=3600)
     rec.close()
     assert not old.exists() and young.exists() and unrelated.exists()
+
+
+# ---- issue 24 item 1: retention touches only bags this recorder family wrote
+def _foreign_things(root: Path) -> list[Path]:
+    """What a user keeps beside our bags: an old rosbag2 bag of another tool (rosbag2-like name too),
+    a plain old folder, an old file; all very old and big."""
+    things = [_old_bag(root, "experiment_march", 200_000, 8 * 86400),
+              _old_bag(root, "rosbag2_2001_01_01-00_00_00", 200_000, 30 * 86400)]
+    plain = root / "user_dir"
+    plain.mkdir()
+    (plain / "data.bin").write_bytes(bytes(300_000))
+    (root / "notes.txt").write_text("mine")
+    things += [_age(plain, 9 * 86400), root / "notes.txt"]
+    return things
+
+
+@pytest.mark.parametrize("rule", ["size", "age", "both"])
+def test_a_foreign_bag_beside_ours_survives_every_retention_rule(tmp_path, rule):
+    foreign = _foreign_things(tmp_path)
+    ours = [_our_old_bag(tmp_path, 1000, 8 * 86400) for _ in range(2)]
+    kw = {"size": {"retention_max_total_bytes": 1}, "age": {"retention_max_age_s": 3600},
+          "both": {"retention_max_total_bytes": 1, "retention_max_age_s": 1}}[rule]
+    logs = []
+    rec = Recorder(tmp_path, log=logs.append, **kw)
+    rec.write("/x", "std_msgs/msg/Float64", {"data": 1.0})
+    rec.close()
+    assert all(p.exists() for p in foreign), [line for line in logs if "retention" in line]
+    assert not any(p.exists() for p in ours)           # ours went: the rules did act
+    assert rec.status()["bags_deleted"] == 2
+    assert not any("experiment_march" in line or "user_dir" in line for line in logs)
+    # a foreign bag whose name got into the manifest (a user copied a bag in under a listed name) has no
+    # marker in its metadata.yaml: still never deleted
+    intruder = _old_bag(tmp_path, ours[0].name, 1000, 9 * 86400)
+    rec2 = Recorder(tmp_path, retention_max_total_bytes=1, retention_max_age_s=1)
+    rec2.close()
+    assert intruder.exists() and all(p.exists() for p in foreign)
+
+
+def test_record_dir_never_sweeps_its_parent(tmp_path):
+    foreign = _foreign_things(tmp_path)
+    logs = []
+    rec = Recorder(bag_dir=tmp_path / "run1", retention_max_total_bytes=1, retention_max_age_s=1, log=logs.append)
+    rec.write("/x", "std_msgs/msg/Float64", {"data": 1.0})
+    rec.close()
+    assert all(p.exists() for p in foreign) and rosbags_count(tmp_path / "run1") == 1
+    assert rec.status()["bags_deleted"] == 0
+    assert any("retention off" in line for line in logs)
+    assert not (tmp_path / ".jident_ros_bags").exists()
+
+
+_KILLED = textwrap.dedent("""
+    import os, signal, sys, numpy as np
+    from jident_ros.bag.rotating_recorder import Recorder
+    rec = Recorder(sys.argv[1], max_bag_size_bytes=20_000, chunk_size=4_000, compression=None)
+    for i in range(int(sys.argv[2])):
+        rec.write("/x", "std_msgs/msg/UInt8MultiArray", {"data": np.full(3_000, i % 256, dtype=np.uint8)})
+    rec.flush()
+    print(rec.bag_dir, flush=True)
+    os.kill(os.getpid(), signal.SIGKILL)
+""")
+
+
+@pytest.mark.parametrize("messages", [3, 30])   # killed before any split (no metadata.yaml), and after splits
+def test_a_killed_bag_survives_retention_unless_the_user_opts_in(tmp_path, messages):
+    r = subprocess.run([sys.executable, "-c", _KILLED, str(tmp_path), str(messages)], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == -signal.SIGKILL, r.stderr
+    killed = Path(r.stdout.strip())
+    assert killed.is_dir() and killed.name in (tmp_path / ".jident_ros_bags").read_text().split()
+    _age(killed, 30 * 86400)
+    logs = []
+    rec = Recorder(tmp_path, retention_max_total_bytes=1, retention_max_age_s=1, log=logs.append)
+    rec.close()
+    assert killed.exists(), logs
+    assert rec.status()["bags_kept_unfinalised"] == 1
+    assert sum(f"kept {killed}: not finalised" in line for line in logs) == 1
+    # salvage still works on it; then the user opts in and retention may delete it
+    salvaged = tmp_path.parent / f"{tmp_path.name}_salvaged"
+    from jident_ros.bag.salvage import salvage
+    report = salvage(killed, salvaged)
+    assert report["messages_recovered"] >= 1
+    rec = Recorder(tmp_path, retention_max_total_bytes=1, retention_max_age_s=1, retention_delete_unfinalised=True)
+    rec.close()
+    assert not killed.exists() and salvaged.exists()
 
 
 # ------------------------------------------------------------------ failures: disk full, I/O errors
@@ -316,7 +414,8 @@ def test_signal_under_load_finalises_the_bag(tmp_path, sig, inherited):
         raise AssertionError(f"{sig} ({inherited} before): the child did not stop") from None
     assert rc == -getattr(signal, sig)   # SIGINT: an uncaught KeyboardInterrupt ends Python by SIGINT
     assert sig != "SIGINT" or "KeyboardInterrupt" in proc.stderr.read()
-    (bag,) = (tmp_path / "root").iterdir()
+    (bag,) = [p for p in (tmp_path / "root").iterdir() if p.is_dir()]
+    assert (tmp_path / "root" / ".jident_ros_bags").read_text() == bag.name + "\n"   # the manifest
     info = read_metadata(bag)
     assert info["message_count"] >= 50
     assert rosbags_count(bag) == info["message_count"]
@@ -331,7 +430,8 @@ def test_close_from_atexit_finalises(tmp_path):
         rec.write("/x", "std_msgs/msg/Float64", {{"data": 1.5}})
         """)   # no close: the interpreter's exit does it
     subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
-    (bag,) = (tmp_path / "root").iterdir()
+    (bag,) = [p for p in (tmp_path / "root").iterdir() if p.is_dir()]
+    assert (tmp_path / "root" / ".jident_ros_bags").read_text() == bag.name + "\n"   # the manifest
     assert [m.message.data for m in read_bag(bag)] == [1.5]
 
 
@@ -351,7 +451,8 @@ def test_an_unfinalised_split_bag_is_read_by_salvaging_it(tmp_path):
         os.kill(os.getpid(), signal.SIGKILL)
         """)
     subprocess.run([sys.executable, "-c", code], timeout=60)
-    (bag,) = (tmp_path / "root").iterdir()
+    (bag,) = [p for p in (tmp_path / "root").iterdir() if p.is_dir()]
+    assert (tmp_path / "root" / ".jident_ros_bags").read_text() == bag.name + "\n"   # the manifest
     files = sorted(bag.glob("*.mcap"))
     assert len(files) >= 2
     listed = read_metadata(bag)["relative_file_paths"]

@@ -22,15 +22,20 @@ EXCEPTIONS = {
     "identify/gap.py": "781 lines: the estimator helper's file (issue 20 rewrites it)",
     "identify/gap.py:estimate_inertia": "the estimator helper's file (issue 20 rewrites it)",
     "identify/gap.py:_joint_fit": "the estimator helper's file (issue 20 rewrites it)",
+    "identify/gap_free.py:free_angle_fit": "the change-point scan and the fits share the span's design as closures; "
+                                           "estimator helper's file (issue 20), to be split into a class",
     "identify/verdict.py:input_refusal": "9: the window's five header fields + config, policy, nominal, width_unknown; "
                                          "estimator helper's file",
     # numerics kernels
     "method/khm.py:khm_fit_batch": "9: the histograms (3) + the KHM options of MethodConfig (n_clusters, p, max_iter, "
                                    "tol) + the two numerics switches, all keywords with defaults",
-    "method/khm.py:_squarem": "85 lines: one SQUAREM loop whose 8 state arrays change together",
     "method/patterns.py:identify_window": "9: the window (3), library, method, p + the research variants "
                                           "(signals, width_mode, system) as keywords with defaults",
     "sim/simulate.py:_rk4_window": "10: the integrator's state arrays; speed helper's file (single-case fast path)",
+    "sim/simulate.py:_rk4_window_one": "98 lines, 10 parameters: _rk4_window's arguments; the one-case RK4 on 10 "
+                                       "unpacked floats (not packing them is the speed, issue 23)",
+    "sim/simulate.py:rhs": "12 parameters: the 10 state floats + 2 supply values of _rk4_window_one's kernel, "
+                           "passed unpacked for speed (issue 23)",
     # command-line tools: argument tables and scripted runs
     "cli/main.py:build_parser": "the argument table of every subcommand; speed helper's file (lazy imports)",
     "cli/demo.py:_listen": "the demo's DDS listener (a dev tool, not beside a drive)",

@@ -6,6 +6,7 @@ The 100,000-window false-alarm run and the full target measurement are marked sl
 from __future__ import annotations
 
 import json
+import math
 import os
 
 import numpy as np
@@ -219,14 +220,37 @@ def test_bad_inputs_are_skipped_with_reason(args, field):
     assert u.skipped and field in u.reason and "skipped" in u.message
     after = tr.to_dict()
     assert after.pop("n_windows") == before.pop("n_windows") + 1
-    assert after == before
+    inputs = after.pop("inputs")
+    before.pop("inputs")
+    assert after == before                       # the estimates' state is unchanged; the skip is counted
+    if field == "no estimate":                   # no estimate: not a skip (counted as refused when a reason is given)
+        assert inputs["windows_skipped"] == {} and u.level == OK
+    else:
+        assert inputs["windows_skipped"] == {field: 1} and u.level == WARN
 
 
-def test_time_going_backwards_is_skipped():
-    tr = TrendTracker()
-    tr.update(100.0, J1, 0.005)
-    u = tr.update(50.0, J1, 0.005)
-    assert u.skipped and "before the previous" in u.reason
+def test_time_going_backwards_starts_a_reported_segment_not_a_skip_for_ever():
+    """Issue 24: a drive restart (its clock back to 1 s) or a stretch stamped far ahead is a reported time
+    segment; every later window is used (before: every later window was skipped for good)."""
+    tr = TrendTracker(TrendConfig(commissioning_windows=3))
+    for i in range(6):
+        tr.update(100.0 + 10 * i, J1, 0.005, 0.003, 3e-6)
+    u = tr.update(1.0, J1, 0.005, 0.003, 3e-6)                      # restart: the clock goes back
+    assert not u.skipped and u.time_segment == 1 and u.level == WARN and "went back by 149" in u.message
+    us = [tr.update(11.0 + 10 * i, J1, 0.005, 0.003, 3e-6) for i in range(5)]
+    assert not any(x.skipped for x in us) and us[-1].inertia_windows_fed == 12
+    assert us[-1].wear_rate_m_per_s is not None                      # the wear line restarted on the new segment
+    u = tr.update(1.0e6, J1, 0.005, 0.003, 3e-6)                     # far ahead (> 7 days)
+    assert u.time_segment == 2 and "jumped ahead" in u.message
+    u = tr.update(61.0, J1, 0.005, 0.003, 3e-6)                      # and back: a third segment, used
+    assert not u.skipped and u.time_segment == 3 and u.inertia_windows_fed == 14
+    later = [tr.update(71.0 + 10 * i, J1, 0.005, 0.003, 3e-6) for i in range(30)]
+    assert later[-1].level == OK and not later[-1].changes           # the WARN is held, then the drive is OK again
+    TrendTracker.from_dict(tr.to_dict())                             # the state after a clock going back loads
+    small = TrendTracker(TrendConfig(commissioning_windows=3))
+    for i in range(6):
+        small.update(100.0 + 10 * i, J1, 0.005)
+    assert small.update(150.0 + 6 * 86400.0, J1, 0.005).time_segment == 0   # a 6-day pause is no discontinuity
 
 
 def test_the_same_window_again_is_skipped_and_leaves_the_state():
@@ -236,8 +260,10 @@ def test_the_same_window_again_is_skipped_and_leaves_the_state():
     tr.update(100.0, J1, 0.005)
     before = tr.to_dict()
     u = tr.update(100.0, J1 * 1.1, 0.005)
-    assert u.skipped and "the same window again" in u.reason
+    assert u.skipped and "the same window again" in u.reason and u.level == OK   # benign: counted, no WARN
     after = tr.to_dict()
+    assert after.pop("inputs")["windows_skipped"] == {"duplicate": 1}
+    before.pop("inputs")
     assert after.pop("n_windows") == before.pop("n_windows") + 1 and after == before
 
 
@@ -330,3 +356,104 @@ def test_save_replaces_existing_file(tmp_path):
     tr.save(path)
     assert TrendTracker.load(path).n_windows == 1
     assert sorted(os.listdir(tmp_path)) == ["t.json"]
+
+
+# --------------------------------------------------------------------------- issue 24: a state checked on load
+
+def _monitored_state(tmp_path):
+    tr = TrendTracker(TrendConfig(commissioning_windows=3))
+    for i in range(12):
+        tr.update(100.0 + 10 * i, J1 * (1 + 0.001 * (-1) ** i), 0.005, 0.003 + 1e-6 * i, 3e-6)
+    path = tmp_path / "state.json"
+    tr.save(path)
+    return tr, path, json.loads(path.read_text())
+
+
+@pytest.mark.parametrize("tamper, field", [
+    (lambda d: d["inertia"].update(x=50.0), "inertia.x"),                       # the attack: 49.999 was published
+    (lambda d: d["inertia"].update(P=-1.0), "inertia.P"),                       # the attack: math domain error
+    (lambda d: d["inertia"].update(baseline=1.16 * 1.6), "inertia.baseline"),   # beyond 1.5x its reference
+    (lambda d: d["inertia"].update(baseline_var=-1e-6), "inertia.baseline_var"),
+    (lambda d: d["inertia"].update(x="1.16"), "inertia.x"),                     # a string is not a number
+    (lambda d: d["inertia"].update(scale=0.1), "inertia.scale"),
+    (lambda d: d["inertia"]["history"][-1].__setitem__(3, 0.0), "inertia.history"),    # se 0
+    (lambda d: d["inertia"]["history"][-1].__setitem__(1, 1e9), "inertia.history"),    # a time in the future
+    (lambda d: d["width"]["y"].__setitem__(0, 5.0), "width.y[0]"),              # a 5 m backlash
+    (lambda d: d["width"]["cusum"].__setitem__(0, -3.0), "width.cusum.pos"),
+    (lambda d: d.update(n_windows=True), "n_windows"),
+])
+def test_a_tampered_state_is_refused_naming_the_field(tmp_path, tamper, field):
+    tr, path, d = _monitored_state(tmp_path)
+    tamper(d)
+    path.write_text(json.dumps(d))
+    with pytest.raises(TrendStateError) as exc:
+        TrendTracker.load(path)
+    assert field in str(exc.value) and str(path) in str(exc.value), str(exc.value)
+
+
+def test_a_valid_state_loads_and_a_plausible_band_is_applied(tmp_path):
+    tr, path, d = _monitored_state(tmp_path)
+    again = TrendTracker.load(path)
+    assert again.to_dict() == tr.to_dict()
+    with pytest.raises(TrendStateError, match="inertia.baseline"):    # a band of another drive: refused
+        TrendTracker.load(path, plausible={"inertia_kgm2": (2.0, 3.0)})
+    TrendTracker.load(path, plausible={"inertia_kgm2": (0.58, 1.74)})
+
+
+# --------------------------------------------------------------------------- issue 21
+
+def test_short_commissioning_relative_drift_interval_and_the_class_of_the_change():
+    cfg = TrendConfig()
+    assert cfg.commissioning_windows == 5 and cfg.baseline_refine_windows == 20
+    s = steady(40, step_at=25, step_pct=-2.5, j1_se_pct=0.5, seed=5)
+    us = TrendTracker(cfg).batch(s.time_s, s.inertia_kgm2, s.inertia_se_kgm2)
+    assert us[3].commissioning and not us[4].commissioning                  # the baseline from 5 windows
+    assert us[5].inertia_baseline_windows == 6 and us[22].inertia_baseline_windows == 0   # refined up to 20
+    assert us[4].inertia_baseline_se_kgm2 > us[19].inertia_baseline_se_kgm2  # its uncertainty shrinks
+    u = us[10]
+    lo, hi = u.inertia_drift_ci95_pct
+    assert lo < u.inertia_drift_pct < hi and hi - lo == pytest.approx(2 * 1.959964 * u.inertia_drift_se_pct)
+    fired = [x for x in us if x.changes]
+    assert fired and 25 <= fired[0].window_index <= 29
+    ev = fired[0].changes[0]
+    assert ev.sign == -1 and ev.class_pct == -2.5 and "nearest class -2.5 %" in fired[0].message
+    # the torque accuracy widens the absolute J1 only (it cancels in the drift)
+    t = TrendTracker(TrendConfig(torque_accuracy_pct=3.0)).batch(s.time_s, s.inertia_kgm2, s.inertia_se_kgm2)
+    assert t[20].inertia_drift_se_pct == us[20].inertia_drift_se_pct
+    assert t[20].inertia_abs_se_kgm2 == pytest.approx(math.hypot(us[20].inertia_se_kgm2, 0.03 * us[20].inertia_kgm2))
+    assert us[20].inertia_abs_se_kgm2 == pytest.approx(us[20].inertia_se_kgm2)
+
+
+def test_refused_windows_are_counted_by_reason_and_said():
+    tr = TrendTracker(TrendConfig(commissioning_windows=3))
+    for i in range(6):
+        tr.update(100.0 + i, J1, 0.005)
+    u = tr.update(106.0, None, None, 0.003, 3e-6, inertia_refused="outside_band")
+    tr.count_refused("no_gap")
+    u = tr.update(107.0, J1, 0.005)
+    assert u.inertia_windows_fed == 7 and u.inertia_windows_refused == {"outside_band": 1, "no_gap": 1}
+    assert "J1 fed 7 of 8 windows, 2 without J1 (1 outside_band, 1 no_gap)" in u.message
+    assert TrendTracker.from_dict(tr.to_dict()).inertia_refused == {"outside_band": 1, "no_gap": 1}
+
+
+def test_over_reported_errors_are_scaled_down_once_the_baseline_is_refined_calibrated_ones_not():
+    """The issue-21 scenario: estimates scattered 0.3 % with +-2 % intervals (se 1.05 %): a -2.5 % step is found
+    within 3 windows once the refined baseline shows the errors over-reported; calibrated errors keep scale 1."""
+    rng = np.random.default_rng(3)
+    n, at = 40, 24
+    truth = np.full(n, J1)
+    truth[at:] *= 0.975
+    y = truth * (1 + 0.003 * rng.standard_normal(n))
+    se = truth * 0.0105
+    t = 3600.0 * np.arange(n)
+    tr = TrendTracker()
+    us = tr.batch(t, y, se)
+    assert tr._inertia.scale == pytest.approx(0.45, abs=0.2)
+    fired = [u.window_index for u in us if u.changes]
+    assert fired and at <= fired[0] <= at + 2
+    off = TrendTracker(TrendConfig(se_scale_down=False)).batch(t, y, se)
+    assert not any(u.changes for u in off[:at + 3])            # without it: slower (4-8 windows typically)
+    calibrated = TrendTracker()
+    calibrated.batch(t[:at], J1 * (1 + 0.0105 * rng.standard_normal(at)), se[:at])
+    assert calibrated._inertia.scale == 1.0
+    TrendTracker.from_dict(tr.to_dict())                         # a scaled state loads

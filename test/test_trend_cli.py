@@ -62,7 +62,7 @@ def test_one_entry_an_hour_loses_nothing(system, tmp_path):
     """Each entry's stream starts 48 samples before it (the first 50-sample batch holds the entry):
     without the clock-jump handling the detector dropped that batch as a 'gap' and lost the window."""
     from jident_ros.cli.offline import diagnose_recording
-    from jident_ros.cli.trend import write_scenario_recording
+    from jident_ros.cli.scenario import write_scenario_recording
     from jident_ros.sim.scenarios import wear_scenario
     sc = wear_scenario(system, 6, 3600.0, 0.0025, 0.003, j1_step_at_window=3)
     rec = write_scenario_recording(tmp_path / "rec", system, sc, gap_samples=0)
@@ -133,7 +133,7 @@ def test_jident_trend_end_to_end(wear40, tmp_path, capsys):
 
 
 def test_trend_state_resumes_where_it_stopped(system, tmp_path, capsys):
-    from jident_ros.cli.trend import write_scenario_recording
+    from jident_ros.cli.scenario import write_scenario_recording
     from jident_ros.identify.trend import TrendTracker
     from jident_ros.sim.scenarios import wear_scenario
     sc = wear_scenario(system, 16, 3600.0, j1_step_at_window=12)
@@ -181,9 +181,10 @@ def test_trend_bad_input_is_one_line(wear40, tmp_path, capsys):
 
 def test_trend_parameters_map_to_the_config():
     from jident_ros.identify.trend import PARAMETER_FIELDS, TrendConfig
+    from jident_ros.identify.trend_config import NOT_PARAMETERS
     from jident_ros.parameters import DIAGNOSTIC, TREND
     assert TrendConfig.from_parameters(TREND) == TrendConfig()       # the defaults agree
-    assert set(PARAMETER_FIELDS.values()) == {f.name for f in dataclasses.fields(TrendConfig)}
+    assert set(PARAMETER_FIELDS.values()) == {f.name for f in dataclasses.fields(TrendConfig)} - NOT_PARAMETERS
     assert set(TREND) - set(PARAMETER_FIELDS) == {"trend_enabled", "trend_state_file"}
     assert all(DIAGNOSTIC[k] == v for k, v in TREND.items())
     cfg = TrendConfig.from_parameters({"trend_commissioning_windows": 10, "trend_width_warn_m": 0.01,
@@ -220,6 +221,15 @@ def test_trend_status_levels_messages_and_values():
     skipped = tr.update(float(s.time_s[-1]) + 1.0, float("nan"), 0.01)
     level, msg, vals = trend_status(skipped)
     assert dict(vals)["skipped"] is True and "inertia_kgm2" in dict(vals)["skip_reason"] and "skipped" in msg
+    assert level == 2                                    # a skip is at least WARN (here the held change's ERROR)
+    tr.count_refused("outside_band")
+    u = tr.update(float(s.time_s[-1]) + 2.0, None, None, float(s.width_m[-1]), float(s.width_se_m[-1]),
+                  inertia_refused="no_gap")
+    d = dict(trend_status(u)[2])
+    assert d["inertia_windows_fed"] == 60 and d["inertia_windows_refused"] in ("outside_band 1, no_gap 1",
+                                                                               "no_gap 1, outside_band 1")
+    assert d["windows_skipped"] == "inertia_kgm2 1" and d["time_segment"] == 0
+    assert d["inertia_drift_ci95_low_pct"] < d["inertia_drift_pct"] < d["inertia_drift_ci95_high_pct"]
 
 
 @pytest.mark.slow
@@ -251,14 +261,25 @@ def _offline_window(d, detector="paper", estimate=None):
                            backlash_width_estimate_m=estimate, backlash_width_se_m=None if estimate is None else 3e-6)
 
 
-def test_a_refused_or_ambiguous_gap_j1_is_not_fed_and_the_width_source_is_named():
+def test_an_ambiguous_gap_j1_is_fed_a_refused_one_is_not_and_the_width_source_is_named():
+    """Issue 21: the class verdict (one window) does not decide what the trend sees; physics does."""
     from jident_ros.cli.trend import trend_window
-    from jident_ros.identify.trend_status import trend_inputs
-    for status in ("refused", "ambiguous"):
-        tw = trend_window(_offline_window(_diagnosis(status, None)), "rec")
-        assert tw.inertia_kgm2 is None and tw.inertia_se_kgm2 is None, tw
-        assert tw.skip_reason.startswith(f"gap J1 1.3 kg m^2 not published ({status}") and "plausible" in tw.skip_reason
-        assert (tw.width_m, tw.width_source) == (0.0051, "gap")          # the width is still followed
+    from jident_ros.identify.trend_status import refusal_kind, trend_inputs
+    tw = trend_window(_offline_window(_diagnosis("ambiguous", None)), "rec")
+    assert (tw.inertia_kgm2, tw.inertia_se_kgm2, tw.skip_reason, tw.refused_kind) == (1.3, 0.01, None, None)
+    assert (tw.width_m, tw.width_source) == (0.0051, "gap")
+    # refused as implausible: neither its J1 nor its width (likely a false entry), the reason kept and counted
+    tw = trend_window(_offline_window(_diagnosis("refused", None)), "rec")
+    assert tw.inertia_kgm2 is None and tw.inertia_se_kgm2 is None and tw.width_m is None, tw
+    assert tw.skip_reason.startswith("gap J1 1.3 kg m^2 refused (refused") and "plausible" in tw.skip_reason
+    assert tw.refused_kind == "outside_band"
+    d = _diagnosis("refused", None)
+    d.refused_reason = "backlash_width_m: the window's K2 = 0.005 m disagrees with the re-contact"
+    assert refusal_kind(d) == "inconsistent"
+    d.gap = None
+    assert refusal_kind(d) == "input"
+    d.status = "undiagnosed"
+    assert refusal_kind(d) == "no_gap" and trend_inputs(d).width_m == 0.0051   # no gap: the width still counts
     tw = trend_window(_offline_window(_diagnosis("deviating", "gap")), "rec")
     assert (tw.inertia_kgm2, tw.inertia_se_kgm2, tw.inertia_ci_low_kgm2, tw.skip_reason) == (1.3, 0.01, 1.28, None)
     # a flank-detector window: its flank-to-flank K2 wins over the gap estimator's width, with its se (floored)
@@ -289,3 +310,103 @@ def test_jident_trend_flank_and_paper_detectors_and_parallel_jobs(wear40, system
     assert {x.width_source for x in paper.windows} == {"gap"} and np.max(np.abs(wp / truth - 1)) > 0.01
     # the wear rate (1 mm in 39 h) from the flank estimates within 2 %
     assert flank.updates[-1].wear_rate_m_per_s == pytest.approx(0.001 / 39 / 3600, rel=0.02)
+
+
+# --------------------------------------------------------------------------- fleet (issue 21)
+
+def test_fleet_groups_by_namespace_and_by_mapping_one_trend_per_drive(tmp_path, system, capsys):
+    """Three recordings of two drives (namespaces /press1 and /press2; press1's split in two recordings, the
+    second one's J1 stepped): one trend per drive, one row each, the grouping by a --drive-id file equal to it."""
+    from jident_ros.cli.fleet import FLEET_COLUMNS, group_by_drive, recording_namespaces
+    from jident_ros.cli.scenario import write_scenario_recording
+    from jident_ros.sim.scenarios import wear_scenario
+    sc = wear_scenario(system, 16, 3600.0, 0.0025, 0.0030, None, None, 10, -5.0, None)
+    first = dataclasses.replace(sc, cases=sc.cases[:8], entry_times_s=sc.entry_times_s[:8])
+    second = dataclasses.replace(sc, cases=sc.cases[8:], entry_times_s=sc.entry_times_s[8:])
+    steady = wear_scenario(system, 8, 3600.0, 0.0025, 0.0030, None, None, None, 0.0, None)
+    fleet = tmp_path / "fleet"
+    write_scenario_recording(fleet / "a" / "r1", system, first, snr_db=30.0, namespace="/press1")
+    write_scenario_recording(fleet / "b" / "r2", system, second, snr_db=30.0, seed=1, namespace="/press1")
+    write_scenario_recording(fleet / "a" / "r3", system, steady, snr_db=30.0, seed=2, namespace="/press2")
+    assert recording_namespaces(fleet / "a" / "r3") == {"press2": "/press2/drive/signals"}
+    out = tmp_path / "out"
+    assert jident(["trend", str(fleet), "--fleet", "--out", str(out), "--jobs", "2", "--quiet"]) == 0
+    rows = list(csv.DictReader(open(out / "fleet.csv")))
+    assert list(rows[0]) == list(FLEET_COLUMNS)
+    by = {r["drive"]: r for r in rows}
+    assert set(by) == {"press1", "press2"}
+    assert (by["press1"]["recordings"], by["press1"]["windows"], by["press2"]["windows"]) == ("2", "16", "8")
+    assert int(by["press1"]["changes"]) >= 1 and by["press1"]["last_change"].startswith("-")   # the -5 % step
+    assert by["press2"]["changes"] == "0" and "change" not in by["press2"]["message"]   # (WARN: the wear)
+    assert float(by["press1"]["inertia_drift_pct"]) < -3.0 < float(by["press2"]["inertia_drift_pct"])
+    assert (out / "fleet.png").stat().st_size > 0 and (out / "drives" / "press2" / "trend.csv").exists()
+    assert "press1" in capsys.readouterr().out
+    # the same grouping from a mapping file; a recording it does not name is one clear line
+    mapping = tmp_path / "drives.csv"
+    mapping.write_text("# recording,drive\nfleet/a/r1,press1\nfleet/b/r2,press1\nfleet/a/r3,press2\n")
+    recs = [fleet / "a" / "r1", fleet / "b" / "r2", fleet / "a" / "r3"]
+    assert {k: [r for r, _ in v] for k, v in group_by_drive(recs, str(mapping)).items()} == \
+        {k: [r for r, _ in v] for k, v in group_by_drive(recs).items()}
+    mapping.write_text("fleet/a/r1,press1\n")
+    assert jident(["trend", str(fleet), "--fleet", "--drive-id", str(mapping), "--out", str(out), "--quiet"]) == 2
+    assert "no drive for recording" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_hidden_scenario_rebuilt_step_flagged_within_5_recordings_none_before(tmp_path, system):
+    """Issue 21's scenario rebuilt with our writers: one drive recorded hourly for 40 h (one bag each), raw 2^16
+    encoder angles, the drive/signals topic only (no truth topics), 30 dB, K2 2.5 -> 5 mm, J1 -2.5 % from
+    recording 25 (index 24).  ~3 min."""
+    from jident_ros.cli.trend_run import run_trend
+    from jident_ros.research.evaluation.raw_scenario import write_raw_scenario
+    from jident_ros.sim.scenarios import wear_scenario
+    from jident_ros.stream.layout import DEFAULT_CHANNELS
+    sc = wear_scenario(system, 40, 3600.0, 0.0025, 0.005, None, None, 24, -2.5, None)
+    paths = write_raw_scenario(tmp_path / "rec", system, sc, snr_db=30.0, channels=DEFAULT_CHANNELS)
+    run = run_trend(paths, system=system, jobs=2)
+    changes = [c for c in run.tracker.changes if c.quantity == "inertia"]
+    step_t = sc.entry_times_s[24]
+    assert changes and all(c.time_s >= step_t for c in changes), changes               # none before the step
+    first = changes[0]
+    assert first.sign == -1 and first.class_pct == -2.5
+    assert sum(1 for w in run.windows if step_t <= w.time_s <= first.time_s) <= 5       # within 5 recordings
+    widths = [u.width_m for u in run.updates if u.width_m is not None]
+    assert widths[-1] / widths[0] == pytest.approx(2.0, rel=0.1)                        # the width trend as before
+
+
+def test_the_drive_monitor_feeds_an_ambiguous_j1_and_counts_a_refused_one():
+    """The nodes' path (identify.monitor.DriveMonitor): an ambiguous window's J1 reaches the tracker; a window
+    refused as implausible gives no update and is counted by its reason."""
+    from types import SimpleNamespace
+
+    from jident_ros.identify.monitor import DriveMonitor
+    from jident_ros.identify.trend import TrendConfig, TrendTracker
+    diagnoses = iter([_diagnosis("ambiguous", None), _diagnosis("refused", None)])
+    diagnoser = SimpleNamespace(diagnose=lambda win, **kw: next(diagnoses))
+    mon = DriveMonitor(None, diagnoser, TrendTracker(TrendConfig(commissioning_windows=3)))
+    win = SimpleNamespace(entry_time_s=10.0, detector="paper", backlash_width_estimate_m=None,
+                          backlash_width_se_m=None)
+    r = mon.window(win)
+    assert r.trend is not None and r.trend.inertia_kgm2 == 1.3 and r.trend.inertia_windows_fed == 1
+    r = mon.window(SimpleNamespace(**{**vars(win), "entry_time_s": 20.0}))
+    assert r.trend is None and mon.tracker.inertia_refused == {"outside_band": 1}
+
+
+def test_the_torque_accuracy_term_is_left_out_of_the_relative_test_and_given_to_the_absolute_j1():
+    """A scale error of the drive's torque estimate moves every J1 alike: the gap's 'torque_accuracy' term is
+    taken out of the se the trend tests the drift with; the drive's declared torque_accuracy (a uniform bound)
+    becomes the absolute J1's term."""
+    import math as m
+
+    from jident_ros.identify.trend import TrendConfig
+    from jident_ros.identify.trend_status import trend_inputs
+    d = _diagnosis("ambiguous", None)
+    d.gap.std_error_terms = (("fit", 0.006), ("torque_accuracy", 0.008))
+    d.gap.std_error_kgm2 = 0.01
+    assert trend_inputs(d).inertia_se_kgm2 == pytest.approx(0.006)
+    d.gap.std_error_terms = ()
+    assert trend_inputs(d).inertia_se_kgm2 == pytest.approx(0.01)
+    cfg = TrendConfig.from_parameters({"torque_accuracy": 0.02})
+    assert cfg.torque_accuracy_pct == pytest.approx(2.0 / m.sqrt(3.0))
+    assert TrendConfig.from_parameters({"torque_accuracy": 0.02, "trend_torque_accuracy_pct": 1.5}).torque_accuracy_pct \
+        == 1.5

@@ -19,9 +19,10 @@ def configs():
 
 
 @pytest.fixture(scope="module")
-def library(configs):
+def library(default_library_file):
+    """The default configuration's library (conftest: built once per run; ``configs`` are the defaults)."""
     from jident_ros.method.patterns import PatternLibrary
-    return PatternLibrary.build(*configs)
+    return PatternLibrary.load(default_library_file)
 
 
 @pytest.fixture(scope="module")

@@ -22,7 +22,7 @@ import numpy as np
 
 from jident_ros.bag.errors import RecordingError
 from jident_ros.bag.messages import deserialize
-from jident_ros.bag.reader import read_bag
+from jident_ros.bag.reader import in_publish_order, read_bag
 from jident_ros.stream.layout import (
     CASE_TOPIC,
     DRIVE_TOPICS,
@@ -38,16 +38,17 @@ from jident_ros.stream.layout import (
 
 
 def read_drive_messages(path, error: type, note: Callable[[str], Any] = lambda text: None) -> tuple[list, list]:
-    """(the drive-topic messages of a recording as (topic, type, raw CDR) in receive order, every topic
-    name).  An unreadable or damaged recording raises ``error`` with one line naming the file and the
+    """(the drive-topic messages of a recording as (topic, type, raw CDR) in publish order -- the order the
+    drive sent them, :func:`~jident_ros.bag.reader.in_publish_order`; receive order in a bag without publish
+    times -- every topic name).  An unreadable or damaged recording raises ``error`` with one line naming the file and the
     problem; a file its recorder never finalised (killed) is read by salvaging it, and ``note`` gets one
     line saying so."""
     kept, seen = [], set()
     try:
-        for topic, msg_type, _, raw in read_bag(path, raw=True, on_salvage=note):
-            seen.add(topic)
-            if any(topic_matches(topic, rel) for rel in DRIVE_TOPICS):
-                kept.append((topic, msg_type, raw))
+        for m in in_publish_order(read_bag(path, raw=True, on_salvage=note)):
+            seen.add(m.topic)
+            if any(topic_matches(m.topic, rel) for rel in DRIVE_TOPICS):
+                kept.append((m.topic, m.msg_type, m.message))
     except RecordingError as exc:
         raise error(f"recording {exc}") from None
     except OSError as exc:

@@ -7,6 +7,7 @@ scanning it (:class:`StreamScan`, also what :mod:`jident_ros.bag.salvage` recove
 """
 from __future__ import annotations
 
+import heapq
 import os
 from collections import namedtuple
 from pathlib import Path
@@ -22,12 +23,33 @@ from jident_ros.bag.errors import RecordingError
 from jident_ros.bag.messages import canonical_type, deserialize_with
 from jident_ros.bag.metadata_yaml import read_metadata
 
-__all__ = ["BagMessage", "StreamScan", "bag_files", "check_magic", "describe_error", "is_finalised", "read_bag",
-           "read_metadata"]
+__all__ = ["BagMessage", "StreamScan", "bag_files", "check_magic", "describe_error", "in_publish_order", "is_finalised",
+           "read_bag", "read_metadata", "recorded_topics", "schema_problem", "skipped_topics_line", "TopicInfo"]
 
-BagMessage = namedtuple("BagMessage", "topic msg_type log_time_ns message")
-BagMessage.__doc__ = """One recorded message: topic, type name, receive time (ns) and the message (decoded
-by rosbags: fields are attributes, numeric arrays numpy; or CDR ``bytes`` with ``raw=True``)."""
+class BagMessage(namedtuple("BagMessage", "topic msg_type log_time_ns message")):
+    """One recorded message: topic, type name, receive time (ns) and the message (decoded by rosbags: fields
+    are attributes, numeric arrays numpy; or CDR ``bytes`` with ``raw=True``).  ``publish_time_ns``: the
+    MCAP publish time -- the publisher's send time (DDS source timestamp) in bags that rosbag2 (Iron on) or our
+    recorder wrote, else the receive time."""
+
+    def __new__(cls, topic, msg_type, log_time_ns, message, publish_time_ns=None):
+        self = super().__new__(cls, topic, msg_type, log_time_ns, message)
+        self.publish_time_ns = log_time_ns if publish_time_ns is None else publish_time_ns
+        return self
+
+
+def in_publish_order(messages: Iterable[BagMessage], horizon_ns: int = 10_000_000_000) -> Iterator[BagMessage]:
+    """``messages`` (in receive-time order) in the order they were published (stable), e.g. a drive's
+    K2 message after the signal batches the drive sent before it, although a recorder received it earlier.
+    A message is held until one received ``horizon_ns`` later arrives: nothing is sent longer than that after
+    it was published (a bag without publish times comes out unchanged)."""
+    heap: list = []
+    for k, m in enumerate(messages):
+        heapq.heappush(heap, (m.publish_time_ns, k, m))
+        while heap and heap[0][0] < m.log_time_ns - horizon_ns:
+            yield heapq.heappop(heap)[2]
+    while heap:
+        yield heapq.heappop(heap)[2]
 
 
 def _split_index(p: Path) -> tuple:
@@ -39,7 +61,8 @@ def _split_index(p: Path) -> tuple:
 def bag_files(path: str | os.PathLike) -> list[Path]:
     """The MCAP files of a recording in order: the file itself, or a bag directory's files (those named in
     metadata.yaml, then any other ``*.mcap`` of the directory -- a file still open when the recorder
-    died -- by split index)."""
+    died -- by split index; such a file shorter than the MCAP magic, e.g. zero bytes, holds nothing and is
+    left out)."""
     path = Path(path)
     if path.is_file():
         return [path]
@@ -55,10 +78,18 @@ def bag_files(path: str | os.PathLike) -> list[Path]:
         if missing:
             raise RecordingError(f"{path}: files named in metadata.yaml are missing: {missing}")
     listed = {p.name for p in files}
-    files += sorted((p for p in path.glob("*.mcap") if p.name not in listed), key=_split_index)
+    # an unlisted file shorter than the MCAP magic holds nothing: a split begun when the recorder died
+    files += sorted((p for p in path.glob("*.mcap") if p.name not in listed and _holds_data(p)), key=_split_index)
     if not files:
         raise RecordingError(f"{path}: no metadata.yaml and no .mcap file")
     return files
+
+
+def _holds_data(path: Path) -> bool:
+    try:
+        return path.stat().st_size >= 8
+    except OSError:
+        return False
 
 
 def check_magic(path: Path) -> None:
@@ -100,6 +131,59 @@ def _store_for(schema) -> Typestore:
         store.register(types)
         _STORES[key] = store
     return store
+
+
+TopicInfo = namedtuple("TopicInfo", "topic msg_type problem")
+TopicInfo.__doc__ = """A recorded topic: name, type name and why its schema cannot be parsed ("" when it can)."""
+
+
+def _schemas_and_channels(path: Path) -> tuple[dict, dict]:
+    """({schema id: Schema}, {channel id: Channel}) of one MCAP file: from its summary, or by scanning it."""
+    if is_finalised(path):
+        with open(path, "rb") as f:
+            summary = make_reader(f).get_summary()
+        return dict(summary.schemas), dict(summary.channels)
+    scan = StreamScan(path)
+    for _ in scan.records():
+        pass
+    return scan.schemas, scan.channels
+
+
+def schema_problem(schema) -> str:
+    """Why rosbags cannot build a type from a recorded schema ("" when it can)."""
+    if schema is None:
+        return "no schema"
+    try:
+        _store_for(schema)
+    except Exception as exc:  # rosbags' parse errors (TypesysError, lark's), a bad encoding, bad UTF-8
+        return f"{type(exc).__name__}: {' '.join(str(exc).split())[:120]}"
+    return ""
+
+
+def recorded_topics(path: str | os.PathLike) -> list[TopicInfo]:
+    """Every topic of a recording (an .mcap file or a bag directory) with its type, and whether its schema
+    can be parsed -- read from the MCAP summaries without decoding a message, so a bag that also holds types
+    nobody here can parse (``ros2 bag record -a`` on Jazzy: the ``_service_event`` topics of service
+    introspection) can still be read for the topics it is asked for."""
+    seen: dict[str, TopicInfo] = {}
+    for p in bag_files(path):
+        check_magic(p)
+        schemas, channels = _schemas_and_channels(p)
+        for ch in channels.values():
+            if ch.topic not in seen:
+                schema = schemas.get(ch.schema_id)
+                seen[ch.topic] = TopicInfo(ch.topic, schema.name if schema is not None else "", schema_problem(schema))
+    return [seen[t] for t in sorted(seen)]
+
+
+def skipped_topics_line(path, topics: Iterable[TopicInfo]) -> str:
+    """One line naming the topics of a recording whose types cannot be parsed ("" when there are none)."""
+    bad = [t for t in topics if t.problem]
+    if not bad:
+        return ""
+    names = ", ".join(f"{t.topic} ({t.msg_type or 'no type'})" for t in bad[:6])
+    more = f" and {len(bad) - 6} more" if len(bad) > 6 else ""
+    return f"{path}: skipped {len(bad)} topic(s) whose type cannot be parsed: {names}{more}"
 
 
 def describe_error(exc: BaseException) -> str:
@@ -146,7 +230,7 @@ def _decoded(path, schema, channel, message, raw) -> BagMessage:
     except ValueError:
         pass  # not a ROS type name; reported as found
     if raw:
-        return BagMessage(channel.topic, msg_type, message.log_time, message.data)
+        return BagMessage(channel.topic, msg_type, message.log_time, message.data, message.publish_time)
     if schema is None or channel.message_encoding != "cdr":
         raise RecordingError(f"{path}: topic {channel.topic}: cannot decode {channel.message_encoding!r} "
                              f"messages (read with raw=True or select other topics)")
@@ -155,7 +239,7 @@ def _decoded(path, schema, channel, message, raw) -> BagMessage:
     except Exception as exc:  # rosbags: SerdeError, TypesysError, parse errors
         raise RecordingError(f"{path}: topic {channel.topic} at {message.log_time}: cannot decode "
                              f"{schema.name} ({type(exc).__name__}: {exc})") from None
-    return BagMessage(channel.topic, msg_type, message.log_time, decoded)
+    return BagMessage(channel.topic, msg_type, message.log_time, decoded, message.publish_time)
 
 
 def _iter_finalised(path: Path, selected, raw: bool) -> Iterator[BagMessage]:

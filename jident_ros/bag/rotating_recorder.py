@@ -18,11 +18,17 @@ old bags deleted by a retention limit, every failure counted and reported.  No R
 * **Split**: the open file is finalised and ``<name>_<k+1>.mcap`` begun when it holds
   ``max_bag_size_bytes`` or is ``max_bag_duration_s`` old (0: no limit), as ``ros2 bag record
   --max-bag-size / --max-bag-duration`` do; metadata.yaml lists the finished files after each split.
-* **Retention**: after each split and at start, the oldest complete bags under the root (a directory with
-  metadata.yaml whose .mcap files no process holds open -- the writer keeps an ``flock`` on its open
-  file) are deleted while all bags together exceed ``retention_max_total_bytes`` or a bag's newest file
-  is older than ``retention_max_age_s`` (0: no limit).  The open bag is never deleted, nor a bag another
-  recorder is writing, nor an unfinalised bag left by a crash (salvage it first).
+* **Retention**: after each split and at start, the oldest of *this recorder's own* bags under the root are
+  deleted while they together exceed ``retention_max_total_bytes`` or a bag's newest file is older than
+  ``retention_max_age_s`` (0: no limit).  Ours = named in the root's manifest ``.jident_ros_bags`` (a line
+  appended, under an ``flock``, when a recorder claims a bag directory) **and** marked in its metadata.yaml
+  (``custom_data: recorded_by: jident_ros.bag.rotating_recorder``).  The root is never scanned: a directory that
+  is not in the manifest (a user's own bag, another tool's) is never looked at, never counted, never
+  deleted.  Never deleted either: the open bag, a bag another recorder is writing (the writer keeps an
+  ``flock`` on its open file), and a bag that was not finalised (a crash or kill cut it: a file without
+  its summary, or no metadata.yaml) -- salvage it first (``jident salvage``), or opt in with
+  ``retention_delete_unfinalised``.  With ``bag_dir`` (the node's deprecated ``record_dir``) there is no
+  root of ours: retention is off (said once in the log), the parent folder is never swept.
 * **Failures**: an unusable root or bag directory raises :class:`RecorderError` with the reason (the node
   turns it into an ERROR status).  A failed write (disk full) finalises what was written, and from then on
   every message is counted as dropped with the reason; :meth:`status` reports it.
@@ -40,9 +46,16 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from jident_ros.bag.errors import RecordingError
+from jident_ros.bag.metadata_yaml import read_metadata
+from jident_ros.bag.reader import is_finalised
 from jident_ros.bag.writer import DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_AGE_S, BagWriter
 
-__all__ = ["Recorder", "RecorderError", "bag_name", "default_record_root"]
+__all__ = ["MANIFEST", "RECORDED_BY", "Recorder", "RecorderError", "bag_name", "default_record_root", "our_bags"]
+
+#: The root's manifest: the names of the bag directories the recorders claimed under it, one a line.
+MANIFEST = ".jident_ros_bags"
+#: The marker in each bag's metadata.yaml (``custom_data``): retention deletes only bags that carry it.
+RECORDED_BY = ("recorded_by", "jident_ros.bag.rotating_recorder")
 
 
 class RecorderError(RecordingError):
@@ -115,6 +128,67 @@ def _newest_mtime(bag: Path) -> float:
     return max(times, default=0.0)
 
 
+def _manifest_names(root: Path) -> list[str]:
+    """The bag names in ``root``'s manifest (none when there is none); only plain names of subdirectories."""
+    try:
+        text = (root / MANIFEST).read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return []
+    out = []
+    for line in text.splitlines():
+        name = line.strip()
+        if name and name not in out and "/" not in name and name not in (".", "..") and not name.startswith("."):
+            out.append(name)
+    return out
+
+
+def _edit_manifest(root: Path, add: str | None = None, remove: set | None = None) -> None:
+    """Append ``add`` to / drop ``remove`` from the manifest, under an exclusive flock (two recorders on
+    one root).  Raises OSError."""
+    fd = os.open(root / MANIFEST, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        if add is not None:
+            os.lseek(fd, 0, os.SEEK_END)
+            os.write(fd, (add + "\n").encode())
+        if remove:
+            keep = [n for n in _manifest_names(root) if n not in remove]
+            data = "".join(n + "\n" for n in keep).encode()
+            os.lseek(fd, 0, os.SEEK_SET)
+            os.ftruncate(fd, 0)
+            os.write(fd, data)
+    finally:
+        os.close(fd)
+
+
+def _bag_state(bag: Path) -> str:
+    """``ours`` (metadata.yaml marked by a recorder, every .mcap file finalised), ``unfinalised`` (no
+    metadata.yaml, a file named in it missing, or a file without its summary: a crash or kill cut it),
+    ``foreign`` (metadata.yaml without our marker)."""
+    try:
+        meta = read_metadata(bag)
+    except (RecordingError, OSError, ValueError):
+        return "unfinalised" if (not (bag / "metadata.yaml").exists()) else "foreign"
+    custom = meta.get("custom_data") if isinstance(meta, dict) else None
+    if not isinstance(custom, dict) or custom.get(RECORDED_BY[0]) != RECORDED_BY[1]:
+        return "foreign"
+    listed = meta.get("relative_file_paths") or []
+    files = sorted(set(bag.glob("*.mcap")) | {bag / str(p) for p in listed})
+    for f in files:
+        try:
+            if not f.is_file() or not is_finalised(f):
+                return "unfinalised"
+        except (RecordingError, OSError):
+            return "unfinalised"
+    return "ours"
+
+
+def our_bags(root: str | os.PathLike) -> list[Path]:
+    """The bag directories under ``root`` that its manifest names and that exist (ours, in any state)."""
+    root = Path(root)
+    return [root / n for n in _manifest_names(root) if (root / n).is_dir() and not (root / n).is_symlink()]
+
+
 class Recorder:
     """Records topics into timestamped, split, retention-limited bags under ``root`` (module docstring).
 
@@ -122,11 +196,14 @@ class Recorder:
     ----------
     root : directory of the bags ("" or None: :func:`default_record_root`)
     bag_dir : record into exactly this bag directory instead (must not exist or be empty; the node's
-        deprecated ``record_dir``); retention then looks at its parent
+        deprecated ``record_dir``); retention is then off (its parent is never swept)
     max_bag_size_bytes, max_bag_duration_s : split limits of one .mcap file (0: none)
-    retention_max_total_bytes, retention_max_age_s : retention limits over the root (0: none)
+    retention_max_total_bytes, retention_max_age_s : retention limits over this recorder's bags under the
+        root (0: none)
+    retention_delete_unfinalised : let retention delete our bags that were not finalised (default: kept
+        for ``jident salvage``)
     chunk_size, flush_age_s, compression : of the :class:`~jident_ros.bag.writer.BagWriter`
-    custom_data : str -> str for metadata.yaml (e.g. the node's namespace)
+    custom_data : str -> str for metadata.yaml (e.g. the node's namespace; the marker ``recorded_by`` is added)
     clock : ns since the epoch for a message's time stamp when :meth:`write` gets none (default: wall clock)
     log : gets one line for each split, retention deletion and failure
 
@@ -136,6 +213,7 @@ class Recorder:
     def __init__(self, root: str | os.PathLike | None = None, *, bag_dir: str | os.PathLike | None = None,
                  max_bag_size_bytes: int = 0, max_bag_duration_s: float = 0.0,
                  retention_max_total_bytes: int = 0, retention_max_age_s: float = 0.0,
+                 retention_delete_unfinalised: bool = False,
                  chunk_size: int = DEFAULT_CHUNK_SIZE, flush_age_s: float | None = DEFAULT_FLUSH_AGE_S,
                  compression: str | None = "zstd", custom_data: Mapping[str, str] | None = None,
                  clock: Callable[[], int] = time.time_ns, log: Callable[[str], Any] = lambda text: None):
@@ -148,6 +226,10 @@ class Recorder:
         self.max_bag_duration_s = float(max_bag_duration_s)
         self.retention_max_total_bytes = int(retention_max_total_bytes)
         self.retention_max_age_s = float(retention_max_age_s)
+        self.retention_delete_unfinalised = bool(retention_delete_unfinalised)
+        self.retention_on = True
+        self.bags_kept_unfinalised = 0
+        self._kept_logged: set = set()
         self._clock, self._log = clock, log
         self._lock = threading.RLock()
         self._topics: dict[str, tuple] = {}
@@ -166,14 +248,19 @@ class Recorder:
             if self.bag_dir.exists() and (not self.bag_dir.is_dir() or any(self.bag_dir.iterdir())):
                 kind = "a file" if not self.bag_dir.is_dir() else "a non-empty directory"
                 raise RecorderError(f"bag directory {self.bag_dir}: is {kind} (give a new or empty one)")
+            self.retention_on = False   # one bag where the user put it: its parent is not ours to sweep
+            if self.retention_max_total_bytes or self.retention_max_age_s:
+                log(f"retention off: recording into the given bag directory {self.bag_dir}; retention applies "
+                    "only to the bags a recorder made under record_root, never to a parent folder")
         else:
             self.root = Path(root).expanduser() if root else default_record_root()
             _usable_dir(self.root, "record root")
             self.bag_dir = self._claim_bag_dir()
         try:
+            marked = {**dict(custom_data or {}), RECORDED_BY[0]: RECORDED_BY[1]}
             self.bag_writer: BagWriter | None = BagWriter(self.bag_dir, chunk_size=chunk_size,
                                                           flush_age_s=flush_age_s, compression=compression,
-                                                          custom_data=custom_data)
+                                                          custom_data=marked)
         except (OSError, ValueError) as exc:
             raise RecorderError(f"bag directory {self.bag_dir}: cannot start recording "
                                 f"({getattr(exc, 'strerror', None) or exc})") from None
@@ -188,12 +275,21 @@ class Recorder:
             candidate = self.root / (name if k == 0 else f"{name}_{k}")
             try:
                 candidate.mkdir()  # atomic: two recorders never share a bag
-                return candidate
             except FileExistsError:
                 continue
             except OSError as exc:
                 raise RecorderError(f"record root {self.root}: cannot create a bag directory "
                                     f"({exc.strerror or exc})") from None
+            try:
+                _edit_manifest(self.root, add=candidate.name)   # ours: the only bags retention may delete
+            except OSError as exc:
+                try:
+                    candidate.rmdir()
+                except OSError:
+                    pass
+                raise RecorderError(f"record root {self.root}: cannot write its manifest {MANIFEST} "
+                                    f"({exc.strerror or exc})") from None
+            return candidate
         raise RecorderError(f"record root {self.root}: 1000 bags named {name}* already")
 
     # ------------------------------------------------------------------ writing
@@ -205,15 +301,19 @@ class Recorder:
             if self.bag_writer is not None and self.bag_writer.error is None and not self._closed:
                 self.bag_writer.add_topic(topic, msg_type, qos)
 
-    def write(self, topic: str, msg_type: str, message: Any, t_ns: int | None = None) -> bool:
+    def write(self, topic: str, msg_type: str, message: Any, t_ns: int | None = None,
+              publish_time_ns: int | None = None) -> bool:
         """Record one message (CDR bytes, an rclpy or rosbags message, or a dict of fields) stamped with
-        ``t_ns`` (default: the wall clock now).  Never raises: a message that cannot be recorded is
+        ``t_ns`` (default: the wall clock now); ``publish_time_ns``: the publisher's send time (the DDS source
+        timestamp, as rosbag2 records it; default ``t_ns``).  Never raises: a message that cannot be recorded is
         counted in :attr:`messages_dropped` under its reason.  Returns True when it was recorded."""
         t = self._clock() if t_ns is None else t_ns
         with self._lock:
             bag = self.bag_writer
             if bag is not None and bag.closed and bag.error is None:
                 self._closed = True  # closed by a signal handler through the writer
+            if bag is not None and bag.error is not None:   # also after close: a failure's drops keep its reason
+                return self._drop(self._stopped_reason())
             if self._closed or bag is None:
                 return self._drop("recorder closed" if self._closed else "recorder stopped")
             if bag.error is not None:
@@ -223,7 +323,7 @@ class Recorder:
                 if topic not in self._topics:
                     self.add_topic(topic, msg_type)
                 self._maybe_split(bag)
-                bag.write(topic, message, t)
+                bag.write(topic, message, t, publish_time_ns)
             except (ValueError, TypeError) as exc:  # this message only
                 self.last_error = f"{topic}: {exc}"
                 return self._drop("unrecordable message")
@@ -298,16 +398,13 @@ class Recorder:
 
     # ------------------------------------------------------------------ retention
     def _bags(self) -> list[Path]:
-        try:
-            return [p for p in self.root.iterdir() if p.is_dir() and not p.name.startswith(".")
-                    and ((p / "metadata.yaml").is_file() or any(p.glob("*.mcap")))]
-        except OSError:
-            return []
+        """This recorder family's bags under the root (the manifest's names that exist); never a scan."""
+        return our_bags(self.root) if self.retention_on else []
 
     def apply_retention(self) -> list[Path]:
-        """Delete the oldest complete bags under the root while the limits are exceeded (module
+        """Delete the oldest of our finalised bags under the root while the limits are exceeded (module
         docstring); returns the deleted directories."""
-        if not (self.retention_max_total_bytes or self.retention_max_age_s):
+        if not self.retention_on or not (self.retention_max_total_bytes or self.retention_max_age_s):
             return []
         deleted = []
         with self._lock:
@@ -316,7 +413,7 @@ class Recorder:
             total = sum(sizes.values())
             now = time.time()
             mine = self.bag_dir.resolve()
-            candidates = sorted((b for b in bags if b.resolve() != mine and (b / "metadata.yaml").is_file()),
+            candidates = sorted((b for b in bags if b.resolve() != mine),
                                 key=lambda b: (_newest_mtime(b), b.name))
             for b in candidates:
                 too_big = self.retention_max_total_bytes and total > self.retention_max_total_bytes
@@ -324,6 +421,16 @@ class Recorder:
                 if not (too_big or too_old):
                     continue
                 if _bag_in_use(b):
+                    continue
+                state = _bag_state(b)
+                if state == "foreign":   # named in the manifest but not marked: not ours after all
+                    continue
+                if state == "unfinalised" and not self.retention_delete_unfinalised:
+                    if b.name not in self._kept_logged:
+                        self._kept_logged.add(b.name)
+                        self.bags_kept_unfinalised += 1
+                        self._log(f"retention: kept {b}: not finalised (a crash or kill cut it); recover it "
+                                  "with `jident salvage`, then delete it (or set retention_delete_unfinalised)")
                     continue
                 try:
                     shutil.rmtree(b)
@@ -334,9 +441,15 @@ class Recorder:
                 self.bags_deleted += 1
                 self.bytes_deleted += sizes[b]
                 deleted.append(b)
-                why = (f"all bags over retention_max_total_bytes {self.retention_max_total_bytes}" if too_big
+                why = (f"our bags over retention_max_total_bytes {self.retention_max_total_bytes}" if too_big
                        else f"older than retention_max_age_s {self.retention_max_age_s:g}")
                 self._log(f"retention: deleted {b} ({sizes[b]} bytes; {why})")
+            gone = {b.name for b in deleted}
+            if gone:
+                try:
+                    _edit_manifest(self.root, remove=gone)
+                except OSError:
+                    pass   # a stale name is harmless: a missing directory is skipped
         return deleted
 
     # ------------------------------------------------------------------ status and close
@@ -359,7 +472,8 @@ class Recorder:
                     "bytes_written": bag.bytes_written if bag is not None else 0,
                     "messages_written": self.messages_written, "messages_dropped": self.messages_dropped,
                     "drop_reasons": dict(self.drop_reasons), "splits": self.splits,
-                    "bags_deleted": self.bags_deleted, "bytes_deleted": self.bytes_deleted, "error": error}
+                    "bags_deleted": self.bags_deleted, "bytes_deleted": self.bytes_deleted,
+                    "bags_kept_unfinalised": self.bags_kept_unfinalised, "error": error}
 
     @property
     def closed(self) -> bool:

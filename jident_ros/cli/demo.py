@@ -42,6 +42,7 @@ from jident_ros.identify.library import default_library_path
 from jident_ros.identify.trend import TrendConfig
 from jident_ros.identify.trend_status import TREND_STATUS_NAME
 from jident_ros.method.patterns import LibraryMismatch, PatternLibrary
+from jident_ros.nodes.diagnostics import status_task
 from jident_ros.nodes.ros_io import array_from_multiarray, qos_diagnostics, qos_latched, status_level, status_values
 from jident_ros.resources import node_command, stop_process
 from jident_ros.sim.scenarios import wear_scenario
@@ -56,7 +57,7 @@ DEFAULT_CASES = (
     (1.131, 0.00375, 0.05),
 )
 NAMESPACE = "/demo"
-STATUS_NAME = "jident: inertia"
+STATUS_NAME = "jident_diagnostic: inertia"   # without the namespace (nodes/diagnostics.status_task)
 
 
 @dataclass
@@ -228,9 +229,9 @@ def _listen(cases, procs, timeout, start_simulator, trend: bool = False):
 
     def on_diag(arr):
         for s in arr.status:
-            if s.name == STATUS_NAME and s.hardware_id == f"{NAMESPACE}/drive":
+            if status_task(s.name) == STATUS_NAME and s.hardware_id == f"{NAMESPACE}/drive":
                 statuses.append(s)
-            elif s.name == TREND_STATUS_NAME and s.hardware_id == f"{NAMESPACE}/drive":
+            elif status_task(s.name) == TREND_STATUS_NAME and s.hardware_id == f"{NAMESPACE}/drive":
                 trend_statuses.append(s)
 
     node.create_subscription(Float64MultiArray, "drive/case", on_case, qos_latched(100))

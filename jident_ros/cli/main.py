@@ -12,44 +12,23 @@ import argparse
 import math
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-import numpy as np
-
 from jident_ros import __version__
-from jident_ros.cli.calibration import library_from_labelled_windows, parse_labels, pattern_grid, read_recordings
-from jident_ros.cli.demo import main as demo_main
-from jident_ros.cli.drive_info import identification_lines, library_line, model_problem
-from jident_ros.cli.offline import (
-    TABLE_HEADER,
-    OfflineError,
-    default_policy,
-    diagnose_recording,
-    diagnose_samples,
-    format_window_line,
-    summary_line,
-    write_json,
-)
-from jident_ros.cli.salvage import salvage_main
-from jident_ros.cli.trend import add_scenario_arguments, add_trend_parser, cmd_simulate_scenario
-from jident_ros.config import ConfigError, load_method_config, load_system_config
-from jident_ros.identify.library import default_library_path, load_pattern_library
-from jident_ros.method.patterns import PatternLibrary
-from jident_ros.method.pipeline import VARIANTS
-from jident_ros.parameters import GAP_METHODS, cli_help
-from jident_ros.research.evaluation.evaluate import VALIDITY_FILM_SHARES, run_evaluation
-from jident_ros.research.evaluation.plotting import plot_case
-from jident_ros.research.evaluation.report import render_markdown, write_figures, write_results_section
-from jident_ros.research.evaluation.report_robustness import write_robustness_figures
-from jident_ros.research.evaluation.robustness import run_robustness
-from jident_ros.sim import Case, add_measurement_noise, paper_grid_cases, quantise_encoders, simulate_grid, steady_state
-from jident_ros.sim.model import Model
-from jident_ros.sim.motor import breakdown_slip, steady_state_phasors
-from jident_ros.stream.inputs import parse_map
+from jident_ros.parameters import DIAGNOSTIC_PARAMS, GAP_METHODS, cli_help  # light: dataclasses only
+
+# Every subcommand imports what it runs inside its cmd_* function (issue 23): `jident --help` and
+# `jident simulate` do not pay for scipy.stats, the offline diagnosis, the bag layer or rclpy
+# (test_cli_imports.py checks which modules each one loads).
 
 #: The one list of gap methods (jident_ros/parameters.py, light: `jident --help` does not import the method)
 CLI_GAP_METHODS = GAP_METHODS
+#: method.pipeline.VARIANTS, spelled out so that `jident --help` does not import the method (test_cli_imports)
+CLI_VARIANTS = ("paper", "load_scaled", "sensor_matched")
+#: `jident trend`'s one-line help in the command list (cli.trend.add_trend_parser registers the same text;
+#: test_cli_imports compares the two listings)
+TREND_HELP = ("trend of J1 and the backlash width over many recordings (diagnose every window, time order, change "
+              "detection, wear rate): trend.csv, trend.png, a summary")
 
 
 class CliError(Exception):
@@ -86,8 +65,11 @@ def _progress(total, desc, enabled):
 
 
 def cmd_simulate(args) -> int:
-    if args.scenario:
+    if getattr(args, "scenario", None):     # parsed only when given (main: the scenario options live in cli.scenario)
+        from jident_ros.cli.scenario import cmd_simulate_scenario
         return cmd_simulate_scenario(args)
+    from jident_ros.config import load_system_config
+    from jident_ros.sim import Case, add_measurement_noise, paper_grid_cases, quantise_encoders, simulate_grid
     cfg = load_system_config(args.config)
     if args.grid:
         if any(v is not None for v in (args.j1, args.backlash, args.eta)):
@@ -114,6 +96,7 @@ def cmd_simulate(args) -> int:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         ws.save_npz(args.out)
     if args.plot:
+        from jident_ros.research.evaluation.plotting import plot_case
         plot_case(ws, 0, args.plot)
     if not args.quiet:
         print(f"simulated {len(cases)} case(s), {cfg.sampling.window_length} samples each "
@@ -133,6 +116,14 @@ def cmd_simulate(args) -> int:
 
 def cmd_info(args) -> int:
     """Base values and the loaded steady state at every eta_k (docs/model.md)."""
+    import numpy as np
+
+    from jident_ros.cli.drive_info import identification_lines, library_line, model_problem
+    from jident_ros.config import load_method_config, load_system_config
+    from jident_ros.identify.library import default_library_path
+    from jident_ros.sim import Case, steady_state
+    from jident_ros.sim.model import Model
+    from jident_ros.sim.motor import breakdown_slip, steady_state_phasors
     cfg = load_system_config(args.config)
     m, b = cfg.motor, cfg.motor.base
     s_bd = breakdown_slip(m)
@@ -171,6 +162,7 @@ def cmd_info(args) -> int:
 
 
 def _method_config(args):
+    from jident_ros.config import load_method_config
     m = load_method_config(getattr(args, "method_config", None))
     if getattr(args, "p", None):
         m = m.replace(p_values=tuple(args.p))
@@ -183,6 +175,10 @@ def cmd_build_patterns(args) -> int:
     """Build the pattern library from simulations (default) or from calibration recordings with known J1."""
     if not args.from_recordings and (args.label or args.backlash_width_m is not None):
         raise CliError("--label and --backlash-width-m need --from-recordings")
+    from jident_ros.cli.calibration import library_from_labelled_windows, parse_labels, pattern_grid, read_recordings
+    from jident_ros.config import load_system_config
+    from jident_ros.identify.library import default_library_path
+    from jident_ros.method.patterns import PatternLibrary
     system = load_system_config(args.config)
     method = _method_config(args)
     out = Path(args.out) if args.out else default_library_path(system, method)
@@ -222,6 +218,13 @@ def cmd_build_patterns(args) -> int:
 
 def cmd_evaluate(args) -> int:
     t_start = time.perf_counter()
+    from concurrent.futures import ProcessPoolExecutor
+
+    from jident_ros.config import load_system_config
+    from jident_ros.research.evaluation.evaluate import VALIDITY_FILM_SHARES, run_evaluation
+    from jident_ros.research.evaluation.report import render_markdown, write_figures, write_results_section
+    from jident_ros.research.evaluation.report_robustness import write_robustness_figures
+    from jident_ros.research.evaluation.robustness import run_robustness
     system = load_system_config(args.config)
     method = _method_config(args)
     log = (lambda *a: None) if args.quiet else (lambda msg: print(msg, flush=True))
@@ -265,6 +268,19 @@ def cmd_evaluate(args) -> int:
 
 def cmd_diagnose(args) -> int:
     """Diagnose every backlash entry of a recording as the windowing + diagnostic nodes do (offline.py)."""
+    from jident_ros.cli.offline import (
+        TABLE_HEADER,
+        OfflineError,
+        default_policy,
+        diagnose_recording,
+        diagnose_samples,
+        format_window_line,
+        summary_line,
+        write_json,
+    )
+    from jident_ros.config import load_method_config, load_system_config
+    from jident_ros.identify.library import load_pattern_library
+    from jident_ros.stream.inputs import parse_map
     system = load_system_config(args.config)
     method = load_method_config(args.method_config)
     log = (lambda text: None) if args.quiet else (lambda text: print(f"jident diagnose: {text}", file=sys.stderr,
@@ -317,12 +333,52 @@ def cmd_diagnose(args) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None, scenario: bool = True) -> argparse.ArgumentParser:
+    """The ``jident`` parser.  ``command`` given: only that subcommand gets its arguments (the others, all of
+    them for "", are listed with their one-line help), so that a run imports only what it needs; ``scenario=False`` leaves out
+    ``simulate --scenario ...`` (its options come from cli.scenario, which imports the offline diagnosis)."""
+    def wanted(name):
+        return command is None or command == name
+
     p = _Parser(prog="jident", description="Identify the inertia J1 of an induction-motor drive "
                 "from its backlash-zone transient (offline tools).")
     p.add_argument("--version", action="version", version=f"jident {__version__}")
     sub = p.add_subparsers(dest="command", parser_class=_Parser, metavar="COMMAND")
     s = sub.add_parser("simulate", help="simulate backlash-entry windows of the motor-load model")
+    if wanted("simulate"):
+        _simulate_arguments(s, scenario)
+    b = sub.add_parser("build-patterns", help="build the pattern library (simulated eta_k = 0.025 runs, or "
+                       "calibration recordings with known J1: --from-recordings)")
+    if wanted("build-patterns"):
+        _build_patterns_arguments(b)
+    e = sub.add_parser("evaluate", help="evaluate the method on the full grid; regenerate docs/results.md's section")
+    if wanted("evaluate"):
+        _evaluate_arguments(e)
+    g = sub.add_parser("diagnose", help="diagnose every backlash entry of a recording (drive/signals or "
+                       "/joint_states bag, or CSV) as the "
+                       "windowing and diagnostic nodes do, without ROS")
+    if wanted("diagnose"):
+        _diagnose_arguments(g)
+    if wanted("trend"):
+        from jident_ros.cli.trend import add_trend_parser
+        add_trend_parser(sub)
+    else:
+        sub.add_parser("trend", help=TREND_HELP)
+    sub.add_parser("salvage", help="recover every complete chunk of a truncated MCAP recording "
+                   "(jident salvage <truncated.mcap> <out_dir>)", add_help=False)
+    sub.add_parser("samples", help="one message per sample, stamped with drive time, for plotting in Foxglove "
+                   "(jident samples <recording> <out_dir>)", add_help=False)
+    sub.add_parser("demo", help="end-to-end demo: simulator, windowing and diagnostic nodes over DDS on a few "
+                   "cases (jident demo --help)", add_help=False)
+    i = sub.add_parser("info", help="print base values and the steady state of the model")
+    if wanted("info"):
+        i.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); "
+                       "default config/system.yaml")
+        i.set_defaults(func=cmd_info)
+    return p
+
+
+def _simulate_arguments(s, scenario: bool) -> None:
     s.add_argument("--j1", type=_positive("--j1"), help="J1 in kg m^2 (default: the nominal 1.16)")
     s.add_argument("--backlash", type=_positive("--backlash"),
                    help="backlash zone width at the wheel circumference, m (default: K2[0])")
@@ -335,10 +391,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--plot", help="write a PNG of the five signals of the (first) case")
     s.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     s.add_argument("--quiet", action="store_true")
-    add_scenario_arguments(s)
+    if scenario:
+        from jident_ros.cli.scenario import add_scenario_arguments
+        add_scenario_arguments(s)
     s.set_defaults(func=cmd_simulate)
-    b = sub.add_parser("build-patterns", help="build the pattern library (simulated eta_k = 0.025 runs, or "
-                       "calibration recordings with known J1: --from-recordings)")
+
+
+def _build_patterns_arguments(b) -> None:
     b.add_argument("--from-recordings", nargs="+", metavar="REC",
                    help="build from these calibration recordings (bag directories or .mcap files; "
                    "docs/recording.md, 'Calibration recordings') instead of simulations")
@@ -349,12 +408,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="K2 of the recordings, m (default: their drive/backlash_width messages)")
     b.add_argument("--out", help="library file (default: ~/.cache/jident_ros/patterns-<hash>.npz)")
     b.add_argument("--p", type=_positive("--p"), action="append", help="KHM exponent p (repeatable; default: config)")
-    b.add_argument("--variant", choices=VARIANTS, help="method variant (default: config; docs/method.md)")
+    b.add_argument("--variant", choices=CLI_VARIANTS, help="method variant (default: config; docs/method.md)")
     b.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     b.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     b.add_argument("--quiet", action="store_true")
     b.set_defaults(func=cmd_build_patterns)
-    e = sub.add_parser("evaluate", help="evaluate the method on the full grid; regenerate docs/results.md's section")
+
+
+def _evaluate_arguments(e) -> None:
     e.add_argument("--results", default="docs/results.md", help="results file to update ('-' prints)")
     e.add_argument("--quick", action="store_true", help="noise-free only, no reading comparison (smoke run)")
     e.add_argument("--no-figures", action="store_true")
@@ -369,16 +430,16 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     e.add_argument("--quiet", action="store_true")
     e.set_defaults(func=cmd_evaluate)
-    g = sub.add_parser("diagnose", help="diagnose every backlash entry of a recording (drive/signals or "
-                       "/joint_states bag, or CSV) as the "
-                       "windowing and diagnostic nodes do, without ROS")
+
+
+def _diagnose_arguments(g) -> None:
     g.add_argument("recording", help="bag directory or .mcap file (a diagnostic node's record_dir, or a "
                    "`ros2 bag record` of joint_states [+ imu]), or a .csv file")
-    g.add_argument("--p", type=_positive("--p"), default=2.0, help="KHM exponent p, one of method.p_values (default 2)")
+    g.add_argument("--p", type=_positive("--p"), default=DIAGNOSTIC_PARAMS["p"].default, help=cli_help("p"))
     g.add_argument("--library", help="pattern library .npz (default: build-patterns' default path; built when missing)")
-    g.add_argument("--gap-method", choices=CLI_GAP_METHODS, default="auto",
-                   help="gap estimator (default auto: acceleration fit when a1 is recorded, else the angle fit "
-                        "when alpha1 is, else speed)")
+    g.add_argument("--gap-method", choices=CLI_GAP_METHODS, default=DIAGNOSTIC_PARAMS["gap_method"].default,
+                   help=cli_help("gap_method") + "; auto: the acceleration fit when a1 is recorded, else the angle "
+                        "fit when alpha1 is, else speed")
     g.add_argument("--no-image", action="store_true", help="skip the paper's image method (gap estimate only)")
     g.add_argument("--backlash-width-m", type=_positive("--backlash-width-m"),
                    help="K2 of inequality (1), m, paper detector only (default for drive/signals recordings: their "
@@ -404,31 +465,39 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     g.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     g.set_defaults(func=cmd_diagnose)
-    add_trend_parser(sub)
-    sub.add_parser("salvage", help="recover every complete chunk of a truncated MCAP recording "
-                   "(jident salvage <truncated.mcap> <out_dir>)", add_help=False)
-    sub.add_parser("demo", help="end-to-end demo: simulator, windowing and diagnostic nodes over DDS on a few "
-                   "cases (jident demo --help)", add_help=False)
-    i = sub.add_parser("info", help="print base values and the steady state of the model")
-    i.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
-    i.set_defaults(func=cmd_info)
-    return p
+
+
+def _parse(argv: list, command: str) -> argparse.Namespace:
+    """Parse with the parser of ``command`` alone.  ``jident simulate`` first without the scenario options
+    (they import cli.scenario and with it the offline diagnosis): only when something is left over (or help is
+    asked for) is it parsed again with them, so every error and the help text are the full parser's."""
+    if command == "simulate" and not {"-h", "--help"} & set(argv):
+        args, rest = build_parser(command, scenario=False).parse_known_args(argv)
+        if not rest:
+            return args
+    return build_parser(command).parse_args(argv)
 
 
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv[:1] == ["demo"]:  # `jident demo [...]`: demo.py owns its arguments
+    if argv[:1] == ["demo"]:  # `jident demo [...]`: demo.py owns its arguments (the only command with rclpy)
+        from jident_ros.cli.demo import main as demo_main
         return demo_main(argv[1:])
     if argv[:1] == ["salvage"]:  # `jident salvage <truncated.mcap> <out_dir>`: cli/salvage.py owns its arguments
+        from jident_ros.cli.salvage import salvage_main
         return salvage_main(argv[1:])
-    parser = build_parser()
+    if argv[:1] == ["samples"]:  # `jident samples <recording> <out_dir>`: cli/samples.py owns its arguments
+        from jident_ros.cli.samples import samples_main
+        return samples_main(argv[1:])
+    # the subcommand (""  for `jident`, `jident --help`, `jident --version`: the command list only)
+    command = argv[0] if argv and not argv[0].startswith("-") else ""
     try:
-        args = parser.parse_args(argv)
+        args = _parse(argv, command)
         if not getattr(args, "command", None):
-            parser.print_help()
+            build_parser(command="").print_help()
             return 2
         return args.func(args)
-    except (CliError, ConfigError, ValueError, FileNotFoundError) as exc:
+    except (CliError, ValueError, FileNotFoundError) as exc:    # config.ConfigError is a ValueError
         print(f"jident: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

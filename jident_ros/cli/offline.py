@@ -29,6 +29,7 @@ import numpy as np
 
 from jident_ros.bag.drive_replay import DriveReplay, in_sample_time_order, read_drive_messages
 from jident_ros.bag.messages import deserialize
+from jident_ros.cli.jointstate_bag import jointstate_batches
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig, WindowDiagnosis
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES
@@ -40,15 +41,11 @@ from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
 from jident_ros.parameters import gap_method_problem
 from jident_ros.stream.detector import stream_batches
 from jident_ros.stream.flank import DETECTORS
-from jident_ros.stream.inputs import InputError, JointStateAdapter, read_csv
+from jident_ros.stream.imu_skew import ImuSkewGuard
+from jident_ros.stream.inputs import CsvStream, InputError
 from jident_ros.stream.layout import DRIVE_TOPICS, SIGNALS_TOPIC, WIDTH_TOPIC, pack
 from jident_ros.stream.layout import topic_matches as _matches
-
-try:  # reading a `ros2 bag record` of /joint_states (any storage, any distro) needs rosbags
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
-except ImportError:  # pragma: no cover - the drive/signals path does not need it
-    AnyReader = None
+from jident_ros.stream.text import plain_numbers
 
 
 class OfflineError(ValueError):
@@ -197,7 +194,7 @@ class OfflineOptions:
         first batch carries; alpha1 and alpha2 are required)
     gap_tolerance : drive/signals: the detector's gap tolerance in sample periods (default: the windowing node's)
     motor_joint, load_joint, imu_axis, topic : JointState: the joints, the Imu axis that is a1, the topic
-    maps : CSV: column maps (:func:`jident_ros.stream.inputs.read_csv`)
+    maps : CSV: column maps (:class:`jident_ros.stream.inputs.CsvStream`)
     """
 
     system: Any = None
@@ -272,6 +269,7 @@ def diagnose_recording(path, options: Optional[OfflineOptions] = None, *,
 
     Raises :class:`OfflineError` (one line naming the field and value) on bad input.
     """
+    log = _plain_log(log)
     setup = _Setup.of(options, fields, "auto")
     o = setup.options
     if o.backlash_width_m is not None and not (math.isfinite(o.backlash_width_m) and o.backlash_width_m > 0):
@@ -357,6 +355,11 @@ def _backlash_width(messages, width_topic: str, option: Optional[float]) -> tupl
     return float(WINDOWING_DEFAULTS["backlash_width_m"]), "default"
 
 
+def _plain_log(log: Callable[[str], Any]) -> Callable[[str], Any]:
+    """``log`` with plain numbers (no numpy reprs) in every line."""
+    return lambda text: log(plain_numbers(str(text)))
+
+
 def default_policy(**overrides) -> VerdictPolicy:
     """The diagnostic node's default publishing policy (jident_ros/parameters.py), with ``overrides``."""
     return VerdictPolicy.from_params(dict(DIAGNOSTIC_DEFAULTS, **overrides))
@@ -425,51 +428,6 @@ def _make_detector(system, config: DetectorConfig, batch_channels, topic_name):
 
 # --------------------------------------------------------------------------- JointState bags, CSV files
 
-def jointstate_batches(path, sample_period_s: float, motor_joint: str = "motor", load_joint: str = "load",
-                       imu_axis: str = "x", topic: Optional[str] = None, batch_size: int = 50):
-    """(adapter, batch iterator, joint_states topic) of a `ros2 bag record` bag holding sensor_msgs/JointState
-    (topic ending in ``joint_states``, any namespace) and optionally sensor_msgs/Imu (ending in ``imu``),
-    read with rosbags' AnyReader; the header stamps give t."""
-    if AnyReader is None:
-        raise OfflineError("reading JointState bags needs the rosbags package (pip install rosbags)")
-    path = Path(path)
-    reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-    try:
-        reader.open()
-    except Exception as exc:
-        raise OfflineError(f"recording {path}: cannot be read as a rosbag2 bag ({type(exc).__name__}: {exc})") from None
-    js = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/JointState" and _matches(c.topic, "joint_states")]
-    topics = sorted({c.topic for c in js})
-    if topic is not None:
-        js = [c for c in js if c.topic == topic]
-        if not js:
-            raise OfflineError(f"joint_states topic {topic!r}: not in recording {path} (found: {', '.join(topics) or 'none'})")
-    elif len(topics) > 1:
-        raise OfflineError(f"recording {path}: several joint_states topics ({', '.join(topics)}); choose one with --topic")
-    if not js:
-        raise OfflineError(f"recording {path}: no drive/signals topic and no sensor_msgs/JointState topic ending in "
-                           f"joint_states "
-                           f"(topics: {', '.join(sorted({c.topic for c in reader.connections})) or 'none'})")
-    prefix = js[0].topic[:-len("joint_states")]
-    imu = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/Imu" and c.topic == prefix + "imu"]
-    adapter = JointStateAdapter(sample_period_s, motor_joint, load_joint, batch_size=batch_size,
-                                use_imu=bool(imu), imu_axis=imu_axis)
-
-    def batches():
-        try:
-            for conn, _, raw in reader.messages(connections=js + imu):
-                msg = reader.deserialize(raw, conn.msgtype)
-                stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-                if conn.msgtype.endswith("Imu"):
-                    yield from adapter.push_imu(stamp, msg.linear_acceleration)
-                else:
-                    yield from adapter.push(stamp, msg.name, msg.position, msg.velocity, msg.effort)
-            yield from adapter.flush()
-        finally:
-            reader.close()
-    return adapter, batches(), js[0].topic
-
-
 def diagnose_samples(path, options: Optional[OfflineOptions] = None, *,
                      log: Callable[[str], Any] = lambda text: None,
                      on_window: Optional[Callable[[OfflineWindow], Any]] = None, **fields) -> OfflineResult:
@@ -477,6 +435,7 @@ def diagnose_samples(path, options: Optional[OfflineOptions] = None, *,
     diagnostic nodes do.  ``options`` (:class:`OfflineOptions`) or its fields as keyword arguments;
     ``detector``: "flank" (no K2; the default for real drives), "dynamics" (no load encoder) or "paper"
     (inequality 1 with ``backlash_width_m``, zone-centred angles).  Raises OfflineError on bad input."""
+    log = _plain_log(log)
     setup = _Setup.of(options, fields, "flank")
     o = setup.options
     _check_sample_options(o)
@@ -485,26 +444,42 @@ def diagnose_samples(path, options: Optional[OfflineOptions] = None, *,
     adapter = None
     try:
         if path.suffix.lower() == ".csv":
-            data, channels, ignored = read_csv(path, o.maps)
-            if ignored:
-                log(f"{path}: columns ignored (not channels): {', '.join(ignored)}")
-            source, batches = str(path), ((b, channels) for b in stream_batches(data, 50))
+            csv_stream = CsvStream(path, o.maps)     # block by block: bounded memory for any file size
+            if csv_stream.ignored:
+                log(f"{path}: columns ignored (not channels): {', '.join(csv_stream.ignored)}")
+            channels = csv_stream.channels
+            source = str(path)
+            batches = ((b, channels) for block in csv_stream.blocks() for b in stream_batches(block, 50))
         else:
-            adapter, batches, source = jointstate_batches(path, ts, o.motor_joint, o.load_joint, o.imu_axis, o.topic)
+            adapter, batches, source = jointstate_batches(path, ts, o.motor_joint, o.load_joint, o.imu_axis, o.topic,
+                                                           log=log)
     except InputError as exc:
         raise OfflineError(str(exc)) from None
     result = OfflineResult(str(path), source, "estimated" if o.detector != "paper" else "option",
                            detector=o.detector)
     monitor = setup.monitor(result, log, say_gap_only=False)
-    for arr, channels in batches:
-        if monitor.detector is None:
-            config = DetectorConfig(o.detector, o.backlash_width_m, None, None, o.gear_ratio)
-            monitor.detector = _make_detector(setup.system, config, channels, source)
-        for r in monitor.feed(arr, channels):
-            _add_window(result, r.window, r.diagnosis, None, on_window)
-    if monitor.detector is None:
+    skew = ImuSkewGuard(adapter, log)
+    try:
+        for arr, channels in batches:
+            arr, channels = skew.strip(arr, channels)
+            if monitor.detector is None:
+                config = DetectorConfig(o.detector, o.backlash_width_m, None, None, o.gear_ratio)
+                monitor.detector = skew.carried(_make_detector(setup.system, config, channels, source))
+            for ev in monitor.detector.push(arr, channels):
+                if ev.kind != "window":
+                    monitor.events.append(ev)
+                elif skew.in_step(ev.window, monitor):     # no J1 from an Imu out of step with the encoder
+                    r = monitor.window(ev.window)
+                    _add_window(result, r.window, r.diagnosis, None, on_window)
+                else:
+                    break                                  # a new detector from the next batch, without a1
+    except InputError as exc:   # a CSV read block by block: its errors come while streaming
+        raise OfflineError(str(exc)) from None
+    if monitor.detector is None and skew.retired is None:
         raise OfflineError(f"recording {path}: no sample")
-    _finish(result, monitor.detector, log)
+    _finish(result, monitor.detector or skew.retired, log)
+    if skew.dropped:
+        result.dropped["imu_skew"] = skew.dropped
     if adapter is not None:
         _jointstate_counts(result, adapter, source, ts, log)
     return result
@@ -522,10 +497,13 @@ def _check_sample_options(o: OfflineOptions) -> None:
 
 
 def _jointstate_counts(result, adapter, source, ts, log) -> None:
-    """The JointState adapter's stamp jitter and drops into the result (a stamp period off T_s is said)."""
+    """The JointState adapter's stamp jitter and drops into the result (a stamp period off T_s is said), and
+    its most frequent problems, one line each."""
     result.jitter = adapter.jitter()
     result.dropped.update({f"jointstate.{k}": v for k, v in adapter.counts.items()
-                           if v and k in ("missing_joint", "imu_unmatched")})
+                           if v and k not in ("messages", "samples", "imu_messages")})
+    for text, n in adapter.problems()[:3]:
+        log(f"{source}: {n} message(s) dropped: {text}")
     if result.jitter.get("periods") and not result.jitter["period_matches"]:
         log(f"{source}: stamp period {result.jitter['median_period_s']:.6g} s (median) does not match "
             f"sampling.sample_period_s {ts:g} s")
@@ -545,7 +523,7 @@ def format_window_line(w: OfflineWindow) -> str:
         return "-" if v is None else format(v, fmt)
     return (f"{w.window_id:>6}  {w.entry_time_s:>10.4f}  {num(w.true_inertia_kgm2, '>8.5g')}  "
             f"{num(d.inertia_kgm2, '>11.6g')}  {d.source or '-':>6}  {num(d.class_kgm2, '>6.5g')}  "
-            f"{num(w.error_percent, '>+7.3f')}  {LEVEL_NAMES[d.level]:<5}  {d.message}")
+            f"{num(w.error_percent, '>+7.3f')}  {LEVEL_NAMES[d.level]:<5}  {plain_numbers(d.message)}")
 
 
 def summary_line(result: OfflineResult) -> str:
@@ -567,7 +545,7 @@ def summary_line(result: OfflineResult) -> str:
     errs = [abs(w.error_percent) for w in result.windows if w.error_percent is not None]
     if errs:
         text += f"; largest |J1 error| against the true J1 {max(errs):.3f} %"
-    return text
+    return plain_numbers(text)
 
 
 def write_json(result: OfflineResult, out) -> Path:

@@ -114,6 +114,21 @@ def write_scenario_recording(out, system, scenario: Scenario, *, snr_db: Optiona
     return out
 
 
+def write_signals_bag(path, data: np.ndarray, channels, namespace: str = "", batch_size: int = 50) -> Path:
+    """A bag directory ``path`` holding only ``<namespace>/drive/signals``: ``data`` ((n, c) samples, columns
+    ``channels`` with ``t`` among them) in batches of ``batch_size``, each logged at its last sample's time
+    (what a drive records: no truth topics)."""
+    path = Path(path)
+    ti = list(channels).index("t")
+    topic = f"{namespace.rstrip('/')}/drive/signals"
+    with BagWriter(path, flush_every_s=None) as bag:
+        bag.add_topic(topic, "std_msgs/msg/Float64MultiArray")
+        for s0 in range(0, len(data), int(batch_size)):
+            b = data[s0:s0 + int(batch_size)]
+            bag.write(topic, multiarray_message(b, channels), int(round(b[-1, ti] * 1e9)))
+    return path
+
+
 def add_scenario_arguments(s) -> None:
     """The ``jident simulate --scenario ...`` options (added to the simulate subparser)."""
     s.add_argument("--scenario", choices=SCENARIOS,
@@ -135,6 +150,7 @@ def add_scenario_arguments(s) -> None:
                    help="scenario: J1 step, %% (default 2.5; 0: no step)")
     s.add_argument("--gap-samples", type=_count("--gap-samples", 0), default=100,
                    help="scenario: steady samples before each entry's 48 pre-entry samples (default 100)")
+    s.add_argument("--namespace", default="", help="scenario: the drive's namespace (e.g. /drive_07)")
 
 
 def cmd_simulate_scenario(args) -> int:
@@ -144,7 +160,8 @@ def cmd_simulate_scenario(args) -> int:
     if args.grid or args.backlash is not None or args.plot:
         raise OfflineError("--scenario: drop --grid/--backlash/--plot (the scenario sets K2 per entry)")
     if args.encoder_counts is not None:
-        raise OfflineError("--encoder-counts: not supported with --scenario")
+        raise OfflineError("--encoder-counts: not supported with --scenario (raw encoders, one bag per entry: "
+                           "python -m jident_ros.research.evaluation.raw_scenario)")
     out = Path(args.out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise OfflineError(f"--out {out}: already exists and is not an empty directory")
@@ -163,8 +180,8 @@ def cmd_simulate_scenario(args) -> int:
         bar = tqdm(total=n, desc="simulating + writing", unit="window", file=sys.stderr, leave=False)
     t0 = time.perf_counter()
     try:
-        write_scenario_recording(out, system, sc, snr_db=args.snr_db, seed=args.seed, gap_samples=args.gap_samples,
-                                 progress=None if bar is None else bar.update)
+        write_scenario_recording(out, system, sc, snr_db=args.snr_db, seed=args.seed, namespace=args.namespace,
+                                 gap_samples=args.gap_samples, progress=None if bar is None else bar.update)
     finally:
         if bar is not None:
             bar.close()
@@ -181,4 +198,5 @@ def cmd_simulate_scenario(args) -> int:
     return 0
 
 
-__all__ = ["NOISY_CHANNELS", "add_scenario_arguments", "cmd_simulate_scenario", "write_scenario_recording"]
+__all__ = ["NOISY_CHANNELS", "add_scenario_arguments", "cmd_simulate_scenario", "write_scenario_recording",
+           "write_signals_bag"]

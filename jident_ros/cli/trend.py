@@ -9,9 +9,9 @@ Every recording is diagnosed window by window exactly as ``jident diagnose`` doe
 flank detector, ``--detector flank``, which needs no K2).
 Each window becomes a :class:`TrendWindow` (time, J1 with its standard error and 95 % interval, width
 with its standard error and its source, or the reason why it has no J1) by the diagnostic node's rule
-(:func:`jident_ros.identify.trend_status.trend_inputs`: the published gap J1 only -- a refused or ambiguous gap
-estimate is not used -- and the flank detector's flank-to-flank K2 of the window, else the gap estimator's width
-at re-contact).  The windows of all recordings are sorted by
+(:func:`jident_ros.identify.trend_status.trend_inputs`: the gap J1 whenever physics allows it -- published or
+ambiguous, not refused as implausible or inconsistent -- and the flank detector's flank-to-flank K2 of the window,
+else the gap estimator's width at re-contact).  The windows of all recordings are sorted by
 their **drive time**: ``entry_time_s``, the ``t`` column (drive clock, s) of the window's entry sample,
 as the drive publishes it on ``drive/signals`` (recordings are assumed to share one drive clock; the bag's
 receive time is not used).  They then go through one :class:`jident_ros.identify.trend.TrendTracker`
@@ -23,209 +23,33 @@ left out: already in the state) and saves it back (atomically).
 from __future__ import annotations
 
 import argparse
-import csv
-import math
 import os
 import sys
-import time
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence
+from typing import Optional
 
 import numpy as np
 
 from jident_ros.cli.argtypes import count_arg as _count
 from jident_ros.cli.argtypes import finite_float_arg as _finite_float
-from jident_ros.cli.offline import OfflineError, diagnose_recording
-from jident_ros.cli.scenario import (  # noqa: F401  (re-exported: cli/main.py and the tests import them from here)
-    add_scenario_arguments,
-    cmd_simulate_scenario,
-    write_scenario_recording,
+from jident_ros.cli.fleet import cmd_fleet
+from jident_ros.cli.offline import OfflineError
+from jident_ros.cli.trend_run import (  # noqa: F401  (re-exported: the demo and the tests import them from here)
+    CSV_COLUMNS,
+    TrendOptions,
+    TrendRun,
+    TrendWindow,
+    run_trend,
+    trend_window,
+    write_trend_csv,
 )
 from jident_ros.config import load_method_config, load_system_config
-from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.identify.trend import SECONDS_PER_DAY, TrendConfig, TrendStateError, TrendTracker
-from jident_ros.identify.trend_status import WIDTH_SOURCES, Z95, trend_inputs
+from jident_ros.identify.trend_status import WIDTH_SOURCES, Z95
 from jident_ros.parameters import cli_help
 from jident_ros.stream.flank import DETECTORS
 
-CSV_COLUMNS = ("time_s", "recording", "window_id", "inertia_kgm2", "inertia_se_kgm2", "inertia_ci_low_kgm2",
-               "inertia_ci_high_kgm2", "backlash_width_m", "backlash_width_se_m", "true_inertia_kgm2",
-               "inertia_smoothed_kgm2", "inertia_smoothed_se_kgm2", "inertia_baseline_kgm2", "inertia_drift_pct",
-               "backlash_width_smoothed_m", "backlash_width_smoothed_se_m", "wear_rate_m_per_day",
-               "wear_rate_se_m_per_day", "time_to_limit_s", "change", "change_quantity", "level", "skip_reason",
-               "width_source")
-
-
-# --------------------------------------------------------------------------- per-window input
-
-@dataclass(frozen=True)
-class TrendWindow:
-    """What the trend needs of one diagnosed window.
-
-    time_s : drive clock t of the entry sample, s
-    inertia_kgm2, inertia_se_kgm2 : the published gap J1 and its standard error, kg m^2 (None: no published
-        gap J1 -- refused, ambiguous, image method only or no gap; ``skip_reason`` says why)
-    inertia_ci_low_kgm2, inertia_ci_high_kgm2 : its 95 % interval, kg m^2
-    width_m, width_se_m : backlash width K2 of the window and its standard uncertainty, m
-    width_source : 'flank' (the flank detector's flank-to-flank estimate), 'gap' (the gap estimator's width
-        at re-contact: the fallback when the window has no flank estimate) or None
-    skip_reason : why there is no J1 (None when there is one)
-    true_inertia_kgm2 : from drive/case or drive/true_inertia when the recording has it
-    """
-
-    time_s: float
-    recording: str
-    window_id: int
-    inertia_kgm2: Optional[float]
-    inertia_se_kgm2: Optional[float]
-    inertia_ci_low_kgm2: Optional[float]
-    inertia_ci_high_kgm2: Optional[float]
-    width_m: Optional[float]
-    width_se_m: Optional[float]
-    skip_reason: Optional[str]
-    true_inertia_kgm2: Optional[float] = None
-    width_source: Optional[str] = None
-
-
-def trend_window(ow, recording: str, width_se_floor_m: float = 0.0) -> TrendWindow:
-    """An :class:`jident_ros.cli.offline.OfflineWindow` -> :class:`TrendWindow`, with the diagnostic node's
-    rule (:func:`jident_ros.identify.trend_status.trend_inputs`): J1 only when the published J1 is the gap
-    estimate (a refused or ambiguous gap J1 and an image class alone are skipped, with the reason); the
-    width from the flank detector when the window has its estimate, else from the gap estimator."""
-    d = ow.diagnosis
-    j, se, wm, wse, source = trend_inputs(d, width_se_floor_m, ow)
-    lo = hi = reason = None
-    if j is not None:
-        lo, hi = (float(v) for v in d.gap.ci95_kgm2)
-    elif d.inertia_kgm2 is not None:
-        reason = f"J1 {d.inertia_kgm2:.5g} kg m^2 from the {d.source} method has no standard error"
-    elif d.gap is not None:
-        reason = f"gap J1 {d.gap.inertia_kgm2:.5g} kg m^2 not published ({d.status}: {d.refused_reason or d.message})"
-    else:
-        reason = "; ".join(d.problems) or d.message
-    return TrendWindow(float(ow.entry_time_s), recording, int(ow.window_id), j, se, lo, hi, wm, wse, reason,
-                       ow.true_inertia_kgm2, source)
-
-
-# --------------------------------------------------------------------------- the run
-
-@dataclass
-class TrendRun:
-    """Result of :func:`run_trend`."""
-
-    windows: list                # TrendWindow, in time order (the ones fed to the tracker)
-    updates: list                # TrendUpdate, one per window
-    tracker: TrendTracker
-    recordings: list             # (path, windows, samples, dropped dict, clock jumps)
-    already_in_state: int = 0    # windows at or before the resumed state's last time, left out
-    seconds: float = 0.0
-
-
-def _diagnose_for_trend(rec, floor: float, kwargs: dict) -> tuple:
-    """One recording for :func:`run_trend` (also in a worker process): (TrendWindows, summary row, log
-    lines, the OfflineError's text or None)."""
-    lines: list = []
-    try:
-        res = diagnose_recording(rec, log=lines.append, **kwargs)
-    except OfflineError as exc:
-        return [], None, lines, str(exc)
-    return ([trend_window(w, str(rec), floor) for w in res.windows],
-            (str(rec), len(res.windows), res.samples, dict(res.dropped), res.clock_jumps), lines, None)
-
-
-def run_trend(recordings: Sequence, *, system=None, method=None, config: Optional[TrendConfig] = None,
-              tracker: Optional[TrendTracker] = None, p: float = 2.0, gap_method: str = "auto",
-              image_method: bool = False, library_path=None, backlash_width_m: Optional[float] = None,
-              detector: str = "flank", gear_ratio: float = 1.0, log: Callable[[str], Any] = lambda text: None,
-              on_window: Optional[Callable[[Any], Any]] = None,
-              on_recording: Optional[Callable[[int, str], Any]] = None, jobs: int = 1) -> TrendRun:
-    """Diagnose every recording (``diagnose_recording``, with ``detector``: 'flank' -- no K2 needed, every
-    window carries the flank-to-flank K2 estimate the trend follows -- or 'paper', inequality (1) with the
-    recording's K2, the width then from the gap estimator), sort all windows by drive time and run the
-    tracker (``tracker``, e.g. restored from a state, else a new one with ``config``) over them.
-
-    ``jobs`` > 1 (without the image method): the recordings are diagnosed by that many worker processes
-    (recordings are independent; the order of the result does not change); ``on_window`` is then not
-    called and ``on_recording`` is called as each recording is done."""
-    t0 = time.perf_counter()
-    system = load_system_config() if system is None else system
-    method = load_method_config() if method is None else method
-    library = None
-    if image_method:
-        lib_path = Path(library_path).expanduser() if library_path else default_library_path(system, method)
-        library, err = load_pattern_library(lib_path, system, method, True, log=log, warn=log)
-        if err:
-            log(f"{err}; windows are diagnosed from the gap only")
-    windows, summary = [], []
-    tr = tracker if tracker is not None else TrendTracker(config)
-    floor = tr.config.width_se_floor_m
-    kwargs = dict(system=system, method=method, p=p, library_path=library_path, build_if_missing=False,
-                  gap_method=gap_method, image_method=image_method and library is not None,
-                  backlash_width_m=backlash_width_m, detector=detector, gear_ratio=gear_ratio)
-    jobs = max(1, min(int(jobs), len(recordings)))
-    if jobs > 1 and not image_method:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = [pool.submit(_diagnose_for_trend, rec, floor, kwargs) for rec in recordings]
-            results = []
-            for k, (rec, fut) in enumerate(zip(recordings, futures)):
-                results.append(fut.result())
-                if on_recording is not None:
-                    on_recording(k, str(rec))
-    else:
-        results = []
-        for k, rec in enumerate(recordings):
-            if on_recording is not None:
-                on_recording(k, str(rec))
-            try:
-                res = diagnose_recording(rec, library=library, log=log, on_window=on_window, **kwargs)
-            except OfflineError as exc:
-                results.append(([], None, [], str(exc)))
-                break
-            results.append(([trend_window(w, str(rec), floor) for w in res.windows],
-                             (str(rec), len(res.windows), res.samples, dict(res.dropped), res.clock_jumps), [], None))
-    for wins, row, lines, error in results:
-        for line in lines:
-            log(line)
-        if error is not None:
-            raise OfflineError(error)
-        windows.extend(wins)
-        summary.append(row)
-    windows.sort(key=lambda w: w.time_s)          # stable: recording order breaks ties
-    skipped_old = 0
-    if tr.last_time_s is not None:
-        n0 = len(windows)
-        windows = [w for w in windows if w.time_s > tr.last_time_s]
-        skipped_old = n0 - len(windows)
-    updates = [tr.update(w.time_s, w.inertia_kgm2, w.inertia_se_kgm2, w.width_m, w.width_se_m) for w in windows]
-    return TrendRun(windows, updates, tr, summary, skipped_old, time.perf_counter() - t0)
-
-
 # --------------------------------------------------------------------------- outputs
-
-def _num(v) -> str:
-    return "" if v is None or (isinstance(v, float) and not math.isfinite(v)) else repr(float(v))
-
-
-def write_trend_csv(run: TrendRun, path) -> Path:
-    """One row per window (columns :data:`CSV_COLUMNS`); ``change`` is 1 on the window at which a
-    change was detected (``change_quantity``: inertia, width or both)."""
-    path = Path(path)
-    with open(path, "w", newline="") as f:
-        wr = csv.writer(f)
-        wr.writerow(CSV_COLUMNS)
-        for w, u in zip(run.windows, run.updates):
-            reason = w.skip_reason if w.inertia_kgm2 is None else (u.reason if u.skipped else None)
-            wr.writerow([_num(w.time_s), w.recording, w.window_id, _num(w.inertia_kgm2), _num(w.inertia_se_kgm2),
-                         _num(w.inertia_ci_low_kgm2), _num(w.inertia_ci_high_kgm2), _num(w.width_m),
-                         _num(w.width_se_m), _num(w.true_inertia_kgm2), _num(u.inertia_kgm2),
-                         _num(u.inertia_se_kgm2), _num(u.inertia_baseline_kgm2), _num(u.inertia_drift_pct),
-                         _num(u.width_m), _num(u.width_se_m), _num(u.wear_rate_m_per_day),
-                         _num(u.wear_rate_se_m_per_day), _num(u.time_to_limit_s), int(u.change),
-                         "+".join(c.quantity for c in u.changes), u.level_name, reason or "", w.width_source or ""])
-    return path
-
 
 def _days(t, t0):
     return (np.asarray(t, dtype=float) - t0) / SECONDS_PER_DAY
@@ -324,15 +148,16 @@ def format_summary(run: TrendRun, config: TrendConfig) -> str:
     jumps = sum(r[4] for r in run.recordings)
     used = sum(1 for u in us if not u.skipped)
     skipped = len(us) - used
-    text = (f"windows: {len(ws)} from {n_rec} recording(s) in drive-time order; {used} used by the trend, "
-            f"{skipped} skipped")
-    if skipped:
-        reasons: dict = {}
-        for w, u in zip(ws, us):
-            if u.skipped:
-                r = (w.skip_reason or u.reason or "?").split(":")[0]
-                reasons[r] = reasons.get(r, 0) + 1
-        text += " (" + ", ".join(f"{r}: {n}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1])) + ")"
+    fed = sum(1 for w, u in zip(ws, us) if w.inertia_kgm2 is not None and not u.skipped)
+    text = (f"windows: {len(ws)} from {n_rec} recording(s) in drive-time order; {used} used by the trend "
+            f"(J1 fed from {fed}), {skipped} skipped")
+    reasons: dict = {}
+    for w, u in zip(ws, us):
+        if w.inertia_kgm2 is None or u.skipped:
+            r = w.refused_kind or (u.reason or w.skip_reason or "?").split(":")[0]
+            reasons[r] = reasons.get(r, 0) + 1
+    if reasons:
+        text += "; without J1: " + ", ".join(f"{r} {n}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1]))
     if run.already_in_state:
         text += f"; {run.already_in_state} already in the state (at or before its last time) left out"
     lines.append(text)
@@ -425,8 +250,23 @@ def add_trend_parser(sub) -> None:
     g.add_argument("--jobs", type=_count("--jobs", 0), default=0,
                    help="worker processes diagnosing the recordings in parallel (0, default: one per core; 1: in "
                         "this process, progress per window; the image method always runs in this process)")
+    g.add_argument("--fleet", action="store_true",
+                   help="REC... are folders of many drives' recordings (searched recursively): one trend per drive, "
+                        "OUT/fleet.csv (drive, J1 drift, width, wear rate, time to limit, level), OUT/fleet.png (small "
+                        "multiples), OUT/drives/<drive>/trend.csv; drives in a process pool (--jobs)")
+    g.add_argument("--drive-id", metavar="FILE|parent",
+                   help="--fleet: which drive a recording belongs to: a CSV of 'recording,drive' lines, or 'parent' "
+                        "(the recording's folder name); default: the namespace of its drive/signals topic")
     g.add_argument("--quiet", action="store_true", help="no progress bar")
     g.set_defaults(func=cmd_trend)
+
+
+def trend_options(args, system, method, jobs: int) -> TrendOptions:
+    """The :class:`TrendOptions` of ``jident trend``'s flags."""
+    return TrendOptions(system=system, method=method, p=args.p, gap_method=args.gap_method,
+                        image_method=args.image_method, library_path=args.library,
+                        backlash_width_m=args.backlash_width_m, detector=args.detector, gear_ratio=args.gear_ratio,
+                        jobs=jobs)
 
 
 def _trend_config(args, saved: Optional[dict]) -> TrendConfig:
@@ -447,6 +287,12 @@ def cmd_trend(args) -> int:
         raise OfflineError(f"--out {out}: exists and is not a directory")
     system = load_system_config(args.config)
     method = load_method_config(args.method_config)
+    if args.drive_id and not args.fleet:
+        raise OfflineError("--drive-id: only with --fleet")
+    if args.fleet:
+        if args.state:
+            raise OfflineError("--state: one state per drive is not kept by --fleet yet; drop --state")
+        return cmd_fleet(args, trend_options(args, system, method, args.jobs), _trend_config(args, None))
     tracker = None
     if args.state and Path(args.state).exists():
         try:
@@ -470,11 +316,8 @@ def cmd_trend(args) -> int:
     if bar is not None and jobs > 1 and n_rec > 1 and not args.image_method:
         bar.unit, bar.total = "recording", n_rec
     try:
-        run = run_trend(args.recordings, system=system, method=method, config=config, tracker=tracker, p=args.p,
-                        jobs=jobs,
-                        gap_method=args.gap_method, image_method=args.image_method, library_path=args.library,
-                        backlash_width_m=args.backlash_width_m, detector=args.detector,
-                        gear_ratio=args.gear_ratio, log=log,
+        run = run_trend(args.recordings, trend_options(args, system, method, jobs), config=config, tracker=tracker,
+                        log=log,
                         on_window=None if bar is None else (lambda w: bar.update(1)),
                         on_recording=None if bar is None else
                         (lambda k, rec: bar.update(1) if bar.unit == "recording" else
@@ -492,6 +335,5 @@ def cmd_trend(args) -> int:
     return 0 if run.windows else 1
 
 
-__all__ = ["CSV_COLUMNS", "TrendRun", "TrendWindow", "add_scenario_arguments", "add_trend_parser",
-           "cmd_simulate_scenario", "cmd_trend", "format_summary", "plot_trend", "run_trend", "trend_window",
-           "write_scenario_recording", "write_trend_csv"]
+__all__ = ["CSV_COLUMNS", "TrendOptions", "TrendRun", "TrendWindow", "add_trend_parser", "cmd_trend", "format_summary", "plot_trend",
+           "run_trend", "trend_window", "write_trend_csv"]

@@ -313,7 +313,8 @@ class _WindowRun:
                                         w.sample_period_s, method=None if method == "auto" else method,
                                         bearing_friction_nms_per_rad=dg.system.motor.bearing_friction_nms_per_rad,
                                         recontact_index=w.recontact_index,
-                                        entry_uncertainty_samples=w.entry_uncertainty_samples)
+                                        entry_uncertainty_samples=w.entry_uncertainty_samples,
+                                        model=dg.policy.gap_model())   # issue 20: torque accuracy, friction
         except NoGapError as exc:
             self.gap_reason = str(exc)
             self.problems.append(f"gap: {exc}")

@@ -73,12 +73,22 @@ residual RMS.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
-from scipy import stats
 from scipy.signal import savgol_filter
+
+from jident_ros.identify.distributions import f_survival, t_quantile
+from jident_ros.identify.gap_free import (
+    FREE_REL_SE_FLOOR,
+    KINK_PRE_SAMPLES,
+    KINK_SEARCH,
+    FreeFitError,
+    GapModel,
+    free_angle_fit,
+    kink_fit,
+)
 
 #: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
 GAP_QUADRATIC_MIN = 12
@@ -149,6 +159,11 @@ class GapEstimate:
                                     dynamics show to be out of the zone; -1: the gap interval itself)
     model_choice : str              how the fit was chosen: '' when the caller named it, else the
                                     pre-entry steadiness test's verdict (:func:`pre_entry_steady`)
+    change_point_error_kgm2 : float 'angle': the change of J1 when the estimated gap interval loses 1 or 2
+                                    samples at an end (included in std_error_kgm2)
+    friction : str                  'angle': how the motor's bearing friction was treated (fitted or bounded)
+    std_error_terms : tuple         ((term, kg m^2), ...): the parts of std_error_kgm2, in quadrature
+                                    (statistical, torque noise, change points, friction band, torque accuracy)
     """
 
     inertia_kgm2: float
@@ -163,6 +178,9 @@ class GapEstimate:
     model_choice: str = ""
     fit_start: int = -1
     fit_end: int = -1
+    change_point_error_kgm2: float = 0.0
+    friction: str = ""
+    std_error_terms: tuple = ()
 
     @property
     def n_samples(self) -> int:
@@ -224,16 +242,25 @@ def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_
 def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
                      sample_period_s: float, method: str | None = None,
                      bearing_friction_nms_per_rad: float = 0.0, recontact_index: int | None = None,
-                     entry_uncertainty_samples: int = 0) -> GapEstimate:
+                     entry_uncertainty_samples: int = 0, model: GapModel | None = None,
+                     cross_check: bool = True) -> GapEstimate:
     """Least-squares J1 over the gap; raises :class:`NoGapError` with a reason.  ``recontact_index``: see
     :func:`gap_interval`.  ``entry_uncertainty_samples`` k > 0: the entry row is known only to +-k samples
     (the dynamics detector without a1); J1 is refitted with the entry moved by -k and +k and the larger change
     is added to the standard error in quadrature (as a model error), so that a fit that depends on the entry
     row is refused or its interval widened, never published narrow.  ``method``: one of :data:`FITS`, or None /
     'auto' for the model choice (the module docstring): with a1, the joint fit when the pre-entry m_el is steady
-    (:func:`pre_entry_steady`), else 'gap_only'; without a1, 'angle' (α1) or 'speed'."""
+    (:func:`pre_entry_steady`), else 'gap_only'; without a1, 'angle' (α1) or 'speed'.  ``model``: the
+    drive's torque accuracy and friction band (:class:`~jident_ros.identify.gap_free.GapModel`; default: exact
+    torque, no friction band): the torque-accuracy term J1 a/sqrt(3) goes into every fit's standard error.
+    ``cross_check`` (the model choice with a1 and alpha1): the a1 fit and the free angle fit, cross-checked
+    (:func:`_cross_checked`); False: the a1 fit's model choice alone."""
+    model = GapModel() if model is None else model
     if "m_el" not in window:
         raise NoGapError("no electromagnetic torque: the gap fit needs m_el")
+    if (method is None or method == "auto") and "a1" in window and "alpha1" in window and cross_check:
+        return _cross_checked((window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s),
+                              bearing_friction_nms_per_rad, recontact_index, entry_uncertainty_samples, model)
     start, end, how = gap_interval(window, entry_index, backlash_width_m, wheel_radius_m,
                                    recontact_index=recontact_index)
     m = np.asarray(window["m_el"], float)[start:end]
@@ -241,6 +268,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         m = m - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)[start:end]
     choice = ""
     fit_span = (start, end)
+    free_extra: dict = {}
     if method is None or method == "auto":
         method = None
         if "a1" in window:
@@ -317,15 +345,33 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     elif method == "angle":
         if "alpha1" not in window:
             raise NoGapError("method 'angle' needs alpha1 (use 'speed' with omega1)")
-        torque = np.asarray(window["m_el"], float)[:end]
+        torque = np.asarray(window["m_el"], float)
         if bearing_friction_nms_per_rad and "omega1" in window:
-            torque = torque - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)[:end]
-        j, se, res, dof, model_error = _angle_fit(np.asarray(window["alpha1"], float), torque, start, end,
-                                                  sample_period_s)
+            torque = torque - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)
+        try:
+            ff = free_angle_fit(np.asarray(window["alpha1"], float), torque, sample_period_s, start, end, model)
+        except FreeFitError as exc:
+            raise NoGapError(str(exc)) from None
+        j, se, res, dof = ff["j1"], ff["se_stat"], ff["residual"], ff["dof"]
+        model_error = ff["change_point_error"]
+        fit_span = (ff["start"], ff["end"])
+        free_extra = {"change_point_error_kgm2": ff["change_point_error"], "friction": ff["friction"],
+                      "std_error_terms": tuple((k, float(v)) for k, v in ff["terms"].items())}
+        entry_uncertainty_samples = 0        # the change-point search has taken the entry's uncertainty
+        anchored = _anchored_angle(np.asarray(window["alpha1"], float), torque, ff, (start, end), sample_period_s,
+                                   model)
+        choice = "; ".join(x for x in (choice, anchored.pop("choice")) if x)
+        if anchored:
+            j, se, res, dof, model_error = (anchored[k] for k in ("j1", "se", "res", "dof", "model_error"))
+            free_extra["std_error_terms"] = tuple(anchored["terms"].items())
+            free_extra["change_point_error_kgm2"] = float(anchored["terms"]["change_points"])
+            free_extra["friction"] = (f"bounded (F_c in [0, {model.coulomb_friction_max_nm:.3g}] N m, a term)"
+                                      if model.coulomb_friction_max_nm else "none declared")
+            fit_span = anchored["span"]
     elif method == "speed":
         if "omega1" not in window:
             raise NoGapError("method 'speed' needs omega1")
-        j, se, res, dof = speed_fit(np.asarray(window["omega1"], float)[start:end], m, sample_period_s)
+        j, se, res, dof = speed_fit(np.asarray(window["omega1"], float)[start:end], m, sample_period_s, lag=True)
     else:
         raise ValueError(f"method: expected one of {', '.join(FITS)} (or None: the model choice), got {method!r}")
     if not np.isfinite(j) or j <= 0:
@@ -342,19 +388,155 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         entry_error = max(abs(x - j) for x in moved)
         model_error = float(np.hypot(model_error, entry_error))
         se = float(np.hypot(se, entry_error))
+    if method == "speed" and model.coulomb_friction_max_nm:
+        # the speed fit takes no Coulomb friction: a constant torque F in [0, F_max] is −F t in ∫m_el dt, which
+        # moves J1 by J1 F (r_κ · t) (r_κ: the least-squares row of 1/J1); a uniform term of half-width F_max
+        tq = np.asarray(window["m_el"], float)[start:end]
+        yint = np.concatenate([[0.0], np.cumsum(0.5 * (tq[1:] + tq[:-1])) * sample_period_s])
+        A = np.column_stack([np.ones(n), yint, tq])
+        row = np.linalg.pinv(A)[1]
+        fr = j * abs(float(row @ (np.arange(n) * sample_period_s))) * model.coulomb_friction_max_nm / np.sqrt(3.0)
+        terms = dict(free_extra.get("std_error_terms", ()))
+        terms["coulomb_band"] = fr
+        free_extra["std_error_terms"] = tuple(terms.items())
+        se = float(np.hypot(se, fr))
+    if method in ("gap_only", "acceleration", "anchored") and model.coulomb_friction_max_nm and "a1" in window:
+        # the a1 fits take no Coulomb friction: a friction F in [0, F_max] moves J1 (the slope of the torque on
+        # dω1/dt) by F Σx/Σx² over the fitted samples; a uniform term of half-width F_max, in quadrature
+        x = np.asarray(window["a1"], float)[fit_span[0]:fit_span[1]] / wheel_radius_m
+        fr = model.coulomb_friction_max_nm / np.sqrt(3.0) * abs(float(x.sum())) / max(float(x @ x), 1e-300)
+        terms = dict(free_extra.get("std_error_terms", ()))
+        terms["coulomb_band"] = fr
+        free_extra["std_error_terms"] = tuple(terms.items())
+        se = float(np.hypot(se, fr))
+    # every fit: the model's own error as a floor, then the drive's torque accuracy (a scale error of m_el
+    # is one of J1: all fits of m_el share it)
+    se = max(float(se), FREE_REL_SE_FLOOR * j)
+    if model.torque_accuracy:
+        terms = dict(free_extra.get("std_error_terms", ()))
+        terms["torque_accuracy"] = j * model.torque_rel_se()
+        free_extra["std_error_terms"] = tuple(terms.items())
+        se = float(np.hypot(se, j * model.torque_rel_se()))
     if not se <= MAX_RELATIVE_STD_ERROR * j:
         raise NoGapError(f"gap fit undetermined: J1 = {j:.4g} kg m^2 with standard error {se:.3g} kg m^2 "
                          f"(> {MAX_RELATIVE_STD_ERROR:.0%}); the window shows no free acceleration of the motor")
     half = _t975(max(int(dof), 1)) * se
     return GapEstimate(j, se, (j - half, j + half), float(np.sqrt(np.mean(res ** 2))), start, end, method, how,
-                       float(model_error), choice, int(fit_span[0]), int(fit_span[1]))
+                       float(model_error), choice, int(fit_span[0]), int(fit_span[1]), **free_extra)
+
+
+def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tuple, sample_period_s: float,
+                    model: GapModel) -> dict:
+    """The free angle fit's J1 with the pre-entry samples too, when the drive was steady before the entry.
+
+    A drive on line (our simulator, the paper's) turns at constant speed under a steady torque before the entry;
+    then the pre-entry samples pin ω0 and the torque level, and the first angle fit (:func:`_angle_fit`, over
+    [0, e) of the detector's ``coarse`` interval (s, e)) is several times more precise than the free fit on a short
+    gap (our simulator: 9-32 samples).  Used when the pre-entry m_el is steady (:func:`pre_entry_steady` on the
+    samples before both entries), its J1 agrees with the free fit's within CROSS_CHECK_Z combined standard errors
+    and its standard error (with a change-point term: the largest change of J1 with s or e moved in by 1 or 2) is the
+    smaller: the free fit is its check.  Returns {} and a 'choice' phrase otherwise."""
+    s, e = coarse
+    lo, hi = min(s, ff["start"]), max(s, ff["start"])
+    test = pre_entry_steady(torque[:max(lo - KINK_SEARCH, 0)])
+    if not test.steady:
+        return {"choice": f"angle (free): {test.reason}"}
+    end = min(e, ff["end"])
+    try:
+        kf = kink_fit(alpha1, torque, sample_period_s, range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1), end,
+                      model.coulomb_friction_max_nm)
+        # the re-contact row: moved in by 1 and 2 (contact after it is not modelled)
+        trims = [kink_fit(alpha1, torque, sample_period_s, kf["plausible_entries"], end - k)["j1"] for k in (1, 2)]
+    except (FreeFitError, np.linalg.LinAlgError) as exc:
+        return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
+    # the torque steady right up to the estimated entry (a speed controller acting just before it is not): its
+    # last KINK_SEARCH samples within 5 robust noise levels (or 1e-3 of the level) of the steady stretch's median
+    sb = kf["start"]
+    ref = torque[max(0, sb - KINK_PRE_SAMPLES):sb - KINK_SEARCH]
+    last = torque[sb - KINK_SEARCH:sb]
+    level = float(np.median(ref))
+    tol = max(5.0 * _robust_noise(ref), 1e-3 * abs(level))
+    if float(np.max(np.abs(last - level))) > tol:
+        return {"choice": f"angle (free): the torque changes in the {KINK_SEARCH} samples before the entry row {sb} "
+                          f"(by {float(np.max(np.abs(last - level))):.3g} N m): not a steady drive's entry"}
+    # ... and it stays near its level through the first samples after it (a machine on line: the flux is
+    # continuous; a speed controller reacting to an event moves it at once, and the kink is then the event)
+    first = torque[sb:sb + KINK_SEARCH]
+    if float(np.max(np.abs(first - level))) > max(tol, KINK_TORQUE_AFTER_REL * abs(level)):
+        return {"choice": f"angle (free): the torque moves by {float(np.max(np.abs(first - level))):.3g} N m in the "
+                          f"{KINK_SEARCH} samples after the entry row {sb}: not a steady drive's entry"}
+    j, res, dof = kf["j1"], kf["residual"], kf["dof"]
+    cp_end = max(abs(x - j) for x in trims)
+    terms = dict(kf["terms"])
+    terms["change_points"] = float(np.hypot(terms["change_points"], cp_end))
+    model_error = terms["change_points"]
+    se = max(float(np.sqrt(sum(v * v for v in terms.values()))), FREE_REL_SE_FLOOR * j)
+    z = abs(j - ff["j1"]) / max(float(np.hypot(se, ff["se_stat"])), 1e-300)
+    if z > CROSS_CHECK_Z:
+        return {"choice": f"angle (free): the steady-entry fit (J1 = {j:.4g}) disagrees by {z:.1f} standard errors"}
+    if se >= ff["se_stat"]:
+        return {"choice": f"angle (free): the steady-entry fit is no more precise (J1 = {j:.4g} ± {se:.2g})"}
+    return {"choice": f"angle (steady entry): the entry a change point of a steady drive at row {kf['start']}, "
+                      f"agrees with the free fit (J1 = {ff['j1']:.4g}, {z:.1f} standard errors)", "j1": j, "se": se,
+            "res": res, "dof": dof, "model_error": model_error, "terms": terms, "span": (kf["start"], kf["end"])}
+
+
+#: Steady-entry fit: the torque may move by at most this fraction of its level in the first samples after the
+#: entry (our simulator: 0.3 %; the stress bench's speed step: 100 % within 2 samples).
+KINK_TORQUE_AFTER_REL = 0.02
+
+
+#: Cross-check of two fits of one window (a1 and the motor angle): they disagree when their J1 differ by more
+#: than this many combined standard errors (without the torque-accuracy term, which both share).
+CROSS_CHECK_Z = 3.0
+
+
+def _stat_se(g: GapEstimate, model: GapModel) -> float:
+    return float(np.sqrt(max(g.std_error_kgm2 ** 2 - (g.inertia_kgm2 * model.torque_rel_se()) ** 2, 0.0)))
+
+
+def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_samples: int,
+                   model: GapModel) -> GapEstimate:
+    """The model choice when the window has a1 and alpha1 (an Imu beside the encoder): the a1 fit (the joint
+    or gap_only fit, :func:`pre_entry_steady`) and the free angle fit, cross-checked; the one with the smaller
+    standard error is returned when they agree within CROSS_CHECK_Z combined standard errors, else NoGapError
+    names both.  One that fails alone leaves the other, with the failure in its model_choice.  ``args``: the
+    window, entry index, K2, r and T_s of :func:`estimate_inertia`."""
+    kw = dict(bearing_friction_nms_per_rad=b1, recontact_index=recontact_index, model=model)
+    fits, why = {}, {}
+    for name, method in (("angle", "angle"), ("a1", None)):
+        # each over its own interval (the a1 fit's from the detector, the angle fit's estimated): a shared
+        # interval would make their errors common and the check weaker
+        try:
+            fits[name] = estimate_inertia(*args, method=method, entry_uncertainty_samples=entry_uncertainty_samples,
+                                          cross_check=False, **kw)
+        except NoGapError as exc:
+            why[name] = str(exc)
+    if not fits:
+        raise NoGapError(f"a1 fit: {why['a1']}; angle fit: {why['angle']}")
+    if len(fits) == 1:
+        (name, g), = fits.items()
+        other = "angle" if name == "a1" else "a1"
+        return replace(g, model_choice=f"{g.model_choice or g.method}; no cross-check: the {other} fit failed "
+                                       f"({why[other]})")
+    a, b = fits["a1"], fits["angle"]
+    z = abs(a.inertia_kgm2 - b.inertia_kgm2) / max(float(np.hypot(_stat_se(a, model), _stat_se(b, model))), 1e-300)
+    if z > CROSS_CHECK_Z:
+        raise NoGapError(f"the a1 fit ({a.method}: J1 = {a.inertia_kgm2:.4g} ± {a.std_error_kgm2:.2g} kg m^2) and "
+                         f"the angle fit (J1 = {b.inertia_kgm2:.4g} ± {b.std_error_kgm2:.2g} kg m^2) disagree by "
+                         f"{z:.1f} standard errors (> {CROSS_CHECK_Z:g}): friction, a wrong gap interval or a "
+                         f"lagging signal")
+    best = a if a.std_error_kgm2 <= b.std_error_kgm2 else b
+    other = b if best is a else a
+    return replace(best, model_choice=f"{best.model_choice or best.method}; cross-checked with the "
+                                      f"{other.method} fit (J1 = {other.inertia_kgm2:.4g}, {z:.1f} standard errors)")
 
 
 #: The speed fit's model error: J1 refitted with this many samples dropped at each end of the interval.
 SPEED_TRIM_SAMPLES = (1, 2)
 
 
-def speed_fit(omega1: np.ndarray, torque: np.ndarray, sample_period_s: float) -> tuple:
+def speed_fit(omega1: np.ndarray, torque: np.ndarray, sample_period_s: float, lag: bool = False) -> tuple:
     """(J1, standard error, residual, degrees of freedom) of the ``"speed"`` fit over the gap samples.
 
     In the gap ω1(t_k) = ω1(t_0) + Y_k / J1 with Y_k = ∫_{t0}^{tk} m_el dt (trapezoid).  The measured speed
@@ -365,33 +547,38 @@ def speed_fit(omega1: np.ndarray, torque: np.ndarray, sample_period_s: float) ->
     J1 when one or two samples are dropped at each end of the interval (the larger) is added in quadrature (the
     interval's end rows: an entry found early, a re-contact row late).
     Regressing Y on ω1 instead (the first release) put the speed noise in the regressor: on the second drive at
-    30 dB its interval was far too narrow and 52 of 84 published J1 were more than 10 % off (docs/results.md)."""
+    30 dB its interval was far too narrow and 52 of 84 published J1 were more than 10 % off (docs/results.md).
+
+    ``lag`` (estimate_inertia's 'speed' fit): the drive's speed feedback lags the shaft (a filter, a
+    differenced encoder): ω1_meas(t) ≈ ω1(t − τ) ≈ ω1(t) − τ dω1/dt = ω1_0 + Y/J1 − (τ/J1) m_el, so the torque
+    itself is a third regressor and τ is fitted with J1 (issue 20: −3 … −7 % with a 0.4 ms lag unmodelled)."""
     n = omega1.size
     y = np.concatenate([[0.0], np.cumsum(0.5 * (torque[1:] + torque[:-1])) * sample_period_s])
 
-    def slope(w, yy):
-        A = np.column_stack([np.ones(w.size), yy])
+    def slope(w, yy, mm=None):
+        A = np.column_stack([np.ones(w.size), yy] + ([] if mm is None else [mm]))
         coef, *_ = np.linalg.lstsq(A, w, rcond=None)
         return coef, A
 
     if n < 6:
         raise NoGapError(f"speed fit: {n} gap samples, at least 6 are needed")
-    coef, A = slope(omega1, y)
+    tq = np.asarray(torque, float) if lag else None
+    coef, A = slope(omega1, y, tq)
     kappa = float(coef[1])
     if not kappa > 0:
         raise NoGapError(f"gap fit gave a non-physical J1 = 1/{kappa!r} (dω1 against ∫m_el dt)")
     res = omega1 - A @ coef
-    dof = n - 2
+    dof = n - A.shape[1]
     rho = float(res[1:] @ res[:-1]) / float(res @ res) if float(res @ res) > 0 else 0.0
     inflation = (1.0 + max(rho, 0.0)) / max(1.0 - max(rho, 0.0), 1e-6)
-    cov = (res @ res) / dof * np.linalg.inv(A.T @ A) * inflation
+    cov = (res @ res) / dof * np.linalg.pinv(A.T @ A) * inflation
     j = 1.0 / kappa
     se_stat = float(np.sqrt(cov[1, 1])) / kappa ** 2
     model_error = 0.0
     for k in SPEED_TRIM_SAMPLES:
         if n - 2 * k < 6:
             break
-        trimmed, _ = slope(omega1[k:n - k], y[k:n - k] - y[k])
+        trimmed, _ = slope(omega1[k:n - k], y[k:n - k] - y[k], None if tq is None else tq[k:n - k])
         model_error = max(model_error, abs(1.0 / trimmed[1] - j) if trimmed[1] > 0 else np.inf)
     return j, float(np.hypot(se_stat, model_error)), res * j, dof
 
@@ -443,7 +630,7 @@ def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTes
         f, p = (0.0, 1.0) if rss0 <= (1e-12 * scale) ** 2 * n else (np.inf, 0.0)
     else:
         f = max((rss0 - rss2) / 2.0 / (rss2 / (n - 3)), 0.0)
-        p = float(stats.f.sf(f, 2, n - 3))
+        p = f_survival(f, 2, n - 3)
     if np.ptp(A[:, 1:] @ coef[1:]) <= STEADY_REL_TOL * scale:    # slope and curvature move it by next to nothing
         return SteadinessTest(True, float(f), p, n)
     if p < p_value:
@@ -698,7 +885,7 @@ def _angle_fit(alpha1: np.ndarray, m_el: np.ndarray, start: int, end: int, sampl
 @lru_cache(maxsize=256)
 def _t975(dof: int) -> float:
     """Student t 97.5 % quantile (cached: scipy's ppf costs ~0.3 ms a call)."""
-    return float(stats.t.ppf(0.975, dof))
+    return t_quantile(0.975, dof)
 
 
 def nearest_class(inertia_kgm2: float, classes_kgm2) -> int:

@@ -136,10 +136,12 @@ class DriveMonitor:
             d = self.on_error(win, exc)
         result = MonitorResult(win, d)
         if self.tracker is not None:
-            j, jse, w, wse, source = trend_inputs(d, self.tracker.config.width_se_floor_m, win)
+            j, jse, w, wse, source, refused = trend_inputs(d, self.tracker.config.width_se_floor_m, win)
             result.trend_source = source
             if j is not None or w is not None:
-                result.trend = self.tracker.update(win.entry_time_s, j, jse, w, wse)
+                result.trend = self.tracker.update(win.entry_time_s, j, jse, w, wse, inertia_refused=refused)
+            elif refused is not None:   # no estimate at all: counted by reason (the trend status says it)
+                self.tracker.count_refused(refused)
         return result
 
     def finish(self) -> list:

@@ -40,11 +40,9 @@ state file (the names of the others are re-exported here).  The simulation harne
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import os
-import tempfile
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any, Sequence
 
 import numpy as np
@@ -73,13 +71,26 @@ from jident_ros.identify.trend_maths import (  # noqa: F401  (re-exported)
     siegmund_arl,
     two_sided_arl,
 )
+from jident_ros.identify.trend_state import (  # noqa: F401  (re-exported)
+    STATE_KIND,
+    STATE_VERSION,
+    load_state,
+    save_state,
+    state_from_dict,
+    state_to_dict,
+)
+
+#: z of the two-sided 95 % interval.
+Z95 = 1.959963984540054
+#: The end of the skip reason of a window at the previous window's time (a duplicate: counted, no WARN).
+SAME_WINDOW = "(the same window again)"
+#: The skip reason of a window without any estimate (counted as refused, not as skipped).
+NO_ESTIMATE = "no estimate in this window"
 
 #: Levels, same values as diagnostic_msgs/DiagnosticStatus (and jident_ros.ros_io).
 OK, WARN, ERROR = 0, 1, 2
 LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR"}
 
-STATE_KIND = "jident_ros.identify.trend"
-STATE_VERSION = 1
 
 
 @dataclass(frozen=True)
@@ -121,6 +132,15 @@ class TrendUpdate:
     changes: tuple                              # the ChangeEvents detected at this window
     level: int                                  # OK 0 / WARN 1 / ERROR 2
     message: str
+    # J1 relative to the drive's own baseline (the monitored quantity) and the absolute J1 beside it (issue 21)
+    inertia_drift_ci95_pct: tuple | None = None     # 95 % interval of inertia_drift_pct (the baseline's included)
+    inertia_abs_se_kgm2: float | None = None        # smoothed J1's se with the torque-accuracy term
+    inertia_baseline_windows: int = 0               # windows the baseline rests on while still refined (0: done)
+    # what went in, what did not (issues 21, 24)
+    inertia_windows_fed: int = 0                    # windows whose J1 went into the tracker, so far
+    inertia_windows_refused: dict = field(default_factory=dict)   # windows without a J1, by reason, so far
+    windows_skipped: dict = field(default_factory=dict)           # windows refused whole, by field, so far
+    time_segment: int = 0                           # time discontinuities so far (clock back / far ahead)
 
     @property
     def level_name(self) -> str:
@@ -188,6 +208,12 @@ class TrendTracker:
         self.n_windows = 0
         self.last_time_s: float | None = None
         self.changes: list[ChangeEvent] = []
+        self.inertia_fed = 0                         # windows whose J1 went into the tracker
+        self.inertia_refused: dict[str, int] = {}    # windows without a J1, by reason
+        self.windows_skipped: dict[str, int] = {}    # windows refused whole (bad input or time), by field
+        self.last_skip: tuple | None = None          # (window index, reason) of the last skipped window
+        self.time_segment = 0                        # time discontinuities so far
+        self.last_discontinuity: tuple | None = None   # (window index, what)
 
     # -- public API ---------------------------------------------------------------------------------
     @property
@@ -207,18 +233,61 @@ class TrendTracker:
         self._width = WidthChannel(self.config)
 
     def update(self, time_s: float, inertia_kgm2: float | None = None, inertia_se_kgm2: float | None = None,
-               width_m: float | None = None, width_se_m: float | None = None) -> TrendUpdate:
-        """One window.  A quantity whose value and standard error are both None is not updated;
-        a non-finite or non-positive input (or a value without its standard error, or a time
-        not after the previous window's) refuses the whole window: the returned update has
-        ``skipped=True`` and the reason, and the state is unchanged (the window is still counted)."""
+               width_m: float | None = None, width_se_m: float | None = None, *,
+               inertia_refused: str | None = None) -> TrendUpdate:
+        """One window.  A quantity whose value and standard error are both None is not updated
+        (``inertia_refused``: why the window has no J1, counted per reason, :data:`~jident_ros.identify.
+        trend_status.REFUSAL_KINDS`); a non-finite or non-positive input (or a value without its standard error,
+        or the previous window's time again) refuses the whole window: the returned update has ``skipped=True``
+        and the reason, the state is unchanged (the window is still counted, and the skip by its reason; the
+        status is WARN).  A time before the previous window's (the drive's clock went back: a restart) or more
+        than ``time_discontinuity_s`` after it starts a new time segment: reported, the wear line restarts,
+        the window is used."""
         idx = self.n_windows
         self.n_windows += 1
+        t, vals, reason = self._check_window(time_s, inertia_kgm2, inertia_se_kgm2, width_m, width_se_m)
+        if vals and vals["inertia_kgm2"][0] is None and inertia_refused:
+            self.count_refused(inertia_refused)
+        if reason is not None:
+            if reason.endswith(SAME_WINDOW):
+                self.windows_skipped["duplicate"] = self.windows_skipped.get("duplicate", 0) + 1
+            elif reason != NO_ESTIMATE:
+                kind = reason.split(":", 1)[0]
+                self.windows_skipped[kind] = self.windows_skipped.get(kind, 0) + 1
+                self.last_skip = (idx, reason)
+            return self._snapshot(idx, t if t is not None else float("nan"), True, reason, ())
+        if self.last_time_s is not None and (t < self.last_time_s
+                                             or t - self.last_time_s > self.config.time_discontinuity_s):
+            self._discontinuity(idx, t)
+        self.last_time_s = t
+        events = []
+        y, se = vals["inertia_kgm2"]
+        if y is not None:
+            self.inertia_fed += 1
+            ev = self._inertia.update(idx, t, y, se, self._k, self._h)
+            if ev is not None:
+                events.append(self._classed(ev))
+        y, se = vals["width_m"]
+        if y is not None:
+            ev = self._width.update(idx, t, y, se, self._k, self._h)
+            if ev is not None:
+                events.append(ev)
+        if events:
+            self.changes.extend(events)
+            del self.changes[:-self.config.max_changes_kept]
+        return self._snapshot(idx, t, False, None, tuple(events))
+
+    def count_refused(self, kind: str):
+        """Count a window without a J1 for the trend, by reason (a window not given to :meth:`update` at all,
+        e.g. without any estimate); the status says how many and why."""
+        self.inertia_refused[str(kind)] = self.inertia_refused.get(str(kind), 0) + 1
+
+    def _check_window(self, time_s, inertia_kgm2, inertia_se_kgm2, width_m, width_se_m):
+        """(time, {quantity: (value, se)}, None) or (time or None, the values so far, the reason to skip)."""
         t, reason = _check_time(time_s)
-        if reason is None and self.last_time_s is not None and t <= self.last_time_s:
-            # equal: the same window again (e.g. re-delivered by a latched drive/window after a restart)
-            reason = (f"time_s: {t!r} is before the previous window's {self.last_time_s!r}" if t < self.last_time_s
-                      else f"time_s: {t!r} is the previous window's (the same window again)")
+        if reason is None and self.last_time_s is not None and t == self.last_time_s:
+            # the same window again (e.g. re-delivered by a latched drive/window after a restart)
+            reason = f"time_s: {t!r} is the previous window's {SAME_WINDOW}"
         vals = {}
         if reason is None:
             for name, v, sename, se in (("inertia_kgm2", inertia_kgm2, "inertia_se_kgm2", inertia_se_kgm2),
@@ -233,25 +302,26 @@ class TrendTracker:
                     break
                 vals[name] = (fv, fse)
             if reason is None and vals["inertia_kgm2"][0] is None and vals["width_m"][0] is None:
-                reason = "no estimate in this window"
-        if reason is not None:
-            return self._snapshot(idx, t if t is not None else float("nan"), True, reason, ())
-        self.last_time_s = t
-        events = []
-        y, se = vals["inertia_kgm2"]
-        if y is not None:
-            ev = self._inertia.update(idx, t, y, se, self._k, self._h)
-            if ev is not None:
-                events.append(ev)
-        y, se = vals["width_m"]
-        if y is not None:
-            ev = self._width.update(idx, t, y, se, self._k, self._h)
-            if ev is not None:
-                events.append(ev)
-        if events:
-            self.changes.extend(events)
-            del self.changes[:-self.config.max_changes_kept]
-        return self._snapshot(idx, t, False, None, tuple(events))
+                reason = NO_ESTIMATE
+        return t, vals, reason
+
+    def _discontinuity(self, idx: int, t: float):
+        """The drive clock went back, or jumped ahead by more than time_discontinuity_s: a new time segment.
+        The wear line restarts on it (its slope never spans the jump); J1 and the baselines carry on."""
+        dt = t - self.last_time_s
+        what = (f"the drive clock went back by {-dt:.6g} s (a restart?)" if dt < 0 else
+                f"the drive clock jumped ahead by {dt:.6g} s (> time_discontinuity_s {self.config.time_discontinuity_s:g})")
+        self.time_segment += 1
+        self.last_discontinuity = (idx, f"time segment {self.time_segment} from window {idx}: {what}")
+        for ch in (self._inertia, self._width):
+            if ch.first_time is not None:
+                ch.first_time += dt          # the commissioning duration counts drive time within segments
+        self._width.new_segment(idx)
+
+    def _classed(self, ev: ChangeEvent) -> ChangeEvent:
+        """A J1 change with the nearest of the paper's relative classes (change_classes_pct)."""
+        cls = min(self.config.change_classes_pct, key=lambda c: abs(c - ev.size_pct))
+        return dataclasses.replace(ev, class_pct=float(cls))
 
     def batch(self, time_s: Sequence[float], inertia_kgm2: Sequence | None = None,
               inertia_se_kgm2: Sequence | None = None, width_m: Sequence | None = None,
@@ -326,65 +396,107 @@ class TrendTracker:
             wx, wse, Wd.baseline, math.sqrt(Wd.baseline_var) if Wd.baseline_var is not None else None, wd, wdse,
             Wd.cusum.stat, rate, rate_se,
             None if rate is None else rate * SECONDS_PER_DAY, None if rate_se is None else rate_se * SECONDS_PER_DAY,
-            ttl, ttl_lo, ttl_hi, bool(events), events, OK, "")
+            ttl, ttl_lo, ttl_hi, bool(events), events, OK, "",
+            None if jd is None else (jd - Z95 * jdse, jd + Z95 * jdse),
+            None if jx is None else math.sqrt(J.P + (0.01 * cfg.torque_accuracy_pct * jx) ** 2),
+            J.baseline_windows if J.phase != COMMISSIONING else len(J.comm), self.inertia_fed,
+            dict(self.inertia_refused), dict(self.windows_skipped), self.time_segment)
         level, message = self._health(u)
         if skipped:
             message = f"window skipped ({reason}); {message}"
+            if reason != NO_ESTIMATE and not reason.endswith(SAME_WINDOW):
+                level = max(level, WARN)
         return dataclasses.replace(u, level=level, message=message)
 
     def _health(self, u: TrendUpdate) -> tuple[int, str]:
         """(level, one-line message) of the tracker after the window of update ``u`` (its level/message unset)."""
-        cfg = self.config
         J, Wd = self._inertia, self._width
-        idx, jx, jb, jd, jdse, jdr = (u.window_index, u.inertia_kgm2, u.inertia_baseline_kgm2, u.inertia_drift_pct,
-                                      u.inertia_drift_se_pct, u.inertia_drift_from_reference_pct)
-        wx, rate, rate_se = u.width_m, u.wear_rate_m_per_s, u.wear_rate_se_m_per_s
-        ttl, ttl_lo, ttl_hi = u.time_to_limit_s, u.time_to_limit_low_s, u.time_to_limit_high_s
-        parts, level = [], OK
         if J.n == 0 and Wd.n == 0:
-            return OK, f"learning the baseline: 0 of {cfg.commissioning_windows} windows (no estimate yet)"
-        # J1
+            level, text = OK, f"learning the baseline: 0 of {self.config.commissioning_windows} windows (no estimate yet)"
+            lv, extra = self._inputs_text(u)
+            return max(level, lv), text + extra
+        level, parts = OK, []
+        for lv, txt in (self._inertia_text(u), self._width_text(u)):
+            level = max(level, lv)
+            if txt:
+                parts.append(txt)
+        lv, extra = self._inputs_text(u)
+        return max(level, lv), "; ".join(parts) + extra
+
+    def _inertia_text(self, u: TrendUpdate) -> tuple[int, str]:
+        """J1 relative to the drive's own baseline (drift with its 95 % interval; alarms and the class of a
+        change from it), the absolute J1 beside it (with the torque-accuracy term)."""
+        cfg, J = self.config, self._inertia
+        jx, jb, jd, jdr = u.inertia_kgm2, u.inertia_baseline_kgm2, u.inertia_drift_pct, u.inertia_drift_from_reference_pct
         if J.phase == COMMISSIONING:
             if J.n > 0 or J.baseline is None:
-                parts.append(f"J1 learning the baseline: {J.progress()}"
-                             + (f" (J1 {jx:.5g} kg m^2)" if jx is not None else ""))
-        else:
-            txt = f"J1 {jx:.5g} kg m^2 ({_fmt_pm(jd, jdse)} % of baseline {jb:.5g}"
-            if J.reference != jb:
-                txt += f"; {jdr:+.2f} % of commissioned {J.reference:.5g}"
-            txt += ")"
-            lv = _beyond(max(abs(jd), abs(jdr)), cfg.drift_warn_pct, cfg.drift_alarm_pct)
-            level = max(level, lv)
-            txt += _beyond_text(lv, f"{cfg.drift_warn_pct:g} % warning", f"{cfg.drift_alarm_pct:g} % alarm")
-            if J.phase == RELEARNING:
-                txt += f", re-learning the baseline ({len(J.relearn)} of {cfg.relearn_windows})"
-            level, txt = self._with_change(level, txt, J, idx,
-                                           lambda ev: f"; change {ev.size_pct:+.2f} % ({ev.size:+.4g} kg m^2)")
-            parts.append(txt)
-        # width
-        if Wd.n > 0:
-            if Wd.phase == COMMISSIONING and wx is None:
-                parts.append(f"width learning the baseline: {Wd.progress()}")
-            elif wx is not None:
-                txt = f"width {wx * 1e3:.4g} mm"
-                if rate is not None:
-                    txt += f", wear {rate * SECONDS_PER_DAY * 1e3:.3g} ± {rate_se * SECONDS_PER_DAY * 1e3:.2g} mm/day"
-                if ttl is not None:
-                    txt += (f", limit {cfg.width_limit_m * 1e3:.4g} mm in {ttl / SECONDS_PER_DAY:.3g} d "
-                            f"[{ttl_lo / SECONDS_PER_DAY:.3g}, {ttl_hi / SECONDS_PER_DAY:.3g}]")
-                lv = _beyond(wx, cfg.width_warn_limit_m, cfg.width_limit_m)
-                txt += _beyond_text(lv, f"{cfg.width_warn_limit_m * 1e3:.4g} mm warning",
-                                    f"{cfg.width_limit_m * 1e3:.4g} mm limit")
-                if lv == OK and ttl is not None and cfg.time_to_limit_warn_s is not None \
-                        and ttl < cfg.time_to_limit_warn_s:
-                    lv = WARN
-                    txt += f" (< {cfg.time_to_limit_warn_s / SECONDS_PER_DAY:.3g} d)"
-                level = max(level, lv)
-                if Wd.phase == COMMISSIONING:
-                    txt += f" (learning the baseline: {Wd.progress()})"
-                level, txt = self._with_change(level, txt, Wd, idx, lambda ev: f"; width change {ev.size * 1e3:+.3g} mm")
-                parts.append(txt)
-        return level, "; ".join(parts)
+                return OK, (f"J1 learning the baseline: {J.progress()}"
+                            + (f" (J1 {jx:.5g} kg m^2)" if jx is not None else ""))
+            return OK, ""
+        lo, hi = u.inertia_drift_ci95_pct
+        txt = f"J1 {jx:.5g} kg m^2 ({_fmt_pm(jd, u.inertia_drift_se_pct)} % of baseline {jb:.5g}"
+        if J.reference != jb:
+            txt += f"; {jdr:+.2f} % of commissioned {J.reference:.5g}"
+        txt += f"; 95 % [{lo:+.2f}, {hi:+.2f}] %"
+        if u.inertia_baseline_windows:
+            txt += f"; baseline on {u.inertia_baseline_windows} of {cfg.baseline_refine_windows} windows, refining"
+        txt += ")"
+        if cfg.torque_accuracy_pct > 0:
+            txt += f", absolute ± {Z95 * u.inertia_abs_se_kgm2:.2g} kg m^2 with the {cfg.torque_accuracy_pct:g} % torque accuracy"
+        level = _beyond(max(abs(jd), abs(jdr)), cfg.drift_warn_pct, cfg.drift_alarm_pct)
+        txt += _beyond_text(level, f"{cfg.drift_warn_pct:g} % warning", f"{cfg.drift_alarm_pct:g} % alarm")
+        if J.phase == RELEARNING:
+            txt += f", re-learning the baseline ({len(J.relearn)} of {cfg.relearn_windows})"
+
+        def what(ev):
+            cls = "" if ev.class_pct is None else f", nearest class {ev.class_pct:+g} %"
+            return f"; change {ev.size_pct:+.2f} % ({ev.size:+.4g} kg m^2{cls})"
+        return self._with_change(level, txt, J, u.window_index, what)
+
+    def _width_text(self, u: TrendUpdate) -> tuple[int, str]:
+        cfg, Wd = self.config, self._width
+        wx, rate, rate_se = u.width_m, u.wear_rate_m_per_s, u.wear_rate_se_m_per_s
+        ttl, ttl_lo, ttl_hi = u.time_to_limit_s, u.time_to_limit_low_s, u.time_to_limit_high_s
+        if Wd.n == 0:
+            return OK, ""
+        if wx is None:
+            return OK, (f"width learning the baseline: {Wd.progress()}" if Wd.phase == COMMISSIONING
+                        else "width: a new time segment, no line yet")
+        txt = f"width {wx * 1e3:.4g} mm"
+        if rate is not None:
+            txt += f", wear {rate * SECONDS_PER_DAY * 1e3:.3g} ± {rate_se * SECONDS_PER_DAY * 1e3:.2g} mm/day"
+        if ttl is not None:
+            txt += (f", limit {cfg.width_limit_m * 1e3:.4g} mm in {ttl / SECONDS_PER_DAY:.3g} d "
+                    f"[{ttl_lo / SECONDS_PER_DAY:.3g}, {ttl_hi / SECONDS_PER_DAY:.3g}]")
+        lv = _beyond(wx, cfg.width_warn_limit_m, cfg.width_limit_m)
+        txt += _beyond_text(lv, f"{cfg.width_warn_limit_m * 1e3:.4g} mm warning", f"{cfg.width_limit_m * 1e3:.4g} mm limit")
+        if lv == OK and ttl is not None and cfg.time_to_limit_warn_s is not None and ttl < cfg.time_to_limit_warn_s:
+            lv = WARN
+            txt += f" (< {cfg.time_to_limit_warn_s / SECONDS_PER_DAY:.3g} d)"
+        if Wd.phase == COMMISSIONING:
+            txt += f" (learning the baseline: {Wd.progress()})"
+        return self._with_change(lv, txt, Wd, u.window_index, lambda ev: f"; width change {ev.size * 1e3:+.3g} mm")
+
+    def _inputs_text(self, u: TrendUpdate) -> tuple[int, str]:
+        """What went in and what did not: J1 windows fed / refused by reason; WARN for change_hold_windows after
+        a skipped window or a time discontinuity, with the reason."""
+        hold = self.config.change_hold_windows
+        text, level = "", OK
+        if self.inertia_refused or self.windows_skipped:
+            text = f"; J1 fed {self.inertia_fed} of {self.n_windows} windows"
+            refused = sum(self.inertia_refused.values())
+            if refused:
+                text += f", {refused} without J1 (" + ", ".join(
+                    f"{n} {k}" for k, n in sorted(self.inertia_refused.items(), key=lambda kv: -kv[1])) + ")"
+            skipped = sum(self.windows_skipped.values())
+            if skipped:
+                text += f", {skipped} skipped (" + ", ".join(
+                    f"{n} {k}" for k, n in sorted(self.windows_skipped.items(), key=lambda kv: -kv[1])) + ")"
+        if self.last_skip is not None and u.window_index - self.last_skip[0] < hold and not u.skipped:
+            level, text = WARN, text + f"; window {self.last_skip[0]} skipped: {self.last_skip[1]}"
+        if self.last_discontinuity is not None and u.window_index - self.last_discontinuity[0] < hold:
+            level, text = WARN, text + f"; {self.last_discontinuity[1]}"
+        return level, text
 
     def _with_change(self, level: int, txt: str, ch: Channel, idx: int, what) -> tuple[int, str]:
         """(level, txt) with the channel's held change (:meth:`_held_change`) appended and WARN raised."""
@@ -399,84 +511,30 @@ class TrendTracker:
         ev = next((e for e in reversed(self.changes) if e.quantity == ch.name), None)
         return "" if ev is None else f"{what(ev)} detected at window {ev.window_index} (t = {ev.time_s:.0f} s)"
 
-    # -- state --------------------------------------------------------------------------------------
+    # -- state (jident_ros.identify.trend_state) ------------------------------------------------------
     def to_dict(self) -> dict:
         """JSON-serialisable state (with the configuration), versioned."""
-        return {"kind": STATE_KIND, "version": STATE_VERSION, "config": self.config.to_dict(),
-                "n_windows": self.n_windows, "last_time_s": self.last_time_s,
-                "changes": [asdict(c) for c in self.changes],
-                "inertia": self._inertia.to_dict(), "width": self._width.to_dict()}
+        return state_to_dict(self)
 
     @classmethod
-    def from_dict(cls, d: Any, config: TrendConfig | None = None) -> "TrendTracker":
+    def from_dict(cls, d: Any, config: TrendConfig | None = None, plausible: dict | None = None) -> "TrendTracker":
         """Rebuild a tracker from :meth:`to_dict`'s output.  ``config`` replaces the saved
         configuration (thresholds may change between runs; width_regression_windows must match).
-        Raises :class:`TrendStateError` on anything unusable."""
-        if not isinstance(d, dict):
-            raise TrendStateError(f"trend state: expected a JSON object, got {type(d).__name__}")
-        if d.get("kind") != STATE_KIND:
-            raise TrendStateError(f"trend state: kind {d.get('kind')!r}, expected {STATE_KIND!r}")
-        if d.get("version") != STATE_VERSION:
-            raise TrendStateError(f"trend state: version {d.get('version')!r}, this code reads version {STATE_VERSION}")
-        try:
-            cfg = config if config is not None else TrendConfig.from_dict(d["config"])
-            tr = cls(cfg)
-            tr.n_windows = int(d["n_windows"])
-            tr.last_time_s = None if d["last_time_s"] is None else float(d["last_time_s"])
-            tr.changes = [ChangeEvent(**c) for c in d["changes"]]
-            tr._inertia.load(d["inertia"])
-            tr._width.load(d["width"])
-        except TrendStateError:
-            raise
-        except KeyError as e:
-            raise TrendStateError(f"trend state: missing field {e.args[0]!r}") from e
-        except (TypeError, ValueError, IndexError) as e:
-            raise TrendStateError(f"trend state: bad content ({e})") from e
-        return tr
+        Raises :class:`TrendStateError` on anything unusable or untrustworthy
+        (:func:`~jident_ros.identify.trend_state.check_state`, ``plausible`` bands)."""
+        return state_from_dict(cls, d, config, plausible)
 
     def save(self, path: str | os.PathLike):
         """Write the state atomically: temp file in the same directory, fsync, os.replace."""
-        path = os.fspath(path)
-        directory = os.path.dirname(os.path.abspath(path))
-        text = json.dumps(self.to_dict(), allow_nan=False, separators=(",", ":"))
-        fd, tmp = tempfile.mkstemp(prefix=os.path.basename(path) + ".", suffix=".tmp", dir=directory)
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as f:
-                f.write(text)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-            raise
-        try:
-            dfd = os.open(directory, os.O_RDONLY)
-            try:
-                os.fsync(dfd)
-            finally:
-                os.close(dfd)
-        except OSError:
-            pass
+        save_state(self, path)
 
     @classmethod
-    def load(cls, path: str | os.PathLike, config: TrendConfig | None = None) -> "TrendTracker":
+    def load(cls, path: str | os.PathLike, config: TrendConfig | None = None,
+             plausible: dict | None = None) -> "TrendTracker":
         """Read a state written by :meth:`save`.  TrendStateError when the file is unreadable,
-        not JSON, of another kind or version, or incomplete (FileNotFoundError when it does not exist)."""
-        path = os.fspath(path)
-        try:
-            with open(path, encoding="utf-8") as f:
-                d = json.load(f)
-        except FileNotFoundError:
-            raise
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-            raise TrendStateError(f"{path}: not a readable trend state ({e})") from e
-        try:
-            return cls.from_dict(d, config)
-        except TrendStateError as e:
-            raise TrendStateError(f"{path}: {e}") from e
+        not JSON, of another kind or version, incomplete or fails the checks naming the field
+        (FileNotFoundError when it does not exist)."""
+        return load_state(cls, path, config, plausible)
 
 
 def _isnan(v) -> bool:

@@ -36,6 +36,7 @@ class ChangeEvent:
     size_se: float
     size_pct: float             # per cent of the old baseline
     sign: int                   # +1 increase, -1 decrease
+    class_pct: float | None = None   # J1: the nearest of the paper's relative classes (TrendConfig.change_classes_pct)
 
 
 
@@ -82,6 +83,29 @@ class Channel:
         if self.cfg.se_scale_from_commissioning and dof > 0 \
                 and robust_scale ** 2 > chi2.ppf(SE_SCALE_TEST_LEVEL, dof) / dof:
             self.scale = min(robust_scale, self.cfg.se_scale_max)
+
+    def _scale_down(self):
+        """The baseline is refined (it rests on baseline_refine_windows windows): when their scatter about it is
+        significantly below what their standard errors say -- the 99 % upper confidence bound of the robust
+        scale below 1 -- the later standard errors (and the baseline's) are scaled by that bound (never below
+        se_scale_min; once).  An estimator whose errors are over-reported (e.g. a torque-accuracy floor the
+        drive's own scatter does not show) then sees a change as large as it is; calibrated or under-reported
+        errors are left alone."""
+        cfg = self.cfg
+        if not cfg.se_scale_down or self.scale != 1.0:
+            return
+        pts = list(self.history)[-cfg.baseline_refine_windows:]
+        n = len(pts)
+        if n < 10:
+            return
+        r = np.array([(p[2] - self.baseline) / p[3] for p in pts])
+        upper = m_scale(r, n / (n - 1.0)) * math.sqrt((n - 1) / chi2.ppf(1.0 - SE_SCALE_TEST_LEVEL, n - 1))
+        if upper < 1.0:
+            self.scale = max(upper, cfg.se_scale_min)
+            self.baseline_var *= self.scale ** 2
+            self.reference_var = min(self.reference_var, self.baseline_var) if self.reference_var else self.baseline_var
+            self.history = deque(((i, tt, yy, sd * self.scale) for i, tt, yy, sd in self.history),
+                                 maxlen=self.history.maxlen)
 
     def _commissioned(self, m: float, v: float, idx: int):
         """End of commissioning at window ``idx``: the baseline (and the kept reference) m with variance
@@ -145,9 +169,11 @@ class InertiaChannel(Channel):
             self.x, self.P, _ = weighted_mean(self.comm)
             if self._commissioning_done(t):
                 m, v, rs = huber_mean(self.comm, estimate_scale=True)
-                self._set_scale(rs, len(self.comm) - 1)
+                n_comm = len(self.comm)
+                self._set_scale(rs, n_comm - 1)
                 self._commissioned(m, v, idx)
                 self.x, self.P = m, self.baseline_var
+                self._start_refining(n_comm)
             return None
         se = se * self.scale
         p = (idx, t, y, se)
@@ -184,8 +210,9 @@ class InertiaChannel(Channel):
             self.seg_swy += w * (self.baseline + z * sd if z != zraw else y)
             self.seg_n += 1
             self.baseline, self.baseline_var = self.seg_swy / self.seg_sw, 1.0 / self.seg_sw
-            if self.seg_n >= cfg.commissioning_windows:
+            if self.seg_n >= cfg.baseline_refine_windows:
                 self.seg_n = 0
+                self._scale_down()
         sign = self.cusum.step(z, k, h, idx)
         if not sign:
             return None
@@ -206,12 +233,23 @@ class InertiaChannel(Channel):
             self._rebaseline(idx)
         return ev
 
+    def _start_refining(self, n: int):
+        """The baseline (on ``n`` windows) keeps being refined by the next windows up to baseline_refine_windows."""
+        v = self.baseline_var
+        if v is not None and v > 0.0 and n < self.cfg.baseline_refine_windows:
+            self.seg_sw, self.seg_swy, self.seg_n = 1.0 / v, self.baseline / v, n
+        else:
+            self.seg_n = 0
+
+    @property
+    def baseline_windows(self) -> int:
+        """Windows the current baseline rests on while it is still being refined (0: refined or given)."""
+        return self.seg_n
+
     def _rebaseline(self, idx: int):
         m, v, _ = huber_mean(self.relearn)
         self.baseline, self.baseline_var = m, v
-        self.seg_sw, self.seg_swy, self.seg_n = 1.0 / v, m / v, len(self.relearn)
-        if self.seg_n >= self.cfg.commissioning_windows:
-            self.seg_n = 0
+        self._start_refining(len(self.relearn))
         self.relearn = []
         self.phase = MONITORING
         self.cusum.reset(idx + 1)
@@ -242,6 +280,12 @@ class WidthChannel(Channel):
         self.pos = 0
         self.t0 = 0.0
         self.fit = None      # (t_mean_rel, y_mean, slope, s2, sum_w, sxx) or None
+
+    def new_segment(self, idx: int):
+        """A time discontinuity at window ``idx``: the regression line restarts (its slope never spans the
+        jump) and so does the CUSUM (it compares with that line); the baseline and the phase carry on."""
+        self._reset_segment(0.0)
+        self.cusum.reset(idx)
 
     def _reset_segment(self, t0: float):
         self.count = self.pos = 0

@@ -17,8 +17,13 @@ class TrendConfig:
     """Parameters of :class:`TrendTracker`; units in the names, ``_sd`` = in standard deviations of
     the standardised innovation, ``_pct`` = per cent of the baseline."""
 
-    #: commissioning: number of windows with an estimate (per quantity) used to learn the baseline
-    commissioning_windows: int = 20
+    #: commissioning: number of windows with an estimate (per quantity) that give the first baseline (issue 21:
+    #: few; the baseline's uncertainty is carried into the change test, and it keeps being refined, see below)
+    commissioning_windows: int = 5
+    #: after commissioning, J1's baseline keeps being refined by the monitored windows (winsorised at
+    #: innovation_clip_sd) until it rests on this many windows; changes are flagged meanwhile against a band
+    #: widened by its uncertainty (z = (y - b) / sqrt(se^2 + var b)).  <= commissioning_windows: no refinement
+    baseline_refine_windows: int = 20
     #: commissioning by duration instead (s since the quantity's first window; >= 3 windows); None: by count
     commissioning_duration_s: float | None = None
     #: given baselines (skip the J1 / width commissioning); standard errors of the given values
@@ -43,6 +48,11 @@ class TrendConfig:
     #: learn a factor s >= 1 for the reported standard errors from the commissioning scatter
     se_scale_from_commissioning: bool = False
     se_scale_max: float = 3.0
+    #: when the J1 baseline is refined (baseline_refine_windows), scale the later standard errors DOWN to the
+    #: 99 % upper bound of the baseline windows' scatter when that is below 1 (over-reported errors), not below
+    #: se_scale_min
+    se_scale_down: bool = True
+    se_scale_min: float = 0.25
     #: J1 local-level random walk, per cent of the baseline per window (1 sd)
     inertia_process_sd_pct_per_window: float = 0.02
     #: windows (since the estimated onset) averaged into the new baseline after a change
@@ -67,6 +77,16 @@ class TrendConfig:
     wear_significance_sd: float = 1.96
     #: change events kept in the state
     max_changes_kept: int = 100
+    #: the drive's torque-estimate accuracy (1 sd, % of the torque): a scale error that moves every absolute J1
+    #: alike and cancels in J1 relative to the drive's own baseline; it widens only the absolute J1's interval
+    torque_accuracy_pct: float = 0.0
+    #: a window more than this much drive time after the previous one (or any window before it: the drive's
+    #: clock went back, e.g. a restart) starts a new time segment: reported, the wear line restarts, nothing
+    #: is skipped for ever, s (default 7 days)
+    time_discontinuity_s: float = 7.0 * SECONDS_PER_DAY
+    #: the paper's J1 classes relative to the nominal, per cent: a change is named by the nearest
+    #: (1.131, 1.102, 1.073, 0.957, 1.189, 1.218 against 1.16); not a node parameter
+    change_classes_pct: tuple = (-2.5, -5.0, -7.5, -17.5, 2.5, 5.0)
 
     def __post_init__(self):
         def bad(name, rule):
@@ -90,21 +110,29 @@ class TrendConfig:
         count("change_hold_windows", 0)
         count("width_regression_windows", 3)
         count("max_changes_kept", 1)
+        count("baseline_refine_windows", 0)
         for n in ("commissioning_duration_s", "inertia_baseline_kgm2", "width_baseline_m", "cusum_threshold_sd",
                   "width_warn_m", "time_to_limit_warn_s"):
             pos(n, allow_none=True)
         for n in ("inertia_baseline_se_kgm2", "width_baseline_se_m", "inertia_process_sd_pct_per_window",
-                  "width_se_floor_m"):
+                  "width_se_floor_m", "torque_accuracy_pct"):
             pos(n, allow_zero=True)
         for n in ("cusum_reference_sd", "innovation_clip_sd", "drift_warn_pct", "drift_alarm_pct", "width_limit_m",
-                  "wear_significance_sd"):
+                  "wear_significance_sd", "time_discontinuity_s"):
             pos(n)
+        if not isinstance(self.change_classes_pct, tuple) or not self.change_classes_pct or not all(
+                isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) and c != 0
+                for c in self.change_classes_pct):
+            bad("change_classes_pct", "a non-empty tuple of finite non-zero per cents")
         pos("target_arl_windows")
         if self.target_arl_windows <= 1:
             bad("target_arl_windows", "> 1")
         pos("se_scale_max")
         if self.se_scale_max < 1:
             bad("se_scale_max", ">= 1")
+        pos("se_scale_min")
+        if self.se_scale_min > 1:
+            bad("se_scale_min", "<= 1")
         if self.innovation_clip_sd <= self.cusum_reference_sd:
             bad("innovation_clip_sd", f"> cusum_reference_sd ({self.cusum_reference_sd})")
         if self.drift_alarm_pct < self.drift_warn_pct:
@@ -138,6 +166,9 @@ class TrendConfig:
         unknown = set(d) - names
         if unknown:
             raise ValueError(f"{sorted(unknown)[0]}: unknown trend parameter")
+        d = dict(d)
+        if isinstance(d.get("change_classes_pct"), list):        # JSON has no tuples
+            d["change_classes_pct"] = tuple(d["change_classes_pct"])
         return cls(**d)
 
 
@@ -149,6 +180,12 @@ NODE_ONLY = set(TREND_NODE_ONLY)
 _INT_FIELDS = {f for n, f in TREND_FIELDS.items()
                if isinstance(TREND_PARAMS[n].default, int) and not isinstance(TREND_PARAMS[n].default, bool)}
 _BOOL_FIELDS = {f for n, f in TREND_FIELDS.items() if isinstance(TREND_PARAMS[n].default, bool)}
+#: TrendConfig fields that are not node parameters.
+NOT_PARAMETERS = {"change_classes_pct"}
+
+
+def _positive_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
 
 
 def _config_from_parameters(cls, params) -> "TrendConfig":
@@ -171,6 +208,11 @@ def _config_from_parameters(cls, params) -> "TrendConfig":
         else:
             v = float(v)
         kw[fname] = v
+    if not kw.get("torque_accuracy_pct") and _positive_number(params.get("torque_accuracy") if hasattr(params, "get")
+                                                              else None):
+        # the drive's declared torque accuracy (the gap estimator's ``torque_accuracy``: a uniform bound, fraction)
+        # as the absolute J1's 1-sd term, unless trend_torque_accuracy_pct sets its own
+        kw["torque_accuracy_pct"] = 100.0 * float(params["torque_accuracy"]) / math.sqrt(3.0)
     try:
         return cls(**kw)
     except ValueError as exc:

@@ -1,8 +1,9 @@
 """The pure pieces the diagnostic node needs for the trend (issue 14 part 2); no ROS.
 
-* :func:`trend_inputs`: one window's diagnosis -> what the tracker takes of it (the published J1 of
-  the gap estimate with its standard error, the backlash width estimate with its standard uncertainty:
-  the flank detector's when the window has one, else the gap estimator's, and which).
+* :func:`trend_inputs`: one window's diagnosis -> what the tracker takes of it (the gap estimate's J1
+  with its standard error whenever physics allows it, published or not; the backlash width estimate with its
+  standard uncertainty: the flank detector's when the window has one, else the gap estimator's, and which;
+  and why there is no J1).
 * :func:`trend_status`: a :class:`~jident_ros.identify.trend.TrendUpdate` -> the content of the
   diagnostic node's periodic "jident_diagnostic: trend" DiagnosticStatus: (level, message,
   [(key, value), ...]) with the levels of diagnostic_msgs (OK 0, WARN 1, ERROR 2), the tracker's one-line
@@ -24,50 +25,97 @@ Z95 = 1.959963984540054
 
 
 class TrendInputs(NamedTuple):
-    """What :meth:`TrendTracker.update` takes of one window (None where a quantity is not known) and where
-    the width came from: ``width_source`` 'flank' (the flank detector's flank-to-flank K2 of the window,
-    window format 2's ``backlash_width_estimate_m``), 'gap' (the gap estimator's width at re-contact: the
-    fallback when the window has no flank estimate) or None (no width)."""
+    """What :meth:`TrendTracker.update` takes of one window (None where a quantity is not known), where the
+    width came from, and why the window has no J1: ``width_source`` 'flank' (the flank detector's
+    flank-to-flank K2 of the window, window format 2's ``backlash_width_estimate_m``), 'gap' (the gap
+    estimator's width at re-contact: the fallback when the window has no flank estimate) or None (no width);
+    ``inertia_refused`` one of :data:`REFUSAL_KINDS` when the window has no J1 for the trend, else None."""
 
     inertia_kgm2: Optional[float]
     inertia_se_kgm2: Optional[float]
     width_m: Optional[float]
     width_se_m: Optional[float]
     width_source: Optional[str]
+    inertia_refused: Optional[str] = None
 
 
 #: the width sources of :class:`TrendInputs`
 WIDTH_SOURCES = ("flank", "gap")
+
+#: Why a window gives the trend no J1 (issue 21: only physics refuses an estimate; the class verdict does not):
+#: the key counted by the tracker -> what it means.
+REFUSAL_KINDS = {
+    "outside_band": "the gap J1 is outside the plausible band (a false entry, a wrong K2, radius or torque scale)",
+    "inconsistent": "the gap fit is inconsistent with the window (the K2 disagrees with the re-contact)",
+    "no_gap": "no gap estimate (undetermined, too short, no usable fit)",
+    "input": "the window's input was refused",
+    "no_std_error": "a J1 without a standard error (the image method's class alone)",
+}
 
 
 def _finite(*v) -> bool:
     return all(x is not None and math.isfinite(float(x)) for x in v)
 
 
+def _gap_se(g) -> float:
+    """The gap J1's standard error for the trend: the fit's (else from its 95 % interval) WITHOUT the drive's
+    torque-accuracy term (``std_error_terms``' 'torque_accuracy'): a scale error of m_el moves every J1 of the
+    drive alike and cancels in J1 relative to its own baseline, which is what the trend tests; the absolute J1
+    gets it back (TrendConfig.torque_accuracy_pct)."""
+    se = g.std_error_kgm2
+    if se is None or not math.isfinite(float(se)):
+        lo, hi = (float(v) for v in g.ci95_kgm2)
+        se = (hi - lo) / (2 * Z95)
+    common = dict(getattr(g, "std_error_terms", ()) or ()).get("torque_accuracy", 0.0)
+    if common and math.isfinite(float(common)) and 0.0 < float(common) < float(se):
+        se = math.sqrt(float(se) ** 2 - float(common) ** 2)
+    return float(se)
+
+
+def refusal_kind(diagnosis) -> Optional[str]:
+    """None when the window's gap estimate goes to the trend, else the :data:`REFUSAL_KINDS` key.  A gap
+    estimate goes to the trend whatever its class verdict ('ambiguous': an interval over two classes, or
+    'between classes'), unless the publishing policy refused it for a physical reason ('refused': outside the
+    plausible band, K2 inconsistent with the re-contact), or it is not finite."""
+    g = getattr(diagnosis, "gap", None)
+    status = getattr(diagnosis, "status", None)
+    if g is None:
+        if getattr(diagnosis, "inertia_kgm2", None) is not None:
+            return "no_std_error"
+        return "input" if status == "refused" else "no_gap"
+    if status == "refused":
+        return "outside_band" if "plausible band" in (getattr(diagnosis, "refused_reason", "") or "") \
+            else "inconsistent"
+    if not _finite(g.inertia_kgm2) or not _finite(_gap_se(g)) or not _gap_se(g) > 0.0:
+        return "no_gap"
+    return None
+
+
 def trend_inputs(diagnosis, width_se_floor_m: float = 0.0, window=None) -> TrendInputs:
     """The tracker's inputs from one window's :class:`~jident_ros.identify.diagnosis.WindowDiagnosis`
     (and the :class:`~jident_ros.stream.layout.Window` it was diagnosed from, when at hand).
 
-    J1 only when the published J1 is the gap estimate (``source == 'gap'``: the policy accepted it; a
-    refused or ambiguous gap estimate is not used): its standard error is the fit's, else
-    (high - low) / (2 x 1.96) of its 95 % interval; a J1 of the image method alone has no standard error
-    and is not used.  The width K2, in this order of preference (``width_source``):
+    J1: the gap estimate whenever physics allows it (:func:`refusal_kind`), published or not (an 'ambiguous'
+    window, whose interval holds two classes, still carries its J1 and standard error: twenty such windows
+    can name a change that one cannot); its standard error is the fit's, else (high - low) / (2 x 1.96) of its
+    95 % interval; a J1 of the image method alone has no standard error and is not used.  The width K2, in
+    this order of preference (``width_source``):
 
     * 'flank': the flank detector's flank-to-flank estimate of the window (``window``'s
       ``backlash_width_estimate_m`` / ``backlash_width_se_m``, or the diagnosis' width when it came from
       the window: method 'flank'), whether or not the gap fit succeeded;
     * 'gap': the gap estimator's width at re-contact (paper-detector windows, zone-centred angles);
 
-    its standard uncertainty at least ``width_se_floor_m`` (the tracker's floor)."""
+    none when the gap estimate was refused as physically implausible or inconsistent (the window is then
+    likely a false entry: its width is not trusted either); its standard uncertainty at least
+    ``width_se_floor_m`` (the tracker's floor)."""
     j = jse = w = wse = src = None
+    kind = refusal_kind(diagnosis)
     g = getattr(diagnosis, "gap", None)
-    if g is not None and getattr(diagnosis, "source", None) == "gap" and diagnosis.inertia_kgm2 is not None:
-        j = float(g.inertia_kgm2)
-        se = g.std_error_kgm2
-        if se is None or not math.isfinite(float(se)):
-            lo, hi = (float(v) for v in g.ci95_kgm2)
-            se = (hi - lo) / (2 * Z95)
-        jse = float(se)
+    if kind is None:
+        j, jse = float(g.inertia_kgm2), _gap_se(g)
+    if kind in ("outside_band", "inconsistent"):
+        return TrendInputs(None, None, None, None, None, kind)
     est = getattr(window, "backlash_width_estimate_m", None)
     est_se = getattr(window, "backlash_width_se_m", None)
     width = getattr(diagnosis, "width", None)
@@ -78,11 +126,16 @@ def trend_inputs(diagnosis, width_se_floor_m: float = 0.0, window=None) -> Trend
         src = "flank" if getattr(width, "method", "") == "flank" else "gap"
     if w is not None:
         wse = max(wse, float(width_se_floor_m))
-    return TrendInputs(j, jse, w, wse, src)
+    return TrendInputs(j, jse, w, wse, src, kind)
 
 
 def _v(x: Optional[float]) -> Any:
     return "" if x is None or (isinstance(x, float) and not math.isfinite(x)) else float(x)
+
+
+def _counts(d: dict) -> str:
+    """{reason: n} -> 'reason n, reason n' (largest first); '' when empty."""
+    return ", ".join(f"{k} {n}" for k, n in sorted(d.items(), key=lambda kv: -kv[1]))
 
 
 def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
@@ -94,7 +147,10 @@ def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
     inertia_se_kgm2, inertia_baseline_kgm2, inertia_reference_kgm2, inertia_drift_pct,
     inertia_drift_se_pct, inertia_drift_from_reference_pct, backlash_width_m (regression line),
     backlash_width_se_m, backlash_width_baseline_m, wear_rate_m_per_day, wear_rate_se_m_per_day,
-    time_to_limit_days (+ _low, _high), changes_detected (at this window), and for the last change
+    time_to_limit_days (+ _low, _high), changes_detected (at this window), inertia_drift_ci95_low_pct /
+    _high_pct, inertia_abs_se_kgm2 (with the torque-accuracy term), inertia_baseline_windows_refining (0: refined),
+    inertia_windows_fed, inertia_windows_refused and windows_skipped (by reason, 'reason n, ...'), time_segment,
+    and for the last change
     of this window: last_change_quantity, last_change_time_s, last_change_onset_time_s,
     last_change_size, last_change_size_pct."""
     def days(s):
@@ -114,6 +170,13 @@ def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
             ("time_to_limit_low_days", _v(days(u.time_to_limit_low_s))),
             ("time_to_limit_high_days", _v(days(u.time_to_limit_high_s))),
             ("changes_detected", len(u.changes))]
+    lo_hi = u.inertia_drift_ci95_pct or (None, None)
+    vals += [("inertia_drift_ci95_low_pct", _v(lo_hi[0])), ("inertia_drift_ci95_high_pct", _v(lo_hi[1])),
+             ("inertia_abs_se_kgm2", _v(u.inertia_abs_se_kgm2)),
+             ("inertia_baseline_windows_refining", int(u.inertia_baseline_windows)),
+             ("inertia_windows_fed", int(u.inertia_windows_fed)),
+             ("inertia_windows_refused", _counts(u.inertia_windows_refused)),
+             ("windows_skipped", _counts(u.windows_skipped)), ("time_segment", int(u.time_segment))]
     if u.changes:
         c = u.changes[-1]
         vals += [("last_change_quantity", c.quantity), ("last_change_time_s", c.time_s),
@@ -122,5 +185,5 @@ def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
     return int(u.level), u.message, vals
 
 
-__all__ = ["TREND_STATUS_NAME", "TrendInputs", "WIDTH_SOURCES", "trend_inputs",
-           "trend_status"]
+__all__ = ["REFUSAL_KINDS", "TREND_STATUS_NAME", "TrendInputs", "WIDTH_SOURCES", "refusal_kind",
+           "trend_inputs", "trend_status"]

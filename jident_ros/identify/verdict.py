@@ -32,6 +32,7 @@ from typing import Mapping, Optional
 import numpy as np
 
 from jident_ros.identify.gap import GapEstimate, NoGapError, gap_interval
+from jident_ros.identify.gap_free import GapModel
 
 #: Window channels whose magnitude is bounded (see :func:`input_bounds`).
 BOUNDED = ("m_el", "omega1", "omega2", "a1", "a2", "v2")
@@ -67,6 +68,12 @@ class VerdictPolicy:
     max_torque_factor : |m_el| above this many base torques M_b is absurd (refused)
     max_speed_factor : |omega1|, |omega2| above this many synchronous speeds Omega_b is absurd; |v2|
         above r times that; |a1|, |a2| above r x (max torque) / (plausible_min_ratio x nominal J1)
+    torque_accuracy : the drive's torque estimate (m_el) scale-error bound, fraction (0.02 = 2 %): J1 a/sqrt(3)
+        in every gap fit's standard error, so in the 95 % interval and the 'between classes' test
+    coulomb_friction_max_nm : the motor's Coulomb (bearing) friction lies in [0, this], N m: fitted in the gap
+        inside that band when the torque varies enough, else a bounded term of the standard error
+    viscous_friction_band_nms_per_rad : the viscous friction is motor.bearing_friction_nms_per_rad ± this,
+        N m s/rad (a bounded term)
     """
 
     plausible_min_ratio: float = 0.5
@@ -75,6 +82,16 @@ class VerdictPolicy:
     library_width_tolerance: float = 0.05
     max_torque_factor: float = 100.0
     max_speed_factor: float = 10.0
+    # the gap fits' drive model (jident_ros.identify.gap_free.GapModel; issue 20)
+    torque_accuracy: float = 0.0
+    coulomb_friction_max_nm: float = 0.0
+    viscous_friction_band_nms_per_rad: float = 0.0
+
+    def gap_model(self) -> GapModel:
+        """The gap fits' drive model from this policy's torque accuracy and friction band."""
+        return GapModel(torque_accuracy=float(self.torque_accuracy),
+                        coulomb_friction_max_nm=float(self.coulomb_friction_max_nm),
+                        viscous_friction_band_nms_per_rad=float(self.viscous_friction_band_nms_per_rad))
 
     @classmethod
     def from_params(cls, params: Mapping) -> "VerdictPolicy":
@@ -99,6 +116,11 @@ class VerdictPolicy:
         for name in ("library_width_tolerance", "max_torque_factor", "max_speed_factor"):
             if not getattr(self, name) > 0:
                 out.append((name, "a number > 0"))
+        if not 0 <= self.torque_accuracy < 0.5:
+            out.append(("torque_accuracy", "a fraction in [0, 0.5)"))
+        for name in ("coulomb_friction_max_nm", "viscous_friction_band_nms_per_rad"):
+            if not getattr(self, name) >= 0:
+                out.append((name, "a number >= 0"))
         return out
 
     def check(self) -> None:

@@ -370,15 +370,7 @@ def _squarem(xn, c, s, p, lam, tol, max_iter):
             s, s1, r, res0 = s[keep], s1[keep], r[keep], res0[keep]
         s2 = g(s1)
         evals += 1
-        v = s2 - 2.0 * s1 + s
-        nr = np.sqrt(np.add.reduce(r * r, axis=1))
-        nv = np.sqrt(np.add.reduce(v * v, axis=1))
-        if (nv > 0).all():
-            a = np.minimum(-nr / nv, -1.0)
-        else:
-            a = np.minimum(np.where(nv > 0, -nr / np.where(nv > 0, nv, 1.0), -1.0), -1.0)
-        a = a[:, None]
-        ext = s - 2.0 * a * r + a * a * v
+        ext = _squarem_point(s, s1, s2, r)
         new = g(ext)
         evals += 1
         res_new = np.maximum.reduce(np.abs(new - ext), axis=1)
@@ -391,3 +383,17 @@ def _squarem(xn, c, s, p, lam, tol, max_iter):
     out = at_conv.copy()     # max_iter reached: converged rows keep s_c
     out[active] = s
     return out, evals, converged
+
+
+def _squarem_point(s, s1, s2, r):
+    """SQUAREM's extrapolated point s - 2 a r + a^2 v, v = s2 - 2 s1 + s, a = -|r|/|v| (at most -1; -1 where
+    v = 0), per row."""
+    v = s2 - 2.0 * s1 + s
+    nr = np.sqrt(np.add.reduce(r * r, axis=1))
+    nv = np.sqrt(np.add.reduce(v * v, axis=1))
+    if (nv > 0).all():
+        a = np.minimum(-nr / nv, -1.0)
+    else:
+        a = np.minimum(np.where(nv > 0, -nr / np.where(nv > 0, nv, 1.0), -1.0), -1.0)
+    a = a[:, None]
+    return s - 2.0 * a * r + a * a * v

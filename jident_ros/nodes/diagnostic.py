@@ -11,7 +11,7 @@ A thin ROS adapter over :class:`jident_ros.identify.monitor.DriveMonitor` and
    against the pattern library; when the window has no usable gap, the fused verdict's class J1
    (the margin-weighted vote of the five signals, :mod:`jident_ros.identify.fusion`) is what goes
    out on ``inertia_estimate``;
-3. one DiagnosticStatus "jident: inertia" on ``/diagnostics`` (REP 107) per window: OK when the verdict's
+3. one DiagnosticStatus "<ns>/jident_diagnostic: inertia" on ``/diagnostics`` (REP 107) per window: OK when the verdict's
    class is the nominal J1; WARN when it deviates, lies between classes, or the image method's vote
    disagrees with the gap; ERROR when the window could not be diagnosed (unreadable, or its length, sample
    period or wheel radius differ from the configuration).
@@ -64,7 +64,9 @@ from jident_ros.identify.trend_status import WIDTH_SOURCES
 from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.nodes.bag_recording import RecorderError, Recording
 from jident_ros.nodes.diagnostic_trend import TrendTask
-from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater
+from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater, status_name
+from jident_ros.nodes.estimate_out import TOPICS as STAMPED_TOPIC_TYPES
+from jident_ros.nodes.estimate_out import StampedEstimate
 from jident_ros.nodes.params import (
     ParameterError,
     RuntimeParameters,
@@ -80,10 +82,13 @@ from jident_ros.nodes.ros_io import LayoutError, make_status, qos_latched, qos_s
 from jident_ros.nodes.runtime import RunnableNode
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, gap_method_problem
+from jident_ros.stream.text import plain_numbers
 
 NODE_NAME = "jident_diagnostic"
 #: Each window's result.
-STATUS_NAME = "jident: inertia"
+STAMPED_TOPICS = tuple(topic for topic, _ in STAMPED_TOPIC_TYPES)
+CASE_QUEUE_DEPTH = 100   # drive/case, drive/true_inertia, drive/backlash_width: subscribed and recorded with it
+STATUS_TASK = "inertia"   # event status "<ns>/jident_diagnostic: inertia", one per window
 #: Periodic tasks (status names "jident_diagnostic: <task>").
 TASKS = ("diagnosis", "library", "recorder", "trend")
 #: Period of the task statuses, s (steady clock).
@@ -167,6 +172,7 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         self.last_window_id = None
         self.window_id_restarts = 0
         self.last_estimate = None
+        self.published_j1 = None       # J1 sent on inertia_estimate for the window being diagnosed
         self.last_message = ""
         self.last_input = None             # steady time (s) of the last drive/window or drive/progress
         self.started = time.monotonic()
@@ -174,6 +180,7 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         self.monitor = DriveMonitor(None, self._diagnoser())   # .tracker: TrendTracker (trend_enabled, configured)
         self.trend_update = None           # its last TrendUpdate
         self.trend_error = None            # why the trend's state file was not used (ERROR), one line
+        self.trend_state_refused = False   # trend_state_file is not a regular file: never read nor written
         self.trend_save_error = None       # the last failure to write the state file (ERROR), one line
         self.trend_windows_without_estimate = 0
         self.trend_width_source = ""        # where the last window's width came from: flank, gap or none
@@ -192,6 +199,14 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         self.parameters = RuntimeParameters(self, self.schema, values, validate, self.on_parameters)
 
     # ----------------------------------------------------------------- lifecycle
+    def make_executor(self):
+        """SingleThreadedExecutor, not the EventsExecutor of the other nodes: the recorder's subscriptions take
+        ``(msg, MessageInfo)`` (the publish time), and rclpy 9.1's EventsExecutor fails on such callbacks
+        ("SystemError: null argument to internal routine" from spin_until_future_complete; issue 25).  It costs
+        this node the executor overhead the others shed (bench/bench_ros.py --profile)."""
+        from rclpy.executors import SingleThreadedExecutor
+        return SingleThreadedExecutor(context=self.context)
+
     def autostart(self) -> None:
         """Configure + activate (``ros2 run``, the launch file): the node works as an unmanaged one."""
         self.trigger_configure()
@@ -203,6 +218,7 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         if c["image_method"]:
             self._load_library()
         self.pub_estimate = self.create_lifecycle_publisher(Float64, "inertia_estimate", qos_latched())
+        self.stamped = StampedEstimate(self, qos_latched())      # inertia_estimate/stamped and /detail
         if c["trend_enabled"]:
             self._start_trend()
             self.pub_inertia_trend = self.create_lifecycle_publisher(Float64, "inertia_trend", qos_latched())
@@ -214,13 +230,16 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         if self.recorder is not None and c["record_signals"]:
             sq = qos_signals(c["signals_queue_depth"])
             # raw: the CDR bytes go to the recording as received, never decoded here
+            # each callback also takes the message info: its source timestamp is recorded as the publish time
+            # (as rosbag2 does), so a reader can restore the order the drive sent its topics in (replay = live)
             self.subs.append(self.create_subscription(Float64MultiArray, "drive/signals",
-                                                      lambda m: self._record("drive/signals", m), sq, raw=True))
-            deep = qos_latched(100)  # keep every case message while a window is being diagnosed
+                                                      lambda m, i: self._record("drive/signals", m, i), sq, raw=True))
+            deep = qos_latched(CASE_QUEUE_DEPTH)  # keep every case message while a window is being diagnosed
             for name in ("drive/backlash_width", "drive/true_inertia"):
-                self.subs.append(self.create_subscription(Float64, name, lambda m, n=name: self._record(n, m), deep))
+                self.subs.append(self.create_subscription(Float64, name, lambda m, i, n=name: self._record(n, m, i),
+                                                          deep))
             self.subs.append(self.create_subscription(Float64MultiArray, "drive/case",
-                                                      lambda m: self._record("drive/case", m), deep))
+                                                      lambda m, i: self._record("drive/case", m, i), deep))
         if self.recorder is not None:  # a chunk never waits long in memory (flush age 0.5 s), even when messages pause
             self.flush_timer = self.create_timer(0.25, self._flush_bag, clock=self.steady)
         self.updater.force_update()
@@ -331,17 +350,19 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
             return
         if c["record_dir"]:
             self.get_logger().warning("record_dir is deprecated: use record_root (bags get rosbag2 names under it)")
-        topics = [("drive/window", "std_msgs/msg/Float64MultiArray", qos_latched(self.cfg["window_queue_depth"])),
+        # True: another node's topic, recorded with the QoS its publishers offer (nodes/recorded_qos.py)
+        topics = [("drive/window", "std_msgs/msg/Float64MultiArray", qos_latched(self.cfg["window_queue_depth"]), True),
                   ("inertia_estimate", "std_msgs/msg/Float64", qos_latched()),
+                  *((topic, typ, qos_latched()) for topic, typ in STAMPED_TOPIC_TYPES),
                   ("inertia_trend", "std_msgs/msg/Float64", qos_latched()),
                   ("backlash_width_trend", "std_msgs/msg/Float64", qos_latched()),
                   ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", self.diag.pub.qos_profile)]
         if self.cfg["record_signals"]:
             topics += [("drive/signals", "std_msgs/msg/Float64MultiArray",
-                        qos_signals(self.cfg["signals_queue_depth"])),
-                       ("drive/backlash_width", "std_msgs/msg/Float64", qos_latched()),
-                       ("drive/true_inertia", "std_msgs/msg/Float64", qos_latched()),
-                       ("drive/case", "std_msgs/msg/Float64MultiArray", qos_latched())]
+                        qos_signals(self.cfg["signals_queue_depth"]), True),
+                       ("drive/backlash_width", "std_msgs/msg/Float64", qos_latched(CASE_QUEUE_DEPTH), True),
+                       ("drive/true_inertia", "std_msgs/msg/Float64", qos_latched(CASE_QUEUE_DEPTH), True),
+                       ("drive/case", "std_msgs/msg/Float64MultiArray", qos_latched(CASE_QUEUE_DEPTH), True)]
         try:
             self.recorder = Recording(self, c, topics)
             self.get_logger().info(f"recording to {self.recorder.bag_dir}")
@@ -349,17 +370,19 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
             self.recorder_error = f"not recording: {exc}"
             self.get_logger().error(self.recorder_error)
 
-    def _record(self, name, msg):
+    def _record(self, name, msg, info=None):
         if self.recorder is not None:
-            self.recorder.write(name, msg)
+            sent = (info or {}).get("source_timestamp") or None    # rclpy's MessageInfo; 0: not known
+            # after a failure: counted as dropped, by reason
+            self.recorder.write(name, msg, sent if sent is None or 0 < sent < 2**63 else None)
             if self.recorder.error:
-                self.close()
+                self.recorder.finalise_failed()
 
     def _flush_bag(self):
-        if self.recorder is not None:
+        if self.recorder is not None and self.recorder.open:
             self.recorder.flush()
             if self.recorder.error:
-                self.close()
+                self.recorder.finalise_failed()
 
     def recorder_status(self, stat):
         rec = self.recorder or getattr(self, "_closed_recorder", None)
@@ -367,6 +390,10 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
             stat.summary(ERROR, self.recorder_error)
         elif not self.cfg["record"]:
             stat.summary(OK, "not recording (record is false)")
+        elif self.recorder is not None and self.recorder.error:
+            st = self.recorder.status()
+            stat.summary(ERROR, f"recording stopped: {self.recorder.error}; {st['messages_dropped']} message(s) "
+                         "dropped since (by reason in the values)")
         elif self.recorder is not None:
             stat.summary(OK, f"recording to {self.recorder.bag_dir}")
         else:
@@ -386,19 +413,25 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         try:
             self._record("drive/window", msg)
             if not self.active:
+                # ignored, not lost: its id moves on, so the next diagnosed window sees no gap
                 self.windows_inactive += 1
+                try:
+                    self.last_window_id = int(window_from_msg(msg).window_id)
+                except (LayoutError, ValueError):
+                    pass
                 return
             self.windows_seen += 1
             self._diagnose(msg, t_recv)
         except Exception as exc:  # never die on a window: report, go on
-            text = f"window could not be diagnosed: internal error {type(exc).__name__}: {exc}"
+            text = plain_numbers(f"window could not be diagnosed: internal error {type(exc).__name__}: {exc}")
             self.get_logger().error(text)
             try:
-                self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id))
+                self.diag.publish(make_status(status_name(self, STATUS_TASK), ERROR, text, self.hardware_id))
             except Exception:
                 pass
 
     def _publish_estimate(self, j1):
+        self.published_j1 = float(j1)
         m = Float64(data=float(j1))
         self.pub_estimate.publish(m)
         self._record("inertia_estimate", m)
@@ -450,23 +483,25 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         except LayoutError as exc:
             text = f"window could not be diagnosed: unreadable drive/window message: {exc}"
             self.get_logger().error(text)
-            self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id))
+            self.diag.publish(make_status(status_name(self, STATUS_TASK), ERROR, text, self.hardware_id))
             return
         self._count_window_id(int(win.window_id))
         errors, warnings = self.check_window(win)
         if errors:
             self.windows_mismatched += 1
-            text = f"window {win.window_id} not diagnosed: it does not match the configuration: " + "; ".join(errors)
+            text = plain_numbers(f"window {win.window_id} not diagnosed: it does not match the configuration: "
+                                 + "; ".join(errors))
             self.get_logger().error(text, throttle_duration_sec=1.0)
             self.last_message = text
-            self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id,
+            self.diag.publish(make_status(status_name(self, STATUS_TASK), ERROR, text, self.hardware_id,
                                           [("window_id", win.window_id), ("entry_time_s", win.entry_time_s),
                                            ("mismatch", "; ".join(errors))]))
             return
         # the gap estimate goes out on inertia_estimate (on_estimate) before the image method runs
+        self.published_j1 = None
         result = self.monitor.window(win, on_estimate=self._publish_estimate, started_at=t_recv)
         d = result.diagnosis
-        level, message, values = d.level, d.message, list(d.values)
+        level, message, values = d.level, plain_numbers(d.message), list(d.values)
         if warnings:
             self.windows_mismatched += 1
             level = max(level, WARN)
@@ -479,7 +514,11 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         else:
             self.get_logger().error(message)
         self.last_message = message
-        self.diag.publish(make_status(STATUS_NAME, level, message, self.hardware_id, values))
+        self.diag.publish(make_status(status_name(self, STATUS_TASK), level, message, self.hardware_id, values))
+        if self.published_j1 is not None:
+            for topic, msg in zip(STAMPED_TOPICS, self.stamped.publish(win.window_id, win.entry_time_s,
+                                                                        self.published_j1, values, level)):
+                self._record(topic, msg)
         if self.trend is not None:
             self._update_trend(win, result)
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import os
+import stat
 import time
 
 from std_msgs.msg import Float64
@@ -14,6 +15,18 @@ from std_msgs.msg import Float64
 from jident_ros.identify.levels import ERROR, OK
 from jident_ros.identify.trend import TrendConfig, TrendStateError, TrendTracker
 from jident_ros.identify.trend_status import trend_status
+
+
+def _not_regular(path: str) -> str:
+    """What ``path`` is when it exists and is not a regular file ("a FIFO", "a directory", ...), else ""."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return ""
+    if stat.S_ISREG(mode):
+        return ""
+    return {stat.S_IFIFO: "a FIFO", stat.S_IFDIR: "a directory", stat.S_IFCHR: "a character device",
+            stat.S_IFBLK: "a block device", stat.S_IFSOCK: "a socket"}.get(stat.S_IFMT(mode), "not a file")
 
 
 class TrendTask:
@@ -31,8 +44,17 @@ class TrendTask:
         if not path:
             return
         path = os.path.expanduser(path)
+        kind = _not_regular(path)
+        if kind:   # a FIFO would block the read (and configure with it), a device or directory is not a state file
+            self.trend_state_refused = True
+            self.trend_error = (f"trend_state_file {path}: {kind}, not a regular file: not read, not written; "
+                                "the trend runs without a state file")
+            self.get_logger().error(self.trend_error)
+            return
         try:
-            self.trend = TrendTracker.load(path, config)
+            # checked on load (identify/trend_state.py): J1 within the policy's plausible band of the nominal
+            plausible = {"inertia_kgm2": self.policy.band_kgm2(self.nominal)}
+            self.trend = TrendTracker.load(path, config, plausible)
             self.get_logger().info(f"trend state read from {path} ({self.trend.n_windows} window(s) so far)")
         except FileNotFoundError:
             self.get_logger().info(f"trend state file {path} does not exist yet: the trend starts fresh")
@@ -70,7 +92,7 @@ class TrendTask:
         for ev in u.changes:
             self.get_logger().warning(f"trend: change of {ev.quantity} detected at window {win.window_id}: "
                                       f"{ev.size_pct:+.2f} % (onset t = {ev.onset_time_s:.3f} s)")
-        if self.cfg["trend_state_file"]:
+        if self.cfg["trend_state_file"] and not getattr(self, "trend_state_refused", False):
             path = os.path.expanduser(self.cfg["trend_state_file"])
             try:
                 self.trend.save(path)

@@ -1,28 +1,39 @@
 """/diagnostics of the nodes (REP 107): event statuses and periodic task statuses.
 
 * :class:`DiagnosticsPublisher` publishes event statuses as they happen (a dropped window, each
-  window's result "jident: inertia"), stamped with the node's clock.
+  window's result "<ns>/jident_diagnostic: inertia"), stamped with the node's clock.
+* Status names: ``"<namespace>/<node name>: <task>"`` (:func:`status_name`), e.g. ``press3/jident_diagnostic:
+  inertia``, ``jident_windowing: rate`` in the root namespace: the node and the task, and unique per drive --
+  diagnostic_aggregator keys its items by name, so two drives in two namespaces no longer overwrite each other
+  (config/analyzers.yaml groups them; docs/interfaces.md).
 * :class:`Updater` runs periodic *tasks* — ``add(name, callback)``, ``period`` — the API of ROS's
   ``diagnostic_updater.Updater``: every ``period`` it calls each task's callback with a
   :class:`DiagnosticStatusWrapper` (``summary(level, message)``, ``add(key, value)``) and publishes
-  the results in one DiagnosticArray; the status names are ``"<node name>: <task name>"`` as
-  diagnostic_updater names them.  A ROS distribution's diagnostic_updater is used when it is
-  installed (:data:`USING_DIAGNOSTIC_UPDATER`); the plain venv has no wheel of it, and then this
-  module's small equivalent runs.  Unlike diagnostic_updater's, this Updater's timer runs on the
-  node's *steady* clock: with ``use_sim_time`` a stopped (or foreign) /clock cannot stop the statuses.
+  the results in one DiagnosticArray.  diagnostic_updater names them ``"<node name>: <task>"`` without the
+  namespace, which is not unique per drive; this Updater (always used) names them by :func:`status_name`, and
+  its timer runs on the node's *steady* clock: with ``use_sim_time`` a stopped (or foreign) /clock cannot stop
+  the statuses.
 """
 from __future__ import annotations
 
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES, OK, STALE, WARN  # noqa: F401  (re-exported)
 from jident_ros.nodes.ros_io import format_value, make_diagnostic_array, qos_diagnostics
 
-try:  # a ROS distribution's diagnostic_updater (optional: no wheel for the venv)
-    from diagnostic_updater import DiagnosticStatusWrapper as _RosWrapper  # noqa: F401
-    from diagnostic_updater import Updater as _RosUpdater
-    USING_DIAGNOSTIC_UPDATER = True
-except ImportError:
-    _RosUpdater = None
-    USING_DIAGNOSTIC_UPDATER = False
+#: The periodic statuses come from this module's Updater, never from a distribution's diagnostic_updater
+#: (its names lack the namespace: two drives would share them).
+USING_DIAGNOSTIC_UPDATER = False
+
+
+def status_name(node, task: str) -> str:
+    """``"<namespace>/<node name>: <task>"`` (no leading slash; the root namespace adds nothing)."""
+    return f"{node.get_fully_qualified_name().lstrip('/')}: {task}"
+
+
+def status_task(name: str) -> str:
+    """``"<node name>: <task>"`` of a status name (its namespace removed): what one drive's statuses share
+    with another's."""
+    node, sep, task = name.partition(": ")
+    return f"{node.rsplit('/', 1)[-1]}{sep}{task}"
 
 
 def drive_hardware_id(node, given: str = "") -> str:
@@ -121,7 +132,7 @@ class JidentUpdater:
         return len(self.tasks) < n
 
     def _name(self, task_name: str) -> str:
-        return f"{self.node.get_name()}: {task_name}"
+        return status_name(self.node, task_name)
 
     def update(self) -> None:
         self.force_update()
@@ -155,22 +166,9 @@ class JidentUpdater:
 
 
 def make_updater(node, period: float, publisher: DiagnosticsPublisher):
-    """The periodic-status Updater of a node: a ROS distribution's ``diagnostic_updater.Updater`` where
-    one is installed, else :class:`JidentUpdater` (same API: ``add``, ``setHardwareID``,
-    ``force_update``).  diagnostic_updater's timer runs on the node's ROS clock (with use_sim_time it
-    would stop with /clock, or follow another drive's); it is replaced by one on the steady clock, so the
-    statuses (and STALE) follow the node's own time in both cases.  (No ROS distribution here: that
-    branch is not exercised by the tests of the venv.)"""
-    if _RosUpdater is None:
-        return JidentUpdater(node, period, publisher)
-    from rclpy.clock import Clock, ClockType
-    up = _RosUpdater(node, period=period)
-    timer = getattr(up, "timer", None)
-    if timer is not None:
-        node.destroy_timer(timer)
-    if period > 0:
-        up.steady_timer = node.create_timer(period, up.update, clock=Clock(clock_type=ClockType.STEADY_TIME))
-    return up
+    """The periodic-status Updater of a node (:class:`JidentUpdater`: diagnostic_updater.Updater's API --
+    ``add``, ``setHardwareID``, ``force_update`` -- with names unique per drive, on the steady clock)."""
+    return JidentUpdater(node, period, publisher)
 
 
 #: The Updater of the plain venv (diagnostic_updater.Updater's API); nodes get theirs from make_updater.

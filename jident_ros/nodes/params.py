@@ -10,7 +10,9 @@ and the value (:func:`jident_ros.nodes.runtime.main` prints it and exits with st
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import re
 from typing import Any, Callable, Mapping
 
 from jident_ros.config import (
@@ -21,8 +23,9 @@ from jident_ros.config import (
     method_config_from_dict,
     system_config_from_dict,
 )
-from jident_ros.method.pipeline import MATCHED_SENSOR_FIELDS
+from jident_ros.method.pipeline import MATCHED_SENSOR_FIELDS, MethodConfig
 from jident_ros.parameters import UNIT_SUFFIXES, Param
+from jident_ros.sim.params import GridParams, LoadParams, MotorParams, SamplingParams
 
 #: Sections of the shared configuration files (config/system.yaml, config/method.yaml).
 SYSTEM_SECTIONS = ("motor", "load", "sampling", "grid")
@@ -93,17 +96,48 @@ def method_defaults() -> dict:
 
 # --------------------------------------------------------------------------- schema
 
+def _attribute_docs(cls) -> dict:
+    """{field: its description's first sentence} from the ``Attributes`` section of a config dataclass's
+    docstring (numpydoc ``name : type`` then indented text): the one place the model's and the method's fields
+    are described."""
+    out, current, lines = {}, None, (cls.__doc__ or "").splitlines()
+    for line in lines[next((i for i, t in enumerate(lines) if t.strip() == "Attributes"), len(lines)):]:
+        head = re.match(r"^    (\w+(?:, \w+)*) : ", line)
+        if head:
+            current = [n.strip() for n in head.group(1).split(",")]
+            for n in current:
+                out[n] = ""
+        elif current and line.startswith("        ") and line.strip():
+            for n in current:
+                out[n] = f"{out[n]} {line.strip()}".strip()
+        elif not line.strip():
+            current = None
+    return {n: re.split(r"(?<=\.)\s", text, maxsplit=1)[0] for n, text in out.items() if text}
+
+
+@functools.lru_cache(maxsize=None)
+def field_docs() -> dict:
+    """{dotted parameter: description} of the model's (system.yaml) and the method's (method.yaml) fields."""
+    sections = {"motor": MotorParams, "load": LoadParams, "sampling": SamplingParams, "grid": GridParams,
+                "method": MethodConfig}
+    return {f"{sec}.{n}": text for sec, cls in sections.items() for n, text in _attribute_docs(cls).items()}
+
+
 def describe_field(name: str) -> str:
-    """One-line description of a dotted model/method parameter from its field name and unit suffix:
-    ``load.wheel_radius_m`` -> ``load: wheel radius, m (config/system.yaml; fixed at start)``."""
+    """One-line description of a dotted model/method parameter: its dataclass docstring's, else from its field
+    name and unit suffix: ``load.wheel_radius_m`` -> ``load: wheel radius, m (config/system.yaml; fixed at
+    start)``."""
     section, _, field = name.partition(".")
+    source = "config/method.yaml" if section in METHOD_SECTIONS else "config/system.yaml"
+    doc = field_docs().get(name)
+    if doc:
+        return f"{section}: {doc.rstrip('.')} ({source}; fixed at start)"
     unit = ""
     for suffix, u in UNIT_SUFFIXES:
         if field.endswith(suffix):
             field, unit = field[: -len(suffix)], u
             break
     text = f"{section}: {field.replace('.', ' ').replace('_', ' ')}" + (f", {unit}" if unit else "")
-    source = "config/method.yaml" if section in METHOD_SECTIONS else "config/system.yaml"
     return f"{text} ({source}; fixed at start)"
 
 
@@ -153,10 +187,16 @@ def descriptor(name: str, param: Param):
     if param.min is not None or param.max is not None:
         lo = -math.inf if param.min is None else param.min
         hi = math.inf if param.max is None else param.max
+        # an exclusive end as the nearest value inside: the range `ros2 param describe` shows is exactly the
+        # values the validation accepts, at both ends (issue 24)
         if typ == T.PARAMETER_DOUBLE:
+            lo = math.nextafter(lo, math.inf) if param.min_exclusive else lo
+            hi = math.nextafter(hi, -math.inf) if param.max_exclusive else hi
             d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
         elif typ == T.PARAMETER_INTEGER:
             big = 2 ** 63 - 1
+            lo = lo + 1 if param.min_exclusive else lo
+            hi = hi - 1 if param.max_exclusive else hi
             d.integer_range = [IntegerRange(from_value=int(max(lo, -big)), to_value=int(min(hi, big)), step=1)]
     return d
 
@@ -190,7 +230,7 @@ def coerce(name: str, value: Any, param: Param) -> Any:
     if param.min is not None or param.max is not None:
         for i, x in enumerate(value if isinstance(value, list) else [value]):
             low = param.min is not None and (x <= param.min if param.min_exclusive else x < param.min)
-            high = param.max is not None and x > param.max
+            high = param.max is not None and (x >= param.max if param.max_exclusive else x > param.max)
             if low or high:
                 where = f"{name}[{i}]" if isinstance(value, list) else name
                 raise ParameterError(f"parameter {where}: must be {what}, got {x!r}")

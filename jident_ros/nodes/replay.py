@@ -45,6 +45,9 @@ from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import REPLAY, REPLAY_PARAMS
 
 NODE_NAME = "jident_replay"
+#: At rate 0, at most this many messages per tick of ``fast_sleep_s`` (while the windowing node's progress allows
+#: them): one per tick capped the replay at 1 batch / fast_sleep_s (issue 25).
+RATE0_MESSAGES_PER_TICK = 4
 
 DEFAULTS = REPLAY
 
@@ -79,6 +82,57 @@ def schema() -> dict:
     return dict(REPLAY_PARAMS)
 
 
+class RatePacer:
+    """When the next message may go out: the recorded receive-time differences divided by ``rate`` (rate > 0;
+    rate 0: at once), and never more than the gate's ``max_lead_s`` drive seconds ahead of the windowing node's
+    ``drive/progress`` (:class:`ProgressGate`, any rate).  Lossless at any rate: when the downstream falls behind
+    at rate > 0, the replay pauses (back-pressure) instead of letting the reliable queue overwrite batches, counts
+    the pauses and says so in a WARN (``warn(text)``) at the first pause of each episode; the schedule restarts
+    from the first message after a pause (no burst to catch up).  ``clock``: monotonic seconds."""
+
+    def __init__(self, rate: float, gate=None, warn=None, clock=time.monotonic):
+        self.rate, self.gate, self.warn, self.clock = float(rate), gate, warn, clock
+        self.wall0 = self.rec0 = None
+        self.pauses = 0            # episodes in which the downstream was behind at rate > 0
+        self.behind = False
+
+    def due(self, log_ns: int, t_last: float | None) -> bool:
+        """True when the message recorded at ``log_ns`` (a drive/signals batch ending at drive time ``t_last``,
+        else None) may be published now."""
+        if self.gate is not None and t_last is not None and not self.gate.allows(t_last):
+            if self.rate > 0:
+                if not self.behind:
+                    self.pauses += 1
+                    # no progress ever (no windowing node): the gate itself says so when it gives up waiting
+                    if self.warn is not None and getattr(self.gate, "progress_wall", 0.0) is not None:
+                        self.warn(self.behind_text(t_last))
+                self.behind = True
+                self.wall0 = None              # restart the schedule after the pause
+            return False
+        self.behind = False
+        if self.rate <= 0:
+            return True
+        now = self.clock()
+        if self.wall0 is None:
+            self.wall0, self.rec0 = now, log_ns
+        return self.wall0 + (log_ns - self.rec0) / 1e9 / self.rate <= now
+
+    def behind_text(self, t_last: float) -> str:
+        g = self.gate
+        read = "nothing yet" if g.progress_t is None else f"t = {g.progress_t:.3f} s"
+        return (f"downstream behind at rate {self.rate:g}: the windowing node has read to {read}, the next batch "
+                f"ends at t = {t_last:.3f} s (max_lead_s {g.max_lead_s:g}): pausing the replay (back-pressure; "
+                f"{self.pauses} pause(s) so far, nothing is dropped, the replay runs slower than asked)")
+
+    def summary(self) -> str:
+        """'' or what the back-pressure did at rate > 0 (for the final log line)."""
+        if self.rate <= 0 or not self.pauses:
+            return ""
+        waited = self.gate.waited_s if self.gate is not None else 0.0
+        return (f"; the downstream fell behind rate {self.rate:g} {self.pauses} time(s): paused {waited:.2f} s in "
+                "all (back-pressure, no message dropped)")
+
+
 class ReplayNode(RunnableNode, Node):
     """The replay node (composable: keyword arguments go to rclpy's Node; ``bag`` may be given as
     ``argv_bag``).  Replays from a timer: a state machine WAITING -> REPLAYING -> DONE; at rate > 0
@@ -93,7 +147,7 @@ class ReplayNode(RunnableNode, Node):
         self.done = False
         try:
             from jident_ros.bag.errors import RecordingError  # the bag layer: optional mcap dependency
-            from jident_ros.bag.reader import read_bag  # the bag layer: optional mcap dependency
+            from jident_ros.bag.reader import in_publish_order, read_bag  # the bag layer: optional mcap dependency
         except ImportError as exc:
             raise ParameterError(f"parameter bag: cannot read recordings here (jident_ros.bag.reader: {exc})")
         self.RecordingError = RecordingError
@@ -107,14 +161,16 @@ class ReplayNode(RunnableNode, Node):
             raise ParameterError(f"recording {exc}") from None
         except Exception as exc:
             raise ParameterError(f"parameter bag: {self.bag}: {exc}") from None
-        self.messages = itertools.chain([] if first is None else [first], messages)
+        # in the order the drive published them: a K2 or case message after the batches sent before it, although
+        # the recorder may have received it first (replay = live)
+        self.messages = in_publish_order(itertools.chain([] if first is None else [first], messages))
         self.pubs = {}
         self.pub_clock = (self.create_publisher(Clock, "/clock", qos_clock())
                           if self.cfg["publish_clock"] else None)
         self.counts = {}
         self.pending = None
         self.gate = None
-        self.wall0 = self.rec0 = None
+        self.pacer = RatePacer(self.cfg["rate"])
         self.state = "waiting"
         c = self.cfg
         self.wait_deadline = time.monotonic() + c["wait_timeout_s"]
@@ -158,8 +214,11 @@ class ReplayNode(RunnableNode, Node):
                 return
             self.settle_until = time.monotonic() + 0.2
         self.state = "replaying"
-        if c["rate"] == 0 and c["max_lead_s"] > 0:
+        if c["max_lead_s"] > 0:   # any rate: a downstream that falls behind slows the replay, never loses batches
             self.gate = ProgressGate(self, c["max_lead_s"], c["progress_timeout_s"])
+            # one WARN per episode of falling behind, at most every 5 s (with the count so far); the total at the end
+            self.pacer = RatePacer(c["rate"], self.gate,
+                                   lambda text: self.get_logger().warning(text, throttle_duration_sec=5.0))
 
     def _next(self):
         """The next message to replay: (rel, pub, log_ns, raw, t_last) or None at the end."""
@@ -182,6 +241,7 @@ class ReplayNode(RunnableNode, Node):
         now = time.monotonic()
         if now < self.settle_until:
             return
+        burst = 0
         while True:
             if self.pending is None:
                 self.pending = self._next()
@@ -189,20 +249,17 @@ class ReplayNode(RunnableNode, Node):
                     self._finish()
                     return
             rel, pub, log_ns, raw, t_last = self.pending
-            if c["rate"] > 0:
-                if self.wall0 is None:
-                    self.wall0, self.rec0 = now, log_ns
-                if self.wall0 + (log_ns - self.rec0) / 1e9 / c["rate"] > now:
-                    return                              # not due yet
-            elif self.gate is not None and t_last is not None and not self.gate.allows(t_last):
-                return                                  # the windowing node is behind: next tick
+            if not self.pacer.due(log_ns, t_last):
+                return                                  # not due yet, or the windowing node is behind: next tick
             pub.publish(bytes(raw))
             self.counts[rel] = self.counts.get(rel, 0) + 1
             if t_last is not None and self.pub_clock is not None:
                 self.pub_clock.publish(clock_msg(t_last))
             self.pending = None
             if c["rate"] == 0:
-                return                                  # one message per tick of fast_sleep_s
+                burst += 1
+                if burst >= RATE0_MESSAGES_PER_TICK:
+                    return                              # at most this many messages per tick of fast_sleep_s
 
     def _failed(self, exc: Exception) -> None:
         """A failure while replaying: one line, stop."""
@@ -221,7 +278,7 @@ class ReplayNode(RunnableNode, Node):
             self.gate = None
         if self.exit_code == 0:
             self.get_logger().info("replayed " + ", ".join(f"{n} x {k}" for k, n in self.counts.items())
-                                   if self.counts else "nothing to replay: no matching topic")
+                                   + self.pacer.summary() if self.counts else "nothing to replay: no matching topic")
         self.state = "done"
         self.done = True
 

@@ -13,6 +13,7 @@ import numpy as np
 
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES, OK, STALE, WARN  # noqa: F401  (re-exported)
 from jident_ros.stream.layout import LayoutError, Window, pack, unpack
+from jident_ros.stream.text import plain_numbers
 
 # --------------------------------------------------------------------------- Float64MultiArray
 
@@ -110,7 +111,7 @@ def qos_diagnostics():
 def format_value(v: Any) -> str:
     """KeyValue text: floats with repr precision, vectors space-separated."""
     if isinstance(v, str):
-        return v
+        return plain_numbers(v)
     if isinstance(v, (bool, np.bool_)):
         return "true" if v else "false"
     if isinstance(v, (int, np.integer)):
@@ -130,7 +131,7 @@ def make_status(name: str, level: int, message: str, hardware_id: str = "",
     st = DiagnosticStatus()
     st.level = bytes([int(level)])
     st.name = str(name)
-    st.message = str(message)
+    st.message = plain_numbers(str(message))
     st.hardware_id = str(hardware_id)
     items = values.items() if isinstance(values, Mapping) else values
     st.values = [KeyValue(key=str(k), value=format_value(v)) for k, v in items]

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 import re
-import signal
 import sys
 import time
 from pathlib import Path
@@ -22,37 +21,12 @@ from typing import Any, Callable, Mapping
 
 import yaml
 
+from jident_ros.nodes.entry import StopFlag, take_early_flag
 from jident_ros.nodes.params import EXIT_BAD_PARAMETER, ParameterError
 from jident_ros.nodes.ros_io import qos_signals
 
 #: The spin loop looks at the stop flag at least this often, s.
 SPIN_PERIOD_S = 0.1
-
-
-class StopFlag:
-    """SIGINT/SIGTERM handlers that only record the signal (the spin loop acts on it)."""
-
-    def __init__(self):
-        self.signum = None
-        self._previous = {}
-
-    def install(self) -> "StopFlag":
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            self._previous[sig] = signal.signal(sig, self._handler)
-        return self
-
-    def _handler(self, signum, frame):
-        if self.signum is None:
-            self.signum = signum
-
-    @property
-    def set(self) -> bool:
-        return self.signum is not None
-
-    def restore(self) -> None:
-        for sig, prev in self._previous.items():
-            signal.signal(sig, prev)
-        self._previous.clear()
 
 
 class ProgressGate:
@@ -124,6 +98,31 @@ class ProgressGate:
 _RCL_LOCATION = re.compile(r",? at /[^,]*\.c:\d+")
 
 
+class _ParamsFileLoader(yaml.SafeLoader):
+    """YAML as rcl's params-file parser reads it: a node's tag does not change what it holds.  launch_ros
+    writes the list parameters of a launch file as ``!!python/tuple`` sequences (it dumps tuples with
+    ``yaml.dump``) and rcl reads them as arrays; ``yaml.safe_load`` refused them.  Any tag other than
+    YAML's own is read by the node's kind (sequence -> list, mapping -> dict, scalar -> its text); nothing
+    is ever constructed from a tag."""
+
+
+def _untagged(loader: yaml.SafeLoader, tag_suffix: str, node: yaml.Node):
+    if isinstance(node, yaml.SequenceNode):
+        return loader.construct_sequence(node, deep=True)
+    if isinstance(node, yaml.MappingNode):
+        return loader.construct_mapping(node, deep=True)
+    return loader.construct_scalar(node)
+
+
+_ParamsFileLoader.add_multi_constructor("tag:yaml.org,2002:python/", _untagged)
+_ParamsFileLoader.add_multi_constructor("!", _untagged)
+
+
+def load_params_file(text: str):
+    """A params file's YAML as rcl accepts it (``!!python/tuple`` lists included); yaml.YAMLError if not YAML."""
+    return yaml.load(text, Loader=_ParamsFileLoader)  # noqa: S506 - a SafeLoader subclass
+
+
 def check_params_files(args) -> None:
     """ParameterError (one line naming the file and the problem) for a ``--params-file`` that rcl
     would refuse with a multi-line error before any of our code runs: missing, unreadable, not YAML,
@@ -133,7 +132,7 @@ def check_params_files(args) -> None:
     for f in files:
         path = Path(f)
         try:
-            doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+            doc = load_params_file(path.read_text(encoding="utf-8"))
         except OSError as exc:
             raise ParameterError(f"--params-file {f}: cannot read it ({exc.strerror or exc})") from None
         except yaml.YAMLError as exc:
@@ -190,8 +189,11 @@ class RunnableNode:
     spin_in_periods: bool = False
 
     def make_executor(self):
-        """The executor to spin the node with; None: a SingleThreadedExecutor."""
-        return None
+        """The executor to spin the node with: rclpy's EventsExecutor where there is one (spun a period at a
+        time), else None: a SingleThreadedExecutor.  SingleThreadedExecutor rebuilds its wait set in Python for
+        every callback: 4-5x the CPU of the callbacks themselves in each node at one batch of 50 samples per
+        message (bench/bench_ros.py --profile, issue 25)."""
+        return events_executor(self)
 
     def autostart(self) -> None:
         """Called once after the node is built and added to the executor (a lifecycle node configures and
@@ -204,6 +206,17 @@ class RunnableNode:
     def close(self) -> None:
         """Called first on the way down (always, also after a signal): finalise what must be (the recording);
         idempotent."""
+
+
+def events_executor(node):
+    """rclpy.experimental.EventsExecutor on the node's context, with ``node.spin_in_periods`` set (a period's
+    callbacks per spin call); None when this rclpy has none (before Jazzy)."""
+    try:
+        from rclpy.experimental import EventsExecutor
+    except ImportError:
+        return None
+    node.spin_in_periods = True
+    return EventsExecutor(context=node.context)
 
 
 def spin(node, executor, stop: StopFlag, period_s: float = SPIN_PERIOD_S) -> None:
@@ -231,10 +244,13 @@ def main(factory: Callable[..., Any], prog: str, args=None) -> int:
     from rclpy.signals import SignalHandlerOptions
 
     args = sys.argv if args is None else args
-    stop = StopFlag().install()
+    early = take_early_flag()          # installed by the entry point before the heavy imports (nodes/entry.py)
+    stop = early or StopFlag().install()
     node = executor = None
     code = 0
     try:
+        if stop.set:                   # stopped before rcl started: nothing to finalise
+            return 0
         try:
             check_params_files(args)
             rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
@@ -273,5 +289,6 @@ def main(factory: Callable[..., Any], prog: str, args=None) -> int:
             if node is not None:
                 node.destroy_node()
             rclpy.try_shutdown()
-            stop.restore()
+            if early is None:
+                stop.restore()         # the entry point keeps its handlers until the interpreter exits
     return code

@@ -11,7 +11,7 @@ Publishes (topic names relative, see docs/interfaces.md):
 
 Every case is preceded by ``gap_samples`` steady-state samples; the drive clock runs on without a
 break.  ``real_time_factor`` paces the drive clock against the wall clock (0 = as fast as the windowing
-node reads: a ``fast_sleep_s`` pause per batch and at most ``max_lead_s`` drive seconds ahead of its
+node reads: at most ``RATE0_BATCHES_PER_TICK`` batches per ``fast_sleep_s`` and at most ``max_lead_s`` drive seconds ahead of its
 ``drive/progress``, :class:`jident_ros.nodes.runtime.ProgressGate`), from a timer: parameter requests
 are answered while it streams.
 
@@ -40,6 +40,9 @@ from jident_ros.stream.detector import embed_windows
 from jident_ros.stream.layout import CASE_LABEL, DEFAULT_CHANNELS
 
 NODE_NAME = "jident_simulator"
+#: At real_time_factor 0, at most this many batches per tick of ``fast_sleep_s`` (while the windowing node's
+#: progress allows them): one per tick capped the stream at 1 batch / fast_sleep_s = 25x at 1 ms (issue 25).
+RATE0_BATCHES_PER_TICK = 4
 #: Wall-clock pause after announcing a case whose backlash width differs from the previous one, s.
 CASE_SETTLE_S = 0.05
 
@@ -89,7 +92,7 @@ class SimulatorNode(RunnableNode, Node):
 
     Streams from a timer (never a blocking loop: parameter requests are answered while it streams): a
     state machine WAITING (for ``wait_for_subscribers``) -> STREAMING -> DONE; at real_time_factor > 0
-    every tick publishes the batches due by the wall clock, at 0 one batch per tick of ``fast_sleep_s``
+    every tick publishes the batches due by the wall clock, at 0 up to RATE0_BATCHES_PER_TICK per tick of ``fast_sleep_s``
     when the windowing node's progress allows it (:class:`ProgressGate`)."""
 
     def __init__(self, **kwargs):
@@ -204,6 +207,7 @@ class SimulatorNode(RunnableNode, Node):
         if now < self.settle_until:
             return
         rt = c["real_time_factor"]
+        burst = 0
         while True:
             if self.pending is None:
                 self.pending = next(self.batches, None)
@@ -229,9 +233,12 @@ class SimulatorNode(RunnableNode, Node):
                 self.pub_signals.publish(multiarray_from_array(payload, DEFAULT_CHANNELS))
                 if self.pub_clock is not None:
                     self.pub_clock.publish(clock_msg(t_last))
+                self.pending = None
                 if rt == 0:
-                    self.pending = None
-                    return                           # one batch per tick of fast_sleep_s
+                    burst += 1
+                    if burst >= RATE0_BATCHES_PER_TICK:
+                        return                       # at most this many batches per tick of fast_sleep_s
+                continue
             self.pending = None
 
     def _failed(self, exc: Exception) -> None:

@@ -13,13 +13,14 @@ from __future__ import annotations
 import math
 import time
 
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rosbags.typesys import Stores, get_typestore
 from std_msgs.msg import Float64, Float64MultiArray
 
 from jident_ros.identify.levels import ERROR, OK, STALE, WARN
 from jident_ros.identify.monitor import DetectorConfig, make_detector
-from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater
+from jident_ros.nodes.diagnostics import DiagnosticsPublisher, drive_hardware_id, make_updater, status_name
 from jident_ros.nodes.params import (
     RuntimeParameters,
     checked,
@@ -38,16 +39,19 @@ from jident_ros.nodes.ros_io import (
     qos_signals,
     window_to_msg,
 )
-from jident_ros.nodes.runtime import RunnableNode
+from jident_ros.nodes.runtime import RunnableNode, events_executor
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import WINDOWING, WINDOWING_PARAMS
 from jident_ros.stream.detector import REASONS
+from jident_ros.stream.imu_skew import IMU_SKEW_TOLERANCE_SAMPLES, carry_counts, check_imu_skew, skew_line
 from jident_ros.stream.inputs import JointStateAdapter
 from jident_ros.stream.layout import KNOWN_CHANNELS
+from jident_ros.stream.text import plain_numbers
 
 NODE_NAME = "jident_windowing"
 #: Event statuses (a dropped window or batch, an internal error).
-STATUS_NAME = "jident: windowing"
+INPUT_TASK = "input"      # event status "<ns>/jident_windowing: input": a publisher whose QoS cannot match
+STATUS_TASK = "windows"   # event status "<ns>/jident_windowing: windows": a dropped window or batch
 #: Periodic task (diagnostics_period_s, steady clock): "jident_windowing: rate".
 RATE_TASK = "rate"
 
@@ -89,6 +93,14 @@ def schema() -> dict:
     return node_schema(WINDOWING_PARAMS)
 
 
+def input_qos(depth: int, reliability: str):
+    """The input subscriptions' QoS: drive/signals' (keep last ``depth``, volatile), reliable or best effort."""
+    from rclpy.qos import ReliabilityPolicy
+    qos = qos_signals(depth)
+    qos.reliability = ReliabilityPolicy.BEST_EFFORT if reliability == "best_effort" else ReliabilityPolicy.RELIABLE
+    return qos
+
+
 class WindowingNode(RunnableNode, Node):
     """The windowing node (composable: keyword arguments go to rclpy's Node)."""
 
@@ -103,27 +115,31 @@ class WindowingNode(RunnableNode, Node):
         if c["input"] == "joint_states":   # JointState carries alpha1, omega1, m_el, alpha2, omega2 (+ a1 from Imu)
             chans = tuple(ch for ch in chans if ch in ("t", "alpha1", "omega1", "m_el", "alpha2", "omega2")
                           or (ch == "a1" and c["use_imu"]))
-        self.detector = make_detector(s, DetectorConfig.from_parameters(c, self.detector_kind, chans))
+        self.detector = self._make_detector(chans)
         self.hardware_id = drive_hardware_id(self, c["hardware_id"])
         self.diag = DiagnosticsPublisher(self)
         self.pub_window = self.create_publisher(Float64MultiArray, "drive/window",
                                                 qos_latched(c["window_queue_depth"]))
         self.adapter = None
+        qos_in = input_qos(c["signals_queue_depth"], c["input_reliability"])
+        events = SubscriptionEventCallbacks(incompatible_qos=self.on_incompatible_qos)
+        self.incompatible_qos = 0
         if c["input"] == "joint_states":
             from sensor_msgs.msg import Imu, JointState  # only this input needs sensor_msgs (ros-sensor-msgs)
+            # the channel set from the configuration (channels, use_imu), never from the first message
             self.adapter = JointStateAdapter(s.sampling.sample_period_s, c["motor_joint"], c["load_joint"],
-                                             c["batch_size"], c["use_imu"], c["imu_axis"])
+                                             c["batch_size"], c["use_imu"], c["imu_axis"], channels=chans)
             # raw subscriptions, decoded by rosbags' CDR deserialiser: half the CPU of rclpy's message conversion
             # (JointState 8 vs 14 us, Imu 8 vs 23 us; bench/bench_jointstate.py, docs/results.md)
             self._cdr = get_typestore(Stores.ROS2_HUMBLE).deserialize_cdr
-            self.sub = self.create_subscription(JointState, "joint_states", self.on_joint_state_cdr,
-                                                qos_signals(c["signals_queue_depth"]), raw=True)
+            self.sub = self.create_subscription(JointState, "joint_states", self.on_joint_state_cdr, qos_in, raw=True,
+                                                event_callbacks=events)
             if c["use_imu"]:
-                self.sub_imu = self.create_subscription(Imu, "imu", self.on_imu_cdr,
-                                                        qos_signals(c["signals_queue_depth"]), raw=True)
+                self.sub_imu = self.create_subscription(Imu, "imu", self.on_imu_cdr, qos_in, raw=True,
+                                                        event_callbacks=events)
         else:
-            self.sub = self.create_subscription(Float64MultiArray, "drive/signals", self.on_signals,
-                                                qos_signals(c["signals_queue_depth"]))
+            self.sub = self.create_subscription(Float64MultiArray, "drive/signals", self.on_signals, qos_in,
+                                                event_callbacks=events)
         # the simulator's back-pressure at real_time_factor 0 (and anyone's progress bar)
         self.pub_progress = (self.create_publisher(Float64, "drive/progress", qos_signals(10))
                              if c["progress_every_batches"] > 0 else None)
@@ -133,6 +149,9 @@ class WindowingNode(RunnableNode, Node):
                                                       qos_latched())
         self.errors = 0
         self.drops_since_summary = 0
+        self.imu_skew = None              # the last window's Imu skew report (check_imu_skew)
+        self.windows_imu_skew = 0
+        self._input_mark = (0, 0)         # adapter messages, samples at the last rate status
         self._rate_mark = (time.monotonic(), 0, 0, 0)
         self._last_batch_wall = time.monotonic()   # steady time, samples, batches, windows at last status
         self.updater = make_updater(self, c["diagnostics_period_s"], self.diag)
@@ -154,21 +173,17 @@ class WindowingNode(RunnableNode, Node):
             f"{', following drive/backlash_width' if c['backlash_width_from_topic'] else ''}); windows of "
             f"{self.detector.window_length} samples on {self.resolve_topic_name('drive/window')}")
 
+    def _make_detector(self, chans):
+        return make_detector(self.system, DetectorConfig.from_parameters(self.cfg, self.detector_kind, chans))
+
     def make_executor(self):
-        """The executor runtime.main spins this node with.  ``input: joint_states`` (one message per sample, 2
-        callbacks per sample with the Imu): rclpy's EventsExecutor -- SingleThreadedExecutor rebuilds its wait set
-        for every callback, which cost about 3/4 of the node's CPU at 2 kHz (bench/bench_jointstate.py --profile);
-        ``signals`` (one batch of 50 samples per message): SingleThreadedExecutor as every other node."""
-        if self.adapter is not None:
-            try:
-                from rclpy.experimental import EventsExecutor
-            except ImportError:   # an rclpy without it (before Jazzy): the default executor, slower
-                pass
-            else:
-                self.spin_in_periods = True     # runtime.spin: a period's callbacks per call, not one
-                return EventsExecutor(context=self.context)
+        """The executor runtime.main spins this node with: rclpy's EventsExecutor (:func:`events_executor`), for
+        ``input: joint_states`` (one message per sample, 2 callbacks per sample with the Imu: SingleThreadedExecutor
+        rebuilds its wait set for every callback, about 3/4 of the node's CPU at 2 kHz, bench/bench_jointstate.py
+        --profile) and for ``signals`` alike (one batch of 50 samples per message: the executor cost 4-5x the
+        batch's own work, bench/bench_ros.py --profile, issue 25).  Before Jazzy: SingleThreadedExecutor."""
         from rclpy.executors import SingleThreadedExecutor
-        return SingleThreadedExecutor(context=self.context)
+        return events_executor(self) or SingleThreadedExecutor(context=self.context)
 
     # ----------------------------------------------------------------- parameters at run time
     def on_parameters(self, changed: dict) -> None:
@@ -228,9 +243,32 @@ class WindowingNode(RunnableNode, Node):
         """A window on drive/window; a dropped window or batch on /diagnostics (with its reason)."""
         for ev in events:
             if ev.kind == "window":
+                if self.adapter is not None and self.adapter.use_imu and not self._imu_in_step(ev.window):
+                    continue
                 self.pub_window.publish(window_to_msg(ev.window))
             else:
                 self._report_drop(ev)
+
+    def _imu_in_step(self, win) -> bool:
+        """The Imu a1 of a window against the encoder (:func:`check_imu_skew`).  Beyond the tolerance the window
+        is not published (its entry and re-contact were placed with the skewed a1: no J1 from it), counted, a
+        WARN says so, and the input goes on without a1 (a new detector on the encoder's acceleration)."""
+        report = check_imu_skew(win)
+        if report is None:
+            return True
+        self.imu_skew = report
+        if report["within"]:
+            return True
+        self.windows_imu_skew += 1
+        self.drops_since_summary += 1
+        text = skew_line(report, win.window_id)
+        self.get_logger().warning(text)
+        self.adapter.drop_a1()
+        self.detector = carry_counts(self.detector, self._make_detector(
+            tuple(ch for ch in self.detector.channels if ch != "a1")))
+        self.diag.publish(make_status(status_name(self, STATUS_TASK), WARN, text, self.hardware_id, self._values(
+            [("reason", "imu_skew"), ("window_dropped", True)])))
+        return False
 
     def close(self) -> None:
         """At shutdown: a window in progress is reported as cut off by the end of the data."""
@@ -262,6 +300,23 @@ class WindowingNode(RunnableNode, Node):
         except Exception as exc:
             self._report_error("drive/backlash_width callback", exc, reset=False)
 
+    def on_incompatible_qos(self, info) -> None:
+        """A publisher of the input topic offers a QoS this subscription cannot match (no sample of it will
+        arrive): one ERROR status and one log line naming the topic, the policy and what to change."""
+        self.incompatible_qos = int(getattr(info, "total_count", self.incompatible_qos + 1))
+        policy = getattr(getattr(info, "last_policy_kind", None), "name", "unknown").replace("_QOS_POLICY", "")
+        topic = self.resolve_topic_name(self.sub.topic_name)
+        hint = (f"the publisher is best effort and input_reliability is {self.cfg['input_reliability']}: set "
+                "input_reliability:=best_effort" if policy.endswith("RELIABILITY") and
+                self.cfg["input_reliability"] == "reliable" else "compare its QoS with docs/interfaces.md")
+        text = (f"{topic}: {self.incompatible_qos} publisher(s) offer a QoS this subscription cannot match "
+                f"(policy {policy}; {hint}); no sample arrives from them")
+        self.get_logger().error(text)
+        self.diag.publish(make_status(status_name(self, INPUT_TASK), ERROR, text, self.hardware_id,
+                                      [("topic", topic), ("policy", policy),
+                                       ("incompatible_qos_publishers", self.incompatible_qos),
+                                       ("input_reliability", self.cfg["input_reliability"])]))
+
     def rate_status(self, stat):
         """Periodic task "jident_windowing: rate" (steady clock): samples, batches and windows per second
         since the last status; WARN when something was dropped in the period; STALE when no drive/signals
@@ -278,11 +333,27 @@ class WindowingNode(RunnableNode, Node):
         stat.add("period_s", dt)
         for k, v in self._values():
             stat.add(k, v)
-        if batches == 0:
-            stat.summary(STALE, "no drive/signals received yet" if d.batches_seen == 0
-                         else f"no drive/signals for {now - self._last_batch_wall:.1f} s")
-        elif self.drops_since_summary:
-            stat.summary(WARN, f"{self.drops_since_summary} window(s)/batch(es) dropped in the last {dt:.1f} s")
+        ad = self.adapter
+        msgs = samples = 0
+        if ad is not None:
+            msgs, samples = ad.counts["messages"] - self._input_mark[0], ad.counts["samples"] - self._input_mark[1]
+            self._input_mark = (ad.counts["messages"], ad.counts["samples"])
+        if ad is not None and msgs > 0 and samples == 0:
+            # JointStates arrive but none is usable (a renamed joint, an empty field): say which, by name
+            top = ad.problems()[:2]
+            why = "; ".join(f"{text} ({n}x)" for text, n in top) or ad.last_problem or "no usable sample"
+            stat.summary(ERROR, f"{msgs} JointState message(s) in the last {dt:.1f} s, none usable: {why}")
+        elif batches == 0:
+            what = "joint_states" if ad is not None else "drive/signals"
+            stat.summary(STALE, f"no {what} received yet" if d.batches_seen == 0 and msgs == 0
+                         else f"no {what} for {now - self._last_batch_wall:.1f} s")
+        elif self.drops_since_summary or msgs > samples:
+            parts = []
+            if self.drops_since_summary:
+                parts.append(f"{self.drops_since_summary} window(s)/batch(es) dropped")
+            if msgs > samples:
+                parts.append(f"{msgs - samples} JointState message(s) dropped (last: {ad.last_problem})")
+            stat.summary(WARN, f"{'; '.join(parts)} in the last {dt:.1f} s")
         else:
             stat.summary(OK, f"{(d.samples_seen - s0) / dt:.0f} samples/s, {d.windows_captured} window(s) "
                          "captured, no drops in the period")
@@ -298,9 +369,20 @@ class WindowingNode(RunnableNode, Node):
             ("empty_batches", d.counts["empty"]), ("samples_seen", d.samples_seen),
             ("batches_seen", d.batches_seen), ("callback_errors", self.errors),
             ("backlash_width_m", d.backlash_width_m), ("threshold_rad", d.threshold_rad),
-            ("capturing", d.capturing), ("detector", self.detector_kind), ("input", self.cfg["input"])]
+            ("capturing", d.capturing), ("detector", self.detector_kind), ("input", self.cfg["input"]),
+            ("input_reliability", self.cfg["input_reliability"]),
+            ("incompatible_qos_publishers", getattr(self, "incompatible_qos", 0))]
         if self.adapter is not None:
             vals += [(f"jointstate.{k}", v) for k, v in self.adapter.counts.items()]
+            problems = self.adapter.problems()
+            if problems:
+                vals.append(("jointstate.top_problem", f"{problems[0][0]} ({problems[0][1]}x)"))
+            if self.adapter.use_imu or self.adapter.a1_dropped:
+                sk = self.imu_skew or {}
+                vals += [("imu_skew_s", "unknown" if sk.get("skew_s") is None else sk["skew_s"]),
+                         ("imu_skew_tolerance_s", IMU_SKEW_TOLERANCE_SAMPLES * self.adapter.sample_period_s),
+                         ("windows_dropped_imu_skew", self.windows_imu_skew),
+                         ("a1_used", self.adapter.use_imu)]
             vals += [(f"jitter.{k}", v) for k, v in self.adapter.jitter().items()]
         vals += [(f"dropped.{r}", d.counts[r]) for r in REASONS if r != "empty"]
         return vals
@@ -310,19 +392,19 @@ class WindowingNode(RunnableNode, Node):
             self.drops_since_summary += 1
         what = "window dropped" if ev.window_dropped else ("batch reported" if ev.reason == "empty"
                                                           else "batch dropped")
-        text = f"{what}: {ev.reason}: {ev.detail}"
+        text = plain_numbers(f"{what}: {ev.reason}: {ev.detail}")
         self.get_logger().warning(text, throttle_duration_sec=1.0)
-        self.diag.publish(make_status(STATUS_NAME, WARN, text, self.hardware_id, self._values(
+        self.diag.publish(make_status(status_name(self, STATUS_TASK), WARN, text, self.hardware_id, self._values(
             [("reason", ev.reason), ("detail", ev.detail), ("window_dropped", ev.window_dropped)])))
 
     def _report_error(self, where, exc, reset=True):
         self.errors += 1
         if reset:
             self.detector.reset()
-        text = f"internal error in {where}: {type(exc).__name__}: {exc}"
+        text = plain_numbers(f"internal error in {where}: {type(exc).__name__}: {exc}")
         self.get_logger().error(text, throttle_duration_sec=1.0)
         try:
-            self.diag.publish(make_status(STATUS_NAME, ERROR, text, self.hardware_id,
+            self.diag.publish(make_status(status_name(self, STATUS_TASK), ERROR, text, self.hardware_id,
                                           self._values([("reason", "internal_error")])))
         except Exception:
             pass

@@ -166,20 +166,10 @@ class Model:
         m_el = M_b x_m / w (psi_sb psi_ra - psi_sa psi_rb), algebraically equal
         to the current form.  Tested equal to :meth:`rhs` to 1e-12.
         """
-        A = np.zeros((N_STATES, N_STATES))
-        A[PSI_SA, PSI_SA] = A[PSI_SB, PSI_SB] = -self._c_rs * self._c_ss
-        A[PSI_SA, PSI_RA] = A[PSI_SB, PSI_RB] = self._c_rs * self._c_sr
-        A[PSI_RA, PSI_SA] = A[PSI_RB, PSI_SB] = self._c_rm
-        A[PSI_RA, PSI_RA] = A[PSI_RB, PSI_RB] = -self._c_rr
-        A[ALPHA1, OMEGA1] = 1.0
-        A[DELTA, OMEGA1], A[DELTA, OMEGA2] = 1.0, -1.0
-        r, jw, m2, kl, cl = self.r, self.jw, self.m2, self.kl, self.cl
-        A[OMEGA2, LINE_STRETCH], A[OMEGA2, OMEGA2], A[OMEGA2, V2] = -r * kl / jw, -r * cl * r / jw, r * cl / jw
-        A[LINE_STRETCH, OMEGA2], A[LINE_STRETCH, V2] = r, -1.0
-        A[V2, LINE_STRETCH], A[V2, OMEGA2], A[V2, V2] = kl / m2, cl * r / m2, -cl / m2
+        A = self.linear_matrix()
         inv_j = 1.0 / case.inertia_kgm2
         k_torque = self._c_te * self._c_sr * inv_j
-        film = self.film_gain * case.consistency_pa_sn / m2
+        film = self.film_gain * case.consistency_pa_sn / self.m2
         theta_b = case.backlash_angle_rad
         pp, ir, cc, kc, ijw, b1 = self.pp, self.inv_ramp, self.cc, self.kc, self._inv_jw, self.b1
         eps2, ex = self.eps2, (self.n1 - 1.0) / 2.0
@@ -222,6 +212,21 @@ class Model:
             out[V2] -= f
             return out
         return rhs
+
+    def linear_matrix(self) -> np.ndarray:
+        """The 10 x 10 matrix of everything linear in the state (:meth:`fast_rhs`)."""
+        A = np.zeros((N_STATES, N_STATES))
+        A[PSI_SA, PSI_SA] = A[PSI_SB, PSI_SB] = -self._c_rs * self._c_ss
+        A[PSI_SA, PSI_RA] = A[PSI_SB, PSI_RB] = self._c_rs * self._c_sr
+        A[PSI_RA, PSI_SA] = A[PSI_RB, PSI_SB] = self._c_rm
+        A[PSI_RA, PSI_RA] = A[PSI_RB, PSI_RB] = -self._c_rr
+        A[ALPHA1, OMEGA1] = 1.0
+        A[DELTA, OMEGA1], A[DELTA, OMEGA2] = 1.0, -1.0
+        r, jw, m2, kl, cl = self.r, self.jw, self.m2, self.kl, self.cl
+        A[OMEGA2, LINE_STRETCH], A[OMEGA2, OMEGA2], A[OMEGA2, V2] = -r * kl / jw, -r * cl * r / jw, r * cl / jw
+        A[LINE_STRETCH, OMEGA2], A[LINE_STRETCH, V2] = r, -1.0
+        A[V2, LINE_STRETCH], A[V2, OMEGA2], A[V2, V2] = kl / m2, cl * r / m2, -cl / m2
+        return A
 
     def bias_table(self, times):
         """Bias columns for :meth:`fast_rhs` at the given times: shape (n_times, N_STATES, 1)."""

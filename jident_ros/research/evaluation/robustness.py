@@ -29,7 +29,7 @@ import numpy as np
 
 from jident_ros.identify.fusion import fuse_verdict
 from jident_ros.identify.gap import GapEstimate, NoGapError, estimate_backlash_width, estimate_inertia, nearest_class
-from jident_ros.method.patterns import PatternLibrary, identify_window
+from jident_ros.method.patterns import PatternLibrary, identify_windows
 from jident_ros.sim import (
     Case,
     CaseTruths,
@@ -268,10 +268,16 @@ def image_and_verdict(system: SystemConfig, windows: WindowSet, gap: dict, libra
     evaluated = np.zeros(n, bool)
     v_cls, v_between, v_j1, v_src = np.full(n, -1), np.zeros(n, bool), np.full(n, np.nan), []
     g = gap[PRIMARY]
+    # identify_window of every stride-th window, the features in one batch (patterns.identify_windows: the
+    # same answers, bit for bit, at ~40 % of the per-window cost)
+    image_rows = range(0, n, stride)
+    idents = dict(zip(image_rows, identify_windows([windows.case(i) for i in image_rows], windows.entry_index,
+                                                   [windows.cases[i].backlash_width_m for i in image_rows],
+                                                   library, method, p)))
     for i, c in enumerate(windows.cases):
         answers, fci = None, None
         if i % stride == 0:
-            ident = identify_window(windows.case(i), windows.entry_index, c.backlash_width_m, library, method, p)
+            ident = idents[i]
             answers, fci = ident.answers, ident.fused_class_index
             fused[i], evaluated[i] = fci, True
             used[i] = library.widths_m[ident.width_index]

@@ -1,0 +1,497 @@
+"""The gap as an estimated interval, with free initial conditions (issue 20, items 1-3).
+
+Inside the backlash gap the motor is a single mass,
+
+    J1 dω1/dt = m_el − f(ω1),        f = F_c sgn(ω1) + b ω1   (bearing friction; b1 ω1 known, taken off first)
+
+and in contact it is not (the coupling torque is unknown).  Nothing is assumed about the time before the
+entry: over the gap's own samples [s, e) the motor angle is, in double-integral form,
+
+    α1(t) = θ0 + ω0 (t − t_s) + (1/J1) Φ(t) − (F_c/J1) C(t) − (b/J1) V(t)
+
+with Φ = ∬ m_el dt dt, C = ∬ sgn(ω1) dt dt, V = ∫ (α1 − α1(t_s)) dt (= ∬ ω1), all from any origin: a change
+of origin adds a linear function of t, which the free θ0 and ω0 absorb.  So the regressors do not depend on
+the interval and every candidate interval is a row range of one design matrix: linear least squares in
+(θ0, ω0, 1/J1[, F_c/J1]) (:func:`free_angle_fit`).
+
+Change points (entry s, re-contact e): around the detector's coarse rows (± ``search`` samples) the interval
+is the longest one whose residual is consistent with the noise (χ² test at CHANGEPOINT_P of the residual sum
+of squares against σ̂², σ̂ from the coarse gap's core fit and the encoder quantum), grown from the inside:
+e first (the re-contact is the sharp end), then s, then e again.  The detector only localises.  Their
+uncertainty goes into J1's: the change of J1 when the interval loses 1 or 2 samples at either end.
+
+Standard error of J1 (all in quadrature, docs/method.md "Free-initial-condition gap fit"):
+
+* the least-squares one of 1/J1 from the angle residual (AR(1) inflation for a correlated residual);
+* the torque noise through Φ (errors in the regressor): κ σ_m ‖Wᵀ r_κ‖ (W the double integration);
+* the change points (above);
+* friction: fitted (a free F_c column) when that gives the smaller total; else the Coulomb term is taken at
+  the middle of its band [0, F_c,max] with ± half the band as a uniform term, and the viscous band ± b_max
+  as a uniform term;
+* the drive's torque-estimate accuracy a (a relative scale error bound, uniform): J1 a/√3;
+* a floor, FREE_REL_SE_FLOOR J1: the model's own error (trapezoid double integral, sampled torque).
+
+Plain numpy; never imports rclpy.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+#: Change-point search: rows around the detector's entry and re-contact rows that may be the gap's ends.
+CHANGEPOINT_SEARCH_SAMPLES = 25
+#: Fewest samples of a candidate gap interval.
+FREE_MIN_SAMPLES = 8
+#: A candidate interval is consistent when its residual sum of squares is below the (1 - this) χ² quantile.
+CHANGEPOINT_P = 1e-3
+#: Chow forecast test of a candidate's end rows: this many rows predicted by the fit without them.
+CHANGEPOINT_FORECAST_SAMPLES = 3
+#: Relative floor of the standard error (the model's own error: trapezoid double integral of a sampled torque).
+FREE_REL_SE_FLOOR = 5e-4
+#: Samples taken off an end for the change-point term of the standard error (while at least half the interval
+#: stays): a contaminated end moves J1 as it is cut back; on a light-load reversal the coupling torque before the
+#: entry is too small for the residual test and the first 1-2 samples, yet biases J1 by 3 % (gap_stress).
+CHANGEPOINT_TRIMS = (1, 2, 4, 8)
+
+
+class FreeFitError(ValueError):
+    """No gap interval the free fit can use (the caller turns it into NoGapError)."""
+
+
+@dataclass(frozen=True)
+class GapModel:
+    """What the gap fits take as given about the drive (the diagnostic node's parameters of the same names).
+
+    torque_accuracy : relative bound of the drive's torque-estimate scale error (0.02 = 2 %), uniform
+    coulomb_friction_max_nm : band [0, this] of the motor's Coulomb (bearing) friction, N m, when it is not
+        fitted
+    viscous_friction_band_nms_per_rad : ± band of the viscous friction around the configured b1, N m s/rad
+    changepoint_search_samples : rows around the detector's entry and re-contact searched for the change points
+    """
+
+    torque_accuracy: float = 0.0
+    coulomb_friction_max_nm: float = 0.0
+    viscous_friction_band_nms_per_rad: float = 0.0
+    changepoint_search_samples: int = CHANGEPOINT_SEARCH_SAMPLES
+
+    def problems(self) -> list:
+        out = []
+        for name in ("torque_accuracy", "coulomb_friction_max_nm", "viscous_friction_band_nms_per_rad"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
+                out.append((name, "a finite number >= 0"))
+        if not 0 <= self.torque_accuracy < 0.5:
+            out.append(("torque_accuracy", "a fraction in [0, 0.5)"))
+        c = self.changepoint_search_samples
+        if isinstance(c, bool) or not isinstance(c, (int, np.integer)) or not 0 <= c <= 1000:
+            out.append(("changepoint_search_samples", "an integer in [0, 1000]"))
+        return out
+
+    def torque_rel_se(self) -> float:
+        """Relative standard uncertainty of J1 from the torque accuracy (a uniform scale error)."""
+        return float(self.torque_accuracy) / np.sqrt(3.0)
+
+
+_Z_CHANGEPOINT = float(stats.norm.isf(CHANGEPOINT_P))
+
+
+def _chi2_upper(dof: np.ndarray) -> np.ndarray:
+    """The (1 - CHANGEPOINT_P) quantile of χ² with ``dof`` degrees of freedom (Wilson-Hilferty: within 1 % of
+    scipy's from 3 degrees of freedom on; a scipy call per scan cost more than the scan)."""
+    v = np.asarray(dof, float)
+    c = 2.0 / (9.0 * v)
+    return v * (1.0 - c + _Z_CHANGEPOINT * np.sqrt(c)) ** 3
+
+
+def _cumtrapz(x: np.ndarray, ts: float) -> np.ndarray:
+    out = np.empty(x.size)
+    out[0] = 0.0
+    np.cumsum(0.5 * (x[1:] + x[:-1]), out=out[1:])
+    return out * ts
+
+
+def _solve_rss(X: np.ndarray, y: np.ndarray, lo_rows: np.ndarray, hi_rows: np.ndarray) -> np.ndarray:
+    """RSS of the least-squares fit of y on X over rows [lo, hi) for every pair (batched normal equations on
+    cumulative sums; y should be a residual already, so that the differences do not cancel)."""
+    p = X.shape[1]
+    outer = np.einsum("ki,kj->kij", X, X)
+    C = np.concatenate([np.zeros((1, p, p)), np.cumsum(outer, axis=0)])
+    b = np.concatenate([np.zeros((1, p)), np.cumsum(X * y[:, None], axis=0)])
+    yy = np.concatenate([[0.0], np.cumsum(y * y)])
+    A = C[hi_rows] - C[lo_rows]
+    bb = b[hi_rows] - b[lo_rows]
+    A = A + np.eye(p) * (1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] / p)
+    beta = np.linalg.solve(A, bb[..., None])[..., 0]
+    return yy[hi_rows] - yy[lo_rows] - np.einsum("ki,ki->k", bb, beta)
+
+
+def _quantum(alpha: np.ndarray) -> float:
+    """The encoder's count (the smallest non-zero second difference: whole counts on a quantised angle), 0
+    when the angle looks continuous."""
+    d = np.abs(np.diff(alpha, 2))
+    d = d[d > 1e-10 * max(1.0, float(np.max(np.abs(alpha))))]     # a zero second difference, to rounding
+    if d.size < 5:
+        return 0.0
+    # a quantised angle moves by whole counts: the second differences are integer multiples of the count; the
+    # smallest one may be several counts (try its 1/1 .. 1/4, the largest that divides them all)
+    q0 = float(d.min())
+    for div in (1, 2, 3, 4):
+        q = q0 / div
+        k = d / q
+        if float(np.max(np.abs(k - np.round(k)))) < 0.01:
+            return q
+    return 0.0
+
+
+def _robust_noise(x: np.ndarray) -> float:
+    d2 = np.diff(np.asarray(x, float), 2)
+    if d2.size < 3:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+
+
+def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, start: int, end: int,
+                   model: GapModel | None = None, fixed: bool = False) -> dict:
+    """J1 from the motor angle over the gap with free initial angle and speed (module docstring).
+
+    ``alpha1``: motor angle over the window, rad (any offset); ``torque``: m_el − b1 ω1 over the window, N m;
+    [start, end): the detector's coarse gap (entry row, re-contact row).  ``fixed``: no change-point search
+    (the interval as given).  Returns a dict: j1, se (kg m^2, all terms), se_stat (without the torque
+    accuracy term: what a cross-check with another fit on the same torque compares), terms (each term of the
+    standard error, kg m^2), start, end (the estimated interval), friction ('fitted F_c = ..' or 'bounded'),
+    coulomb_nm (the fitted or assumed F_c), residual (rad), dof.  Raises FreeFitError."""
+    model = GapModel() if model is None else model
+    a = np.asarray(alpha1, float)
+    m_all = np.asarray(torque, float)
+    n_all = a.size
+    ts = float(sample_period_s)
+    W = 0 if fixed else int(model.changepoint_search_samples)
+    L, R = max(0, start - W), min(n_all, end + W)
+    if end - start < FREE_MIN_SAMPLES and (fixed or R - L < FREE_MIN_SAMPLES):
+        raise FreeFitError(f"gap too short: {end - start} samples, the free angle fit needs >= {FREE_MIN_SAMPLES}")
+    y = a[L:R] - a[start]
+    m = m_all[L:R]
+    rows = np.arange(L, R)
+    tau = (rows - start) * ts
+    D = max((end - start) * ts, ts)
+    Phi = _cumtrapz(_cumtrapz(m, ts), ts)
+    vel = np.gradient(a[L:R])
+    sg = np.sign(vel)
+    Cc = _cumtrapz(_cumtrapz(sg, ts), ts)
+    Vv = _cumtrapz(y, ts)
+    phi_scale = max(float(np.max(np.abs(Phi))), 1e-300)
+    coulomb_mid = 0.5 * float(model.coulomb_friction_max_nm)
+    # the scan's design: the physics alone, 1, τ and Φ of the torque less the assumed friction (a free
+    # offset torque would let the fit take a slowly changing coupling torque for friction)
+    u = tau / D
+    phi_mid = Phi - coulomb_mid * Cc
+    Xs = np.column_stack([np.ones(R - L), u, phi_mid / max(float(np.max(np.abs(phi_mid))), 1e-300)])
+    q = _quantum(a[L:R])
+    s_est, e_est = start, end
+    if not fixed:
+        lo_c, hi_c = start - L, end - L
+        k_in = min(W // 2, max((hi_c - lo_c) // 4, 0))
+        core = (lo_c + k_in, hi_c - k_in) if hi_c - lo_c - 2 * k_in >= FREE_MIN_SAMPLES else (lo_c, hi_c)
+        if core[1] - core[0] < FREE_MIN_SAMPLES:
+            core = (max(0, min(lo_c, R - L - FREE_MIN_SAMPLES)), max(0, min(lo_c, R - L - FREE_MIN_SAMPLES))
+                    + FREE_MIN_SAMPLES)
+        # a long coarse interval may hold contact (a re-contact row that is a later flank's): the core is the
+        # third of it whose fit is the tightest, when that is long enough
+        third = (core[1] - core[0]) // 3
+        if third >= 2 * FREE_MIN_SAMPLES:
+            best_var = np.inf
+            for k in range(3):
+                sub = (core[0] + k * third, core[0] + (k + 1) * third)
+                cs, *_ = np.linalg.lstsq(Xs[sub[0]:sub[1]], y[sub[0]:sub[1]], rcond=None)
+                rs = y[sub[0]:sub[1]] - Xs[sub[0]:sub[1]] @ cs
+                v = float(rs @ rs) / (third - Xs.shape[1])
+                if v < best_var:
+                    best_var, best_sub = v, sub
+            core = best_sub
+        c0, *_ = np.linalg.lstsq(Xs[core[0]:core[1]], y[core[0]:core[1]], rcond=None)
+        r = y - Xs @ c0
+        rc = r[core[0]:core[1]]
+        s2 = max(float(rc @ rc) / max(rc.size - Xs.shape[1], 1), q * q / 12.0, 1e-30)
+        p = Xs.shape[1]
+
+        k_f = CHANGEPOINT_FORECAST_SAMPLES
+        outer = np.einsum("ki,kj->kij", Xs, Xs)
+        Cx = np.concatenate([np.zeros((1, p, p)), np.cumsum(outer, axis=0)])
+        bx = np.concatenate([np.zeros((1, p)), np.cumsum(Xs * r[:, None], axis=0)])
+        chi_f = float(_chi2_upper(np.array([k_f]))[0])
+
+        def accepted(lo_rows, hi_rows, side):
+            """The whole interval's residual is noise (χ² test) and its k_f end rows on ``side`` are predicted by
+            the fit without them (Chow's forecast test: a contaminated end shows in the extrapolation first)."""
+            rss = _solve_rss(Xs, r, lo_rows, hi_rows)
+            nn = hi_rows - lo_rows
+            ok = rss <= s2 * _chi2_upper(np.maximum(nn - p, 1))
+            if side == "end":
+                ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + np.arange(k_f)
+            else:
+                ilo, ihi, test = lo_rows + k_f, hi_rows, lo_rows[:, None] + np.arange(k_f)
+            A = Cx[ihi] - Cx[ilo]
+            A = A + np.eye(p) * (1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] / p)
+            beta = np.linalg.solve(A, (bx[ihi] - bx[ilo])[..., None])[..., 0]
+            Ainv = np.linalg.inv(A)
+            xt = Xs[test]                                             # (cand, k_f, p)
+            pred = np.einsum("ckp,cp->ck", xt, beta)
+            lev = np.einsum("ckp,cpq,ckq->ck", xt, Ainv, xt)
+            stat = np.sum((r[test] - pred) ** 2 / (s2 * (1.0 + lev)), axis=1)
+            return ok & ((ihi - ilo < p + 2) | (stat <= chi_f))
+
+        def grow_end(s_row, e_from):
+            cand = np.arange(max(s_row + FREE_MIN_SAMPLES, e_from), min(hi_c + W, R - L) + 1)
+            if cand.size == 0:
+                return e_from
+            ok = accepted(np.full(cand.size, s_row), cand, "end")
+            if not ok[0]:
+                return int(cand[0])
+            bad = np.flatnonzero(~ok)
+            return int(cand[bad[0] - 1]) if bad.size else int(cand[-1])
+
+        def grow_start(e_row, s_from):
+            cand = np.arange(min(e_row - FREE_MIN_SAMPLES, s_from), max(lo_c - W, 0) - 1, -1)
+            if cand.size == 0:
+                return s_from
+            ok = accepted(cand, np.full(cand.size, e_row), "start")
+            if not ok[0]:
+                return int(cand[0])
+            bad = np.flatnonzero(~ok)
+            return int(cand[bad[0] - 1]) if bad.size else int(cand[-1])
+
+        e_row = grow_end(core[0], core[1])
+        s_row = grow_start(e_row, core[0])
+        e_row = grow_end(s_row, core[1] if core[1] <= e_row else e_row)
+        s_est, e_est = L + s_row, L + e_row
+    if e_est - s_est < FREE_MIN_SAMPLES:
+        raise FreeFitError(f"gap too short: {e_est - s_est} samples consistent with a free motor, need >= "
+                           f"{FREE_MIN_SAMPLES}")
+
+    def fit(s_row: int, e_row: int, with_coulomb: bool) -> dict:
+        i, j = s_row - L, e_row - L
+        cols = [np.ones(j - i), u[i:j], Phi[i:j] / phi_scale]
+        c_scale = max(float(np.max(np.abs(Cc[i:j]))), 1e-300)
+        if with_coulomb:
+            cols.append(Cc[i:j] / c_scale)
+        X = np.column_stack(cols)
+        pinv = np.linalg.solve(X.T @ X, X.T)          # (XᵀX)⁻¹Xᵀ: the columns are scaled, p <= 4
+        yy = y[i:j]
+        coef = pinv @ yy
+        kappa = float(coef[2]) / phi_scale            # 1/J1
+        if with_coulomb:
+            fc = -float(coef[3]) / c_scale / kappa if kappa else np.nan
+        else:
+            # the assumed Coulomb term (middle of its band) taken off: α1 + κ F_mid C = θ0 + ω0 t + κ Φ
+            fc = coulomb_mid
+            if coulomb_mid:
+                for _ in range(2):
+                    yy = y[i:j] + kappa * coulomb_mid * Cc[i:j]
+                    coef = pinv @ yy
+                    kappa = float(coef[2]) / phi_scale
+        return {"kappa": kappa, "coef": coef, "pinv": pinv, "res": yy - X @ coef, "X": X, "fc": fc, "i": i, "j": j}
+
+    def se_terms(f: dict) -> dict:
+        kappa, res, X = f["kappa"], f["res"], f["X"]
+        n, p = X.shape
+        dof = n - p
+        if dof < 1 or not kappa > 0:
+            return {}
+        row = f["pinv"][2] / phi_scale                 # 1/J1 = row · y
+        s2r = float(res @ res) / dof
+        rr = float(res @ res)
+        rho = float(res[1:] @ res[:-1]) / rr if rr > 0 else 0.0
+        infl = (1.0 + max(rho, 0.0)) / max(1.0 - max(rho, 0.0), 1e-6)
+        var_stat = s2r * float(row @ row) * infl
+        # torque noise through Φ: δκ = −κ row·(W n_m), W the double trapezoid from the interval's first row
+        mm = m[f["i"]:f["j"]]
+        sm = _robust_noise(mm)
+        g = _double_trapz_adjoint(row, ts)
+        var_eiv = (kappa * sm) ** 2 * float(g @ g)
+        j1 = 1.0 / kappa
+        terms = {"statistical": j1 * j1 * np.sqrt(var_stat), "torque_noise": j1 * j1 * np.sqrt(var_eiv)}
+        if X.shape[1] == 3:
+            # bounded friction: sensitivity of J1 to F_c and b (J1 rel. change = +F rowκ·C / κ ... per unit)
+            cs = float(row @ Cc[f["i"]:f["j"]])
+            vs = float(row @ Vv[f["i"]:f["j"]])
+            terms["coulomb_band"] = j1 * abs(cs) * coulomb_mid / np.sqrt(3.0)
+            terms["viscous_band"] = j1 * abs(vs) * float(model.viscous_friction_band_nms_per_rad) / np.sqrt(3.0)
+        return terms
+
+    def j_trims(s_row, e_row, with_coulomb, trims):
+        """J1 alone over [s_row + k, e_row) and [s_row, e_row - k) for each k in ``trims`` (batched normal
+        equations on cumulative sums: the change-point term)."""
+        i, j = s_row - L, e_row - L
+        cols = [np.ones(j - i), u[i:j], Phi[i:j] / phi_scale]
+        if with_coulomb:
+            cols.append(Cc[i:j] / max(float(np.max(np.abs(Cc[i:j]))), 1e-300))
+        X = np.column_stack(cols)
+        p = X.shape[1]
+        Cx = np.concatenate([np.zeros((1, p, p)), np.cumsum(np.einsum("ki,kj->kij", X, X), axis=0)])
+        by = np.concatenate([np.zeros((1, p)), np.cumsum(X * y[i:j, None], axis=0)])
+        bc = np.concatenate([np.zeros((1, p)), np.cumsum(X * Cc[i:j, None], axis=0)])
+        lo = np.array([k for k in trims] + [0 for _ in trims])
+        hi = np.array([j - i for _ in trims] + [j - i - k for k in trims])
+        A = Cx[hi] - Cx[lo]
+        sol_y = np.linalg.solve(A, (by[hi] - by[lo])[..., None])[..., 0]
+        kappa = sol_y[:, 2] / phi_scale
+        if not with_coulomb and coulomb_mid:
+            sol_c = np.linalg.solve(A, (bc[hi] - bc[lo])[..., None])[..., 0][:, 2] / phi_scale
+            for _ in range(2):
+                kappa = sol_y[:, 2] / phi_scale + kappa * coulomb_mid * sol_c
+        with np.errstate(divide="ignore"):
+            return np.where(kappa > 0, 1.0 / kappa, np.inf)
+
+    best = None
+    for with_coulomb in (False, True):
+        if with_coulomb and (e_est - s_est < FREE_MIN_SAMPLES + 2 or not model.coulomb_friction_max_nm):
+            continue
+        f = fit(s_est, e_est, with_coulomb)
+        if not f["kappa"] > 0:
+            continue
+        j1 = 1.0 / f["kappa"]
+        terms = se_terms(f)
+        if not terms:
+            continue
+        if with_coulomb:
+            # fitted friction only inside its band (within 3 of its standard errors): else it is taking a
+            # coupling torque, a wrong interval, for friction
+            X = f["X"]
+            res = f["res"]
+            cov = float(res @ res) / max(X.shape[0] - X.shape[1], 1) * np.linalg.pinv(X.T @ X)
+            c_scale = max(float(np.max(np.abs(Cc[f["i"]:f["j"]]))), 1e-300)
+            se_fc = np.sqrt(max(cov[3, 3], 0.0)) / c_scale / f["kappa"]
+            if not (-3 * se_fc <= f["fc"] <= model.coulomb_friction_max_nm + 3 * se_fc):
+                continue
+        n = e_est - s_est
+        trims = [k for k in CHANGEPOINT_TRIMS if n - k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)]
+        terms["change_points"] = float(np.max(np.abs(j_trims(s_est, e_est, with_coulomb, trims) - j1))) \
+            if trims else 0.0
+        se_stat = float(np.sqrt(sum(v * v for v in terms.values())))
+        se_stat = max(se_stat, FREE_REL_SE_FLOOR * j1)
+        cand = {"j1": j1, "se_stat": se_stat, "terms": terms, "fit": f, "coulomb": with_coulomb}
+        if best is None or se_stat < best["se_stat"]:
+            best = cand
+    if best is None:
+        raise FreeFitError("gap fit gave a non-physical 1/J1 from alpha1 (the angle does not curve with the "
+                           "torque's double integral over the gap)")
+    j1 = best["j1"]
+    terms = dict(best["terms"])
+    terms["torque_accuracy"] = j1 * model.torque_rel_se()
+    se = float(np.hypot(best["se_stat"], terms["torque_accuracy"]))
+    f = best["fit"]
+    friction = (f"fitted F_c = {f['fc']:.3g} N m" if best["coulomb"] else
+                f"bounded (F_c = {coulomb_mid:.3g} ± {coulomb_mid:.3g} N m, b ± "
+                f"{model.viscous_friction_band_nms_per_rad:.3g} N m s/rad)")
+    return {"j1": j1, "se": se, "se_stat": best["se_stat"], "terms": terms, "start": int(s_est), "end": int(e_est),
+            "friction": friction, "coulomb_nm": float(f["fc"]), "residual": f["res"], "dof": f["X"].shape[0] - f["X"].shape[1],
+            "change_point_error": float(terms["change_points"])}
+
+
+def _double_trapz_adjoint(row: np.ndarray, ts: float) -> np.ndarray:
+    """G = Wᵀ row with (W x)_k = the double trapezoid integral of x from the first row to row k."""
+    n = row.size
+    # single trapezoid T: (T x)_k = ts (x_0/2 + x_1 + ... + x_{k-1} + x_k/2) for k >= 1, 0 for k = 0
+    def t_adj(v):
+        # (Tᵀ v)_i = ts Σ_k v_k w_ki ; w_ki = 1/2 at i = 0 or i = k (k>=1), 1 for 0 < i < k
+        out = np.zeros(n)
+        if n < 2:
+            return out
+        rev = np.cumsum(v[::-1])[::-1]          # Σ_{k >= i} v_k
+        out[0] = 0.5 * float(rev[1])
+        inner = np.zeros(n)
+        inner[1:n - 1] = rev[2:]                 # Σ_{k > i} v_k
+        out[1:] += inner[1:] + 0.5 * v[1:]
+        return out * ts
+    return t_adj(t_adj(row))
+
+
+#: Kink fit: steady pre-entry samples used before the earliest candidate entry row, and the candidate rows
+#: searched around the free fit's and the detector's entry rows.
+KINK_PRE_SAMPLES = 40
+KINK_SEARCH = 4
+#: Kink fit: fewest gap samples after a candidate entry (the steady samples before it carry ω0).
+KINK_MIN_GAP_SAMPLES = 6
+#: Kink fit: the pre-entry angle's t² term must not be significant beyond this t statistic.
+KINK_STEADY_T = 3.0
+#: Kink fit: entry rows whose profile residual is within this χ²₁ quantile (95 %) of the best one are plausible.
+KINK_CHI2_1 = 3.841
+
+
+def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int,
+             coulomb_max_nm: float = 0.0) -> dict:
+    """J1 with the entry row as a change point of a steady drive (profile likelihood).
+
+    Before the entry the drive turns at constant speed (steady, in contact); from the entry row s on it is free:
+    α1(t) = θ0 + ω0 (t − t_s) + [t ≥ t_s] Φ_s(t)/J1, Φ_s the double integral of the torque from t_s (zero value
+    and slope at t_s: angle and speed are continuous).  The same rows [P, end) for every candidate s in
+    ``entries``, so the residual sums compare: s* minimises it; the plausible entries are those within
+    KINK_CHI2_1 σ̂² of it, and the largest change of J1 over them is the change-point term.  Returns j1, se_stat
+    (statistical, torque noise and change points in quadrature), terms, start (s*), end, residual, dof; raises
+    FreeFitError."""
+    a = np.asarray(alpha1, float)
+    m = np.asarray(torque, float)
+    ts = float(sample_period_s)
+    entries = sorted(int(x) for x in entries if end - int(x) >= KINK_MIN_GAP_SAMPLES)
+    if not entries:
+        raise FreeFitError(f"kink fit: fewer than {KINK_MIN_GAP_SAMPLES} samples after every candidate entry")
+    P = max(0, entries[0] - KINK_PRE_SAMPLES)
+    if entries[0] - P < 10:
+        raise FreeFitError("kink fit: fewer than 10 steady samples before the entry")
+    rows = np.arange(P, end)
+    y = a[P:end] - a[entries[0]]
+    out = []
+    for s_row in entries:
+        i = s_row - P
+        phi = np.zeros(end - P)
+        phi[i:] = _cumtrapz(_cumtrapz(m[s_row:end], ts), ts)
+        scale = max(float(np.max(np.abs(phi))), 1e-300)
+        X = np.column_stack([np.ones(end - P), (rows - s_row) * ts / max((end - s_row) * ts, ts), phi / scale])
+        pinv = np.linalg.solve(X.T @ X, X.T)
+        coef = pinv @ y
+        res = y - X @ coef
+        out.append((float(res @ res), float(coef[2]) / scale, res, pinv[2] / scale, s_row))
+    rss = np.array([o[0] for o in out])
+    k = int(np.argmin(rss))
+    rss_min, kappa, res, row, s_best = out[k]
+    if not kappa > 0:
+        raise FreeFitError(f"kink fit: non-physical 1/J1 = {kappa!r}")
+    dof = end - P - 3
+    q = _quantum(a[P:end])
+    s2 = max(rss_min / max(dof, 1), q * q / 12.0, 1e-30)
+    # the model's premise: constant speed before the entry (a speed controller's drive is not): the pre-entry
+    # angle gets a t² term, refused when it is significant (t statistic > KINK_STEADY_T)
+    n_pre = s_best - P
+    tt = (np.arange(n_pre) - n_pre / 2.0) / max(n_pre, 1)
+    Xp = np.column_stack([np.ones(n_pre), tt, tt * tt])
+    cp_, *_ = np.linalg.lstsq(Xp, a[P:s_best], rcond=None)
+    rp = a[P:s_best] - Xp @ cp_
+    s2p = max(float(rp @ rp) / max(n_pre - 3, 1), q * q / 12.0, 1e-30)
+    t_quad = abs(float(cp_[2])) / float(np.sqrt(s2p * np.linalg.inv(Xp.T @ Xp)[2, 2]))
+    if t_quad > KINK_STEADY_T:
+        raise FreeFitError(f"kink fit: the speed before the entry is not constant (t = {t_quad:.3g} for a t² term "
+                           f"over {n_pre} samples)")
+    j1 = 1.0 / kappa
+    plausible = [o for o in out if o[0] - rss_min <= KINK_CHI2_1 * s2 and o[1] > 0]
+    cp = max(abs(1.0 / o[1] - j1) for o in plausible)
+    rr = float(res @ res)
+    rho = float(res[1:] @ res[:-1]) / rr if rr > 0 else 0.0
+    infl = (1.0 + max(rho, 0.0)) / max(1.0 - max(rho, 0.0), 1e-6)
+    var_stat = s2 * float(row @ row) * infl
+    i = s_best - P
+    g = _double_trapz_adjoint(row[i:], ts)
+    sm = _robust_noise(m[s_best:end])
+    terms = {"statistical": j1 * j1 * float(np.sqrt(var_stat)),
+             "torque_noise": j1 * j1 * kappa * sm * float(np.sqrt(g @ g)), "change_points": float(cp)}
+    if coulomb_max_nm:
+        # an unmodelled Coulomb friction F in [0, F_max] is a torque offset in the gap: C = (t − t_s)²/2 after
+        # the entry; J1 moves by J1 F (r_κ · C); a uniform term of half-width F_max (not centred: a drive without
+        # friction is not biased)
+        c_col = np.zeros(end - P)
+        c_col[i:] = 0.5 * ((np.arange(end - s_best)) * ts) ** 2
+        terms["coulomb_band"] = j1 * abs(float(row @ c_col)) * float(coulomb_max_nm) / np.sqrt(3.0)
+    se = float(np.sqrt(sum(v * v for v in terms.values())))
+    return {"j1": j1, "se_stat": max(se, FREE_REL_SE_FLOOR * j1), "terms": terms, "start": int(s_best),
+            "end": int(end), "residual": res, "dof": dof, "plausible_entries": [o[4] for o in plausible]}
