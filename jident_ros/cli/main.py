@@ -118,7 +118,9 @@ def cmd_info(args) -> int:
     """Base values and the loaded steady state at every eta_k (docs/model.md)."""
     import numpy as np
 
-    from jident_ros.config import load_system_config
+    from jident_ros.cli.drive_info import identification_lines, library_line, model_problem
+    from jident_ros.config import load_method_config, load_system_config
+    from jident_ros.identify.library import default_library_path
     from jident_ros.sim import Case, steady_state
     from jident_ros.sim.model import Model
     from jident_ros.sim.motor import breakdown_slip, steady_state_phasors
@@ -132,6 +134,15 @@ def cmd_info(args) -> int:
           f"U_b = {b.voltage_peak_v:.1f} V peak, I_b = {b.current_peak_a:.1f} A peak, Z_b = {b.impedance_ohm:.3f} ohm")
     print(f"  w = x_s x_w - x_m^2 = {m.sigma_determinant_pu:.4f}; pull-out torque "
           f"{steady_state_phasors(m, s_bd)['torque_pu']:.3f} p.u. at slip {s_bd * 100:.1f} %")
+    for line in identification_lines(cfg):
+        print(line)
+    problem = model_problem(cfg)
+    method = load_method_config()
+    lib = default_library_path(cfg, method)
+    print(library_line(cfg, method, lib, lib.exists(), problem))
+    if problem:
+        print(f"Loaded steady state: not available: {problem}")
+        return 0
     cases = [Case(m.nominal_inertia_kgm2, cfg.grid.backlash_widths_m[0], e)
              for e in cfg.grid.consistency_indices_pa_sn]
     y, slip = steady_state(cfg, cases, 0.0)
@@ -303,7 +314,7 @@ def cmd_diagnose(args) -> int:
     else:
         try:
             result = diagnose_recording(args.recording, backlash_width_m=args.backlash_width_m,
-                                        signals_topic=args.topic, detector=args.detector or "paper",
+                                        signals_topic=args.topic, detector=args.detector or "auto",
                                         gear_ratio=args.gear_ratio, **common)
         except OfflineError as exc:
             if "no drive/signals topic" not in str(exc):
@@ -316,7 +327,8 @@ def cmd_diagnose(args) -> int:
         write_json(result, args.json)
     print(summary_line(result) + (f"; JSON: {args.json}" if args.json else ""))
     if not result.windows:
-        print(f"jident diagnose: no backlash entry found in {result.signals_topic}", file=sys.stderr)
+        print(f"jident diagnose: no backlash entry found in {result.signals_topic}"
+              + (f": {result.no_entry_hint}" if result.no_entry_hint else ""), file=sys.stderr)
         return 1
     return 0
 
@@ -434,7 +446,8 @@ def _diagnose_arguments(g) -> None:
                         "drive/backlash_width, else 0.005)")
     g.add_argument("--detector", choices=("flank", "paper", "dynamics"),
                    help="entry detector: flank (no K2, raw encoder angles; the default for JointState bags and CSV), "
-                        "paper (inequality 1 with K2, zone-centred angles; the default for drive/signals) or dynamics "
+                        "paper (inequality 1 with K2, zone-centred angles; the default for drive/signals recordings "
+                        "whose K2 is known: --backlash-width-m or their drive/backlash_width; flank otherwise) or dynamics "
                         "(no angles needed: the load-torque step from m_el and a1 or the alpha1 encoder)")
     g.add_argument("--gear-ratio", type=_positive("--gear-ratio"), default=1.0,
                    help="N in delta = alpha1 - N alpha2 (motor turns per load-encoder turn; default 1)")

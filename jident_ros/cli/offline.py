@@ -33,7 +33,7 @@ from jident_ros.cli.jointstate_bag import jointstate_batches
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.diagnosis import Diagnoser, DiagnosisConfig, WindowDiagnosis
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES
-from jident_ros.identify.library import default_library_path, load_pattern_library
+from jident_ros.identify.library import IMAGE_METHOD_OFF, default_library_path, load_pattern_library
 from jident_ros.identify.monitor import DetectorConfig, DriveMonitor, make_detector, required_channels
 from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.parameters import DIAGNOSTIC as DIAGNOSTIC_DEFAULTS
@@ -125,6 +125,8 @@ class OfflineResult:
     cut_off: list = field(default_factory=list)    # windows cut off by the end of the data: {entry_time_s, samples}
     jitter: Optional[dict] = None                  # JointState stamp period statistics
     notes: list = field(default_factory=list)      # one line each: a file read by salvaging it, dropped batches
+    no_entry_hint: str = ""            # no window: why not, and what to set (the detector's no_entry_reason)
+    detector: str = ""                 # the entry detector that ran (flank, paper, dynamics)
 
     @property
     def estimates(self) -> list:
@@ -183,7 +185,9 @@ class OfflineOptions:
     policy : the publishing policy (default: the diagnostic node's default parameters, :func:`default_policy`)
     backlash_width_m : K2, m.  A drive/signals recording: None = from drive/backlash_width messages, else the
         windowing node's default.  JointState/CSV: only (and needed) with the paper detector
-    detector : 'paper', 'flank' or 'dynamics' (None: 'paper' for drive/signals, 'flank' for JointState/CSV)
+    detector : 'paper', 'flank', 'dynamics' or 'auto' (None: 'auto' for drive/signals: paper where K2 is known --
+        backlash_width_m or the recording's drive/backlash_width --, else flank, dynamics without alpha2; 'flank'
+        for JointState/CSV)
     gear_ratio : N of the flank and dynamics detectors
     signals_topic : drive/signals: the topic to read (None: the recording's only topic ending in drive/signals)
     channels : drive/signals: window channels besides t (default: the windowing node's ``channels`` that the
@@ -245,7 +249,10 @@ class _Setup:
             result.library_path = str(lib_path)
             library, result.library_error = load_pattern_library(lib_path, self.system, self.method,
                                                                  o.build_if_missing, log=log, warn=log)
-            if result.library_error and say_gap_only:
+            if result.library_error and result.library_error.startswith(IMAGE_METHOD_OFF):
+                result.notes.append(result.library_error)     # a drive without a library: said once, here
+                log(result.library_error)
+            elif result.library_error and say_gap_only:
                 log(f"{result.library_error}; windows are diagnosed from the gap only (level ERROR)")
         diagnoser = Diagnoser(self.system, self.method, self.config, self.policy, library,
                               result.library_error or "")
@@ -263,7 +270,7 @@ def diagnose_recording(path, options: Optional[OfflineOptions] = None, *,
     Raises :class:`OfflineError` (one line naming the field and value) on bad input.
     """
     log = _plain_log(log)
-    setup = _Setup.of(options, fields, "paper")
+    setup = _Setup.of(options, fields, "auto")
     o = setup.options
     if o.backlash_width_m is not None and not (math.isfinite(o.backlash_width_m) and o.backlash_width_m > 0):
         raise OfflineError(f"backlash_width_m: must be a finite number > 0, got {o.backlash_width_m!r}")
@@ -280,7 +287,16 @@ def diagnose_recording(path, options: Optional[OfflineOptions] = None, *,
     monitor = setup.monitor(result, log, say_gap_only=True)
 
     def make_detector(batch_channels, topic_name, k2):
-        config = DetectorConfig(o.detector, k2, o.channels, o.gap_tolerance, o.gear_ratio)
+        kind = o.detector
+        if kind == "auto":
+            # the paper detector only where K2 is known (given, or the drive publishes it: zone-centred angles, our
+            # simulator); any other drive/signals recording is read as raw encoder angles (issue 20)
+            kind = ("paper" if width_source != "default" else "flank" if "alpha2" in batch_channels
+                    else "dynamics")
+        result.detector = kind
+        if kind != "paper":
+            result.backlash_width_source = "estimated"
+        config = DetectorConfig(kind, k2, o.channels, o.gap_tolerance, o.gear_ratio)
         return _make_detector(setup.system, config, batch_channels, topic_name)
 
     replay = DriveReplay(names, width, width_source not in ("option", "default"), decode=_decode,
@@ -379,11 +395,14 @@ def _add_window(result, win, d, true_j1, on_window):
 
 
 def _finish(result, detector, log):
-    """The end of the data: a window in progress is reported (cut_off), the counts collected."""
+    """The end of the data: a window in progress is reported (cut_off), the counts collected; without a window,
+    why (the detector's no_entry_reason, in result.no_entry_hint)."""
     for ev in detector.finish():
         w = ev.window
         result.cut_off.append({"entry_time_s": w.entry_time_s, "samples_from_entry": len(w) - w.entry_index})
         log(f"window cut off by the end of the data: {ev.detail}")
+    if not result.windows and not result.cut_off and hasattr(detector, "no_entry_reason"):
+        result.no_entry_hint = f"the {result.detector} detector: {detector.no_entry_reason()}"
     result.samples, result.batches = detector.samples_seen, detector.batches_seen
     result.dropped = {r: n for r, n in detector.counts.items() if n}
 
@@ -436,7 +455,8 @@ def diagnose_samples(path, options: Optional[OfflineOptions] = None, *,
                                                            log=log)
     except InputError as exc:
         raise OfflineError(str(exc)) from None
-    result = OfflineResult(str(path), source, "estimated" if o.detector != "paper" else "option")
+    result = OfflineResult(str(path), source, "estimated" if o.detector != "paper" else "option",
+                           detector=o.detector)
     monitor = setup.monitor(result, log, say_gap_only=False)
     skew = ImuSkewGuard(adapter, log)
     try:

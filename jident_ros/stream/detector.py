@@ -48,6 +48,8 @@ REASONS = {
     "irregular_stamp": "t advanced by less than half the sample period",
     "short_history": "a backlash entry with fewer than samples_before_entry samples of history",
     "cut_off": "the data ended before the window was complete (finish(); the event carries the partial window)",
+    "swallowed_entry": "an entry inside a window whose own entry shows no traversal (flank detector): the window "
+                       "goes out, flagged; the entry inside it gets no window of its own",
 }
 
 
@@ -92,6 +94,9 @@ class BacklashDetector:
     samples_before_entry : int     history kept and put in front of the entry (48)
     samples_from_entry : int       samples from the entry sample on (2000)
     gap_tolerance : float          a step of t above gap_tolerance x T_s is a gap (1.5)
+    unwrap_angles : bool           alpha1 and alpha2 are unwrapped (True): a step of more than pi rad between two
+                                   samples is a wrap of a continuous joint's position (reported in [-pi, pi)), not
+                                   motion (it would take 6283 rad/s at 2 kHz); the windows carry the unwrapped angles
 
     Subclasses that need other channels set :attr:`required_channels` (and :attr:`required_reason`).
 
@@ -108,7 +113,7 @@ class BacklashDetector:
 
     def __init__(self, backlash_width_m: float, wheel_radius_m: float, sample_period_s: float,
                  channels: Sequence[str] = DEFAULT_CHANNELS, samples_before_entry: int = 48,
-                 samples_from_entry: int = 2000, gap_tolerance: float = 1.5):
+                 samples_from_entry: int = 2000, gap_tolerance: float = 1.5, unwrap_angles: bool = True):
         for name, v in (("wheel_radius_m", wheel_radius_m), ("sample_period_s", sample_period_s),
                         ("gap_tolerance", gap_tolerance)):
             if not _positive(v):
@@ -135,6 +140,9 @@ class BacklashDetector:
         self.samples_before_entry = int(samples_before_entry)
         self.samples_from_entry = int(samples_from_entry)
         self.gap_tolerance = float(gap_tolerance)
+        self.unwrap_angles = bool(unwrap_angles)
+        #: wraps of alpha1/alpha2 undone so far (information)
+        self.wraps_undone = 0
         self._i_t = 0
         self._i_a1 = self.channels.index("alpha1") if "alpha1" in self.channels else -1
         self._i_a2 = self.channels.index("alpha2") if "alpha2" in self.channels else -1
@@ -168,6 +176,9 @@ class BacklashDetector:
 
     def reset(self) -> None:
         """Forget the history and the window in progress (continuity lost)."""
+        self._wrap = {}
+        if not hasattr(self, "_rel_range"):
+            self._rel_range = (math.inf, -math.inf)
         self._tail = np.empty((0, len(self.channels)))
         self._last_t: float | None = None
         self._prev_inside: bool | None = None
@@ -260,11 +271,62 @@ class BacklashDetector:
                 where = "between batches" if (prev is not None and k == 0) else "inside the batch"
                 return None, (reason, f"t {tt[k]!r} -> {tt[k + 1]!r} s (step {dt[k]:.6g} s, "
                                       f"T_s {ts:.6g} s) {where}")
+        if self.unwrap_angles:
+            self._unwrap(x)
         return x, None
+
+    def _unwrap(self, x: np.ndarray) -> None:
+        """Undo the wraps of alpha1 and alpha2 in place, continuing across batches (this batch's first sample
+        against the last one of the previous batch included).  A wrap is a step of more than pi and less than
+        2 pi between two values that both lie within one turn of zero (a position reported in [-pi, pi) or
+        [0, 2 pi)); a larger jump (a simulator starting its next case elsewhere) is left alone.  The state is
+        forgotten with the history (reset)."""
+        two_pi = 2.0 * math.pi
+        lim = two_pi * (1.0 + 1e-9)
+        for j in (self._i_a1, self._i_a2):
+            if j < 0:
+                continue
+            raw = x[:, j].copy()
+            prev = self._wrap.get(j)            # (last raw value, its unwrapped value)
+            seq = raw if prev is None else np.concatenate([[prev[0]], raw])
+            step = np.diff(seq)
+            wraps = (np.abs(step) > math.pi) & (np.abs(step) < lim) & (np.abs(seq[:-1]) <= lim) & (np.abs(seq[1:]) <= lim)
+            shift = 0.0 if prev is None else prev[1] - prev[0]
+            if wraps.any():
+                self.wraps_undone += int(np.count_nonzero(wraps))
+                turns = np.cumsum(np.where(wraps, -np.sign(step), 0.0))
+                if prev is None:
+                    turns = np.concatenate([[0.0], turns])
+                x[:, j] = raw + shift + two_pi * turns
+            elif shift:
+                x[:, j] = raw + shift
+            self._wrap[j] = (float(raw[-1]), float(x[-1, j]))
 
     # ------------------------------------------------------------- detection
     def _inside(self, x: np.ndarray) -> np.ndarray:
-        return np.abs(x[:, self._i_a1] - x[:, self._i_a2]) < self.threshold_rad
+        rel = np.abs(x[:, self._i_a1] - x[:, self._i_a2])
+        if rel.size:
+            lo, hi = float(rel.min()), float(rel.max())
+            self._rel_range = (min(self._rel_range[0], lo), max(self._rel_range[1], hi))
+        return rel < self.threshold_rad
+
+    def no_entry_reason(self) -> str:
+        """Why no entry was found so far, and what to set (one line; '' when a window was captured)."""
+        if self.windows_captured or not self.samples_seen:
+            return ""
+        lo, hi = self._rel_range
+        thr = self.threshold_rad
+        if lo >= thr:
+            return (f"|alpha1 - alpha2| stayed between {lo:.4g} and {hi:.4g} rad, never inside the zone K2/r = "
+                    f"{thr:.4g} rad (paper inequality 1 needs zone-centred angles): raw encoder angles with offsets "
+                    f"or a gear ratio? use the flank detector (--detector flank / detector: flank, with gear_ratio), "
+                    f"which needs no K2 and no zone-centred angles")
+        if hi < thr:
+            return (f"|alpha1 - alpha2| stayed inside the zone K2/r = {thr:.4g} rad (at most {hi:.4g} rad) and never "
+                    f"entered it from outside: K2 = {self.backlash_width_m:g} m too large for wheel_radius_m "
+                    f"{self.wheel_radius_m:g}? or use the flank detector (--detector flank), which needs no K2")
+        return (f"|alpha1 - alpha2| ranged {lo:.4g}..{hi:.4g} rad around K2/r = {thr:.4g} rad but never entered the "
+                f"zone after {self.samples_before_entry} samples outside it")
 
     def _consume(self, x: np.ndarray) -> list:
         events = []

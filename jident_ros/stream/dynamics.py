@@ -92,7 +92,8 @@ class DynamicsDetector(FlankDetector):
                          samples_from_entry=samples_from_entry, gap_tolerance=gap_tolerance, gear_ratio=gear_ratio,
                          nominal_inertia_kgm2=nominal_inertia_kgm2, contact_samples=contact_samples,
                          k_sigma=k_sigma, flank_time_constant_s=flank_time_constant_s,
-                         encoder_counts_per_rev=encoder_counts_per_rev, refine_samples=refine_samples)
+                         encoder_counts_per_rev=encoder_counts_per_rev, refine_samples=refine_samples,
+                         min_travel_rad=0.0)
         self.drop_fraction = float(drop_fraction)
         self.acceleration_source = "a1" if "a1" in self.channels else "alpha1"
         self.lookahead = 0 if self.acceleration_source == "a1" else int(w) // 2

@@ -1,0 +1,48 @@
+"""``jident info`` for any drive: what the configuration tells the identification, and whether the simulator and
+the image method's pattern library can serve this drive (docs/your_drive.md).  Never imports rclpy."""
+from __future__ import annotations
+
+from jident_ros.identify.library import model_problem
+from jident_ros.parameters import DIAGNOSTIC as DIAGNOSTIC_DEFAULTS
+from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
+
+
+def identification_lines(system) -> list:
+    """The keys the gap estimator and the detectors read, with their values and units."""
+    m, s, g, r = system.motor, system.sampling, system.grid, system.load.wheel_radius_m
+    lo, hi = DIAGNOSTIC_DEFAULTS["plausible_min_ratio"], DIAGNOSTIC_DEFAULTS["plausible_max_ratio"]
+    j = m.nominal_inertia_kgm2
+    widths = ", ".join(f"{w:g}" for w in g.backlash_widths_m)
+    return [
+        "Identification (docs/your_drive.md):",
+        f"  motor.nominal_inertia_kgm2 = {j:g} kg m^2 (plausible band {lo * j:.4g}..{hi * j:.4g} kg m^2: "
+        f"plausible_min/max_ratio {lo:g}/{hi:g})",
+        f"  grid.inertia_classes_kgm2 = [{', '.join(f'{c:g}' for c in g.inertia_classes_kgm2)}] kg m^2",
+        f"  load.wheel_radius_m = {r:g} m (K2 is reported at this radius: half zone K2/r; library widths "
+        f"[{widths}] m = [{', '.join(f'{w / r * 1e3:.4g}' for w in g.backlash_widths_m)}] mrad)",
+        f"  motor.bearing_friction_nms_per_rad = {m.bearing_friction_nms_per_rad:g} N m s/rad",
+        f"  sampling.sample_period_s = {s.sample_period_s:g} s ({1.0 / s.sample_period_s:g} Hz); window "
+        f"{s.samples_before_entry} + {s.samples_from_entry} samples = "
+        f"{(s.samples_before_entry + s.samples_from_entry) * s.sample_period_s:g} s",
+        f"  windowing: detector {WINDOWING_DEFAULTS['detector']}, gear_ratio {WINDOWING_DEFAULTS['gear_ratio']:g} "
+        f"(motor turns per load-encoder turn), joints motor_joint '{WINDOWING_DEFAULTS['motor_joint']}' / "
+        f"load_joint '{WINDOWING_DEFAULTS['load_joint']}' (node parameters; jident diagnose --gear-ratio, "
+        f"--motor-joint, --load-joint)",
+    ]
+
+
+def library_line(system, method, path, exists: bool, problem: str) -> str:
+    """Whether the image method has a pattern library for this drive, and how to get one."""
+    if exists:
+        return f"Pattern library: {path} (the image method is on)"
+    if problem:
+        return ("Pattern library: none for this drive, and the simulator cannot build one: the image method is off "
+                "(windows are identified from the gap). Build one from calibration recordings of this drive with "
+                "known J1: jident build-patterns --from-recordings REC... --label REC=J1 (docs/recording.md, "
+                "docs/your_drive.md)")
+    return (f"Pattern library: not built yet ({path}); the first jident diagnose / diagnostic node builds it from "
+            f"the simulator ({len(system.grid.inertia_classes_kgm2)} classes x {len(system.grid.backlash_widths_m)} "
+            f"widths), or jident build-patterns --from-recordings REC... --label REC=J1 from your recordings")
+
+
+__all__ = ["identification_lines", "library_line", "model_problem"]
