@@ -130,24 +130,26 @@ def test_recording_quantisation_offsets_and_truth(step_down, tmp_path):
     assert json.loads((tmp_path / f"{rec.name}.truth.json").read_text())["inertia_kgm2"] == 1.16
 
 
+def _delta_and_gaps(event, direction, duration_s):
+    """The coupling's twist delta = theta_M - N theta_L of SHORT after ``event`` at 0.1 s, and its gaps."""
+    p = SHORT
+    run = simulate(p, scenario(p, event, direction, event_time_s=0.1), duration_s)
+    m = p.mechanics
+    delta = run.data["theta_M"] - m.gear_ratio * run.data["theta_L"]
+    return delta, gaps(delta, m.half_zone_rad)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("event", ["speed_step_up", "load_step_same_flank", "steady"])
 def test_same_flank_events_open_no_gap(event):
-    p = SHORT
-    run = simulate(p, scenario(p, event, "forward", event_time_s=0.1), 0.6)
-    m = p.mechanics
-    delta = run.data["theta_M"] - m.gear_ratio * run.data["theta_L"]
-    assert gaps(delta, m.half_zone_rad) == []
+    delta, gl = _delta_and_gaps(event, "forward", 0.6)
+    assert gl == []
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("event", ["speed_reversal", "load_reversal_light", "load_reversal_heavy"])
 def test_reversals_traverse(event):
-    p = SHORT
-    run = simulate(p, scenario(p, event, "reverse", event_time_s=0.1), 0.7)
-    m = p.mechanics
-    delta = run.data["theta_M"] - m.gear_ratio * run.data["theta_L"]
-    gl = gaps(delta, m.half_zone_rad)
+    delta, gl = _delta_and_gaps(event, "reverse", 0.7)
     assert gl and delta[gl[0][0] - 1] < 0 < delta[gl[0][1]], "reverse: from the - flank to the + flank"
 
 

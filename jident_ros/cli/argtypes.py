@@ -27,3 +27,14 @@ def count_arg(name, minimum):
             raise argparse.ArgumentTypeError(f"{name} must be >= {minimum}, got {v}")
         return v
     return parse
+
+
+def raising_parser(error_cls, prog: str, description: str):
+    """An ArgumentParser whose usage errors raise ``error_cls(message)`` instead of exiting, so that the
+    subcommand prints them as its own one-line error (``jident salvage``, ``jident samples``)."""
+
+    class _Parser(argparse.ArgumentParser):
+        def error(self, message):
+            raise error_cls(message)
+
+    return _Parser(prog=prog, description=description)

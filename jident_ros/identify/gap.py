@@ -239,6 +239,14 @@ def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_
     return entry_index, end, how
 
 
+def _net_torque(window: dict, bearing_friction_nms_per_rad: float) -> np.ndarray:
+    """m_el − b1·ω1 over the whole window: the torque that accelerates J1 (m_el alone without b1 or ω1)."""
+    torque = np.asarray(window["m_el"], float)
+    if bearing_friction_nms_per_rad and "omega1" in window:
+        torque = torque - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)
+    return torque
+
+
 def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
                      sample_period_s: float, method: str | None = None,
                      bearing_friction_nms_per_rad: float = 0.0, recontact_index: int | None = None,
@@ -263,9 +271,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
                               bearing_friction_nms_per_rad, recontact_index, entry_uncertainty_samples, model)
     start, end, how = gap_interval(window, entry_index, backlash_width_m, wheel_radius_m,
                                    recontact_index=recontact_index)
-    m = np.asarray(window["m_el"], float)[start:end]
-    if bearing_friction_nms_per_rad and "omega1" in window:
-        m = m - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)[start:end]
+    m = _net_torque(window, bearing_friction_nms_per_rad)[start:end]
     choice = ""
     fit_span = (start, end)
     free_extra: dict = {}
@@ -283,9 +289,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     if method == "gap_only":
         if "a1" not in window:
             raise NoGapError("method 'gap_only' needs a1 (use 'speed' with omega1)")
-        mf = np.asarray(window["m_el"], float)
-        if bearing_friction_nms_per_rad and "omega1" in window:
-            mf = mf - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)
+        mf = _net_torque(window, bearing_friction_nms_per_rad)
         fit = gap_only_fit(mf, np.asarray(window["a1"], float) / wheel_radius_m, start, end)
         j, se, res, dof, model_error = fit["j1"], fit["se"], fit["residual"], fit["dof"], fit["model_error"]
         fit_span = (fit["start"], fit["end"])
@@ -311,9 +315,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         # the entry (steady state): anchor it with the pre-entry mean and a quadratic in
         # time over the gap, then fit a1 = (r/J1) m_el_hat through the origin.
         # b1 ω1 comes off the pre-entry samples too: m0 anchors m_el − b1 ω1, the torque that accelerates J1
-        mf = np.asarray(window["m_el"], float)
-        if bearing_friction_nms_per_rad and "omega1" in window:
-            mf = mf - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)
+        mf = _net_torque(window, bearing_friction_nms_per_rad)
         a = np.asarray(window["a1"], float)[start:end]
         t = np.arange(n) * sample_period_s
         pre = mf[:start]
@@ -345,9 +347,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     elif method == "angle":
         if "alpha1" not in window:
             raise NoGapError("method 'angle' needs alpha1 (use 'speed' with omega1)")
-        torque = np.asarray(window["m_el"], float)
-        if bearing_friction_nms_per_rad and "omega1" in window:
-            torque = torque - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)
+        torque = _net_torque(window, bearing_friction_nms_per_rad)
         try:
             ff = free_angle_fit(np.asarray(window["alpha1"], float), torque, sample_period_s, start, end, model)
         except FreeFitError as exc:

@@ -29,14 +29,17 @@ def _bad(name, value, why):
     sys.exit(2)
 
 
-def _float_list(text):
-    try:
-        vals = [float(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a comma-separated list of numbers: {text!r}") from None
-    if not vals:
-        raise argparse.ArgumentTypeError(f"empty list: {text!r}")
-    return vals
+def comma_list(kind):
+    """Argparse type: a comma-separated list of ``kind`` values (one line naming the value when it is not)."""
+    def parse(text):
+        try:
+            vals = [kind(x) for x in text.split(",") if x.strip()]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a comma-separated list of {kind.__name__}: {text!r}") from None
+        if not vals:
+            raise argparse.ArgumentTypeError(f"empty list: {text!r}")
+        return vals
+    return parse
 
 
 def parser():
@@ -55,9 +58,9 @@ def parser():
     p.add_argument("--post-s", type=float, default=1.3, help="simulated time after the event, s (>= 1.25)")
     p.add_argument("--direction", default="both", choices=("forward", "reverse", "both"))
     p.add_argument("--gear-ratio", type=float, default=1.0, help="gearbox ratio N (1 or 4)")
-    p.add_argument("--inertias", type=_float_list, default=None,
+    p.add_argument("--inertias", type=comma_list(float), default=None,
                    help="J1 values, kg m^2 (default: grid the 7 classes, wear 1.16)")
-    p.add_argument("--widths", type=_float_list, default=None,
+    p.add_argument("--widths", type=comma_list(float), default=None,
                    help="K2 values, m (default: grid the paper's 6; wear 10 increasing widths, on and off the grid)")
     p.add_argument("--namespace", default="", help="topic namespace, e.g. press3")
     p.add_argument("--imu", action="store_true", help="jointstate: also sensor_msgs/Imu on <ns>/imu (x = a1)")

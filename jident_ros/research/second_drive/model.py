@@ -353,12 +353,12 @@ def simulate(drive: Drive, duration_s: float, t0: float = 0.0) -> Result:
 def gaps(delta_col, theta_col, start=0):
     """Gap intervals of one case: list of (first index with |delta| < theta_b,
     first index after it with |delta| >= theta_b, or len), from index ``start``."""
-    inside = np.abs(delta_col) < theta_col
+    inside = np.abs(np.asarray(delta_col)) < theta_col
     inside[:start] = False
     d = np.diff(inside.astype(np.int8))
     begins = list(np.nonzero(d == 1)[0] + 1)
     ends = list(np.nonzero(d == -1)[0] + 1)
-    if inside[0]:
+    if inside.size and inside[0]:
         begins.insert(0, 0)
     out = []
     for b in begins:

@@ -13,6 +13,8 @@ import sys
 import time
 from pathlib import Path
 
+from jident_ros.research.second_drive.__main__ import comma_list  # the same argparse list type
+
 from .model import EVENTS, DriveParams, motulator_available, small_drive
 from .record import INPUTS, Sensors, build, with_inertia, with_width, write
 
@@ -25,28 +27,16 @@ class _Parser(argparse.ArgumentParser):
         sys.exit(2)
 
 
-def _list(kind):
-    def parse(text):
-        try:
-            vals = [kind(x) for x in text.split(",") if x.strip()]
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a comma-separated list: {text!r}") from None
-        if not vals:
-            raise argparse.ArgumentTypeError(f"empty list: {text!r}")
-        return vals
-    return parse
-
-
 def parser():
     p = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--events", type=_list(str), default=list(EVENTS), help=f"comma-separated, of {', '.join(EVENTS)}")
-    p.add_argument("--directions", type=_list(str), default=["forward", "reverse"])
-    p.add_argument("--inertias", type=_list(float), default=[1.16], help="J1 values, kg m^2")
-    p.add_argument("--widths", type=_list(float), default=[0.005], help="K2 values, m (at r)")
-    p.add_argument("--counts", type=_list(int), default=[65536], help="encoder counts per revolution")
-    p.add_argument("--snr-db", type=_list(float), default=None, help="noise levels in dB (default: clean only)")
-    p.add_argument("--formats", type=_list(str), default=list(INPUTS), help=f"of {', '.join(INPUTS)}")
+    p.add_argument("--events", type=comma_list(str), default=list(EVENTS), help=f"comma-separated, of {', '.join(EVENTS)}")
+    p.add_argument("--directions", type=comma_list(str), default=["forward", "reverse"])
+    p.add_argument("--inertias", type=comma_list(float), default=[1.16], help="J1 values, kg m^2")
+    p.add_argument("--widths", type=comma_list(float), default=[0.005], help="K2 values, m (at r)")
+    p.add_argument("--counts", type=comma_list(int), default=[65536], help="encoder counts per revolution")
+    p.add_argument("--snr-db", type=comma_list(float), default=None, help="noise levels in dB (default: clean only)")
+    p.add_argument("--formats", type=comma_list(str), default=list(INPUTS), help=f"of {', '.join(INPUTS)}")
     p.add_argument("--size", choices=("default", "small"), default="default",
                    help="default: 37 kW, J1 1.16 kg m^2; small: motulator's 2.2 kW machine, 3:1 gear")
     p.add_argument("--duration-s", type=float, default=2.2)

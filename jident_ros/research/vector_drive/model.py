@@ -32,6 +32,8 @@ from typing import Optional
 
 import numpy as np
 
+from jident_ros.research.second_drive.model import gaps  # the gap intervals of a delta series: one home
+
 MOTULATOR_HINT = ("the vector drive needs motulator (Python < 3.12: motulator==0.5.0): "
                   "pip install -e '.[zoo]'")
 
@@ -471,22 +473,6 @@ def simulate(p: DriveParams, sc: Scenario, duration_s: float) -> Run:
     if not np.all(np.isfinite(data["w_M"])):
         raise RuntimeError("motulator reported a numerical failure (non-finite states)")
     return Run(p, sc, data, _version())
-
-
-def gaps(delta, half_zone, start: int = 0) -> list:
-    """Gap intervals: (first index with |delta| < theta_b, first index after it back in contact, or len)."""
-    inside = np.abs(np.asarray(delta)) < half_zone
-    inside[:start] = False
-    d = np.diff(inside.astype(np.int8))
-    begins = list(np.nonzero(d == 1)[0] + 1)
-    ends = list(np.nonzero(d == -1)[0] + 1)
-    if inside.size and inside[0]:
-        begins.insert(0, 0)
-    out = []
-    for b in begins:
-        e = next((x for x in ends if x > b), len(inside))
-        out.append((int(b), int(e)))
-    return out
 
 
 __all__ = ["Controller", "DriveParams", "EVENTS", "LOG_KEYS", "Machine", "Mechanics", "Run", "Scenario",
