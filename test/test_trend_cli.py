@@ -94,10 +94,17 @@ def test_joined_batches_give_the_same_windows_and_drops(system, tmp_path, monkey
         for s in range(0, stream.shape[0], 50):
             b = stream[s:s + 50]
             bag.write("/drive/signals", multiarray_message(b, DEFAULT_CHANNELS), int(b[-1, 0] * 1e9))
-    joined = diagnose_recording(tmp_path / "rec", system=system, image_method=False)
+    # the paper detector (K2 given): 'auto' would take the flank detector for a recording without drive/backlash_width
+    joined = diagnose_recording(tmp_path / "rec", system=system, image_method=False, detector="paper")
+    flank_joined = diagnose_recording(tmp_path / "rec", system=system, image_method=False)
     monkeypatch.setattr(DriveReplay, "MAX_RUN_SAMPLES", 1)       # every batch alone
-    single = diagnose_recording(tmp_path / "rec", system=system, image_method=False)
+    single = diagnose_recording(tmp_path / "rec", system=system, image_method=False, detector="paper")
+    flank_single = diagnose_recording(tmp_path / "rec", system=system, image_method=False)
     assert joined.dropped == single.dropped == {"nonfinite": 1}
+    assert flank_joined.detector == "flank" and flank_joined.dropped == flank_single.dropped
+    assert flank_joined.dropped["nonfinite"] == 1
+    assert [(w.entry_time_s, w.inertia_kgm2) for w in flank_joined.windows] == \
+        [(w.entry_time_s, w.inertia_kgm2) for w in flank_single.windows]
     assert joined.batches == single.batches == math.ceil(stream.shape[0] / 50)
     assert len(joined.windows) == 3
     assert [(w.entry_time_s, w.inertia_kgm2) for w in joined.windows] == \

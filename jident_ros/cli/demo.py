@@ -43,7 +43,7 @@ from jident_ros.identify.trend import TrendConfig
 from jident_ros.identify.trend_status import TREND_STATUS_NAME
 from jident_ros.method.patterns import LibraryMismatch, PatternLibrary
 from jident_ros.nodes.diagnostics import status_task
-from jident_ros.nodes.ros_io import array_from_multiarray, qos_diagnostics, qos_latched, status_level, status_values
+from jident_ros.nodes.ros_io import array_from_multiarray, qos_diagnostics, qos_latched, qos_signals, status_level, status_values
 from jident_ros.resources import node_command, stop_process
 from jident_ros.sim.scenarios import wear_scenario
 
@@ -235,6 +235,9 @@ def _listen(cases, procs, timeout, start_simulator, trend: bool = False):
                 trend_statuses.append(s)
 
     node.create_subscription(Float64MultiArray, "drive/case", on_case, qos_latched(100))
+    # a subscriber of drive/signals too, so that the simulator (wait_for_subscribers 3) streams only once this
+    # listener is discovered: under load its latched drive/case rows were otherwise missed (ci, 0 cases run)
+    node.create_subscription(Float64MultiArray, "drive/signals", lambda m: None, qos_signals())
     sub_est = node.create_subscription(Float64, "inertia_estimate", lambda m: estimates.append(m.data),
                                        qos_latched(100))
     sub_diag = node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, qos_diagnostics())
@@ -405,8 +408,8 @@ def run(args) -> int:
             procs["simulator"] = NodeProcess("simulator", logs, [
                 "-p", "cases:=zip", "-p", f"inertias_kgm2:={lists[0]}", "-p", f"backlash_widths_m:={lists[1]}",
                 "-p", f"consistencies_pa_sn:={lists[2]}", "-p", f"real_time_factor:={args.real_time_factor}",
-                # windowing + the diagnostic node's recorder subscribe to drive/signals
-                "-p", "wait_for_subscribers:=2", "-p", "wait_timeout_s:=60.0"], env)
+                # windowing, the diagnostic node's recorder and this demo's listener subscribe to drive/signals
+                "-p", "wait_for_subscribers:=3", "-p", "wait_timeout_s:=60.0"], env)
             print(f"[demo] started {', '.join(f'{n} ({p.cmd[0]})' for n, p in procs.items())} in namespace "
                   f"{NAMESPACE}, ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}; {len(cases)} case(s)", flush=True)
 
