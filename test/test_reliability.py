@@ -411,6 +411,17 @@ def test_windows_ignored_while_inactive_are_not_counted_as_lost():
 
 
 # ------------------------------------------------------------------ live nodes: signals, a FIFO (item 6, item 7)
+def _signals_as_a_launcher_leaves_them():
+    """In the child before exec: SIGINT and SIGTERM at their default action, as a terminal or `ros2 launch` starts
+    a node.  A test runner started as a background job of a non-interactive shell has SIGINT *ignored*, and an
+    ignored disposition survives exec: a SIGINT sent before the node's first Python line (entry.py's handler)
+    was then discarded by the kernel and the node ran on (2 of 200 in the slow run, at 43 and 157 ms) -- a state
+    of the test's parent, not of the node, and no code in the node can see such a signal."""
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def _start_and_signal(node_env, tmp_path, node, delay_s, sig, *ros_args):
     """Start ``node``, send ``sig`` ``delay_s`` after the spawn (during the imports, rcl's start, the node's
     construction or the spin), wait; (returncode, output)."""
@@ -421,7 +432,7 @@ def _start_and_signal(node_env, tmp_path, node, delay_s, sig, *ros_args):
     log = tmp_path / f"{node}-{time.monotonic_ns()}.log"
     with open(log, "w") as out:
         p = subprocess.Popen([*node_command(node), "--ros-args", *ros_args], env=node_env, cwd=tmp_path,
-                             stdout=out, stderr=subprocess.STDOUT)
+                             stdout=out, stderr=subprocess.STDOUT, preexec_fn=_signals_as_a_launcher_leaves_them)
         time.sleep(delay_s)
         rc = stop_process(p, sig, 30.0)
     return rc, log.read_text()
