@@ -496,6 +496,13 @@ def test_best_effort_input_is_selectable_and_a_mismatch_is_an_error_status(node_
         seen.k = 0
         assert ros.spin_until(seen), logs(*procs)
         assert not statuses(diags, "jident_windowing: input", "/bee/drive")
+        # the input status is periodic (a listener that starts late still sees the ERROR), and turns OK once the
+        # incompatible publisher is gone
+        n_err = len(err())
+        assert ros.spin_until(lambda: len([s for s in err() if status_level(s) == 2]) > n_err), logs(*procs)
+        ros.node.destroy_publisher(pubs.pop("ber"))
+        assert ros.spin_until(lambda: status_level(err()[-1]) == 0), logs(*procs)
+        assert "no publisher with an incompatible QoS now" in err()[-1].message
     finally:
         for p in procs:
             p.stop()

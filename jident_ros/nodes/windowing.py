@@ -302,20 +302,60 @@ class WindowingNode(RunnableNode, Node):
 
     def on_incompatible_qos(self, info) -> None:
         """A publisher of the input topic offers a QoS this subscription cannot match (no sample of it will
-        arrive): one ERROR status and one log line naming the topic, the policy and what to change."""
+        arrive): one log line naming the topic, the policy and what to change, and from then on a periodic task
+        "jident_windowing: input" that is ERROR while such a publisher exists (checked again each period, so a
+        diagnostics listener that starts later still sees it, and it turns OK when the publisher goes)."""
         self.incompatible_qos = int(getattr(info, "total_count", self.incompatible_qos + 1))
-        policy = getattr(getattr(info, "last_policy_kind", None), "name", "unknown").replace("_QOS_POLICY", "")
+        self._qos_policy = getattr(getattr(info, "last_policy_kind", None), "name", "unknown").replace("_QOS_POLICY", "")
+        text = self._incompatible_text(self.incompatible_qos)
+        self.get_logger().error(text)
+        self.diag.publish(make_status(status_name(self, INPUT_TASK), ERROR, text, self.hardware_id,
+                                      [("topic", self.resolve_topic_name(self.sub.topic_name)),
+                                       ("policy", self._qos_policy),
+                                       ("incompatible_qos_publishers", self.incompatible_qos),
+                                       ("input_reliability", self.cfg["input_reliability"])]))
+        if not getattr(self, "_input_task", False):
+            self._input_task = True
+            self.updater.add(INPUT_TASK, self.input_status)
+
+    def _incompatible_text(self, n: int) -> str:
         topic = self.resolve_topic_name(self.sub.topic_name)
+        policy = getattr(self, "_qos_policy", "unknown")
         hint = (f"the publisher is best effort and input_reliability is {self.cfg['input_reliability']}: set "
                 "input_reliability:=best_effort" if policy.endswith("RELIABILITY") and
                 self.cfg["input_reliability"] == "reliable" else "compare its QoS with docs/interfaces.md")
-        text = (f"{topic}: {self.incompatible_qos} publisher(s) offer a QoS this subscription cannot match "
+        return (f"{topic}: {n} publisher(s) offer a QoS this subscription cannot match "
                 f"(policy {policy}; {hint}); no sample arrives from them")
-        self.get_logger().error(text)
-        self.diag.publish(make_status(status_name(self, INPUT_TASK), ERROR, text, self.hardware_id,
-                                      [("topic", topic), ("policy", policy),
-                                       ("incompatible_qos_publishers", self.incompatible_qos),
-                                       ("input_reliability", self.cfg["input_reliability"])]))
+
+    def _incompatible_now(self) -> int:
+        """How many publishers of the input topic cannot match this subscription now (rclpy's own check)."""
+        from rclpy.qos import QoSCompatibility, qos_check_compatible
+        topic = self.resolve_topic_name(self.sub.topic_name)
+        n = 0
+        for info in self.get_publishers_info_by_topic(topic):
+            try:
+                compat = qos_check_compatible(info.qos_profile, self.sub.qos_profile)[0]
+            except Exception:  # noqa: BLE001  (an unknown policy value: cannot tell, do not count)
+                continue
+            n += compat == QoSCompatibility.ERROR
+        return n
+
+    def input_status(self, stat):
+        """Periodic task "jident_windowing: input", added at the first incompatible-QoS event: ERROR while a
+        publisher of the input topic cannot match, OK once none is left."""
+        topic = self.resolve_topic_name(self.sub.topic_name)
+        now = self._incompatible_now()
+        stat.add("topic", topic)
+        stat.add("policy", getattr(self, "_qos_policy", "unknown"))
+        stat.add("incompatible_qos_publishers", now)
+        stat.add("incompatible_qos_events_total", self.incompatible_qos)
+        stat.add("input_reliability", self.cfg["input_reliability"])
+        if now:
+            stat.summary(ERROR, self._incompatible_text(now))
+        else:
+            stat.summary(OK, f"{topic}: no publisher with an incompatible QoS now "
+                             f"({self.incompatible_qos} seen since start)")
+        return stat
 
     def rate_status(self, stat):
         """Periodic task "jident_windowing: rate" (steady clock): samples, batches and windows per second
