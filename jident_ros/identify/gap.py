@@ -73,11 +73,13 @@ residual RMS.
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
-from functools import lru_cache
+from functools import lru_cache, wraps
 
 import numpy as np
-from scipy.signal import savgol_filter
+from scipy.ndimage import convolve1d
+from scipy.signal import savgol_coeffs, savgol_filter
 
 from jident_ros.identify.distributions import f_survival, t_quantile
 from jident_ros.identify.gap_free import (
@@ -218,9 +220,9 @@ def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_
             acc = np.asarray(window["a1"], float)
         elif "alpha1" in window or "omega1" in window:
             if "alpha1" in window:   # a motor encoder: acceleration per sample^2
-                acc = savgol_filter(np.asarray(window["alpha1"], float), 7, 2, deriv=2)
+                acc = _savgol_for_gap(np.asarray(window["alpha1"], float), 2, entry_index, drop)
             else:
-                acc = savgol_filter(np.asarray(window["omega1"], float), 7, 2, deriv=1)
+                acc = _savgol_for_gap(np.asarray(window["omega1"], float), 1, entry_index, drop)
         else:
             raise NoGapError("no gap signal: the window needs alpha1+alpha2, a1, alpha1 or omega1")
         a0 = acc[entry_index]
@@ -237,6 +239,27 @@ def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_
     if end - entry_index < min_samples:
         raise NoGapError(f"gap too short: {end - entry_index} samples inside the zone, need >= {min_samples}")
     return entry_index, end, how
+
+
+@lru_cache(maxsize=4)
+def _savgol_7_2(deriv: int) -> np.ndarray:
+    return savgol_coeffs(7, 2, deriv=deriv)
+
+
+def _savgol_for_gap(x: np.ndarray, deriv: int, entry_index: int, drop: float) -> np.ndarray:
+    """``savgol_filter(x, 7, 2, deriv=deriv)`` where :func:`gap_interval`'s signature test reads it: the
+    interior rows are scipy's own convolution with the same coefficients (bit for bit); the 3 rows at each end,
+    which scipy fills with polynomial fits (most of its cost), only when the test reaches them (an entry row
+    within 3 rows of an end, or no drop before the last 3 rows): then the whole savgol_filter."""
+    half = 3
+    n = x.size
+    if n < 7 or not half <= entry_index < n - half:
+        return savgol_filter(x, 7, 2, deriv=deriv)
+    y = convolve1d(x, _savgol_7_2(deriv), axis=-1, mode="constant")
+    a0 = y[entry_index]
+    if not abs(a0) > 0 or not (np.sign(a0) * y[entry_index:n - half] < drop * abs(a0)).any():
+        return savgol_filter(x, 7, 2, deriv=deriv)
+    return y
 
 
 def _net_torque(window: dict, bearing_friction_nms_per_rad: float) -> np.ndarray:
@@ -348,18 +371,13 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         if "alpha1" not in window:
             raise NoGapError("method 'angle' needs alpha1 (use 'speed' with omega1)")
         torque = _net_torque(window, bearing_friction_nms_per_rad)
-        try:
-            ff = free_angle_fit(np.asarray(window["alpha1"], float), torque, sample_period_s, start, end, model)
-        except FreeFitError as exc:
-            raise NoGapError(str(exc)) from None
+        ff, anchored = _angle_fits(np.asarray(window["alpha1"], float), torque, sample_period_s, start, end, model)
         j, se, res, dof = ff["j1"], ff["se_stat"], ff["residual"], ff["dof"]
         model_error = ff["change_point_error"]
         fit_span = (ff["start"], ff["end"])
         free_extra = {"change_point_error_kgm2": ff["change_point_error"], "friction": ff["friction"],
                       "std_error_terms": tuple((k, float(v)) for k, v in ff["terms"].items())}
         entry_uncertainty_samples = 0        # the change-point search has taken the entry's uncertainty
-        anchored = _anchored_angle(np.asarray(window["alpha1"], float), torque, ff, (start, end), sample_period_s,
-                                   model)
         choice = "; ".join(x for x in (choice, anchored.pop("choice")) if x)
         if anchored:
             j, se, res, dof, model_error = (anchored[k] for k in ("j1", "se", "res", "dof", "model_error"))
@@ -423,6 +441,81 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     half = _t975(max(int(dof), 1)) * se
     return GapEstimate(j, se, (j - half, j + half), float(np.sqrt(np.mean(res ** 2))), start, end, method, how,
                        float(model_error), choice, int(fit_span[0]), int(fit_span[1]), **free_extra)
+
+
+#: Memo of the angle fits (:func:`_angle_fits`), :func:`_joint_fit` and :func:`pre_entry_steady` while
+#: :func:`fit_cache` is active (None: off, the default).
+_FIT_CACHE: dict | None = None
+
+
+@contextmanager
+def fit_cache():
+    """Memoise the angle fits (free angle fit and steady-entry fit), the joint a1 fit and the pre-entry steadiness
+    test by their inputs while active.
+
+    An evaluation runs several channel sets on one window: the cross-checked model choice ('auto' with a1 and
+    alpha1) and the 'angle' fit over the same alpha1, torque and gap interval do the same angle fits, and the a1
+    fits of two channel sets (the interval from the angles and from the a1 signature) test the same pre-entry
+    torque and often fit the same interval; with the cache the second is a lookup (the same
+    inputs give the same numbers: pure functions of them).  Off by
+    default (the runtime path sees each window once); the research evaluation turns it on around a sweep."""
+    global _FIT_CACHE
+    outer = _FIT_CACHE
+    if outer is None:
+        _FIT_CACHE = {}
+    try:
+        yield
+    finally:
+        if outer is None:
+            _FIT_CACHE = None
+
+
+def _memoised(fn):
+    """``fn`` memoised by its arguments' values while :func:`fit_cache` is active (arrays by their bytes)."""
+    def key_of(v):
+        if isinstance(v, np.ndarray):
+            return v.dtype.str, v.shape, v.tobytes()
+        if isinstance(v, dict):
+            return tuple((k, key_of(x)) for k, x in sorted(v.items()))
+        if isinstance(v, (tuple, list)):
+            return type(v).__name__, tuple(key_of(x) for x in v)
+        return v
+
+    @wraps(fn)
+    def wrapper(*args, **kwargs):
+        if _FIT_CACHE is None:
+            return fn(*args, **kwargs)
+        key = (fn.__name__, tuple(key_of(a) for a in args), tuple((k, key_of(v)) for k, v in sorted(kwargs.items())))
+        try:
+            return _FIT_CACHE[key]
+        except KeyError:
+            out = _FIT_CACHE[key] = fn(*args, **kwargs)
+            return out
+    return wrapper
+
+
+def _angle_fits(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, start: int, end: int,
+                model: GapModel) -> tuple:
+    """(free angle fit, steady-entry fit) of the 'angle' method: :func:`free_angle_fit` (NoGapError when it
+    fails) and :func:`_anchored_angle` (a fresh dict: the caller pops from it); memoised under :func:`fit_cache`."""
+    key = None
+    if _FIT_CACHE is not None:
+        key = ("angle_fits", alpha1.tobytes(), torque.tobytes(), float(sample_period_s), int(start), int(end), model)
+        hit = _FIT_CACHE.get(key)
+        if hit is not None:
+            if isinstance(hit, str):
+                raise NoGapError(hit)
+            return hit[0], dict(hit[1])
+    try:
+        ff = free_angle_fit(alpha1, torque, sample_period_s, start, end, model)
+    except FreeFitError as exc:
+        if key is not None:
+            _FIT_CACHE[key] = str(exc)
+        raise NoGapError(str(exc)) from None
+    anchored = _anchored_angle(alpha1, torque, ff, (start, end), sample_period_s, model)
+    if key is not None:
+        _FIT_CACHE[key] = (ff, anchored)
+    return ff, dict(anchored)
 
 
 def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tuple, sample_period_s: float,
@@ -609,6 +702,7 @@ class SteadinessTest:
         return f"gap_only: {self.reason}"
 
 
+@_memoised
 def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTest:
     """Test the joint fit's assumption on the pre-entry m_el samples: a steady torque, m_el = m0 + white
     noise.  Regress m_el on (1, t, t^2); not steady when the slope and curvature explain more than the noise
@@ -732,6 +826,7 @@ def _torque_powers(n_gap: int, linear_term: bool = False) -> tuple:
     return (1,) + powers if linear_term else powers
 
 
+@_memoised
 def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=None,
                linear_term: bool = False, warm: dict | None = None) -> dict:
     """Weighted joint least squares of m_el (pre-entry and gap) and a1 (gap); see the module docstring.

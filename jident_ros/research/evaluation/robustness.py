@@ -28,7 +28,14 @@ from typing import Sequence
 import numpy as np
 
 from jident_ros.identify.fusion import fuse_verdict
-from jident_ros.identify.gap import GapEstimate, NoGapError, estimate_backlash_width, estimate_inertia, nearest_class
+from jident_ros.identify.gap import (
+    GapEstimate,
+    NoGapError,
+    estimate_backlash_width,
+    estimate_inertia,
+    fit_cache,
+    nearest_class,
+)
 from jident_ros.method.patterns import PatternLibrary, identify_windows
 from jident_ros.sim import (
     Case,
@@ -213,24 +220,25 @@ def gap_on_windows(system: SystemConfig, windows: WindowSet, keys: Sequence[str]
     n = len(windows.cases)
     true = np.array([c.inertia_kgm2 for c in windows.cases])
     out = {}
-    for key in keys:
-        chans, meth, _ = CHANNEL_SETS[key]
-        est, lo, hi, se = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
-        n_gap, end = np.zeros(n, int), np.full(n, -1)
-        failed = {}
-        for i, c in enumerate(windows.cases):
-            win = {k: windows.signals[k][i] for k in chans}
-            try:
-                g = estimate_inertia(win, windows.entry_index, c.backlash_width_m, r, windows.sample_period_s,
-                                     meth, system.motor.bearing_friction_nms_per_rad)
-            except NoGapError as exc:
-                failed[i] = str(exc)
-                continue
-            est[i], (lo[i], hi[i]), se[i] = g.inertia_kgm2, g.ci95_kgm2, g.std_error_kgm2
-            n_gap[i], end[i] = g.n_samples, g.gap_end
-        out[key] = {"estimate": est, "lo": lo, "hi": hi, "se": se, "rel_error": (est - true) / true,
-                    "covered": np.isfinite(est) & (lo <= true) & (true <= hi), "n_gap": n_gap, "gap_end": end,
-                    "failed": failed}
+    with fit_cache():        # the channel sets share a window's angle fits ('angles' cross-checks, 'angle_eq1')
+        for key in keys:
+            chans, meth, _ = CHANNEL_SETS[key]
+            est, lo, hi, se = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+            n_gap, end = np.zeros(n, int), np.full(n, -1)
+            failed = {}
+            for i, c in enumerate(windows.cases):
+                win = {k: windows.signals[k][i] for k in chans}
+                try:
+                    g = estimate_inertia(win, windows.entry_index, c.backlash_width_m, r, windows.sample_period_s,
+                                         meth, system.motor.bearing_friction_nms_per_rad)
+                except NoGapError as exc:
+                    failed[i] = str(exc)
+                    continue
+                est[i], (lo[i], hi[i]), se[i] = g.inertia_kgm2, g.ci95_kgm2, g.std_error_kgm2
+                n_gap[i], end[i] = g.n_samples, g.gap_end
+            out[key] = {"estimate": est, "lo": lo, "hi": hi, "se": se, "rel_error": (est - true) / true,
+                        "covered": np.isfinite(est) & (lo <= true) & (true <= hi), "n_gap": n_gap, "gap_end": end,
+                        "failed": failed}
     return out
 
 

@@ -1,0 +1,134 @@
+"""The gap estimator's shortcuts give the numbers of the plain computation, bit for bit (issue 23, item 3).
+
+`jident evaluate` runs the gap estimator ~40,000 times; three shortcuts cut its cost without changing a number:
+the fit cache (identify.gap.fit_cache: the channel sets of one window share its angle fits and steadiness test),
+the kink fit's candidates in one stacked solve (gap_free.kink_fit), and the signature interval's Savitzky-Golay
+derivative without scipy's edge fits where they are not read (gap._savgol_for_gap)."""
+import numpy as np
+import pytest
+from scipy.signal import savgol_filter
+
+from jident_ros.config import load_system_config
+from jident_ros.identify import gap, gap_free
+from jident_ros.identify.gap import NoGapError, estimate_inertia, fit_cache
+from jident_ros.identify.gap_free import GapModel, _cumtrapz, kink_fit
+from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
+from jident_ros.research.evaluation.robustness import CHANNEL_SETS
+from jident_ros.sim import Case, add_measurement_noise, quantise_encoders, simulate_grid
+
+SYSTEM = load_system_config()
+R = SYSTEM.load.wheel_radius_m
+
+
+@pytest.fixture(scope="module")
+def windows():
+    cases = [Case(1.16, 0.005, 0.025), Case(0.9, 0.003, 0.1), Case(1.4, 0.0085, 0.4)]
+    clean = simulate_grid(SYSTEM, cases)
+    return [clean, add_measurement_noise(clean, 30.0, 7), quantise_encoders(clean, 2 ** 14)]
+
+
+def _all_sets(sets, model=None):
+    out = []
+    for w in sets:
+        for key, (chans, meth, _) in CHANNEL_SETS.items():
+            for i, c in enumerate(w.cases):
+                win = {k: w.signals[k][i] for k in chans}
+                try:
+                    out.append(estimate_inertia(win, w.entry_index, c.backlash_width_m, R, w.sample_period_s, meth,
+                                                SYSTEM.motor.bearing_friction_nms_per_rad, model=model))
+                except NoGapError as exc:
+                    out.append(str(exc))
+    return out
+
+
+@pytest.mark.parametrize("model", [None, GapModel(torque_accuracy=0.02, coulomb_friction_max_nm=0.5)])
+def test_the_fit_cache_changes_no_number(windows, model, monkeypatch):
+    """Every channel set on clean, noisy and quantised windows: the same GapEstimate (every float equal) with the
+    cache as without, on the first pass and on a second pass that is all lookups; the 'angle_eq1' fits after the
+    cross-checked 'angles' ones are lookups; the cache is off again after the block."""
+    plain = _all_sets(windows, model)
+    calls = []
+    real = gap.free_angle_fit
+    monkeypatch.setattr(gap, "free_angle_fit", lambda *a, **k: calls.append(1) or real(*a, **k))
+    with fit_cache():
+        cached = _all_sets(windows, model)
+        n_first = len(calls)
+        again = _all_sets(windows, model)
+    assert cached == plain
+    assert again == plain
+    assert len(calls) == n_first                          # the second pass computed no angle fit
+    n_windows = sum(len(w.cases) for w in windows)
+    assert n_first <= 2 * n_windows                       # 'angles' and 'angle_eq1' share one, 'angle' its own
+    assert gap._FIT_CACHE is None
+
+
+def _kink_reference(alpha1, torque, ts, entries, end):
+    """The kink fit's candidate loop, one entry at a time (its first implementation): (rss, 1/J1, residual)."""
+    P = max(0, entries[0] - gap_free.KINK_PRE_SAMPLES)
+    rows = np.arange(P, end)
+    y = alpha1[P:end] - alpha1[entries[0]]
+    out = []
+    for s_row in entries:
+        phi = np.zeros(end - P)
+        phi[s_row - P:] = _cumtrapz(_cumtrapz(torque[s_row:end], ts), ts)
+        scale = max(float(np.max(np.abs(phi))), 1e-300)
+        X = np.column_stack([np.ones(end - P), (rows - s_row) * ts / max((end - s_row) * ts, ts), phi / scale])
+        pinv = np.linalg.solve(X.T @ X, X.T)
+        coef = pinv @ y
+        res = y - X @ coef
+        out.append((float(res @ res), float(coef[2]) / scale, res))
+    return out
+
+
+def _check_kink(alpha1, m_el, ts, entries, end):
+    kf = kink_fit(alpha1, m_el, ts, entries, end)
+    ref = _kink_reference(np.asarray(alpha1, float), np.asarray(m_el, float), ts, list(entries), end)
+    best = int(np.argmin([r[0] for r in ref]))
+    assert kf["start"] == entries[best]
+    assert kf["j1"] == 1.0 / ref[best][1]                 # bit for bit
+    assert kf["residual"].tobytes() == ref[best][2].tobytes()
+
+
+@pytest.mark.parametrize("scenario,seed", [("speed_step", 3), ("speed_reversal", 4)])
+def test_kink_fit_matches_the_one_entry_at_a_time_loop(scenario, seed):
+    rec = simulate(StressDrive(j1_kgm2=1.16), scenario, seed=seed)
+    _check_kink(rec["window"]["alpha1"], rec["window"]["m_el"], 5e-4, list(range(rec["entry"] - 4, rec["entry"] + 5)),
+                rec["recontact"])
+
+
+def test_kink_fit_matches_the_loop_on_grid_windows(windows, monkeypatch):
+    """The kink fits the steady-entry check makes on clean, noisy and quantised grid windows (the trims' fits on
+    the plausible entries too)."""
+    calls = []
+    real = gap.kink_fit
+    monkeypatch.setattr(gap, "kink_fit", lambda *a, **k: calls.append(a) or real(*a, **k))
+    _all_sets(windows)
+    checked = 0
+    for alpha1, m_el, ts, entries, end, *_ in calls:
+        entries = sorted(int(x) for x in entries if end - int(x) >= gap_free.KINK_MIN_GAP_SAMPLES)
+        try:
+            real(alpha1, m_el, ts, entries, end)
+        except gap_free.FreeFitError:
+            continue
+        _check_kink(alpha1, m_el, ts, entries, end)
+        checked += 1
+    assert checked >= 10
+
+
+def test_the_signature_derivative_reads_what_savgol_filter_gives():
+    """Where gap_interval reads it (the entry row's value and the first drop after it), the shortcut equals
+    scipy's savgol_filter bit for bit, including entries near either end and signals with no drop."""
+    rng = np.random.default_rng(3)
+    for trial in range(400):
+        n = int(rng.integers(7, 300))
+        x = np.cumsum(np.cumsum(rng.standard_normal(n))) * 10.0 ** rng.uniform(-6, 3)
+        for deriv in (1, 2):
+            e = int(rng.integers(0, n))
+            full = savgol_filter(x, 7, 2, deriv=deriv)
+            fast = gap._savgol_for_gap(x, deriv, e, 0.6)
+
+            def reads(a):
+                below = np.sign(a[e]) * a[e:] < 0.6 * abs(a[e])
+                return a[e].tobytes(), int(np.argmax(below)) if below.any() else -1
+
+            assert reads(fast) == reads(full), (trial, n, deriv, e)
