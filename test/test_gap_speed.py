@@ -132,3 +132,25 @@ def test_the_signature_derivative_reads_what_savgol_filter_gives():
                 return a[e].tobytes(), int(np.argmax(below)) if below.any() else -1
 
             assert reads(fast) == reads(full), (trial, n, deriv, e)
+
+
+def test_the_gap_only_sweeps_in_a_process_of_their_own_change_no_number():
+    """run_robustness(jobs=2) (what `jident evaluate` runs) and the serial run: the same report, but for the line
+    of timings."""
+    from jident_ros.config import load_method_config
+    from jident_ros.method.patterns import PatternLibrary
+    from jident_ros.research.evaluation.report_robustness import render_robustness
+    from jident_ros.research.evaluation.robustness import run_robustness
+
+    method = load_method_config().replace(p_values=(2.0,))
+    library = PatternLibrary.build(SYSTEM, method)
+    kw = dict(library=library, log=None, snr_db=(30.0,), extra_seeds=(3,), offgrid_j1=(("1.00", 1.00),),
+              offgrid_widths=(0.006,), encoder_counts=(4096,), sample_periods=(1e-3,), image_stride=8,
+              grid_cases=[Case(1.16, 0.005, 0.0125), Case(1.218, 0.0025, 0.05)])
+    reports = []
+    for jobs in (1, 2):
+        res = run_robustness(SYSTEM, method, jobs=jobs, **kw)
+        assert len(res.grid_extra) == 1 and len(res.attribution) == 4 and len(res.sample_period) == 2
+        reports.append([line for line in render_robustness(res, {}).splitlines() if " s, " not in line
+                        and "took" not in line])
+    assert reports[0] == reports[1]

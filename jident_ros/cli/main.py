@@ -237,10 +237,11 @@ def cmd_evaluate(args) -> int:
     shares = VALIDITY_FILM_SHARES if not args.quick else (0.01,)
     if args.validity_map == "off":
         shares, stress = (), None
-    # the robustness sweeps (serial) run in a process of their own beside the method part's pool: the same
-    # numbers, less wall time on a shared machine (the 2-minute budget)
+    # the robustness sweeps run in a process of their own beside the method part's pool, their gap-only sweeps in
+    # another (jobs=2): the same numbers, less wall time (the 2-minute budget)
     rob_pool = ProcessPoolExecutor(max_workers=1)
-    rob_future = rob_pool.submit(run_robustness, system, method, log=None if args.quiet else print, quick=args.quick)
+    rob_future = rob_pool.submit(run_robustness, system, method, log=None if args.quiet else print, quick=args.quick,
+                                 jobs=2)
     ev = run_evaluation(system, method, snr_db=snr, seeds=(2,) if snr == (30.0,) else (1, 2)[:len(snr)],
                         readings=readings, log=log,
                         # the 2-minute budget: load_scaled and sensor_matched on noise-free windows with --full only

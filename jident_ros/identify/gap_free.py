@@ -232,17 +232,22 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         def accepted(lo_rows, hi_rows, side):
             """The whole interval's residual is noise (χ² test) and its k_f end rows on ``side`` are predicted by
             the fit without them (Chow's forecast test: a contaminated end shows in the extrapolation first)."""
-            rss = _solve_rss(Xs, r, lo_rows, hi_rows, sums)
-            nn = hi_rows - lo_rows
-            ok = rss <= s2 * _chi2_upper(np.maximum(nn - p, 1))
             if side == "end":
                 ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + np.arange(k_f)
             else:
                 ilo, ihi, test = lo_rows + k_f, hi_rows, lo_rows[:, None] + np.arange(k_f)
-            A = Cx[ihi] - Cx[ilo]
+            # the χ² fits over [lo, hi) and the forecast fits over [ilo, ihi) in one stacked solve (the same
+            # LAPACK call per matrix as two solves: the same numbers)
+            c = lo_rows.size
+            A = Cx[np.concatenate([hi_rows, ihi])] - Cx[np.concatenate([lo_rows, ilo])]
+            bb = bx[np.concatenate([hi_rows, ihi])] - bx[np.concatenate([lo_rows, ilo])]
             A = A + np.eye(p) * (1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] / p)
-            beta = np.linalg.solve(A, (bx[ihi] - bx[ilo])[..., None])[..., 0]
-            Ainv = np.linalg.inv(A)
+            sol = np.linalg.solve(A, bb[..., None])[..., 0]
+            rss = sums[2][hi_rows] - sums[2][lo_rows] - np.einsum("ki,ki->k", bb[:c], sol[:c])
+            nn = hi_rows - lo_rows
+            ok = rss <= s2 * _chi2_upper(np.maximum(nn - p, 1))
+            beta = sol[c:]
+            Ainv = np.linalg.inv(A[c:])
             xt = Xs[test]                                             # (cand, k_f, p)
             pred = np.einsum("ckp,cp->ck", xt, beta)
             lev = np.einsum("ckp,cpq,ckq->ck", xt, Ainv, xt)

@@ -382,11 +382,14 @@ def run_robustness(system: SystemConfig, method, library: PatternLibrary | None 
                    offgrid_j1=OFFGRID_J1, offgrid_widths=OFFGRID_WIDTHS_M, encoder_counts=ENCODER_COUNTS,
                    sample_periods=SAMPLE_PERIODS_S, target_snr_db: float = TARGET_SNR_DB, p: float = 2.0,
                    image_stride: int = 1, grid_cases: Sequence[Case] | None = None,
-                   quick: bool = False, sensor_factors: Sequence[float] = (1.0, 3.0, 10.0)) -> RobustnessResult:
+                   quick: bool = False, sensor_factors: Sequence[float] = (1.0, 3.0, 10.0),
+                   jobs: int = 1) -> RobustnessResult:
     """Every sweep (module docstring); ``image_stride`` > 1 runs the image method (and with it the
     image part of the fused verdict) on every k-th window only. ``grid_cases`` replaces the 168 grid
     cases (tests). The pattern library is built from the noise-free eta_k = 0.025 runs at p unless given.
-    ``quick`` (smoke run, ~15 s): SNR 30 dB only, no extra seeds, the image method on every 4th window."""
+    ``quick`` (smoke run, ~15 s): SNR 30 dB only, no extra seeds, the image method on every 4th window.
+    ``jobs`` >= 2: the gap-only sweeps (extra noise seeds, attribution, sample periods: :func:`_gap_only_sweeps`)
+    run in a process of their own beside the others (the same function on the same inputs: the same numbers)."""
     if quick:
         snr_db, extra_seeds, image_stride = (target_snr_db,), (), max(image_stride, 4)
         sensor_factors = tuple(sensor_factors)[:1]
@@ -420,6 +423,14 @@ def run_robustness(system: SystemConfig, method, library: PatternLibrary | None 
     kw = dict(library=library, method=mp, p=p, stride=image_stride)
     grid = []
     levels = [None] + [float(s) for s in snr_db]
+    noisy_levels = [None] + ([target_snr_db] if target_snr_db is not None else [])
+    gap_only_args = (system, clean, cases, levels, tuple(extra_seeds), seed, target_snr_db, noisy_levels,
+                     tuple(sample_periods))
+    pool = None
+    if jobs >= 2:
+        from concurrent.futures import ProcessPoolExecutor
+        pool = ProcessPoolExecutor(max_workers=1)
+        gap_only_future = pool.submit(_gap_only_sweeps, *gap_only_args)
     for k, snr in enumerate(levels):
         sd = None if snr is None else noise_seed(seed, snr)
         sw = evaluate_windows(system, _noisy(clean, snr, sd), _data_label(snr, sd), "grid", snr_db=snr, seed=sd, **kw)
@@ -438,26 +449,8 @@ def run_robustness(system: SystemConfig, method, library: PatternLibrary | None 
         a = sw.accuracy(classes)
         log(f"robustness, grid {sw.label}: gap class {a['gap'] * 100:.1f} %, fused {a['fused'] * 100:.1f} %, "
             f"image {a['image'] * 100:.1f} % ({sw.seconds:.1f} s)")
-    grid_extra = []
-    for es in extra_seeds:
-        for k, snr in enumerate(levels[1:], start=1):
-            sd = noise_seed(es, snr)
-            grid_extra.append(evaluate_windows(system, add_measurement_noise(clean, snr, sd), _data_label(snr, sd),
-                                               "grid", snr_db=snr, seed=sd, gap_verdict=True))
-    timings["grid sweeps"] = sum(s.seconds for s in grid + grid_extra)
-    attribution = []
-    if target_snr_db is not None:  # which channel's noise limits the gap estimator (cheap: no image method)
-        for chans in (("a1",), ("m_el",)):
-            for es in (seed,) + tuple(extra_seeds):
-                sd = noise_seed(es, target_snr_db, 9)
-                sw = evaluate_windows(system, add_measurement_noise(clean, target_snr_db, sd, channels=chans),
-                                      f"{target_snr_db:g} dB on {'+'.join(chans)} only (seed {sd})", "attribution",
-                                      keys=(PRIMARY, "no_angles"), snr_db=target_snr_db, seed=sd)
-                sw.noised = chans
-                attribution.append(sw)
-
+    timings["grid sweeps"] = np.nan       # with the extra seeds' sweeps, below
     # (b) off-grid J1 ------------------------------------------------------------------------
-    noisy_levels = [None] + ([target_snr_db] if target_snr_db is not None else [])
 
     def offgrid_sweeps(cases, kind: str, name: str, salt: int) -> list[Sweep]:
         """The off-grid cases simulated once, evaluated noise-free and at the target SNR (noise seed salt)."""
@@ -484,16 +477,14 @@ def run_robustness(system: SystemConfig, method, library: PatternLibrary | None 
                               keys=ENCODER_KEYS, counts_per_rev=int(n)) for n in encoder_counts]
     timings["encoder quantisation"] = time.perf_counter() - t0
 
-    # (e) sample periods: the gap estimator only ----------------------------------------------
-    t0 = time.perf_counter()
-    per = []
-    for j, ts in enumerate(sample_periods):
-        w = simulate_grid(system, cases, sample_period_s=float(ts))
-        for k, snr in enumerate(noisy_levels):
-            sd = None if snr is None else noise_seed(seed, snr, 3 + j)
-            per.append(evaluate_windows(system, _noisy(w, snr, sd), f"Ts = {ts * 1e3:g} ms, {_data_label(snr, sd)}",
-                                        "sample_period", snr_db=snr, seed=sd))
-    timings["sample periods"] = time.perf_counter() - t0
+    # the gap-only sweeps: (a) extra noise seeds and the attribution, (e) sample periods
+    if pool is not None:
+        with pool:
+            grid_extra, attribution, per, gap_only_timings = gap_only_future.result()
+    else:
+        grid_extra, attribution, per, gap_only_timings = _gap_only_sweeps(*gap_only_args)
+    timings["grid sweeps"] = sum(s.seconds for s in grid + grid_extra)
+    timings["sample periods"] = gap_only_timings["sample periods"]
 
     res = RobustnessResult(classes, tuple(float(x) for x in g.backlash_widths_m), float(g.pattern_consistency_pa_sn),
                            grid, grid_extra, offj, offw, quant, per, tuple(library.widths_m),
@@ -508,6 +499,39 @@ def run_robustness(system: SystemConfig, method, library: PatternLibrary | None 
         log(f"robustness target {t['name']}: {t['measured']} -> {'met' if t['met'] else 'NOT met'}")
     log(f"robustness evaluation: {res.seconds:.1f} s")
     return res
+
+
+def _gap_only_sweeps(system: SystemConfig, clean: WindowSet, cases, levels, extra_seeds, seed: int, target_snr_db,
+                     noisy_levels, sample_periods) -> tuple:
+    """The sweeps of :func:`run_robustness` without the image method: the grid at the extra noise seeds (with the
+    gap-only verdict), the attribution (noise on one channel only, at the target SNR) and the sample periods.
+    Returns (grid_extra, attribution, sample-period sweeps, timings)."""
+    grid_extra = []
+    for es in extra_seeds:
+        for k, snr in enumerate(levels[1:], start=1):
+            sd = noise_seed(es, snr)
+            grid_extra.append(evaluate_windows(system, add_measurement_noise(clean, snr, sd), _data_label(snr, sd),
+                                               "grid", snr_db=snr, seed=sd, gap_verdict=True))
+    attribution = []
+    if target_snr_db is not None:  # which channel's noise limits the gap estimator (cheap: no image method)
+        for chans in (("a1",), ("m_el",)):
+            for es in (seed,) + tuple(extra_seeds):
+                sd = noise_seed(es, target_snr_db, 9)
+                sw = evaluate_windows(system, add_measurement_noise(clean, target_snr_db, sd, channels=chans),
+                                      f"{target_snr_db:g} dB on {'+'.join(chans)} only (seed {sd})", "attribution",
+                                      keys=(PRIMARY, "no_angles"), snr_db=target_snr_db, seed=sd)
+                sw.noised = chans
+                attribution.append(sw)
+    # (e) sample periods: the gap estimator only
+    t0 = time.perf_counter()
+    per = []
+    for j, ts in enumerate(sample_periods):
+        w = simulate_grid(system, cases, sample_period_s=float(ts))
+        for k, snr in enumerate(noisy_levels):
+            sd = None if snr is None else noise_seed(seed, snr, 3 + j)
+            per.append(evaluate_windows(system, _noisy(w, snr, sd), f"Ts = {ts * 1e3:g} ms, {_data_label(snr, sd)}",
+                                        "sample_period", snr_db=snr, seed=sd))
+    return grid_extra, attribution, per, {"sample periods": time.perf_counter() - t0}
 
 
 def speed_scale(clean: WindowSet, sweep: Sweep) -> dict:
