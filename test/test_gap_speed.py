@@ -154,3 +154,16 @@ def test_the_gap_only_sweeps_in_a_process_of_their_own_change_no_number():
         reports.append([line for line in render_robustness(res, {}).splitlines() if " s, " not in line
                         and "took" not in line])
     assert reports[0] == reports[1]
+
+
+def test_the_median_is_numpys_bit_for_bit():
+    """gap_free._median (the robust noise scale's) against np.median: odd and even sizes, ties, signed zeros, NaN."""
+    rng = np.random.default_rng(5)
+    for trial in range(3000):
+        n = int(rng.integers(1, 120))
+        x = rng.standard_normal(n) * 10.0 ** rng.uniform(-9, 4)
+        if trial % 3 == 0:
+            x = np.round(x, 1) * np.where(rng.random(n) < 0.5, -1.0, 1.0)     # ties and ±0.0
+        if trial % 97 == 0:
+            x[rng.integers(0, n)] = np.nan
+        assert np.asarray(gap_free._median(x)).tobytes() == np.asarray(np.median(x)).tobytes(), (trial, x)

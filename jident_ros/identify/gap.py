@@ -88,6 +88,7 @@ from jident_ros.identify.gap_free import (
     KINK_SEARCH,
     FreeFitError,
     GapModel,
+    _median,
     free_angle_fit,
     kink_fit,
 )
@@ -740,7 +741,7 @@ def _robust_noise(*segments) -> float:
     d2 = np.concatenate([np.diff(np.asarray(x, float), 2) for x in segments if len(x) >= 3] or [np.zeros(0)])
     if d2.size < 3:
         return 0.0
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+    return float(1.4826 * _median(np.abs(d2 - _median(d2))) / np.sqrt(6.0))
 
 
 def _origin_slope(y: np.ndarray, x: np.ndarray, sy: float, sx: float) -> float:
@@ -884,7 +885,8 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
         kappa = float(beta @ Ga - fa) / uu
     N = np.zeros((p + 1, p + 1))
     for _ in range(GN_MAX_ITER):
-        Gu = GG @ beta - Gf
+        GGb = GG @ beta
+        Gu = GGb - Gf
         uu = float(beta @ Gu - beta @ Gf + ff)
         ua = float(beta @ Ga - fa)
         N[0, 0] = wa * uu
@@ -892,7 +894,7 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
         N[1:, 1:] = Nm + wa * kappa * kappa * GG
         g = np.empty(p + 1)
         g[0] = wa * (ua - kappa * uu)
-        g[1:] = wm * (s_pre * e1 - na * beta[0] * e1 + Gm - GG @ beta) + wa * kappa * (Ga - kappa * Gu)
+        g[1:] = wm * (s_pre * e1 - na * beta[0] * e1 + Gm - GGb) + wa * kappa * (Ga - kappa * Gu)
         step = np.linalg.solve(N, g)
         kappa += float(step[0])
         beta = beta + step[1:]

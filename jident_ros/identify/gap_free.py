@@ -153,11 +153,25 @@ def _quantum(alpha: np.ndarray) -> float:
     return 0.0
 
 
+def _median(x: np.ndarray) -> np.float64:
+    """``np.median`` of a 1-D float array, bit for bit (the middle one or two of a partition, averaged as numpy's
+    mean sums: from +0.0; NaN when one is NaN), without its generic-axis overhead (a third of its time)."""
+    n = x.size
+    h = n // 2
+    if n % 2:
+        part = np.partition(x, (h, n - 1))
+        m = (0.0 + part[h]) / 1.0
+    else:
+        part = np.partition(x, (h - 1, h, n - 1))
+        m = (0.0 + part[h - 1] + part[h]) / 2.0
+    return np.float64(np.nan) if np.isnan(part[-1]) else m
+
+
 def _robust_noise(x: np.ndarray) -> float:
     d2 = np.diff(np.asarray(x, float), 2)
     if d2.size < 3:
         return 0.0
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+    return float(1.4826 * _median(np.abs(d2 - _median(d2))) / np.sqrt(6.0))
 
 
 def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, start: int, end: int,

@@ -22,6 +22,7 @@ Plain numpy/scipy: no rclpy, no matplotlib (figures: ``jident_ros.research.evalu
 from __future__ import annotations
 
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -428,7 +429,6 @@ def run_robustness(system: SystemConfig, method, library: PatternLibrary | None 
                      tuple(sample_periods))
     pool = None
     if jobs >= 2:
-        from concurrent.futures import ProcessPoolExecutor
         pool = ProcessPoolExecutor(max_workers=1)
         gap_only_future = pool.submit(_gap_only_sweeps, *gap_only_args)
     for k, snr in enumerate(levels):
