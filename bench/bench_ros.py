@@ -121,7 +121,23 @@ def machine() -> dict:
             pass
     return {"nproc": os.cpu_count(), "cpu_model": model, "python": platform.python_version(),
             "rmw": os.environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp (default)"), "versions": vers,
-            "load_average_start": os.getloadavg()}
+            "load_average_start": os.getloadavg(), **code_commit()}
+
+
+def code_commit() -> dict:
+    """The commit of the tree the nodes import (this bench's checkout: :func:`ros_environment` puts it first on
+    PYTHONPATH), with ``-dirty`` when its tracked files differ from it: every number names the code it measured."""
+    tree = REPO
+
+    def git(*a):
+        try:
+            return subprocess.run(["git", "-C", str(tree), *a], capture_output=True, text=True,
+                                  timeout=30).stdout.strip()
+        except (OSError, subprocess.SubprocessError):
+            return ""
+    head = git("rev-parse", "--short=7", "HEAD") or "unknown (not a git tree)"
+    dirty = bool(git("status", "--porcelain", "--untracked-files=no")) if head[0] != "u" else False
+    return {"commit": head + ("-dirty" if dirty else ""), "code_tree": str(tree)}
 
 
 def pattern_library(path: str | None) -> tuple[Path, float]:
@@ -713,6 +729,7 @@ def main(argv=None) -> int:
     print(f"machine: {mach['nproc']} cores ({mach['cpu_model']}), Python {mach['python']}, "
           f"rclpy {mach['versions'].get('rclpy', '?')}, {mach['rmw']}, ROS_DOMAIN_ID {os.environ['ROS_DOMAIN_ID']}, "
           f"load average {mach['load_average_start'][0]:.2f}", flush=True)
+    print(f"code: commit {mach['commit']} ({mach['code_tree']})", flush=True)
     library, build_s = pattern_library(args.library)
     print(f"pattern library: {library}" + (f" (built in {build_s:.1f} s)" if build_s else " (cached)"), flush=True)
     logroot = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="jident-bench-ros-"))
@@ -754,6 +771,7 @@ def main(argv=None) -> int:
     if limit is not None:
         print()
         print(limit_line(limit))
+    print(f"measured on commit {mach['commit']}")
     print(f"bench run time {total_s:.0f} s, load average at end {os.getloadavg()[0]:.2f}; node logs in {logroot}")
     if args.out:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
