@@ -381,7 +381,7 @@ def run_level(k: int, rtf: float, args, env, library: Path, logroot: Path) -> di
         nsarg = ["-r", f"__ns:={ns}"]
         prof = None
         if args.profile:
-            prof = Path(args.profile) / f"rtf{rtf:g}"
+            prof = Path(args.profile).resolve() / f"rtf{rtf:g}"   # the nodes run in another cwd
             prof.mkdir(parents=True, exist_ok=True)
         procs["diagnostic"] = Proc(env, logdir, "diagnostic", *nsarg, "-p", f"pattern_library:={library}",
                                    "-p", f"use_sim_time:={str(args.sim_time).lower()}", "-p", "stale_after_s:=0.0", profile=prof)
@@ -400,7 +400,9 @@ def run_level(k: int, rtf: float, args, env, library: Path, logroot: Path) -> di
             "-p", f"backlash_widths_m:=[{WIDTH_M}]", "-p", f"consistencies_pa_sn:=[{ETA}]",
             "-p", f"real_time_factor:={float(rtf)}", "-p", f"repeat:={args.repeat}",
             "-p", f"gap_samples:={GAP_SAMPLES}", "-p", f"batch_size:={BATCH}", "-p", f"start_time_s:={SIM_START_S}",
-            "-p", "wait_for_subscribers:=2", "-p", "wait_timeout_s:=120.0", "-p", "exit_when_done:=false",
+            # 3 subscribers of drive/signals: windowing, the diagnostic node's recorder, this bench (with 2 it
+            # could start before this bench's subscription matched: the first batches missed, a false "lost")
+            "-p", "wait_for_subscribers:=3", "-p", "wait_timeout_s:=120.0", "-p", "exit_when_done:=false",
             "-p", f"fast_sleep_s:={args.fast_sleep}", "-p", f"max_lead_s:={args.max_lead}", profile=prof)
         sim = procs["simulator"]
         cpu0 = {}
