@@ -305,12 +305,17 @@ class Listener:
             elif task in ("jident_windowing: windows", "jident_windowing: rate"):
                 self.windowing.append((recv, status_values(s), status_level(s), s.message))
 
-    def spin_until(self, pred, timeout: float, every=None) -> bool:
+    def spin_until(self, pred, timeout: float, every=None, period_s: float = 0.02) -> bool:
+        """Spin until ``pred()`` (checked, with ``every()``, once per ``period_s`` of spinning: each check reads
+        the simulator's log and /proc of every node; once per message they cost this process more CPU than
+        its callbacks, CPU the nodes then lack on 2 cores)."""
+        from rclpy.task import Future
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             if pred():
                 return True
-            self.ex.spin_once(timeout_sec=0.02)
+            # every callback that is ready within period_s (the future never completes)
+            self.ex.spin_until_future_complete(Future(), timeout_sec=period_s)
             if every is not None:
                 every()
         return pred()
