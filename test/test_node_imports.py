@@ -2,7 +2,8 @@
 
 Those three cost about 44 MiB of the diagnostic node's resident memory (163-168 MiB peak with them, target
 <= 150 MiB) and a second of its start-up; the runtime needs only ``scipy.special``, ``fft``, ``linalg`` and
-``ndimage`` (stream/filters.py, identify/distributions.py, identify/roots.py).  A module that imports one of
+``ndimage`` (stream/filters.py, identify/distributions.py; ``scipy.optimize`` is imported where the trend designs its
+CUSUM threshold, once per configuration).  A module that imports one of
 them again at its top fails here, by name.
 """
 from __future__ import annotations

@@ -11,7 +11,6 @@ import math
 import numpy as np
 
 from jident_ros.identify.distributions import normal_cdf, normal_pdf, normal_ppf, normal_sf
-from jident_ros.identify.roots import brentq
 
 #: Siegmund's correction of the threshold for the overshoot: b = h + 2 * 0.583 (unit-variance increments).
 SIEGMUND_OVERSHOOT = 1.166
@@ -76,6 +75,8 @@ def cusum_threshold_for_arl(arl_windows: float, reference_sd: float, two_sided: 
     else:
         raise ValueError(f"method: 'integral' or 'siegmund', got {method!r}")
     f = lambda h: math.log(arl(h)) - math.log(arl_windows)  # noqa: E731
+    # imported here: scipy.optimize costs ~14 MiB of a node's memory and is needed once per threshold design
+    from scipy.optimize import brentq
     return float(brentq(f, 1e-6, hi, xtol=1e-9))
 
 
