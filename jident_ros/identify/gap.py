@@ -79,7 +79,6 @@ from functools import lru_cache, wraps
 
 import numpy as np
 from scipy.ndimage import convolve1d
-from scipy.signal import savgol_coeffs, savgol_filter
 
 from jident_ros.identify.distributions import f_survival, t_quantile
 from jident_ros.identify.gap_free import (
@@ -92,6 +91,7 @@ from jident_ros.identify.gap_free import (
     free_angle_fit,
     kink_fit,
 )
+from jident_ros.stream.filters import savgol_coeffs, savgol_filter
 
 #: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
 GAP_QUADRATIC_MIN = 12
