@@ -120,3 +120,21 @@ def test_the_zoo_declares_each_drive_as_a_user_would():
     assert v["bearing_friction_nms_per_rad"] == mech.motor_viscous_nms_per_rad
     assert v["coulomb_friction_max_nm"] >= mech.motor_coulomb_nm
     assert v["torque_accuracy"] > 0 and v["torque_offset_rel_base"] > 0 and v["torque_lag_max_s"] > 0
+
+
+def test_the_oracle_reads_j1_and_its_sensitivities_off_an_exact_gap():
+    """zoo_oracle.gap_oracle on a single mass under a known ramping torque (exact double integral): J1 exact with
+    and without the extra columns, the fitted lag 0, and the sensitivities the ones of the interval's terms."""
+    from jident_ros.research.evaluation.zoo_oracle import gap_oracle
+    n, j1 = 60, 1.16
+    t = np.arange(n) * TS
+    m = 300.0 - 4.0e6 * t ** 2                          # a torque ramping through the gap
+    z = 300.0 * t ** 2 / 2 - 4.0e6 * t ** 4 / 12
+    alpha = 2.0 + 100.0 * t + z / j1
+    o = gap_oracle(t, alpha, m, np.full(n, 100.0), 0, n)
+    assert o["j1"] == pytest.approx(j1, rel=1e-3) and o["j1_lag"] == pytest.approx(j1, rel=2e-3)   # trapezoid
+    assert abs(o["lag_s"]) < 5e-5
+    assert o["per_nm"] > 0 and o["per_ms"] > 0
+    # b1 taken off: a viscous torque added to m_el and declared leaves J1
+    o2 = gap_oracle(t, alpha, m + 0.02 * 100.0, np.full(n, 100.0), 0, n, b1=0.02)
+    assert o2["j1"] == pytest.approx(o["j1"], rel=1e-9)
