@@ -7,7 +7,9 @@
    and raw angles, every channel the model records (with ``--drive-only`` the drive's own signals only:
    ``t, alpha1, omega1, m_el, alpha2, omega2``, no accelerometer -- :data:`jident_ros.research.evaluation.raw_scenario.DRIVE_CHANNELS`;
    today's gap estimator gives almost no usable window then, docs/results.md), K2 spread over 2.5-6 mm,
-   J1 = 1.16 (the baseline) and 1.131 (-2.5 %, the next paper class):
+   J1 = 1.16 (the baseline) and 1.131 (-2.5 %, the next paper class); ``--no-entry-refinement``: an experiment
+   with the flank detector's entry sample = its departure sample (:func:`~jident_ros.research.evaluation.
+   raw_scenario.entry_refinement`):
 
    * ``ours``: :func:`jident_ros.research.evaluation.raw_inputs.raw_recordings` (our simulator);
    * ``second_drive``: ``python -m jident_ros.research.second_drive --format csv --scenario grid`` (docs/second_drive.md);
@@ -45,7 +47,7 @@ from jident_ros.cli.trend_run import trend_window
 from jident_ros.config import load_system_config
 from jident_ros.identify.trend import TrendConfig, TrendTracker
 from jident_ros.research.evaluation.raw_inputs import raw_recordings
-from jident_ros.research.evaluation.raw_scenario import DRIVE_CHANNELS
+from jident_ros.research.evaluation.raw_scenario import DRIVE_CHANNELS, entry_refinement
 from jident_ros.research.evaluation.trend_simulation import step_trials
 
 MODELS = ("ours", "second_drive", "vector_drive")
@@ -208,10 +210,11 @@ def false_changes(base: dict, seed: int, config: TrendConfig, series: int = 10, 
 
 
 def run_model(model: str, work: Path, n_per_j1: int, trials: int, seed: int, system, config: TrendConfig,
-              drive_only: bool = False) -> dict:
+              drive_only: bool = False, refine: bool = True) -> dict:
     t0 = time.perf_counter()
     recs = recordings(model, work / (model + ("_drive_only" if drive_only else "")), n_per_j1, seed, system, drive_only)
-    pl = pools(recs, system)
+    with entry_refinement(refine):
+        pl = pools(recs, system)
     p = pl["pools"]
     if not (p[J1_BASE]["j1"].size and p[J1_STEP]["j1"].size):
         return {"model": model, "counts": pl["counts"], "error": "no window reached the trend"}
@@ -252,13 +255,17 @@ def main(argv=None) -> int:
     ap.add_argument("--work", help="work directory (default: a temporary one)")
     ap.add_argument("--drive-only", action="store_true",
                     help="keep only the drive's own channels (t, alpha1, omega1, m_el, alpha2, omega2)")
+    ap.add_argument("--no-entry-refinement", action="store_true",
+                    help="experiment: the flank detector's entry sample = its departure sample "
+                         "(raw_scenario.entry_refinement), to tell the detector's share from the estimator's")
     a = ap.parse_args(argv)
     system = load_system_config()
     work = Path(a.work or tempfile.mkdtemp(prefix="trend_relative_"))
     results = []
     for m in a.models.split(","):
         try:
-            results.append(run_model(m, work, a.recordings, a.trials, a.seed, system, TrendConfig(), a.drive_only))
+            results.append(run_model(m, work, a.recordings, a.trials, a.seed, system, TrendConfig(), a.drive_only,
+                                     not a.no_entry_refinement))
         except RuntimeError as exc:
             results.append({"model": m, "counts": {}, "error": str(exc)})
         print(json.dumps(results[-1], default=str), file=sys.stderr)
