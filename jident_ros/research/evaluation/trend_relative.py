@@ -6,7 +6,7 @@
 1. **Windows as a drive records them**: per model, single-event recordings at 30 dB with 2^16-count encoders
    and raw angles, every channel the model records (with ``--drive-only`` the drive's own signals only:
    ``t, alpha1, omega1, m_el, alpha2, omega2``, no accelerometer -- :data:`jident_ros.research.evaluation.raw_scenario.DRIVE_CHANNELS`;
-   today's gap estimator gives almost no usable window then, docs/results.md), K2 spread over 2.5-6 mm,
+   on our simulator the flank detector's entry refinement then puts half the entries late, docs/results.md), K2 spread over 2.5-6 mm,
    J1 = 1.16 (the baseline) and 1.131 (-2.5 %, the next paper class); ``--no-entry-refinement``: an experiment
    with the flank detector's entry sample = its departure sample (:func:`~jident_ros.research.evaluation.
    raw_scenario.entry_refinement`):
