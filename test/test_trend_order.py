@@ -156,3 +156,35 @@ def test_fleet_keeps_one_state_per_drive(restarted, tmp_path, capsys):
                    *common]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "a directory for one state per drive" in err[0]
+
+
+def test_trend_relative_diagnoses_each_drive_with_its_own_radius(monkeypatch, tmp_path):
+    """trend_relative's pools: the second drive's windows with its truth file's r = 0.08 m and N (the run of the
+    former section used our 0.1 m: every absolute J1 +25 %); ours with the system's r."""
+    from jident_ros.research.evaluation import trend_relative as tr
+    seen = []
+
+    def fake(path, system=None, gear_ratio=1.0, **kw):
+        seen.append((str(path), system.load.wheel_radius_m, gear_ratio))
+        raise tr.OfflineError("not diagnosed here")
+    monkeypatch.setattr(tr, "diagnose_samples", fake)
+    system = load_system_config()
+    recs = [(tmp_path / "a.csv", tr.J1_BASE, 0.08, 2.0), (tmp_path / "b.csv", tr.J1_STEP, system.load.wheel_radius_m, 1.0)]
+    assert tr.pools(recs, system)["counts"]["errors"] == 2
+    assert seen == [(str(tmp_path / "a.csv"), 0.08, 2.0), (str(tmp_path / "b.csv"), system.load.wheel_radius_m, 1.0)]
+    # the truth record of a recording: its own .truth.json, else its row of the folder's truth.json
+    (tmp_path / "truth.json").write_text(json.dumps({"recordings": [{"file": "x/a.csv", "inertia_kgm2": 1.131,
+                                                                     "reference_radius_m": 0.08, "gear_ratio": 1.0}]}))
+    assert tr._truth(tmp_path / "a.csv")["reference_radius_m"] == 0.08
+
+
+def test_entry_refinement_experiment_is_undone():
+    from jident_ros.research.evaluation.raw_scenario import entry_refinement
+    from jident_ros.stream.flank import FlankDetector
+    shipped = FlankDetector._refine
+    with entry_refinement(False):
+        assert FlankDetector._refine is not shipped and FlankDetector._refine(None, None, 7) == (0, None)
+    assert FlankDetector._refine is shipped
+    with pytest.raises(RuntimeError), entry_refinement(False):
+        raise RuntimeError
+    assert FlankDetector._refine is shipped
