@@ -188,3 +188,28 @@ def test_entry_refinement_experiment_is_undone():
     with pytest.raises(RuntimeError), entry_refinement(False):
         raise RuntimeError
     assert FlankDetector._refine is shipped
+
+
+def test_a_step_inside_the_baseline_refinement_is_measured_from_the_windows_before_it():
+    """Noise-free J1 1.16 for 5 windows, then +2.5 %: with a 3-window commissioning the baseline is still being
+    refined (towards 20 windows) when the step arrives and takes the first stepped window in (winsorised) before
+    the CUSUM fires; the change's size is measured from the baseline's windows before the onset: +2.50 %, not
+    the +2.42 % of the half-absorbed baseline (the demo's wear scenario).  A change after the refinement is
+    measured from the baseline as before; the state round-trips base_start and refuses a wrong one."""
+    from jident_ros.identify.trend import TrendConfig, TrendStateError, TrendTracker
+    tr = TrendTracker(TrendConfig(commissioning_windows=3))
+    ys = [1.16] * 5 + [1.16 * 1.025] * 5
+    ups = [tr.update(3600.0 * (i + 1), y, 0.0004 * y) for i, y in enumerate(ys)]
+    ev = [c for u in ups for c in u.changes if c.quantity == "inertia"]
+    assert len(ev) == 1 and ev[0].onset_window_index == 5 and ev[0].sign == 1
+    assert ev[0].size_pct == pytest.approx(2.5, abs=1e-6) and ev[0].class_pct == 2.5
+    d = tr.to_dict()
+    assert d["inertia"]["base_start"] == 5 and TrendTracker.from_dict(d)._inertia.base_start == 5
+    d["inertia"]["base_start"] = 99
+    with pytest.raises(TrendStateError, match="inertia.base_start"):
+        TrendTracker.from_dict(d)
+    # after the refinement (20 windows) the baseline holds no later window: the same size either way
+    late = TrendTracker(TrendConfig(commissioning_windows=3))
+    ys = [1.16] * 25 + [1.16 * 0.975] * 5
+    ev = [c for i, y in enumerate(ys) for c in late.update(3600.0 * (i + 1), y, 0.0004 * y).changes]
+    assert len(ev) == 1 and ev[0].size_pct == pytest.approx(-2.5, abs=1e-6)

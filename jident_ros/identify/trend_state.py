@@ -167,6 +167,8 @@ def check_state(tr, plausible: Optional[dict] = None):
     _finite("inertia.seg_swy", J.seg_swy, 0.0)
     if J.seg_n < 0:
         _bad("inertia.seg_n", J.seg_n, "must be >= 0")
+    if J.base_start is not None and not 0 <= J.base_start <= tr.n_windows:
+        _bad("inertia.base_start", J.base_start, f"must be a window index 0..{tr.n_windows}")
     for k in range(W.count):
         _finite(f"width.t[{k}]", float(W.t[k]))
         _finite(f"width.y[{k}]", float(W.y[k]), 0.0, strict=True)

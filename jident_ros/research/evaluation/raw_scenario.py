@@ -28,9 +28,11 @@ from pathlib import Path
 from typing import Optional
 
 from jident_ros.cli.scenario import write_signals_bag
+from jident_ros.cli.trend_run import run_trend
 from jident_ros.config import load_system_config
 from jident_ros.research.evaluation.raw_inputs import raw_recordings
 from jident_ros.sim.scenarios import Scenario, wear_scenario
+from jident_ros.stream.flank import FlankDetector
 from jident_ros.stream.layout import DEFAULT_CHANNELS, KNOWN_CHANNELS
 
 #: What a drive itself measures (the JointState of a motor and a load joint: positions, velocities, the motor's
@@ -62,7 +64,6 @@ def entry_refinement(on: bool):
     the load torque m_el - J1_nom dω1/dt has not vanished) as it is (``on``) or off (the entry sample is the
     departure sample, no re-contact row from the dynamics) inside the block: an experiment on the detector lane's
     code, in this process only."""
-    from jident_ros.stream.flank import FlankDetector
     saved = FlankDetector._refine
     if not on:
         FlankDetector._refine = lambda self, data, dep: (0, None)
@@ -77,7 +78,6 @@ def study(paths, truth: dict, system, refine: bool = True) -> dict:
     the entry refinement on or off: per window its entry offset from the truth (samples), K2, J1 (or why none);
     the J1 fed/refused counts, the first J1 change (recording index, its delay in recordings from the step, any
     before it) and the width's last/first ratio."""
-    from jident_ros.cli.trend_run import run_trend
     ts = system.sampling.sample_period_s
     with entry_refinement(refine):
         run = run_trend(paths, system=system, jobs=1)
