@@ -77,7 +77,6 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from jident_ros.identify.distributions import f_survival, t_quantile
 from jident_ros.identify.gap_free import (
@@ -89,6 +88,7 @@ from jident_ros.identify.gap_free import (
     free_angle_fit,
     kink_fit,
 )
+from jident_ros.stream.filters import savgol_filter
 
 #: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
 GAP_QUADRATIC_MIN = 12

@@ -38,7 +38,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
+
+from jident_ros.identify.distributions import normal_isf
 
 #: Change-point search: rows around the detector's entry and re-contact rows that may be the gap's ends.
 CHANGEPOINT_SEARCH_SAMPLES = 25
@@ -94,7 +95,7 @@ class GapModel:
         return float(self.torque_accuracy) / np.sqrt(3.0)
 
 
-_Z_CHANGEPOINT = float(stats.norm.isf(CHANGEPOINT_P))
+_Z_CHANGEPOINT = float(normal_isf(CHANGEPOINT_P))
 
 
 def _chi2_upper(dof: np.ndarray) -> np.ndarray:

@@ -9,8 +9,8 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
 
+from jident_ros.identify.distributions import chi2_ppf
 from jident_ros.identify.trend_config import TrendConfig
 from jident_ros.identify.trend_maths import SE_SCALE_TEST_LEVEL, Cusum, huber_mean, m_scale, weighted_mean
 
@@ -81,7 +81,7 @@ class Channel:
         """Apply the commissioning scatter's scale factor when it is significantly above 1
         (robust scale^2 above the 99 % quantile of chi^2_dof / dof), capped at se_scale_max."""
         if self.cfg.se_scale_from_commissioning and dof > 0 \
-                and robust_scale ** 2 > chi2.ppf(SE_SCALE_TEST_LEVEL, dof) / dof:
+                and robust_scale ** 2 > chi2_ppf(SE_SCALE_TEST_LEVEL, dof) / dof:
             self.scale = min(robust_scale, self.cfg.se_scale_max)
 
     def _scale_down(self):
@@ -99,7 +99,7 @@ class Channel:
         if n < 10:
             return
         r = np.array([(p[2] - self.baseline) / p[3] for p in pts])
-        upper = m_scale(r, n / (n - 1.0)) * math.sqrt((n - 1) / chi2.ppf(1.0 - SE_SCALE_TEST_LEVEL, n - 1))
+        upper = m_scale(r, n / (n - 1.0)) * math.sqrt((n - 1) / chi2_ppf(1.0 - SE_SCALE_TEST_LEVEL, n - 1))
         if upper < 1.0:
             self.scale = max(upper, cfg.se_scale_min)
             self.baseline_var *= self.scale ** 2
