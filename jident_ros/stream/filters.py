@@ -53,8 +53,10 @@ def _polyfit(x: np.ndarray, y: np.ndarray, deg: int) -> np.ndarray:
     return (c.T / scale).T
 
 
-def _fit_edge(x: np.ndarray, start: int, stop: int, interp_start: int, interp_stop: int, polyorder: int,
-              deriv: int, delta: float, y: np.ndarray) -> None:
+def _fit_edge(x: np.ndarray, window: tuple[int, int], interp: tuple[int, int], polyorder: int, deriv: int,
+              delta: float, y: np.ndarray) -> None:
+    """scipy.signal._savitzky_golay._fit_edge: fit x[window] and write the fit's values on y[interp]."""
+    (start, stop), (interp_start, interp_stop) = window, interp
     p = _polyfit(np.arange(0, stop - start, dtype=x.dtype), x[start:stop], polyorder)
     if deriv > 0:        # scipy.signal._savitzky_golay._polyder
         n = p.shape[0]
@@ -86,9 +88,9 @@ def savgol_filter(x, window_length: int, polyorder: int, deriv: int = 0, delta: 
     coeffs = savgol_coeffs(window_length, polyorder, deriv=deriv, delta=delta)
     y = convolve1d(x, coeffs, axis=-1, mode="constant")
     halflen = window_length // 2
-    _fit_edge(x, 0, window_length, 0, halflen, polyorder, deriv, delta, y)
+    _fit_edge(x, (0, window_length), (0, halflen), polyorder, deriv, delta, y)
     n = x.shape[0]
-    _fit_edge(x, n - window_length, n, n - halflen, n, polyorder, deriv, delta, y)
+    _fit_edge(x, (n - window_length, n), (n - halflen, n), polyorder, deriv, delta, y)
     return y
 
 
