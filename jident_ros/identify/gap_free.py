@@ -466,28 +466,10 @@ KINK_STEADY_T = 3.0
 KINK_CHI2_1 = 3.841
 
 
-def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int,
-             coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0, torque_lag_s: float = 0.0) -> dict:
-    """J1 with the entry row as a change point of a steady drive (profile likelihood).
-
-    Before the entry the drive turns at constant speed (steady, in contact); from the entry row s on it is free:
-    α1(t) = θ0 + ω0 (t − t_s) + [t ≥ t_s] Φ_s(t)/J1, Φ_s the double integral of the torque from t_s (zero value
-    and slope at t_s: angle and speed are continuous).  The same rows [P, end) for every candidate s in
-    ``entries``, so the residual sums compare: s* minimises it; the plausible entries are those within
-    KINK_CHI2_1 σ̂² of it, and the largest change of J1 over them is the change-point term.  Returns j1, se_stat
-    (statistical, torque noise and change points in quadrature), terms, start (s*), end, residual, dof; raises
-    FreeFitError."""
-    a = np.asarray(alpha1, float)
-    m = np.asarray(torque, float)
-    ts = float(sample_period_s)
-    entries = sorted(int(x) for x in entries if end - int(x) >= KINK_MIN_GAP_SAMPLES)
-    if not entries:
-        raise FreeFitError(f"kink fit: fewer than {KINK_MIN_GAP_SAMPLES} samples after every candidate entry")
-    P = max(0, entries[0] - KINK_PRE_SAMPLES)
-    if entries[0] - P < 10:
-        raise FreeFitError("kink fit: fewer than 10 steady samples before the entry")
+def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, y: np.ndarray) -> list:
+    """:func:`kink_fit`'s least-squares fit over rows [P, end) for every candidate entry row: a list of (residual
+    sum of squares, 1/J1, residual, the least-squares row of 1/J1, entry row)."""
     rows = np.arange(P, end)
-    y = a[P:end] - a[entries[0]]
     # every candidate's design at once, (entry, row, column): numpy's stacked matmul and solve call the same
     # BLAS/LAPACK routine per candidate as the 2-D calls (bit for bit the same numbers, a fraction of the calls)
     # Φ_s of every candidate: the double trapezoid from its row, as rows of one cumulative sum (zeros before the
@@ -512,8 +494,32 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
     coef = pinv @ y
     res = y - (X @ coef[:, :, None])[:, :, 0]
     rss_all = (res[:, None, :] @ res[:, :, None])[:, 0, 0]
-    out = [(float(rss_all[q]), float(coef[q, 2]) / scales[q], res[q], pinv[q, 2] / scales[q], s_row)
-           for q, s_row in enumerate(entries)]
+    return [(float(rss_all[q]), float(coef[q, 2]) / scales[q], res[q], pinv[q, 2] / scales[q], s_row)
+            for q, s_row in enumerate(entries)]
+
+
+def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int,
+             coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0, torque_lag_s: float = 0.0) -> dict:
+    """J1 with the entry row as a change point of a steady drive (profile likelihood).
+
+    Before the entry the drive turns at constant speed (steady, in contact); from the entry row s on it is free:
+    α1(t) = θ0 + ω0 (t − t_s) + [t ≥ t_s] Φ_s(t)/J1, Φ_s the double integral of the torque from t_s (zero value
+    and slope at t_s: angle and speed are continuous).  The same rows [P, end) for every candidate s in
+    ``entries``, so the residual sums compare: s* minimises it; the plausible entries are those within
+    KINK_CHI2_1 σ̂² of it, and the largest change of J1 over them is the change-point term.  Returns j1, se_stat
+    (statistical, torque noise and change points in quadrature), terms, start (s*), end, residual, dof; raises
+    FreeFitError."""
+    a = np.asarray(alpha1, float)
+    m = np.asarray(torque, float)
+    ts = float(sample_period_s)
+    entries = sorted(int(x) for x in entries if end - int(x) >= KINK_MIN_GAP_SAMPLES)
+    if not entries:
+        raise FreeFitError(f"kink fit: fewer than {KINK_MIN_GAP_SAMPLES} samples after every candidate entry")
+    P = max(0, entries[0] - KINK_PRE_SAMPLES)
+    if entries[0] - P < 10:
+        raise FreeFitError("kink fit: fewer than 10 steady samples before the entry")
+    y = a[P:end] - a[entries[0]]
+    out = _kink_candidates(m, ts, entries, P, end, y)
     rss = np.array([o[0] for o in out])
     k = int(np.argmin(rss))
     rss_min, kappa, res, row, s_best = out[k]
