@@ -389,7 +389,7 @@ def run_robustness(system: SystemConfig, method, library: PatternLibrary | None 
     image part of the fused verdict) on every k-th window only. ``grid_cases`` replaces the 168 grid
     cases (tests). The pattern library is built from the noise-free eta_k = 0.025 runs at p unless given.
     ``quick`` (smoke run, ~15 s): SNR 30 dB only, no extra seeds, the image method on every 4th window.
-    ``jobs`` >= 2: the gap-only sweeps (extra noise seeds, attribution, sample periods: :func:`_gap_only_sweeps`)
+    ``jobs`` >= 2: the gap-only sweeps (extra noise seeds, attribution, quantisation, sample periods: :func:`_gap_only_sweeps`)
     run in a process of their own beside the others (the same function on the same inputs: the same numbers)."""
     if quick:
         snr_db, extra_seeds, image_stride = (target_snr_db,), (), max(image_stride, 4)
@@ -426,7 +426,7 @@ def run_robustness(system: SystemConfig, method, library: PatternLibrary | None 
     levels = [None] + [float(s) for s in snr_db]
     noisy_levels = [None] + ([target_snr_db] if target_snr_db is not None else [])
     gap_only_args = (system, clean, cases, levels, tuple(extra_seeds), seed, target_snr_db, noisy_levels,
-                     tuple(sample_periods))
+                     tuple(sample_periods), tuple(encoder_counts))
     pool = None
     if jobs >= 2:
         pool = ProcessPoolExecutor(max_workers=1)
@@ -471,20 +471,17 @@ def run_robustness(system: SystemConfig, method, library: PatternLibrary | None 
     offw = (offgrid_sweeps(offgrid_width_cases(system, offgrid_widths), "offgrid_width", "off-grid widths", 2)
             if offgrid_widths else [])
 
-    # (d) encoder quantisation ---------------------------------------------------------------
-    t0 = time.perf_counter()
-    quant = [evaluate_windows(system, quantise_encoders(clean, int(n)), f"{int(n)} counts/rev", "quantisation",
-                              keys=ENCODER_KEYS, counts_per_rev=int(n)) for n in encoder_counts]
-    timings["encoder quantisation"] = time.perf_counter() - t0
+    # (d) encoder quantisation: with the gap-only sweeps below
+    timings["encoder quantisation"] = np.nan
 
     # the gap-only sweeps: (a) extra noise seeds and the attribution, (e) sample periods
     if pool is not None:
         with pool:
-            grid_extra, attribution, per, gap_only_timings = gap_only_future.result()
+            grid_extra, attribution, quant, per, gap_only_timings = gap_only_future.result()
     else:
-        grid_extra, attribution, per, gap_only_timings = _gap_only_sweeps(*gap_only_args)
+        grid_extra, attribution, quant, per, gap_only_timings = _gap_only_sweeps(*gap_only_args)
     timings["grid sweeps"] = sum(s.seconds for s in grid + grid_extra)
-    timings["sample periods"] = gap_only_timings["sample periods"]
+    timings.update(gap_only_timings)
 
     res = RobustnessResult(classes, tuple(float(x) for x in g.backlash_widths_m), float(g.pattern_consistency_pa_sn),
                            grid, grid_extra, offj, offw, quant, per, tuple(library.widths_m),
@@ -502,10 +499,10 @@ def run_robustness(system: SystemConfig, method, library: PatternLibrary | None 
 
 
 def _gap_only_sweeps(system: SystemConfig, clean: WindowSet, cases, levels, extra_seeds, seed: int, target_snr_db,
-                     noisy_levels, sample_periods) -> tuple:
+                     noisy_levels, sample_periods, encoder_counts) -> tuple:
     """The sweeps of :func:`run_robustness` without the image method: the grid at the extra noise seeds (with the
-    gap-only verdict), the attribution (noise on one channel only, at the target SNR) and the sample periods.
-    Returns (grid_extra, attribution, sample-period sweeps, timings)."""
+    gap-only verdict), the attribution (noise on one channel only, at the target SNR), the encoder quantisation and
+    the sample periods.  Returns (grid_extra, attribution, quantisation sweeps, sample-period sweeps, timings)."""
     grid_extra = []
     for es in extra_seeds:
         for k, snr in enumerate(levels[1:], start=1):
@@ -522,6 +519,11 @@ def _gap_only_sweeps(system: SystemConfig, clean: WindowSet, cases, levels, extr
                                       keys=(PRIMARY, "no_angles"), snr_db=target_snr_db, seed=sd)
                 sw.noised = chans
                 attribution.append(sw)
+    # (d) encoder quantisation
+    t0 = time.perf_counter()
+    quant = [evaluate_windows(system, quantise_encoders(clean, int(n)), f"{int(n)} counts/rev", "quantisation",
+                              keys=ENCODER_KEYS, counts_per_rev=int(n)) for n in encoder_counts]
+    timings = {"encoder quantisation": time.perf_counter() - t0}
     # (e) sample periods: the gap estimator only
     t0 = time.perf_counter()
     per = []
@@ -531,7 +533,8 @@ def _gap_only_sweeps(system: SystemConfig, clean: WindowSet, cases, levels, extr
             sd = None if snr is None else noise_seed(seed, snr, 3 + j)
             per.append(evaluate_windows(system, _noisy(w, snr, sd), f"Ts = {ts * 1e3:g} ms, {_data_label(snr, sd)}",
                                         "sample_period", snr_db=snr, seed=sd))
-    return grid_extra, attribution, per, {"sample periods": time.perf_counter() - t0}
+    timings["sample periods"] = time.perf_counter() - t0
+    return grid_extra, attribution, quant, per, timings
 
 
 def speed_scale(clean: WindowSet, sweep: Sweep) -> dict:
