@@ -88,6 +88,9 @@ class _FlankCapture:
     flank_sigma_rad: float
     second_entry_rows: list = field(default_factory=list)   # departures seen while capturing (capture rows)
     skip: bool = False         # short history: the transient is skipped, not captured
+    pending: bool = False      # an entry inside another window: its own window only once its excursion ends on the
+                               # other flank (a traversal), decided at the next contact
+    own_window: list = field(default_factory=list)          # per second_entry_rows: that entry has a window of its own
 
 
 def motor_acceleration(window: dict, wheel_radius_m: float, sample_period_s: float):
@@ -120,6 +123,17 @@ def recontact_index(acc: np.ndarray, entry_index: int, drop: float = 0.6, min_sa
     return entry_index + min_samples + int(np.argmax(below)) - 1
 
 
+#: An entry inside a running window gets its own window only when its excursion took at least this many samples
+#: to the contact on the other flank (a traversal takes time; a jump of delta -- the line's slip, an encoder glitch
+#: -- is at its new level at once).
+MIN_TRAVERSAL_SAMPLES = 4
+
+#: With m_el and a1 (an accelerometer), the entry sample may move back this many samples before the departure, to
+#: where the motor equation starts to hold (:func:`single_mass_run`'s max_back; the vector drive's return traversal
+#: rests at the flank for 54 samples after the contact loss).  Without a1 the second difference of alpha1 is too
+#: noisy for it (2^16 counts at 2 kHz: ~20 N m of torque noise): the gap estimator's change points refine it.
+REFINE_BACK_SAMPLES = 64
+
 #: single_mass_run fits m_el = J acc + c (True) or m_el = J acc (False).
 SINGLE_MASS_OFFSET = True
 #: ... with |c| at most this share of the run's median |m_el| or of the steady |m_el| before the departure, the
@@ -129,7 +143,7 @@ SINGLE_MASS_OFFSET_MAX = 0.15
 
 def single_mass_run(m_el: np.ndarray, acc: np.ndarray, departure: int, inertia_seed_kgm2: float,
                     pre_samples: int = 48, max_shift: int = 16, rel_tol: float = 0.01, k_sigma: float = 4.0,
-                    iterations: int = 4):
+                    iterations: int = 4, max_back: int = 0):
     """(entry row, re-contact row, J1 fitted) of the backlash gap from the dynamics, or None.
 
     Inside the zone the load torque on the motor is zero: m_el = J1 dω1/dt, one J1 for every sample (the
@@ -139,7 +153,11 @@ def single_mass_run(m_el: np.ndarray, acc: np.ndarray, departure: int, inertia_s
     refitted by least squares over the run and the run found again with the tolerance
     max(k_sigma * noise, rel_tol * |m_el|), noise from the steady samples before the departure (there
     dω1/dt = 0), ``iterations`` times.  The entry is the first sample whose load torque has vanished; the
-    re-contact row the first with load again.
+    re-contact row the first with load again.  ``max_back`` > 0: the entry then moves back from the departure,
+    at most that many samples, while the samples before it are explained by the run's fit as well (the residual
+    within the tolerance): a departure that delta shows late (a coupling that leaves its flank with no relative
+    speed -- a light load reversal, a return traversal that rests at the flank -- or a stiff coupling's unloading
+    twist below the threshold) is moved to where the load torque vanished.
     """
     n = m_el.size
     lo = max(departure - pre_samples, 0)
@@ -188,7 +206,40 @@ def single_mass_run(m_el: np.ndarray, acc: np.ndarray, departure: int, inertia_s
             break
         entry, end, j, c = a, b, j_new, c_new
         tol_rel = rel_tol
+    if max_back > 0 and entry is not None:
+        entry = _back_to_load(m_el, m_el - j * acc - c, entry, end, max(departure - int(max_back), BACK_BLOCK),
+                              rel_tol)
     return entry, end, j
+
+
+#: The entry moves back over a sample while the BACK_BLOCK residuals before it stay, on average, within the
+#: tolerance of the gap's own residual extrapolated back (a line through its first BACK_FIT samples: the friction
+#: and the torque estimate's error drift with the speed); tolerance max(BACK_Z standard errors, rel_tol |m_el|).
+BACK_BLOCK = 3
+BACK_FIT = 8
+BACK_Z = 3.0
+
+
+def _back_to_load(m_el: np.ndarray, res: np.ndarray, entry: int, end: int, first: int, rel_tol: float) -> int:
+    """The entry moved back from ``entry`` (not before ``first``) while the motor equation's residual ``res``
+    (the load torque left, N m) of the BACK_BLOCK samples before it stays near the line fitted to the run's first
+    BACK_FIT residuals (module constants); the noise from the run [entry, end) (1.4826 MAD of its first
+    differences / sqrt 2)."""
+    m = min(BACK_FIT, end - entry)
+    if m < 3:
+        return entry
+    k = np.arange(m, dtype=float)
+    slope, icpt = np.polyfit(k, res[entry:entry + m], 1)
+    sigma = _noise(res[entry:end])
+    e0 = entry
+    while entry > first:
+        blk = np.arange(entry - BACK_BLOCK, entry)
+        dev = float(np.mean(res[blk] - (icpt + slope * (blk - e0))))
+        lim = max(BACK_Z * sigma / math.sqrt(BACK_BLOCK), rel_tol * float(np.mean(np.abs(m_el[blk]))))
+        if abs(dev) > lim:
+            break
+        entry -= 1
+    return entry
 
 
 def _noise(x: np.ndarray) -> float:
@@ -293,6 +344,10 @@ class FlankDetector(BacklashDetector):
     detector_name = "flank"
     #: History kept beyond samples_before_entry (the entry sample may move this far before the departure).
     history_extra = 0
+    #: An entry inside a running window gets a window of its own when its excursion ends on the other flank (a
+    #: return traversal: the second drive's and the vector drive's speed steps re-cross the zone 130-270 samples
+    #: after the first traversal, inside its window).
+    second_windows = True
 
     def __init__(self, wheel_radius_m: float, sample_period_s: float,
                  channels: Sequence[str] = DEFAULT_CHANNELS, samples_before_entry: int = 48,
@@ -332,6 +387,9 @@ class FlankDetector(BacklashDetector):
         self.confirm_samples = int(confirm_samples)
         self.deeper_travel_factor = float(deeper_travel_factor)
         self._i_m_el = self.channels.index("m_el") if "m_el" in self.channels and self.detector_name == "flank" else -1
+        if self.nominal_inertia_kgm2 is not None and "m_el" in self.channels and "a1" in self.channels:
+            # the entry sample may move back from the departure (single_mass_run's max_back): the history holds it
+            self.history_extra = REFINE_BACK_SAMPLES
         self.min_travel_rad = float(min_travel_rad)
         #: departures back on their flank within confirm_samples (an encoder spike; not entries, counted)
         self.spikes = 0
@@ -342,6 +400,8 @@ class FlankDetector(BacklashDetector):
         self.backlash_width_m = math.nan
         self.last_width: Optional[WidthResult] = None
         self.second_entries = 0
+        #: entries inside a running window that got a window of their own (a traversal back)
+        self.return_windows = 0
         self.reset()
 
     # ------------------------------------------------------------- state
@@ -359,8 +419,7 @@ class FlankDetector(BacklashDetector):
 
     @property
     def capturing(self) -> bool:
-        cap = getattr(self, "_fcap", None)
-        return cap is not None and not cap.skip
+        return any(not c.skip for c in getattr(self, "_caps", ()))
 
     @property
     def angle_quantum_rad(self) -> float:
@@ -379,7 +438,11 @@ class FlankDetector(BacklashDetector):
         self._recent = np.empty(0)              # the last contact_samples - 1 delta values
         self._flank: Optional[float] = None
         self._sigma = 0.0
-        self._fcap: Optional[_FlankCapture] = None
+        self._caps: list = []                   # running captures, in the order of their entries
+        self._last_cap: Optional[_FlankCapture] = None   # the capture the last entry opened (None: none)
+        self._entry_id = 0                      # entries so far (ties second entries to their captures)
+        self._entry_row = 0                     # stream row of the last entry
+        self._rows_in = 0                       # rows handed to the captures so far
         if not hasattr(self, "_seen"):          # what the stream showed, for no_entry_reason (kept over resets)
             self._seen = {"contacts": 0, "spread_min": math.inf, "departure_max": 0.0, "threshold": math.nan}
         self._held_x = np.empty((0, len(self.channels)))     # rows waiting for their confirmation rows
@@ -434,14 +497,18 @@ class FlankDetector(BacklashDetector):
                         self._recent_aux = seq_aux[-(L - 1):]
                     return events
                 k = int(np.argmax(ok))
+                cancelled = False
                 if self._tent is not None:
                     if not self._note_travel(seq[:k + L]):
                         events.append(("cancel", i + k + L - carried - 1))
+                        cancelled = True
                         if self._tent[1] != self._torque_sign:     # back from a deeper move: reference done
                             self._ref_flank = None
                     else:
                         self._ref_flank = None
                     self._tent = None
+                if not cancelled:
+                    events.append(("contact", i + k + L - carried - 1, float(runs[k].mean())))
                 self._torque_sign = 0.0
                 if seq_aux is not None:
                     ra = seq_aux[k:k + L]
@@ -539,75 +606,93 @@ class FlankDetector(BacklashDetector):
     def _consume_rows(self, x: np.ndarray, d: np.ndarray, look: np.ndarray) -> list:
         events = []
         found = self._track(d, look, x[:, self._i_m_el] if self._i_m_el >= 0 else None)
-        n = x.shape[0]
-        pos = 0                                   # rows of x before pos are consumed
+        pos = 0                                   # rows of x before pos are fed to the running captures
         extra = self.history_extra
-        need = self.window_length + self.refine_samples + extra
         for kind, k, *rest in found:
-            cap = self._fcap
             if kind == "cancel":
-                # the last entry was a same-flank torque change: its capture is dropped (counted), a second
-                # entry it made inside another window is no longer one
+                # the last entry was a same-flank torque change: its capture is dropped (counted) unless it was
+                # complete before the change was known; in other windows it is no longer a second entry
+                events += self._feed(x[pos:k + 1])
+                pos = max(pos, k + 1)
                 self.flank_shifts += 1
-                if cap is not None and self._last_entry_captured:
-                    take = min(need - cap.count, k + 1 - pos)
-                    if take > 0:
-                        self._append(cap, x[pos:pos + take])
-                        pos += take
-                    if cap.count >= need:
-                        events += self._close(cap)
+                last = self._last_cap
+                if last is not None and last in self._caps:
+                    self._caps.remove(last)
+                for c in self._caps:
+                    c.second_entry_rows = [e for e in c.second_entry_rows if e[1] != self._entry_id]
+                self._last_cap = None
+                continue
+            if kind == "contact":
+                # the last entry's excursion ended in a contact: an entry inside another window gets its own
+                # window when that contact lies on the other flank (a traversal), else (a bounce back to the
+                # flank it left) it stays a second entry of the window holding it
+                last = self._last_cap
+                travel = self._rows_in + k - self.contact_samples + 1 - self._entry_row
+                if last is not None and last.pending and last in self._caps:
+                    if abs(rest[0] - last.flank_rad) > max(self.min_travel_rad, self.threshold_for(last)) \
+                            and travel >= MIN_TRAVERSAL_SAMPLES:
+                        last.pending = False
+                        self.return_windows += 1
+                        for c in self._caps:
+                            for e in c.second_entry_rows:
+                                if e[1] == self._entry_id:
+                                    e[2] = True
                     else:
-                        self._fcap = None
-                elif cap is not None and cap.second_entry_rows:
-                    cap.second_entry_rows.pop()
+                        self._caps.remove(last)
+                self._last_cap = None
                 continue
             flank, sigma = rest
-            if cap is not None:
-                take = min(need - cap.count, k - pos)     # rows before k belong to the running capture
-                if take > 0:
-                    self._append(cap, x[pos:pos + take])
-                    pos += take
-                if cap.count < need:
-                    if not cap.skip:
-                        cap.second_entry_rows.append(cap.count + (k - pos))
-                    self._last_entry_captured = False
-                    continue
-                events += self._close(cap)
-            # a new entry at row k (no capture running now)
-            hist = np.concatenate([self._tail, x[:pos], x[pos:k]])[-(self.samples_before_entry + extra):]
+            events += self._feed(x[pos:k])        # rows before k belong to the running captures
+            pos = max(pos, k)
+            self._entry_id += 1
+            self._entry_row = self._rows_in + k
+            hist = np.concatenate([self._tail, x[:k]])[-(self.samples_before_entry + extra):]
             t_k = float(x[k, self._i_t])
+            if self._caps:
+                # an entry inside a running window: a second entry of each (information)
+                for c in self._caps:
+                    if not c.skip:
+                        c.second_entry_rows.append([c.count, self._entry_id, False])
+                self._last_cap = None
+                if self.second_windows and not any(c.skip for c in self._caps) \
+                        and hist.shape[0] >= self.samples_before_entry + extra:
+                    self._last_cap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma, pending=True)
+                    self._caps.append(self._last_cap)
+                continue
+            # a new entry at row k (no capture running now)
             if hist.shape[0] < self.samples_before_entry + extra:
                 events.append(self._short_history(t_k, hist.shape[0], self.samples_before_entry + extra))
-                self._fcap = _FlankCapture([], self.samples_before_entry + extra, self.samples_before_entry + extra,
-                                           math.nan, math.nan, skip=True)
+                self._last_cap = _FlankCapture([], self.samples_before_entry + extra,
+                                               self.samples_before_entry + extra, math.nan, math.nan, skip=True)
             else:
-                self._fcap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma)
-            self._last_entry_captured = True
-            pos = k
-        cap = self._fcap
-        if cap is not None and pos < n:
-            take = min(need - cap.count, n - pos)
-            self._append(cap, x[pos:pos + take])
-            pos += take
-            if cap.count >= need:
-                events += self._close(cap)
+                self._last_cap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma)
+            self._caps.append(self._last_cap)
+        events += self._feed(x[pos:])
         self._tail = np.concatenate([self._tail, x])[-(self.samples_before_entry + extra):]
+        self._rows_in += x.shape[0]
         return events
 
-    def _append(self, cap: _FlankCapture, rows: np.ndarray) -> None:
-        if not cap.skip:
-            cap.rows.append(rows)
-        cap.count += rows.shape[0]
-
-    def _close(self, cap: _FlankCapture) -> list:
-        self._fcap = None
-        if cap.skip:
-            return []
-        return [self._finish_flank(cap)]
+    def _feed(self, rows: np.ndarray) -> list:
+        """Rows to every running capture (each up to its length); the windows completed by them, in order."""
+        events = []
+        need = self.window_length + self.refine_samples + self.history_extra
+        for cap in list(self._caps):
+            take = min(need - cap.count, rows.shape[0])
+            if take > 0:
+                if not cap.skip:
+                    cap.rows.append(rows[:take])
+                cap.count += take
+            if cap.count >= need:
+                # complete (a pending one found no contact within its window: a long excursion, kept)
+                self._caps.remove(cap)
+                if not cap.skip:
+                    events.append(self._finish_flank(cap))
+        return events
 
     def finish(self) -> list:
         """The data ended: a window in progress is reported as ``cut_off`` (a drop, counted); the event
-        carries the partial window (FLAG_CUT_OFF set) for an offline report."""
+        carries the partial window (FLAG_CUT_OFF set) for an offline report.  An entry inside another window
+        whose excursion has not yet ended in a contact is not reported."""
         events = []
         if self._held_x.shape[0]:
             held_x, held_d = self._held_x, self._held_d
@@ -616,14 +701,15 @@ class FlankDetector(BacklashDetector):
         return events + self._finish_capture()
 
     def _finish_capture(self) -> list:
-        cap = self._fcap
-        if cap is None or cap.skip:
-            self._fcap = None
-            return []
-        self._fcap = None
-        data = np.concatenate(cap.rows)
-        e = cap.departure_row
-        return [self._cut_off(data, e, float(data[e, self._i_t]), math.nan, self.detector_name)]
+        caps, self._caps, self._last_cap = self._caps, [], None
+        events = []
+        for cap in caps:
+            if cap.skip or cap.pending:
+                continue
+            data = np.concatenate(cap.rows)
+            e = cap.departure_row
+            events.append(self._cut_off(data, e, float(data[e, self._i_t]), math.nan, self.detector_name))
+        return events
 
     def _finish_flank(self, cap: _FlankCapture) -> Event:
         data = np.concatenate(cap.rows)
@@ -640,14 +726,15 @@ class FlankDetector(BacklashDetector):
                              contact_tolerance_rad=self.contact_tolerance_rad)
         self.last_width = res
         flags = 0
-        inside = [r for r in cap.second_entry_rows if dep + shift < r < e0 + self.window_length]
+        inside = [se for se in cap.second_entry_rows if dep + shift < se[0] < e0 + self.window_length]
         swallowed = ""
         if inside:
             flags |= FLAG_SECOND_ENTRY
             self.second_entries += 1
             d = self._delta(win)
             back = np.abs(d[e:e + self.contact_samples // 2] - cap.flank_rad) <= self.threshold_for(cap)
-            if not math.isfinite(res.width_m) or back.any():
+            inside = [se for se in inside if not se[2]]     # the others have a window of their own
+            if inside and (not math.isfinite(res.width_m) or back.any()):
                 # the window's own entry shows no traversal, or delta was back on the flank it left within
                 # contact_samples / 2 samples (a glitch longer than confirm_samples, not a gap: the shortest gap
                 # on our models is 11 samples, and it never ends on the flank it left); the entry inside it gets
@@ -702,11 +789,11 @@ class FlankDetector(BacklashDetector):
         if self.nominal_inertia_kgm2 is None or "m_el" not in self.channels:
             return 0, None
         wd = {c: data[:, j] for j, c in enumerate(self.channels)}
-        acc, _ = motor_acceleration(wd, self.wheel_radius_m, self.sample_period_s)
+        acc, src = motor_acceleration(wd, self.wheel_radius_m, self.sample_period_s)
         if acc is None:
             return 0, None
         run = single_mass_run(wd["m_el"], acc, dep, self.nominal_inertia_kgm2, self.samples_before_entry,
-                              self.refine_samples)
+                              self.refine_samples, max_back=self.history_extra if src == "a1" else 0)
         if run is None:
             return 0, None
         return run[0] - dep, run[1]
