@@ -137,3 +137,76 @@ def test_bad_configuration_raises_with_the_name():
         FlankDetector(0.1, 5e-4, contact_samples=2)
     with pytest.raises(ValueError, match="wheel_radius_m"):
         FlankDetector(0.0, 5e-4)
+
+
+def _excursions(segments, n=3000, ts=5e-4, w=150.0):
+    """t, alpha1, alpha2 turning steadily, delta = alpha1 - alpha2 following ``segments``: [(row, delta)] joined by
+    straight lines (held after the last)."""
+    t = 1.0 + np.arange(n) * ts
+    rows, vals = zip(*segments)
+    delta = np.interp(np.arange(n), rows, vals)
+    a2 = 1.0 + w * (t - 1.0)
+    return np.column_stack([t, a2 + 2.0 + delta, a2]), ("t", "alpha1", "alpha2")
+
+
+def _windows(data, ch, **kw):
+    det = FlankDetector(0.1, 5e-4, channels=ch, **kw)
+    evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)] + det.finish()
+    return [e.window for e in evs if e.kind == "window"], det
+
+
+def test_a_return_traversal_inside_a_window_gets_a_window_of_its_own():
+    """Flank 0 -> flank -0.1 rad (30 samples) -> back to 0 at row 900, inside the first window: two windows, each on
+    its own departure; the first flags the second entry. A bounce (back to the flank it left) and a jump of delta
+    (a slip) inside the window get no window of their own."""
+    data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (940, 0.0)])
+    wins, det = _windows(data, ch)
+    assert [round((w.entry_time_s - 1.0) / 5e-4) for w in wins] == [501, 901]
+    assert wins[0].flags & FLAG_SECOND_ENTRY and det.return_windows == 1
+    assert not wins[1].flags & FLAG_SECOND_ENTRY
+    # a bounce off the second flank, back to it: one window
+    data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (920, -0.07), (940, -0.1)])
+    wins, det = _windows(data, ch)
+    assert len(wins) == 1 and wins[0].flags & FLAG_SECOND_ENTRY and det.return_windows == 0
+    # a jump of delta to a new level (the line's slip) inside the window: one window
+    data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (901, 0.0)])
+    wins, det = _windows(data, ch)
+    assert len(wins) == 1 and det.return_windows == 0
+    # the return traversal after the first window has ended: its own window as before
+    data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (2700, -0.1), (2740, 0.0)], n=5000)
+    wins, det = _windows(data, ch)
+    assert [round((w.entry_time_s - 1.0) / 5e-4) for w in wins] == [501, 2701] and det.return_windows == 0
+
+
+def _late_departure(with_a1=True, n=3000, x=600, ts=5e-4, r=0.1, j1=1.16, load_nm=40.0, gap_nm=-20.0, snr=None):
+    """A contact lost at row ``x`` (the load torque on the motor drops from ``load_nm`` to 0) while delta leaves
+    the flank only slowly (the motor decelerates at gap_nm/J1 from zero relative speed): the flank detector's
+    departure (1.5 mrad) comes ~26 samples after ``x``."""
+    k = np.arange(n)
+    t = 1.0 + k * ts
+    w = 50.0
+    dt = np.clip(k - x, 0, None) * ts
+    m_el = np.where((k < x) | (k >= x + 300), load_nm, gap_nm)       # re-contact 300 samples later (no motion
+    acc = np.where((k < x) | (k >= x + 300), 0.0, gap_nm / j1)        # of delta modelled: the run needs its end)
+    a2 = w * (t - 1.0)
+    a1 = a2 + 0.5 * (gap_nm / j1) * dt ** 2 + 0.3
+    cols = {"t": t, "alpha1": a1, "alpha2": a2, "m_el": m_el, "a1": r * acc}
+    if snr is not None:
+        rng = np.random.default_rng(3)
+        for c in ("m_el", "a1"):
+            cols[c] = cols[c] + rng.normal(0, np.sqrt(np.mean(cols[c] ** 2)) / 10 ** (snr / 20), n)
+    ch = ("t", "alpha1", "alpha2", "m_el") + (("a1",) if with_a1 else ())
+    return np.column_stack([cols[c] for c in ch]), ch
+
+
+@pytest.mark.parametrize("snr", [None, 30.0])
+def test_with_an_accelerometer_the_entry_moves_back_to_where_the_load_torque_vanished(snr):
+    data, ch = _late_departure(snr=snr)
+    wins, _ = _windows(data, ch, nominal_inertia_kgm2=1.16)
+    assert len(wins) == 1
+    entry = round((wins[0].entry_time_s - 1.0) / 5e-4)
+    assert abs(entry - 600) <= 2, entry
+    # without a1 the second difference of alpha1 cannot place it: the departure stays (the gap estimator refines)
+    data, ch = _late_departure(with_a1=False)
+    wins, _ = _windows(data, ch, nominal_inertia_kgm2=1.16)
+    assert len(wins) == 1 and round((wins[0].entry_time_s - 1.0) / 5e-4) > 615

@@ -129,10 +129,10 @@ def recontact_index(acc: np.ndarray, entry_index: int, drop: float = 0.6, min_sa
 MIN_TRAVERSAL_SAMPLES = 4
 
 #: With m_el and a1 (an accelerometer), the entry sample may move back this many samples before the departure, to
-#: where the motor equation starts to hold (:func:`single_mass_run`'s max_back; the vector drive's return traversal
+#: where the motor equation starts to hold (:func:`back_to_load`; the vector drive's return traversal
 #: rests at the flank for 54 samples after the contact loss).  Without a1 the second difference of alpha1 is too
 #: noisy for it (2^16 counts at 2 kHz: ~20 N m of torque noise): the gap estimator's change points refine it.
-REFINE_BACK_SAMPLES = 64
+REFINE_BACK_SAMPLES = 128
 
 #: single_mass_run fits m_el = J acc + c (True) or m_el = J acc (False).
 SINGLE_MASS_OFFSET = True
@@ -143,7 +143,7 @@ SINGLE_MASS_OFFSET_MAX = 0.15
 
 def single_mass_run(m_el: np.ndarray, acc: np.ndarray, departure: int, inertia_seed_kgm2: float,
                     pre_samples: int = 48, max_shift: int = 16, rel_tol: float = 0.01, k_sigma: float = 4.0,
-                    iterations: int = 4, max_back: int = 0):
+                    iterations: int = 4):
     """(entry row, re-contact row, J1 fitted) of the backlash gap from the dynamics, or None.
 
     Inside the zone the load torque on the motor is zero: m_el = J1 dω1/dt, one J1 for every sample (the
@@ -153,11 +153,7 @@ def single_mass_run(m_el: np.ndarray, acc: np.ndarray, departure: int, inertia_s
     refitted by least squares over the run and the run found again with the tolerance
     max(k_sigma * noise, rel_tol * |m_el|), noise from the steady samples before the departure (there
     dω1/dt = 0), ``iterations`` times.  The entry is the first sample whose load torque has vanished; the
-    re-contact row the first with load again.  ``max_back`` > 0: the entry then moves back from the departure,
-    at most that many samples, while the samples before it are explained by the run's fit as well (the residual
-    within the tolerance): a departure that delta shows late (a coupling that leaves its flank with no relative
-    speed -- a light load reversal, a return traversal that rests at the flank -- or a stiff coupling's unloading
-    twist below the threshold) is moved to where the load torque vanished.
+    re-contact row the first with load again.
     """
     n = m_el.size
     lo = max(departure - pre_samples, 0)
@@ -206,39 +202,61 @@ def single_mass_run(m_el: np.ndarray, acc: np.ndarray, departure: int, inertia_s
             break
         entry, end, j, c = a, b, j_new, c_new
         tol_rel = rel_tol
-    if max_back > 0 and entry is not None:
-        entry = _back_to_load(m_el, m_el - j * acc - c, entry, end, max(departure - int(max_back), BACK_BLOCK),
-                              rel_tol)
     return entry, end, j
 
 
-#: The entry moves back over a sample while the BACK_BLOCK residuals before it stay, on average, within the
-#: tolerance of the gap's own residual extrapolated back (a line through its first BACK_FIT samples: the friction
-#: and the torque estimate's error drift with the speed); tolerance max(BACK_Z standard errors, rel_tol |m_el|).
+#: The entry moves back over a sample while the BACK_BLOCK samples before it, on average, are explained by the motor
+#: equation fitted to the first BACK_FIT samples of the gap (m_el = J dω1/dt + c: the friction and the torque
+#: estimate's offset in c) within max(BACK_Z standard errors, BACK_REL_TOL |m_el|).
 BACK_BLOCK = 3
-BACK_FIT = 8
+BACK_FIT = 48
 BACK_Z = 3.0
+#: ... or this share of |m_el| (the fitted J's error drifts the residual by a few % of m_el over the fit; the load
+#: torque before a contact loss is the whole m_el)
+BACK_REL_TOL = 0.05
+#: ... with a relative lag of m_el and dω1/dt as a regressor (dm_el/dt, per sample), kept when the fit puts it within
+#: +-this many samples (the vector drive's torque estimate and its a1 are 0.1-0.2 samples apart: its fast torque
+#: changes left a residual of 10 N m without it)
+BACK_MAX_LAG_SAMPLES = 4.0
 
 
-def _back_to_load(m_el: np.ndarray, res: np.ndarray, entry: int, end: int, first: int, rel_tol: float) -> int:
-    """The entry moved back from ``entry`` (not before ``first``) while the motor equation's residual ``res``
-    (the load torque left, N m) of the BACK_BLOCK samples before it stays near the line fitted to the run's first
-    BACK_FIT residuals (module constants); the noise from the run [entry, end) (1.4826 MAD of its first
-    differences / sqrt 2)."""
-    m = min(BACK_FIT, end - entry)
-    if m < 3:
+def back_to_load(m_el: np.ndarray, acc: np.ndarray, entry: int, first: int, inertia_seed_kgm2: float,
+                 rel_tol: float = None, end: Optional[int] = None) -> int:
+    """The entry sample moved back from ``entry`` (a sample in the gap), not before ``first``, to where the motor
+    equation stops explaining the samples (the load torque is back): a departure that delta shows late (a coupling
+    that leaves its flank with no relative speed -- a light load reversal, a return traversal resting at the flank
+    -- or a stiff coupling's unloading twist below the threshold).  The equation m_el = J dω1/dt + c - tau dm_el/dt
+    is fitted to the BACK_FIT samples from ``entry`` (before ``end``, the re-contact, when known; without tau when
+    it leaves +-BACK_MAX_LAG_SAMPLES, J kept at the seed when dω1/dt does not vary there or the fit leaves 0.5..2 x
+    the seed); the entry moves back while the BACK_BLOCK residuals before it average within
+    max(BACK_Z standard errors, rel_tol |m_el|).  Reaching ``first`` means no load was found: ``entry`` is
+    returned unchanged."""
+    rel_tol = BACK_REL_TOL if rel_tol is None else float(rel_tol)
+    m = min(BACK_FIT, m_el.size - entry, (end - entry) if end is not None else BACK_FIT)
+    if m < 4 or first >= entry:
         return entry
-    k = np.arange(m, dtype=float)
-    slope, icpt = np.polyfit(k, res[entry:entry + m], 1)
-    sigma = _noise(res[entry:end])
-    e0 = entry
-    while entry > first:
-        blk = np.arange(entry - BACK_BLOCK, entry)
-        dev = float(np.mean(res[blk] - (icpt + slope * (blk - e0))))
+    y, x = m_el[entry:entry + m], acc[entry:entry + m]
+    dm = np.gradient(m_el)          # a relative lag tau of m_el and dω1/dt: m_el(t) = m(t - tau) ~ m - tau dm/dt
+    j = float(inertia_seed_kgm2)
+    c, lag = float(np.mean(y - j * x)), 0.0
+    if np.ptp(x) > 0:
+        (jf, cf, lf), *_ = np.linalg.lstsq(np.column_stack([x, np.ones(m), dm[entry:entry + m]]), y, rcond=None)
+        if 0.5 * j <= jf <= 2.0 * j and abs(lf) <= BACK_MAX_LAG_SAMPLES:
+            j, c, lag = float(jf), float(cf), float(lf)
+        else:
+            (jf, cf), *_ = np.linalg.lstsq(np.column_stack([x, np.ones(m)]), y, rcond=None)
+            if 0.5 * j <= jf <= 2.0 * j:
+                j, c = float(jf), float(cf)
+    res = m_el - j * acc - c - lag * dm
+    sigma = float(np.std(res[entry:entry + m], ddof=3)) if m > 3 else 0.0
+    k = entry
+    first = max(int(first), BACK_BLOCK)
+    while k > first:
+        blk = slice(k - BACK_BLOCK, k)
         lim = max(BACK_Z * sigma / math.sqrt(BACK_BLOCK), rel_tol * float(np.mean(np.abs(m_el[blk]))))
-        if abs(dev) > lim:
-            break
-        entry -= 1
+        if abs(float(np.mean(res[blk]))) > lim:
+            return k
+        k -= 1
     return entry
 
 
@@ -388,7 +406,7 @@ class FlankDetector(BacklashDetector):
         self.deeper_travel_factor = float(deeper_travel_factor)
         self._i_m_el = self.channels.index("m_el") if "m_el" in self.channels and self.detector_name == "flank" else -1
         if self.nominal_inertia_kgm2 is not None and "m_el" in self.channels and "a1" in self.channels:
-            # the entry sample may move back from the departure (single_mass_run's max_back): the history holds it
+            # the entry sample may move back from the departure (back_to_load): the history holds it
             self.history_extra = REFINE_BACK_SAMPLES
         self.min_travel_rad = float(min_travel_rad)
         #: departures back on their flank within confirm_samples (an encoder spike; not entries, counted)
@@ -793,7 +811,9 @@ class FlankDetector(BacklashDetector):
         if acc is None:
             return 0, None
         run = single_mass_run(wd["m_el"], acc, dep, self.nominal_inertia_kgm2, self.samples_before_entry,
-                              self.refine_samples, max_back=self.history_extra if src == "a1" else 0)
-        if run is None:
-            return 0, None
-        return run[0] - dep, run[1]
+                              self.refine_samples)
+        entry, recontact = (dep, None) if run is None else run[:2]
+        if src == "a1" and self.history_extra:
+            entry = back_to_load(wd["m_el"], acc, entry, entry - self.history_extra, self.nominal_inertia_kgm2,
+                                 end=recontact)
+        return entry - dep, recontact

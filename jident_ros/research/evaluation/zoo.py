@@ -238,6 +238,7 @@ def diagnose_one(zr: ZooRecording, fmt: str, system) -> dict:
     except OfflineError as exc:
         return {"error": str(exc), "windows": [], "cut_off": []}
     ts = zr.sample_period_s
+    entry_row = int(system.sampling.samples_before_entry)      # the window's entry row (every window of a detector)
     t_first = _first_time(zr, fmt)
     wins = []
     for w in res.windows:
@@ -246,7 +247,7 @@ def diagnose_one(zr: ZooRecording, fmt: str, system) -> dict:
         gap = d.gap
         start = None if gap is None else (gap.fit_start if gap.fit_start >= 0 else gap.gap_start)
         wins.append({"index": idx, "gap": match(zr.gaps, idx), "published": d.inertia_kgm2 is not None,
-                     "gap_entry": None if start is None else idx + int(start) - int(w.entry_index),
+                     "gap_entry": None if start is None else idx + int(start) - entry_row,
                      "j1": d.inertia_kgm2, "source": d.source,
                      "ci95": list(gap.ci95_kgm2) if gap is not None and d.inertia_kgm2 is not None else None,
                      "reason": None if d.inertia_kgm2 is not None else _reason(d.refused_reason),
