@@ -90,7 +90,7 @@ class _FlankCapture:
     skip: bool = False         # short history: the transient is skipped, not captured
     pending: bool = False      # an entry inside another window: its own window only once its excursion ends on the
                                # other flank (a traversal), decided at the next contact
-    own_window: list = field(default_factory=list)          # per second_entry_rows: that entry has a window of its own
+    start_row: int = 0         # stream row of the capture's first row
 
 
 def motor_acceleration(window: dict, wheel_radius_m: float, sample_period_s: float):
@@ -133,6 +133,11 @@ MIN_TRAVERSAL_SAMPLES = 4
 #: rests at the flank for 54 samples after the contact loss).  Without a1 the second difference of alpha1 is too
 #: noisy for it (2^16 counts at 2 kHz: ~20 N m of torque noise): the gap estimator's change points refine it.
 REFINE_BACK_SAMPLES = 128
+
+#: A return traversal found by a window's edge scan (:meth:`FlankDetector._scan_returns`) opens no capture when one
+#: exists with its entry this close (the contact rule found it already); one whose entry lies later, up to where the
+#: traversal reached the other flank, is replaced
+RETURN_MATCH_SAMPLES = 8
 
 #: single_mass_run fits m_el = J acc + c (True) or m_el = J acc (False).
 SINGLE_MASS_OFFSET = True
@@ -460,6 +465,7 @@ class FlankDetector(BacklashDetector):
         self._last_cap: Optional[_FlankCapture] = None   # the capture the last entry opened (None: none)
         self._entry_id = 0                      # entries so far (ties second entries to their captures)
         self._entry_row = 0                     # stream row of the last entry
+        self._new_caps: list = []               # captures opened by a window's edge scan, fed from its end on
         self._rows_in = 0                       # rows handed to the captures so far
         if not hasattr(self, "_seen"):          # what the stream showed, for no_entry_reason (kept over resets)
             self._seen = {"contacts": 0, "spread_min": math.inf, "departure_max": 0.0, "threshold": math.nan}
@@ -647,8 +653,11 @@ class FlankDetector(BacklashDetector):
                 last = self._last_cap
                 travel = self._rows_in + k - self.contact_samples + 1 - self._entry_row
                 if last is not None and last.pending and last in self._caps:
+                    events += self._feed(x[pos:k + 1])
+                    pos = max(pos, k + 1)
+                if last is not None and last.pending and last in self._caps:
                     if abs(rest[0] - last.flank_rad) > max(self.min_travel_rad, self.threshold_for(last)) \
-                            and travel >= MIN_TRAVERSAL_SAMPLES:
+                            and travel >= MIN_TRAVERSAL_SAMPLES and not self._came_back(last):
                         last.pending = False
                         self.return_windows += 1
                         for c in self._caps:
@@ -674,7 +683,8 @@ class FlankDetector(BacklashDetector):
                 self._last_cap = None
                 if self.second_windows and not any(c.skip for c in self._caps) \
                         and hist.shape[0] >= self.samples_before_entry + extra:
-                    self._last_cap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma, pending=True)
+                    self._last_cap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma, pending=True,
+                                                   start_row=self._entry_row - hist.shape[0])
                     self._caps.append(self._last_cap)
                 continue
             # a new entry at row k (no capture running now)
@@ -683,28 +693,45 @@ class FlankDetector(BacklashDetector):
                 self._last_cap = _FlankCapture([], self.samples_before_entry + extra,
                                                self.samples_before_entry + extra, math.nan, math.nan, skip=True)
             else:
-                self._last_cap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma)
+                self._last_cap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma,
+                                               start_row=self._entry_row - hist.shape[0])
             self._caps.append(self._last_cap)
         events += self._feed(x[pos:])
         self._tail = np.concatenate([self._tail, x])[-(self.samples_before_entry + extra):]
         self._rows_in += x.shape[0]
         return events
 
+    def _came_back(self, cap: _FlankCapture) -> bool:
+        """Whether delta came back to the flank a capture's entry left (within its departure threshold) after the
+        entry's confirmation: a bounce, whatever contact comes later (short contacts are not learnt)."""
+        d = self._delta(np.concatenate(cap.rows)[cap.departure_row + self.confirm_samples:])
+        return bool(np.any(np.abs(d - cap.flank_rad) <= self.threshold_for(cap)))
+
     def _feed(self, rows: np.ndarray) -> list:
         """Rows to every running capture (each up to its length); the windows completed by them, in order."""
         events = []
         need = self.window_length + self.refine_samples + self.history_extra
         for cap in list(self._caps):
-            take = min(need - cap.count, rows.shape[0])
-            if take > 0:
-                if not cap.skip:
-                    cap.rows.append(rows[:take])
-                cap.count += take
-            if cap.count >= need:
-                # complete (a pending one found no contact within its window: a long excursion, kept)
-                self._caps.remove(cap)
-                if not cap.skip:
-                    events.append(self._finish_flank(cap))
+            events += self._feed_one(cap, rows, need)
+        return events
+
+    def _feed_one(self, cap: _FlankCapture, rows: np.ndarray, need: int) -> list:
+        """Rows to one capture; when it completes, its window (a pending one found no contact within its window: a
+        long excursion, kept), then the rows after its end to the captures its edge scan opened."""
+        take = max(min(need - cap.count, rows.shape[0]), 0)
+        if take > 0:
+            if not cap.skip:
+                cap.rows.append(rows[:take])
+            cap.count += take
+        if cap.count < need:
+            return []
+        self._caps.remove(cap)
+        if cap.skip:
+            return []
+        events = [self._finish_flank(cap)]
+        opened, self._new_caps = self._new_caps, []
+        for new in opened:
+            events += self._feed_one(new, rows[take:], need)
         return events
 
     def finish(self) -> list:
@@ -743,6 +770,8 @@ class FlankDetector(BacklashDetector):
                              contact_samples=self.contact_samples,
                              contact_tolerance_rad=self.contact_tolerance_rad)
         self.last_width = res
+        if self.second_windows and res.how == "traversal" and res.recontact_index > e:
+            self._scan_returns(cap, data, self._delta(win), e0, e, res.recontact_index)
         flags = 0
         inside = [se for se in cap.second_entry_rows if dep + shift < se[0] < e0 + self.window_length]
         swallowed = ""
@@ -773,6 +802,75 @@ class FlankDetector(BacklashDetector):
                                     f"{res.width_m:.6g} m ({res.how}){swallowed}", window=w)
         self.last_event = ev
         return ev
+
+    def _scan_returns(self, cap: _FlankCapture, data: np.ndarray, d: np.ndarray, e0: int, e: int, g: int) -> None:
+        """Return traversals inside a traversal window that no contact announced (the contacts between them are
+        shorter than contact_samples or ring: the second drive's impacts): the window's own traversal gives both
+        flanks' edges (δ at its entry and at its re-contact); δ leaving the re-contact edge into the zone and
+        reaching the entry edge before it comes back is a traversal back, entering at its first sample in the
+        zone.  Each one that has no capture yet opens one (from this window's rows on, fed from its end)."""
+        edge_in, edge_out = 0.5 * (d[e - 1] + d[e]), 0.5 * (d[g - 1] + d[g])
+        span = edge_out - edge_in
+        margin = self.threshold_for(cap)
+        if not abs(span) > 4.0 * margin:
+            return
+        s = 1.0 if span > 0 else -1.0
+        depth = s * (edge_out - d)                 # how far inside the zone from the re-contact edge (> 0: inside)
+        to_in = s * (d - edge_in)                  # how far from the entry edge (<= margin: reached it)
+        # the edge lies between the samples around the contact instant: beyond it by less than half that step is
+        # no proof of a contact (the second drive's slow return traversal dips 0.8 mrad past the estimate)
+        unsure = 0.5 * max(abs(d[g] - d[g - 1]), margin)
+        # a contact as the tracker takes it (contact_samples within contact_tolerance_rad) ending at each sample
+        L = self.contact_samples
+        steady = np.zeros(d.size, bool)
+        if d.size >= L:
+            steady[L - 1:] = np.ptp(np.lib.stride_tricks.sliding_window_view(d, L), axis=1) <= self.contact_tolerance_rad
+        known = [c.start_row + c.departure_row for c in self._caps + self._new_caps]
+        k, n, at_out, last_out = g + 1, d.size, True, g
+        while k < n:
+            if at_out:                             # resting at (or beyond) the re-contact edge
+                if depth[k] <= 0:
+                    last_out = k
+                elif depth[k] > margin and to_in[k] > margin:
+                    at_out = False                 # left it into the zone
+                k += 1
+                continue
+            if depth[k] < -unsure or (steady[k] and depth[k] < 0.5 * abs(span)):
+                # back beyond the re-contact edge, or a contact nearer to it than to the entry edge (the edge from
+                # the window's re-contact row may be a few mrad off: 5 mrad on the vector drive's 2^13 JointState
+                # recordings): a bounce
+                at_out, last_out = True, k
+                k += 1
+                continue
+            if to_in[k] > margin:
+                k += 1
+                continue
+            # reached the entry edge: a traversal back, entering at the first sample past the re-contact edge
+            reached = cap.start_row + e0 + k
+            while k < n and depth[k] > 0:          # re-armed only once back at the re-contact edge
+                k += 1
+            at_out, start = True, last_out + 1
+            last_out = k
+            row = e0 + start                            # capture row of the return traversal's entry
+            abs_row = cap.start_row + row
+            if any(abs(abs_row - r) <= RETURN_MATCH_SAMPLES for r in known):
+                continue                                # the contact rule found it already
+            lo = row - self.samples_before_entry - self.history_extra
+            if lo < 0:
+                continue
+            for c in [c for c in self._caps if abs_row < c.start_row + c.departure_row <= reached]:
+                self._caps.remove(c)                    # found late by the contact rule (delta resting at the flank
+                self.return_windows -= 1                # looked like a contact): the edge crossing replaces it
+            rows = data[lo:]
+            new = _FlankCapture([rows], rows.shape[0], row - lo, float(edge_out), cap.flank_sigma_rad,
+                                start_row=cap.start_row + lo)
+            self._caps.append(new)
+            self._new_caps.append(new)
+            known.append(abs_row)
+            self.return_windows += 1
+            for c in self._caps:
+                if c is not new and not c.skip and c.start_row <= abs_row:
+                    c.second_entry_rows.append([abs_row - c.start_row, -1, True])
 
     def no_entry_reason(self) -> str:
         """Why no entry was found so far, and what to set (one line; '' when a window was captured)."""
