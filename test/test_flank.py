@@ -259,3 +259,17 @@ def test_a_return_traversal_after_a_short_contact_is_found_from_the_window_s_fla
     wins, det = _windows(data, ch)
     rows = [round((w.entry_time_s - 1.0) / 5e-4) for w in wins]
     assert len(rows) == 2 and x1 < rows[1] <= x1 + 12 and det.return_windows == 1, rows
+
+
+def test_a_stream_starting_shortly_before_an_entry_still_gives_its_window():
+    """With a1 the history may hold 128 samples more for the entry's back-walk; a stream starting 70 samples before
+    the contact loss (a recording cut around an event) still gives the window (the walk limited to the history
+    there is), and the capture ends samples_from_entry + refine_samples rows after the departure (the windows of
+    back-to-back recordings cut 2064 rows after their entry are not lost at the next clock jump)."""
+    data, ch = _late_departure()
+    part = data[600 - 70:600 - 70 + 70 + 30 + 2000 + 16 + 4]        # departure ~28 samples after the loss
+    det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16)
+    evs = [e for b in stream_batches(part, 50) for e in det.push(b, ch)]
+    wins = [e.window for e in evs if e.kind == "window"]
+    assert len(wins) == 1 and det.counts["short_history"] == 0 and not det.capturing
+    assert abs(round((wins[0].entry_time_s - 1.0) / 5e-4) - 600) <= 2

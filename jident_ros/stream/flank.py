@@ -367,6 +367,9 @@ class FlankDetector(BacklashDetector):
     detector_name = "flank"
     #: History kept beyond samples_before_entry (the entry sample may move this far before the departure).
     history_extra = 0
+    #: Whether the history_extra rows are optional (the entry's back-walk is limited to the history there is; a
+    #: stream that starts less than samples_before_entry + history_extra rows before an entry still gives its window)
+    extra_optional = True
     #: An entry inside a running window gets a window of its own when its excursion ends on the other flank (a
     #: return traversal: the second drive's and the vector drive's speed steps re-cross the zone 130-270 samples
     #: after the first traversal, inside its window).
@@ -443,6 +446,11 @@ class FlankDetector(BacklashDetector):
     @property
     def capturing(self) -> bool:
         return any(not c.skip for c in getattr(self, "_caps", ()))
+
+    @property
+    def _extra_needed(self) -> int:
+        """History rows beyond samples_before_entry an entry needs for its window."""
+        return 0 if self.extra_optional else self.history_extra
 
     @property
     def angle_quantum_rad(self) -> float:
@@ -682,14 +690,14 @@ class FlankDetector(BacklashDetector):
                         c.second_entry_rows.append([c.count, self._entry_id, False])
                 self._last_cap = None
                 if self.second_windows and not any(c.skip for c in self._caps) \
-                        and hist.shape[0] >= self.samples_before_entry + extra:
+                        and hist.shape[0] >= self.samples_before_entry + self._extra_needed:
                     self._last_cap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma, pending=True,
                                                    start_row=self._entry_row - hist.shape[0])
                     self._caps.append(self._last_cap)
                 continue
             # a new entry at row k (no capture running now)
-            if hist.shape[0] < self.samples_before_entry + extra:
-                events.append(self._short_history(t_k, hist.shape[0], self.samples_before_entry + extra))
+            if hist.shape[0] < self.samples_before_entry + self._extra_needed:
+                events.append(self._short_history(t_k, hist.shape[0], self.samples_before_entry + self._extra_needed))
                 self._last_cap = _FlankCapture([], self.samples_before_entry + extra,
                                                self.samples_before_entry + extra, math.nan, math.nan, skip=True)
             else:
@@ -710,14 +718,16 @@ class FlankDetector(BacklashDetector):
     def _feed(self, rows: np.ndarray) -> list:
         """Rows to every running capture (each up to its length); the windows completed by them, in order."""
         events = []
-        need = self.window_length + self.refine_samples + self.history_extra
         for cap in list(self._caps):
-            events += self._feed_one(cap, rows, need)
+            events += self._feed_one(cap, rows)
         return events
 
-    def _feed_one(self, cap: _FlankCapture, rows: np.ndarray, need: int) -> list:
+    def _feed_one(self, cap: _FlankCapture, rows: np.ndarray) -> list:
         """Rows to one capture; when it completes, its window (a pending one found no contact within its window: a
-        long excursion, kept), then the rows after its end to the captures its edge scan opened."""
+        long excursion, kept), then the rows after its end to the captures its edge scan opened.  A capture is
+        complete with samples_from_entry + refine_samples rows from its departure on (the entry sample moves at
+        most refine_samples forward)."""
+        need = cap.departure_row + self.samples_from_entry + self.refine_samples
         take = max(min(need - cap.count, rows.shape[0]), 0)
         if take > 0:
             if not cap.skip:
@@ -731,7 +741,7 @@ class FlankDetector(BacklashDetector):
         events = [self._finish_flank(cap)]
         opened, self._new_caps = self._new_caps, []
         for new in opened:
-            events += self._feed_one(new, rows[take:], need)
+            events += self._feed_one(new, rows[take:])
         return events
 
     def finish(self) -> list:
@@ -855,8 +865,8 @@ class FlankDetector(BacklashDetector):
             abs_row = cap.start_row + row
             if any(abs(abs_row - r) <= RETURN_MATCH_SAMPLES for r in known):
                 continue                                # the contact rule found it already
-            lo = row - self.samples_before_entry - self.history_extra
-            if lo < 0:
+            lo = max(row - self.samples_before_entry - self.history_extra, 0)
+            if row - lo < self.samples_before_entry + self._extra_needed:
                 continue
             for c in [c for c in self._caps if abs_row < c.start_row + c.departure_row <= reached]:
                 self._caps.remove(c)                    # found late by the contact rule (delta resting at the flank
@@ -912,6 +922,6 @@ class FlankDetector(BacklashDetector):
                               self.refine_samples)
         entry, recontact = (dep, None) if run is None else run[:2]
         if src == "a1" and self.history_extra:
-            entry = back_to_load(wd["m_el"], acc, entry, entry - self.history_extra, self.nominal_inertia_kgm2,
-                                 end=recontact)
+            first = max(entry - self.history_extra, self.samples_before_entry)     # the history there is
+            entry = back_to_load(wd["m_el"], acc, entry, first, self.nominal_inertia_kgm2, end=recontact)
         return entry - dep, recontact
