@@ -445,7 +445,9 @@ class FlankDetector(BacklashDetector):
 
     @property
     def capturing(self) -> bool:
-        return any(not c.skip for c in getattr(self, "_caps", ()))
+        """True while a window is being captured (not counting an entry inside a window whose excursion is still
+        undecided: a clock jump then restarts the detector, as outside a window)."""
+        return any(not c.skip and not c.pending for c in getattr(self, "_caps", ()))
 
     @property
     def _extra_needed(self) -> int:
