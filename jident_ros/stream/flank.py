@@ -138,6 +138,10 @@ REFINE_BACK_SAMPLES = 128
 #: exists with its entry this close (the contact rule found it already); one whose entry lies later, up to where the
 #: traversal reached the other flank, is replaced
 RETURN_MATCH_SAMPLES = 8
+#: ... and scans only a window whose delta stays at (or beyond) its re-contact edge this many samples after the
+#: re-contact (a contact there; our simulator's slip excursion with a skewed Imu read as a 'traversal' rang around
+#: the edge and gave two false windows)
+RETURN_REST_SAMPLES = 8
 
 #: single_mass_run fits m_el = J acc + c (True) or m_el = J acc (False).
 SINGLE_MASS_OFFSET = True
@@ -832,6 +836,8 @@ class FlankDetector(BacklashDetector):
         # the edge lies between the samples around the contact instant: beyond it by less than half that step is
         # no proof of a contact (the second drive's slow return traversal dips 0.8 mrad past the estimate)
         unsure = 0.5 * max(abs(d[g] - d[g - 1]), margin)
+        if g + RETURN_REST_SAMPLES > d.size or np.any(depth[g:g + RETURN_REST_SAMPLES] > unsure):
+            return          # no contact on the re-contact edge after it (a misread excursion: edges not trusted)
         # a contact as the tracker takes it (contact_samples within contact_tolerance_rad) ending at each sample
         L = self.contact_samples
         steady = np.zeros(d.size, bool)
