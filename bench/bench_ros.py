@@ -121,7 +121,23 @@ def machine() -> dict:
             pass
     return {"nproc": os.cpu_count(), "cpu_model": model, "python": platform.python_version(),
             "rmw": os.environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp (default)"), "versions": vers,
-            "load_average_start": os.getloadavg()}
+            "load_average_start": os.getloadavg(), **code_commit()}
+
+
+def code_commit() -> dict:
+    """The commit of the tree the nodes import (this bench's checkout: :func:`ros_environment` puts it first on
+    PYTHONPATH), with ``-dirty`` when its tracked files differ from it: every number names the code it measured."""
+    tree = REPO
+
+    def git(*a):
+        try:
+            return subprocess.run(["git", "-C", str(tree), *a], capture_output=True, text=True,
+                                  timeout=30).stdout.strip()
+        except (OSError, subprocess.SubprocessError):
+            return ""
+    head = git("rev-parse", "--short=7", "HEAD") or "unknown (not a git tree)"
+    dirty = bool(git("status", "--porcelain", "--untracked-files=no")) if head[0] != "u" else False
+    return {"commit": head + ("-dirty" if dirty else ""), "code_tree": str(tree)}
 
 
 def pattern_library(path: str | None) -> tuple[Path, float]:
@@ -289,12 +305,17 @@ class Listener:
             elif task in ("jident_windowing: windows", "jident_windowing: rate"):
                 self.windowing.append((recv, status_values(s), status_level(s), s.message))
 
-    def spin_until(self, pred, timeout: float, every=None) -> bool:
+    def spin_until(self, pred, timeout: float, every=None, period_s: float = 0.02) -> bool:
+        """Spin until ``pred()`` (checked, with ``every()``, once per ``period_s`` of spinning: each check reads
+        the simulator's log and /proc of every node; once per message they cost this process more CPU than
+        its callbacks, CPU the nodes then lack on 2 cores)."""
+        from rclpy.task import Future
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             if pred():
                 return True
-            self.ex.spin_once(timeout_sec=0.02)
+            # every callback that is ready within period_s (the future never completes)
+            self.ex.spin_until_future_complete(Future(), timeout_sec=period_s)
             if every is not None:
                 every()
         return pred()
@@ -365,7 +386,7 @@ def run_level(k: int, rtf: float, args, env, library: Path, logroot: Path) -> di
         nsarg = ["-r", f"__ns:={ns}"]
         prof = None
         if args.profile:
-            prof = Path(args.profile) / f"rtf{rtf:g}"
+            prof = Path(args.profile).resolve() / f"rtf{rtf:g}"   # the nodes run in another cwd
             prof.mkdir(parents=True, exist_ok=True)
         procs["diagnostic"] = Proc(env, logdir, "diagnostic", *nsarg, "-p", f"pattern_library:={library}",
                                    "-p", f"use_sim_time:={str(args.sim_time).lower()}", "-p", "stale_after_s:=0.0", profile=prof)
@@ -384,7 +405,9 @@ def run_level(k: int, rtf: float, args, env, library: Path, logroot: Path) -> di
             "-p", f"backlash_widths_m:=[{WIDTH_M}]", "-p", f"consistencies_pa_sn:=[{ETA}]",
             "-p", f"real_time_factor:={float(rtf)}", "-p", f"repeat:={args.repeat}",
             "-p", f"gap_samples:={GAP_SAMPLES}", "-p", f"batch_size:={BATCH}", "-p", f"start_time_s:={SIM_START_S}",
-            "-p", "wait_for_subscribers:=2", "-p", "wait_timeout_s:=120.0", "-p", "exit_when_done:=false",
+            # 3 subscribers of drive/signals: windowing, the diagnostic node's recorder, this bench (with 2 it
+            # could start before this bench's subscription matched: the first batches missed, a false "lost")
+            "-p", "wait_for_subscribers:=3", "-p", "wait_timeout_s:=120.0", "-p", "exit_when_done:=false",
             "-p", f"fast_sleep_s:={args.fast_sleep}", "-p", f"max_lead_s:={args.max_lead}", profile=prof)
         sim = procs["simulator"]
         cpu0 = {}
@@ -713,6 +736,7 @@ def main(argv=None) -> int:
     print(f"machine: {mach['nproc']} cores ({mach['cpu_model']}), Python {mach['python']}, "
           f"rclpy {mach['versions'].get('rclpy', '?')}, {mach['rmw']}, ROS_DOMAIN_ID {os.environ['ROS_DOMAIN_ID']}, "
           f"load average {mach['load_average_start'][0]:.2f}", flush=True)
+    print(f"code: commit {mach['commit']} ({mach['code_tree']})", flush=True)
     library, build_s = pattern_library(args.library)
     print(f"pattern library: {library}" + (f" (built in {build_s:.1f} s)" if build_s else " (cached)"), flush=True)
     logroot = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="jident-bench-ros-"))
@@ -754,6 +778,7 @@ def main(argv=None) -> int:
     if limit is not None:
         print()
         print(limit_line(limit))
+    print(f"measured on commit {mach['commit']}")
     print(f"bench run time {total_s:.0f} s, load average at end {os.getloadavg()[0]:.2f}; node logs in {logroot}")
     if args.out:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)

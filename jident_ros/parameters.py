@@ -289,6 +289,13 @@ DIAGNOSTIC_PARAMS = {
     "viscous_friction_band_nms_per_rad": Param(0.0, "viscous friction = motor.bearing_friction_nms_per_rad +- this, "
                                                "N m s/rad (a bounded term of the gap interval)", min=0.0, max=1e6,
                                                read_only=False, unit="N m s/rad"),
+    "torque_offset_rel_base": Param(0.01, "an unknown constant torque in the gap (the torque estimate's offset, "
+                                    "friction the keys above leave out) within +- this x the base torque M_b: a "
+                                    "bounded term of the gap interval", min=0.0, max=1.0, max_exclusive=True,
+                                    read_only=False, unit="1 (fraction of M_b)"),
+    "torque_lag_max_s": Param(0.0, "the drive's torque estimate m_el lags (or leads) the shaft's torque by at "
+                              "most this, s: a bounded term of the gap interval", min=0.0, max=1.0, read_only=False,
+                              unit="s"),
     **TREND_PARAMS,
 }
 

@@ -188,9 +188,9 @@ def _diagnose(system, w):
 
 
 def test_a_missing_k2_never_blocks_the_gap_j1(system, monkeypatch):
-    """With FLANK_WINDOWS_WITHOUT_K2 on, a flank window without a K2 estimate (a one-sided excursion: the motor
-    left its flank and came back) is diagnosed from its gap like any other: not refused 'backlash_width_m: ...
-    got nan'.  Off (today, until the gap fit's intervals are honest without a1) it is refused."""
+    """With FLANK_WINDOWS_WITHOUT_K2 on (the default since the gap fit's intervals are honest without a1), a flank
+    window without a K2 estimate (a one-sided excursion: the motor left its flank and came back) is diagnosed from
+    its gap like any other: not refused 'backlash_width_m: ... got nan'.  Off it is refused."""
     import dataclasses
 
     from jident_ros.identify import diagnosis
@@ -200,6 +200,8 @@ def test_a_missing_k2_never_blocks_the_gap_j1(system, monkeypatch):
     assert ref.diagnosed and ref.inertia_kgm2 == pytest.approx(1.16, rel=0.02)
     no_k2 = dataclasses.replace(w, backlash_width_m=math.nan, backlash_width_estimate_m=math.nan,
                                 backlash_width_se_m=math.nan)
+    assert diagnosis.FLANK_WINDOWS_WITHOUT_K2 is True
+    monkeypatch.setattr(diagnosis, "FLANK_WINDOWS_WITHOUT_K2", False)
     assert not _diagnose(system, no_k2).diagnosed
     monkeypatch.setattr(diagnosis, "FLANK_WINDOWS_WITHOUT_K2", True)
     d = _diagnose(system, no_k2)

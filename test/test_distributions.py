@@ -48,3 +48,23 @@ def test_gap_calls_no_scipy_stats():
              for a in n.names] + [n.module or "" for n in ast.walk(ast.parse(src.read_text()))
                                   if isinstance(n, ast.ImportFrom)]
     assert not [x for x in names if x == "stats" or x.startswith("scipy.stats")], names
+
+
+def test_normal_and_chi2_equal_scipy_stats():
+    # issue 25: the trend and the change-point search take these from scipy.special (no scipy.stats import)
+    from jident_ros.identify.distributions import chi2_ppf, normal_cdf, normal_isf, normal_pdf, normal_ppf, normal_sf
+    xs = np.array([-40.0, -8.0, -2.5, -1.0, -1e-9, 0.0, 0.3, 1.96, 2.5, 8.0, 40.0])
+    np.testing.assert_array_equal(normal_cdf(xs), stats.norm.cdf(xs))
+    np.testing.assert_array_equal(normal_sf(xs), stats.norm.sf(xs))
+    np.testing.assert_array_equal(normal_pdf(xs), stats.norm.pdf(xs))
+    assert normal_sf(2.5) == stats.norm.sf(2.5) and normal_pdf(2.5) == stats.norm.pdf(2.5)
+    qs = np.array([1e-12, 1e-3, 0.01, 0.025, 0.5, 0.975, 0.99, 1 - 1e-9])
+    np.testing.assert_array_equal(normal_ppf(qs), stats.norm.ppf(qs))
+    np.testing.assert_array_equal(normal_isf(qs), stats.norm.isf(qs))
+    for dof in (1, 2, 3, 4.5, 7, 30, 199, 5000):
+        for q in (0.01, 0.5, 0.99):
+            assert chi2_ppf(q, dof) == stats.chi2.ppf(q, dof)
+    assert normal_isf(0.025) == pytest.approx(1.959963984540054, rel=1e-14)   # the upper, not the lower tail
+    assert chi2_ppf(0.99, 1) == pytest.approx(6.634896601021214, rel=1e-12)
+    with pytest.raises(ValueError):
+        chi2_ppf(1.0, 3)

@@ -150,3 +150,23 @@ def test_speed_fit_models_the_feedback_lag(step):
     g = estimate_inertia(w, step["entry"], 0.005, R, TS, method="speed", recontact_index=step["recontact"],
                          model=GapModel(coulomb_friction_max_nm=1.5))
     assert abs(g.inertia_kgm2 / 1.16 - 1) < 0.01 and g.ci95_kgm2[0] <= 1.16 <= g.ci95_kgm2[1], g
+
+
+def test_a_steady_entry_on_the_edge_of_the_search_is_not_located(ours_window):
+    """The steady-entry fit searches +-4 rows around the detector's and the free fit's entry rows.  With both 8
+    rows early, the true entry lies outside the search and the profile minimum sits on its last row: that row is
+    not a located entry, and the fit is not used (the vector drive's heavy load reversal at 30 dB: the edge row, 13
+    samples early, gave J1 +29 % with +-1.7 %).  Around the right rows it is used."""
+    from jident_ros.identify.gap import _anchored_angle, _net_torque
+    w = ours_window
+    d = w.as_dict()
+    e, r = w.entry_index, w.recontact_index
+    alpha, torque = np.asarray(d["alpha1"], float), _net_torque(d, 0.0)
+
+    def anchored(start):
+        return _anchored_angle(alpha, torque, {"start": start, "end": r, "j1": 1.131, "se_stat": 1.0}, (start, r), TS,
+                               GapModel())
+    ok = anchored(e)
+    assert "j1" in ok and abs(ok["j1"] / 1.131 - 1) < 0.01, ok["choice"]
+    early = anchored(e - 8)
+    assert "j1" not in early and "on the edge" in early["choice"], early["choice"]

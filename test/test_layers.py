@@ -27,6 +27,8 @@ LAZY = {
     "jident_ros.cli.main": "the dispatcher: each subcommand imports only what it runs",
     "jident_ros.config": "the method config's class (method.pipeline imports scipy.fft): `jident simulate` "
                          "reads the system config only",
+    "jident_ros.identify.trend_maths": "scipy.optimize (brentq) once per CUSUM threshold design: ~14 MiB of a "
+                                       "node's memory that the nodes need only then (issue 25)",
 }
 #: Of those, the ROS client library and messages: never imported below nodes and cli.
 ROS = OPTIONAL - {"ament_index_python", "matplotlib", "tqdm",

@@ -391,7 +391,9 @@ def test_cli_flags_that_mirror_node_parameters_take_their_help_from_the_schema()
     from jident_ros.cli.main import build_parser
     from jident_ros.cli.trend import MIRRORED_FLAGS
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
-    mirrored = {"diagnose": ["--image-min-margin", "--plausible-min-ratio", "--plausible-max-ratio", "--p"],
+    mirrored = {"diagnose": ["--image-min-margin", "--plausible-min-ratio", "--plausible-max-ratio", "--p",
+                             "--torque-accuracy", "--coulomb-friction-max-nm", "--viscous-friction-band-nms-per-rad",
+                             "--torque-offset-rel-base", "--torque-lag-max-s"],
                 "trend": list(MIRRORED_FLAGS)}
     for command, flags in mirrored.items():
         actions = {o: a for a in sub.choices[command]._actions for o in a.option_strings}

@@ -185,11 +185,17 @@ def test_image_method_disagreeing_inside_its_domain_is_warn(heavy):
 
 
 def test_between_classes_is_warn(windows, configs, library):
+    """J1 = 1.10, 0.2 % below the class 1.102: with the simulator's exact torque declared (no offset band) the
+    interval is ± 0.05 % and no class lies within 3 standard errors: between classes, WARN.  With the default
+    torque offset band (± 1 % of M_b) 1.102 is within them: its class."""
     from jident_ros.identify.levels import WARN
-    d = _diagnose(windows, 3, configs, library)
+    from jident_ros.identify.verdict import VerdictPolicy
+    d = _diagnose(windows, 3, configs, library, policy=VerdictPolicy(torque_offset_rel_base=0.0))
     v = d.value_dict()
     assert v["verdict_between_classes"] is True and math.isnan(v["verdict_class_kgm2"]), d.message
     assert d.level == WARN and "between classes" in d.message and abs(d.inertia_kgm2 - 1.10) / 1.10 < 1e-3
+    banded = _diagnose(windows, 3, configs, library).value_dict()
+    assert banded["verdict_between_classes"] is False and banded["verdict_class_kgm2"] == pytest.approx(1.102)
 
 
 def test_no_gap_and_no_library_is_error(windows, configs):

@@ -3,6 +3,7 @@ estimates, aggregator names, recorded QoS, best-effort input.  The tests without
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 
 import pytest
@@ -124,6 +125,42 @@ def _windows(path):
     from jident_ros.cli.offline import diagnose_recording
     r = diagnose_recording(path, image_method=False)
     return [(w.window_id, w.entry_time_s, w.backlash_width_m, w.inertia_kgm2) for w in r.windows]
+
+
+@pytest.mark.parametrize("executor", ["events", "single"])
+@pytest.mark.parametrize("raw", [False, True])
+def test_message_info_callbacks_work_on_both_executors(ros_env, executor, raw):
+    """issue 25: the diagnostic node spins rclpy's EventsExecutor, which (rclpy 9.1) calls a callback with message
+    info as cb((msg, info)) where SingleThreadedExecutor calls cb(msg, info): WithMessageInfo takes both, so the
+    recorder still gets each message's source timestamp (the recorded publish time, replay = live)."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.experimental import EventsExecutor
+    from std_msgs.msg import Float64
+
+    from jident_ros.nodes.ros_io import WithMessageInfo, qos_latched
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        node = rclpy.create_node(f"jident_info_{executor}_{int(raw)}", context=ctx)
+        got = []
+        node.create_subscription(Float64, "info_test", WithMessageInfo(lambda m, i: got.append((m, i))),
+                                 qos_latched(), raw=raw)
+        pub = node.create_publisher(Float64, "info_test", qos_latched())
+        ex = EventsExecutor(context=ctx) if executor == "events" else SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        end = time.monotonic() + 10.0
+        while len(got) < 2 and time.monotonic() < end:
+            pub.publish(Float64(data=2.5))
+            ex.spin_once(timeout_sec=0.05)
+        assert len(got) >= 2
+        msg, info = got[0]
+        assert (isinstance(msg, bytes) if raw else msg.data == 2.5)
+        assert info["source_timestamp"] > 0 and info["received_timestamp"] >= info["source_timestamp"]
+        ex.shutdown()
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
 
 
 def test_a_k2_message_received_early_is_applied_in_publish_order(tmp_path):

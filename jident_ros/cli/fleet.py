@@ -8,9 +8,13 @@
   recordings to drives instead (CSV lines ``recording,drive``; a recording path relative to the FILE's folder
   or absolute); ``--drive-id parent`` takes the name of the recording's folder.
 * **One trend per drive**: :func:`drive_trend` (a pure function of one drive's recordings, the options and the
-  configuration) diagnoses the drive's recordings in drive-time order and runs one
+  configuration) diagnoses the drive's recordings in recording order and runs one
   :class:`~jident_ros.identify.trend.TrendTracker` (the same as ``jident trend`` on that drive alone).  The
   drives run in a process pool (``--jobs``); the same function runs on Dask or Ray unchanged (docs/trend.md).
+* **State** (``--state DIR``): one tracker state per drive, ``DIR/<drive>.json`` (the drive id percent-encoded):
+  each drive resumes from its own when it exists (what it already holds is left out, as ``jident trend
+  --state``) and saves it back atomically; a drive whose state is unusable gets an error row naming the file,
+  the others carry on.
 * **Outputs**: ``OUT/fleet.csv`` (one row per drive: recordings, windows, J1 fed, J1 drift from the
   drive's commissioned baseline with its 95 % interval, width, wear rate, time to the limit, level, changes,
   the status line), ``OUT/fleet.png`` (small multiples: J1 drift and width against time per drive),
@@ -23,6 +27,7 @@ import math
 import os
 import re
 import time
+import urllib.parse
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,7 +38,7 @@ from mcap.reader import make_reader
 from jident_ros.bag.reader import bag_files
 from jident_ros.cli.offline import OfflineError
 from jident_ros.cli.trend_run import TrendOptions, run_trend, write_trend_csv
-from jident_ros.identify.trend import LEVEL_NAMES, SECONDS_PER_DAY, Z95, TrendConfig
+from jident_ros.identify.trend import LEVEL_NAMES, SECONDS_PER_DAY, Z95, TrendConfig, TrendStateError, TrendTracker
 
 _SIGNALS = re.compile(r"^(.*?)/?(drive/signals|joint_states)$")
 FLEET_COLUMNS = ("drive", "recordings", "windows", "inertia_fed", "inertia_drift_pct", "inertia_drift_low_pct",
@@ -128,19 +133,43 @@ class DriveTrend:
     seconds: float = 0.0
 
 
+def state_file(state_dir, drive: str) -> Path:
+    """The state file of ``drive`` in the fleet's ``--state`` directory: ``<drive>.json``, the drive id
+    percent-encoded (no separator or other character of the id can leave the directory or collide)."""
+    return Path(state_dir) / (urllib.parse.quote(drive, safe="") + ".json")
+
+
+def _resumed(path: Path, config: TrendConfig, overrides: Optional[dict]) -> Optional[TrendTracker]:
+    """The tracker saved at ``path`` (None: no such file yet; then ``config`` starts a new one) under its saved
+    configuration with ``overrides`` (the flags given).  TrendStateError when it cannot be used."""
+    if not path.exists():
+        return None
+    saved = TrendTracker.load(path)
+    return TrendTracker.load(path, TrendConfig.from_dict({**saved.config.to_dict(), **(overrides or {})}))
+
+
 def drive_trend(drive: str, recordings: list, options: TrendOptions, config: TrendConfig,
-                out_dir: Optional[str] = None) -> DriveTrend:
+                out_dir: Optional[str] = None, state_dir: Optional[str] = None,
+                overrides: Optional[dict] = None) -> DriveTrend:
     """One drive's trend (picklable in and out: a process pool, Dask or Ray can run it).  ``recordings``:
     [(path, signals topic or None)]; all of one drive share one topic or the recording's only one.
-    ``out_dir``: where the drive's trend.csv goes (None: not written).  Never raises on a bad recording: the
-    row's ``error`` says what failed."""
+    ``out_dir``: where the drive's trend.csv goes (None: not written).  ``state_dir``: the drive resumes from
+    :func:`state_file` when it exists (its saved configuration with ``overrides``) and saves its tracker there.
+    Never raises on a bad recording or state: the row's ``error`` says what failed."""
     t0 = time.perf_counter()
     paths = [r for r, _ in recordings]
     topics = {t for _, t in recordings}
     opts = options if len(topics) != 1 else TrendOptions(**{**asdict_shallow(options), "signals_topic": topics.pop()})
+    state = None if state_dir is None else state_file(state_dir, drive)
     try:
-        run = run_trend(paths, opts, config=config)
-    except OfflineError as exc:
+        tracker = None if state is None else _resumed(state, config, overrides)
+        run = run_trend(paths, opts, config=config, tracker=tracker)
+        if state is not None:
+            run.tracker.save(state)
+    except TrendStateError as exc:
+        return DriveTrend(drive, _row(drive, len(paths), None, f"--state {state}: {exc}"),
+                          seconds=time.perf_counter() - t0)
+    except (OfflineError, OSError) as exc:
         return DriveTrend(drive, _row(drive, len(paths), None, str(exc)), seconds=time.perf_counter() - t0)
     if out_dir is not None:
         d = Path(out_dir) / "drives" / drive
@@ -171,7 +200,7 @@ def _row(drive: str, n_rec: int, run, error: Optional[str]) -> dict:
     # the drift from the commissioned baseline (kept over re-baselines after a change), with the drift's interval
     drift = u.inertia_drift_from_reference_pct
     half = None if u.inertia_drift_se_pct is None else Z95 * u.inertia_drift_se_pct
-    lo_hi = ("", "") if drift is None or half is None else (drift - half, drift + half)
+    lo_hi = (None, None) if drift is None or half is None else (drift - half, drift + half)
     last = next((c for c in reversed(run.tracker.changes) if c.quantity == "inertia"), None)
     row.update(windows=len(run.windows), inertia_fed=u.inertia_windows_fed, inertia_drift_pct=_n(drift),
                inertia_drift_low_pct=_n(lo_hi[0]), inertia_drift_high_pct=_n(lo_hi[1]), inertia_kgm2=_n(u.inertia_kgm2),
@@ -190,20 +219,23 @@ def _n(v) -> str:
 
 
 def run_fleet(groups: dict, options: TrendOptions, config: TrendConfig, out_dir, jobs: int = 1,
-              on_drive=None) -> list:
+              on_drive=None, state_dir=None, overrides: Optional[dict] = None) -> list:
     """:func:`drive_trend` for every drive of ``groups`` in a pool of ``jobs`` processes (1: in this process);
-    the results in the drives' order.  ``on_drive(result)`` as each finishes."""
+    the results in the drives' order.  ``on_drive(result)`` as each finishes.  ``state_dir``: one state per
+    drive (:func:`state_file`)."""
     drives = sorted(groups)
     one = dataclasses_replace_jobs(options)
+    sd = None if state_dir is None else str(state_dir)
     if jobs <= 1 or len(drives) <= 1:
         out = []
         for d in drives:
-            out.append(drive_trend(d, groups[d], one, config, str(out_dir)))
+            out.append(drive_trend(d, groups[d], one, config, str(out_dir), sd, overrides))
             if on_drive is not None:
                 on_drive(out[-1])
         return out
     with ProcessPoolExecutor(max_workers=min(jobs, len(drives))) as pool:
-        futures = {d: pool.submit(drive_trend, d, groups[d], one, config, str(out_dir)) for d in drives}
+        futures = {d: pool.submit(drive_trend, d, groups[d], one, config, str(out_dir), sd, overrides)
+                   for d in drives}
         out = []
         for d in drives:
             out.append(futures[d].result())
@@ -277,24 +309,33 @@ def _short(v) -> str:
     return "" if v == "" else f"{float(v):.3g}"
 
 
-def cmd_fleet(args, options: TrendOptions, config: TrendConfig) -> int:
-    """``jident trend --fleet``: group, run, write (module docstring)."""
+def cmd_fleet(args, options: TrendOptions, config: TrendConfig, overrides: Optional[dict] = None) -> int:
+    """``jident trend --fleet``: group, run, write (module docstring).  ``overrides``: the trend flags given
+    (they replace a resumed state's saved values)."""
     t0 = time.perf_counter()
     recordings = find_recordings(args.recordings)
     if not recordings:
         raise OfflineError(f"--fleet: no bag directory or .mcap file under {' '.join(args.recordings)}")
     groups = group_by_drive(recordings, args.drive_id)
     out = Path(args.out)
+    state_dir = None
+    if getattr(args, "state", None):
+        state_dir = Path(args.state)
+        if state_dir.exists() and not state_dir.is_dir():
+            raise OfflineError(f"--state {state_dir}: with --fleet, a directory for one state per drive "
+                               f"(<drive>.json), and this is a file")
+        state_dir.mkdir(parents=True, exist_ok=True)
     out.mkdir(parents=True, exist_ok=True)
     jobs = options.jobs if options.jobs > 0 else (os.cpu_count() or 1)
-    results = run_fleet(groups, options, config, out, jobs)
+    results = run_fleet(groups, options, config, out, jobs, state_dir=state_dir, overrides=overrides)
     csv_path = write_fleet_csv(results, out / "fleet.csv")
     png_path = plot_fleet(results, out / "fleet.png")
     print(format_fleet(results))
     print(f"{len(groups)} drive(s), {len(recordings)} recording(s); wrote {csv_path}, {png_path} and "
-          f"{out / 'drives'}/<drive>/trend.csv ({time.perf_counter() - t0:.1f} s, {jobs} process(es))")
+          f"{out / 'drives'}/<drive>/trend.csv" + (f"; states in {state_dir}" if state_dir else "")
+          + f" ({time.perf_counter() - t0:.1f} s, {jobs} process(es))")
     return 0 if all(not r.row["error"] for r in results) else 1
 
 
 __all__ = ["DriveTrend", "FLEET_COLUMNS", "cmd_fleet", "drive_trend", "find_recordings", "format_fleet",
-           "group_by_drive", "plot_fleet", "recording_namespaces", "run_fleet", "write_fleet_csv"]
+           "group_by_drive", "plot_fleet", "recording_namespaces", "run_fleet", "state_file", "write_fleet_csv"]

@@ -114,10 +114,12 @@ def write_scenario_recording(out, system, scenario: Scenario, *, snr_db: Optiona
     return out
 
 
-def write_signals_bag(path, data: np.ndarray, channels, namespace: str = "", batch_size: int = 50) -> Path:
+def write_signals_bag(path, data: np.ndarray, channels, namespace: str = "", batch_size: int = 50,
+                      log_offset_s: float = 0.0) -> Path:
     """A bag directory ``path`` holding only ``<namespace>/drive/signals``: ``data`` ((n, c) samples, columns
     ``channels`` with ``t`` among them) in batches of ``batch_size``, each logged at its last sample's time
-    (what a drive records: no truth topics)."""
+    plus ``log_offset_s`` (what a drive records: no truth topics; an offset: a recorder's clock that is not
+    the drive's, e.g. across a drive restart)."""
     path = Path(path)
     ti = list(channels).index("t")
     topic = f"{namespace.rstrip('/')}/drive/signals"
@@ -125,7 +127,7 @@ def write_signals_bag(path, data: np.ndarray, channels, namespace: str = "", bat
         bag.add_topic(topic, "std_msgs/msg/Float64MultiArray")
         for s0 in range(0, len(data), int(batch_size)):
             b = data[s0:s0 + int(batch_size)]
-            bag.write(topic, multiarray_message(b, channels), int(round(b[-1, ti] * 1e9)))
+            bag.write(topic, multiarray_message(b, channels), int(round((b[-1, ti] + log_offset_s) * 1e9)))
     return path
 
 

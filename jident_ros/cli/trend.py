@@ -11,14 +11,17 @@ Each window becomes a :class:`TrendWindow` (time, J1 with its standard error and
 with its standard error and its source, or the reason why it has no J1) by the diagnostic node's rule
 (:func:`jident_ros.identify.trend_status.trend_inputs`: the gap J1 whenever physics allows it -- published or
 ambiguous, not refused as implausible or inconsistent -- and the flank detector's flank-to-flank K2 of the window,
-else the gap estimator's width at re-contact).  The windows of all recordings are sorted by
-their **drive time**: ``entry_time_s``, the ``t`` column (drive clock, s) of the window's entry sample,
-as the drive publishes it on ``drive/signals`` (recordings are assumed to share one drive clock; the bag's
-receive time is not used).  They then go through one :class:`jident_ros.identify.trend.TrendTracker`
-in that order.  Outputs: ``DIR/trend.csv`` (one row per window),
-``DIR/trend.png`` (J1 and K2 against time with their bands, the baseline and the detected changes) and a
-summary on stdout.  ``--state FILE`` resumes from a saved tracker (windows at or before its last time are
-left out: already in the state) and saves it back (atomically).
+else the gap estimator's width at re-contact).  The windows go through one
+:class:`jident_ros.identify.trend.TrendTracker` **recording by recording** (``--order recorded``, the default:
+by each bag's start, its first message's log time; CSV files, which have none, by their first entry on the drive
+clock; ``--order given``: as listed), each recording's windows in their stream order (``entry_time_s``, the
+``t`` of the entry sample on the drive clock).  A drive whose clock restarted between two recordings (t back
+to 0) is therefore never interleaved: the tracker sees the clock go back once and starts a time segment.
+Outputs: ``DIR/trend.csv`` (one row per window), ``DIR/trend.png`` (J1 and K2 against time with their bands,
+the baseline and the detected changes) and a summary on stdout.  ``--state FILE`` resumes from a saved tracker
+(what it already holds is left out: recordings that started before the last one it took, and that one's
+windows up to its last; for CSV files, windows at or before its last drive time) and saves it back
+(atomically).
 """
 from __future__ import annotations
 
@@ -36,6 +39,7 @@ from jident_ros.cli.fleet import cmd_fleet
 from jident_ros.cli.offline import OfflineError
 from jident_ros.cli.trend_run import (  # noqa: F401  (re-exported: the demo and the tests import them from here)
     CSV_COLUMNS,
+    ORDERS,
     TrendOptions,
     TrendRun,
     TrendWindow,
@@ -149,7 +153,7 @@ def format_summary(run: TrendRun, config: TrendConfig) -> str:
     used = sum(1 for u in us if not u.skipped)
     skipped = len(us) - used
     fed = sum(1 for w, u in zip(ws, us) if w.inertia_kgm2 is not None and not u.skipped)
-    text = (f"windows: {len(ws)} from {n_rec} recording(s) in drive-time order; {used} used by the trend "
+    text = (f"windows: {len(ws)} from {n_rec} recording(s) {run.order or 'in order'}; {used} used by the trend "
             f"(J1 fed from {fed}), {skipped} skipped")
     reasons: dict = {}
     for w, u in zip(ws, us):
@@ -159,7 +163,7 @@ def format_summary(run: TrendRun, config: TrendConfig) -> str:
     if reasons:
         text += "; without J1: " + ", ".join(f"{r} {n}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1]))
     if run.already_in_state:
-        text += f"; {run.already_in_state} already in the state (at or before its last time) left out"
+        text += f"; {run.already_in_state} already in the state left out"
     lines.append(text)
     sources = {src: sum(1 for w in ws if w.width_source == src) for src in WIDTH_SOURCES}
     lines.append(f"width: the flank detector's flank-to-flank estimate in {sources['flank']} window(s), the gap "
@@ -225,7 +229,8 @@ def add_trend_parser(sub) -> None:
     g.add_argument("recordings", nargs="+", metavar="REC", help="bag directories or .mcap files (any order)")
     g.add_argument("--out", required=True, metavar="DIR", help="directory for trend.csv and trend.png")
     g.add_argument("--state", metavar="FILE", help="resume from this tracker state when it exists and save the "
-                   "state to it at the end (atomic write)")
+                   "state to it at the end (atomic write); with --fleet a directory: one state per drive, "
+                   "FILE/<drive>.json")
     for flag, parse in ((MIRRORED_FLAGS[0], _count("--commissioning-windows", 2)),
                         *((f, _finite_float(f)) for f in MIRRORED_FLAGS[1:])):    # the node's trend_*, mirrored
         g.add_argument(flag, type=parse, help=cli_help("trend_" + flag[2:].replace("-", "_")))
@@ -245,6 +250,11 @@ def add_trend_parser(sub) -> None:
     g.add_argument("--backlash-width-m", type=_finite_float("--backlash-width-m"),
                    help="--detector paper: K2 of inequality (1), m (default: the recording's drive/backlash_width, "
                         "else 0.005)")
+    g.add_argument("--order", choices=ORDERS, default="recorded",
+                   help="order of the recordings: recorded (default: by each bag's start, its first message's log "
+                        "time; CSV files by their first entry on the drive clock) or given (as listed); a "
+                        "recording's windows always stay together, in stream order, so a drive clock that restarted "
+                        "between recordings is never interleaved")
     g.add_argument("--config", help="system config YAML (default: config/system.yaml)")
     g.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     g.add_argument("--jobs", type=_count("--jobs", 0), default=0,
@@ -266,16 +276,17 @@ def trend_options(args, system, method, jobs: int) -> TrendOptions:
     return TrendOptions(system=system, method=method, p=args.p, gap_method=args.gap_method,
                         image_method=args.image_method, library_path=args.library,
                         backlash_width_m=args.backlash_width_m, detector=args.detector, gear_ratio=args.gear_ratio,
-                        jobs=jobs)
+                        jobs=jobs, order=args.order)
+
+
+def _overrides(args) -> dict:
+    """The trend flags given (they replace a resumed state's saved values)."""
+    names = ("commissioning_windows", "drift_warn_pct", "drift_alarm_pct", "width_limit_m")
+    return {n: getattr(args, n) for n in names if getattr(args, n) is not None}
 
 
 def _trend_config(args, saved: Optional[dict]) -> TrendConfig:
-    d = dict(saved) if saved else {}
-    for name in ("commissioning_windows", "drift_warn_pct", "drift_alarm_pct", "width_limit_m"):
-        v = getattr(args, name)
-        if v is not None:
-            d[name] = v
-    return TrendConfig.from_dict(d)
+    return TrendConfig.from_dict({**(dict(saved) if saved else {}), **_overrides(args)})
 
 
 def cmd_trend(args) -> int:
@@ -290,9 +301,8 @@ def cmd_trend(args) -> int:
     if args.drive_id and not args.fleet:
         raise OfflineError("--drive-id: only with --fleet")
     if args.fleet:
-        if args.state:
-            raise OfflineError("--state: one state per drive is not kept by --fleet yet; drop --state")
-        return cmd_fleet(args, trend_options(args, system, method, args.jobs), _trend_config(args, None))
+        return cmd_fleet(args, trend_options(args, system, method, args.jobs), _trend_config(args, None),
+                         _overrides(args))
     tracker = None
     if args.state and Path(args.state).exists():
         try:

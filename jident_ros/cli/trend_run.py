@@ -1,7 +1,8 @@
 """The engine of ``jident trend`` (issue 14), shared by one drive's trend (:mod:`jident_ros.cli.trend`) and a
 fleet's (:mod:`jident_ros.cli.fleet`): every recording diagnosed as ``jident diagnose`` does, each window
-turned into a :class:`TrendWindow` by the diagnostic node's rule, all windows in drive-time order through one
-:class:`~jident_ros.identify.trend.TrendTracker` (:func:`run_trend`), and the per-window ``trend.csv``.
+turned into a :class:`TrendWindow` by the diagnostic node's rule, all windows in recording order
+(:func:`order_recordings`) through one :class:`~jident_ros.identify.trend.TrendTracker` (:func:`run_trend`),
+and the per-window ``trend.csv``.
 """
 from __future__ import annotations
 
@@ -14,6 +15,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
+from mcap.reader import make_reader
+
+from jident_ros.bag.metadata_yaml import read_metadata
+from jident_ros.bag.reader import bag_files
 from jident_ros.cli.offline import OfflineError, diagnose_recording
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.library import default_library_path, load_pattern_library
@@ -88,12 +93,84 @@ def trend_window(ow, recording: str, width_se_floor_m: float = 0.0) -> TrendWind
 class TrendRun:
     """Result of :func:`run_trend`."""
 
-    windows: list                # TrendWindow, in time order (the ones fed to the tracker)
+    windows: list                # TrendWindow, in recording order (the ones fed to the tracker)
     updates: list                # TrendUpdate, one per window
     tracker: TrendTracker
     recordings: list             # (path, windows, samples, dropped dict, clock jumps)
-    already_in_state: int = 0    # windows at or before the resumed state's last time, left out
+    already_in_state: int = 0    # windows the resumed state already covers (recording_cursor), left out
     seconds: float = 0.0
+    order: str = ""              # how the recordings were ordered (order_recordings), for the summary
+
+
+#: How ``jident trend`` orders the recordings (``--order``): 'recorded' (when they were recorded: each bag's start,
+#: else each recording's first entry on the drive clock) or 'given' (as listed).
+ORDERS = ("recorded", "given")
+
+
+def recording_start_ns(rec) -> Optional[int]:
+    """When recording ``rec`` began, ns since the epoch: its first message's log time (the MCAP summary's
+    message_start_time, the earliest over a bag's files), else metadata.yaml's starting_time; None for a CSV
+    file or a bag that has neither (a file cut off without its summary and no metadata.yaml)."""
+    path = Path(rec)
+    if path.suffix.lower() == ".csv":
+        return None
+    starts = []
+    try:
+        for f in bag_files(path):
+            with open(f, "rb") as fh:
+                summary = make_reader(fh).get_summary()
+            if summary is not None and summary.statistics is not None and summary.statistics.message_count:
+                starts.append(int(summary.statistics.message_start_time))
+    except Exception:    # a cut or foreign file: diagnose_recording says what is wrong with it
+        starts = []
+    if starts:
+        return min(starts)
+    if path.is_dir() and (path / "metadata.yaml").is_file():
+        try:
+            ns = read_metadata(path).get("starting_time", {}).get("nanoseconds_since_epoch")
+            return int(ns) if ns else None
+        except Exception:
+            return None
+    return None
+
+
+def order_recordings(blocks: list, order: str = "recorded") -> tuple:
+    """(blocks sorted, how) -- ``blocks``: [(start_ns or None, TrendWindows in stream order)] in the order
+    given.  A recording's windows stay together and in their stream order: a drive whose clock restarted
+    between recordings (t back to 0) is never interleaved.  'recorded': by each recording's start
+    (:func:`recording_start_ns`) when every recording has one, else by each one's first entry on the drive
+    clock (recordings sharing one clock); ties and recordings without a window keep the order given.  'given':
+    as given."""
+    idx = list(range(len(blocks)))
+    if order == "given":
+        return list(blocks), "in the order given"
+    if order != "recorded":
+        raise ValueError(f"order: expected one of {', '.join(ORDERS)}, got {order!r}")
+    if blocks and all(b[0] is not None for b in blocks):
+        idx.sort(key=lambda i: blocks[i][0])
+        return [blocks[i] for i in idx], "in recording order (each recording's start)"
+    first = [b[1][0].time_s if b[1] else math.inf for b in blocks]
+    idx.sort(key=lambda i: first[i])
+    return [blocks[i] for i in idx], "in recording order (each recording's first entry on the drive clock)"
+
+
+def _not_in_state(blocks: list, tr: TrendTracker) -> tuple:
+    """(windows not yet in the resumed tracker ``tr``, how many were left out): with its recording_cursor
+    (start ns, time) a recording that started before the cursor's is in whole, the cursor's own recording up to
+    its time; a recording without a start (CSV) or a cursor without one: windows at or before the tracker's
+    last time are in (one shared drive clock)."""
+    cur = tr.recording_cursor
+    out, left = [], 0
+    for start, wins in blocks:
+        if cur is not None and cur[0] is not None and start is not None:
+            keep = [] if start < cur[0] else ([w for w in wins if w.time_s > cur[1]] if start == cur[0] else wins)
+        elif tr.last_time_s is not None:
+            keep = [w for w in wins if w.time_s > tr.last_time_s]
+        else:
+            keep = wins
+        left += len(wins) - len(keep)
+        out.append((start, keep))
+    return out, left
 
 
 def _diagnose_for_trend(rec, floor: float, kwargs: dict) -> tuple:
@@ -127,6 +204,7 @@ class TrendOptions:
     gear_ratio: float = 1.0
     signals_topic: Optional[str] = None
     jobs: int = 1
+    order: str = "recorded"
 
 
 def run_trend(recordings: Sequence, options: Optional[TrendOptions] = None, *, config: Optional[TrendConfig] = None,
@@ -134,8 +212,9 @@ def run_trend(recordings: Sequence, options: Optional[TrendOptions] = None, *, c
               on_window: Optional[Callable[[Any], Any]] = None,
               on_recording: Optional[Callable[[int, str], Any]] = None, **fields) -> TrendRun:
     """Diagnose every recording (``diagnose_recording`` with :class:`TrendOptions` ``options``, or its fields
-    given by name), sort all windows by drive time and run the tracker (``tracker``, e.g. restored from a
-    state, else a new one with ``config``) over them.
+    given by name), put the recordings in order (:func:`order_recordings`, ``order``; each one's windows in
+    stream order), leave out what a resumed state already holds and run the tracker (``tracker``, e.g.
+    restored from a state, else a new one with ``config``) over the rest.
 
     ``jobs`` > 1 (without the image method): the recordings are diagnosed by that many worker processes
     (recordings are independent; the order of the result does not change); ``on_window`` is then not
@@ -178,22 +257,24 @@ def run_trend(recordings: Sequence, options: Optional[TrendOptions] = None, *, c
                 break
             results.append(([trend_window(w, str(rec), floor) for w in res.windows],
                              (str(rec), len(res.windows), res.samples, dict(res.dropped), res.clock_jumps), [], None))
-    for wins, row, lines, error in results:
+    blocks = []
+    for rec, (wins, row, lines, error) in zip(recordings, results):
         for line in lines:
             log(line)
         if error is not None:
             raise OfflineError(error)
-        windows.extend(wins)
+        blocks.append((recording_start_ns(rec), wins))
         summary.append(row)
-    windows.sort(key=lambda w: w.time_s)          # stable: recording order breaks ties
-    skipped_old = 0
-    if tr.last_time_s is not None:
-        n0 = len(windows)
-        windows = [w for w in windows if w.time_s > tr.last_time_s]
-        skipped_old = n0 - len(windows)
-    updates = [tr.update(w.time_s, w.inertia_kgm2, w.inertia_se_kgm2, w.width_m, w.width_se_m,
-                         inertia_refused=w.refused_kind) for w in windows]
-    return TrendRun(windows, updates, tr, summary, skipped_old, time.perf_counter() - t0)
+    blocks, how = order_recordings(blocks, o.order)
+    blocks, skipped_old = _not_in_state(blocks, tr)
+    updates = []
+    for start, wins in blocks:
+        for w in wins:
+            windows.append(w)
+            updates.append(tr.update(w.time_s, w.inertia_kgm2, w.inertia_se_kgm2, w.width_m, w.width_se_m,
+                                     inertia_refused=w.refused_kind))
+            tr.recording_cursor = (start, w.time_s)
+    return TrendRun(windows, updates, tr, summary, skipped_old, time.perf_counter() - t0, how)
 
 
 def _num(v) -> str:

@@ -77,7 +77,6 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from jident_ros.identify.distributions import f_survival, t_quantile
 from jident_ros.identify.gap_free import (
@@ -89,6 +88,7 @@ from jident_ros.identify.gap_free import (
     free_angle_fit,
     kink_fit,
 )
+from jident_ros.stream.filters import savgol_filter
 
 #: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
 GAP_QUADRATIC_MIN = 12
@@ -388,27 +388,39 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         entry_error = max(abs(x - j) for x in moved)
         model_error = float(np.hypot(model_error, entry_error))
         se = float(np.hypot(se, entry_error))
-    if method == "speed" and model.coulomb_friction_max_nm:
-        # the speed fit takes no Coulomb friction: a constant torque F in [0, F_max] is −F t in ∫m_el dt, which
-        # moves J1 by J1 F (r_κ · t) (r_κ: the least-squares row of 1/J1); a uniform term of half-width F_max
+    # the bounded constant torques the speed and a1 fits do not model: the Coulomb band (F in [0, F_max], a
+    # uniform term of half-width F_max) and the torque offset (|T| <= torque_offset_nm, uniform)
+    bounded = [(name, v) for name, v in (("coulomb_band", model.coulomb_friction_max_nm),
+                                         ("torque_offset", model.torque_offset_nm)) if v]
+    if method == "speed" and bounded:
+        # a constant torque F is F t in ∫m_el dt, which moves J1 by J1 F (r_κ · t) (r_κ: the least-squares row
+        # of 1/J1)
         tq = np.asarray(window["m_el"], float)[start:end]
         yint = np.concatenate([[0.0], np.cumsum(0.5 * (tq[1:] + tq[:-1])) * sample_period_s])
         A = np.column_stack([np.ones(n), yint, tq])
         row = np.linalg.pinv(A)[1]
-        fr = j * abs(float(row @ (np.arange(n) * sample_period_s))) * model.coulomb_friction_max_nm / np.sqrt(3.0)
+        sens = j * abs(float(row @ (np.arange(n) * sample_period_s)))
         terms = dict(free_extra.get("std_error_terms", ()))
-        terms["coulomb_band"] = fr
+        for name, v in bounded:
+            terms[name] = sens * v / np.sqrt(3.0)
+            se = float(np.hypot(se, terms[name]))
         free_extra["std_error_terms"] = tuple(terms.items())
-        se = float(np.hypot(se, fr))
-    if method in ("gap_only", "acceleration", "anchored") and model.coulomb_friction_max_nm and "a1" in window:
-        # the a1 fits take no Coulomb friction: a friction F in [0, F_max] moves J1 (the slope of the torque on
-        # dω1/dt) by F Σx/Σx² over the fitted samples; a uniform term of half-width F_max, in quadrature
+    if method in ("gap_only", "acceleration", "anchored") and (bounded or model.torque_lag_s) and "a1" in window:
+        # the a1 fits: a constant torque F moves J1 (the slope of the torque on dω1/dt) by F Σx/Σx² over the
+        # fitted samples
         x = np.asarray(window["a1"], float)[fit_span[0]:fit_span[1]] / wheel_radius_m
-        fr = model.coulomb_friction_max_nm / np.sqrt(3.0) * abs(float(x.sum())) / max(float(x @ x), 1e-300)
+        sens = abs(float(x.sum())) / max(float(x @ x), 1e-300)
         terms = dict(free_extra.get("std_error_terms", ()))
-        terms["coulomb_band"] = fr
+        for name, v in bounded:
+            terms[name] = sens * v / np.sqrt(3.0)
+            se = float(np.hypot(se, terms[name]))
+        if model.torque_lag_s:
+            # the torque estimate's bounded lag τ: the shaft's torque is m_el + τ dm_el/dt, which moves J1 by
+            # τ Σ x ṁ / Σx²
+            mt = np.gradient(_net_torque(window, bearing_friction_nms_per_rad), sample_period_s)[fit_span[0]:fit_span[1]]
+            terms["torque_lag"] = abs(float(x @ mt)) / max(float(x @ x), 1e-300) * model.torque_lag_s / np.sqrt(3.0)
+            se = float(np.hypot(se, terms["torque_lag"]))
         free_extra["std_error_terms"] = tuple(terms.items())
-        se = float(np.hypot(se, fr))
     # every fit: the model's own error as a floor, then the drive's torque accuracy (a scale error of m_el
     # is one of J1: all fits of m_el share it)
     se = max(float(se), FREE_REL_SE_FLOOR * j)
@@ -444,11 +456,17 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     end = min(e, ff["end"])
     try:
         kf = kink_fit(alpha1, torque, sample_period_s, range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1), end,
-                      model.coulomb_friction_max_nm)
+                      model.coulomb_friction_max_nm, model.torque_offset_nm, model.torque_lag_s)
         # the re-contact row: moved in by 1 and 2 (contact after it is not modelled)
         trims = [kink_fit(alpha1, torque, sample_period_s, kf["plausible_entries"], end - k)["j1"] for k in (1, 2)]
     except (FreeFitError, np.linalg.LinAlgError) as exc:
         return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
+    # a profile minimum on the edge of the searched rows has not located the entry: the change point may lie
+    # beyond it (the vector drive's heavy load reversal at 30 dB: the edge row, 13 samples early, J1 +29 %)
+    cand = range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1)
+    if kf["start"] in (cand[0], cand[-1]) and cand[0] > 1:
+        return {"choice": f"angle (free): the steady-entry fit's entry row {kf['start']} is on the edge of the rows "
+                          f"searched ({cand[0]}..{cand[-1]}): not located"}
     # the torque steady right up to the estimated entry (a speed controller acting just before it is not): its
     # last KINK_SEARCH samples within 5 robust noise levels (or 1e-3 of the level) of the steady stretch's median
     sb = kf["start"]

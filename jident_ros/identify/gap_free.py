@@ -38,7 +38,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
+
+from jident_ros.identify.distributions import normal_isf
 
 #: Change-point search: rows around the detector's entry and re-contact rows that may be the gap's ends.
 CHANGEPOINT_SEARCH_SAMPLES = 25
@@ -68,17 +69,26 @@ class GapModel:
     coulomb_friction_max_nm : band [0, this] of the motor's Coulomb (bearing) friction, N m, when it is not
         fitted
     viscous_friction_band_nms_per_rad : ± band of the viscous friction around the configured b1, N m s/rad
+    torque_offset_nm : bound of an unknown constant torque in the gap, N m: the torque estimate's offset and the
+        friction that b1 and the Coulomb band do not describe (± this, uniform; a term of every fit's standard
+        error: J1 |r_κ · t²/2| this/√3)
+    torque_lag_s : bound of the torque estimate's unknown lag (or lead) behind the shaft's torque, s: m_el(t) is
+        the torque at t ∓ τ, |τ| <= this, uniform; a term J1 |r_κ · ∫m_el dt| this/√3 (a torque ramping through the
+        gap: the vector drive's estimate lags by ≈ 0.7 ms)
     changepoint_search_samples : rows around the detector's entry and re-contact searched for the change points
     """
 
     torque_accuracy: float = 0.0
     coulomb_friction_max_nm: float = 0.0
     viscous_friction_band_nms_per_rad: float = 0.0
+    torque_offset_nm: float = 0.0
+    torque_lag_s: float = 0.0
     changepoint_search_samples: int = CHANGEPOINT_SEARCH_SAMPLES
 
     def problems(self) -> list:
         out = []
-        for name in ("torque_accuracy", "coulomb_friction_max_nm", "viscous_friction_band_nms_per_rad"):
+        for name in ("torque_accuracy", "coulomb_friction_max_nm", "viscous_friction_band_nms_per_rad",
+                     "torque_offset_nm", "torque_lag_s"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
                 out.append((name, "a finite number >= 0"))
@@ -94,7 +104,7 @@ class GapModel:
         return float(self.torque_accuracy) / np.sqrt(3.0)
 
 
-_Z_CHANGEPOINT = float(stats.norm.isf(CHANGEPOINT_P))
+_Z_CHANGEPOINT = float(normal_isf(CHANGEPOINT_P))
 
 
 def _chi2_upper(dof: np.ndarray) -> np.ndarray:
@@ -318,6 +328,16 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             vs = float(row @ Vv[f["i"]:f["j"]])
             terms["coulomb_band"] = j1 * abs(cs) * coulomb_mid / np.sqrt(3.0)
             terms["viscous_band"] = j1 * abs(vs) * float(model.viscous_friction_band_nms_per_rad) / np.sqrt(3.0)
+        if model.torque_offset_nm:
+            # an unknown constant torque T (|T| <= torque_offset_nm) adds T t²/2 /J1 to α1: J1 moves by
+            # J1 T (r_κ · t²/2); zero when a fitted Coulomb column (one-signed ω1: ± t²/2) absorbs it
+            tt = tau[f["i"]:f["j"]]
+            terms["torque_offset"] = j1 * abs(float(row @ (0.5 * tt * tt))) * float(model.torque_offset_nm) / np.sqrt(3.0)
+        if model.torque_lag_s:
+            # m_el lagging by τ: the shaft's torque is m_el(t + τ) ≈ m_el + τ dm_el/dt, whose double integral adds
+            # τ ∫m_el dt (and a linear term, absorbed): J1 moves by J1 τ (r_κ · ∫m_el dt)
+            psi = _cumtrapz(m[f["i"]:f["j"]], ts)
+            terms["torque_lag"] = j1 * abs(float(row @ psi)) * float(model.torque_lag_s) / np.sqrt(3.0)
         return terms
 
     def j_trims(s_row, e_row, with_coulomb, trims):
@@ -421,7 +441,7 @@ KINK_CHI2_1 = 3.841
 
 
 def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int,
-             coulomb_max_nm: float = 0.0) -> dict:
+             coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0, torque_lag_s: float = 0.0) -> dict:
     """J1 with the entry row as a change point of a steady drive (profile likelihood).
 
     Before the entry the drive turns at constant speed (steady, in contact); from the entry row s on it is free:
@@ -492,6 +512,16 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
         c_col = np.zeros(end - P)
         c_col[i:] = 0.5 * ((np.arange(end - s_best)) * ts) ** 2
         terms["coulomb_band"] = j1 * abs(float(row @ c_col)) * float(coulomb_max_nm) / np.sqrt(3.0)
+    if torque_offset_nm:
+        # an unknown constant torque T in [-torque_offset_nm, +torque_offset_nm] in the gap: the same column, symmetric
+        c_col = np.zeros(end - P)
+        c_col[i:] = 0.5 * ((np.arange(end - s_best)) * ts) ** 2
+        terms["torque_offset"] = j1 * abs(float(row @ c_col)) * float(torque_offset_nm) / np.sqrt(3.0)
+    if torque_lag_s:
+        # the torque estimate's bounded lag: τ ∫m_el dt from the entry (free_angle_fit's term)
+        l_col = np.zeros(end - P)
+        l_col[i:] = _cumtrapz(m[s_best:end], ts)
+        terms["torque_lag"] = j1 * abs(float(row @ l_col)) * float(torque_lag_s) / np.sqrt(3.0)
     se = float(np.sqrt(sum(v * v for v in terms.values())))
     return {"j1": j1, "se_stat": max(se, FREE_REL_SE_FLOOR * j1), "terms": terms, "start": int(s_best),
             "end": int(end), "residual": res, "dof": dof, "plausible_entries": [o[4] for o in plausible]}

@@ -214,6 +214,9 @@ class TrendTracker:
         self.last_skip: tuple | None = None          # (window index, reason) of the last skipped window
         self.time_segment = 0                        # time discontinuities so far
         self.last_discontinuity: tuple | None = None   # (window index, what)
+        # offline (jident trend): where the windows fed so far end: (the last recording's start, ns, or None when
+        # it has none; its last window's drive time, s); resuming from a state leaves out what it covers
+        self.recording_cursor: tuple | None = None
 
     # -- public API ---------------------------------------------------------------------------------
     @property

@@ -9,8 +9,8 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
 
+from jident_ros.identify.distributions import chi2_ppf
 from jident_ros.identify.trend_config import TrendConfig
 from jident_ros.identify.trend_maths import SE_SCALE_TEST_LEVEL, Cusum, huber_mean, m_scale, weighted_mean
 
@@ -81,7 +81,7 @@ class Channel:
         """Apply the commissioning scatter's scale factor when it is significantly above 1
         (robust scale^2 above the 99 % quantile of chi^2_dof / dof), capped at se_scale_max."""
         if self.cfg.se_scale_from_commissioning and dof > 0 \
-                and robust_scale ** 2 > chi2.ppf(SE_SCALE_TEST_LEVEL, dof) / dof:
+                and robust_scale ** 2 > chi2_ppf(SE_SCALE_TEST_LEVEL, dof) / dof:
             self.scale = min(robust_scale, self.cfg.se_scale_max)
 
     def _scale_down(self):
@@ -99,7 +99,7 @@ class Channel:
         if n < 10:
             return
         r = np.array([(p[2] - self.baseline) / p[3] for p in pts])
-        upper = m_scale(r, n / (n - 1.0)) * math.sqrt((n - 1) / chi2.ppf(1.0 - SE_SCALE_TEST_LEVEL, n - 1))
+        upper = m_scale(r, n / (n - 1.0)) * math.sqrt((n - 1) / chi2_ppf(1.0 - SE_SCALE_TEST_LEVEL, n - 1))
         if upper < 1.0:
             self.scale = max(upper, cfg.se_scale_min)
             self.baseline_var *= self.scale ** 2
@@ -156,6 +156,7 @@ class InertiaChannel(Channel):
         self.P = self.baseline_var
         self.seg_sw = self.seg_swy = 0.0     # running sums of a re-learnt baseline still being refined
         self.seg_n = 0
+        self.base_start: int | None = None   # first window of the current baseline's data (None: given)
 
     def update(self, idx: int, t: float, y: float, se: float, k: float, h: float) -> ChangeEvent | None:
         cfg = self.cfg
@@ -164,6 +165,8 @@ class InertiaChannel(Channel):
         self.n += 1
         if self.phase == COMMISSIONING:
             p = (idx, t, y, se)
+            if not self.comm:
+                self.base_start = idx
             self.comm.append(p)
             self.history.append(p)
             self.x, self.P, _ = weighted_mean(self.comm)
@@ -219,9 +222,10 @@ class InertiaChannel(Channel):
         onset = self.cusum.pos_start if sign > 0 else self.cusum.neg_start
         seg = [q for q in self.history if q[0] >= onset] or [p]
         m, v, _ = huber_mean(seg)
-        size = m - self.baseline
-        ev = ChangeEvent("inertia", t, idx, seg[0][0], seg[0][1], size, math.sqrt(v + self.baseline_var),
-                         100.0 * size / self.baseline, sign)
+        base, base_var = self._level_before(onset)
+        size = m - base
+        ev = ChangeEvent("inertia", t, idx, seg[0][0], seg[0][1], size, math.sqrt(v + base_var),
+                         100.0 * size / base, sign)
         # restart the smoother on the new segment, re-learn the baseline from it
         self.x, self.P = m, v
         self.relearn = list(seg)
@@ -232,6 +236,18 @@ class InertiaChannel(Channel):
         if len(self.relearn) >= cfg.relearn_windows:
             self._rebaseline(idx)
         return ev
+
+    def _level_before(self, onset: int) -> tuple:
+        """(level, variance) a change with this onset is measured from: the baseline, or -- while the baseline is
+        still being refined, when it may already hold windows of the new level (a step inside the refinement) --
+        the Huber mean of the baseline's own windows before the onset (the history, its standard errors
+        scaled)."""
+        if self.seg_n and self.base_start is not None:
+            pre = [q for q in self.history if self.base_start <= q[0] < onset]
+            if pre:
+                m, v, _ = huber_mean(pre)
+                return m, v
+        return self.baseline, self.baseline_var
 
     def _start_refining(self, n: int):
         """The baseline (on ``n`` windows) keeps being refined by the next windows up to baseline_refine_windows."""
@@ -249,6 +265,7 @@ class InertiaChannel(Channel):
     def _rebaseline(self, idx: int):
         m, v, _ = huber_mean(self.relearn)
         self.baseline, self.baseline_var = m, v
+        self.base_start = self.relearn[0][0]
         self._start_refining(len(self.relearn))
         self.relearn = []
         self.phase = MONITORING
@@ -256,7 +273,8 @@ class InertiaChannel(Channel):
 
     def to_dict(self) -> dict:
         d = self._base_dict()
-        d.update(x=self.x, P=self.P, seg_sw=self.seg_sw, seg_swy=self.seg_swy, seg_n=self.seg_n)
+        d.update(x=self.x, P=self.P, seg_sw=self.seg_sw, seg_swy=self.seg_swy, seg_n=self.seg_n,
+                 base_start=self.base_start)
         return d
 
     def load(self, d: dict):
@@ -264,6 +282,8 @@ class InertiaChannel(Channel):
         self.x = None if d["x"] is None else float(d["x"])
         self.P = None if d["P"] is None else float(d["P"])
         self.seg_sw, self.seg_swy, self.seg_n = float(d["seg_sw"]), float(d["seg_swy"]), int(d["seg_n"])
+        bs = d.get("base_start")          # optional: states saved before it measure a change from the baseline
+        self.base_start = None if bs is None else int(bs)
 
 
 class WidthChannel(Channel):

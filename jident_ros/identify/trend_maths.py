@@ -9,8 +9,8 @@ import functools
 import math
 
 import numpy as np
-from scipy.optimize import brentq
-from scipy.stats import norm
+
+from jident_ros.identify.distributions import normal_cdf, normal_pdf, normal_ppf, normal_sf
 
 #: Siegmund's correction of the threshold for the overshoot: b = h + 2 * 0.583 (unit-variance increments).
 SIEGMUND_OVERSHOOT = 1.166
@@ -47,8 +47,8 @@ def cusum_arl(threshold_sd: float, reference_sd: float, shift_sd: float = 0.0, s
     def one(mu):
         arg = (x[None, :] + reference_sd - u[:, None] - mu) / sd
         A = np.zeros((nodes + 1, nodes + 1))
-        A[:, 0] = -norm.cdf((reference_sd - u - mu) / sd)
-        A[:, 1:] = -w[None, :] * norm.pdf(arg) / sd
+        A[:, 0] = -normal_cdf((reference_sd - u - mu) / sd)
+        A[:, 1:] = -w[None, :] * normal_pdf(arg) / sd
         A[np.arange(nodes + 1), np.arange(nodes + 1)] += 1.0
         return float(np.linalg.solve(A, np.ones(nodes + 1))[0])
 
@@ -75,13 +75,15 @@ def cusum_threshold_for_arl(arl_windows: float, reference_sd: float, two_sided: 
     else:
         raise ValueError(f"method: 'integral' or 'siegmund', got {method!r}")
     f = lambda h: math.log(arl(h)) - math.log(arl_windows)  # noqa: E731
+    # imported here: scipy.optimize costs ~14 MiB of a node's memory and is needed once per threshold design
+    from scipy.optimize import brentq
     return float(brentq(f, 1e-6, hi, xtol=1e-9))
 
 
 def coverage_to_se_scale(coverage: float) -> float:
     """True standard deviation / reported standard error for which the reported 95 % interval
     (+-1.96 se) covers the truth with probability ``coverage`` (Gaussian errors)."""
-    return float(norm.ppf(0.975) / norm.ppf(0.5 + coverage / 2.0))
+    return float(normal_ppf(0.975) / normal_ppf(0.5 + coverage / 2.0))
 
 
 
@@ -146,8 +148,8 @@ SE_SCALE_TEST_LEVEL = 0.99
 #: Huber's tuning constant (standardised residuals) for the robust baseline means and the se-scale estimate.
 HUBER_C = 2.5
 #: E[min(Z^2, c^2)] for Z ~ N(0, 1): consistency of Huber's proposal-2 scale.
-_HUBER_KAPPA = float((2 * norm.cdf(HUBER_C) - 1) - 2 * HUBER_C * norm.pdf(HUBER_C)
-                     + 2 * HUBER_C ** 2 * norm.sf(HUBER_C))
+_HUBER_KAPPA = float((2 * normal_cdf(HUBER_C) - 1) - 2 * HUBER_C * normal_pdf(HUBER_C)
+                     + 2 * HUBER_C ** 2 * normal_sf(HUBER_C))
 
 
 def m_scale(r: np.ndarray, dof_factor: float = 1.0) -> float:

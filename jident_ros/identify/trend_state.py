@@ -33,7 +33,8 @@ def state_to_dict(tr) -> dict:
             "inertia": tr._inertia.to_dict(), "width": tr._width.to_dict(),
             "inputs": {"inertia_fed": tr.inertia_fed, "inertia_refused": dict(tr.inertia_refused),
                        "windows_skipped": dict(tr.windows_skipped), "last_skip": tr.last_skip,
-                       "time_segment": tr.time_segment, "last_discontinuity": tr.last_discontinuity}}
+                       "time_segment": tr.time_segment, "last_discontinuity": tr.last_discontinuity},
+            "recording_cursor": None if tr.recording_cursor is None else list(tr.recording_cursor)}
 
 
 def state_from_dict(cls, d: Any, config: Optional[TrendConfig] = None, plausible: Optional[dict] = None):
@@ -63,6 +64,7 @@ def state_from_dict(cls, d: Any, config: Optional[TrendConfig] = None, plausible
         tr.time_segment = int(inputs.get("time_segment", 0))
         ld = inputs.get("last_discontinuity")
         tr.last_discontinuity = None if ld is None else (int(ld[0]), str(ld[1]))
+        tr.recording_cursor = _cursor(d.get("recording_cursor"))
     except TrendStateError:
         raise
     except KeyError as e:
@@ -71,6 +73,21 @@ def state_from_dict(cls, d: Any, config: Optional[TrendConfig] = None, plausible
         raise TrendStateError(f"trend state: bad content ({e})") from e
     check_state(tr, plausible)
     return tr
+
+
+def _cursor(c) -> Optional[tuple]:
+    """The saved ``recording_cursor`` (start of the last recording fed, ns or None; its last window's drive time,
+    s), checked: None, or [integer >= 0 or null, finite number]."""
+    if c is None:
+        return None
+    if not isinstance(c, list) or len(c) != 2:
+        _bad("recording_cursor", c, "must be [start_ns or null, time_s]")
+    ns, t = c
+    if ns is not None and (not isinstance(ns, int) or isinstance(ns, bool) or ns < 0):
+        _bad("recording_cursor[0]", ns, "must be an integer >= 0 (ns) or null")
+    if not _is_number(t) or not math.isfinite(t):
+        _bad("recording_cursor[1]", t, "must be a finite number")
+    return (ns, float(t))
 
 
 # --------------------------------------------------------------------------- checks
@@ -150,6 +167,8 @@ def check_state(tr, plausible: Optional[dict] = None):
     _finite("inertia.seg_swy", J.seg_swy, 0.0)
     if J.seg_n < 0:
         _bad("inertia.seg_n", J.seg_n, "must be >= 0")
+    if J.base_start is not None and not 0 <= J.base_start <= tr.n_windows:
+        _bad("inertia.base_start", J.base_start, f"must be a window index 0..{tr.n_windows}")
     for k in range(W.count):
         _finite(f"width.t[{k}]", float(W.t[k]))
         _finite(f"width.y[{k}]", float(W.y[k]), 0.0, strict=True)

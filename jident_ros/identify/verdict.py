@@ -74,6 +74,11 @@ class VerdictPolicy:
         inside that band when the torque varies enough, else a bounded term of the standard error
     viscous_friction_band_nms_per_rad : the viscous friction is motor.bearing_friction_nms_per_rad ± this,
         N m s/rad (a bounded term)
+    torque_offset_rel_base : an unknown constant torque in the gap (the torque estimate's offset, friction
+        that b1 and the Coulomb band leave out) lies within ± this × the base torque M_b: a bounded term of
+        every gap fit's standard error (GapModel.torque_offset_nm)
+    torque_lag_max_s : the torque estimate lags (or leads) the shaft's torque by at most this, s: a bounded term
+        of the angle and a1 fits' standard error (GapModel.torque_lag_s; the speed fit fits its own lag)
     """
 
     plausible_min_ratio: float = 0.5
@@ -86,12 +91,17 @@ class VerdictPolicy:
     torque_accuracy: float = 0.0
     coulomb_friction_max_nm: float = 0.0
     viscous_friction_band_nms_per_rad: float = 0.0
+    torque_offset_rel_base: float = 0.01   # chosen on the vector drive (docs/method.md "Torque offset")
+    torque_lag_max_s: float = 0.0
 
-    def gap_model(self) -> GapModel:
-        """The gap fits' drive model from this policy's torque accuracy and friction band."""
+    def gap_model(self, base_torque_nm: float = 0.0) -> GapModel:
+        """The gap fits' drive model from this policy's torque accuracy, friction band and torque offset
+        (``base_torque_nm``: the motor's M_b, which scales torque_offset_rel_base)."""
         return GapModel(torque_accuracy=float(self.torque_accuracy),
                         coulomb_friction_max_nm=float(self.coulomb_friction_max_nm),
-                        viscous_friction_band_nms_per_rad=float(self.viscous_friction_band_nms_per_rad))
+                        viscous_friction_band_nms_per_rad=float(self.viscous_friction_band_nms_per_rad),
+                        torque_offset_nm=float(self.torque_offset_rel_base) * abs(float(base_torque_nm)),
+                        torque_lag_s=float(self.torque_lag_max_s))
 
     @classmethod
     def from_params(cls, params: Mapping) -> "VerdictPolicy":
@@ -121,6 +131,10 @@ class VerdictPolicy:
         for name in ("coulomb_friction_max_nm", "viscous_friction_band_nms_per_rad"):
             if not getattr(self, name) >= 0:
                 out.append((name, "a number >= 0"))
+        if not 0 <= self.torque_offset_rel_base < 1:
+            out.append(("torque_offset_rel_base", "a fraction in [0, 1)"))
+        if not 0 <= self.torque_lag_max_s <= 1:
+            out.append(("torque_lag_max_s", "a time in [0, 1] s"))
         return out
 
     def check(self) -> None:
@@ -283,6 +297,12 @@ class GapDecision:
     classes_in_ci: tuple
 
 
+#: A gap J1 is published only with a 95 % interval within ± this fraction of it: a wider one could hold a J1 this
+#: far off (issue 20's target: no published J1 more than 10 % off); it is refused as undetermined, whatever classes
+#: it holds (the vector drive's heavy load reversal: ± 14 % around −30 %, one class inside, was published).
+MAX_CI95_HALF_WIDTH_REL = 0.10
+
+
 def decide_gap(gap: GapEstimate, classes, nominal_kgm2: float, policy: VerdictPolicy,
                recontact: Optional[RecontactCheck], backlash_width_m: float) -> GapDecision:
     """Publish the gap estimate or not (module docstring): plausible band, width consistency,
@@ -296,6 +316,12 @@ def decide_gap(gap: GapEstimate, classes, nominal_kgm2: float, policy: VerdictPo
                                       f"the nominal {nominal_kgm2:g}); a wrong K2, radius or torque scale?", held)
     if recontact is not None and not recontact.consistent:
         return GapDecision("refused", width_disagreement(recontact, backlash_width_m), held)
+    half = 0.5 * (gap.ci95_kgm2[1] - gap.ci95_kgm2[0])
+    if not half <= MAX_CI95_HALF_WIDTH_REL * j1:
+        a, b = gap.ci95_kgm2
+        return GapDecision("refused", f"undetermined: 95 % interval {a:.4g}..{b:.4g} kg m^2 is ± "
+                                      f"{100 * half / j1:.3g} % of J1 (> ± {100 * MAX_CI95_HALF_WIDTH_REL:g} %): it cannot tell "
+                                      f"a {100 * MAX_CI95_HALF_WIDTH_REL:g} % change", held)
     if len(held) >= 2:
         a, b = gap.ci95_kgm2
         return GapDecision("ambiguous", f"ambiguous: 95 % interval {a:.4g}..{b:.4g} kg m^2 holds classes "

@@ -78,8 +78,15 @@ from jident_ros.nodes.params import (
     require,
     system_config,
 )
-from jident_ros.nodes.ros_io import LayoutError, make_status, qos_latched, qos_signals, window_from_msg
-from jident_ros.nodes.runtime import RunnableNode
+from jident_ros.nodes.ros_io import (
+    LayoutError,
+    WithMessageInfo,
+    make_status,
+    qos_latched,
+    qos_signals,
+    window_from_msg,
+)
+from jident_ros.nodes.runtime import RunnableNode, events_executor
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, gap_method_problem
 from jident_ros.stream.text import plain_numbers
@@ -200,12 +207,13 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
 
     # ----------------------------------------------------------------- lifecycle
     def make_executor(self):
-        """SingleThreadedExecutor, not the EventsExecutor of the other nodes: the recorder's subscriptions take
-        ``(msg, MessageInfo)`` (the publish time), and rclpy 9.1's EventsExecutor fails on such callbacks
-        ("SystemError: null argument to internal routine" from spin_until_future_complete; issue 25).  It costs
-        this node the executor overhead the others shed (bench/bench_ros.py --profile)."""
+        """The EventsExecutor of rclpy, as the other nodes (before Jazzy: SingleThreadedExecutor, which rebuilds its
+        wait set in Python for every callback: at 10x it cost this node more CPU than its windows, most of it per
+        recorded drive/signals batch; bench/bench_ros.py --profile, issue 25).  The recorder's subscriptions take
+        the message info (the publish time) through :class:`~jident_ros.nodes.ros_io.WithMessageInfo`, which
+        also works with rclpy 9.1's EventsExecutor."""
         from rclpy.executors import SingleThreadedExecutor
-        return SingleThreadedExecutor(context=self.context)
+        return events_executor(self) or SingleThreadedExecutor(context=self.context)
 
     def autostart(self) -> None:
         """Configure + activate (``ros2 run``, the launch file): the node works as an unmanaged one."""
@@ -232,14 +240,15 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
             # raw: the CDR bytes go to the recording as received, never decoded here
             # each callback also takes the message info: its source timestamp is recorded as the publish time
             # (as rosbag2 does), so a reader can restore the order the drive sent its topics in (replay = live)
-            self.subs.append(self.create_subscription(Float64MultiArray, "drive/signals",
-                                                      lambda m, i: self._record("drive/signals", m, i), sq, raw=True))
+            self.subs.append(self.create_subscription(
+                Float64MultiArray, "drive/signals", WithMessageInfo(lambda m, i: self._record("drive/signals", m, i)),
+                sq, raw=True))
             deep = qos_latched(CASE_QUEUE_DEPTH)  # keep every case message while a window is being diagnosed
             for name in ("drive/backlash_width", "drive/true_inertia"):
-                self.subs.append(self.create_subscription(Float64, name, lambda m, i, n=name: self._record(n, m, i),
-                                                          deep))
-            self.subs.append(self.create_subscription(Float64MultiArray, "drive/case",
-                                                      lambda m, i: self._record("drive/case", m, i), deep))
+                self.subs.append(self.create_subscription(
+                    Float64, name, WithMessageInfo(lambda m, i, n=name: self._record(n, m, i)), deep))
+            self.subs.append(self.create_subscription(
+                Float64MultiArray, "drive/case", WithMessageInfo(lambda m, i: self._record("drive/case", m, i)), deep))
         if self.recorder is not None:  # a chunk never waits long in memory (flush age 0.5 s), even when messages pause
             self.flush_timer = self.create_timer(0.25, self._flush_bag, clock=self.steady)
         self.updater.force_update()

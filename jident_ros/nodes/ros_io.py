@@ -6,6 +6,7 @@ needs ROS.  The layouts themselves are defined (and tested without ROS) in :mod:
 from __future__ import annotations
 
 import array
+import inspect
 import math
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -14,6 +15,33 @@ import numpy as np
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES, OK, STALE, WARN  # noqa: F401  (re-exported)
 from jident_ros.stream.layout import LayoutError, Window, pack, unpack
 from jident_ros.stream.text import plain_numbers
+
+# --------------------------------------------------------------------------- subscriptions
+
+
+class WithMessageInfo:
+    """A subscription callback ``fn(msg, info)`` (info: rclpy's MessageInfo dict, e.g. its ``source_timestamp``)
+    that works on every executor.  rclpy gives a callback the message info when its signature takes two
+    arguments (``Subscription.callback``'s setter inspects it; ``__signature__`` says two here); the
+    SingleThreadedExecutor then calls ``cb(msg, info)``, but rclpy 9.1's EventsExecutor calls ``cb((msg, info))``,
+    one tuple (its HandleSubscriptionReady; a plain two-argument callback fails there with "SystemError: null
+    argument to internal routine").  Both calls reach ``fn(msg, info)`` (issue 25: the diagnostic node records the
+    publish time and spins the EventsExecutor)."""
+
+    __slots__ = ("fn",)
+    __signature__ = inspect.Signature([inspect.Parameter("msg", inspect.Parameter.POSITIONAL_ONLY),
+                                       inspect.Parameter("info", inspect.Parameter.POSITIONAL_ONLY)])
+
+    def __init__(self, fn):
+        self.fn = fn
+
+    def __call__(self, *args):
+        if len(args) == 1:      # rclpy 9.1 EventsExecutor: one (msg, info) tuple
+            msg, info = args[0]
+        else:
+            msg, info = args
+        return self.fn(msg, info)
+
 
 # --------------------------------------------------------------------------- Float64MultiArray
 

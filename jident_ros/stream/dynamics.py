@@ -39,9 +39,9 @@ import math
 from typing import Optional, Sequence
 
 import numpy as np
-from scipy.signal import savgol_coeffs
 
 from jident_ros.stream.detector import _positive
+from jident_ros.stream.filters import savgol_coeffs
 from jident_ros.stream.flank import FlankDetector, motor_acceleration, single_mass_run
 
 #: Without a1 the entry row is searched from this many samples before the departure less the look-ahead on

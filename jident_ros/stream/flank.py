@@ -59,9 +59,9 @@ from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
 import numpy as np
-from scipy.signal import lfilter, savgol_filter
 
 from jident_ros.stream.detector import BacklashDetector, Event, _positive
+from jident_ros.stream.filters import first_order_lowpass, savgol_filter
 from jident_ros.stream.layout import DEFAULT_CHANNELS, FLAG_SECOND_ENTRY, Window
 
 #: Detector names of the ``detector`` parameter.
@@ -563,8 +563,7 @@ class FlankDetector(BacklashDetector):
             # contact: first-order tracking of the flank; departure when |delta - F_prev| > threshold
             thr = self.threshold_rad
             seg = d[i:]
-            f = lfilter([self._alpha], [1.0, self._alpha - 1.0], seg,
-                        zi=[(1.0 - self._alpha) * self._flank])[0]
+            f = first_order_lowpass(seg, self._alpha, self._flank)
             prev = np.concatenate([[self._flank], f[:-1]])
             out = self._departed(seg, prev, thr)
             if not self.windows_captured:

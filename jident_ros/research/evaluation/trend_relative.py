@@ -6,8 +6,10 @@
 1. **Windows as a drive records them**: per model, single-event recordings at 30 dB with 2^16-count encoders
    and raw angles, every channel the model records (with ``--drive-only`` the drive's own signals only:
    ``t, alpha1, omega1, m_el, alpha2, omega2``, no accelerometer -- :data:`jident_ros.research.evaluation.raw_scenario.DRIVE_CHANNELS`;
-   today's gap estimator gives almost no usable window then, docs/results.md), K2 spread over 2.5-6 mm,
-   J1 = 1.16 (the baseline) and 1.131 (-2.5 %, the next paper class):
+   on our simulator the flank detector's entry refinement then puts half the entries late, docs/results.md), K2 spread over 2.5-6 mm,
+   J1 = 1.16 (the baseline) and 1.131 (-2.5 %, the next paper class); ``--no-entry-refinement``: an experiment
+   with the flank detector's entry sample = its departure sample (:func:`~jident_ros.research.evaluation.
+   raw_scenario.entry_refinement`):
 
    * ``ours``: :func:`jident_ros.research.evaluation.raw_inputs.raw_recordings` (our simulator);
    * ``second_drive``: ``python -m jident_ros.research.second_drive --format csv --scenario grid`` (docs/second_drive.md);
@@ -34,6 +36,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +47,7 @@ from jident_ros.cli.trend_run import trend_window
 from jident_ros.config import load_system_config
 from jident_ros.identify.trend import TrendConfig, TrendTracker
 from jident_ros.research.evaluation.raw_inputs import raw_recordings
-from jident_ros.research.evaluation.raw_scenario import DRIVE_CHANNELS
+from jident_ros.research.evaluation.raw_scenario import DRIVE_CHANNELS, entry_refinement
 from jident_ros.research.evaluation.trend_simulation import step_trials
 
 MODELS = ("ours", "second_drive", "vector_drive")
@@ -77,8 +80,11 @@ def _drive_only(src: Path, dst: Path) -> Path:
 
 
 def recordings(model: str, work: Path, n_per_j1: int, seed: int, system, drive_only: bool = False) -> list:
-    """[(CSV path, true J1)] of ``model`` (module docstring): every channel the model records, or with
-    ``drive_only`` the drive's own (:data:`~jident_ros.research.evaluation.raw_scenario.DRIVE_CHANNELS`)."""
+    """[(CSV path, true J1, wheel radius r in m, gear ratio N)] of ``model`` (module docstring): every channel the
+    model records, or with ``drive_only`` the drive's own
+    (:data:`~jident_ros.research.evaluation.raw_scenario.DRIVE_CHANNELS`).  r and N are the drive's geometry as
+    its user configures it: ``system``'s for ours, the truth file's ``reference_radius_m`` and ``gear_ratio`` for
+    the other models (the second drive's r is 0.08 m, not our 0.1 m)."""
     work.mkdir(parents=True, exist_ok=True)
     widths = np.linspace(0.0025, 0.006, 8)
     out = []
@@ -89,7 +95,7 @@ def recordings(model: str, work: Path, n_per_j1: int, seed: int, system, drive_o
                                           seed=seed * 7919 + k + (0 if j1 == J1_BASE else 100_000)):
                     p = work / f"ours_{j1:.3f}_{len(out):04d}.csv"
                     out.append((_write_csv(p, rec.data, list(rec.channels), DRIVE_CHANNELS if drive_only else None),
-                                j1))
+                                j1, system.load.wheel_radius_m, 1.0))
         return out
     module = {"second_drive": "jident_ros.research.second_drive",
               "vector_drive": "jident_ros.research.vector_drive"}[model]
@@ -107,19 +113,21 @@ def recordings(model: str, work: Path, n_per_j1: int, seed: int, system, drive_o
         if proc.returncode != 0:
             raise RuntimeError(f"{model}: {proc.stderr.strip().splitlines()[-1] if proc.stderr else proc.returncode}")
         for csv_path in sorted(d.rglob("*.csv")):
-            j1 = _truth_j1(csv_path)
-            out.append((_drive_only(csv_path, csv_path.with_suffix(".drive.csv")) if drive_only else csv_path, j1))
+            tr = _truth(csv_path)
+            out.append((_drive_only(csv_path, csv_path.with_suffix(".drive.csv")) if drive_only else csv_path,
+                        float(tr["inertia_kgm2"]), float(tr["reference_radius_m"]), float(tr.get("gear_ratio", 1.0))))
     return out
 
 
-def _truth_j1(csv_path: Path) -> float:
+def _truth(csv_path: Path) -> dict:
+    """The truth record of one recording (its own ``.truth.json``, else its row in the folder's truth.json)."""
     own = csv_path.with_suffix(".truth.json")
     if own.exists():
-        return float(json.loads(own.read_text())["inertia_kgm2"])
+        return json.loads(own.read_text())
     index = json.loads((csv_path.parent / "truth.json").read_text())
     for r in index.get("recordings", []):
         if Path(r["file"]).name == csv_path.name:
-            return float(r["inertia_kgm2"])
+            return r
     raise KeyError(f"{csv_path}: no truth")
 
 
@@ -128,9 +136,11 @@ def pools(recs: list, system) -> dict:
     out = {J1_BASE: ([], []), J1_STEP: ([], [])}
     counts = {"recordings": len(recs), "windows": 0, "published": 0, "ambiguous_fed": 0, "other_fed": 0,
               "refused": {}, "no_window": 0, "errors": 0}
-    for path, j1 in recs:
+    for path, j1, radius_m, gear_ratio in recs:
+        sysr = system if radius_m == system.load.wheel_radius_m else \
+            replace(system, load=replace(system.load, wheel_radius_m=radius_m))
         try:
-            res = diagnose_samples(path, system=system, image_method=False, build_if_missing=False)
+            res = diagnose_samples(path, system=sysr, image_method=False, build_if_missing=False, gear_ratio=gear_ratio)
         except OfflineError:
             counts["errors"] += 1
             continue
@@ -200,10 +210,11 @@ def false_changes(base: dict, seed: int, config: TrendConfig, series: int = 10, 
 
 
 def run_model(model: str, work: Path, n_per_j1: int, trials: int, seed: int, system, config: TrendConfig,
-              drive_only: bool = False) -> dict:
+              drive_only: bool = False, refine: bool = True) -> dict:
     t0 = time.perf_counter()
     recs = recordings(model, work / (model + ("_drive_only" if drive_only else "")), n_per_j1, seed, system, drive_only)
-    pl = pools(recs, system)
+    with entry_refinement(refine):
+        pl = pools(recs, system)
     p = pl["pools"]
     if not (p[J1_BASE]["j1"].size and p[J1_STEP]["j1"].size):
         return {"model": model, "counts": pl["counts"], "error": "no window reached the trend"}
@@ -244,13 +255,17 @@ def main(argv=None) -> int:
     ap.add_argument("--work", help="work directory (default: a temporary one)")
     ap.add_argument("--drive-only", action="store_true",
                     help="keep only the drive's own channels (t, alpha1, omega1, m_el, alpha2, omega2)")
+    ap.add_argument("--no-entry-refinement", action="store_true",
+                    help="experiment: the flank detector's entry sample = its departure sample "
+                         "(raw_scenario.entry_refinement), to tell the detector's share from the estimator's")
     a = ap.parse_args(argv)
     system = load_system_config()
     work = Path(a.work or tempfile.mkdtemp(prefix="trend_relative_"))
     results = []
     for m in a.models.split(","):
         try:
-            results.append(run_model(m, work, a.recordings, a.trials, a.seed, system, TrendConfig(), a.drive_only))
+            results.append(run_model(m, work, a.recordings, a.trials, a.seed, system, TrendConfig(), a.drive_only,
+                                     not a.no_entry_refinement))
         except RuntimeError as exc:
             results.append({"model": m, "counts": {}, "error": str(exc)})
         print(json.dumps(results[-1], default=str), file=sys.stderr)
