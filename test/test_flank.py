@@ -149,8 +149,9 @@ def _excursions(segments, n=3000, ts=5e-4, w=150.0):
     return np.column_stack([t, a2 + 2.0 + delta, a2]), ("t", "alpha1", "alpha2")
 
 
-def _windows(data, ch, **kw):
+def _windows(data, ch, returns=True, **kw):
     det = FlankDetector(0.1, 5e-4, channels=ch, **kw)
+    det.second_windows = returns            # the return-traversal windows (off by default, on here)
     evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)] + det.finish()
     return [e.window for e in evs if e.kind == "window"], det
 
@@ -172,6 +173,11 @@ def test_a_return_traversal_inside_a_window_gets_a_window_of_its_own():
     data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (901, 0.0)])
     wins, det = _windows(data, ch)
     assert len(wins) == 1 and det.return_windows == 0
+    # off (the default): the traversal back stays a second entry of the first window
+    data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (940, 0.0)])
+    wins, det = _windows(data, ch, returns=False)
+    assert len(wins) == 1 and wins[0].flags & FLAG_SECOND_ENTRY and det.return_windows == 0
+    assert FlankDetector.second_windows is False
     # the return traversal after the first window has ended: its own window as before
     data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (2700, -0.1), (2740, 0.0)], n=5000)
     wins, det = _windows(data, ch)
