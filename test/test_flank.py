@@ -137,3 +137,145 @@ def test_bad_configuration_raises_with_the_name():
         FlankDetector(0.1, 5e-4, contact_samples=2)
     with pytest.raises(ValueError, match="wheel_radius_m"):
         FlankDetector(0.0, 5e-4)
+
+
+def _excursions(segments, n=3000, ts=5e-4, w=150.0):
+    """t, alpha1, alpha2 turning steadily, delta = alpha1 - alpha2 following ``segments``: [(row, delta)] joined by
+    straight lines (held after the last)."""
+    t = 1.0 + np.arange(n) * ts
+    rows, vals = zip(*segments)
+    delta = np.interp(np.arange(n), rows, vals)
+    a2 = 1.0 + w * (t - 1.0)
+    return np.column_stack([t, a2 + 2.0 + delta, a2]), ("t", "alpha1", "alpha2")
+
+
+def _windows(data, ch, returns=True, **kw):
+    det = FlankDetector(0.1, 5e-4, channels=ch, **kw)
+    det.second_windows = returns            # the return-traversal windows (off by default, on here)
+    evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)] + det.finish()
+    return [e.window for e in evs if e.kind == "window"], det
+
+
+def test_a_return_traversal_inside_a_window_gets_a_window_of_its_own():
+    """Flank 0 -> flank -0.1 rad (30 samples) -> back to 0 at row 900, inside the first window: two windows, each on
+    its own departure; the first flags the second entry. A bounce (back to the flank it left) and a jump of delta
+    (a slip) inside the window get no window of their own."""
+    data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (940, 0.0)])
+    wins, det = _windows(data, ch)
+    assert [round((w.entry_time_s - 1.0) / 5e-4) for w in wins] == [501, 901]
+    assert wins[0].flags & FLAG_SECOND_ENTRY and det.return_windows == 1
+    assert not wins[1].flags & FLAG_SECOND_ENTRY
+    # a bounce off the second flank, back to it: one window
+    data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (920, -0.07), (940, -0.1)])
+    wins, det = _windows(data, ch)
+    assert len(wins) == 1 and wins[0].flags & FLAG_SECOND_ENTRY and det.return_windows == 0
+    # a jump of delta to a new level (the line's slip) inside the window: one window
+    data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (901, 0.0)])
+    wins, det = _windows(data, ch)
+    assert len(wins) == 1 and det.return_windows == 0
+    # off (the default): the traversal back stays a second entry of the first window
+    data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (940, 0.0)])
+    wins, det = _windows(data, ch, returns=False)
+    assert len(wins) == 1 and wins[0].flags & FLAG_SECOND_ENTRY and det.return_windows == 0
+    assert FlankDetector.second_windows is False
+    # the return traversal after the first window has ended: its own window as before
+    data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (2700, -0.1), (2740, 0.0)], n=5000)
+    wins, det = _windows(data, ch)
+    assert [round((w.entry_time_s - 1.0) / 5e-4) for w in wins] == [501, 2701] and det.return_windows == 0
+
+
+def _late_departure(with_a1=True, n=3000, x=600, ts=5e-4, r=0.1, j1=1.16, load_nm=40.0, gap_nm=-20.0, snr=None):
+    """A contact lost at row ``x`` (the load torque on the motor drops from ``load_nm`` to 0) while delta leaves
+    the flank only slowly (the motor decelerates at gap_nm/J1 from zero relative speed): the flank detector's
+    departure (1.5 mrad) comes ~26 samples after ``x``."""
+    k = np.arange(n)
+    t = 1.0 + k * ts
+    w = 50.0
+    dt = np.clip(k - x, 0, None) * ts
+    m_el = np.where((k < x) | (k >= x + 300), load_nm, gap_nm)       # re-contact 300 samples later (no motion
+    acc = np.where((k < x) | (k >= x + 300), 0.0, gap_nm / j1)        # of delta modelled: the run needs its end)
+    ramp = (k >= x - 20) & (k < x)
+    m_el = np.where(ramp, load_nm * (x - k) / 20.0, m_el)             # the coupling unloads over 20 samples
+    a2 = w * (t - 1.0)
+    a1 = a2 + 0.5 * (gap_nm / j1) * dt ** 2 + 0.3
+    cols = {"t": t, "alpha1": a1, "alpha2": a2, "m_el": m_el, "a1": r * acc}
+    if snr is not None:
+        rng = np.random.default_rng(3)
+        for c in ("m_el", "a1"):
+            cols[c] = cols[c] + rng.normal(0, np.sqrt(np.mean(cols[c] ** 2)) / 10 ** (snr / 20), n)
+    ch = ("t", "alpha1", "alpha2", "m_el") + (("a1",) if with_a1 else ())
+    return np.column_stack([cols[c] for c in ch]), ch
+
+
+@pytest.mark.parametrize("snr", [None, 30.0])
+def test_with_an_accelerometer_the_entry_moves_back_to_where_the_load_torque_vanished(snr):
+    data, ch = _late_departure(snr=snr)
+    wins, _ = _windows(data, ch, nominal_inertia_kgm2=1.16)
+    assert len(wins) == 1
+    entry = round((wins[0].entry_time_s - 1.0) / 5e-4)
+    assert abs(entry - 600) <= 2, entry
+    # without a1 the second difference of alpha1 cannot place it: the departure stays (the gap estimator refines)
+    data, ch = _late_departure(with_a1=False)
+    wins, _ = _windows(data, ch, nominal_inertia_kgm2=1.16)
+    assert len(wins) == 1 and round((wins[0].entry_time_s - 1.0) / 5e-4) > 615
+
+
+def _short_contact(contact=20, n=3000, ts=5e-4, r=0.1, x0=500, gap=30, w=50.0):
+    """Flank A (delta 0) -> flank B (-0.1 rad) in ``gap`` samples (uniform acceleration from rest), ``contact``
+    samples on B (shorter than contact_samples: never learnt as a contact), back to A the same way; a1 = r d²δ/dt²
+    (the load turning steadily)."""
+    k = np.arange(n, dtype=float)
+    T = gap * ts
+    c = 0.2 / T ** 2                       # 0.1 rad in T from rest, then stopped by the flank
+    t = (k - x0) * ts
+    x1 = x0 + gap + contact
+    t1 = (k - x1) * ts
+    delta = np.where(k < x0, 0.0, np.where(k < x0 + gap, -0.5 * c * t ** 2, -0.1))
+    delta = np.where((k >= x1) & (k < x1 + gap), -0.1 + 0.5 * c * t1 ** 2, delta)
+    delta = np.where(k >= x1 + gap, 0.0, delta)
+    acc = np.where((k >= x0) & (k < x0 + gap), -c, 0.0) + np.where((k >= x1) & (k < x1 + gap), c, 0.0)
+    tt = 1.0 + k * ts
+    a2 = w * (tt - 1.0)
+    return np.column_stack([tt, a2 + 2.0 + delta, a2, r * acc]), ("t", "alpha1", "alpha2", "a1"), x1
+
+
+def test_a_return_traversal_after_a_short_contact_is_found_from_the_window_s_flank_edges():
+    """The contact on flank B lasts 20 samples (< contact_samples): the tracker learns no flank there, so no
+    departure announces the traversal back; the first window's own traversal gives both edges, and delta leaving
+    B's edge and reaching A's opens a window at the first sample past B's edge. With 40 samples on B the same."""
+    for contact in (20, 40):
+        data, ch, x1 = _short_contact(contact)
+        wins, det = _windows(data, ch)
+        rows = [round((w.entry_time_s - 1.0) / 5e-4) for w in wins]
+        # B's edge is bracketed by the samples around the re-contact (6 mrad apart at this impact speed): the entry
+        # comes when delta is back past the bracket's middle, ~10 samples after leaving B from rest
+        assert len(rows) == 2 and x1 < rows[1] <= x1 + 12, (contact, rows)
+        assert det.return_windows == 1
+    # 30 samples on B, a bounce off it (back to B after 10 samples), 20 samples on B, then the traversal back: its
+    # entry, not the bounce's
+    data, ch, x1 = _short_contact(60, x0=500)
+    bounce, _, _ = _short_contact(60, x0=500 - 30)
+    k = np.arange(data.shape[0])
+    d = data[:, 1] - data[:, 2] - 2.0
+    db = bounce[:, 1] - bounce[:, 2] - 2.0
+    b = (k >= x1 - 30) & (k < x1 - 20)
+    d[b] = db[b]                                     # leaves B like the traversal back, returns to B at x1 - 20
+    d[(k >= x1 - 20) & (k < x1)] = -0.1
+    data[:, 1] = data[:, 2] + 2.0 + d
+    wins, det = _windows(data, ch)
+    rows = [round((w.entry_time_s - 1.0) / 5e-4) for w in wins]
+    assert len(rows) == 2 and x1 < rows[1] <= x1 + 12 and det.return_windows == 1, rows
+
+
+def test_a_stream_starting_shortly_before_an_entry_still_gives_its_window():
+    """With a1 the history may hold 128 samples more for the entry's back-walk; a stream starting 70 samples before
+    the contact loss (a recording cut around an event) still gives the window (the walk limited to the history
+    there is), and the capture ends samples_from_entry + refine_samples rows after the departure (the windows of
+    back-to-back recordings cut 2064 rows after their entry are not lost at the next clock jump)."""
+    data, ch = _late_departure()
+    part = data[600 - 70:600 - 70 + 70 + 30 + 2000 + 16 + 4]        # departure ~28 samples after the loss
+    det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16)
+    evs = [e for b in stream_batches(part, 50) for e in det.push(b, ch)]
+    wins = [e.window for e in evs if e.kind == "window"]
+    assert len(wins) == 1 and det.counts["short_history"] == 0 and not det.capturing
+    assert abs(round((wins[0].entry_time_s - 1.0) / 5e-4) - 600) <= 2

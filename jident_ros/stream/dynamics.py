@@ -66,6 +66,10 @@ class DynamicsDetector(FlankDetector):
     """
 
     detector_name = "dynamics"
+    #: An entry inside a running window stays a second entry of it (its load-torque level says nothing of the flank).
+    second_windows = False
+    #: Its look-ahead history is needed (the smoothed derivative spreads the step over it).
+    extra_optional = False
     required_channels = ("t", "m_el")
     required_reason = "the load torque m_el - J1 dω1/dt needs t and m_el"
     missing_channel_hint = ("; the dynamics detector captures every channel in `channels`: on a drive without a load "

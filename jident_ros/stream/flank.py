@@ -88,6 +88,9 @@ class _FlankCapture:
     flank_sigma_rad: float
     second_entry_rows: list = field(default_factory=list)   # departures seen while capturing (capture rows)
     skip: bool = False         # short history: the transient is skipped, not captured
+    pending: bool = False      # an entry inside another window: its own window only once its excursion ends on the
+                               # other flank (a traversal), decided at the next contact
+    start_row: int = 0         # stream row of the capture's first row
 
 
 def motor_acceleration(window: dict, wheel_radius_m: float, sample_period_s: float):
@@ -119,6 +122,26 @@ def recontact_index(acc: np.ndarray, entry_index: int, drop: float = 0.6, min_sa
         return -1
     return entry_index + min_samples + int(np.argmax(below)) - 1
 
+
+#: An entry inside a running window gets its own window only when its excursion took at least this many samples
+#: to the contact on the other flank (a traversal takes time; a jump of delta -- the line's slip, an encoder glitch
+#: -- is at its new level at once).
+MIN_TRAVERSAL_SAMPLES = 4
+
+#: With m_el and a1 (an accelerometer), the entry sample may move back this many samples before the departure, to
+#: where the motor equation starts to hold (:func:`back_to_load`; the vector drive's return traversal
+#: rests at the flank for 54 samples after the contact loss).  Without a1 the second difference of alpha1 is too
+#: noisy for it (2^16 counts at 2 kHz: ~20 N m of torque noise): the gap estimator's change points refine it.
+REFINE_BACK_SAMPLES = 128
+
+#: A return traversal found by a window's edge scan (:meth:`FlankDetector._scan_returns`) opens no capture when one
+#: exists with its entry this close (the contact rule found it already); one whose entry lies later, up to where the
+#: traversal reached the other flank, is replaced
+RETURN_MATCH_SAMPLES = 8
+#: ... and scans only a window whose delta stays at (or beyond) its re-contact edge this many samples after the
+#: re-contact (a contact there; our simulator's slip excursion with a skewed Imu read as a 'traversal' rang around
+#: the edge and gave two false windows)
+RETURN_REST_SAMPLES = 8
 
 #: single_mass_run fits m_el = J acc + c (True) or m_el = J acc (False).
 SINGLE_MASS_OFFSET = True
@@ -189,6 +212,61 @@ def single_mass_run(m_el: np.ndarray, acc: np.ndarray, departure: int, inertia_s
         entry, end, j, c = a, b, j_new, c_new
         tol_rel = rel_tol
     return entry, end, j
+
+
+#: The entry moves back over a sample while the BACK_BLOCK samples before it, on average, are explained by the motor
+#: equation fitted to the first BACK_FIT samples of the gap (m_el = J dω1/dt + c: the friction and the torque
+#: estimate's offset in c) within max(BACK_Z standard errors, BACK_REL_TOL |m_el|).
+BACK_BLOCK = 3
+BACK_FIT = 48
+BACK_Z = 3.0
+#: ... or this share of |m_el| (the fitted J's error drifts the residual by a few % of m_el over the fit; the load
+#: torque before a contact loss is the whole m_el)
+BACK_REL_TOL = 0.05
+#: ... with a relative lag of m_el and dω1/dt as a regressor (dm_el/dt, per sample), kept when the fit puts it within
+#: +-this many samples (the vector drive's torque estimate and its a1 are 0.1-0.2 samples apart: its fast torque
+#: changes left a residual of 10 N m without it)
+BACK_MAX_LAG_SAMPLES = 4.0
+
+
+def back_to_load(m_el: np.ndarray, acc: np.ndarray, entry: int, first: int, inertia_seed_kgm2: float,
+                 rel_tol: float = None, end: Optional[int] = None) -> int:
+    """The entry sample moved back from ``entry`` (a sample in the gap), not before ``first``, to where the motor
+    equation stops explaining the samples (the load torque is back): a departure that delta shows late (a coupling
+    that leaves its flank with no relative speed -- a light load reversal, a return traversal resting at the flank
+    -- or a stiff coupling's unloading twist below the threshold).  The equation m_el = J dω1/dt + c - tau dm_el/dt
+    is fitted to the BACK_FIT samples from ``entry`` (before ``end``, the re-contact, when known; without tau when
+    it leaves +-BACK_MAX_LAG_SAMPLES, J kept at the seed when dω1/dt does not vary there or the fit leaves 0.5..2 x
+    the seed); the entry moves back while the BACK_BLOCK residuals before it average within
+    max(BACK_Z standard errors, rel_tol |m_el|).  Reaching ``first`` means no load was found: ``entry`` is
+    returned unchanged."""
+    rel_tol = BACK_REL_TOL if rel_tol is None else float(rel_tol)
+    m = min(BACK_FIT, m_el.size - entry, (end - entry) if end is not None else BACK_FIT)
+    if m < 4 or first >= entry:
+        return entry
+    y, x = m_el[entry:entry + m], acc[entry:entry + m]
+    dm = np.gradient(m_el)          # a relative lag tau of m_el and dω1/dt: m_el(t) = m(t - tau) ~ m - tau dm/dt
+    j = float(inertia_seed_kgm2)
+    c, lag = float(np.mean(y - j * x)), 0.0
+    if np.ptp(x) > 0:
+        (jf, cf, lf), *_ = np.linalg.lstsq(np.column_stack([x, np.ones(m), dm[entry:entry + m]]), y, rcond=None)
+        if 0.5 * j <= jf <= 2.0 * j and abs(lf) <= BACK_MAX_LAG_SAMPLES:
+            j, c, lag = float(jf), float(cf), float(lf)
+        else:
+            (jf, cf), *_ = np.linalg.lstsq(np.column_stack([x, np.ones(m)]), y, rcond=None)
+            if 0.5 * j <= jf <= 2.0 * j:
+                j, c = float(jf), float(cf)
+    res = m_el - j * acc - c - lag * dm
+    sigma = float(np.std(res[entry:entry + m], ddof=3)) if m > 3 else 0.0
+    k = entry
+    first = max(int(first), BACK_BLOCK)
+    while k > first:
+        blk = slice(k - BACK_BLOCK, k)
+        lim = max(BACK_Z * sigma / math.sqrt(BACK_BLOCK), rel_tol * float(np.mean(np.abs(m_el[blk]))))
+        if abs(float(np.mean(res[blk]))) > lim:
+            return k
+        k -= 1
+    return entry
 
 
 def _noise(x: np.ndarray) -> float:
@@ -293,6 +371,16 @@ class FlankDetector(BacklashDetector):
     detector_name = "flank"
     #: History kept beyond samples_before_entry (the entry sample may move this far before the departure).
     history_extra = 0
+    #: Whether the history_extra rows are optional (the entry's back-walk is limited to the history there is; a
+    #: stream that starts less than samples_before_entry + history_extra rows before an entry still gives its window)
+    extra_optional = True
+    #: An entry inside a running window gets a window of its own when its excursion ends on the other flank (a
+    #: return traversal: the second drive's and the vector drive's speed steps re-cross the zone 130-270 samples
+    #: after the first traversal, inside its window).  OFF by default: with the gap estimator of main 73110d2, 2 of
+    #: the vector drive's 18 return-traversal windows published J1 +12 % (a torque decaying like an exponential,
+    #: the torque estimate's lag scaling it like J1; docs/results.md "Entries: return traversals ..."): turn it on
+    #: once the gap stage refuses them (the zoo then finds 120/128 and 114/120 instead of 64/128 and 93/120).
+    second_windows = False
 
     def __init__(self, wheel_radius_m: float, sample_period_s: float,
                  channels: Sequence[str] = DEFAULT_CHANNELS, samples_before_entry: int = 48,
@@ -332,6 +420,9 @@ class FlankDetector(BacklashDetector):
         self.confirm_samples = int(confirm_samples)
         self.deeper_travel_factor = float(deeper_travel_factor)
         self._i_m_el = self.channels.index("m_el") if "m_el" in self.channels and self.detector_name == "flank" else -1
+        if self.nominal_inertia_kgm2 is not None and "m_el" in self.channels and "a1" in self.channels:
+            # the entry sample may move back from the departure (back_to_load): the history holds it
+            self.history_extra = REFINE_BACK_SAMPLES
         self.min_travel_rad = float(min_travel_rad)
         #: departures back on their flank within confirm_samples (an encoder spike; not entries, counted)
         self.spikes = 0
@@ -342,6 +433,8 @@ class FlankDetector(BacklashDetector):
         self.backlash_width_m = math.nan
         self.last_width: Optional[WidthResult] = None
         self.second_entries = 0
+        #: entries inside a running window that got a window of their own (a traversal back)
+        self.return_windows = 0
         self.reset()
 
     # ------------------------------------------------------------- state
@@ -359,8 +452,14 @@ class FlankDetector(BacklashDetector):
 
     @property
     def capturing(self) -> bool:
-        cap = getattr(self, "_fcap", None)
-        return cap is not None and not cap.skip
+        """True while a window is being captured (not counting an entry inside a window whose excursion is still
+        undecided: a clock jump then restarts the detector, as outside a window)."""
+        return any(not c.skip and not c.pending for c in getattr(self, "_caps", ()))
+
+    @property
+    def _extra_needed(self) -> int:
+        """History rows beyond samples_before_entry an entry needs for its window."""
+        return 0 if self.extra_optional else self.history_extra
 
     @property
     def angle_quantum_rad(self) -> float:
@@ -379,7 +478,12 @@ class FlankDetector(BacklashDetector):
         self._recent = np.empty(0)              # the last contact_samples - 1 delta values
         self._flank: Optional[float] = None
         self._sigma = 0.0
-        self._fcap: Optional[_FlankCapture] = None
+        self._caps: list = []                   # running captures, in the order of their entries
+        self._last_cap: Optional[_FlankCapture] = None   # the capture the last entry opened (None: none)
+        self._entry_id = 0                      # entries so far (ties second entries to their captures)
+        self._entry_row = 0                     # stream row of the last entry
+        self._new_caps: list = []               # captures opened by a window's edge scan, fed from its end on
+        self._rows_in = 0                       # rows handed to the captures so far
         if not hasattr(self, "_seen"):          # what the stream showed, for no_entry_reason (kept over resets)
             self._seen = {"contacts": 0, "spread_min": math.inf, "departure_max": 0.0, "threshold": math.nan}
         self._held_x = np.empty((0, len(self.channels)))     # rows waiting for their confirmation rows
@@ -434,14 +538,18 @@ class FlankDetector(BacklashDetector):
                         self._recent_aux = seq_aux[-(L - 1):]
                     return events
                 k = int(np.argmax(ok))
+                cancelled = False
                 if self._tent is not None:
                     if not self._note_travel(seq[:k + L]):
                         events.append(("cancel", i + k + L - carried - 1))
+                        cancelled = True
                         if self._tent[1] != self._torque_sign:     # back from a deeper move: reference done
                             self._ref_flank = None
                     else:
                         self._ref_flank = None
                     self._tent = None
+                if not cancelled:
+                    events.append(("contact", i + k + L - carried - 1, float(runs[k].mean())))
                 self._torque_sign = 0.0
                 if seq_aux is not None:
                     ra = seq_aux[k:k + L]
@@ -538,75 +646,116 @@ class FlankDetector(BacklashDetector):
     def _consume_rows(self, x: np.ndarray, d: np.ndarray, look: np.ndarray) -> list:
         events = []
         found = self._track(d, look, x[:, self._i_m_el] if self._i_m_el >= 0 else None)
-        n = x.shape[0]
-        pos = 0                                   # rows of x before pos are consumed
+        pos = 0                                   # rows of x before pos are fed to the running captures
         extra = self.history_extra
-        need = self.window_length + self.refine_samples + extra
         for kind, k, *rest in found:
-            cap = self._fcap
             if kind == "cancel":
-                # the last entry was a same-flank torque change: its capture is dropped (counted), a second
-                # entry it made inside another window is no longer one
+                # the last entry was a same-flank torque change: its capture is dropped (counted) unless it was
+                # complete before the change was known; in other windows it is no longer a second entry
+                events += self._feed(x[pos:k + 1])
+                pos = max(pos, k + 1)
                 self.flank_shifts += 1
-                if cap is not None and self._last_entry_captured:
-                    take = min(need - cap.count, k + 1 - pos)
-                    if take > 0:
-                        self._append(cap, x[pos:pos + take])
-                        pos += take
-                    if cap.count >= need:
-                        events += self._close(cap)
+                last = self._last_cap
+                if last is not None and last in self._caps:
+                    self._caps.remove(last)
+                for c in self._caps:
+                    c.second_entry_rows = [e for e in c.second_entry_rows if e[1] != self._entry_id]
+                self._last_cap = None
+                continue
+            if kind == "contact":
+                # the last entry's excursion ended in a contact: an entry inside another window gets its own
+                # window when that contact lies on the other flank (a traversal), else (a bounce back to the
+                # flank it left) it stays a second entry of the window holding it
+                last = self._last_cap
+                travel = self._rows_in + k - self.contact_samples + 1 - self._entry_row
+                if last is not None and last.pending and last in self._caps:
+                    events += self._feed(x[pos:k + 1])
+                    pos = max(pos, k + 1)
+                if last is not None and last.pending and last in self._caps:
+                    if abs(rest[0] - last.flank_rad) > max(self.min_travel_rad, self.threshold_for(last)) \
+                            and travel >= MIN_TRAVERSAL_SAMPLES and not self._came_back(last):
+                        last.pending = False
+                        self.return_windows += 1
+                        for c in self._caps:
+                            for e in c.second_entry_rows:
+                                if e[1] == self._entry_id:
+                                    e[2] = True
                     else:
-                        self._fcap = None
-                elif cap is not None and cap.second_entry_rows:
-                    cap.second_entry_rows.pop()
+                        self._caps.remove(last)
+                self._last_cap = None
                 continue
             flank, sigma = rest
-            if cap is not None:
-                take = min(need - cap.count, k - pos)     # rows before k belong to the running capture
-                if take > 0:
-                    self._append(cap, x[pos:pos + take])
-                    pos += take
-                if cap.count < need:
-                    if not cap.skip:
-                        cap.second_entry_rows.append(cap.count + (k - pos))
-                    self._last_entry_captured = False
-                    continue
-                events += self._close(cap)
-            # a new entry at row k (no capture running now)
-            hist = np.concatenate([self._tail, x[:pos], x[pos:k]])[-(self.samples_before_entry + extra):]
+            events += self._feed(x[pos:k])        # rows before k belong to the running captures
+            pos = max(pos, k)
+            self._entry_id += 1
+            self._entry_row = self._rows_in + k
+            hist = np.concatenate([self._tail, x[:k]])[-(self.samples_before_entry + extra):]
             t_k = float(x[k, self._i_t])
-            if hist.shape[0] < self.samples_before_entry + extra:
-                events.append(self._short_history(t_k, hist.shape[0], self.samples_before_entry + extra))
-                self._fcap = _FlankCapture([], self.samples_before_entry + extra, self.samples_before_entry + extra,
-                                           math.nan, math.nan, skip=True)
+            if self._caps:
+                # an entry inside a running window: a second entry of each (information)
+                for c in self._caps:
+                    if not c.skip:
+                        c.second_entry_rows.append([c.count, self._entry_id, False])
+                self._last_cap = None
+                if self.second_windows and not any(c.skip for c in self._caps) \
+                        and hist.shape[0] >= self.samples_before_entry + self._extra_needed:
+                    self._last_cap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma, pending=True,
+                                                   start_row=self._entry_row - hist.shape[0])
+                    self._caps.append(self._last_cap)
+                continue
+            # a new entry at row k (no capture running now)
+            if hist.shape[0] < self.samples_before_entry + self._extra_needed:
+                events.append(self._short_history(t_k, hist.shape[0], self.samples_before_entry + self._extra_needed))
+                self._last_cap = _FlankCapture([], self.samples_before_entry + extra,
+                                               self.samples_before_entry + extra, math.nan, math.nan, skip=True)
             else:
-                self._fcap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma)
-            self._last_entry_captured = True
-            pos = k
-        cap = self._fcap
-        if cap is not None and pos < n:
-            take = min(need - cap.count, n - pos)
-            self._append(cap, x[pos:pos + take])
-            pos += take
-            if cap.count >= need:
-                events += self._close(cap)
+                self._last_cap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma,
+                                               start_row=self._entry_row - hist.shape[0])
+            self._caps.append(self._last_cap)
+        events += self._feed(x[pos:])
         self._tail = np.concatenate([self._tail, x])[-(self.samples_before_entry + extra):]
+        self._rows_in += x.shape[0]
         return events
 
-    def _append(self, cap: _FlankCapture, rows: np.ndarray) -> None:
-        if not cap.skip:
-            cap.rows.append(rows)
-        cap.count += rows.shape[0]
+    def _came_back(self, cap: _FlankCapture) -> bool:
+        """Whether delta came back to the flank a capture's entry left (within its departure threshold) after the
+        entry's confirmation: a bounce, whatever contact comes later (short contacts are not learnt)."""
+        d = self._delta(np.concatenate(cap.rows)[cap.departure_row + self.confirm_samples:])
+        return bool(np.any(np.abs(d - cap.flank_rad) <= self.threshold_for(cap)))
 
-    def _close(self, cap: _FlankCapture) -> list:
-        self._fcap = None
+    def _feed(self, rows: np.ndarray) -> list:
+        """Rows to every running capture (each up to its length); the windows completed by them, in order."""
+        events = []
+        for cap in list(self._caps):
+            events += self._feed_one(cap, rows)
+        return events
+
+    def _feed_one(self, cap: _FlankCapture, rows: np.ndarray) -> list:
+        """Rows to one capture; when it completes, its window (a pending one found no contact within its window: a
+        long excursion, kept), then the rows after its end to the captures its edge scan opened.  A capture is
+        complete with samples_from_entry + refine_samples rows from its departure on (the entry sample moves at
+        most refine_samples forward)."""
+        need = cap.departure_row + self.samples_from_entry + self.refine_samples
+        take = max(min(need - cap.count, rows.shape[0]), 0)
+        if take > 0:
+            if not cap.skip:
+                cap.rows.append(rows[:take])
+            cap.count += take
+        if cap.count < need:
+            return []
+        self._caps.remove(cap)
         if cap.skip:
             return []
-        return [self._finish_flank(cap)]
+        events = [self._finish_flank(cap)]
+        opened, self._new_caps = self._new_caps, []
+        for new in opened:
+            events += self._feed_one(new, rows[take:])
+        return events
 
     def finish(self) -> list:
         """The data ended: a window in progress is reported as ``cut_off`` (a drop, counted); the event
-        carries the partial window (FLAG_CUT_OFF set) for an offline report."""
+        carries the partial window (FLAG_CUT_OFF set) for an offline report.  An entry inside another window
+        whose excursion has not yet ended in a contact is not reported."""
         events = []
         if self._held_x.shape[0]:
             held_x, held_d = self._held_x, self._held_d
@@ -615,14 +764,15 @@ class FlankDetector(BacklashDetector):
         return events + self._finish_capture()
 
     def _finish_capture(self) -> list:
-        cap = self._fcap
-        if cap is None or cap.skip:
-            self._fcap = None
-            return []
-        self._fcap = None
-        data = np.concatenate(cap.rows)
-        e = cap.departure_row
-        return [self._cut_off(data, e, float(data[e, self._i_t]), math.nan, self.detector_name)]
+        caps, self._caps, self._last_cap = self._caps, [], None
+        events = []
+        for cap in caps:
+            if cap.skip or cap.pending:
+                continue
+            data = np.concatenate(cap.rows)
+            e = cap.departure_row
+            events.append(self._cut_off(data, e, float(data[e, self._i_t]), math.nan, self.detector_name))
+        return events
 
     def _finish_flank(self, cap: _FlankCapture) -> Event:
         data = np.concatenate(cap.rows)
@@ -638,15 +788,18 @@ class FlankDetector(BacklashDetector):
                              contact_samples=self.contact_samples,
                              contact_tolerance_rad=self.contact_tolerance_rad)
         self.last_width = res
+        if self.second_windows and res.how == "traversal" and res.recontact_index > e:
+            self._scan_returns(cap, data, self._delta(win), e0, e, res.recontact_index)
         flags = 0
-        inside = [r for r in cap.second_entry_rows if dep + shift < r < e0 + self.window_length]
+        inside = [se for se in cap.second_entry_rows if dep + shift < se[0] < e0 + self.window_length]
         swallowed = ""
         if inside:
             flags |= FLAG_SECOND_ENTRY
             self.second_entries += 1
             d = self._delta(win)
             back = np.abs(d[e:e + self.contact_samples // 2] - cap.flank_rad) <= self.threshold_for(cap)
-            if not math.isfinite(res.width_m) or back.any():
+            inside = [se for se in inside if not se[2]]     # the others have a window of their own
+            if inside and (not math.isfinite(res.width_m) or back.any()):
                 # the window's own entry shows no traversal, or delta was back on the flank it left within
                 # contact_samples / 2 samples (a glitch longer than confirm_samples, not a gap: the shortest gap
                 # on our models is 11 samples, and it never ends on the flank it left); the entry inside it gets
@@ -667,6 +820,77 @@ class FlankDetector(BacklashDetector):
                                     f"{res.width_m:.6g} m ({res.how}){swallowed}", window=w)
         self.last_event = ev
         return ev
+
+    def _scan_returns(self, cap: _FlankCapture, data: np.ndarray, d: np.ndarray, e0: int, e: int, g: int) -> None:
+        """Return traversals inside a traversal window that no contact announced (the contacts between them are
+        shorter than contact_samples or ring: the second drive's impacts): the window's own traversal gives both
+        flanks' edges (δ at its entry and at its re-contact); δ leaving the re-contact edge into the zone and
+        reaching the entry edge before it comes back is a traversal back, entering at its first sample in the
+        zone.  Each one that has no capture yet opens one (from this window's rows on, fed from its end)."""
+        edge_in, edge_out = 0.5 * (d[e - 1] + d[e]), 0.5 * (d[g - 1] + d[g])
+        span = edge_out - edge_in
+        margin = self.threshold_for(cap)
+        if not abs(span) > 4.0 * margin:
+            return
+        s = 1.0 if span > 0 else -1.0
+        depth = s * (edge_out - d)                 # how far inside the zone from the re-contact edge (> 0: inside)
+        to_in = s * (d - edge_in)                  # how far from the entry edge (<= margin: reached it)
+        # the edge lies between the samples around the contact instant: beyond it by less than half that step is
+        # no proof of a contact (the second drive's slow return traversal dips 0.8 mrad past the estimate)
+        unsure = 0.5 * max(abs(d[g] - d[g - 1]), margin)
+        if g + RETURN_REST_SAMPLES > d.size or np.any(depth[g:g + RETURN_REST_SAMPLES] > unsure):
+            return          # no contact on the re-contact edge after it (a misread excursion: edges not trusted)
+        # a contact as the tracker takes it (contact_samples within contact_tolerance_rad) ending at each sample
+        L = self.contact_samples
+        steady = np.zeros(d.size, bool)
+        if d.size >= L:
+            steady[L - 1:] = np.ptp(np.lib.stride_tricks.sliding_window_view(d, L), axis=1) <= self.contact_tolerance_rad
+        known = [c.start_row + c.departure_row for c in self._caps + self._new_caps]
+        k, n, at_out, last_out = g + 1, d.size, True, g
+        while k < n:
+            if at_out:                             # resting at (or beyond) the re-contact edge
+                if depth[k] <= 0:
+                    last_out = k
+                elif depth[k] > margin and to_in[k] > margin:
+                    at_out = False                 # left it into the zone
+                k += 1
+                continue
+            if depth[k] < -unsure or (steady[k] and depth[k] < 0.5 * abs(span)):
+                # back beyond the re-contact edge, or a contact nearer to it than to the entry edge (the edge from
+                # the window's re-contact row may be a few mrad off: 5 mrad on the vector drive's 2^13 JointState
+                # recordings): a bounce
+                at_out, last_out = True, k
+                k += 1
+                continue
+            if to_in[k] > margin:
+                k += 1
+                continue
+            # reached the entry edge: a traversal back, entering at the first sample past the re-contact edge
+            reached = cap.start_row + e0 + k
+            while k < n and depth[k] > 0:          # re-armed only once back at the re-contact edge
+                k += 1
+            at_out, start = True, last_out + 1
+            last_out = k
+            row = e0 + start                            # capture row of the return traversal's entry
+            abs_row = cap.start_row + row
+            if any(abs(abs_row - r) <= RETURN_MATCH_SAMPLES for r in known):
+                continue                                # the contact rule found it already
+            lo = max(row - self.samples_before_entry - self.history_extra, 0)
+            if row - lo < self.samples_before_entry + self._extra_needed:
+                continue
+            for c in [c for c in self._caps if abs_row < c.start_row + c.departure_row <= reached]:
+                self._caps.remove(c)                    # found late by the contact rule (delta resting at the flank
+                self.return_windows -= 1                # looked like a contact): the edge crossing replaces it
+            rows = data[lo:]
+            new = _FlankCapture([rows], rows.shape[0], row - lo, float(edge_out), cap.flank_sigma_rad,
+                                start_row=cap.start_row + lo)
+            self._caps.append(new)
+            self._new_caps.append(new)
+            known.append(abs_row)
+            self.return_windows += 1
+            for c in self._caps:
+                if c is not new and not c.skip and c.start_row <= abs_row:
+                    c.second_entry_rows.append([abs_row - c.start_row, -1, True])
 
     def no_entry_reason(self) -> str:
         """Why no entry was found so far, and what to set (one line; '' when a window was captured)."""
@@ -701,11 +925,13 @@ class FlankDetector(BacklashDetector):
         if self.nominal_inertia_kgm2 is None or "m_el" not in self.channels:
             return 0, None
         wd = {c: data[:, j] for j, c in enumerate(self.channels)}
-        acc, _ = motor_acceleration(wd, self.wheel_radius_m, self.sample_period_s)
+        acc, src = motor_acceleration(wd, self.wheel_radius_m, self.sample_period_s)
         if acc is None:
             return 0, None
         run = single_mass_run(wd["m_el"], acc, dep, self.nominal_inertia_kgm2, self.samples_before_entry,
                               self.refine_samples)
-        if run is None:
-            return 0, None
-        return run[0] - dep, run[1]
+        entry, recontact = (dep, None) if run is None else run[:2]
+        if src == "a1" and self.history_extra:
+            first = max(entry - self.history_extra, self.samples_before_entry)     # the history there is
+            entry = back_to_load(wd["m_el"], acc, entry, first, self.nominal_inertia_kgm2, end=recontact)
+        return entry - dep, recontact

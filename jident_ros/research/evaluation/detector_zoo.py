@@ -77,6 +77,14 @@ def evaluate_dir(directory, system=None, wrap: bool = False, spike_s: float = 0.
             row = int(round((w.entry_time_s - t0) / ts))
             best = min(gaps, key=lambda g: abs(g["entry_index"] - row)) if gaps else None
             off = None if best is None else row - int(best["entry_index"])
+            inside = [g for g in gaps if g["entry_index"] + MATCH_SAMPLES < row < (g.get("end_index") or
+                                                                              g.get("recontact_index") or -1)]
+            if inside and (off is None or abs(off) > MATCH_SAMPLES):
+                # an entry inside a true gap, more than MATCH_SAMPLES after its start (a return traversal that rests
+                # at the flank with no relative speed: delta looks like a contact there): late, not false
+                rows.append({**key, "name": tr["name"], "false": False, "late": True, "row": row,
+                             "offset": row - int(inside[0]["entry_index"])})
+                continue
             if off is None or abs(off) > MATCH_SAMPLES:
                 rows.append({**key, "name": tr["name"], "false": True, "row": row})
                 continue
@@ -93,12 +101,15 @@ def summarise(rows: list) -> dict:
     recs = [r for r in rows if r.get("rec")]
     wins = [r for r in rows if not r.get("rec")]
     with_gap = {r["name"] for r in recs if r["gaps"]}
+    late = [r for r in wins if r.get("late")]
+    wins = [r for r in wins if not r.get("late")]
     found = {r["name"] for r in wins if not r["false"] and r["first"]}
     offs = [r["offset"] for r in wins if not r["false"]]
     k2 = np.array([r["k2_error"] for r in wins if not r["false"] and r["traversal"]], float)
     fin = np.abs(k2[np.isfinite(k2)])
     return {"recordings": len(recs), "with_gap": len(with_gap), "found": len(found & with_gap),
-            "false": sum(r["false"] for r in wins), "windows": len(wins),
+            "false": sum(r["false"] for r in wins), "windows": len(wins) + len(late), "late": len(late),
+            "late_offsets": sorted(r["offset"] for r in late),
             "offsets": {int(k): int(v) for k, v in zip(*np.unique(offs, return_counts=True))} if offs else {},
             "within_2": sum(abs(o) <= 2 for o in offs), "matched": len(offs),
             "k2_windows": int(k2.size), "k2_no_estimate": int(np.sum(~np.isfinite(k2))),

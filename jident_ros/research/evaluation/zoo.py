@@ -267,13 +267,16 @@ def diagnose_one(zr: ZooRecording, fmt: str, system, declare: bool = True) -> di
     except OfflineError as exc:
         return {"error": str(exc), "windows": [], "cut_off": []}
     ts = zr.sample_period_s
+    entry_row = int(system.sampling.samples_before_entry)      # the window's entry row (every window of a detector)
     t_first = _first_time(zr, fmt)
     wins = []
     for w in res.windows:
         idx = int(round((w.entry_time_s - t_first) / ts))
         d = w.diagnosis
         gap = d.gap
+        start = None if gap is None else (gap.fit_start if gap.fit_start >= 0 else gap.gap_start)
         wins.append({"index": idx, "gap": match(zr.gaps, idx), "published": d.inertia_kgm2 is not None,
+                     "gap_entry": None if start is None else idx + int(start) - entry_row,
                      "j1": d.inertia_kgm2, "source": d.source,
                      "ci95": list(gap.ci95_kgm2) if gap is not None and d.inertia_kgm2 is not None else None,
                      "reason": None if d.inertia_kgm2 is not None else _reason(d.refused_reason),
@@ -345,6 +348,7 @@ def summarise(items: list) -> dict:
     """Counts over (ZooRecording, diagnose_one result) pairs of one group."""
     s = Counter()
     offsets, errs, k2errs, oracle, oracle_f = [], [], [], [], []
+    gap_offsets = []        # the entry the gap estimator used (its change point) minus the true one
     reasons = Counter()
     covered = []
     for zr, res in items:
@@ -365,6 +369,13 @@ def summarise(items: list) -> dict:
         for k in trav:
             if k in first:
                 offsets.append(first[k] - zr.gaps[k]["entry_index"])
+        est = {}
+        for w in res["windows"]:
+            if w["gap"] is not None and w["gap"] not in est:
+                est[w["gap"]] = w.get("gap_entry")
+        for k in trav:
+            if est.get(k) is not None:
+                gap_offsets.append(est[k] - zr.gaps[k]["entry_index"])
         seen = set()
         for w in res["windows"]:
             k = w["gap"]
@@ -398,6 +409,7 @@ def summarise(items: list) -> dict:
                 reasons[w["reason"]] += 1
     out = dict(s)
     out["offsets"] = offsets
+    out["gap_offsets"] = gap_offsets
     out["within2"] = sum(1 for o in offsets if abs(o) <= 2)
     out["err_median"] = float(np.median(errs)) if errs else None
     out["err_max"] = float(np.max(errs)) if errs else None
@@ -503,6 +515,7 @@ def markdown(res: dict, command: str, commit: str) -> str:
              "chosen: docs/method.md (the torque offset band's default on the vector drive; the others on our "
              "simulator and the stress bench).", ""]
     lines += targets(res)
+    lines += entry_offsets(res)
     lines += ["### Totals per model × input × noise (all events)", "",
               "| model | input | noise " + HEAD, "|" + "---|" * 16]
     for (model, label, noise), s in sorted(res["totals"].items(), key=lambda kv: (MODELS.index(kv[0][0]),
@@ -526,6 +539,34 @@ def markdown(res: dict, command: str, commit: str) -> str:
 
 
 SPEED_EVENTS = ("speed step down", "speed reversal")
+
+
+def entry_offsets(res: dict) -> list:
+    """The entry against the true contact loss per model x input (all events, both noise levels): the detector's
+    window entry (the first window of each traversal) and the entry the gap estimator used (its change point,
+    fit_start; windows that reached an estimate)."""
+    lines = ["### Entry offsets: the detector and the gap estimator", "",
+             "Samples from the true first sample in the zone, over the traversals found (detector: the first matching "
+             "window's entry; estimator: that window's gap fit start, where the gap stage produced an estimate).", "",
+             "| model | input | detector: within ±2 | detector: offsets | estimator: within ±2 | estimator: offsets |",
+             "|---|---|---|---|---|---|"]
+
+    def cell(o):
+        return (f"{sum(1 for v in o if abs(v) <= 2)}/{len(o)} ({_pct(sum(1 for v in o if abs(v) <= 2), len(o))})",
+                _offsets(o))
+    for model in MODELS:
+        for label, _, _ in INPUTS:
+            tot = [s for (m, lab, _), s in res["totals"].items() if m == model and lab == label]
+            if not tot:
+                continue
+            a = _merge(tot)
+            d, g = cell(a.get("offsets", [])), cell(a.get("gap_offsets", []))
+            lines.append(f"| {model} | {label} | {d[0]} | {d[1]} | {g[0]} | {g[1]} |")
+        a = _merge([s for (m, _, _), s in res["totals"].items() if m == model])
+        if a:
+            d, g = cell(a.get("offsets", [])), cell(a.get("gap_offsets", []))
+            lines.append(f"| {model} | all | **{d[0]}** | {d[1]} | **{g[0]}** | {g[1]} |")
+    return lines + [""]
 
 
 def _merge(rows) -> dict:
