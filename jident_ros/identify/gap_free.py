@@ -122,19 +122,6 @@ def _cumtrapz(x: np.ndarray, ts: float) -> np.ndarray:
     return out * ts
 
 
-def _solve_rss(X: np.ndarray, y: np.ndarray, lo_rows: np.ndarray, hi_rows: np.ndarray, sums=None) -> np.ndarray:
-    """RSS of the least-squares fit of y on X over rows [lo, hi) for every pair (batched normal equations on
-    cumulative sums; y should be a residual already, so that the differences do not cancel).  ``sums``: the
-    cumulative sums (C, b, yy) of :func:`_cumulative_sums` when the caller has them (several scans of one X, y)."""
-    p = X.shape[1]
-    C, b, yy = _cumulative_sums(X, y) if sums is None else sums
-    A = C[hi_rows] - C[lo_rows]
-    bb = b[hi_rows] - b[lo_rows]
-    A = A + np.eye(p) * (1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] / p)
-    beta = np.linalg.solve(A, bb[..., None])[..., 0]
-    return yy[hi_rows] - yy[lo_rows] - np.einsum("ki,ki->k", bb, beta)
-
-
 def _cumulative_sums(X: np.ndarray, y: np.ndarray) -> tuple:
     """Cumulative sums of x xᵀ, x y and y² over the rows of X, y, each with a zero row in front."""
     p = X.shape[1]
