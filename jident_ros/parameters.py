@@ -95,7 +95,8 @@ SIMULATOR_PARAMS = {
                               "(back-pressure by drive/progress)", min=0.0, max=1000.0),
     "fast_sleep_s": Param(0.001, "timer period when real_time_factor = 0 (at most 4 batches per tick), s", min=0.0, max=1.0),
     "max_lead_s": Param(2.0, "real_time_factor 0: at most this many drive seconds ahead of the windowing "
-                        "node's drive/progress; 0 = no back-pressure", min=0.0, max=3600.0),
+                        "node's drive/progress and, once heard, the diagnostic node's drive/diagnosed_progress; "
+                        "0 = no back-pressure", min=0.0, max=3600.0),
     "progress_timeout_s": Param(2.0, "no drive/progress for this long while waiting: back-pressure off "
                                 "(warning), s", min=0.0, max=3600.0, min_exclusive=True),
     "start_time_s": Param(1.0, "drive clock of the first sample, s", min=0.0, max=1e9),
@@ -304,8 +305,9 @@ REPLAY_PARAMS = {
     "bag": Param("", "bag directory or .mcap file (or the first command-line argument)"),
     "rate": Param(1.0, "playback speed factor; 0 = as fast as the windowing node reads", min=0.0, max=1000.0),
     "fast_sleep_s": Param(0.001, "timer period when rate = 0 (at most 4 messages per tick), s", min=0.0, max=1.0),
-    "max_lead_s": Param(2.0, "at most this many drive seconds ahead of drive/progress, at any rate (a downstream "
-                        "that falls behind pauses the replay, WARN with the count); 0 = off",
+    "max_lead_s": Param(2.0, "at most this many drive seconds ahead of drive/progress and, once heard, "
+                        "drive/diagnosed_progress, at any rate (a downstream that falls behind pauses the replay, "
+                        "WARN with the count); 0 = off",
                         min=0.0, max=3600.0),
     "progress_timeout_s": Param(2.0, "no drive/progress for this long while waiting: back-pressure off, s",
                                 min=0.0, max=3600.0, min_exclusive=True),

@@ -86,7 +86,7 @@ from jident_ros.nodes.ros_io import (
     qos_signals,
     window_from_msg,
 )
-from jident_ros.nodes.runtime import RunnableNode, events_executor
+from jident_ros.nodes.runtime import DIAGNOSED_PROGRESS_TOPIC, RunnableNode, events_executor
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, gap_method_problem
 from jident_ros.stream.text import plain_numbers
@@ -233,7 +233,9 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
             self.pub_width_trend = self.create_lifecycle_publisher(Float64, "backlash_width_trend", qos_latched())
         self.subs.append(self.create_subscription(Float64MultiArray, "drive/window", self.on_window,
                                                   qos_latched(c["window_queue_depth"])))
-        # the windowing node's drive/progress: evidence that input flows between windows (STALE)
+        # the windowing node's drive/progress: evidence that input flows between windows (STALE); echoed on
+        # drive/diagnosed_progress once every window before it has been handled (back-pressure, ProgressGate)
+        self.pub_diagnosed_progress = self.create_publisher(Float64, DIAGNOSED_PROGRESS_TOPIC, qos_signals(10))
         self.subs.append(self.create_subscription(Float64, "drive/progress", self.on_progress, qos_signals(10)))
         if self.recorder is not None and c["record_signals"]:
             sq = qos_signals(c["signals_queue_depth"])
@@ -414,7 +416,12 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
 
     # ----------------------------------------------------------------- windows
     def on_progress(self, msg):
+        """drive/progress: input flows (STALE), and its echo on drive/diagnosed_progress. The executor hands
+        this node its callbacks in arrival order, so the echo of a progress message goes out only after every
+        window that arrived before it was diagnosed: a streaming node's ProgressGate waits for the slower of
+        the windowing and the diagnostic node, and no window piles up in this node's queue."""
         self.last_input = time.monotonic()
+        self.pub_diagnosed_progress.publish(msg)
 
     def on_window(self, msg):
         t_recv = time.perf_counter()
