@@ -23,7 +23,7 @@ class FakeNode:
         self.callbacks.pop(sub, None)
 
     def get_logger(self):
-        return types.SimpleNamespace(warning=self.warnings.append)
+        return types.SimpleNamespace(warning=self.warnings.append, info=lambda _text: None)
 
 
 def msg(t):
@@ -55,7 +55,7 @@ def test_a_diagnostic_node_behind_the_windowing_node_holds_the_stream():
     assert gate.allows(12.5)
 
 
-def test_a_stalled_diagnostic_node_opens_the_gate_after_the_timeout_and_says_so():
+def test_a_stalled_diagnostic_node_opens_the_gate_until_its_next_progress_and_says_so():
     node = FakeNode()
     gate = ProgressGate(node, max_lead_s=1.0, timeout_s=0.5)
     assert gate.allows(1.0)
@@ -64,6 +64,11 @@ def test_a_stalled_diagnostic_node_opens_the_gate_after_the_timeout_and_says_so(
     assert not gate.allows(5.0)                   # the diagnostic node has done 1.0 s: wait ...
     gate._wait_start -= 1.0                       # ... 1 s with no progress of the slower node
     assert gate.allows(5.0)                       # beyond timeout_s: open for good
-    assert not gate.active and "diagnostic" in node.warnings[0]
+    assert not gate.active and "diagnostic" in node.warnings[0] and gate.openings == 1
+    assert gate.allows(9.0)                       # open: the stream goes on while nothing progresses ...
+    node.callbacks[DIAGNOSED_PROGRESS_TOPIC](msg(2.0))
+    assert gate.active and not gate.allows(9.0)   # ... and the next progress closes it again
+    node.callbacks[DIAGNOSED_PROGRESS_TOPIC](msg(4.9))
+    assert gate.allows(5.9) and not gate.allows(6.0)
     gate.close()
     assert not node.callbacks

@@ -252,8 +252,10 @@ class SimulatorNode(RunnableNode, Node):
         gate, self.gate = self.gate, None
         waited = ""
         if gate is not None:
-            waited = (f"; waited {gate.waited_s:.2f} s for the windowing node (back-pressure)"
+            waited = (f"; waited {gate.waited_s:.2f} s for the downstream nodes (back-pressure)"
                       if gate.waited_s else "")
+            if gate.openings:
+                waited += f"; back-pressure off {gate.openings} time(s) after progress_timeout_s without progress"
             gate.close()
         self.get_logger().info(f"done: {self.passes} pass(es) over {len(self.cases)} case(s){waited}")
         self.state = "done"
