@@ -19,7 +19,9 @@ and on what the clutch does, not on inequality (1):
   and is caught by the same test.  After an entry, F is forgotten and learnt again from the next contact
   (a slip is re-baselined there).
 * **Entry sample** (where the window is centred): the first sample in the zone.  When the window holds
-  ``m_el`` and ``a1`` (and ``nominal_inertia_kgm2`` is given) the departure sample is moved forward while
+  ``m_el`` and a motor acceleration (``a1``, else the smoothed second difference of ``alpha1`` or the derivative
+  of ``omega1``: :func:`motor_acceleration`) and ``nominal_inertia_kgm2`` is given,
+  the departure sample is moved forward (:func:`single_mass_run`; with ``a1`` also back, :func:`back_to_load`) while
   the load-torque estimate T_L = m_el - J1_nom a1 / r still carries more than ``load_drop_fraction`` of the
   steady load torque: a coupling that unloads gradually (a drive that decelerates off its flank) is still in
   contact while delta starts to move (at most ``refine_samples`` samples).  In the simulator's slip
