@@ -11,31 +11,28 @@ from __future__ import annotations
 import json
 import statistics
 import sys
+from pathlib import Path
 
-
-def _level(run: dict, rtf: float) -> dict | None:
-    return next((lv for lv in run["levels"] if abs(lv["rtf"] - rtf) < 1e-9), None)
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_ros import targets  # noqa: E402  (the bench's own reading of its targets, not a second one)
 
 
 def row(run: dict) -> dict:
-    t = run["targets"]
-    at20 = _level(run, 20.0)
-    peak, peak_ok = {}, 0.0
+    t = targets(run["levels"], run.get("limit"))
+    peak = {}
     for lv in run["levels"]:
-        hwm = (lv.get("memory_mib", {}).get("diagnostic") or {}).get("VmHWM")
-        if lv.get("sustained") and hwm is not None:
-            peak_ok = max(peak_ok, float(hwm))
         for node, mem in lv.get("memory_mib", {}).items():
             hwm = mem.get("VmHWM") if isinstance(mem, dict) else None
             if hwm is not None:
                 peak[node] = max(peak.get(node, 0.0), float(hwm))
     return {"commit": run["machine"].get("commit", "?"),
             "load": run["machine"].get("load_average_start", [float("nan")])[0],
-            "lossless": (run.get("limit") or {}).get("lossless_rtf"),
-            "rate0": t["backpressured_rate"]["value"],
-            "rate0_lossless": bool(_level(run, 0.0) and _level(run, 0.0)["lossless"]),
-            "lat20": None if at20 is None else at20["latency_ms"].get("median"),
-            "peak": peak, "peak_ok": peak_ok or None}
+            "lossless": t["sustained_rtf"]["value"],
+            "rate0": t["backpressured_rate"]["value"],          # None unless rate 0 was lossless and right
+            "rate0_lossless": t["backpressured_rate"]["value"] is not None,
+            "lat20": t["latency_median_ms"]["value"],
+            "peak_ok": t["diagnostic_peak_rss_mib"]["value"],
+            "peak": peak}
 
 
 def _fmt(x, unit=""):
