@@ -558,8 +558,6 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     try:
         kf = kink_fit(alpha1, torque, sample_period_s, range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1), end,
                       model.coulomb_friction_max_nm, model.torque_offset_nm, model.torque_lag_s)
-        # the re-contact row: moved in by 1 and 2 (contact after it is not modelled)
-        trims = [kink_fit(alpha1, torque, sample_period_s, kf["plausible_entries"], end - k)["j1"] for k in (1, 2)]
     except (FreeFitError, np.linalg.LinAlgError) as exc:
         return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
     # a profile minimum on the edge of the searched rows has not located the entry: the change point may lie
@@ -584,6 +582,12 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     if float(np.max(np.abs(first - level))) > max(tol, KINK_TORQUE_AFTER_REL * abs(level)):
         return {"choice": f"angle (free): the torque moves by {float(np.max(np.abs(first - level))):.3g} N m in the "
                           f"{KINK_SEARCH} samples after the entry row {sb}: not a steady drive's entry"}
+    try:
+        # the re-contact row: moved in by 1 and 2 (contact after it is not modelled); fitted once the checks above
+        # have kept the steady-entry fit (a speed controller's entry is refused there: 2 of its 3 fits saved)
+        trims = [kink_fit(alpha1, torque, sample_period_s, kf["plausible_entries"], end - k)["j1"] for k in (1, 2)]
+    except (FreeFitError, np.linalg.LinAlgError) as exc:
+        return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
     j, res, dof = kf["j1"], kf["residual"], kf["dof"]
     cp_end = max(abs(x - j) for x in trims)
     terms = dict(kf["terms"])
