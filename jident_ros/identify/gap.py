@@ -140,6 +140,23 @@ class NoGapError(ValueError):
     """The window holds no usable backlash gap."""
 
 
+#: How a NoGapError's message starts when the window's gap is there but cannot resolve J1 (too few samples in it,
+#: a standard error above MAX_RELATIVE_STD_ERROR): a fact about this window, not about the monitor's configuration
+#: or sensors (:func:`resolution_limited`).
+RESOLUTION_REASONS = ("gap too short", "gap fit undetermined")
+
+
+def resolution_limited(reason: str) -> bool:
+    """Whether a gap failure (a NoGapError's message) says only that this window cannot resolve J1: every fit tried
+    (the cross-check's "a1 fit: ...; angle fit: ...") failed for one of RESOLUTION_REASONS."""
+    text = str(reason)
+    if text.startswith("a1 fit: ") and "; angle fit: " in text:
+        parts = text[len("a1 fit: "):].split("; angle fit: ", 1)
+    else:
+        parts = [text]
+    return all(p.startswith(RESOLUTION_REASONS) for p in parts)
+
+
 @dataclass(frozen=True)
 class GapEstimate:
     """J1 from the gap.
