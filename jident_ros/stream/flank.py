@@ -341,31 +341,10 @@ def _noise(x: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(dx - np.median(dx))) / math.sqrt(2.0))
 
 
-def delta_recontact(delta: np.ndarray, entry: int, flank_rad: float, min_travel_rad: float, contact_samples: int,
-                    contact_tolerance_rad: float) -> int:
-    """The re-contact row after ``entry`` from delta alone: the first row where delta reaches (within
-    ``contact_tolerance_rad``) the level at which it next rests (``contact_samples`` rows within
-    ``contact_tolerance_rad``) at least ``min_travel_rad`` from the entry's flank level: a contact on the other
-    flank; -1 when there is none in ``delta``."""
-    L = int(contact_samples)
-    if delta.size - entry - 1 < L:
-        return -1
-    runs = np.lib.stride_tricks.sliding_window_view(delta[entry + 1:], L)
-    ok = (np.ptp(runs, axis=1) <= contact_tolerance_rad) & (np.abs(runs[:, 0] - flank_rad) >= min_travel_rad)
-    if not ok.any():
-        return -1
-    j = int(np.argmax(ok))
-    level = float(runs[j].mean())
-    # the coupling's impact overshoots and rebounds before it rests: the contact began where delta first reached
-    # the level it rests at
-    near = np.abs(delta[entry + 1:entry + 2 + j] - level) <= contact_tolerance_rad
-    return entry + 1 + int(np.argmax(near))
-
-
 def estimate_width(window: dict, entry_index: int, wheel_radius_m: float, sample_period_s: float,
                    gear_ratio: float = 1.0, flank_rad: Optional[float] = None, recontact: Optional[int] = None,
                    angle_quantum_rad: float = 0.0, contact_samples: int = 32,
-                   contact_tolerance_rad: float = 2e-3, min_travel_rad: float = 0.0) -> WidthResult:
+                   contact_tolerance_rad: float = 2e-3) -> WidthResult:
     """K2 of one traversal from raw angles (module docstring), with its standard uncertainty.
 
     ``flank_rad``: the entry flank's delta level (learnt before the entry; default: the mean of the
@@ -379,9 +358,8 @@ def estimate_width(window: dict, entry_index: int, wheel_radius_m: float, sample
     if not 2 <= e < d.size - 2:
         return WidthResult(math.nan, math.nan, "entry at the window's edge")
     f_entry = float(np.mean(d[:e])) if flank_rad is None else float(flank_rad)
-    src = ""
     if recontact is None:
-        acc, src = motor_acceleration(window, wheel_radius_m, sample_period_s)
+        acc, _ = motor_acceleration(window, wheel_radius_m, sample_period_s)
         recontact = recontact_index(acc, e) if acc is not None else -1
     g = int(recontact)
     r = float(wheel_radius_m)
@@ -391,12 +369,6 @@ def estimate_width(window: dict, entry_index: int, wheel_radius_m: float, sample
     # steps around it are 0 and the entry's one count looked like a slip; the vector drive's K2 was 96 % off)
     slip = abs(step_in) > max(4.0 * max(abs(step_before), abs(step_after)), 10.0 * angle_quantum_rad,
                               contact_tolerance_rad, 1e-12)
-    if src not in ("", "a1") and not slip and min_travel_rad > 0 and 0 <= g < d.size \
-            and abs(d[g] - f_entry) < min_travel_rad:
-        # the encoder's noisy acceleration dropped before delta had gone anywhere (a light load reversal leaves its
-        # flank slowly: 2 samples after the entry, "gap too short"): the re-contact is where delta next rests,
-        # min_travel_rad or more from the flank it left (the gap stage's change points refine it)
-        g = delta_recontact(d, e, f_entry, min_travel_rad, contact_samples, contact_tolerance_rad)
     if slip:
         # the slip scenario: delta jumped off the flank and the motor turns back to the same flank; the
         # excursion, measured against the settled flank level after re-contact (an offset moved by the
@@ -410,9 +382,7 @@ def estimate_width(window: dict, entry_index: int, wheel_radius_m: float, sample
         return WidthResult(width, se, "same_flank", g)
     if g <= e + 2:
         return WidthResult(math.nan, math.nan, "no re-contact found", g)
-    far = e + int(np.argmax(np.abs(d[e:g] - f_entry)))
-    s = 1.0 if d[far] >= f_entry else -1.0        # direction in which delta left its flank (its farthest sample
-                                                  # before the re-contact: a slow departure is still on it at e)
+    s = 1.0 if d[e] >= f_entry else -1.0          # direction in which delta left its flank
     if (d[g - 1] - d[g - 3]) * s <= 0:
         return WidthResult(math.nan, math.nan, "bounce back to the same flank (width not observable)", g)
     # a traversal: 2 K2/r from flank to flank, each end bracketed by the samples around the contact instant
@@ -882,7 +852,7 @@ class FlankDetector(BacklashDetector):
         res = estimate_width(wd, e, self.wheel_radius_m, self.sample_period_s, self.gear_ratio,
                              flank_rad=cap.flank_rad, recontact=rc, angle_quantum_rad=self.angle_quantum_rad,
                              contact_samples=self.contact_samples,
-                             contact_tolerance_rad=self.contact_tolerance_rad, min_travel_rad=self.min_travel_rad)
+                             contact_tolerance_rad=self.contact_tolerance_rad)
         self.last_width = res
         if self.second_windows and res.how == "traversal" and res.recontact_index > e:
             self._scan_returns(cap, data, self._delta(win), e0, e, res.recontact_index)
