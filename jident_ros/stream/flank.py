@@ -96,6 +96,7 @@ class _FlankCapture:
     pending: bool = False      # an entry inside another window: its own window only once its excursion ends on the
                                # other flank (a traversal), decided at the next contact
     start_row: int = 0         # stream row of the capture's first row
+    returning: bool = False    # a traversal back inside another window (its flank: the other window's re-contact)
 
 
 def motor_acceleration(window: dict, wheel_radius_m: float, sample_period_s: float):
@@ -765,6 +766,7 @@ class FlankDetector(BacklashDetector):
                 if self.second_windows and not any(c.skip for c in self._caps) \
                         and hist.shape[0] >= self.samples_before_entry + self._extra_needed:
                     self._last_cap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma, pending=True,
+                                                   returning=True,
                                                    start_row=self._entry_row - hist.shape[0])
                     self._caps.append(self._last_cap)
                 continue
@@ -843,6 +845,7 @@ class FlankDetector(BacklashDetector):
         data = np.concatenate(cap.rows)
         dep = cap.departure_row
         self._cap_sigma = cap.flank_sigma_rad      # the entry flank's contact noise (free_departure)
+        self._cap_returning = cap.returning
         shift, recontact = self._refine(data, dep)
         e0 = dep + shift - self.samples_before_entry
         win = data[e0:e0 + self.window_length]
@@ -948,7 +951,7 @@ class FlankDetector(BacklashDetector):
                 self._caps.remove(c)                    # found late by the contact rule (delta resting at the flank
                 self.return_windows -= 1                # looked like a contact): the edge crossing replaces it
             rows = data[lo:]
-            new = _FlankCapture([rows], rows.shape[0], row - lo, float(edge_out), cap.flank_sigma_rad,
+            new = _FlankCapture([rows], rows.shape[0], row - lo, float(edge_out), cap.flank_sigma_rad, returning=True,
                                 start_row=cap.start_row + lo)
             self._caps.append(new)
             self._new_caps.append(new)
@@ -1003,7 +1006,10 @@ class FlankDetector(BacklashDetector):
         back to delta's free curvature when delta drifted off its flank before the departure (:func:`free_departure`;
         then the forward move is not tried); (0, None) when delta jumped off its flank (:meth:`_jumped`: a slip)."""
         jumped = self._jumped(data, dep)
-        if self.detector_name == "flank" and "a1" not in self.channels and not jumped:
+        # not in a traversal back (delta rings at the other flank after the impact before it leaves it again: on the
+        # vector drive's 2^13 speed steps the move took return entries 10-40 samples back, one before its gap)
+        if self.detector_name == "flank" and "a1" not in self.channels and not jumped \
+                and not getattr(self, "_cap_returning", False):
             delta = self._delta(data)
             # the noise: the contact's sigma, at least the quantisation (the configured encoder's, else the smallest
             # step delta makes before the departure, below the departure threshold)
