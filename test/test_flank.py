@@ -342,3 +342,18 @@ def test_without_a1_a_slip_keeps_its_departure_sample(system, snr):
         assert len(wins) == 1
         t = rec.data[:, rec.channels.index("t")]
         assert wins[0].entry_time_s == t[rec.entry_row], (rec.entry_row, wins[0].entry_time_s)
+
+
+def test_a_traversal_back_keeps_its_departure():
+    """free_departure moves a window's own entry only: a traversal back inside another window (delta rings at the
+    other flank after the impact, which looks like a drift) keeps its departure."""
+    data, ch = _untwisting(seed=0)
+    det = FlankDetector(0.1, 5e-4, channels=ch)
+    d = data[:, 1] - data[:, 2]
+    dep = int(np.argmax(np.abs(d - d[500]) > 1.5e-3))
+    part = data[dep - 88:dep + 2100]
+    det._cap_sigma, det._cap_returning = 0.0, False
+    shift, _ = det._refine(part, 88)
+    assert -25 <= shift <= -15
+    det._cap_returning = True
+    assert det._refine(part, 88) == (0, None)
