@@ -176,14 +176,19 @@ def free_departure(delta: np.ndarray, departure: int, first: int, noise_rad: flo
         return departure
     t = np.arange(lo, hi, dtype=float)
     y = np.asarray(delta[lo:hi], float)
-    best = None
-    for e in range(lo_e, departure + 1):
-        X = np.column_stack([np.ones_like(t), t - e, np.clip(t - e, 0.0, None) ** 2])
-        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-        rss = float(np.sum((y - X @ coef) ** 2))
-        if best is None or rss < best[0]:
-            best = (rss, e, coef, X)
-    rss, e, coef, X = best
+    y0 = float(y.mean())                          # centred: the normal equations stay well conditioned
+    cand = np.arange(lo_e, departure + 1, dtype=float)
+    X = np.stack([np.ones((cand.size, t.size)), t[None, :] - cand[:, None],
+                  np.clip(t[None, :] - cand[:, None], 0.0, None) ** 2], axis=2)      # (candidates, samples, 3)
+    XtX = np.einsum("kni,knj->kij", X, X)
+    Xty = np.einsum("kni,n->ki", X, y - y0)
+    try:
+        coefs = np.linalg.solve(XtX, Xty[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        return departure
+    rss_all = np.sum((y - y0 - np.einsum("kni,ki->kn", X, coefs)) ** 2, axis=1)
+    k = int(np.argmin(rss_all))                   # the first of equal ones, as a loop over the candidates would
+    rss, e, coef, X = float(rss_all[k]), int(cand[k]), coefs[k], X[k]
     if e >= departure or not math.sqrt(rss / y.size) <= DRIFT_MAX_RMS_SIGMAS * noise_rad:
         return departure
     v, c2 = float(coef[1]), float(coef[2])
