@@ -32,7 +32,7 @@ Fits
   whose noise is small relative to their gap value, fix the torque's shape; the m_el
   samples before and inside the gap fix its level — so the level is no longer
   anchored on the 48 pre-entry samples alone (docs/method.md, "Gap estimator").
-  Uncertainty: covariance of the Gauss-Newton solution with each channel's residual
+  Uncertainty: covariance of the least-squares solution with each channel's residual
   variance (robust to a wrong noise ratio), plus, in quadrature, the change of J1 when
   the torque model gets a linear term too (the model-form error).
 * ``"gap_only"`` (a1 and m_el measured; no assumption about the drive before the entry):
@@ -100,7 +100,7 @@ GAP_QUADRATIC_MIN = 12
 #: m0 + c2 τ^2 + c3 τ^3, shorter ones as m0 + c2 τ^2.
 GAP_CUBIC_MIN = 8
 
-#: 'acceleration' fit: Gauss-Newton stops when J1 changes by less than this fraction.
+#: 'acceleration' fit: the Newton iteration on the profile stops when J1 changes by less than this fraction.
 GN_TOL = 1e-9
 GN_MAX_ITER = 30
 
@@ -916,9 +916,8 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
         sa = sm * float(np.abs(ag).mean() / max(np.abs(mg).mean(), 1e-300))
     sm = max(sm, JOINT_NOISE_FLOOR_REL * float(np.abs(mg).max()), 1e-300)
     sa = max(sa, JOINT_NOISE_FLOOR_REL * float(np.abs(ag).max()), 1e-300)
-    # Gauss-Newton on theta = (kappa, beta) in normal-equation form: every block reduces to
-    # p x p sums (the pre-entry block to its count and sum), so an iteration costs no
-    # n-length work.  Whitened model: pre m_el = m0, gap m_el = G beta (weight 1/sm^2);
+    # normal-equation form: every block reduces to p x p sums (the pre-entry block to its count and sum), so an
+    # iteration costs no n-length work.  Whitened model: pre m_el = m0, gap m_el = G beta (weight 1/sm^2);
     # gap a1 = kappa (G beta - fr) (weight 1/sa^2).
     na = pre.size
     wm, wa = 1.0 / sm ** 2, 1.0 / sa ** 2
