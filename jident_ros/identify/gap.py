@@ -32,7 +32,7 @@ Fits
   whose noise is small relative to their gap value, fix the torque's shape; the m_el
   samples before and inside the gap fix its level — so the level is no longer
   anchored on the 48 pre-entry samples alone (docs/method.md, "Gap estimator").
-  Uncertainty: covariance of the Gauss-Newton solution with each channel's residual
+  Uncertainty: covariance of the least-squares solution with each channel's residual
   variance (robust to a wrong noise ratio), plus, in quadrature, the change of J1 when
   the torque model gets a linear term too (the model-form error).
 * ``"gap_only"`` (a1 and m_el measured; no assumption about the drive before the entry):
@@ -100,7 +100,7 @@ GAP_QUADRATIC_MIN = 12
 #: m0 + c2 τ^2 + c3 τ^3, shorter ones as m0 + c2 τ^2.
 GAP_CUBIC_MIN = 8
 
-#: 'acceleration' fit: Gauss-Newton stops when J1 changes by less than this fraction.
+#: 'acceleration' fit: the Newton iteration on the profile stops when J1 changes by less than this fraction.
 GN_TOL = 1e-9
 GN_MAX_ITER = 30
 
@@ -873,6 +873,13 @@ def _torque_powers(n_gap: int, linear_term: bool = False) -> tuple:
     return (1,) + powers if linear_term else powers
 
 
+#: Floor of the joint fit's noise levels, relative to the channel's largest value: keeps a noise-free channel's
+#: weight finite and the normal equations conditioned (1e-9 let an exact a1 outweigh a noisy m_el by 1e15, below
+#: the m_el rows' round-off: kappa then stayed at its starting value, 1.5 % off; no accelerometer or torque
+#: estimate is better than 1 ppm of its reading)
+JOINT_NOISE_FLOOR_REL = 1e-6
+
+
 @_memoised
 def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=None,
                linear_term: bool = False, warm: dict | None = None) -> dict:
@@ -907,11 +914,10 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
         cm, *_ = np.linalg.lstsq(G, mg, rcond=None)
         sm = float(np.sqrt(np.sum((mg - G @ cm) ** 2) / max(n - p, 1)))
         sa = sm * float(np.abs(ag).mean() / max(np.abs(mg).mean(), 1e-300))
-    sm = max(sm, 1e-9 * float(np.abs(mg).max()), 1e-300)
-    sa = max(sa, 1e-9 * float(np.abs(ag).max()), 1e-300)
-    # Gauss-Newton on theta = (kappa, beta) in normal-equation form: every block reduces to
-    # p x p sums (the pre-entry block to its count and sum), so an iteration costs no
-    # n-length work.  Whitened model: pre m_el = m0, gap m_el = G beta (weight 1/sm^2);
+    sm = max(sm, JOINT_NOISE_FLOOR_REL * float(np.abs(mg).max()), 1e-300)
+    sa = max(sa, JOINT_NOISE_FLOOR_REL * float(np.abs(ag).max()), 1e-300)
+    # normal-equation form: every block reduces to p x p sums (the pre-entry block to its count and sum), so an
+    # iteration costs no n-length work.  Whitened model: pre m_el = m0, gap m_el = G beta (weight 1/sm^2);
     # gap a1 = kappa (G beta - fr) (weight 1/sa^2).
     na = pre.size
     wm, wa = 1.0 / sm ** 2, 1.0 / sa ** 2
@@ -930,9 +936,10 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
         uu = float(beta @ GG @ beta - 2.0 * beta @ Gf + ff)
         kappa = float(beta @ Ga - fa) / uu
     # the cost is quadratic in beta for a given kappa: beta(kappa) in closed form (one p x p solve), and the optimum
-    # is the root of h(kappa) = kappa - (the a1-on-u slope at beta(kappa)); found by the secant method (superlinear:
-    # 4-8 solves, where Gauss-Newton on (kappa, beta) converged linearly, 13-30 iterations, and stopped at
-    # GN_MAX_ITER unconverged on the stress bench's load reversal)
+    # is the root of h(kappa) = kappa - (the a1-on-u slope at beta(kappa)), found by Newton's method with a
+    # finite-difference slope (h is close to linear: 2-4 steps, 2 solves each), stopped on the step, not on h (with a
+    # nearly exact a1, h is ~1e-11 everywhere); Gauss-Newton on (kappa, beta) converged linearly (13-30 solves) and
+    # stopped unconverged at GN_MAX_ITER on the stress bench's load reversal
     b_m = wm * (s_pre * e1 + Gm)
 
     def profile(k: float) -> tuple:
@@ -940,19 +947,20 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
         uu_ = float(b @ GG @ b - 2.0 * float(b @ Gf) + ff)
         return b, (k - float(b @ Ga - fa) / uu_) if uu_ > 0 else np.nan
 
-    k0 = kappa
-    b0, h0 = profile(k0)
-    beta, kappa = b0, k0
-    if np.isfinite(h0) and h0 != 0.0:
-        k1 = k0 - h0
-        for _ in range(GN_MAX_ITER):
-            b1, h1 = profile(k1)
-            if not np.isfinite(h1):
-                break
-            beta, kappa = b1, k1
-            if abs(h1) <= GN_TOL * abs(k1) or h1 == h0:
-                break
-            k0, h0, k1 = k1, h1, k1 - h1 * (k1 - k0) / (h1 - h0)
+    beta, h = profile(kappa)
+    for _ in range(GN_MAX_ITER):
+        if not np.isfinite(h):
+            break
+        dk = 1e-4 * abs(kappa) if kappa else 1e-12
+        _, h2 = profile(kappa + dk)
+        slope = (h2 - h) / dk
+        if not np.isfinite(slope) or slope == 0.0:
+            break
+        step = -h / slope
+        kappa += step
+        beta, h = profile(kappa)
+        if abs(step) <= GN_TOL * abs(kappa):
+            break
     # residuals and the sandwich covariance at the solution
     m_hat = G @ beta
     r_a = ag - kappa * (m_hat - fr)
