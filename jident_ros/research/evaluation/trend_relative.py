@@ -101,6 +101,7 @@ def recordings(model: str, work: Path, n_per_j1: int, seed: int, system, drive_o
               "vector_drive": "jident_ros.research.vector_drive"}[model]
     for k in range(math.ceil(n_per_j1 / len(widths))):
         d = work / f"{model}_{k}"
+        done = d / ".complete"
         if model == "second_drive":
             args = ["--format", "csv", "--scenario", "grid", "--direction", "forward", "--snr-db", str(SNR_DB),
                     "--inertias", f"{J1_BASE},{J1_STEP}", "--widths", ",".join(f"{w:.5f}" for w in widths)]
@@ -108,10 +109,15 @@ def recordings(model: str, work: Path, n_per_j1: int, seed: int, system, drive_o
             args = ["--formats", "csv", "--events", "speed_step_down", "--directions", "forward", "--counts", "65536",
                     "--snr-db", f"{SNR_DB:g}", "--inertias", f"{J1_BASE},{J1_STEP}",
                     "--widths", ",".join(f"{w:.5f}" for w in widths)]
-        proc = subprocess.run([sys.executable, "-m", module, "--out", str(d), "--seed", str(seed * 1000 + k)] + args,
-                              capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise RuntimeError(f"{model}: {proc.stderr.strip().splitlines()[-1] if proc.stderr else proc.returncode}")
+        cmd = [sys.executable, "-m", module, "--out", str(d), "--seed", str(seed * 1000 + k)] + args
+        if not (done.exists() and done.read_text() == " ".join(cmd[1:])):
+            # simulate (the vector drive takes minutes per batch); a batch already simulated by the same command
+            # in this work directory is reused (its .complete names the command)
+            done.unlink(missing_ok=True)
+            proc = subprocess.run(cmd, capture_output=True, text=True)
+            if proc.returncode != 0:
+                raise RuntimeError(f"{model}: {proc.stderr.strip().splitlines()[-1] if proc.stderr else proc.returncode}")
+            done.write_text(" ".join(cmd[1:]))
         for csv_path in sorted(d.rglob("*.csv")):
             tr = _truth(csv_path)
             out.append((_drive_only(csv_path, csv_path.with_suffix(".drive.csv")) if drive_only else csv_path,
@@ -166,6 +172,32 @@ def pools(recs: list, system) -> dict:
     return {"pools": p, "counts": counts}
 
 
+def save_pools(pl: dict, path: Path) -> None:
+    """The diagnosed windows (J1, se per true J1) and their counts, so that a tracker design can be tried again
+    on them without simulating and diagnosing again (``--work DIR``)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    d = {"counts": pl["counts"], "pools": {str(j): {"j1": v["j1"].tolist(), "se": v["se"].tolist()}
+                                            for j, v in pl["pools"].items()}}
+    path.write_text(json.dumps(d))
+
+
+def load_pools(path: Path) -> dict | None:
+    """What :func:`save_pools` wrote (with the pools' statistics recomputed), or None when absent."""
+    if not path.exists():
+        return None
+    d = json.loads(path.read_text())
+    p = {}
+    for j, v in d["pools"].items():
+        jf = float(j)
+        a = {"j1": np.array(v["j1"], dtype=float), "se": np.array(v["se"], dtype=float)}
+        if a["j1"].size:
+            z = (a["j1"] - jf) / a["se"]
+            a.update(n=int(a["j1"].size), se_pct_median=float(np.median(a["se"] / jf * 100)),
+                     z_sd=float(z.std(ddof=1)) if z.size > 1 else math.nan, z_mean=float(z.mean()))
+        p[jf] = a
+    return {"pools": p, "counts": d["counts"]}
+
+
 def detection(p: dict, trials: int, seed: int, config: TrendConfig, pre: int = 25, post: int = 20) -> dict:
     rng = np.random.default_rng(seed)
     base, step = p[J1_BASE], p[J1_STEP]
@@ -212,9 +244,14 @@ def false_changes(base: dict, seed: int, config: TrendConfig, series: int = 10, 
 def run_model(model: str, work: Path, n_per_j1: int, trials: int, seed: int, system, config: TrendConfig,
               drive_only: bool = False, refine: bool = True) -> dict:
     t0 = time.perf_counter()
-    recs = recordings(model, work / (model + ("_drive_only" if drive_only else "")), n_per_j1, seed, system, drive_only)
-    with entry_refinement(refine):
-        pl = pools(recs, system)
+    mdir = work / (model + ("_drive_only" if drive_only else ""))
+    cache = mdir / f"pools_n{n_per_j1}_s{seed}{'' if refine else '_norefine'}.json"
+    pl = load_pools(cache)
+    if pl is None:
+        recs = recordings(model, mdir, n_per_j1, seed, system, drive_only)
+        with entry_refinement(refine):
+            pl = pools(recs, system)
+        save_pools(pl, cache)
     p = pl["pools"]
     if not (p[J1_BASE]["j1"].size and p[J1_STEP]["j1"].size):
         return {"model": model, "counts": pl["counts"], "error": "no window reached the trend"}
