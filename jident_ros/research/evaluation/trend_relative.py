@@ -13,7 +13,9 @@
 
    * ``ours``: :func:`jident_ros.research.evaluation.raw_inputs.raw_recordings` (our simulator);
    * ``second_drive``: ``python -m jident_ros.research.second_drive --format csv --scenario grid`` (docs/second_drive.md);
-   * ``vector_drive``: ``python -m jident_ros.research.vector_drive --formats csv`` (motulator; skipped when missing).
+   * ``vector_drive``: ``python -m jident_ros.research.vector_drive --formats csv`` (motulator; skipped when missing),
+     one call per recording with its own seed (a call draws all its recordings' noise from one seed), the
+     noise-free simulation cached in the work directory.
 
    Every recording is diagnosed by ``jident diagnose``'s path (:func:`jident_ros.cli.offline.diagnose_samples`,
    flank detector, gap estimator, no image method) and each window turned into the tracker's inputs by the
@@ -99,26 +101,38 @@ def recordings(model: str, work: Path, n_per_j1: int, seed: int, system, drive_o
         return out
     module = {"second_drive": "jident_ros.research.second_drive",
               "vector_drive": "jident_ros.research.vector_drive"}[model]
-    for k in range(math.ceil(n_per_j1 / len(widths))):
-        d = work / f"{model}_{k}"
+    calls = []       # (folder, seed, J1 values, widths)
+    if model == "second_drive":
+        # one call per 8 widths: its noise is drawn per case (rng [seed, case])
+        for k in range(math.ceil(n_per_j1 / len(widths))):
+            calls.append((work / f"{model}_{k}", seed * 1000 + k, (J1_BASE, J1_STEP), widths))
+    else:
+        # the vector drive draws every recording of one call from the same rng ([seed, counts, snr]): the same
+        # noise and encoder offsets for every J1 and width of a call.  One call per recording (its own seed), the
+        # noise-free simulation cached in the work directory (the J1 x width cases are simulated once)
+        for j1, off in ((J1_BASE, 0), (J1_STEP, 500)):
+            for k in range(n_per_j1):
+                calls.append((work / f"{model}_{j1:.3f}_{k:03d}", seed * 1000 + off + k, (j1,),
+                              (widths[k % len(widths)],)))
+    for d, call_seed, j1s, ws in calls:
         done = d / ".complete"
         if model == "second_drive":
             args = ["--format", "csv", "--scenario", "grid", "--direction", "forward", "--snr-db", str(SNR_DB),
-                    "--inertias", f"{J1_BASE},{J1_STEP}", "--widths", ",".join(f"{w:.5f}" for w in widths)]
+                    "--inertias", ",".join(f"{j:g}" for j in j1s), "--widths", ",".join(f"{w:.5f}" for w in ws)]
         else:
             args = ["--formats", "csv", "--events", "speed_step_down", "--directions", "forward", "--counts", "65536",
-                    "--snr-db", f"{SNR_DB:g}", "--inertias", f"{J1_BASE},{J1_STEP}",
-                    "--widths", ",".join(f"{w:.5f}" for w in widths)]
-        cmd = [sys.executable, "-m", module, "--out", str(d), "--seed", str(seed * 1000 + k)] + args
+                    "--snr-db", f"{SNR_DB:g}", "--inertias", ",".join(f"{j:g}" for j in j1s),
+                    "--widths", ",".join(f"{w:.5f}" for w in ws), "--cache", str(work / "simulation_cache")]
+        cmd = [sys.executable, "-m", module, "--out", str(d), "--seed", str(call_seed)] + args
         if not (done.exists() and done.read_text() == " ".join(cmd[1:])):
-            # simulate (the vector drive takes minutes per batch); a batch already simulated by the same command
-            # in this work directory is reused (its .complete names the command)
+            # simulate; a folder already written by the same command in this work directory is reused (its
+            # .complete names the command)
             done.unlink(missing_ok=True)
             proc = subprocess.run(cmd, capture_output=True, text=True)
             if proc.returncode != 0:
                 raise RuntimeError(f"{model}: {proc.stderr.strip().splitlines()[-1] if proc.stderr else proc.returncode}")
             done.write_text(" ".join(cmd[1:]))
-        for csv_path in sorted(d.rglob("*.csv")):
+        for csv_path in sorted(p for p in d.rglob("*.csv") if not p.name.endswith("_drive.csv")):
             tr = _truth(csv_path)
             out.append((_drive_only(csv_path, csv_path.with_suffix(".drive.csv")) if drive_only else csv_path,
                         float(tr["inertia_kgm2"]), float(tr["reference_radius_m"]), float(tr.get("gear_ratio", 1.0))))
@@ -245,7 +259,7 @@ def run_model(model: str, work: Path, n_per_j1: int, trials: int, seed: int, sys
               drive_only: bool = False, refine: bool = True) -> dict:
     t0 = time.perf_counter()
     mdir = work / (model + ("_drive_only" if drive_only else ""))
-    cache = mdir / f"pools_n{n_per_j1}_s{seed}{'' if refine else '_norefine'}.json"
+    cache = mdir / f"pools_v2_n{n_per_j1}_s{seed}{'' if refine else '_norefine'}.json"
     pl = load_pools(cache)
     if pl is None:
         recs = recordings(model, mdir, n_per_j1, seed, system, drive_only)
