@@ -151,7 +151,7 @@ def _excursions(segments, n=3000, ts=5e-4, w=150.0):
 
 def _windows(data, ch, returns=True, **kw):
     det = FlankDetector(0.1, 5e-4, channels=ch, **kw)
-    det.second_windows = returns            # the return-traversal windows (off by default, on here)
+    det.second_windows = returns            # the return-traversal windows (on by default)
     evs = [e for b in stream_batches(data, 50) for e in det.push(b, ch)] + det.finish()
     return [e.window for e in evs if e.kind == "window"], det
 
@@ -173,11 +173,12 @@ def test_a_return_traversal_inside_a_window_gets_a_window_of_its_own():
     data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (901, 0.0)])
     wins, det = _windows(data, ch)
     assert len(wins) == 1 and det.return_windows == 0
-    # off (the default): the traversal back stays a second entry of the first window
+    # off (on is the default since the gap stage refuses the return traversals' low-torque J1): the traversal back
+    # stays a second entry of the first window
     data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (940, 0.0)])
     wins, det = _windows(data, ch, returns=False)
     assert len(wins) == 1 and wins[0].flags & FLAG_SECOND_ENTRY and det.return_windows == 0
-    assert FlankDetector.second_windows is False
+    assert FlankDetector.second_windows is True
     # the return traversal after the first window has ended: its own window as before
     data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (2700, -0.1), (2740, 0.0)], n=5000)
     wins, det = _windows(data, ch)

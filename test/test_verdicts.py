@@ -176,6 +176,25 @@ def test_an_interval_over_two_classes_is_ambiguous(configs, library, windows, mo
     assert d.refused_reason.startswith("ambiguous: ")
 
 
+@pytest.mark.parametrize("j1,se,level", [
+    (1.20, 0.07, "OK"),       # ± 11 %, the nominal inside: this window cannot resolve J1, nothing against the drive
+    (0.70, 0.04, "WARN"),     # ± 11 %, the nominal 11 standard errors away: the drive has changed, by how much unknown
+])
+def test_an_interval_wider_than_ten_percent_is_undetermined_not_an_error(configs, library, windows, monkeypatch, j1,
+                                                                          se, level):
+    """Not a fault of the monitor's configuration (ERROR) but this window's resolution (a low-torque return
+    traversal): no J1 published, the level follows the nominal as for an interval over two classes; the trend
+    takes it with its standard error (status 'ambiguous': trend_status.refusal_kind)."""
+    import jident_ros.identify.diagnosis as diagnosis
+    from jident_ros.identify.trend_status import refusal_kind
+    monkeypatch.setattr(diagnosis, "estimate_inertia", lambda *a, **kw: _wide_gap(j1, se))
+    d, published = _diagnose(configs, library, windows.case(0))
+    assert d.inertia_kgm2 is None and published == [] and d.class_kgm2 is None
+    assert d.status == "ambiguous" and d.level_name == level, d.message
+    assert d.message.startswith("undetermined: 95 % interval ") and "nothing published" in d.message, d.message
+    assert refusal_kind(d) is None
+
+
 def test_a_healthy_nominal_window_is_ok(configs, library, windows):
     from jident_ros.sim import Case, simulate_grid
     ws = simulate_grid(configs[0], [Case(1.16, 0.005, 0.0375), Case(1.16, 0.0025, 0.05)])  # off the pattern runs

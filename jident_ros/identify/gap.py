@@ -433,6 +433,13 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         for name, v in bounded:
             terms[name] = sens * v / np.sqrt(3.0)
             se = float(np.hypot(se, terms[name]))
+        if model.torque_offset_nm and x.size > 1:
+            # ... and a torque error drifting linearly across the fitted samples, -T..+T (gap_free.drift_term):
+            # J1 moves by sum x T(t) / sum x^2
+            ramp = np.linspace(-1.0, 1.0, x.size)
+            terms["torque_drift"] = abs(float(x @ ramp)) / max(float(x @ x), 1e-300) * model.torque_offset_nm \
+                / np.sqrt(3.0)
+            se = float(np.hypot(se, terms["torque_drift"]))
         if model.torque_lag_s:
             # the torque estimate's bounded lag τ: the shaft's torque is m_el + τ dm_el/dt, which moves J1 by
             # τ Σ x ṁ / Σx²

@@ -346,6 +346,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             # J1 T (r_κ · t²/2); zero when a fitted Coulomb column (one-signed ω1: ± t²/2) absorbs it
             tt = tau[f["i"]:f["j"]]
             terms["torque_offset"] = j1 * abs(float(row @ (0.5 * tt * tt))) * float(model.torque_offset_nm) / np.sqrt(3.0)
+            terms["torque_drift"] = drift_term(row, tt, j1, float(model.torque_offset_nm))
         if model.torque_lag_s:
             # m_el lagging by τ: the shaft's torque is m_el(t + τ) ≈ m_el + τ dm_el/dt, whose double integral adds
             # τ ∫m_el dt (and a linear term, absorbed): J1 moves by J1 τ (r_κ · ∫m_el dt)
@@ -421,6 +422,21 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     return {"j1": j1, "se": se, "se_stat": best["se_stat"], "terms": terms, "start": int(s_est), "end": int(e_est),
             "friction": friction, "coulomb_nm": float(f["fc"]), "residual": f["res"], "dof": f["X"].shape[0] - f["X"].shape[1],
             "change_point_error": float(terms["change_points"])}
+
+
+def drift_term(row: np.ndarray, tt: np.ndarray, j1: float, offset_nm: float) -> float:
+    """J1's standard uncertainty from a torque error that drifts linearly across the gap, from −offset to +offset
+    (or back): T(t) = T_d (2 (t − t_mid)/D − 1 + 1), |T_d| <= offset_nm, uniform.  The drive's torque estimate is off
+    by an amount that moves with the operating point (a rotor-resistance mismatch: with the slip), and a gap whose
+    torque is small shows it most (the vector drive's return traversals: 19 N m of gap torque, an estimate off by
+    1-3 N m across it).  Its double integral from the gap's first row, (T_d/J1)(2/D)(t³/6 − t_mid t²/2); θ0 and ω0
+    absorb nothing of it; J1 moves by J1 (r_κ · that)."""
+    if not offset_nm or tt.size < 2:
+        return 0.0
+    t0 = tt - tt[0]
+    dur = max(float(t0[-1]), 1e-300)
+    col = (2.0 / dur) * (t0 ** 3 / 6.0 - 0.5 * dur * t0 ** 2 / 2.0)
+    return float(j1 * abs(float(row @ col)) * offset_nm / np.sqrt(3.0))
 
 
 def _double_trapz_adjoint(row: np.ndarray, ts: float) -> np.ndarray:
@@ -551,6 +567,8 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
         c_col = np.zeros(end - P)
         c_col[i:] = 0.5 * ((np.arange(end - s_best)) * ts) ** 2
         terms["torque_offset"] = j1 * abs(float(row @ c_col)) * float(torque_offset_nm) / np.sqrt(3.0)
+        # ... and one that drifts across the gap (drift_term), zero before the entry
+        terms["torque_drift"] = drift_term(row[i:], np.arange(end - s_best) * ts, j1, float(torque_offset_nm))
     if torque_lag_s:
         # the torque estimate's bounded lag: τ ∫m_el dt from the entry (free_angle_fit's term)
         l_col = np.zeros(end - P)

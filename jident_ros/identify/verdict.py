@@ -298,8 +298,11 @@ class GapDecision:
 
 
 #: A gap J1 is published only with a 95 % interval within ± this fraction of it: a wider one could hold a J1 this
-#: far off (issue 20's target: no published J1 more than 10 % off); it is refused as undetermined, whatever classes
-#: it holds (the vector drive's heavy load reversal: ± 14 % around −30 %, one class inside, was published).
+#: far off (issue 20's target: no published J1 more than 10 % off); it is not published, as undetermined, whatever
+#: classes it holds (the vector drive's heavy load reversal: ± 14 % around −30 %, one class inside, was published).
+#: Such a window is 'ambiguous' (like an interval over two classes): a fact about this window's resolution, not
+#: the monitor's configuration, so its level follows the nominal (OK when the interval is consistent with it, WARN
+#: when it excludes it), and the trend takes its J1 with its standard error (issue 21).
 MAX_CI95_HALF_WIDTH_REL = 0.10
 
 
@@ -319,7 +322,7 @@ def decide_gap(gap: GapEstimate, classes, nominal_kgm2: float, policy: VerdictPo
     half = 0.5 * (gap.ci95_kgm2[1] - gap.ci95_kgm2[0])
     if not half <= MAX_CI95_HALF_WIDTH_REL * j1:
         a, b = gap.ci95_kgm2
-        return GapDecision("refused", f"undetermined: 95 % interval {a:.4g}..{b:.4g} kg m^2 is ± "
+        return GapDecision("ambiguous", f"undetermined: 95 % interval {a:.4g}..{b:.4g} kg m^2 is ± "
                                       f"{100 * half / j1:.3g} % of J1 (> ± {100 * MAX_CI95_HALF_WIDTH_REL:g} %): it cannot tell "
                                       f"a {100 * MAX_CI95_HALF_WIDTH_REL:g} % change", held)
     if len(held) >= 2:

@@ -378,11 +378,11 @@ class FlankDetector(BacklashDetector):
     extra_optional = True
     #: An entry inside a running window gets a window of its own when its excursion ends on the other flank (a
     #: return traversal: the second drive's and the vector drive's speed steps re-cross the zone 130-270 samples
-    #: after the first traversal, inside its window).  OFF by default: with the gap estimator of main 73110d2, 2 of
-    #: the vector drive's 18 return-traversal windows published J1 +12 % (a torque decaying like an exponential,
-    #: the torque estimate's lag scaling it like J1; docs/results.md "Entries: return traversals ..."): turn it on
-    #: once the gap stage refuses them (the zoo then finds 120/128 and 114/120 instead of 64/128 and 93/120).
-    second_windows = False
+    #: after the first traversal, inside its window).  On since stop 20: the gap stage now carries a torque error
+    #: drifting across the gap (gap_free.drift_term), which refuses the return traversals' low-torque J1 that went out
+    #: +12 % before (a fitted Coulomb term had absorbed the estimate's constant error, not its drift; docs/results.md
+    #: "Zoo: return traversals on").  False: one window per excursion, as before.
+    second_windows = True
 
     def __init__(self, wheel_radius_m: float, sample_period_s: float,
                  channels: Sequence[str] = DEFAULT_CHANNELS, samples_before_entry: int = 48,
