@@ -379,6 +379,7 @@ def _monitored_state(tmp_path):
     (lambda d: d["inertia"].update(scale=0.1), "inertia.scale"),
     (lambda d: d["inertia"].update(scale_ss=-1.0), "inertia.scale_ss"),
     (lambda d: d["inertia"].update(scale_dof=-2), "inertia.scale_dof"),
+    (lambda d: d["inertia"].update(refine_pending=[[0.0, 1.16, 0.0]]), "inertia.refine_pending"),
     (lambda d: d["inertia"]["history"][-1].__setitem__(3, 0.0), "inertia.history"),    # se 0
     (lambda d: d["inertia"]["history"][-1].__setitem__(1, 1e9), "inertia.history"),    # a time in the future
     (lambda d: d["width"]["y"].__setitem__(0, 5.0), "width.y[0]"),              # a 5 m backlash
@@ -514,3 +515,23 @@ def test_three_3_sd_windows_fire_the_gaussian_cusum_but_not_the_t_scored_one():
     step = J1 * 1.025                                                   # a 2.5 % step at se 0.5 %: 5 sd
     hits = run(TrendConfig(), [step] * 3)
     assert hits and hits[0].sign == 1 and hits[0].window_index <= 41
+
+
+def test_a_step_inside_the_refinement_does_not_widen_the_band_that_should_flag_it():
+    """The refinement (baseline and error scale) takes a window only once the CUSUM is back at 0: the first windows
+    of a step inside the refinement are held and dropped when it is flagged.  A +4 sd step right after a 5-window
+    commissioning: flagged at its 4th window (each scores t_8(3.65) = 2.75: +1.25); taken at once, the windows
+    moved the baseline towards the step and blew sigma_hat up, and the step came at its 6th (window 10; the golden
+    wear scenario was not flagged at all)."""
+    se = J1 * 0.005
+    ys = [J1 + d * se for d in (0.3, -0.3, 0.5, -0.5, 0.0)] + [J1 + 4.0 * se] * 4
+    tr = TrendTracker(TrendConfig())
+    us = tr.batch(3600.0 * np.arange(len(ys)), np.array(ys), np.full(len(ys), se))
+    hits = [(i, c) for i, u in enumerate(us) for c in u.changes if c.quantity == "inertia"]
+    assert hits and hits[0][0] == 8 and hits[0][1].sign == 1, hits
+    assert tr._inertia.scale_dof == 4                   # the commissioning's only: the step's windows were dropped
+    # in control, the held windows are learnt when the CUSUM returns to 0
+    calm = TrendTracker(TrendConfig(baseline_refine_windows=12))
+    zs = (0.3, -0.3, 0.5, -0.5, 0.0, 2.0, 0.0, -1.0, 0.2, 0.1, -0.2, 0.0)
+    calm.batch(3600.0 * np.arange(len(zs)), J1 + se * np.array(zs), np.full(len(zs), se))
+    assert calm._inertia.scale_dof == 4 + 7 and not calm._inertia.refine_pending
