@@ -303,3 +303,59 @@ def test_reverse_rotation_gives_the_same_j1_and_width_uncertainty(simulated):
         assert j_r == pytest.approx(j_f, rel=1e-9) and s_r == pytest.approx(s_f, rel=1e-9)
         assert w_r.width_m == pytest.approx(w_f.width_m, rel=1e-9)
         assert w_r.std_m == pytest.approx(w_f.std_m, rel=1e-9)
+
+
+@pytest.mark.parametrize("a1_noise", [1e-3, 0.2])
+def test_the_joint_fit_minimises_its_cost(a1_noise):
+    """The joint a1 fit's kappa is the minimum of its weighted least-squares cost (pre-entry m_el = m0, gap m_el =
+    G beta, gap a1 = kappa G beta), checked against an independent stacked least squares scanned over kappa, with an
+    accelerometer far more precise than the torque (the profile's stationarity h(kappa) is then tiny everywhere: a
+    solver that stopped on h instead of on its step returned its starting kappa) and with a noisy one."""
+    from jident_ros.identify.gap import _joint_fit, _torque_powers
+    rng = np.random.default_rng(4)
+    start, n, kappa_true = 48, 14, 0.0862
+    tau = np.arange(n) / n
+    m_true = np.concatenate([np.full(start, 300.0), 300.0 - 60.0 * tau ** 2 + 20.0 * tau ** 3, np.full(20, 150.0)])
+    a1 = rng.normal(0.0, a1_noise, m_true.size)
+    a1[start:start + n] += kappa_true * m_true[start:start + n]
+    m_el = m_true + rng.normal(0.0, 9.0, m_true.size)
+    fit = _joint_fit(m_el, a1, start, start + n)
+    sm, sa = fit["noise"]
+    G = np.column_stack([np.ones(n)] + [tau ** q for q in _torque_powers(n)])
+    e1 = np.eye(G.shape[1])[0]
+
+    def cost(k):
+        X = np.vstack([np.tile(e1, (start, 1)) / sm, G / sm, k * G / sa])
+        y = np.concatenate([m_el[:start] / sm, m_el[start:start + n] / sm, a1[start:start + n] / sa])
+        b, *_ = np.linalg.lstsq(X, y, rcond=None)
+        return float(np.sum((y - X @ b) ** 2))
+    k = fit["kappa"]
+    ks = k * (1.0 + np.linspace(-0.03, 0.03, 121))
+    costs = np.array([cost(x) for x in ks])
+    assert np.ptp(costs) > 0
+    assert abs(ks[int(np.argmin(costs))] / k - 1.0) <= 1e-3        # the scan's minimum is at the fit's kappa
+    assert cost(k) <= costs.min() * (1 + 1e-9)
+
+
+def test_the_joint_fit_with_an_exact_accelerometer_minimises_the_torque_residual():
+    """a1 exact (its noise at the floor, as in the robustness sweep's 'noise on m_el only'): the a1 rows pin G beta
+    = a1/kappa, so kappa minimises the m_el residual sum((pre - c0/kappa)^2) + |mg - G c/kappa|^2 (c: a1's
+    coefficients on G). The profile's stationarity is then ~1e-11 for every kappa: a solver that stopped on it
+    returned its starting kappa, 1 % off on the grid's windows."""
+    from jident_ros.identify.gap import _joint_fit, _torque_powers
+    rng = np.random.default_rng(5)
+    start, n, kappa_true = 48, 14, 0.0862
+    tau = np.arange(n) / n
+    m_true = np.concatenate([np.full(start, 300.0), 300.0 - 60.0 * tau ** 2 + 20.0 * tau ** 3, np.full(20, 150.0)])
+    a1 = np.zeros(m_true.size)
+    a1[start:start + n] = kappa_true * m_true[start:start + n]
+    m_el = m_true + rng.normal(0.0, 9.0, m_true.size)
+    k = _joint_fit(m_el, a1, start, start + n)["kappa"]
+    G = np.column_stack([np.ones(n)] + [tau ** q for q in _torque_powers(n)])
+    c, *_ = np.linalg.lstsq(G, a1[start:start + n], rcond=None)
+
+    def torque_residual(x):
+        return float(np.sum((m_el[:start] - c[0] / x) ** 2) + np.sum((m_el[start:start + n] - G @ c / x) ** 2))
+    ks = kappa_true * (1.0 + np.linspace(-0.05, 0.05, 2001))
+    best = ks[int(np.argmin([torque_residual(x) for x in ks]))]
+    assert k == pytest.approx(best, rel=1e-4)

@@ -195,6 +195,37 @@ def test_an_interval_wider_than_ten_percent_is_undetermined_not_an_error(configs
     assert refusal_kind(d) is None
 
 
+@pytest.mark.parametrize("why,level", [
+    ("gap too short: 2 samples inside the zone, need >= 3", "OK"),
+    ("gap fit undetermined: J1 = 1.2 kg m^2 with standard error 0.4 kg m^2 (> 25%); the window shows no free "
+     "acceleration of the motor", "OK"),
+    ("a1 fit: gap fit undetermined: J1 = 1.3 kg m^2 with standard error 0.5 kg m^2 (> 25%); the window shows no free "
+     "acceleration of the motor; angle fit: gap too short: 5 samples consistent with a free motor, need >= 8", "OK"),
+    ("a1 fit: gap fit undetermined: J1 = 1.3 kg m^2 with standard error 0.5 kg m^2 (> 25%); angle fit: gap fit gave "
+     "a non-physical 1/J1 from alpha1", "ERROR"),
+    ("gap fit gave a non-physical J1 = -0.3", "ERROR"),
+    ("the a1 fit (gap_only: J1 = 1.431 ± 0.016 kg m^2) and the angle fit (J1 = 1.151 ± 0.018 kg m^2) disagree by "
+     "11.6 standard errors (> 3): friction, a wrong gap interval or a lagging signal", "ERROR"),
+])
+def test_a_gap_that_cannot_resolve_j1_is_not_an_error(configs, library, windows, monkeypatch, why, level):
+    """A gap too short, or a fit whose standard error is above 25 %, says only that this window cannot resolve J1
+    (a low-torque return traversal): OK, nothing published. A non-physical or inconsistent fit says something is
+    wrong with the sensors or the configuration: ERROR."""
+    import jident_ros.identify.diagnosis as diagnosis
+    from jident_ros.identify.gap import NoGapError
+
+    def fail(*a, **kw):
+        raise NoGapError(why)
+    from jident_ros.identify.verdict import VerdictPolicy
+    monkeypatch.setattr(diagnosis, "estimate_inertia", fail)
+    # the image method never answers alone (margin 0): its untrusted class is information, not a problem
+    d, published = _diagnose(configs, library, windows.case(0), policy=VerdictPolicy(image_min_margin=0.0))
+    assert d.inertia_kgm2 is None and published == [] and d.status == "undiagnosed"
+    assert d.level_name == level, d.message
+    assert d.message.startswith("no J1 from this window: gap: " if level == "OK" else "window could not be diagnosed"), \
+        d.message
+
+
 def test_a_healthy_nominal_window_is_ok(configs, library, windows):
     from jident_ros.sim import Case, simulate_grid
     ws = simulate_grid(configs[0], [Case(1.16, 0.005, 0.0375), Case(1.16, 0.0025, 0.05)])  # off the pattern runs
