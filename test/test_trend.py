@@ -492,7 +492,11 @@ def test_the_error_scale_is_learnt_from_the_commissioning_and_the_refinement_the
     assert (ch.scale_ss, ch.scale_dof) == (pytest.approx(ss), 4)
     sig, nu = ch.error_scale()
     assert nu == 8.0 and sig == pytest.approx(math.sqrt((4.0 + ss) / 8.0)) and sig > 1.3
-    for i in range(5, 12):                                             # 3 refinement windows, then frozen
+    from jident_ros.identify.trend_status import trend_status
+    u = tr.update(3600.0 * 5, J1, se)
+    kv = dict(trend_status(u)[2])
+    assert u.inertia_error_scale == pytest.approx(ch.error_scale()[0]) and kv["inertia_error_scale_dof"] == 9.0
+    for i in range(6, 12):                                             # 3 refinement windows, then frozen
         tr.update(3600.0 * i, J1, se)
     assert ch.scale_dof == 4 + 3
     off = TrendTracker(TrendConfig(error_scale_prior_dof=None))

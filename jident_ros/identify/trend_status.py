@@ -164,7 +164,8 @@ def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
     time_to_limit_days (+ _low, _high), changes_detected (at this window), inertia_drift_ci95_low_pct /
     _high_pct, inertia_abs_se_kgm2 (with the torque-accuracy term), inertia_baseline_windows_refining (0: refined),
     inertia_windows_fed, inertia_windows_refused and windows_skipped (by reason, 'reason n, ...'), time_segment,
-    and for the last change
+    inertia_error_scale and inertia_error_scale_dof (the drive's learnt J1 error scale and its dof), and for the last
+    change
     of this window: last_change_quantity, last_change_time_s, last_change_onset_time_s,
     last_change_size, last_change_size_pct."""
     def days(s):
@@ -190,7 +191,9 @@ def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
              ("inertia_baseline_windows_refining", int(u.inertia_baseline_windows)),
              ("inertia_windows_fed", int(u.inertia_windows_fed)),
              ("inertia_windows_refused", _counts(u.inertia_windows_refused)),
-             ("windows_skipped", _counts(u.windows_skipped)), ("time_segment", int(u.time_segment))]
+             ("windows_skipped", _counts(u.windows_skipped)), ("time_segment", int(u.time_segment)),
+             ("inertia_error_scale", _v(u.inertia_error_scale)),
+             ("inertia_error_scale_dof", _v(u.inertia_error_scale_dof))]
     if u.changes:
         c = u.changes[-1]
         vals += [("last_change_quantity", c.quantity), ("last_change_time_s", c.time_s),
