@@ -13,6 +13,8 @@ error scale", and docs/results.md, "Trend: the drive's error scale".
   :func:`trend_relative.false_changes`, seeds as ``trend_relative`` (1, 2);
 * ``--config``: ``name=value`` pairs, comma-separated, of :class:`TrendConfig` (value a number, ``None``, ``True`` or
   ``False``); ``""`` is the default configuration;
+* ``--by-kind``: an experiment, not the tracker: per model, whole recordings drawn and one tracker per window
+  position in its recording (0: the entry, 1: the return traversal), the drive's change the first of either;
 * ``--precision``: synthetic calibrated Gaussian pools (4,000 windows per level, scatter = se = 0.5 ... 1.5 % of
   J1, seed 7): the -2.5 % step within 5 windows per scatter, default and Gaussian z (400 trials, seed 1).
 """
@@ -25,9 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from jident_ros.identify.trend import TrendConfig
+from jident_ros.identify.trend import TrendConfig, TrendTracker
 from jident_ros.research.evaluation import trend_relative as trl
 from jident_ros.research.evaluation import trend_targets as tt
+from jident_ros.research.evaluation.trend_simulation import delay_summary
 
 
 def parse_config(text: str) -> TrendConfig:
@@ -65,6 +68,52 @@ def on_model(pool_file: Path, cfg: TrendConfig, trials: int) -> dict:
             "false": f["changes"], "commissioning_changes": f["commissioning_changes"]}
 
 
+def by_kind(pool_file: Path, cfg: TrendConfig, trials: int, seed: int = 1, pre: int = 25, post: int = 20) -> dict:
+    """Step trials drawing whole recordings (as :func:`trend_relative.detection` with ``by_recording``), each window
+    fed to the tracker of its position in the recording: a baseline per window kind."""
+    p = trl.load_pools(pool_file)["pools"]
+    rng = np.random.default_rng(seed)
+    pos = {}
+    for j, d in p.items():
+        k = np.zeros(d["rec"].size, dtype=int)
+        for i in range(1, k.size):
+            k[i] = k[i - 1] + 1 if d["rec"][i] == d["rec"][i - 1] else 0
+        pos[j] = k
+
+    def draw(j, n):
+        recs = np.unique(p[j]["rec"])
+        idx: list = []
+        while len(idx) < n:
+            idx.extend(np.flatnonzero(p[j]["rec"] == recs[rng.integers(0, recs.size)]).tolist())
+        return idx
+    delays, missed, before = [], 0, 0
+    for _ in range(trials):
+        i0 = draw(trl.J1_BASE, cfg.commissioning_windows + pre)
+        i1 = draw(trl.J1_STEP, post)
+        seq = [(trl.J1_BASE, i) for i in i0] + [(trl.J1_STEP, i) for i in i1]
+        trackers: dict = {}
+        found = None
+        for n, (j, i) in enumerate(seq):
+            tr = trackers.setdefault(int(pos[j][i]), TrendTracker(cfg))
+            u = tr.update(trl.WINDOW_PERIOD_S * n, float(p[j]["j1"][i]), float(p[j]["se"][i]))
+            for c in u.changes:
+                if c.quantity != "inertia":
+                    continue
+                if n < len(i0):
+                    before += 1
+                elif c.sign == -1 and found is None:
+                    found = n - len(i0) + 1
+            if found is not None:
+                break
+        if found is None:
+            missed += 1
+        else:
+            delays.append(found)
+    r = delay_summary(trials, delays, missed, before)
+    return {"within_5": sum(v for k, v in r["histogram"].items() if k <= 5), "before": before,
+            "histogram": r["histogram"], "detected": r["detected"]}
+
+
 def precision(seed: int = 7) -> list:
     rng = np.random.default_rng(seed)
     rows = []
@@ -89,6 +138,7 @@ def main(argv=None) -> int:
     ap.add_argument("--trials", type=int, default=400)
     ap.add_argument("--monitored", type=int, default=100_000)
     ap.add_argument("--precision", action="store_true")
+    ap.add_argument("--by-kind", action="store_true", help="experiment: one tracker per window kind (module docstring)")
     a = ap.parse_args(argv)
     try:
         configs = [(c, parse_config(c)) for c in (a.config if a.config is not None else [""])]
@@ -106,6 +156,8 @@ def main(argv=None) -> int:
                     print(f"{m}: no {f}", file=sys.stderr)
                     continue
                 print(json.dumps({"pool": m, "config": text, **on_model(f, cfg, a.trials)}), flush=True)
+                if a.by_kind:
+                    print(json.dumps({"pool": m, "config": text, "by_kind": by_kind(f, cfg, a.trials)}), flush=True)
     if a.precision:
         for r in precision():
             print(json.dumps(r), flush=True)
