@@ -216,9 +216,9 @@ def three_entries():
 
 @pytest.mark.parametrize("shift", [0, 4, -4, 1])   # samples (0.5 ms each): aligned, 2 ms late / early, 0.5 ms
 def test_a_skewed_imu_gives_no_wrong_j1_and_is_reported(tmp_path, three_entries, shift):
-    """The Imu stamped as the JointState but its data ``shift`` samples late: today a 2 ms skew gives a J1
-    off by 2.5 %.  Beyond the tolerance (half a sample) the window is not diagnosed, the skew is reported,
-    and the next entries are diagnosed from the encoder."""
+    """The Imu stamped as the JointState but its data ``shift`` samples late: a 2 ms skew gave a J1 off by 2.5 %.
+    Beyond the tolerance (half a sample) the skew is reported, a1 is left out from then on, and the window in
+    which it was found is detected again from the encoder (issue 20: it was dropped): every window, none lost."""
     from jident_ros.cli.offline import diagnose_samples
     from jident_ros.research.second_drive.record import write_jointstate
     system, sig = three_entries
@@ -229,14 +229,34 @@ def test_a_skewed_imu_gives_no_wrong_j1_and_is_reported(tmp_path, three_entries,
     published = [w.inertia_kgm2 for w in res.windows if w.inertia_kgm2 is not None]
     assert all(abs(j - 1.16) / 1.16 < 0.002 for j in published), published   # 0 wrong publications
     skew_lines = [line for line in logs if "Imu a1 is" in line]
+    assert "imu_skew" not in res.dropped                                   # nothing lost
     if shift == 0:
-        assert len(published) == 2 and not skew_lines and "imu_skew" not in res.dropped
+        assert len(published) == 2 and not skew_lines
     else:
-        assert len(published) == 1 and res.dropped["imu_skew"] == 1        # the next entry: from the encoder
         (line,) = skew_lines
         ms = abs(shift) * 0.5
         assert f"Imu a1 is {ms:.2f} ms {'late' if shift > 0 else 'early'}" in line and "tolerance 0.25 ms" in line
-        assert [w.window_id for w in res.windows] == [2]                    # ids go on after the dropped one
+        assert "detected again from the encoder" in line
+        assert [w.window_id for w in res.windows] == [1, 2]                 # the skewed window, found again
+        assert any("1 window(s) detected again from the encoder, 0 lost" in n for n in res.notes)
+
+
+def test_no_entry_hint_is_never_empty_when_entries_were_found():
+    """Entries found but no window diagnosed (all lost): the no-entry line says so, never an empty reason."""
+    from jident_ros.cli.offline import OfflineResult, _finish
+
+    class Lost:
+        windows_captured, samples_seen, batches_seen = 1, 4400, 88
+        counts = {"imu_skew": 1, "gap": 0}
+
+        def finish(self):
+            return []
+
+        def no_entry_reason(self):
+            return ""
+    res = OfflineResult("x", "/joint_states", "estimated", detector="flank")
+    _finish(res, Lost(), lambda text: None)
+    assert res.no_entry_hint == "the flank detector: 1 entry found, no window diagnosed (drops: imu_skew 1)"
 
 
 def test_imu_skew_estimate_sign_and_size():
@@ -620,8 +640,9 @@ def test_a_renamed_joint_is_named_in_the_windowing_status_live(node_env, ros, tm
 
 @pytest.mark.ros
 def test_a_skewed_imu_live_no_wrong_j1(node_env, ros, tmp_path, three_entries):
-    """The windowing node on JointState + a 2 ms late Imu: the first window is not published (WARN naming the
-    skew), the next entries go out from the encoder; every J1 the diagnostic node publishes is right."""
+    """The windowing node on JointState + a 2 ms late Imu: a WARN names the skew, the first window is detected again
+    from the encoder (the chain of jident diagnose, :class:`ImuSkewGuard`), so are the next entries; every J1 the
+    diagnostic node publishes is right."""
     from builtin_interfaces.msg import Time
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Vector3
@@ -664,6 +685,7 @@ def test_a_skewed_imu_live_no_wrong_j1(node_env, ros, tmp_path, three_entries):
         ros.spin_until(lambda: False, 2.0)
         assert all(abs(m.data - 1.16) / 1.16 < 0.002 for m in est), [m.data for m in est]
         assert len(warned()) >= 1 and win.alive() and diag.alive()
+        assert all("detected again from the encoder" in s.message for s in warned())
     finally:
         win.stop()
         diag.stop()

@@ -401,10 +401,17 @@ def _finish(result, detector, log):
         w = ev.window
         result.cut_off.append({"entry_time_s": w.entry_time_s, "samples_from_entry": len(w) - w.entry_index})
         log(f"window cut off by the end of the data: {ev.detail}")
-    if not result.windows and not result.cut_off and hasattr(detector, "no_entry_reason"):
-        result.no_entry_hint = f"the {result.detector} detector: {detector.no_entry_reason()}"
     result.samples, result.batches = detector.samples_seen, detector.batches_seen
     result.dropped = {r: n for r, n in detector.counts.items() if n}
+    if not result.windows and not result.cut_off:
+        why = detector.no_entry_reason() if hasattr(detector, "no_entry_reason") else ""
+        if not why and getattr(detector, "windows_captured", 0):
+            # entries were found, but no window came out: never an empty reason
+            lost = ", ".join(f"{r} {n}" for r, n in result.dropped.items()) or "none counted"
+            why = (f"{detector.windows_captured} entr{'y' if detector.windows_captured == 1 else 'ies'} found, "
+                   f"no window diagnosed (drops: {lost})")
+        if why:
+            result.no_entry_hint = f"the {result.detector} detector: {why}"
 
 
 def _make_detector(system, config: DetectorConfig, batch_channels, topic_name):
@@ -458,26 +465,28 @@ def diagnose_samples(path, options: Optional[OfflineOptions] = None, *,
     result = OfflineResult(str(path), source, "estimated" if o.detector != "paper" else "option",
                            detector=o.detector)
     monitor = setup.monitor(result, log, say_gap_only=False)
-    skew = ImuSkewGuard(adapter, log)
+    config = DetectorConfig(o.detector, o.backlash_width_m, None, None, o.gear_ratio)
+    # every batch through the Imu skew check (the node's chain): a window whose a1 is out of step is detected
+    # again without a1
+    skew = ImuSkewGuard(adapter, lambda chans: _make_detector(setup.system, config, chans, source), log)
     try:
         for arr, channels in batches:
-            arr, channels = skew.strip(arr, channels)
-            if monitor.detector is None:
-                config = DetectorConfig(o.detector, o.backlash_width_m, None, None, o.gear_ratio)
-                monitor.detector = skew.carried(_make_detector(setup.system, config, channels, source))
-            for ev in monitor.detector.push(arr, channels):
+            monitor.detector, events = skew.push(monitor.detector, arr, channels)
+            for ev in events:
                 if ev.kind != "window":
                     monitor.events.append(ev)
-                elif skew.in_step(ev.window, monitor):     # no J1 from an Imu out of step with the encoder
+                else:
                     r = monitor.window(ev.window)
                     _add_window(result, r.window, r.diagnosis, None, on_window)
-                else:
-                    break                                  # a new detector from the next batch, without a1
     except InputError as exc:   # a CSV read block by block: its errors come while streaming
         raise OfflineError(str(exc)) from None
-    if monitor.detector is None and skew.retired is None:
+    if monitor.detector is None:
         raise OfflineError(f"recording {path}: no sample")
-    _finish(result, monitor.detector or skew.retired, log)
+    _finish(result, monitor.detector, log)
+    if skew.skews:
+        result.notes.append(f"Imu a1 out of step with the encoder in {skew.skews} window(s): a1 left out from then "
+                            f"on, {skew.skews - skew.dropped} window(s) detected again from the encoder, "
+                            f"{skew.dropped} lost")
     if skew.dropped:
         result.dropped["imu_skew"] = skew.dropped
     if adapter is not None:

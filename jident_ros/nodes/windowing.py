@@ -43,7 +43,7 @@ from jident_ros.nodes.runtime import RunnableNode, events_executor
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import WINDOWING, WINDOWING_PARAMS
 from jident_ros.stream.detector import REASONS
-from jident_ros.stream.imu_skew import IMU_SKEW_TOLERANCE_SAMPLES, carry_counts, check_imu_skew, skew_line
+from jident_ros.stream.imu_skew import IMU_SKEW_TOLERANCE_SAMPLES, ImuSkewGuard
 from jident_ros.stream.inputs import JointStateAdapter
 from jident_ros.stream.layout import KNOWN_CHANNELS
 from jident_ros.stream.text import plain_numbers
@@ -149,8 +149,11 @@ class WindowingNode(RunnableNode, Node):
                                                       qos_latched())
         self.errors = 0
         self.drops_since_summary = 0
-        self.imu_skew = None              # the last window's Imu skew report (check_imu_skew)
-        self.windows_imu_skew = 0
+        # with use_imu: every batch through the Imu skew check (jident diagnose's chain): a window whose a1 is out of
+        # step is detected again without a1 by a new detector (the adapter goes on without a1)
+        self.skew = (ImuSkewGuard(self.adapter, lambda chans: self._make_detector(
+            tuple(ch for ch in self.detector.channels if ch != "a1")), self._imu_skew_found)
+            if self.adapter is not None and c["use_imu"] else None)
         self._input_mark = (0, 0)         # adapter messages, samples at the last rate status
         self._rate_mark = (time.monotonic(), 0, 0, 0)
         self._last_batch_wall = time.monotonic()   # steady time, samples, batches, windows at last status
@@ -235,7 +238,10 @@ class WindowingNode(RunnableNode, Node):
     def _batches(self, batches):
         """Push (array, channels) batches through the detector; publish what each one gives."""
         for arr, channels in batches:
-            events = self.detector.push(arr, channels)
+            if self.skew is not None:
+                self.detector, events = self.skew.push(self.detector, arr, channels)
+            else:
+                events = self.detector.push(arr, channels)
             self._progress(arr, channels)
             self._publish_events(events)
 
@@ -243,32 +249,19 @@ class WindowingNode(RunnableNode, Node):
         """A window on drive/window; a dropped window or batch on /diagnostics (with its reason)."""
         for ev in events:
             if ev.kind == "window":
-                if self.adapter is not None and self.adapter.use_imu and not self._imu_in_step(ev.window):
-                    continue
                 self.pub_window.publish(window_to_msg(ev.window))
             else:
                 self._report_drop(ev)
 
-    def _imu_in_step(self, win) -> bool:
-        """The Imu a1 of a window against the encoder (:func:`check_imu_skew`).  Beyond the tolerance the window
-        is not published (its entry and re-contact were placed with the skewed a1: no J1 from it), counted, a
-        WARN says so, and the input goes on without a1 (a new detector on the encoder's acceleration)."""
-        report = check_imu_skew(win)
-        if report is None:
-            return True
-        self.imu_skew = report
-        if report["within"]:
-            return True
-        self.windows_imu_skew += 1
-        self.drops_since_summary += 1
-        text = skew_line(report, win.window_id)
+    def _imu_skew_found(self, text: str) -> None:
+        """A window's Imu a1 out of step with the encoder (:class:`ImuSkewGuard`): a WARN says so; a1 is left out
+        from now on and the window is detected again from the encoder (``window_dropped`` only when it was not)."""
+        lost = self.skew.last_lost
+        if lost:
+            self.drops_since_summary += 1
         self.get_logger().warning(text)
-        self.adapter.drop_a1()
-        self.detector = carry_counts(self.detector, self._make_detector(
-            tuple(ch for ch in self.detector.channels if ch != "a1")))
         self.diag.publish(make_status(status_name(self, STATUS_TASK), WARN, text, self.hardware_id, self._values(
-            [("reason", "imu_skew"), ("window_dropped", True)])))
-        return False
+            [("reason", "imu_skew"), ("window_dropped", lost)])))
 
     def close(self) -> None:
         """At shutdown: a window in progress is reported as cut off by the end of the data."""
@@ -418,10 +411,11 @@ class WindowingNode(RunnableNode, Node):
             if problems:
                 vals.append(("jointstate.top_problem", f"{problems[0][0]} ({problems[0][1]}x)"))
             if self.adapter.use_imu or self.adapter.a1_dropped:
-                sk = self.imu_skew or {}
+                sk = (self.skew.report if self.skew is not None else None) or {}
                 vals += [("imu_skew_s", "unknown" if sk.get("skew_s") is None else sk["skew_s"]),
                          ("imu_skew_tolerance_s", IMU_SKEW_TOLERANCE_SAMPLES * self.adapter.sample_period_s),
-                         ("windows_dropped_imu_skew", self.windows_imu_skew),
+                         ("windows_imu_skew", 0 if self.skew is None else self.skew.skews),
+                         ("windows_dropped_imu_skew", 0 if self.skew is None else self.skew.dropped),
                          ("a1_used", self.adapter.use_imu)]
             vals += [(f"jitter.{k}", v) for k, v in self.adapter.jitter().items()]
         vals += [(f"dropped.{r}", d.counts[r]) for r in REASONS if r != "empty"]
@@ -441,6 +435,8 @@ class WindowingNode(RunnableNode, Node):
         self.errors += 1
         if reset:
             self.detector.reset()
+            if self.skew is not None:
+                self.skew.reset()
         text = plain_numbers(f"internal error in {where}: {type(exc).__name__}: {exc}")
         self.get_logger().error(text, throttle_duration_sec=1.0)
         try:

@@ -25,7 +25,10 @@ and on what the clutch does, not on inequality (1):
   the load-torque estimate T_L = m_el - J1_nom a1 / r still carries more than ``load_drop_fraction`` of the
   steady load torque: a coupling that unloads gradually (a drive that decelerates off its flank) is still in
   contact while delta starts to move (at most ``refine_samples`` samples).  In the simulator's slip
-  scenario the departure sample is the entry sample already.
+  scenario the departure sample is the entry sample already: without a1, a departure where delta jumps (a slip)
+  is not moved at all.  Without a1, a departure that delta reached by drifting off its flank at a good share of its
+  speed (a coupling untwisting as its torque ramps through zero: a light load reversal, whose departure comes 22-24
+  samples after the contact loss) moves back to where delta's free curvature starts (:func:`free_departure`).
 * **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
   ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
   (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry
@@ -93,6 +96,7 @@ class _FlankCapture:
     pending: bool = False      # an entry inside another window: its own window only once its excursion ends on the
                                # other flank (a traversal), decided at the next contact
     start_row: int = 0         # stream row of the capture's first row
+    returning: bool = False    # a traversal back inside another window (its flank: the other window's re-contact)
 
 
 def motor_acceleration(window: dict, wheel_radius_m: float, sample_period_s: float):
@@ -135,6 +139,69 @@ MIN_TRAVERSAL_SAMPLES = 4
 #: rests at the flank for 54 samples after the contact loss).  Without a1 the second difference of alpha1 is too
 #: noisy for it (2^16 counts at 2 kHz: ~20 N m of torque noise): the gap estimator's change points refine it.
 REFINE_BACK_SAMPLES = 128
+
+#: Without a1, the entry sample may move back this many samples before the departure to the start of delta's free
+#: curvature (:func:`free_departure`: a light load reversal leaves its flank with little relative speed, so delta
+#: crosses the departure threshold 22-24 samples after the contact loss on the vector drive's 2^16 recordings) ...
+DRIFT_BACK_SAMPLES = 40
+#: ... fitted over this many samples before the earliest candidate and ...
+DRIFT_PRE_SAMPLES = 10
+#: ... this many from the departure on
+DRIFT_POST_SAMPLES = 32
+#: The move is taken only when delta was already drifting off its flank, in the departure's direction, at this share
+#: of its speed at the departure (the coupling untwisting as its torque ramps through zero: 0.24-0.35 on the vector
+#: drive's light load reversals; at most 0.05 on its speed steps, speed reversals and heavy load reversals and on
+#: the second drive's speed steps, whose delta rests flat before a curvature onset that lies 8-26 samples before the
+#: contact loss) -- chosen on the vector drive, checked on the second drive and ours (zoo report) ...
+DRIFT_MIN_SPEED_SHARE = 0.15
+#: ... significantly (z of the drift speed) ...
+DRIFT_MIN_Z = 3.0
+#: ... and the fit explains delta within this many times its noise (the flank's contact sigma, at least one
+#: quantum / sqrt 12): a jump of delta (our simulator's slip) is not a curvature
+DRIFT_MAX_RMS_SIGMAS = 3.0
+
+
+def free_departure(delta: np.ndarray, departure: int, first: int, noise_rad: float,
+                   back: int = DRIFT_BACK_SAMPLES) -> int:
+    """The entry row moved back from ``departure`` (not before ``first``) to where delta's free curvature starts,
+    without a1 (module docstring): delta over [e - DRIFT_PRE_SAMPLES, departure + DRIFT_POST_SAMPLES) is fitted by a
+    line that turns C1 into a parabola at e (delta = a + v (t - e) + c/2 (t - e)_+^2: in contact a torque ramping
+    through zero untwists the coupling at a constant rate; in the gap the relative motion is free, constant relative
+    acceleration), e by least squares over [departure - back, departure]; the move is taken when the line's speed v
+    is at least DRIFT_MIN_SPEED_SHARE of the departure speed v + c (departure - e), in its direction, with
+    z >= DRIFT_MIN_Z, and the fit's rms is within DRIFT_MAX_RMS_SIGMAS x ``noise_rad``.  Else ``departure``."""
+    lo_e = max(departure - back, first, DRIFT_PRE_SAMPLES + 2)
+    lo, hi = lo_e - DRIFT_PRE_SAMPLES, min(departure + DRIFT_POST_SAMPLES, delta.size)
+    if lo_e >= departure or hi - departure < DRIFT_POST_SAMPLES // 2:
+        return departure
+    t = np.arange(lo, hi, dtype=float)
+    y = np.asarray(delta[lo:hi], float)
+    y0 = float(y.mean())                          # centred: the normal equations stay well conditioned
+    cand = np.arange(lo_e, departure + 1, dtype=float)
+    X = np.stack([np.ones((cand.size, t.size)), t[None, :] - cand[:, None],
+                  np.clip(t[None, :] - cand[:, None], 0.0, None) ** 2], axis=2)      # (candidates, samples, 3)
+    XtX = np.einsum("kni,knj->kij", X, X)
+    Xty = np.einsum("kni,n->ki", X, y - y0)
+    try:
+        coefs = np.linalg.solve(XtX, Xty[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        return departure
+    rss_all = np.sum((y - y0 - np.einsum("kni,ki->kn", X, coefs)) ** 2, axis=1)
+    k = int(np.argmin(rss_all))                   # the first of equal ones, as a loop over the candidates would
+    rss, e, coef, X = float(rss_all[k]), int(cand[k]), coefs[k], X[k]
+    if e >= departure or not math.sqrt(rss / y.size) <= DRIFT_MAX_RMS_SIGMAS * noise_rad:
+        return departure
+    v, c2 = float(coef[1]), float(coef[2])
+    v_dep = v + 2.0 * c2 * (departure - e)
+    side = 1.0 if v_dep >= 0 else -1.0
+    try:
+        se_v = math.sqrt(float(np.linalg.inv(X.T @ X)[1, 1]) * rss / (y.size - 3))
+    except np.linalg.LinAlgError:
+        return departure
+    if side * v >= DRIFT_MIN_SPEED_SHARE * abs(v_dep) and side * v >= DRIFT_MIN_Z * se_v:
+        return e
+    return departure
+
 
 #: A return traversal found by a window's edge scan (:meth:`FlankDetector._scan_returns`) opens no capture when one
 #: exists with its entry this close (the contact rule found it already); one whose entry lies later, up to where the
@@ -425,6 +492,8 @@ class FlankDetector(BacklashDetector):
         if self.nominal_inertia_kgm2 is not None and "m_el" in self.channels and "a1" in self.channels:
             # the entry sample may move back from the departure (back_to_load): the history holds it
             self.history_extra = REFINE_BACK_SAMPLES
+        elif self.detector_name == "flank" and "a1" not in self.channels:
+            self.history_extra = DRIFT_BACK_SAMPLES          # ... or to delta's free curvature (free_departure)
         self.min_travel_rad = float(min_travel_rad)
         #: departures back on their flank within confirm_samples (an encoder spike; not entries, counted)
         self.spikes = 0
@@ -702,6 +771,7 @@ class FlankDetector(BacklashDetector):
                 if self.second_windows and not any(c.skip for c in self._caps) \
                         and hist.shape[0] >= self.samples_before_entry + self._extra_needed:
                     self._last_cap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma, pending=True,
+                                                   returning=True,
                                                    start_row=self._entry_row - hist.shape[0])
                     self._caps.append(self._last_cap)
                 continue
@@ -779,6 +849,8 @@ class FlankDetector(BacklashDetector):
     def _finish_flank(self, cap: _FlankCapture) -> Event:
         data = np.concatenate(cap.rows)
         dep = cap.departure_row
+        self._cap_sigma = cap.flank_sigma_rad      # the entry flank's contact noise (free_departure)
+        self._cap_returning = cap.returning
         shift, recontact = self._refine(data, dep)
         e0 = dep + shift - self.samples_before_entry
         win = data[e0:e0 + self.window_length]
@@ -884,7 +956,7 @@ class FlankDetector(BacklashDetector):
                 self._caps.remove(c)                    # found late by the contact rule (delta resting at the flank
                 self.return_windows -= 1                # looked like a contact): the edge crossing replaces it
             rows = data[lo:]
-            new = _FlankCapture([rows], rows.shape[0], row - lo, float(edge_out), cap.flank_sigma_rad,
+            new = _FlankCapture([rows], rows.shape[0], row - lo, float(edge_out), cap.flank_sigma_rad, returning=True,
                                 start_row=cap.start_row + lo)
             self._caps.append(new)
             self._new_caps.append(new)
@@ -921,12 +993,53 @@ class FlankDetector(BacklashDetector):
         """The departure threshold of the contact a capture's entry left."""
         return max(self.k_sigma * cap.flank_sigma_rad, self.min_departure_rad)
 
+    def _jumped(self, data: np.ndarray, dep: int) -> bool:
+        """Whether delta left its flank by a jump at ``dep`` (a slip of the line or the load encoder, our simulator's
+        scenario: the contact is lost at that sample, not while delta moves off gradually), as
+        :func:`estimate_width` tells a slip: the step into the departure sample 4 x the steps around it, and beyond
+        10 quanta and contact_tolerance_rad."""
+        if not 2 <= dep < data.shape[0] - 1:
+            return False
+        d = self._delta(data[dep - 2:dep + 2])
+        before, step, after = d[1] - d[0], d[2] - d[1], d[3] - d[2]
+        return abs(step) > max(4.0 * max(abs(before), abs(after)), 10.0 * self.angle_quantum_rad,
+                               self.contact_tolerance_rad)
+
     def _refine(self, data: np.ndarray, dep: int):
         """(samples from the departure to the entry sample, re-contact row or None) from the dynamics
-        (:func:`single_mass_run`), (0, None) without m_el, a motor acceleration or J1_nom."""
+        (:func:`single_mass_run`), (0, None) without m_el, a motor acceleration or J1_nom.  Without a1: first moved
+        back to delta's free curvature when delta drifted off its flank before the departure (:func:`free_departure`;
+        then the forward move is not tried); (0, None) when delta jumped off its flank (:meth:`_jumped`: a slip)."""
+        jumped = self._jumped(data, dep)
+        # not in a traversal back (delta rings at the other flank after the impact before it leaves it again: on the
+        # vector drive's 2^13 speed steps the move took return entries 10-40 samples back, one before its gap)
+        if self.detector_name == "flank" and "a1" not in self.channels and not jumped \
+                and not getattr(self, "_cap_returning", False):
+            delta = self._delta(data)
+            # the noise: the contact's sigma, at least the quantisation (the configured encoder's, else the smallest
+            # step delta makes before the departure, below the departure threshold)
+            steps = np.abs(np.diff(delta[max(dep - DRIFT_BACK_SAMPLES - DRIFT_PRE_SAMPLES, 0):dep]))
+            steps = steps[(steps > 1e-9) & (steps < self.min_departure_rad)]   # not a float rounding, not a jump
+            quantum = self.angle_quantum_rad or (float(steps.min()) if steps.size else 0.0)
+            sigma = float(getattr(self, "_cap_sigma", 0.0))
+            noise = max(sigma if math.isfinite(sigma) else 0.0, quantum / math.sqrt(12.0))
+            e = free_departure(delta, dep, self.samples_before_entry, noise)
+            if e < dep:
+                return e - dep, None
         if self.nominal_inertia_kgm2 is None or "m_el" not in self.channels:
             return 0, None
-        wd = {c: data[:, j] for j, c in enumerate(self.channels)}
+        if "a1" not in self.channels and jumped:
+            # delta jumped off its flank (a slip): the contact is lost at the jump.  Without a1 the dynamics' forward
+            # move runs on the noisy second difference of alpha1 and put 21 of the raw scenario's 40 entries 1-12
+            # samples late (its run's re-contact row with them: 8 of 40 windows refused); the gap stage finds both
+            return 0, None
+        # without a1 the rows kept for free_departure are left out here: the dynamics see the samples_before_entry
+        # rows before the departure as before (single_mass_run's noise of the second difference of a 2^13 encoder's
+        # alpha1 comes from them and the filter's edge; with 40 rows more the second drive's 2^13 K2 went from 6.4 %
+        # to 39-86 % median error: the re-contact row is that fragile, the zoo report)
+        off = 0 if "a1" in self.channels else max(dep - self.samples_before_entry, 0)
+        wd = {c: data[off:, j] for j, c in enumerate(self.channels)}
+        dep -= off
         acc, src = motor_acceleration(wd, self.wheel_radius_m, self.sample_period_s)
         if acc is None:
             return 0, None
@@ -936,4 +1049,4 @@ class FlankDetector(BacklashDetector):
         if src == "a1" and self.history_extra:
             first = max(entry - self.history_extra, self.samples_before_entry)     # the history there is
             entry = back_to_load(wd["m_el"], acc, entry, first, self.nominal_inertia_kgm2, end=recontact)
-        return entry - dep, recontact
+        return entry - dep, None if recontact is None else recontact + off

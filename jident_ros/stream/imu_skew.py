@@ -5,21 +5,26 @@ JointState's while its data do not (a stamp taken late) gives a J1 off by percen
   the second difference of alpha1, smoothed alike; the better correlated wins), to a fraction of a sample;
 * :func:`check_imu_skew` says whether a captured window's skew is within :data:`IMU_SKEW_TOLERANCE_SAMPLES`
   (half a sample: 0.25 ms at 2 kHz, the stamp matching's own tolerance);
-* beyond it the window is not diagnosed (the detector placed its entry and re-contact with the skewed a1) and
-  the input goes on without a1 (:meth:`jident_ros.stream.inputs.JointStateAdapter.drop_a1`), the detector
-  replaced by one on the encoder's acceleration (:func:`carry_counts`, :class:`ImuSkewGuard`).
+* beyond it the input goes on without a1 (:meth:`jident_ros.stream.inputs.JointStateAdapter.drop_a1`), the
+  detector replaced by one on the encoder's acceleration, and the window is detected again by it from the rows
+  kept (:class:`ImuSkewGuard`, the node's and ``jident diagnose``'s one chain): no J1 from the skewed a1, and the
+  window is not lost (issue 20: before, the window in which the skew was found was dropped).
 """
 from __future__ import annotations
 
+import math
 from typing import Optional
 
 import numpy as np
 
-__all__ = ["IMU_SKEW_MIN_CORRELATION", "IMU_SKEW_TOLERANCE_SAMPLES", "ImuSkewGuard", "carry_counts",
-           "check_imu_skew", "imu_skew", "skew_line"]
+__all__ = ["IMU_SKEW_MIN_CORRELATION", "IMU_SKEW_TOLERANCE_SAMPLES", "ImuSkewGuard",
+           "SKEW_REFEED_MARGIN_SAMPLES", "check_imu_skew", "imu_skew", "skew_line"]
 
 #: Imu a1 may be this many sample periods out of step with the encoder before a1 is left out of a window.
 IMU_SKEW_TOLERANCE_SAMPLES = 0.5
+#: A window whose a1 is out of step is detected again without a1 from this many samples before its first sample
+#: (the new detector learns the flank level there: contact_samples 32 and the confirmation)
+SKEW_REFEED_MARGIN_SAMPLES = 64
 #: The smallest correlation of a1 with the encoder's acceleration at which a skew estimate is trusted.
 IMU_SKEW_MIN_CORRELATION = 0.5
 
@@ -91,8 +96,8 @@ def check_imu_skew(window, tolerance_samples: float = IMU_SKEW_TOLERANCE_SAMPLES
     """The Imu skew of a captured window holding a1: None without a1, else ``{"skew_s"`` (None when no
     estimate was possible: :func:`imu_skew`), ``"tolerance_s"``, ``"correlation"``, ``"reference"``,
     ``"within"`` (False only for an estimate beyond the tolerance)}.  A window beyond the tolerance must not
-    give a J1: its a1 is out of step, and the detector placed the entry and the re-contact with it -- drop it
-    and go on without a1 (:meth:`JointStateAdapter.drop_a1`).  Without an estimate a1 is kept (the stamps
+    give a J1: its a1 is out of step, and the detector placed the entry and the re-contact with it -- it is
+    detected again without a1 (:class:`ImuSkewGuard`).  Without an estimate a1 is kept (the stamps
     matched within T_s/2)."""
     chans = tuple(window.channels)
     if "a1" not in chans:
@@ -107,36 +112,48 @@ def check_imu_skew(window, tolerance_samples: float = IMU_SKEW_TOLERANCE_SAMPLES
             "within": est is None or abs(est["skew_s"]) <= tol_s}
 
 
-def carry_counts(old, new):
-    """``new`` detector goes on where ``old`` stopped: window ids, samples, batches and drop counts carried
-    over (a detector replaced mid-stream, e.g. without a1).  Returns ``new``."""
-    for name in ("windows_captured", "samples_seen", "batches_seen"):
-        if hasattr(old, name) and hasattr(new, name):
-            setattr(new, name, getattr(old, name))
-    for r, n in getattr(old, "counts", {}).items():
-        if r in getattr(new, "counts", {}):
-            new.counts[r] += n
-    return new
-
-
-def skew_line(report: dict, window_id) -> str:
-    """One line for a window whose Imu skew is beyond the tolerance (:func:`check_imu_skew`)."""
+def skew_line(report: dict, window_id, outcome: str = "lost") -> str:
+    """One line for a window whose Imu skew is beyond the tolerance (:func:`check_imu_skew`); ``outcome``: "again"
+    (the window detected again without a1), "capturing" (... its window still being captured) or "lost"."""
     late = "late" if report["skew_s"] > 0 else "early"
-    return (f"window {window_id} not diagnosed: Imu a1 is {1e3 * abs(report['skew_s']):.2f} ms {late} against the "
+    head = f"window {window_id}" if outcome != "lost" else f"window {window_id} not diagnosed"
+    tail = {"again": "the window is detected again from the encoder",
+            "capturing": "the window is being detected again from the encoder",
+            "lost": "the encoder found no window there again (lost, counted in imu_skew)"}[outcome]
+    return (f"{head}: Imu a1 is {1e3 * abs(report['skew_s']):.2f} ms {late} against the "
             f"encoder (a1 against the derivative of {report['reference']}, correlation {report['correlation']:.2f}); "
             f"beyond the tolerance {1e3 * report['tolerance_s']:.2f} ms: no J1 from a1, a1 left out from now on "
-            "(the encoder gives the acceleration)")
+            f"(the encoder gives the acceleration); {tail}")
 
 
 class ImuSkewGuard:
-    """An offline reader's side of :func:`check_imu_skew` (``jident diagnose`` on a JointState + Imu bag): a
-    window whose a1 is out of step is not diagnosed (counted in :attr:`dropped`, one line to ``log``), the
-    adapter goes on without a1 and the owner's detector is replaced (:meth:`carried` carries ids and counts)."""
+    """The one home of :func:`check_imu_skew` in a running chain (the windowing node with ``use_imu`` and
+    ``jident diagnose`` on a JointState + Imu bag push every batch through :meth:`push`).
 
-    def __init__(self, adapter, log):
-        self.adapter, self.log = adapter, log
-        self.dropped = 0
-        self.retired = None
+    Each window the detector gives is checked; a window whose a1 is out of step is **detected again without a1**:
+    the adapter goes on without a1 (:meth:`JointStateAdapter.drop_a1`), a new detector (``remake(channels)``, the
+    owner's factory) takes over, counts and window ids carried over, and is fed the recent rows it
+    keeps (from :data:`SKEW_REFEED_MARGIN_SAMPLES` before the skewed window's first sample, not before the end of the
+    window before it) without a1: the window comes out again with its entry placed from the encoder, under the same
+    window id.  Only a window that this second pass does not find (nor keeps capturing) is lost, counted in
+    :attr:`dropped`.  :attr:`skews` counts the windows whose check found the skew, :attr:`report` is the last check.
+    ``log`` gets one line per skew found (:func:`skew_line`) and per window lost.
+    """
+
+    def __init__(self, adapter, remake, log=lambda text: None, keep_rows: int = 0):
+        self.adapter, self.remake, self.log = adapter, remake, log
+        self.skews = 0          # windows whose Imu check found a1 out of step (a1 left out after the first)
+        self.dropped = 0        # ... of them, windows lost (not found again without a1)
+        self.report: Optional[dict] = None
+        self.keep_rows = int(keep_rows)
+        self._kept: list = []   # recent (array, channels) batches the detector took, since its last drop
+        self._kept_rows = 0
+        self._last_end_t = -math.inf     # the last sample of the last window given out
+        self.last_lost = False
+
+    def reset(self) -> None:
+        """The owner reset its detector (continuity lost): the rows kept so far are not fed again."""
+        self._kept, self._kept_rows = [], 0
 
     def strip(self, arr, channels):
         """A batch made before a1 was left out, without its a1 column."""
@@ -145,18 +162,73 @@ class ImuSkewGuard:
             return arr[:, keep], tuple(channels[j] for j in keep)
         return arr, channels
 
-    def carried(self, detector):
-        return detector if self.retired is None else carry_counts(self.retired, detector)
+    def push(self, detector, arr, channels) -> tuple:
+        """One batch through ``detector`` (None: made by ``remake`` from the batch's channels); returns (the
+        detector that goes on, its events in stream order)."""
+        arr, channels = self.strip(arr, channels)
+        if detector is None:
+            detector = self.remake(tuple(channels))
+        if not (self.adapter is not None and self.adapter.use_imu):
+            return detector, self._seen(detector.push(arr, channels))
+        if self.keep_rows <= 0:
+            self.keep_rows = 2 * int(detector.window_length) + SKEW_REFEED_MARGIN_SAMPLES
+        self._keep(arr, channels)
+        events = detector.push(arr, channels)
+        for k, ev in enumerate(events):
+            report = check_imu_skew(ev.window) if ev.kind == "window" else None
+            if report is not None:
+                self.report = report
+            if report is None or report["within"]:
+                self._seen([ev])
+                continue
+            # the skewed window and everything after it come again from a detector without a1
+            detector, again = self._again(detector, ev.window, report)
+            return detector, events[:k] + again
+        return detector, events
 
-    def in_step(self, win, owner) -> bool:
-        """True when ``win`` may be diagnosed; else ``owner.detector`` is retired (set to None)."""
-        if self.adapter is None or not self.adapter.use_imu:
-            return True
-        report = check_imu_skew(win)
-        if report is None or report["within"]:
-            return True
-        self.dropped += 1
-        self.log(skew_line(report, win.window_id))
+    def _seen(self, events: list) -> list:
+        for ev in events:
+            if ev.kind == "window":
+                w = ev.window
+                self._last_end_t = float(w.column("t")[-1])
+            elif ev.reason != "empty":      # continuity lost: the detector restarted, so does the history
+                self.reset()
+        return events
+
+    def _keep(self, arr, channels) -> None:
+        if self.keep_rows <= 0:
+            return
+        self._kept.append((arr, tuple(channels)))
+        self._kept_rows += arr.shape[0]
+        while self._kept and self._kept_rows - self._kept[0][0].shape[0] >= self.keep_rows:
+            self._kept_rows -= self._kept.pop(0)[0].shape[0]
+
+    def _again(self, old, win, report) -> tuple:
+        self.skews += 1
         self.adapter.drop_a1()
-        self.retired, owner.detector = owner.detector, None
-        return False
+        kept, self._kept, self._kept_rows = self._kept, [], 0
+        rows = [self.strip(a, c) for a, c in kept]
+        chans = tuple(c for c in old.channels if c != "a1")
+        new = self.remake(rows[0][1] if rows else chans)
+        t = win.column("t")
+        ts = float(win.sample_period_s)
+        start = max(float(t[0]) - SKEW_REFEED_MARGIN_SAMPLES * ts, self._last_end_t + 0.5 * ts)
+        ids = old.windows_captured - 1          # the window comes out again under its own id
+        samples, batches, counts = old.samples_seen, old.batches_seen, dict(getattr(old, "counts", {}))
+        new.windows_captured = ids
+        events = []
+        for a, c in rows:
+            tcol = a[:, list(c).index("t")]
+            a = a[tcol >= start]
+            if a.shape[0]:
+                events += new.push(a, c)
+        self._seen(events)
+        for r, n in counts.items():          # the old detector's counts go on (the second pass adds its own)
+            if r in new.counts:
+                new.counts[r] += n
+        new.samples_seen, new.batches_seen = samples, batches
+        again = any(ev.kind == "window" for ev in events)
+        self.last_lost = not again and not getattr(new, "capturing", False)
+        self.dropped += int(self.last_lost)
+        self.log(skew_line(report, win.window_id, "lost" if self.last_lost else "again" if again else "capturing"))
+        return new, events
