@@ -72,7 +72,8 @@ def test_coverage_to_se_scale():
 def test_step_detected_within_5_windows():
     r = detection_delays(200, seed=0)
     assert r["missed"] == 0 and r["false_before_step"] <= 1
-    assert r["median"] <= 2 and r["p95"] <= 3 and r["max"] <= 5, r
+    # p95 4 (was 3 with the Gaussian z): the t score of the learnt error scale costs ~a window in the tail
+    assert r["median"] <= 2 and r["p95"] <= 4 and r["max"] <= 5, r
     # sensitivity: the same test fails with the threshold doubled
     h = TrendConfig().threshold_sd
     slow = detection_delays(50, seed=0, config=TrendConfig(cusum_threshold_sd=2 * h))
@@ -376,6 +377,9 @@ def _monitored_state(tmp_path):
     (lambda d: d["inertia"].update(baseline_var=-1e-6), "inertia.baseline_var"),
     (lambda d: d["inertia"].update(x="1.16"), "inertia.x"),                     # a string is not a number
     (lambda d: d["inertia"].update(scale=0.1), "inertia.scale"),
+    (lambda d: d["inertia"].update(scale_ss=-1.0), "inertia.scale_ss"),
+    (lambda d: d["inertia"].update(scale_dof=-2), "inertia.scale_dof"),
+    (lambda d: d["inertia"].update(refine_pending=[[0.0, 1.16, 0.0]]), "inertia.refine_pending"),
     (lambda d: d["inertia"]["history"][-1].__setitem__(3, 0.0), "inertia.history"),    # se 0
     (lambda d: d["inertia"]["history"][-1].__setitem__(1, 1e9), "inertia.history"),    # a time in the future
     (lambda d: d["width"]["y"].__setitem__(0, 5.0), "width.y[0]"),              # a 5 m backlash
@@ -457,3 +461,81 @@ def test_over_reported_errors_are_scaled_down_once_the_baseline_is_refined_calib
     calibrated.batch(t[:at], J1 * (1 + 0.0105 * rng.standard_normal(at)), se[:at])
     assert calibrated._inertia.scale == 1.0
     TrendTracker.from_dict(tr.to_dict())                         # a scaled state loads
+
+
+# --------------------------------------------------------------------------- the drive's error scale (issue 21)
+
+def test_t_normal_score_is_the_normal_quantile_of_the_student_t():
+    from scipy.stats import norm, t
+
+    from jident_ros.identify.trend_maths import t_normal_score
+    for z, dof in ((3.0, 5.0), (-3.0, 5.0), (1.0, 8.0), (-0.5, 23.0), (6.0, 4.0)):
+        assert t_normal_score(z, dof) == pytest.approx(norm.ppf(t.cdf(z, dof)), rel=1e-9, abs=1e-12)
+    assert t_normal_score(3.0, 5.0) == pytest.approx(-t_normal_score(-3.0, 5.0))
+    assert 2.1 < t_normal_score(3.0, 5.0) < 2.2                  # a t_5 3-sd innovation is a 2.17-sd normal one
+    assert t_normal_score(3.0, 1e7) == pytest.approx(3.0, abs=1e-5)
+    assert t_normal_score(60.0, 4.0) > 4.5                     # far out: large (clipped by the caller), no NaN
+
+
+def test_the_error_scale_is_learnt_from_the_commissioning_and_the_refinement_then_frozen():
+    """Prior nu0 dof at 1, then the commissioning's residuals about its baseline (n - 1 dof) and each refinement
+    window's clipped innovation (1 dof), until the baseline is refined."""
+    cfg = TrendConfig(commissioning_windows=5, baseline_refine_windows=8, error_scale_prior_dof=4.0)
+    tr = TrendTracker(cfg)
+    se = 0.005
+    ys = [J1 + d * se for d in (2.0, -2.0, 2.0, -2.0, 0.0)]           # scatter 2 se: errors under-reported
+    for i, y in enumerate(ys):
+        tr.update(3600.0 * i, y, se)
+    ch = tr._inertia
+    m = ch.baseline
+    ss = sum(((y - m) / se) ** 2 for y in ys)
+    assert (ch.scale_ss, ch.scale_dof) == (pytest.approx(ss), 4)
+    sig, nu = ch.error_scale()
+    assert nu == 8.0 and sig == pytest.approx(math.sqrt((4.0 + ss) / 8.0)) and sig > 1.3
+    from jident_ros.identify.trend_status import trend_status
+    u = tr.update(3600.0 * 5, J1, se)
+    kv = dict(trend_status(u)[2])
+    assert u.inertia_error_scale == pytest.approx(ch.error_scale()[0]) and kv["inertia_error_scale_dof"] == 9.0
+    for i in range(6, 12):                                             # 3 refinement windows, then frozen
+        tr.update(3600.0 * i, J1, se)
+    assert ch.scale_dof == 4 + 3
+    off = TrendTracker(TrendConfig(error_scale_prior_dof=None))
+    off.batch(3600.0 * np.arange(5), np.array(ys), np.full(5, se))
+    assert off._inertia.error_scale() is None and off._inertia.scale_dof == 0
+
+
+def test_three_3_sd_windows_fire_the_gaussian_cusum_but_not_the_t_scored_one():
+    """After a refined baseline the score is a Student-t's with nu0 + 19 dof: three windows at +3 sd add
+    3 x (3 - 1.5) = 4.5 > h = 3.83 to the Gaussian CUSUM, and 3 x (2.73 - 1.5) = 3.7 < h to the t-scored one (the
+    real windows' tails: P(|z| > 4) is 30 x the Gaussian's on trend_targets' pool); a true step still fires."""
+    def run(cfg, extra):
+        tr = TrendTracker(cfg)
+        ys = [J1 * (1 + 0.005 * 0.9 * (-1) ** i) for i in range(40)]      # calibrated-ish, scale ~1
+        us = tr.batch(3600.0 * np.arange(40 + len(extra)), np.array(ys + extra), np.full(40 + len(extra), J1 * 0.005))
+        return [c for u in us for c in u.changes if c.quantity == "inertia"]
+    b = J1 * (1 + 0.005 * 3.0)
+    assert run(TrendConfig(error_scale_prior_dof=None), [b, b, b])
+    assert not run(TrendConfig(), [b, b, b])
+    step = J1 * 1.025                                                   # a 2.5 % step at se 0.5 %: 5 sd
+    hits = run(TrendConfig(), [step] * 3)
+    assert hits and hits[0].sign == 1 and hits[0].window_index <= 41
+
+
+def test_a_step_inside_the_refinement_does_not_widen_the_band_that_should_flag_it():
+    """The refinement (baseline and error scale) takes a window only once the CUSUM is back at 0: the first windows
+    of a step inside the refinement are held and dropped when it is flagged.  A +4 sd step right after a 5-window
+    commissioning: flagged at its 4th window (each scores t_8(3.65) = 2.75: +1.25); taken at once, the windows
+    moved the baseline towards the step and blew sigma_hat up, and the step came at its 6th (window 10; the golden
+    wear scenario was not flagged at all)."""
+    se = J1 * 0.005
+    ys = [J1 + d * se for d in (0.3, -0.3, 0.5, -0.5, 0.0)] + [J1 + 4.0 * se] * 4
+    tr = TrendTracker(TrendConfig())
+    us = tr.batch(3600.0 * np.arange(len(ys)), np.array(ys), np.full(len(ys), se))
+    hits = [(i, c) for i, u in enumerate(us) for c in u.changes if c.quantity == "inertia"]
+    assert hits and hits[0][0] == 8 and hits[0][1].sign == 1, hits
+    assert tr._inertia.scale_dof == 4                   # the commissioning's only: the step's windows were dropped
+    # in control, the held windows are learnt when the CUSUM returns to 0
+    calm = TrendTracker(TrendConfig(baseline_refine_windows=12))
+    zs = (0.3, -0.3, 0.5, -0.5, 0.0, 2.0, 0.0, -1.0, 0.2, 0.1, -0.2, 0.0)
+    calm.batch(3600.0 * np.arange(len(zs)), J1 + se * np.array(zs), np.full(len(zs), se))
+    assert calm._inertia.scale_dof == 4 + 7 and not calm._inertia.refine_pending

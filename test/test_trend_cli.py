@@ -413,6 +413,12 @@ def test_the_torque_accuracy_term_is_left_out_of_the_relative_test_and_given_to_
     assert trend_inputs(d).inertia_se_kgm2 == pytest.approx(0.006)
     d.gap.std_error_terms = ()
     assert trend_inputs(d).inertia_se_kgm2 == pytest.approx(0.01)
+    # the other constants of the drive (the torque estimate's bounded offset and lag, the Coulomb band) go out too;
+    # the window's own terms (statistical, torque noise, change points) stay
+    d.gap.std_error_terms = (("statistical", 0.003), ("torque_noise", 0.004), ("torque_offset", 0.005),
+                             ("torque_lag", 0.002), ("coulomb_band", 0.001), ("torque_accuracy", 0.002))
+    d.gap.std_error_kgm2 = m.sqrt(0.003 ** 2 + 0.004 ** 2 + 0.005 ** 2 + 0.002 ** 2 + 0.001 ** 2 + 0.002 ** 2)
+    assert trend_inputs(d).inertia_se_kgm2 == pytest.approx(0.005)
     cfg = TrendConfig.from_parameters({"torque_accuracy": 0.02})
     assert cfg.torque_accuracy_pct == pytest.approx(2.0 / m.sqrt(3.0))
     assert TrendConfig.from_parameters({"torque_accuracy": 0.02, "trend_torque_accuracy_pct": 1.5}).torque_accuracy_pct \

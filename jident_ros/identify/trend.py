@@ -141,6 +141,8 @@ class TrendUpdate:
     inertia_windows_refused: dict = field(default_factory=dict)   # windows without a J1, by reason, so far
     windows_skipped: dict = field(default_factory=dict)           # windows refused whole, by field, so far
     time_segment: int = 0                           # time discontinuities so far (clock back / far ahead)
+    inertia_error_scale: float | None = None        # the drive's learnt J1 error scale sigma_hat (None: not learnt)
+    inertia_error_scale_dof: float | None = None    # its degrees of freedom (prior's included)
 
     @property
     def level_name(self) -> str:
@@ -403,7 +405,8 @@ class TrendTracker:
             None if jd is None else (jd - Z95 * jdse, jd + Z95 * jdse),
             None if jx is None else math.sqrt(J.P + (0.01 * cfg.torque_accuracy_pct * jx) ** 2),
             J.baseline_windows if J.phase != COMMISSIONING else len(J.comm), self.inertia_fed,
-            dict(self.inertia_refused), dict(self.windows_skipped), self.time_segment)
+            dict(self.inertia_refused), dict(self.windows_skipped), self.time_segment,
+            *(J.error_scale() or (None, None)))
         level, message = self._health(u)
         if skipped:
             message = f"window skipped ({reason}); {message}"

@@ -12,7 +12,7 @@ import numpy as np
 
 from jident_ros.identify.distributions import chi2_ppf
 from jident_ros.identify.trend_config import TrendConfig
-from jident_ros.identify.trend_maths import SE_SCALE_TEST_LEVEL, Cusum, huber_mean, m_scale, weighted_mean
+from jident_ros.identify.trend_maths import SE_SCALE_TEST_LEVEL, Cusum, huber_mean, m_scale, t_normal_score, weighted_mean
 
 COMMISSIONING, MONITORING, RELEARNING = "commissioning", "monitoring", "relearning"
 _PHASES = (COMMISSIONING, MONITORING, RELEARNING)
@@ -157,6 +157,10 @@ class InertiaChannel(Channel):
         self.seg_sw = self.seg_swy = 0.0     # running sums of a re-learnt baseline still being refined
         self.seg_n = 0
         self.base_start: int | None = None   # first window of the current baseline's data (None: given)
+        self.scale_ss = 0.0                  # the error scale's data: sum of squared clipped standardised residuals
+        self.scale_dof = 0                   # ... and their degrees of freedom (beyond the prior's)
+        self.refine_pending: list = []       # refinement windows (1/se^2, winsorised J1, z) held while the
+                                             # CUSUM is away from 0
 
     def update(self, idx: int, t: float, y: float, se: float, k: float, h: float) -> ChangeEvent | None:
         cfg = self.cfg
@@ -174,6 +178,7 @@ class InertiaChannel(Channel):
                 m, v, rs = huber_mean(self.comm, estimate_scale=True)
                 n_comm = len(self.comm)
                 self._set_scale(rs, n_comm - 1)
+                self._learn_scale([(q[2] - m) / (q[3] * self.scale) for q in self.comm], n_comm - 1)
                 self._commissioned(m, v, idx)
                 self.x, self.P = m, self.baseline_var
                 self._start_refining(n_comm)
@@ -206,19 +211,20 @@ class InertiaChannel(Channel):
         sd = math.sqrt(r + self.baseline_var)
         zraw = (y - self.baseline) / sd
         z = self._innovation(zraw)
+        zc = self._scored(zraw)              # the CUSUM's input: the normal score under the learnt error scale
         if self.seg_n:
-            # re-learnt baseline: refined by the following windows (winsorised) up to commissioning_windows
-            w = 1.0 / r
-            self.seg_sw += w
-            self.seg_swy += w * (self.baseline + z * sd if z != zraw else y)
-            self.seg_n += 1
-            self.baseline, self.baseline_var = self.seg_swy / self.seg_sw, 1.0 / self.seg_sw
-            if self.seg_n >= cfg.baseline_refine_windows:
-                self.seg_n = 0
-                self._scale_down()
-        sign = self.cusum.step(z, k, h, idx)
+            # the refinement (the baseline, winsorised, and the error scale) takes a window only once the CUSUM is
+            # back at 0: the first windows of a step inside the refinement are held, and dropped when the step is
+            # flagged (taken at once, they would move the baseline towards the step and widen the band that
+            # should flag it)
+            self.refine_pending.append((1.0 / r, self.baseline + z * sd if z != zraw else y, zraw))
+        sign = self.cusum.step(zc, k, h, idx)
         if not sign:
+            if self.refine_pending and self.cusum.pos == 0.0 and self.cusum.neg == 0.0:
+                self._refine(self.refine_pending)
+                self.refine_pending = []
             return None
+        self.refine_pending = []
         onset = self.cusum.pos_start if sign > 0 else self.cusum.neg_start
         seg = [q for q in self.history if q[0] >= onset] or [p]
         m, v, _ = huber_mean(seg)
@@ -236,6 +242,53 @@ class InertiaChannel(Channel):
         if len(self.relearn) >= cfg.relearn_windows:
             self._rebaseline(idx)
         return ev
+
+    def _refine(self, points):
+        """The held windows ``points`` (1/se^2, winsorised J1, innovation) into the baseline being refined and into
+        the error scale, until the baseline rests on baseline_refine_windows windows (then it is frozen, and the
+        errors scaled down if its windows prove them over-reported)."""
+        for w, yw, zraw in points:
+            if not self.seg_n:
+                return
+            self.seg_sw += w
+            self.seg_swy += w * yw
+            self.seg_n += 1
+            self.baseline, self.baseline_var = self.seg_swy / self.seg_sw, 1.0 / self.seg_sw
+            self._learn_scale([zraw], 1)
+            if self.seg_n >= self.cfg.baseline_refine_windows:
+                self.seg_n = 0
+                self._scale_down()
+
+    def _learn_scale(self, residuals, dof: int):
+        """Add standardised residuals (clipped at innovation_clip_sd: one outlier cannot blow the scale up) with
+        ``dof`` degrees of freedom to the error scale's data."""
+        if self.cfg.error_scale_prior_dof is None:
+            return
+        for x in residuals:
+            c = self._innovation(x)
+            self.scale_ss += c * c
+        self.scale_dof += dof
+
+    def error_scale(self) -> tuple[float, float] | None:
+        """(sigma_hat, nu): the posterior of the drive's error scale (scaled inverse chi^2: prior nu0 dof at 1, then
+        the windows' residuals), sigma_hat = sqrt((nu0 + sum r^2) / (nu0 + dof)); None when off."""
+        nu0 = self.cfg.error_scale_prior_dof
+        if nu0 is None:
+            return None
+        nu = nu0 + self.scale_dof
+        return math.sqrt((nu0 + self.scale_ss) / nu), nu
+
+    def _scored(self, zraw: float) -> float:
+        """The CUSUM's input for the standardised innovation ``zraw``: with the error scale learnt, the normal
+        score of its Student-t predictive, Φ⁻¹(T_ν(zraw / max(1, sigma_hat))), clipped (N(0, 1) under the model,
+        whatever the number of windows the scale rests on: the CUSUM's design holds in the commissioning phase
+        too); never narrower than the reported errors (over-reported ones are scaled down by se_scale_down);
+        else the clipped zraw."""
+        es = self.error_scale()
+        if es is None:
+            return self._innovation(zraw)
+        sig, nu = es
+        return self._innovation(t_normal_score(zraw / max(sig, 1.0), nu))
 
     def _level_before(self, onset: int) -> tuple:
         """(level, variance) a change with this onset is measured from: the baseline, or -- while the baseline is
@@ -274,7 +327,8 @@ class InertiaChannel(Channel):
     def to_dict(self) -> dict:
         d = self._base_dict()
         d.update(x=self.x, P=self.P, seg_sw=self.seg_sw, seg_swy=self.seg_swy, seg_n=self.seg_n,
-                 base_start=self.base_start)
+                 base_start=self.base_start, scale_ss=self.scale_ss, scale_dof=self.scale_dof,
+                 refine_pending=[list(p) for p in self.refine_pending])
         return d
 
     def load(self, d: dict):
@@ -284,6 +338,11 @@ class InertiaChannel(Channel):
         self.seg_sw, self.seg_swy, self.seg_n = float(d["seg_sw"]), float(d["seg_swy"]), int(d["seg_n"])
         bs = d.get("base_start")          # optional: states saved before it measure a change from the baseline
         self.base_start = None if bs is None else int(bs)
+        # optional: a state saved before the error scale was learnt goes on with the prior alone
+        self.scale_ss, self.scale_dof = float(d.get("scale_ss") or 0.0), int(d.get("scale_dof") or 0)
+        self.refine_pending = [tuple(float(v) for v in p) for p in (d.get("refine_pending") or [])]
+        if any(len(p) != 3 for p in self.refine_pending):
+            raise TrendStateError("inertia.refine_pending: each entry must be [1/se^2, J1, z]")
 
 
 class WidthChannel(Channel):

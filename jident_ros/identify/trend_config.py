@@ -53,6 +53,13 @@ class TrendConfig:
     #: se_scale_min
     se_scale_down: bool = True
     se_scale_min: float = 0.25
+    #: the drive's J1 error scale sigma (true scatter / reported se) is learnt from its own windows: a prior of
+    #: this many degrees of freedom at sigma = 1 (the reported errors are right), updated by the commissioning's
+    #: residuals and the refinement's innovations (clipped at innovation_clip_sd) until the baseline is refined;
+    #: the CUSUM then takes the normal score of the innovation under the Student-t predictive,
+    #: Φ⁻¹(T_ν(z / max(1, sigma_hat))), ν = this + the windows' dof (docs/trend.md, "The drive's error scale").
+    #: None: the Gaussian z of the reported errors (the design before)
+    error_scale_prior_dof: float | None = 4.0
     #: J1 local-level random walk, per cent of the baseline per window (1 sd)
     inertia_process_sd_pct_per_window: float = 0.02
     #: windows (since the estimated onset) averaged into the new baseline after a change
@@ -131,6 +138,7 @@ class TrendConfig:
         if self.se_scale_max < 1:
             bad("se_scale_max", ">= 1")
         pos("se_scale_min")
+        pos("error_scale_prior_dof", allow_none=True)
         if self.se_scale_min > 1:
             bad("se_scale_min", "<= 1")
         if self.innovation_clip_sd <= self.cusum_reference_sd:
@@ -181,7 +189,7 @@ _INT_FIELDS = {f for n, f in TREND_FIELDS.items()
                if isinstance(TREND_PARAMS[n].default, int) and not isinstance(TREND_PARAMS[n].default, bool)}
 _BOOL_FIELDS = {f for n, f in TREND_FIELDS.items() if isinstance(TREND_PARAMS[n].default, bool)}
 #: TrendConfig fields that are not node parameters.
-NOT_PARAMETERS = {"change_classes_pct"}
+NOT_PARAMETERS = {"change_classes_pct", "error_scale_prior_dof"}
 
 
 def _positive_number(v) -> bool:

@@ -9,6 +9,7 @@ import functools
 import math
 
 import numpy as np
+from scipy.special import ndtri, stdtr
 
 from jident_ros.identify.distributions import normal_cdf, normal_pdf, normal_ppf, normal_sf
 
@@ -78,6 +79,15 @@ def cusum_threshold_for_arl(arl_windows: float, reference_sd: float, two_sided: 
     # imported here: scipy.optimize costs ~14 MiB of a node's memory and is needed once per threshold design
     from scipy.optimize import brentq
     return float(brentq(f, 1e-6, hi, xtol=1e-9))
+
+
+def t_normal_score(z: float, dof: float) -> float:
+    """The standard normal quantile of a Student-t variate: Φ⁻¹(T_dof(z)), computed from the tail on z's side
+    (exact far out; ±inf when the t tail underflows, which the caller clips).  A t_dof variate becomes exactly
+    N(0, 1): the CUSUM's N(0, 1) design holds for standardised innovations whose scale is itself estimated."""
+    if z >= 0.0:
+        return -float(ndtri(stdtr(dof, -z)))
+    return float(ndtri(stdtr(dof, z)))
 
 
 def coverage_to_se_scale(coverage: float) -> float:

@@ -167,6 +167,13 @@ def check_state(tr, plausible: Optional[dict] = None):
     _finite("inertia.seg_swy", J.seg_swy, 0.0)
     if J.seg_n < 0:
         _bad("inertia.seg_n", J.seg_n, "must be >= 0")
+    _finite("inertia.scale_ss", J.scale_ss, 0.0)
+    if J.scale_dof < 0:
+        _bad("inertia.scale_dof", J.scale_dof, "must be >= 0")
+    for i, (w, yw, zr) in enumerate(J.refine_pending):
+        _finite(f"inertia.refine_pending[{i}]", w, 0.0, strict=True, optional=False)
+        _finite(f"inertia.refine_pending[{i}]", zr, optional=False)
+        _in_band(f"inertia.refine_pending[{i}]", yw, j_band)
     if J.base_start is not None and not 0 <= J.base_start <= tr.n_windows:
         _bad("inertia.base_start", J.base_start, f"must be a window index 0..{tr.n_windows}")
     for k in range(W.count):

@@ -57,18 +57,32 @@ def _finite(*v) -> bool:
     return all(x is not None and math.isfinite(float(x)) for x in v)
 
 
+#: The parts of a gap J1's standard error (``GapEstimate.std_error_terms``) that are constants of the drive, not of
+#: the window: the torque estimate's scale error ('torque_accuracy'), its bounded offset ('torque_offset') and lag
+#: ('torque_lag'), and the Coulomb band ('coulomb_band': the drive's friction).  Each moves the drive's J1 estimates
+#: alike (the same window shape, the same bias) and cancels in J1 relative to the drive's own baseline.
+DRIVE_CONSTANT_TERMS = ("torque_accuracy", "torque_offset", "torque_lag", "coulomb_band")
+
+
 def _gap_se(g) -> float:
-    """The gap J1's standard error for the trend: the fit's (else from its 95 % interval) WITHOUT the drive's
-    torque-accuracy term (``std_error_terms``' 'torque_accuracy'): a scale error of m_el moves every J1 of the
-    drive alike and cancels in J1 relative to its own baseline, which is what the trend tests; the absolute J1
-    gets it back (TrendConfig.torque_accuracy_pct)."""
+    """The gap J1's standard error for the trend: the fit's (else from its 95 % interval) WITHOUT the terms that are
+    constants of the drive (:data:`DRIVE_CONSTANT_TERMS`): they move every J1 of the drive alike and cancel in J1
+    relative to its own baseline, which is what the trend tests; the absolute J1 gets the torque accuracy back
+    (TrendConfig.torque_accuracy_pct).  If they do not cancel on a drive (windows of very different shapes), its
+    windows scatter more than this se says, and the tracker's error scale, learnt from the drive's own windows,
+    widens the band (docs/trend.md, "The drive's error scale")."""
     se = g.std_error_kgm2
     if se is None or not math.isfinite(float(se)):
         lo, hi = (float(v) for v in g.ci95_kgm2)
         se = (hi - lo) / (2 * Z95)
-    common = dict(getattr(g, "std_error_terms", ()) or ()).get("torque_accuracy", 0.0)
-    if common and math.isfinite(float(common)) and 0.0 < float(common) < float(se):
-        se = math.sqrt(float(se) ** 2 - float(common) ** 2)
+    terms = dict(getattr(g, "std_error_terms", ()) or ())
+    common = 0.0
+    for name in DRIVE_CONSTANT_TERMS:
+        v = terms.get(name, 0.0)
+        if v and math.isfinite(float(v)) and float(v) > 0.0:
+            common += float(v) ** 2
+    if 0.0 < common < float(se) ** 2:
+        se = math.sqrt(float(se) ** 2 - common)
     return float(se)
 
 
@@ -150,7 +164,8 @@ def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
     time_to_limit_days (+ _low, _high), changes_detected (at this window), inertia_drift_ci95_low_pct /
     _high_pct, inertia_abs_se_kgm2 (with the torque-accuracy term), inertia_baseline_windows_refining (0: refined),
     inertia_windows_fed, inertia_windows_refused and windows_skipped (by reason, 'reason n, ...'), time_segment,
-    and for the last change
+    inertia_error_scale and inertia_error_scale_dof (the drive's learnt J1 error scale and its dof), and for the last
+    change
     of this window: last_change_quantity, last_change_time_s, last_change_onset_time_s,
     last_change_size, last_change_size_pct."""
     def days(s):
@@ -176,7 +191,9 @@ def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
              ("inertia_baseline_windows_refining", int(u.inertia_baseline_windows)),
              ("inertia_windows_fed", int(u.inertia_windows_fed)),
              ("inertia_windows_refused", _counts(u.inertia_windows_refused)),
-             ("windows_skipped", _counts(u.windows_skipped)), ("time_segment", int(u.time_segment))]
+             ("windows_skipped", _counts(u.windows_skipped)), ("time_segment", int(u.time_segment)),
+             ("inertia_error_scale", _v(u.inertia_error_scale)),
+             ("inertia_error_scale_dof", _v(u.inertia_error_scale_dof))]
     if u.changes:
         c = u.changes[-1]
         vals += [("last_change_quantity", c.quantity), ("last_change_time_s", c.time_s),

@@ -150,9 +150,14 @@ def main(argv=None) -> int:
                     help="then run the trend with the flank detector's entry refinement on and off (module docstring)")
     a = ap.parse_args(argv)
     system = load_system_config()
-    sc = wear_scenario(system, a.windows, a.interval_s, a.width_start_m, a.width_end_m, None, None,
-                       a.j1_step_at, a.j1_step_pct, None)
     out = Path(a.out)
+    if out.exists() and any(out.glob("rec_*")):
+        ap.error(f"--out {a.out}: already holds recordings (rec_*); give a new or empty directory")
+    try:
+        sc = wear_scenario(system, a.windows, a.interval_s, a.width_start_m, a.width_end_m, None, None,
+                           a.j1_step_at, a.j1_step_pct, None)
+    except ValueError as exc:
+        ap.error(str(exc))
     paths = write_raw_scenario(out, system, sc, snr_db=a.snr_db, seed=a.seed, encoder_counts=a.encoder_counts,
                                namespace=a.namespace, channels=_channels(a.channels))
     truth = {"entry_times_s": [float(t) for t in sc.entry_times_s],

@@ -13,7 +13,9 @@
 
    * ``ours``: :func:`jident_ros.research.evaluation.raw_inputs.raw_recordings` (our simulator);
    * ``second_drive``: ``python -m jident_ros.research.second_drive --format csv --scenario grid`` (docs/second_drive.md);
-   * ``vector_drive``: ``python -m jident_ros.research.vector_drive --formats csv`` (motulator; skipped when missing).
+   * ``vector_drive``: ``python -m jident_ros.research.vector_drive --formats csv`` (motulator; skipped when missing),
+     one call per recording with its own seed (a call draws all its recordings' noise from one seed), the
+     noise-free simulation cached in the work directory.
 
    Every recording is diagnosed by ``jident diagnose``'s path (:func:`jident_ros.cli.offline.diagnose_samples`,
    flank detector, gap estimator, no image method) and each window turned into the tracker's inputs by the
@@ -21,7 +23,9 @@
    pools say how many windows named a class alone (published), how many were ambiguous, and how many refused.
 2. **Step detection**: series of ``commissioning_windows`` (5) + 25 steady windows drawn (with replacement)
    from the 1.16 pool, then windows from the 1.131 pool: the first J1 change at or after the step, and any
-   before it (the tracker's defaults).
+   before it (the tracker's defaults).  Also with whole recordings drawn (each with its windows in order: since
+   the flank detector's return traversals, a second-drive or vector-drive recording gives an entry window and a
+   return window, whose standard errors differ ~7x on the vector drive).
 3. **False changes**: 10 series of 5 + 1,000 steady windows (bootstrap of the 1.16 pool); the changes in
    the commissioning phase (the windows while the baseline is refined, 5..19) counted apart, from 2,000
    series, as a rate per window.
@@ -48,7 +52,7 @@ from jident_ros.config import load_system_config
 from jident_ros.identify.trend import TrendConfig, TrendTracker
 from jident_ros.research.evaluation.raw_inputs import raw_recordings
 from jident_ros.research.evaluation.raw_scenario import DRIVE_CHANNELS, entry_refinement
-from jident_ros.research.evaluation.trend_simulation import step_trials
+from jident_ros.research.evaluation.trend_simulation import delay_summary, step_delay, step_trials
 
 MODELS = ("ours", "second_drive", "vector_drive")
 SNR_DB = 30.0
@@ -99,20 +103,38 @@ def recordings(model: str, work: Path, n_per_j1: int, seed: int, system, drive_o
         return out
     module = {"second_drive": "jident_ros.research.second_drive",
               "vector_drive": "jident_ros.research.vector_drive"}[model]
-    for k in range(math.ceil(n_per_j1 / len(widths))):
-        d = work / f"{model}_{k}"
+    calls = []       # (folder, seed, J1 values, widths)
+    if model == "second_drive":
+        # one call per 8 widths: its noise is drawn per case (rng [seed, case])
+        for k in range(math.ceil(n_per_j1 / len(widths))):
+            calls.append((work / f"{model}_{k}", seed * 1000 + k, (J1_BASE, J1_STEP), widths))
+    else:
+        # the vector drive draws every recording of one call from the same rng ([seed, counts, snr]): the same
+        # noise and encoder offsets for every J1 and width of a call.  One call per recording (its own seed), the
+        # noise-free simulation cached in the work directory (the J1 x width cases are simulated once)
+        for j1, off in ((J1_BASE, 0), (J1_STEP, 500)):
+            for k in range(n_per_j1):
+                calls.append((work / f"{model}_{j1:.3f}_{k:03d}", seed * 1000 + off + k, (j1,),
+                              (widths[k % len(widths)],)))
+    for d, call_seed, j1s, ws in calls:
+        done = d / ".complete"
         if model == "second_drive":
             args = ["--format", "csv", "--scenario", "grid", "--direction", "forward", "--snr-db", str(SNR_DB),
-                    "--inertias", f"{J1_BASE},{J1_STEP}", "--widths", ",".join(f"{w:.5f}" for w in widths)]
+                    "--inertias", ",".join(f"{j:g}" for j in j1s), "--widths", ",".join(f"{w:.5f}" for w in ws)]
         else:
             args = ["--formats", "csv", "--events", "speed_step_down", "--directions", "forward", "--counts", "65536",
-                    "--snr-db", f"{SNR_DB:g}", "--inertias", f"{J1_BASE},{J1_STEP}",
-                    "--widths", ",".join(f"{w:.5f}" for w in widths)]
-        proc = subprocess.run([sys.executable, "-m", module, "--out", str(d), "--seed", str(seed * 1000 + k)] + args,
-                              capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise RuntimeError(f"{model}: {proc.stderr.strip().splitlines()[-1] if proc.stderr else proc.returncode}")
-        for csv_path in sorted(d.rglob("*.csv")):
+                    "--snr-db", f"{SNR_DB:g}", "--inertias", ",".join(f"{j:g}" for j in j1s),
+                    "--widths", ",".join(f"{w:.5f}" for w in ws), "--cache", str(work / "simulation_cache")]
+        cmd = [sys.executable, "-m", module, "--out", str(d), "--seed", str(call_seed)] + args
+        if not (done.exists() and done.read_text() == " ".join(cmd[1:])):
+            # simulate; a folder already written by the same command in this work directory is reused (its
+            # .complete names the command)
+            done.unlink(missing_ok=True)
+            proc = subprocess.run(cmd, capture_output=True, text=True)
+            if proc.returncode != 0:
+                raise RuntimeError(f"{model}: {proc.stderr.strip().splitlines()[-1] if proc.stderr else proc.returncode}")
+            done.write_text(" ".join(cmd[1:]))
+        for csv_path in sorted(p for p in d.rglob("*.csv") if not p.name.endswith("_drive.csv")):
             tr = _truth(csv_path)
             out.append((_drive_only(csv_path, csv_path.with_suffix(".drive.csv")) if drive_only else csv_path,
                         float(tr["inertia_kgm2"]), float(tr["reference_radius_m"]), float(tr.get("gear_ratio", 1.0))))
@@ -133,10 +155,10 @@ def _truth(csv_path: Path) -> dict:
 
 def pools(recs: list, system) -> dict:
     """{true J1: {"j1": array, "se": array}} of the windows the trend takes, and the counts of what happened."""
-    out = {J1_BASE: ([], []), J1_STEP: ([], [])}
+    out = {J1_BASE: ([], [], []), J1_STEP: ([], [], [])}
     counts = {"recordings": len(recs), "windows": 0, "published": 0, "ambiguous_fed": 0, "other_fed": 0,
               "refused": {}, "no_window": 0, "errors": 0}
-    for path, j1, radius_m, gear_ratio in recs:
+    for rec_index, (path, j1, radius_m, gear_ratio) in enumerate(recs):
         sysr = system if radius_m == system.load.wheel_radius_m else \
             replace(system, load=replace(system.load, wheel_radius_m=radius_m))
         try:
@@ -156,8 +178,9 @@ def pools(recs: list, system) -> dict:
                 "ambiguous_fed" if ow.diagnosis.status == "ambiguous" else "other_fed")
             counts[key] += 1
             out[j1][0].append(tw.inertia_kgm2)
+            out[j1][2].append(rec_index)
             out[j1][1].append(tw.inertia_se_kgm2)
-    p = {j: {"j1": np.array(a), "se": np.array(b)} for j, (a, b) in out.items()}
+    p = {j: {"j1": np.array(a), "se": np.array(b), "rec": np.array(c, dtype=int)} for j, (a, b, c) in out.items()}
     for j, d in p.items():
         if d["j1"].size:
             z = (d["j1"] - j) / d["se"]
@@ -166,18 +189,73 @@ def pools(recs: list, system) -> dict:
     return {"pools": p, "counts": counts}
 
 
-def detection(p: dict, trials: int, seed: int, config: TrendConfig, pre: int = 25, post: int = 20) -> dict:
+def save_pools(pl: dict, path: Path) -> None:
+    """The diagnosed windows (J1, se per true J1) and their counts, so that a tracker design can be tried again
+    on them without simulating and diagnosing again (``--work DIR``)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    d = {"counts": pl["counts"], "pools": {str(j): {"j1": v["j1"].tolist(), "se": v["se"].tolist(),
+                                                    "rec": v["rec"].tolist()}
+                                            for j, v in pl["pools"].items()}}
+    path.write_text(json.dumps(d))
+
+
+def load_pools(path: Path) -> dict | None:
+    """What :func:`save_pools` wrote (with the pools' statistics recomputed), or None when absent."""
+    if not path.exists():
+        return None
+    d = json.loads(path.read_text())
+    p = {}
+    for j, v in d["pools"].items():
+        jf = float(j)
+        a = {"j1": np.array(v["j1"], dtype=float), "se": np.array(v["se"], dtype=float),
+             "rec": np.array(v.get("rec", range(len(v["j1"]))), dtype=int)}
+        if a["j1"].size:
+            z = (a["j1"] - jf) / a["se"]
+            a.update(n=int(a["j1"].size), se_pct_median=float(np.median(a["se"] / jf * 100)),
+                     z_sd=float(z.std(ddof=1)) if z.size > 1 else math.nan, z_mean=float(z.mean()))
+        p[jf] = a
+    return {"pools": p, "counts": d["counts"]}
+
+
+def detection(p: dict, trials: int, seed: int, config: TrendConfig, pre: int = 25, post: int = 20,
+              by_recording: bool = False) -> dict:
+    """The step trials.  Windows drawn one by one from the pools (default), or ``by_recording``: whole recordings
+    drawn, each bringing its windows in their order (a drive whose every recording has an entry and a return
+    traversal feeds them alternately), the step at the first window of the first stepped recording, the delay
+    still counted in windows."""
     rng = np.random.default_rng(seed)
     base, step = p[J1_BASE], p[J1_STEP]
     comm = config.commissioning_windows
 
+    def draw(pool, n):
+        if not by_recording:
+            return rng.integers(0, pool["j1"].size, n)
+        recs = np.unique(pool["rec"])
+        idx: list = []
+        while len(idx) < n:
+            idx.extend(np.flatnonzero(pool["rec"] == recs[rng.integers(0, recs.size)]).tolist())
+        return np.array(idx, dtype=int)
+
     def series(_):
-        i0 = rng.integers(0, base["j1"].size, comm + pre)
-        i1 = rng.integers(0, step["j1"].size, post)
+        i0 = draw(base, comm + pre)
+        i1 = draw(step, post)
         j = np.concatenate([base["j1"][i0], step["j1"][i1]])
         se = np.concatenate([base["se"][i0], step["se"][i1]])
+        series.step_at = i0.size
         return WINDOW_PERIOD_S * np.arange(j.size), j, se, -1
-    r = step_trials(trials, series, config, comm + pre)
+    if not by_recording:
+        r = step_trials(trials, series, config, comm + pre)
+    else:
+        delays, missed, before = [], 0, 0
+        for trial in range(trials):
+            t, j, se, sign = series(trial)
+            found, false = step_delay(TrendTracker(config), t, j, se, series.step_at, sign)
+            before += false
+            if found is None:
+                missed += 1
+            else:
+                delays.append(found)
+        r = delay_summary(trials, delays, missed, before)
     r["within_5"] = sum(v for k, v in r["histogram"].items() if k <= 5)
     return r
 
@@ -212,34 +290,43 @@ def false_changes(base: dict, seed: int, config: TrendConfig, series: int = 10, 
 def run_model(model: str, work: Path, n_per_j1: int, trials: int, seed: int, system, config: TrendConfig,
               drive_only: bool = False, refine: bool = True) -> dict:
     t0 = time.perf_counter()
-    recs = recordings(model, work / (model + ("_drive_only" if drive_only else "")), n_per_j1, seed, system, drive_only)
-    with entry_refinement(refine):
-        pl = pools(recs, system)
+    mdir = work / (model + ("_drive_only" if drive_only else ""))
+    cache = mdir / f"pools_v2_n{n_per_j1}_s{seed}{'' if refine else '_norefine'}.json"
+    pl = load_pools(cache)
+    if pl is None:
+        recs = recordings(model, mdir, n_per_j1, seed, system, drive_only)
+        with entry_refinement(refine):
+            pl = pools(recs, system)
+        save_pools(pl, cache)
     p = pl["pools"]
     if not (p[J1_BASE]["j1"].size and p[J1_STEP]["j1"].size):
         return {"model": model, "counts": pl["counts"], "error": "no window reached the trend"}
     return {"model": model, "counts": pl["counts"],
             "pools": {str(j): {k: v for k, v in d.items() if not isinstance(v, np.ndarray)} for j, d in p.items()},
             "detection": detection(p, trials, seed + 1, config),
+            "detection_by_recording": detection(p, trials, seed + 1, config, by_recording=True),
             "false": false_changes(p[J1_BASE], seed + 2, config), "seconds": time.perf_counter() - t0}
 
 
 def format_rows(results: list) -> str:
     lines = ["| model | windows (published alone / ambiguous, fed / refused) | se median | -2.5 % step: within 5 "
-             "windows / detected / trials, delay median, max; before the step | false changes after commissioning "
-             "| commissioning phase (windows 5-19) |", "|---|---|---|---|---|---|"]
+             "windows / detected / trials, delay median, max; before the step | the same, whole recordings drawn "
+             "| false changes after commissioning | commissioning phase (windows 5-19) |", "|---|---|---|---|---|---|---|"]
     for r in results:
         c = r["counts"]
         if "error" in r:
-            lines.append(f"| {r['model']} | {c} | | {r['error']} | | |")
+            lines.append(f"| {r['model']} | {c} | | {r['error']} | | | |")
             continue
         d, f = r["detection"], r["false"]
+        dr = r.get("detection_by_recording") or d
         se = r["pools"][str(J1_BASE)]["se_pct_median"]
         lines.append(
             f"| {r['model']} | {c['windows']} ({c['published']} / {c['ambiguous_fed']} / "
             f"{sum(c['refused'].values())} {c['refused']}) | {se:.2f} % | {d['within_5']} / {d['detected']} / "
             f"{d['trials']} = {100 * d['within_5'] / d['trials']:.1f} %, median {d['median']:g}, max {d['max']:g}; "
-            f"{d['false_before_step']} | {f['changes']} in {f['monitored']:,} (95 % upper bound "
+            f"{d['false_before_step']} | {dr['within_5']} / {dr['detected']} / {dr['trials']} = "
+            f"{100 * dr['within_5'] / dr['trials']:.1f} %, median {dr['median']:g}, max {dr['max']:g}; "
+            f"{dr['false_before_step']} | {f['changes']} in {f['monitored']:,} (95 % upper bound "
             f"{f['per_10k_upper95']:.2g} per 10,000) | {f['commissioning_changes']} in {f['commissioning_windows']:,} "
             f"windows = {f['commissioning_rate_per_window']:.2g} per window (upper {f['commissioning_rate_upper95']:.2g}); "
             f"{f['commissioning_series_with_change']} of {f['commissioning_series']} commissionings |")

@@ -223,14 +223,34 @@ def update_time(steady: dict, n: int, config: TrendConfig) -> dict:
     return {"median_ms": float(np.median(times)) / 1e6, "p95_ms": float(np.percentile(times, 95)) / 1e6}
 
 
-def measure(seed: int = 0, quick: bool = False, config: TrendConfig | None = None, system=None) -> dict:
+def pools(system, seed: int = 0, quick: bool = False, path=None) -> tuple:
+    """(steady, up, down) pools of :func:`pool`; with ``path`` (an .npz) read from it when it was written for the
+    same seed and size, else computed and written there (a tracker design can then be tried on the same
+    windows without diagnosing them again: ~10 min under load)."""
+    n_pool = 1000 if quick else 4000
+    key = f"seed={seed} n={n_pool}"
+    if path is not None:
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                if str(z["key"]) == key:
+                    return tuple({k[len(name) + 1:]: (z[k] if z[k].ndim else z[k].item()) for k in z.files
+                                  if k.startswith(name + ".")} for name in ("steady", "up", "down"))
+        except FileNotFoundError:
+            pass
+    out = (pool(system, J1_NOMINAL, n_pool, seed), pool(system, J1_NOMINAL * 1.025, n_pool // 2, seed + 1),
+           pool(system, J1_NOMINAL * 0.975, n_pool // 2, seed + 2))
+    if path is not None:
+        np.savez(path, key=key, **{f"{name}.{k}": v for name, d in zip(("steady", "up", "down"), out)
+                                   for k, v in d.items()})
+    return out
+
+
+def measure(seed: int = 0, quick: bool = False, config: TrendConfig | None = None, system=None,
+            pools_path=None) -> dict:
     system = load_system_config() if system is None else system
     cfg = config if config is not None else TrendConfig()
     t0 = time.perf_counter()
-    n_pool = 1000 if quick else 4000
-    steady = pool(system, J1_NOMINAL, n_pool, seed)
-    up = pool(system, J1_NOMINAL * 1.025, n_pool // 2, seed + 1)
-    down = pool(system, J1_NOMINAL * 0.975, n_pool // 2, seed + 2)
+    steady, up, down = pools(system, seed, quick, pools_path)
     r = {"steady": steady, "up": up, "down": down,
          "false": false_changes(steady, 20_000 if quick else 100_000, seed + 3, cfg),
          "detection": detection(steady, up, down, 100 if quick else 400, seed + 4, cfg),
@@ -277,8 +297,10 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description="issue 14's trend targets on real diagnosed simulator windows")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quick", action="store_true", help="smaller pools and fewer trials (~30 s)")
+    ap.add_argument("--pools", help="an .npz: the diagnosed pools read from it when written for the same seed and "
+                                    "size, else computed and written there")
     a = ap.parse_args(argv)
-    print(format_table(measure(a.seed, a.quick)))
+    print(format_table(measure(a.seed, a.quick, pools_path=a.pools)))
     return 0
 
 
