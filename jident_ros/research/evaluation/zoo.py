@@ -652,8 +652,9 @@ def targets(res: dict) -> list:
                      f"{jsall.get('unresolvable', 0)} of {jsall.get('trav_windows', 0) - jsall.get('trav_published', 0)} | "
                      f"{a.get('level_OK_nominal', 0)} / {a.get('level_WARN_nominal', 0)} / {a.get('level_ERROR_nominal', 0)} | "
                      f"{a.get('level_OK', 0)} / {a.get('level_WARN', 0)} / {a.get('level_ERROR', 0)} |")
-    lines += ["", "(Ours has one event type, the line's slip; its 'speed events' column counts all its windows. The column "
-              "'samples alone cannot name a class': windows whose fit's statistical standard error alone, the encoder's quantisation and the noise "
+    lines += ["", "(Ours has one event type, the line's slip; its 'speed events' column counts all its windows. The "
+              "column 'samples alone cannot name a class': windows whose fit's statistical standard error alone, the "
+              "encoder's quantisation and the noise "
               f"through the fit with no model term, gives a 95 % half-width above {100 * HALF_CLASS_SPACING:g} % of J1, "
               "half the classes' spacing: their interval holds two classes whatever the fit's model terms.)", ""]
     return lines
