@@ -49,6 +49,8 @@ FREE_MIN_SAMPLES = 8
 CHANGEPOINT_P = 1e-3
 #: Chow forecast test of a candidate's end rows: this many rows predicted by the fit without them.
 CHANGEPOINT_FORECAST_SAMPLES = 3
+#: The change-point scans test this many candidate rows first, the rest only when all of them are accepted.
+CHANGEPOINT_CHUNK = 12
 #: Relative floor of the standard error (the model's own error: trapezoid double integral of a sampled torque).
 FREE_REL_SE_FLOOR = 5e-4
 #: Samples taken off an end for the change-point term of the standard error (while at least half the interval
@@ -265,25 +267,31 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             stat = np.sum((r[test] - pred) ** 2 / (s2 * (1.0 + lev)), axis=1)
             return ok & ((ihi - ilo < p + 2) | (stat <= chi_f))
 
+        def first_failure(lo_rows, hi_rows, side):
+            """Index of the first candidate that is not accepted (None: all are): the first CHANGEPOINT_CHUNK, then the
+            rest (a scan usually stops within the first few: the other 2W candidates were computed for nothing)."""
+            for c0, c1 in ((0, CHANGEPOINT_CHUNK), (CHANGEPOINT_CHUNK, lo_rows.size)):
+                if c0 >= lo_rows.size:
+                    break
+                ok = accepted(lo_rows[c0:c1], hi_rows[c0:c1], side)
+                bad = np.flatnonzero(~ok)
+                if bad.size:
+                    return c0 + int(bad[0])
+            return None
+
         def grow_end(s_row, e_from):
             cand = np.arange(max(s_row + FREE_MIN_SAMPLES, e_from), min(hi_c + W, R - L) + 1)
             if cand.size == 0:
                 return e_from
-            ok = accepted(np.full(cand.size, s_row), cand, "end")
-            if not ok[0]:
-                return int(cand[0])
-            bad = np.flatnonzero(~ok)
-            return int(cand[bad[0] - 1]) if bad.size else int(cand[-1])
+            k = first_failure(np.full(cand.size, s_row), cand, "end")
+            return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
 
         def grow_start(e_row, s_from):
             cand = np.arange(min(e_row - FREE_MIN_SAMPLES, s_from), max(lo_c - W, 0) - 1, -1)
             if cand.size == 0:
                 return s_from
-            ok = accepted(cand, np.full(cand.size, e_row), "start")
-            if not ok[0]:
-                return int(cand[0])
-            bad = np.flatnonzero(~ok)
-            return int(cand[bad[0] - 1]) if bad.size else int(cand[-1])
+            k = first_failure(cand, np.full(cand.size, e_row), "start")
+            return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
 
         e_row = grow_end(core[0], core[1])
         s_row = grow_start(e_row, core[0])
