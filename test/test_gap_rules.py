@@ -112,8 +112,8 @@ def test_joint_fit_is_the_weighted_least_squares_solution(n_pre, noise, b1):
     j = R / kappa
     model_error = abs(R / kappa_lin - j)
     se = np.hypot(R / kappa ** 2 * se_kappa, model_error)
-    assert g.inertia_kgm2 == pytest.approx(j, rel=1e-8)                          # GN_TOL 1e-9 per step
-    assert g.model_error_kgm2 == pytest.approx(model_error, abs=1e-8)        # a difference of two J1 (GN_TOL 1e-9)
+    assert g.inertia_kgm2 == pytest.approx(j, rel=1e-8)                          # JOINT_FIT_TOL 1e-9 per step
+    assert g.model_error_kgm2 == pytest.approx(model_error, abs=1e-8)        # a difference of two J1 (JOINT_FIT_TOL 1e-9)
     assert g.std_error_kgm2 == pytest.approx(se, rel=1e-5)
     assert g.residual_rms == pytest.approx(np.sqrt(np.mean((res_a / kappa) ** 2)), rel=1e-6)
     assert g.ci95_kgm2[1] - g.inertia_kgm2 == pytest.approx(stats.t.ppf(0.975, dof) * se, rel=1e-6)

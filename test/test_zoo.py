@@ -122,3 +122,33 @@ def test_missing_results_file_is_one_line_before_any_work(tmp_path, capsys):
     assert rc == 2
     assert "none.md" in err and err.count("\n") == 1
     assert not (tmp_path / "zoo").exists()
+
+
+def test_summarise_counts_what_would_mislead_a_user():
+    """On a drive that sits on its class: a 'between classes' window and another class named are counted apart;
+    levels are counted apart for drives at the nominal J1 (a WARN there is false) and at another class; a refused
+    window whose fit's statistical error alone is wider than half the classes' spacing is 'unresolvable'."""
+    gaps = [{"entry_index": 200 + 100 * k, "recontact_index": 250 + 100 * k, "traversal": True} for k in range(4)]
+
+    def win(k, **kw):
+        w = _win(201 + 100 * k, k, **{a: kw.pop(a) for a in ("published", "j1", "reason") if a in kw})
+        w.update(kw)
+        return w
+    nominal = {"windows": [win(0, status="between_classes", level="WARN"),
+                           win(1, cls=1.131, status="deviating", level="WARN"),
+                           win(2, cls=1.16, status="nominal", level="OK"),
+                           win(3, published=False, reason="ambiguous", status="ambiguous", level="OK",
+                               stat_rel=0.0065)],                           # 1.96 x 0.65 % > 1.25 %: unresolvable
+               "cut_off": []}
+    s = summarise([(_rec(gaps, j1=1.16), nominal)])
+    assert s["between_on_class"] == 1 and s["wrong_class"] == 1
+    assert s["level_WARN_nominal"] == 2 and s["level_OK_nominal"] == 2 and "level_WARN" not in s
+    assert s["unresolvable"] == 1
+    other = {"windows": [win(0, j1=1.073, cls=1.073, status="deviating", level="WARN"),
+                         win(1, published=False, reason="ambiguous", status="ambiguous", level="OK",
+                             stat_rel=0.006)],                              # 1.96 x 0.6 % < 1.25 %: resolvable
+             "cut_off": []}
+    s = summarise([(_rec(gaps, j1=1.073), other)])
+    assert s.get("wrong_class", 0) == 0 and s.get("between_on_class", 0) == 0
+    assert s["level_WARN"] == 1 and s["level_OK"] == 1 and "level_WARN_nominal" not in s
+    assert s.get("unresolvable", 0) == 0

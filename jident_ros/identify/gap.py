@@ -101,8 +101,8 @@ GAP_QUADRATIC_MIN = 12
 GAP_CUBIC_MIN = 8
 
 #: 'acceleration' fit: the Newton iteration on the profile stops when J1 changes by less than this fraction.
-GN_TOL = 1e-9
-GN_MAX_ITER = 30
+JOINT_FIT_TOL = 1e-9
+JOINT_FIT_MAX_ITER = 30
 
 
 #: 'angle' fit: relative floor of the standard error.  The torque model's own error (noise-free,
@@ -941,19 +941,16 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     fa, ff = float(fr @ ag), float(fr @ fr)
     s_pre = float(pre.sum())
     Nm = wm * (na * np.outer(e1, e1) + GG)            # m_el blocks: J_m^T J_m for beta (kappa column is 0)
-    if warm is not None and linear_term:               # the linear coefficient starts at 0
-        beta = np.insert(warm["beta"], 1, 0.0)
+    if warm is not None and linear_term:               # start from the fit without the linear term
         kappa = warm["kappa"]
-    else:  # start: m_el alone (the pre-entry rows pin m0), then kappa through the origin
-        beta = np.linalg.solve(Nm, wm * (s_pre * e1 + Gm))
-        Gu = GG @ beta - Gf                             # G^T u, u = G beta - fr = m_hat - friction
-        uu = float(beta @ GG @ beta - 2.0 * beta @ Gf + ff)
-        kappa = float(beta @ Ga - fa) / uu
+    else:  # start: m_el alone (the pre-entry rows pin m0), then kappa through the origin (u = m_hat - friction)
+        b0 = np.linalg.solve(Nm, wm * (s_pre * e1 + Gm))
+        kappa = float(b0 @ Ga - fa) / float(b0 @ GG @ b0 - 2.0 * b0 @ Gf + ff)
     # the cost is quadratic in beta for a given kappa: beta(kappa) in closed form (one p x p solve), and the optimum
     # is the root of h(kappa) = kappa - (the a1-on-u slope at beta(kappa)), found by Newton's method with a
     # finite-difference slope (h is close to linear: 2-4 steps, 2 solves each), stopped on the step, not on h (with a
     # nearly exact a1, h is ~1e-11 everywhere); Gauss-Newton on (kappa, beta) converged linearly (13-30 solves) and
-    # stopped unconverged at GN_MAX_ITER on the stress bench's load reversal
+    # stopped unconverged after 30 iterations on the stress bench's load reversal
     b_m = wm * (s_pre * e1 + Gm)
 
     def profile(k: float) -> tuple:
@@ -962,7 +959,7 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
         return b, (k - float(b @ Ga - fa) / uu_) if uu_ > 0 else np.nan
 
     beta, h = profile(kappa)
-    for _ in range(GN_MAX_ITER):
+    for _ in range(JOINT_FIT_MAX_ITER):
         if not np.isfinite(h):
             break
         dk = 1e-4 * abs(kappa) if kappa else 1e-12
@@ -973,7 +970,7 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
         step = -h / slope
         kappa += step
         beta, h = profile(kappa)
-        if abs(step) <= GN_TOL * abs(kappa):
+        if abs(step) <= JOINT_FIT_TOL * abs(kappa):
             break
     # residuals and the sandwich covariance at the solution
     m_hat = G @ beta

@@ -28,6 +28,7 @@ coverage, 'ambiguous' (two classes in the interval), J1 published by the verdict
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import sys
@@ -57,6 +58,19 @@ NOISY = ("a1", "m_el", "omega1", "a2", "v2", "omega2")
 EVENT_WINDOW_EARLY_SAMPLES = 4
 #: A published J1 this far from the truth is counted as misleading (issue 12: none may be).
 PUBLISHED_TOLERANCE = 0.10
+
+
+@contextlib.contextmanager
+def flank_refine(replacement):
+    """Inside the block, ``FlankDetector._refine`` (the entry sample from the departure, and the re-contact row) is
+    ``replacement(saved)``, a function of the saved one; restored after, also on an exception. The experiments on
+    the detector lane's code (raw_scenario.entry_refinement, zoo.entry_shift), in this process only."""
+    saved = FlankDetector._refine
+    FlankDetector._refine = replacement(saved)
+    try:
+        yield
+    finally:
+        FlankDetector._refine = saved
 
 
 def gap_row(w, true_j1: float, classes, nominal_kgm2: float, bearing_friction: float = 0.0,

@@ -30,9 +30,8 @@ from typing import Optional
 from jident_ros.cli.scenario import write_signals_bag
 from jident_ros.cli.trend_run import run_trend
 from jident_ros.config import load_system_config
-from jident_ros.research.evaluation.raw_inputs import raw_recordings
+from jident_ros.research.evaluation.raw_inputs import flank_refine, raw_recordings
 from jident_ros.sim.scenarios import Scenario, wear_scenario
-from jident_ros.stream.flank import FlankDetector
 from jident_ros.stream.layout import DEFAULT_CHANNELS, KNOWN_CHANNELS
 
 #: What a drive itself measures (the JointState of a motor and a load joint: positions, velocities, the motor's
@@ -58,19 +57,14 @@ def write_raw_scenario(out, system, scenario: Scenario, *, snr_db: Optional[floa
     return paths
 
 
-@contextlib.contextmanager
 def entry_refinement(on: bool):
     """The flank detector's entry refinement (``FlankDetector._refine``: the entry moved past the departure while
     the load torque m_el - J1_nom dω1/dt has not vanished) as it is (``on``) or off (the entry sample is the
     departure sample, no re-contact row from the dynamics) inside the block: an experiment on the detector lane's
-    code, in this process only."""
-    saved = FlankDetector._refine
-    if not on:
-        FlankDetector._refine = lambda self, data, dep: (0, None)
-    try:
-        yield
-    finally:
-        FlankDetector._refine = saved
+    code, in this process only (:func:`~jident_ros.research.evaluation.raw_inputs.flank_refine`)."""
+    if on:
+        return contextlib.nullcontext()
+    return flank_refine(lambda saved: lambda self, data, dep: (0, None))
 
 
 def study(paths, truth: dict, system, refine: bool = True) -> dict:

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import json
 import math
 import re
@@ -45,14 +46,13 @@ import numpy as np
 
 from jident_ros.cli.offline import OfflineError, default_policy, diagnose_samples
 from jident_ros.config import load_system_config
-from jident_ros.research.evaluation.raw_inputs import raw_recordings
+from jident_ros.research.evaluation.raw_inputs import flank_refine, raw_recordings
 from jident_ros.research.second_drive import record as sd_record
 from jident_ros.research.second_drive.model import DriveParams as SecondParams
 from jident_ros.research.vector_drive import record as vd_record
 from jident_ros.research.vector_drive.model import EVENTS as VD_EVENTS
 from jident_ros.research.vector_drive.model import TRAVERSING_EVENTS, motulator_available
 from jident_ros.research.vector_drive.model import DriveParams as VectorParams
-from jident_ros.stream.flank import FlankDetector
 
 MODELS = ("ours", "second drive", "vector drive")
 #: (label, format, encoder counts)
@@ -300,13 +300,16 @@ def _stat_rel(gap) -> Optional[float]:
                                                               / gap.inertia_kgm2)
 
 
-#: Half the spacing of the paper's classes (2.5 % apart near the nominal): a 95 % interval wider than this
-#: on either side holds two classes however the fit is done
-HALF_CLASS_SPACING = 0.0125
-
-#: The nominal J1 of every zoo drive (config/system.yaml's motor.nominal_inertia_kgm2; the zoo's J1 are 1.16 and
-#: 1.073, a class 7.5 % below)
-NOMINAL_KGM2 = 1.16
+@functools.lru_cache(maxsize=1)
+def nominal_and_half_spacing() -> tuple:
+    """(the nominal J1, half the classes' closest spacing relative to it) of config/system.yaml, which every zoo
+    drive is diagnosed with (its J1 are 1.16, the nominal, and 1.073, a class 7.5 % below; the classes are 2.5 %
+    apart near the nominal: a 95 % interval wider than half that on either side holds two classes however the fit
+    is done)."""
+    system = load_system_config()
+    nominal = float(system.motor.nominal_inertia_kgm2)
+    classes = sorted(float(c) for c in system.grid.inertia_classes_kgm2)
+    return nominal, min(b - a for a, b in zip(classes, classes[1:])) / nominal / 2.0
 
 #: the oracle fit needs at least this many samples in the true gap
 ORACLE_MIN_SAMPLES = 8
@@ -369,6 +372,7 @@ def _first_time(zr: ZooRecording, fmt: str) -> float:
 # ------------------------------------------------------------------------------------------ statistics
 def summarise(items: list) -> dict:
     """Counts over (ZooRecording, diagnose_one result) pairs of one group."""
+    nominal_kgm2, half_spacing = nominal_and_half_spacing()
     s = Counter()
     offsets, errs, k2errs, oracle, oracle_f = [], [], [], [], []
     gap_offsets = []        # the entry the gap estimator used (its change point) minus the true one
@@ -421,7 +425,7 @@ def summarise(items: list) -> dict:
             if kind == "trav" and w.get("level"):
                 # on a drive at the nominal J1 a WARN is false (look at a drive that has not changed); at another
                 # class it is the right answer
-                nominal = abs(zr.inertia_kgm2 - NOMINAL_KGM2) < 1e-9
+                nominal = abs(zr.inertia_kgm2 - nominal_kgm2) < 1e-9
                 s[f"level_{w['level']}{'_nominal' if nominal else ''}"] += 1
             if w["k2"] is not None and math.isfinite(w["k2"]) and kind == "trav":
                 k2errs.append(abs(w["k2"] / zr.backlash_width_m - 1))
@@ -442,7 +446,7 @@ def summarise(items: list) -> dict:
             elif kind == "trav":
                 reasons[w["reason"]] += 1
                 # not published, and the samples alone cannot name a class (no estimator can on this window)
-                if w.get("stat_rel") is not None and 1.96 * w["stat_rel"] > HALF_CLASS_SPACING:
+                if w.get("stat_rel") is not None and 1.96 * w["stat_rel"] > half_spacing:
                     s["unresolvable"] += 1
     out = dict(s)
     out["offsets"] = offsets
@@ -655,7 +659,7 @@ def targets(res: dict) -> list:
     lines += ["", "(Ours has one event type, the line's slip; its 'speed events' column counts all its windows. The "
               "column 'samples alone cannot name a class': windows whose fit's statistical standard error alone, the "
               "encoder's quantisation and the noise "
-              f"through the fit with no model term, gives a 95 % half-width above {100 * HALF_CLASS_SPACING:g} % of J1, "
+              f"through the fit with no model term, gives a 95 % half-width above {100 * nominal_and_half_spacing()[1]:.3g} % of J1, "
               "half the classes' spacing: their interval holds two classes whatever the fit's model terms.)", ""]
     return lines
 
@@ -683,24 +687,19 @@ def _commit() -> str:
         return "unknown"
 
 
-@contextlib.contextmanager
 def entry_shift(samples: int):
     """The flank detector's entry sample moved by ``samples`` (FlankDetector._refine's shift) inside the block: how
     the gap stage copes with a detector a few samples off (stop 20: moved by -1 the vector drive's heavy load
     reversal published J1 +27.5 % before the steady-entry fit had to agree with the detector's entry)."""
     if not samples:
-        yield
-        return
-    saved = FlankDetector._refine
+        return contextlib.nullcontext()
 
-    def shifted(self, data, dep):
-        shift, recontact = saved(self, data, dep)
-        return shift + int(samples), recontact
-    FlankDetector._refine = shifted
-    try:
-        yield
-    finally:
-        FlankDetector._refine = saved
+    def shifted(saved):
+        def refine(self, data, dep):
+            shift, recontact = saved(self, data, dep)
+            return shift + int(samples), recontact
+        return refine
+    return flank_refine(shifted)
 
 
 def main(argv=None) -> int:
