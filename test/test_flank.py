@@ -357,3 +357,62 @@ def test_a_traversal_back_keeps_its_departure():
     assert -25 <= shift <= -15
     det._cap_returning = True
     assert det._refine(part, 88) == (0, None)
+
+
+def _free_motor(counts=65536, entry=200, load_nm=80.0, ramp=15, n=400, noise_nm=0.0, seed=0):
+    """alpha1 (quantised) and m_el of a motor whose contact torque falls linearly to zero at ``entry`` (over ``ramp``
+    samples; ``load_nm`` before) and that runs free after it, under a varying m_el (J1 1.16, T_s 0.5 ms)."""
+    ts, j1 = 5e-4, 1.16
+    k = np.arange(n)
+    m_el = -100.0 + 60.0 * np.sin(2 * np.pi * 7 * k * ts)
+    tau = np.where(k < entry, load_nm * np.minimum(1.0, (entry - k) / ramp), 0.0)
+    omega = 80.0 + np.cumsum((m_el - tau) / j1) * ts
+    q = 2 * np.pi / counts
+    alpha1 = np.round((0.37 + np.cumsum(omega) * ts) / q) * q
+    return alpha1, m_el + np.random.default_rng(seed).normal(0.0, noise_nm, n), q
+
+
+@pytest.mark.parametrize("noise_nm", [0.0, 3.0])
+@pytest.mark.parametrize("late", [3, 40])
+def test_free_motion_start_finds_where_the_motor_ran_free(noise_nm, late):
+    """Without a1, a return traversal's late departure (delta resting near its flank with no relative speed) moves
+    back to where the motor equation in angle form starts to hold: alpha1 = a + v k + Phi / J + c k^2 / 2 free from
+    the true entry on, a contact's load before it (issue 20: the vector drive's traversals back were 26-54 samples
+    late, the walk + hinge put them at -6 .. +1)."""
+    from jident_ros.stream.flank import free_motion_start
+    alpha1, m_el, q = _free_motor(noise_nm=noise_nm)
+    assert abs(free_motion_start(alpha1, m_el, 200 + late, 48, 5e-4, q) - 200) <= 2
+
+
+def test_free_motion_start_keeps_the_departure_of_a_coarse_encoder():
+    """A coarse encoder (2^13: a light contact's load is below its resolution, FREE_MAX_NOISE_RAD; its walk ran 51
+    samples back on the vector drive, a false entry): the departure is kept."""
+    from jident_ros.stream import flank
+    alpha1, m_el, q = _free_motor(counts=8192, load_nm=20.0, ramp=60)
+    assert flank.free_motion_start(alpha1, m_el, 240, 48, 5e-4, q) == 240
+    # the guard is what keeps it: without it the coarse encoder's walk moves the entry
+    saved = flank.FREE_MAX_NOISE_RAD
+    try:
+        flank.FREE_MAX_NOISE_RAD = 1.0
+        assert flank.free_motion_start(alpha1, m_el, 240, 48, 5e-4, q) < 200 - 20
+    finally:
+        flank.FREE_MAX_NOISE_RAD = saved
+
+
+def test_free_motion_start_only_for_traversals_back_without_a1():
+    """The walk is a traversal back's (a window's own entry keeps free_departure and the dynamics: ours stays on its
+    sample, the second drive's first traversals unchanged); with a1 back_to_load does it."""
+    alpha1, m_el, q = _free_motor()
+    k = np.arange(alpha1.size)
+    t = k * 5e-4
+    # delta rests on its flank (the encoders' quantisation) and leaves it at the departure, row 240
+    alpha2 = np.round((alpha1 - 0.01 - 2e-4 * np.clip(k - 240, 0, None) ** 2 + 0.3 * q * np.sin(1.3 * k)) / q) * q
+    data = np.column_stack([t, alpha1, alpha2, m_el])
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16,
+                        encoder_counts_per_rev=65536)
+    det._cap_sigma, det._cap_flank = 0.0, (0.01, 1.5e-3)
+    det._cap_returning = True
+    shift, _ = det._refine(data, 240)
+    assert abs(240 + shift - 200) <= 2
+    det._cap_returning = False
+    assert det._refine(data, 240)[0] >= 0

@@ -28,7 +28,10 @@ and on what the clutch does, not on inequality (1):
   scenario the departure sample is the entry sample already: without a1, a departure where delta jumps (a slip)
   is not moved at all.  Without a1, a departure that delta reached by drifting off its flank at a good share of its
   speed (a coupling untwisting as its torque ramps through zero: a light load reversal, whose departure comes 22-24
-  samples after the contact loss) moves back to where delta's free curvature starts (:func:`free_departure`).
+  samples after the contact loss) moves back to where delta's free curvature starts (:func:`free_departure`).  A
+  traversal back inside another window, without a1 (delta may rest near the flank it left with no relative speed and
+  look like a contact), moves back to where the motor equation in angle form starts to explain alpha1
+  (:func:`free_motion_start`).
 * **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
   ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
   (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry
@@ -338,6 +341,104 @@ def back_to_load(m_el: np.ndarray, acc: np.ndarray, entry: int, first: int, iner
     return entry
 
 
+#: Without a1, a return traversal's entry (delta resting near the flank it left with no relative speed, read as a
+#: contact: the second drive's and the vector drive's traversals back were entered 26-138 samples late) moves back
+#: while the motor equation in angle form still explains alpha1 (:func:`free_motion_start`): fitted over the
+#: FREE_FIT_SAMPLES samples from the departure ...
+FREE_FIT_SAMPLES = 48
+#: ... walked back while the fit's rms over [s, departure + FREE_FIT_SAMPLES) stays within this factor of the rms
+#: of the fit from the departure (the quantisation noise: alpha1 of a free motor is a + v t + Phi / J + c t^2 / 2
+#: to the encoder's quantum; a contact's load torque bends it away) -- chosen on the vector drive's return
+#: traversals (rms 2.5-2.7e-5 rad over the free samples; x 1.18 with 12 samples of contact in the fit, x 1.5 with
+#: 15), checked on the second drive's (x 1.1 up to 4 samples before the true entry, x 1.5 at 6) and ours
+FREE_RMS_FACTOR = 1.25
+#: ... then placed where a torque ramping to zero meets the free motion: a hinge (e - t)_+^3 in alpha1 (a contact
+#: torque falling linearly to zero at e, double-integrated) fitted over FREE_HINGE_PRE samples before each candidate
+#: e and FREE_FIT_SAMPLES after it, e from FREE_HINGE_BACK before the walk's end to FREE_HINGE_FWD after it, least
+#: squares (the walk ends where the contact's load becomes visible, 5-23 samples before the true entry)
+FREE_HINGE_PRE = 24
+FREE_HINGE_BACK = 8
+FREE_HINGE_FWD = 24
+#: The walk needs alpha1 resolved to this rms (rad) around the free fit: a 2^16 encoder gives 2.5-2.8e-5 (its
+#: quantum / sqrt 12), a 2^13 one 2.1-2.3e-4, whose walk on the vector drive ran 51 samples back through a light
+#: contact it could not see (a false entry) -- chosen on the vector drive, checked on the second drive
+FREE_MAX_NOISE_RAD = 1.0e-4
+
+
+def _double_integral(m_el: np.ndarray, sample_period_s: float) -> np.ndarray:
+    """Phi(k) = sum_{j<k} sum_{i<=j} m_el(i) T_s^2 (rectangle rule; a free motor: alpha1 = a + v k + Phi / J)."""
+    v = np.cumsum(np.asarray(m_el, float)) * sample_period_s
+    phi = np.zeros(v.size)
+    phi[1:] = np.cumsum(v[:-1]) * sample_period_s
+    return phi
+
+
+def _free_columns(k: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """The free motor's regressors (1, k, Phi, k^2), scaled to order 1."""
+    ks = k / max(float(np.abs(k).max()), 1.0)
+    return np.column_stack([np.ones_like(ks), ks, phi / max(float(np.abs(phi).max()), 1e-300), ks * ks])
+
+
+def free_motion_start(alpha1: np.ndarray, m_el: np.ndarray, departure: int, first: int, sample_period_s: float,
+                      quantum_rad: float = 0.0) -> int:
+    """The entry row moved back from ``departure`` (not before ``first``) to where the motor started to run free,
+    without a1 (module constants FREE_*): alpha1 = a + v k + Phi(k) / J + c k^2 / 2 (Phi the double integral of m_el;
+    a, v, 1/J and c -- friction, the torque estimate's offset -- free) fitted over [s, departure + FREE_FIT_SAMPLES);
+    s walks back while the rms stays within FREE_RMS_FACTOR x the rms from the departure (at least the quantum /
+    sqrt 12); the entry is then refined by a hinge (a contact torque ramping to zero at e) around the walk's end.
+    ``departure`` itself when the walk does not move (the samples before it carry load)."""
+    n = alpha1.size
+    end = min(departure + FREE_FIT_SAMPLES, n)
+    lo = max(int(first), FREE_HINGE_PRE)
+    if end - departure < FREE_FIT_SAMPLES // 2 or lo >= departure:
+        return departure
+    phi_all = _double_integral(m_el, sample_period_s)
+    rows = np.arange(lo, end)
+    k = (rows - departure).astype(float)
+    X = _free_columns(k, phi_all[lo:end] - phi_all[departure])
+    y = np.asarray(alpha1[lo:end], float)
+    beta, *_ = np.linalg.lstsq(X, y, rcond=None)
+    y = y - X @ beta                     # a small residual: the normal equations below keep their precision
+    # fits over [s, end) for every s in lo .. departure: reverse cumulative normal equations
+    P = np.cumsum((X[:, :, None] * X[:, None, :])[::-1], axis=0)[::-1]
+    q = np.cumsum((X * y[:, None])[::-1], axis=0)[::-1]
+    yy = np.cumsum((y * y)[::-1])[::-1]
+    m = departure - lo + 1                       # candidates s = lo + i, i < m
+    try:
+        b = np.linalg.solve(P[:m], q[:m, :, None])[..., 0]
+    except np.linalg.LinAlgError:
+        return departure
+    rss = np.maximum(yy[:m] - np.einsum("ki,ki->k", b, q[:m]), 0.0)
+    dof = (end - rows[:m] - 4).astype(float)
+    rms = np.sqrt(rss / np.maximum(dof, 1.0))
+    noise = max(float(rms[-1]), quantum_rad / math.sqrt(12.0))
+    if not noise <= FREE_MAX_NOISE_RAD:
+        return departure        # a coarse encoder: a light contact's load is below its resolution
+    limit = FREE_RMS_FACTOR * noise
+    bad = np.nonzero(rms > limit)[0]
+    if bad.size == 0:
+        return departure        # no load seen before the departure within reach: nothing says where the gap began
+    start = int(bad[-1]) + 1 + lo           # the earliest s of the unbroken run up to the departure
+    if start >= departure:
+        return departure
+    # the hinge: alpha1 = free motion - h (e - k)_+^3 (a contact torque falling linearly to zero at e, double-
+    # integrated) over [e - FREE_HINGE_PRE, e + FREE_FIT_SAMPLES), e from FREE_HINGE_BACK before the walk's end to
+    # FREE_HINGE_FWD after it (not past the departure); the e of the least mean square residual
+    best, best_rss = departure, math.inf
+    for e in range(max(start - FREE_HINGE_BACK, lo), min(start + FREE_HINGE_FWD, departure) + 1):
+        a, z = e - FREE_HINGE_PRE, min(e + FREE_FIT_SAMPLES, n)
+        kk = np.arange(a, z, dtype=float) - e
+        Xh = np.column_stack([_free_columns(kk, phi_all[a:z] - phi_all[e]),
+                              (np.clip(-kk, 0.0, None) / FREE_HINGE_PRE) ** 3])
+        yh = np.asarray(alpha1[a:z], float) - float(alpha1[e])
+        coef, *_ = np.linalg.lstsq(Xh, yh, rcond=None)
+        r = yh - Xh @ coef
+        val = float(r @ r) / max(z - a - 5, 1)
+        if val < best_rss:
+            best, best_rss = e, val
+    return best
+
+
 def _noise(x: np.ndarray) -> float:
     """White-noise standard deviation of a steady stretch, robust to a few samples of a starting transient
     (the drive may act just before the clutch leaves its flank): 1.4826 MAD of the first differences / sqrt 2."""
@@ -492,6 +593,8 @@ class FlankDetector(BacklashDetector):
         if self.nominal_inertia_kgm2 is not None and "m_el" in self.channels and "a1" in self.channels:
             # the entry sample may move back from the departure (back_to_load): the history holds it
             self.history_extra = REFINE_BACK_SAMPLES
+        elif self.detector_name == "flank" and "a1" not in self.channels and "m_el" in self.channels:
+            self.history_extra = REFINE_BACK_SAMPLES         # ... or to where the motor ran free (free_motion_start)
         elif self.detector_name == "flank" and "a1" not in self.channels:
             self.history_extra = DRIFT_BACK_SAMPLES          # ... or to delta's free curvature (free_departure)
         self.min_travel_rad = float(min_travel_rad)
@@ -851,6 +954,7 @@ class FlankDetector(BacklashDetector):
         dep = cap.departure_row
         self._cap_sigma = cap.flank_sigma_rad      # the entry flank's contact noise (free_departure)
         self._cap_returning = cap.returning
+        self._cap_flank = (cap.flank_rad, self.threshold_for(cap))
         shift, recontact = self._refine(data, dep)
         e0 = dep + shift - self.samples_before_entry
         win = data[e0:e0 + self.window_length]
@@ -1011,6 +1115,24 @@ class FlankDetector(BacklashDetector):
         back to delta's free curvature when delta drifted off its flank before the departure (:func:`free_departure`;
         then the forward move is not tried); (0, None) when delta jumped off its flank (:meth:`_jumped`: a slip)."""
         jumped = self._jumped(data, dep)
+        if self.detector_name == "flank" and "a1" not in self.channels and "m_el" in self.channels \
+                and getattr(self, "_cap_returning", False):
+            # a traversal back: delta may rest near the flank it left with no relative speed (read as a contact);
+            # the motor equation in angle form finds where the motor started to run free (free_motion_start)
+            # not back past the last sample where delta was inside the zone on the side it departs to (the gap
+            # before the contact it left: the motor runs free there too, and the contact between may be short)
+            first = self.samples_before_entry
+            flank, thr = getattr(self, "_cap_flank", (math.nan, math.nan))
+            if math.isfinite(flank) and math.isfinite(thr) and dep > first:
+                d = self._delta(data[:dep + 1])
+                side = 1.0 if d[dep] >= flank else -1.0
+                inside = np.nonzero(side * (d[:dep] - flank) > thr)[0]
+                if inside.size:
+                    first = max(first, int(inside[-1]) + 1)
+            e = free_motion_start(data[:, self._i_a1], data[:, self.channels.index("m_el")], dep, first,
+                                  self.sample_period_s, self.angle_quantum_rad)
+            if e < dep:
+                return e - dep, None
         # not in a traversal back (delta rings at the other flank after the impact before it leaves it again: on the
         # vector drive's 2^13 speed steps the move took return entries 10-40 samples back, one before its gap)
         if self.detector_name == "flank" and "a1" not in self.channels and not jumped \
