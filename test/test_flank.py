@@ -416,3 +416,52 @@ def test_free_motion_start_only_for_traversals_back_without_a1():
     assert abs(240 + shift - 200) <= 2
     det._cap_returning = False
     assert det._refine(data, 240)[0] >= 0
+
+
+def _untwisting_two_mass(n=420, ts=5e-4, sub=20, j1=1.16, j2=2.0, k=5e4, c=40.0, half=0.05, load0=200.0,
+                         ramp=(0.1, 0.112), counts=65536):
+    """A two-mass drive with a linear spring-damper coupling in a dead zone (the vector drive's coupling), on its +
+    flank under 200 N m, whose load reverses (-150 N m) while m_el falls to -50 N m within 12 ms: the coupling
+    untwists off its flank and the contact is lost.  (t, alpha1, alpha2, m_el) at 2^16 counts and the first row in
+    the zone."""
+    h = ts / sub
+    th1, w1, th2, w2 = half + load0 / k, 50.0, 0.0, 50.0
+    out, free = np.zeros((n, 4)), np.zeros(n, bool)
+    for i in range(n):
+        for _ in range(sub):
+            f = min(max((i * ts - ramp[0]) / (ramp[1] - ramp[0]), 0.0), 1.0)
+            m = load0 + (-50.0 - load0) * f + 20.0 * math.sin(2 * math.pi * 9 * i * ts)
+            pen = abs(th1 - th2) - half
+            tc = math.copysign(max(k * pen + c * math.copysign(1.0, th1 - th2) * (w1 - w2), 0.0), th1 - th2) \
+                if pen > 0 else 0.0
+            w1 += h * (m - tc) / j1
+            th1 += h * w1
+            w2 += h * (tc - (load0 - 350.0 * f)) / j2
+            th2 += h * w2
+        out[i] = (i * ts, th1, th2, m)
+        free[i] = abs(th1 - th2) <= half
+    q = 2 * math.pi / counts
+    out[:, 1] = np.round(out[:, 1] / q) * q
+    out[:, 2] = np.round((out[:, 2] + 0.3) / q) * q
+    return out, int(np.argmax(free))
+
+
+def test_coupling_entry_puts_an_untwisting_departure_at_the_contact_loss():
+    """Without a1, delta crosses the departure threshold while the coupling still untwists (7 samples early here; the
+    vector drive's heavy load reversals 8-9, the second drive's speed steps 3-4): the coupling model's contact loss
+    is the entry, accepted as a forward move; from the true entry it stays."""
+    from jident_ros.stream.flank import COUPLING_MIN_GAIN, coupling_entry
+    data, entry = _untwisting_two_mass()
+    d = data[:, 1] - data[:, 2]
+    flank = float(np.median(d[100:150]))
+    dep = int(np.argmax(np.abs(d - flank) > 1.5e-3))
+    assert entry - dep >= 5                       # the departure is early: the rule is what moves it
+    e, gain, rms = coupling_entry(data[:, 1], d, data[:, 3], dep, 1.0 if d[dep] >= flank else -1.0, 5e-4)
+    assert abs(e - entry) <= 1 and gain > 1.0 and rms < 1e-4
+    e, gain, _ = coupling_entry(data[:, 1], d, data[:, 3], entry, -1.0, 5e-4)
+    assert abs(e - entry) <= 1 and gain < COUPLING_MIN_GAIN
+    # the detector's own window: its entry at the contact loss
+    data, entry = _untwisting_two_mass(n=2300)
+    wins, _ = _windows(data, ("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16,
+                       encoder_counts_per_rev=65536)
+    assert wins and abs(round(wins[0].entry_time_s / 5e-4) - entry) <= 2

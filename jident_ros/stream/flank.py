@@ -439,6 +439,60 @@ def free_motion_start(alpha1: np.ndarray, m_el: np.ndarray, departure: int, firs
     return best
 
 
+#: Without a1, a window's own entry that delta left gradually (a coupling untwisting as its load falls, so delta
+#: crosses the departure threshold before the contact is lost: the vector drive's heavy load reversals 8-9 samples
+#: early) moves to the contact loss of a coupling model (:func:`coupling_entry`): alpha1 = a + v k + (Phi - K Psi -
+#: D Psi') / J + c k^2 / 2, the contact torque K pen + D pen' of delta's penetration beyond the edge it leaves at
+#: the candidate entry, fitted over COUPLING_FIT_BEFORE samples before the departure and COUPLING_FIT_AFTER from it
+#: (before a short gap's re-contact: the second drive's 2.5 mm gaps last 30 samples), candidates within
+#: +-COUPLING_SEARCH samples ...
+COUPLING_FIT_BEFORE = 52
+COUPLING_FIT_AFTER = 32
+COUPLING_SEARCH = 12
+#: ... taken only when it explains alpha1 this much better than the departure itself (residual sum of squares at the
+#: departure / at the best candidate) -- chosen on the vector drive (heavy load reversals 1.8-2.3; its speed steps,
+#: light load reversals and speed reversals 1.0-1.3, where the model's best lay up to 9 samples off), tested on the
+#: second drive (1.0-1.15: unchanged)
+COUPLING_MIN_GAIN = 1.5
+COUPLING_MIN_GAIN_FORWARD = 1.0
+
+
+def coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, departure: int, side: float,
+                   sample_period_s: float) -> tuple:
+    """(entry row, gain) of a coupling model's contact loss near ``departure`` (COUPLING_* constants): for each
+    candidate e the contact torque acts while delta is beyond the edge delta had at e (on the side opposite to
+    ``side``, the direction delta departs to) and not from e on; alpha1 = a + v k + b1 Phi + b2 Psi + b3 Psi_d +
+    c k^2 (Phi, Psi, Psi_d the double integrals of m_el, the penetration and its rate) by least squares over one
+    sample set; the e of the least residual and the gain RSS(departure) / RSS(e).  (departure, 1.0) when the rows are
+    not there."""
+    lo, hi = departure - COUPLING_FIT_BEFORE, departure + COUPLING_FIT_AFTER
+    if lo < 1 or hi > alpha1.size or departure - COUPLING_SEARCH < lo + 2:
+        return departure, 1.0, math.inf
+    ts = sample_period_s
+    k = np.arange(lo, hi, dtype=float) - departure
+    base = _free_columns(k, _double_integral(m_el[lo:hi], ts))
+    y = np.asarray(alpha1[lo:hi], float)
+    y = y - base @ np.linalg.lstsq(base, y, rcond=None)[0]
+    d = np.asarray(delta[lo:hi], float)
+    rate = np.gradient(d) / ts
+    best, best_rss, rss_dep = departure, math.inf, math.nan
+    for e in range(departure - COUPLING_SEARCH, departure + COUPLING_SEARCH + 1):
+        edge = 0.5 * (delta[e - 1] + delta[e])
+        pen = np.clip(-side * (d - edge), 0.0, None)
+        pen[e - lo:] = 0.0
+        cols = [_double_integral(pen, ts), _double_integral(rate * (pen > 0), ts)]
+        X = np.column_stack([base] + [c / (float(np.abs(c).max()) or 1.0) for c in cols])
+        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+        r = y - X @ coef
+        val = float(r @ r)
+        if e == departure:
+            rss_dep = val
+        if val < best_rss:
+            best, best_rss = e, val
+    gain = rss_dep / best_rss if best_rss > 0 else 1.0
+    return best, gain, math.sqrt(best_rss / max(y.size - 6, 1))
+
+
 def _noise(x: np.ndarray) -> float:
     """White-noise standard deviation of a steady stretch, robust to a few samples of a starting transient
     (the drive may act just before the clutch leaves its flank): 1.4826 MAD of the first differences / sqrt 2."""
@@ -1171,4 +1225,21 @@ class FlankDetector(BacklashDetector):
         if src == "a1" and self.history_extra:
             first = max(entry - self.history_extra, self.samples_before_entry)     # the history there is
             entry = back_to_load(wd["m_el"], acc, entry, first, self.nominal_inertia_kgm2, end=recontact)
+        elif src != "a1" and self.detector_name == "flank" and not getattr(self, "_cap_returning", False):
+            # without a1, a coupling that untwisted off its flank: the entry at the coupling model's contact loss
+            entry = self._coupling_move(data, entry + off) - off
         return entry - dep, None if recontact is None else recontact + off
+
+    def _coupling_move(self, data: np.ndarray, entry: int) -> int:
+        """``entry`` moved to the coupling model's contact loss (:func:`coupling_entry`) when that explains alpha1 at
+        least COUPLING_MIN_GAIN times better; else ``entry``."""
+        flank = getattr(self, "_cap_flank", (math.nan, math.nan))[0]
+        if not math.isfinite(flank) or "m_el" not in self.channels or getattr(self, "_cap_returning", False):
+            return entry
+        delta = self._delta(data)
+        side = 1.0 if delta[entry] >= flank else -1.0
+        e, gain, rms = coupling_entry(data[:, self._i_a1], delta, data[:, self.channels.index("m_el")], entry, side,
+                                      self.sample_period_s)
+        if not max(rms, self.angle_quantum_rad / math.sqrt(12.0)) <= FREE_MAX_NOISE_RAD:
+            return entry        # a coarse encoder (2^13: its moves went 3-12 samples the wrong way)
+        return e if gain >= (COUPLING_MIN_GAIN_FORWARD if e > entry else COUPLING_MIN_GAIN) else entry
