@@ -454,6 +454,11 @@ COUPLING_SEARCH = 12
 #: light load reversals and speed reversals 1.0-1.3, where the model's best lay up to 9 samples off), tested on the
 #: second drive (1.0-1.15: unchanged)
 COUPLING_MIN_GAIN = 1.5
+#: A forward move (the contact still loaded after delta's departure: the second drive's speed steps, gains 1.0-1.15,
+#: -3/-4 -> -2..-1) needs no more than a better fit; so does the coupling model's step after a traversal back's walk
+#: (free_motion_start's hinge put the second drive's at +3, the vector drive's at -6; the coupling model at -2..+1),
+#: with a1 after back_to_load too.  With a1 a window's own entry is not moved (its light load reversals went 5-11
+#: samples late at gains 1.02-1.08, the heavy ones' gains 1.02-1.15 are no larger)
 COUPLING_MIN_GAIN_FORWARD = 1.0
 
 
@@ -489,6 +494,8 @@ def coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, depa
             rss_dep = val
         if val < best_rss:
             best, best_rss = e, val
+    if not best_rss < rss_dep * (1.0 - 1e-9):
+        return departure, 1.0, math.sqrt(rss_dep / max(y.size - 6, 1))   # no candidate explains alpha1 better
     gain = rss_dep / best_rss if best_rss > 0 else 1.0
     return best, gain, math.sqrt(best_rss / max(y.size - 6, 1))
 
@@ -1186,6 +1193,8 @@ class FlankDetector(BacklashDetector):
             e = free_motion_start(data[:, self._i_a1], data[:, self.channels.index("m_el")], dep, first,
                                   self.sample_period_s, self.angle_quantum_rad)
             if e < dep:
+                # then the coupling model's contact loss near the walk's end (a better fit is enough)
+                e = min(self._coupling_move(data, e, dep, 1.0, 1.0), dep)
                 return e - dep, None
         # not in a traversal back (delta rings at the other flank after the impact before it leaves it again: on the
         # vector drive's 2^13 speed steps the move took return entries 10-40 samples back, one before its gap)
@@ -1225,21 +1234,26 @@ class FlankDetector(BacklashDetector):
         if src == "a1" and self.history_extra:
             first = max(entry - self.history_extra, self.samples_before_entry)     # the history there is
             entry = back_to_load(wd["m_el"], acc, entry, first, self.nominal_inertia_kgm2, end=recontact)
+            if getattr(self, "_cap_returning", False):
+                # a traversal back: the coupling model's contact loss near back_to_load's entry
+                entry = self._coupling_move(data, entry + off, dep + off, 1.0, 1.0) - off
         elif src != "a1" and self.detector_name == "flank" and not getattr(self, "_cap_returning", False):
             # without a1, a coupling that untwisted off its flank: the entry at the coupling model's contact loss
-            entry = self._coupling_move(data, entry + off) - off
+            entry = self._coupling_move(data, entry + off, dep + off) - off
         return entry - dep, None if recontact is None else recontact + off
 
-    def _coupling_move(self, data: np.ndarray, entry: int) -> int:
-        """``entry`` moved to the coupling model's contact loss (:func:`coupling_entry`) when that explains alpha1 at
-        least COUPLING_MIN_GAIN times better; else ``entry``."""
+    def _coupling_move(self, data: np.ndarray, entry: int, departure: int,
+                       forward_gain: float = COUPLING_MIN_GAIN_FORWARD, back_gain: float = COUPLING_MIN_GAIN) -> int:
+        """``entry`` moved to the coupling model's contact loss (:func:`coupling_entry`; the side delta left its flank
+        to: at ``departure``) when that explains alpha1 ``forward_gain`` (a later entry) or ``back_gain`` (an
+        earlier one) times better; else ``entry``."""
         flank = getattr(self, "_cap_flank", (math.nan, math.nan))[0]
-        if not math.isfinite(flank) or "m_el" not in self.channels or getattr(self, "_cap_returning", False):
+        if not math.isfinite(flank) or "m_el" not in self.channels:
             return entry
         delta = self._delta(data)
-        side = 1.0 if delta[entry] >= flank else -1.0
+        side = 1.0 if delta[departure] >= flank else -1.0
         e, gain, rms = coupling_entry(data[:, self._i_a1], delta, data[:, self.channels.index("m_el")], entry, side,
                                       self.sample_period_s)
         if not max(rms, self.angle_quantum_rad / math.sqrt(12.0)) <= FREE_MAX_NOISE_RAD:
             return entry        # a coarse encoder (2^13: its moves went 3-12 samples the wrong way)
-        return e if gain >= (COUPLING_MIN_GAIN_FORWARD if e > entry else COUPLING_MIN_GAIN) else entry
+        return e if gain >= (forward_gain if e > entry else back_gain) else entry
