@@ -462,6 +462,10 @@ def test_coupling_entry_puts_an_untwisting_departure_at_the_contact_loss():
     assert abs(e - entry) <= 1 and gain > 1.0 and rms < 1e-4
     e, gain, _ = coupling_entry(data[:, 1], d, data[:, 3], entry, -1.0, 5e-4)
     assert abs(e - entry) <= 1 and gain < COUPLING_MIN_GAIN
+    # a departure farther off than the search: the best candidate lies on the search's edge, the model locates
+    # nothing there and the departure is kept (a traversal back 76 samples late went to +88)
+    far = entry - 20
+    assert coupling_entry(data[:, 1], d, data[:, 3], far, 1.0, 5e-4)[:2] == (far, 1.0)
     # the detector's own window: its entry at the contact loss
     data, entry = _untwisting_two_mass(n=2300)
     wins, _ = _windows(data, ("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16,

@@ -494,8 +494,10 @@ def coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, depa
             rss_dep = val
         if val < best_rss:
             best, best_rss = e, val
-    if not best_rss < rss_dep * (1.0 - 1e-9):
-        return departure, 1.0, math.sqrt(rss_dep / max(y.size - 6, 1))   # no candidate explains alpha1 better
+    if not best_rss < rss_dep * (1.0 - 1e-9) or abs(best - departure) >= COUPLING_SEARCH:
+        # no candidate explains alpha1 better, or the best lies on the search's edge (the minimum is beyond it: the
+        # model locates nothing there; a traversal back 76 samples late went to +88)
+        return departure, 1.0, math.sqrt(rss_dep / max(y.size - 6, 1))
     gain = rss_dep / best_rss if best_rss > 0 else 1.0
     return best, gain, math.sqrt(best_rss / max(y.size - 6, 1))
 
