@@ -475,6 +475,7 @@ def summarise(items: list) -> dict:
     out["covered"] = int(sum(covered))
     out["with_interval"] = len(covered)
     out["k2_median"] = float(np.median(k2errs)) if k2errs else None
+    out["k2_errors"] = k2errs
     out["reasons"] = dict(reasons.most_common())
     out["oracle"] = oracle
     out["oracle_friction"] = oracle_f
@@ -649,9 +650,9 @@ def targets(res: dict) -> list:
              "published | published > 10 % off (all inputs) | 95 % CI covers (all inputs) | 'between classes' / another "
              "class named, on a drive on its class (all inputs) | JointState 2^16 windows not published: no estimate / "
              "the samples alone > ± 10 % / the declared model terms > ± 10 % / other | "
-             "traversal windows' levels OK / WARN / ERROR (all inputs), drives at the "
+             "K2 median error, clean (all inputs) | traversal windows' levels OK / WARN / ERROR (all inputs), drives at the "
              "nominal J1 | the same, drives at another class |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for model in MODELS:
         tot = [s for (m, _, _), s in res["totals"].items() if m == model]
         if not tot:
@@ -663,6 +664,9 @@ def targets(res: dict) -> list:
         js30 = _merge([s for (m, label, ev, noise), s in res["rows"].items() if m == model
                        and label == "JointState 2^16" and noise == "30 dB"])
         jsall = _merge(js)
+        k2_clean = _merge([s for (m, _, noise), s in res["totals"].items() if m == model and noise == "clean"])
+        k2e = k2_clean.get("k2_errors", [])
+        k2_cell = f"{100 * float(np.median(k2e)):.1f} % (target ≤ 5 %)" if k2e else "–"
 
         def pub(x):
             return f"{x.get('trav_published', 0)}/{x.get('trav_windows', 0)}"
@@ -673,7 +677,7 @@ def targets(res: dict) -> list:
                      f"{a.get('published_off', 0)} (target: 0) | {a.get('covered', 0)}/{a.get('with_interval', 0)} "
                      f"(target ≥ 85 %) | {a.get('between_on_class', 0)} / {a.get('wrong_class', 0)} (target: 0 / 0) | "
                      f"{jsall.get('unpub_no_estimate', 0)} / {jsall.get('unpub_samples', 0)} / {jsall.get('unpub_model', 0)} / "
-                     f"{jsall.get('unpub_other', 0)} | "
+                     f"{jsall.get('unpub_other', 0)} | {k2_cell} | "
                      f"{a.get('level_OK_nominal', 0)} / {a.get('level_WARN_nominal', 0)} / {a.get('level_ERROR_nominal', 0)} | "
                      f"{a.get('level_OK', 0)} / {a.get('level_WARN', 0)} / {a.get('level_ERROR', 0)} |")
     lines += ["", "(Ours has one event type, the line's slip; its 'speed events' column counts all its windows. "
