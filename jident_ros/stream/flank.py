@@ -381,17 +381,24 @@ def _free_columns(k: np.ndarray, phi: np.ndarray) -> np.ndarray:
 
 def free_motion_start(alpha1: np.ndarray, m_el: np.ndarray, departure: int, first: int, sample_period_s: float,
                       quantum_rad: float = 0.0) -> int:
+    """:func:`free_motion_walk`'s entry (its hinge's)."""
+    return free_motion_walk(alpha1, m_el, departure, first, sample_period_s, quantum_rad)[1]
+
+
+def free_motion_walk(alpha1: np.ndarray, m_el: np.ndarray, departure: int, first: int, sample_period_s: float,
+                     quantum_rad: float = 0.0) -> tuple:
     """The entry row moved back from ``departure`` (not before ``first``) to where the motor started to run free,
     without a1 (module constants FREE_*): alpha1 = a + v k + Phi(k) / J + c k^2 / 2 (Phi the double integral of m_el;
     a, v, 1/J and c -- friction, the torque estimate's offset -- free) fitted over [s, departure + FREE_FIT_SAMPLES);
     s walks back while the rms stays within FREE_RMS_FACTOR x the rms from the departure (at least the quantum /
     sqrt 12); the entry is then refined by a hinge (a contact torque ramping to zero at e) around the walk's end.
-    ``departure`` itself when the walk does not move (the samples before it carry load)."""
+    (walk's end, entry); (``departure``, ``departure``) when the walk does not move (the samples before it carry
+    load)."""
     n = alpha1.size
     end = min(departure + FREE_FIT_SAMPLES, n)
     lo = max(int(first), FREE_HINGE_PRE)
     if end - departure < FREE_FIT_SAMPLES // 2 or lo >= departure:
-        return departure
+        return departure, departure
     phi_all = _double_integral(m_el, sample_period_s)
     rows = np.arange(lo, end)
     k = (rows - departure).astype(float)
@@ -407,20 +414,20 @@ def free_motion_start(alpha1: np.ndarray, m_el: np.ndarray, departure: int, firs
     try:
         b = np.linalg.solve(P[:m], q[:m, :, None])[..., 0]
     except np.linalg.LinAlgError:
-        return departure
+        return departure, departure
     rss = np.maximum(yy[:m] - np.einsum("ki,ki->k", b, q[:m]), 0.0)
     dof = (end - rows[:m] - 4).astype(float)
     rms = np.sqrt(rss / np.maximum(dof, 1.0))
     noise = max(float(rms[-1]), quantum_rad / math.sqrt(12.0))
     if not noise <= FREE_MAX_NOISE_RAD:
-        return departure        # a coarse encoder: a light contact's load is below its resolution
+        return departure, departure        # a coarse encoder: a light contact's load is below its resolution
     limit = FREE_RMS_FACTOR * noise
     bad = np.nonzero(rms > limit)[0]
     if bad.size == 0:
-        return departure        # no load seen before the departure within reach: nothing says where the gap began
+        return departure, departure        # no load seen before the departure within reach: nothing says where the gap began
     start = int(bad[-1]) + 1 + lo           # the earliest s of the unbroken run up to the departure
     if start >= departure:
-        return departure
+        return departure, departure
     # the hinge: alpha1 = free motion - h (e - k)_+^3 (a contact torque falling linearly to zero at e, double-
     # integrated) over [e - FREE_HINGE_PRE, e + FREE_FIT_SAMPLES), e from FREE_HINGE_BACK before the walk's end to
     # FREE_HINGE_FWD after it (not past the departure); the e of the least mean square residual
@@ -436,7 +443,7 @@ def free_motion_start(alpha1: np.ndarray, m_el: np.ndarray, departure: int, firs
         val = float(r @ r) / max(z - a - 5, 1)
         if val < best_rss:
             best, best_rss = e, val
-    return best
+    return start, best
 
 
 #: Without a1, a window's own entry that delta left gradually (a coupling untwisting as its load falls, so delta
@@ -1182,21 +1189,16 @@ class FlankDetector(BacklashDetector):
                 and getattr(self, "_cap_returning", False):
             # a traversal back: delta may rest near the flank it left with no relative speed (read as a contact);
             # the motor equation in angle form finds where the motor started to run free (free_motion_start)
-            # not back past the last sample where delta was inside the zone on the side it departs to (the gap
-            # before the contact it left: the motor runs free there too, and the contact between may be short)
-            first = self.samples_before_entry
-            flank, thr = getattr(self, "_cap_flank", (math.nan, math.nan))
-            if math.isfinite(flank) and math.isfinite(thr) and dep > first:
-                d = self._delta(data[:dep + 1])
-                side = 1.0 if d[dep] >= flank else -1.0
-                inside = np.nonzero(side * (d[:dep] - flank) > thr)[0]
-                if inside.size:
-                    first = max(first, int(inside[-1]) + 1)
-            e = free_motion_start(data[:, self._i_a1], data[:, self.channels.index("m_el")], dep, first,
-                                  self.sample_period_s, self.angle_quantum_rad)
+            # (through any excursion of delta into the zone: the second drive's traversal back turns inside the zone
+            # and rests 1 mrad off the flank it left before leaving it again, one gap; a guard that stopped the walk
+            # where delta was last inside the zone left 3 of them 88-92 samples late)
+            walk, e = free_motion_walk(data[:, self._i_a1], data[:, self.channels.index("m_el")], dep,
+                                       self.samples_before_entry, self.sample_period_s, self.angle_quantum_rad)
             if e < dep:
-                # then the coupling model's contact loss near the walk's end (a better fit is enough)
-                e = min(self._coupling_move(data, e, dep, 1.0, 1.0), dep)
+                # then the coupling model's contact loss: forward from the walk's end (the walk stops where the
+                # contact's load becomes visible, before the contact loss), else near the hinge's entry
+                e2 = self._coupling_move(data, walk, dep, 1.0, 1.0)
+                e = min(e2 if e2 > walk else self._coupling_move(data, e, dep, 1.0, 1.0), dep)
                 return e - dep, None
         # not in a traversal back (delta rings at the other flank after the impact before it leaves it again: on the
         # vector drive's 2^13 speed steps the move took return entries 10-40 samples back, one before its gap)
