@@ -471,3 +471,41 @@ def test_coupling_entry_puts_an_untwisting_departure_at_the_contact_loss():
     wins, _ = _windows(data, ("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16,
                        encoder_counts_per_rev=65536)
     assert wins and abs(round(wins[0].entry_time_s / 5e-4) - entry) <= 2
+
+
+def test_a_skewed_imu_in_a_traversal_back_is_detected_again_as_one(monkeypatch):
+    """The Imu check fails on a traversal back (the window inside the window before it): ImuSkewGuard detects it
+    again without a1 from the margin before it, inside the window given out before (the vector drive's speed steps
+    lost 3 such windows when the second pass started after that window's end), as a traversal back, and drops the
+    window before it if found again (a duplicate)."""
+    from jident_ros.stream import imu_skew as sk
+    data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (940, 0.0)])
+    data = np.column_stack([data, np.zeros(data.shape[0])])
+    ch = ch + ("a1",)
+
+    class Adapter:
+        use_imu, a1_dropped = True, False
+
+        def drop_a1(self):
+            self.a1_dropped = True
+
+    def check(window):
+        bad = window.window_id == 2 and "a1" in window.channels
+        return {"within": not bad, "skew_s": 1e-3, "tolerance_s": 2.5e-4, "correlation": 1.0, "reference": "omega1"}
+
+    monkeypatch.setattr(sk, "check_imu_skew", check)
+    made = []
+
+    def remake(chans):
+        made.append(FlankDetector(0.1, 5e-4, channels=chans))
+        return made[-1]
+
+    guard = sk.ImuSkewGuard(Adapter(), remake)
+    det, wins = None, []
+    for b in stream_batches(data, 50):
+        det, evs = guard.push(det, b, ch)
+        wins += [e.window for e in evs if e.kind == "window"]
+    wins += [e.window for e in det.finish() if e.kind == "window"]
+    assert [round((w.entry_time_s - 1.0) / 5e-4) for w in wins] == [501, 901] and guard.dropped == 0
+    assert "a1" not in wins[1].channels and len(made) == 2
+    assert made[1].inside_window_until_s == pytest.approx(float(wins[0].column("t")[-1]))

@@ -621,6 +621,9 @@ class FlankDetector(BacklashDetector):
     #: +12 % before (a fitted Coulomb term had absorbed the estimate's constant error, not its drift; docs/results.md
     #: "Zoo: return traversals on").  False: one window per excursion, as before.
     second_windows = True
+    #: Entries at or before this time lie inside a window given out before this detector started (set by
+    #: :class:`~jident_ros.stream.imu_skew.ImuSkewGuard` when it detects a window again without a1): traversals back
+    inside_window_until_s = -math.inf
 
     def __init__(self, wheel_radius_m: float, sample_period_s: float,
                  channels: Sequence[str] = DEFAULT_CHANNELS, samples_before_entry: int = 48,
@@ -954,8 +957,11 @@ class FlankDetector(BacklashDetector):
                 self._last_cap = _FlankCapture([], self.samples_before_entry + extra,
                                                self.samples_before_entry + extra, math.nan, math.nan, skip=True)
             else:
+                # an entry inside a window given out before this detector started (ImuSkewGuard's second pass from
+                # inside the window before the skewed one) is a traversal back, as one inside a running capture
                 self._last_cap = _FlankCapture([hist], hist.shape[0], hist.shape[0], flank, sigma,
-                                               start_row=self._entry_row - hist.shape[0])
+                                               start_row=self._entry_row - hist.shape[0],
+                                               returning=t_k <= self.inside_window_until_s)
             self._caps.append(self._last_cap)
         events += self._feed(x[pos:])
         self._tail = np.concatenate([self._tail, x])[-(self.samples_before_entry + extra):]

@@ -133,9 +133,10 @@ class ImuSkewGuard:
     Each window the detector gives is checked; a window whose a1 is out of step is **detected again without a1**:
     the adapter goes on without a1 (:meth:`JointStateAdapter.drop_a1`), a new detector (``remake(channels)``, the
     owner's factory) takes over, counts and window ids carried over, and is fed the recent rows it
-    keeps (from :data:`SKEW_REFEED_MARGIN_SAMPLES` before the skewed window's first sample, not before the end of the
-    window before it) without a1: the window comes out again with its entry placed from the encoder, under the same
-    window id.  Only a window that this second pass does not find (nor keeps capturing) is lost, counted in
+    keeps (from :data:`SKEW_REFEED_MARGIN_SAMPLES` before the skewed window's first sample, also inside the window
+    before it: a traversal back lies there; a window found again at or before that window's entry is dropped, a
+    duplicate; entries inside it are traversals back, ``inside_window_until_s``) without a1: the window comes out
+    again with its entry placed from the encoder, under the same window id.  Only a window that this second pass does not find (nor keeps capturing) is lost, counted in
     :attr:`dropped`.  :attr:`skews` counts the windows whose check found the skew, :attr:`report` is the last check.
     ``log`` gets one line per skew found (:func:`skew_line`) and per window lost.
     """
@@ -149,6 +150,7 @@ class ImuSkewGuard:
         self._kept: list = []   # recent (array, channels) batches the detector took, since its last drop
         self._kept_rows = 0
         self._last_end_t = -math.inf     # the last sample of the last window given out
+        self._last_entry_t = -math.inf   # ... and its entry
         self.last_lost = False
 
     def reset(self) -> None:
@@ -191,6 +193,7 @@ class ImuSkewGuard:
             if ev.kind == "window":
                 w = ev.window
                 self._last_end_t = float(w.column("t")[-1])
+                self._last_entry_t = float(w.entry_time_s)
             elif ev.reason != "empty":      # continuity lost: the detector restarted, so does the history
                 self.reset()
         return events
@@ -212,16 +215,23 @@ class ImuSkewGuard:
         new = self.remake(rows[0][1] if rows else chans)
         t = win.column("t")
         ts = float(win.sample_period_s)
-        start = max(float(t[0]) - SKEW_REFEED_MARGIN_SAMPLES * ts, self._last_end_t + 0.5 * ts)
+        # from the margin before the skewed window, even inside the window given out before it (a traversal back
+        # lies inside the window of the traversal before it: started after that window's end, the vector drive's
+        # speed steps lost 3 of them); a window found again at or before that window's entry is a duplicate, dropped
+        start = float(t[0]) - SKEW_REFEED_MARGIN_SAMPLES * ts
         ids = old.windows_captured - 1          # the window comes out again under its own id
         samples, batches, counts = old.samples_seen, old.batches_seen, dict(getattr(old, "counts", {}))
         new.windows_captured = ids
+        if self._last_end_t > start:
+            new.inside_window_until_s = self._last_end_t     # its entries there are traversals back
         events = []
         for a, c in rows:
             tcol = a[:, list(c).index("t")]
             a = a[tcol >= start]
             if a.shape[0]:
                 events += new.push(a, c)
+        events = [ev for ev in events if not (ev.kind == "window" and ev.window is not None
+                                              and ev.window.entry_time_s <= self._last_entry_t + 0.5 * ts)]
         self._seen(events)
         for r, n in counts.items():          # the old detector's counts go on (the second pass adds its own)
             if r in new.counts:
