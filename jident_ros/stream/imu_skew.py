@@ -136,8 +136,9 @@ class ImuSkewGuard:
     keeps (from :data:`SKEW_REFEED_MARGIN_SAMPLES` before the skewed window's first sample, also inside the window
     before it: a traversal back lies there; a window found again at or before that window's entry is dropped, a
     duplicate; entries inside it are traversals back, ``inside_window_until_s``) without a1: the window comes out
-    again with its entry placed from the encoder, under the same window id.  Only a window that this second pass does not find (nor keeps capturing) is lost, counted in
-    :attr:`dropped`.  :attr:`skews` counts the windows whose check found the skew, :attr:`report` is the last check.
+    again with its entry placed from the encoder, under the same window id.  Only a window that this second pass
+    does not find (nor keeps capturing) is lost, counted in :attr:`dropped`.  :attr:`skews` counts the windows whose
+    check found the skew, :attr:`report` is the last check.
     ``log`` gets one line per skew found (:func:`skew_line`) and per window lost.
     """
 
