@@ -31,7 +31,11 @@ and on what the clutch does, not on inequality (1):
   samples after the contact loss) moves back to where delta's free curvature starts (:func:`free_departure`).  A
   traversal back inside another window, without a1 (delta may rest near the flank it left with no relative speed and
   look like a contact), moves back to where the motor equation in angle form starts to explain alpha1
-  (:func:`free_motion_start`).
+  (:func:`free_motion_walk`).  Then, without a1 (and for a traversal back with a1 too), the entry is placed at the
+  contact loss of a coupling model (:func:`coupling_entry`: the motor equation with a spring-damper torque acting
+  while delta is beyond the edge it leaves, the double integrals in alpha1): a coupling that untwists off its flank
+  under a falling load crosses the departure threshold before the contact is lost (the second drive's speed steps
+  3-4 samples, the vector drive's heavy load reversals 8-9).
 * **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
   ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
   (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry
