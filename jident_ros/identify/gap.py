@@ -598,7 +598,7 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     sb = kf["start"]
     ref = torque[max(0, sb - KINK_PRE_SAMPLES):sb - KINK_SEARCH]
     last = torque[sb - KINK_SEARCH:sb]
-    level = float(np.median(ref))
+    level = float(_median(np.asarray(ref, float)))
     tol = max(5.0 * _robust_noise(ref), 1e-3 * abs(level))
     if float(np.max(np.abs(last - level))) > tol:
         return {"choice": f"angle (free): the torque changes in the {KINK_SEARCH} samples before the entry row {sb} "
@@ -763,6 +763,15 @@ class SteadinessTest:
         return f"gap_only: {self.reason}"
 
 
+@lru_cache(maxsize=64)
+def _steady_design(n: int) -> np.ndarray:
+    """The steadiness test's design (1, t, t²), t from -1 to 1 over n samples (read-only: shared by every call)."""
+    tt = np.linspace(-1.0, 1.0, n)
+    A = np.column_stack([np.ones(n), tt, tt * tt])
+    A.flags.writeable = False
+    return A
+
+
 @_memoised
 def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTest:
     """Test the joint fit's assumption on the pre-entry m_el samples: a steady torque, m_el = m0 + white
@@ -776,8 +785,7 @@ def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTes
     if n < 6:
         return SteadinessTest(False, np.nan, np.nan, n, f"{n} pre-entry samples, too few to test a steady torque")
     scale = max(float(np.max(np.abs(x))), 1e-300)
-    tt = np.linspace(-1.0, 1.0, n)
-    A = np.column_stack([np.ones(n), tt, tt * tt])
+    A = _steady_design(n)
     coef, *_ = np.linalg.lstsq(A, x, rcond=None)
     rss0 = float(np.sum((x - x.mean()) ** 2))
     rss2 = float(np.sum((x - A @ coef) ** 2))
@@ -894,6 +902,15 @@ def _torque_powers(n_gap: int, linear_term: bool = False) -> tuple:
 JOINT_NOISE_FLOOR_REL = 1e-6
 
 
+@lru_cache(maxsize=64)
+def _joint_design(n: int, linear_term: bool) -> np.ndarray:
+    """The joint fit's gap torque model's columns, 1 and τ^p (τ = k/n) over n gap samples (read-only: shared)."""
+    tau = np.arange(n) / n
+    G = np.column_stack([np.ones(n)] + [tau ** q for q in _torque_powers(n, linear_term)])
+    G.flags.writeable = False
+    return G
+
+
 @_memoised
 def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=None,
                linear_term: bool = False, warm: dict | None = None) -> dict:
@@ -912,9 +929,7 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     pre = m_el[:start]
     mg, ag = m_el[start:end], a1[start:end]
     fr = np.zeros(n) if friction is None else np.asarray(friction, float)
-    tau = np.arange(n) / n
-    powers = _torque_powers(n, linear_term)
-    G = np.column_stack([np.ones(n)] + [tau ** q for q in powers])
+    G = _joint_design(n, linear_term)
     p = G.shape[1]
     # noise levels: pre-entry steady state (m_el = m0, a1 = 0); fall back on the gap's
     # own m_el-only fit when there are too few pre-entry samples.  Floors keep noise-free

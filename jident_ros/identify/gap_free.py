@@ -36,6 +36,7 @@ Plain numpy; never imports rclpy.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -49,8 +50,6 @@ FREE_MIN_SAMPLES = 8
 CHANGEPOINT_P = 1e-3
 #: Chow forecast test of a candidate's end rows: this many rows predicted by the fit without them.
 CHANGEPOINT_FORECAST_SAMPLES = 3
-#: The change-point scans test this many candidate rows first, the rest only when all of them are accepted.
-CHANGEPOINT_CHUNK = 12
 #: Relative floor of the standard error (the model's own error: trapezoid double integral of a sampled torque).
 FREE_REL_SE_FLOOR = 5e-4
 #: Samples taken off an end for the change-point term of the standard error (while at least half the interval
@@ -117,11 +116,31 @@ def _chi2_upper(dof: np.ndarray) -> np.ndarray:
     return v * (1.0 - c + _Z_CHANGEPOINT * np.sqrt(c)) ** 3
 
 
+#: The forecast test's rows relative to its first one, and its χ² bound.
+_FORECAST_ROWS = np.arange(CHANGEPOINT_FORECAST_SAMPLES)
+_CHI2_FORECAST = float(_chi2_upper(np.array([CHANGEPOINT_FORECAST_SAMPLES]))[0])
+
+
 def _cumtrapz(x: np.ndarray, ts: float) -> np.ndarray:
     out = np.empty(x.size)
     out[0] = 0.0
     np.cumsum(0.5 * (x[1:] + x[:-1]), out=out[1:])
     return out * ts
+
+
+def _sym3_inverse(A: np.ndarray) -> np.ndarray:
+    """Inverses of a stack of symmetric 3 x 3 matrices, (k, 3, 3), by the adjugate over the determinant.
+
+    The change-point scans' normal matrices (34-190 of them per scan): numpy's batched ``inv`` (and ``solve``) calls
+    LAPACK once per matrix, ~0.5 us each, so a scan's inverses cost 20-100 us; the closed form is a few dozen array
+    operations for the whole stack.  It serves a decision (the χ² and forecast tests), not a published number:
+    equal to LAPACK's to rounding for the scaled, regularised matrices the scans build."""
+    a, b, c = A[:, 0, 0], A[:, 0, 1], A[:, 0, 2]
+    d, e, f = A[:, 1, 1], A[:, 1, 2], A[:, 2, 2]
+    i00, i01, i02 = d * f - e * e, c * e - b * f, b * e - c * d
+    i11, i12, i22 = a * f - c * c, b * c - a * e, a * d - b * b
+    det = a * i00 + b * i01 + c * i02
+    return np.stack([i00, i01, i02, i01, i11, i12, i02, i12, i22], axis=1).reshape(-1, 3, 3) / det[:, None, None]
 
 
 def _cumulative_sums(X: np.ndarray, y: np.ndarray) -> tuple:
@@ -132,6 +151,25 @@ def _cumulative_sums(X: np.ndarray, y: np.ndarray) -> tuple:
     b = np.concatenate([np.zeros((1, p)), np.cumsum(X * y[:, None], axis=0)])
     yy = np.concatenate([[0.0], np.cumsum(y * y)])
     return C, b, yy
+
+
+@lru_cache(maxsize=256)
+def _trim_rows(n: int, trims: tuple) -> tuple:
+    """Row bounds (lo, hi) of the intervals [k, n) and [0, n - k) for k in ``trims`` (the change-point term)."""
+    lo = np.array([k for k in trims] + [0 for _ in trims], dtype=np.intp)
+    hi = np.array([n for _ in trims] + [n - k for k in trims], dtype=np.intp)
+    return lo, hi
+
+
+def _gradient_sign(x: np.ndarray) -> np.ndarray:
+    """``np.sign(np.gradient(x))`` (unit spacing, first-order ends): the sign of the central difference inside and of
+    the one-sided ones at the ends (np.gradient's halving does not change a sign), without np.gradient's generic-axis
+    set-up (most of its cost on a short array)."""
+    d = np.empty(x.size)
+    np.subtract(x[2:], x[:-2], out=d[1:-1])
+    d[0] = x[1] - x[0]
+    d[-1] = x[-1] - x[-2]
+    return np.sign(d)
 
 
 def _quantum(alpha: np.ndarray) -> float:
@@ -198,8 +236,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     tau = (rows - start) * ts
     D = max((end - start) * ts, ts)
     Phi = _cumtrapz(_cumtrapz(m, ts), ts)
-    vel = np.gradient(a[L:R])
-    sg = np.sign(vel)
+    sg = _gradient_sign(a[L:R])
     Cc = _cumtrapz(_cumtrapz(sg, ts), ts)
     Vv = _cumtrapz(y, ts)
     phi_scale = max(float(np.max(np.abs(Phi))), 1e-300)
@@ -238,46 +275,35 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         p = Xs.shape[1]
 
         k_f = CHANGEPOINT_FORECAST_SAMPLES
-        sums = _cumulative_sums(Xs, r)          # shared by every scan below
-        Cx, bx = sums[0], sums[1]
-        chi_f = float(_chi2_upper(np.array([k_f]))[0])
-
-        def accepted(lo_rows, hi_rows, side):
-            """The whole interval's residual is noise (χ² test) and its k_f end rows on ``side`` are predicted by
-            the fit without them (Chow's forecast test: a contaminated end shows in the extrapolation first)."""
-            if side == "end":
-                ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + np.arange(k_f)
-            else:
-                ilo, ihi, test = lo_rows + k_f, hi_rows, lo_rows[:, None] + np.arange(k_f)
-            # the χ² fits over [lo, hi) and the forecast fits over [ilo, ihi) in one stacked solve (the same
-            # LAPACK call per matrix as two solves: the same numbers)
-            c = lo_rows.size
-            A = Cx[np.concatenate([hi_rows, ihi])] - Cx[np.concatenate([lo_rows, ilo])]
-            bb = bx[np.concatenate([hi_rows, ihi])] - bx[np.concatenate([lo_rows, ilo])]
-            A = A + np.eye(p) * (1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] / p)
-            sol = np.linalg.solve(A, bb[..., None])[..., 0]
-            rss = sums[2][hi_rows] - sums[2][lo_rows] - np.einsum("ki,ki->k", bb[:c], sol[:c])
-            nn = hi_rows - lo_rows
-            ok = rss <= s2 * _chi2_upper(np.maximum(nn - p, 1))
-            beta = sol[c:]
-            Ainv = np.linalg.inv(A[c:])
-            xt = Xs[test]                                             # (cand, k_f, p)
-            pred = np.einsum("ckp,cp->ck", xt, beta)
-            lev = np.einsum("ckp,cpq,ckq->ck", xt, Ainv, xt)
-            stat = np.sum((r[test] - pred) ** 2 / (s2 * (1.0 + lev)), axis=1)
-            return ok & ((ihi - ilo < p + 2) | (stat <= chi_f))
+        Cx, bx, rx = _cumulative_sums(Xs, r)          # shared by every scan below
+        reg = np.eye(p) * (1e-12 / p)
 
         def first_failure(lo_rows, hi_rows, side):
-            """Index of the first candidate that is not accepted (None: all are): the first CHANGEPOINT_CHUNK, then the
-            rest (a scan usually stops within the first few: the other 2W candidates were computed for nothing)."""
-            for c0, c1 in ((0, CHANGEPOINT_CHUNK), (CHANGEPOINT_CHUNK, lo_rows.size)):
-                if c0 >= lo_rows.size:
-                    break
-                ok = accepted(lo_rows[c0:c1], hi_rows[c0:c1], side)
-                bad = np.flatnonzero(~ok)
-                if bad.size:
-                    return c0 + int(bad[0])
-            return None
+            """Index of the first candidate interval [lo, hi) that is not accepted (None: all are).  Accepted: the
+            whole interval's residual is noise (χ² test) and its k_f end rows on ``side`` are predicted by the fit
+            without them (Chow's forecast test: a contaminated end shows in the extrapolation first).  Every
+            candidate's two fits (over [lo, hi) and over the interval without the k_f rows) in one batch: normal
+            matrices from the cumulative sums, inverted once (a decision, not a published number: the inverse's
+            product where the earlier code solved, the same test to rounding)."""
+            if side == "end":
+                ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + _FORECAST_ROWS
+            else:
+                ilo, ihi, test = lo_rows + k_f, hi_rows, lo_rows[:, None] + _FORECAST_ROWS
+            c = lo_rows.size
+            lo_all, hi_all = np.concatenate([lo_rows, ilo]), np.concatenate([hi_rows, ihi])
+            A = Cx[hi_all] - Cx[lo_all]
+            bb = bx[hi_all] - bx[lo_all]
+            A += reg * np.trace(A, axis1=1, axis2=2)[:, None, None]
+            Ainv = _sym3_inverse(A)
+            sol = np.einsum("kij,kj->ki", Ainv, bb)
+            rss = rx[hi_rows] - rx[lo_rows] - np.einsum("ki,ki->k", bb[:c], sol[:c])
+            ok = rss <= s2 * _chi2_upper(np.maximum(hi_rows - lo_rows - p, 1))
+            xt = Xs[test]                                             # (cand, k_f, p)
+            pred = np.einsum("ckp,cp->ck", xt, sol[c:])
+            lev = np.einsum("ckp,cpq,ckq->ck", xt, Ainv[c:], xt)
+            stat = np.sum((r[test] - pred) ** 2 / (s2 * (1.0 + lev)), axis=1)
+            bad = np.flatnonzero(~(ok & ((ihi - ilo < p + 2) | (stat <= _CHI2_FORECAST))))
+            return int(bad[0]) if bad.size else None
 
         def grow_end(s_row, e_from):
             cand = np.arange(max(s_row + FREE_MIN_SAMPLES, e_from), min(hi_c + W, R - L) + 1)
@@ -322,7 +348,10 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
                     yy = y[i:j] + kappa * coulomb_mid * Cc[i:j]
                     coef = pinv @ yy
                     kappa = float(coef[2]) / phi_scale
-        return {"kappa": kappa, "coef": coef, "pinv": pinv, "res": yy - X @ coef, "X": X, "fc": fc, "i": i, "j": j}
+        return {"kappa": kappa, "coef": coef, "pinv": pinv, "res": yy - X @ coef, "X": X, "fc": fc, "i": i, "j": j,
+                "c_scale": c_scale}
+
+    torque_noise: dict = {}
 
     def se_terms(f: dict) -> dict:
         kappa, res, X = f["kappa"], f["res"], f["X"]
@@ -331,14 +360,16 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         if dof < 1 or not kappa > 0:
             return {}
         row = f["pinv"][2] / phi_scale                 # 1/J1 = row · y
-        s2r = float(res @ res) / dof
         rr = float(res @ res)
+        s2r = rr / dof
         rho = float(res[1:] @ res[:-1]) / rr if rr > 0 else 0.0
         infl = (1.0 + max(rho, 0.0)) / max(1.0 - max(rho, 0.0), 1e-6)
         var_stat = s2r * float(row @ row) * infl
         # torque noise through Φ: δκ = −κ row·(W n_m), W the double trapezoid from the interval's first row
-        mm = m[f["i"]:f["j"]]
-        sm = _robust_noise(mm)
+        key = (f["i"], f["j"])
+        if key not in torque_noise:                   # both fits (with and without a Coulomb column) share it
+            torque_noise[key] = _robust_noise(m[f["i"]:f["j"]])
+        sm = torque_noise[key]
         g = _double_trapz_adjoint(row, ts)
         var_eiv = (kappa * sm) ** 2 * float(g @ g)
         j1 = 1.0 / kappa
@@ -362,27 +393,33 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             terms["torque_lag"] = j1 * abs(float(row @ psi)) * float(model.torque_lag_s) / np.sqrt(3.0)
         return terms
 
-    def j_trims(s_row, e_row, with_coulomb, trims):
+    def j_trims(f: dict, with_coulomb: bool, trims: list) -> np.ndarray:
         """J1 alone over [s_row + k, e_row) and [s_row, e_row - k) for each k in ``trims`` (batched normal
-        equations on cumulative sums: the change-point term)."""
-        i, j = s_row - L, e_row - L
-        cols = [np.ones(j - i), u[i:j], Phi[i:j] / phi_scale]
-        if with_coulomb:
-            cols.append(Cc[i:j] / max(float(np.max(np.abs(Cc[i:j]))), 1e-300))
-        X = np.column_stack(cols)
-        p = X.shape[1]
-        Cx = np.concatenate([np.zeros((1, p, p)), np.cumsum(np.einsum("ki,kj->kij", X, X), axis=0)])
-        by = np.concatenate([np.zeros((1, p)), np.cumsum(X * y[i:j, None], axis=0)])
-        bc = np.concatenate([np.zeros((1, p)), np.cumsum(X * Cc[i:j, None], axis=0)])
-        lo = np.array([k for k in trims] + [0 for _ in trims])
-        hi = np.array([j - i for _ in trims] + [j - i - k for k in trims])
-        A = Cx[hi] - Cx[lo]
-        sol_y = np.linalg.solve(A, (by[hi] - by[lo])[..., None])[..., 0]
-        kappa = sol_y[:, 2] / phi_scale
+        equations on cumulative sums: the change-point term).  ``f``: the fit over [s_row, e_row) (its design)."""
+        i, j = f["i"], f["j"]
+        X = f["X"]
+        n, p = X.shape
+        # the cumulative sums of x xᵀ, x α1 and x C in one array (a zero row in front): column by column the same
+        # running sums as three separate cumsums
+        Z = np.empty((n + 1, p * p + 2 * p))
+        Z[0] = 0.0
+        np.einsum("ki,kj->kij", X, X, out=Z[1:, :p * p].reshape(n, p, p))
+        np.multiply(X, y[i:j, None], out=Z[1:, p * p:p * p + p])
+        np.multiply(X, Cc[i:j, None], out=Z[1:, p * p + p:])
+        np.cumsum(Z[1:], axis=0, out=Z[1:])
+        lo, hi = _trim_rows(n, tuple(trims))
+        D = Z[hi] - Z[lo]
+        A = D[:, :p * p].reshape(-1, p, p)
+        t = len(lo)
         if not with_coulomb and coulomb_mid:
-            sol_c = np.linalg.solve(A, (bc[hi] - bc[lo])[..., None])[..., 0][:, 2] / phi_scale
+            # the α1 and C right-hand sides in one stacked solve (the same LAPACK call per matrix as two solves)
+            sol = np.linalg.solve(np.concatenate([A, A]), np.concatenate([D[:, p * p:p * p + p], D[:, p * p + p:]])[..., None])
+            sol_y, sol_c = sol[:t, 2, 0], sol[t:, 2, 0] / phi_scale
+            kappa = sol_y / phi_scale
             for _ in range(2):
-                kappa = sol_y[:, 2] / phi_scale + kappa * coulomb_mid * sol_c
+                kappa = sol_y / phi_scale + kappa * coulomb_mid * sol_c
+        else:
+            kappa = np.linalg.solve(A, D[:, p * p:p * p + p, None])[:, 2, 0] / phi_scale
         with np.errstate(divide="ignore"):
             return np.where(kappa > 0, 1.0 / kappa, np.inf)
 
@@ -402,14 +439,16 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             # coupling torque, a wrong interval, for friction
             X = f["X"]
             res = f["res"]
-            cov = float(res @ res) / max(X.shape[0] - X.shape[1], 1) * np.linalg.pinv(X.T @ X)
-            c_scale = max(float(np.max(np.abs(Cc[f["i"]:f["j"]]))), 1e-300)
-            se_fc = np.sqrt(max(cov[3, 3], 0.0)) / c_scale / f["kappa"]
+            # (a decision, not a published number: (XᵀX)⁻¹ as the product of the fit's (XᵀX)⁻¹Xᵀ with its
+            # transpose, where a pseudo-inverse was computed: the same to rounding)
+            xtx_inv_33 = float(f["pinv"][3] @ f["pinv"][3])
+            cov_33 = float(res @ res) / max(X.shape[0] - X.shape[1], 1) * xtx_inv_33
+            se_fc = np.sqrt(max(cov_33, 0.0)) / f["c_scale"] / f["kappa"]
             if not (-3 * se_fc <= f["fc"] <= model.coulomb_friction_max_nm + 3 * se_fc):
                 continue
         n = e_est - s_est
         trims = [k for k in CHANGEPOINT_TRIMS if n - k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)]
-        terms["change_points"] = float(np.max(np.abs(j_trims(s_est, e_est, with_coulomb, trims) - j1))) \
+        terms["change_points"] = float(np.max(np.abs(j_trims(f, with_coulomb, trims) - j1))) \
             if trims else 0.0
         se_stat = float(np.sqrt(sum(v * v for v in terms.values())))
         se_stat = max(se_stat, FREE_REL_SE_FLOOR * j1)
@@ -453,15 +492,14 @@ def _double_trapz_adjoint(row: np.ndarray, ts: float) -> np.ndarray:
     # single trapezoid T: (T x)_k = ts (x_0/2 + x_1 + ... + x_{k-1} + x_k/2) for k >= 1, 0 for k = 0
     def t_adj(v):
         # (Tᵀ v)_i = ts Σ_k v_k w_ki ; w_ki = 1/2 at i = 0 or i = k (k>=1), 1 for 0 < i < k
-        out = np.zeros(n)
         if n < 2:
-            return out
+            return np.zeros(n)
         rev = np.cumsum(v[::-1])[::-1]          # Σ_{k >= i} v_k
+        out = 0.5 * v
         out[0] = 0.5 * float(rev[1])
-        inner = np.zeros(n)
-        inner[1:n - 1] = rev[2:]                 # Σ_{k > i} v_k
-        out[1:] += inner[1:] + 0.5 * v[1:]
-        return out * ts
+        out[1:n - 1] += rev[2:]                  # + Σ_{k > i} v_k
+        out *= ts
+        return out
     return t_adj(t_adj(row))
 
 
