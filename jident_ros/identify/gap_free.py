@@ -128,29 +128,39 @@ def _cumtrapz(x: np.ndarray, ts: float) -> np.ndarray:
     return out * ts
 
 
-def _sym3_inverse(A: np.ndarray) -> np.ndarray:
-    """Inverses of a stack of symmetric 3 x 3 matrices, (k, 3, 3), by the adjugate over the determinant.
+#: The unique elements of a symmetric 3 x 3 matrix, row-major upper triangle: (0,0) (0,1) (0,2) (1,1) (1,2) (2,2).
+_SYM3_I = np.array([0, 0, 0, 1, 1, 2])
+_SYM3_J = np.array([0, 1, 2, 1, 2, 2])
+
+
+def _scan_sums(X: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Cumulative sums over the rows of X (n x 3) and y, with a zero row in front, (n + 1, 10): the unique elements of
+    x xᵀ (:data:`_SYM3_I`, :data:`_SYM3_J`), x y and y²; a row range's normal equations are a difference of two rows."""
+    n = X.shape[0]
+    S = np.empty((n + 1, 10))
+    S[0] = 0.0
+    np.multiply(X[:, _SYM3_I], X[:, _SYM3_J], out=S[1:, :6])
+    np.multiply(X, y[:, None], out=S[1:, 6:9])
+    np.multiply(y, y, out=S[1:, 9])
+    np.cumsum(S[1:], axis=0, out=S[1:])
+    return S
+
+
+def _sym3_inverse(U: np.ndarray) -> np.ndarray:
+    """Inverses, (k, 3, 3), of a stack of symmetric 3 x 3 matrices given by their unique elements (k, 6) (order
+    :data:`_SYM3_I`), each regularised by 1e-12 of its mean diagonal element, by the adjugate over the determinant.
 
     The change-point scans' normal matrices (34-190 of them per scan): numpy's batched ``inv`` (and ``solve``) calls
     LAPACK once per matrix, ~0.5 us each, so a scan's inverses cost 20-100 us; the closed form is a few dozen array
     operations for the whole stack.  It serves a decision (the χ² and forecast tests), not a published number:
     equal to LAPACK's to rounding for the scaled, regularised matrices the scans build."""
-    a, b, c = A[:, 0, 0], A[:, 0, 1], A[:, 0, 2]
-    d, e, f = A[:, 1, 1], A[:, 1, 2], A[:, 2, 2]
+    a, b, c, d, e, f = U.T
+    t = (a + d + f) * (1e-12 / 3.0)
+    a, d, f = a + t, d + t, f + t
     i00, i01, i02 = d * f - e * e, c * e - b * f, b * e - c * d
     i11, i12, i22 = a * f - c * c, b * c - a * e, a * d - b * b
     det = a * i00 + b * i01 + c * i02
     return np.stack([i00, i01, i02, i01, i11, i12, i02, i12, i22], axis=1).reshape(-1, 3, 3) / det[:, None, None]
-
-
-def _cumulative_sums(X: np.ndarray, y: np.ndarray) -> tuple:
-    """Cumulative sums of x xᵀ, x y and y² over the rows of X, y, each with a zero row in front."""
-    p = X.shape[1]
-    outer = np.einsum("ki,kj->kij", X, X)
-    C = np.concatenate([np.zeros((1, p, p)), np.cumsum(outer, axis=0)])
-    b = np.concatenate([np.zeros((1, p)), np.cumsum(X * y[:, None], axis=0)])
-    yy = np.concatenate([[0.0], np.cumsum(y * y)])
-    return C, b, yy
 
 
 @lru_cache(maxsize=256)
@@ -275,29 +285,27 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         p = Xs.shape[1]
 
         k_f = CHANGEPOINT_FORECAST_SAMPLES
-        Cx, bx, rx = _cumulative_sums(Xs, r)          # shared by every scan below
-        reg = np.eye(p) * (1e-12 / p)
+        sums = _scan_sums(Xs, r)                  # shared by every scan below
+        # the χ² test's bound s2 · χ²(1 - CHANGEPOINT_P; n - p) for every interval length n (at least 1 dof)
+        chi_bound = s2 * _chi2_upper(np.maximum(np.arange(R - L + 1) - p, 1))
 
         def first_failure(lo_rows, hi_rows, side):
             """Index of the first candidate interval [lo, hi) that is not accepted (None: all are).  Accepted: the
             whole interval's residual is noise (χ² test) and its k_f end rows on ``side`` are predicted by the fit
             without them (Chow's forecast test: a contaminated end shows in the extrapolation first).  Every
             candidate's two fits (over [lo, hi) and over the interval without the k_f rows) in one batch: normal
-            matrices from the cumulative sums, inverted once (a decision, not a published number: the inverse's
-            product where the earlier code solved, the same test to rounding)."""
+            matrices from the cumulative sums, inverted in closed form (a decision, not a published number: the
+            inverse's product where the earlier code solved, the same test to rounding)."""
             if side == "end":
                 ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + _FORECAST_ROWS
             else:
                 ilo, ihi, test = lo_rows + k_f, hi_rows, lo_rows[:, None] + _FORECAST_ROWS
             c = lo_rows.size
-            lo_all, hi_all = np.concatenate([lo_rows, ilo]), np.concatenate([hi_rows, ihi])
-            A = Cx[hi_all] - Cx[lo_all]
-            bb = bx[hi_all] - bx[lo_all]
-            A += reg * np.trace(A, axis1=1, axis2=2)[:, None, None]
-            Ainv = _sym3_inverse(A)
-            sol = np.einsum("kij,kj->ki", Ainv, bb)
-            rss = rx[hi_rows] - rx[lo_rows] - np.einsum("ki,ki->k", bb[:c], sol[:c])
-            ok = rss <= s2 * _chi2_upper(np.maximum(hi_rows - lo_rows - p, 1))
+            D = sums[np.concatenate([hi_rows, ihi])] - sums[np.concatenate([lo_rows, ilo])]
+            Ainv = _sym3_inverse(D[:, :6])
+            sol = np.einsum("kij,kj->ki", Ainv, D[:, 6:9])
+            rss = D[:c, 9] - np.einsum("ki,ki->k", D[:c, 6:9], sol[:c])
+            ok = rss <= chi_bound[hi_rows - lo_rows]
             xt = Xs[test]                                             # (cand, k_f, p)
             pred = np.einsum("ckp,cp->ck", xt, sol[c:])
             lev = np.einsum("ckp,cpq,ckq->ck", xt, Ainv[c:], xt)
