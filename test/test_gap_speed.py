@@ -167,3 +167,65 @@ def test_the_median_is_numpys_bit_for_bit():
         if trial % 97 == 0:
             x[rng.integers(0, n)] = np.nan
         assert np.asarray(gap_free._median(x)).tobytes() == np.asarray(np.median(x)).tobytes(), (trial, x)
+
+
+def test_the_gradient_sign_is_numpys_bit_for_bit():
+    """gap_free._gradient_sign (the free fit's Coulomb column's sign of ω1) against np.sign(np.gradient(x)): quantised
+    angles (flat runs: zero differences), steady ramps, reversals, 2 to 300 samples."""
+    rng = np.random.default_rng(11)
+    for trial in range(2000):
+        n = int(rng.integers(2, 300))
+        x = np.cumsum(rng.standard_normal(n)) * 10.0 ** rng.uniform(-6, 2) + rng.uniform(-10, 10)
+        if trial % 2:
+            q = 2 * np.pi / 2 ** int(rng.integers(8, 17))
+            x = np.floor(x / q) * q
+        assert gap_free._gradient_sign(x).tobytes() == np.sign(np.gradient(x)).tobytes(), (trial, n)
+
+
+def _double_trapz_adjoint_reference(row, ts):
+    """Wᵀ row with W the double trapezoid integral from the first row, as an explicit matrix (column i: the double
+    integral of the i-th unit vector)."""
+    n = row.size
+    W = np.column_stack([_cumtrapz(_cumtrapz(np.eye(n)[i], ts), ts) for i in range(n)])
+    return W.T @ row
+
+
+def test_the_double_trapezoid_adjoint_is_the_transposed_integral():
+    rng = np.random.default_rng(12)
+    for n in (1, 2, 3, 5, 26, 190):
+        row = rng.standard_normal(n)
+        got = gap_free._double_trapz_adjoint(row, 5e-4)
+        want = _double_trapz_adjoint_reference(row, 5e-4)
+        assert got.shape == (n,)
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * float(np.max(np.abs(want), initial=0.0)))
+
+
+def test_the_scans_closed_form_inverse_is_lapacks_to_rounding():
+    """gap_free._sym3_inverse (the change-point scans' normal matrices) against np.linalg.inv of the same regularised
+    matrices: scaled designs (1, u, Φ) over short and long row ranges, one of them nearly collinear."""
+    rng = np.random.default_rng(13)
+    for trial in range(200):
+        n = int(rng.integers(3, 200))
+        u = np.sort(rng.uniform(-1, 2, n))
+        X = np.column_stack([np.ones(n), u, u * u + 1e-3 * rng.standard_normal(n)])
+        A = X.T @ X
+        U = A[gap_free._SYM3_I, gap_free._SYM3_J][None, :]
+        A_reg = A + np.eye(3) * (1e-12 * np.trace(A) / 3.0)
+        np.testing.assert_allclose(gap_free._sym3_inverse(U)[0], np.linalg.inv(A_reg), rtol=1e-6,
+                                   atol=1e-9 * float(np.max(np.abs(np.linalg.inv(A_reg)))))
+
+
+def test_the_kink_fit_without_terms_then_with_them_is_the_kink_fit():
+    """kink_fit(with_terms=False) then kink_terms (the steady-entry check's order: its standard error only for a fit
+    the checks keep) gives kink_fit's dict, every number equal."""
+    rec = simulate(StressDrive(j1_kgm2=1.16), "speed_step", seed=3)
+    args = (rec["window"]["alpha1"], rec["window"]["m_el"], 5e-4, list(range(rec["entry"] - 4, rec["entry"] + 5)),
+            rec["recontact"])
+    full = kink_fit(*args, 0.5, 0.2, 1e-3)
+    part = kink_fit(*args, with_terms=False)
+    assert "terms" not in part and part["j1"] == full["j1"] and part["start"] == full["start"]
+    done = gap_free.kink_terms(part, 0.5, 0.2, 1e-3)
+    assert done.keys() == full.keys()
+    for k in full:
+        a, b = done[k], full[k]
+        assert (a.tobytes() == b.tobytes()) if isinstance(a, np.ndarray) else a == b, k

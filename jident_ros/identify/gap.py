@@ -90,6 +90,7 @@ from jident_ros.identify.gap_free import (
     _median,
     free_angle_fit,
     kink_fit,
+    kink_terms,
 )
 from jident_ros.stream.filters import savgol_coeffs, savgol_filter
 
@@ -573,8 +574,9 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
         return {"choice": f"angle (free): {test.reason}"}
     end = min(e, ff["end"])
     try:
+        # its standard error only once the checks below have kept it (most steady-entry fits are refused there)
         kf = kink_fit(alpha1, torque, sample_period_s, range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1), end,
-                      model.coulomb_friction_max_nm, model.torque_offset_nm, model.torque_lag_s)
+                      with_terms=False)
     except (FreeFitError, np.linalg.LinAlgError) as exc:
         return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
     # a profile minimum on the edge of the searched rows has not located the entry: the change point may lie
@@ -612,9 +614,11 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     try:
         # the re-contact row: moved in by 1 and 2 (contact after it is not modelled); fitted once the checks above
         # have kept the steady-entry fit (a speed controller's entry is refused there: 2 of its 3 fits saved)
-        trims = [kink_fit(alpha1, torque, sample_period_s, kf["plausible_entries"], end - k)["j1"] for k in (1, 2)]
+        trims = [kink_fit(alpha1, torque, sample_period_s, kf["plausible_entries"], end - k, with_terms=False)["j1"]
+                 for k in (1, 2)]
     except (FreeFitError, np.linalg.LinAlgError) as exc:
         return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
+    kf = kink_terms(kf, model.coulomb_friction_max_nm, model.torque_offset_nm, model.torque_lag_s)
     j, res, dof = kf["j1"], kf["residual"], kf["dof"]
     cp_end = max(abs(x - j) for x in trims)
     terms = dict(kf["terms"])

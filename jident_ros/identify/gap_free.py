@@ -556,7 +556,8 @@ def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, 
 
 
 def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int,
-             coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0, torque_lag_s: float = 0.0) -> dict:
+             coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0, torque_lag_s: float = 0.0,
+             with_terms: bool = True) -> dict:
     """J1 with the entry row as a change point of a steady drive (profile likelihood).
 
     Before the entry the drive turns at constant speed (steady, in contact); from the entry row s on it is free:
@@ -565,7 +566,9 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
     ``entries``, so the residual sums compare: s* minimises it; the plausible entries are those within
     KINK_CHI2_1 σ̂² of it, and the largest change of J1 over them is the change-point term.  Returns j1, se_stat
     (statistical, torque noise and change points in quadrature), terms, start (s*), end, residual, dof; raises
-    FreeFitError."""
+    FreeFitError.  ``with_terms`` False: the fit and its checks without the standard error (j1, start, end,
+    residual, dof, plausible_entries; :func:`kink_terms` adds the rest): what a caller that may still refuse the
+    fit, or needs only J1, reads."""
     a = np.asarray(alpha1, float)
     m = np.asarray(torque, float)
     ts = float(sample_period_s)
@@ -599,7 +602,18 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
                            f"over {n_pre} samples)")
     j1 = 1.0 / kappa
     plausible = [o for o in out if o[0] - rss_min <= KINK_CHI2_1 * s2 and o[1] > 0]
-    cp = max(abs(1.0 / o[1] - j1) for o in plausible)
+    fit = {"j1": j1, "start": int(s_best), "end": int(end), "residual": res, "dof": dof,
+           "plausible_entries": [o[4] for o in plausible],
+           "_state": (m, ts, P, kappa, row, s2, [o[1] for o in plausible])}
+    return kink_terms(fit, coulomb_max_nm, torque_offset_nm, torque_lag_s) if with_terms else fit
+
+
+def kink_terms(fit: dict, coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0,
+               torque_lag_s: float = 0.0) -> dict:
+    """:func:`kink_fit`'s result with its standard error (se_stat, terms), from a ``with_terms=False`` fit."""
+    m, ts, P, kappa, row, s2, plausible_kappa = fit["_state"]
+    j1, res, s_best, end = fit["j1"], fit["residual"], fit["start"], fit["end"]
+    cp = max(abs(1.0 / k - j1) for k in plausible_kappa)
     rr = float(res @ res)
     rho = float(res[1:] @ res[:-1]) / rr if rr > 0 else 0.0
     infl = (1.0 + max(rho, 0.0)) / max(1.0 - max(rho, 0.0), 1e-6)
@@ -630,4 +644,4 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
         terms["torque_lag"] = j1 * abs(float(row @ l_col)) * float(torque_lag_s) / np.sqrt(3.0)
     se = float(np.sqrt(sum(v * v for v in terms.values())))
     return {"j1": j1, "se_stat": max(se, FREE_REL_SE_FLOOR * j1), "terms": terms, "start": int(s_best),
-            "end": int(end), "residual": res, "dof": dof, "plausible_entries": [o[4] for o in plausible]}
+            "end": int(end), "residual": res, "dof": fit["dof"], "plausible_entries": fit["plausible_entries"]}
