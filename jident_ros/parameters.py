@@ -297,8 +297,18 @@ DIAGNOSTIC_PARAMS = {
     "torque_lag_max_s": Param(0.0, "the drive's torque estimate m_el lags (or leads) the shaft's torque by at "
                               "most this, s: a bounded term of the gap interval", min=0.0, max=1.0, read_only=False,
                               unit="s"),
+    "publish_ambiguous": Param(True, "publish the gap J1 (with its interval on inertia_estimate/detail) when its 95 % "
+                               "interval, within +-10 %, holds two or more classes: no class named, status "
+                               "'ambiguous'; false: nothing published for such a window", read_only=False),
     **TREND_PARAMS,
 }
+
+#: The publishing policy's parameters that `jident diagnose` takes as flags (--torque-accuracy, ...; fields of
+#: jident_ros.identify.verdict.VerdictPolicy: a test keeps them so).  The input bounds (library_width_tolerance,
+#: max_torque_factor, max_speed_factor) stay the node's only.
+POLICY_CLI_FLAGS = ("image_min_margin", "plausible_min_ratio", "plausible_max_ratio", "torque_accuracy",
+                    "coulomb_friction_max_nm", "viscous_friction_band_nms_per_rad", "torque_offset_rel_base",
+                    "torque_lag_max_s", "publish_ambiguous")
 
 #: The replay node.  Everything is fixed at start: read-only.
 REPLAY_PARAMS = {

@@ -393,7 +393,7 @@ def test_cli_flags_that_mirror_node_parameters_take_their_help_from_the_schema()
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     mirrored = {"diagnose": ["--image-min-margin", "--plausible-min-ratio", "--plausible-max-ratio", "--p",
                              "--torque-accuracy", "--coulomb-friction-max-nm", "--viscous-friction-band-nms-per-rad",
-                             "--torque-offset-rel-base", "--torque-lag-max-s"],
+                             "--torque-offset-rel-base", "--torque-lag-max-s", "--publish-ambiguous"],
                 "trend": list(MIRRORED_FLAGS)}
     for command, flags in mirrored.items():
         actions = {o: a for a in sub.choices[command]._actions for o in a.option_strings}
@@ -401,7 +401,11 @@ def test_cli_flags_that_mirror_node_parameters_take_their_help_from_the_schema()
             name = ("trend_" if command == "trend" else "") + flag[2:].replace("-", "_")
             assert actions[flag].help == P.cli_help(name), flag
             assert P.DIAGNOSTIC_PARAMS[name].description.replace("%", "%%") in actions[flag].help
-    gap = {o: a for a in sub.choices["diagnose"]._actions for o in a.option_strings}["--gap-method"]
+    from jident_ros.identify.verdict import VerdictPolicy
+    assert set(P.POLICY_CLI_FLAGS) <= {f.name for f in dataclasses.fields(VerdictPolicy)}
+    diag = {o: a for a in sub.choices["diagnose"]._actions for o in a.option_strings}
+    assert "--no-publish-ambiguous" in diag          # a bool policy key: --x / --no-x
+    gap = diag["--gap-method"]
     assert gap.help.startswith(P.cli_help("gap_method")) and tuple(gap.choices) == P.GAP_METHODS
 
 

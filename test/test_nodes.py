@@ -620,3 +620,26 @@ def test_simulator_back_pressure_waits_for_drive_progress(node_env, ros, procs, 
     assert sim2.wait() == 0, logs(sim2)
     ros.spin_until(lambda: len(signals) >= n_expected, 10)
     assert len(signals) == n_expected and "back-pressure off" in sim2.text(), logs(sim2)
+
+
+@pytest.mark.ros
+def test_a_late_subscriber_gets_every_case_k2_and_j1(node_env, ros, procs, tmp_path):
+    """A recorder whose drive/backlash_width subscription is matched after case 2 began (a loaded machine: the
+    demo's recording held case 2's K2 alone, and its replay diagnosed case 1 with it) still receives every case's
+    K2 and true J1, in order: the simulator keeps them as it keeps drive/case (keep last n_cases)."""
+    from std_msgs.msg import Float64, Float64MultiArray
+
+    from jident_ros.nodes.ros_io import array_from_multiarray, qos_latched, qos_signals
+    signals = ros.collect(Float64MultiArray, "/late/drive/signals", qos_signals())
+    sim = Proc(node_env, tmp_path, "simulator", "-r", "__ns:=/late", "-p", "cases:=zip",
+               "-p", "inertias_kgm2:=[1.16, 1.073, 1.189]", "-p", "backlash_widths_m:=[0.005, 0.0025, 0.0075]",
+               "-p", "consistencies_pa_sn:=[0.0375, 0.0375, 0.0375]", "-p", "real_time_factor:=1.0",
+               "-p", "wait_for_subscribers:=1", "-p", 'wait_for_node:=""', "-p", "publish_clock:=false")
+    procs.append(sim)
+    last_t = lambda: max((array_from_multiarray(m)[0][-1, 0] for m in signals), default=-1.0)  # noqa: E731
+    assert ros.spin_until(lambda: last_t() > 2.5, TIMEOUT), logs(sim)         # case 3 has begun
+    widths = ros.collect(Float64, "/late/drive/backlash_width", qos_latched(100))
+    inertias = ros.collect(Float64, "/late/drive/true_inertia", qos_latched(100))
+    ros.spin_until(lambda: len(widths) >= 3 and len(inertias) >= 3, 20)
+    assert [m.data for m in widths] == [0.005, 0.0025, 0.0075], logs(sim)
+    assert [m.data for m in inertias] == [1.16, 1.073, 1.189], logs(sim)

@@ -164,10 +164,33 @@ def _wide_gap(j1, se):
     (1.16, 0.02, "OK", "1.131, 1.16, 1.189"),      # the nominal among them: nothing to look at
     (1.09, 0.012, "WARN", "1.073, 1.102"),          # the nominal excluded: look at this drive
 ])
-def test_an_interval_over_two_classes_is_ambiguous(configs, library, windows, monkeypatch, j1, se, level, holds):
+def test_an_interval_over_two_classes_publishes_j1_without_a_class(configs, library, windows, monkeypatch, j1, se,
+                                                                    level, holds):
+    """Issue 20: the continuous J1 goes out with its interval (what the data support), no class is named (what
+    they do not); the level follows the nominal."""
     import jident_ros.identify.diagnosis as diagnosis
     monkeypatch.setattr(diagnosis, "estimate_inertia", lambda *a, **kw: _wide_gap(j1, se))
     d, published = _diagnose(configs, library, windows.case(0))
+    assert d.inertia_kgm2 == j1 and published == [j1] and d.class_kgm2 is None and d.source == "gap"
+    assert d.status == "ambiguous" and d.level_name == level, d.message
+    lo, hi = j1 - 1.96 * se, j1 + 1.96 * se
+    assert d.message.startswith(f"J1 = {j1:.5g} ± {se:.2g} kg m^2 published without a class: ambiguous: 95 % "
+                                f"interval {lo:.4g}..{hi:.4g} kg m^2 holds classes {holds}; "), d.message
+    assert d.refused_reason is None and d.value_dict()["no_class_reason"].startswith("ambiguous: ")
+    assert math.isnan(d.value_dict()["identified_class_kgm2"]) and d.value_dict()["inertia_estimate_kgm2"] == j1
+
+
+@pytest.mark.parametrize("j1,se,level,holds", [
+    (1.16, 0.02, "OK", "1.131, 1.16, 1.189"),
+    (1.09, 0.012, "WARN", "1.073, 1.102"),
+])
+def test_publish_ambiguous_false_publishes_nothing_for_an_interval_over_two_classes(configs, library, windows,
+                                                                                     monkeypatch, j1, se, level, holds):
+    """publish_ambiguous: false, issue 12's first reading: nothing goes out, the status says why."""
+    import jident_ros.identify.diagnosis as diagnosis
+    from jident_ros.identify.verdict import VerdictPolicy
+    monkeypatch.setattr(diagnosis, "estimate_inertia", lambda *a, **kw: _wide_gap(j1, se))
+    d, published = _diagnose(configs, library, windows.case(0), policy=VerdictPolicy(publish_ambiguous=False))
     assert d.inertia_kgm2 is None and published == [] and d.class_kgm2 is None
     assert d.status == "ambiguous" and d.level_name == level, d.message
     lo, hi = j1 - 1.96 * se, j1 + 1.96 * se
@@ -252,6 +275,7 @@ def test_policy_defaults_are_the_diagnostic_nodes():
     ("plausible_max_ratio", 0.9, "a number > 1"),
     ("library_width_tolerance", 0.0, "a number > 0"),
     ("max_speed_factor", math.nan, "a finite number"),
+    ("publish_ambiguous", 1.0, "true or false"),
 ])
 def test_bad_policy_values_name_the_field(name, value, what):
     from jident_ros.identify.verdict import VerdictPolicy

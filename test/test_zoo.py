@@ -126,8 +126,8 @@ def test_missing_results_file_is_one_line_before_any_work(tmp_path, capsys):
 
 def test_summarise_counts_what_would_mislead_a_user():
     """On a drive that sits on its class: a 'between classes' window and another class named are counted apart;
-    levels are counted apart for drives at the nominal J1 (a WARN there is false) and at another class; a refused
-    window whose fit's statistical error alone is wider than half the classes' spacing is 'unresolvable'."""
+    levels are counted apart for drives at the nominal J1 (a WARN there is false) and at another class; a window not
+    published is counted by why: no estimate, the samples alone, the declared model terms (95 % half-width > 10 %)."""
     gaps = [{"entry_index": 200 + 100 * k, "recontact_index": 250 + 100 * k, "traversal": True} for k in range(4)]
 
     def win(k, **kw):
@@ -137,18 +137,22 @@ def test_summarise_counts_what_would_mislead_a_user():
     nominal = {"windows": [win(0, status="between_classes", level="WARN"),
                            win(1, cls=1.131, status="deviating", level="WARN"),
                            win(2, cls=1.16, status="nominal", level="OK"),
-                           win(3, published=False, reason="ambiguous", status="ambiguous", level="OK",
-                               stat_rel=0.0065)],                           # 1.96 x 0.65 % > 1.25 %: unresolvable
+                           win(3, published=False, reason="undetermined", status="ambiguous", level="OK",
+                               stat_rel=0.052, model_rel=0.01)],            # 1.96 x 5.2 % > 10 %: the samples
                "cut_off": []}
     s = summarise([(_rec(gaps, j1=1.16), nominal)])
     assert s["between_on_class"] == 1 and s["wrong_class"] == 1
     assert s["level_WARN_nominal"] == 2 and s["level_OK_nominal"] == 2 and "level_WARN" not in s
-    assert s["unresolvable"] == 1
+    assert s["unpub_samples"] == 1 and "unpub_model" not in s and "unpub_no_estimate" not in s
     other = {"windows": [win(0, j1=1.073, cls=1.073, status="deviating", level="WARN"),
-                         win(1, published=False, reason="ambiguous", status="ambiguous", level="OK",
-                             stat_rel=0.006)],                              # 1.96 x 0.6 % < 1.25 %: resolvable
+                         win(1, published=False, reason="undetermined", status="ambiguous", level="OK",
+                             stat_rel=0.049, model_rel=0.052),              # the model terms: 1.96 x 5.2 % > 10 %
+                         win(2, published=False, reason="gap too short", status="undiagnosed", level="OK",
+                             stat_rel=None, model_rel=None),                 # no estimate
+                         win(3, published=False, reason="band", status="refused", level="ERROR",
+                             stat_rel=0.01, model_rel=0.01)],               # the policy
              "cut_off": []}
     s = summarise([(_rec(gaps, j1=1.073), other)])
     assert s.get("wrong_class", 0) == 0 and s.get("between_on_class", 0) == 0
-    assert s["level_WARN"] == 1 and s["level_OK"] == 1 and "level_WARN_nominal" not in s
-    assert s.get("unresolvable", 0) == 0
+    assert s["level_WARN"] == 1 and s["level_OK"] == 2 and s["level_ERROR"] == 1 and "level_WARN_nominal" not in s
+    assert s["unpub_model"] == 1 and s["unpub_no_estimate"] == 1 and s["unpub_other"] == 1 and "unpub_samples" not in s

@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from jident_ros import __version__
-from jident_ros.parameters import DIAGNOSTIC_PARAMS, GAP_METHODS, cli_help  # light: dataclasses only
+from jident_ros.parameters import DIAGNOSTIC_PARAMS, GAP_METHODS, POLICY_CLI_FLAGS, cli_help  # light: dataclasses only
 
 # Every subcommand imports what it runs inside its cmd_* function (issue 23): `jident --help` and
 # `jident simulate` do not pay for scipy.stats, the offline diagnosis, the bag layer or rclpy
@@ -302,11 +302,7 @@ def cmd_diagnose(args) -> int:
             header_printed = True
         print(format_window_line(window), flush=True)
 
-    overrides = {k: getattr(args, k) for k in ("image_min_margin", "plausible_min_ratio", "plausible_max_ratio",
-                                               "torque_accuracy", "coulomb_friction_max_nm",
-                                               "viscous_friction_band_nms_per_rad", "torque_offset_rel_base",
-                                               "torque_lag_max_s")
-                 if getattr(args, k) is not None}
+    overrides = {k: getattr(args, k) for k in POLICY_CLI_FLAGS if getattr(args, k) is not None}
     common = dict(system=system, method=method, p=args.p, library=library, library_path=args.library, gap_method=args.gap_method,
                   image_method=not args.no_image, log=log, on_window=show,
                   policy=default_policy(**overrides))
@@ -462,10 +458,12 @@ def _diagnose_arguments(g) -> None:
     g.add_argument("--map", metavar="CH=COL[:SCALE],...",
                    help="CSV: other column names and scale factors to SI, e.g. alpha1=enc_motor:0.0000958738,t=time_ms:0.001")
     g.add_argument("--topic", help="the drive/signals or joint_states topic (default: the recording's only one)")
-    for name in ("image_min_margin", "plausible_min_ratio", "plausible_max_ratio", "torque_accuracy",   # the node's
-                 "coulomb_friction_max_nm", "viscous_friction_band_nms_per_rad", "torque_offset_rel_base",
-                 "torque_lag_max_s"):
-        g.add_argument("--" + name.replace("_", "-"), type=float, help=cli_help(name))
+    for name in POLICY_CLI_FLAGS:   # the node's publishing policy (VerdictPolicy's fields but the input bounds)
+        if isinstance(DIAGNOSTIC_PARAMS[name].default, bool):
+            g.add_argument("--" + name.replace("_", "-"), action=argparse.BooleanOptionalAction, default=None,
+                           help=cli_help(name))
+        else:
+            g.add_argument("--" + name.replace("_", "-"), type=float, help=cli_help(name))
     g.add_argument("--json", metavar="OUT", help="also write every window's diagnosis to this JSON file")
     g.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
     g.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")

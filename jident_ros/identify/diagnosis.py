@@ -68,7 +68,8 @@ class WindowDiagnosis:
     message : str               one line, the status message
     values : list of (key, value)   the status key/values in publishing order (docs/interfaces.md)
     inertia_kgm2 : float | None     J1 published on ``inertia_estimate``, kg m^2: the accepted gap
-                                    estimate, else the image method's class when it is trusted; None
+                                    estimate (with a class, or 'ambiguous' without one), else the image
+                                    method's class when it is trusted; None
                                     when nothing was published (``refused_reason`` says why)
     source : str | None         'gap' or 'image'
     class_kgm2 : float | None   the class named: the J1 class (K1 entry) nearest ``inertia_kgm2``
@@ -346,7 +347,7 @@ class _WindowRun:
         w, dg, gap = self.win, self.dg, self.gap
         self.decision = decision = decide_gap(gap, dg.classes, dg.nominal, dg.policy, self.recontact,
                                               w.backlash_width_m)
-        if decision.status == "accepted":
+        if decision.publish:
             self.publish(gap.inertia_kgm2)
         self.vals += [("gap_j1_kgm2", gap.inertia_kgm2), ("gap_ci95_kgm2", list(gap.ci95_kgm2)),
                       ("gap_std_error_kgm2", gap.std_error_kgm2), ("gap_samples", gap.n_samples),
@@ -506,12 +507,18 @@ class _WindowRun:
         else:
             level, note = WARN, (f"the nominal {nominal:g} is excluded (more than {BETWEEN_Z:g} standard errors "
                                  f"from J1 = {j1:.4g} ± {se:.2g})")
-        text = f"{reason}: no class named, nothing published; {note}"
+        if self.decision.publish:   # the continuous J1 with its interval, no class (VerdictPolicy.publish_ambiguous)
+            text = f"J1 = {j1:.5g} ± {se:.2g} kg m^2 published without a class: {reason}; {note}"
+        else:
+            text = f"{reason}: no class named, nothing published; {note}"
         if self.idn is not None and self.image_cls not in held:
             bump, phrase = self.image_phrase(f"outside the interval's classes {fmt_classes(held)}")
             level, text = max(level, bump), text + phrase
         if self.library_missing:
             level, text = ERROR, text + f"; {self.lib_text}"
+        if self.decision.publish:   # a J1 went out: why no class is named is a value, not a refusal
+            return self.finish(level, "ambiguous", text, j1, "gap", gap=gap, identification=self.idn, width=self.width,
+                               tail=[("no_class_reason", reason)] + self.timing())
         return self.finish(level, "ambiguous", text, gap=gap, identification=self.idn, width=self.width,
                            refused_reason=reason, tail=self.timing())
 

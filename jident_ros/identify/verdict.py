@@ -10,7 +10,9 @@ Principle: a J1 is published on ``inertia_estimate`` only when the data support 
 * not when the backlash width K2 the window was cut with disagrees with the re-contact the dynamics
   show (:func:`recontact_check`: where a1 -- else the second difference of alpha1 -- drops at the
   flank impact, |alpha1 - alpha2| must be K2/r);
-* not with a 95 % interval that holds two or more classes ("ambiguous": no class is named);
+* not with a 95 % interval wider than ± :data:`MAX_CI95_HALF_WIDTH_REL` of J1 ("undetermined");
+* with a 95 % interval that holds two or more classes ("ambiguous"), the continuous J1 goes out but no class is
+  named (:attr:`VerdictPolicy.publish_ambiguous`; false: nothing goes out, the first reading of issue 12);
 * not from a guess: the image method's class alone only when its margin clears
   :attr:`VerdictPolicy.image_min_margin` (chosen from an evaluation set by
   :mod:`jident_ros.research.evaluation.verdicts` so that it is wrong in <= 1 % of the windows it answers) and
@@ -79,6 +81,11 @@ class VerdictPolicy:
         every gap fit's standard error (GapModel.torque_offset_nm)
     torque_lag_max_s : the torque estimate lags (or leads) the shaft's torque by at most this, s: a bounded term
         of the angle and a1 fits' standard error (GapModel.torque_lag_s; the speed fit fits its own lag)
+    publish_ambiguous : a gap J1 whose 95 % interval (within ± MAX_CI95_HALF_WIDTH_REL) holds two or more
+        classes is published as a continuous J1 with its interval, no class named (status 'ambiguous'); False:
+        nothing is published for it (issue 12's first reading: a plotted J1 looks like a result).  The J1 is what
+        the data support (issue 20: JointState windows hold J1 to ± 2..10 %, classes are 2.5 % apart); the class is
+        what they do not
     """
 
     plausible_min_ratio: float = 0.5
@@ -93,6 +100,7 @@ class VerdictPolicy:
     viscous_friction_band_nms_per_rad: float = 0.0
     torque_offset_rel_base: float = 0.01   # chosen on the vector drive (docs/method.md "Torque offset")
     torque_lag_max_s: float = 0.0
+    publish_ambiguous: bool = True
 
     def gap_model(self, base_torque_nm: float = 0.0) -> GapModel:
         """The gap fits' drive model from this policy's torque accuracy, friction band and torque offset
@@ -106,13 +114,18 @@ class VerdictPolicy:
     @classmethod
     def from_params(cls, params: Mapping) -> "VerdictPolicy":
         """The policy from a parameter dict (the diagnostic node's); missing keys take the defaults."""
-        return cls(**{f.name: float(params[f.name]) for f in fields(cls) if f.name in params})
+        return cls(**{f.name: (params[f.name] if isinstance(f.default, bool) else float(params[f.name]))
+                      for f in fields(cls) if f.name in params})
 
     def problems(self) -> list:
         """(field, what it must be) for every invalid field; empty when valid."""
         out = []
         for f in fields(self):
             v = getattr(self, f.name)
+            if isinstance(f.default, bool):
+                if not isinstance(v, bool):
+                    out.append((f.name, "true or false"))
+                continue
             if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v)):
                 out.append((f.name, "a finite number"))
         if out:
@@ -288,13 +301,16 @@ class GapDecision:
     """Whether the gap estimate may be published.
 
     status : 'accepted', 'ambiguous' or 'refused'
-    reason : one line (why not), '' when accepted
+    reason : one line (why no class, or why nothing is published), '' when accepted
     classes_in_ci : the classes inside the 95 % interval
+    publish : the continuous J1 goes out on ``inertia_estimate`` (accepted; ambiguous over classes with
+        :attr:`VerdictPolicy.publish_ambiguous`)
     """
 
     status: str
     reason: str
     classes_in_ci: tuple
+    publish: bool = False
 
 
 #: A gap J1 is published only with a 95 % interval within ± this fraction of it: a wider one could hold a J1 this
@@ -328,8 +344,8 @@ def decide_gap(gap: GapEstimate, classes, nominal_kgm2: float, policy: VerdictPo
     if len(held) >= 2:
         a, b = gap.ci95_kgm2
         return GapDecision("ambiguous", f"ambiguous: 95 % interval {a:.4g}..{b:.4g} kg m^2 holds classes "
-                                        f"{fmt_classes(held)}", held)
-    return GapDecision("accepted", "", held)
+                                        f"{fmt_classes(held)}", held, publish=bool(policy.publish_ambiguous))
+    return GapDecision("accepted", "", held, publish=True)
 
 
 def width_disagreement(rc: RecontactCheck, backlash_width_m: float) -> str:

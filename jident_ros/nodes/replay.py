@@ -44,6 +44,9 @@ from jident_ros.nodes.runtime import ProgressGate, RunnableNode, tick
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import REPLAY, REPLAY_PARAMS
 
+#: keep-last depth of the replayed latched topics (drive/case, drive/backlash_width, drive/true_inertia)
+REPLAY_LATCHED_DEPTH = 100
+
 NODE_NAME = "jident_replay"
 #: At rate 0, at most this many messages per tick of ``fast_sleep_s`` (while the windowing node's progress allows
 #: them): one per tick capped the replay at 1 batch / fast_sleep_s (issue 25).
@@ -187,7 +190,9 @@ class ReplayNode(RunnableNode, Node):
             if mod is None:
                 return None
             typ = getattr(importlib.import_module(mod), cls)
-            qos = qos_signals() if rel == "drive/signals" else qos_latched()
+            # the case topics keep their last REPLAY_LATCHED_DEPTH messages for a subscriber matched late (as the
+            # simulator keeps every case's): a recorder then still gets the K2 each earlier window was cut with
+            qos = qos_signals() if rel == "drive/signals" else qos_latched(REPLAY_LATCHED_DEPTH)
             pub = self.pubs[rel] = self.create_publisher(typ, rel, qos)
         return pub
 

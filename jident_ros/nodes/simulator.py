@@ -106,11 +106,13 @@ class SimulatorNode(RunnableNode, Node):
         self.pub_signals = self.create_publisher(Float64MultiArray, "drive/signals",
                                                  qos_signals(c["signals_queue_depth"]))
         self.pub_clock = self.create_publisher(Clock, "/clock", qos_clock()) if c["publish_clock"] else None
-        self.pub_inertia = self.create_publisher(Float64, "drive/true_inertia", qos_latched())
-        self.pub_width = self.create_publisher(Float64, "drive/backlash_width", qos_latched())
-        # every case stays available to late subscribers while the node lives
-        self.pub_case = self.create_publisher(Float64MultiArray, "drive/case",
-                                              qos_latched(min(len(self.cases), 1000)))
+        # every case stays available to late subscribers while the node lives: a recorder whose subscription was
+        # matched after case 2 began (a loaded machine) still records case 1's K2 and J1, with their publish times
+        # (with keep-last 1 it got case 2's K2 alone, and the replay diagnosed case 1 with it: replay != live)
+        latched_cases = qos_latched(min(len(self.cases), 1000))
+        self.pub_inertia = self.create_publisher(Float64, "drive/true_inertia", latched_cases)
+        self.pub_width = self.create_publisher(Float64, "drive/backlash_width", latched_cases)
+        self.pub_case = self.create_publisher(Float64MultiArray, "drive/case", latched_cases)
         t0 = time.perf_counter()
         try:
             self.windows = simulate_grid(self.system, self.cases)

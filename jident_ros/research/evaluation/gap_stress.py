@@ -169,7 +169,7 @@ def run(model: GapModel, *, snr_db=None, with_imu=False, torque_scale_errors=(0.
                     v = fuse_verdict(CLASSES, None, None, g)
                     row.update(est=g.inertia_kgm2, rel_error=g.inertia_kgm2 / j1 - 1,
                                covered=bool(g.ci95_kgm2[0] <= j1 <= g.ci95_kgm2[1]),
-                               published=dec.status == "accepted", reason=dec.reason[:70],
+                               published=dec.publish, reason=dec.reason[:70],
                                between=v.between_classes, class_ok=CLASSES[nearest_class(g.inertia_kgm2, CLASSES)] == j1,
                                fit=(g.fit_start - rec["entry"], g.fit_end - rec["recontact"]), se=g.std_error_kgm2 / j1,
                                method=g.method)

@@ -92,7 +92,7 @@ def gap_row(w, true_j1: float, classes, nominal_kgm2: float, bearing_friction: f
     return {"j1": g.inertia_kgm2, "rel_error": g.inertia_kgm2 / true_j1 - 1.0,
             "class_ok": classes[nearest_class(g.inertia_kgm2, classes)] == true_j1,
             "covered": bool(g.ci95_kgm2[0] <= true_j1 <= g.ci95_kgm2[1]), "ambiguous": dec.status == "ambiguous",
-            "published": dec.status == "accepted", "fit": g.method, "gap_problem": ""}
+            "published": dec.publish, "fit": g.method, "gap_problem": ""}
 
 
 def gap_summary(rows: list) -> dict:

@@ -26,6 +26,7 @@ Plain numpy; never imports rclpy.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -311,7 +312,19 @@ def main(argv=None) -> int:
     ap.add_argument("--p", type=float, default=2.0, help="KHM exponent (default 2, the diagnostic node's p)")
     ap.add_argument("--image-min-margin", type=float,
                     help="stress: the policy's image_min_margin (default: VerdictPolicy's default)")
+    ap.add_argument("--policy", action="append", default=[], metavar="FIELD=VALUE",
+                    help="stress: another VerdictPolicy field, e.g. torque_offset_rel_base=0 (repeatable)")
     args = ap.parse_args(argv)
+    overrides = {}
+    names = {f.name: f for f in dataclasses.fields(VerdictPolicy)}
+    for item in args.policy:
+        name, _, value = item.partition("=")
+        if name not in names or not value:
+            ap.error(f"argument --policy: not FIELD=VALUE with a VerdictPolicy field: {item!r}")
+        try:
+            overrides[name] = value.lower() in ("1", "true") if isinstance(names[name].default, bool) else float(value)
+        except ValueError:
+            ap.error(f"argument --policy: {name} must be a number, got {value!r}")
     t0 = time.perf_counter()
     system, method, library = _load(args.p)
     log = lambda text: print(text, file=sys.stderr, flush=True)  # noqa: E731
@@ -324,7 +337,11 @@ def main(argv=None) -> int:
     elif args.what == "reverse":
         print(json.dumps(reverse_evaluation(system, method, library, args.p)))
     else:
-        policy = VerdictPolicy() if args.image_min_margin is None else VerdictPolicy(image_min_margin=args.image_min_margin)
+        if args.image_min_margin is not None:
+            overrides["image_min_margin"] = args.image_min_margin
+        policy = VerdictPolicy(**overrides)
+        for name, what in policy.problems():
+            ap.error(f"argument --policy: {name} must be {what}, got {getattr(policy, name)!r}")
         rows = stress_evaluation(system, method, library, policy, args.p, log=log)
         print(f"policy: {policy}")
         print(render_stress(rows))
