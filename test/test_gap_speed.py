@@ -229,3 +229,28 @@ def test_the_kink_fit_without_terms_then_with_them_is_the_kink_fit():
     for k in full:
         a, b = done[k], full[k]
         assert (a.tobytes() == b.tobytes()) if isinstance(a, np.ndarray) else a == b, k
+
+
+def test_the_lapack_shortcuts_are_numpy_linalg_bit_for_bit():
+    """identify.lapack's solve, inv and lstsq (numpy.linalg's gufuncs without its wrapper) against numpy.linalg: the
+    gap stage's shapes (one system, stacks, several right-hand sides, strided views), and LinAlgError on a singular
+    matrix."""
+    from jident_ros.identify import lapack
+    rng = np.random.default_rng(14)
+    for trial in range(300):
+        p = int(rng.integers(1, 6))
+        k = int(rng.integers(1, 9))
+        X = rng.standard_normal((k, 30, p)) * 10.0 ** rng.uniform(-3, 3)
+        A = X.transpose(0, 2, 1) @ X
+        B = rng.standard_normal((k, p, 3))
+        assert lapack.solve(A, B).tobytes() == np.linalg.solve(A, B).tobytes()
+        assert lapack.solve(A[0], B[0, :, 0]).tobytes() == np.linalg.solve(A[0], B[0, :, 0]).tobytes()
+        assert lapack.solve(A, B[:, :, 1:2]).tobytes() == np.linalg.solve(A, B[:, :, 1:2]).tobytes()
+        assert lapack.inv(A).tobytes() == np.linalg.inv(A).tobytes()
+        y = rng.standard_normal(30)
+        assert lapack.lstsq(X[0], y).tobytes() == np.linalg.lstsq(X[0], y, rcond=None)[0].tobytes()
+        assert lapack.lstsq(X[0][::2], y[1::2]).tobytes() == np.linalg.lstsq(X[0][::2], y[1::2], rcond=None)[0].tobytes()
+    with pytest.raises(np.linalg.LinAlgError):
+        lapack.solve(np.zeros((3, 3)), np.ones(3))
+    with pytest.raises(np.linalg.LinAlgError):
+        lapack.inv(np.ones((2, 2)))

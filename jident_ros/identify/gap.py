@@ -80,6 +80,7 @@ from functools import lru_cache, wraps
 import numpy as np
 from scipy.ndimage import convolve1d
 
+from jident_ros.identify import lapack
 from jident_ros.identify.distributions import f_survival, t_quantile
 from jident_ros.identify.gap_free import (
     FREE_REL_SE_FLOOR,
@@ -790,7 +791,7 @@ def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTes
         return SteadinessTest(False, np.nan, np.nan, n, f"{n} pre-entry samples, too few to test a steady torque")
     scale = max(float(np.max(np.abs(x))), 1e-300)
     A = _steady_design(n)
-    coef, *_ = np.linalg.lstsq(A, x, rcond=None)
+    coef = lapack.lstsq(A, x)
     rss0 = float(np.sum((x - x.mean()) ** 2))
     rss2 = float(np.sum((x - A @ coef) ** 2))
     if rss2 <= (1e-12 * scale) ** 2 * n:               # an exact polynomial, no noise to compare with
@@ -963,7 +964,7 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     if warm is not None and linear_term:               # start from the fit without the linear term
         kappa = warm["kappa"]
     else:  # start: m_el alone (the pre-entry rows pin m0), then kappa through the origin (u = m_hat - friction)
-        b0 = np.linalg.solve(Nm, wm * (s_pre * e1 + Gm))
+        b0 = lapack.solve(Nm, wm * (s_pre * e1 + Gm))
         kappa = float(b0 @ Ga - fa) / float(b0 @ GG @ b0 - 2.0 * b0 @ Gf + ff)
     # the cost is quadratic in beta for a given kappa: beta(kappa) in closed form (one p x p solve), and the optimum
     # is the root of h(kappa) = kappa - (the a1-on-u slope at beta(kappa)), found by Newton's method with a
@@ -973,7 +974,7 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     b_m = wm * (s_pre * e1 + Gm)
 
     def profile(k: float) -> tuple:
-        b = np.linalg.solve(Nm + (wa * k * k) * GG, b_m + (wa * k) * (Ga + k * Gf))
+        b = lapack.solve(Nm + (wa * k * k) * GG, b_m + (wa * k) * (Ga + k * Gf))
         uu_ = float(b @ GG @ b - 2.0 * float(b @ Gf) + ff)
         return b, (k - float(b @ Ga - fa) / uu_) if uu_ > 0 else np.nan
 
@@ -1004,7 +1005,7 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     Fa[1:, 1:] = wa * kappa * kappa * GG
     Fm = np.zeros((p + 1, p + 1))
     Fm[1:, 1:] = Nm
-    F_inv = np.linalg.inv(Fa + Fm)
+    F_inv = lapack.inv(Fa + Fm)
     s2m = ss_m / max(na + n - p, 1)
     s2a = ss_a / max(n - 1, 1)
     cov = F_inv @ (s2m * Fm + s2a * Fa) @ F_inv

@@ -40,6 +40,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from jident_ros.identify import lapack
 from jident_ros.identify.distributions import normal_isf
 
 #: Change-point search: rows around the detector's entry and re-contact rows that may be the gap's ends.
@@ -272,13 +273,13 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             best_var = np.inf
             for k in range(3):
                 sub = (core[0] + k * third, core[0] + (k + 1) * third)
-                cs, *_ = np.linalg.lstsq(Xs[sub[0]:sub[1]], y[sub[0]:sub[1]], rcond=None)
+                cs = lapack.lstsq(Xs[sub[0]:sub[1]], y[sub[0]:sub[1]])
                 rs = y[sub[0]:sub[1]] - Xs[sub[0]:sub[1]] @ cs
                 v = float(rs @ rs) / (third - Xs.shape[1])
                 if v < best_var:
                     best_var, best_sub = v, sub
             core = best_sub
-        c0, *_ = np.linalg.lstsq(Xs[core[0]:core[1]], y[core[0]:core[1]], rcond=None)
+        c0 = lapack.lstsq(Xs[core[0]:core[1]], y[core[0]:core[1]])
         r = y - Xs @ c0
         rc = r[core[0]:core[1]]
         s2 = max(float(rc @ rc) / max(rc.size - Xs.shape[1], 1), q * q / 12.0, 1e-30)
@@ -342,7 +343,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         if with_coulomb:
             cols.append(Cc[i:j] / c_scale)
         X = np.column_stack(cols)
-        pinv = np.linalg.solve(X.T @ X, X.T)          # (XᵀX)⁻¹Xᵀ: the columns are scaled, p <= 4
+        pinv = lapack.solve(X.T @ X, X.T)          # (XᵀX)⁻¹Xᵀ: the columns are scaled, p <= 4
         yy = y[i:j]
         coef = pinv @ yy
         kappa = float(coef[2]) / phi_scale            # 1/J1
@@ -421,13 +422,13 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         t = len(lo)
         if not with_coulomb and coulomb_mid:
             # the α1 and C right-hand sides in one stacked solve (the same LAPACK call per matrix as two solves)
-            sol = np.linalg.solve(np.concatenate([A, A]), np.concatenate([D[:, p * p:p * p + p], D[:, p * p + p:]])[..., None])
+            sol = lapack.solve(np.concatenate([A, A]), np.concatenate([D[:, p * p:p * p + p], D[:, p * p + p:]])[..., None])
             sol_y, sol_c = sol[:t, 2, 0], sol[t:, 2, 0] / phi_scale
             kappa = sol_y / phi_scale
             for _ in range(2):
                 kappa = sol_y / phi_scale + kappa * coulomb_mid * sol_c
         else:
-            kappa = np.linalg.solve(A, D[:, p * p:p * p + p, None])[:, 2, 0] / phi_scale
+            kappa = lapack.solve(A, D[:, p * p:p * p + p, None])[:, 2, 0] / phi_scale
         with np.errstate(divide="ignore"):
             return np.where(kappa > 0, 1.0 / kappa, np.inf)
 
@@ -547,7 +548,7 @@ def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, 
     X[:, :, 1] = (rows[None, :] - s_arr[:, None]) * ts / np.maximum((end - s_arr) * ts, ts)[:, None]
     X[:, :, 2] = phi / np.array(scales)[:, None]
     XT = X.transpose(0, 2, 1)
-    pinv = np.linalg.solve(XT @ X, XT)
+    pinv = lapack.solve(XT @ X, XT)
     coef = pinv @ y
     res = y - (X @ coef[:, :, None])[:, :, 0]
     rss_all = (res[:, None, :] @ res[:, :, None])[:, 0, 0]
@@ -593,10 +594,10 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
     n_pre = s_best - P
     tt = (np.arange(n_pre) - n_pre / 2.0) / max(n_pre, 1)
     Xp = np.column_stack([np.ones(n_pre), tt, tt * tt])
-    cp_, *_ = np.linalg.lstsq(Xp, a[P:s_best], rcond=None)
+    cp_ = lapack.lstsq(Xp, a[P:s_best])
     rp = a[P:s_best] - Xp @ cp_
     s2p = max(float(rp @ rp) / max(n_pre - 3, 1), q * q / 12.0, 1e-30)
-    t_quad = abs(float(cp_[2])) / float(np.sqrt(s2p * np.linalg.inv(Xp.T @ Xp)[2, 2]))
+    t_quad = abs(float(cp_[2])) / float(np.sqrt(s2p * lapack.inv(Xp.T @ Xp)[2, 2]))
     if t_quad > KINK_STEADY_T:
         raise FreeFitError(f"kink fit: the speed before the entry is not constant (t = {t_quad:.3g} for a t² term "
                            f"over {n_pre} samples)")
