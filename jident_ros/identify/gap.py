@@ -88,6 +88,7 @@ from jident_ros.identify.gap_free import (
     KINK_SEARCH,
     FreeFitError,
     GapModel,
+    _diff2,
     _median,
     free_angle_fit,
     kink_fit,
@@ -792,8 +793,9 @@ def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTes
     scale = max(float(np.max(np.abs(x))), 1e-300)
     A = _steady_design(n)
     coef = lapack.lstsq(A, x)
-    rss0 = float(np.sum((x - x.mean()) ** 2))
-    rss2 = float(np.sum((x - A @ coef) ** 2))
+    # np.sum and np.mean's own reductions (np.add.reduce over the array; the mean divided by the count)
+    rss0 = float(np.add.reduce((x - np.add.reduce(x) / n) ** 2))
+    rss2 = float(np.add.reduce((x - A @ coef) ** 2))
     if rss2 <= (1e-12 * scale) ** 2 * n:               # an exact polynomial, no noise to compare with
         f, p = (0.0, 1.0) if rss0 <= (1e-12 * scale) ** 2 * n else (np.inf, 0.0)
     else:
@@ -811,7 +813,7 @@ def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTes
 def _robust_noise(*segments) -> float:
     """White-noise standard deviation from the second differences of the segments (1.4826 MAD / sqrt 6):
     blind to a smooth signal and to a few samples of a transient."""
-    d2 = np.concatenate([np.diff(np.asarray(x, float), 2) for x in segments if len(x) >= 3] or [np.zeros(0)])
+    d2 = np.concatenate([_diff2(np.asarray(x, float)) for x in segments if len(x) >= 3] or [np.zeros(0)])
     if d2.size < 3:
         return 0.0
     return float(1.4826 * _median(np.abs(d2 - _median(d2))) / np.sqrt(6.0))

@@ -172,6 +172,12 @@ def _trim_rows(n: int, trims: tuple) -> tuple:
     return lo, hi
 
 
+def _diff2(x: np.ndarray) -> np.ndarray:
+    """``np.diff(x, 2)`` of a 1-D array: the same two subtractions, without np.diff's generic set-up."""
+    d = x[1:] - x[:-1]
+    return d[1:] - d[:-1]
+
+
 def _gradient_sign(x: np.ndarray) -> np.ndarray:
     """``np.sign(np.gradient(x))`` (unit spacing, first-order ends): the sign of the central difference inside and of
     the one-sided ones at the ends (np.gradient's halving does not change a sign), without np.gradient's generic-axis
@@ -186,7 +192,7 @@ def _gradient_sign(x: np.ndarray) -> np.ndarray:
 def _quantum(alpha: np.ndarray) -> float:
     """The encoder's count (the smallest non-zero second difference: whole counts on a quantised angle), 0
     when the angle looks continuous."""
-    d = np.abs(np.diff(alpha, 2))
+    d = np.abs(_diff2(alpha))
     d = d[d > 1e-10 * max(1.0, float(np.max(np.abs(alpha))))]     # a zero second difference, to rounding
     if d.size < 5:
         return 0.0
@@ -216,7 +222,7 @@ def _median(x: np.ndarray) -> np.float64:
 
 
 def _robust_noise(x: np.ndarray) -> float:
-    d2 = np.diff(np.asarray(x, float), 2)
+    d2 = _diff2(np.asarray(x, float))
     if d2.size < 3:
         return 0.0
     return float(1.4826 * _median(np.abs(d2 - _median(d2))) / np.sqrt(6.0))
