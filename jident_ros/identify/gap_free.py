@@ -461,6 +461,11 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             se_fc = np.sqrt(max(cov_33, 0.0)) / f["c_scale"] / f["kappa"]
             if not (-3 * se_fc <= f["fc"] <= model.coulomb_friction_max_nm + 3 * se_fc):
                 continue
+        if best is not None and max(float(np.sqrt(sum(v * v for v in terms.values()))), FREE_REL_SE_FLOOR * j1) \
+                >= best["se_stat"]:
+            # already no more precise than the fit before it without the change-point term, which only adds to the
+            # sum of squares (rounding is monotone): it cannot be chosen, its refits are not needed
+            continue
         n = e_est - s_est
         trims = [k for k in CHANGEPOINT_TRIMS if n - k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)]
         terms["change_points"] = float(np.max(np.abs(j_trims(f, with_coulomb, trims) - j1))) \
