@@ -73,6 +73,7 @@ residual RMS.
 """
 from __future__ import annotations
 
+import math
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from functools import lru_cache, wraps
@@ -479,7 +480,9 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         raise NoGapError(f"gap fit undetermined: J1 = {j:.4g} kg m^2 with standard error {se:.3g} kg m^2 "
                          f"(> {MAX_RELATIVE_STD_ERROR:.0%}); the window shows no free acceleration of the motor")
     half = _t975(max(int(dof), 1)) * se
-    return GapEstimate(j, se, (j - half, j + half), float(np.sqrt(np.mean(res ** 2))), start, end, method, how,
+    # the residual's RMS: np.mean's own reduction (np.add.reduce, divided by the count)
+    rms = float(np.sqrt(np.add.reduce(res ** 2) / res.size))
+    return GapEstimate(j, se, (j - half, j + half), rms, start, end, method, how,
                        float(model_error), choice, int(fit_span[0]), int(fit_span[1]), **free_extra)
 
 
@@ -982,12 +985,12 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
 
     beta, h = profile(kappa)
     for _ in range(JOINT_FIT_MAX_ITER):
-        if not np.isfinite(h):
+        if not math.isfinite(h):
             break
         dk = 1e-4 * abs(kappa) if kappa else 1e-12
         _, h2 = profile(kappa + dk)
         slope = (h2 - h) / dk
-        if not np.isfinite(slope) or slope == 0.0:
+        if not math.isfinite(slope) or slope == 0.0:
             break
         step = -h / slope
         kappa += step
