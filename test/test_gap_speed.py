@@ -254,3 +254,15 @@ def test_the_lapack_shortcuts_are_numpy_linalg_bit_for_bit():
         lapack.solve(np.zeros((3, 3)), np.ones(3))
     with pytest.raises(np.linalg.LinAlgError):
         lapack.inv(np.ones((2, 2)))
+
+
+def test_the_joint_fits_standard_deviation_is_numpys_bit_for_bit():
+    """gap._std_ddof1 (the joint fit's noise levels) against np.std(x, ddof=1): sizes 5..900, offsets, scales, strided
+    views."""
+    rng = np.random.default_rng(15)
+    for trial in range(3000):
+        n = int(rng.integers(5, 900))
+        x = rng.standard_normal(n) * 10.0 ** rng.uniform(-8, 4) + rng.uniform(-1e3, 1e3)
+        if trial % 3 == 0:
+            x = x[::2]
+        assert np.asarray(gap._std_ddof1(x)).tobytes() == np.asarray(np.std(x, ddof=1)).tobytes(), (trial, n)

@@ -921,6 +921,29 @@ def _joint_design(n: int, linear_term: bool) -> np.ndarray:
     return G
 
 
+@lru_cache(maxsize=64)
+def _joint_constants(n: int, linear_term: bool) -> tuple:
+    """The joint fit's constant blocks for n gap samples: e1 (the m0 coordinate), e1 e1ᵀ and GᵀG (read-only)."""
+    G = _joint_design(n, linear_term)
+    p = G.shape[1]
+    e1 = np.zeros(p)
+    e1[0] = 1.0
+    out = (e1, np.outer(e1, e1), G.T @ G)
+    for a in out:
+        a.flags.writeable = False
+    return out
+
+
+def _std_ddof1(x: np.ndarray) -> np.float64:
+    """``np.std(x, ddof=1)`` of a 1-D float array, bit for bit: numpy's own steps (the mean as the sum over the count,
+    the squared deviations' sum over n - 1, its square root) without its generic-axis set-up (most of its cost on the
+    joint fit's pre-entry samples)."""
+    n = x.size
+    d = x - np.add.reduce(x, axis=None, keepdims=True) / n
+    np.multiply(d, d, out=d)
+    return np.sqrt(np.add.reduce(d, axis=None) / max(n - 1, 0))
+
+
 @_memoised
 def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=None,
                linear_term: bool = False, warm: dict | None = None) -> dict:
@@ -947,8 +970,8 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     if warm is not None:
         sm, sa = warm["noise"]
     elif pre.size >= 5:
-        sm = float(np.std(pre, ddof=1))
-        sa = float(np.std(a1[:start], ddof=1))
+        sm = float(_std_ddof1(pre))
+        sa = float(_std_ddof1(a1[:start]))
     else:
         cm, *_ = np.linalg.lstsq(G, mg, rcond=None)
         sm = float(np.sqrt(np.sum((mg - G @ cm) ** 2) / max(n - p, 1)))
@@ -960,23 +983,22 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     # gap a1 = kappa (G beta - fr) (weight 1/sa^2).
     na = pre.size
     wm, wa = 1.0 / sm ** 2, 1.0 / sa ** 2
-    e1 = np.zeros(p)
-    e1[0] = 1.0
-    GG, Gm, Ga, Gf = G.T @ G, G.T @ mg, G.T @ ag, G.T @ fr
+    e1, e11, GG = _joint_constants(n, linear_term)
+    Gm, Ga, Gf = G.T @ mg, G.T @ ag, G.T @ fr
     fa, ff = float(fr @ ag), float(fr @ fr)
     s_pre = float(pre.sum())
-    Nm = wm * (na * np.outer(e1, e1) + GG)            # m_el blocks: J_m^T J_m for beta (kappa column is 0)
+    Nm = wm * (na * e11 + GG)            # m_el blocks: J_m^T J_m for beta (kappa column is 0)
+    b_m = wm * (s_pre * e1 + Gm)
     if warm is not None and linear_term:               # start from the fit without the linear term
         kappa = warm["kappa"]
     else:  # start: m_el alone (the pre-entry rows pin m0), then kappa through the origin (u = m_hat - friction)
-        b0 = lapack.solve(Nm, wm * (s_pre * e1 + Gm))
+        b0 = lapack.solve(Nm, b_m)
         kappa = float(b0 @ Ga - fa) / float(b0 @ GG @ b0 - 2.0 * b0 @ Gf + ff)
     # the cost is quadratic in beta for a given kappa: beta(kappa) in closed form (one p x p solve), and the optimum
     # is the root of h(kappa) = kappa - (the a1-on-u slope at beta(kappa)), found by Newton's method with a
     # finite-difference slope (h is close to linear: 2-4 steps, 2 solves each), stopped on the step, not on h (with a
     # nearly exact a1, h is ~1e-11 everywhere); Gauss-Newton on (kappa, beta) converged linearly (13-30 solves) and
     # stopped unconverged after 30 iterations on the stress bench's load reversal
-    b_m = wm * (s_pre * e1 + Gm)
 
     def profile(k: float) -> tuple:
         b = lapack.solve(Nm + (wa * k * k) * GG, b_m + (wa * k) * (Ga + k * Gf))
@@ -1000,7 +1022,7 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     # residuals and the sandwich covariance at the solution
     m_hat = G @ beta
     r_a = ag - kappa * (m_hat - fr)
-    ss_m = float(np.sum((pre - beta[0]) ** 2) + np.sum((mg - m_hat) ** 2)) * wm
+    ss_m = float(np.add.reduce((pre - beta[0]) ** 2) + np.add.reduce((mg - m_hat) ** 2)) * wm    # np.sum's reduction
     ss_a = float(r_a @ r_a) * wa
     Gu = GG @ beta - Gf
     uu = float(beta @ Gu - beta @ Gf + ff)
