@@ -535,9 +535,10 @@ KINK_STEADY_T = 3.0
 KINK_CHI2_1 = 3.841
 
 
-def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, y: np.ndarray) -> list:
-    """:func:`kink_fit`'s least-squares fit over rows [P, end) for every candidate entry row: a list of (residual
-    sum of squares, 1/J1, residual, the least-squares row of 1/J1, entry row)."""
+def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, y: np.ndarray) -> tuple:
+    """:func:`kink_fit`'s least-squares fit over rows [P, end) for every candidate entry row: arrays over the
+    candidates of the residual sum of squares and 1/J1, the residuals (candidate, row), the least-squares solutions
+    (XᵀX)⁻¹Xᵀ (candidate, column, row) and the Φ column's scales (1/J1 = row 2 of the solution / scale)."""
     rows = np.arange(P, end)
     # every candidate's design at once, (entry, row, column): numpy's stacked matmul and solve call the same
     # BLAS/LAPACK routine per candidate as the 2-D calls (bit for bit the same numbers, a fraction of the calls)
@@ -553,18 +554,27 @@ def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, 
     phi = np.zeros((s_arr.size, n))
     np.cumsum(0.5 * (c1[:, 1:] + c1[:, :-1]), axis=1, out=phi[:, 1:])
     phi *= ts
-    scales = [max(float(v), 1e-300) for v in np.max(np.abs(phi), axis=1)]
+    scales = np.maximum(np.max(np.abs(phi), axis=1), 1e-300)
     X = np.empty((s_arr.size, n, 3))
     X[:, :, 0] = 1.0
     X[:, :, 1] = (rows[None, :] - s_arr[:, None]) * ts / np.maximum((end - s_arr) * ts, ts)[:, None]
-    X[:, :, 2] = phi / np.array(scales)[:, None]
+    X[:, :, 2] = phi / scales[:, None]
     XT = X.transpose(0, 2, 1)
     pinv = lapack.solve(XT @ X, XT)
     coef = pinv @ y
     res = y - (X @ coef[:, :, None])[:, :, 0]
     rss_all = (res[:, None, :] @ res[:, :, None])[:, 0, 0]
-    return [(float(rss_all[q]), float(coef[q, 2]) / scales[q], res[q], pinv[q, 2] / scales[q], s_row)
-            for q, s_row in enumerate(entries)]
+    return rss_all, coef[:, 2] / scales, res, pinv, scales
+
+
+@lru_cache(maxsize=64)
+def _kink_pre_design(n_pre: int) -> tuple:
+    """The kink fit's pre-entry steadiness test: the design (1, t, t²) over n_pre samples (t centred, over n_pre)
+    and the (2, 2) element of (XᵀX)⁻¹ (read-only: shared)."""
+    tt = (np.arange(n_pre) - n_pre / 2.0) / max(n_pre, 1)
+    Xp = np.column_stack([np.ones(n_pre), tt, tt * tt])
+    Xp.flags.writeable = False
+    return Xp, float(lapack.inv(Xp.T @ Xp)[2, 2])
 
 
 def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int,
@@ -591,10 +601,10 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
     if entries[0] - P < 10:
         raise FreeFitError("kink fit: fewer than 10 steady samples before the entry")
     y = a[P:end] - a[entries[0]]
-    out = _kink_candidates(m, ts, entries, P, end, y)
-    rss = np.array([o[0] for o in out])
-    k = int(np.argmin(rss))
-    rss_min, kappa, res, row, s_best = out[k]
+    rss_all, kappa_all, res_all, pinv, scales = _kink_candidates(m, ts, entries, P, end, y)
+    k = int(np.argmin(rss_all))
+    rss_list, kappa_list = rss_all.tolist(), kappa_all.tolist()
+    rss_min, kappa, s_best = rss_list[k], kappa_list[k], entries[k]
     if not kappa > 0:
         raise FreeFitError(f"kink fit: non-physical 1/J1 = {kappa!r}")
     dof = end - P - 3
@@ -603,20 +613,19 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
     # the model's premise: constant speed before the entry (a speed controller's drive is not): the pre-entry
     # angle gets a t² term, refused when it is significant (t statistic > KINK_STEADY_T)
     n_pre = s_best - P
-    tt = (np.arange(n_pre) - n_pre / 2.0) / max(n_pre, 1)
-    Xp = np.column_stack([np.ones(n_pre), tt, tt * tt])
+    Xp, xtx_inv_22 = _kink_pre_design(n_pre)
     cp_ = lapack.lstsq(Xp, a[P:s_best])
     rp = a[P:s_best] - Xp @ cp_
     s2p = max(float(rp @ rp) / max(n_pre - 3, 1), q * q / 12.0, 1e-30)
-    t_quad = abs(float(cp_[2])) / float(np.sqrt(s2p * lapack.inv(Xp.T @ Xp)[2, 2]))
+    t_quad = abs(float(cp_[2])) / float(np.sqrt(s2p * xtx_inv_22))
     if t_quad > KINK_STEADY_T:
         raise FreeFitError(f"kink fit: the speed before the entry is not constant (t = {t_quad:.3g} for a t² term "
                            f"over {n_pre} samples)")
     j1 = 1.0 / kappa
-    plausible = [o for o in out if o[0] - rss_min <= KINK_CHI2_1 * s2 and o[1] > 0]
-    fit = {"j1": j1, "start": int(s_best), "end": int(end), "residual": res, "dof": dof,
-           "plausible_entries": [o[4] for o in plausible],
-           "_state": (m, ts, P, kappa, row, s2, [o[1] for o in plausible])}
+    plausible = [q_ for q_ in range(len(entries)) if rss_list[q_] - rss_min <= KINK_CHI2_1 * s2 and kappa_list[q_] > 0]
+    fit = {"j1": j1, "start": int(s_best), "end": int(end), "residual": res_all[k], "dof": dof,
+           "plausible_entries": [entries[q_] for q_ in plausible],
+           "_state": (m, ts, P, kappa, pinv[k, 2] / scales[k], s2, [kappa_list[q_] for q_ in plausible])}
     return kink_terms(fit, coulomb_max_nm, torque_offset_nm, torque_lag_s) if with_terms else fit
 
 
