@@ -793,7 +793,7 @@ def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTes
     n = x.size
     if n < 6:
         return SteadinessTest(False, np.nan, np.nan, n, f"{n} pre-entry samples, too few to test a steady torque")
-    scale = max(float(np.max(np.abs(x))), 1e-300)
+    scale = max(float(np.maximum.reduce(np.abs(x), axis=None)), 1e-300)      # np.max's reduction
     A = _steady_design(n)
     coef = lapack.lstsq(A, x)
     # np.sum and np.mean's own reductions (np.add.reduce over the array; the mean divided by the count)
@@ -804,7 +804,9 @@ def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTes
     else:
         f = max((rss0 - rss2) / 2.0 / (rss2 / (n - 3)), 0.0)
         p = f_survival(f, 2, n - 3)
-    if np.ptp(A[:, 1:] @ coef[1:]) <= STEADY_REL_TOL * scale:    # slope and curvature move it by next to nothing
+    trend = A[:, 1:] @ coef[1:]
+    # np.ptp's reductions: slope and curvature move it by next to nothing
+    if np.maximum.reduce(trend, axis=None) - np.minimum.reduce(trend, axis=None) <= STEADY_REL_TOL * scale:
         return SteadinessTest(True, float(f), p, n)
     if p < p_value:
         return SteadinessTest(False, float(f), p, n,

@@ -344,11 +344,14 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
 
     def fit(s_row: int, e_row: int, with_coulomb: bool) -> dict:
         i, j = s_row - L, e_row - L
-        cols = [np.ones(j - i), u[i:j], Phi[i:j] / phi_scale]
         c_scale = max(float(np.max(np.abs(Cc[i:j]))), 1e-300)
+        # the design [1, u, Φ/scale(, C/scale)] (what np.column_stack builds, written in place)
+        X = np.empty((j - i, 4 if with_coulomb else 3))
+        X[:, 0] = 1.0
+        X[:, 1] = u[i:j]
+        np.divide(Phi[i:j], phi_scale, out=X[:, 2])
         if with_coulomb:
-            cols.append(Cc[i:j] / c_scale)
-        X = np.column_stack(cols)
+            np.divide(Cc[i:j], c_scale, out=X[:, 3])
         pinv = lapack.solve(X.T @ X, X.T)          # (XᵀX)⁻¹Xᵀ: the columns are scaled, p <= 4
         yy = y[i:j]
         coef = pinv @ yy
