@@ -350,7 +350,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
             raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa!r}")
         j = wheel_radius_m / kappa
         alt = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction,
-                         linear_term=True, warm=fit)
+                         linear_term=True, warm=fit, kappa_only=True)
         model_error = abs(wheel_radius_m / alt["kappa"] - j) if alt["kappa"] > 0 else np.inf
         se = float(np.hypot(wheel_radius_m / kappa ** 2 * fit["kappa_se"], model_error))
         res = fit["a1_residual"] / kappa
@@ -948,7 +948,7 @@ def _std_ddof1(x: np.ndarray) -> np.float64:
 
 @_memoised
 def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=None,
-               linear_term: bool = False, warm: dict | None = None) -> dict:
+               linear_term: bool = False, warm: dict | None = None, kappa_only: bool = False) -> dict:
     """Weighted joint least squares of m_el (pre-entry and gap) and a1 (gap); see the module docstring.
 
     Parameters: kappa = r/J1 and beta = (m0, c_1.., c_q) of m_hat(τ) = m0 + Σ c_i τ^p_i,
@@ -958,7 +958,8 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     Returns kappa, its standard error (sandwich covariance with per-channel residual
     variances), the a1 residual over the gap, the degrees of freedom and the noise levels.
     ``warm``: the result of the fit without the linear term, to start from (and reuse its
-    noise levels).
+    noise levels).  ``kappa_only``: {"kappa": ...} alone (the model-error fit's use: its residuals and covariance
+    are not computed).
     """
     n = end - start
     pre = m_el[:start]
@@ -1021,6 +1022,8 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
         beta, h = profile(kappa)
         if abs(step) <= JOINT_FIT_TOL * abs(kappa):
             break
+    if kappa_only:
+        return {"kappa": float(kappa)}
     # residuals and the sandwich covariance at the solution
     m_hat = G @ beta
     r_a = ag - kappa * (m_hat - fr)
