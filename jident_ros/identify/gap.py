@@ -869,10 +869,10 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
 
     core = (start + 2, end - 2) if end - start >= 10 else (start, end)
     j = slope(*core)
-    if not np.isfinite(j) or j <= 0:
+    if not math.isfinite(j) or j <= 0:
         raise NoGapError(f"gap fit gave a non-physical J1 = {j!r} (m_el against a1 over the gap)")
     lo, hi = start, end
-    level = float(np.median(np.abs(y_all[start:end])))
+    level = float(_median(np.abs(y_all[start:end])))
     for it in range(4):
         res = y_all[start:end] - j * x_all[start:end]
         tol = max(trim_sigma * float(np.hypot(sy, j * sx)), trim_rel * level)
@@ -885,7 +885,7 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
             break
         lo, hi = new_lo, new_hi
         j = slope(lo, hi)
-        if not np.isfinite(j) or j <= 0:
+        if not math.isfinite(j) or j <= 0:
             raise NoGapError(f"gap fit gave a non-physical J1 = {j!r} (m_el against a1 over the gap)")
     n = hi - lo
     if n < 3:
