@@ -31,8 +31,11 @@ def _no_convergence(err, flag):
     raise np.linalg.LinAlgError("SVD did not converge in Linear Least Squares")
 
 
-def _float64(*arrays) -> bool:
-    return _gufuncs is not None and all(type(a) is np.ndarray and a.dtype == _F8 for a in arrays)
+def _float64(a, b=None) -> bool:
+    """Whether the gufuncs apply: float64 ndarrays (and the module found)."""
+    if _gufuncs is None or type(a) is not np.ndarray or a.dtype != _F8:
+        return False
+    return b is None or (type(b) is np.ndarray and b.dtype == _F8)
 
 
 def solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
