@@ -23,8 +23,12 @@ from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
 
 
 def commit() -> str:
-    """The repository's commit, short, and whether jident_ros/ has uncommitted changes ('unknown' outside git)."""
-    repo = Path(__file__).resolve().parents[1]
+    """The commit of the jident_ros measured (the checkout it is imported from), short, and whether its jident_ros/ has
+    uncommitted changes ('unknown' when that is not a git checkout, e.g. an exported tree on PYTHONPATH)."""
+    import jident_ros
+    repo = Path(jident_ros.__file__).resolve().parents[1]
+    if not (repo / ".git").exists():
+        return f"unknown (jident_ros from {repo}, not a git checkout)"
     try:
         head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=repo, capture_output=True, text=True,
                               check=True).stdout.strip()
