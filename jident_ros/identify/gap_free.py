@@ -315,7 +315,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             ok = rss <= chi_bound[hi_rows - lo_rows]
             xt = Xs[test]                                             # (cand, k_f, p)
             pred = np.einsum("ckp,cp->ck", xt, sol[c:])
-            lev = np.einsum("ckp,cpq,ckq->ck", xt, Ainv[c:], xt)
+            lev = np.einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)          # x A⁻¹ xᵀ of each test row
             stat = np.sum((r[test] - pred) ** 2 / (s2 * (1.0 + lev)), axis=1)
             bad = np.flatnonzero(~(ok & ((ihi - ilo < p + 2) | (stat <= _CHI2_FORECAST))))
             return int(bad[0]) if bad.size else None
