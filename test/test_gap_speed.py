@@ -3,7 +3,11 @@
 `jident evaluate` runs the gap estimator ~40,000 times; three shortcuts cut its cost without changing a number:
 the fit cache (identify.gap.fit_cache: the channel sets of one window share its angle fits and steadiness test),
 the kink fit's candidates in one stacked solve (gap_free.kink_fit), and the signature interval's Savitzky-Golay
-derivative without scipy's edge fits where they are not read (gap._savgol_for_gap)."""
+derivative without scipy's edge fits where they are not read (gap._savgol_for_gap).  Issue 20's per-window budget
+(bench/bench_gap.py) added more, each checked here against numpy or its plain form: numpy.linalg's gufuncs without
+their wrapper (identify.lapack), np.diff/np.gradient/np.std re-expressed as numpy's own steps, the change-point
+scans' closed-form 3 x 3 inverse (a decision, equal to LAPACK's to rounding), the double-trapezoid adjoint, the kink
+fit's standard error after its checks.  bench/gap_outputs.py compares every gap estimate of two versions."""
 import numpy as np
 import pytest
 from scipy.signal import savgol_filter
