@@ -772,9 +772,10 @@ class SteadinessTest:
         return f"gap_only: {self.reason}"
 
 
-@lru_cache(maxsize=64)
+@lru_cache(maxsize=16)
 def _steady_design(n: int) -> np.ndarray:
-    """The steadiness test's design (1, t, t²), t from -1 to 1 over n samples (read-only: shared by every call)."""
+    """The steadiness test's design (1, t, t²), t from -1 to 1 over n samples (read-only: shared by every call; 16
+    lengths kept, 24 bytes a sample each: < 1 MB for windows of 2000 samples)."""
     tt = np.linspace(-1.0, 1.0, n)
     A = np.column_stack([np.ones(n), tt, tt * tt])
     A.flags.writeable = False
