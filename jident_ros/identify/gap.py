@@ -607,13 +607,13 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     last = torque[sb - KINK_SEARCH:sb]
     level = float(_median(np.asarray(ref, float)))
     tol = max(5.0 * _robust_noise(ref), 1e-3 * abs(level))
-    if float(np.max(np.abs(last - level))) > tol:
+    if float(np.abs(last - level).max()) > tol:
         return {"choice": f"angle (free): the torque changes in the {KINK_SEARCH} samples before the entry row {sb} "
                           f"(by {float(np.max(np.abs(last - level))):.3g} N m): not a steady drive's entry"}
     # ... and it stays near its level through the first samples after it (a machine on line: the flux is
     # continuous; a speed controller reacting to an event moves it at once, and the kink is then the event)
     first = torque[sb:sb + KINK_SEARCH]
-    if float(np.max(np.abs(first - level))) > max(tol, KINK_TORQUE_AFTER_REL * abs(level)):
+    if float(np.abs(first - level).max()) > max(tol, KINK_TORQUE_AFTER_REL * abs(level)):
         return {"choice": f"angle (free): the torque moves by {float(np.max(np.abs(first - level))):.3g} N m in the "
                           f"{KINK_SEARCH} samples after the entry row {sb}: not a steady drive's entry"}
     try:
@@ -860,9 +860,9 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
     y_all, x_all = np.asarray(torque, float), np.asarray(acc, float)
     sy = _robust_noise(y_all[:start], y_all[start:end])
     sx = _robust_noise(x_all[:start], x_all[start:end])
-    if sx <= 1e-9 * float(np.max(np.abs(x_all[start:end]))):
+    if sx <= 1e-9 * float(np.abs(x_all[start:end]).max()):
         sx = 0.0
-    if sy <= 1e-9 * float(np.max(np.abs(y_all[start:end]))):
+    if sy <= 1e-9 * float(np.abs(y_all[start:end]).max()):
         sy = 0.0
 
     def slope(a, b):

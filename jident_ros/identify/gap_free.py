@@ -125,7 +125,7 @@ _CHI2_FORECAST = float(_chi2_upper(np.array([CHANGEPOINT_FORECAST_SAMPLES]))[0])
 def _cumtrapz(x: np.ndarray, ts: float) -> np.ndarray:
     out = np.empty(x.size)
     out[0] = 0.0
-    np.cumsum(0.5 * (x[1:] + x[:-1]), out=out[1:])
+    (0.5 * (x[1:] + x[:-1])).cumsum(out=out[1:])
     return out * ts
 
 
@@ -143,7 +143,7 @@ def _scan_sums(X: np.ndarray, y: np.ndarray) -> np.ndarray:
     np.multiply(X[:, _SYM3_I], X[:, _SYM3_J], out=S[1:, :6])
     np.multiply(X, y[:, None], out=S[1:, 6:9])
     np.multiply(y, y, out=S[1:, 9])
-    np.cumsum(S[1:], axis=0, out=S[1:])
+    S[1:].cumsum(axis=0, out=S[1:])
     return S
 
 
@@ -193,7 +193,7 @@ def _quantum(alpha: np.ndarray) -> float:
     """The encoder's count (the smallest non-zero second difference: whole counts on a quantised angle), 0
     when the angle looks continuous."""
     d = np.abs(_diff2(alpha))
-    d = d[d > 1e-10 * max(1.0, float(np.max(np.abs(alpha))))]     # a zero second difference, to rounding
+    d = d[d > 1e-10 * max(1.0, float(np.abs(alpha).max()))]     # a zero second difference, to rounding
     if d.size < 5:
         return 0.0
     # a quantised angle moves by whole counts: the second differences are integer multiples of the count; the
@@ -202,7 +202,7 @@ def _quantum(alpha: np.ndarray) -> float:
     for div in (1, 2, 3, 4):
         q = q0 / div
         k = d / q
-        if float(np.max(np.abs(k - np.round(k)))) < 0.01:
+        if float(np.abs(k - np.rint(k)).max()) < 0.01:
             return q
     return 0.0
 
@@ -256,13 +256,13 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     sg = _gradient_sign(a[L:R])
     Cc = _cumtrapz(_cumtrapz(sg, ts), ts)
     Vv = _cumtrapz(y, ts)
-    phi_scale = max(float(np.max(np.abs(Phi))), 1e-300)
+    phi_scale = max(float(np.abs(Phi).max()), 1e-300)
     coulomb_mid = 0.5 * float(model.coulomb_friction_max_nm)
     # the scan's design: the physics alone, 1, τ and Φ of the torque less the assumed friction (a free
     # offset torque would let the fit take a slowly changing coupling torque for friction)
     u = tau / D
     phi_mid = Phi - coulomb_mid * Cc
-    Xs = np.column_stack([np.ones(R - L), u, phi_mid / max(float(np.max(np.abs(phi_mid))), 1e-300)])
+    Xs = np.column_stack([np.ones(R - L), u, phi_mid / max(float(np.abs(phi_mid).max()), 1e-300)])
     q = _quantum(a[L:R])
     s_est, e_est = start, end
     if not fixed:
@@ -344,7 +344,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
 
     def fit(s_row: int, e_row: int, with_coulomb: bool) -> dict:
         i, j = s_row - L, e_row - L
-        c_scale = max(float(np.max(np.abs(Cc[i:j]))), 1e-300)
+        c_scale = max(float(np.abs(Cc[i:j]).max()), 1e-300)
         # the design [1, u, Φ/scale(, C/scale)] (what np.column_stack builds, written in place)
         X = np.empty((j - i, 4 if with_coulomb else 3))
         X[:, 0] = 1.0
@@ -424,7 +424,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         np.einsum("ki,kj->kij", X, X, out=Z[1:, :p * p].reshape(n, p, p))
         np.multiply(X, y[i:j, None], out=Z[1:, p * p:p * p + p])
         np.multiply(X, Cc[i:j, None], out=Z[1:, p * p + p:])
-        np.cumsum(Z[1:], axis=0, out=Z[1:])
+        Z[1:].cumsum(axis=0, out=Z[1:])
         lo, hi = _trim_rows(n, tuple(trims))
         D = Z[hi] - Z[lo]
         A = D[:, :p * p].reshape(-1, p, p)
@@ -471,7 +471,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             continue
         n = e_est - s_est
         trims = [k for k in CHANGEPOINT_TRIMS if n - k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)]
-        terms["change_points"] = float(np.max(np.abs(j_trims(f, with_coulomb, trims) - j1))) \
+        terms["change_points"] = float(np.abs(j_trims(f, with_coulomb, trims) - j1).max()) \
             if trims else 0.0
         se_stat = float(np.sqrt(sum(v * v for v in terms.values())))
         se_stat = max(se_stat, FREE_REL_SE_FLOOR * j1)
@@ -517,7 +517,7 @@ def _double_trapz_adjoint(row: np.ndarray, ts: float) -> np.ndarray:
         # (Tᵀ v)_i = ts Σ_k v_k w_ki ; w_ki = 1/2 at i = 0 or i = k (k>=1), 1 for 0 < i < k
         if n < 2:
             return np.zeros(n)
-        rev = np.cumsum(v[::-1])[::-1]          # Σ_{k >= i} v_k
+        rev = v[::-1].cumsum()[::-1]          # Σ_{k >= i} v_k
         out = 0.5 * v
         out[0] = 0.5 * float(rev[1])
         out[1:n - 1] += rev[2:]                  # + Σ_{k > i} v_k
@@ -552,12 +552,12 @@ def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, 
     keep = np.arange(n - 1)[None, :] >= (s_arr - P)[:, None]
     half = np.where(keep, 0.5 * (m[P + 1:end] + m[P:end - 1])[None, :], 0.0)
     c1 = np.zeros((s_arr.size, n))
-    np.cumsum(half, axis=1, out=c1[:, 1:])
+    half.cumsum(axis=1, out=c1[:, 1:])
     c1 *= ts
     phi = np.zeros((s_arr.size, n))
-    np.cumsum(0.5 * (c1[:, 1:] + c1[:, :-1]), axis=1, out=phi[:, 1:])
+    (0.5 * (c1[:, 1:] + c1[:, :-1])).cumsum(axis=1, out=phi[:, 1:])
     phi *= ts
-    scales = np.maximum(np.max(np.abs(phi), axis=1), 1e-300)
+    scales = np.maximum(np.abs(phi).max(axis=1), 1e-300)
     X = np.empty((s_arr.size, n, 3))
     X[:, :, 0] = 1.0
     X[:, :, 1] = (rows[None, :] - s_arr[:, None]) * ts / np.maximum((end - s_arr) * ts, ts)[:, None]
