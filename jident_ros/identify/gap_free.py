@@ -161,7 +161,7 @@ def _sym3_inverse(U: np.ndarray) -> np.ndarray:
     i00, i01, i02 = d * f - e * e, c * e - b * f, b * e - c * d
     i11, i12, i22 = a * f - c * c, b * c - a * e, a * d - b * b
     det = a * i00 + b * i01 + c * i02
-    return np.stack([i00, i01, i02, i01, i11, i12, i02, i12, i22], axis=1).reshape(-1, 3, 3) / det[:, None, None]
+    return (np.array([i00, i01, i02, i01, i11, i12, i02, i12, i22]) / det).T.reshape(-1, 3, 3)
 
 
 @lru_cache(maxsize=256)
@@ -316,7 +316,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             xt = Xs[test]                                             # (cand, k_f, p)
             pred = np.einsum("ckp,cp->ck", xt, sol[c:])
             lev = np.einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)          # x A⁻¹ xᵀ of each test row
-            stat = np.sum((r[test] - pred) ** 2 / (s2 * (1.0 + lev)), axis=1)
+            stat = ((r[test] - pred) ** 2 / (s2 * (1.0 + lev))).sum(axis=1)
             bad = np.flatnonzero(~(ok & ((ihi - ilo < p + 2) | (stat <= _CHI2_FORECAST))))
             return int(bad[0]) if bad.size else None
 
