@@ -13,9 +13,10 @@ import pytest
 from scipy.signal import savgol_filter
 
 from jident_ros.config import load_system_config
-from jident_ros.identify import gap, gap_free
+from jident_ros.identify import gap, gap_free, gap_numerics
 from jident_ros.identify.gap import NoGapError, estimate_inertia, fit_cache
-from jident_ros.identify.gap_free import GapModel, _cumtrapz, kink_fit
+from jident_ros.identify.gap_free import GapModel, kink_fit
+from jident_ros.identify.gap_numerics import _cumtrapz
 from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
 from jident_ros.research.evaluation.robustness import CHANNEL_SETS
 from jident_ros.sim import Case, add_measurement_noise, quantise_encoders, simulate_grid
@@ -104,8 +105,9 @@ def test_kink_fit_matches_the_loop_on_grid_windows(windows, monkeypatch):
     """The kink fits the steady-entry check makes on clean, noisy and quantised grid windows (the trims' fits on
     the plausible entries too)."""
     calls = []
-    real = gap.kink_fit
-    monkeypatch.setattr(gap, "kink_fit", lambda *a, **k: calls.append(a) or real(*a, **k))
+    real = gap_free.kink_fit
+    locate = gap.kink_locate          # the steady-entry check's kink fits (their standard error added after its checks)
+    monkeypatch.setattr(gap, "kink_locate", lambda *a, **k: calls.append(a) or locate(*a, **k))
     _all_sets(windows)
     checked = 0
     for alpha1, m_el, ts, entries, end, *_ in calls:
@@ -161,7 +163,7 @@ def test_the_gap_only_sweeps_in_a_process_of_their_own_change_no_number():
 
 
 def test_the_median_is_numpys_bit_for_bit():
-    """gap_free._median (the robust noise scale's) against np.median: odd and even sizes, ties, signed zeros, NaN."""
+    """gap_numerics._median (the robust noise scale's) against np.median: odd and even sizes, ties, signed zeros, NaN."""
     rng = np.random.default_rng(5)
     for trial in range(3000):
         n = int(rng.integers(1, 120))
@@ -170,11 +172,11 @@ def test_the_median_is_numpys_bit_for_bit():
             x = np.round(x, 1) * np.where(rng.random(n) < 0.5, -1.0, 1.0)     # ties and ±0.0
         if trial % 97 == 0:
             x[rng.integers(0, n)] = np.nan
-        assert np.asarray(gap_free._median(x)).tobytes() == np.asarray(np.median(x)).tobytes(), (trial, x)
+        assert np.asarray(gap_numerics._median(x)).tobytes() == np.asarray(np.median(x)).tobytes(), (trial, x)
 
 
 def test_the_gradient_sign_is_numpys_bit_for_bit():
-    """gap_free._gradient_sign (the free fit's Coulomb column's sign of ω1) against np.sign(np.gradient(x)): quantised
+    """gap_numerics._gradient_sign (the free fit's Coulomb column's sign of ω1) against np.sign(np.gradient(x)): quantised
     angles (flat runs: zero differences), steady ramps, reversals, 2 to 300 samples."""
     rng = np.random.default_rng(11)
     for trial in range(2000):
@@ -183,7 +185,7 @@ def test_the_gradient_sign_is_numpys_bit_for_bit():
         if trial % 2:
             q = 2 * np.pi / 2 ** int(rng.integers(8, 17))
             x = np.floor(x / q) * q
-        assert gap_free._gradient_sign(x).tobytes() == np.sign(np.gradient(x)).tobytes(), (trial, n)
+        assert gap_numerics._gradient_sign(x).tobytes() == np.sign(np.gradient(x)).tobytes(), (trial, n)
 
 
 def _double_trapz_adjoint_reference(row, ts):
@@ -198,14 +200,14 @@ def test_the_double_trapezoid_adjoint_is_the_transposed_integral():
     rng = np.random.default_rng(12)
     for n in (1, 2, 3, 5, 26, 190):
         row = rng.standard_normal(n)
-        got = gap_free._double_trapz_adjoint(row, 5e-4)
+        got = gap_numerics._double_trapz_adjoint(row, 5e-4)
         want = _double_trapz_adjoint_reference(row, 5e-4)
         assert got.shape == (n,)
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * float(np.max(np.abs(want), initial=0.0)))
 
 
 def test_the_scans_closed_form_inverse_is_lapacks_to_rounding():
-    """gap_free._sym3_inverse (the change-point scans' normal matrices) against np.linalg.inv of the same regularised
+    """gap_numerics._sym3_inverse (the change-point scans' normal matrices) against np.linalg.inv of the same regularised
     matrices: scaled designs (1, u, Φ) over short and long row ranges, one of them nearly collinear."""
     rng = np.random.default_rng(13)
     for trial in range(200):
@@ -213,20 +215,20 @@ def test_the_scans_closed_form_inverse_is_lapacks_to_rounding():
         u = np.sort(rng.uniform(-1, 2, n))
         X = np.column_stack([np.ones(n), u, u * u + 1e-3 * rng.standard_normal(n)])
         A = X.T @ X
-        U = A[gap_free._SYM3_I, gap_free._SYM3_J][None, :]
+        U = A[gap_numerics._SYM3_I, gap_numerics._SYM3_J][None, :]
         A_reg = A + np.eye(3) * (1e-12 * np.trace(A) / 3.0)
-        np.testing.assert_allclose(gap_free._sym3_inverse(U)[0], np.linalg.inv(A_reg), rtol=1e-6,
+        np.testing.assert_allclose(gap_numerics._sym3_inverse(U)[0], np.linalg.inv(A_reg), rtol=1e-6,
                                    atol=1e-9 * float(np.max(np.abs(np.linalg.inv(A_reg)))))
 
 
-def test_the_kink_fit_without_terms_then_with_them_is_the_kink_fit():
-    """kink_fit(with_terms=False) then kink_terms (the steady-entry check's order: its standard error only for a fit
-    the checks keep) gives kink_fit's dict, every number equal."""
+def test_the_kink_fit_located_then_its_terms_is_the_kink_fit():
+    """kink_locate then kink_terms (the steady-entry check's order: the standard error only for a fit its checks keep)
+    gives kink_fit's dict, every number equal."""
     rec = simulate(StressDrive(j1_kgm2=1.16), "speed_step", seed=3)
     args = (rec["window"]["alpha1"], rec["window"]["m_el"], 5e-4, list(range(rec["entry"] - 4, rec["entry"] + 5)),
             rec["recontact"])
     full = kink_fit(*args, 0.5, 0.2, 1e-3)
-    part = kink_fit(*args, with_terms=False)
+    part = gap_free.kink_locate(*args)
     assert "terms" not in part and part["j1"] == full["j1"] and part["start"] == full["start"]
     done = gap_free.kink_terms(part, 0.5, 0.2, 1e-3)
     assert done.keys() == full.keys()

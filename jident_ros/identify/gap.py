@@ -89,12 +89,11 @@ from jident_ros.identify.gap_free import (
     KINK_SEARCH,
     FreeFitError,
     GapModel,
-    _diff2,
-    _median,
     free_angle_fit,
-    kink_fit,
+    kink_locate,
     kink_terms,
 )
+from jident_ros.identify.gap_numerics import _diff2, _median
 from jident_ros.stream.filters import savgol_coeffs, savgol_filter
 
 #: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
@@ -580,8 +579,8 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     end = min(e, ff["end"])
     try:
         # its standard error only once the checks below have kept it (most steady-entry fits are refused there)
-        kf = kink_fit(alpha1, torque, sample_period_s, range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1), end,
-                      with_terms=False)
+        kf = kink_locate(alpha1, torque, sample_period_s, range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1),
+                         end)
     except (FreeFitError, np.linalg.LinAlgError) as exc:
         return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
     # a profile minimum on the edge of the searched rows has not located the entry: the change point may lie
@@ -619,8 +618,7 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     try:
         # the re-contact row: moved in by 1 and 2 (contact after it is not modelled); fitted once the checks above
         # have kept the steady-entry fit (a speed controller's entry is refused there: 2 of its 3 fits saved)
-        trims = [kink_fit(alpha1, torque, sample_period_s, kf["plausible_entries"], end - k, with_terms=False)["j1"]
-                 for k in (1, 2)]
+        trims = [kink_locate(alpha1, torque, sample_period_s, kf["plausible_entries"], end - k)["j1"] for k in (1, 2)]
     except (FreeFitError, np.linalg.LinAlgError) as exc:
         return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
     kf = kink_terms(kf, model.coulomb_friction_max_nm, model.torque_offset_nm, model.torque_lag_s)

@@ -42,6 +42,16 @@ import numpy as np
 
 from jident_ros.identify import lapack
 from jident_ros.identify.distributions import normal_isf
+from jident_ros.identify.gap_numerics import (
+    _cumtrapz,
+    _double_trapz_adjoint,
+    _gradient_sign,
+    _quantum,
+    _robust_noise,
+    _scan_sums,
+    _sym3_inverse,
+    _trim_rows,
+)
 
 #: Change-point search: rows around the detector's entry and re-contact rows that may be the gap's ends.
 CHANGEPOINT_SEARCH_SAMPLES = 25
@@ -120,112 +130,6 @@ def _chi2_upper(dof: np.ndarray) -> np.ndarray:
 #: The forecast test's rows relative to its first one, and its χ² bound.
 _FORECAST_ROWS = np.arange(CHANGEPOINT_FORECAST_SAMPLES)
 _CHI2_FORECAST = float(_chi2_upper(np.array([CHANGEPOINT_FORECAST_SAMPLES]))[0])
-
-
-def _cumtrapz(x: np.ndarray, ts: float) -> np.ndarray:
-    out = np.empty(x.size)
-    out[0] = 0.0
-    (0.5 * (x[1:] + x[:-1])).cumsum(out=out[1:])
-    return out * ts
-
-
-#: The unique elements of a symmetric 3 x 3 matrix, row-major upper triangle: (0,0) (0,1) (0,2) (1,1) (1,2) (2,2).
-_SYM3_I = np.array([0, 0, 0, 1, 1, 2])
-_SYM3_J = np.array([0, 1, 2, 1, 2, 2])
-
-
-def _scan_sums(X: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Cumulative sums over the rows of X (n x 3) and y, with a zero row in front, (n + 1, 10): the unique elements of
-    x xᵀ (:data:`_SYM3_I`, :data:`_SYM3_J`), x y and y²; a row range's normal equations are a difference of two rows."""
-    n = X.shape[0]
-    S = np.empty((n + 1, 10))
-    S[0] = 0.0
-    np.multiply(X[:, _SYM3_I], X[:, _SYM3_J], out=S[1:, :6])
-    np.multiply(X, y[:, None], out=S[1:, 6:9])
-    np.multiply(y, y, out=S[1:, 9])
-    S[1:].cumsum(axis=0, out=S[1:])
-    return S
-
-
-def _sym3_inverse(U: np.ndarray) -> np.ndarray:
-    """Inverses, (k, 3, 3), of a stack of symmetric 3 x 3 matrices given by their unique elements (k, 6) (order
-    :data:`_SYM3_I`), each regularised by 1e-12 of its mean diagonal element, by the adjugate over the determinant.
-
-    The change-point scans' normal matrices (34-190 of them per scan): numpy's batched ``inv`` (and ``solve``) calls
-    LAPACK once per matrix, ~0.5 us each, so a scan's inverses cost 20-100 us; the closed form is a few dozen array
-    operations for the whole stack.  It serves a decision (the χ² and forecast tests), not a published number:
-    equal to LAPACK's to rounding for the scaled, regularised matrices the scans build."""
-    a, b, c, d, e, f = U.T
-    t = (a + d + f) * (1e-12 / 3.0)
-    a, d, f = a + t, d + t, f + t
-    i00, i01, i02 = d * f - e * e, c * e - b * f, b * e - c * d
-    i11, i12, i22 = a * f - c * c, b * c - a * e, a * d - b * b
-    det = a * i00 + b * i01 + c * i02
-    return (np.array([i00, i01, i02, i01, i11, i12, i02, i12, i22]) / det).T.reshape(-1, 3, 3)
-
-
-@lru_cache(maxsize=256)
-def _trim_rows(n: int, trims: tuple) -> tuple:
-    """Row bounds (lo, hi) of the intervals [k, n) and [0, n - k) for k in ``trims`` (the change-point term)."""
-    lo = np.array([k for k in trims] + [0 for _ in trims], dtype=np.intp)
-    hi = np.array([n for _ in trims] + [n - k for k in trims], dtype=np.intp)
-    return lo, hi
-
-
-def _diff2(x: np.ndarray) -> np.ndarray:
-    """``np.diff(x, 2)`` of a 1-D array: the same two subtractions, without np.diff's generic set-up."""
-    d = x[1:] - x[:-1]
-    return d[1:] - d[:-1]
-
-
-def _gradient_sign(x: np.ndarray) -> np.ndarray:
-    """``np.sign(np.gradient(x))`` (unit spacing, first-order ends): the sign of the central difference inside and of
-    the one-sided ones at the ends (np.gradient's halving does not change a sign), without np.gradient's generic-axis
-    set-up (most of its cost on a short array)."""
-    d = np.empty(x.size)
-    np.subtract(x[2:], x[:-2], out=d[1:-1])
-    d[0] = x[1] - x[0]
-    d[-1] = x[-1] - x[-2]
-    return np.sign(d)
-
-
-def _quantum(alpha: np.ndarray) -> float:
-    """The encoder's count (the smallest non-zero second difference: whole counts on a quantised angle), 0
-    when the angle looks continuous."""
-    d = np.abs(_diff2(alpha))
-    d = d[d > 1e-10 * max(1.0, float(np.abs(alpha).max()))]     # a zero second difference, to rounding
-    if d.size < 5:
-        return 0.0
-    # a quantised angle moves by whole counts: the second differences are integer multiples of the count; the
-    # smallest one may be several counts (try its 1/1 .. 1/4, the largest that divides them all)
-    q0 = float(d.min())
-    for div in (1, 2, 3, 4):
-        q = q0 / div
-        k = d / q
-        if float(np.abs(k - np.rint(k)).max()) < 0.01:
-            return q
-    return 0.0
-
-
-def _median(x: np.ndarray) -> np.float64:
-    """``np.median`` of a 1-D float array, bit for bit (the middle one or two of a partition, averaged as numpy's
-    mean sums: from +0.0; NaN when one is NaN), without its generic-axis overhead (a third of its time)."""
-    n = x.size
-    h = n // 2
-    if n % 2:
-        part = np.partition(x, (h, n - 1))
-        m = (0.0 + part[h]) / 1.0
-    else:
-        part = np.partition(x, (h - 1, h, n - 1))
-        m = (0.0 + part[h - 1] + part[h]) / 2.0
-    return np.float64(np.nan) if np.isnan(part[-1]) else m
-
-
-def _robust_noise(x: np.ndarray) -> float:
-    d2 = _diff2(np.asarray(x, float))
-    if d2.size < 3:
-        return 0.0
-    return float(1.4826 * _median(np.abs(d2 - _median(d2))) / np.sqrt(6.0))
 
 
 def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, start: int, end: int,
@@ -509,23 +413,6 @@ def drift_term(row: np.ndarray, tt: np.ndarray, j1: float, offset_nm: float) -> 
     return float(j1 * abs(float(row @ col)) * offset_nm / np.sqrt(3.0))
 
 
-def _double_trapz_adjoint(row: np.ndarray, ts: float) -> np.ndarray:
-    """G = Wᵀ row with (W x)_k = the double trapezoid integral of x from the first row to row k."""
-    n = row.size
-    # single trapezoid T: (T x)_k = ts (x_0/2 + x_1 + ... + x_{k-1} + x_k/2) for k >= 1, 0 for k = 0
-    def t_adj(v):
-        # (Tᵀ v)_i = ts Σ_k v_k w_ki ; w_ki = 1/2 at i = 0 or i = k (k>=1), 1 for 0 < i < k
-        if n < 2:
-            return np.zeros(n)
-        rev = v[::-1].cumsum()[::-1]          # Σ_{k >= i} v_k
-        out = 0.5 * v
-        out[0] = 0.5 * float(rev[1])
-        out[1:n - 1] += rev[2:]                  # + Σ_{k > i} v_k
-        out *= ts
-        return out
-    return t_adj(t_adj(row))
-
-
 #: Kink fit: steady pre-entry samples used before the earliest candidate entry row, and the candidate rows
 #: searched around the free fit's and the detector's entry rows.
 KINK_PRE_SAMPLES = 40
@@ -581,8 +468,7 @@ def _kink_pre_design(n_pre: int) -> tuple:
 
 
 def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int,
-             coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0, torque_lag_s: float = 0.0,
-             with_terms: bool = True) -> dict:
+             coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0, torque_lag_s: float = 0.0) -> dict:
     """J1 with the entry row as a change point of a steady drive (profile likelihood).
 
     Before the entry the drive turns at constant speed (steady, in contact); from the entry row s on it is free:
@@ -591,9 +477,15 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
     ``entries``, so the residual sums compare: s* minimises it; the plausible entries are those within
     KINK_CHI2_1 σ̂² of it, and the largest change of J1 over them is the change-point term.  Returns j1, se_stat
     (statistical, torque noise and change points in quadrature), terms, start (s*), end, residual, dof; raises
-    FreeFitError.  ``with_terms`` False: the fit and its checks without the standard error (j1, start, end,
-    residual, dof, plausible_entries; :func:`kink_terms` adds the rest): what a caller that may still refuse the
-    fit, or needs only J1, reads."""
+    FreeFitError.  :func:`kink_locate` and :func:`kink_terms`, its two halves, for a caller that may still refuse the
+    fit or needs only J1."""
+    return kink_terms(kink_locate(alpha1, torque, sample_period_s, entries, end), coulomb_max_nm, torque_offset_nm,
+                      torque_lag_s)
+
+
+def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int) -> dict:
+    """:func:`kink_fit` without its standard error: the entry row, J1 and the fit's checks (FreeFitError) — j1,
+    start, end, residual, dof, plausible_entries (:func:`kink_terms` adds se_stat and terms)."""
     a = np.asarray(alpha1, float)
     m = np.asarray(torque, float)
     ts = float(sample_period_s)
@@ -629,12 +521,12 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
     fit = {"j1": j1, "start": int(s_best), "end": int(end), "residual": res_all[k], "dof": dof,
            "plausible_entries": [entries[q_] for q_ in plausible],
            "_state": (m, ts, P, kappa, pinv[k, 2] / scales[k], s2, [kappa_list[q_] for q_ in plausible])}
-    return kink_terms(fit, coulomb_max_nm, torque_offset_nm, torque_lag_s) if with_terms else fit
+    return fit
 
 
 def kink_terms(fit: dict, coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0,
                torque_lag_s: float = 0.0) -> dict:
-    """:func:`kink_fit`'s result with its standard error (se_stat, terms), from a ``with_terms=False`` fit."""
+    """:func:`kink_fit`'s result with its standard error (se_stat, terms), from :func:`kink_locate`'s."""
     m, ts, P, kappa, row, s2, plausible_kappa = fit["_state"]
     j1, res, s_best, end = fit["j1"], fit["residual"], fit["start"], fit["end"]
     cp = max(abs(1.0 / k - j1) for k in plausible_kappa)
