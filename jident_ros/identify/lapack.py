@@ -13,10 +13,13 @@ from __future__ import annotations
 import numpy as np
 
 try:
+    # numpy 2's numpy.linalg calls these with the arguments below (1.x named and dispatched them differently)
+    if np.lib.NumpyVersion(np.__version__) < "2.0.0":
+        raise ImportError("numpy < 2")
     from numpy.linalg import _umath_linalg as _gufuncs
 
     _SOLVE1, _SOLVE, _INV, _LSTSQ = _gufuncs.solve1, _gufuncs.solve, _gufuncs.inv, _gufuncs.lstsq
-except (ImportError, AttributeError):          # pragma: no cover - a numpy that moved its gufuncs
+except (ImportError, AttributeError):          # pragma: no cover - another numpy: numpy.linalg itself
     _gufuncs = None
 
 _EPS = float(np.finfo(np.float64).eps)
