@@ -272,3 +272,22 @@ def test_the_joint_fits_standard_deviation_is_numpys_bit_for_bit():
         if trial % 3 == 0:
             x = x[::2]
         assert np.asarray(gap._std_ddof1(x)).tobytes() == np.asarray(np.std(x, ddof=1)).tobytes(), (trial, n)
+
+
+def test_lapack_fast_path_checks_itself_and_falls_back(monkeypatch):
+    """The private gufuncs are used only when they agree with numpy.linalg on the import-time probe; without them
+    every call goes to numpy.linalg (same numbers)."""
+    import numpy as np
+
+    from jident_ros.identify import lapack
+    if lapack._gufuncs is not None:
+        assert lapack._self_check()
+    a = np.array([[2.0, 0.3], [0.3, 1.0]])
+    b = np.array([1.0, -1.0])
+    fast = lapack.solve(a, b)
+    monkeypatch.setattr(lapack, "_gufuncs", None)
+    assert np.array_equal(lapack.solve(a, b), fast) and np.array_equal(lapack.solve(a, b), np.linalg.solve(a, b))
+    assert np.array_equal(lapack.inv(a), np.linalg.inv(a))
+    monkeypatch.setattr(lapack, "_SOLVE1", lambda *x, **k: (_ for _ in ()).throw(TypeError("moved")), raising=False)
+    monkeypatch.setattr(lapack, "_gufuncs", object())
+    assert not lapack._self_check()                       # a moved calling convention is caught by the probe
