@@ -4,11 +4,16 @@ cross-checked), on the stress bench's speed step and light-load reversal (evalua
 
     nice -n 10 .venv/bin/python bench/bench_gap.py [--repeats 200]
 
-Prints the wall-clock median and 90th percentile and the CPU-time median per window, ms.  On a loaded machine the
-CPU time is the closer measure of the idle cost (the wall clock includes waiting for a core).
+Prints the commit measured (with "+ uncommitted changes" when jident_ros/ differs from it) and the machine's load
+average before and after, then the wall-clock median and 90th percentile and the CPU-time median per window, ms.  On a
+loaded machine the CPU time is the closer measure of the idle cost (the wall clock includes waiting for a core); a
+load above the core count still slows it (shared caches, frequency).
 """
 import argparse
+import os
+import subprocess
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -17,10 +22,35 @@ from jident_ros.identify.gap_free import GapModel
 from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
 
 
+def commit() -> str:
+    """The commit of the jident_ros measured (the checkout it is imported from), short, and whether its jident_ros/ has
+    uncommitted changes ('unknown' when that is not a git checkout, e.g. an exported tree on PYTHONPATH)."""
+    import jident_ros
+    repo = Path(jident_ros.__file__).resolve().parents[1]
+    if not (repo / ".git").exists():
+        return f"unknown (jident_ros from {repo}, not a git checkout)"
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=repo, capture_output=True, text=True,
+                              check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "jident_ros"], cwd=repo, capture_output=True,
+                               text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown (not a git checkout)"
+    return head + (" + uncommitted changes in jident_ros/" if dirty else "")
+
+
+def load() -> str:
+    try:
+        return "load average %.2f %.2f %.2f" % os.getloadavg() + f" on {os.cpu_count()} cores"
+    except OSError:
+        return "load average unknown"
+
+
 def main(argv=None):
     p = argparse.ArgumentParser()
     p.add_argument("--repeats", type=int, default=200)
     a = p.parse_args(argv)
+    print(f"commit {commit()}; before: {load()}")
     model = GapModel(torque_accuracy=0.01, coulomb_friction_max_nm=1.5)
     for event in ("speed_step", "load_reversal"):
         rec = simulate(StressDrive(), event, seed=1)
@@ -36,6 +66,7 @@ def main(argv=None):
             print(f"{event:>14} {label:<26} gap {rec['recontact'] - rec['entry']:>3} samples: wall median "
                   f"{np.median(times):.3f} ms, p90 {np.percentile(times, 90):.3f} ms; CPU median {np.median(cpu):.3f} ms "
                   f"({a.repeats} runs)")
+    print(f"after: {load()}")
 
 
 if __name__ == "__main__":

@@ -3,15 +3,20 @@
 `jident evaluate` runs the gap estimator ~40,000 times; three shortcuts cut its cost without changing a number:
 the fit cache (identify.gap.fit_cache: the channel sets of one window share its angle fits and steadiness test),
 the kink fit's candidates in one stacked solve (gap_free.kink_fit), and the signature interval's Savitzky-Golay
-derivative without scipy's edge fits where they are not read (gap._savgol_for_gap)."""
+derivative without scipy's edge fits where they are not read (gap._savgol_for_gap).  Issue 20's per-window budget
+(bench/bench_gap.py) added more, each checked here against numpy or its plain form: numpy.linalg's gufuncs without
+their wrapper (identify.lapack), np.diff/np.gradient/np.std re-expressed as numpy's own steps, the change-point
+scans' closed-form 3 x 3 inverse (a decision, equal to LAPACK's to rounding), the double-trapezoid adjoint, the kink
+fit's standard error after its checks.  bench/gap_outputs.py compares every gap estimate of two versions."""
 import numpy as np
 import pytest
 from scipy.signal import savgol_filter
 
 from jident_ros.config import load_system_config
-from jident_ros.identify import gap, gap_free
+from jident_ros.identify import gap, gap_free, gap_numerics
 from jident_ros.identify.gap import NoGapError, estimate_inertia, fit_cache
-from jident_ros.identify.gap_free import GapModel, _cumtrapz, kink_fit
+from jident_ros.identify.gap_free import GapModel, kink_fit
+from jident_ros.identify.gap_numerics import _cumtrapz
 from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
 from jident_ros.research.evaluation.robustness import CHANNEL_SETS
 from jident_ros.sim import Case, add_measurement_noise, quantise_encoders, simulate_grid
@@ -100,8 +105,9 @@ def test_kink_fit_matches_the_loop_on_grid_windows(windows, monkeypatch):
     """The kink fits the steady-entry check makes on clean, noisy and quantised grid windows (the trims' fits on
     the plausible entries too)."""
     calls = []
-    real = gap.kink_fit
-    monkeypatch.setattr(gap, "kink_fit", lambda *a, **k: calls.append(a) or real(*a, **k))
+    real = gap_free.kink_fit
+    locate = gap.kink_locate          # the steady-entry check's kink fits (their standard error added after its checks)
+    monkeypatch.setattr(gap, "kink_locate", lambda *a, **k: calls.append(a) or locate(*a, **k))
     _all_sets(windows)
     checked = 0
     for alpha1, m_el, ts, entries, end, *_ in calls:
@@ -157,7 +163,7 @@ def test_the_gap_only_sweeps_in_a_process_of_their_own_change_no_number():
 
 
 def test_the_median_is_numpys_bit_for_bit():
-    """gap_free._median (the robust noise scale's) against np.median: odd and even sizes, ties, signed zeros, NaN."""
+    """gap_numerics._median (the robust noise scale's) against np.median: odd and even sizes, ties, signed zeros, NaN."""
     rng = np.random.default_rng(5)
     for trial in range(3000):
         n = int(rng.integers(1, 120))
@@ -166,4 +172,122 @@ def test_the_median_is_numpys_bit_for_bit():
             x = np.round(x, 1) * np.where(rng.random(n) < 0.5, -1.0, 1.0)     # ties and ±0.0
         if trial % 97 == 0:
             x[rng.integers(0, n)] = np.nan
-        assert np.asarray(gap_free._median(x)).tobytes() == np.asarray(np.median(x)).tobytes(), (trial, x)
+        assert np.asarray(gap_numerics._median(x)).tobytes() == np.asarray(np.median(x)).tobytes(), (trial, x)
+
+
+def test_the_gradient_sign_is_numpys_bit_for_bit():
+    """gap_numerics._gradient_sign (the free fit's Coulomb column's sign of ω1) against np.sign(np.gradient(x)): quantised
+    angles (flat runs: zero differences), steady ramps, reversals, 2 to 300 samples."""
+    rng = np.random.default_rng(11)
+    for trial in range(2000):
+        n = int(rng.integers(2, 300))
+        x = np.cumsum(rng.standard_normal(n)) * 10.0 ** rng.uniform(-6, 2) + rng.uniform(-10, 10)
+        if trial % 2:
+            q = 2 * np.pi / 2 ** int(rng.integers(8, 17))
+            x = np.floor(x / q) * q
+        assert gap_numerics._gradient_sign(x).tobytes() == np.sign(np.gradient(x)).tobytes(), (trial, n)
+
+
+def _double_trapz_adjoint_reference(row, ts):
+    """Wᵀ row with W the double trapezoid integral from the first row, as an explicit matrix (column i: the double
+    integral of the i-th unit vector)."""
+    n = row.size
+    W = np.column_stack([_cumtrapz(_cumtrapz(np.eye(n)[i], ts), ts) for i in range(n)])
+    return W.T @ row
+
+
+def test_the_double_trapezoid_adjoint_is_the_transposed_integral():
+    rng = np.random.default_rng(12)
+    for n in (1, 2, 3, 5, 26, 190):
+        row = rng.standard_normal(n)
+        got = gap_numerics._double_trapz_adjoint(row, 5e-4)
+        want = _double_trapz_adjoint_reference(row, 5e-4)
+        assert got.shape == (n,)
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * float(np.max(np.abs(want), initial=0.0)))
+
+
+def test_the_scans_closed_form_inverse_is_lapacks_to_rounding():
+    """gap_numerics._sym3_inverse (the change-point scans' normal matrices) against np.linalg.inv of the same regularised
+    matrices: scaled designs (1, u, Φ) over short and long row ranges, one of them nearly collinear."""
+    rng = np.random.default_rng(13)
+    for trial in range(200):
+        n = int(rng.integers(3, 200))
+        u = np.sort(rng.uniform(-1, 2, n))
+        X = np.column_stack([np.ones(n), u, u * u + 1e-3 * rng.standard_normal(n)])
+        A = X.T @ X
+        U = A[gap_numerics._SYM3_I, gap_numerics._SYM3_J][None, :]
+        A_reg = A + np.eye(3) * (1e-12 * np.trace(A) / 3.0)
+        np.testing.assert_allclose(gap_numerics._sym3_inverse(U)[0], np.linalg.inv(A_reg), rtol=1e-6,
+                                   atol=1e-9 * float(np.max(np.abs(np.linalg.inv(A_reg)))))
+
+
+def test_the_kink_fit_located_then_its_terms_is_the_kink_fit():
+    """kink_locate then kink_terms (the steady-entry check's order: the standard error only for a fit its checks keep)
+    gives kink_fit's dict, every number equal."""
+    rec = simulate(StressDrive(j1_kgm2=1.16), "speed_step", seed=3)
+    args = (rec["window"]["alpha1"], rec["window"]["m_el"], 5e-4, list(range(rec["entry"] - 4, rec["entry"] + 5)),
+            rec["recontact"])
+    full = kink_fit(*args, 0.5, 0.2, 1e-3)
+    part = gap_free.kink_locate(*args)
+    assert "terms" not in part and part["j1"] == full["j1"] and part["start"] == full["start"]
+    done = gap_free.kink_terms(part, 0.5, 0.2, 1e-3)
+    assert done.keys() == full.keys()
+    for k in full:
+        a, b = done[k], full[k]
+        assert (a.tobytes() == b.tobytes()) if isinstance(a, np.ndarray) else a == b, k
+
+
+def test_the_lapack_shortcuts_are_numpy_linalg_bit_for_bit():
+    """identify.lapack's solve, inv and lstsq (numpy.linalg's gufuncs without its wrapper) against numpy.linalg: the
+    gap stage's shapes (one system, stacks, several right-hand sides, strided views), and LinAlgError on a singular
+    matrix."""
+    from jident_ros.identify import lapack
+    rng = np.random.default_rng(14)
+    for trial in range(300):
+        p = int(rng.integers(1, 6))
+        k = int(rng.integers(1, 9))
+        X = rng.standard_normal((k, 30, p)) * 10.0 ** rng.uniform(-3, 3)
+        A = X.transpose(0, 2, 1) @ X
+        B = rng.standard_normal((k, p, 3))
+        assert lapack.solve(A, B).tobytes() == np.linalg.solve(A, B).tobytes()
+        assert lapack.solve(A[0], B[0, :, 0]).tobytes() == np.linalg.solve(A[0], B[0, :, 0]).tobytes()
+        assert lapack.solve(A, B[:, :, 1:2]).tobytes() == np.linalg.solve(A, B[:, :, 1:2]).tobytes()
+        assert lapack.inv(A).tobytes() == np.linalg.inv(A).tobytes()
+        y = rng.standard_normal(30)
+        assert lapack.lstsq(X[0], y).tobytes() == np.linalg.lstsq(X[0], y, rcond=None)[0].tobytes()
+        assert lapack.lstsq(X[0][::2], y[1::2]).tobytes() == np.linalg.lstsq(X[0][::2], y[1::2], rcond=None)[0].tobytes()
+    with pytest.raises(np.linalg.LinAlgError):
+        lapack.solve(np.zeros((3, 3)), np.ones(3))
+    with pytest.raises(np.linalg.LinAlgError):
+        lapack.inv(np.ones((2, 2)))
+
+
+def test_the_joint_fits_standard_deviation_is_numpys_bit_for_bit():
+    """gap._std_ddof1 (the joint fit's noise levels) against np.std(x, ddof=1): sizes 5..900, offsets, scales, strided
+    views."""
+    rng = np.random.default_rng(15)
+    for trial in range(3000):
+        n = int(rng.integers(5, 900))
+        x = rng.standard_normal(n) * 10.0 ** rng.uniform(-8, 4) + rng.uniform(-1e3, 1e3)
+        if trial % 3 == 0:
+            x = x[::2]
+        assert np.asarray(gap._std_ddof1(x)).tobytes() == np.asarray(np.std(x, ddof=1)).tobytes(), (trial, n)
+
+
+def test_lapack_fast_path_checks_itself_and_falls_back(monkeypatch):
+    """The private gufuncs are used only when they agree with numpy.linalg on the import-time probe; without them
+    every call goes to numpy.linalg (same numbers)."""
+    import numpy as np
+
+    from jident_ros.identify import lapack
+    if lapack._gufuncs is not None:
+        assert lapack._self_check()
+    a = np.array([[2.0, 0.3], [0.3, 1.0]])
+    b = np.array([1.0, -1.0])
+    fast = lapack.solve(a, b)
+    monkeypatch.setattr(lapack, "_gufuncs", None)
+    assert np.array_equal(lapack.solve(a, b), fast) and np.array_equal(lapack.solve(a, b), np.linalg.solve(a, b))
+    assert np.array_equal(lapack.inv(a), np.linalg.inv(a))
+    monkeypatch.setattr(lapack, "_SOLVE1", lambda *x, **k: (_ for _ in ()).throw(TypeError("moved")), raising=False)
+    monkeypatch.setattr(lapack, "_gufuncs", object())
+    assert not lapack._self_check()                       # a moved calling convention is caught by the probe

@@ -156,3 +156,28 @@ def test_summarise_counts_what_would_mislead_a_user():
     assert s.get("wrong_class", 0) == 0 and s.get("between_on_class", 0) == 0
     assert s["level_WARN"] == 1 and s["level_OK"] == 2 and s["level_ERROR"] == 1 and "level_WARN_nominal" not in s
     assert s["unpub_model"] == 1 and s["unpub_no_estimate"] == 1 and s["unpub_other"] == 1 and "unpub_samples" not in s
+
+
+def test_zoo_variants_each_change_one_thing_and_refuse_bad_names(tmp_path, capsys):
+    pytest.importorskip("motulator")
+    from jident_ros.research.evaluation import zoo_variants as zv
+    vs = zv.variants()
+    names = [v[0] for v in vs]
+    assert len(set(names)) == len(names) and names[0] == "base"
+    base = vs[0][2]
+    for name, _, p, _ in vs[1:]:
+        assert p != base, name                                   # every variant differs from the base drive
+    assert dict((n, e) for n, _, _, e in vs)["more friction"]["coulomb_friction_max_nm"] == pytest.approx(3.75)
+    assert zv.main(["--report", "--variants", "nope", "--results", "-", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "nope" in err and err.count("\n") == 1 and not list(tmp_path.iterdir())
+
+
+def test_zoo_variants_markdown_totals_follow_the_rows():
+    from jident_ros.research.evaluation import zoo_variants as zv
+    row = {"found": 3, "traversals": 4, "offsets": [0, 1, 5], "trav_published": 2, "trav_windows": 3,
+           "published_off": 1, "err_median": 0.01, "err_max": 0.12, "covered": 1, "with_interval": 2,
+           "wrong_class": 0, "between_on_class": 1, "false_same_flank": 2}
+    md = zv.markdown({"rows": {"base": row, "soft coupling": dict(row, published_off=0)}, "elapsed_s": 1.0}, "cmd", "abc")
+    assert "| base | docs/vector_drive.md's drive | 3/4 | 67 % | 2/3 | 1 | 1.0 % / 12.0 % | 1/2 | 0 / 1 | 2 |" in md
+    assert "published 4/6 traversal windows; **1 more than 10 % off**; the 95 % interval covers 2/4 (50 %)" in md

@@ -507,20 +507,18 @@ class _WindowRun:
         else:
             level, note = WARN, (f"the nominal {nominal:g} is excluded (more than {BETWEEN_Z:g} standard errors "
                                  f"from J1 = {j1:.4g} ± {se:.2g})")
-        if self.decision.publish:   # the continuous J1 with its interval, no class (VerdictPolicy.publish_ambiguous)
-            text = f"J1 = {j1:.5g} ± {se:.2g} kg m^2 published without a class: {reason}; {note}"
-        else:
-            text = f"{reason}: no class named, nothing published; {note}"
+        pub = self.decision.publish   # the continuous J1 with its interval, no class (VerdictPolicy.publish_ambiguous)
+        text = (f"J1 = {j1:.5g} ± {se:.2g} kg m^2 published without a class: {reason}; {note}" if pub else
+                f"{reason}: no class named, nothing published; {note}")
         if self.idn is not None and self.image_cls not in held:
             bump, phrase = self.image_phrase(f"outside the interval's classes {fmt_classes(held)}")
             level, text = max(level, bump), text + phrase
         if self.library_missing:
             level, text = ERROR, text + f"; {self.lib_text}"
-        if self.decision.publish:   # a J1 went out: why no class is named is a value, not a refusal
-            return self.finish(level, "ambiguous", text, j1, "gap", gap=gap, identification=self.idn, width=self.width,
-                               tail=[("no_class_reason", reason)] + self.timing())
-        return self.finish(level, "ambiguous", text, gap=gap, identification=self.idn, width=self.width,
-                           refused_reason=reason, tail=self.timing())
+        # a J1 that went out: why no class is named is a value, not a refusal
+        return self.finish(level, "ambiguous", text, *((j1, "gap") if pub else ()), gap=gap, identification=self.idn,
+                           width=self.width, refused_reason=None if pub else reason,
+                           tail=([("no_class_reason", reason)] if pub else []) + self.timing())
 
     def image_only(self) -> WindowDiagnosis:
         idn, classes, nominal, policy = self.idn, self.dg.classes, self.dg.nominal, self.dg.policy

@@ -73,6 +73,7 @@ residual RMS.
 """
 from __future__ import annotations
 
+import math
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from functools import lru_cache, wraps
@@ -80,6 +81,7 @@ from functools import lru_cache, wraps
 import numpy as np
 from scipy.ndimage import convolve1d
 
+from jident_ros.identify import lapack
 from jident_ros.identify.distributions import f_survival, t_quantile
 from jident_ros.identify.gap_free import (
     FREE_REL_SE_FLOOR,
@@ -87,10 +89,11 @@ from jident_ros.identify.gap_free import (
     KINK_SEARCH,
     FreeFitError,
     GapModel,
-    _median,
     free_angle_fit,
-    kink_fit,
+    kink_locate,
+    kink_terms,
 )
+from jident_ros.identify.gap_numerics import _diff2, _median
 from jident_ros.stream.filters import savgol_coeffs, savgol_filter
 
 #: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
@@ -346,7 +349,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
             raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa!r}")
         j = wheel_radius_m / kappa
         alt = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction,
-                         linear_term=True, warm=fit)
+                         linear_term=True, warm=fit, kappa_only=True)
         model_error = abs(wheel_radius_m / alt["kappa"] - j) if alt["kappa"] > 0 else np.inf
         se = float(np.hypot(wheel_radius_m / kappa ** 2 * fit["kappa_se"], model_error))
         res = fit["a1_residual"] / kappa
@@ -476,7 +479,9 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         raise NoGapError(f"gap fit undetermined: J1 = {j:.4g} kg m^2 with standard error {se:.3g} kg m^2 "
                          f"(> {MAX_RELATIVE_STD_ERROR:.0%}); the window shows no free acceleration of the motor")
     half = _t975(max(int(dof), 1)) * se
-    return GapEstimate(j, se, (j - half, j + half), float(np.sqrt(np.mean(res ** 2))), start, end, method, how,
+    # the residual's RMS: np.mean's own reduction (np.add.reduce, divided by the count)
+    rms = float(np.sqrt(np.add.reduce(res ** 2) / res.size))
+    return GapEstimate(j, se, (j - half, j + half), rms, start, end, method, how,
                        float(model_error), choice, int(fit_span[0]), int(fit_span[1]), **free_extra)
 
 
@@ -573,8 +578,9 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
         return {"choice": f"angle (free): {test.reason}"}
     end = min(e, ff["end"])
     try:
-        kf = kink_fit(alpha1, torque, sample_period_s, range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1), end,
-                      model.coulomb_friction_max_nm, model.torque_offset_nm, model.torque_lag_s)
+        # its standard error only once the checks below have kept it (most steady-entry fits are refused there)
+        kf = kink_locate(alpha1, torque, sample_period_s, range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1),
+                         end)
     except (FreeFitError, np.linalg.LinAlgError) as exc:
         return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
     # a profile minimum on the edge of the searched rows has not located the entry: the change point may lie
@@ -598,23 +604,24 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     sb = kf["start"]
     ref = torque[max(0, sb - KINK_PRE_SAMPLES):sb - KINK_SEARCH]
     last = torque[sb - KINK_SEARCH:sb]
-    level = float(np.median(ref))
+    level = float(_median(np.asarray(ref, float)))
     tol = max(5.0 * _robust_noise(ref), 1e-3 * abs(level))
-    if float(np.max(np.abs(last - level))) > tol:
+    if float(np.abs(last - level).max()) > tol:
         return {"choice": f"angle (free): the torque changes in the {KINK_SEARCH} samples before the entry row {sb} "
                           f"(by {float(np.max(np.abs(last - level))):.3g} N m): not a steady drive's entry"}
     # ... and it stays near its level through the first samples after it (a machine on line: the flux is
     # continuous; a speed controller reacting to an event moves it at once, and the kink is then the event)
     first = torque[sb:sb + KINK_SEARCH]
-    if float(np.max(np.abs(first - level))) > max(tol, KINK_TORQUE_AFTER_REL * abs(level)):
+    if float(np.abs(first - level).max()) > max(tol, KINK_TORQUE_AFTER_REL * abs(level)):
         return {"choice": f"angle (free): the torque moves by {float(np.max(np.abs(first - level))):.3g} N m in the "
                           f"{KINK_SEARCH} samples after the entry row {sb}: not a steady drive's entry"}
     try:
         # the re-contact row: moved in by 1 and 2 (contact after it is not modelled); fitted once the checks above
         # have kept the steady-entry fit (a speed controller's entry is refused there: 2 of its 3 fits saved)
-        trims = [kink_fit(alpha1, torque, sample_period_s, kf["plausible_entries"], end - k)["j1"] for k in (1, 2)]
+        trims = [kink_locate(alpha1, torque, sample_period_s, kf["plausible_entries"], end - k)["j1"] for k in (1, 2)]
     except (FreeFitError, np.linalg.LinAlgError) as exc:
         return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
+    kf = kink_terms(kf, model.coulomb_friction_max_nm, model.torque_offset_nm, model.torque_lag_s)
     j, res, dof = kf["j1"], kf["residual"], kf["dof"]
     cp_end = max(abs(x - j) for x in trims)
     terms = dict(kf["terms"])
@@ -763,6 +770,16 @@ class SteadinessTest:
         return f"gap_only: {self.reason}"
 
 
+@lru_cache(maxsize=16)
+def _steady_design(n: int) -> np.ndarray:
+    """The steadiness test's design (1, t, t²), t from -1 to 1 over n samples (read-only: shared by every call; 16
+    lengths kept, 24 bytes a sample each: < 1 MB for windows of 2000 samples)."""
+    tt = np.linspace(-1.0, 1.0, n)
+    A = np.column_stack([np.ones(n), tt, tt * tt])
+    A.flags.writeable = False
+    return A
+
+
 @_memoised
 def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTest:
     """Test the joint fit's assumption on the pre-entry m_el samples: a steady torque, m_el = m0 + white
@@ -775,18 +792,20 @@ def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTes
     n = x.size
     if n < 6:
         return SteadinessTest(False, np.nan, np.nan, n, f"{n} pre-entry samples, too few to test a steady torque")
-    scale = max(float(np.max(np.abs(x))), 1e-300)
-    tt = np.linspace(-1.0, 1.0, n)
-    A = np.column_stack([np.ones(n), tt, tt * tt])
-    coef, *_ = np.linalg.lstsq(A, x, rcond=None)
-    rss0 = float(np.sum((x - x.mean()) ** 2))
-    rss2 = float(np.sum((x - A @ coef) ** 2))
+    scale = max(float(np.maximum.reduce(np.abs(x), axis=None)), 1e-300)      # np.max's reduction
+    A = _steady_design(n)
+    coef = lapack.lstsq(A, x)
+    # np.sum and np.mean's own reductions (np.add.reduce over the array; the mean divided by the count)
+    rss0 = float(np.add.reduce((x - np.add.reduce(x) / n) ** 2))
+    rss2 = float(np.add.reduce((x - A @ coef) ** 2))
     if rss2 <= (1e-12 * scale) ** 2 * n:               # an exact polynomial, no noise to compare with
         f, p = (0.0, 1.0) if rss0 <= (1e-12 * scale) ** 2 * n else (np.inf, 0.0)
     else:
         f = max((rss0 - rss2) / 2.0 / (rss2 / (n - 3)), 0.0)
         p = f_survival(f, 2, n - 3)
-    if np.ptp(A[:, 1:] @ coef[1:]) <= STEADY_REL_TOL * scale:    # slope and curvature move it by next to nothing
+    trend = A[:, 1:] @ coef[1:]
+    # np.ptp's reductions: slope and curvature move it by next to nothing
+    if np.maximum.reduce(trend, axis=None) - np.minimum.reduce(trend, axis=None) <= STEADY_REL_TOL * scale:
         return SteadinessTest(True, float(f), p, n)
     if p < p_value:
         return SteadinessTest(False, float(f), p, n,
@@ -798,7 +817,7 @@ def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTes
 def _robust_noise(*segments) -> float:
     """White-noise standard deviation from the second differences of the segments (1.4826 MAD / sqrt 6):
     blind to a smooth signal and to a few samples of a transient."""
-    d2 = np.concatenate([np.diff(np.asarray(x, float), 2) for x in segments if len(x) >= 3] or [np.zeros(0)])
+    d2 = np.concatenate([_diff2(np.asarray(x, float)) for x in segments if len(x) >= 3] or [np.zeros(0)])
     if d2.size < 3:
         return 0.0
     return float(1.4826 * _median(np.abs(d2 - _median(d2))) / np.sqrt(6.0))
@@ -839,9 +858,9 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
     y_all, x_all = np.asarray(torque, float), np.asarray(acc, float)
     sy = _robust_noise(y_all[:start], y_all[start:end])
     sx = _robust_noise(x_all[:start], x_all[start:end])
-    if sx <= 1e-9 * float(np.max(np.abs(x_all[start:end]))):
+    if sx <= 1e-9 * float(np.abs(x_all[start:end]).max()):
         sx = 0.0
-    if sy <= 1e-9 * float(np.max(np.abs(y_all[start:end]))):
+    if sy <= 1e-9 * float(np.abs(y_all[start:end]).max()):
         sy = 0.0
 
     def slope(a, b):
@@ -849,10 +868,10 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
 
     core = (start + 2, end - 2) if end - start >= 10 else (start, end)
     j = slope(*core)
-    if not np.isfinite(j) or j <= 0:
+    if not math.isfinite(j) or j <= 0:
         raise NoGapError(f"gap fit gave a non-physical J1 = {j!r} (m_el against a1 over the gap)")
     lo, hi = start, end
-    level = float(np.median(np.abs(y_all[start:end])))
+    level = float(_median(np.abs(y_all[start:end])))
     for it in range(4):
         res = y_all[start:end] - j * x_all[start:end]
         tol = max(trim_sigma * float(np.hypot(sy, j * sx)), trim_rel * level)
@@ -865,7 +884,7 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
             break
         lo, hi = new_lo, new_hi
         j = slope(lo, hi)
-        if not np.isfinite(j) or j <= 0:
+        if not math.isfinite(j) or j <= 0:
             raise NoGapError(f"gap fit gave a non-physical J1 = {j!r} (m_el against a1 over the gap)")
     n = hi - lo
     if n < 3:
@@ -894,9 +913,41 @@ def _torque_powers(n_gap: int, linear_term: bool = False) -> tuple:
 JOINT_NOISE_FLOOR_REL = 1e-6
 
 
+@lru_cache(maxsize=64)
+def _joint_design(n: int, linear_term: bool) -> np.ndarray:
+    """The joint fit's gap torque model's columns, 1 and τ^p (τ = k/n) over n gap samples (read-only: shared)."""
+    tau = np.arange(n) / n
+    G = np.column_stack([np.ones(n)] + [tau ** q for q in _torque_powers(n, linear_term)])
+    G.flags.writeable = False
+    return G
+
+
+@lru_cache(maxsize=64)
+def _joint_constants(n: int, linear_term: bool) -> tuple:
+    """The joint fit's constant blocks for n gap samples: e1 (the m0 coordinate), e1 e1ᵀ and GᵀG (read-only)."""
+    G = _joint_design(n, linear_term)
+    p = G.shape[1]
+    e1 = np.zeros(p)
+    e1[0] = 1.0
+    out = (e1, np.outer(e1, e1), G.T @ G)
+    for a in out:
+        a.flags.writeable = False
+    return out
+
+
+def _std_ddof1(x: np.ndarray) -> np.float64:
+    """``np.std(x, ddof=1)`` of a 1-D float array, bit for bit: numpy's own steps (the mean as the sum over the count,
+    the squared deviations' sum over n - 1, its square root) without its generic-axis set-up (most of its cost on the
+    joint fit's pre-entry samples)."""
+    n = x.size
+    d = x - np.add.reduce(x, axis=None, keepdims=True) / n
+    np.multiply(d, d, out=d)
+    return np.sqrt(np.add.reduce(d, axis=None) / max(n - 1, 0))
+
+
 @_memoised
 def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=None,
-               linear_term: bool = False, warm: dict | None = None) -> dict:
+               linear_term: bool = False, warm: dict | None = None, kappa_only: bool = False) -> dict:
     """Weighted joint least squares of m_el (pre-entry and gap) and a1 (gap); see the module docstring.
 
     Parameters: kappa = r/J1 and beta = (m0, c_1.., c_q) of m_hat(τ) = m0 + Σ c_i τ^p_i,
@@ -906,15 +957,14 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     Returns kappa, its standard error (sandwich covariance with per-channel residual
     variances), the a1 residual over the gap, the degrees of freedom and the noise levels.
     ``warm``: the result of the fit without the linear term, to start from (and reuse its
-    noise levels).
+    noise levels).  ``kappa_only``: {"kappa": ...} alone (the model-error fit's use: its residuals and covariance
+    are not computed).
     """
     n = end - start
     pre = m_el[:start]
     mg, ag = m_el[start:end], a1[start:end]
     fr = np.zeros(n) if friction is None else np.asarray(friction, float)
-    tau = np.arange(n) / n
-    powers = _torque_powers(n, linear_term)
-    G = np.column_stack([np.ones(n)] + [tau ** q for q in powers])
+    G = _joint_design(n, linear_term)
     p = G.shape[1]
     # noise levels: pre-entry steady state (m_el = m0, a1 = 0); fall back on the gap's
     # own m_el-only fit when there are too few pre-entry samples.  Floors keep noise-free
@@ -922,8 +972,8 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     if warm is not None:
         sm, sa = warm["noise"]
     elif pre.size >= 5:
-        sm = float(np.std(pre, ddof=1))
-        sa = float(np.std(a1[:start], ddof=1))
+        sm = float(_std_ddof1(pre))
+        sa = float(_std_ddof1(a1[:start]))
     else:
         cm, *_ = np.linalg.lstsq(G, mg, rcond=None)
         sm = float(np.sqrt(np.sum((mg - G @ cm) ** 2) / max(n - p, 1)))
@@ -935,47 +985,48 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     # gap a1 = kappa (G beta - fr) (weight 1/sa^2).
     na = pre.size
     wm, wa = 1.0 / sm ** 2, 1.0 / sa ** 2
-    e1 = np.zeros(p)
-    e1[0] = 1.0
-    GG, Gm, Ga, Gf = G.T @ G, G.T @ mg, G.T @ ag, G.T @ fr
+    e1, e11, GG = _joint_constants(n, linear_term)
+    Gm, Ga, Gf = G.T @ mg, G.T @ ag, G.T @ fr
     fa, ff = float(fr @ ag), float(fr @ fr)
     s_pre = float(pre.sum())
-    Nm = wm * (na * np.outer(e1, e1) + GG)            # m_el blocks: J_m^T J_m for beta (kappa column is 0)
+    Nm = wm * (na * e11 + GG)            # m_el blocks: J_m^T J_m for beta (kappa column is 0)
+    b_m = wm * (s_pre * e1 + Gm)
     if warm is not None and linear_term:               # start from the fit without the linear term
         kappa = warm["kappa"]
     else:  # start: m_el alone (the pre-entry rows pin m0), then kappa through the origin (u = m_hat - friction)
-        b0 = np.linalg.solve(Nm, wm * (s_pre * e1 + Gm))
+        b0 = lapack.solve(Nm, b_m)
         kappa = float(b0 @ Ga - fa) / float(b0 @ GG @ b0 - 2.0 * b0 @ Gf + ff)
     # the cost is quadratic in beta for a given kappa: beta(kappa) in closed form (one p x p solve), and the optimum
     # is the root of h(kappa) = kappa - (the a1-on-u slope at beta(kappa)), found by Newton's method with a
     # finite-difference slope (h is close to linear: 2-4 steps, 2 solves each), stopped on the step, not on h (with a
     # nearly exact a1, h is ~1e-11 everywhere); Gauss-Newton on (kappa, beta) converged linearly (13-30 solves) and
     # stopped unconverged after 30 iterations on the stress bench's load reversal
-    b_m = wm * (s_pre * e1 + Gm)
 
     def profile(k: float) -> tuple:
-        b = np.linalg.solve(Nm + (wa * k * k) * GG, b_m + (wa * k) * (Ga + k * Gf))
+        b = lapack.solve(Nm + (wa * k * k) * GG, b_m + (wa * k) * (Ga + k * Gf))
         uu_ = float(b @ GG @ b - 2.0 * float(b @ Gf) + ff)
         return b, (k - float(b @ Ga - fa) / uu_) if uu_ > 0 else np.nan
 
     beta, h = profile(kappa)
     for _ in range(JOINT_FIT_MAX_ITER):
-        if not np.isfinite(h):
+        if not math.isfinite(h):
             break
         dk = 1e-4 * abs(kappa) if kappa else 1e-12
         _, h2 = profile(kappa + dk)
         slope = (h2 - h) / dk
-        if not np.isfinite(slope) or slope == 0.0:
+        if not math.isfinite(slope) or slope == 0.0:
             break
         step = -h / slope
         kappa += step
         beta, h = profile(kappa)
         if abs(step) <= JOINT_FIT_TOL * abs(kappa):
             break
+    if kappa_only:
+        return {"kappa": float(kappa)}
     # residuals and the sandwich covariance at the solution
     m_hat = G @ beta
     r_a = ag - kappa * (m_hat - fr)
-    ss_m = float(np.sum((pre - beta[0]) ** 2) + np.sum((mg - m_hat) ** 2)) * wm
+    ss_m = float(np.add.reduce((pre - beta[0]) ** 2) + np.add.reduce((mg - m_hat) ** 2)) * wm    # np.sum's reduction
     ss_a = float(r_a @ r_a) * wa
     Gu = GG @ beta - Gf
     uu = float(beta @ Gu - beta @ Gf + ff)
@@ -985,7 +1036,7 @@ def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=
     Fa[1:, 1:] = wa * kappa * kappa * GG
     Fm = np.zeros((p + 1, p + 1))
     Fm[1:, 1:] = Nm
-    F_inv = np.linalg.inv(Fa + Fm)
+    F_inv = lapack.inv(Fa + Fm)
     s2m = ss_m / max(na + n - p, 1)
     s2a = ss_a / max(n - 1, 1)
     cov = F_inv @ (s2m * Fm + s2a * Fa) @ F_inv

@@ -36,10 +36,22 @@ Plain numpy; never imports rclpy.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
+from jident_ros.identify import lapack
 from jident_ros.identify.distributions import normal_isf
+from jident_ros.identify.gap_numerics import (
+    _cumtrapz,
+    _double_trapz_adjoint,
+    _gradient_sign,
+    _quantum,
+    _robust_noise,
+    _scan_sums,
+    _sym3_inverse,
+    _trim_rows,
+)
 
 #: Change-point search: rows around the detector's entry and re-contact rows that may be the gap's ends.
 CHANGEPOINT_SEARCH_SAMPLES = 25
@@ -49,8 +61,6 @@ FREE_MIN_SAMPLES = 8
 CHANGEPOINT_P = 1e-3
 #: Chow forecast test of a candidate's end rows: this many rows predicted by the fit without them.
 CHANGEPOINT_FORECAST_SAMPLES = 3
-#: The change-point scans test this many candidate rows first, the rest only when all of them are accepted.
-CHANGEPOINT_CHUNK = 12
 #: Relative floor of the standard error (the model's own error: trapezoid double integral of a sampled torque).
 FREE_REL_SE_FLOOR = 5e-4
 #: Samples taken off an end for the change-point term of the standard error (while at least half the interval
@@ -117,60 +127,9 @@ def _chi2_upper(dof: np.ndarray) -> np.ndarray:
     return v * (1.0 - c + _Z_CHANGEPOINT * np.sqrt(c)) ** 3
 
 
-def _cumtrapz(x: np.ndarray, ts: float) -> np.ndarray:
-    out = np.empty(x.size)
-    out[0] = 0.0
-    np.cumsum(0.5 * (x[1:] + x[:-1]), out=out[1:])
-    return out * ts
-
-
-def _cumulative_sums(X: np.ndarray, y: np.ndarray) -> tuple:
-    """Cumulative sums of x xᵀ, x y and y² over the rows of X, y, each with a zero row in front."""
-    p = X.shape[1]
-    outer = np.einsum("ki,kj->kij", X, X)
-    C = np.concatenate([np.zeros((1, p, p)), np.cumsum(outer, axis=0)])
-    b = np.concatenate([np.zeros((1, p)), np.cumsum(X * y[:, None], axis=0)])
-    yy = np.concatenate([[0.0], np.cumsum(y * y)])
-    return C, b, yy
-
-
-def _quantum(alpha: np.ndarray) -> float:
-    """The encoder's count (the smallest non-zero second difference: whole counts on a quantised angle), 0
-    when the angle looks continuous."""
-    d = np.abs(np.diff(alpha, 2))
-    d = d[d > 1e-10 * max(1.0, float(np.max(np.abs(alpha))))]     # a zero second difference, to rounding
-    if d.size < 5:
-        return 0.0
-    # a quantised angle moves by whole counts: the second differences are integer multiples of the count; the
-    # smallest one may be several counts (try its 1/1 .. 1/4, the largest that divides them all)
-    q0 = float(d.min())
-    for div in (1, 2, 3, 4):
-        q = q0 / div
-        k = d / q
-        if float(np.max(np.abs(k - np.round(k)))) < 0.01:
-            return q
-    return 0.0
-
-
-def _median(x: np.ndarray) -> np.float64:
-    """``np.median`` of a 1-D float array, bit for bit (the middle one or two of a partition, averaged as numpy's
-    mean sums: from +0.0; NaN when one is NaN), without its generic-axis overhead (a third of its time)."""
-    n = x.size
-    h = n // 2
-    if n % 2:
-        part = np.partition(x, (h, n - 1))
-        m = (0.0 + part[h]) / 1.0
-    else:
-        part = np.partition(x, (h - 1, h, n - 1))
-        m = (0.0 + part[h - 1] + part[h]) / 2.0
-    return np.float64(np.nan) if np.isnan(part[-1]) else m
-
-
-def _robust_noise(x: np.ndarray) -> float:
-    d2 = np.diff(np.asarray(x, float), 2)
-    if d2.size < 3:
-        return 0.0
-    return float(1.4826 * _median(np.abs(d2 - _median(d2))) / np.sqrt(6.0))
+#: The forecast test's rows relative to its first one, and its χ² bound.
+_FORECAST_ROWS = np.arange(CHANGEPOINT_FORECAST_SAMPLES)
+_CHI2_FORECAST = float(_chi2_upper(np.array([CHANGEPOINT_FORECAST_SAMPLES]))[0])
 
 
 def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, start: int, end: int,
@@ -198,17 +157,16 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     tau = (rows - start) * ts
     D = max((end - start) * ts, ts)
     Phi = _cumtrapz(_cumtrapz(m, ts), ts)
-    vel = np.gradient(a[L:R])
-    sg = np.sign(vel)
+    sg = _gradient_sign(a[L:R])
     Cc = _cumtrapz(_cumtrapz(sg, ts), ts)
     Vv = _cumtrapz(y, ts)
-    phi_scale = max(float(np.max(np.abs(Phi))), 1e-300)
+    phi_scale = max(float(np.abs(Phi).max()), 1e-300)
     coulomb_mid = 0.5 * float(model.coulomb_friction_max_nm)
     # the scan's design: the physics alone, 1, τ and Φ of the torque less the assumed friction (a free
     # offset torque would let the fit take a slowly changing coupling torque for friction)
     u = tau / D
     phi_mid = Phi - coulomb_mid * Cc
-    Xs = np.column_stack([np.ones(R - L), u, phi_mid / max(float(np.max(np.abs(phi_mid))), 1e-300)])
+    Xs = np.column_stack([np.ones(R - L), u, phi_mid / max(float(np.abs(phi_mid).max()), 1e-300)])
     q = _quantum(a[L:R])
     s_est, e_est = start, end
     if not fixed:
@@ -225,59 +183,46 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             best_var = np.inf
             for k in range(3):
                 sub = (core[0] + k * third, core[0] + (k + 1) * third)
-                cs, *_ = np.linalg.lstsq(Xs[sub[0]:sub[1]], y[sub[0]:sub[1]], rcond=None)
+                cs = lapack.lstsq(Xs[sub[0]:sub[1]], y[sub[0]:sub[1]])
                 rs = y[sub[0]:sub[1]] - Xs[sub[0]:sub[1]] @ cs
                 v = float(rs @ rs) / (third - Xs.shape[1])
                 if v < best_var:
                     best_var, best_sub = v, sub
             core = best_sub
-        c0, *_ = np.linalg.lstsq(Xs[core[0]:core[1]], y[core[0]:core[1]], rcond=None)
+        c0 = lapack.lstsq(Xs[core[0]:core[1]], y[core[0]:core[1]])
         r = y - Xs @ c0
         rc = r[core[0]:core[1]]
         s2 = max(float(rc @ rc) / max(rc.size - Xs.shape[1], 1), q * q / 12.0, 1e-30)
         p = Xs.shape[1]
 
         k_f = CHANGEPOINT_FORECAST_SAMPLES
-        sums = _cumulative_sums(Xs, r)          # shared by every scan below
-        Cx, bx = sums[0], sums[1]
-        chi_f = float(_chi2_upper(np.array([k_f]))[0])
-
-        def accepted(lo_rows, hi_rows, side):
-            """The whole interval's residual is noise (χ² test) and its k_f end rows on ``side`` are predicted by
-            the fit without them (Chow's forecast test: a contaminated end shows in the extrapolation first)."""
-            if side == "end":
-                ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + np.arange(k_f)
-            else:
-                ilo, ihi, test = lo_rows + k_f, hi_rows, lo_rows[:, None] + np.arange(k_f)
-            # the χ² fits over [lo, hi) and the forecast fits over [ilo, ihi) in one stacked solve (the same
-            # LAPACK call per matrix as two solves: the same numbers)
-            c = lo_rows.size
-            A = Cx[np.concatenate([hi_rows, ihi])] - Cx[np.concatenate([lo_rows, ilo])]
-            bb = bx[np.concatenate([hi_rows, ihi])] - bx[np.concatenate([lo_rows, ilo])]
-            A = A + np.eye(p) * (1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] / p)
-            sol = np.linalg.solve(A, bb[..., None])[..., 0]
-            rss = sums[2][hi_rows] - sums[2][lo_rows] - np.einsum("ki,ki->k", bb[:c], sol[:c])
-            nn = hi_rows - lo_rows
-            ok = rss <= s2 * _chi2_upper(np.maximum(nn - p, 1))
-            beta = sol[c:]
-            Ainv = np.linalg.inv(A[c:])
-            xt = Xs[test]                                             # (cand, k_f, p)
-            pred = np.einsum("ckp,cp->ck", xt, beta)
-            lev = np.einsum("ckp,cpq,ckq->ck", xt, Ainv, xt)
-            stat = np.sum((r[test] - pred) ** 2 / (s2 * (1.0 + lev)), axis=1)
-            return ok & ((ihi - ilo < p + 2) | (stat <= chi_f))
+        sums = _scan_sums(Xs, r)                  # shared by every scan below
+        # the χ² test's bound s2 · χ²(1 - CHANGEPOINT_P; n - p) for every interval length n (at least 1 dof)
+        chi_bound = s2 * _chi2_upper(np.maximum(np.arange(R - L + 1) - p, 1))
 
         def first_failure(lo_rows, hi_rows, side):
-            """Index of the first candidate that is not accepted (None: all are): the first CHANGEPOINT_CHUNK, then the
-            rest (a scan usually stops within the first few: the other 2W candidates were computed for nothing)."""
-            for c0, c1 in ((0, CHANGEPOINT_CHUNK), (CHANGEPOINT_CHUNK, lo_rows.size)):
-                if c0 >= lo_rows.size:
-                    break
-                ok = accepted(lo_rows[c0:c1], hi_rows[c0:c1], side)
-                bad = np.flatnonzero(~ok)
-                if bad.size:
-                    return c0 + int(bad[0])
-            return None
+            """Index of the first candidate interval [lo, hi) that is not accepted (None: all are).  Accepted: the
+            whole interval's residual is noise (χ² test) and its k_f end rows on ``side`` are predicted by the fit
+            without them (Chow's forecast test: a contaminated end shows in the extrapolation first).  Every
+            candidate's two fits (over [lo, hi) and over the interval without the k_f rows) in one batch: normal
+            matrices from the cumulative sums, inverted in closed form (a decision, not a published number: the
+            inverse's product where the earlier code solved, the same test to rounding)."""
+            if side == "end":
+                ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + _FORECAST_ROWS
+            else:
+                ilo, ihi, test = lo_rows + k_f, hi_rows, lo_rows[:, None] + _FORECAST_ROWS
+            c = lo_rows.size
+            D = sums[np.concatenate([hi_rows, ihi])] - sums[np.concatenate([lo_rows, ilo])]
+            Ainv = _sym3_inverse(D[:, :6])
+            sol = np.einsum("kij,kj->ki", Ainv, D[:, 6:9])
+            rss = D[:c, 9] - np.einsum("ki,ki->k", D[:c, 6:9], sol[:c])
+            ok = rss <= chi_bound[hi_rows - lo_rows]
+            xt = Xs[test]                                             # (cand, k_f, p)
+            pred = np.einsum("ckp,cp->ck", xt, sol[c:])
+            lev = np.einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)          # x A⁻¹ xᵀ of each test row
+            stat = ((r[test] - pred) ** 2 / (s2 * (1.0 + lev))).sum(axis=1)
+            bad = np.flatnonzero(~(ok & ((ihi - ilo < p + 2) | (stat <= _CHI2_FORECAST))))
+            return int(bad[0]) if bad.size else None
 
         def grow_end(s_row, e_from):
             cand = np.arange(max(s_row + FREE_MIN_SAMPLES, e_from), min(hi_c + W, R - L) + 1)
@@ -303,12 +248,15 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
 
     def fit(s_row: int, e_row: int, with_coulomb: bool) -> dict:
         i, j = s_row - L, e_row - L
-        cols = [np.ones(j - i), u[i:j], Phi[i:j] / phi_scale]
-        c_scale = max(float(np.max(np.abs(Cc[i:j]))), 1e-300)
+        c_scale = max(float(np.abs(Cc[i:j]).max()), 1e-300)
+        # the design [1, u, Φ/scale(, C/scale)] (what np.column_stack builds, written in place)
+        X = np.empty((j - i, 4 if with_coulomb else 3))
+        X[:, 0] = 1.0
+        X[:, 1] = u[i:j]
+        np.divide(Phi[i:j], phi_scale, out=X[:, 2])
         if with_coulomb:
-            cols.append(Cc[i:j] / c_scale)
-        X = np.column_stack(cols)
-        pinv = np.linalg.solve(X.T @ X, X.T)          # (XᵀX)⁻¹Xᵀ: the columns are scaled, p <= 4
+            np.divide(Cc[i:j], c_scale, out=X[:, 3])
+        pinv = lapack.solve(X.T @ X, X.T)          # (XᵀX)⁻¹Xᵀ: the columns are scaled, p <= 4
         yy = y[i:j]
         coef = pinv @ yy
         kappa = float(coef[2]) / phi_scale            # 1/J1
@@ -322,7 +270,10 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
                     yy = y[i:j] + kappa * coulomb_mid * Cc[i:j]
                     coef = pinv @ yy
                     kappa = float(coef[2]) / phi_scale
-        return {"kappa": kappa, "coef": coef, "pinv": pinv, "res": yy - X @ coef, "X": X, "fc": fc, "i": i, "j": j}
+        return {"kappa": kappa, "coef": coef, "pinv": pinv, "res": yy - X @ coef, "X": X, "fc": fc, "i": i, "j": j,
+                "c_scale": c_scale}
+
+    torque_noise: dict = {}
 
     def se_terms(f: dict) -> dict:
         kappa, res, X = f["kappa"], f["res"], f["X"]
@@ -331,14 +282,16 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         if dof < 1 or not kappa > 0:
             return {}
         row = f["pinv"][2] / phi_scale                 # 1/J1 = row · y
-        s2r = float(res @ res) / dof
         rr = float(res @ res)
+        s2r = rr / dof
         rho = float(res[1:] @ res[:-1]) / rr if rr > 0 else 0.0
         infl = (1.0 + max(rho, 0.0)) / max(1.0 - max(rho, 0.0), 1e-6)
         var_stat = s2r * float(row @ row) * infl
         # torque noise through Φ: δκ = −κ row·(W n_m), W the double trapezoid from the interval's first row
-        mm = m[f["i"]:f["j"]]
-        sm = _robust_noise(mm)
+        key = (f["i"], f["j"])
+        if key not in torque_noise:                   # both fits (with and without a Coulomb column) share it
+            torque_noise[key] = _robust_noise(m[f["i"]:f["j"]])
+        sm = torque_noise[key]
         g = _double_trapz_adjoint(row, ts)
         var_eiv = (kappa * sm) ** 2 * float(g @ g)
         j1 = 1.0 / kappa
@@ -362,27 +315,33 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             terms["torque_lag"] = j1 * abs(float(row @ psi)) * float(model.torque_lag_s) / np.sqrt(3.0)
         return terms
 
-    def j_trims(s_row, e_row, with_coulomb, trims):
+    def j_trims(f: dict, with_coulomb: bool, trims: list) -> np.ndarray:
         """J1 alone over [s_row + k, e_row) and [s_row, e_row - k) for each k in ``trims`` (batched normal
-        equations on cumulative sums: the change-point term)."""
-        i, j = s_row - L, e_row - L
-        cols = [np.ones(j - i), u[i:j], Phi[i:j] / phi_scale]
-        if with_coulomb:
-            cols.append(Cc[i:j] / max(float(np.max(np.abs(Cc[i:j]))), 1e-300))
-        X = np.column_stack(cols)
-        p = X.shape[1]
-        Cx = np.concatenate([np.zeros((1, p, p)), np.cumsum(np.einsum("ki,kj->kij", X, X), axis=0)])
-        by = np.concatenate([np.zeros((1, p)), np.cumsum(X * y[i:j, None], axis=0)])
-        bc = np.concatenate([np.zeros((1, p)), np.cumsum(X * Cc[i:j, None], axis=0)])
-        lo = np.array([k for k in trims] + [0 for _ in trims])
-        hi = np.array([j - i for _ in trims] + [j - i - k for k in trims])
-        A = Cx[hi] - Cx[lo]
-        sol_y = np.linalg.solve(A, (by[hi] - by[lo])[..., None])[..., 0]
-        kappa = sol_y[:, 2] / phi_scale
+        equations on cumulative sums: the change-point term).  ``f``: the fit over [s_row, e_row) (its design)."""
+        i, j = f["i"], f["j"]
+        X = f["X"]
+        n, p = X.shape
+        # the cumulative sums of x xᵀ, x α1 and x C in one array (a zero row in front): column by column the same
+        # running sums as three separate cumsums
+        Z = np.empty((n + 1, p * p + 2 * p))
+        Z[0] = 0.0
+        np.einsum("ki,kj->kij", X, X, out=Z[1:, :p * p].reshape(n, p, p))
+        np.multiply(X, y[i:j, None], out=Z[1:, p * p:p * p + p])
+        np.multiply(X, Cc[i:j, None], out=Z[1:, p * p + p:])
+        Z[1:].cumsum(axis=0, out=Z[1:])
+        lo, hi = _trim_rows(n, tuple(trims))
+        D = Z[hi] - Z[lo]
+        A = D[:, :p * p].reshape(-1, p, p)
+        t = len(lo)
         if not with_coulomb and coulomb_mid:
-            sol_c = np.linalg.solve(A, (bc[hi] - bc[lo])[..., None])[..., 0][:, 2] / phi_scale
+            # the α1 and C right-hand sides in one stacked solve (the same LAPACK call per matrix as two solves)
+            sol = lapack.solve(np.concatenate([A, A]), np.concatenate([D[:, p * p:p * p + p], D[:, p * p + p:]])[..., None])
+            sol_y, sol_c = sol[:t, 2, 0], sol[t:, 2, 0] / phi_scale
+            kappa = sol_y / phi_scale
             for _ in range(2):
-                kappa = sol_y[:, 2] / phi_scale + kappa * coulomb_mid * sol_c
+                kappa = sol_y / phi_scale + kappa * coulomb_mid * sol_c
+        else:
+            kappa = lapack.solve(A, D[:, p * p:p * p + p, None])[:, 2, 0] / phi_scale
         with np.errstate(divide="ignore"):
             return np.where(kappa > 0, 1.0 / kappa, np.inf)
 
@@ -402,14 +361,21 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             # coupling torque, a wrong interval, for friction
             X = f["X"]
             res = f["res"]
-            cov = float(res @ res) / max(X.shape[0] - X.shape[1], 1) * np.linalg.pinv(X.T @ X)
-            c_scale = max(float(np.max(np.abs(Cc[f["i"]:f["j"]]))), 1e-300)
-            se_fc = np.sqrt(max(cov[3, 3], 0.0)) / c_scale / f["kappa"]
+            # (a decision, not a published number: (XᵀX)⁻¹ as the product of the fit's (XᵀX)⁻¹Xᵀ with its
+            # transpose, where a pseudo-inverse was computed: the same to rounding)
+            xtx_inv_33 = float(f["pinv"][3] @ f["pinv"][3])
+            cov_33 = float(res @ res) / max(X.shape[0] - X.shape[1], 1) * xtx_inv_33
+            se_fc = np.sqrt(max(cov_33, 0.0)) / f["c_scale"] / f["kappa"]
             if not (-3 * se_fc <= f["fc"] <= model.coulomb_friction_max_nm + 3 * se_fc):
                 continue
+        if best is not None and max(float(np.sqrt(sum(v * v for v in terms.values()))), FREE_REL_SE_FLOOR * j1) \
+                >= best["se_stat"]:
+            # already no more precise than the fit before it without the change-point term, which only adds to the
+            # sum of squares (rounding is monotone): it cannot be chosen, its refits are not needed
+            continue
         n = e_est - s_est
         trims = [k for k in CHANGEPOINT_TRIMS if n - k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)]
-        terms["change_points"] = float(np.max(np.abs(j_trims(s_est, e_est, with_coulomb, trims) - j1))) \
+        terms["change_points"] = float(np.abs(j_trims(f, with_coulomb, trims) - j1).max()) \
             if trims else 0.0
         se_stat = float(np.sqrt(sum(v * v for v in terms.values())))
         se_stat = max(se_stat, FREE_REL_SE_FLOOR * j1)
@@ -447,24 +413,6 @@ def drift_term(row: np.ndarray, tt: np.ndarray, j1: float, offset_nm: float) -> 
     return float(j1 * abs(float(row @ col)) * offset_nm / np.sqrt(3.0))
 
 
-def _double_trapz_adjoint(row: np.ndarray, ts: float) -> np.ndarray:
-    """G = Wᵀ row with (W x)_k = the double trapezoid integral of x from the first row to row k."""
-    n = row.size
-    # single trapezoid T: (T x)_k = ts (x_0/2 + x_1 + ... + x_{k-1} + x_k/2) for k >= 1, 0 for k = 0
-    def t_adj(v):
-        # (Tᵀ v)_i = ts Σ_k v_k w_ki ; w_ki = 1/2 at i = 0 or i = k (k>=1), 1 for 0 < i < k
-        out = np.zeros(n)
-        if n < 2:
-            return out
-        rev = np.cumsum(v[::-1])[::-1]          # Σ_{k >= i} v_k
-        out[0] = 0.5 * float(rev[1])
-        inner = np.zeros(n)
-        inner[1:n - 1] = rev[2:]                 # Σ_{k > i} v_k
-        out[1:] += inner[1:] + 0.5 * v[1:]
-        return out * ts
-    return t_adj(t_adj(row))
-
-
 #: Kink fit: steady pre-entry samples used before the earliest candidate entry row, and the candidate rows
 #: searched around the free fit's and the detector's entry rows.
 KINK_PRE_SAMPLES = 40
@@ -477,9 +425,10 @@ KINK_STEADY_T = 3.0
 KINK_CHI2_1 = 3.841
 
 
-def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, y: np.ndarray) -> list:
-    """:func:`kink_fit`'s least-squares fit over rows [P, end) for every candidate entry row: a list of (residual
-    sum of squares, 1/J1, residual, the least-squares row of 1/J1, entry row)."""
+def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, y: np.ndarray) -> tuple:
+    """:func:`kink_fit`'s least-squares fit over rows [P, end) for every candidate entry row: arrays over the
+    candidates of the residual sum of squares and 1/J1, the residuals (candidate, row), the least-squares solutions
+    (XᵀX)⁻¹Xᵀ (candidate, column, row) and the Φ column's scales (1/J1 = row 2 of the solution / scale)."""
     rows = np.arange(P, end)
     # every candidate's design at once, (entry, row, column): numpy's stacked matmul and solve call the same
     # BLAS/LAPACK routine per candidate as the 2-D calls (bit for bit the same numbers, a fraction of the calls)
@@ -490,23 +439,32 @@ def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, 
     keep = np.arange(n - 1)[None, :] >= (s_arr - P)[:, None]
     half = np.where(keep, 0.5 * (m[P + 1:end] + m[P:end - 1])[None, :], 0.0)
     c1 = np.zeros((s_arr.size, n))
-    np.cumsum(half, axis=1, out=c1[:, 1:])
+    half.cumsum(axis=1, out=c1[:, 1:])
     c1 *= ts
     phi = np.zeros((s_arr.size, n))
-    np.cumsum(0.5 * (c1[:, 1:] + c1[:, :-1]), axis=1, out=phi[:, 1:])
+    (0.5 * (c1[:, 1:] + c1[:, :-1])).cumsum(axis=1, out=phi[:, 1:])
     phi *= ts
-    scales = [max(float(v), 1e-300) for v in np.max(np.abs(phi), axis=1)]
+    scales = np.maximum(np.abs(phi).max(axis=1), 1e-300)
     X = np.empty((s_arr.size, n, 3))
     X[:, :, 0] = 1.0
     X[:, :, 1] = (rows[None, :] - s_arr[:, None]) * ts / np.maximum((end - s_arr) * ts, ts)[:, None]
-    X[:, :, 2] = phi / np.array(scales)[:, None]
+    X[:, :, 2] = phi / scales[:, None]
     XT = X.transpose(0, 2, 1)
-    pinv = np.linalg.solve(XT @ X, XT)
+    pinv = lapack.solve(XT @ X, XT)
     coef = pinv @ y
     res = y - (X @ coef[:, :, None])[:, :, 0]
     rss_all = (res[:, None, :] @ res[:, :, None])[:, 0, 0]
-    return [(float(rss_all[q]), float(coef[q, 2]) / scales[q], res[q], pinv[q, 2] / scales[q], s_row)
-            for q, s_row in enumerate(entries)]
+    return rss_all, coef[:, 2] / scales, res, pinv, scales
+
+
+@lru_cache(maxsize=64)
+def _kink_pre_design(n_pre: int) -> tuple:
+    """The kink fit's pre-entry steadiness test: the design (1, t, t²) over n_pre samples (t centred, over n_pre)
+    and the (2, 2) element of (XᵀX)⁻¹ (read-only: shared)."""
+    tt = (np.arange(n_pre) - n_pre / 2.0) / max(n_pre, 1)
+    Xp = np.column_stack([np.ones(n_pre), tt, tt * tt])
+    Xp.flags.writeable = False
+    return Xp, float(lapack.inv(Xp.T @ Xp)[2, 2])
 
 
 def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int,
@@ -519,7 +477,15 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
     ``entries``, so the residual sums compare: s* minimises it; the plausible entries are those within
     KINK_CHI2_1 σ̂² of it, and the largest change of J1 over them is the change-point term.  Returns j1, se_stat
     (statistical, torque noise and change points in quadrature), terms, start (s*), end, residual, dof; raises
-    FreeFitError."""
+    FreeFitError.  :func:`kink_locate` and :func:`kink_terms`, its two halves, for a caller that may still refuse the
+    fit or needs only J1."""
+    return kink_terms(kink_locate(alpha1, torque, sample_period_s, entries, end), coulomb_max_nm, torque_offset_nm,
+                      torque_lag_s)
+
+
+def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int) -> dict:
+    """:func:`kink_fit` without its standard error: the entry row, J1 and the fit's checks (FreeFitError) — j1,
+    start, end, residual, dof, plausible_entries (:func:`kink_terms` adds se_stat and terms)."""
     a = np.asarray(alpha1, float)
     m = np.asarray(torque, float)
     ts = float(sample_period_s)
@@ -530,10 +496,10 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
     if entries[0] - P < 10:
         raise FreeFitError("kink fit: fewer than 10 steady samples before the entry")
     y = a[P:end] - a[entries[0]]
-    out = _kink_candidates(m, ts, entries, P, end, y)
-    rss = np.array([o[0] for o in out])
-    k = int(np.argmin(rss))
-    rss_min, kappa, res, row, s_best = out[k]
+    rss_all, kappa_all, res_all, pinv, scales = _kink_candidates(m, ts, entries, P, end, y)
+    k = int(np.argmin(rss_all))
+    rss_list, kappa_list = rss_all.tolist(), kappa_all.tolist()
+    rss_min, kappa, s_best = rss_list[k], kappa_list[k], entries[k]
     if not kappa > 0:
         raise FreeFitError(f"kink fit: non-physical 1/J1 = {kappa!r}")
     dof = end - P - 3
@@ -542,18 +508,28 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
     # the model's premise: constant speed before the entry (a speed controller's drive is not): the pre-entry
     # angle gets a t² term, refused when it is significant (t statistic > KINK_STEADY_T)
     n_pre = s_best - P
-    tt = (np.arange(n_pre) - n_pre / 2.0) / max(n_pre, 1)
-    Xp = np.column_stack([np.ones(n_pre), tt, tt * tt])
-    cp_, *_ = np.linalg.lstsq(Xp, a[P:s_best], rcond=None)
+    Xp, xtx_inv_22 = _kink_pre_design(n_pre)
+    cp_ = lapack.lstsq(Xp, a[P:s_best])
     rp = a[P:s_best] - Xp @ cp_
     s2p = max(float(rp @ rp) / max(n_pre - 3, 1), q * q / 12.0, 1e-30)
-    t_quad = abs(float(cp_[2])) / float(np.sqrt(s2p * np.linalg.inv(Xp.T @ Xp)[2, 2]))
+    t_quad = abs(float(cp_[2])) / float(np.sqrt(s2p * xtx_inv_22))
     if t_quad > KINK_STEADY_T:
         raise FreeFitError(f"kink fit: the speed before the entry is not constant (t = {t_quad:.3g} for a t² term "
                            f"over {n_pre} samples)")
     j1 = 1.0 / kappa
-    plausible = [o for o in out if o[0] - rss_min <= KINK_CHI2_1 * s2 and o[1] > 0]
-    cp = max(abs(1.0 / o[1] - j1) for o in plausible)
+    plausible = [q_ for q_ in range(len(entries)) if rss_list[q_] - rss_min <= KINK_CHI2_1 * s2 and kappa_list[q_] > 0]
+    fit = {"j1": j1, "start": int(s_best), "end": int(end), "residual": res_all[k], "dof": dof,
+           "plausible_entries": [entries[q_] for q_ in plausible],
+           "_state": (m, ts, P, kappa, pinv[k, 2] / scales[k], s2, [kappa_list[q_] for q_ in plausible])}
+    return fit
+
+
+def kink_terms(fit: dict, coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0,
+               torque_lag_s: float = 0.0) -> dict:
+    """:func:`kink_fit`'s result with its standard error (se_stat, terms), from :func:`kink_locate`'s."""
+    m, ts, P, kappa, row, s2, plausible_kappa = fit["_state"]
+    j1, res, s_best, end = fit["j1"], fit["residual"], fit["start"], fit["end"]
+    cp = max(abs(1.0 / k - j1) for k in plausible_kappa)
     rr = float(res @ res)
     rho = float(res[1:] @ res[:-1]) / rr if rr > 0 else 0.0
     infl = (1.0 + max(rho, 0.0)) / max(1.0 - max(rho, 0.0), 1e-6)
@@ -584,4 +560,4 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
         terms["torque_lag"] = j1 * abs(float(row @ l_col)) * float(torque_lag_s) / np.sqrt(3.0)
     se = float(np.sqrt(sum(v * v for v in terms.values())))
     return {"j1": j1, "se_stat": max(se, FREE_REL_SE_FLOOR * j1), "terms": terms, "start": int(s_best),
-            "end": int(end), "residual": res, "dof": dof, "plausible_entries": [o[4] for o in plausible]}
+            "end": int(end), "residual": res, "dof": fit["dof"], "plausible_entries": fit["plausible_entries"]}

@@ -257,9 +257,11 @@ def _declared_text() -> str:
     return "each drive declared as a user would (`zoo.declared`; " + "; ".join(parts) + "; the rest the node's defaults)"
 
 
-def diagnose_one(zr: ZooRecording, fmt: str, system, declare: bool = True) -> dict:
-    """Windows of one file, each matched to the truth (``declare``: with the drive's :func:`declared` keys)."""
+def diagnose_one(zr: ZooRecording, fmt: str, system, declare: bool = True, extra: Optional[dict] = None) -> dict:
+    """Windows of one file, each matched to the truth (``declare``: with the drive's :func:`declared` keys;
+    ``extra``: keys that replace or add to them, e.g. a drive variant's own friction)."""
     keys = dict(declared(zr.model)) if declare else {}
+    keys.update(extra or {})
     b1 = keys.pop("bearing_friction_nms_per_rad", system.motor.bearing_friction_nms_per_rad)
     sysr = replace(system, load=replace(system.load, wheel_radius_m=zr.radius_m),
                    motor=replace(system.motor, bearing_friction_nms_per_rad=b1))

@@ -1,0 +1,134 @@
+"""The gap fits' numerical kernels (identify/gap_free.py's, issue 20's per-window budget): cumulative trapezoids, the
+change-point scans' cumulative sums and closed-form 3 x 3 inverse, the change-point refits' row pairs, numpy's
+np.diff(x, 2), np.sign(np.gradient(x)) and np.median as their own steps, the robust noise scale, the encoder quantum and
+the double trapezoid's adjoint.  Each gives numpy's numbers bit for bit, or (the closed-form inverse, a decision
+only) LAPACK's to rounding; test/test_gap_speed.py checks them.  Plain numpy; never imports rclpy.
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+
+def _cumtrapz(x: np.ndarray, ts: float) -> np.ndarray:
+    out = np.empty(x.size)
+    out[0] = 0.0
+    (0.5 * (x[1:] + x[:-1])).cumsum(out=out[1:])
+    return out * ts
+
+
+#: The unique elements of a symmetric 3 x 3 matrix, row-major upper triangle: (0,0) (0,1) (0,2) (1,1) (1,2) (2,2).
+_SYM3_I = np.array([0, 0, 0, 1, 1, 2])
+_SYM3_J = np.array([0, 1, 2, 1, 2, 2])
+
+
+def _scan_sums(X: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Cumulative sums over the rows of X (n x 3) and y, with a zero row in front, (n + 1, 10): the unique elements of
+    x xᵀ (:data:`_SYM3_I`, :data:`_SYM3_J`), x y and y²; a row range's normal equations are a difference of two rows."""
+    n = X.shape[0]
+    S = np.empty((n + 1, 10))
+    S[0] = 0.0
+    np.multiply(X[:, _SYM3_I], X[:, _SYM3_J], out=S[1:, :6])
+    np.multiply(X, y[:, None], out=S[1:, 6:9])
+    np.multiply(y, y, out=S[1:, 9])
+    S[1:].cumsum(axis=0, out=S[1:])
+    return S
+
+
+def _sym3_inverse(U: np.ndarray) -> np.ndarray:
+    """Inverses, (k, 3, 3), of a stack of symmetric 3 x 3 matrices given by their unique elements (k, 6) (order
+    :data:`_SYM3_I`), each regularised by 1e-12 of its mean diagonal element, by the adjugate over the determinant.
+
+    The change-point scans' normal matrices (34-190 of them per scan): numpy's batched ``inv`` (and ``solve``) calls
+    LAPACK once per matrix, ~0.5 us each, so a scan's inverses cost 20-100 us; the closed form is a few dozen array
+    operations for the whole stack.  It serves a decision (the χ² and forecast tests), not a published number:
+    equal to LAPACK's to rounding for the scaled, regularised matrices the scans build."""
+    a, b, c, d, e, f = U.T
+    t = (a + d + f) * (1e-12 / 3.0)
+    a, d, f = a + t, d + t, f + t
+    i00, i01, i02 = d * f - e * e, c * e - b * f, b * e - c * d
+    i11, i12, i22 = a * f - c * c, b * c - a * e, a * d - b * b
+    det = a * i00 + b * i01 + c * i02
+    return (np.array([i00, i01, i02, i01, i11, i12, i02, i12, i22]) / det).T.reshape(-1, 3, 3)
+
+
+@lru_cache(maxsize=256)
+def _trim_rows(n: int, trims: tuple) -> tuple:
+    """Row bounds (lo, hi) of the intervals [k, n) and [0, n - k) for k in ``trims`` (the change-point term)."""
+    lo = np.array([k for k in trims] + [0 for _ in trims], dtype=np.intp)
+    hi = np.array([n for _ in trims] + [n - k for k in trims], dtype=np.intp)
+    return lo, hi
+
+
+def _diff2(x: np.ndarray) -> np.ndarray:
+    """``np.diff(x, 2)`` of a 1-D array: the same two subtractions, without np.diff's generic set-up."""
+    d = x[1:] - x[:-1]
+    return d[1:] - d[:-1]
+
+
+def _gradient_sign(x: np.ndarray) -> np.ndarray:
+    """``np.sign(np.gradient(x))`` (unit spacing, first-order ends): the sign of the central difference inside and of
+    the one-sided ones at the ends (np.gradient's halving does not change a sign), without np.gradient's generic-axis
+    set-up (most of its cost on a short array)."""
+    d = np.empty(x.size)
+    np.subtract(x[2:], x[:-2], out=d[1:-1])
+    d[0] = x[1] - x[0]
+    d[-1] = x[-1] - x[-2]
+    return np.sign(d)
+
+
+def _quantum(alpha: np.ndarray) -> float:
+    """The encoder's count (the smallest non-zero second difference: whole counts on a quantised angle), 0
+    when the angle looks continuous."""
+    d = np.abs(_diff2(alpha))
+    d = d[d > 1e-10 * max(1.0, float(np.abs(alpha).max()))]     # a zero second difference, to rounding
+    if d.size < 5:
+        return 0.0
+    # a quantised angle moves by whole counts: the second differences are integer multiples of the count; the
+    # smallest one may be several counts (try its 1/1 .. 1/4, the largest that divides them all)
+    q0 = float(d.min())
+    for div in (1, 2, 3, 4):
+        q = q0 / div
+        k = d / q
+        if float(np.abs(k - np.rint(k)).max()) < 0.01:
+            return q
+    return 0.0
+
+
+def _median(x: np.ndarray) -> np.float64:
+    """``np.median`` of a 1-D float array, bit for bit (the middle one or two of a partition, averaged as numpy's
+    mean sums: from +0.0; NaN when one is NaN), without its generic-axis overhead (a third of its time)."""
+    n = x.size
+    h = n // 2
+    if n % 2:
+        part = np.partition(x, (h, n - 1))
+        m = (0.0 + part[h]) / 1.0
+    else:
+        part = np.partition(x, (h - 1, h, n - 1))
+        m = (0.0 + part[h - 1] + part[h]) / 2.0
+    return np.float64(np.nan) if np.isnan(part[-1]) else m
+
+
+def _robust_noise(x: np.ndarray) -> float:
+    d2 = _diff2(np.asarray(x, float))
+    if d2.size < 3:
+        return 0.0
+    return float(1.4826 * _median(np.abs(d2 - _median(d2))) / np.sqrt(6.0))
+
+
+def _double_trapz_adjoint(row: np.ndarray, ts: float) -> np.ndarray:
+    """G = Wᵀ row with (W x)_k = the double trapezoid integral of x from the first row to row k."""
+    n = row.size
+    # single trapezoid T: (T x)_k = ts (x_0/2 + x_1 + ... + x_{k-1} + x_k/2) for k >= 1, 0 for k = 0
+    def t_adj(v):
+        # (Tᵀ v)_i = ts Σ_k v_k w_ki ; w_ki = 1/2 at i = 0 or i = k (k>=1), 1 for 0 < i < k
+        if n < 2:
+            return np.zeros(n)
+        rev = v[::-1].cumsum()[::-1]          # Σ_{k >= i} v_k
+        out = 0.5 * v
+        out[0] = 0.5 * float(rev[1])
+        out[1:n - 1] += rev[2:]                  # + Σ_{k > i} v_k
+        out *= ts
+        return out
+    return t_adj(t_adj(row))
