@@ -411,3 +411,28 @@ def test_contact_fit_width_and_uncertainty_are_the_delta_method_ones(torque_nois
     assert got.method == ("bracket" if torque_noise == 2.0 else "contact")
     if torque_noise == 0.5:
         assert s_fit > 3e-3 * theta                                   # the fit's own error, not the floor
+
+
+def test_a1_vetoes_a_steady_entry_that_still_carries_a_contact_torque():
+    """With a1 beside the encoder, the angle fit's steady-entry (kink) fit is dropped from the cross-check when the
+    motor equation leaves a torque in the first rows after its entry row (a slowly unloading contact): free motion
+    after it passes, a contact torque of 80 N m does not, and a fit that is not the steady-entry one is never checked."""
+    from dataclasses import replace
+
+    from jident_ros.identify.gap import STEADY_ENTRY_CHOICE, GapEstimate, steady_entry_contact
+    from jident_ros.identify.gap_free import GapModel
+    rng = np.random.default_rng(3)
+    n, s, j1, r = 200, 100, 1.16, 0.1
+    m = np.full(n, 150.0) + rng.normal(0.0, 1.0, n)
+    a1 = np.zeros(n)
+    a1[s:] = r * m[s:] / j1                       # free after row s, at rest in contact before it
+    g = GapEstimate(j1, 0.01, (j1 - 0.02, j1 + 0.02), 0.0, s, 150, "angle", "detector", fit_start=s,
+                    model_choice=f"{STEADY_ENTRY_CHOICE}: the entry a change point of a steady drive at row {s}")
+    model = GapModel(torque_offset_nm=2.0)
+    assert steady_entry_contact({"a1": a1, "m_el": m}, g, 0.0, r, model) is None
+    loaded = a1.copy()
+    loaded[s:s + 6] = r * (m[s:s + 6] - 80.0) / j1   # the contact still carries 80 N m in the first rows
+    why = steady_entry_contact({"a1": loaded, "m_el": m}, g, 0.0, r, model)
+    assert why is not None and f"steady entry at row {s}" in why and "-80" in why
+    free_fit = replace(g, model_choice="angle: no a1 in the window")
+    assert steady_entry_contact({"a1": loaded, "m_el": m}, free_fit, 0.0, r, model) is None
