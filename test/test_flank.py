@@ -473,6 +473,49 @@ def test_coupling_entry_puts_an_untwisting_departure_at_the_contact_loss():
     assert wins and abs(round(wins[0].entry_time_s / 5e-4) - entry) <= 2
 
 
+def test_a_soft_coupling_untwisting_beyond_the_search_is_entered_at_its_contact_loss(monkeypatch):
+    """A soft coupling (k 15000 N m/rad: 13 mrad of twist under 200 N m) untwists far beyond the departure threshold
+    before the contact is lost: delta departs 16 samples early, beyond one search of the coupling model (its best on
+    the search's forward edge, the entry kept); searching on from that edge (COUPLING_FORWARD_ROUNDS) finds the
+    contact loss (the vector drive with k x 0.3, heavy load reversal: -22 -> -1).  With one search the detector's
+    window stays early."""
+    from jident_ros.stream import flank
+    data, entry = _untwisting_two_mass(k=1.5e4, c=10.0)
+    d = data[:, 1] - data[:, 2]
+    level = float(np.median(d[120:190]))
+    dep = 150 + int(np.argmax(np.abs(d[150:] - level) > 1.5e-3))
+    assert entry - dep > flank.COUPLING_SEARCH           # beyond one search: the further searches are what move it
+    assert flank.coupling_entry(data[:, 1], d, data[:, 3], dep, -1.0, 5e-4)[:2] == (dep, 1.0)
+    e, gain, rms = flank.coupling_entry(data[:, 1], d, data[:, 3], dep, -1.0, 5e-4, rounds=flank.COUPLING_FORWARD_ROUNDS)
+    assert abs(e - entry) <= 2 and gain > 1.0 and rms < 1e-4
+    data, entry = _untwisting_two_mass(n=2300, k=1.5e4, c=10.0)
+    ch = ("t", "alpha1", "alpha2", "m_el")
+    wins, _ = _windows(data, ch, nominal_inertia_kgm2=1.16, encoder_counts_per_rev=65536)
+    assert len(wins) == 1 and abs(round(wins[0].entry_time_s / 5e-4) - entry) <= 2
+    monkeypatch.setattr(flank, "COUPLING_FORWARD_ROUNDS", 1)
+    wins, _ = _windows(data, ch, nominal_inertia_kgm2=1.16, encoder_counts_per_rev=65536)
+    assert len(wins) == 1 and round(wins[0].entry_time_s / 5e-4) < entry - 10
+
+
+def test_a_swing_on_the_flank_reached_is_not_a_traversal_back(monkeypatch):
+    """After a traversal (flank 0 -> -0.1 rad) a soft coupling swings on the flank it reached and settles 6 mrad off
+    the contact level learnt there (its torque falling back): beyond min_travel_rad, but 0.06 of the zone the window
+    crossed, not a traversal back (RETURN_MIN_SPAN_SHARE; the vector drive with k x 0.3: a false entry, J1 outside the
+    plausible band).  A traversal back to the first flank still gets its window; without the rule the swing got one."""
+    from jident_ros.stream import flank
+    swing = [(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (920, -0.094)]
+    data, ch = _excursions(swing)
+    wins, det = _windows(data, ch)
+    assert len(wins) == 1 and wins[0].flags & FLAG_SECOND_ENTRY and det.return_windows == 0
+    data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (940, 0.0)])
+    wins, det = _windows(data, ch)
+    assert [round((w.entry_time_s - 1.0) / 5e-4) for w in wins] == [501, 901] and det.return_windows == 1
+    monkeypatch.setattr(flank, "RETURN_MIN_SPAN_SHARE", 0.0)
+    data, ch = _excursions(swing)
+    wins, det = _windows(data, ch)
+    assert len(wins) == 2 and det.return_windows == 1
+
+
 def test_a_skewed_imu_in_a_traversal_back_is_detected_again_as_one(monkeypatch):
     """The Imu check fails on a traversal back (the window inside the window before it): ImuSkewGuard detects it
     again without a1 from the margin before it, inside the window given out before (the vector drive's speed steps

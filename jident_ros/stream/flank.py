@@ -219,6 +219,15 @@ RETURN_MATCH_SAMPLES = 8
 #: the edge and gave two false windows)
 RETURN_REST_SAMPLES = 8
 
+#: An entry inside a running window gets a window of its own only when its excursion, ending in a contact, travelled
+#: at least this share of the zone the running windows crossed (the distance from the flank it left to their farthest
+#: flank level): a soft coupling's swing after its re-contact leaves a contact on the flank it reached and settles
+#: 5.6 mrad away, beyond min_travel_rad, as its torque falls back (the vector drive with k x 0.3, heavy load reversal:
+#: 0.04 of its 133 mrad; a false entry, J1 outside the plausible band) -- chosen on that variant; the zoo's and the
+#: variants' traversals back travel 0.99-1.01 of it, a turning point inside the zone read as a contact 0.17 (the fast
+#: speed loop's light load reversal: a bounce window 59 samples late, now not given)
+RETURN_MIN_SPAN_SHARE = 0.5
+
 #: single_mass_run fits m_el = J acc + c (True) or m_el = J acc (False).
 SINGLE_MASS_OFFSET = True
 #: ... with |c| at most this share of the run's median |m_el| or of the steady |m_el| before the departure, the
@@ -471,28 +480,33 @@ COUPLING_MIN_GAIN = 1.5
 #: with a1 after back_to_load too.  With a1 a window's own entry is not moved (its light load reversals went 5-11
 #: samples late at gains 1.02-1.08, the heavy ones' gains 1.02-1.15 are no larger)
 COUPLING_MIN_GAIN_FORWARD = 1.0
+#: Without a1, a window's own entry whose best candidate lies on the search's forward edge searches again from there,
+#: at most this many searches in all (COUPLING_SEARCH x this many samples forward): a soft coupling untwists far beyond
+#: the departure threshold before the contact is lost (the vector drive with k x 0.3, heavy load reversal: 13 mrad
+#: under 0.8 rated torque, the departure 22-23 samples early; two searches), when the edge explains alpha1
+#: COUPLING_MIN_GAIN times better than the search's centre (that variant 1.89-1.98, the heavy load variant's heavy
+#: load reversal 1.63: -13 -> 0; the fast speed loop's and the more friction variant's speed reversals, whose best
+#: lay on the edge at gains 1.02-1.20, walked 11-21 samples late without it) -- chosen on the soft coupling variant,
+#: tested on the zoo's three drives and the other variants (docs/results.md, "A soft coupling's contact loss")
+COUPLING_FORWARD_ROUNDS = 3
 
 
-def coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, departure: int, side: float,
-                   sample_period_s: float) -> tuple:
-    """(entry row, gain) of a coupling model's contact loss near ``departure`` (COUPLING_* constants): for each
-    candidate e the contact torque acts while delta is beyond the edge delta had at e (on the side opposite to
-    ``side``, the direction delta departs to) and not from e on; alpha1 = a + v k + b1 Phi + b2 Psi + b3 Psi_d +
-    c k^2 (Phi, Psi, Psi_d the double integrals of m_el, the penetration and its rate) by least squares over one
-    sample set; the e of the least residual and the gain RSS(departure) / RSS(e).  (departure, 1.0) when the rows are
-    not there."""
-    lo, hi = departure - COUPLING_FIT_BEFORE, departure + COUPLING_FIT_AFTER
-    if lo < 1 or hi > alpha1.size or departure - COUPLING_SEARCH < lo + 2:
-        return departure, 1.0, math.inf
+def _coupling_fit(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, centre: int, side: float,
+                  sample_period_s: float):
+    """(best candidate, its RSS, the RSS at ``centre``, samples in the fit) of :func:`coupling_entry`'s search
+    around ``centre``; None when the rows are not there."""
+    lo, hi = centre - COUPLING_FIT_BEFORE, centre + COUPLING_FIT_AFTER
+    if lo < 1 or hi > alpha1.size or centre - COUPLING_SEARCH < lo + 2:
+        return None
     ts = sample_period_s
-    k = np.arange(lo, hi, dtype=float) - departure
+    k = np.arange(lo, hi, dtype=float) - centre
     base = _free_columns(k, _double_integral(m_el[lo:hi], ts))
     y = np.asarray(alpha1[lo:hi], float)
     y = y - base @ np.linalg.lstsq(base, y, rcond=None)[0]
     d = np.asarray(delta[lo:hi], float)
     rate = np.gradient(d) / ts
-    best, best_rss, rss_dep = departure, math.inf, math.nan
-    for e in range(departure - COUPLING_SEARCH, departure + COUPLING_SEARCH + 1):
+    best, best_rss, rss_centre = centre, math.inf, math.nan
+    for e in range(centre - COUPLING_SEARCH, centre + COUPLING_SEARCH + 1):
         edge = 0.5 * (delta[e - 1] + delta[e])
         pen = np.clip(-side * (d - edge), 0.0, None)
         pen[e - lo:] = 0.0
@@ -501,16 +515,43 @@ def coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, depa
         coef, *_ = np.linalg.lstsq(X, y, rcond=None)
         r = y - X @ coef
         val = float(r @ r)
-        if e == departure:
-            rss_dep = val
+        if e == centre:
+            rss_centre = val
         if val < best_rss:
             best, best_rss = e, val
-    if not best_rss < rss_dep * (1.0 - 1e-9) or abs(best - departure) >= COUPLING_SEARCH:
+    return best, best_rss, rss_centre, y.size
+
+
+def coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, departure: int, side: float,
+                   sample_period_s: float, rounds: int = 1) -> tuple:
+    """(entry row, gain, rms) of a coupling model's contact loss near ``departure`` (COUPLING_* constants): for each
+    candidate e the contact torque acts while delta is beyond the edge delta had at e (on the side opposite to
+    ``side``, the direction delta departs to) and not from e on; alpha1 = a + v k + b1 Phi + b2 Psi + b3 Psi_d +
+    c k^2 (Phi, Psi, Psi_d the double integrals of m_el, the penetration and its rate) by least squares over one
+    sample set; the e of the least residual and the gain RSS(departure) / RSS(e).  (departure, 1.0) when the rows are
+    not there.  ``rounds`` > 1: a best candidate on the search's forward edge that explains alpha1 COUPLING_MIN_GAIN
+    times better than the search's centre starts another search there (at most ``rounds`` searches, forward only: a
+    soft coupling untwists beyond the search before its contact is lost, see COUPLING_FORWARD_ROUNDS); the gain is
+    then the last search's."""
+    got = _coupling_fit(alpha1, delta, m_el, departure, side, sample_period_s)
+    if got is None:
+        return departure, 1.0, math.inf
+    rss_dep = got[2]
+    centre = departure
+    for _ in range(int(rounds) - 1):
+        if got[0] != centre + COUPLING_SEARCH or not got[2] >= COUPLING_MIN_GAIN * got[1]:
+            break           # not on the forward edge, or not a clear gain there (the speed reversals: 1.02-1.2)
+        nxt = _coupling_fit(alpha1, delta, m_el, got[0], side, sample_period_s)
+        if nxt is None:
+            break
+        centre, got = got[0], nxt
+    best, best_rss, rss_centre, n = got
+    if not best_rss < rss_centre * (1.0 - 1e-9) or abs(best - centre) >= COUPLING_SEARCH:
         # no candidate explains alpha1 better, or the best lies on the search's edge (the minimum is beyond it: the
         # model locates nothing there; a traversal back 76 samples late went to +88)
-        return departure, 1.0, math.sqrt(rss_dep / max(y.size - 6, 1))
-    gain = rss_dep / best_rss if best_rss > 0 else 1.0
-    return best, gain, math.sqrt(best_rss / max(y.size - 6, 1))
+        return departure, 1.0, math.sqrt(rss_dep / max(n - 6, 1))
+    gain = rss_centre / best_rss if best_rss > 0 else 1.0
+    return best, gain, math.sqrt(best_rss / max(n - 6, 1))
 
 
 def _noise(x: np.ndarray) -> float:
@@ -924,7 +965,8 @@ class FlankDetector(BacklashDetector):
                     pos = max(pos, k + 1)
                 if last is not None and last.pending and last in self._caps:
                     if abs(rest[0] - last.flank_rad) > max(self.min_travel_rad, self.threshold_for(last)) \
-                            and travel >= MIN_TRAVERSAL_SAMPLES and not self._came_back(last):
+                            and travel >= MIN_TRAVERSAL_SAMPLES and not self._came_back(last) \
+                            and self._crossed_zone(last, rest[0]):
                         last.pending = False
                         self.return_windows += 1
                         for c in self._caps:
@@ -971,6 +1013,17 @@ class FlankDetector(BacklashDetector):
         self._tail = np.concatenate([self._tail, x])[-(self.samples_before_entry + extra):]
         self._rows_in += x.shape[0]
         return events
+
+    def _crossed_zone(self, cap: _FlankCapture, level: float) -> bool:
+        """Whether a pending entry's excursion, ending in a contact at ``level``, crossed the zone: it travelled at
+        least RETURN_MIN_SPAN_SHARE of the way from the flank it left to the farthest flank level of the other
+        running captures (the zone those windows crossed).  True when no other capture knows a flank."""
+        spans = [abs(c.flank_rad - cap.flank_rad) for c in self._caps
+                 if c is not cap and not c.skip and not c.pending and math.isfinite(c.flank_rad)]
+        span = max(spans, default=0.0)
+        if not span > max(self.min_travel_rad, self.threshold_for(cap)):
+            return True
+        return abs(level - cap.flank_rad) >= RETURN_MIN_SPAN_SHARE * span
 
     def _came_back(self, cap: _FlankCapture) -> bool:
         """Whether delta came back to the flank a capture's entry left (within its departure threshold) after the
@@ -1253,21 +1306,22 @@ class FlankDetector(BacklashDetector):
                 entry = self._coupling_move(data, entry + off, dep + off, 1.0, 1.0) - off
         elif src != "a1" and self.detector_name == "flank" and not getattr(self, "_cap_returning", False):
             # without a1, a coupling that untwisted off its flank: the entry at the coupling model's contact loss
-            entry = self._coupling_move(data, entry + off, dep + off) - off
+            entry = self._coupling_move(data, entry + off, dep + off, rounds=COUPLING_FORWARD_ROUNDS) - off
         return entry - dep, None if recontact is None else recontact + off
 
     def _coupling_move(self, data: np.ndarray, entry: int, departure: int,
-                       forward_gain: float = COUPLING_MIN_GAIN_FORWARD, back_gain: float = COUPLING_MIN_GAIN) -> int:
-        """``entry`` moved to the coupling model's contact loss (:func:`coupling_entry`; the side delta left its flank
-        to: at ``departure``) when that explains alpha1 ``forward_gain`` (a later entry) or ``back_gain`` (an
-        earlier one) times better; else ``entry``."""
+                       forward_gain: float = COUPLING_MIN_GAIN_FORWARD, back_gain: float = COUPLING_MIN_GAIN,
+                       rounds: int = 1) -> int:
+        """``entry`` moved to the coupling model's contact loss (:func:`coupling_entry`, ``rounds`` searches forward;
+        the side delta left its flank to: at ``departure``) when that explains alpha1 ``forward_gain`` (a later
+        entry) or ``back_gain`` (an earlier one) times better; else ``entry``."""
         flank = getattr(self, "_cap_flank", (math.nan, math.nan))[0]
         if not math.isfinite(flank) or "m_el" not in self.channels:
             return entry
         delta = self._delta(data)
         side = 1.0 if delta[departure] >= flank else -1.0
         e, gain, rms = coupling_entry(data[:, self._i_a1], delta, data[:, self.channels.index("m_el")], entry, side,
-                                      self.sample_period_s)
+                                      self.sample_period_s, rounds)
         if not max(rms, self.angle_quantum_rad / math.sqrt(12.0)) <= FREE_MAX_NOISE_RAD:
             return entry        # a coarse encoder (2^13: its moves went 3-12 samples the wrong way)
         return e if gain >= (forward_gain if e > entry else back_gain) else entry
