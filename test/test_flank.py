@@ -488,10 +488,11 @@ def test_a_soft_coupling_untwisting_beyond_the_search_is_entered_at_its_contact_
     assert flank.coupling_entry(data[:, 1], d, data[:, 3], dep, -1.0, 5e-4)[:2] == (dep, 1.0)
     e, gain, rms = flank.coupling_entry(data[:, 1], d, data[:, 3], dep, -1.0, 5e-4, rounds=flank.COUPLING_FORWARD_ROUNDS)
     assert abs(e - entry) <= 2 and gain > 1.0 and rms < 1e-4
-    data, entry = _untwisting_two_mass(n=2300, k=1.5e4, c=10.0)
+    data, entry = _untwisting_two_mass(n=2300, k=1.5e4, c=10.0, load0=300.0)   # 20 mrad: 19 samples forward
     ch = ("t", "alpha1", "alpha2", "m_el")
     wins, _ = _windows(data, ch, nominal_inertia_kgm2=1.16, encoder_counts_per_rev=65536)
     assert len(wins) == 1 and abs(round(wins[0].entry_time_s / 5e-4) - entry) <= 2
+    assert len(wins[0]) == 48 + 2000                     # the capture held the rows the move needs (not cut short)
     monkeypatch.setattr(flank, "COUPLING_FORWARD_ROUNDS", 1)
     wins, _ = _windows(data, ch, nominal_inertia_kgm2=1.16, encoder_counts_per_rev=65536)
     assert len(wins) == 1 and round(wins[0].entry_time_s / 5e-4) < entry - 10

@@ -754,6 +754,15 @@ class FlankDetector(BacklashDetector):
         return 0 if self.extra_optional else self.history_extra
 
     @property
+    def _forward_room(self) -> int:
+        """Rows a window's entry may move forward from its departure: refine_samples (the dynamics), and without a1
+        the coupling model's searches after them (a soft coupling's contact loss came 22 samples after its
+        departure: its window lacked those rows, refused as short)."""
+        if self.detector_name == "flank" and "a1" not in self.channels and "m_el" in self.channels:
+            return self.refine_samples + COUPLING_SEARCH * COUPLING_FORWARD_ROUNDS
+        return self.refine_samples
+
+    @property
     def angle_quantum_rad(self) -> float:
         if not self.encoder_counts_per_rev:
             return 0.0
@@ -1042,8 +1051,9 @@ class FlankDetector(BacklashDetector):
         """Rows to one capture; when it completes, its window (a pending one found no contact within its window: a
         long excursion, kept), then the rows after its end to the captures its edge scan opened.  A capture is
         complete with samples_from_entry + refine_samples rows from its departure on (the entry sample moves at
-        most refine_samples forward)."""
-        need = cap.departure_row + self.samples_from_entry + self.refine_samples
+        most refine_samples forward; without a1, COUPLING_SEARCH x COUPLING_FORWARD_ROUNDS more: the coupling
+        model's searches, :attr:`_forward_room`)."""
+        need = cap.departure_row + self.samples_from_entry + self._forward_room
         take = max(min(need - cap.count, rows.shape[0]), 0)
         if take > 0:
             if not cap.skip:
