@@ -35,11 +35,15 @@ and on what the clutch does, not on inequality (1):
   contact loss of a coupling model (:func:`coupling_entry`: the motor equation with a spring-damper torque acting
   while delta is beyond the edge it leaves, the double integrals in alpha1): a coupling that untwists off its flank
   under a falling load crosses the departure threshold before the contact is lost (the second drive's speed steps
-  3-4 samples, the vector drive's heavy load reversals 8-9).
+  3-4 samples, the vector drive's heavy load reversals 8-9; a soft coupling's 22-23, beyond one search: a best
+  candidate on the search's forward edge at a clear gain searches on from there, COUPLING_FORWARD_ROUNDS).
 * **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
   ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
   (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry
-  inside the window sets :data:`~jident_ros.stream.layout.FLAG_SECOND_ENTRY` (information).
+  inside the window sets :data:`~jident_ros.stream.layout.FLAG_SECOND_ENTRY` (information); it gets a window of
+  its own only when its excursion ends in a contact across the zone (a traversal back: at least
+  RETURN_MIN_SPAN_SHARE of the way to the running windows' other flank; a soft coupling's swing on the flank it
+  reached is not one).
 
 **Width estimate** (per window; docs/model.md's convention: theta_b = K2/r is the half-width, the flanks lie
 at +-K2/r from the centre):
