@@ -107,7 +107,9 @@ def one_line_failures(env, tmp: Path, runs) -> list[str]:
     running = [Proc(env, tmp, node, *args) for node, args in runs]
     lines = []
     for proc in running:
-        rc = proc.wait(TIMEOUT)
+        # all start at once: on a loaded 2-core machine their imports alone took over 60 s (a clean clone's CI
+        # beside another job); a node that hangs instead of exiting still fails here
+        rc = proc.wait(3 * TIMEOUT)
         out = proc.text().strip().splitlines()
         assert rc == 2 and len(out) == 1, logs(proc)
         lines.append(out[0])

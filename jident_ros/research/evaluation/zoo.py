@@ -732,6 +732,17 @@ def entry_shift(samples: int):
     return flank_refine(shifted)
 
 
+def argument_problem(flag: str, given, known, results: str) -> str:
+    """'' when every name of ``given`` is one of ``known`` and ``results`` is '-' or an existing file, else the one
+    line that says which argument is wrong (the zoo's and zoo_variants' command lines)."""
+    for name in given:
+        if name not in known:
+            return f"argument {flag}: not one of {', '.join(known)}: {name!r}"
+    if results != "-" and not Path(results).is_file():
+        return f"argument --results: no such file: {results} (give '-' to print)"
+    return ""
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m jident_ros.research.evaluation.zoo", description=__doc__.split("\n\n")[0])
     p.add_argument("--report", action="store_true", help="generate/reuse the recordings, diagnose, write the section")
@@ -753,12 +764,9 @@ def main(argv=None) -> int:
         p.print_help()
         return 0
     models = tuple(m.strip() for m in a.models.split(",") if m.strip())
-    for m in models:
-        if m not in MODELS:
-            sys.stderr.write(f"zoo: error: argument --models: not one of {', '.join(MODELS)}: {m!r}\n")
-            return 2
-    if a.results != "-" and not Path(a.results).is_file():
-        sys.stderr.write(f"zoo: error: argument --results: no such file: {a.results} (give '-' to print)\n")
+    problem = argument_problem("--models", models, MODELS, a.results)
+    if problem:
+        sys.stderr.write(f"zoo: error: {problem}\n")
         return 2
     commit = _commit()      # the code measured: read before the run
     with entry_shift(a.entry_shift):

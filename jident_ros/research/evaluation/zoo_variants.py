@@ -180,14 +180,10 @@ def main(argv=None) -> int:
     if reason:
         sys.stderr.write(f"zoo_variants: error: the vector drive needs motulator: {reason}\n")
         return 2
-    known = [n for n, _, _, _ in variants()]
     names = [n.strip() for n in a.variants.split(",") if n.strip()]
-    for n in names:
-        if n not in known:
-            sys.stderr.write(f"zoo_variants: error: argument --variants: not one of {', '.join(known)}: {n!r}\n")
-            return 2
-    if a.results != "-" and not Path(a.results).is_file():
-        sys.stderr.write(f"zoo_variants: error: argument --results: no such file: {a.results} (give '-' to print)\n")
+    problem = zoo.argument_problem("--variants", names, [n for n, _, _, _ in variants()], a.results)
+    if problem:
+        sys.stderr.write(f"zoo_variants: error: {problem}\n")
         return 2
     commit = zoo._commit()
     res = run(Path(a.out), log=lambda t: print(t, file=sys.stderr, flush=True), names=names or None)
