@@ -228,7 +228,7 @@ RETURN_REST_SAMPLES = 8
 #: flank level): a soft coupling's swing after its re-contact leaves a contact on the flank it reached and settles
 #: 5.6 mrad away, beyond min_travel_rad, as its torque falls back (the vector drive with k x 0.3, heavy load reversal:
 #: 0.04 of its 133 mrad; a false entry, J1 outside the plausible band) -- chosen on that variant; the zoo's and the
-#: variants' traversals back travel 0.99-1.01 of it, a turning point inside the zone read as a contact 0.17 (the fast
+#: variants' traversals back travel 0.99-1.03 of it, a turning point inside the zone read as a contact 0.17 (the fast
 #: speed loop's light load reversal: a bounce window 59 samples late, now not given)
 RETURN_MIN_SPAN_SHARE = 0.5
 
