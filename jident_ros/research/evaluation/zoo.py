@@ -178,6 +178,19 @@ def vector_cases(quick: bool) -> list:
     return cases
 
 
+def vector_recording(r, event: str, direction: str, j1: float, counts: int, snr, out: Path, formats) -> ZooRecording:
+    """The ZooRecording of one vector-drive recording ``r`` (:func:`vd_record.build`), its ``formats`` written
+    under ``out`` (the zoo's and zoo_variants' recordings)."""
+    tr = r.truth
+    gl = [{"entry_index": g["entry_index"], "recontact_index": g["recontact_index"], "traversal": g["traversal"]}
+          for g in tr["gaps"]]
+    zr = ZooRecording("vector drive", r.name, event.replace("_", " "), event in TRAVERSING_EVENTS, direction, j1,
+                      tr["backlash_width_m"], tr["reference_radius_m"], tr["gear_ratio"], counts, snr,
+                      tr["sample_period_s"], tr["event"]["index"], gl)
+    zr.files = {f: str(out / vd_record.write(out, r, f)) for f in formats}
+    return zr
+
+
 def gen_vector(out: Path, cache: Path, quick: bool, log) -> list:
     base = VectorParams()
     recs = []
@@ -187,14 +200,7 @@ def gen_vector(out: Path, cache: Path, quick: bool, log) -> list:
             for noise, snr in NOISE:
                 t0 = time.perf_counter()
                 r = vd_record.build(p, ev, d, vd_record.Sensors(counts, snr), seed=11, cache_dir=cache)
-                tr = r.truth
-                gl = [{"entry_index": g["entry_index"], "recontact_index": g["recontact_index"],
-                       "traversal": g["traversal"]} for g in tr["gaps"]]
-                zr = ZooRecording("vector drive", r.name, ev.replace("_", " "), ev in TRAVERSING_EVENTS, d, j1,
-                                  tr["backlash_width_m"], tr["reference_radius_m"], tr["gear_ratio"], counts, snr,
-                                  tr["sample_period_s"], tr["event"]["index"], gl)
-                zr.files = {f: str(out / vd_record.write(out, r, f)) for f in _formats(counts)}
-                recs.append(zr)
+                recs.append(vector_recording(r, ev, d, j1, counts, snr, out, _formats(counts)))
                 if time.perf_counter() - t0 > 2:
                     log(f"vector drive: simulated {r.name} ({time.perf_counter() - t0:.0f} s)")
     log(f"vector drive: {len(recs)} recordings")

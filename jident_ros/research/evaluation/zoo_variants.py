@@ -33,7 +33,7 @@ import numpy as np
 from jident_ros.config import load_system_config
 from jident_ros.research.evaluation import zoo
 from jident_ros.research.vector_drive import record as vd_record
-from jident_ros.research.vector_drive.model import TRAVERSING_EVENTS, DriveParams, motulator_available
+from jident_ros.research.vector_drive.model import DriveParams, motulator_available
 
 #: The events of every variant (forward): the traversing ones and a same-flank torque change.
 EVENTS = ("speed_step_down", "speed_reversal", "load_reversal_light", "load_reversal_heavy", "speed_step_up")
@@ -94,14 +94,8 @@ def generate(out: Path, log=print, names=None) -> dict:
             for label, fmt, counts, snr in SENSORS:
                 t0 = time.perf_counter()
                 r = vd_record.build(p, ev, "forward", vd_record.Sensors(counts, snr), seed=23, cache_dir=out / "cache")
-                tr = r.truth
-                gl = [{"entry_index": g["entry_index"], "recontact_index": g["recontact_index"],
-                       "traversal": g["traversal"]} for g in tr["gaps"]]
-                zr = zoo.ZooRecording("vector drive", r.name, ev.replace("_", " "), ev in TRAVERSING_EVENTS, "forward",
-                                      p.mechanics.motor_inertia_kgm2, tr["backlash_width_m"], tr["reference_radius_m"],
-                                      tr["gear_ratio"], counts, snr, tr["sample_period_s"], tr["event"]["index"], gl)
-                zr.files = {fmt: str(sub / vd_record.write(sub, r, fmt))}
-                recs.append((label, zr))
+                recs.append((label, zoo.vector_recording(r, ev, "forward", p.mechanics.motor_inertia_kgm2, counts, snr,
+                                                         sub, (fmt,))))
                 if time.perf_counter() - t0 > 2:
                     log(f"{name}: simulated {r.name} ({time.perf_counter() - t0:.0f} s)")
         got[name] = recs
