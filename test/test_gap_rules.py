@@ -436,3 +436,11 @@ def test_a1_vetoes_a_steady_entry_that_still_carries_a_contact_torque():
     assert why is not None and f"steady entry at row {s}" in why and "-80" in why
     free_fit = replace(g, model_choice="angle: no a1 in the window")
     assert steady_entry_contact({"a1": loaded, "m_el": m}, free_fit, 0.0, r, model) is None
+    # noise-free a1, no torque bands declared: a fit 1 % off J1 with a 0.5 % standard error leaves 1 % of the torque
+    # (two of its standard errors), which is the fit's own uncertainty, not a contact (our simulator's grid)
+    exact = np.zeros(n)
+    exact[s:] = r * np.full(n - s, 150.0) / j1
+    off = replace(g, inertia_kgm2=1.01 * j1, std_error_kgm2=0.005 * j1)
+    assert steady_entry_contact({"a1": exact, "m_el": np.full(n, 150.0)}, off, 0.0, r, GapModel()) is None
+    assert steady_entry_contact({"a1": exact, "m_el": np.full(n, 150.0)}, replace(off, inertia_kgm2=1.05 * j1), 0.0, r,
+                                GapModel()) is not None      # 5 % off: ten of its standard errors
