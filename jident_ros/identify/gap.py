@@ -650,8 +650,8 @@ KINK_TORQUE_AFTER_REL = 0.02
 #: The model choice's phrase of an angle fit that took the steady-entry fit (:func:`_anchored_angle`).
 STEADY_ENTRY_CHOICE = "angle (steady entry)"
 #: With a1 beside the encoder: the steady-entry fit's entry is checked by the motor equation over this many rows after
-#: it -- their mean torque residual J1 a1/r - (m_el - b1 w1) within STEADY_ENTRY_A1_Z of its noise (from the pre-entry
-#: rows' first differences) plus the declared torque offset and Coulomb bands and the torque accuracy.  A slowly
+#: it -- their mean torque residual J1 a1/r - (m_el - b1 w1) within STEADY_ENTRY_A1_Z of its noise (_robust_noise of the
+#: pre-entry rows) plus the declared torque offset and Coulomb bands and the torque accuracy.  A slowly
 #: unloading contact, which m_el and the angle cannot show, leaves its torque there: the vector drive with a light
 #: load (zoo_variants, J2 x 0.3), heavy load reversal at 30 dB: -86 N m in the first 4 rows (z = 32), the fit's entry 8
 #: samples early and J1 +9.8 % published as another class.  No other window of the zoo or the variants took the
@@ -672,7 +672,7 @@ def steady_entry_contact(window: dict, g: GapEstimate, b1: float, wheel_radius_m
     pre = res[max(0, s - 200):s]
     if pre.size < 8 or s + k > res.size:
         return None
-    noise = 1.4826 * float(np.median(np.abs(np.diff(pre)))) / np.sqrt(2.0)
+    noise = _robust_noise(pre)
     mean = float(np.mean(res[s:s + k]))
     level = float(np.mean(np.abs(net[s:s + k])))
     # the fit's own J1 uncertainty moves the residual by (se/J1) |net|: our simulator's noise-free steady entries
