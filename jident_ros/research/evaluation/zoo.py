@@ -319,15 +319,11 @@ def _model_rel(gap) -> Optional[float]:
     return float(math.sqrt(sum(x * x for x in v)) / gap.inertia_kgm2) if v else None
 
 
-def nominal_and_half_spacing() -> tuple:
-    """(the nominal J1, half the classes' closest spacing relative to it) of config/system.yaml, which every zoo
-    drive is diagnosed with (its J1 are 1.16, the nominal, and 1.073, a class 7.5 % below; the classes are 2.5 %
-    apart near the nominal: a 95 % interval wider than half that on either side holds two classes however the fit
-    is done)."""
-    system = load_system_config()
-    nominal = float(system.motor.nominal_inertia_kgm2)
-    classes = sorted(float(c) for c in system.grid.inertia_classes_kgm2)
-    return nominal, min(b - a for a, b in zip(classes, classes[1:])) / nominal / 2.0
+def nominal_inertia() -> float:
+    """The nominal J1 of config/system.yaml, which every zoo drive is diagnosed with (its J1 are 1.16, the nominal,
+    and 1.073, a class 7.5 % below): a WARN on a drive at it is false."""
+    return float(load_system_config().motor.nominal_inertia_kgm2)
+
 
 #: the oracle fit needs at least this many samples in the true gap
 ORACLE_MIN_SAMPLES = 8
@@ -390,7 +386,7 @@ def _first_time(zr: ZooRecording, fmt: str) -> float:
 # ------------------------------------------------------------------------------------------ statistics
 def summarise(items: list) -> dict:
     """Counts over (ZooRecording, diagnose_one result) pairs of one group."""
-    nominal_kgm2 = nominal_and_half_spacing()[0]
+    nominal_kgm2 = nominal_inertia()
     s = Counter()
     offsets, errs, k2errs, oracle, oracle_f = [], [], [], [], []
     gap_offsets = []        # the entry the gap estimator used (its change point) minus the true one
