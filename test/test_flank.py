@@ -221,6 +221,38 @@ def test_with_an_accelerometer_the_entry_moves_back_to_where_the_load_torque_van
     assert len(wins) == 1 and round((wins[0].entry_time_s - 1.0) / 5e-4) > 615
 
 
+
+def test_with_an_accelerometer_a_noisy_load_ramp_is_entered_at_its_end():
+    """With a1 at 20 dB, single_mass_run's 4-sigma tolerance starts the gap 3 samples before the load ramp ends
+    (the vector drive's heavy load reversals at 30 dB: -4) and back_to_load moves only back; the load torque's hinge
+    (load_hinge: a ramp to zero, then the gap's level) moves it forward to the ramp's end."""
+    from jident_ros.stream.flank import LOAD_HINGE_SEARCH, load_hinge
+    data, ch = _late_departure(snr=20.0)
+    wins, _ = _windows(data, ch, nominal_inertia_kgm2=1.16)
+    assert len(wins) == 1
+    assert abs(round((wins[0].entry_time_s - 1.0) / 5e-4) - 600) <= 1
+    # the hinge itself: a load ramp falling to zero at row 100, the gap's offset after it, noise
+    rng = np.random.default_rng(5)
+    k = np.arange(200)
+    acc = np.where(k >= 100, -20.0, 0.0)
+    m_el = 1.16 * acc + 3.0 + np.clip(100 - k, 0, None) * 12.0 + rng.normal(0, 4.0, k.size)
+    for start in (100 - LOAD_HINGE_SEARCH + 2, 97, 100, 103):
+        assert abs(load_hinge(m_el, acc, start, 1.16) - 100) <= 1, start
+    assert load_hinge(m_el, acc, 3, 1.16) == 3              # rows not there: unchanged
+
+
+def test_with_an_accelerometer_a_slip_keeps_its_departure_sample(system):
+    """Our simulator's slip with a1: delta jumps at the entry, the contact is lost there, no load ramp; the load hinge
+    is not applied after a jump (it put ours' entries 1-4 samples late)."""
+    recs = raw_recordings(system, J1S, K2S, snr_db=30.0, steady_s=0.3, seed=11)
+    for rec in recs:
+        det = flank_detector(system, 0, channels=rec.channels)
+        assert det.nominal_inertia_kgm2 is not None and "a1" in det.channels
+        wins = [e.window for e in run_detector(det, rec) if e.kind == "window"]
+        assert len(wins) == 1
+        t = rec.data[:, rec.channels.index("t")]
+        assert abs(wins[0].entry_time_s - t[rec.entry_row]) < 1e-9, (rec.entry_row, wins[0].entry_time_s)
+
 def _short_contact(contact=20, n=3000, ts=5e-4, r=0.1, x0=500, gap=30, w=50.0):
     """Flank A (delta 0) -> flank B (-0.1 rad) in ``gap`` samples (uniform acceleration from rest), ``contact``
     samples on B (shorter than contact_samples: never learnt as a contact), back to A the same way; a1 = r d²δ/dt²
