@@ -312,6 +312,17 @@ BACK_Z = 3.0
 #: ... or this share of |m_el| (the fitted J's error drifts the residual by a few % of m_el over the fit; the load
 #: torque before a contact loss is the whole m_el)
 BACK_REL_TOL = 0.05
+#: ... with a relative lag of m_el and dω1/dt as a regressor (dm_el/dt, per sample), kept when the fit puts it within
+#: +-this many samples (the vector drive's torque estimate and its a1 are 0.1-0.2 samples apart: its fast torque
+#: changes left a residual of 10 N m without it)
+BACK_MAX_LAG_SAMPLES = 4.0
+#: ... and J fitted only where the samples resolve it: its standard error within this share of the seed J1_nom, else
+#: the seed with the offset fitted to it -- a gap whose dω1/dt barely varies lets J and the offset trade off (the vector
+#: drive's speed reversal at 30 dB: J 0.93 with c 72 N m, the entry kept 3 samples late; its light load reversal at
+#: 30 dB: 15 late; the second drive's return traversal at 30 dB: 76 late).  Chosen on the vector drive's zoo (0.05 and
+#: 0.1 equal there); 0.05 put the J1 1.073 variant's speed reversal at 30 dB 16 samples early (the seed 8 % off the
+#: drive's J1 walked back into the contact), 0.1 not: the seed's error bounds what this can give, see results.md
+BACK_J_MAX_REL_SE = 0.1
 #: With a1, a window's own entry then moves forward (never back) to the end of the load torque's ramp: the residual
 #: m_el - J1_nom dω1/dt is fitted by c + h (e - k)_+ (a contact torque falling linearly to zero at e, then the gap's
 #: friction and offset) over the LOAD_HINGE_BEFORE samples before the entry and LOAD_HINGE_AFTER from it, e within
@@ -321,10 +332,27 @@ BACK_REL_TOL = 0.05
 LOAD_HINGE_BEFORE = 8
 LOAD_HINGE_AFTER = 16
 LOAD_HINGE_SEARCH = 6
-#: ... with a relative lag of m_el and dω1/dt as a regressor (dm_el/dt, per sample), kept when the fit puts it within
-#: +-this many samples (the vector drive's torque estimate and its a1 are 0.1-0.2 samples apart: its fast torque
-#: changes left a residual of 10 N m without it)
-BACK_MAX_LAG_SAMPLES = 4.0
+#: ... when the hinge explains the residual this much better than the entry itself (RSS at the entry / at the hinge:
+#: the vector drive's heavy load reversals at 30 dB 3.8-4.9, the second drive's speed steps at 30 dB 1.9-2.6; a speed
+#: reversal at 30 dB, whose torque falls in an S-curve, went 0 -> +3 at 1.14) -- chosen on the vector drive, tested on
+#: the second drive and ours
+LOAD_HINGE_MIN_GAIN = 1.5
+
+
+
+def _resolved(X: np.ndarray, y: np.ndarray, j_seed: float) -> bool:
+    """Whether the least-squares J of y on X (J the first column) is resolved: its standard error within
+    BACK_J_MAX_REL_SE of the seed."""
+    n, p = X.shape
+    if n <= p + 1:
+        return False
+    try:
+        cov = np.linalg.inv(X.T @ X)
+    except np.linalg.LinAlgError:
+        return False
+    coef = np.linalg.lstsq(X, y, rcond=None)[0]
+    s2 = float(np.sum((y - X @ coef) ** 2)) / (n - p)
+    return math.sqrt(max(float(cov[0, 0]) * s2, 0.0)) <= BACK_J_MAX_REL_SE * abs(j_seed)
 
 
 def back_to_load(m_el: np.ndarray, acc: np.ndarray, entry: int, first: int, inertia_seed_kgm2: float,
@@ -347,13 +375,16 @@ def back_to_load(m_el: np.ndarray, acc: np.ndarray, entry: int, first: int, iner
     j = float(inertia_seed_kgm2)
     c, lag = float(np.mean(y - j * x)), 0.0
     if np.ptp(x) > 0:
-        (jf, cf, lf), *_ = np.linalg.lstsq(np.column_stack([x, np.ones(m), dm[entry:entry + m]]), y, rcond=None)
-        if 0.5 * j <= jf <= 2.0 * j and abs(lf) <= BACK_MAX_LAG_SAMPLES:
+        X = np.column_stack([x, np.ones(m), dm[entry:entry + m]])
+        (jf, cf, lf), *_ = np.linalg.lstsq(X, y, rcond=None)
+        if 0.5 * j <= jf <= 2.0 * j and abs(lf) <= BACK_MAX_LAG_SAMPLES and _resolved(X, y, j):
             j, c, lag = float(jf), float(cf), float(lf)
         else:
-            (jf, cf), *_ = np.linalg.lstsq(np.column_stack([x, np.ones(m)]), y, rcond=None)
-            if 0.5 * j <= jf <= 2.0 * j:
+            (jf, cf), *_ = np.linalg.lstsq(X[:, :2], y, rcond=None)
+            if 0.5 * j <= jf <= 2.0 * j and _resolved(X[:, :2], y, j):
                 j, c = float(jf), float(cf)
+            else:
+                c = float(np.mean(y - j * x))      # J not resolved: the seed, the offset fitted with it
     res = m_el - j * acc - c - lag * dm
     sigma = float(np.std(res[entry:entry + m], ddof=3)) if m > 3 else 0.0
 
@@ -369,25 +400,27 @@ def back_to_load(m_el: np.ndarray, acc: np.ndarray, entry: int, first: int, iner
 
 
 
-def load_hinge(m_el: np.ndarray, acc: np.ndarray, entry: int, inertia_kgm2: float) -> int:
-    """The row where the load torque's ramp ends near ``entry`` (LOAD_HINGE_* constants): r = m_el - J1 dω1/dt fitted
-    by c + h (e - k)_+ over the fixed rows [entry - LOAD_HINGE_BEFORE, entry + LOAD_HINGE_AFTER), for e within
-    +-LOAD_HINGE_SEARCH of ``entry``; the e of the least residual sum of squares (the first of equal ones).
-    ``entry`` when the rows are not there."""
+def load_hinge(m_el: np.ndarray, acc: np.ndarray, entry: int, inertia_kgm2: float) -> tuple:
+    """(row, gain) of where the load torque's ramp ends near ``entry`` (LOAD_HINGE_* constants): r = m_el - J1 dω1/dt
+    fitted by c + h (e - k)_+ over the fixed rows [entry - LOAD_HINGE_BEFORE, entry + LOAD_HINGE_AFTER), for e within
+    +-LOAD_HINGE_SEARCH of ``entry``; the e of the least residual sum of squares (the first of equal ones) and the gain
+    RSS(entry) / RSS(e).  (``entry``, 1.0) when the rows are not there."""
     lo, hi = entry - LOAD_HINGE_BEFORE, entry + LOAD_HINGE_AFTER
     if lo < 0 or hi > m_el.size:
-        return entry
+        return entry, 1.0
     k = np.arange(lo, hi, dtype=float)
     y = np.asarray(m_el[lo:hi], float) - float(inertia_kgm2) * np.asarray(acc[lo:hi], float)
-    best, best_rss = entry, math.inf
+    best, best_rss, rss_entry = entry, math.inf, math.nan
     for e in range(max(entry - LOAD_HINGE_SEARCH, lo + 1), min(entry + LOAD_HINGE_SEARCH, hi - 2) + 1):
         X = np.column_stack([np.ones(k.size), np.clip(e - k, 0.0, None)])
         coef, *_ = np.linalg.lstsq(X, y, rcond=None)
         r = y - X @ coef
         val = float(r @ r)
+        if e == entry:
+            rss_entry = val
         if val < best_rss:
             best, best_rss = e, val
-    return best
+    return best, (rss_entry / best_rss if best_rss > 0 else 1.0)
 
 #: Without a1, a return traversal's entry (delta resting near the flank it left with no relative speed, read as a
 #: contact: the second drive's and the vector drive's traversals back were entered 26-138 samples late) moves back
@@ -1349,7 +1382,8 @@ class FlankDetector(BacklashDetector):
             if not getattr(self, "_cap_returning", False) and not jumped:
                 # forward (never back) to the end of the load torque's ramp (LOAD_HINGE_*; not after a jump of delta,
                 # our simulator's slip: its contact is lost at the jump, no ramp -- the hinge put it 1-4 samples late)
-                entry = max(entry, load_hinge(wd["m_el"], acc, entry, self.nominal_inertia_kgm2))
+                hinge, gain = load_hinge(wd["m_el"], acc, entry, self.nominal_inertia_kgm2)
+                entry = hinge if hinge > entry and gain >= LOAD_HINGE_MIN_GAIN else entry
             if getattr(self, "_cap_returning", False):
                 # a traversal back: the coupling model's contact loss near back_to_load's entry
                 entry = self._coupling_move(data, entry + off, dep + off, 1.0, 1.0) - off
