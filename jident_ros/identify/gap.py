@@ -258,7 +258,11 @@ def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_
         end -= 1  # the flanks meet between samples: the last sample before the drop may already carry load
         how = "signature"
     if end - entry_index < min_samples:
-        raise NoGapError(f"gap too short: {end - entry_index} samples inside the zone, need >= {min_samples}")
+        by = {"detector": "to the detector's re-contact row",
+              "angles": "while |alpha1 - alpha2| < K2/r",
+              "signature": f"until the motor's acceleration falls below {drop:g} x its entry value: a short gap, or a "
+                           f"motor that hardly accelerates in it, as in a load-driven traversal"}[how]
+        raise NoGapError(f"gap too short: {end - entry_index} samples inside the zone ({by}), need >= {min_samples}")
     return entry_index, end, how
 
 
