@@ -146,7 +146,8 @@ def markdown(res: dict, command: str, commit: str) -> str:
              "with one property changed per variant, events " + ", ".join(e.replace("_", " ") for e in EVENTS)
              + " (forward; the last a same-flank torque increase: no entry may be found), each as "
              + ", ".join(s[0] for s in SENSORS) + "; diagnosed as the zoo diagnoses the vector drive (declared as "
-             "there, the friction variant with its own friction, the small drive with its drive file). No threshold was chosen on any of these drives.", "",
+             "there, the friction variant with its own friction, the small drive with its drive file). No threshold "
+             "was chosen on any of these drives.", "",
              "| variant | what changed | traversals found | entry within ±2 | published (traversal windows) | "
              "published > 10 % off | median / max abs error | 95 % CI covers | another class named / 'between "
              "classes', on the drive's class | false entries |",
