@@ -391,3 +391,14 @@ def test_model_error_is_the_change_of_j1_with_a_linear_torque_term():
         assert estimate_inertia(w, N_PRE, width, R, TS, method).model_error_kgm2 == 0.0
     ga = estimate_inertia(motor_angles(w), N_PRE, width, R, TS, "angle")   # the angle fit: its change-point term
     assert ga.method == "angle" and ga.model_error_kgm2 == ga.change_point_error_kgm2
+
+
+def test_a_gap_too_short_says_by_what_its_end_was_found():
+    """The refusal names the rule that ended the gap: the angles (K2), the detector's re-contact row, or the
+    motor's acceleration (a motor that hardly accelerates, as in a load-driven traversal, ends it at once)."""
+    with pytest.raises(NoGapError, match=r"gap too short: 2 samples inside the zone \(while \|alpha1 - alpha2\|"):
+        gap_interval(_angles([0.7, 0.6, 0.1, 0.2, 0.3, 0.4, 0.5, 0.2, 0.1, 0.9]), 4, 0.05, 0.1)
+    with pytest.raises(NoGapError, match=r"2 samples inside the zone \(to the detector's re-contact row\)"):
+        gap_interval(_angles([0.1] * 10), 4, 0.05, 0.1, recontact_index=6)
+    with pytest.raises(NoGapError, match=r"2 samples inside the zone \(until the motor's acceleration falls below 0.6 x"):
+        gap_interval({"a1": np.array([0.0, 10.0, 9.0, 8.0, 1.0, 0.0])}, 1, 0.005, R)

@@ -354,3 +354,30 @@ def test_image_min_margin_applies_only_to_the_variant_it_was_chosen_for():
     assert image_domain(*args) == (True, "")
     inside, reason = image_domain(*args, variant="sensor_matched")
     assert not inside and "'sensor_matched'" in reason and "image_min_margin" in reason
+
+
+@pytest.mark.parametrize("terms,names", [
+    # the vector drive's heavy load reversal: 2 N m of gap torque against the declared offset band
+    ((("statistical", 0.007), ("torque_offset", 0.143), ("torque_lag", 0.027)),
+     ("an unknown constant torque in the gap", "± 24.1 %", "bounded by torque_offset_rel_base")),
+    # a short gap on a coarse encoder: only the data narrow it
+    ((("statistical", 0.143), ("torque_offset", 0.007), ("torque_accuracy", 0.02)),
+     ("the samples themselves", "± 24.1 %", "only more data narrow it")),
+    ((("torque_lag", 0.09), ("change_points", 0.02)), ("the torque estimate's lag", "bounded by torque_lag_max_s")),
+])
+def test_an_undetermined_refusal_names_its_largest_part_and_the_key_that_bounds_it(terms, names):
+    """A user whose drive gives 'undetermined' learns what widens the interval: a declared band (which a better
+    declaration may narrow) or the data; the part's share is of the 95 % half-width (its share of se)."""
+    from dataclasses import replace
+
+    from jident_ros.identify.verdict import VerdictPolicy, decide_gap
+    se = 0.146   # the interval ± 1.96 x 0.146 / 1.165 = ± 24.6 %; a part of 0.143: ± 24.6 x 0.143 / 0.146 = ± 24.1 %
+    base = _wide_gap(1.165, se)
+    gap = replace(base, std_error_terms=terms)
+    d = decide_gap(gap, (1.073, 1.16, 1.247), 1.16, VerdictPolicy(), None, 0.005)
+    assert d.status == "ambiguous" and not d.publish
+    tail = d.reason.split("; the largest part: ", 1)[1]
+    for n in names:
+        assert n in tail, d.reason
+    # without parts, the message is the plain one
+    assert "largest part" not in decide_gap(base, (1.073, 1.16, 1.247), 1.16, VerdictPolicy(), None, 0.005).reason

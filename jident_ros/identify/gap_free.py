@@ -69,6 +69,34 @@ FREE_REL_SE_FLOOR = 5e-4
 CHANGEPOINT_TRIMS = (1, 2, 4, 8)
 
 
+#: The parts of a gap J1's standard error (``GapEstimate.std_error_terms``): what each is, and the drive parameter
+#: (config/nodes.yaml, docs/your_drive.md) that bounds it, None where only the data narrow it (a longer gap, more
+#: torque in it, a finer encoder, less noise).  The "undetermined" refusal names its largest term from here.
+STD_ERROR_TERM_SOURCES = {
+    "statistical": ("the samples themselves (encoder quantisation and noise through the fit)", None),
+    "torque_noise": ("the noise on the torque estimate m_el", None),
+    "coulomb_band": ("the motor's Coulomb friction band", "coulomb_friction_max_nm"),
+    "viscous_band": ("the viscous friction band", "viscous_friction_band_nms_per_rad"),
+    "torque_offset": ("an unknown constant torque in the gap (the torque estimate's offset)", "torque_offset_rel_base"),
+    "torque_drift": ("a drift of that unknown torque across the gap", "torque_offset_rel_base"),
+    "torque_lag": ("the torque estimate's lag", "torque_lag_max_s"),
+    "change_points": ("where the gap begins and ends (the change points)", None),
+    "model_form": ("the fit's model form (with and without a constant torque term)", None),
+    "model_floor": ("the model's own error (a floor: the sampled torque's double integral)", None),
+    "torque_accuracy": ("the torque estimate's scale accuracy", "torque_accuracy"),
+}
+
+
+def largest_term(std_error_terms) -> tuple | None:
+    """(name, standard error) of the largest finite part of a gap J1's standard error, None when there is none."""
+    best = None
+    for name, value in std_error_terms or ():
+        v = float(value)
+        if np.isfinite(v) and v > 0.0 and (best is None or v > best[1]):
+            best = (str(name), v)
+    return best
+
+
 class FreeFitError(ValueError):
     """No gap interval the free fit can use (the caller turns it into NoGapError)."""
 

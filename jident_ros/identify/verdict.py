@@ -34,7 +34,7 @@ from typing import Mapping, Optional
 import numpy as np
 
 from jident_ros.identify.gap import GapEstimate, NoGapError, gap_interval
-from jident_ros.identify.gap_free import GapModel
+from jident_ros.identify.gap_free import STD_ERROR_TERM_SOURCES, GapModel, largest_term
 
 #: Window channels whose magnitude is bounded (see :func:`input_bounds`).
 BOUNDED = ("m_el", "omega1", "omega2", "a1", "a2", "v2")
@@ -340,12 +340,31 @@ def decide_gap(gap: GapEstimate, classes, nominal_kgm2: float, policy: VerdictPo
         a, b = gap.ci95_kgm2
         return GapDecision("ambiguous", f"undetermined: 95 % interval {a:.4g}..{b:.4g} kg m^2 is ± "
                                       f"{100 * half / j1:.3g} % of J1 (> ± {100 * MAX_CI95_HALF_WIDTH_REL:g} %): it cannot tell "
-                                      f"a {100 * MAX_CI95_HALF_WIDTH_REL:g} % change", held)
+                                      f"a {100 * MAX_CI95_HALF_WIDTH_REL:g} % change{widest_term(gap)}", held)
     if len(held) >= 2:
         a, b = gap.ci95_kgm2
         return GapDecision("ambiguous", f"ambiguous: 95 % interval {a:.4g}..{b:.4g} kg m^2 holds classes "
                                         f"{fmt_classes(held)}", held, publish=bool(policy.publish_ambiguous))
     return GapDecision("accepted", "", held, publish=True)
+
+
+def widest_term(gap: GapEstimate) -> str:
+    """'; the largest part: ...' for an undetermined gap J1: which part of its standard error
+    (:data:`~jident_ros.identify.gap_free.STD_ERROR_TERM_SOURCES`) widens its interval most, as ± % of J1 (the
+    interval's half-width times that part's share of the standard error), and the parameter that bounds it: a
+    drive declared too loosely can be declared tighter there; a part only the data narrow says so.  '' when the
+    estimate carries no parts."""
+    top = largest_term(getattr(gap, "std_error_terms", ()))
+    if top is None or not gap.inertia_kgm2:
+        return ""
+    name, part = top
+    se = float(gap.std_error_kgm2)
+    if not (math.isfinite(se) and se > 0.0):
+        return ""
+    half = 0.5 * (gap.ci95_kgm2[1] - gap.ci95_kgm2[0])   # the interval's own quantile times se
+    what, param = STD_ERROR_TERM_SOURCES.get(name, (name, None))
+    where = f"bounded by {param}" if param else "only more data narrow it"
+    return f"; the largest part: {what}, ± {100 * half * part / se / abs(gap.inertia_kgm2):.3g} % ({where})"
 
 
 def width_disagreement(rc: RecontactCheck, backlash_width_m: float) -> str:
@@ -388,4 +407,4 @@ def image_domain(fused_margin: float, library_width_m: float, backlash_width_m: 
 
 __all__ = ["BOUNDED", "MARGIN_CALIBRATED_VARIANTS", "RECONTACT_SLACK_SAMPLES", "STATUSES", "GapDecision", "RecontactCheck", "VerdictPolicy",
            "classes_in_interval", "decide_gap", "fmt_classes", "image_domain", "input_bounds", "input_refusal",
-           "recontact_check", "width_disagreement"]
+           "recontact_check", "widest_term", "width_disagreement"]
