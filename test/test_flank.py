@@ -600,3 +600,27 @@ def test_back_to_load_keeps_the_seed_j1_where_the_gap_does_not_resolve_it():
     m_el, acc = d["m_el"].astype(float), d["acc"].astype(float)
     for seed in (1.073, 1.16, 1.25):
         assert abs(back_to_load(m_el, acc, 182, 54, seed) - 160) <= 2, seed
+
+
+def test_without_a1_a_late_departure_moves_to_the_spring_s_contact_loss():
+    """The vector drive's speed reversals at 30 dB, JointState (alpha1, alpha2 at 2^16 counts, m_el; rows 120 before
+    the true entry to 60 after, from the zoo's CSV): delta crosses the departure threshold 3 samples after the contact
+    loss (the coupling untwists 0.8 mrad, the threshold is 1.5 mrad).  The spring model (the contact carries the
+    steady m_el, falling linearly with delta's untwist to nothing at the entry) puts the entry within 2 samples, at a
+    clear gain and with J1 near 1.16; from the true entry it moves less than SPRING_MIN_MOVE.  The detector takes the
+    move only at SPRING_MIN_GAIN with a plausible J."""
+    from pathlib import Path
+
+    from jident_ros.stream.flank import SPRING_MAX_J_DEVIATION, SPRING_MIN_GAIN, SPRING_MIN_MOVE, spring_entry
+    d = np.load(Path(__file__).parent / "data" / "vd_speed_reversal_jointstate_30dB.npz")
+    for key in ("fwd", "rev"):
+        a1, a2, m_el = d[f"{key}_alpha1"], d[f"{key}_alpha2"], d[f"{key}_m_el"].astype(float)
+        delta = a1 - a2
+        flank = float(np.mean(delta[:60]))
+        assert abs(delta[123] - flank) > 1.5e-3 >= abs(delta[122] - flank)      # the departure: 3 samples late
+        e, gain, j = spring_entry(a1, delta, m_el, 123, flank, 5e-4)
+        assert abs(e - 120) <= 2 and gain >= SPRING_MIN_GAIN and abs(j / 1.16 - 1) <= SPRING_MAX_J_DEVIATION, key
+        e, gain, _ = spring_entry(a1, delta, m_el, 120, flank, 5e-4)
+        assert abs(e - 120) < SPRING_MIN_MOVE, key
+    e, gain, j = spring_entry(a1, delta, m_el, 30, flank, 5e-4)        # the rows before it are not there
+    assert (e, gain) == (30, 1.0) and math.isnan(j)

@@ -36,7 +36,11 @@ and on what the clutch does, not on inequality (1):
   while delta is beyond the edge it leaves, the double integrals in alpha1): a coupling that untwists off its flank
   under a falling load crosses the departure threshold before the contact is lost (the second drive's speed steps
   3-4 samples, the vector drive's heavy load reversals 8-9; a soft coupling's 22-23, beyond one search: a best
-  candidate on the search's forward edge at a clear gain searches on from there, COUPLING_FORWARD_ROUNDS).
+  candidate on the search's forward edge at a clear gain searches on from there, COUPLING_FORWARD_ROUNDS).  A window's
+  own entry that nothing moved, without a1, goes back to where a spring carrying the steady m_el loses its contact
+  (:func:`spring_entry`: a fast departure crosses the threshold after the contact loss, the vector drive's speed
+  reversals 3 samples); with a1 it goes forward to the end of the load torque's ramp (:func:`load_hinge`: a noisy run
+  starts early) -- both at a clear gain (SPRING_*, LOAD_HINGE_*).
 * **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
   ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
   (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry
@@ -620,6 +624,68 @@ def coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, depa
         return departure, 1.0, math.sqrt(rss_dep / max(n - 6, 1))
     gain = rss_centre / best_rss if best_rss > 0 else 1.0
     return best, gain, math.sqrt(best_rss / max(n - 6, 1))
+
+
+#: Without a1, a window's own entry that delta's departure threshold placed after the contact loss (a fast departure:
+#: the vector drive's speed reversals, +3: the coupling untwists 0.8 mrad before the contact is lost, the threshold is
+#: 1.5 mrad) moves to the contact loss of a spring whose stiffness the steady contact gives (:func:`spring_entry`):
+#: in contact the coupling torque is T0 (1 - u / u_e), u delta's move off its flank level toward the zone, u_e that move
+#: at the candidate entry e (so the coupling carries T0, the steady m_el before the departure, on the flank and nothing
+#: at e), 0 from e on; alpha1 = a + v k + c k^2 + (Phi(m_el) - Phi(torque)) / J (Phi the double integral), least
+#: squares over SPRING_FIT_BEFORE rows before the departure and SPRING_FIT_AFTER from it, e within +-SPRING_SEARCH;
+#: T0 the median m_el over the rows SPRING_TORQUE_ROWS before the departure ...
+SPRING_FIT_BEFORE = 52
+SPRING_FIT_AFTER = 32
+SPRING_SEARCH = 12
+SPRING_TORQUE_ROWS = (80, 30)
+#: ... taken when it explains alpha1 this much better than the departure (RSS at the departure / at e: the vector
+#: drive's speed reversals 2.4-5.0, the second drive's speed steps 2.4-10; the vector drive's speed steps 1.3-1.7, whose
+#: best lay 1-2 samples before the departure, early) ...
+SPRING_MIN_GAIN = 2.0
+#: ... with its J within this share of J1_nom (the vector drive's heavy load reversals, whose load torque reverses
+#: during the contact, not a steady T0: J +20..+28 %, e 5 early; the speed reversals and the second drive's speed steps
+#: -9..-1 %) -- chosen on the vector drive, tested on the second drive, ours (a jump: not applied) and the variants
+SPRING_MAX_J_DEVIATION = 0.15
+#: ... and only a move of at least this many samples: the model finds where the coupling torque vanishes, which comes
+#: before the zone entry by the coupling's damping (c/k: 1.6 samples on the vector drive), so 1-2 samples are within
+#: what it resolves (the vector drive's J1 1.073 speed step clean moved -1 -> -3, the second drive's speed steps
+#: -1 -> -2 and -3 -> -2; the speed reversals move 4-5 samples back)
+SPRING_MIN_MOVE = 3
+
+
+def spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, departure: int, flank_rad: float,
+                 sample_period_s: float) -> tuple:
+    """(entry row, gain, J) of the spring model's contact loss near ``departure`` (SPRING_* constants); (departure, 1.0,
+    nan) when the rows are not there or delta does not leave its flank."""
+    lo, hi = departure - SPRING_FIT_BEFORE, departure + SPRING_FIT_AFTER
+    t_lo, t_hi = departure - SPRING_TORQUE_ROWS[0], departure - SPRING_TORQUE_ROWS[1]
+    if min(lo, t_lo) < 0 or hi > alpha1.size or departure - SPRING_SEARCH < lo + 2:
+        return departure, 1.0, math.nan
+    side = 1.0 if delta[departure] >= flank_rad else -1.0
+    t0 = float(np.median(m_el[t_lo:t_hi]))
+    rows = np.arange(lo, hi)
+    k = (rows - departure) / float(SPRING_FIT_AFTER)
+    phi = _double_integral(m_el[lo:hi], sample_period_s)
+    y = np.asarray(alpha1[lo:hi], float)
+    y = y - y.mean()
+    u = side * (np.asarray(delta[lo:hi], float) - flank_rad)
+    base = np.column_stack([np.ones(k.size), k, k * k])
+    best, best_rss, rss_dep, best_j = departure, math.inf, math.nan, math.nan
+    for e in range(departure - SPRING_SEARCH, departure + SPRING_SEARCH + 1):
+        ue = u[e - lo]
+        frac = np.clip(1.0 - u / ue, 0.0, None) if ue > 0 else np.ones(k.size)
+        torque = np.where(rows < e, t0 * frac, 0.0)
+        X = np.column_stack([base, phi - _double_integral(torque, sample_period_s)])
+        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+        r = y - X @ coef
+        val = float(r @ r)
+        if e == departure:
+            rss_dep = val
+        if val < best_rss:
+            best, best_rss, best_j = e, val, (1.0 / coef[3] if coef[3] != 0 else math.nan)
+    if not best_rss > 0:
+        return departure, 1.0, math.nan
+    return best, rss_dep / best_rss, float(best_j)
 
 
 def _noise(x: np.ndarray) -> float:
@@ -1390,7 +1456,24 @@ class FlankDetector(BacklashDetector):
         elif src != "a1" and self.detector_name == "flank" and not getattr(self, "_cap_returning", False):
             # without a1, a coupling that untwisted off its flank: the entry at the coupling model's contact loss
             entry = self._coupling_move(data, entry + off, dep + off, rounds=COUPLING_FORWARD_ROUNDS) - off
+            if entry == dep:
+                # nothing moved the departure (a coupling that untwisted off its flank moved forward, SPRING_*)
+                entry = self._spring_move(data, entry + off, dep + off) - off
         return entry - dep, None if recontact is None else recontact + off
+
+    def _spring_move(self, data: np.ndarray, entry: int, departure: int) -> int:
+        """``entry`` moved to :func:`spring_entry`'s contact loss at a clear gain with a plausible J, by SPRING_MIN_MOVE
+        samples or more (SPRING_*), on a fine encoder (FREE_MAX_NOISE_RAD, as the coupling model); else ``entry``."""
+        flank = getattr(self, "_cap_flank", (math.nan, math.nan))[0]
+        if not math.isfinite(flank) or "m_el" not in self.channels or self.nominal_inertia_kgm2 is None \
+                or not self.angle_quantum_rad / math.sqrt(12.0) <= FREE_MAX_NOISE_RAD:
+            return entry
+        e, gain, j = spring_entry(data[:, self._i_a1], self._delta(data), data[:, self.channels.index("m_el")],
+                                  departure, flank, self.sample_period_s)
+        if gain >= SPRING_MIN_GAIN and abs(j / self.nominal_inertia_kgm2 - 1.0) <= SPRING_MAX_J_DEVIATION \
+                and e <= entry - SPRING_MIN_MOVE:
+            return e
+        return entry
 
     def _coupling_move(self, data: np.ndarray, entry: int, departure: int,
                        forward_gain: float = COUPLING_MIN_GAIN_FORWARD, back_gain: float = COUPLING_MIN_GAIN,
