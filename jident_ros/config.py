@@ -20,7 +20,7 @@ import dataclasses
 import dataclasses as dc
 import math
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Optional
 
 import pywt
 import yaml
@@ -92,13 +92,48 @@ def _coerce(name: str, default: Any, v: Any) -> Any:
     return v
 
 
+#: The section of a params file that holds the system configuration when the file has node sections too.
+ALL_NODES_SECTION = "/**"
+
+
+def _ros_sections(data) -> Optional[dict]:
+    """{section name: its ros__parameters} when ``data`` is a ROS 2 params file (every top-level value a mapping
+    with ``ros__parameters``), else None."""
+    if not isinstance(data, Mapping) or not data:
+        return None
+    if not all(isinstance(v, Mapping) and "ros__parameters" in v for v in data.values()):
+        return None
+    return {str(k): (v["ros__parameters"] or {}) for k, v in data.items()}
+
+
 def strip_ros_wrapper(data: Mapping) -> Mapping:
-    """Return the ``ros__parameters`` mapping of a params file (or data itself)."""
-    if isinstance(data, Mapping) and len(data) == 1:
-        (key, inner), = data.items()
-        if isinstance(inner, Mapping) and "ros__parameters" in inner:
-            return inner["ros__parameters"]
-    return data
+    """Return the ``ros__parameters`` mapping of a params file (or data itself).  A file with several sections
+    (a drive file: ``/**`` for the system configuration, ``/**/jident_diagnostic`` and ``/**/jident_windowing``
+    for the nodes, docs/your_drive.md) gives its ``/**`` section; the node sections are read by
+    :func:`node_parameters`."""
+    sections = _ros_sections(data)
+    if sections is None:
+        return data
+    if len(sections) == 1:
+        return next(iter(sections.values()))
+    return sections.get(ALL_NODES_SECTION, {})
+
+
+def node_parameters(path_or_profile: str | Path | None, node: str) -> dict:
+    """The parameters a params file (``--config``: a file or a profile name) sets for the node named ``node``
+    (e.g. ``jident_diagnostic``): its sections ``/**/<node>``, ``<node>`` and ``/<node>``, merged in file order.
+    {} for a file without such a section (a plain system configuration)."""
+    if path_or_profile is None or str(path_or_profile) == "":
+        return {}
+    target = resolve_config_path(path_or_profile)
+    sections = _ros_sections(load_yaml(target)) or {}
+    out: dict = {}
+    for name, values in sections.items():
+        if name in (f"/**/{node}", node, f"/{node}"):
+            if not isinstance(values, Mapping):
+                raise ConfigError(f"{target}: section {name}: expected a mapping of parameters, got {values!r}")
+            out.update(values)
+    return out
 
 
 def system_config_from_dict(data: Mapping | None) -> SystemConfig:
@@ -109,7 +144,9 @@ def system_config_from_dict(data: Mapping | None) -> SystemConfig:
     parts = {}
     for key in data:
         if key not in SECTIONS and key not in _FOREIGN_SECTIONS:
-            raise ConfigError(f"{key}: unknown section (known: {', '.join(SECTIONS)})")
+            raise ConfigError(f"{key}: unknown section (known: {', '.join(SECTIONS)}; a node's parameter goes in "
+                              f"the node's own section, e.g. /**/jident_diagnostic: ros__parameters: "
+                              f"{{{key}: ...}}, docs/your_drive.md)")
     for section, cls in SECTIONS.items():
         given = data.get(section) or {}
         if not isinstance(given, Mapping):

@@ -7,10 +7,13 @@ from jident_ros.parameters import DIAGNOSTIC as DIAGNOSTIC_DEFAULTS
 from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
 
 
-def identification_lines(system) -> list:
-    """The keys the gap estimator and the detectors read, with their values and units."""
+def identification_lines(system, diagnostic: dict | None = None, windowing: dict | None = None) -> list:
+    """The keys the gap estimator and the detectors read, with their values and units; ``diagnostic`` and
+    ``windowing``: what a drive file declares for those nodes (cli/drive_file.py), over the nodes' defaults."""
     m, s, g, r = system.motor, system.sampling, system.grid, system.load.wheel_radius_m
-    lo, hi = DIAGNOSTIC_DEFAULTS["plausible_min_ratio"], DIAGNOSTIC_DEFAULTS["plausible_max_ratio"]
+    dg = dict(DIAGNOSTIC_DEFAULTS, **(diagnostic or {}))
+    wd = dict(WINDOWING_DEFAULTS, **(windowing or {}))
+    lo, hi = dg["plausible_min_ratio"], dg["plausible_max_ratio"]
     j = m.nominal_inertia_kgm2
     widths = ", ".join(f"{w:g}" for w in g.backlash_widths_m)
     return [
@@ -24,10 +27,15 @@ def identification_lines(system) -> list:
         f"  sampling.sample_period_s = {s.sample_period_s:g} s ({1.0 / s.sample_period_s:g} Hz); window "
         f"{s.samples_before_entry} + {s.samples_from_entry} samples = "
         f"{(s.samples_before_entry + s.samples_from_entry) * s.sample_period_s:g} s",
-        f"  windowing: detector {WINDOWING_DEFAULTS['detector']}, gear_ratio {WINDOWING_DEFAULTS['gear_ratio']:g} "
-        f"(motor turns per load-encoder turn), joints motor_joint '{WINDOWING_DEFAULTS['motor_joint']}' / "
-        f"load_joint '{WINDOWING_DEFAULTS['load_joint']}' (node parameters; jident diagnose --gear-ratio, "
+        f"  windowing: detector {wd['detector']}, gear_ratio {wd['gear_ratio']:g} "
+        f"(motor turns per load-encoder turn), joints motor_joint '{wd['motor_joint']}' / "
+        f"load_joint '{wd['load_joint']}' (node parameters; jident diagnose --gear-ratio, "
         f"--motor-joint, --load-joint)",
+        f"  the drive's torque estimate and friction: torque_accuracy {dg['torque_accuracy']:g}, torque_offset_rel_base "
+        f"{dg['torque_offset_rel_base']:g} (± {dg['torque_offset_rel_base'] * m.base.torque_nm:.3g} N m), "
+        f"coulomb_friction_max_nm {dg['coulomb_friction_max_nm']:g}, viscous_friction_band_nms_per_rad "
+        f"{dg['viscous_friction_band_nms_per_rad']:g}, torque_lag_max_s {dg['torque_lag_max_s']:g} (diagnostic node "
+        f"parameters; jident diagnose --torque-accuracy, ...)",
     ]
 
 

@@ -118,6 +118,7 @@ def cmd_info(args) -> int:
     """Base values and the loaded steady state at every eta_k (docs/model.md)."""
     import numpy as np
 
+    from jident_ros.cli.drive_file import read_drive_file
     from jident_ros.cli.drive_info import identification_lines, library_line, model_problem
     from jident_ros.config import load_method_config, load_system_config
     from jident_ros.identify.library import default_library_path
@@ -134,8 +135,14 @@ def cmd_info(args) -> int:
           f"U_b = {b.voltage_peak_v:.1f} V peak, I_b = {b.current_peak_a:.1f} A peak, Z_b = {b.impedance_ohm:.3f} ohm")
     print(f"  w = x_s x_w - x_m^2 = {m.sigma_determinant_pu:.4f}; pull-out torque "
           f"{steady_state_phasors(m, s_bd)['torque_pu']:.3f} p.u. at slip {s_bd * 100:.1f} %")
-    for line in identification_lines(cfg):
+    declared = read_drive_file(args.config)
+    for line in identification_lines(cfg, declared.diagnostic, declared.windowing):
         print(line)
+    if declared.lines():
+        print(f"Declared in {declared.path} (jident diagnose and trend use these; the nodes get them with "
+              f"--params-file; a flag overrides them):")
+        for line in declared.lines():
+            print(line)
     problem = model_problem(cfg)
     method = load_method_config()
     lib = default_library_path(cfg, method)
@@ -269,6 +276,7 @@ def cmd_evaluate(args) -> int:
 
 def cmd_diagnose(args) -> int:
     """Diagnose every backlash entry of a recording as the windowing + diagnostic nodes do (offline.py)."""
+    from jident_ros.cli.drive_file import read_drive_file, resolve
     from jident_ros.cli.offline import (
         TABLE_HEADER,
         OfflineError,
@@ -302,20 +310,27 @@ def cmd_diagnose(args) -> int:
             header_printed = True
         print(format_window_line(window), flush=True)
 
-    overrides = {k: getattr(args, k) for k in POLICY_CLI_FLAGS if getattr(args, k) is not None}
-    common = dict(system=system, method=method, p=args.p, library=library, library_path=args.library, gap_method=args.gap_method,
+    declared = read_drive_file(args.config)
+    overrides = dict(declared.policy())
+    overrides.update({k: getattr(args, k) for k in POLICY_CLI_FLAGS if getattr(args, k) is not None})
+    detector = resolve(args.detector, declared, "detector")
+    detector = None if detector == "auto" else detector
+    gear_ratio = resolve(args.gear_ratio, declared, "gear_ratio")
+    common = dict(system=system, method=method, p=resolve(args.p, declared, "p"), library=library,
+                  library_path=args.library, gap_method=resolve(args.gap_method, declared, "gap_method"),
                   image_method=not args.no_image, log=log, on_window=show,
                   policy=default_policy(**overrides))
-    samples = dict(gear_ratio=args.gear_ratio, motor_joint=args.motor_joint, load_joint=args.load_joint,
-                   imu_axis=args.imu_axis, topic=args.topic, backlash_width_m=args.backlash_width_m,
-                   detector=args.detector or "flank")
+    samples = dict(gear_ratio=gear_ratio, motor_joint=resolve(args.motor_joint, declared, "motor_joint"),
+                   load_joint=resolve(args.load_joint, declared, "load_joint"),
+                   imu_axis=resolve(args.imu_axis, declared, "imu_axis"), topic=args.topic,
+                   backlash_width_m=args.backlash_width_m, detector=detector or "flank")
     if str(args.recording).lower().endswith(".csv"):
         result = diagnose_samples(args.recording, maps=parse_map(args.map) if args.map else None, **common, **samples)
     else:
         try:
             result = diagnose_recording(args.recording, backlash_width_m=args.backlash_width_m,
-                                        signals_topic=args.topic, detector=args.detector or "auto",
-                                        gear_ratio=args.gear_ratio, **common)
+                                        signals_topic=args.topic, detector=detector or "auto",
+                                        gear_ratio=gear_ratio, **common)
         except OfflineError as exc:
             if "no drive/signals topic" not in str(exc):
                 raise
@@ -435,9 +450,10 @@ def _evaluate_arguments(e) -> None:
 def _diagnose_arguments(g) -> None:
     g.add_argument("recording", help="bag directory or .mcap file (a diagnostic node's record_dir, or a "
                    "`ros2 bag record` of joint_states [+ imu]), or a .csv file")
-    g.add_argument("--p", type=_positive("--p"), default=DIAGNOSTIC_PARAMS["p"].default, help=cli_help("p"))
+    # None: not given; then the drive file's (--config, cli/drive_file.py), else the node's default
+    g.add_argument("--p", type=_positive("--p"), default=None, help=cli_help("p"))
     g.add_argument("--library", help="pattern library .npz (default: build-patterns' default path; built when missing)")
-    g.add_argument("--gap-method", choices=CLI_GAP_METHODS, default=DIAGNOSTIC_PARAMS["gap_method"].default,
+    g.add_argument("--gap-method", choices=CLI_GAP_METHODS, default=None,
                    help=cli_help("gap_method") + "; auto: the acceleration fit when a1 is recorded, else the angle "
                         "fit when alpha1 is, else speed")
     g.add_argument("--no-image", action="store_true", help="skip the paper's image method (gap estimate only)")
@@ -449,11 +465,11 @@ def _diagnose_arguments(g) -> None:
                         "paper (inequality 1 with K2, zone-centred angles; the default for drive/signals recordings "
                         "whose K2 is known: --backlash-width-m or their drive/backlash_width; flank otherwise) or dynamics "
                         "(no angles needed: the load-torque step from m_el and a1 or the alpha1 encoder)")
-    g.add_argument("--gear-ratio", type=_positive("--gear-ratio"), default=1.0,
+    g.add_argument("--gear-ratio", type=_positive("--gear-ratio"), default=None,
                    help="N in delta = alpha1 - N alpha2 (motor turns per load-encoder turn; default 1)")
-    g.add_argument("--motor-joint", default="motor", help="JointState name of the motor joint (default motor)")
-    g.add_argument("--load-joint", default="load", help="JointState name of the load joint (default load)")
-    g.add_argument("--imu-axis", choices=("x", "y", "z"), default="x",
+    g.add_argument("--motor-joint", default=None, help="JointState name of the motor joint (default motor)")
+    g.add_argument("--load-joint", default=None, help="JointState name of the load joint (default load)")
+    g.add_argument("--imu-axis", choices=("x", "y", "z"), default=None,
                    help="sensor_msgs/Imu linear_acceleration axis that is a1 (default x)")
     g.add_argument("--map", metavar="CH=COL[:SCALE],...",
                    help="CSV: other column names and scale factors to SI, e.g. alpha1=enc_motor:0.0000958738,t=time_ms:0.001")
@@ -465,7 +481,9 @@ def _diagnose_arguments(g) -> None:
         else:
             g.add_argument("--" + name.replace("_", "-"), type=float, help=cli_help(name))
     g.add_argument("--json", metavar="OUT", help="also write every window's diagnosis to this JSON file")
-    g.add_argument("--config", help="system config YAML or drive profile (config/profiles/, e.g. heavy_film); default config/system.yaml")
+    g.add_argument("--config", help="system config YAML, drive file or drive profile (config/profiles/, e.g. "
+                   "heavy_film); default config/system.yaml. A drive file's /**/jident_diagnostic and "
+                   "/**/jident_windowing sections set the options above that are not given (docs/your_drive.md)")
     g.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     g.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     g.set_defaults(func=cmd_diagnose)

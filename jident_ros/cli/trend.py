@@ -35,8 +35,9 @@ import numpy as np
 
 from jident_ros.cli.argtypes import count_arg as _count
 from jident_ros.cli.argtypes import finite_float_arg as _finite_float
+from jident_ros.cli.drive_file import read_drive_file, resolve
 from jident_ros.cli.fleet import cmd_fleet
-from jident_ros.cli.offline import OfflineError
+from jident_ros.cli.offline import OfflineError, default_policy
 from jident_ros.cli.trend_run import (  # noqa: F401  (re-exported: the demo and the tests import them from here)
     CSV_COLUMNS,
     ORDERS,
@@ -245,8 +246,8 @@ def add_trend_parser(sub) -> None:
                    help="entry detector: flank (default: no K2 needed; every window carries the flank-to-flank K2 "
                         "estimate the width trend follows) or paper (inequality (1) with the recording's K2; the "
                         "width then comes from the gap estimator, ~25x noisier)")
-    g.add_argument("--gear-ratio", type=_finite_float("--gear-ratio"), default=1.0,
-                   help="flank detector: N in delta = alpha1 - N alpha2 (default 1)")
+    g.add_argument("--gear-ratio", type=_finite_float("--gear-ratio"), default=None,
+                   help="flank detector: N in delta = alpha1 - N alpha2 (default: the drive file's, else 1)")
     g.add_argument("--backlash-width-m", type=_finite_float("--backlash-width-m"),
                    help="--detector paper: K2 of inequality (1), m (default: the recording's drive/backlash_width, "
                         "else 0.005)")
@@ -255,7 +256,9 @@ def add_trend_parser(sub) -> None:
                         "time; CSV files by their first entry on the drive clock) or given (as listed); a "
                         "recording's windows always stay together, in stream order, so a drive clock that restarted "
                         "between recordings is never interleaved")
-    g.add_argument("--config", help="system config YAML (default: config/system.yaml)")
+    g.add_argument("--config", help="system config YAML or drive file (default: config/system.yaml); a drive "
+                   "file's /**/jident_diagnostic section declares the drive (torque accuracy, friction bands) and its "
+                   "/**/jident_windowing section the gear ratio and joint names (docs/your_drive.md)")
     g.add_argument("--method-config", help="method config YAML (default: config/method.yaml)")
     g.add_argument("--jobs", type=_count("--jobs", 0), default=0,
                    help="worker processes diagnosing the recordings in parallel (0, default: one per core; 1: in "
@@ -272,11 +275,13 @@ def add_trend_parser(sub) -> None:
 
 
 def trend_options(args, system, method, jobs: int) -> TrendOptions:
-    """The :class:`TrendOptions` of ``jident trend``'s flags."""
+    """The :class:`TrendOptions` of ``jident trend``'s flags and the drive file (``--config``, cli/drive_file.py)."""
+    declared = read_drive_file(getattr(args, "config", None))
     return TrendOptions(system=system, method=method, p=args.p, gap_method=args.gap_method,
                         image_method=args.image_method, library_path=args.library,
-                        backlash_width_m=args.backlash_width_m, detector=args.detector, gear_ratio=args.gear_ratio,
-                        jobs=jobs, order=args.order)
+                        backlash_width_m=args.backlash_width_m, detector=args.detector,
+                        gear_ratio=resolve(args.gear_ratio, declared, "gear_ratio"),
+                        jobs=jobs, order=args.order, policy=default_policy(**declared.policy()))
 
 
 def _overrides(args) -> dict:

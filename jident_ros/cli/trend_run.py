@@ -191,7 +191,8 @@ class TrendOptions:
     processes it uses: ``detector`` 'flank' (no K2 needed, every window carries the flank-to-flank K2 estimate
     the trend follows) or 'paper' (inequality (1) with the recording's K2, the width then from the gap
     estimator); ``signals_topic`` the drive/signals topic to read (a recording of several drives; None: the
-    recording's only one); ``jobs`` > 1 (without the image method): recordings diagnosed in parallel."""
+    recording's only one); ``jobs`` > 1 (without the image method): recordings diagnosed in parallel; ``policy``
+    the drive's declaration (torque accuracy, friction bands: a drive file's /**/jident_diagnostic section)."""
 
     system: Any = None
     method: Any = None
@@ -205,6 +206,7 @@ class TrendOptions:
     signals_topic: Optional[str] = None
     jobs: int = 1
     order: str = "recorded"
+    policy: Any = None          # the publishing policy (VerdictPolicy; None: the diagnostic node's defaults)
 
 
 def run_trend(recordings: Sequence, options: Optional[TrendOptions] = None, *, config: Optional[TrendConfig] = None,
@@ -236,6 +238,8 @@ def run_trend(recordings: Sequence, options: Optional[TrendOptions] = None, *, c
                   gap_method=o.gap_method, image_method=o.image_method and library is not None,
                   backlash_width_m=o.backlash_width_m, detector=o.detector, gear_ratio=o.gear_ratio,
                   signals_topic=o.signals_topic)
+    if o.policy is not None:
+        kwargs["policy"] = o.policy
     jobs = max(1, min(int(o.jobs), len(recordings)))
     if jobs > 1 and not o.image_method:
         with ProcessPoolExecutor(max_workers=jobs) as pool:

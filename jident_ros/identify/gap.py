@@ -419,6 +419,21 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         raise ValueError(f"method: expected one of {', '.join(FITS)} (or None: the model choice), got {method!r}")
     if not np.isfinite(j) or j <= 0:
         raise NoGapError(f"gap fit gave a non-physical J1 = {j!r}")
+    if "std_error_terms" in free_extra:
+        # the angle fits: gap_free raises se to FREE_REL_SE_FLOOR J1 where the data would allow less; that floor
+        # is a part too (the only way se exceeds its parts there)
+        terms = dict(free_extra["std_error_terms"])
+        total = float(np.sqrt(sum(float(v) ** 2 for v in terms.values())))
+        if float(se) > total * (1.0 + 1e-9):
+            terms["model_floor"] = float(np.sqrt(float(se) ** 2 - total ** 2))
+            free_extra["std_error_terms"] = tuple(terms.items())
+    else:
+        # the a1, anchored and speed fits: their own standard error as parts too, so that the parts account for
+        # se in quadrature on every path (verdict.widest_term names the largest; test_gap_bands checks the sum)
+        own = {"statistical": float(np.sqrt(max(float(se) ** 2 - float(model_error) ** 2, 0.0)))}
+        if model_error:
+            own["change_points" if method == "gap_only" else "model_form"] = float(model_error)
+        free_extra["std_error_terms"] = tuple(own.items())
     k = int(entry_uncertainty_samples)
     if k > 0:
         moved = []
@@ -431,6 +446,9 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         entry_error = max(abs(x - j) for x in moved)
         model_error = float(np.hypot(model_error, entry_error))
         se = float(np.hypot(se, entry_error))
+        terms = dict(free_extra["std_error_terms"])
+        terms["change_points"] = float(np.hypot(terms.get("change_points", 0.0), entry_error))
+        free_extra["std_error_terms"] = tuple(terms.items())
     # the bounded constant torques the speed and a1 fits do not model: the Coulomb band (F in [0, F_max], a
     # uniform term of half-width F_max) and the torque offset (|T| <= torque_offset_nm, uniform)
     bounded = [(name, v) for name, v in (("coulomb_band", model.coulomb_friction_max_nm),
@@ -473,7 +491,11 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         free_extra["std_error_terms"] = tuple(terms.items())
     # every fit: the model's own error as a floor, then the drive's torque accuracy (a scale error of m_el
     # is one of J1: all fits of m_el share it)
-    se = max(float(se), FREE_REL_SE_FLOOR * j)
+    if float(se) < FREE_REL_SE_FLOOR * j:
+        terms = dict(free_extra.get("std_error_terms", ()))
+        terms["model_floor"] = float(np.sqrt((FREE_REL_SE_FLOOR * j) ** 2 - float(se) ** 2))
+        free_extra["std_error_terms"] = tuple(terms.items())
+        se = FREE_REL_SE_FLOOR * j
     if model.torque_accuracy:
         terms = dict(free_extra.get("std_error_terms", ()))
         terms["torque_accuracy"] = j * model.torque_rel_se()

@@ -81,6 +81,8 @@ STD_ERROR_TERM_SOURCES = {
     "torque_drift": ("a drift of that unknown torque across the gap", "torque_offset_rel_base"),
     "torque_lag": ("the torque estimate's lag", "torque_lag_max_s"),
     "change_points": ("where the gap begins and ends (the change points)", None),
+    "model_form": ("the fit's model form (with and without a constant torque term)", None),
+    "model_floor": ("the model's own error (a floor: the sampled torque's double integral)", None),
     "torque_accuracy": ("the torque estimate's scale accuracy", "torque_accuracy"),
 }
 
