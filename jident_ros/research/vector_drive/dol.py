@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from types import SimpleNamespace
 
 import numpy as np
+from scipy.optimize import brentq
 
 from .model import LOG_KEYS, Machine, Mechanics, Run, Scenario, _version, load_friction, make_mechanics, motor_friction, motulator_available
 
@@ -126,7 +127,6 @@ def pull_out(p: DolParams):
 def slip_for_torque(p: DolParams, torque_nm: float) -> float:
     """The slip angular frequency (electrical rad/s) at which the machine gives ``torque_nm`` (>= 0) on the
     stable branch."""
-    from scipy.optimize import brentq
     ws_po, t_po = pull_out(p)
     if not 0 <= torque_nm < t_po:
         raise ValueError(f"load torque: must be in [0, the pull-out torque {t_po:.0f} N m), got {torque_nm:.1f}")

@@ -30,6 +30,7 @@ import numpy as np
 
 from jident_ros.research.second_drive.record import write_csv, write_jointstate
 
+from .dol import DOL_TRAVERSING_EVENTS, SLIP_EVENTS, dol_scenario, estimate_error_nm, gamma_pars, load_inertia, simulate_dol
 from .model import TRAVERSING_EVENTS, DriveParams, Run, gaps, scenario, simulate
 
 NOISY_CHANNELS = ("omega1", "omega2", "m_el", "a1")
@@ -227,7 +228,6 @@ def with_width(p: DriveParams, k2: float) -> DriveParams:
 def simulate_dol_cached(p, event: str, direction: str, duration_s: float, event_time_s: float,
                         cache_dir: Optional[Path] = None) -> dict:
     """:func:`simulate_cached` of the DOL mode (dol.DolParams; npz files ``dol_<event>_<direction>_<key>.npz``)."""
-    from .dol import dol_scenario, simulate_dol
     sc = dol_scenario(p, event, direction, event_time_s)
     key = params_key(p, event, direction, duration_s, event_time_s, asdict(sc))
     path = None if cache_dir is None else Path(cache_dir) / f"dol_{event}_{direction}_{key}.npz"
@@ -255,7 +255,6 @@ def build_dol(p, event: str, direction: str, sensors: Sensors, seed: int = 0, du
     """One recording (signals + truth) of the DOL mode (dol.DolParams, dol.DOL_EVENTS), written as :func:`build`
     writes the vector drive's: the same channels, encoders, noise and truth keys; ``m_el`` is the voltage-model
     torque estimate (dol.TorqueEstimate), ``omega1``/``omega2`` the encoder-difference speeds."""
-    from .dol import DOL_TRAVERSING_EVENTS, SLIP_EVENTS, dol_scenario, estimate_error_nm, gamma_pars, load_inertia
     st = simulate_dol_cached(p, event, direction, duration_s, event_time_s, cache_dir)
     ts = p.sample_period_s
     mech = p.mechanics
