@@ -229,7 +229,8 @@ def markdown(res: dict, command: str, commit: str) -> str:
     for (label, noise), s in sorted(res["totals"].items(), key=lambda kv: _key_order(kv[0])):
         if s["reasons"]:
             lines.append(f"* {label}, {noise}: " + "; ".join(f"{n}× {r}" for r, n in s["reasons"].items()))
-    lines += ["", "### Published windows more than 10 % off or whose 95 % interval misses the truth", ""]
+    lines += ["", "### Published windows more than 10 % off or whose 95 % interval misses the truth", "",
+              "Each window's cause, from per-window debugging: docs/vector_drive.md, \"What the DOL zoo finds\".", ""]
     if not res["misses"]:
         lines.append("None.")
     else:
