@@ -97,3 +97,33 @@ def test_quick_report(tmp_path):
     tot = res["totals"][("JointState 2^16", "clean")]
     assert tot["recordings"] == 2 and tot["traversals"] == 1 and tot["found"] == 1
     assert tot.get("false_steady", 0) == 0
+
+
+def test_sweep_varies_one_property_from_the_zoo_drive():
+    from jident_ros.research.vector_drive.dol import DolParams
+    sw = zoo_dol.sweep()
+    assert sw[0][0] == "base" and sw[0][2] == DolParams()
+    assert len({n for n, _, _ in sw}) == len(sw)
+    base = DolParams()
+    for name, _, p in sw[1:]:
+        changed = [k for k in ("slip_load_ratio", "wheel_inertia_kgm2") if getattr(p, k) != getattr(base, k)]
+        changed += [k for k in ("backlash_width_m", "stiffness_nm_per_rad") if getattr(p.mechanics, k) !=
+                    getattr(base.mechanics, k)]
+        assert len(changed) == 1, name
+
+
+def test_sweep_misses_of_the_base_drive_are_listed_once():
+    zr = _zr()
+    groups = {("JointState 2^16", "slip drop", "clean"): [(zr, {"windows": [_win(1211, 0, j1=0.70, ci=(0.69, 0.71))],
+                                                               "cut_off": []})]}
+    one = zoo_dol.misses(groups)
+    sw_groups = {(f"{v}: JointState 2^16 clean", "slip drop", "clean"): v_items for v in ("base", "light wheel")
+                 for v_items in groups.values()}
+    tot = zoo.summarise(groups[("JointState 2^16", "slip drop", "clean")])
+    res = {"rows": {("JointState 2^16", "slip drop", "clean"): tot}, "totals": {("JointState 2^16", "clean"): tot},
+           "all": tot, "misses": one, "files": 1, "recordings": 1, "elapsed_s": 1.0,
+           "sweep": {"rows": {"base": tot, "light wheel": tot}, "misses": zoo_dol.misses(sw_groups), "elapsed_s": 1.0}}
+    md = zoo_dol.markdown(res, "cmd", "abc")
+    assert md.count("| dol_slip_drop_fwd |") == 2          # the zoo's window and the light wheel's, not base's again
+    assert "light wheel: JointState 2^16 clean" in md and "base: JointState" not in md
+    assert "| light wheel | the wheel 0.06 kg m² (what stays after the slip) | 1/2 |" in md
