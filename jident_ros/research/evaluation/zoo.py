@@ -384,9 +384,10 @@ def _first_time(zr: ZooRecording, fmt: str) -> float:
 
 
 # ------------------------------------------------------------------------------------------ statistics
-def summarise(items: list) -> dict:
-    """Counts over (ZooRecording, diagnose_one result) pairs of one group."""
-    nominal_kgm2 = nominal_inertia()
+def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
+    """Counts over (ZooRecording, diagnose_one result) pairs of one group (``nominal_kgm2``: the nominal J1 they
+    were diagnosed with; default config/system.yaml's)."""
+    nominal_kgm2 = nominal_inertia() if nominal_kgm2 is None else float(nominal_kgm2)
     s = Counter()
     offsets, errs, k2errs, oracle, oracle_f = [], [], [], [], []
     gap_offsets = []        # the entry the gap estimator used (its change point) minus the true one

@@ -12,7 +12,8 @@ reversal) and one same-flank event (speed step up: no entry may be found), forwa
 2^16 (clean and 30 dB) and JointState + Imu 2^16 (30 dB).  Every file goes through the zoo's diagnosis
 (:func:`jident_ros.research.evaluation.zoo.diagnose_one`: ``jident diagnose``'s own function, flank detector, no
 K2, the image method off), with the drive declared as the zoo declares the vector drive
-(:func:`jident_ros.research.evaluation.zoo.declared`) and, for the friction variant, its own friction.  Nothing
+(:func:`jident_ros.research.evaluation.zoo.declared`) and, for the friction variant, its own friction; the small
+drive (docs/your_drive.md's worked example) with its own drive file (:data:`DRIVE_FILES`).  Nothing
 is chosen here: it measures what a published J1 is worth on drives the thresholds were not chosen on.
 
 Counted per variant (the zoo's definitions): traversals found, entry within ±2 samples, published J1 (traversal
@@ -30,10 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
+from jident_ros.cli.drive_file import read_drive_file
 from jident_ros.config import load_system_config
 from jident_ros.research.evaluation import zoo
 from jident_ros.research.vector_drive import record as vd_record
-from jident_ros.research.vector_drive.model import DriveParams, motulator_available
+from jident_ros.research.vector_drive.model import DriveParams, motulator_available, small_drive
 
 #: The events of every variant (forward): the traversing ones and a same-flank torque change.
 EVENTS = ("speed_step_down", "speed_reversal", "load_reversal_light", "load_reversal_heavy", "speed_step_up")
@@ -41,6 +43,20 @@ EVENTS = ("speed_step_down", "speed_reversal", "load_reversal_light", "load_reve
 SENSORS = (("JointState 2^16 clean", "jointstate", 65536, None), ("JointState 2^16 30 dB", "jointstate", 65536, 30.0),
            ("JointState+Imu 2^16 30 dB", "jointstate_imu", 65536, 30.0))
 GENERATION = 1
+
+
+#: Variants diagnosed with a drive file of their own (its system configuration: nominal J1, classes, radius; and
+#: its declaration) instead of config/system.yaml and the vector drive's declaration: docs/your_drive.md's worked
+#: example, a drive 38 times lighter behind a 3:1 gear, declared as its user would from its data sheet.
+DRIVE_FILES = {"small drive, 3:1 gear": Path(__file__).resolve().parents[3] / "docs" / "examples" / "profiles"
+               / "small_drive.yaml"}
+
+
+def _declared_by_file(name: str) -> dict:
+    """The declaration of a :data:`DRIVE_FILES` variant: its drive file's policy and its b1."""
+    path = DRIVE_FILES[name]
+    return {"bearing_friction_nms_per_rad": load_system_config(path).motor.bearing_friction_nms_per_rad,
+            **read_drive_file(path).policy()}
 
 
 def _mech(p: DriveParams, **kw) -> DriveParams:
@@ -78,6 +94,9 @@ def variants() -> list:
          _mech(b, motor_coulomb_nm=3.0, motor_viscous_nms_per_rad=0.05),
          {"bearing_friction_nms_per_rad": 0.05, "coulomb_friction_max_nm": 1.25 * 3.0}),
         ("laggy speed feedback", "speed filter 2 ms", _ctrl(b, speed_filter_s=2e-3), {}),
+        ("small drive, 3:1 gear", "docs/your_drive.md's example: 2.2 kW, J1 0.03 kg m^2, J2 0.54 behind a 3:1 gear, "
+         "K2 1.5 mm at r 0.03 m, its torque estimate 3-4 % off; diagnosed with its drive file "
+         "(docs/examples/profiles/small_drive.yaml)", small_drive(), _declared_by_file("small drive, 3:1 gear")),
     ]
 
 
@@ -105,16 +124,16 @@ def generate(out: Path, log=print, names=None) -> dict:
 def run(out: Path, log=print, names=None) -> dict:
     t0 = time.perf_counter()
     recs = generate(out, log, names)
-    system = load_system_config()
     rows = {}
     for name, _, _, extra in variants():
         if name not in recs:
             continue
+        system = load_system_config(DRIVE_FILES.get(name))
         items = []
         for label, zr in recs[name]:
             fmt = next(iter(zr.files))
             items.append((zr, zoo.diagnose_one(zr, fmt, system, declare=True, extra=extra)))
-        rows[name] = zoo.summarise(items)
+        rows[name] = zoo.summarise(items, nominal_kgm2=system.motor.nominal_inertia_kgm2)
         log(f"{name}: diagnosed {len(items)} files ({time.perf_counter() - t0:.0f} s)")
     return {"rows": rows, "elapsed_s": time.perf_counter() - t0}
 
@@ -127,7 +146,8 @@ def markdown(res: dict, command: str, commit: str) -> str:
              "with one property changed per variant, events " + ", ".join(e.replace("_", " ") for e in EVENTS)
              + " (forward; the last a same-flank torque increase: no entry may be found), each as "
              + ", ".join(s[0] for s in SENSORS) + "; diagnosed as the zoo diagnoses the vector drive (declared as "
-             "there, the friction variant with its own friction). No threshold was chosen on any of these drives.", "",
+             "there, the friction variant with its own friction, the small drive with its drive file). No threshold "
+             "was chosen on any of these drives.", "",
              "| variant | what changed | traversals found | entry within ±2 | published (traversal windows) | "
              "published > 10 % off | median / max abs error | 95 % CI covers | another class named / 'between "
              "classes', on the drive's class | false entries |",
