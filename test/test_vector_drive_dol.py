@@ -155,3 +155,23 @@ def test_recorded_m_el_is_the_estimate_and_its_error_is_in_the_truth(recorded):
     assert e["max_abs_minus_resistance_term_nm"] < 0.5
     assert tr["gaps"][0]["torque_estimate_error_mean_nm"] > 0
     assert rec.name.startswith("dol_slip_reversal_fwd_J1.160")
+
+
+def test_the_vector_modes_cache_keys_are_unchanged():
+    """The DOL mode leaves the vector mode's parameters alone: the zoo's cached vector-drive simulations
+    (out/zoo/vector_drive_cache, keyed by every parameter) stay valid and its recordings bit-identical."""
+    from dataclasses import asdict
+
+    from jident_ros.research.vector_drive.model import DriveParams, scenario
+    p = DriveParams()
+    for ev, key in (("steady", "2aa0086af90b0146"), ("load_reversal_heavy", "e3c2ebec3e6f242c")):
+        assert record.params_key(p, ev, "forward", 2.2, 0.6, asdict(scenario(p, ev, "forward", 0.6))) == key
+
+
+def test_cli_refuses_a_vector_event_in_dol_mode(tmp_path, capsys):
+    from jident_ros.research.vector_drive.__main__ import main
+    with pytest.raises(SystemExit) as exc:
+        main(["--mode", "dol", "--out", str(tmp_path), "--events", "speed_step_down"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--events" in err[0] and "speed_step_down" in err[0] and "slip_drop" in err[0]
