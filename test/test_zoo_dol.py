@@ -86,6 +86,7 @@ def test_markdown_names_the_targets_and_the_misses():
     assert "| 0 published > 10 % off (all inputs, traversal and bounce windows) | 1 |" in md
     assert "| dol_slip_drop_fwd | JointState 2^16 | traversal | +3 | +3 | 0.7 (1.073) | 0.69 … 0.71 | -34.8 % |" in md
     assert "| JointState 2^16 | slip drop | clean |" in md
+    assert "| K2 median error ≤ 5 %, clean (all inputs; the flank-to-flank events: slip drop's excursion is no width) | – |" in md
 
 
 @pytest.mark.slow
