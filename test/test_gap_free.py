@@ -133,7 +133,9 @@ def test_a_steady_entry_far_from_the_detectors_is_not_used(ours_window, moved, s
                          recontact_index=w.recontact_index)
     assert ("steady entry" in g.model_choice) is steady, g.model_choice
     if not steady:
-        assert "not the same change point" in g.model_choice, g.model_choice
+        # (with the load angle's bound, gap_load.py, the free fit starts later and the kink is on the searched rows'
+        # edge: refused as 'not located' instead)
+        assert "not the same change point" in g.model_choice or "not located" in g.model_choice, g.model_choice
 
 
 def test_a_speed_controller_ramp_before_the_entry_is_not_a_steady_entry():

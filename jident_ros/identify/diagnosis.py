@@ -42,6 +42,7 @@ from jident_ros.identify.gap import (
     nearest_class,
     resolution_limited,
 )
+from jident_ros.identify.gap_load import LOAD_ANGLE_KEY
 from jident_ros.identify.levels import ERROR, LEVEL_NAMES, OK, WARN
 from jident_ros.identify.library import IMAGE_METHOD_OFF
 from jident_ros.identify.verdict import (
@@ -304,12 +305,11 @@ class _WindowRun:
 
     def gap_step(self):
         """1. the gap: fast; published first when the policy accepts it."""
-        w, dg = self.win, self.dg
-        method = dg.config.gap_method
-        # a detector window (its own K2, or none) holds raw encoder angles: the gap interval comes from the
-        # detector's re-contact row or the dynamics, never from |alpha1 - alpha2| < K2/r (issue 20)
+        w, dg, method = self.win, self.dg, self.dg.config.gap_method
+        # a detector window (its own K2, or none) holds raw encoder angles: the gap interval comes from the detector's
+        # re-contact row or the dynamics, never from |alpha1 - alpha2| < K2/r (issue 20); alpha2 bounds the fits (gap_load)
         raw_angles = w.width_estimate is not None or self.k2_unknown
-        data = {k: v for k, v in w.data.items() if k != "alpha2"} if raw_angles else w.data
+        data = {(LOAD_ANGLE_KEY if k == "alpha2" else k): v for k, v in w.data.items()} if raw_angles else w.data
         try:
             self.gap = estimate_inertia(data, w.entry_index, w.backlash_width_m, w.wheel_radius_m,
                                         w.sample_period_s, method=None if method == "auto" else method,

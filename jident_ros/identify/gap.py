@@ -93,6 +93,7 @@ from jident_ros.identify.gap_free import (
     kink_locate,
     kink_terms,
 )
+from jident_ros.identify.gap_load import LOAD_ANGLE_KEY, load_free_bounds
 from jident_ros.identify.gap_numerics import _diff2, _median
 from jident_ros.stream.filters import savgol_coeffs, savgol_filter
 
@@ -396,7 +397,13 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         if "alpha1" not in window:
             raise NoGapError("method 'angle' needs alpha1 (use 'speed' with omega1)")
         torque = _net_torque(window, bearing_friction_nms_per_rad)
-        ff, anchored = _angle_fits(np.asarray(window["alpha1"], float), torque, sample_period_s, start, end, model)
+        bounds = load_free_bounds(window.get(LOAD_ANGLE_KEY, window.get("alpha2")), start, end,
+                                  int(model.changepoint_search_samples))
+        ff, anchored = _angle_fits(np.asarray(window["alpha1"], float), torque, sample_period_s, start, end, model,
+                                   bounds)
+        if bounds is not None and (bounds[0] > start - model.changepoint_search_samples
+                                   or bounds[1] < end + model.changepoint_search_samples):
+            choice = "; ".join(x for x in (choice, f"the load angle free in rows {bounds[0]}..{bounds[1]}") if x)
         j, se, res, dof = ff["j1"], ff["se_stat"], ff["residual"], ff["dof"]
         model_error = ff["change_point_error"]
         fit_span = (ff["start"], ff["end"])
@@ -563,19 +570,21 @@ def _memoised(fn):
 
 
 def _angle_fits(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, start: int, end: int,
-                model: GapModel) -> tuple:
+                model: GapModel, bounds: tuple | None = None) -> tuple:
     """(free angle fit, steady-entry fit) of the 'angle' method: :func:`free_angle_fit` (NoGapError when it
-    fails) and :func:`_anchored_angle` (a fresh dict: the caller pops from it); memoised under :func:`fit_cache`."""
+    fails; inside the load side's free ``bounds``, gap_load.py) and :func:`_anchored_angle` (a fresh dict: the
+    caller pops from it); memoised under :func:`fit_cache`."""
     key = None
     if _FIT_CACHE is not None:
-        key = ("angle_fits", alpha1.tobytes(), torque.tobytes(), float(sample_period_s), int(start), int(end), model)
+        key = ("angle_fits", alpha1.tobytes(), torque.tobytes(), float(sample_period_s), int(start), int(end), model,
+               bounds)
         hit = _FIT_CACHE.get(key)
         if hit is not None:
             if isinstance(hit, str):
                 raise NoGapError(hit)
             return hit[0], dict(hit[1])
     try:
-        ff = free_angle_fit(alpha1, torque, sample_period_s, start, end, model)
+        ff = free_angle_fit(alpha1, torque, sample_period_s, start, end, model, bounds=bounds)
     except FreeFitError as exc:
         if key is not None:
             _FIT_CACHE[key] = str(exc)

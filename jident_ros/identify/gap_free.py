@@ -161,15 +161,17 @@ _CHI2_FORECAST = float(_chi2_upper(np.array([CHANGEPOINT_FORECAST_SAMPLES]))[0])
 
 
 def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, start: int, end: int,
-                   model: GapModel | None = None, fixed: bool = False) -> dict:
+                   model: GapModel | None = None, fixed: bool = False, bounds: tuple | None = None) -> dict:
     """J1 from the motor angle over the gap with free initial angle and speed (module docstring).
 
     ``alpha1``: motor angle over the window, rad (any offset); ``torque``: m_el − b1 ω1 over the window, N m;
     [start, end): the detector's coarse gap (entry row, re-contact row).  ``fixed``: no change-point search
-    (the interval as given).  Returns a dict: j1, se (kg m^2, all terms), se_stat (without the torque
-    accuracy term: what a cross-check with another fit on the same torque compares), terms (each term of the
-    standard error, kg m^2), start, end (the estimated interval), friction ('fitted F_c = ..' or 'bounded'),
-    coulomb_nm (the fitted or assumed F_c), residual (rad), dof.  Raises FreeFitError."""
+    (the interval as given).  ``bounds`` (lo, hi): rows the interval stays within (the load side's free
+    interval, gap_load.load_free_bounds); the coarse gap is clipped to them.  Returns a dict: j1, se (kg m^2,
+    all terms), se_stat (without the torque accuracy term: what a cross-check with another fit on the same torque
+    compares), terms (each term of the standard error, kg m^2), start, end (the estimated interval), friction
+    ('fitted F_c = ..' or 'bounded'), coulomb_nm (the fitted or assumed F_c), residual (rad), dof.  Raises
+    FreeFitError."""
     model = GapModel() if model is None else model
     a = np.asarray(alpha1, float)
     m_all = np.asarray(torque, float)
@@ -177,6 +179,12 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     ts = float(sample_period_s)
     W = 0 if fixed else int(model.changepoint_search_samples)
     L, R = max(0, start - W), min(n_all, end + W)
+    if bounds is not None:
+        L, R = max(L, int(bounds[0])), min(R, int(bounds[1]))
+        start, end = max(start, L), min(end, R)
+        if end <= start or R - L < FREE_MIN_SAMPLES:
+            raise FreeFitError(f"gap too short: the load angle is free in rows {L}..{R} only, {max(end - start, 0)} "
+                               f"of them in the detector's gap (the free angle fit needs >= {FREE_MIN_SAMPLES})")
     if end - start < FREE_MIN_SAMPLES and (fixed or R - L < FREE_MIN_SAMPLES):
         raise FreeFitError(f"gap too short: {end - start} samples, the free angle fit needs >= {FREE_MIN_SAMPLES}")
     y = a[L:R] - a[start]

@@ -15,8 +15,9 @@ from pathlib import Path
 
 from jident_ros.research.second_drive.__main__ import comma_list  # the same argparse list type
 
+from .dol import DOL_EVENTS, DolParams
 from .model import EVENTS, DriveParams, motulator_available, small_drive
-from .record import INPUTS, Sensors, build, with_inertia, with_width, write
+from .record import INPUTS, Sensors, build, build_dol, with_inertia, with_width, write
 
 PROG = "python -m jident_ros.research.vector_drive"
 
@@ -30,7 +31,12 @@ class _Parser(argparse.ArgumentParser):
 def parser():
     p = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--events", type=comma_list(str), default=list(EVENTS), help=f"comma-separated, of {', '.join(EVENTS)}")
+    p.add_argument("--mode", choices=("vector", "dol"), default="vector",
+                   help="vector: motulator's vector control and speed PI (default); dol: the machine direct on a stiff "
+                        "50 Hz grid, its torque estimated from stator voltages and currents (docs/vector_drive.md)")
+    p.add_argument("--events", type=comma_list(str), default=None,
+                   help=f"comma-separated, of {', '.join(EVENTS)} (vector) or {', '.join(DOL_EVENTS)} (dol); "
+                        "default: all of the mode's")
     p.add_argument("--directions", type=comma_list(str), default=["forward", "reverse"])
     p.add_argument("--inertias", type=comma_list(float), default=[1.16], help="J1 values, kg m^2")
     p.add_argument("--widths", type=comma_list(float), default=[0.005], help="K2 values, m (at r)")
@@ -53,9 +59,11 @@ def _bad(name, value, why):
 
 def main(argv=None) -> int:
     a = parser().parse_args(argv)
+    known = EVENTS if a.mode == "vector" else DOL_EVENTS
+    a.events = list(known) if a.events is None else a.events
     for e in a.events:
-        if e not in EVENTS:
-            _bad("--events", e, f"not one of {', '.join(EVENTS)}")
+        if e not in known:
+            _bad("--events", e, f"not one of {', '.join(known)} (--mode {a.mode})")
     for d in a.directions:
         if d not in ("forward", "reverse"):
             _bad("--directions", d, "not forward or reverse")
@@ -77,7 +85,9 @@ def main(argv=None) -> int:
     if reason:
         sys.stderr.write(f"{PROG}: error: {reason}\n")
         return 2
-    base = DriveParams() if a.size == "default" else small_drive()
+    if a.mode == "dol" and a.size != "default":
+        _bad("--size", a.size, "the dol mode has the default size only")
+    base = (DriveParams() if a.size == "default" else small_drive()) if a.mode == "vector" else DolParams()
     out = Path(a.out)
     cache = Path(a.cache) if a.cache else None
     index = []
@@ -89,8 +99,9 @@ def main(argv=None) -> int:
                 for d in a.directions:
                     for counts in a.counts:
                         for snr in (a.snr_db or [None]):
-                            rec = build(p, ev, d, Sensors(counts, snr), seed=a.seed, duration_s=a.duration_s,
-                                        event_time_s=a.event_time_s, cache_dir=cache)
+                            make = build if a.mode == "vector" else build_dol
+                            rec = make(p, ev, d, Sensors(counts, snr), seed=a.seed, duration_s=a.duration_s,
+                                       event_time_s=a.event_time_s, cache_dir=cache)
                             files = [write(out, rec, f) for f in a.formats]
                             index.append(dict(rec.truth, files=files))
                             tr = rec.truth
@@ -99,7 +110,9 @@ def main(argv=None) -> int:
                                   f"torque estimate {100 * (tr['torque_estimate_error']['steady_relative'] or 0):+.2f} "
                                   f"% (steady)", flush=True)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "truth.json").write_text(json.dumps({"schema": "jident_ros.research.vector_drive/truth/1",
+    schema = "jident_ros.research.vector_drive/truth/1" if a.mode == "vector" else \
+        "jident_ros.research.vector_drive.dol/truth/1"
+    (out / "truth.json").write_text(json.dumps({"schema": schema,
                                                 "command": [PROG] + list(sys.argv[1:] if argv is None else argv),
                                                 "recordings": index}, indent=1, allow_nan=False) + "\n")
     print(f"{len(index)} recordings + truth files in {out} ({time.perf_counter() - t0:.1f} s)")

@@ -30,6 +30,7 @@ import numpy as np
 
 from jident_ros.research.second_drive.record import write_csv, write_jointstate
 
+from .dol import DOL_TRAVERSING_EVENTS, SLIP_EVENTS, dol_scenario, estimate_error_nm, gamma_pars, load_inertia, simulate_dol
 from .model import TRAVERSING_EVENTS, DriveParams, Run, gaps, scenario, simulate
 
 NOISY_CHANNELS = ("omega1", "omega2", "m_el", "a1")
@@ -221,3 +222,116 @@ def with_inertia(p: DriveParams, j1: float) -> DriveParams:
 
 def with_width(p: DriveParams, k2: float) -> DriveParams:
     return replace(p, mechanics=replace(p.mechanics, backlash_width_m=float(k2)))
+
+
+# ------------------------------------------------------------------------------------------ the DOL mode
+def simulate_dol_cached(p, event: str, direction: str, duration_s: float, event_time_s: float,
+                        cache_dir: Optional[Path] = None) -> dict:
+    """:func:`simulate_cached` of the DOL mode (dol.DolParams; npz files ``dol_<event>_<direction>_<key>.npz``)."""
+    sc = dol_scenario(p, event, direction, event_time_s)
+    key = params_key(p, event, direction, duration_s, event_time_s, asdict(sc))
+    path = None if cache_dir is None else Path(cache_dir) / f"dol_{event}_{direction}_{key}.npz"
+    if path is not None and path.exists():
+        with np.load(path) as z:
+            return {k: z[k] for k in z.files if k != "motulator_version"} | \
+                {"motulator_version": str(z["motulator_version"])}
+    run = simulate_dol(p, sc, duration_s)
+    out = decimate(run)
+    out["motulator_version"] = run.motulator_version
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez(tmp, **{k: v for k, v in out.items()})
+        tmp.replace(path)
+    return out
+
+
+def dol_case_name(event: str, direction: str, j1: float, k2: float, sensors: Sensors) -> str:
+    return "dol" + case_name(event, direction, j1, k2, sensors)[2:]
+
+
+def build_dol(p, event: str, direction: str, sensors: Sensors, seed: int = 0, duration_s: float = 2.2,
+              event_time_s: float = 0.6, cache_dir: Optional[Path] = None) -> Recording:
+    """One recording (signals + truth) of the DOL mode (dol.DolParams, dol.DOL_EVENTS), written as :func:`build`
+    writes the vector drive's: the same channels, encoders, noise and truth keys; ``m_el`` is the voltage-model
+    torque estimate (dol.TorqueEstimate), ``omega1``/``omega2`` the encoder-difference speeds."""
+    st = simulate_dol_cached(p, event, direction, duration_s, event_time_s, cache_dir)
+    ts = p.sample_period_s
+    mech = p.mechanics
+    n = st["t"].size
+    rng = np.random.default_rng([seed, sensors.encoder_counts, 0 if sensors.snr_db is None else int(sensors.snr_db)])
+    o1, o2 = draw_offsets(rng, mech.gear_ratio, sensors.min_off_centre_rad)
+    r = mech.reference_radius_m
+    sig = {"t": np.arange(n) * ts,
+           "alpha1": encoder(st["theta_M"], o1, sensors.encoder_counts),
+           "alpha2": encoder(st["theta_L"], o2, sensors.encoder_counts),
+           "omega1": st["w_fbk"].copy(), "omega2": st["w_L_fbk"].copy(),
+           "m_el": st["tau_est"].copy(), "a1": r * st["dw_M"]}
+    if sensors.snr_db is not None:
+        for k in NOISY_CHANNELS:
+            sig[k] = awgn_measured(sig[k], sensors.snr_db, rng)
+    delta = st["theta_M"] - mech.gear_ratio * st["theta_L"]
+    th = mech.half_zone_rad
+    k_ev = int(round(event_time_s / ts))
+    traversing = event in DOL_TRAVERSING_EVENTS
+    gl = gaps(delta, th)
+    gap_list = []
+    for b, e in gl:
+        g = {"entry_index": b, "entry_time_s": _t(sig["t"][b]),
+             "recontact_index": e if e < n else None, "recontact_time_s": _t(sig["t"][e]) if e < n else None,
+             "from_flank": int(np.sign(delta[b - 1])) if b > 0 else 0,
+             "to_flank": int(np.sign(delta[e])) if e < n else 0,
+             "traversal": bool(b > 0 and e < n and np.sign(delta[b - 1]) != np.sign(delta[e])),
+             "samples": e - b, **_gap_torques(st, b, e)}
+        # the gap the event opens (the first after it): a flank-to-flank traversal, or slip_drop's excursion from
+        # the driving flank and back to it (the paper's case)
+        g["event_gap"] = bool(traversing and b >= k_ev and not any(x.get("event_gap") for x in gap_list))
+        gap_list.append(g)
+    steady = slice(min(int(0.1 / ts), k_ev // 2), k_ev)
+    tau = st["tau_M"]
+    err = st["tau_est"] - tau
+    big = np.abs(tau) > 0.2 * p.machine.rated_torque_nm
+    sc = dol_scenario(p, event, direction, event_time_s)
+    pred = estimate_error_nm(p, st["i_s_abs"], sc.direction)
+    name = dol_case_name(event, direction, mech.motor_inertia_kgm2, mech.backlash_width_m, sensors)
+    first = next((g for g in gap_list if g["event_gap"]), gap_list[0] if gap_list else None)
+    gpar = gamma_pars(p)
+    truth = {
+        "name": name, "model": "jident_ros.research.vector_drive.dol",
+        "event": {"type": event, "index": k_ev, "time_s": _t(k_ev * ts), "traversing": traversing,
+                  "slip": event in SLIP_EVENTS, "load_before_nm": sc.load_before_nm, "load_after_nm": sc.load_after_nm,
+                  "ramp_s": sc.ramp_s, "load_inertia_after_kgm2": load_inertia(p, sc, event_time_s + 1.0)},
+        "direction": direction, "inertia_kgm2": mech.motor_inertia_kgm2,
+        "load_inertia_kgm2": mech.load_inertia_kgm2, "backlash_width_m": mech.backlash_width_m,
+        "reference_radius_m": r, "half_zone_rad": th, "flank_to_flank_rad": 2 * th, "gear_ratio": mech.gear_ratio,
+        "bearing_friction": {"coulomb_nm": mech.motor_coulomb_nm, "viscous_nms_per_rad": mech.motor_viscous_nms_per_rad,
+                             "smoothing_rad_s": mech.friction_smoothing_rad_s},
+        "supply": {"kind": "direct on line (stiff grid)", "line_voltage_v": p.grid_line_voltage_v,
+                   "frequency_hz": p.grid_frequency_hz, "rated_torque_nm": p.machine.rated_torque_nm},
+        "entry_index": first["entry_index"] if first else None,
+        "entry_time_s": first["entry_time_s"] if first else None,
+        "recontact_index": first["recontact_index"] if first else None,
+        "recontact_time_s": first["recontact_time_s"] if first else None,
+        "gaps": gap_list, "steady_rows": k_ev,
+        "torque_estimate": {"kind": "voltage model: psi_s = leaky integral of (u_s - R_s,est i_s), corrected at the grid "
+                                    "frequency; tau = 1.5 n_p Im(conj(psi_s) i_s)",
+                            "stator_resistance_ohm": gpar["R_s"],
+                            "stator_resistance_estimate_ohm": gpar["R_s"] * p.stator_resistance_estimate_ratio,
+                            "highpass_hz": p.flux_highpass_hz},
+        "torque_estimate_error": {
+            "steady_relative": float(np.mean(err[steady]) / np.mean(tau[steady])) if np.mean(np.abs(tau[steady])) > 0
+            else None,
+            "steady_nm": float(np.mean(err[steady])),
+            "median_abs_relative_where_loaded": float(np.median(np.abs(err[big] / tau[big]))) if big.any() else None,
+            "max_abs_nm": float(np.max(np.abs(err))),
+            "max_abs_minus_resistance_term_nm": float(np.max(np.abs(err - pred))),
+            "resistance_term_max_nm": float(np.max(np.abs(pred)))},
+        "speed_feedback": {"filter_s": p.speed_filter_s, "control_period_s": p.control_period_s,
+                           "kind": "encoder difference (2^20 counts) over the control period, first-order filter"},
+        "encoder": {"counts_per_rev": sensors.encoder_counts, "alpha1_offset_rad": o1, "alpha2_offset_rad": o2,
+                    "relative_offset_rad": o1 - mech.gear_ratio * o2, "quantisation": "floor"},
+        "noise": {"snr_db": sensors.snr_db, "channels": list(NOISY_CHANNELS), "seed": seed},
+        "sample_period_s": ts, "n_samples": int(n), "t0_s": 0.0,
+        "motulator_version": st.get("motulator_version", "?"),
+    }
+    return Recording(name, sig, truth)

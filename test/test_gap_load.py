@@ -1,0 +1,78 @@
+"""The load side's free interval bounds the angle fits (identify/gap_load.py).
+
+The DOL zoo (motulator's induction machine on line, a line slipping off its wheel) published J1 +32.8 % and +13 %
+from JointState without a1: after the re-contact the motor drags a wheel of 10 % of J1, which its own change-point
+test took for free motion.  The load's acceleration jumps at that re-contact; these tests build such a window."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from jident_ros.identify.gap import NoGapError, estimate_inertia
+from jident_ros.identify.gap_free import GapModel
+from jident_ros.identify.gap_load import LOAD_ANGLE_KEY, load_free_bounds
+
+TS = 5e-4
+J1, J_WHEEL = 1.16, 0.12
+Q16 = 2 * np.pi / 65536
+
+
+def _integrate(x: np.ndarray, start: float) -> np.ndarray:
+    return start + np.concatenate([[0.0], np.cumsum(0.5 * (x[1:] + x[:-1]) * TS)])
+
+
+def slip_window(n_pre: int = 48, n_gap: int = 17, n_after: int = 80, q: float = Q16):
+    """Contact at constant speed, a 17-sample gap (the motor free under m_el, the wheel free under its friction),
+    then the motor and a light wheel together; the torque falls slowly throughout (a DOL motor speeding up)."""
+    n = n_pre + n_gap + n_after
+    t = np.arange(n) * TS
+    g0, g1 = n_pre, n_pre + n_gap
+    m = 180.0 - 300.0 * np.clip(t - g0 * TS, 0.0, None)
+    acc1, acc2 = np.zeros(n), np.zeros(n)
+    acc1[g0:g1] = m[g0:g1] / J1
+    acc2[g0:g1] = -2.0
+    acc1[g1:] = acc2[g1:] = m[g1:] / (J1 + J_WHEEL)
+    w1, w2 = _integrate(acc1, 150.0), _integrate(acc2, 150.0)
+    a1, a2 = _integrate(w1, 0.0), _integrate(w2, 0.0)
+    window = {"alpha1": np.floor((a1 + 0.37) / q) * q, "m_el": m, "omega1": w1}
+    return window, np.floor((a2 + 1.91) / q) * q, g0, g1
+
+
+def test_the_load_bound_ends_within_a_few_samples_of_the_recontact_even_when_the_detector_is_late():
+    _, a2, g0, g1 = slip_window()
+    for late in (0, 10, 20):
+        lo, hi = load_free_bounds(a2, g0, g1 + late, 25)
+        assert g1 <= hi <= g1 + 5, (late, lo, hi)
+        assert lo <= g0 + 1
+
+
+def test_a_light_load_after_the_recontact_no_longer_biases_the_angle_fit():
+    """Without the load angle the free fit runs 45 samples past the re-contact: J1 about +10 %, its interval
+    missing the truth; with it, the fit stops at the bound and its interval holds J1."""
+    w, a2, g0, g1 = slip_window()
+    kw = dict(method="angle", recontact_index=g1 + 20, model=GapModel())
+    blind = estimate_inertia(dict(w), g0, 0.005, 0.1, TS, **kw)
+    assert blind.inertia_kgm2 > 1.05 * J1 and not blind.ci95_kgm2[0] <= J1 <= blind.ci95_kgm2[1]
+    seen = estimate_inertia(dict(w, **{LOAD_ANGLE_KEY: a2}), g0, 0.005, 0.1, TS, **kw)
+    assert seen.ci95_kgm2[0] <= J1 <= seen.ci95_kgm2[1], seen
+    assert abs(seen.inertia_kgm2 / J1 - 1) < 0.03 and seen.fit_end <= g1 + 5
+    assert "the load angle free in rows" in seen.model_choice
+
+
+def test_no_bound_without_a_moving_load_angle():
+    _, a2, g0, g1 = slip_window()
+    assert load_free_bounds(None, g0, g1, 25) is None
+    assert load_free_bounds(np.full(a2.size, 0.3), g0, g1, 25) is None                # the load does not move
+    assert load_free_bounds(a2[:20], 5, 10, 25) is None                                 # too few rows
+    bad = a2.copy()
+    bad[60] = np.nan
+    assert load_free_bounds(bad, g0, g1, 25) is None
+
+
+def test_a_load_angle_free_nowhere_in_the_detectors_gap_refuses_the_angle_fit(monkeypatch):
+    import jident_ros.identify.gap as gap
+    w, a2, g0, g1 = slip_window()
+    monkeypatch.setattr(gap, "load_free_bounds", lambda *a: (0, g0 - 2))
+    with pytest.raises(NoGapError, match="the load angle is free in rows"):
+        estimate_inertia(dict(w, **{LOAD_ANGLE_KEY: a2}), g0, 0.005, 0.1, TS, method="angle",
+                         recontact_index=g1 + 20, model=GapModel())
