@@ -1,8 +1,8 @@
 """The Imu and the JointState clocks matched by their data (issue 24): an Imu whose stamps agree with the
 JointState's while its data do not (a stamp taken late) gives a J1 off by percents (a 2 ms skew: -2.5 %).
 
-* :func:`imu_skew` estimates how far a1 lags the motor encoder's acceleration (the first difference of omega1 and
-  the second difference of alpha1, smoothed alike; the better correlated wins), to a fraction of a sample;
+* :func:`imu_skew` estimates how far a1 lags the motor encoder's acceleration (the second difference of alpha1, else
+  the first difference of omega1, smoothed alike), to a fraction of a sample;
 * :func:`check_imu_skew` says whether a captured window's skew is within :data:`IMU_SKEW_TOLERANCE_SAMPLES`
   (half a sample: 0.25 ms at 2 kHz, the stamp matching's own tolerance);
 * beyond it the input goes on without a1 (:meth:`jident_ros.stream.inputs.JointStateAdapter.drop_a1`), the
@@ -32,12 +32,12 @@ IMU_SKEW_MIN_CORRELATION = 0.5
 def imu_skew(a1, sample_period_s: float, alpha1=None, omega1=None, max_lag_samples: int = 40,
              smooth_samples: int = 15) -> Optional[dict]:
     """How far a1 lags the motor encoder, estimated from the data (the stamps may agree while the data do
-    not): the lag maximising the correlation of a1 with the encoder's acceleration (the first difference of
-    omega1 and the second difference of alpha1, each tried, both signals smoothed alike by a
-    ``smooth_samples`` moving average; the better correlated reference wins), refined by a parabola through
-    the peak.  Returns ``{"skew_s", "skew_samples", "correlation", "reference": "omega1"|"alpha1"}`` (skew > 0:
-    a1 comes late) or None when no encoder channel is given, the data are too short or flat, or the peak
-    correlation is below :data:`IMU_SKEW_MIN_CORRELATION` (no estimate)."""
+    not): the lag maximising the correlation of a1 with the encoder's acceleration (the second difference of
+    alpha1 when it correlates, else the first difference of omega1 -- the drive's speed feedback, which may lag;
+    both signals smoothed alike by a ``smooth_samples`` moving average), refined by a parabola through the peak.
+    Returns ``{"skew_s", "skew_samples", "correlation", "reference": "omega1"|"alpha1"}`` (skew > 0: a1 comes late)
+    or None when no encoder channel is given, the data are too short or flat, or the peak correlation is below
+    :data:`IMU_SKEW_MIN_CORRELATION` (no estimate)."""
     a = np.asarray(a1, dtype=float)
     found = []
     if omega1 is not None:
@@ -49,7 +49,11 @@ def imu_skew(a1, sample_period_s: float, alpha1=None, omega1=None, max_lag_sampl
     found = [f for f in found if f is not None]
     if not found:
         return None
-    best = max(found, key=lambda f: f[1])
+    # the encoder angle when it correlates: omega1 is the drive's speed feedback, which lags (a filter: the vector
+    # drive's 0.5 ms) and read an a1 in step as 1.2 samples early when its correlation was the higher one (a window
+    # of the DOL zoo's slip reversal, 4 samples later: a1 left out and the window lost its J1)
+    angle = [f for f in found if f[2] == "alpha1"]
+    best = angle[0] if angle else max(found, key=lambda f: f[1])
     samples, corr, name = best
     return {"skew_s": samples * sample_period_s, "skew_samples": samples, "correlation": corr, "reference": name}
 
