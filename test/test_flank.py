@@ -624,3 +624,19 @@ def test_without_a1_a_late_departure_moves_to_the_spring_s_contact_loss():
         assert abs(e - 120) < SPRING_MIN_MOVE, key
     e, gain, j = spring_entry(a1, delta, m_el, 30, flank, 5e-4)        # the rows before it are not there
     assert (e, gain) == (30, 1.0) and math.isnan(j)
+
+
+def test_with_an_accelerometer_a_departure_nothing_moved_goes_to_the_spring_s_contact_loss():
+    """The same 30 dB speed reversal (reverse direction) with a1: single_mass_run, back_to_load (its J 0.93 with a 72 N m
+    offset, resolved within 10 %) and the load hinge leave the entry on the departure, 3 samples late; the spring model
+    puts it 1 sample before the true entry."""
+    from pathlib import Path
+    d = np.load(Path(__file__).parent / "data" / "vd_speed_reversal_jointstate_30dB.npz")
+    t = np.arange(d["rev_alpha1"].size) * 5e-4
+    data = np.column_stack([t, d["rev_alpha1"], d["rev_alpha2"], d["rev_m_el"].astype(float), d["rev_a1"].astype(float)])
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el", "a1"), nominal_inertia_kgm2=1.16,
+                        encoder_counts_per_rev=65536)
+    delta = data[:, 1] - data[:, 2]
+    det._cap_flank, det._cap_returning, det._cap_sigma = (float(np.mean(delta[:60])), 1.5e-3), False, 0.0
+    shift, _ = det._refine(data, 123)
+    assert abs(123 + shift - 120) <= 2, shift

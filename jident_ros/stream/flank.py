@@ -1450,6 +1450,10 @@ class FlankDetector(BacklashDetector):
                 # our simulator's slip: its contact is lost at the jump, no ramp -- the hinge put it 1-4 samples late)
                 hinge, gain = load_hinge(wd["m_el"], acc, entry, self.nominal_inertia_kgm2)
                 entry = hinge if hinge > entry and gain >= LOAD_HINGE_MIN_GAIN else entry
+                if entry == dep:
+                    # nothing moved the departure (a1 unresolved or noisy at a fast departure, as without it: the
+                    # spring's contact loss, SPRING_*; the vector drive's 30 dB speed reversal +3 -> -1)
+                    entry = self._spring_move(data, entry + off, dep + off) - off
             if getattr(self, "_cap_returning", False):
                 # a traversal back: the coupling model's contact loss near back_to_load's entry
                 entry = self._coupling_move(data, entry + off, dep + off, 1.0, 1.0) - off
