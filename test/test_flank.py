@@ -640,3 +640,27 @@ def test_with_an_accelerometer_a_departure_nothing_moved_goes_to_the_spring_s_co
     det._cap_flank, det._cap_returning, det._cap_sigma = (float(np.mean(delta[:60])), 1.5e-3), False, 0.0
     shift, _ = det._refine(data, 123)
     assert abs(123 + shift - 120) <= 2, shift
+
+
+def test_a_traversal_found_by_two_rules_gives_one_window(tmp_path):
+    """docs/your_drive.md's small drive (J1 0.03, 3:1 gear), a speed step down as JointState gives (no a1): its
+    traversal back was found by the first window's edge scan and by the contact rule, at the same sample, and went out
+    twice (two windows at t = 0.719 s).  One goes out; the other is counted (duplicate_entry), nothing lost."""
+    from pathlib import Path
+
+    from jident_ros.cli.offline import diagnose_samples
+    from jident_ros.config import load_system_config
+    d = np.load(Path(__file__).parent / "data" / "small_drive_step_down_jointstate.npz")
+    n = d["alpha1"].size
+    t = float(d["t0"]) + np.arange(n) * 5e-4
+    path = tmp_path / "small.csv"
+    cols = {"t": t, "alpha1": d["alpha1"], "alpha2": d["alpha2"], "omega1": d["omega1"], "omega2": d["omega2"],
+            "m_el": d["m_el"]}
+    np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="",
+               fmt="%.17g")
+    profile = Path(__file__).resolve().parents[1] / "docs" / "examples" / "profiles" / "small_drive.yaml"
+    res = diagnose_samples(path, system=load_system_config(profile), gear_ratio=3.0, image_method=False,
+                           detector="flank")
+    entries = [round(w.entry_time_s, 6) for w in res.windows]
+    assert len(entries) == len(set(entries)) == 2, entries
+    assert res.dropped.get("duplicate_entry") == 1, res.dropped

@@ -50,6 +50,8 @@ REASONS = {
     "cut_off": "the data ended before the window was complete (finish(); the event carries the partial window)",
     "swallowed_entry": "an entry inside a window whose own entry shows no traversal (flank detector): the window "
                        "goes out, flagged; the entry inside it gets no window of its own",
+    "duplicate_entry": "a traversal's entry found twice, by the contact rule and by a window's edge scan (flank "
+                       "detector): one window goes out (reported only: nothing lost)",
 }
 
 

@@ -75,6 +75,7 @@ stream is cut into batches (tested).
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
@@ -217,6 +218,9 @@ def free_departure(delta: np.ndarray, departure: int, first: int, noise_rad: flo
         return e
     return departure
 
+
+#: Two windows whose entries (absolute rows) lie this close are one traversal's: the second is not given out.
+DUPLICATE_ENTRY_SAMPLES = 2
 
 #: A return traversal found by a window's edge scan (:meth:`FlankDetector._scan_returns`) opens no capture when one
 #: exists with its entry this close (the contact rule found it already); one whose entry lies later, up to where the
@@ -919,6 +923,7 @@ class FlankDetector(BacklashDetector):
         self._entry_row = 0                     # stream row of the last entry
         self._new_caps: list = []               # captures opened by a window's edge scan, fed from its end on
         self._rows_in = 0                       # rows handed to the captures so far
+        self._emitted_entry_rows: deque = deque(maxlen=8)    # stream rows of the last windows' entries
         if not hasattr(self, "_seen"):          # what the stream showed, for no_entry_reason (kept over resets)
             self._seen = {"contacts": 0, "spread_min": math.inf, "departure_max": 0.0, "threshold": math.nan}
         self._held_x = np.empty((0, len(self.channels)))     # rows waiting for their confirmation rows
@@ -1198,7 +1203,8 @@ class FlankDetector(BacklashDetector):
         self._caps.remove(cap)
         if cap.skip:
             return []
-        events = [self._finish_flank(cap)]
+        ev = self._finish_flank(cap)
+        events = [] if ev is None else [ev]
         opened, self._new_caps = self._new_caps, []
         for new in opened:
             events += self._feed_one(new, rows[take:])
@@ -1226,13 +1232,21 @@ class FlankDetector(BacklashDetector):
             events.append(self._cut_off(data, e, float(data[e, self._i_t]), math.nan, self.detector_name))
         return events
 
-    def _finish_flank(self, cap: _FlankCapture) -> Event:
+    def _finish_flank(self, cap: _FlankCapture) -> Event | None:
+        """The window of a complete capture; None when a window with this entry went out already (counted)."""
         data = np.concatenate(cap.rows)
         dep = cap.departure_row
         self._cap_sigma = cap.flank_sigma_rad      # the entry flank's contact noise (free_departure)
         self._cap_returning = cap.returning
         self._cap_flank = (cap.flank_rad, self.threshold_for(cap))
         shift, recontact = self._refine(data, dep)
+        entry_row = cap.start_row + dep + shift
+        if any(abs(entry_row - r) <= DUPLICATE_ENTRY_SAMPLES for r in self._emitted_entry_rows):
+            # the same traversal by two rules (a returning capture from a window's edge scan and the contact rule's:
+            # docs/your_drive.md's small drive gave its traversal back twice, at the same sample)
+            self.counts["duplicate_entry"] += 1
+            return None
+        self._emitted_entry_rows.append(entry_row)
         e0 = dep + shift - self.samples_before_entry
         win = data[e0:e0 + self.window_length]
         e = self.samples_before_entry
