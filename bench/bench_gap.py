@@ -1,6 +1,7 @@
 """The gap stage's cost per window (issue 20: <= 2 ms): estimate_inertia on JointState-like windows (motor encoder,
-torque, no a1; the free angle fit with its change-point search) and with an Imu (a1 fit and angle fit,
-cross-checked), on the stress bench's speed step and light-load reversal (evaluation/gap_stress.py).
+torque, no a1; the free angle fit with its change-point search), with an Imu (a1 fit and angle fit, cross-checked)
+and with the load encoder too (the load side's bound, identify/gap_load.py), on the stress bench's speed step and
+light-load reversal (evaluation/gap_stress.py).
 
     nice -n 10 .venv/bin/python bench/bench_gap.py [--repeats 200]
 
@@ -19,6 +20,7 @@ import numpy as np
 
 from jident_ros.identify.gap import estimate_inertia
 from jident_ros.identify.gap_free import GapModel
+from jident_ros.identify.gap_load import LOAD_ANGLE_KEY
 from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
 
 
@@ -54,8 +56,11 @@ def main(argv=None):
     model = GapModel(torque_accuracy=0.01, coulomb_friction_max_nm=1.5)
     for event in ("speed_step", "load_reversal"):
         rec = simulate(StressDrive(), event, seed=1)
-        for label, drop in (("JointState (angle fit)", ("a1",)), ("with Imu (cross-checked)", ())):
+        for label, drop, with_load in (("JointState (angle fit)", ("a1",), False), ("with Imu (cross-checked)", (), False),
+                                       ("JointState + load encoder", ("a1",), True)):
             w = {k: v for k, v in rec["window"].items() if k not in drop}
+            if with_load:  # the load side's bound (identify/gap_load.py), as a JointState window with both joints
+                w[LOAD_ANGLE_KEY] = rec["load_angle"]
             e0, r0 = rec["entry"] - 5, rec["recontact"] + 2
             times, cpu = [], []
             for _ in range(a.repeats):

@@ -96,7 +96,8 @@ def load_free_bounds(alpha2, start: int, end: int, search: int) -> tuple | None:
     s2 = max(q * q / 12.0 if q > 0 else _robust_noise(a[L:R]) ** 2, LOAD_NOISE_FLOOR_RAD ** 2 / 12.0)
     if not float(np.ptp(y)) > 10.0 * np.sqrt(s2):
         return None                                       # the load does not move: nothing to read
-    core = _first_free_core(X, y, lo_c, min(max(lo_c, hi_c - CORE_SAMPLES), R - L - CORE_SAMPLES), s2)
+    # (the core starts at most `search` rows after the detector's entry: its cost stays bounded on a long coarse gap)
+    core = _first_free_core(X, y, lo_c, min(max(lo_c, hi_c - CORE_SAMPLES), R - L - CORE_SAMPLES, lo_c + search), s2)
     if core is None:
         return None
     c0, *_ = np.linalg.lstsq(X[core[0]:core[1]], y[core[0]:core[1]], rcond=None)

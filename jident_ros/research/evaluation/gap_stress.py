@@ -137,7 +137,11 @@ def simulate(drive: StressDrive, event: str, seed: int = 0, speed_lag_s: float =
             p = float(np.mean(chans[c][entry - 200:entry + 200] ** 2)) / 10 ** (snr_db / 10)
             chans[c] = chans[c] + rng.standard_normal(n) * math.sqrt(p)
     chans["t"] = np.arange(n) * ts
-    return {"window": chans, "entry": entry, "recontact": recontact, "j1": drive.j1_kgm2, "event": event}
+    # the load encoder (its offset fixed: no draw from rng, so the other channels' noise is as before), for the
+    # gap stage's load-side bound (identify/gap_load.py: bench/bench_gap.py's "with load encoder")
+    load_angle = np.floor((rows["alpha2"] + 1.234) / q) * q
+    return {"window": chans, "entry": entry, "recontact": recontact, "j1": drive.j1_kgm2, "event": event,
+            "load_angle": load_angle}
 
 
 def run(model: GapModel, *, snr_db=None, with_imu=False, torque_scale_errors=(0.0, 0.01), offsets=((-14, -3), (0, 0),
