@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from jident_ros.identify import lapack
 from jident_ros.identify.distributions import normal_isf
 from jident_ros.identify.gap_free import _FORECAST_ROWS, CHANGEPOINT_FORECAST_SAMPLES, FREE_MIN_SAMPLES
 from jident_ros.identify.gap_numerics import _quantum, _robust_noise
@@ -37,6 +38,8 @@ LOAD_POLY_DEGREE = 3
 #: at 2^18); the bound was chosen at 2^13 and 2^16 (the DOL and second drives).  At 2^15's quantum a light wheel's
 #: re-contact (test_gap_load's slip window) went unseen for 20 rows.
 LOAD_NOISE_FLOOR_RAD = 2.0 * np.pi / 2 ** 16
+#: Growing an end tests every this many candidates first (then the ones before the first failure).
+SCAN_STRIDE = 4
 #: Rows of the core the interval grows from.
 CORE_SAMPLES = 2 * FREE_MIN_SAMPLES
 #: A candidate interval is consistent when its residual sum of squares (and its end rows' forecast error) is below
@@ -69,7 +72,7 @@ def _first_free_core(X: np.ndarray, y: np.ndarray, first: int, last: int, s2: fl
     few samples early, into the spring's release); None: no bound (the motor's own test decides alone)."""
     bound = s2 * float(_chi2_upper(np.array([CORE_SAMPLES - X.shape[1]]))[0])
     for k in range(first, last + 1):
-        c, *_ = np.linalg.lstsq(X[k:k + CORE_SAMPLES], y[k:k + CORE_SAMPLES], rcond=None)
+        c = lapack.lstsq(X[k:k + CORE_SAMPLES], y[k:k + CORE_SAMPLES])
         rs = y[k:k + CORE_SAMPLES] - X[k:k + CORE_SAMPLES] @ c
         if float(rs @ rs) <= bound:
             return k, k + CORE_SAMPLES
@@ -100,7 +103,7 @@ def load_free_bounds(alpha2, start: int, end: int, search: int) -> tuple | None:
     core = _first_free_core(X, y, lo_c, min(max(lo_c, hi_c - CORE_SAMPLES), R - L - CORE_SAMPLES, lo_c + search), s2)
     if core is None:
         return None
-    c0, *_ = np.linalg.lstsq(X[core[0]:core[1]], y[core[0]:core[1]], rcond=None)
+    c0 = lapack.lstsq(X[core[0]:core[1]], y[core[0]:core[1]])
     r = y - X @ c0                                        # small numbers: the sums below lose nothing
     chi_bound = s2 * _chi2_upper(np.maximum(np.arange(R - L + 1) - p, 1))
     # cumulative sums of x xᵀ, x r and r² (a zero row in front)
@@ -112,6 +115,18 @@ def load_free_bounds(alpha2, start: int, end: int, search: int) -> tuple | None:
     k_f = CHANGEPOINT_FORECAST_SAMPLES
 
     def first_failure(lo_rows: np.ndarray, hi_rows: np.ndarray, side: str):
+        # every SCAN_STRIDE-th candidate, then those before the first that fails: the batched inverses of every
+        # candidate cost 0.7 ms on a 200-row gap (bench/bench_gap.py's load reversal); a bound, so a failure between
+        # two tested candidates that a later one does not show is not looked for
+        coarse = np.arange(0, lo_rows.size, SCAN_STRIDE)
+        k = _failure(lo_rows[coarse], hi_rows[coarse], side)
+        if k is None:
+            return None
+        fine = np.arange(coarse[k - 1] + 1 if k > 0 else 0, coarse[k])
+        j = _failure(lo_rows[fine], hi_rows[fine], side) if fine.size else None
+        return int(coarse[k]) if j is None else int(fine[j])
+
+    def _failure(lo_rows: np.ndarray, hi_rows: np.ndarray, side: str):
         if side == "end":
             ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + _FORECAST_ROWS
         else:
@@ -119,7 +134,7 @@ def load_free_bounds(alpha2, start: int, end: int, search: int) -> tuple | None:
         c = lo_rows.size
         D = Z[np.concatenate([hi_rows, ihi])] - Z[np.concatenate([lo_rows, ilo])]
         A = D[:, :p * p].reshape(-1, p, p)
-        Ainv = np.linalg.inv(A)
+        Ainv = lapack.inv(A)
         sol = np.einsum("kij,kj->ki", Ainv, D[:, p * p:p * p + p])
         rss = D[:c, -1] - np.einsum("ki,ki->k", D[:c, p * p:p * p + p], sol[:c])
         ok = rss <= chi_bound[hi_rows - lo_rows]
