@@ -38,8 +38,9 @@ LOAD_POLY_DEGREE = 3
 #: at 2^18); the bound was chosen at 2^13 and 2^16 (the DOL and second drives).  At 2^15's quantum a light wheel's
 #: re-contact (test_gap_load's slip window) went unseen for 20 rows.
 LOAD_NOISE_FLOOR_RAD = 2.0 * np.pi / 2 ** 16
-#: Growing an end tests every this many candidates first (then the ones before the first failure).
-SCAN_STRIDE = 4
+#: Growing an end tests the first SCAN_DENSE candidates each, then every SCAN_STRIDE-th (then the ones before the first
+#: failure).
+SCAN_DENSE, SCAN_STRIDE = 24, 4
 #: Rows of the core the interval grows from.
 CORE_SAMPLES = 2 * FREE_MIN_SAMPLES
 #: A candidate interval is consistent when its residual sum of squares (and its end rows' forecast error) is below
@@ -115,16 +116,18 @@ def load_free_bounds(alpha2, start: int, end: int, search: int) -> tuple | None:
     k_f = CHANGEPOINT_FORECAST_SAMPLES
 
     def first_failure(lo_rows: np.ndarray, hi_rows: np.ndarray, side: str):
-        # every SCAN_STRIDE-th candidate, then those before the first that fails: the batched inverses of every
-        # candidate cost 0.7 ms on a 200-row gap (bench/bench_gap.py's load reversal); a bound, so a failure between
-        # two tested candidates that a later one does not show is not looked for
-        coarse = np.arange(0, lo_rows.size, SCAN_STRIDE)
-        k = _failure(lo_rows[coarse], hi_rows[coarse], side)
-        if k is None:
-            return None
-        fine = np.arange(coarse[k - 1] + 1 if k > 0 else 0, coarse[k])
+        # the SCAN_DENSE candidates next to the core each (a contact or a spring's release there may fail one row
+        # and pass the next: every 4th alone put the DOL slip's 2^13 window back at +13 %), then every SCAN_STRIDE-th
+        # and those before the first that fails: the batched inverses of every candidate cost 0.7 ms on a 200-row
+        # gap (bench/bench_gap.py's load reversal)
+        n = lo_rows.size
+        tested = np.concatenate([np.arange(min(SCAN_DENSE, n)), np.arange(SCAN_DENSE, n, SCAN_STRIDE)])
+        k = _failure(lo_rows[tested], hi_rows[tested], side)
+        if k is None or tested[k] < SCAN_DENSE:
+            return None if k is None else int(tested[k])
+        fine = np.arange(tested[k - 1] + 1, tested[k])
         j = _failure(lo_rows[fine], hi_rows[fine], side) if fine.size else None
-        return int(coarse[k]) if j is None else int(fine[j])
+        return int(tested[k]) if j is None else int(fine[j])
 
     def _failure(lo_rows: np.ndarray, hi_rows: np.ndarray, side: str):
         if side == "end":
