@@ -80,6 +80,70 @@ def _first_free_core(X: np.ndarray, y: np.ndarray, first: int, last: int, s2: fl
     return None
 
 
+class _Scan:
+    """The χ² and forecast tests of candidate intervals [lo, hi) of the load angle's cubic, from cumulative normal
+    equations on the residual of the core's fit (small numbers: the differences lose nothing)."""
+
+    def __init__(self, X: np.ndarray, y: np.ndarray, core: tuple, s2: float):
+        n, p = X.shape
+        c0 = lapack.lstsq(X[core[0]:core[1]], y[core[0]:core[1]])
+        self.X, self.r, self.s2, self.p, self.n = X, y - X @ c0, s2, p, n
+        self.chi_bound = s2 * _chi2_upper(np.maximum(np.arange(n + 1) - p, 1))
+        Z = np.zeros((n + 1, p * p + p + 1))       # cumulative x xᵀ, x r and r² (a zero row in front)
+        Z[1:, :p * p] = np.einsum("ki,kj->kij", X, X).reshape(n, p * p)
+        Z[1:, p * p:p * p + p] = X * self.r[:, None]
+        Z[1:, -1] = self.r * self.r
+        np.cumsum(Z, axis=0, out=Z)
+        self.Z = Z
+
+    def first_failure(self, lo_rows: np.ndarray, hi_rows: np.ndarray, side: str):
+        """Index of the first candidate not accepted (None: all are).  The SCAN_DENSE candidates next to the core
+        each (a contact or a spring's release there may fail one row and pass the next: every 4th alone put the DOL
+        slip's 2^13 window back at +13 %), then every SCAN_STRIDE-th and those before the first that fails: the
+        batched inverses of every candidate cost 0.7 ms on a 200-row gap (bench/bench_gap.py's load reversal)."""
+        n = lo_rows.size
+        tested = np.concatenate([np.arange(min(SCAN_DENSE, n)), np.arange(SCAN_DENSE, n, SCAN_STRIDE)])
+        k = self._failure(lo_rows[tested], hi_rows[tested], side)
+        if k is None or tested[k] < SCAN_DENSE:
+            return None if k is None else int(tested[k])
+        fine = np.arange(tested[k - 1] + 1, tested[k])
+        j = self._failure(lo_rows[fine], hi_rows[fine], side) if fine.size else None
+        return int(tested[k]) if j is None else int(fine[j])
+
+    def _failure(self, lo_rows: np.ndarray, hi_rows: np.ndarray, side: str):
+        p, k_f = self.p, CHANGEPOINT_FORECAST_SAMPLES
+        if side == "end":
+            ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + _FORECAST_ROWS
+        else:
+            ilo, ihi, test = lo_rows + k_f, hi_rows, lo_rows[:, None] + _FORECAST_ROWS
+        c = lo_rows.size
+        D = self.Z[np.concatenate([hi_rows, ihi])] - self.Z[np.concatenate([lo_rows, ilo])]
+        Ainv = lapack.inv(D[:, :p * p].reshape(-1, p, p))
+        sol = np.einsum("kij,kj->ki", Ainv, D[:, p * p:p * p + p])
+        rss = D[:c, -1] - np.einsum("ki,ki->k", D[:c, p * p:p * p + p], sol[:c])
+        ok = rss <= self.chi_bound[hi_rows - lo_rows]
+        xt = self.X[test]
+        pred = np.einsum("ckp,cp->ck", xt, sol[c:])
+        lev = np.einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)
+        stat = ((self.r[test] - pred) ** 2 / (self.s2 * (1.0 + lev))).sum(axis=1)
+        bad = np.flatnonzero(~(ok & ((ihi - ilo < p + 2) | (stat <= _CHI2_FORECAST))))
+        return int(bad[0]) if bad.size else None
+
+    def grow_end(self, s_row: int, e_from: int) -> int:
+        cand = np.arange(max(s_row + FREE_MIN_SAMPLES, e_from), self.n + 1)
+        if cand.size == 0:
+            return e_from
+        k = self.first_failure(np.full(cand.size, s_row), cand, "end")
+        return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
+
+    def grow_start(self, e_row: int, s_from: int) -> int:
+        cand = np.arange(min(e_row - FREE_MIN_SAMPLES, s_from), -1, -1)
+        if cand.size == 0:
+            return s_from
+        k = self.first_failure(cand, np.full(cand.size, e_row), "start")
+        return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
+
+
 def load_free_bounds(alpha2, start: int, end: int, search: int) -> tuple | None:
     """(lo, hi): the window rows around the coarse gap [start, end) (± ``search``) in which the load angle is a
     free mass's (module docstring); None when the window has no usable load angle (too few rows, constant)."""
@@ -88,7 +152,6 @@ def load_free_bounds(alpha2, start: int, end: int, search: int) -> tuple | None:
     a = np.asarray(alpha2, float)
     n_all = a.size
     L, R = max(0, start - search), min(n_all, end + search)
-    p = LOAD_POLY_DEGREE + 1
     if R - L < CORE_SAMPLES + FREE_MIN_SAMPLES or not np.all(np.isfinite(a[L:R])):
         return None
     y = a[L:R] - a[start]
@@ -104,70 +167,13 @@ def load_free_bounds(alpha2, start: int, end: int, search: int) -> tuple | None:
     core = _first_free_core(X, y, lo_c, min(max(lo_c, hi_c - CORE_SAMPLES), R - L - CORE_SAMPLES, lo_c + search), s2)
     if core is None:
         return None
-    c0 = lapack.lstsq(X[core[0]:core[1]], y[core[0]:core[1]])
-    r = y - X @ c0                                        # small numbers: the sums below lose nothing
-    chi_bound = s2 * _chi2_upper(np.maximum(np.arange(R - L + 1) - p, 1))
-    # cumulative sums of x xᵀ, x r and r² (a zero row in front)
-    Z = np.zeros((R - L + 1, p * p + p + 1))
-    Z[1:, :p * p] = np.einsum("ki,kj->kij", X, X).reshape(R - L, p * p)
-    Z[1:, p * p:p * p + p] = X * r[:, None]
-    Z[1:, -1] = r * r
-    np.cumsum(Z, axis=0, out=Z)
-    k_f = CHANGEPOINT_FORECAST_SAMPLES
-
-    def first_failure(lo_rows: np.ndarray, hi_rows: np.ndarray, side: str):
-        # the SCAN_DENSE candidates next to the core each (a contact or a spring's release there may fail one row
-        # and pass the next: every 4th alone put the DOL slip's 2^13 window back at +13 %), then every SCAN_STRIDE-th
-        # and those before the first that fails: the batched inverses of every candidate cost 0.7 ms on a 200-row
-        # gap (bench/bench_gap.py's load reversal)
-        n = lo_rows.size
-        tested = np.concatenate([np.arange(min(SCAN_DENSE, n)), np.arange(SCAN_DENSE, n, SCAN_STRIDE)])
-        k = _failure(lo_rows[tested], hi_rows[tested], side)
-        if k is None or tested[k] < SCAN_DENSE:
-            return None if k is None else int(tested[k])
-        fine = np.arange(tested[k - 1] + 1, tested[k])
-        j = _failure(lo_rows[fine], hi_rows[fine], side) if fine.size else None
-        return int(tested[k]) if j is None else int(fine[j])
-
-    def _failure(lo_rows: np.ndarray, hi_rows: np.ndarray, side: str):
-        if side == "end":
-            ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + _FORECAST_ROWS
-        else:
-            ilo, ihi, test = lo_rows + k_f, hi_rows, lo_rows[:, None] + _FORECAST_ROWS
-        c = lo_rows.size
-        D = Z[np.concatenate([hi_rows, ihi])] - Z[np.concatenate([lo_rows, ilo])]
-        A = D[:, :p * p].reshape(-1, p, p)
-        Ainv = lapack.inv(A)
-        sol = np.einsum("kij,kj->ki", Ainv, D[:, p * p:p * p + p])
-        rss = D[:c, -1] - np.einsum("ki,ki->k", D[:c, p * p:p * p + p], sol[:c])
-        ok = rss <= chi_bound[hi_rows - lo_rows]
-        xt = X[test]
-        pred = np.einsum("ckp,cp->ck", xt, sol[c:])
-        lev = np.einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)
-        stat = ((r[test] - pred) ** 2 / (s2 * (1.0 + lev))).sum(axis=1)
-        bad = np.flatnonzero(~(ok & ((ihi - ilo < p + 2) | (stat <= _CHI2_FORECAST))))
-        return int(bad[0]) if bad.size else None
-
-    def grow_end(s_row: int, e_from: int) -> int:
-        cand = np.arange(max(s_row + FREE_MIN_SAMPLES, e_from), R - L + 1)
-        if cand.size == 0:
-            return e_from
-        k = first_failure(np.full(cand.size, s_row), cand, "end")
-        return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
-
-    def grow_start(e_row: int, s_from: int) -> int:
-        cand = np.arange(min(e_row - FREE_MIN_SAMPLES, s_from), -1, -1)
-        if cand.size == 0:
-            return s_from
-        k = first_failure(cand, np.full(cand.size, e_row), "start")
-        return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
-
+    scan = _Scan(X, y, core, s2)
     with np.errstate(all="ignore"):
         try:
             # each end grown from the core alone: a bound on each side, not the best interval (a heavy load's
             # entry barely shows on its side, and a start grown past it would pull the end in)
-            e_row = grow_end(core[0], core[1])
-            s_row = grow_start(core[1], core[0])
+            e_row = scan.grow_end(core[0], core[1])
+            s_row = scan.grow_start(core[1], core[0])
         except np.linalg.LinAlgError:
             return None
     return L + s_row, L + e_row
