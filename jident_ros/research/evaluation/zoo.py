@@ -713,8 +713,9 @@ def _commit() -> str:
     try:
         c = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True,
                            cwd=Path(__file__).resolve().parent).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True,
-                               text=True, cwd=Path(__file__).resolve().parent).stdout.strip()
+        # the code measured: jident_ros/ (a results.md another report of the same run rewrote is not)
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", "jident_ros"],
+                               capture_output=True, text=True, cwd=Path(__file__).resolve().parents[3]).stdout.strip()
         return c + (" (with uncommitted changes)" if dirty else "")
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
