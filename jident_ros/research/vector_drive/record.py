@@ -131,10 +131,10 @@ def case_name(event: str, direction: str, j1: float, k2: float, sensors: Sensors
             f"{sensors.encoder_counts}c_{noise}")
 
 
-def build(p: DriveParams, event: str, direction: str, sensors: Sensors, seed: int = 0, duration_s: float = 2.2,
-          event_time_s: float = 0.6, cache_dir: Optional[Path] = None) -> Recording:
-    """One recording (signals + truth) of ``event`` in ``direction``."""
-    st = simulate_cached(p, event, direction, duration_s, event_time_s, cache_dir)
+def _sensed(st: dict, p, sensors: Sensors, seed: int) -> tuple:
+    """(signals, delta, o1, o2): a simulation ``st`` as the drive records it (encoders with drawn offsets, the
+    drive's speed feedback and torque estimate, a1 at the reference radius, noise), the true relative angle delta and
+    the two encoder offsets; the vector and the DOL mode's recordings alike."""
     ts = p.sample_period_s
     mech = p.mechanics
     n = st["t"].size
@@ -149,7 +149,16 @@ def build(p: DriveParams, event: str, direction: str, sensors: Sensors, seed: in
     if sensors.snr_db is not None:
         for k in NOISY_CHANNELS:
             sig[k] = awgn_measured(sig[k], sensors.snr_db, rng)
-    delta = st["theta_M"] - mech.gear_ratio * st["theta_L"]
+    return sig, st["theta_M"] - mech.gear_ratio * st["theta_L"], o1, o2
+
+
+def build(p: DriveParams, event: str, direction: str, sensors: Sensors, seed: int = 0, duration_s: float = 2.2,
+          event_time_s: float = 0.6, cache_dir: Optional[Path] = None) -> Recording:
+    """One recording (signals + truth) of ``event`` in ``direction``."""
+    st = simulate_cached(p, event, direction, duration_s, event_time_s, cache_dir)
+    ts, mech, n = p.sample_period_s, p.mechanics, st["t"].size
+    r = mech.reference_radius_m
+    sig, delta, o1, o2 = _sensed(st, p, sensors, seed)
     th = mech.half_zone_rad
     k_ev = int(round(event_time_s / ts))
     gl = gaps(delta, th)
@@ -256,21 +265,9 @@ def build_dol(p, event: str, direction: str, sensors: Sensors, seed: int = 0, du
     writes the vector drive's: the same channels, encoders, noise and truth keys; ``m_el`` is the voltage-model
     torque estimate (dol.TorqueEstimate), ``omega1``/``omega2`` the encoder-difference speeds."""
     st = simulate_dol_cached(p, event, direction, duration_s, event_time_s, cache_dir)
-    ts = p.sample_period_s
-    mech = p.mechanics
-    n = st["t"].size
-    rng = np.random.default_rng([seed, sensors.encoder_counts, 0 if sensors.snr_db is None else int(sensors.snr_db)])
-    o1, o2 = draw_offsets(rng, mech.gear_ratio, sensors.min_off_centre_rad)
+    ts, mech, n = p.sample_period_s, p.mechanics, st["t"].size
     r = mech.reference_radius_m
-    sig = {"t": np.arange(n) * ts,
-           "alpha1": encoder(st["theta_M"], o1, sensors.encoder_counts),
-           "alpha2": encoder(st["theta_L"], o2, sensors.encoder_counts),
-           "omega1": st["w_fbk"].copy(), "omega2": st["w_L_fbk"].copy(),
-           "m_el": st["tau_est"].copy(), "a1": r * st["dw_M"]}
-    if sensors.snr_db is not None:
-        for k in NOISY_CHANNELS:
-            sig[k] = awgn_measured(sig[k], sensors.snr_db, rng)
-    delta = st["theta_M"] - mech.gear_ratio * st["theta_L"]
+    sig, delta, o1, o2 = _sensed(st, p, sensors, seed)
     th = mech.half_zone_rad
     k_ev = int(round(event_time_s / ts))
     traversing = event in DOL_TRAVERSING_EVENTS
