@@ -43,6 +43,8 @@ LOAD_NOISE_FLOOR_RAD = 2.0 * np.pi / 2 ** 16
 SCAN_DENSE, SCAN_STRIDE = 24, 4
 #: Rows of the core the interval grows from.
 CORE_SAMPLES = 2 * FREE_MIN_SAMPLES
+#: A core that starts before the detector's entry row (none after it fits) must reach this many rows past it.
+CORE_LATE_OVERLAP = 4
 #: A candidate interval is consistent when its residual sum of squares (and its end rows' forecast error) is below
 #: the (1 - this) χ² quantile: stricter than the motor's test (gap_free.CHANGEPOINT_P, 1e-3), as the load angle's
 #: quantisation error is correlated when the load turns by near a whole number of counts per sample (the second
@@ -67,12 +69,12 @@ def _design(n: int, origin: int, scale: float) -> np.ndarray:
     return np.vander(u, LOAD_POLY_DEGREE + 1, increasing=True)
 
 
-def _first_free_core(X: np.ndarray, y: np.ndarray, first: int, last: int, s2: float) -> tuple | None:
-    """The core: the first CORE_SAMPLES rows, starting at ``first`` .. ``last`` (the detector's entry row on), that a
-    cubic fits to the noise (the detector's re-contact row may be late, the DOL slip's by 21 samples; its entry a
-    few samples early, into the spring's release); None: no bound (the motor's own test decides alone)."""
+def _first_free_core(X: np.ndarray, y: np.ndarray, starts, s2: float) -> tuple | None:
+    """The core: the first CORE_SAMPLES rows, starting at one of ``starts`` in order (the detector's entry row on),
+    that a cubic fits to the noise (the detector's re-contact row may be late, the DOL slip's by 21 samples; its entry
+    a few samples early, into the spring's release); None: no bound (the motor's own test decides alone)."""
     bound = s2 * float(_chi2_upper(np.array([CORE_SAMPLES - X.shape[1]]))[0])
-    for k in range(first, last + 1):
+    for k in starts:
         c = lapack.lstsq(X[k:k + CORE_SAMPLES], y[k:k + CORE_SAMPLES])
         rs = y[k:k + CORE_SAMPLES] - X[k:k + CORE_SAMPLES] @ c
         if float(rs @ rs) <= bound:
@@ -164,7 +166,12 @@ def load_free_bounds(alpha2, start: int, end: int, search: int) -> tuple | None:
     if not float(np.ptp(y)) > 10.0 * np.sqrt(s2):
         return None                                       # the load does not move: nothing to read
     # (the core starts at most `search` rows after the detector's entry: its cost stays bounded on a long coarse gap)
-    core = _first_free_core(X, y, lo_c, min(max(lo_c, hi_c - CORE_SAMPLES), R - L - CORE_SAMPLES, lo_c + search), s2)
+    core = _first_free_core(X, y, range(lo_c, min(max(lo_c, hi_c - CORE_SAMPLES), R - L - CORE_SAMPLES,
+                                                  lo_c + search) + 1), s2)
+    if core is None:
+        # the detector's entry late (the DOL slip's, 12 samples, 4 before the re-contact): a core that starts before
+        # it and still reaches into the coarse gap by CORE_LATE_OVERLAP rows, nearest the entry first
+        core = _first_free_core(X, y, range(lo_c - 1, max(lo_c - CORE_SAMPLES + CORE_LATE_OVERLAP, 0) - 1, -1), s2)
     if core is None:
         return None
     scan = _Scan(X, y, core, s2)
