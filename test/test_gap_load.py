@@ -76,3 +76,29 @@ def test_a_load_angle_free_nowhere_in_the_detectors_gap_refuses_the_angle_fit(mo
     with pytest.raises(NoGapError, match="the load angle is free in rows"):
         estimate_inertia(dict(w, **{LOAD_ANGLE_KEY: a2}), g0, 0.005, 0.1, TS, method="angle",
                          recontact_index=g1 + 20, model=GapModel())
+
+
+def test_a_detector_entry_late_inside_a_short_gap_still_gets_the_bound():
+    """The DOL slip's window whose entry came 12 samples late (4 before the re-contact): no 16 free rows start at or
+    after it, so the core may start up to 12 rows before it if it reaches 4 rows past it.  With the bound every
+    interval holds J1; without it, the latest entry's fit ran 23 samples past the re-contact and missed it."""
+    w, a2, g0, g1 = slip_window()
+    for late in (4, 8, 12):
+        e = g0 + late
+        kw = dict(method="angle", recontact_index=e + 3, model=GapModel())
+        seen = estimate_inertia(dict(w, **{LOAD_ANGLE_KEY: a2}), e, 0.005, 0.1, TS, **kw)
+        assert seen.ci95_kgm2[0] <= J1 <= seen.ci95_kgm2[1], (late, seen)
+        assert load_free_bounds(a2, e, e + 3, 25) is not None
+    blind = estimate_inertia(dict(w), g0 + 12, 0.005, 0.1, TS, **kw)
+    assert not blind.ci95_kgm2[0] <= J1 <= blind.ci95_kgm2[1], blind
+
+
+def test_the_dol_slips_late_entry_gets_a_bound_from_a_core_before_it():
+    """The DOL zoo's slip drop (reverse, J1 1.073, JointState 2^16 30 dB): the true gap is rows 58..74 of this cut, the
+    detector's entry row 70 (12 late), its re-contact row 73.  No free core starts at or after row 70; the one nearest
+    before it gives a bound from the true entry to 3 rows after the re-contact (before: no bound, J1 +5.8 % published
+    with an interval that missed it)."""
+    from pathlib import Path
+    a2 = np.load(Path(__file__).parent / "data" / "dol_slip_drop_rev_load_angle.npz")["alpha2"]
+    lo, hi = load_free_bounds(a2, 70, 73, 25)
+    assert 56 <= lo <= 60 and 74 <= hi <= 78, (lo, hi)
