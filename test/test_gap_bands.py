@@ -186,8 +186,7 @@ def test_the_parts_of_the_standard_error_account_for_it_on_every_fit_path(method
     ('statistical', 'model_form' or 'change_points'), gap_free's floor ('model_floor'), the bands.  An 'undetermined'
     names the largest (verdict.widest_term): a missing part once named a 0.8 % term of a ± 19 % interval."""
     import numpy as np
-
-    from gap_windows import N_PRE, R, TS, exact_window, motor_angles
+    from gap_windows import N_PRE, TS, R, exact_window, motor_angles
     w, k2 = exact_window(1.16, acc_noise=noise)
     window = {k: v for k, v in w.items() if k != "alpha_motor"}
     if method == "angle":
