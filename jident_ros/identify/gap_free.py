@@ -147,12 +147,13 @@ class GapModel:
 _Z_CHANGEPOINT = float(normal_isf(CHANGEPOINT_P))
 
 
-def _chi2_upper(dof: np.ndarray) -> np.ndarray:
+def _chi2_upper(dof: np.ndarray, z: float = _Z_CHANGEPOINT) -> np.ndarray:
     """The (1 - CHANGEPOINT_P) quantile of χ² with ``dof`` degrees of freedom (Wilson-Hilferty: within 1 % of
-    scipy's from 3 degrees of freedom on; a scipy call per scan cost more than the scan)."""
+    scipy's from 3 degrees of freedom on; a scipy call per scan cost more than the scan); ``z``: the normal quantile
+    of another level (gap_load's)."""
     v = np.asarray(dof, float)
     c = 2.0 / (9.0 * v)
-    return v * (1.0 - c + _Z_CHANGEPOINT * np.sqrt(c)) ** 3
+    return v * (1.0 - c + z * np.sqrt(c)) ** 3
 
 
 #: The forecast test's rows relative to its first one, and its χ² bound.

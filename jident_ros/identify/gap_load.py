@@ -25,6 +25,7 @@ import numpy as np
 from jident_ros.identify import lapack
 from jident_ros.identify.distributions import normal_isf
 from jident_ros.identify.gap_free import _FORECAST_ROWS, CHANGEPOINT_FORECAST_SAMPLES, FREE_MIN_SAMPLES
+from jident_ros.identify.gap_free import _chi2_upper as _chi2_upper_at
 from jident_ros.identify.gap_numerics import _quantum, _robust_noise
 
 #: The window key of the load angle the gap stage reads for the bound (the detector windows' raw alpha2: the gap
@@ -55,10 +56,8 @@ _Z_LOAD = float(normal_isf(LOAD_CHANGEPOINT_P))
 
 
 def _chi2_upper(dof) -> np.ndarray:
-    """The (1 - LOAD_CHANGEPOINT_P) quantile of χ² with ``dof`` degrees of freedom (Wilson-Hilferty)."""
-    v = np.asarray(dof, float)
-    c = 2.0 / (9.0 * v)
-    return v * (1.0 - c + _Z_LOAD * np.sqrt(c)) ** 3
+    """The (1 - LOAD_CHANGEPOINT_P) quantile of χ² with ``dof`` degrees of freedom (gap_free's Wilson-Hilferty)."""
+    return _chi2_upper_at(dof, _Z_LOAD)
 
 
 _CHI2_FORECAST = float(_chi2_upper(np.array([CHANGEPOINT_FORECAST_SAMPLES]))[0])

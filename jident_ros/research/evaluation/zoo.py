@@ -709,6 +709,17 @@ def replace_section(text: str, section: str) -> str:
     return "\n".join(lines[:start] + section.rstrip("\n").splitlines() + [""] + lines[end:]).rstrip("\n") + "\n"
 
 
+def write_section(md: str, results: str, note: str) -> None:
+    """Print a report's section (``results`` '-') or write it into the results file in place of its namesake
+    (:func:`replace_section`), saying so with ``note``: the zoo's, the variants' and the DOL zoo's reports."""
+    if results == "-":
+        print(md)
+        return
+    path = Path(results)
+    path.write_text(replace_section(path.read_text(), md))
+    print(f"{path}: section written ({note})")
+
+
 def _commit() -> str:
     try:
         c = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True,
@@ -783,12 +794,7 @@ def main(argv=None) -> int:
         Path(a.json).write_text(json.dumps({"rows": {" | ".join(k): v for k, v in res["rows"].items()},
                                             "totals": {" | ".join(k): v for k, v in res["totals"].items()}},
                                            indent=1, default=float) + "\n")
-    if a.results == "-":
-        print(md)
-    else:
-        path = Path(a.results)
-        path.write_text(replace_section(path.read_text(), md))
-        print(f"{path}: section written ({res['files']} files, {res['elapsed_s']:.0f} s)")
+    write_section(md, a.results, f"{res['files']} files, {res['elapsed_s']:.0f} s")
     return 0
 
 

@@ -385,12 +385,7 @@ def main(argv=None) -> int:
                                             "totals": {" | ".join(k): v for k, v in res["totals"].items()},
                                             "all": res["all"], "misses": res["misses"], "sweep": res["sweep"]},
                                            indent=1, default=float) + "\n")
-    if a.results == "-":
-        print(md)
-    else:
-        path = Path(a.results)
-        path.write_text(zoo.replace_section(path.read_text(), md))
-        print(f"{path}: section written ({res['files']} files, {res['elapsed_s']:.0f} s)")
+    zoo.write_section(md, a.results, f"{res['files']} files, {res['elapsed_s']:.0f} s")
     return 0
 
 

@@ -205,12 +205,7 @@ def main(argv=None) -> int:
     md = markdown(res, cmd, commit)
     if a.json:
         Path(a.json).write_text(json.dumps(res, indent=1, default=float) + "\n")
-    if a.results == "-":
-        print(md)
-    else:
-        path = Path(a.results)
-        path.write_text(zoo.replace_section(path.read_text(), md))
-        print(f"{path}: section written ({res['elapsed_s']:.0f} s)")
+    zoo.write_section(md, a.results, f"{res['elapsed_s']:.0f} s")
     return 0
 
 

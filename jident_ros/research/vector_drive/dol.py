@@ -28,7 +28,19 @@ from types import SimpleNamespace
 import numpy as np
 from scipy.optimize import brentq
 
-from .model import LOG_KEYS, Machine, Mechanics, Run, Scenario, _version, load_friction, make_mechanics, motor_friction, motulator_available
+from .model import (
+    LOG_KEYS,
+    Machine,
+    Mechanics,
+    Run,
+    Scenario,
+    _version,
+    load_friction,
+    log_true_state,
+    make_mechanics,
+    motor_friction,
+    motulator_available,
+)
 
 
 def dol_mechanics() -> Mechanics:
@@ -306,18 +318,7 @@ def _make_measurement(p: DolParams, log: dict, t_offset: float, sign: float, gri
                 self._w_filt += a * ((th - self._enc_prev) / ts - self._w_filt)
                 self._w_filt_L += a * ((th_L - self._enc_prev_L) / ts - self._w_filt_L)
             self._enc_prev, self._enc_prev_L = th, th_L
-            w_M, w_L, tau_c, f1, tl = mdl.mechanics.torques(t)
-            tau_true = float(m.tau_M)
-            log["t"].append(t - t_offset)
-            log["theta_M"].append(float(np.real(s.theta_M)))
-            log["w_M"].append(w_M)
-            log["theta_L"].append(float(np.real(s.theta_L)))
-            log["w_L"].append(w_L)
-            log["tau_M"].append(tau_true)
-            log["tau_c"].append(tau_c)
-            log["tau_f1"].append(f1)
-            log["tau_L"].append(tl)
-            log["dw_M"].append((tau_true - tau_c - f1) / mech.motor_inertia_kgm2)
+            log_true_state(log, mdl, t, t_offset, mech)
             log["w_fbk"].append(self._w_filt)
             log["w_L_fbk"].append(self._w_filt_L)
             log["tau_est"].append(tau_est)

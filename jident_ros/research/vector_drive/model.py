@@ -367,20 +367,7 @@ def _make_control(p: DriveParams, log: dict, sc: Scenario, t_offset: float):
         def get_feedback_signals(self, mdl):
             fbk = super().get_feedback_signals(mdl)
             # the true states at this sample instant (the solver's last evaluation is the period's end)
-            m = mdl.machine
-            w_M, w_L, tau_c, f1, tl = mdl.mechanics.torques(mdl.t0)
-            tau_true = float(m.tau_M)
-            s = mdl.mechanics.state
-            log["t"].append(mdl.t0 - t_offset)
-            log["theta_M"].append(float(np.real(s.theta_M)))
-            log["w_M"].append(w_M)
-            log["theta_L"].append(float(np.real(s.theta_L)))
-            log["w_L"].append(w_L)
-            log["tau_M"].append(tau_true)
-            log["tau_c"].append(tau_c)
-            log["tau_f1"].append(f1)
-            log["tau_L"].append(tl)
-            log["dw_M"].append((tau_true - tau_c - f1) / mech.motor_inertia_kgm2)
+            log_true_state(log, mdl, mdl.t0, t_offset, mech)
             log["w_fbk"].append(fbk.w_m / n_p)
             log["w_L_fbk"].append(fbk.w_L_fbk)
             log["tau_est"].append(1.5 * n_p * fbk.psi_R * float(np.imag(fbk.i_s)))
@@ -393,6 +380,25 @@ def _make_control(p: DriveParams, log: dict, sc: Scenario, t_offset: float):
             return ref
 
     return RecordingControl(), est
+
+
+def log_true_state(log: dict, mdl, t: float, t_offset: float, mech: Mechanics) -> None:
+    """Append the true states at ``t`` (the solver's last evaluation, the period's end) to ``log``: t, the angles and
+    speeds, the machine's torque, the coupling, friction and load torques, and dω_M/dt (the vector and the DOL mode's
+    controllers alike)."""
+    w_M, w_L, tau_c, f1, tl = mdl.mechanics.torques(t)
+    tau_true = float(mdl.machine.tau_M)
+    s = mdl.mechanics.state
+    log["t"].append(t - t_offset)
+    log["theta_M"].append(float(np.real(s.theta_M)))
+    log["w_M"].append(w_M)
+    log["theta_L"].append(float(np.real(s.theta_L)))
+    log["w_L"].append(w_L)
+    log["tau_M"].append(tau_true)
+    log["tau_c"].append(tau_c)
+    log["tau_f1"].append(f1)
+    log["tau_L"].append(tl)
+    log["dw_M"].append((tau_true - tau_c - f1) / mech.motor_inertia_kgm2)
 
 
 LOG_KEYS = ("t", "theta_M", "w_M", "theta_L", "w_L", "tau_M", "tau_c", "tau_f1", "tau_L", "dw_M", "w_fbk",

@@ -94,11 +94,17 @@ def simulate_cached(p: DriveParams, event: str, direction: str, duration_s: floa
     parameter), else simulated (and saved there)."""
     key = params_key(p, event, direction, duration_s, event_time_s, asdict(scenario(p, event, direction, event_time_s)))
     path = None if cache_dir is None else Path(cache_dir) / f"vector_drive_{event}_{direction}_{key}.npz"
+    return _cached(path, lambda: simulate(p, scenario(p, event, direction, event_time_s), duration_s))
+
+
+def _cached(path: Optional[Path], simulate_run) -> dict:
+    """The decimated run at ``path`` (an npz) if there, else ``simulate_run()`` decimated and saved there (atomically;
+    ``path`` None: not saved): the vector and the DOL mode's simulation caches."""
     if path is not None and path.exists():
         with np.load(path) as z:
             return {k: z[k] for k in z.files if k != "motulator_version"} | \
                 {"motulator_version": str(z["motulator_version"])}
-    run = simulate(p, scenario(p, event, direction, event_time_s), duration_s)
+    run = simulate_run()
     out = decimate(run)
     out["motulator_version"] = run.motulator_version
     if path is not None:
@@ -240,19 +246,7 @@ def simulate_dol_cached(p, event: str, direction: str, duration_s: float, event_
     sc = dol_scenario(p, event, direction, event_time_s)
     key = params_key(p, event, direction, duration_s, event_time_s, asdict(sc))
     path = None if cache_dir is None else Path(cache_dir) / f"dol_{event}_{direction}_{key}.npz"
-    if path is not None and path.exists():
-        with np.load(path) as z:
-            return {k: z[k] for k in z.files if k != "motulator_version"} | \
-                {"motulator_version": str(z["motulator_version"])}
-    run = simulate_dol(p, sc, duration_s)
-    out = decimate(run)
-    out["motulator_version"] = run.motulator_version
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp.npz")
-        np.savez(tmp, **{k: v for k, v in out.items()})
-        tmp.replace(path)
-    return out
+    return _cached(path, lambda: simulate_dol(p, sc, duration_s))
 
 
 def dol_case_name(event: str, direction: str, j1: float, k2: float, sensors: Sensors) -> str:
