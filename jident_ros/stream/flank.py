@@ -408,6 +408,28 @@ def back_to_load(m_el: np.ndarray, acc: np.ndarray, entry: int, first: int, iner
 
 
 
+def _lstsq_rss(X: np.ndarray, y: np.ndarray) -> tuple:
+    """(residual sum of squares, coefficients) of the least-squares fit of y on X's columns."""
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ coef
+    return float(r @ r), coef
+
+
+def _profile(candidates, fit, default: int, ref: int | None = None) -> tuple:
+    """A change point profiled over ``candidates``: ``fit(e)`` gives (the residual measure, anything else) of the
+    model with its change at e.  Returns (the e of the least measure, the first of equal ones; ``default`` when none is
+    finite, the measure there, its 'anything else', the measure at ``ref``): the load hinge's, the free hinge's, the
+    coupling model's and the spring model's searches alike."""
+    best, best_val, best_extra, at_ref = default, math.inf, None, math.nan
+    for e in candidates:
+        val, extra = fit(e)
+        if e == ref:
+            at_ref = val
+        if val < best_val:
+            best, best_val, best_extra = e, val, extra
+    return best, best_val, best_extra, at_ref
+
+
 def load_hinge(m_el: np.ndarray, acc: np.ndarray, entry: int, inertia_kgm2: float) -> tuple:
     """(row, gain) of where the load torque's ramp ends near ``entry`` (LOAD_HINGE_* constants): r = m_el - J1 dω1/dt
     fitted by c + h (e - k)_+ over the fixed rows [entry - LOAD_HINGE_BEFORE, entry + LOAD_HINGE_AFTER), for e within
@@ -418,16 +440,9 @@ def load_hinge(m_el: np.ndarray, acc: np.ndarray, entry: int, inertia_kgm2: floa
         return entry, 1.0
     k = np.arange(lo, hi, dtype=float)
     y = np.asarray(m_el[lo:hi], float) - float(inertia_kgm2) * np.asarray(acc[lo:hi], float)
-    best, best_rss, rss_entry = entry, math.inf, math.nan
-    for e in range(max(entry - LOAD_HINGE_SEARCH, lo + 1), min(entry + LOAD_HINGE_SEARCH, hi - 2) + 1):
-        X = np.column_stack([np.ones(k.size), np.clip(e - k, 0.0, None)])
-        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-        r = y - X @ coef
-        val = float(r @ r)
-        if e == entry:
-            rss_entry = val
-        if val < best_rss:
-            best, best_rss = e, val
+    best, best_rss, _, rss_entry = _profile(
+        range(max(entry - LOAD_HINGE_SEARCH, lo + 1), min(entry + LOAD_HINGE_SEARCH, hi - 2) + 1),
+        lambda e: _lstsq_rss(np.column_stack([np.ones(k.size), np.clip(e - k, 0.0, None)]), y), entry, entry)
     return best, (rss_entry / best_rss if best_rss > 0 else 1.0)
 
 #: Without a1, a return traversal's entry (delta resting near the flank it left with no relative speed, read as a
@@ -520,18 +535,16 @@ def free_motion_walk(alpha1: np.ndarray, m_el: np.ndarray, departure: int, first
     # the hinge: alpha1 = free motion - h (e - k)_+^3 (a contact torque falling linearly to zero at e, double-
     # integrated) over [e - FREE_HINGE_PRE, e + FREE_FIT_SAMPLES), e from FREE_HINGE_BACK before the walk's end to
     # FREE_HINGE_FWD after it (not past the departure); the e of the least mean square residual
-    best, best_rss = departure, math.inf
-    for e in range(max(start - FREE_HINGE_BACK, lo), min(start + FREE_HINGE_FWD, departure) + 1):
+    def hinge(e):
         a, z = e - FREE_HINGE_PRE, min(e + FREE_FIT_SAMPLES, n)
         kk = np.arange(a, z, dtype=float) - e
         Xh = np.column_stack([_free_columns(kk, phi_all[a:z] - phi_all[e]),
                               (np.clip(-kk, 0.0, None) / FREE_HINGE_PRE) ** 3])
-        yh = np.asarray(alpha1[a:z], float) - float(alpha1[e])
-        coef, *_ = np.linalg.lstsq(Xh, yh, rcond=None)
-        r = yh - Xh @ coef
-        val = float(r @ r) / max(z - a - 5, 1)
-        if val < best_rss:
-            best, best_rss = e, val
+        rss, _ = _lstsq_rss(Xh, np.asarray(alpha1[a:z], float) - float(alpha1[e]))
+        return rss / max(z - a - 5, 1), None
+
+    best = _profile(range(max(start - FREE_HINGE_BACK, lo), min(start + FREE_HINGE_FWD, departure) + 1), hinge,
+                    departure)[0]
     return start, best
 
 
@@ -581,20 +594,15 @@ def _coupling_fit(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, centr
     y = y - base @ np.linalg.lstsq(base, y, rcond=None)[0]
     d = np.asarray(delta[lo:hi], float)
     rate = np.gradient(d) / ts
-    best, best_rss, rss_centre = centre, math.inf, math.nan
-    for e in range(centre - COUPLING_SEARCH, centre + COUPLING_SEARCH + 1):
+    def coupling(e):
         edge = 0.5 * (delta[e - 1] + delta[e])
         pen = np.clip(-side * (d - edge), 0.0, None)
         pen[e - lo:] = 0.0
         cols = [_double_integral(pen, ts), _double_integral(rate * (pen > 0), ts)]
-        X = np.column_stack([base] + [c / (float(np.abs(c).max()) or 1.0) for c in cols])
-        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-        r = y - X @ coef
-        val = float(r @ r)
-        if e == centre:
-            rss_centre = val
-        if val < best_rss:
-            best, best_rss = e, val
+        return _lstsq_rss(np.column_stack([base] + [c / (float(np.abs(c).max()) or 1.0) for c in cols]), y)
+
+    best, best_rss, _, rss_centre = _profile(range(centre - COUPLING_SEARCH, centre + COUPLING_SEARCH + 1), coupling,
+                                             centre, centre)
     return best, best_rss, rss_centre, y.size
 
 
@@ -674,22 +682,18 @@ def spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, depart
     y = y - y.mean()
     u = side * (np.asarray(delta[lo:hi], float) - flank_rad)
     base = np.column_stack([np.ones(k.size), k, k * k])
-    best, best_rss, rss_dep, best_j = departure, math.inf, math.nan, math.nan
-    for e in range(departure - SPRING_SEARCH, departure + SPRING_SEARCH + 1):
+    def spring(e):
         ue = u[e - lo]
         frac = np.clip(1.0 - u / ue, 0.0, None) if ue > 0 else np.ones(k.size)
         torque = np.where(rows < e, t0 * frac, 0.0)
-        X = np.column_stack([base, phi - _double_integral(torque, sample_period_s)])
-        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-        r = y - X @ coef
-        val = float(r @ r)
-        if e == departure:
-            rss_dep = val
-        if val < best_rss:
-            best, best_rss, best_j = e, val, (1.0 / coef[3] if coef[3] != 0 else math.nan)
+        rss, coef = _lstsq_rss(np.column_stack([base, phi - _double_integral(torque, sample_period_s)]), y)
+        return rss, (1.0 / coef[3] if coef[3] != 0 else math.nan)
+
+    best, best_rss, best_j, rss_dep = _profile(range(departure - SPRING_SEARCH, departure + SPRING_SEARCH + 1), spring,
+                                               departure, departure)
     if not best_rss > 0:
         return departure, 1.0, math.nan
-    return best, rss_dep / best_rss, float(best_j)
+    return best, rss_dep / best_rss, math.nan if best_j is None else float(best_j)
 
 
 def _noise(x: np.ndarray) -> float:
