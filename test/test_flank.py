@@ -664,3 +664,39 @@ def test_a_traversal_found_by_two_rules_gives_one_window(tmp_path):
     entries = [round(w.entry_time_s, 6) for w in res.windows]
     assert len(entries) == len(set(entries)) == 2, entries
     assert res.dropped.get("duplicate_entry") == 1, res.dropped
+
+
+def _dol_slip_drop(key: str):
+    """A cut of the DOL drive's slip drop as JointState 2^16 gives it (zoo_dol: the load torque and the line go in
+    1 ms, the coupling untwists 3.7 mrad in 6 samples and the motor meets the flank it left 17 samples later): rows
+    (t, alpha1, alpha2, m_el), the departure row, the true first row in the zone, the flank level."""
+    from pathlib import Path
+    d = np.load(Path(__file__).parent / "data" / "dol_slip_drop_jointstate.npz")
+    q = 2.0 * math.pi / 65536
+    a1 = float(d[f"{key}_alpha10"]) + q * d[f"{key}_alpha1_counts"]
+    a2 = float(d[f"{key}_alpha20"]) + q * d[f"{key}_alpha2_counts"]
+    m_el = d[f"{key}_m_el"].astype(float)
+    data = np.column_stack([np.arange(a1.size) * 5e-4, a1, a2, m_el])
+    return data, int(d[f"{key}_departure"]), int(d[f"{key}_entry"]), float(d[f"{key}_flank"])
+
+
+@pytest.mark.parametrize("key", ["fwd_clean", "rev_30dB"])
+def test_without_an_accelerometer_a_slip_drop_enters_at_the_damped_spring_s_contact_loss(key):
+    """The DOL drive's slip drop without a1: delta crosses the departure threshold 3 samples before the contact loss
+    (the coupling untwists under 187 N m) and the coupling model, blind to the re-contact on the same flank inside its
+    fit, moved the entry to +7..+8 (clean) and +12 (30 dB); the damped spring with that re-contact puts it on the
+    true first sample in the zone, at a gain >= DAMPED_MIN_GAIN and a torque scale within
+    DAMPED_MAX_SCALE_DEVIATION of the steady m_el (old code: +8 and +12)."""
+    from jident_ros.stream.flank import DAMPED_MAX_SCALE_DEVIATION, DAMPED_MIN_GAIN, damped_spring_entry
+    data, dep, true, flank = _dol_slip_drop(key)
+    delta = data[:, 1] - data[:, 2]
+    assert dep - true == -3
+    e, gain, scale = damped_spring_entry(data[:, 1], delta, data[:, 3], dep, flank, 1.16, 5e-4)
+    assert abs(e - true) <= 2 and gain >= DAMPED_MIN_GAIN and abs(scale - 1) <= DAMPED_MAX_SCALE_DEVIATION, (e, gain)
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16,
+                        encoder_counts_per_rev=65536)
+    det._cap_flank, det._cap_returning, det._cap_sigma = (flank, 1.5e-3), False, 0.0
+    shift, _ = det._refine(data, dep)
+    assert abs(dep + shift - true) <= 2, shift
+    e, gain, scale = damped_spring_entry(data[:, 1], delta, data[:, 3], 60, flank, 1.16, 5e-4)   # rows not there
+    assert (e, gain) == (60, 1.0) and math.isnan(scale)

@@ -696,6 +696,71 @@ def spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, depart
     return best, rss_dep / best_rss, math.nan if best_j is None else float(best_j)
 
 
+#: Without a1, a window's own entry goes to the contact loss of a spring-damper coupling whose torque scale is fitted
+#: (:func:`damped_spring_entry`): in contact the coupling torque is s (1 - u / u_e) - D du/dt (u delta's move off its
+#: flank level toward the zone, u_e that move at the candidate entry e; s and D free), 0 in the zone, and again on the
+#: flank it left once delta's excursion turns back below u_e (a re-contact on that flank within the fit: the DOL
+#: drive's slip drop meets its flank 17 samples after the contact loss, inside the fit; left out, the coupling model
+#: moved its entry from -3 to +7..+12); alpha1 = a + b k + c k^2 + (Phi(m_el) - Phi(torque)) / J1_nom (J1 the
+#: drive's nominal, not fitted: with J free the spring model's J went 10-30 % off and its entry 3-5 samples early),
+#: least squares over DAMPED_FIT_BEFORE rows before the departure and DAMPED_FIT_AFTER from it, e within
+#: +-DAMPED_SEARCH of the departure.  The damping term matters: the contact torque vanishes c/k before the zone
+#: entry (1.6 samples at the vector drive's and the DOL drive's 50 kN m/rad, 40 N m s/rad); without it the same fit
+#: put every DOL slip drop and heavy load reversal 2-5 samples early
+DAMPED_FIT_BEFORE = 52
+DAMPED_FIT_AFTER = 32
+DAMPED_SEARCH = 20
+#: ... taken when it explains alpha1 this much better than the departure (RSS at the departure / at e: the DOL
+#: drive's slip drops 5.2-8.3, its heavy load reversals 1.8-2.8 (entries -3..+1 where the departure was -6); its slip
+#: reversals 1.0-1.4 and light load reversals 1.4-1.9, whose best lay -6..+7 off) ...
+DAMPED_MIN_GAIN = 2.0
+#: ... and when the fitted torque scale s is within this share of T0, the steady m_el over the SPRING_TORQUE_ROWS
+#: before the departure (a coupling that carried T0 until it untwisted: the DOL slip drops and heavy load reversals
+#: 0.96-1.08, the vector drive's heavy load reversals 0.94-0.97; the light load reversals of both drives 0.3-0.7,
+#: where friction and the load's ramp are a large share of the torque and the fit's e lay 3-8 samples late) -- both
+#: chosen on the DOL drive (zoo_dol), tested on the vector drive, the second drive, ours and the variants
+DAMPED_MAX_SCALE_DEVIATION = 0.2
+
+
+def damped_spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, departure: int, flank_rad: float,
+                        inertia_kgm2: float, sample_period_s: float) -> tuple:
+    """(entry row, gain, torque scale / T0) of the damped spring's contact loss near ``departure`` (DAMPED_*
+    constants); (departure, 1.0, nan) when the rows are not there or delta does not leave its flank."""
+    lo, hi = departure - DAMPED_FIT_BEFORE, departure + DAMPED_FIT_AFTER
+    t_lo, t_hi = departure - SPRING_TORQUE_ROWS[0], departure - SPRING_TORQUE_ROWS[1]
+    if min(lo, t_lo) < 0 or hi > alpha1.size or not inertia_kgm2 > 0:
+        return departure, 1.0, math.nan
+    ts = sample_period_s
+    side = 1.0 if delta[departure] >= flank_rad else -1.0
+    t0 = float(np.median(m_el[t_lo:t_hi]))
+    rows = np.arange(lo, hi)
+    k = (rows - departure) / float(DAMPED_FIT_AFTER)
+    y = np.asarray(alpha1[lo:hi], float) - _double_integral(m_el[lo:hi], ts) / float(inertia_kgm2)
+    y = y - y.mean()
+    u = side * (np.asarray(delta[lo:hi], float) - flank_rad)
+    du = np.gradient(u) / ts
+    base = np.column_stack([np.ones(k.size), k, k * k])
+    idx = np.arange(k.size)
+
+    def damped(e):
+        i = e - lo
+        ue = u[i]
+        if not ue > 0:
+            return math.inf, math.nan
+        turn = i + int(np.argmax(u[i:]))          # the excursion's extreme: a re-contact on this flank comes after it
+        contact = (rows < e) | ((idx > turn) & (u < ue))
+        frac = np.where(contact, np.clip(1.0 - u / ue, 0.0, None), 0.0)
+        cols = np.column_stack([base, _double_integral(frac, ts) * 1e6, _double_integral(np.where(contact, du, 0.0), ts) * 1e3])
+        rss, coef = _lstsq_rss(cols, y)
+        return rss, -coef[3] * 1e6 * float(inertia_kgm2)      # the torque scale s, N m
+
+    cand = range(max(departure - DAMPED_SEARCH, lo + 2), min(departure + DAMPED_SEARCH, hi - 4) + 1)
+    best, best_rss, scale, rss_dep = _profile(cand, damped, departure, departure)
+    if not best_rss > 0 or not math.isfinite(rss_dep) or t0 == 0:
+        return departure, 1.0, math.nan
+    return best, rss_dep / best_rss, float(scale) / t0
+
+
 def _noise(x: np.ndarray) -> float:
     """White-noise standard deviation of a steady stretch, robust to a few samples of a starting transient
     (the drive may act just before the clutch leaves its flank): 1.4826 MAD of the first differences / sqrt 2."""
@@ -1481,7 +1546,29 @@ class FlankDetector(BacklashDetector):
             if entry == dep:
                 # nothing moved the departure (a coupling that untwisted off its flank moved forward, SPRING_*)
                 entry = self._spring_move(data, entry + off, dep + off) - off
+            damped = self._damped_move(data, dep + off)
+            if damped is not None and abs(damped - off - entry) >= SPRING_MIN_MOVE:
+                # the damped spring's contact loss at a clear gain and a plausible torque scale (DAMPED_*), when it
+                # lies SPRING_MIN_MOVE or more from the entry so far (it finds where the coupling torque vanishes,
+                # before the zone entry by about the damping's c/k: the soft coupling variant's heavy load reversals
+                # -1 -> -3 with any move taken; the DOL drive's slip drops moved 3-12 samples)
+                entry = damped - off
         return entry - dep, None if recontact is None else recontact + off
+
+    def _damped_move(self, data: np.ndarray, departure: int) -> Optional[int]:
+        """:func:`damped_spring_entry`'s contact loss when it explains alpha1 DAMPED_MIN_GAIN times better than the
+        departure with a torque scale within DAMPED_MAX_SCALE_DEVIATION of the steady m_el, on a fine encoder
+        (FREE_MAX_NOISE_RAD, as the coupling model); else None."""
+        flank = getattr(self, "_cap_flank", (math.nan, math.nan))[0]
+        if not math.isfinite(flank) or "m_el" not in self.channels or self.nominal_inertia_kgm2 is None \
+                or not self.angle_quantum_rad / math.sqrt(12.0) <= FREE_MAX_NOISE_RAD:
+            return None
+        e, gain, scale = damped_spring_entry(data[:, self._i_a1], self._delta(data),
+                                             data[:, self.channels.index("m_el")], departure, flank,
+                                             self.nominal_inertia_kgm2, self.sample_period_s)
+        if gain >= DAMPED_MIN_GAIN and abs(scale - 1.0) <= DAMPED_MAX_SCALE_DEVIATION:
+            return e
+        return None
 
     def _spring_move(self, data: np.ndarray, entry: int, departure: int) -> int:
         """``entry`` moved to :func:`spring_entry`'s contact loss at a clear gain with a plausible J, by SPRING_MIN_MOVE
