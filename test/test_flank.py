@@ -700,3 +700,30 @@ def test_without_an_accelerometer_a_slip_drop_enters_at_the_damped_spring_s_cont
     assert abs(dep + shift - true) <= 2, shift
     e, gain, scale = damped_spring_entry(data[:, 1], delta, data[:, 3], 60, flank, 1.16, 5e-4)   # rows not there
     assert (e, gain) == (60, 1.0) and math.isnan(scale)
+
+
+def test_a_bounce_off_the_far_flank_is_not_the_start_of_the_traversal_back():
+    """The second drive's speed step down as JointState 2^13 gives it (no a1): the motor crosses the zone (row 2010),
+    meets the far flank, bounces 70 mrad back into the zone (2086), is at the far flank again for 20 samples (shorter
+    than a contact) and traverses back (2209).  The first window's edge scan took the bounce's start for the traversal
+    back's entry (2084: a bounce window, the traversal itself without one, 4 of 16 such recordings); with
+    RETURN_TURN_SHARE the bounce is seen and the traversal back enters where delta leaves the far flank again (old
+    code: 2084)."""
+    from pathlib import Path
+
+    from jident_ros.stream.flank import _FlankCapture
+    d = np.load(Path(__file__).parent / "data" / "second_drive_bounce_8192c.npz")
+    q = 2.0 * math.pi / 8192
+    a1 = float(d["alpha10"]) + q * d["alpha1_counts"]
+    a2 = float(d["alpha20"]) + q * d["alpha2_counts"]
+    first, dep = int(d["first_row"]), int(d["departure_row"])
+    gaps = d["gaps"]
+    assert [tuple(g) for g in gaps[:3]] == [(2010, 2069, 1), (2086, 2187, 0), (2209, 2350, 1)]
+    data = np.column_stack([(first + np.arange(a1.size)) * 5e-4, a1, a2])
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2"))
+    cap = _FlankCapture([data], data.shape[0], dep, float(d["flank_rad"]), float(d["flank_sigma_rad"]),
+                        start_row=first)
+    e0, e, g = dep - 48, 48, 48 + 2071 - 2009        # the window's entry and re-contact rows (the pipeline's)
+    det._scan_returns(cap, data, a1[e0:e0 + 2048] - a2[e0:e0 + 2048], e0, e, g)
+    entries = [c.start_row + c.departure_row for c in det._new_caps]
+    assert len(entries) == 1 and abs(entries[0] - 2209) <= 6, entries

@@ -240,6 +240,15 @@ RETURN_REST_SAMPLES = 8
 #: speed loop's light load reversal: a bounce window 59 samples late, now not given)
 RETURN_MIN_SPAN_SHARE = 0.5
 
+#: A window's edge scan (:meth:`FlankDetector._scan_returns`) takes an excursion from the re-contact edge that went
+#: into the zone, came back within this share of the zone's span of that edge and turns away from it again for a
+#: bounce (the motor met the far flank, shorter than a contact), not for the start of a traversal back: the second
+#: drive's 2^13 recordings bounce off the far flank (delta back to within 3 mrad of its 197 mrad span, 20 samples
+#: at the flank) before they traverse back, and the scan gave the bounce's start as the traversal's entry (125
+#: samples early; the traversal itself then had no window) -- chosen on the second drive, tested on the vector drive,
+#: ours, the variants and the DOL drive
+RETURN_TURN_SHARE = 0.1
+
 #: single_mass_run fits m_el = J acc + c (True) or m_el = J acc (False).
 SINGLE_MASS_OFFSET = True
 #: ... with |c| at most this share of the run's median |m_el| or of the steady |m_el| before the departure, the
@@ -1385,20 +1394,33 @@ class FlankDetector(BacklashDetector):
             steady[L - 1:] = np.ptp(np.lib.stride_tricks.sliding_window_view(d, L), axis=1) <= self.contact_tolerance_rad
         known = [c.start_row + c.departure_row for c in self._caps + self._new_caps]
         k, n, at_out, last_out = g + 1, d.size, True, g
+        near = RETURN_TURN_SHARE * abs(span)
+        rest = 0.0                                 # depth up to which delta rests at the re-contact edge
+        deep, low, low_k = False, math.inf, -1     # this excursion: went beyond `near`; its least depth since then
         while k < n:
             if at_out:                             # resting at (or beyond) the re-contact edge
-                if depth[k] <= 0:
+                if depth[k] <= rest:
                     last_out = k
-                elif depth[k] > margin and to_in[k] > margin:
-                    at_out = False                 # left it into the zone
+                elif depth[k] > (margin if rest == 0.0 else rest) and to_in[k] > margin:
+                    at_out, deep, low = False, False, math.inf     # left it into the zone
                 k += 1
                 continue
             if depth[k] < -unsure or (steady[k] and depth[k] < 0.5 * abs(span)):
                 # back beyond the re-contact edge, or a contact nearer to it than to the entry edge (the edge from
                 # the window's re-contact row may be a few mrad off: 5 mrad on the vector drive's 2^13 JointState
                 # recordings): a bounce
-                at_out, last_out = True, k
+                at_out, last_out, rest = True, k, 0.0
                 k += 1
+                continue
+            deep = deep or depth[k] > 2.0 * near
+            if deep and depth[k] < low:
+                low, low_k = float(depth[k]), k
+            if deep and low < near and depth[k] > low + margin:
+                # back near the re-contact edge and leaving it again, shorter than a contact (RETURN_TURN_SHARE): a
+                # bounce; delta rests there until it leaves its turning depth by the departure threshold (as the
+                # contact rule's departure), where a traversal back from it starts
+                at_out, rest = True, low + margin
+                last_out = low_k + int(np.nonzero(depth[low_k:k + 1] <= rest)[0][-1])
                 continue
             if to_in[k] > margin:
                 k += 1
@@ -1407,7 +1429,7 @@ class FlankDetector(BacklashDetector):
             reached = cap.start_row + e0 + k
             while k < n and depth[k] > 0:          # re-armed only once back at the re-contact edge
                 k += 1
-            at_out, start = True, last_out + 1
+            at_out, start, rest = True, last_out + 1, 0.0
             last_out = k
             row = e0 + start                            # capture row of the return traversal's entry
             abs_row = cap.start_row + row
