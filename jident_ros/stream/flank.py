@@ -248,6 +248,11 @@ RETURN_MIN_SPAN_SHARE = 0.5
 #: samples early; the traversal itself then had no window) -- chosen on the second drive, tested on the vector drive,
 #: ours, the variants and the DOL drive
 RETURN_TURN_SHARE = 0.1
+#: ... and the traversal back from that bounce's brief contact starts where delta has left its turning depth by this
+#: many departure thresholds (a contact that carried the bounce's torque untwists before it is lost: the second drive's
+#: 2^13 traversals back after a bounce were entered 4-6 samples early at one threshold, 2-5 at 1.5, 0..-3 at 2, -2..+3
+#: at 2.5) -- chosen on the second drive (the only model whose traversals back start from such a bounce)
+RETURN_REST_DEPARTURES = 2.0
 
 #: single_mass_run fits m_el = J acc + c (True) or m_el = J acc (False).
 SINGLE_MASS_OFFSET = True
@@ -1417,9 +1422,9 @@ class FlankDetector(BacklashDetector):
                 low, low_k = float(depth[k]), k
             if deep and low < near and depth[k] > low + margin:
                 # back near the re-contact edge and leaving it again, shorter than a contact (RETURN_TURN_SHARE): a
-                # bounce; delta rests there until it leaves its turning depth by the departure threshold (as the
-                # contact rule's departure), where a traversal back from it starts
-                at_out, rest = True, low + margin
+                # bounce; delta rests there until it leaves its turning depth by RETURN_REST_DEPARTURES departure
+                # thresholds, where a traversal back from it starts
+                at_out, rest = True, low + RETURN_REST_DEPARTURES * margin
                 last_out = low_k + int(np.nonzero(depth[low_k:k + 1] <= rest)[0][-1])
                 continue
             if to_in[k] > margin:
