@@ -737,9 +737,11 @@ DAMPED_MAX_SCALE_DEVIATION = 0.2
 
 
 def damped_spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, departure: int, flank_rad: float,
-                        inertia_kgm2: float, sample_period_s: float) -> tuple:
+                        inertia_kgm2: float, sample_period_s: float, ref: Optional[int] = None) -> tuple:
     """(entry row, gain, torque scale / T0) of the damped spring's contact loss near ``departure`` (DAMPED_*
-    constants); (departure, 1.0, nan) when the rows are not there or delta does not leave its flank."""
+    constants; the gain RSS(``ref``) / RSS(entry), ``ref`` the departure by default); (departure, 1.0, nan) when the
+    rows are not there or delta does not leave its flank."""
+    ref = departure if ref is None else int(ref)
     lo, hi = departure - DAMPED_FIT_BEFORE, departure + DAMPED_FIT_AFTER
     t_lo, t_hi = departure - SPRING_TORQUE_ROWS[0], departure - SPRING_TORQUE_ROWS[1]
     if min(lo, t_lo) < 0 or hi > alpha1.size or not inertia_kgm2 > 0:
@@ -769,7 +771,7 @@ def damped_spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray,
         return rss, -coef[3] * 1e6 * float(inertia_kgm2)      # the torque scale s, N m
 
     cand = range(max(departure - DAMPED_SEARCH, lo + 2), min(departure + DAMPED_SEARCH, hi - 4) + 1)
-    best, best_rss, scale, rss_dep = _profile(cand, damped, departure, departure)
+    best, best_rss, scale, rss_dep = _profile(cand, damped, departure, ref)
     if not best_rss > 0 or not math.isfinite(rss_dep) or t0 == 0:
         return departure, 1.0, math.nan
     return best, rss_dep / best_rss, float(scale) / t0
@@ -1573,7 +1575,7 @@ class FlankDetector(BacklashDetector):
             if entry == dep:
                 # nothing moved the departure (a coupling that untwisted off its flank moved forward, SPRING_*)
                 entry = self._spring_move(data, entry + off, dep + off) - off
-            damped = self._damped_move(data, dep + off)
+            damped = self._damped_move(data, dep + off, entry + off)
             if damped is not None and abs(damped - off - entry) >= SPRING_MIN_MOVE:
                 # the damped spring's contact loss at a clear gain and a plausible torque scale (DAMPED_*), when it
                 # lies SPRING_MIN_MOVE or more from the entry so far (it finds where the coupling torque vanishes,
@@ -1582,7 +1584,7 @@ class FlankDetector(BacklashDetector):
                 entry = damped - off
         return entry - dep, None if recontact is None else recontact + off
 
-    def _damped_move(self, data: np.ndarray, departure: int) -> Optional[int]:
+    def _damped_move(self, data: np.ndarray, departure: int, entry: Optional[int] = None) -> Optional[int]:
         """:func:`damped_spring_entry`'s contact loss when it explains alpha1 DAMPED_MIN_GAIN times better than the
         departure with a torque scale within DAMPED_MAX_SCALE_DEVIATION of the steady m_el, on a fine encoder
         (FREE_MAX_NOISE_RAD, as the coupling model); else None."""
@@ -1592,7 +1594,7 @@ class FlankDetector(BacklashDetector):
             return None
         e, gain, scale = damped_spring_entry(data[:, self._i_a1], self._delta(data),
                                              data[:, self.channels.index("m_el")], departure, flank,
-                                             self.nominal_inertia_kgm2, self.sample_period_s)
+                                             self.nominal_inertia_kgm2, self.sample_period_s, entry)
         if gain >= DAMPED_MIN_GAIN and abs(scale - 1.0) <= DAMPED_MAX_SCALE_DEVIATION:
             return e
         return None
