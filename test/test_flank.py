@@ -728,3 +728,26 @@ def test_a_bounce_off_the_far_flank_is_not_the_start_of_the_traversal_back():
     det._scan_returns(cap, data, a1[e0:e0 + 2048] - a2[e0:e0 + 2048], e0, e, g)
     entries = [c.start_row + c.departure_row for c in det._new_caps]
     assert len(entries) == 1 and abs(entries[0] - 2209) <= 2, entries
+
+
+def test_a_turn_inside_the_zone_on_a_fine_encoder_is_not_a_bounce():
+    """The second drive with K2 9 mm as CSV 2^16 gives it: after the first traversal the motor leaves the far flank
+    (row 2094), turns inside the zone 2 mrad short of the far edge without meeting it and traverses back, one gap to
+    2392.  On a fine encoder the scan does not take that turn for a bounce (RETURN_TURN_SHARE is for coarse encoders):
+    the traversal back enters at 2094 (with the rule on every encoder: at 2257, 163 samples late)."""
+    from pathlib import Path
+
+    from jident_ros.stream.flank import _FlankCapture
+    d = np.load(Path(__file__).parent / "data" / "second_drive_turn_in_zone_65536c.npz")
+    q = 2.0 * math.pi / 65536
+    a1 = float(d["alpha10"]) + q * d["alpha1_counts"]
+    a2 = float(d["alpha20"]) + q * d["alpha2_counts"]
+    data = np.column_stack([float(d["t0"]) + np.arange(a1.size) * 5e-4, a1, a2])
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2"))
+    first, dep = int(d["start_row"]), int(d["departure_row"])
+    cap = _FlankCapture([data], data.shape[0], dep, float(d["flank_rad"]), float(d["flank_sigma_rad"]),
+                        start_row=first)
+    e0, e, g = int(d["e0"]), int(d["e"]), int(d["g"])
+    det._scan_returns(cap, data, a1[e0:] - a2[e0:], e0, e, g)
+    entries = [c.start_row + c.departure_row for c in det._new_caps]
+    assert len(entries) == 1 and abs(entries[0] - 2094) <= 2, entries

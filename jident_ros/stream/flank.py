@@ -240,13 +240,16 @@ RETURN_REST_SAMPLES = 8
 #: speed loop's light load reversal: a bounce window 59 samples late, now not given)
 RETURN_MIN_SPAN_SHARE = 0.5
 
-#: A window's edge scan (:meth:`FlankDetector._scan_returns`) takes an excursion from the re-contact edge that went
-#: into the zone, came back within this share of the zone's span of that edge and turns away from it again for a
-#: bounce (the motor met the far flank, shorter than a contact), not for the start of a traversal back: the second
-#: drive's 2^13 recordings bounce off the far flank (delta back to within 3 mrad of its 197 mrad span, 20 samples
-#: at the flank) before they traverse back, and the scan gave the bounce's start as the traversal's entry (125
-#: samples early; the traversal itself then had no window) -- chosen on the second drive, tested on the vector drive,
-#: ours, the variants and the DOL drive
+#: On a coarse encoder (2^13), a window's edge scan (:meth:`FlankDetector._scan_returns`) takes an excursion from the
+#: re-contact edge that went into the zone, came back within this share of the zone's span of that edge and turns
+#: away from it again for a bounce (the motor met the far flank, shorter than a contact), not for the start of a
+#: traversal back: the second drive's 2^13 recordings bounce off the far flank (delta back to within 3 mrad of its
+#: 197 mrad span, 20 samples at the flank) before they traverse back, and the scan gave the bounce's start as the
+#: traversal's entry (125 samples early; the traversal itself then had no window) -- chosen on the second drive, tested
+#: on the vector drive, ours, the variants and the DOL drive.  Not on a fine encoder: the second drive's wide backlash
+#: (K2 9-10 mm, 2^16 CSV, detector_zoo) turns 2-6 mrad short of the far edge inside the zone and traverses back in one
+#: gap; read as a bounce, 10 of its 84 traversals back went 154-167 samples late (a turn at the quantum's resolution
+#: looks the same: the rule bets on a contact there)
 RETURN_TURN_SHARE = 0.1
 #: ... and the traversal back from that bounce's brief contact starts where delta has left its turning depth by this
 #: many departure thresholds (a contact that carried the bounce's torque untwists before it is lost: the second drive's
@@ -1402,6 +1405,11 @@ class FlankDetector(BacklashDetector):
         known = [c.start_row + c.departure_row for c in self._caps + self._new_caps]
         k, n, at_out, last_out = g + 1, d.size, True, g
         near = RETURN_TURN_SHARE * abs(span)
+        # a coarse encoder's delta (its smallest step, as _refine's, beyond FREE_MAX_NOISE_RAD sqrt 12: 2^13), where
+        # the traversal back's walk and coupling model are off and this scan's start is its entry (RETURN_TURN_SHARE)
+        steps = np.abs(np.diff(d))
+        steps = steps[(steps > 1e-9) & (steps < margin)]
+        coarse = bool(steps.size) and float(steps.min()) / math.sqrt(12.0) > FREE_MAX_NOISE_RAD
         rest = 0.0                                 # depth up to which delta rests at the re-contact edge
         deep, low, low_k = False, math.inf, -1     # this excursion: went beyond `near`; its least depth since then
         while k < n:
@@ -1422,7 +1430,7 @@ class FlankDetector(BacklashDetector):
             deep = deep or depth[k] > 2.0 * near
             if deep and depth[k] < low:
                 low, low_k = float(depth[k]), k
-            if deep and low < near and depth[k] > low + margin:
+            if coarse and deep and low < near and depth[k] > low + margin:
                 # back near the re-contact edge and leaving it again, shorter than a contact (RETURN_TURN_SHARE): a
                 # bounce; delta rests there until it leaves its turning depth by RETURN_REST_DEPARTURES departure
                 # thresholds, where a traversal back from it starts
