@@ -82,6 +82,7 @@ class OfflineWindow:
     backlash_width_se_m: Optional[float] = None
     detector: str = "paper"
     flags: tuple = ()                                   # "second_entry", "cut_off"
+    recontact_time_s: Optional[float] = None            # drive clock t of the detector's first contact row, s
 
     @property
     def inertia_kgm2(self) -> Optional[float]:
@@ -105,6 +106,7 @@ class OfflineWindow:
                 "message": d.message, "detector": self.detector,
                 "backlash_width_estimate_m": _json_value(self.backlash_width_estimate_m),
                 "backlash_width_se_m": _json_value(self.backlash_width_se_m), "flags": list(self.flags),
+                "recontact_time_s": self.recontact_time_s,
                 "values": {k: _json_value(v) for k, v in d.values}}
 
 
@@ -385,10 +387,12 @@ def _internal_error(win, exc) -> WindowDiagnosis:
 
 def _add_window(result, win, d, true_j1, on_window):
     est = getattr(win, "backlash_width_estimate_m", math.nan)
+    rc = getattr(win, "recontact_index", -1)
     ow = OfflineWindow(win.window_id, win.entry_time_s, win.backlash_width_m, true_j1, d,
                        est if math.isfinite(est) else None,
                        win.backlash_width_se_m if math.isfinite(est) else None, win.detector,
-                       tuple(win.flag_names))
+                       tuple(win.flag_names),
+                       win.entry_time_s + (rc - win.entry_index) * win.sample_period_s if rc >= 0 else None)
     result.windows.append(ow)
     if on_window is not None:
         on_window(ow)

@@ -66,7 +66,12 @@ at +-K2/r from the centre):
 The re-contact row (the first contact sample) comes from the motor's acceleration (a1, else the smoothed
 second difference of alpha1, else of omega1): the first sample after the entry whose acceleration has lost
 ``recontact_drop`` of its entry value toward zero, sign-invariant, less one sample (the flanks meet between
-samples) — the rule of :func:`jident_ros.identify.gap.gap_interval`'s "signature".
+samples) — the rule of :func:`jident_ros.identify.gap.gap_interval`'s "signature".  That rule assumes a motor
+that keeps its acceleration across the gap; a line-fed motor's torque falls as it speeds up, and a coarse encoder's
+second difference is noise.  So a traversal's row is checked against delta itself (:func:`delta_recontact`): where
+delta has not yet come near its farthest travel at that row (still crossing the zone), the contact is where delta's
+travel stops and holds, located at the kink there.  Windows in which delta comes back to the flank it left (a
+bounce, a slip's excursion, a traversal back) keep the acceleration's row.
 
 Same batch API, events and drop reasons as :class:`~jident_ros.stream.detector.BacklashDetector` (which it
 extends), so the windowing node and ``jident diagnose`` take either.  The result does not depend on how a
@@ -789,6 +794,134 @@ def _noise(x: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(dx - np.median(dx))) / math.sqrt(2.0))
 
 
+#: The re-contact from the relative angle delta (:func:`delta_recontact`): delta's speed across the zone, over
+#: RECONTACT_SPAN samples, falls below RECONTACT_DROP of its largest since the entry at the far flank (the coupling
+#: takes the impact) ...
+RECONTACT_SPAN = 4
+RECONTACT_FROM_DELTA = True
+RECONTACT_DROP = 0.5
+#: ... a move of at least this many quanta per span (below it delta barely moves: no traversal to read) ...
+RECONTACT_MIN_QUANTA = 3.0
+#: ... and the contact instant is the kink of delta there: delta = quadratic before row g, plus (k - g)^2 and (k - g)^3
+#: terms from g on (position and speed continuous, the coupling's damping and spring acting from g), profiled over g
+#: within RECONTACT_SEARCH rows before and after the drop row on the fixed rows RECONTACT_FIT rows around it.
+RECONTACT_SEARCH = (8, 4)
+RECONTACT_FIT = (24, 10)
+#: A speed drop is the contact when delta then holds within RECONTACT_HOLD_SHARE of its travel from the entry for
+#: RECONTACT_HOLD samples (the first of at most RECONTACT_MAX_CANDIDATES drops).
+RECONTACT_HOLD = 12
+RECONTACT_HOLD_SHARE = 0.3
+RECONTACT_MAX_CANDIDATES = 400
+#: ... at a travel of at least this share of delta's farthest from the entry in the window.
+RECONTACT_MIN_TRAVEL_SHARE = 0.6
+#: ... and only where delta travels at least this many quanta in the window: below it a quantised delta cannot tell a
+#: contact from the coupling's untwist (the DOL sweep's soft coupling, 2^13: a slip's 12-sample excursion of 4 counts
+#: beyond a 10-count untwist, read as a 13-row gap, published +11.2 % outside its interval; the narrowest traversal
+#: in the zoos, K2 2.5 mm at 2^13, travels 65 counts) -- chosen on the DOL sweep, tested on the other zoos
+RECONTACT_MIN_TRAVEL_QUANTA = 30.0
+#: delta back within this share of its farthest travel so far is a bounce's return to the flank it left: the search
+#: ends there.
+RECONTACT_RETURN_SHARE = 0.2
+
+
+def _travel(d: np.ndarray, e: int) -> np.ndarray:
+    """The travel of delta from the entry row on, positive in the direction it left in (RECONTACT_SPAN rows decide)."""
+    side = 1.0 if d[min(e + RECONTACT_SPAN, d.size - 1)] >= d[e] else -1.0
+    return side * (d[e:] - d[e])
+
+
+def _delta_quantum(d: np.ndarray, e: int, angle_quantum_rad: float) -> float:
+    """The quantum of delta: the configured encoders', else the smallest step delta makes before the entry (whole counts
+    of a quantised angle at rest on its flank; a continuous angle's is tiny and guards nothing)."""
+    if angle_quantum_rad > 0:
+        return float(angle_quantum_rad)
+    steps = np.abs(np.diff(d[:e]))
+    steps = steps[steps > 1e-9]
+    return float(steps.min()) if steps.size else 0.0
+
+
+def _comes_back(D: np.ndarray, angle_quantum_rad: float) -> bool:
+    """Whether delta comes back near the flank it left in the window (within RECONTACT_RETURN_SHARE of its farthest
+    travel so far): a bounce (the second drive's 2^13 bounce windows, whose traversal back across the zone followed:
+    read as their contact, J1 was fitted over 24 contact rows, +2.8 % and another class named), a slip's excursion (the
+    DOL sweep's soft coupling at 2^13: its slow turning point held still, +11.2 % published), or a traversal and a
+    traversal back.  The delta rule does not read those windows: the acceleration's row stands."""
+    run = np.maximum.accumulate(D)
+    return bool(np.any((D <= RECONTACT_RETURN_SHARE * run) & (run > RECONTACT_MIN_QUANTA * max(angle_quantum_rad, 1e-12))))
+
+
+def _delta_arrived(d: np.ndarray, e: int, g: int, angle_quantum_rad: float) -> bool:
+    """Whether a re-contact row g found from the motor's acceleration has delta at the far side: its travel from the
+    entry at least RECONTACT_MIN_TRAVEL_SHARE of its farthest in the window (False: delta still crossing the zone)."""
+    if not e < g < d.size or d.size - e < RECONTACT_SPAN + 6:
+        return True                 # nothing to check against: the acceleration's row (or none) stands
+    D = _travel(d, e)
+    if _comes_back(D, angle_quantum_rad):
+        return True
+    far = float(np.max(D))
+    if not far > RECONTACT_MIN_TRAVEL_QUANTA * max(angle_quantum_rad, 1e-12):
+        return True
+    return bool(D[g - e] >= RECONTACT_MIN_TRAVEL_SHARE * far)
+
+
+def delta_recontact(delta: np.ndarray, entry_index: int, angle_quantum_rad: float = 0.0) -> int:
+    """Row of the first contact sample after the entry from the relative angle delta = alpha1 - N alpha2 (raw
+    offsets cancel in its differences; RECONTACT_* constants): where delta's travel across the zone is stopped.
+    -1 when delta does not move across the zone or never stops in the window (the caller falls back on the motor's
+    acceleration, :func:`recontact_index`).  Chosen on the DOL drive's and the vector drive's traversals (the motor's
+    acceleration there changes inside the gap: a line-fed motor's torque falls as it speeds up, so the acceleration
+    rule put the re-contact 30-140 samples early and K2 73-92 % off), tested on the second drive and ours."""
+    d = np.asarray(delta, float)
+    e = int(entry_index)
+    span = RECONTACT_SPAN
+    if d.size - e < span + 6:
+        return -1
+    D = _travel(d, e)
+    if _comes_back(D, angle_quantum_rad) or not float(np.max(D)) > RECONTACT_MIN_TRAVEL_QUANTA * max(angle_quantum_rad,
+                                                                                                      1e-12):
+        return -1
+    v = (D[span:] - D[:-span]) / span                      # v[i]: delta's speed toward the far flank over i..i+span
+    vmax = np.maximum.accumulate(v)
+    floor = RECONTACT_MIN_QUANTA * max(angle_quantum_rad, 1e-12) / span
+    stop = (v < RECONTACT_DROP * vmax) & (vmax > floor)
+    stop[:2] = False
+    tol_floor = RECONTACT_MIN_QUANTA * max(angle_quantum_rad, 1e-12)
+    # delta's farthest travel from the entry in the window is the far flank (plus the coupling's twist): a contact
+    # there, not the end of the coupling's untwist at the contact loss (the second drive's slow return traversals hold
+    # still for 12 samples after it)
+    travel = max(RECONTACT_MIN_TRAVEL_SHARE * float(np.max(D)), tol_floor)
+    i0 = -1
+    for i in np.flatnonzero(stop)[:RECONTACT_MAX_CANDIDATES]:
+        # held: delta stays within RECONTACT_HOLD_SHARE of its travel for RECONTACT_HOLD samples (a contact; not the
+        # coupling's untwist at the contact loss, after which delta goes on across the zone, nor a free turning
+        # point, after which it goes back)
+        at = i + span
+        after = D[at:at + RECONTACT_HOLD]
+        if after.size < RECONTACT_HOLD:
+            break
+        tol = max(RECONTACT_HOLD_SHARE * D[at], tol_floor)
+        if D[at] >= travel and float(np.max(np.abs(after - D[at]))) <= tol:
+            i0 = e + int(i)
+            break
+    if i0 < 0:
+        return -1
+    lo, hi = i0 - RECONTACT_FIT[0], i0 + span + RECONTACT_FIT[1]
+    lo, hi = max(lo, e), min(hi, d.size)
+    cands = range(max(i0 - RECONTACT_SEARCH[0], lo + 4, e + 2), min(i0 + span + RECONTACT_SEARCH[1], hi - 3))
+    if hi - lo < 10 or len(cands) == 0:
+        return i0 + span // 2
+    k = np.arange(lo, hi, dtype=float)
+    y = d[lo:hi] - d[lo]
+    base = np.column_stack([np.ones(k.size), k - lo, (k - lo) ** 2])
+
+    def hinge(g):
+        h = np.clip(k - g, 0.0, None)
+        return _lstsq_rss(np.column_stack([base, h * h, h * h * h]), y)
+
+    best, _, _, _ = _profile(cands, hinge, i0 + span // 2)
+    return int(best) - 1           # the flanks meet between samples: the row before the kink may carry load
+
+
 def estimate_width(window: dict, entry_index: int, wheel_radius_m: float, sample_period_s: float,
                    gear_ratio: float = 1.0, flank_rad: Optional[float] = None, recontact: Optional[int] = None,
                    angle_quantum_rad: float = 0.0, contact_samples: int = 32,
@@ -828,6 +961,10 @@ def estimate_width(window: dict, entry_index: int, wheel_radius_m: float, sample
         width = r * abs(f_after - d[e])
         se = r * math.sqrt(float(np.var(tail, ddof=1)) + step_after ** 2 / 12.0 + q2)
         return WidthResult(width, se, "same_flank", g)
+    if RECONTACT_FROM_DELTA and not _delta_arrived(d, e, g, q_delta := _delta_quantum(d, e, angle_quantum_rad)):
+        # the motor's acceleration fell while delta was still crossing the zone: delta's own stop
+        g_delta = delta_recontact(d, e, q_delta)
+        g = g_delta if g_delta >= 0 else g
     if g <= e + 2:
         return WidthResult(math.nan, math.nan, "no re-contact found", g)
     s = 1.0 if d[e] >= f_entry else -1.0          # direction in which delta left its flank

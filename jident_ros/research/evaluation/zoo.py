@@ -292,7 +292,8 @@ def diagnose_one(zr: ZooRecording, fmt: str, system, declare: bool = True, extra
                      "reason": None if d.inertia_kgm2 is not None else _reason(d.refused_reason),
                      "status": d.status, "level": d.level_name, "cls": d.class_kgm2,
                      "stat_rel": _stat_rel(gap), "model_rel": _model_rel(gap),
-                     "k2": w.backlash_width_estimate_m})
+                     "k2": w.backlash_width_estimate_m,
+                     "recontact": None if w.recontact_time_s is None else int(round((w.recontact_time_s - t_first) / ts))})
     cut = [int(round((c["entry_time_s"] - t_first) / ts)) for c in res.cut_off]
     return {"windows": wins, "cut_off": [{"index": i, "gap": match(zr.gaps, i)} for i in cut]}
 
