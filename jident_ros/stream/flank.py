@@ -40,14 +40,18 @@ and on what the clutch does, not on inequality (1):
   own entry that nothing moved, without a1, goes back to where a spring carrying the steady m_el loses its contact
   (:func:`spring_entry`: a fast departure crosses the threshold after the contact loss, the vector drive's speed
   reversals 3 samples); with a1 it goes forward to the end of the load torque's ramp (:func:`load_hinge`: a noisy run
-  starts early) -- both at a clear gain (SPRING_*, LOAD_HINGE_*).
+  starts early) -- both at a clear gain (SPRING_*, LOAD_HINGE_*).  Without a1, a window's own entry then goes to a
+  damped spring's contact loss (:func:`damped_spring_entry`: the torque scale and damping fitted, a re-contact on the
+  flank it left inside the fit) when that explains alpha1 clearly better and lies 3 samples or more away (DAMPED_*;
+  the DOL drive's slip drop, whose departure precedes its contact loss and whose gap lasts 17 samples).
 * **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
   ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
   (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry
   inside the window sets :data:`~jident_ros.stream.layout.FLAG_SECOND_ENTRY` (information); it gets a window of
   its own only when its excursion ends in a contact across the zone (a traversal back: at least
   RETURN_MIN_SPAN_SHARE of the way to the running windows' other flank; a soft coupling's swing on the flank it
-  reached is not one).
+  reached is not one).  On a coarse encoder a window's edge scan takes an excursion back near the far flank that
+  leaves it again at once for a bounce, not for the start of the traversal back (RETURN_TURN_SHARE).
 
 **Width estimate** (per window; docs/model.md's convention: theta_b = K2/r is the half-width, the flanks lie
 at +-K2/r from the centre):
@@ -732,9 +736,11 @@ def spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, depart
 DAMPED_FIT_BEFORE = 52
 DAMPED_FIT_AFTER = 32
 DAMPED_SEARCH = 20
-#: ... taken when it explains alpha1 this much better than the departure (RSS at the departure / at e: the DOL
-#: drive's slip drops 5.2-8.3, its heavy load reversals 1.8-2.8 (entries -3..+1 where the departure was -6); its slip
-#: reversals 1.0-1.4 and light load reversals 1.4-1.9, whose best lay -6..+7 off) ...
+#: ... taken when it explains alpha1 this much better than the entry the other rules gave (RSS there / at e; against
+#: the departure: the DOL drive's slip drops 5.2-8.3, its heavy load reversals 1.8-2.8 (entries -3..+1 where the
+#: departure was -6); its slip reversals 1.0-1.4 and light load reversals 1.4-1.9, whose best lay -6..+7 off; against the
+#: departure rather than that entry, a synthetic soft coupling whose coupling model had found the contact loss went 4
+#: samples early) ...
 DAMPED_MIN_GAIN = 2.0
 #: ... and when the fitted torque scale s is within this share of T0, the steady m_el over the SPRING_TORQUE_ROWS
 #: before the departure (a coupling that carried T0 until it untwisted: the DOL slip drops and heavy load reversals
@@ -1730,9 +1736,10 @@ class FlankDetector(BacklashDetector):
         return entry - dep, None if recontact is None else recontact + off
 
     def _damped_move(self, data: np.ndarray, departure: int, entry: Optional[int] = None) -> Optional[int]:
-        """:func:`damped_spring_entry`'s contact loss when it explains alpha1 DAMPED_MIN_GAIN times better than the
-        departure with a torque scale within DAMPED_MAX_SCALE_DEVIATION of the steady m_el, on a fine encoder
-        (FREE_MAX_NOISE_RAD, as the coupling model); else None."""
+        """:func:`damped_spring_entry`'s contact loss when it explains alpha1 DAMPED_MIN_GAIN times better than
+        ``entry`` (the other rules' entry; default the departure) with a torque scale within DAMPED_MAX_SCALE_DEVIATION
+        of the steady m_el, unless the configured encoder is coarse (FREE_MAX_NOISE_RAD, as :meth:`_spring_move`; with
+        encoder_counts_per_rev 0 the gain decides: the zoos' 2^13 recordings stay below it); else None."""
         flank = getattr(self, "_cap_flank", (math.nan, math.nan))[0]
         if not math.isfinite(flank) or "m_el" not in self.channels or self.nominal_inertia_kgm2 is None \
                 or not self.angle_quantum_rad / math.sqrt(12.0) <= FREE_MAX_NOISE_RAD:
