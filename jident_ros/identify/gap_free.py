@@ -67,6 +67,13 @@ FREE_REL_SE_FLOOR = 5e-4
 #: stays): a contaminated end moves J1 as it is cut back; on a light-load reversal the coupling torque before the
 #: entry is too small for the residual test and the first 1-2 samples, yet biases J1 by 3 % (gap_stress).
 CHANGEPOINT_TRIMS = (1, 2, 4, 8)
+#: A long coarse interval's core is its earliest third whose residual variance is within this factor of the tightest
+#: third's.  The tightest alone took the quiet end of a long return traversal, where the drive's torque has settled
+#: and an unknown torque offset is all but inseparable from J1 (the second drive's 30 dB return traversals, 150 rows,
+#: once the re-contact row came from delta: cores in the last third, ± 12.7 % undetermined; the earliest consistent
+#: third: J1 within 0.6 %, ± 2 %); a third holding contact rows has a residual variance many times the free ones'.
+#: Chosen on the second drive; tested on ours, the vector drive and its variants, the DOL drive and its sweep.
+CORE_VAR_RATIO = 4.0
 
 
 #: The parts of a gap J1's standard error (``GapEstimate.std_error_terms``): what each is, and the drive parameter
@@ -214,18 +221,18 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             core = (max(0, min(lo_c, R - L - FREE_MIN_SAMPLES)), max(0, min(lo_c, R - L - FREE_MIN_SAMPLES))
                     + FREE_MIN_SAMPLES)
         # a long coarse interval may hold contact (a re-contact row that is a later flank's): the core is the
-        # third of it whose fit is the tightest, when that is long enough
+        # earliest third of it whose fit is within CORE_VAR_RATIO of the tightest, when that is long enough
         third = (core[1] - core[0]) // 3
         if third >= 2 * FREE_MIN_SAMPLES:
-            best_var = np.inf
+            subs, var = [], []
             for k in range(3):
                 sub = (core[0] + k * third, core[0] + (k + 1) * third)
                 cs = lapack.lstsq(Xs[sub[0]:sub[1]], y[sub[0]:sub[1]])
                 rs = y[sub[0]:sub[1]] - Xs[sub[0]:sub[1]] @ cs
-                v = float(rs @ rs) / (third - Xs.shape[1])
-                if v < best_var:
-                    best_var, best_sub = v, sub
-            core = best_sub
+                subs.append(sub)
+                var.append(float(rs @ rs) / (third - Xs.shape[1]))
+            best = min(var)
+            core = subs[next(k for k in range(3) if var[k] <= CORE_VAR_RATIO * best)]
         c0 = lapack.lstsq(Xs[core[0]:core[1]], y[core[0]:core[1]])
         r = y - Xs @ c0
         rc = r[core[0]:core[1]]

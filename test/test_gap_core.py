@@ -1,0 +1,37 @@
+"""The core of a long coarse gap (gap_free.CORE_VAR_RATIO): the earliest third that fits within a factor of the
+tightest, not the tightest alone."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import jident_ros.identify.gap_free as gap_free
+
+DATA = Path(__file__).parent / "data" / "second_drive_return_traversal_30db.npz"
+
+
+def _fit():
+    z = np.load(DATA)
+    model = gap_free.GapModel(torque_offset_nm=float(z["torque_offset_nm"]), changepoint_search_samples=int(z["search"]))
+    b = tuple(int(x) for x in z["bounds"])
+    ff = gap_free.free_angle_fit(z["alpha1"], z["torque"], float(z["sample_period_s"]), int(z["start"]), int(z["end"]),
+                                 model, bounds=None if b[0] < 0 else b)
+    return ff, z
+
+
+def test_return_traversal_fitted_from_its_entry():
+    """The second drive's 30 dB return traversal (JointState 2^16, J1 1.16, 164 rows to the re-contact row from delta):
+    the fit starts at the entry, where the drive still acts, and J1 comes out within 1 %, its interval ± 5 %."""
+    ff, z = _fit()
+    assert ff["start"] <= int(z["start"]) + 2
+    assert ff["j1"] == pytest.approx(float(z["true_j1"]), rel=0.01)
+    assert 1.96 * ff["se"] < 0.05 * ff["j1"]
+
+
+def test_tightest_third_alone_takes_the_quiet_end(monkeypatch):
+    """The rule before (the tightest third): the core in the quiet last part, the start 40+ rows after the entry
+    and an interval wider than ± 10 % (the window refused as undetermined)."""
+    monkeypatch.setattr(gap_free, "CORE_VAR_RATIO", 1.0)
+    ff, z = _fit()
+    assert ff["start"] > int(z["start"]) + 40
+    assert 1.96 * ff["se"] > 0.10 * ff["j1"]
