@@ -527,6 +527,7 @@ def test_a_soft_coupling_untwisting_beyond_the_search_is_entered_at_its_contact_
     assert len(wins) == 1 and abs(round(wins[0].entry_time_s / 5e-4) - entry) <= 2
     assert len(wins[0]) == 48 + 2000                     # the capture held the rows the move needs (not cut short)
     monkeypatch.setattr(flank, "COUPLING_FORWARD_ROUNDS", 1)
+    monkeypatch.setattr(flank, "DAMPED_MIN_GAIN", math.inf)   # the damped spring alone (below) puts this one at -4
     wins, _ = _windows(data, ch, nominal_inertia_kgm2=1.16, encoder_counts_per_rev=65536)
     assert len(wins) == 1 and round(wins[0].entry_time_s / 5e-4) < entry - 10
 
@@ -664,3 +665,89 @@ def test_a_traversal_found_by_two_rules_gives_one_window(tmp_path):
     entries = [round(w.entry_time_s, 6) for w in res.windows]
     assert len(entries) == len(set(entries)) == 2, entries
     assert res.dropped.get("duplicate_entry") == 1, res.dropped
+
+
+def _dol_slip_drop(key: str):
+    """A cut of the DOL drive's slip drop as JointState 2^16 gives it (zoo_dol: the load torque and the line go in
+    1 ms, the coupling untwists 3.7 mrad in 6 samples and the motor meets the flank it left 17 samples later): rows
+    (t, alpha1, alpha2, m_el), the departure row, the true first row in the zone, the flank level."""
+    from pathlib import Path
+    d = np.load(Path(__file__).parent / "data" / "dol_slip_drop_jointstate.npz")
+    q = 2.0 * math.pi / 65536
+    a1 = float(d[f"{key}_alpha10"]) + q * d[f"{key}_alpha1_counts"]
+    a2 = float(d[f"{key}_alpha20"]) + q * d[f"{key}_alpha2_counts"]
+    m_el = d[f"{key}_m_el"].astype(float)
+    data = np.column_stack([np.arange(a1.size) * 5e-4, a1, a2, m_el])
+    return data, int(d[f"{key}_departure"]), int(d[f"{key}_entry"]), float(d[f"{key}_flank"])
+
+
+@pytest.mark.parametrize("key", ["fwd_clean", "rev_30dB"])
+def test_without_an_accelerometer_a_slip_drop_enters_at_the_damped_spring_s_contact_loss(key):
+    """The DOL drive's slip drop without a1: delta crosses the departure threshold 3 samples before the contact loss
+    (the coupling untwists under 187 N m) and the coupling model, blind to the re-contact on the same flank inside its
+    fit, moved the entry to +7..+8 (clean) and +12 (30 dB); the damped spring with that re-contact puts it on the
+    true first sample in the zone, at a gain >= DAMPED_MIN_GAIN and a torque scale within
+    DAMPED_MAX_SCALE_DEVIATION of the steady m_el (old code: +8 and +12)."""
+    from jident_ros.stream.flank import DAMPED_MAX_SCALE_DEVIATION, DAMPED_MIN_GAIN, damped_spring_entry
+    data, dep, true, flank = _dol_slip_drop(key)
+    delta = data[:, 1] - data[:, 2]
+    assert dep - true == -3
+    e, gain, scale = damped_spring_entry(data[:, 1], delta, data[:, 3], dep, flank, 1.16, 5e-4)
+    assert abs(e - true) <= 2 and gain >= DAMPED_MIN_GAIN and abs(scale - 1) <= DAMPED_MAX_SCALE_DEVIATION, (e, gain)
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16,
+                        encoder_counts_per_rev=65536)
+    det._cap_flank, det._cap_returning, det._cap_sigma = (flank, 1.5e-3), False, 0.0
+    shift, _ = det._refine(data, dep)
+    assert abs(dep + shift - true) <= 2, shift
+    e, gain, scale = damped_spring_entry(data[:, 1], delta, data[:, 3], 60, flank, 1.16, 5e-4)   # rows not there
+    assert (e, gain) == (60, 1.0) and math.isnan(scale)
+
+
+def test_a_bounce_off_the_far_flank_is_not_the_start_of_the_traversal_back():
+    """The second drive's speed step down as JointState 2^13 gives it (no a1): the motor crosses the zone (row 2010),
+    meets the far flank, bounces 70 mrad back into the zone (2086), is at the far flank again for 20 samples (shorter
+    than a contact) and traverses back (2209).  The first window's edge scan took the bounce's start for the traversal
+    back's entry (2084: a bounce window, the traversal itself without one, 4 of 16 such recordings); with
+    RETURN_TURN_SHARE the bounce is seen and the traversal back enters where delta leaves the far flank again by
+    RETURN_REST_DEPARTURES thresholds (old code: 2084; at one threshold 2205)."""
+    from pathlib import Path
+
+    from jident_ros.stream.flank import _FlankCapture
+    d = np.load(Path(__file__).parent / "data" / "second_drive_bounce_8192c.npz")
+    q = 2.0 * math.pi / 8192
+    a1 = float(d["alpha10"]) + q * d["alpha1_counts"]
+    a2 = float(d["alpha20"]) + q * d["alpha2_counts"]
+    first, dep = int(d["first_row"]), int(d["departure_row"])
+    gaps = d["gaps"]
+    assert [tuple(g) for g in gaps[:3]] == [(2010, 2069, 1), (2086, 2187, 0), (2209, 2350, 1)]
+    data = np.column_stack([(first + np.arange(a1.size)) * 5e-4, a1, a2])
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2"))
+    cap = _FlankCapture([data], data.shape[0], dep, float(d["flank_rad"]), float(d["flank_sigma_rad"]),
+                        start_row=first)
+    e0, e, g = dep - 48, 48, 48 + 2071 - 2009        # the window's entry and re-contact rows (the pipeline's)
+    det._scan_returns(cap, data, a1[e0:e0 + 2048] - a2[e0:e0 + 2048], e0, e, g)
+    entries = [c.start_row + c.departure_row for c in det._new_caps]
+    assert len(entries) == 1 and abs(entries[0] - 2209) <= 2, entries
+
+
+def test_a_turn_inside_the_zone_on_a_fine_encoder_is_not_a_bounce():
+    """The second drive with K2 9 mm as CSV 2^16 gives it: after the first traversal the motor leaves the far flank
+    (row 2094), turns inside the zone 2 mrad short of the far edge without meeting it and traverses back, one gap to
+    2392.  On a fine encoder the scan does not take that turn for a bounce (RETURN_TURN_SHARE is for coarse encoders):
+    the traversal back enters at 2094 (with the rule on every encoder: at 2257, 163 samples late)."""
+    from pathlib import Path
+
+    from jident_ros.stream.flank import _FlankCapture
+    d = np.load(Path(__file__).parent / "data" / "second_drive_turn_in_zone_65536c.npz")
+    q = 2.0 * math.pi / 65536
+    a1 = float(d["alpha10"]) + q * d["alpha1_counts"]
+    a2 = float(d["alpha20"]) + q * d["alpha2_counts"]
+    data = np.column_stack([float(d["t0"]) + np.arange(a1.size) * 5e-4, a1, a2])
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2"))
+    first, dep = int(d["start_row"]), int(d["departure_row"])
+    cap = _FlankCapture([data], data.shape[0], dep, float(d["flank_rad"]), float(d["flank_sigma_rad"]),
+                        start_row=first)
+    e0, e, g = int(d["e0"]), int(d["e"]), int(d["g"])
+    det._scan_returns(cap, data, a1[e0:] - a2[e0:], e0, e, g)
+    entries = [c.start_row + c.departure_row for c in det._new_caps]
+    assert len(entries) == 1 and abs(entries[0] - 2094) <= 2, entries

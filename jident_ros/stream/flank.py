@@ -40,14 +40,18 @@ and on what the clutch does, not on inequality (1):
   own entry that nothing moved, without a1, goes back to where a spring carrying the steady m_el loses its contact
   (:func:`spring_entry`: a fast departure crosses the threshold after the contact loss, the vector drive's speed
   reversals 3 samples); with a1 it goes forward to the end of the load torque's ramp (:func:`load_hinge`: a noisy run
-  starts early) -- both at a clear gain (SPRING_*, LOAD_HINGE_*).
+  starts early) -- both at a clear gain (SPRING_*, LOAD_HINGE_*).  Without a1, a window's own entry then goes to a
+  damped spring's contact loss (:func:`damped_spring_entry`: the torque scale and damping fitted, a re-contact on the
+  flank it left inside the fit) when that explains alpha1 clearly better and lies 3 samples or more away (DAMPED_*;
+  the DOL drive's slip drop, whose departure precedes its contact loss and whose gap lasts 17 samples).
 * **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
   ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
   (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry
   inside the window sets :data:`~jident_ros.stream.layout.FLAG_SECOND_ENTRY` (information); it gets a window of
   its own only when its excursion ends in a contact across the zone (a traversal back: at least
   RETURN_MIN_SPAN_SHARE of the way to the running windows' other flank; a soft coupling's swing on the flank it
-  reached is not one).
+  reached is not one).  On a coarse encoder a window's edge scan takes an excursion back near the far flank that
+  leaves it again at once for a bounce, not for the start of the traversal back (RETURN_TURN_SHARE).
 
 **Width estimate** (per window; docs/model.md's convention: theta_b = K2/r is the half-width, the flanks lie
 at +-K2/r from the centre):
@@ -244,6 +248,23 @@ RETURN_REST_SAMPLES = 8
 #: variants' traversals back travel 0.99-1.03 of it, a turning point inside the zone read as a contact 0.17 (the fast
 #: speed loop's light load reversal: a bounce window 59 samples late, now not given)
 RETURN_MIN_SPAN_SHARE = 0.5
+
+#: On a coarse encoder (2^13), a window's edge scan (:meth:`FlankDetector._scan_returns`) takes an excursion from the
+#: re-contact edge that went into the zone, came back within this share of the zone's span of that edge and turns
+#: away from it again for a bounce (the motor met the far flank, shorter than a contact), not for the start of a
+#: traversal back: the second drive's 2^13 recordings bounce off the far flank (delta back to within 3 mrad of its
+#: 197 mrad span, 20 samples at the flank) before they traverse back, and the scan gave the bounce's start as the
+#: traversal's entry (125 samples early; the traversal itself then had no window) -- chosen on the second drive, tested
+#: on the vector drive, ours, the variants and the DOL drive.  Not on a fine encoder: the second drive's wide backlash
+#: (K2 9-10 mm, 2^16 CSV, detector_zoo) turns 2-6 mrad short of the far edge inside the zone and traverses back in one
+#: gap; read as a bounce, 10 of its 84 traversals back went 154-167 samples late (a turn at the quantum's resolution
+#: looks the same: the rule bets on a contact there)
+RETURN_TURN_SHARE = 0.1
+#: ... and the traversal back from that bounce's brief contact starts where delta has left its turning depth by this
+#: many departure thresholds (a contact that carried the bounce's torque untwists before it is lost: the second drive's
+#: 2^13 traversals back after a bounce were entered 4-6 samples early at one threshold, 2-5 at 1.5, 0..-3 at 2, -2..+3
+#: at 2.5) -- chosen on the second drive (the only model whose traversals back start from such a bounce)
+RETURN_REST_DEPARTURES = 2.0
 
 #: single_mass_run fits m_el = J acc + c (True) or m_el = J acc (False).
 SINGLE_MASS_OFFSET = True
@@ -699,6 +720,75 @@ def spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, depart
     if not best_rss > 0:
         return departure, 1.0, math.nan
     return best, rss_dep / best_rss, math.nan if best_j is None else float(best_j)
+
+
+#: Without a1, a window's own entry goes to the contact loss of a spring-damper coupling whose torque scale is fitted
+#: (:func:`damped_spring_entry`): in contact the coupling torque is s (1 - u / u_e) - D du/dt (u delta's move off its
+#: flank level toward the zone, u_e that move at the candidate entry e; s and D free), 0 in the zone, and again on the
+#: flank it left once delta's excursion turns back below u_e (a re-contact on that flank within the fit: the DOL
+#: drive's slip drop meets its flank 17 samples after the contact loss, inside the fit; left out, the coupling model
+#: moved its entry from -3 to +7..+12); alpha1 = a + b k + c k^2 + (Phi(m_el) - Phi(torque)) / J1_nom (J1 the
+#: drive's nominal, not fitted: with J free the spring model's J went 10-30 % off and its entry 3-5 samples early),
+#: least squares over DAMPED_FIT_BEFORE rows before the departure and DAMPED_FIT_AFTER from it, e within
+#: +-DAMPED_SEARCH of the departure.  The damping term matters: the contact torque vanishes c/k before the zone
+#: entry (1.6 samples at the vector drive's and the DOL drive's 50 kN m/rad, 40 N m s/rad); without it the same fit
+#: put every DOL slip drop and heavy load reversal 2-5 samples early
+DAMPED_FIT_BEFORE = 52
+DAMPED_FIT_AFTER = 32
+DAMPED_SEARCH = 20
+#: ... taken when it explains alpha1 this much better than the entry the other rules gave (RSS there / at e; against
+#: the departure: the DOL drive's slip drops 5.2-8.3, its heavy load reversals 1.8-2.8 (entries -3..+1 where the
+#: departure was -6); its slip reversals 1.0-1.4 and light load reversals 1.4-1.9, whose best lay -6..+7 off; against the
+#: departure rather than that entry, a synthetic soft coupling whose coupling model had found the contact loss went 4
+#: samples early) ...
+DAMPED_MIN_GAIN = 2.0
+#: ... and when the fitted torque scale s is within this share of T0, the steady m_el over the SPRING_TORQUE_ROWS
+#: before the departure (a coupling that carried T0 until it untwisted: the DOL slip drops and heavy load reversals
+#: 0.96-1.08, the vector drive's heavy load reversals 0.94-0.97; the light load reversals of both drives 0.3-0.7,
+#: where friction and the load's ramp are a large share of the torque and the fit's e lay 3-8 samples late) -- both
+#: chosen on the DOL drive (zoo_dol), tested on the vector drive, the second drive, ours and the variants
+DAMPED_MAX_SCALE_DEVIATION = 0.2
+
+
+def damped_spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, departure: int, flank_rad: float,
+                        inertia_kgm2: float, sample_period_s: float, ref: Optional[int] = None) -> tuple:
+    """(entry row, gain, torque scale / T0) of the damped spring's contact loss near ``departure`` (DAMPED_*
+    constants; the gain RSS(``ref``) / RSS(entry), ``ref`` the departure by default); (departure, 1.0, nan) when the
+    rows are not there or delta does not leave its flank."""
+    ref = departure if ref is None else int(ref)
+    lo, hi = departure - DAMPED_FIT_BEFORE, departure + DAMPED_FIT_AFTER
+    t_lo, t_hi = departure - SPRING_TORQUE_ROWS[0], departure - SPRING_TORQUE_ROWS[1]
+    if min(lo, t_lo) < 0 or hi > alpha1.size or not inertia_kgm2 > 0:
+        return departure, 1.0, math.nan
+    ts = sample_period_s
+    side = 1.0 if delta[departure] >= flank_rad else -1.0
+    t0 = float(np.median(m_el[t_lo:t_hi]))
+    rows = np.arange(lo, hi)
+    k = (rows - departure) / float(DAMPED_FIT_AFTER)
+    y = np.asarray(alpha1[lo:hi], float) - _double_integral(m_el[lo:hi], ts) / float(inertia_kgm2)
+    y = y - y.mean()
+    u = side * (np.asarray(delta[lo:hi], float) - flank_rad)
+    du = np.gradient(u) / ts
+    base = np.column_stack([np.ones(k.size), k, k * k])
+    idx = np.arange(k.size)
+
+    def damped(e):
+        i = e - lo
+        ue = u[i]
+        if not ue > 0:
+            return math.inf, math.nan
+        turn = i + int(np.argmax(u[i:]))          # the excursion's extreme: a re-contact on this flank comes after it
+        contact = (rows < e) | ((idx > turn) & (u < ue))
+        frac = np.where(contact, np.clip(1.0 - u / ue, 0.0, None), 0.0)
+        cols = np.column_stack([base, _double_integral(frac, ts) * 1e6, _double_integral(np.where(contact, du, 0.0), ts) * 1e3])
+        rss, coef = _lstsq_rss(cols, y)
+        return rss, -coef[3] * 1e6 * float(inertia_kgm2)      # the torque scale s, N m
+
+    cand = range(max(departure - DAMPED_SEARCH, lo + 2), min(departure + DAMPED_SEARCH, hi - 4) + 1)
+    best, best_rss, scale, rss_dep = _profile(cand, damped, departure, ref)
+    if not best_rss > 0 or not math.isfinite(rss_dep) or t0 == 0:
+        return departure, 1.0, math.nan
+    return best, rss_dep / best_rss, float(scale) / t0
 
 
 def _noise(x: np.ndarray) -> float:
@@ -1457,20 +1547,38 @@ class FlankDetector(BacklashDetector):
             steady[L - 1:] = np.ptp(np.lib.stride_tricks.sliding_window_view(d, L), axis=1) <= self.contact_tolerance_rad
         known = [c.start_row + c.departure_row for c in self._caps + self._new_caps]
         k, n, at_out, last_out = g + 1, d.size, True, g
+        near = RETURN_TURN_SHARE * abs(span)
+        # a coarse encoder's delta (its smallest step, as _refine's, beyond FREE_MAX_NOISE_RAD sqrt 12: 2^13), where
+        # the traversal back's walk and coupling model are off and this scan's start is its entry (RETURN_TURN_SHARE)
+        steps = np.abs(np.diff(d))
+        steps = steps[(steps > 1e-9) & (steps < margin)]
+        coarse = bool(steps.size) and float(steps.min()) / math.sqrt(12.0) > FREE_MAX_NOISE_RAD
+        rest = 0.0                                 # depth up to which delta rests at the re-contact edge
+        deep, low, low_k = False, math.inf, -1     # this excursion: went beyond `near`; its least depth since then
         while k < n:
             if at_out:                             # resting at (or beyond) the re-contact edge
-                if depth[k] <= 0:
+                if depth[k] <= rest:
                     last_out = k
-                elif depth[k] > margin and to_in[k] > margin:
-                    at_out = False                 # left it into the zone
+                elif depth[k] > (margin if rest == 0.0 else rest) and to_in[k] > margin:
+                    at_out, deep, low = False, False, math.inf     # left it into the zone
                 k += 1
                 continue
             if depth[k] < -unsure or (steady[k] and depth[k] < 0.5 * abs(span)):
                 # back beyond the re-contact edge, or a contact nearer to it than to the entry edge (the edge from
                 # the window's re-contact row may be a few mrad off: 5 mrad on the vector drive's 2^13 JointState
                 # recordings): a bounce
-                at_out, last_out = True, k
+                at_out, last_out, rest = True, k, 0.0
                 k += 1
+                continue
+            deep = deep or depth[k] > 2.0 * near
+            if deep and depth[k] < low:
+                low, low_k = float(depth[k]), k
+            if coarse and deep and low < near and depth[k] > low + margin:
+                # back near the re-contact edge and leaving it again, shorter than a contact (RETURN_TURN_SHARE): a
+                # bounce; delta rests there until it leaves its turning depth by RETURN_REST_DEPARTURES departure
+                # thresholds, where a traversal back from it starts
+                at_out, rest = True, low + RETURN_REST_DEPARTURES * margin
+                last_out = low_k + int(np.nonzero(depth[low_k:k + 1] <= rest)[0][-1])
                 continue
             if to_in[k] > margin:
                 k += 1
@@ -1479,7 +1587,7 @@ class FlankDetector(BacklashDetector):
             reached = cap.start_row + e0 + k
             while k < n and depth[k] > 0:          # re-armed only once back at the re-contact edge
                 k += 1
-            at_out, start = True, last_out + 1
+            at_out, start, rest = True, last_out + 1, 0.0
             last_out = k
             row = e0 + start                            # capture row of the return traversal's entry
             abs_row = cap.start_row + row
@@ -1618,7 +1726,30 @@ class FlankDetector(BacklashDetector):
             if entry == dep:
                 # nothing moved the departure (a coupling that untwisted off its flank moved forward, SPRING_*)
                 entry = self._spring_move(data, entry + off, dep + off) - off
+            damped = self._damped_move(data, dep + off, entry + off)
+            if damped is not None and abs(damped - off - entry) >= SPRING_MIN_MOVE:
+                # the damped spring's contact loss at a clear gain and a plausible torque scale (DAMPED_*), when it
+                # lies SPRING_MIN_MOVE or more from the entry so far (it finds where the coupling torque vanishes,
+                # before the zone entry by about the damping's c/k: the soft coupling variant's heavy load reversals
+                # -1 -> -3 with any move taken; the DOL drive's slip drops moved 3-12 samples)
+                entry = damped - off
         return entry - dep, None if recontact is None else recontact + off
+
+    def _damped_move(self, data: np.ndarray, departure: int, entry: Optional[int] = None) -> Optional[int]:
+        """:func:`damped_spring_entry`'s contact loss when it explains alpha1 DAMPED_MIN_GAIN times better than
+        ``entry`` (the other rules' entry; default the departure) with a torque scale within DAMPED_MAX_SCALE_DEVIATION
+        of the steady m_el, unless the configured encoder is coarse (FREE_MAX_NOISE_RAD, as :meth:`_spring_move`; with
+        encoder_counts_per_rev 0 the gain decides: the zoos' 2^13 recordings stay below it); else None."""
+        flank = getattr(self, "_cap_flank", (math.nan, math.nan))[0]
+        if not math.isfinite(flank) or "m_el" not in self.channels or self.nominal_inertia_kgm2 is None \
+                or not self.angle_quantum_rad / math.sqrt(12.0) <= FREE_MAX_NOISE_RAD:
+            return None
+        e, gain, scale = damped_spring_entry(data[:, self._i_a1], self._delta(data),
+                                             data[:, self.channels.index("m_el")], departure, flank,
+                                             self.nominal_inertia_kgm2, self.sample_period_s, entry)
+        if gain >= DAMPED_MIN_GAIN and abs(scale - 1.0) <= DAMPED_MAX_SCALE_DEVIATION:
+            return e
+        return None
 
     def _spring_move(self, data: np.ndarray, entry: int, departure: int) -> int:
         """``entry`` moved to :func:`spring_entry`'s contact loss at a clear gain with a plausible J, by SPRING_MIN_MOVE
