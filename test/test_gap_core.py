@@ -35,3 +35,14 @@ def test_tightest_third_alone_takes_the_quiet_end(monkeypatch):
     ff, z = _fit()
     assert ff["start"] > int(z["start"]) + 40
     assert 1.96 * ff["se"] > 0.10 * ff["j1"]
+
+
+def test_undeclared_note():
+    """The one line a drive that declares nothing gets (jident diagnose's notes, the diagnostic node's status);
+    none once any one term is declared."""
+    from jident_ros.identify.verdict import VerdictPolicy
+    assert "exact torque estimate" in VerdictPolicy().undeclared_note(0.0)
+    assert VerdictPolicy(torque_accuracy=0.02).undeclared_note(0.0) == ""
+    assert VerdictPolicy(coulomb_friction_max_nm=1.0).undeclared_note(0.0) == ""
+    assert VerdictPolicy(torque_lag_max_s=1e-3).undeclared_note(0.0) == ""
+    assert VerdictPolicy().undeclared_note(0.01) == ""

@@ -44,6 +44,7 @@ def test_two_drives_with_sim_time_each_get_six_of_six_windows_and_no_false_stale
         assert ros.spin_until(lambda: any(status_values(s)["windows_diagnosed"] == "6" for s in task()), 10), ns
         task = task()
         last = status_values(task[-1])
+        assert last["drive_model_declared"] == "false", last        # nothing declared: the simulator's exact torque
         assert last["windows_diagnosed"] == "6" and last["windows_lost"] == "0" and last["last_window_id"] == "6", last
         # a false STALE is one while windows still arrive (before the sixth is diagnosed); once a drive's
         # simulator has finished, "no input for 3 s" is true (the other drive may still be running under load)

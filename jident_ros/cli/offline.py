@@ -468,6 +468,10 @@ def diagnose_samples(path, options: Optional[OfflineOptions] = None, *,
         raise OfflineError(str(exc)) from None
     result = OfflineResult(str(path), source, "estimated" if o.detector != "paper" else "option",
                            detector=o.detector)
+    undeclared = setup.policy.undeclared_note(setup.system.motor.bearing_friction_nms_per_rad)
+    if undeclared:                  # a real drive's recording (JointState, CSV): said once
+        result.notes.append(undeclared)
+        log(undeclared)
     monitor = setup.monitor(result, log, say_gap_only=False)
     config = DetectorConfig(o.detector, o.backlash_width_m, None, None, o.gear_ratio)
     # every batch through the Imu skew check (the node's chain): a window whose a1 is out of step is detected

@@ -111,6 +111,18 @@ class VerdictPolicy:
                         torque_offset_nm=float(self.torque_offset_rel_base) * abs(float(base_torque_nm)),
                         torque_lag_s=float(self.torque_lag_max_s))
 
+    def undeclared_note(self, bearing_friction_nms_per_rad: float = 0.0) -> str:
+        """One line when the drive declares no torque accuracy, friction or torque lag (the defaults: our simulator's
+        exact torque), '' otherwise: on a real drive's recordings the intervals then hold neither (the DOL drive of
+        docs/vector_drive.md, undeclared: most published intervals miss J1; docs/results.md, stop 23)."""
+        if (self.torque_accuracy or self.coulomb_friction_max_nm or self.viscous_friction_band_nms_per_rad
+                or self.torque_lag_max_s or bearing_friction_nms_per_rad):
+            return ""
+        return ("the drive declares no torque accuracy, friction or torque lag (torque_accuracy, "
+                "coulomb_friction_max_nm, motor.bearing_friction_nms_per_rad, torque_lag_max_s are 0): the intervals "
+                "assume an exact torque estimate and a frictionless motor; declare them for a real drive "
+                "(docs/your_drive.md)")
+
     @classmethod
     def from_params(cls, params: Mapping) -> "VerdictPolicy":
         """The policy from a parameter dict (the diagnostic node's); missing keys take the defaults."""

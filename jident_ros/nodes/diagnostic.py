@@ -173,6 +173,7 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         self.pub_estimate = None
         self.subs = []
         self.windows_seen = self.windows_diagnosed = self.windows_mismatched = self.windows_inactive = 0
+        self.raw_windows = 0
         self.windows_lost = 0
         self.lost_ids = []                 # the last LOST_IDS_SHOWN lost ids
         self.lost_in_period = 0
@@ -473,6 +474,7 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         period and wheel radius (errors: the diagnosis would be wrong), its K2 (a warning when it lies
         outside the library's widths and the image method is on)."""
         errors, warnings = [], []
+        self.raw_windows += win.detector in ("flank", "dynamics")     # a real drive's raw encoder angles
         if len(win) != self.window_length:
             errors.append(f"length {len(win)} samples, configuration {self.window_length} "
                           "(sampling.samples_before_entry + samples_from_entry)")
@@ -546,6 +548,7 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         now = time.monotonic()
         stale = self.cfg["stale_after_s"]
         age = now - (self.last_input if self.last_input is not None else self.started)
+        undeclared = self.policy.undeclared_note(self.system.motor.bearing_friction_nms_per_rad)
         if not self.active:
             stat.summary(OK, "inactive (lifecycle): windows are not diagnosed")
         elif stale > 0 and age >= stale:
@@ -556,6 +559,7 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
                          f"{self.windows_lost} in all, last ids {id_ranges(self.lost_ids)})")
         else:
             stat.summary(OK, f"{self.windows_diagnosed} window(s) diagnosed" +
+                         (f"; {undeclared}" if undeclared and self.raw_windows else "") +
                          (f"; last: {self.last_message}" if self.last_message else ""))
         self.lost_in_period = 0
         for k, v in (("windows_seen", self.windows_seen), ("windows_diagnosed", self.windows_diagnosed),
@@ -565,7 +569,8 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
                      ("window_id_restarts", self.window_id_restarts),
                      ("last_window_id", -1 if self.last_window_id is None else self.last_window_id),
                      ("input_age_s", age), ("stale_after_s", stale), ("p", self.cfg["p"]),
-                     ("gap_method", self.cfg["gap_method"]), ("image_method", self.cfg["image_method"])):
+                     ("gap_method", self.cfg["gap_method"]), ("image_method", self.cfg["image_method"]),
+                     ("drive_model_declared", not undeclared)):
             stat.add(k, v)
         if self.last_estimate is not None:
             stat.add("last_estimate_kgm2", self.last_estimate)

@@ -123,7 +123,7 @@ def generate_sweep(out: Path, log=print) -> dict:
     return got
 
 
-def run_sweep(out: Path, log=print) -> dict:
+def run_sweep(out: Path, log=print, undeclared: bool = False) -> dict:
     t0 = time.perf_counter()
     recs = generate_sweep(out, log)
     system = load_system_config()
@@ -132,7 +132,7 @@ def run_sweep(out: Path, log=print) -> dict:
         res = []
         for label, zr in items:
             fmt = next(iter(zr.files))
-            d = zoo.diagnose_one(zr, fmt, system, declare=False, extra=declared())
+            d = zoo.diagnose_one(zr, fmt, system, declare=False, extra={} if undeclared else declared())
             res.append((zr, d))
             noise = "clean" if zr.snr_db is None else f"{zr.snr_db:g} dB"
             groups.setdefault((f"{name}: {label}", zr.event, noise), []).append((zr, d))
@@ -179,7 +179,7 @@ def generate(out: Path, log=print, quick: bool = False) -> list:
     return recs
 
 
-def run(out: Path, log=print, quick: bool = False, with_sweep: bool = True) -> dict:
+def run(out: Path, log=print, quick: bool = False, with_sweep: bool = True, undeclared: bool = False) -> dict:
     t0 = time.perf_counter()
     recs = generate(out, log, quick)
     system = load_system_config()
@@ -189,7 +189,7 @@ def run(out: Path, log=print, quick: bool = False, with_sweep: bool = True) -> d
         for label, fmt, counts in zoo.INPUTS:
             if counts != zr.counts or fmt not in zr.files:
                 continue
-            res = zoo.diagnose_one(zr, fmt, system, declare=False, extra=declared())
+            res = zoo.diagnose_one(zr, fmt, system, declare=False, extra={} if undeclared else declared())
             if zr.files.get("csv") and fmt != "jointstate_imu":
                 res["oracle"] = zoo.oracle_errors(zr)
                 res["oracle_friction"] = zoo.oracle_errors(zr, True)
@@ -201,7 +201,7 @@ def run(out: Path, log=print, quick: bool = False, with_sweep: bool = True) -> d
     totals = defaultdict(list)
     for (label, _, noise), v in groups.items():
         totals[(label, noise)] += v
-    swept = run_sweep(out, log) if with_sweep and not quick else None
+    swept = run_sweep(out, log, undeclared) if with_sweep and not quick else None
     return {"sweep": swept, "rows": {k: zoo.summarise(v) for k, v in groups.items()},
             "totals": {k: zoo.summarise(v) for k, v in totals.items()},
             "all": zoo.summarise([x for v in groups.values() for x in v]),
@@ -364,7 +364,13 @@ def main(argv=None) -> int:
     p.add_argument("--results", default="docs/results.md", help="results file to update ('-' prints)")
     p.add_argument("--quick", action="store_true", help="two cases, no sweep (smoke run)")
     p.add_argument("--json", default="", help="also write the counts here")
+    p.add_argument("--undeclared", action="store_true",
+                   help="declare nothing (b1 = 0 and the node's defaults): what a user who configures nothing gets "
+                        "(with --results -)")
     a = p.parse_args(argv)
+    if a.undeclared and a.results != "-":
+        sys.stderr.write("zoo_dol: error: argument --undeclared: print it with --results -\n")
+        return 2
     if not a.report:
         p.print_help()
         return 0
@@ -377,8 +383,9 @@ def main(argv=None) -> int:
         sys.stderr.write(f"zoo_dol: error: {problem}\n")
         return 2
     commit = zoo._commit()
-    res = run(Path(a.out), log=lambda t: print(t, file=sys.stderr, flush=True), quick=a.quick)
-    cmd = "python -m jident_ros.research.evaluation.zoo_dol --report" + (" --quick" if a.quick else "")
+    res = run(Path(a.out), log=lambda t: print(t, file=sys.stderr, flush=True), quick=a.quick, undeclared=a.undeclared)
+    cmd = ("python -m jident_ros.research.evaluation.zoo_dol --report" + (" --quick" if a.quick else "")
+           + (" --undeclared" if a.undeclared else ""))
     md = markdown(res, cmd, commit)
     if a.json:
         Path(a.json).write_text(json.dumps({"rows": {" | ".join(k): v for k, v in res["rows"].items()},
