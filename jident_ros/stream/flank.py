@@ -804,6 +804,7 @@ def _noise(x: np.ndarray) -> float:
 #: RECONTACT_SPAN samples, falls below RECONTACT_DROP of its largest since the entry at the far flank (the coupling
 #: takes the impact) ...
 RECONTACT_SPAN = 4
+#: False: the acceleration's row alone (the rule before stop 23; for comparisons and the tests).
 RECONTACT_FROM_DELTA = True
 RECONTACT_DROP = 0.5
 #: ... a move of at least this many quanta per span (below it delta barely moves: no traversal to read) ...
