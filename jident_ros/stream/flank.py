@@ -1594,22 +1594,29 @@ class FlankDetector(BacklashDetector):
             abs_row = cap.start_row + row
             if any(abs(abs_row - r) <= RETURN_MATCH_SAMPLES for r in known):
                 continue                                # the contact rule found it already
-            lo = max(row - self.samples_before_entry - self.history_extra, 0)
-            if row - lo < self.samples_before_entry + self._extra_needed:
-                continue
-            for c in [c for c in self._caps if abs_row < c.start_row + c.departure_row <= reached]:
-                self._caps.remove(c)                    # found late by the contact rule (delta resting at the flank
-                self.return_windows -= 1                # looked like a contact): the edge crossing replaces it
-            rows = data[lo:]
-            new = _FlankCapture([rows], rows.shape[0], row - lo, float(edge_out), cap.flank_sigma_rad, returning=True,
-                                start_row=cap.start_row + lo)
-            self._caps.append(new)
-            self._new_caps.append(new)
-            known.append(abs_row)
-            self.return_windows += 1
-            for c in self._caps:
-                if c is not new and not c.skip and c.start_row <= abs_row:
-                    c.second_entry_rows.append([abs_row - c.start_row, -1, True])
+            if self._open_return(cap, data, row, reached, float(edge_out)):
+                known.append(abs_row)
+
+    def _open_return(self, cap: _FlankCapture, data: np.ndarray, row: int, reached: int, edge_out: float) -> bool:
+        """A capture for the traversal back entering at capture row ``row`` of ``cap`` (reaching the entry edge at
+        stream row ``reached``), fed from ``data``'s rows on; False when the history before it is too short."""
+        abs_row = cap.start_row + row
+        lo = max(row - self.samples_before_entry - self.history_extra, 0)
+        if row - lo < self.samples_before_entry + self._extra_needed:
+            return False
+        for c in [c for c in self._caps if abs_row < c.start_row + c.departure_row <= reached]:
+            self._caps.remove(c)                    # found late by the contact rule (delta resting at the flank
+            self.return_windows -= 1                # looked like a contact): the edge crossing replaces it
+        rows = data[lo:]
+        new = _FlankCapture([rows], rows.shape[0], row - lo, edge_out, cap.flank_sigma_rad, returning=True,
+                            start_row=cap.start_row + lo)
+        self._caps.append(new)
+        self._new_caps.append(new)
+        self.return_windows += 1
+        for c in self._caps:
+            if c is not new and not c.skip and c.start_row <= abs_row:
+                c.second_entry_rows.append([abs_row - c.start_row, -1, True])
+        return True
 
     def no_entry_reason(self) -> str:
         """Why no entry was found so far, and what to set (one line; '' when a window was captured)."""
@@ -1675,15 +1682,7 @@ class FlankDetector(BacklashDetector):
         # vector drive's 2^13 speed steps the move took return entries 10-40 samples back, one before its gap)
         if self.detector_name == "flank" and "a1" not in self.channels and not jumped \
                 and not getattr(self, "_cap_returning", False):
-            delta = self._delta(data)
-            # the noise: the contact's sigma, at least the quantisation (the configured encoder's, else the smallest
-            # step delta makes before the departure, below the departure threshold)
-            steps = np.abs(np.diff(delta[max(dep - DRIFT_BACK_SAMPLES - DRIFT_PRE_SAMPLES, 0):dep]))
-            steps = steps[(steps > 1e-9) & (steps < self.min_departure_rad)]   # not a float rounding, not a jump
-            quantum = self.angle_quantum_rad or (float(steps.min()) if steps.size else 0.0)
-            sigma = float(getattr(self, "_cap_sigma", 0.0))
-            noise = max(sigma if math.isfinite(sigma) else 0.0, quantum / math.sqrt(12.0))
-            e = free_departure(delta, dep, self.samples_before_entry, noise)
+            e = self._free_departure_entry(data, dep)
             if e < dep:
                 return e - dep, None
         if self.nominal_inertia_kgm2 is None or "m_el" not in self.channels:
@@ -1735,6 +1734,18 @@ class FlankDetector(BacklashDetector):
                 # -1 -> -3 with any move taken; the DOL drive's slip drops moved 3-12 samples)
                 entry = damped - off
         return entry - dep, None if recontact is None else recontact + off
+
+    def _free_departure_entry(self, data: np.ndarray, dep: int) -> int:
+        """:func:`free_departure`'s entry for the capture ``data`` departing at ``dep``; its noise: the contact's sigma,
+        at least the quantisation (the configured encoder's, else the smallest step delta makes before the departure,
+        below the departure threshold)."""
+        delta = self._delta(data)
+        steps = np.abs(np.diff(delta[max(dep - DRIFT_BACK_SAMPLES - DRIFT_PRE_SAMPLES, 0):dep]))
+        steps = steps[(steps > 1e-9) & (steps < self.min_departure_rad)]   # not a float rounding, not a jump
+        quantum = self.angle_quantum_rad or (float(steps.min()) if steps.size else 0.0)
+        sigma = float(getattr(self, "_cap_sigma", 0.0))
+        noise = max(sigma if math.isfinite(sigma) else 0.0, quantum / math.sqrt(12.0))
+        return free_departure(delta, dep, self.samples_before_entry, noise)
 
     def _damped_move(self, data: np.ndarray, departure: int, entry: Optional[int] = None) -> Optional[int]:
         """:func:`damped_spring_entry`'s contact loss when it explains alpha1 DAMPED_MIN_GAIN times better than
