@@ -297,6 +297,12 @@ DIAGNOSTIC_PARAMS = {
     "torque_lag_max_s": Param(0.0, "the drive's torque estimate m_el lags (or leads) the shaft's torque by at "
                               "most this, s: a bounded term of the gap interval", min=0.0, max=1.0, read_only=False,
                               unit="s"),
+    "assume_typical_drive": Param(True, "a drive that declares none of torque_accuracy, coulomb_friction_max_nm, "
+                                  "viscous_friction_band_nms_per_rad, torque_lag_max_s, motor.bearing_friction_nms_per_rad "
+                                  "is taken, on windows of raw encoder angles (a real drive's recording: flank or "
+                                  "dynamics detector), for a typical drive: torque accuracy 3 %, offset band 2 % of M_b, "
+                                  "lag 1 ms (jident_ros.identify.verdict.TYPICAL_DRIVE); false: as declared (0 = exact)",
+                                  read_only=False),
     "publish_ambiguous": Param(True, "publish the gap J1 (with its interval on inertia_estimate/detail) when its 95 % "
                                "interval, within +-10 %, holds two or more classes: no class named, status "
                                "'ambiguous'; false: nothing published for such a window", read_only=False),
@@ -308,7 +314,7 @@ DIAGNOSTIC_PARAMS = {
 #: max_torque_factor, max_speed_factor) stay the node's only.
 POLICY_CLI_FLAGS = ("image_min_margin", "plausible_min_ratio", "plausible_max_ratio", "torque_accuracy",
                     "coulomb_friction_max_nm", "viscous_friction_band_nms_per_rad", "torque_offset_rel_base",
-                    "torque_lag_max_s", "publish_ambiguous")
+                    "torque_lag_max_s", "assume_typical_drive", "publish_ambiguous")
 
 #: The replay node.  Everything is fixed at start: read-only.
 REPLAY_PARAMS = {

@@ -109,11 +109,11 @@ def test_an_interval_wider_than_ten_percent_is_not_published():
 
 def test_the_zoo_declares_each_drive_as_a_user_would():
     """The zoo configures each model's friction and torque estimate as its documentation gives them (docs/
-    vector_drive.md, docs/second_drive.md); ours is config/system.yaml as it is."""
+    vector_drive.md, docs/second_drive.md); ours is config/system.yaml as it is, its torque exact."""
     from jident_ros.research.evaluation.zoo import declared
     from jident_ros.research.second_drive.model import DriveParams as SecondParams
     from jident_ros.research.vector_drive.model import DriveParams as VectorParams
-    assert declared("ours") == {}
+    assert declared("ours") == {"assume_typical_drive": False}          # our simulator: an exact torque
     assert declared("second drive") == {"bearing_friction_nms_per_rad": SecondParams().motor.bearing_friction_nms}
     v = declared("vector drive")
     mech = VectorParams().mechanics

@@ -41,8 +41,31 @@ def test_undeclared_note():
     """The one line a drive that declares nothing gets (jident diagnose's notes, the diagnostic node's status);
     none once any one term is declared."""
     from jident_ros.identify.verdict import VerdictPolicy
-    assert "exact torque estimate" in VerdictPolicy().undeclared_note(0.0)
+    assert "typical drive" in VerdictPolicy().undeclared_note(0.0)
+    assert "exact torque estimate" in VerdictPolicy(assume_typical_drive=False).undeclared_note(0.0)
     assert VerdictPolicy(torque_accuracy=0.02).undeclared_note(0.0) == ""
     assert VerdictPolicy(coulomb_friction_max_nm=1.0).undeclared_note(0.0) == ""
     assert VerdictPolicy(torque_lag_max_s=1e-3).undeclared_note(0.0) == ""
     assert VerdictPolicy().undeclared_note(0.01) == ""
+
+
+def test_typical_drive_for_raw_angles_only_when_nothing_is_declared():
+    """TYPICAL_DRIVE on a real drive's window (raw encoder angles) when nothing is declared; the paper detector's
+    windows (our simulator's exact torque) and any declaration keep the policy as given; the offset band at least
+    as declared."""
+    from types import SimpleNamespace
+
+    from jident_ros.identify.verdict import TYPICAL_DRIVE, VerdictPolicy
+    motor = SimpleNamespace(bearing_friction_nms_per_rad=0.0, base=SimpleNamespace(torque_nm=200.0))
+    m = VerdictPolicy().drive_model(True, motor)
+    assert m.torque_accuracy == TYPICAL_DRIVE["torque_accuracy"]
+    assert m.torque_lag_s == TYPICAL_DRIVE["torque_lag_max_s"]
+    assert m.torque_offset_nm == pytest.approx(TYPICAL_DRIVE["torque_offset_rel_base"] * 200.0)
+    assert VerdictPolicy(torque_offset_rel_base=0.05).drive_model(True, motor).torque_offset_nm == pytest.approx(10.0)
+    exact = VerdictPolicy().drive_model(False, motor)
+    assert exact.torque_accuracy == 0.0 and exact.torque_lag_s == 0.0
+    assert VerdictPolicy(assume_typical_drive=False).drive_model(True, motor).torque_accuracy == 0.0
+    declared = VerdictPolicy(torque_accuracy=0.01).drive_model(True, motor)
+    assert declared.torque_accuracy == 0.01 and declared.torque_lag_s == 0.0
+    b1 = SimpleNamespace(bearing_friction_nms_per_rad=0.02, base=SimpleNamespace(torque_nm=200.0))
+    assert VerdictPolicy().drive_model(True, b1).torque_accuracy == 0.0

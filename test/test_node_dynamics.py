@@ -51,8 +51,9 @@ def test_dynamics_detector_on_joint_states_without_a_load_encoder(node_env, libr
     diag = Proc(node_env, tmp_path, "diagnostic", *ns, "-p", f"pattern_library:={library}", "-p", "record:=false",
                 "-p", "stale_after_s:=0.0",
                 # the simulator's torque is exact: declared, as a user declares a drive's (the default 1 % offset
-                # band made this 30 dB window's interval hold 1.131 and 1.16: ambiguous, nothing published)
-                "-p", "torque_offset_rel_base:=0.0")
+                # band made this 30 dB window's interval hold 1.131 and 1.16: ambiguous, nothing published; and a
+                # drive that declares nothing is taken for a typical drive, verdict.TYPICAL_DRIVE: 4 classes held)
+                "-p", "torque_offset_rel_base:=0.0", "-p", "assume_typical_drive:=false")
     win = Proc(node_env, tmp_path, "windowing", *ns, "-p", "input:=joint_states", "-p", "detector:=dynamics",
                "-p", "use_imu:=true", "-p", "signals_queue_depth:=10000", "-p", "channels:=[alpha1,a1,m_el,omega1]")
     procs += [diag, win]

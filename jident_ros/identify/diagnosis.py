@@ -316,8 +316,8 @@ class _WindowRun:
                                         bearing_friction_nms_per_rad=dg.system.motor.bearing_friction_nms_per_rad,
                                         recontact_index=w.recontact_index,
                                         entry_uncertainty_samples=w.entry_uncertainty_samples,
-                                        # issue 20: torque accuracy, friction band, torque offset (x M_b)
-                                        model=dg.policy.gap_model(dg.system.motor.base.torque_nm))
+                                        # torque accuracy, friction band, offset (x M_b); a real drive's: TYPICAL_DRIVE
+                                        model=dg.policy.drive_model(raw_angles or w.recontact_index is not None, dg.system.motor))
         except NoGapError as exc:
             self.gap_reason = str(exc)
             self.problems.append(f"gap: {exc}")

@@ -85,7 +85,9 @@ def declared(model: str) -> dict:
                 # its torque estimate's datasheet-like limits (docs/vector_drive.md): scale within 1 %, offset
                 # within 1 % of the rated torque, response (lag) within 1 ms
                 "torque_accuracy": 0.01, "torque_offset_rel_base": 0.01, "torque_lag_max_s": 1.0e-3}
-    return {}                          # ours: config/system.yaml is its config (b1 = 0: the paper's model)
+    # ours: config/system.yaml is its config (b1 = 0: the paper's model), and its user knows its torque is exact (our
+    # simulator's): not a typical drive (verdict.TYPICAL_DRIVE, which an undeclared drive is taken for)
+    return {"assume_typical_drive": False}
 
 
 @dataclass
@@ -259,7 +261,8 @@ def _declared_text() -> str:
     parts = []
     for model in MODELS:
         d = declared(model)
-        parts.append(f"{model}: " + (", ".join(f"`{k}` {v:g}" for k, v in d.items()) if d else "nothing beyond its config"))
+        parts.append(f"{model}: " + (", ".join(f"`{k}` {str(v).lower() if isinstance(v, bool) else format(v, 'g')}"
+                                               for k, v in d.items()) if d else "nothing beyond its config"))
     return "each drive declared as a user would (`zoo.declared`; " + "; ".join(parts) + "; the rest the node's defaults)"
 
 
