@@ -69,3 +69,17 @@ def test_typical_drive_for_raw_angles_only_when_nothing_is_declared():
     assert declared.torque_accuracy == 0.01 and declared.torque_lag_s == 0.0
     b1 = SimpleNamespace(bearing_friction_nms_per_rad=0.02, base=SimpleNamespace(torque_nm=200.0))
     assert VerdictPolicy().drive_model(True, b1).torque_accuracy == 0.0
+
+
+def test_raw_angles_from_the_detector_alone():
+    """A flank or dynamics window is a real drive's recording for the drive model (VerdictPolicy.drive_model) also
+    without a re-contact row or a K2 of its own; a paper-detector window never."""
+    import math as _m
+    from types import SimpleNamespace
+
+    from jident_ros.identify.diagnosis import detector_arguments
+    w = SimpleNamespace(detector="flank", backlash_width_estimate_m=_m.nan, backlash_width_se_m=_m.nan,
+                        recontact_index=-1, backlash_width_m=0.005, channels=("t", "alpha1", "alpha2"))
+    args = detector_arguments(w)
+    assert args["raw_angles"] is True and args["recontact_index"] is None and args["width_estimate"] is None
+    assert detector_arguments(SimpleNamespace(detector="paper")) == {}

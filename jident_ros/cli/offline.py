@@ -298,6 +298,7 @@ def diagnose_recording(path, options: Optional[OfflineOptions] = None, *,
         result.detector = kind
         if kind != "paper":
             result.backlash_width_source = "estimated"
+            _say_undeclared(result, setup, log)
         config = DetectorConfig(kind, k2, o.channels, o.gap_tolerance, o.gear_ratio)
         return _make_detector(setup.system, config, batch_channels, topic_name)
 
@@ -360,6 +361,15 @@ def _backlash_width(messages, width_topic: str, option: Optional[float]) -> tupl
 def _plain_log(log: Callable[[str], Any]) -> Callable[[str], Any]:
     """``log`` with plain numbers (no numpy reprs) in every line."""
     return lambda text: log(plain_numbers(str(text)))
+
+
+def _say_undeclared(result: "OfflineResult", setup: _Setup, log) -> None:
+    """Once per run, for windows of raw encoder angles (a real drive's recording): what a drive that declares nothing
+    is taken for (:meth:`VerdictPolicy.undeclared_note`)."""
+    note = setup.policy.undeclared_note(setup.system.motor.bearing_friction_nms_per_rad)
+    if note and note not in result.notes:
+        result.notes.append(note)
+        log(note)
 
 
 def default_policy(**overrides) -> VerdictPolicy:
@@ -468,10 +478,8 @@ def diagnose_samples(path, options: Optional[OfflineOptions] = None, *,
         raise OfflineError(str(exc)) from None
     result = OfflineResult(str(path), source, "estimated" if o.detector != "paper" else "option",
                            detector=o.detector)
-    undeclared = setup.policy.undeclared_note(setup.system.motor.bearing_friction_nms_per_rad)
-    if undeclared:                  # a real drive's recording (JointState, CSV): said once
-        result.notes.append(undeclared)
-        log(undeclared)
+    if o.detector != "paper":
+        _say_undeclared(result, setup, log)
     monitor = setup.monitor(result, log, say_gap_only=False)
     config = DetectorConfig(o.detector, o.backlash_width_m, None, None, o.gear_ratio)
     # every batch through the Imu skew check (the node's chain): a window whose a1 is out of step is detected

@@ -57,6 +57,7 @@ from jident_ros.identify.verdict import (
 from jident_ros.method.patterns import Identification, PatternLibrary, identify_window
 from jident_ros.method.pipeline import SIGNALS
 from jident_ros.parameters import GAP_METHODS, NO_GAP, gap_method_problem
+from jident_ros.stream.layout import RAW_ANGLE_DETECTORS
 
 
 @dataclass
@@ -164,8 +165,8 @@ class WindowInput:
     wheel_radius_m : r of inequality (1), m
     sample_period_s : T_s, s
     window_id, entry_time_s : reported in the status (entry_time_s defaults to t at the entry sample)
-    recontact_index, width_estimate : from a flank-detector window (raw encoder angles, no K2): the gap ends at
-        its re-contact row and its K2 estimate is reported instead of one from zone-centred angles
+    recontact_index, width_estimate, raw_angles : from a flank- or dynamics-detector window (raw encoder angles, a real
+        drive's: VerdictPolicy.drive_model): its re-contact row ends the gap, its K2 estimate is reported
     entry_uncertainty_samples : the entry row is known to +- this many samples (a dynamics-detector window
         without a1): the gap fit's uncertainty takes it in
     backlash_width_unknown : K2 is not known (a dynamics-detector window without a load encoder: no flanks to
@@ -184,6 +185,7 @@ class WindowInput:
     entry_time_s: Optional[float] = None
     recontact_index: Optional[int] = None
     width_estimate: Optional[WidthEstimate] = None
+    raw_angles: bool = False
 
     @classmethod
     def from_window(cls, window) -> "WindowInput":
@@ -306,8 +308,7 @@ class _WindowRun:
     def gap_step(self):
         """1. the gap: fast; published first when the policy accepts it."""
         w, dg, method = self.win, self.dg, self.dg.config.gap_method
-        # a detector window (its own K2, or none) holds raw encoder angles: the gap interval comes from the detector's
-        # re-contact row or the dynamics, never from |alpha1 - alpha2| < K2/r (issue 20); alpha2 bounds the fits (gap_load)
+        # raw angles, own K2 or none: the gap from the detector's re-contact row, never |alpha1 - alpha2| < K2/r
         raw_angles = w.width_estimate is not None or self.k2_unknown
         data = {(LOAD_ANGLE_KEY if k == "alpha2" else k): v for k, v in w.data.items()} if raw_angles else w.data
         try:
@@ -317,7 +318,7 @@ class _WindowRun:
                                         recontact_index=w.recontact_index,
                                         entry_uncertainty_samples=w.entry_uncertainty_samples,
                                         # torque accuracy, friction band, offset (x M_b); a real drive's: TYPICAL_DRIVE
-                                        model=dg.policy.drive_model(raw_angles or w.recontact_index is not None, dg.system.motor))
+                                        model=dg.policy.drive_model(w.raw_angles, dg.system.motor))
         except NoGapError as exc:
             self.gap_reason = str(exc)
             self.problems.append(f"gap: {exc}")
@@ -554,8 +555,7 @@ def rotation_sign(window_data: dict, entry_index: int) -> float:
 
 
 def mirrored(window_data: dict) -> dict:
-    """Every channel but t with its sign changed: a reverse window as the forward one the model is odd to
-    (docs/method.md, "Reverse rotation")."""
+    """Every channel but t with its sign changed: a reverse window as a forward one (docs/method.md, "Reverse rotation")."""
     return {k: (v if k == "t" else -np.asarray(v, float)) for k, v in window_data.items()}
 
 
@@ -580,14 +580,14 @@ def detector_arguments(window) -> dict:
     :class:`~jident_ros.stream.layout.Window`: a flank- or dynamics-detector window's own (and, for a dynamics
     window without a1, ``entry_uncertainty_samples``); none for the paper detector's."""
     kind = getattr(window, "detector", "paper")
-    if kind not in ("flank", "dynamics"):
+    if kind not in RAW_ANGLE_DETECTORS:
         return {}
     est = None
     if math.isfinite(window.backlash_width_estimate_m):
         est = WidthEstimate(float(window.backlash_width_estimate_m), float(window.backlash_width_se_m),
                             int(window.recontact_index), "flank")
     out = {"recontact_index": window.recontact_index if window.recontact_index >= 0 else None,
-           "width_estimate": est}
+           "width_estimate": est, "raw_angles": True}
     if kind == "dynamics" and "a1" not in window.channels:
         out["entry_uncertainty_samples"] = ENTRY_UNCERTAINTY_WITHOUT_A1
     if not math.isfinite(window.backlash_width_m) and (kind == "dynamics" or FLANK_WINDOWS_WITHOUT_K2):

@@ -89,6 +89,7 @@ from jident_ros.nodes.ros_io import (
 from jident_ros.nodes.runtime import DIAGNOSED_PROGRESS_TOPIC, RunnableNode, events_executor
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import DIAGNOSTIC, DIAGNOSTIC_PARAMS, gap_method_problem
+from jident_ros.stream.layout import RAW_ANGLE_DETECTORS
 from jident_ros.stream.text import plain_numbers
 
 NODE_NAME = "jident_diagnostic"
@@ -474,7 +475,6 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
         period and wheel radius (errors: the diagnosis would be wrong), its K2 (a warning when it lies
         outside the library's widths and the image method is on)."""
         errors, warnings = [], []
-        self.raw_windows += win.detector in ("flank", "dynamics")     # a real drive's raw encoder angles
         if len(win) != self.window_length:
             errors.append(f"length {len(win)} samples, configuration {self.window_length} "
                           "(sampling.samples_before_entry + samples_from_entry)")
@@ -504,6 +504,7 @@ class DiagnosticNode(TrendTask, RunnableNode, LifecycleNode):
             self.diag.publish(make_status(status_name(self, STATUS_TASK), ERROR, text, self.hardware_id))
             return
         self._count_window_id(int(win.window_id))
+        self.raw_windows += win.detector in RAW_ANGLE_DETECTORS     # a real drive's recording
         errors, warnings = self.check_window(win)
         if errors:
             self.windows_mismatched += 1

@@ -57,6 +57,8 @@ WINDOW_FORMAT = 2.0
 WINDOW_FORMATS = {1.0: len(WINDOW_HEADER_1), 2.0: len(WINDOW_HEADER)}
 #: Header field ``detector``: which detector captured the window.
 DETECTOR_CODES = {"paper": 0, "flank": 1, "dynamics": 2}
+#: The detectors whose windows hold raw encoder angles (a real drive's recording; the paper's: zone-centred angles).
+RAW_ANGLE_DETECTORS = ("flank", "dynamics")
 #: Header field ``flags`` (bits): another zone entry lies inside the window (information) ...
 FLAG_SECOND_ENTRY = 1
 #: ... the data ended before the window was complete (a partial window, reported, never published).
