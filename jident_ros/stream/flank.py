@@ -837,13 +837,14 @@ def _travel(d: np.ndarray, e: int) -> np.ndarray:
     return side * (d[e:] - d[e])
 
 
-def _delta_quantum(d: np.ndarray, e: int, angle_quantum_rad: float) -> float:
-    """The quantum of delta: the configured encoders', else the smallest step delta makes before the entry (whole counts
-    of a quantised angle at rest on its flank; a continuous angle's is tiny and guards nothing)."""
+def _delta_quantum(d: np.ndarray, e: int, angle_quantum_rad: float, first: int = 0, below: float = math.inf) -> float:
+    """The quantum of delta: the configured encoders', else the smallest step delta makes in rows first..e (before the
+    entry: whole counts of a quantised angle at rest on its flank; a continuous angle's is tiny and guards nothing),
+    not a float rounding, and below ``below`` (not a jump)."""
     if angle_quantum_rad > 0:
         return float(angle_quantum_rad)
-    steps = np.abs(np.diff(d[:e]))
-    steps = steps[steps > 1e-9]
+    steps = np.abs(np.diff(d[first:e]))
+    steps = steps[(steps > 1e-9) & (steps < below)]
     return float(steps.min()) if steps.size else 0.0
 
 
@@ -1740,9 +1741,8 @@ class FlankDetector(BacklashDetector):
         at least the quantisation (the configured encoder's, else the smallest step delta makes before the departure,
         below the departure threshold)."""
         delta = self._delta(data)
-        steps = np.abs(np.diff(delta[max(dep - DRIFT_BACK_SAMPLES - DRIFT_PRE_SAMPLES, 0):dep]))
-        steps = steps[(steps > 1e-9) & (steps < self.min_departure_rad)]   # not a float rounding, not a jump
-        quantum = self.angle_quantum_rad or (float(steps.min()) if steps.size else 0.0)
+        quantum = _delta_quantum(delta, dep, self.angle_quantum_rad, max(dep - DRIFT_BACK_SAMPLES - DRIFT_PRE_SAMPLES, 0),
+                                 self.min_departure_rad)
         sigma = float(getattr(self, "_cap_sigma", 0.0))
         noise = max(sigma if math.isfinite(sigma) else 0.0, quantum / math.sqrt(12.0))
         return free_departure(delta, dep, self.samples_before_entry, noise)

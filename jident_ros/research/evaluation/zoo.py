@@ -524,6 +524,26 @@ def _pct(a, b):
     return "–" if not b else f"{100 * a / b:.0f} %"
 
 
+def variant_rows(rows: dict, what: dict, wrong_first: bool = True) -> tuple:
+    """(table lines, totals) of drives varied one property at a time (zoo_variants, zoo_dol's sweep) from
+    :func:`summarise`'s counts per variant; ``wrong_first``: the class column as 'another class / between classes'."""
+    lines, tot = [], dict.fromkeys(("off", "cov", "with", "pub", "win", "wrong", "between", "false"), 0)
+    for name, s in rows.items():
+        off = s.get("offsets", [])
+        err = "–" if s.get("err_median") is None else f"{100 * s['err_median']:.1f} % / {100 * s['err_max']:.1f} %"
+        false = s.get("false_steady", 0) + s.get("false_same_flank", 0) + s.get("false_other", 0)
+        classes = (s.get("wrong_class", 0), s.get("between_on_class", 0))[::1 if wrong_first else -1]
+        lines.append(f"| {name} | {what[name]} | {s.get('found', 0)}/{s.get('traversals', 0)} | "
+                     f"{_pct(sum(1 for o in off if abs(o) <= 2), len(off))} | "
+                     f"{s.get('trav_published', 0)}/{s.get('trav_windows', 0)} | {s.get('published_off', 0)} | {err} | "
+                     f"{s.get('covered', 0)}/{s.get('with_interval', 0)} | {classes[0]} / {classes[1]} | {false} |")
+        for k, key in (("off", "published_off"), ("cov", "covered"), ("with", "with_interval"), ("pub", "trav_published"),
+                       ("win", "trav_windows"), ("wrong", "wrong_class"), ("between", "between_on_class")):
+            tot[k] += s.get(key, 0)
+        tot["false"] += false
+    return lines, tot
+
+
 def _e(x):
     return "–" if x is None else f"{100 * x:.1f} %"
 

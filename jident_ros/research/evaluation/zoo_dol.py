@@ -252,21 +252,8 @@ def sweep_markdown(sw: dict) -> list:
              "", "| variant | what changed | traversals found | entry within ±2 | published (traversal windows) | "
              "published > 10 % off | median / max abs error | 95 % CI covers | 'between classes' / another class "
              "named, on the drive's class | false entries |", "|---|---|---|---|---|---|---|---|---|---|"]
-    tot = {"off": 0, "cov": 0, "with": 0, "pub": 0, "win": 0}
-    for name, s in sw["rows"].items():
-        off = s.get("offsets", [])
-        err = "–" if s.get("err_median") is None else f"{100 * s['err_median']:.1f} % / {100 * s['err_max']:.1f} %"
-        false = s.get("false_steady", 0) + s.get("false_same_flank", 0) + s.get("false_other", 0)
-        lines.append(f"| {name} | {what[name]} | {s.get('found', 0)}/{s.get('traversals', 0)} | "
-                     f"{zoo._pct(sum(1 for o in off if abs(o) <= 2), len(off))} | "
-                     f"{s.get('trav_published', 0)}/{s.get('trav_windows', 0)} | {s.get('published_off', 0)} | {err} | "
-                     f"{s.get('covered', 0)}/{s.get('with_interval', 0)} | {s.get('between_on_class', 0)} / "
-                     f"{s.get('wrong_class', 0)} | {false} |")
-        tot["off"] += s.get("published_off", 0)
-        tot["cov"] += s.get("covered", 0)
-        tot["with"] += s.get("with_interval", 0)
-        tot["pub"] += s.get("trav_published", 0)
-        tot["win"] += s.get("trav_windows", 0)
+    rows, tot = zoo.variant_rows(sw["rows"], what, wrong_first=False)
+    lines += rows
     lines += ["", f"Over the sweep: published {tot['pub']}/{tot['win']} traversal windows, **{tot['off']} more than 10 % "
               f"off**, the 95 % interval covers {tot['cov']}/{tot['with']} ({zoo._pct(tot['cov'], tot['with'])})."]
     return lines
