@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import time
 from dataclasses import replace
@@ -121,7 +122,9 @@ def generate(out: Path, log=print, names=None) -> dict:
     return got
 
 
-def run(out: Path, log=print, names=None) -> dict:
+def run(out: Path, log=print, names=None, undeclared: bool = False) -> dict:
+    """Diagnose every variant, declared as its user would (``undeclared``: nothing declared, b1 = 0 and the node's
+    defaults -- the typical-drive model of docs/your_drive.md -- with the drive file's system for its variant)."""
     t0 = time.perf_counter()
     recs = generate(out, log, names)
     rows = {}
@@ -132,22 +135,34 @@ def run(out: Path, log=print, names=None) -> dict:
         items = []
         for label, zr in recs[name]:
             fmt = next(iter(zr.files))
-            items.append((zr, zoo.diagnose_one(zr, fmt, system, declare=True, extra=extra)))
+            d = (zoo.diagnose_one(zr, fmt, system, declare=False, extra={"bearing_friction_nms_per_rad": 0.0})
+                 if undeclared else zoo.diagnose_one(zr, fmt, system, declare=True, extra=extra))
+            items.append((zr, d))
         rows[name] = zoo.summarise(items, nominal_kgm2=system.motor.nominal_inertia_kgm2)
         log(f"{name}: diagnosed {len(items)} files ({time.perf_counter() - t0:.0f} s)")
-    return {"rows": rows, "elapsed_s": time.perf_counter() - t0}
+    return {"rows": rows, "elapsed_s": time.perf_counter() - t0, "undeclared": undeclared}
+
+
+def _undeclared_what(text: str) -> str:
+    """A variant's description without what its user declares (the ``--undeclared`` table declares nothing)."""
+    text = re.sub(r"; declared [^)]*\)", ")", text).replace(" (declared)", "")
+    return text.replace("diagnosed with its drive file", "diagnosed with its drive file's system")
 
 
 def markdown(res: dict, command: str, commit: str) -> str:
-    what = {n: w for n, w, _, _ in variants()}
+    what = {n: _undeclared_what(w) if res.get("undeclared") else w for n, w, _, _ in variants()}
     lines = [f"## Drives nobody tuned for: the vector drive varied (`{command}`)", "",
              f"Measured on commit {commit} ({res['elapsed_s']:.0f} s; simulations cached under out/zoo_variants). "
              "jident_ros/research/evaluation/zoo_variants.py: the third-party drive (motulator, docs/vector_drive.md) "
              "with one property changed per variant, events " + ", ".join(e.replace("_", " ") for e in EVENTS)
              + " (forward; the last a same-flank torque increase: no entry may be found), each as "
-             + ", ".join(s[0] for s in SENSORS) + "; diagnosed as the zoo diagnoses the vector drive (declared as "
-             "there, the friction variant with its own friction, the small drive with its drive file). No threshold "
-             "was chosen on any of these drives.", "",
+             + ", ".join(s[0] for s in SENSORS) + "; " + (
+                 "diagnosed with nothing declared (b1 = 0 and the node's defaults: the typical-drive model, "
+                 "docs/your_drive.md; the small drive with its drive file's system, not its declaration)"
+                 if res.get("undeclared") else
+                 "diagnosed as the zoo diagnoses the vector drive (declared as there, the friction variant with its "
+                 "own friction, the observer variant with its torque accuracy, the small drive with its drive "
+                 "file)") + ". No threshold was chosen on any of these drives.", "",
              "| variant | what changed | traversals found | entry within ±2 | published (traversal windows) | "
              "published > 10 % off | median / max abs error | 95 % CI covers | another class named / 'between "
              "classes', on the drive's class | false entries |",
@@ -169,7 +184,13 @@ def main(argv=None) -> int:
     p.add_argument("--results", default="docs/results.md", help="results file to update ('-' prints)")
     p.add_argument("--variants", default="", help="comma-separated variant names (default: all)")
     p.add_argument("--json", default="", help="also write the counts here")
+    p.add_argument("--undeclared", action="store_true",
+                   help="declare nothing (b1 = 0 and the node's defaults): what a user who configures nothing gets "
+                        "(with --results -)")
     a = p.parse_args(argv)
+    if a.undeclared and a.results != "-":
+        sys.stderr.write("zoo_variants: error: argument --undeclared: print it with --results -\n")
+        return 2
     if not a.report:
         p.print_help()
         return 0
@@ -183,8 +204,10 @@ def main(argv=None) -> int:
         sys.stderr.write(f"zoo_variants: error: {problem}\n")
         return 2
     commit = zoo._commit()
-    res = run(Path(a.out), log=lambda t: print(t, file=sys.stderr, flush=True), names=names or None)
-    cmd = "python -m jident_ros.research.evaluation.zoo_variants --report" + (f" --variants {a.variants}" if names else "")
+    res = run(Path(a.out), log=lambda t: print(t, file=sys.stderr, flush=True), names=names or None,
+              undeclared=a.undeclared)
+    cmd = ("python -m jident_ros.research.evaluation.zoo_variants --report" + (f" --variants {a.variants}" if names else "")
+           + (" --undeclared" if a.undeclared else ""))
     md = markdown(res, cmd, commit)
     if a.json:
         Path(a.json).write_text(json.dumps(res, indent=1, default=float) + "\n")
