@@ -53,6 +53,23 @@ DRIVE_FILES = {"small drive, 3:1 gear": Path(__file__).resolve().parents[3] / "d
                / "small_drive.yaml"}
 
 
+#: Variants recorded at another rate (their DriveParams.sample_period_s), diagnosed with that sample period and a
+#: window of the same length in time (1 s from the entry), the 48 samples before it kept (docs/your_drive.md): the
+#: detector's and the gap stage's constants that count samples were chosen at 2 kHz.
+RATE_VARIANTS = ("recorded at 1 kHz", "recorded at 4 kHz")
+
+
+def system_for(name: str, p: DriveParams):
+    """The system configuration a variant is diagnosed with: its drive file's, or config/system.yaml's, at the
+    variant's sample period."""
+    system = load_system_config(DRIVE_FILES.get(name))
+    if name in RATE_VARIANTS:
+        s = system.sampling
+        system = replace(system, sampling=replace(s, sample_period_s=p.sample_period_s,
+                                                  samples_from_entry=int(round(1.0 / p.sample_period_s))))
+    return system
+
+
 def _declared_by_file(name: str) -> dict:
     """The declaration of a :data:`DRIVE_FILES` variant: its drive file's policy and its b1."""
     path = DRIVE_FILES[name]
@@ -95,6 +112,8 @@ def variants() -> list:
          _mech(b, motor_coulomb_nm=3.0, motor_viscous_nms_per_rad=0.05),
          {"bearing_friction_nms_per_rad": 0.05, "coulomb_friction_max_nm": 1.25 * 3.0}),
         ("laggy speed feedback", "speed filter 2 ms", _ctrl(b, speed_filter_s=2e-3), {}),
+        ("recorded at 1 kHz", "sample period 1 ms (the window 1 s)", replace(b, sample_period_s=1e-3), {}),
+        ("recorded at 4 kHz", "sample period 0.25 ms (the window 1 s)", replace(b, sample_period_s=2.5e-4), {}),
         ("small drive, 3:1 gear", "docs/your_drive.md's example: 2.2 kW, J1 0.03 kg m^2, J2 0.54 behind a 3:1 gear, "
          "K2 1.5 mm at r 0.03 m, its torque estimate 3-4 % off; diagnosed with its drive file "
          "(docs/examples/profiles/small_drive.yaml)", small_drive(), _declared_by_file("small drive, 3:1 gear")),
@@ -128,10 +147,10 @@ def run(out: Path, log=print, names=None, undeclared: bool = False) -> dict:
     t0 = time.perf_counter()
     recs = generate(out, log, names)
     rows = {}
-    for name, _, _, extra in variants():
+    for name, _, p, extra in variants():
         if name not in recs:
             continue
-        system = load_system_config(DRIVE_FILES.get(name))
+        system = system_for(name, p)
         items = []
         for label, zr in recs[name]:
             fmt = next(iter(zr.files))
