@@ -7,7 +7,7 @@ Issue 20 says the estimator will be checked on drive models we do not have.  The
 drive; this sweep takes the third-party one (jident_ros/research/vector_drive, docs/vector_drive.md) and changes one
 property per variant -- the coupling's stiffness, the load inertia, the speed loop's bandwidth, the drive's
 observer mismatch (its torque estimate's error), the backlash width, the speed, J1, the bearing friction, the
-speed feedback's filter -- over the traversing events (speed step down, speed reversal, light and heavy load
+speed feedback's filter, the sample rate (1 and 4 kHz) -- over the traversing events (speed step down, speed reversal, light and heavy load
 reversal) and one same-flank event (speed step up: no entry may be found), forward, each recorded as JointState
 2^16 (clean and 30 dB) and JointState + Imu 2^16 (30 dB).  Every file goes through the zoo's diagnosis
 (:func:`jident_ros.research.evaluation.zoo.diagnose_one`: ``jident diagnose``'s own function, flank detector, no
