@@ -7,9 +7,10 @@ Issue 20 says the estimator will be checked on drive models we do not have.  The
 drive; this sweep takes the third-party one (jident_ros/research/vector_drive, docs/vector_drive.md) and changes one
 property per variant -- the coupling's stiffness, the load inertia, the speed loop's bandwidth, the drive's
 observer mismatch (its torque estimate's error), the backlash width, the speed, J1, the bearing friction, the
-speed feedback's filter, the sample rate (1 and 4 kHz) -- over the traversing events (speed step down, speed reversal, light and heavy load
-reversal) and one same-flank event (speed step up: no entry may be found), forward, each recorded as JointState
-2^16 (clean and 30 dB) and JointState + Imu 2^16 (30 dB).  Every file goes through the zoo's diagnosis
+speed feedback's filter, the sample rate (1 and 4 kHz), the sampling instants' jitter -- over the traversing events
+(speed step down, speed reversal, light and heavy load reversal) and one same-flank event (speed step up: no entry
+may be found), forward, each recorded as JointState 2^16 (clean and 30 dB) and JointState + Imu 2^16 (30 dB).
+Every file goes through the zoo's diagnosis
 (:func:`jident_ros.research.evaluation.zoo.diagnose_one`: ``jident diagnose``'s own function, flank detector, no
 K2, the image method off), with the drive declared as the zoo declares the vector drive
 (:func:`jident_ros.research.evaluation.zoo.declared`) and, for the friction variant, its own friction; the small
@@ -57,6 +58,10 @@ DRIVE_FILES = {"small drive, 3:1 gear": Path(__file__).resolve().parents[3] / "d
 #: window of the same length in time (1 s from the entry), the 48 samples before it kept (docs/your_drive.md): the
 #: detector's and the gap stage's constants that count samples were chosen at 2 kHz.
 RATE_VARIANTS = ("recorded at 1 kHz", "recorded at 4 kHz")
+
+
+#: Variants recorded with other sensors than SENSORS' (the vector drive's record.Sensors fields).
+SENSOR_VARIANTS = {"sampling jitter 25 µs": {"sample_jitter_s": 25e-6}, "sampling jitter 50 µs": {"sample_jitter_s": 50e-6}}
 
 
 def system_for(name: str, p: DriveParams):
@@ -114,6 +119,8 @@ def variants() -> list:
         ("laggy speed feedback", "speed filter 2 ms", _ctrl(b, speed_filter_s=2e-3), {}),
         ("recorded at 1 kHz", "sample period 1 ms (the window 1 s)", replace(b, sample_period_s=1e-3), {}),
         ("recorded at 4 kHz", "sample period 0.25 ms (the window 1 s)", replace(b, sample_period_s=2.5e-4), {}),
+        ("sampling jitter 25 µs", "sampled at instants jittered by 25 µs rms (5 % of T_s), stamped with them", b, {}),
+        ("sampling jitter 50 µs", "sampled at instants jittered by 50 µs rms (10 % of T_s), stamped with them", b, {}),
         ("small drive, 3:1 gear", "docs/your_drive.md's example: 2.2 kW, J1 0.03 kg m^2, J2 0.54 behind a 3:1 gear, "
          "K2 1.5 mm at r 0.03 m, its torque estimate 3-4 % off; diagnosed with its drive file "
          "(docs/examples/profiles/small_drive.yaml)", small_drive(), _declared_by_file("small drive, 3:1 gear")),
@@ -132,7 +139,8 @@ def generate(out: Path, log=print, names=None) -> dict:
         for ev in EVENTS:
             for label, fmt, counts, snr in SENSORS:
                 t0 = time.perf_counter()
-                r = vd_record.build(p, ev, "forward", vd_record.Sensors(counts, snr), seed=23, cache_dir=out / "cache")
+                r = vd_record.build(p, ev, "forward", vd_record.Sensors(counts, snr, **SENSOR_VARIANTS.get(name, {})),
+                                    seed=23, cache_dir=out / "cache")
                 recs.append((label, zoo.vector_recording(r, ev, "forward", p.mechanics.motor_inertia_kgm2, counts, snr,
                                                          sub, (fmt,))))
                 if time.perf_counter() - t0 > 2:
