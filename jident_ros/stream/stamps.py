@@ -139,6 +139,23 @@ class StampGrid:
         return max(self.gap_tolerance * ts, min(self.gap_tolerance * ts + 6.0 * self.jitter_rms_s, 2.0 * ts))
 
     def _regrid(self, x: np.ndarray) -> np.ndarray:
+        """Rows on the grid: one interpolation per column where every step is forward and bridged (the usual
+        batch), else row by row (:meth:`_regrid_rows`)."""
+        prev, ts = self._prev, self.sample_period_s
+        if prev is not None and x.shape[0]:
+            t = np.concatenate([[prev[0]], x[:, 0]])
+            d = np.diff(t)
+            if d.min() > 0 and d.max() <= self._bridge_s:
+                n = int(math.floor((t[-1] - self._next_t) / ts)) + 1 if t[-1] >= self._next_t else 0
+                g = self._next_t + ts * np.arange(n)
+                rows = np.vstack([prev, x])
+                out = np.column_stack([g] + [np.interp(g, t, rows[:, j]) for j in range(1, x.shape[1])])
+                self._prev, self._next_t = x[-1], self._next_t + n * ts
+                self.resampled += n
+                return out
+        return self._regrid_rows(x)
+
+    def _regrid_rows(self, x: np.ndarray) -> np.ndarray:
         out = []
         ts = self.sample_period_s
         for row in x:
