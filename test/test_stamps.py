@@ -87,3 +87,28 @@ def test_the_jointstate_adapter_resamples_and_says_so():
     assert all(b.shape[0] <= 50 for b, _ in out) and np.allclose(np.diff(y[DECIDE_ROWS - 1:, 0]), TS)
     j = ad.jitter()
     assert j["time_base"] == "stamps" and j["rows_resampled"] == y.shape[0] - DECIDE_ROWS
+
+
+@pytest.mark.parametrize("step, k", [(TS / 2, 2), (TS / 4, 4), (TS, 1), (0.7 * TS, 1), (TS / 2.5, 1)])
+def test_a_faster_recording_is_decimated_to_t_s_and_said(step, k):
+    """Stamps stepping by T_s/k (k an integer): every k-th row from the first, across batch boundaries (batches of
+    7); any other step: nothing decimated (the detector's stamp checks then speak)."""
+    n = 700
+    x = np.column_stack([1.0 + step * np.arange(n), _angle(step * np.arange(n)), np.arange(n, dtype=float)])
+    g = StampGrid(TS, 1)
+    y = _feed(g, x, block=7)
+    assert g.decimation == k and g.summary()["decimated_by"] == k
+    assert np.array_equal(y[:, 2], np.arange(0, n, k))
+    assert (f"every {k}nd sample" in g.said() or f"every {k}th sample" in g.said()) if k > 1 else g.said() == ""
+
+
+def test_the_adapter_decimates_a_4_khz_stream_and_its_period_matches():
+    ad = JointStateAdapter(TS, batch_size=50, channels=("alpha1", "m_el"))
+    out = []
+    for i in range(1000):
+        out += ad.push(1.0 + i * TS / 2, ["motor", "load"], [_angle(i * TS / 2), 0.0], [], [float(i), 0.0])
+    out += ad.flush()
+    y = np.concatenate([b for b, _ in out])
+    assert y.shape[0] == 500 and np.allclose(np.diff(y[:, 0]), TS)
+    j = ad.jitter()
+    assert j["decimated_by"] == 2 and j["period_matches"]

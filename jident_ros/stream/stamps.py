@@ -20,6 +20,11 @@ one is tested (the rows of a block under test go through as they are: no delay).
 longer step is not bridged (the grid starts again after it, and the detector counts the gap); an out-of-order or
 repeated stamp goes through no later than the row before it (the detector counts it).
 
+A recording faster than T_s by an integer factor k (stamps stepping by T_s/k, 2 <= k <= :data:`MAX_DECIMATION`,
+decided from the first two rows) is decimated first: every k-th row is taken, the rest dropped, and it is said
+(the detectors' and the gap stage's sample counts were chosen at 2 kHz; a user who sets T_s to the stamps' period
+gets every row).
+
 Plain numpy; never imports rclpy.
 """
 from __future__ import annotations
@@ -40,6 +45,12 @@ GRID_TOLERANCE = 0.02
 SMOOTHER_RATIO = 0.5
 
 MODES = ("undecided", "index", "stamps")
+#: The largest integer ratio of T_s to the stamps' step that is decimated (a faster recording than T_s).
+MAX_DECIMATION = 16
+
+
+def _ordinal(k: int) -> str:
+    return f"{k}{'nd' if k % 10 == 2 and k != 12 else 'rd' if k % 10 == 3 and k != 13 else 'th'}"
 
 
 def _roughness(x: np.ndarray) -> float:
@@ -75,22 +86,50 @@ class StampGrid:
         self._held = 0
         self._prev: np.ndarray | None = None
         self._next_t = math.nan
+        self.decimation = 0                       # 0: not decided yet (the first two rows decide), else k
+        self._rows_in = 0
+        self._first: np.ndarray | None = None
 
     def said(self) -> str:
-        """One line when the rows were put on the grid ('' otherwise)."""
-        if self.mode != "stamps":
-            return ""
-        return (f"the stamps scatter {1e6 * self.jitter_rms_s:.3g} µs rms around their grid and alpha1 is smoother "
-                f"on them ({self.ratio:.2g} x the sample index's roughness): they are the sampling instants, "
-                f"{self.resampled} rows interpolated onto the T_s grid")
+        """One line when the rows were decimated or put on the grid ('' otherwise)."""
+        out = []
+        if self.decimation > 1:
+            out.append(f"the stamps step by T_s/{self.decimation} ({self.decimation / self.sample_period_s:g} Hz): "
+                       f"every {_ordinal(self.decimation)} sample taken (the detectors' and the gap stage's sample counts "
+                       f"were chosen at sampling.sample_period_s; set it to the stamps' period to take them all)")
+        if self.mode == "stamps":
+            out.append(f"the stamps scatter {1e6 * self.jitter_rms_s:.3g} µs rms around their grid and alpha1 is "
+                       f"smoother on them ({self.ratio:.2g} x the sample index's roughness): they are the sampling "
+                       f"instants, {self.resampled} rows interpolated onto the T_s grid")
+        return "; ".join(out)
 
     def summary(self) -> dict:
         return {"time_base": self.mode, "jitter_rms_s": self.jitter_rms_s, "angle_roughness_ratio": self.ratio,
-                "rows_resampled": self.resampled}
+                "rows_resampled": self.resampled, "decimated_by": max(self.decimation, 1)}
+
+    def _decimate(self, x: np.ndarray) -> np.ndarray:
+        """Every k-th row (k = :attr:`decimation`, decided from the first two rows' step: the stamps step by
+        T_s/k within 10 % for an integer k in 2..:data:`MAX_DECIMATION`), counted from the stream's first row."""
+        if self.decimation == 0:
+            if self._first is not None:
+                x = np.vstack([self._first, x])
+                self._first = None
+            if x.shape[0] < 2:
+                self._first = x
+                return x[:0]
+            step = float(np.median(np.diff(x[:, 0])))
+            k = round(self.sample_period_s / step) if step > 0 else 1
+            ok = 2 <= k <= MAX_DECIMATION and abs(k * step - self.sample_period_s) <= 0.1 * self.sample_period_s
+            self.decimation = k if ok else 1
+        if self.decimation == 1:
+            return x
+        keep = (self._rows_in + np.arange(x.shape[0])) % self.decimation == 0
+        self._rows_in += x.shape[0]
+        return x[keep]
 
     def feed(self, x: np.ndarray) -> np.ndarray:
         """One block of rows in stream order; returns the rows to hand on (possibly a different number)."""
-        x = np.asarray(x, dtype=np.float64)
+        x = self._decimate(np.asarray(x, dtype=np.float64))
         if self.mode == "index" or x.shape[0] == 0:
             return x
         if self.mode == "stamps":
@@ -181,4 +220,4 @@ class StampGrid:
         return np.array(out).reshape(-1, x.shape[1])
 
 
-__all__ = ["DECIDE_ROWS", "GRID_TOLERANCE", "MODES", "SMOOTHER_RATIO", "StampGrid", "grid_deviation"]
+__all__ = ["DECIDE_ROWS", "GRID_TOLERANCE", "MAX_DECIMATION", "MODES", "SMOOTHER_RATIO", "StampGrid", "grid_deviation"]

@@ -122,6 +122,8 @@ def variants() -> list:
         ("laggy speed feedback", "speed filter 2 ms", _ctrl(b, speed_filter_s=2e-3), {}),
         ("recorded at 1 kHz", "sample period 1 ms (the window 1 s)", replace(b, sample_period_s=1e-3), {}),
         ("recorded at 4 kHz", "sample period 0.25 ms (the window 1 s)", replace(b, sample_period_s=2.5e-4), {}),
+        ("4 kHz read at 2 kHz", "sample period 0.25 ms, diagnosed with config/system.yaml's 0.5 ms (every "
+         "2nd sample taken)", replace(b, sample_period_s=2.5e-4), {}),
         ("sampling jitter 25 µs", "sampled at instants jittered by 25 µs rms (5 % of T_s), stamped with them", b, {}),
         ("sampling jitter 50 µs", "sampled at instants jittered by 50 µs rms (10 % of T_s), stamped with them", b, {}),
         ("stamping jitter 50 µs", "sampled every T_s, the stamps jittered by 50 µs rms (10 % of T_s)", b, {}),
