@@ -574,6 +574,19 @@ def free_motion_walk(alpha1: np.ndarray, m_el: np.ndarray, departure: int, first
     return start, best
 
 
+#: With a1, a traversal back's entry moves on to the angle walk's (:meth:`FlankDetector._angle_walk_entry`, the no-a1
+#: path: free_motion_walk, then the coupling model) when that lies this many samples or more before back_to_load's
+#: (then the coupling model's): each walks back while its free-motor model explains the samples, and back_to_load's
+#: J, fitted over a gap of nearly constant torque, absorbs the torque estimate's error -- on the vector drive's clean
+#: speed steps (JointState+Imu, CSV) it stopped 11-24 samples after the contact loss, where the angle walk finds it
+#: (0 / -1, as without a1).  Closer, the angle walk is no better: it leads by at most 2 on the second drive (there one
+#: -2 -> -3 with any lead taken, 8 such windows) and by 5-6 on two variants' 30 dB traversals back (narrow backlash,
+#: J1 1.073: both within +-2 -> -4 / -6 at a lead of 4, the first value tried).  Chosen on the vector drive (leads
+#: 12-24), tested on the second drive, the DOL drive (no such traversal), ours and the 15 variants (docs/results.md,
+#: "Entry placement, fifth round")
+RETURN_ANGLE_WALK_MIN_LEAD = 8
+
+
 #: Without a1, a window's own entry that delta left gradually (a coupling untwisting as its load falls, so delta
 #: crosses the departure threshold before the contact is lost: the vector drive's heavy load reversals 8-9 samples
 #: early) moves to the contact loss of a coupling model (:func:`coupling_entry`): alpha1 = a + v k + (Phi - K Psi -
@@ -1666,18 +1679,8 @@ class FlankDetector(BacklashDetector):
         jumped = self._jumped(data, dep)
         if self.detector_name == "flank" and "a1" not in self.channels and "m_el" in self.channels \
                 and getattr(self, "_cap_returning", False):
-            # a traversal back: delta may rest near the flank it left with no relative speed (read as a contact);
-            # the motor equation in angle form finds where the motor started to run free (free_motion_start)
-            # (through any excursion of delta into the zone: the second drive's traversal back turns inside the zone
-            # and rests 1 mrad off the flank it left before leaving it again, one gap; a guard that stopped the walk
-            # where delta was last inside the zone left 3 of them 88-92 samples late)
-            walk, e = free_motion_walk(data[:, self._i_a1], data[:, self.channels.index("m_el")], dep,
-                                       self.samples_before_entry, self.sample_period_s, self.angle_quantum_rad)
+            e = self._angle_walk_entry(data, dep)
             if e < dep:
-                # then the coupling model's contact loss: forward from the walk's end (the walk stops where the
-                # contact's load becomes visible, before the contact loss), else near the hinge's entry
-                e2 = self._coupling_move(data, walk, dep, 1.0, 1.0)
-                e = min(e2 if e2 > walk else self._coupling_move(data, e, dep, 1.0, 1.0), dep)
                 return e - dep, None
         # not in a traversal back (delta rings at the other flank after the impact before it leaves it again: on the
         # vector drive's 2^13 speed steps the move took return entries 10-40 samples back, one before its gap)
@@ -1721,6 +1724,9 @@ class FlankDetector(BacklashDetector):
             if getattr(self, "_cap_returning", False):
                 # a traversal back: the coupling model's contact loss near back_to_load's entry
                 entry = self._coupling_move(data, entry + off, dep + off, 1.0, 1.0) - off
+                walk = self._angle_walk_entry(data, dep + off) - off
+                if walk <= entry - RETURN_ANGLE_WALK_MIN_LEAD:
+                    entry = walk
         elif src != "a1" and self.detector_name == "flank" and not getattr(self, "_cap_returning", False):
             # without a1, a coupling that untwisted off its flank: the entry at the coupling model's contact loss
             entry = self._coupling_move(data, entry + off, dep + off, rounds=COUPLING_FORWARD_ROUNDS) - off
@@ -1735,6 +1741,23 @@ class FlankDetector(BacklashDetector):
                 # -1 -> -3 with any move taken; the DOL drive's slip drops moved 3-12 samples)
                 entry = damped - off
         return entry - dep, None if recontact is None else recontact + off
+
+    def _angle_walk_entry(self, data: np.ndarray, dep: int) -> int:
+        """A traversal back's entry from the motor equation in angle form (``dep`` when it does not move): delta may
+        rest near the flank it left with no relative speed (read as a contact); the walk finds where the motor started
+        to run free (:func:`free_motion_walk`; through any excursion of delta into the zone: the second drive's
+        traversal back turns inside the zone and rests 1 mrad off the flank it left before leaving it again, one gap;
+        a guard that stopped the walk where delta was last inside the zone left 3 of them 88-92 samples late), then
+        the coupling model's contact loss: forward from the walk's end (the walk stops where the contact's load
+        becomes visible, before the contact loss), else near the hinge's entry."""
+        if "m_el" not in self.channels:
+            return dep
+        walk, e = free_motion_walk(data[:, self._i_a1], data[:, self.channels.index("m_el")], dep,
+                                   self.samples_before_entry, self.sample_period_s, self.angle_quantum_rad)
+        if e >= dep:
+            return dep
+        e2 = self._coupling_move(data, walk, dep, 1.0, 1.0)
+        return min(e2 if e2 > walk else self._coupling_move(data, e, dep, 1.0, 1.0), dep)
 
     def _free_departure_entry(self, data: np.ndarray, dep: int) -> int:
         """:func:`free_departure`'s entry for the capture ``data`` departing at ``dep``; its noise: the contact's sigma,
@@ -1787,7 +1810,12 @@ class FlankDetector(BacklashDetector):
         if not math.isfinite(flank) or "m_el" not in self.channels:
             return entry
         delta = self._delta(data)
-        side = 1.0 if delta[departure] >= flank else -1.0
+        # the side delta departs to: its farthest move off the flank over the fit's rows after the departure (a
+        # traversal back's departure row lies on the re-contact edge its capture takes for the flank, where the sign of
+        # delta - flank is rounding: a 5e-13 rad change of the angles turned the side and moved the vector drive's
+        # traversal back with a1 from 0 to -6, test_flank's cut of it)
+        after = delta[departure:departure + COUPLING_FIT_AFTER] - flank
+        side = 1.0 if after.size and after[int(np.argmax(np.abs(after)))] >= 0 else -1.0
         e, gain, rms = coupling_entry(data[:, self._i_a1], delta, data[:, self.channels.index("m_el")], entry, side,
                                       self.sample_period_s, rounds)
         if not max(rms, self.angle_quantum_rad / math.sqrt(12.0)) <= FREE_MAX_NOISE_RAD:
