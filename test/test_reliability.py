@@ -712,3 +712,43 @@ def test_a_skewed_imu_live_no_wrong_j1(node_env, ros, tmp_path, three_entries):
     finally:
         win.stop()
         diag.stop()
+
+
+def test_a_window_lost_to_a_drop_is_said_not_taken_for_no_entry(tmp_path, three_entries):
+    """One stamp 0.3 T_s after its predecessor inside the second window (a non-real-time loop's jitter): its
+    batch is dropped (irregular_stamp) and the window in progress with it.  The run says a window was lost and
+    why, in the summary and the no-window line; it had said only 'dropped: irregular_stamp 1' and, with no
+    window left, that delta 'never left its flank'."""
+    from jident_ros.cli.offline import diagnose_samples, summary_line
+    from jident_ros.research.second_drive.record import write_jointstate
+    system, sig = three_entries
+    write_jointstate(tmp_path / "clean", sig)
+    entries = [w.entry_time_s for w in diagnose_samples(tmp_path / "clean", system=system, image_method=False).windows]
+    assert len(entries) == 2
+    t = sig["t"].copy()
+    for n, e in enumerate(entries):
+        k = int(np.searchsorted(sig["t"], e)) + 100
+        t[k] = t[k - 1] + 0.3 * 5e-4
+        write_jointstate(tmp_path / f"jitter{n}", dict(sig, t=t))
+    res = diagnose_samples(tmp_path / "jitter0", system=system, image_method=False)
+    assert [w.entry_time_s for w in res.windows] == entries[1:]
+    assert res.dropped["irregular_stamp"] == 1 and res.windows_lost == {"irregular_stamp": 1}
+    assert "1 window(s) in progress lost to a drop of their samples (irregular_stamp 1)" in summary_line(res)
+    assert res.to_json()["windows_lost"] == {"irregular_stamp": 1}
+    res = diagnose_samples(tmp_path / "jitter1", system=system, image_method=False)     # every window lost
+    assert not res.windows and res.windows_lost == {"irregular_stamp": 2}
+    assert "2 window(s) in progress lost" in summary_line(res) and "never left" not in res.no_entry_hint
+    res.cut_off = []                                                  # no window at all: the no-window line
+    from jident_ros.cli.offline import _finish
+
+    class Lost:
+        windows_captured, samples_seen, batches_seen = 0, 4400, 88
+        counts, windows_lost = {"irregular_stamp": 2}, {"irregular_stamp": 2}
+
+        def finish(self):
+            return []
+
+        def no_entry_reason(self):
+            return "delta rested on a flank but never left it"
+    _finish(res, Lost(), lambda text: None)
+    assert res.no_entry_hint.startswith("the flank detector: 2 window(s) in progress lost to a drop of their samples")

@@ -342,7 +342,8 @@ def cmd_diagnose(args) -> int:
         write_json(result, args.json)
     print(summary_line(result) + (f"; JSON: {args.json}" if args.json else ""))
     if not result.windows:
-        print(f"jident diagnose: no backlash entry found in {result.signals_topic}"
+        print(f"jident diagnose: no {'window diagnosed from' if result.windows_lost else 'backlash entry found in'} "
+              f"{result.signals_topic}"
               + (f": {result.no_entry_hint}" if result.no_entry_hint else ""), file=sys.stderr)
         return 1
     return 0

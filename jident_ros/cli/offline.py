@@ -119,6 +119,7 @@ class OfflineResult:
     backlash_width_source: str          # "option", the width topic's name, or "default"
     windows: list = field(default_factory=list)    # OfflineWindow, in stream order
     dropped: dict = field(default_factory=dict)    # windowing drop reason -> count (non-zero only)
+    windows_lost: dict = field(default_factory=dict)   # drop reason -> windows in progress it lost (entry found)
     samples: int = 0
     batches: int = 0
     clock_jumps: int = 0                # forward jumps of t between batches outside a window (DriveReplay)
@@ -145,7 +146,7 @@ class OfflineResult:
         return {"recording": self.recording, "signals_topic": self.signals_topic,
                 "backlash_width_source": self.backlash_width_source, "samples": self.samples,
                 "batches": self.batches, "clock_jumps": self.clock_jumps, "dropped": dict(self.dropped),
-                "library": self.library_path,
+                "windows_lost": dict(self.windows_lost), "library": self.library_path,
                 "library_error": self.library_error, "notes": list(self.notes), "levels": self.level_counts(),
                 "cut_off": [{k: _json_value(v) for k, v in c.items()} for c in self.cut_off],
                 "jitter": None if self.jitter is None else {k: _json_value(v) for k, v in self.jitter.items()},
@@ -417,15 +418,26 @@ def _finish(result, detector, log):
         log(f"window cut off by the end of the data: {ev.detail}")
     result.samples, result.batches = detector.samples_seen, detector.batches_seen
     result.dropped = {r: n for r, n in detector.counts.items() if n}
+    result.windows_lost = dict(getattr(detector, "windows_lost", {}))
+    if result.windows_lost:
+        log(f"{_lost_text(result.windows_lost)}: an entry was found, its window's samples were interrupted")
     if not result.windows and not result.cut_off:
         why = detector.no_entry_reason() if hasattr(detector, "no_entry_reason") else ""
-        if not why and getattr(detector, "windows_captured", 0):
-            # entries were found, but no window came out: never an empty reason
-            lost = ", ".join(f"{r} {n}" for r, n in result.dropped.items()) or "none counted"
-            why = (f"{detector.windows_captured} entr{'y' if detector.windows_captured == 1 else 'ies'} found, "
-                   f"no window diagnosed (drops: {lost})")
+        if result.windows_lost:
+            why = (f"{_lost_text(result.windows_lost)} (the stamps must step by sampling.sample_period_s, "
+                   f"within [T_s/2, gap_tolerance x T_s])")
+        elif not why and (n := getattr(detector, "windows_captured", 0)):   # entries, no window: never an empty reason
+            why = f"{n} entr{'y' if n == 1 else 'ies'} found, no window diagnosed (drops: {_counts(result.dropped) or 'none counted'})"
         if why:
             result.no_entry_hint = f"the {result.detector} detector: {why}"
+
+
+def _counts(counts: dict) -> str:
+    return ", ".join(f"{r} {n}" for r, n in counts.items())
+
+
+def _lost_text(lost: dict) -> str:
+    return f"{sum(lost.values())} window(s) in progress lost to a drop of their samples ({_counts(lost)})"
 
 
 def _make_detector(system, config: DetectorConfig, batch_channels, topic_name):
@@ -560,7 +572,9 @@ def summary_line(result: OfflineResult) -> str:
     if result.clock_jumps:
         text += f"; the drive clock jumped forward {result.clock_jumps} time(s) between windows (history restarted)"
     if result.dropped:
-        text += "; dropped: " + ", ".join(f"{r} {n}" for r, n in result.dropped.items())
+        text += "; dropped: " + _counts(result.dropped)
+    if result.windows_lost:
+        text += "; " + _lost_text(result.windows_lost)
     if result.cut_off:
         text += "; cut off by the end of the data: " + ", ".join(
             f"entry at {c['entry_time_s']:.4f} s ({c['samples_from_entry']} samples)" for c in result.cut_off)

@@ -151,6 +151,7 @@ class BacklashDetector:
         self.backlash_width_m = 0.0
         self.set_backlash_width(backlash_width_m)
         self.counts = {r: 0 for r in REASONS}
+        self.windows_lost: dict = {}        # drop reason -> windows in progress it lost (their entry was found)
         self.windows_captured = 0
         self.samples_seen = 0
         self.batches_seen = 0
@@ -212,6 +213,8 @@ class BacklashDetector:
         if reason != "empty":
             self.reset()
         self.counts[reason] += 1
+        if lost:
+            self.windows_lost[reason] = self.windows_lost.get(reason, 0) + 1
         ev = Event("drop", reason, detail or REASONS[reason], window_dropped=lost)
         self.last_event = ev
         return ev

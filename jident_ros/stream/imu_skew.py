@@ -241,6 +241,8 @@ class ImuSkewGuard:
         for r, n in counts.items():          # the old detector's counts go on (the second pass adds its own)
             if r in new.counts:
                 new.counts[r] += n
+        for r, n in getattr(old, "windows_lost", {}).items():
+            new.windows_lost[r] = new.windows_lost.get(r, 0) + n
         new.samples_seen, new.batches_seen = samples, batches
         again = any(ev.kind == "window" for ev in events)
         self.last_lost = not again and not getattr(new, "capturing", False)

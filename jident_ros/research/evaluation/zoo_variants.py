@@ -7,9 +7,10 @@ Issue 20 says the estimator will be checked on drive models we do not have.  The
 drive; this sweep takes the third-party one (jident_ros/research/vector_drive, docs/vector_drive.md) and changes one
 property per variant -- the coupling's stiffness, the load inertia, the speed loop's bandwidth, the drive's
 observer mismatch (its torque estimate's error), the backlash width, the speed, J1, the bearing friction, the
-speed feedback's filter -- over the traversing events (speed step down, speed reversal, light and heavy load
-reversal) and one same-flank event (speed step up: no entry may be found), forward, each recorded as JointState
-2^16 (clean and 30 dB) and JointState + Imu 2^16 (30 dB).  Every file goes through the zoo's diagnosis
+speed feedback's filter, the sample rate (1 and 4 kHz), the sampling instants' jitter -- over the traversing events
+(speed step down, speed reversal, light and heavy load reversal) and one same-flank event (speed step up: no entry
+may be found), forward, each recorded as JointState 2^16 (clean and 30 dB) and JointState + Imu 2^16 (30 dB).
+Every file goes through the zoo's diagnosis
 (:func:`jident_ros.research.evaluation.zoo.diagnose_one`: ``jident diagnose``'s own function, flank detector, no
 K2, the image method off), with the drive declared as the zoo declares the vector drive
 (:func:`jident_ros.research.evaluation.zoo.declared`) and, for the friction variant, its own friction; the small
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import time
 from dataclasses import replace
@@ -50,6 +52,27 @@ GENERATION = 1
 #: example, a drive 38 times lighter behind a 3:1 gear, declared as its user would from its data sheet.
 DRIVE_FILES = {"small drive, 3:1 gear": Path(__file__).resolve().parents[3] / "docs" / "examples" / "profiles"
                / "small_drive.yaml"}
+
+
+#: Variants recorded at another rate (their DriveParams.sample_period_s), diagnosed with that sample period and a
+#: window of the same length in time (1 s from the entry), the 48 samples before it kept (docs/your_drive.md): the
+#: detector's and the gap stage's constants that count samples were chosen at 2 kHz.
+RATE_VARIANTS = ("recorded at 1 kHz", "recorded at 4 kHz")
+
+
+#: Variants recorded with other sensors than SENSORS' (the vector drive's record.Sensors fields).
+SENSOR_VARIANTS = {"sampling jitter 25 µs": {"sample_jitter_s": 25e-6}, "sampling jitter 50 µs": {"sample_jitter_s": 50e-6}}
+
+
+def system_for(name: str, p: DriveParams):
+    """The system configuration a variant is diagnosed with: its drive file's, or config/system.yaml's, at the
+    variant's sample period."""
+    system = load_system_config(DRIVE_FILES.get(name))
+    if name in RATE_VARIANTS:
+        s = system.sampling
+        system = replace(system, sampling=replace(s, sample_period_s=p.sample_period_s,
+                                                  samples_from_entry=int(round(1.0 / p.sample_period_s))))
+    return system
 
 
 def _declared_by_file(name: str) -> dict:
@@ -94,6 +117,10 @@ def variants() -> list:
          _mech(b, motor_coulomb_nm=3.0, motor_viscous_nms_per_rad=0.05),
          {"bearing_friction_nms_per_rad": 0.05, "coulomb_friction_max_nm": 1.25 * 3.0}),
         ("laggy speed feedback", "speed filter 2 ms", _ctrl(b, speed_filter_s=2e-3), {}),
+        ("recorded at 1 kHz", "sample period 1 ms (the window 1 s)", replace(b, sample_period_s=1e-3), {}),
+        ("recorded at 4 kHz", "sample period 0.25 ms (the window 1 s)", replace(b, sample_period_s=2.5e-4), {}),
+        ("sampling jitter 25 µs", "sampled at instants jittered by 25 µs rms (5 % of T_s), stamped with them", b, {}),
+        ("sampling jitter 50 µs", "sampled at instants jittered by 50 µs rms (10 % of T_s), stamped with them", b, {}),
         ("small drive, 3:1 gear", "docs/your_drive.md's example: 2.2 kW, J1 0.03 kg m^2, J2 0.54 behind a 3:1 gear, "
          "K2 1.5 mm at r 0.03 m, its torque estimate 3-4 % off; diagnosed with its drive file "
          "(docs/examples/profiles/small_drive.yaml)", small_drive(), _declared_by_file("small drive, 3:1 gear")),
@@ -112,7 +139,8 @@ def generate(out: Path, log=print, names=None) -> dict:
         for ev in EVENTS:
             for label, fmt, counts, snr in SENSORS:
                 t0 = time.perf_counter()
-                r = vd_record.build(p, ev, "forward", vd_record.Sensors(counts, snr), seed=23, cache_dir=out / "cache")
+                r = vd_record.build(p, ev, "forward", vd_record.Sensors(counts, snr, **SENSOR_VARIANTS.get(name, {})),
+                                    seed=23, cache_dir=out / "cache")
                 recs.append((label, zoo.vector_recording(r, ev, "forward", p.mechanics.motor_inertia_kgm2, counts, snr,
                                                          sub, (fmt,))))
                 if time.perf_counter() - t0 > 2:
@@ -121,33 +149,47 @@ def generate(out: Path, log=print, names=None) -> dict:
     return got
 
 
-def run(out: Path, log=print, names=None) -> dict:
+def run(out: Path, log=print, names=None, undeclared: bool = False) -> dict:
+    """Diagnose every variant, declared as its user would (``undeclared``: nothing declared, b1 = 0 and the node's
+    defaults -- the typical-drive model of docs/your_drive.md -- with the drive file's system for its variant)."""
     t0 = time.perf_counter()
     recs = generate(out, log, names)
     rows = {}
-    for name, _, _, extra in variants():
+    for name, _, p, extra in variants():
         if name not in recs:
             continue
-        system = load_system_config(DRIVE_FILES.get(name))
+        system = system_for(name, p)
         items = []
         for label, zr in recs[name]:
             fmt = next(iter(zr.files))
-            items.append((zr, zoo.diagnose_one(zr, fmt, system, declare=True, extra=extra)))
+            d = (zoo.diagnose_one(zr, fmt, system, declare=False, extra={"bearing_friction_nms_per_rad": 0.0})
+                 if undeclared else zoo.diagnose_one(zr, fmt, system, declare=True, extra=extra))
+            items.append((zr, d))
         rows[name] = zoo.summarise(items, nominal_kgm2=system.motor.nominal_inertia_kgm2)
         log(f"{name}: diagnosed {len(items)} files ({time.perf_counter() - t0:.0f} s)")
-    return {"rows": rows, "elapsed_s": time.perf_counter() - t0}
+    return {"rows": rows, "elapsed_s": time.perf_counter() - t0, "undeclared": undeclared}
+
+
+def _undeclared_what(text: str) -> str:
+    """A variant's description without what its user declares (the ``--undeclared`` table declares nothing)."""
+    text = re.sub(r"; declared [^)]*\)", ")", text).replace(" (declared)", "")
+    return text.replace("diagnosed with its drive file", "diagnosed with its drive file's system")
 
 
 def markdown(res: dict, command: str, commit: str) -> str:
-    what = {n: w for n, w, _, _ in variants()}
+    what = {n: _undeclared_what(w) if res.get("undeclared") else w for n, w, _, _ in variants()}
     lines = [f"## Drives nobody tuned for: the vector drive varied (`{command}`)", "",
              f"Measured on commit {commit} ({res['elapsed_s']:.0f} s; simulations cached under out/zoo_variants). "
              "jident_ros/research/evaluation/zoo_variants.py: the third-party drive (motulator, docs/vector_drive.md) "
              "with one property changed per variant, events " + ", ".join(e.replace("_", " ") for e in EVENTS)
              + " (forward; the last a same-flank torque increase: no entry may be found), each as "
-             + ", ".join(s[0] for s in SENSORS) + "; diagnosed as the zoo diagnoses the vector drive (declared as "
-             "there, the friction variant with its own friction, the small drive with its drive file). No threshold "
-             "was chosen on any of these drives.", "",
+             + ", ".join(s[0] for s in SENSORS) + "; " + (
+                 "diagnosed with nothing declared (b1 = 0 and the node's defaults: the typical-drive model, "
+                 "docs/your_drive.md; the small drive with its drive file's system, not its declaration)"
+                 if res.get("undeclared") else
+                 "diagnosed as the zoo diagnoses the vector drive (declared as there, the friction variant with its "
+                 "own friction, the observer variant with its torque accuracy, the small drive with its drive "
+                 "file)") + ". No threshold was chosen on any of these drives.", "",
              "| variant | what changed | traversals found | entry within ±2 | published (traversal windows) | "
              "published > 10 % off | median / max abs error | 95 % CI covers | another class named / 'between "
              "classes', on the drive's class | false entries |",
@@ -169,7 +211,13 @@ def main(argv=None) -> int:
     p.add_argument("--results", default="docs/results.md", help="results file to update ('-' prints)")
     p.add_argument("--variants", default="", help="comma-separated variant names (default: all)")
     p.add_argument("--json", default="", help="also write the counts here")
+    p.add_argument("--undeclared", action="store_true",
+                   help="declare nothing (b1 = 0 and the node's defaults): what a user who configures nothing gets "
+                        "(with --results -)")
     a = p.parse_args(argv)
+    if a.undeclared and a.results != "-":
+        sys.stderr.write("zoo_variants: error: argument --undeclared: print it with --results -\n")
+        return 2
     if not a.report:
         p.print_help()
         return 0
@@ -183,8 +231,10 @@ def main(argv=None) -> int:
         sys.stderr.write(f"zoo_variants: error: {problem}\n")
         return 2
     commit = zoo._commit()
-    res = run(Path(a.out), log=lambda t: print(t, file=sys.stderr, flush=True), names=names or None)
-    cmd = "python -m jident_ros.research.evaluation.zoo_variants --report" + (f" --variants {a.variants}" if names else "")
+    res = run(Path(a.out), log=lambda t: print(t, file=sys.stderr, flush=True), names=names or None,
+              undeclared=a.undeclared)
+    cmd = ("python -m jident_ros.research.evaluation.zoo_variants --report" + (f" --variants {a.variants}" if names else "")
+           + (" --undeclared" if a.undeclared else ""))
     md = markdown(res, cmd, commit)
     if a.json:
         Path(a.json).write_text(json.dumps(res, indent=1, default=float) + "\n")

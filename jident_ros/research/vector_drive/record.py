@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Optional
 
 import numpy as np
+from scipy.interpolate import CubicSpline
 
 from jident_ros.research.second_drive.record import write_csv, write_jointstate
 
@@ -44,6 +45,21 @@ class Sensors:
     encoder_counts: int = 65536
     snr_db: Optional[float] = None
     min_off_centre_rad: float = 0.5
+    #: rms jitter of the sampling instants, s (clipped at 3 rms): a loop that reads the drive when it runs and
+    #: stamps each reading with its own clock, so the stamps are the true instants (0: the drive's own clock)
+    sample_jitter_s: float = 0.0
+
+
+def _jittered(st: dict, jitter_s: float, seed: int) -> tuple:
+    """(states, stamps): the simulation's states at jittered instants t_k + e_k (cubic interpolation of the
+    decimated log; the truth's gaps follow them) and those instants as the recording's stamps."""
+    t = st["t"]
+    n = t.size
+    e = np.clip(np.random.default_rng([seed, 7]).normal(0.0, jitter_s, n), -3 * jitter_s, 3 * jitter_s)
+    tj = np.clip(t + e, t[0], t[-1])
+    out = {k: (CubicSpline(t, v)(tj) if k != "t" and isinstance(v, np.ndarray) and v.shape == (n,) else v)
+           for k, v in st.items()}
+    return out, tj - t[0]
 
 
 @dataclass
@@ -144,10 +160,13 @@ def _sensed(st: dict, p, sensors: Sensors, seed: int) -> tuple:
     ts = p.sample_period_s
     mech = p.mechanics
     n = st["t"].size
+    stamps = np.arange(n) * ts
+    if sensors.sample_jitter_s > 0:
+        st, stamps = _jittered(st, sensors.sample_jitter_s, seed)
     rng = np.random.default_rng([seed, sensors.encoder_counts, 0 if sensors.snr_db is None else int(sensors.snr_db)])
     o1, o2 = draw_offsets(rng, mech.gear_ratio, sensors.min_off_centre_rad)
     r = mech.reference_radius_m
-    sig = {"t": np.arange(n) * ts,
+    sig = {"t": stamps,
            "alpha1": encoder(st["theta_M"], o1, sensors.encoder_counts),
            "alpha2": encoder(st["theta_L"], o2, sensors.encoder_counts),
            "omega1": st["w_fbk"].copy(), "omega2": st["w_L_fbk"].copy(),
