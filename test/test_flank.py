@@ -802,3 +802,48 @@ def test_a_traversal_back_s_side_does_not_hang_on_rounding(rounding_rad):
     det._cap_flank, det._cap_returning, det._cap_sigma = (edge, 1.5e-3), True, sigma
     walk = det._angle_walk_entry(data, dep)
     assert abs(walk - true) <= 2, walk - true
+
+
+def _vd_untwist_8192c(key: str):
+    """Cuts of the vector drive as JointState 2^13 gives it (no a1): 'sr' a clean speed reversal, 'heavy' a heavy load
+    reversal at 30 dB, 'step' a clean speed step down; rows (t, alpha1, alpha2, m_el) up to 60 after the departure, the
+    departure row, the true first row in the zone, the flank level, the departure threshold."""
+    from pathlib import Path
+    d = np.load(Path(__file__).parent / "data" / "vd_untwist_8192c.npz")
+    q = 2.0 * math.pi / 8192
+    a1 = float(d[f"{key}_alpha10"]) + q * d[f"{key}_alpha1_counts"]
+    a2 = float(d[f"{key}_alpha20"]) + q * d[f"{key}_alpha2_counts"]
+    data = np.column_stack([np.arange(a1.size) * 5e-4, a1, a2, d[f"{key}_m_el"]])
+    thr = {"sr": 2.89e-3, "heavy": 2.70e-3, "step": 3.06e-3}[key]
+    return data, int(d[f"{key}_departure"]), int(d[f"{key}_entry"]), float(d[f"{key}_flank"]), thr
+
+
+@pytest.mark.parametrize("key, old", [("sr", 6), ("heavy", -3), ("step", 1)])
+def test_on_a_coarse_encoder_the_entry_is_at_the_end_of_the_untwist(key, old):
+    """A 2^13 encoder without a1 (the coupling, spring and damped spring models are off there): the speed reversal
+    crossed the departure threshold (4 quanta) 6 samples after the contact loss, the heavy load reversal 3 before it
+    (the coupling untwists several quanta under its load first).  The untwist model (rest, a constant untwisting rate,
+    the free relative acceleration from the contact loss) puts both within 2 samples, at a gain >= UNTWIST_MIN_GAIN;
+    the speed step (one kink: its untwist starts at the contact loss's neighbour) stays below the gain and keeps its
+    entry (old code, or the rule off: +6, -3, +1)."""
+    from jident_ros.stream.flank import UNTWIST_MIN_GAIN, untwist_entry
+    data, dep, true, level, thr = _vd_untwist_8192c(key)
+    assert dep - true == old
+    e, gain = untwist_entry(data[:, 1] - data[:, 2], dep)
+    if key == "step":
+        assert gain < UNTWIST_MIN_GAIN, gain
+    else:
+        assert abs(e - true) <= 2 and gain >= UNTWIST_MIN_GAIN, (e - true, gain)
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
+    det._cap_flank, det._cap_returning, det._cap_sigma = (level, thr), False, thr / 4.0
+    shift, _ = det._refine(data, dep)
+    assert abs(dep + shift - true) <= 2, dep + shift - true
+    assert untwist_entry(data[:, 1] - data[:, 2], 30) == (30, 1.0)           # rows not there
+
+
+def test_the_untwist_model_is_off_on_a_fine_encoder():
+    """On a 2^16 encoder the coupling models see the twist; the untwist model is not used (_untwist_move: None)."""
+    data, dep, true, level, sigma = _vd_return_with_a1()
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16,
+                        encoder_counts_per_rev=65536)
+    assert det._untwist_move(data[:, :4], dep) is None

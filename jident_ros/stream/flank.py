@@ -804,6 +804,53 @@ def damped_spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray,
     return best, rss_dep / best_rss, float(scale) / t0
 
 
+#: On a coarse encoder (delta's quantum / sqrt 12 beyond FREE_MAX_NOISE_RAD: 2^13, where the coupling, spring and
+#: damped spring models are off) a window's own entry without a1 goes to the end of the coupling's untwist
+#: (:func:`untwist_entry`): delta = F + v (k - s)_+ + c (k - e)_+^2 -- at rest on its flank, then untwisting at a
+#: constant rate while the coupling's torque ramps to zero (from s), then the free relative acceleration from the
+#: contact loss (e) -- fitted over UNTWIST_FIT_BEFORE rows before the departure and UNTWIST_FIT_AFTER from it
+#: (UNTWIST_FIT_AFTER 40 on the vector and DOL drives' heavy load reversals: gains 1.7-2.5, entries -1..+2; with 24 the
+#: parabola had too few free rows, gains 1.0-1.3, entries -32..+2), s and e by least squares (e up to
+#: UNTWIST_SEARCH_AFTER after the departure) ...
+UNTWIST_FIT_BEFORE = 50
+UNTWIST_FIT_AFTER = 40
+UNTWIST_SEARCH_AFTER = 5
+#: ... taken when the untwist phase explains delta this much better than one kink (the least residual with e = s):
+#: the vector drive's 2^13 speed reversals 1.14-1.43 (+6/+7 -> -1..+2: the departure threshold there is 2.9-3.1 mrad,
+#: four quanta, for a 1-quantum untwist) and heavy load reversals 1.26-2.24 (-10..-1 -> -5..+2); its light load
+#: reversals 1.06-1.09 (the model put them 5-16 late) and speed steps 1.00-1.03 (one kink: the untwist starts at the
+#: contact loss's neighbour, e = s 5-11 samples early) stay -- chosen on the vector drive, tested on the DOL drive
+#: (heavy load reversals 1.9-2.6: -4..-1 -> -1..+2; light ones 1.14-1.21: +16..+25 -> +5..+11; slip events <= 1.04)
+#: and the second drive (speed steps 1.00)
+UNTWIST_MIN_GAIN = 1.12
+
+
+def untwist_entry(delta: np.ndarray, departure: int) -> tuple:
+    """(e, gain) of :data:`UNTWIST_MIN_GAIN`'s model around ``departure``: the contact loss e of the best fit and
+    the gain RSS(best with e = s) / RSS(best); (``departure``, 1.0) when the rows are not there."""
+    lo, hi = departure - UNTWIST_FIT_BEFORE, departure + UNTWIST_FIT_AFTER
+    if lo < 0 or hi > delta.size:
+        return departure, 1.0
+    t = np.arange(lo, hi, dtype=float)
+    y = np.asarray(delta[lo:hi], float)
+    y = y - y.mean()
+    pairs = np.array([(s, e) for s in range(lo + 5, departure + 1)
+                      for e in range(s, departure + UNTWIST_SEARCH_AFTER + 1)], dtype=float)
+    X = np.stack([np.ones((pairs.shape[0], t.size)), np.clip(t[None, :] - pairs[:, :1], 0.0, None),
+                  np.clip(t[None, :] - pairs[:, 1:], 0.0, None) ** 2], axis=2)
+    XtX = np.einsum("kni,knj->kij", X, X)
+    Xty = np.einsum("kni,n->ki", X, y)
+    coefs = np.linalg.lstsq(XtX[0], Xty[0], rcond=None)[0][None, :].repeat(pairs.shape[0], 0)
+    ok = np.abs(np.linalg.det(XtX)) > 1e-12 * np.einsum("kii->k", XtX) ** 3
+    coefs[ok] = np.linalg.solve(XtX[ok], Xty[ok][..., None])[..., 0]
+    rss = np.where(ok, np.sum((y[None, :] - np.einsum("kni,ki->kn", X, coefs)) ** 2, axis=1), np.inf)
+    k = int(np.argmin(rss))
+    one = rss[pairs[:, 0] == pairs[:, 1]]
+    if not (np.isfinite(rss[k]) and rss[k] > 0 and one.size):
+        return departure, 1.0
+    return int(pairs[k, 1]), float(np.min(one) / rss[k])
+
+
 def _noise(x: np.ndarray) -> float:
     """White-noise standard deviation of a steady stretch, robust to a few samples of a starting transient
     (the drive may act just before the clutch leaves its flank): 1.4826 MAD of the first differences / sqrt 2."""
@@ -1728,6 +1775,10 @@ class FlankDetector(BacklashDetector):
                 if walk <= entry - RETURN_ANGLE_WALK_MIN_LEAD:
                     entry = walk
         elif src != "a1" and self.detector_name == "flank" and not getattr(self, "_cap_returning", False):
+            untwist = self._untwist_move(data, dep + off)
+            if untwist is not None:
+                # a coarse encoder: the end of the coupling's untwist (UNTWIST_*; the models below are off there)
+                return untwist - off - dep, None if recontact is None else recontact + off
             # without a1, a coupling that untwisted off its flank: the entry at the coupling model's contact loss
             entry = self._coupling_move(data, entry + off, dep + off, rounds=COUPLING_FORWARD_ROUNDS) - off
             if entry == dep:
@@ -1758,6 +1809,17 @@ class FlankDetector(BacklashDetector):
             return dep
         e2 = self._coupling_move(data, walk, dep, 1.0, 1.0)
         return min(e2 if e2 > walk else self._coupling_move(data, e, dep, 1.0, 1.0), dep)
+
+    def _untwist_move(self, data: np.ndarray, departure: int) -> Optional[int]:
+        """:func:`untwist_entry`'s contact loss at a gain >= UNTWIST_MIN_GAIN on a coarse encoder (delta's quantum, the
+        configured one else its smallest step before the departure, / sqrt 12 beyond FREE_MAX_NOISE_RAD); else None."""
+        delta = self._delta(data)
+        quantum = _delta_quantum(delta, departure, self.angle_quantum_rad, max(departure - UNTWIST_FIT_BEFORE, 0),
+                                 self.min_departure_rad)
+        if not quantum / math.sqrt(12.0) > FREE_MAX_NOISE_RAD:
+            return None
+        e, gain = untwist_entry(delta, departure)
+        return e if gain >= UNTWIST_MIN_GAIN else None
 
     def _free_departure_entry(self, data: np.ndarray, dep: int) -> int:
         """:func:`free_departure`'s entry for the capture ``data`` departing at ``dep``; its noise: the contact's sigma,
