@@ -834,21 +834,28 @@ def untwist_entry(delta: np.ndarray, departure: int) -> tuple:
     t = np.arange(lo, hi, dtype=float)
     y = np.asarray(delta[lo:hi], float)
     y = y - y.mean()
-    pairs = np.array([(s, e) for s in range(lo + 5, departure + 1)
-                      for e in range(s, departure + UNTWIST_SEARCH_AFTER + 1)], dtype=float)
-    X = np.stack([np.ones((pairs.shape[0], t.size)), np.clip(t[None, :] - pairs[:, :1], 0.0, None),
-                  np.clip(t[None, :] - pairs[:, 1:], 0.0, None) ** 2], axis=2)
-    XtX = np.einsum("kni,knj->kij", X, X)
-    Xty = np.einsum("kni,n->ki", X, y)
+    first = lo + 5
+    c = np.arange(first, departure + UNTWIST_SEARCH_AFTER + 1, dtype=float)     # the change points' rows
+    d = np.clip(t[None, :] - c[:, None], 0.0, None)
+    S = [np.sum(d ** p, axis=1) for p in range(5)]                             # sums of (k - c)_+^p
+    dy, d2y = d @ y, (d * d) @ y
+    pairs = np.array([(si, ei) for si in range(departure + 1 - first) for ei in range(si, c.size)])
+    i, j = pairs[:, 0], pairs[:, 1]
+    # the normal equations of (1, a, b), a = (k - s)_+, b = (k - e)_+^2, from the sums: sum a b over k >= e is
+    # sum (k - e)^3 + (e - s) (k - e)^2
+    ab = S[3][j] + (j - i) * S[2][j]
+    XtX = np.stack([np.stack([np.full(i.size, float(t.size)), S[1][i], S[2][j]], -1),
+                    np.stack([S[1][i], S[2][i], ab], -1), np.stack([S[2][j], ab, S[4][j]], -1)], -2)
+    Xty = np.stack([np.full(i.size, float(y.sum())), dy[i], d2y[j]], -1)
     coefs = np.linalg.lstsq(XtX[0], Xty[0], rcond=None)[0][None, :].repeat(pairs.shape[0], 0)
     ok = np.abs(np.linalg.det(XtX)) > 1e-12 * np.einsum("kii->k", XtX) ** 3
     coefs[ok] = np.linalg.solve(XtX[ok], Xty[ok][..., None])[..., 0]
-    rss = np.where(ok, np.sum((y[None, :] - np.einsum("kni,ki->kn", X, coefs)) ** 2, axis=1), np.inf)
+    rss = np.where(ok, np.maximum(float(y @ y) - np.einsum("ki,ki->k", coefs, Xty), 0.0), np.inf)
     k = int(np.argmin(rss))
-    one = rss[pairs[:, 0] == pairs[:, 1]]
+    one = rss[i == j]
     if not (np.isfinite(rss[k]) and rss[k] > 0 and one.size):
         return departure, 1.0
-    return int(pairs[k, 1]), float(np.min(one) / rss[k])
+    return int(c[j[k]]), float(np.min(one) / rss[k])
 
 
 def _noise(x: np.ndarray) -> float:
