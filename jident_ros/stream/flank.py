@@ -43,7 +43,12 @@ and on what the clutch does, not on inequality (1):
   starts early) -- both at a clear gain (SPRING_*, LOAD_HINGE_*).  Without a1, a window's own entry then goes to a
   damped spring's contact loss (:func:`damped_spring_entry`: the torque scale and damping fitted, a re-contact on the
   flank it left inside the fit) when that explains alpha1 clearly better and lies 3 samples or more away (DAMPED_*;
-  the DOL drive's slip drop, whose departure precedes its contact loss and whose gap lasts 17 samples).
+  the DOL drive's slip drop, whose departure precedes its contact loss and whose gap lasts 17 samples).  On a coarse
+  encoder (2^13), where those models are off, a window's own entry without a1 goes instead to the end of the
+  coupling's untwist (:func:`untwist_entry`: delta at rest, untwisting at a constant rate, then free) when that model
+  clearly beats one kink (UNTWIST_*).  With a1, a traversal back takes the angle walk's entry (the no-a1 path) when that
+  lies RETURN_ANGLE_WALK_MIN_LEAD samples or more before the a1 path's (back_to_load's J, fitted over a gap of nearly
+  constant torque, stops late).
 * **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
   ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
   (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry
