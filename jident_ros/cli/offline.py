@@ -39,7 +39,6 @@ from jident_ros.identify.verdict import VerdictPolicy
 from jident_ros.parameters import DIAGNOSTIC as DIAGNOSTIC_DEFAULTS
 from jident_ros.parameters import WINDOWING as WINDOWING_DEFAULTS
 from jident_ros.parameters import gap_method_problem
-from jident_ros.stream.detector import stream_batches
 from jident_ros.stream.flank import DETECTORS
 from jident_ros.stream.imu_skew import ImuSkewGuard
 from jident_ros.stream.inputs import CsvStream, InputError
@@ -474,15 +473,14 @@ def diagnose_samples(path, options: Optional[OfflineOptions] = None, *,
     _check_sample_options(o)
     ts = float(setup.system.sampling.sample_period_s)
     path = Path(path)
-    adapter = None
+    adapter = csv_stream = None
     try:
         if path.suffix.lower() == ".csv":
             csv_stream = CsvStream(path, o.maps)     # block by block: bounded memory for any file size
             if csv_stream.ignored:
                 log(f"{path}: columns ignored (not channels): {', '.join(csv_stream.ignored)}")
-            channels = csv_stream.channels
-            source = str(path)
-            batches = ((b, channels) for block in csv_stream.blocks() for b in stream_batches(block, 50))
+            channels, source = csv_stream.channels, str(path)
+            batches = ((b, channels) for b in csv_stream.batches(ts))
         else:
             adapter, batches, source = jointstate_batches(path, ts, o.motor_joint, o.load_joint, o.imu_axis, o.topic,
                                                            log=log)
@@ -517,8 +515,7 @@ def diagnose_samples(path, options: Optional[OfflineOptions] = None, *,
                             f"{skew.dropped} lost")
     if skew.dropped:
         result.dropped["imu_skew"] = skew.dropped
-    if adapter is not None:
-        _jointstate_counts(result, adapter, source, ts, log)
+    _input_counts(result, adapter or csv_stream, source, ts, log)
     return result
 
 
@@ -533,10 +530,13 @@ def _check_sample_options(o: OfflineOptions) -> None:
         raise OfflineError(f"gear_ratio: must be a finite number > 0, got {o.gear_ratio!r}")
 
 
-def _jointstate_counts(result, adapter, source, ts, log) -> None:
-    """The JointState adapter's stamp jitter and drops into the result (a stamp period off T_s is said), and
-    its most frequent problems, one line each."""
+def _input_counts(result, adapter, source, ts, log) -> None:
+    """The input's time base (said when resampled), a JointState adapter's stamp period, drops and problems."""
+    if adapter.grid is not None and adapter.grid.said():
+        log(f"{source}: {adapter.grid.said()}")
     result.jitter = adapter.jitter()
+    if isinstance(adapter, CsvStream):
+        return
     result.dropped.update({f"jointstate.{k}": v for k, v in adapter.counts.items()
                            if v and k not in ("messages", "samples", "imu_messages")})
     for text, n in adapter.problems()[:3]:

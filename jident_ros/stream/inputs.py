@@ -46,6 +46,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from jident_ros.stream.layout import KNOWN_CHANNELS
+from jident_ros.stream.stamps import StampGrid
 
 #: Where each channel comes from in a JointState message: (joint role, field).
 JOINT_CHANNELS = (("alpha1", "motor", "position"), ("omega1", "motor", "velocity"), ("m_el", "motor", "effort"),
@@ -117,6 +118,7 @@ class JointStateAdapter:
         self.counts = {"messages": 0, "samples": 0, "missing_joint": 0, "empty_field": 0, "nonfinite": 0,
                        "imu_messages": 0, "imu_nonfinite": 0, "imu_unmatched": 0, "imu_ignored": 0}
         self.a1_dropped = False
+        self.grid: Optional[StampGrid] = None      # the time base (stream/stamps.py), made with the first batch
         self._problems: dict = {}                  # one line -> count
         self.last_problem = ""
 
@@ -244,9 +246,17 @@ class JointStateAdapter:
     def _ready(self) -> list:
         out = []
         while len(self._rows) >= self.batch_size:
-            out.append((np.array(self._rows[:self.batch_size]), self.channels))
+            out += self._on_grid(np.array(self._rows[:self.batch_size]))
             del self._rows[:self.batch_size]
         return out
+
+    def _on_grid(self, batch: np.ndarray) -> list:
+        """A batch through the time base (stream/stamps.py): [(rows, channels)], none while a block is held."""
+        if self.grid is None:
+            self.grid = StampGrid(self.sample_period_s, self.channels.index("alpha1") if "alpha1" in self.channels
+                                   else None)
+        rows = self.grid.feed(batch)
+        return [(rows[i:i + self.batch_size], self.channels) for i in range(0, rows.shape[0], self.batch_size)]
 
     def flush(self) -> list:
         """The samples left (pending IMU matches given up): at most one short batch."""
@@ -256,7 +266,7 @@ class JointStateAdapter:
             self._problem("imu_unmatched", "no Imu message for the last sample(s) of the input")
         out = early + self._ready()
         if self._rows:
-            out.append((np.array(self._rows), self.channels))
+            out += self._on_grid(np.array(self._rows))
             self._rows = []
         return out
 
@@ -268,6 +278,8 @@ class JointStateAdapter:
         self.use_imu = False
         self.a1_dropped = True
         self.channels = tuple(c for c in self.channels if c != "a1")
+        if self.grid is not None:
+            self.grid.drop_last_column()
         self._rows = [r[:-1] for r in self._rows] + [r[:-1] for r in self._pending]
         self._pending.clear()
         self._imu.clear()
@@ -278,10 +290,11 @@ class JointStateAdapter:
         p = np.asarray(self._periods[-100000:])
         if p.size == 0:
             return {"periods": 0}
+        grid = {} if self.grid is None else self.grid.summary()
         med = float(np.median(p))
         return {"periods": int(p.size), "median_period_s": med, "std_s": float(p.std()),
                 "max_abs_deviation_s": float(np.max(np.abs(p - self.sample_period_s))),
-                "period_matches": bool(abs(med - self.sample_period_s) <= 0.01 * self.sample_period_s)}
+                "period_matches": bool(abs(med - self.sample_period_s) <= 0.01 * self.sample_period_s), **grid}
 
 
 # --------------------------------------------------------------------------- CSV
@@ -351,6 +364,7 @@ class CsvStream:
 
     def __init__(self, path, maps: Optional[dict] = None, block_rows: int = CSV_BLOCK_ROWS):
         self.path = Path(path)
+        self.grid: Optional[StampGrid] = None      # the time base (stream/stamps.py), made by batches()
         self.block_rows = int(block_rows)
         self.rows_read = 0
         if csv.field_size_limit() < _FIELD_LIMIT:
@@ -439,6 +453,18 @@ class CsvStream:
             r += 1
         self.rows_read += r
         return out[:r]
+
+    def jitter(self) -> dict:
+        """The time base's summary (:meth:`~jident_ros.stream.stamps.StampGrid.summary`; {} before :meth:`batches`)."""
+        return {} if self.grid is None else self.grid.summary()
+
+    def batches(self, sample_period_s: float, batch_rows: int = 50):
+        """The rows in batches of ``batch_rows`` through the stream's time base (:attr:`grid`, a
+        :class:`~jident_ros.stream.stamps.StampGrid`: stamps that are the sampling instants put on the T_s grid)."""
+        self.grid = StampGrid(sample_period_s, self.channels.index("alpha1") if "alpha1" in self.channels else None)
+        for block in self.blocks():
+            rows = self.grid.feed(block)
+            yield from (rows[i:i + batch_rows] for i in range(0, rows.shape[0], batch_rows))
 
     def blocks(self):
         """The rows as arrays (n <= block_rows, channels); closes the file at the end."""

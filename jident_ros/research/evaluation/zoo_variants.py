@@ -61,7 +61,8 @@ RATE_VARIANTS = ("recorded at 1 kHz", "recorded at 4 kHz")
 
 
 #: Variants recorded with other sensors than SENSORS' (the vector drive's record.Sensors fields).
-SENSOR_VARIANTS = {"sampling jitter 25 µs": {"sample_jitter_s": 25e-6}, "sampling jitter 50 µs": {"sample_jitter_s": 50e-6}}
+SENSOR_VARIANTS = {"sampling jitter 25 µs": {"sample_jitter_s": 25e-6}, "sampling jitter 50 µs": {"sample_jitter_s": 50e-6},
+                   "stamping jitter 50 µs": {"stamp_jitter_s": 50e-6}}
 
 
 def system_for(name: str, p: DriveParams):
@@ -121,6 +122,7 @@ def variants() -> list:
         ("recorded at 4 kHz", "sample period 0.25 ms (the window 1 s)", replace(b, sample_period_s=2.5e-4), {}),
         ("sampling jitter 25 µs", "sampled at instants jittered by 25 µs rms (5 % of T_s), stamped with them", b, {}),
         ("sampling jitter 50 µs", "sampled at instants jittered by 50 µs rms (10 % of T_s), stamped with them", b, {}),
+        ("stamping jitter 50 µs", "sampled every T_s, the stamps jittered by 50 µs rms (10 % of T_s)", b, {}),
         ("small drive, 3:1 gear", "docs/your_drive.md's example: 2.2 kW, J1 0.03 kg m^2, J2 0.54 behind a 3:1 gear, "
          "K2 1.5 mm at r 0.03 m, its torque estimate 3-4 % off; diagnosed with its drive file "
          "(docs/examples/profiles/small_drive.yaml)", small_drive(), _declared_by_file("small drive, 3:1 gear")),

@@ -48,6 +48,9 @@ class Sensors:
     #: rms jitter of the sampling instants, s (clipped at 3 rms): a loop that reads the drive when it runs and
     #: stamps each reading with its own clock, so the stamps are the true instants (0: the drive's own clock)
     sample_jitter_s: float = 0.0
+    #: rms jitter of the stamps alone, s (clipped at 3 rms): the drive samples on its own clock, a loop stamps the
+    #: samples when it passes them on
+    stamp_jitter_s: float = 0.0
 
 
 def _jittered(st: dict, jitter_s: float, seed: int) -> tuple:
@@ -163,6 +166,9 @@ def _sensed(st: dict, p, sensors: Sensors, seed: int) -> tuple:
     stamps = np.arange(n) * ts
     if sensors.sample_jitter_s > 0:
         st, stamps = _jittered(st, sensors.sample_jitter_s, seed)
+    if sensors.stamp_jitter_s > 0:
+        j = sensors.stamp_jitter_s
+        stamps = stamps + 3 * j + np.clip(np.random.default_rng([seed, 8]).normal(0.0, j, n), -3 * j, 3 * j)
     rng = np.random.default_rng([seed, sensors.encoder_counts, 0 if sensors.snr_db is None else int(sensors.snr_db)])
     o1, o2 = draw_offsets(rng, mech.gear_ratio, sensors.min_off_centre_rad)
     r = mech.reference_radius_m
