@@ -816,7 +816,7 @@ def damped_spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray,
 #: contact loss (e) -- fitted over UNTWIST_FIT_BEFORE rows before the departure and UNTWIST_FIT_AFTER from it, s and e
 #: by least squares (e up to UNTWIST_SEARCH_AFTER after the departure; 50 and 5 the first values tried, not tuned).
 #: UNTWIST_FIT_AFTER 40 was chosen on the DOL drive's 2^13 heavy load reversals (with 32: -3 on each at 30 dB; with 40:
-#: 0..+1, gains 1.9-2.3); the vector drive's entries were the same with 32 and 40; with 24 the parabola had too few free
+#: 0..+1, gains 1.9-2.3); the vector drive's were within +-2 alike with 32 and 40; with 24 the parabola had too few free
 #: rows (gains 1.0-1.3, entries -32..+2) ...
 UNTWIST_FIT_BEFORE = 50
 UNTWIST_FIT_AFTER = 40
