@@ -33,6 +33,7 @@ class Param:
     max_exclusive: bool = False   # the range is [min, max): max itself is refused
     unit: str = ""
     zero_is_none: bool = False
+    nonzero: bool = False         # 0 itself is refused (a signed ratio)
 
     def range_text(self) -> str:
         """The range as the docs and the one-line errors say it ("" when there is none)."""
@@ -40,7 +41,7 @@ class Param:
             return "one of " + ", ".join(str(c) for c in self.choices)
         lo = "" if self.min is None else (f"> {self.min:g}" if self.min_exclusive else f">= {self.min:g}")
         hi = "" if self.max is None else (f"< {self.max:g}" if self.max_exclusive else f"<= {self.max:g}")
-        return " and ".join(x for x in (lo, hi) if x)
+        return " and ".join(x for x in (lo, hi, "!= 0" if self.nonzero else "") if x)
 
 
 #: Units of parameter and field names (suffix -> unit, SI, REP 103), longest suffix first.
@@ -142,8 +143,9 @@ WINDOWING_PARAMS = {
                       "J1_nom dω1/dt, from a1 or the alpha1 encoder) | auto (flank for joint_states, dynamics for "
                       "joint_states whose channels hold no alpha2, paper for signals)",
                       choices=("auto", "flank", "paper", "dynamics")),
-    "gear_ratio": Param(1.0, "N in delta = alpha1 - N alpha2: motor turns per load-encoder turn (flank detector)",
-                        min=0.0, max=1000.0, min_exclusive=True),
+    "gear_ratio": Param(1.0, "N in delta = alpha1 - N alpha2: motor turns per load-encoder turn (flank detector); "
+                             "negative when the load encoder counts the other way (a reversing gear, an encoder "
+                             "mounted facing the motor's)", min=-1000.0, max=1000.0, nonzero=True),
     "motor_joint": Param("motor", "joint_states: the motor joint (position alpha1, velocity omega1, effort m_el)"),
     "load_joint": Param("load", "joint_states: the load joint (position alpha2, velocity omega2)"),
     "use_imu": Param(False, "joint_states: a1 from sensor_msgs/Imu on imu (matched by stamp)"),

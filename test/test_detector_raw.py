@@ -52,6 +52,37 @@ def test_wrapped_positions_give_the_windows_of_the_unwrapped_ones(system, batch_
             np.testing.assert_allclose(turns, np.round(turns[0]), atol=1e-9)   # one whole-turn shift, no jump
 
 
+@pytest.mark.parametrize("gear", [1.0, 3.0])
+def test_a_load_encoder_counting_the_other_way_takes_a_negative_gear_ratio(system, gear):
+    """A reversing gear or an encoder mounted facing the motor's: alpha2 counts the other way.  With N < 0 every
+    window is the one of the encoder counting the same way with |N| (same entry, same K2); with |N| the flank
+    detector finds nothing and says what to set.  Parameters, CLI and the detector accept any non-zero N."""
+    from jident_ros.nodes.params import ParameterError, coerce
+    from jident_ros.parameters import WINDOWING_PARAMS
+    (rec,) = raw_recordings(system, (1.16,), (0.005,), steady_s=0.5, seed=3)
+    same = rec.data.copy()
+    same[:, rec.channels.index("alpha2")] /= gear
+    flipped = same.copy()
+    flipped[:, rec.channels.index("alpha2")] *= -1.0
+
+    def windows(data, n):
+        det = flank_detector(system, gear_ratio=n)
+        evs = []
+        for b in stream_batches(data, 50):
+            evs += det.push(b, rec.channels)
+        return det, [e.window for e in evs + det.finish() if e.kind == "window"]
+    _, ref = windows(same, gear)
+    _, got = windows(flipped, -gear)
+    assert len(ref) == len(got) == 1 and got[0].entry_time_s == ref[0].entry_time_s
+    assert got[0].backlash_width_estimate_m == pytest.approx(ref[0].backlash_width_estimate_m, rel=1e-9)
+    det, none = windows(flipped, gear)
+    assert not none and "negative when the load encoder counts the other way" in det.no_entry_reason()
+    p = WINDOWING_PARAMS["gear_ratio"]
+    assert coerce("gear_ratio", -gear, p) == -gear and "!= 0" in p.range_text()
+    with pytest.raises(ParameterError, match="gear_ratio: must be .* != 0, got 0"):
+        coerce("gear_ratio", 0.0, p)
+
+
 def test_without_unwrapping_wrapped_positions_are_not_found(system):
     """The test above depends on the unwrapping (wrapped positions and unwrap_angles off: not every entry)."""
     rec = raw_recordings(system, (1.16,), (0.005,), steady_s=0.5, seed=3)[0]

@@ -57,7 +57,7 @@ def test_a_drive_file_gives_the_system_configuration_and_each_nodes_settings(tmp
     ("jident_diagnostic", "torque_acuracy: 0.03", "/**/jident_diagnostic: torque_acuracy: not a parameter of jident_diagnostic"),
     ("jident_diagnostic", "torque_accuracy: 0.7", "/**/jident_diagnostic: torque_accuracy: must be >= 0 and < 0.5, got 0.7"),
     ("jident_diagnostic", "coulomb_friction_max_nm: lots", "coulomb_friction_max_nm: expected a finite number, got 'lots'"),
-    ("jident_windowing", "gear_ratio: 0", "/**/jident_windowing: gear_ratio: must be > 0"),
+    ("jident_windowing", "gear_ratio: 0", "/**/jident_windowing: gear_ratio: must be >= -1000 and <= 1000 and != 0, got 0"),
     ("jident_windowing", "imu_axis: w", "/**/jident_windowing: imu_axis: must be one of x, y, z, got 'w'"),
 ])
 def test_a_bad_drive_file_value_is_one_line_naming_the_file_section_and_key(tmp_path, capsys, section, line, message):

@@ -163,3 +163,33 @@ def test_the_small_drive_traverses_its_backlash():
     gl = gaps(delta, m.half_zone_rad)
     assert gl and delta[gl[0][0] - 1] > 0 > delta[gl[0][1]]
     assert delta[gl[0][0] - 1] - delta[gl[0][1]] == pytest.approx(2 * m.half_zone_rad, rel=0.15)
+
+
+def test_jittered_instants_stamps_and_reported_units(step_down, monkeypatch):
+    """Sensors' jitter and units (zoo_variants' 'sampling jitter', 'stamping jitter', 'CiA 402 units'): jittered
+    instants move the samples with their stamps; stamp jitter moves the stamps alone; the torque estimate and the
+    speeds land on their units."""
+    import jident_ros.research.vector_drive.record as rec_mod
+    st = rec_mod.decimate(step_down)
+    st["motulator_version"] = step_down.motulator_version
+    monkeypatch.setattr(rec_mod, "simulate_cached", lambda *a, **k: st)
+
+    def build(**kw):
+        return rec_mod.build(SHORT, "speed_step_down", "forward", rec_mod.Sensors(**kw), seed=3, duration_s=0.26,
+                             event_time_s=0.1).signals
+    base = build()
+    ts = SHORT.sample_period_s
+    np.testing.assert_allclose(np.diff(base["t"]), ts)
+    inst = build(sample_jitter_s=25e-6)
+    dev = inst["t"] - base["t"]
+    assert 15e-6 < np.std(dev) < 35e-6 and np.max(np.abs(dev)) <= 75e-6 + 1e-12
+    moved = np.abs(inst["alpha1"] - base["alpha1"])[10:-10]
+    assert np.median(moved) > 5 * 2 * math.pi / 65536                    # the angle went with its instant
+    stamped = build(stamp_jitter_s=25e-6)
+    assert np.array_equal(stamped["alpha1"], base["alpha1"]) and np.std(np.diff(stamped["t"])) > 10e-6
+    units = build(torque_quantum_rel_rated=1e-3, speed_quantum_rad_s=2 * math.pi / 60)
+    q = 1e-3 * SHORT.machine.rated_torque_nm
+    np.testing.assert_allclose(units["m_el"] / q, np.round(units["m_el"] / q), atol=1e-9)
+    np.testing.assert_allclose(units["omega1"] * 60 / (2 * math.pi), np.round(units["omega1"] * 60 / (2 * math.pi)),
+                               atol=1e-9)
+    assert np.max(np.abs(units["m_el"] - base["m_el"])) <= q / 2 + 1e-9

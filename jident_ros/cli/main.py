@@ -15,7 +15,13 @@ import time
 from pathlib import Path
 
 from jident_ros import __version__
-from jident_ros.parameters import DIAGNOSTIC_PARAMS, GAP_METHODS, POLICY_CLI_FLAGS, cli_help  # light: dataclasses only
+from jident_ros.parameters import (  # light: dataclasses only
+    DIAGNOSTIC_PARAMS,
+    GAP_METHODS,
+    POLICY_CLI_FLAGS,
+    WINDOWING_PARAMS,
+    cli_help,
+)
 
 # Every subcommand imports what it runs inside its cmd_* function (issue 23): `jident --help` and
 # `jident simulate` do not pay for scipy.stats, the offline diagnosis, the bag layer or rclpy
@@ -40,14 +46,15 @@ class _Parser(argparse.ArgumentParser):
         raise CliError(message)
 
 
-def _positive(name):
+def _positive(name, signed: bool = False):
+    """A finite number > 0 (``signed``: any finite non-zero number)."""
     def parse(text):
         try:
             v = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
-        if not math.isfinite(v) or v <= 0:
-            raise argparse.ArgumentTypeError(f"{name} must be > 0, got {text}")
+        if not math.isfinite(v) or v == 0 or (v < 0 and not signed):
+            raise argparse.ArgumentTypeError(f"{name} must be {'a non-zero number' if signed else '> 0'}, got {text}")
         return v
     return parse
 
@@ -466,8 +473,8 @@ def _diagnose_arguments(g) -> None:
                         "paper (inequality 1 with K2, zone-centred angles; the default for drive/signals recordings "
                         "whose K2 is known: --backlash-width-m or their drive/backlash_width; flank otherwise) or dynamics "
                         "(no angles needed: the load-torque step from m_el and a1 or the alpha1 encoder)")
-    g.add_argument("--gear-ratio", type=_positive("--gear-ratio"), default=None,
-                   help="N in delta = alpha1 - N alpha2 (motor turns per load-encoder turn; default 1)")
+    g.add_argument("--gear-ratio", type=_positive("--gear-ratio", signed=True), default=None,
+                   help=cli_help("gear_ratio", WINDOWING_PARAMS, "windowing"))
     g.add_argument("--motor-joint", default=None, help="JointState name of the motor joint (default motor)")
     g.add_argument("--load-joint", default=None, help="JointState name of the load joint (default load)")
     g.add_argument("--imu-axis", choices=("x", "y", "z"), default=None,

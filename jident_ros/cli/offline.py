@@ -526,8 +526,8 @@ def _check_sample_options(o: OfflineOptions) -> None:
         raise OfflineError("backlash_width_m: the paper detector (inequality 1) needs K2 (--backlash-width-m)")
     if o.detector in ("flank", "dynamics") and o.backlash_width_m is not None:
         raise OfflineError("backlash_width_m: only for --detector paper (the flank and dynamics detectors need no K2)")
-    if not (math.isfinite(o.gear_ratio) and o.gear_ratio > 0):
-        raise OfflineError(f"gear_ratio: must be a finite number > 0, got {o.gear_ratio!r}")
+    if not (math.isfinite(o.gear_ratio) and o.gear_ratio != 0):
+        raise OfflineError(f"gear_ratio: must be a finite non-zero number (< 0: the load turns the other way), got {o.gear_ratio!r}")
 
 
 def _input_counts(result, adapter, source, ts, log) -> None:

@@ -231,7 +231,7 @@ def coerce(name: str, value: Any, param: Param) -> Any:
         for i, x in enumerate(value if isinstance(value, list) else [value]):
             low = param.min is not None and (x <= param.min if param.min_exclusive else x < param.min)
             high = param.max is not None and (x >= param.max if param.max_exclusive else x > param.max)
-            if low or high:
+            if low or high or (param.nonzero and x == 0):
                 where = f"{name}[{i}]" if isinstance(value, list) else name
                 raise ParameterError(f"parameter {where}: must be {what}, got {x!r}")
     return value

@@ -1122,7 +1122,10 @@ class FlankDetector(BacklashDetector):
                  flank_time_constant_s: float = 0.05, encoder_counts_per_rev: int = 0,
                  refine_samples: int = 16, load_drop_fraction: float = 0.5, unwrap_angles: bool = True,
                  confirm_samples: int = 3, min_travel_rad: float = 5e-3, deeper_travel_factor: float = 4.0):
-        for name, v in (("gear_ratio", gear_ratio), ("contact_tolerance_rad", contact_tolerance_rad),
+        if isinstance(gear_ratio, bool) or not (math.isfinite(float(gear_ratio)) and gear_ratio != 0):
+            raise ValueError(f"gear_ratio: must be a finite non-zero number (negative: the load encoder counts the "
+                             f"other way), got {gear_ratio!r}")
+        for name, v in (("contact_tolerance_rad", contact_tolerance_rad),
                         ("k_sigma", k_sigma), ("min_departure_rad", min_departure_rad),
                         ("flank_time_constant_s", flank_time_constant_s),
                         ("load_drop_fraction", load_drop_fraction)):
@@ -1710,7 +1713,8 @@ class FlankDetector(BacklashDetector):
             return (f"{what} (gear_ratio N = {self.gear_ratio:g}) never stayed within contact_tolerance_rad "
                     f"{self.contact_tolerance_rad:g} rad over contact_samples {self.contact_samples} samples (its "
                     f"smallest spread: {seen['spread_min']:.4g} rad): a wrong gear_ratio (motor turns per load-encoder "
-                    f"turn), angles not in rad (--map SCALE), or a drive that never rests on a flank{extra}")
+                    f"turn; negative when the load encoder counts the other way), angles not in rad (--map SCALE), or "
+                    f"a drive that never rests on a flank{extra}")
         return (f"{what} rested on a flank but never left it by more than the departure threshold "
                 f"{seen['threshold']:.4g} (largest move {seen['departure_max']:.4g}): no backlash entry in these data "
                 f"(k_sigma, min_departure_rad set the threshold){extra}")

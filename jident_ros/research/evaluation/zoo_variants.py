@@ -7,10 +7,10 @@ Issue 20 says the estimator will be checked on drive models we do not have.  The
 drive; this sweep takes the third-party one (jident_ros/research/vector_drive, docs/vector_drive.md) and changes one
 property per variant -- the coupling's stiffness, the load inertia, the speed loop's bandwidth, the drive's
 observer mismatch (its torque estimate's error), the backlash width, the speed, J1, the bearing friction, the
-speed feedback's filter, the sample rate (1 and 4 kHz), the sampling instants' jitter -- over the traversing events
-(speed step down, speed reversal, light and heavy load reversal) and one same-flank event (speed step up: no entry
-may be found), forward, each recorded as JointState 2^16 (clean and 30 dB) and JointState + Imu 2^16 (30 dB).
-Every file goes through the zoo's diagnosis
+speed feedback's filter, the sample rate (1 and 4 kHz), the sampling instants' jitter, the reported units -- over
+the traversing events (speed step down, speed reversal, light and heavy load reversal) and one same-flank event
+(speed step up: no entry may be found), forward, each recorded as JointState 2^16 (clean and 30 dB) and
+JointState + Imu 2^16 (30 dB).  Every file goes through the zoo's diagnosis
 (:func:`jident_ros.research.evaluation.zoo.diagnose_one`: ``jident diagnose``'s own function, flank detector, no
 K2, the image method off), with the drive declared as the zoo declares the vector drive
 (:func:`jident_ros.research.evaluation.zoo.declared`) and, for the friction variant, its own friction; the small
@@ -62,7 +62,9 @@ RATE_VARIANTS = ("recorded at 1 kHz", "recorded at 4 kHz")
 
 #: Variants recorded with other sensors than SENSORS' (the vector drive's record.Sensors fields).
 SENSOR_VARIANTS = {"sampling jitter 25 µs": {"sample_jitter_s": 25e-6}, "sampling jitter 50 µs": {"sample_jitter_s": 50e-6},
-                   "stamping jitter 50 µs": {"stamp_jitter_s": 50e-6}}
+                   "stamping jitter 50 µs": {"stamp_jitter_s": 50e-6},
+                   "CiA 402 units": {"torque_quantum_rel_rated": 1e-3, "speed_quantum_rad_s": 2 * np.pi / 60},
+                   "coarse torque": {"torque_quantum_rel_rated": 1e-2}}
 
 
 def system_for(name: str, p: DriveParams):
@@ -123,6 +125,8 @@ def variants() -> list:
         ("sampling jitter 25 µs", "sampled at instants jittered by 25 µs rms (5 % of T_s), stamped with them", b, {}),
         ("sampling jitter 50 µs", "sampled at instants jittered by 50 µs rms (10 % of T_s), stamped with them", b, {}),
         ("stamping jitter 50 µs", "sampled every T_s, the stamps jittered by 50 µs rms (10 % of T_s)", b, {}),
+        ("CiA 402 units", "the torque estimate in 0.1 % of rated (0.24 N m), the speeds in rpm", b, {}),
+        ("coarse torque", "the torque estimate in 1 % of rated (2.4 N m)", b, {}),
         ("small drive, 3:1 gear", "docs/your_drive.md's example: 2.2 kW, J1 0.03 kg m^2, J2 0.54 behind a 3:1 gear, "
          "K2 1.5 mm at r 0.03 m, its torque estimate 3-4 % off; diagnosed with its drive file "
          "(docs/examples/profiles/small_drive.yaml)", small_drive(), _declared_by_file("small drive, 3:1 gear")),

@@ -51,6 +51,11 @@ class Sensors:
     #: rms jitter of the stamps alone, s (clipped at 3 rms): the drive samples on its own clock, a loop stamps the
     #: samples when it passes them on
     stamp_jitter_s: float = 0.0
+    #: the drive reports its torque estimate in units of this share of its rated torque and its speed in units of
+    #: speed_quantum_rad_s (0: unquantised), as a CiA 402 drive does (0x6077 torque actual value in 0.1 % of rated,
+    #: 0x606C velocity actual value in rpm); applied after the noise
+    torque_quantum_rel_rated: float = 0.0
+    speed_quantum_rad_s: float = 0.0
 
 
 def _jittered(st: dict, jitter_s: float, seed: int) -> tuple:
@@ -180,6 +185,10 @@ def _sensed(st: dict, p, sensors: Sensors, seed: int) -> tuple:
     if sensors.snr_db is not None:
         for k in NOISY_CHANNELS:
             sig[k] = awgn_measured(sig[k], sensors.snr_db, rng)
+    for keys, q in ((("m_el",), sensors.torque_quantum_rel_rated * p.machine.rated_torque_nm),
+                    (("omega1", "omega2"), sensors.speed_quantum_rad_s)):
+        for k in keys if q > 0 else ():
+            sig[k] = q * np.round(sig[k] / q)
     return sig, st["theta_M"] - mech.gear_ratio * st["theta_L"], o1, o2
 
 
