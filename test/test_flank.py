@@ -751,3 +751,99 @@ def test_a_turn_inside_the_zone_on_a_fine_encoder_is_not_a_bounce():
     det._scan_returns(cap, data, a1[e0:] - a2[e0:], e0, e, g)
     entries = [c.start_row + c.departure_row for c in det._new_caps]
     assert len(entries) == 1 and abs(entries[0] - 2094) <= 2, entries
+
+
+def _vd_return_with_a1():
+    """A cut of the vector drive's clean speed step down as CSV 2^16 (with a1) gives it, up to 150 rows after the
+    departure of its traversal back: rows (t, alpha1, alpha2, m_el, a1), the departure row, the true first row in the
+    zone, the flank level and its contact sigma."""
+    from pathlib import Path
+    d = np.load(Path(__file__).parent / "data" / "vd_return_traversal_a1_clean.npz")
+    q = 2.0 * math.pi / 65536
+    a1 = float(d["alpha10"]) + q * d["alpha1_counts"]
+    a2 = float(d["alpha20"]) + q * d["alpha2_counts"]
+    data = np.column_stack([float(d["t0"]) + np.arange(a1.size) * 5e-4, a1, a2, d["m_el"].astype(float),
+                            d["a1"].astype(float)])
+    return data, int(d["departure"]), int(d["entry"]), float(d["flank"]), float(d["sigma"])
+
+
+@pytest.mark.parametrize("min_lead", [None, 10 ** 6])
+def test_with_an_accelerometer_a_traversal_back_takes_the_angle_walk_when_it_leads_clearly(monkeypatch, min_lead):
+    """The vector drive's traversal back with a1 (clean speed step down, CSV): back_to_load's J, fitted over a gap of
+    nearly constant torque, stops 24 samples after the contact loss; the angle walk (the no-a1 path) finds it.  Taken
+    when it lies RETURN_ANGLE_WALK_MIN_LEAD samples or more before the a1 path's entry (old code, or the rule off:
+    +24)."""
+    from jident_ros.stream import flank
+    if min_lead is not None:
+        monkeypatch.setattr(flank, "RETURN_ANGLE_WALK_MIN_LEAD", min_lead)
+    data, dep, true, level, sigma = _vd_return_with_a1()
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el", "a1"), nominal_inertia_kgm2=1.16,
+                        encoder_counts_per_rev=65536)
+    det._cap_flank, det._cap_returning, det._cap_sigma = (level, 1.5e-3), True, sigma
+    shift, _ = det._refine(data, dep)
+    if min_lead is None:
+        assert abs(dep + shift - true) <= 2, dep + shift - true
+    else:
+        assert dep + shift - true >= 20, dep + shift - true          # the a1 path alone: late
+    walk = det._angle_walk_entry(data, dep)
+    assert abs(walk - true) <= 2 and walk < dep, walk - true
+
+
+@pytest.mark.parametrize("rounding_rad", [-1e-12, 0.0, 1e-12])
+def test_a_traversal_back_s_side_does_not_hang_on_rounding(rounding_rad):
+    """A traversal back's departure row lies on the re-contact edge its capture takes for the flank level, so the sign
+    of delta - flank there is rounding.  The coupling model takes the side delta departs to from its farthest move
+    over the fit's rows (with the sign at the departure row, a 5e-13 rad change of the angles turned the side: the
+    angle walk's entry 0 -> -6 on this cut)."""
+    data, dep, true, level, sigma = _vd_return_with_a1()
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el", "a1"), nominal_inertia_kgm2=1.16,
+                        encoder_counts_per_rev=65536)
+    edge = float(data[dep, 1] - data[dep, 2]) + rounding_rad       # the flank level on the departure row's delta
+    det._cap_flank, det._cap_returning, det._cap_sigma = (edge, 1.5e-3), True, sigma
+    walk = det._angle_walk_entry(data, dep)
+    assert abs(walk - true) <= 2, walk - true
+
+
+def _vd_untwist_8192c(key: str):
+    """Cuts of the vector drive as JointState 2^13 gives it (no a1): 'sr' a clean speed reversal, 'heavy' a heavy load
+    reversal at 30 dB, 'step' a clean speed step down; rows (t, alpha1, alpha2, m_el) up to 60 after the departure, the
+    departure row, the true first row in the zone, the flank level, the departure threshold."""
+    from pathlib import Path
+    d = np.load(Path(__file__).parent / "data" / "vd_untwist_8192c.npz")
+    q = 2.0 * math.pi / 8192
+    a1 = float(d[f"{key}_alpha10"]) + q * d[f"{key}_alpha1_counts"]
+    a2 = float(d[f"{key}_alpha20"]) + q * d[f"{key}_alpha2_counts"]
+    data = np.column_stack([np.arange(a1.size) * 5e-4, a1, a2, d[f"{key}_m_el"]])
+    thr = {"sr": 2.89e-3, "heavy": 2.70e-3, "step": 3.06e-3}[key]
+    return data, int(d[f"{key}_departure"]), int(d[f"{key}_entry"]), float(d[f"{key}_flank"]), thr
+
+
+@pytest.mark.parametrize("key, old", [("sr", 6), ("heavy", -3), ("step", 1)])
+def test_on_a_coarse_encoder_the_entry_is_at_the_end_of_the_untwist(key, old):
+    """A 2^13 encoder without a1 (the coupling, spring and damped spring models are off there): the speed reversal
+    crossed the departure threshold (4 quanta) 6 samples after the contact loss, the heavy load reversal 3 before it
+    (the coupling untwists several quanta under its load first).  The untwist model (rest, a constant untwisting rate,
+    the free relative acceleration from the contact loss) puts both within 2 samples, at a gain >= UNTWIST_MIN_GAIN;
+    the speed step (one kink: its untwist starts at the contact loss's neighbour) stays below the gain and keeps its
+    entry (old code, or the rule off: +6, -3, +1)."""
+    from jident_ros.stream.flank import UNTWIST_MIN_GAIN, untwist_entry
+    data, dep, true, level, thr = _vd_untwist_8192c(key)
+    assert dep - true == old
+    e, gain = untwist_entry(data[:, 1] - data[:, 2], dep)
+    if key == "step":
+        assert gain < UNTWIST_MIN_GAIN, gain
+    else:
+        assert abs(e - true) <= 2 and gain >= UNTWIST_MIN_GAIN, (e - true, gain)
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
+    det._cap_flank, det._cap_returning, det._cap_sigma = (level, thr), False, thr / 4.0
+    shift, _ = det._refine(data, dep)
+    assert abs(dep + shift - true) <= 2, dep + shift - true
+    assert untwist_entry(data[:, 1] - data[:, 2], 30) == (30, 1.0)           # rows not there
+
+
+def test_the_untwist_model_is_off_on_a_fine_encoder():
+    """On a 2^16 encoder the coupling models see the twist; the untwist model is not used (_untwist_move: None)."""
+    data, dep, true, level, sigma = _vd_return_with_a1()
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16,
+                        encoder_counts_per_rev=65536)
+    assert det._untwist_move(data[:, :4], dep) is None

@@ -43,7 +43,12 @@ and on what the clutch does, not on inequality (1):
   starts early) -- both at a clear gain (SPRING_*, LOAD_HINGE_*).  Without a1, a window's own entry then goes to a
   damped spring's contact loss (:func:`damped_spring_entry`: the torque scale and damping fitted, a re-contact on the
   flank it left inside the fit) when that explains alpha1 clearly better and lies 3 samples or more away (DAMPED_*;
-  the DOL drive's slip drop, whose departure precedes its contact loss and whose gap lasts 17 samples).
+  the DOL drive's slip drop, whose departure precedes its contact loss and whose gap lasts 17 samples).  On a coarse
+  encoder (2^13), where those models are off, a window's own entry without a1 goes instead to the end of the
+  coupling's untwist (:func:`untwist_entry`: delta at rest, untwisting at a constant rate, then free) when that model
+  clearly beats one kink (UNTWIST_*).  With a1, a traversal back takes the angle walk's entry (the no-a1 path) when that
+  lies RETURN_ANGLE_WALK_MIN_LEAD samples or more before the a1 path's (back_to_load's J, fitted over a gap of nearly
+  constant torque, stops late).
 * **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
   ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
   (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry
@@ -574,6 +579,19 @@ def free_motion_walk(alpha1: np.ndarray, m_el: np.ndarray, departure: int, first
     return start, best
 
 
+#: With a1, a traversal back's entry moves on to the angle walk's (:meth:`FlankDetector._angle_walk_entry`, the no-a1
+#: path: free_motion_walk, then the coupling model) when that lies this many samples or more before back_to_load's
+#: (then the coupling model's): each walks back while its free-motor model explains the samples, and back_to_load's
+#: J, fitted over a gap of nearly constant torque, absorbs the torque estimate's error -- on the vector drive's clean
+#: speed steps (JointState+Imu, CSV) it stopped 11-24 samples after the contact loss, where the angle walk finds it
+#: (0 / -1, as without a1).  Closer, the angle walk is no better: it leads by at most 2 on the second drive (there one
+#: -2 -> -3 with any lead taken, 8 such windows) and by 5-6 on two variants' 30 dB traversals back (narrow backlash,
+#: J1 1.073: both within +-2 -> -4 / -6 at a lead of 4, the first value tried).  Chosen on the vector drive (leads
+#: 12-24), tested on the second drive, the DOL drive (no such traversal), ours and the 15 variants (docs/results.md,
+#: "Entry placement, fifth round")
+RETURN_ANGLE_WALK_MIN_LEAD = 8
+
+
 #: Without a1, a window's own entry that delta left gradually (a coupling untwisting as its load falls, so delta
 #: crosses the departure threshold before the contact is lost: the vector drive's heavy load reversals 8-9 samples
 #: early) moves to the contact loss of a coupling model (:func:`coupling_entry`): alpha1 = a + v k + (Phi - K Psi -
@@ -789,6 +807,61 @@ def damped_spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray,
     if not best_rss > 0 or not math.isfinite(rss_dep) or t0 == 0:
         return departure, 1.0, math.nan
     return best, rss_dep / best_rss, float(scale) / t0
+
+
+#: On a coarse encoder (delta's quantum / sqrt 12 beyond FREE_MAX_NOISE_RAD: 2^13, where the coupling, spring and
+#: damped spring models are off) a window's own entry without a1 goes to the end of the coupling's untwist
+#: (:func:`untwist_entry`): delta = F + v (k - s)_+ + c (k - e)_+^2 -- at rest on its flank, then untwisting at a
+#: constant rate while the coupling's torque ramps to zero (from s), then the free relative acceleration from the
+#: contact loss (e) -- fitted over UNTWIST_FIT_BEFORE rows before the departure and UNTWIST_FIT_AFTER from it, s and e
+#: by least squares (e up to UNTWIST_SEARCH_AFTER after the departure; 50 and 5 the first values tried, not tuned).
+#: UNTWIST_FIT_AFTER 40 was chosen on the DOL drive's 2^13 heavy load reversals (with 32: -3 on each at 30 dB; with 40:
+#: 0..+1, gains 1.9-2.3); the vector drive's were within +-2 alike with 32 and 40; with 24 the parabola had too few free
+#: rows (gains 1.0-1.3, entries -32..+2) ...
+UNTWIST_FIT_BEFORE = 50
+UNTWIST_FIT_AFTER = 40
+UNTWIST_SEARCH_AFTER = 5
+#: ... taken when the untwist phase explains delta this much better than one kink (the least residual with e = s):
+#: the vector drive's 2^13 speed reversals 1.14-1.43 (+6/+7 -> -1..+2: the departure threshold there is 2.9-3.1 mrad,
+#: four quanta, for a 1-quantum untwist) and heavy load reversals 1.26-2.24 (-10..-1 -> -5..+2); its light load
+#: reversals 1.06-1.09 (the model put them 5-16 late) and speed steps 1.00-1.03 (one kink: the untwist starts at the
+#: contact loss's neighbour, e = s 5-11 samples early) stay -- chosen on the vector drive, tested on the DOL drive
+#: (heavy load reversals 1.9-2.6: -4..-1 -> -1..+2; light ones 1.14-1.21: +16..+25 -> +5..+11; slip events <= 1.04)
+#: and the second drive (speed steps 1.00)
+UNTWIST_MIN_GAIN = 1.12
+
+
+def untwist_entry(delta: np.ndarray, departure: int) -> tuple:
+    """(e, gain) of :data:`UNTWIST_MIN_GAIN`'s model around ``departure``: the contact loss e of the best fit and
+    the gain RSS(best with e = s) / RSS(best); (``departure``, 1.0) when the rows are not there."""
+    lo, hi = departure - UNTWIST_FIT_BEFORE, departure + UNTWIST_FIT_AFTER
+    if lo < 0 or hi > delta.size:
+        return departure, 1.0
+    t = np.arange(lo, hi, dtype=float)
+    y = np.asarray(delta[lo:hi], float)
+    y = y - y.mean()
+    first = lo + 5
+    c = np.arange(first, departure + UNTWIST_SEARCH_AFTER + 1, dtype=float)     # the change points' rows
+    d = np.clip(t[None, :] - c[:, None], 0.0, None)
+    S = [np.sum(d ** p, axis=1) for p in range(5)]                             # sums of (k - c)_+^p
+    dy, d2y = d @ y, (d * d) @ y
+    pairs = np.array([(si, ei) for si in range(departure + 1 - first) for ei in range(si, c.size)])
+    i, j = pairs[:, 0], pairs[:, 1]
+    # the normal equations of (1, a, b), a = (k - s)_+, b = (k - e)_+^2, from the sums: sum a b over k >= e is
+    # sum (k - e)^3 + (e - s) (k - e)^2
+    ab = S[3][j] + (j - i) * S[2][j]
+    XtX = np.stack([np.stack([np.full(i.size, float(t.size)), S[1][i], S[2][j]], -1),
+                    np.stack([S[1][i], S[2][i], ab], -1), np.stack([S[2][j], ab, S[4][j]], -1)], -2)
+    Xty = np.stack([np.full(i.size, float(y.sum())), dy[i], d2y[j]], -1)
+    coefs = np.linalg.lstsq(XtX[0], Xty[0], rcond=None)[0][None, :].repeat(pairs.shape[0], 0)
+    ok = np.abs(np.linalg.det(XtX)) > 1e-12 * np.einsum("kii->k", XtX) ** 3
+    coefs[ok] = np.linalg.solve(XtX[ok], Xty[ok][..., None])[..., 0]
+    rss = np.where(ok, np.maximum(float(y @ y) - np.einsum("ki,ki->k", coefs, Xty), 0.0), np.inf)
+    k = int(np.argmin(rss))
+    one = rss[i == j]
+    if not (np.isfinite(rss[k]) and rss[k] > 0 and one.size):
+        return departure, 1.0
+    return int(c[j[k]]), float(np.min(one) / rss[k])
 
 
 def _noise(x: np.ndarray) -> float:
@@ -1670,18 +1743,8 @@ class FlankDetector(BacklashDetector):
         jumped = self._jumped(data, dep)
         if self.detector_name == "flank" and "a1" not in self.channels and "m_el" in self.channels \
                 and getattr(self, "_cap_returning", False):
-            # a traversal back: delta may rest near the flank it left with no relative speed (read as a contact);
-            # the motor equation in angle form finds where the motor started to run free (free_motion_start)
-            # (through any excursion of delta into the zone: the second drive's traversal back turns inside the zone
-            # and rests 1 mrad off the flank it left before leaving it again, one gap; a guard that stopped the walk
-            # where delta was last inside the zone left 3 of them 88-92 samples late)
-            walk, e = free_motion_walk(data[:, self._i_a1], data[:, self.channels.index("m_el")], dep,
-                                       self.samples_before_entry, self.sample_period_s, self.angle_quantum_rad)
+            e = self._angle_walk_entry(data, dep)
             if e < dep:
-                # then the coupling model's contact loss: forward from the walk's end (the walk stops where the
-                # contact's load becomes visible, before the contact loss), else near the hinge's entry
-                e2 = self._coupling_move(data, walk, dep, 1.0, 1.0)
-                e = min(e2 if e2 > walk else self._coupling_move(data, e, dep, 1.0, 1.0), dep)
                 return e - dep, None
         # not in a traversal back (delta rings at the other flank after the impact before it leaves it again: on the
         # vector drive's 2^13 speed steps the move took return entries 10-40 samples back, one before its gap)
@@ -1725,7 +1788,14 @@ class FlankDetector(BacklashDetector):
             if getattr(self, "_cap_returning", False):
                 # a traversal back: the coupling model's contact loss near back_to_load's entry
                 entry = self._coupling_move(data, entry + off, dep + off, 1.0, 1.0) - off
+                walk = self._angle_walk_entry(data, dep + off) - off
+                if walk <= entry - RETURN_ANGLE_WALK_MIN_LEAD:
+                    entry = walk
         elif src != "a1" and self.detector_name == "flank" and not getattr(self, "_cap_returning", False):
+            untwist = self._untwist_move(data, dep + off)
+            if untwist is not None:
+                # a coarse encoder: the end of the coupling's untwist (UNTWIST_*; the models below are off there)
+                return untwist - off - dep, None if recontact is None else recontact + off
             # without a1, a coupling that untwisted off its flank: the entry at the coupling model's contact loss
             entry = self._coupling_move(data, entry + off, dep + off, rounds=COUPLING_FORWARD_ROUNDS) - off
             if entry == dep:
@@ -1739,6 +1809,34 @@ class FlankDetector(BacklashDetector):
                 # -1 -> -3 with any move taken; the DOL drive's slip drops moved 3-12 samples)
                 entry = damped - off
         return entry - dep, None if recontact is None else recontact + off
+
+    def _angle_walk_entry(self, data: np.ndarray, dep: int) -> int:
+        """A traversal back's entry from the motor equation in angle form (``dep`` when it does not move): delta may
+        rest near the flank it left with no relative speed (read as a contact); the walk finds where the motor started
+        to run free (:func:`free_motion_walk`; through any excursion of delta into the zone: the second drive's
+        traversal back turns inside the zone and rests 1 mrad off the flank it left before leaving it again, one gap;
+        a guard that stopped the walk where delta was last inside the zone left 3 of them 88-92 samples late), then
+        the coupling model's contact loss: forward from the walk's end (the walk stops where the contact's load
+        becomes visible, before the contact loss), else near the hinge's entry."""
+        if "m_el" not in self.channels:
+            return dep
+        walk, e = free_motion_walk(data[:, self._i_a1], data[:, self.channels.index("m_el")], dep,
+                                   self.samples_before_entry, self.sample_period_s, self.angle_quantum_rad)
+        if e >= dep:
+            return dep
+        e2 = self._coupling_move(data, walk, dep, 1.0, 1.0)
+        return min(e2 if e2 > walk else self._coupling_move(data, e, dep, 1.0, 1.0), dep)
+
+    def _untwist_move(self, data: np.ndarray, departure: int) -> Optional[int]:
+        """:func:`untwist_entry`'s contact loss at a gain >= UNTWIST_MIN_GAIN on a coarse encoder (delta's quantum, the
+        configured one else its smallest step before the departure, / sqrt 12 beyond FREE_MAX_NOISE_RAD); else None."""
+        delta = self._delta(data)
+        quantum = _delta_quantum(delta, departure, self.angle_quantum_rad, max(departure - UNTWIST_FIT_BEFORE, 0),
+                                 self.min_departure_rad)
+        if not quantum / math.sqrt(12.0) > FREE_MAX_NOISE_RAD:
+            return None
+        e, gain = untwist_entry(delta, departure)
+        return e if gain >= UNTWIST_MIN_GAIN else None
 
     def _free_departure_entry(self, data: np.ndarray, dep: int) -> int:
         """:func:`free_departure`'s entry for the capture ``data`` departing at ``dep``; its noise: the contact's sigma,
@@ -1791,7 +1889,12 @@ class FlankDetector(BacklashDetector):
         if not math.isfinite(flank) or "m_el" not in self.channels:
             return entry
         delta = self._delta(data)
-        side = 1.0 if delta[departure] >= flank else -1.0
+        # the side delta departs to: its farthest move off the flank over the fit's rows after the departure (a
+        # traversal back's departure row lies on the re-contact edge its capture takes for the flank, where the sign of
+        # delta - flank is rounding: a 5e-13 rad change of the angles turned the side and moved the vector drive's
+        # traversal back with a1 from 0 to -6, test_flank's cut of it)
+        after = delta[departure:departure + COUPLING_FIT_AFTER] - flank
+        side = 1.0 if after.size and after[int(np.argmax(np.abs(after)))] >= 0 else -1.0
         e, gain, rms = coupling_entry(data[:, self._i_a1], delta, data[:, self.channels.index("m_el")], entry, side,
                                       self.sample_period_s, rounds)
         if not max(rms, self.angle_quantum_rad / math.sqrt(12.0)) <= FREE_MAX_NOISE_RAD:
