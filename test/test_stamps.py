@@ -74,6 +74,13 @@ def test_a_gap_is_not_bridged_and_out_of_order_stamps_go_through():
     x2[1500, 0] = x2[1499, 0]                                                   # a repeated stamp
     y2 = _feed(StampGrid(TS, 1), x2)
     assert np.sum(np.diff(y2[:, 0]) <= 0) == 1                                  # the detector's to count
+    x3 = _rows(2000, 25e-6, instants=True)
+    x3[1500:, 0] -= 0.5                                                         # the clock set back 0.5 s
+    g3 = StampGrid(TS, 1)
+    y3 = _feed(g3, x3)
+    steps = np.diff(y3[:, 0])
+    assert np.sum(steps < 0) == 1 and np.allclose(steps[steps > 0][-400:], TS)  # one jump, then the grid again
+    assert y3.shape[0] >= 1995
 
 
 def test_the_jointstate_adapter_resamples_and_says_so():

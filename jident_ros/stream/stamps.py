@@ -17,8 +17,9 @@ between jittered stamps beyond ``gap_tolerance`` T_s that lose no sample: up to 
 smoother on the index (above 1 / SMOOTHER_RATIO), or stamps on their grid: the rows go through as they are, for
 good.  Undecided (the drive at rest: no motion tells the two apart): the block goes through as it is and the next
 one is tested (the rows of a block under test go through as they are: no delay).  A
-longer step is not bridged (the grid starts again after it, and the detector counts the gap); an out-of-order or
-repeated stamp goes through no later than the row before it (the detector counts it).
+longer step, or a clock set back by more, is not bridged (the grid starts again after it, and the detector counts
+the gap or the jump); a stamp a little out of order or repeated goes through no later than the row before it (the
+detector counts it).
 
 A recording faster than T_s by an integer factor k (stamps stepping by T_s/k, 2 <= k <= :data:`MAX_DECIMATION`,
 decided from the first two rows) is decimated first: every k-th row is taken, the rest dropped, and it is said
@@ -200,7 +201,7 @@ class StampGrid:
         for row in x:
             t = row[0]
             prev = self._prev
-            if prev is None or t - prev[0] > self._bridge_s:               # a start, or a gap not bridged
+            if prev is None or abs(t - prev[0]) > self._bridge_s:          # a start, a gap, a clock set back
                 out.append(row)
                 self._prev, self._next_t = row, t + ts
                 continue
