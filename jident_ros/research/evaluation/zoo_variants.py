@@ -7,7 +7,7 @@ Issue 20 says the estimator will be checked on drive models we do not have.  The
 drive; this sweep takes the third-party one (jident_ros/research/vector_drive, docs/vector_drive.md) and changes one
 property per variant -- the coupling's stiffness, the load inertia, the speed loop's bandwidth, the drive's
 observer mismatch (its torque estimate's error), the backlash width, the speed, J1, the bearing friction, the
-speed feedback's filter, the sample rate (1 and 4 kHz), the sampling instants' jitter, the reported units -- over
+speed feedback's filter, the sample rate (1 and 4 kHz), the sampling instants' jitter, the reported units, the encoders -- over
 the traversing events (speed step down, speed reversal, light and heavy load reversal) and one same-flank event
 (speed step up: no entry may be found), forward, each recorded as JointState 2^16 (clean and 30 dB) and
 JointState + Imu 2^16 (30 dB).  Every file goes through the zoo's diagnosis
@@ -64,7 +64,8 @@ RATE_VARIANTS = ("recorded at 1 kHz", "recorded at 4 kHz")
 SENSOR_VARIANTS = {"sampling jitter 25 µs": {"sample_jitter_s": 25e-6}, "sampling jitter 50 µs": {"sample_jitter_s": 50e-6},
                    "stamping jitter 50 µs": {"stamp_jitter_s": 50e-6},
                    "CiA 402 units": {"torque_quantum_rel_rated": 1e-3, "speed_quantum_rad_s": 2 * np.pi / 60},
-                   "coarse torque": {"torque_quantum_rel_rated": 1e-2}}
+                   "coarse torque": {"torque_quantum_rel_rated": 1e-2},
+                   "2^14 encoders": {"encoder_counts": 2 ** 14}, "2^20 encoders": {"encoder_counts": 2 ** 20}}
 
 
 def system_for(name: str, p: DriveParams):
@@ -129,6 +130,8 @@ def variants() -> list:
         ("stamping jitter 50 µs", "sampled every T_s, the stamps jittered by 50 µs rms (10 % of T_s)", b, {}),
         ("CiA 402 units", "the torque estimate in 0.1 % of rated (0.24 N m), the speeds in rpm", b, {}),
         ("coarse torque", "the torque estimate in 1 % of rated (2.4 N m)", b, {}),
+        ("2^14 encoders", "both encoders 16384 counts/rev (in place of 65536)", b, {}),
+        ("2^20 encoders", "both encoders 1048576 counts/rev (in place of 65536)", b, {}),
         ("small drive, 3:1 gear", "docs/your_drive.md's example: 2.2 kW, J1 0.03 kg m^2, J2 0.54 behind a 3:1 gear, "
          "K2 1.5 mm at r 0.03 m, its torque estimate 3-4 % off; diagnosed with its drive file "
          "(docs/examples/profiles/small_drive.yaml)", small_drive(), _declared_by_file("small drive, 3:1 gear")),
@@ -147,8 +150,9 @@ def generate(out: Path, log=print, names=None) -> dict:
         for ev in EVENTS:
             for label, fmt, counts, snr in SENSORS:
                 t0 = time.perf_counter()
-                r = vd_record.build(p, ev, "forward", vd_record.Sensors(counts, snr, **SENSOR_VARIANTS.get(name, {})),
-                                    seed=23, cache_dir=out / "cache")
+                sensors = vd_record.Sensors(**{"encoder_counts": counts, "snr_db": snr, **SENSOR_VARIANTS.get(name, {})})
+                counts = sensors.encoder_counts
+                r = vd_record.build(p, ev, "forward", sensors, seed=23, cache_dir=out / "cache")
                 recs.append((label, zoo.vector_recording(r, ev, "forward", p.mechanics.motor_inertia_kgm2, counts, snr,
                                                          sub, (fmt,))))
                 if time.perf_counter() - t0 > 2:
