@@ -220,6 +220,7 @@ def test_a_drop_loses_the_window_in_progress_and_an_empty_batch_does_not():
     (e,) = d.push(np.array([[23.0, np.nan, 0.0]]), CH)
     assert e.reason == "nonfinite" and e.window_dropped is False      # nothing in progress to lose
     assert d.reject("layout").window_dropped is False
+    assert d.windows_lost == {"gap": 1}                                # the lost window, counted by reason
     assert d.counts["layout"] == 1 and d.dropped_total == 3
 
 

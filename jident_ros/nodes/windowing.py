@@ -419,6 +419,7 @@ class WindowingNode(RunnableNode, Node):
                          ("a1_used", self.adapter.use_imu)]
             vals += [(f"jitter.{k}", v) for k, v in self.adapter.jitter().items()]
         vals += [(f"dropped.{r}", d.counts[r]) for r in REASONS if r != "empty"]
+        vals += [(f"windows_lost.{r}", n) for r, n in getattr(d, "windows_lost", {}).items()]
         return vals
 
     def _report_drop(self, ev):
