@@ -288,17 +288,15 @@ RETURN_FREE_TURN_RMS = 1.5
 #: 2, -1 at 1) -- chosen on the second drive's one such recording (clean and 30 dB), so fitted to it
 RETURN_SHALLOW_REST_DEPARTURES = 1.0
 
-#: On a coarse encoder (delta's smallest step / sqrt 12 beyond FREE_MAX_NOISE_RAD: 2^13), the departure threshold is
-#: a window's own departure counts from where delta left its flank by this many counts (:meth:`FlankDetector.
-#: _coarse_departure`): a contact on one count has sigma 0 and its threshold min_departure_rad (2 counts of 2^13),
-#: and the DOL drive's coupling untwists 4.8 counts (3.7 mrad under 187 N m) before its contact is lost: its 2^13
-#: slip drops and slip reversals departing from such a contact were entered 4-5 samples early (those from a contact
-#: dithering over two counts, threshold 3.2 counts: -2 ... -1) -- chosen on the DOL drive, tested on the second
-#: drive, the vector drive, ours and the variants
+#: On a coarse encoder (delta's smallest step / sqrt 12 beyond FREE_MAX_NOISE_RAD: 2^13), a window's own departure
+#: counts from where delta left its flank by this many counts (:meth:`FlankDetector._coarse_departure`): a contact on
+#: one count has sigma 0 and its threshold min_departure_rad (2 counts of 2^13), and the DOL drive's coupling untwists
+#: 4.8 counts (3.7 mrad under 187 N m) before its contact is lost: its 2^13 slip drops and slip reversals departing
+#: from such a contact were entered 4-5 samples early (those from a contact dithering over two counts, threshold 3.2
+#: counts: -2 ... -1) -- chosen on the DOL drive, tested on the second drive, the vector drive, ours and the variants
 COARSE_DEPARTURE_QUANTA = 3.5
 #: ... searched this many samples from the departure (the untwist's counts come within 6 samples on the DOL drive)
 COARSE_DEPARTURE_SEARCH = 8
-
 
 
 #: single_mass_run fits m_el = J acc + c (True) or m_el = J acc (False).
