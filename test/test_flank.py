@@ -847,3 +847,92 @@ def test_the_untwist_model_is_off_on_a_fine_encoder():
     det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16,
                         encoder_counts_per_rev=65536)
     assert det._untwist_move(data[:, :4], dep) is None
+
+
+def _second_drive_turn_scan(tag: str) -> list:
+    """The edge scan of the first window of a second-drive 2^13 JointState recording (test/data/second_drive_turns_
+    8192c.npz, cut from the zoo's clean speed steps down, K2 2.5 mm): 'bounce' reverse J1 1.073 (two bounces, the second
+    12 mrad into a 68 mrad zone, the traversal back at 2196), 'turn' forward J1 1.160 and 'still' reverse J1 1.160 (one
+    bounce, then a turn inside the zone without contact, 11.5 / 14.6 mrad in; the traversal back at 2135).  Returns the
+    entries (recording rows) of the captures the scan opens."""
+    from pathlib import Path
+
+    from jident_ros.stream.flank import _FlankCapture
+    d = np.load(Path(__file__).parent / "data" / "second_drive_turns_8192c.npz")
+    q = 2.0 * math.pi / 8192
+    a1 = float(d[f"{tag}_alpha10"]) + q * d[f"{tag}_alpha1_counts"]
+    a2 = float(d[f"{tag}_alpha20"]) + q * d[f"{tag}_alpha2_counts"]
+    first = int(d[f"{tag}_first_index"])
+    data = np.column_stack([(first + np.arange(a1.size)) * 5e-4, a1, a2, d[f"{tag}_m_el"].astype(float)])
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"))
+    cap = _FlankCapture([data], data.shape[0], int(d[f"{tag}_dep"]), float(d[f"{tag}_flank"]),
+                        float(d[f"{tag}_sigma"]), start_row=first)
+    e0, e = 128, 48                                 # the window's rows as the pipeline cut them
+    g = {"bounce": 79, "turn": 81, "still": 81}[tag]     # ... and its re-contact row (estimate_width's)
+    det._scan_returns(cap, data, a1[e0:] - a2[e0:], e0, e, g)
+    return [c.start_row + c.departure_row for c in det._new_caps]
+
+
+def test_a_shallow_bounce_on_a_coarse_encoder_is_a_bounce(monkeypatch):
+    """The second bounce 12 mrad deep (beyond RETURN_SHALLOW_TURN_SHARE of the span, the motor not free through its
+    turn) is a bounce: the traversal back enters at 2196, not at the bounce's start (2125, matched to the bounce's gap:
+    the traversal had no window); with the old depth (2 x RETURN_TURN_SHARE) or the old rest (RETURN_REST_DEPARTURES
+    after it, +6) it fails."""
+    import jident_ros.stream.flank as fl
+    entries = _second_drive_turn_scan("bounce")
+    assert len(entries) == 1 and abs(entries[0] - 2196) <= 2, entries
+    monkeypatch.setattr(fl, "RETURN_SHALLOW_REST_DEPARTURES", fl.RETURN_REST_DEPARTURES)
+    assert abs(_second_drive_turn_scan("bounce")[0] - 2196) > 2
+    monkeypatch.setattr(fl, "RETURN_SHALLOW_TURN_SHARE", 2.0 * fl.RETURN_TURN_SHARE)
+    assert abs(_second_drive_turn_scan("bounce")[0] - 2196) > 2
+
+
+@pytest.mark.parametrize("tag", ["turn", "still"])
+def test_a_turn_the_motor_runs_free_through_is_no_bounce_and_no_contact(monkeypatch, tag):
+    """A turn inside the zone 11.5 mrad ('turn') or 14.6 mrad ('still', delta still for a contact's length) in, the
+    motor running free through it (RETURN_FREE_TURN_*): the traversal back enters at its true start, 2135 ('still':
+    at 2131, -4, delta's edge from the first impact), not at the turn's end (with every turn taken for a bounce or a
+    contact: +90 / +92)."""
+    import jident_ros.stream.flank as fl
+    entries = _second_drive_turn_scan(tag)
+    assert len(entries) == 1 and abs(entries[0] - 2135) <= 4, entries
+    monkeypatch.setattr(fl, "RETURN_FREE_TURN_RMS", 0.0)
+    assert abs(_second_drive_turn_scan(tag)[0] - 2135) > 50
+
+
+def _coarse_untwist(counts=8192, ts=5e-4, x=900, n=3000):
+    """t, alpha1, alpha2 on a `counts` encoder turning steadily, delta on whole counts (a contact one count wide,
+    sigma 0): a settling move at the start, a contact from row 3, then at row x - 12 the DOL drive's 2^13 slip
+    reversal's untwist (its counts, 4.8 counts before the contact loss at row x) and a free run 80 counts across
+    the zone to a contact there.  Returns (data, channels, x)."""
+    q = 2.0 * math.pi / counts
+    c = np.zeros(n)
+    c[:3] = [9, 6, 3]
+    untwist = [0, 0, 0, 0, 1, 1, 1, 2, 3, 3, 4, 4, 5, 5, 7, 7, 7, 7, 9, 9]
+    c[x - 12:x + 8] = untwist
+    k = np.arange(n - (x + 8))
+    c[x + 8:] = np.minimum(9 + np.round(0.02 * (k + 10) ** 2 - 2.0), 80)
+    t = 1.0 + np.arange(n) * ts
+    a2 = q * np.round((1.0 + 150.0 * (t - 1.0)) / q)
+    return np.column_stack([t, a2 + q * c, a2]), ("t", "alpha1", "alpha2"), x
+
+
+def test_on_a_coarse_encoder_the_departure_counts_from_a_few_counts_off_the_flank(monkeypatch):
+    """A contact one count wide (sigma 0) has min_departure_rad for its threshold, 2 counts of 2^13; the DOL drive's
+    coupling untwists 4.8 counts before its contact is lost: the departure was 5 samples early.  Moved on to where
+    delta left the flank by COARSE_DEPARTURE_QUANTA counts (delta's quantum from its steps before the departure) the
+    entry is within 2 samples, in any batching; on a 2^16 encoder (the same counts) nothing moves."""
+    import jident_ros.stream.flank as fl
+    data, ch, x = _coarse_untwist()
+    for batch in (50, 1):
+        det = FlankDetector(0.1, 5e-4, channels=ch)
+        evs = [e for b in stream_batches(data, batch) for e in det.push(b, ch)] + det.finish()
+        wins = [e.window for e in evs if e.kind == "window"]
+        assert len(wins) == 1
+        assert abs(round((wins[0].entry_time_s - 1.0) / 5e-4) - x) <= 2, wins[0].entry_time_s
+    fine, ch, x = _coarse_untwist(counts=65536)
+    before = [w.entry_time_s for w in _windows(fine, ch)[0]]
+    monkeypatch.setattr(fl, "COARSE_DEPARTURE_QUANTA", 0.0)
+    wins, _ = _windows(data, ch)
+    assert round((wins[0].entry_time_s - 1.0) / 5e-4) - x == -5
+    assert [w.entry_time_s for w in _windows(fine, ch)[0]] == before

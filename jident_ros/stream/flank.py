@@ -271,6 +271,34 @@ RETURN_TURN_SHARE = 0.1
 #: at 2.5) -- chosen on the second drive (the only model whose traversals back start from such a bounce)
 RETURN_REST_DEPARTURES = 2.0
 
+#: ... a bounce's excursion must have gone this share of the span into the zone (was 2 x RETURN_TURN_SHARE: the
+#: second drive's 2^13 reverse J1 1.073 K2 2.5 mm recording bounces twice, its second bounce 12.3 mrad into a 68 mrad
+#: zone, and its traversal back had no window) -- chosen on the second drive, where the turns inside the zone that
+#: are not bounces (J1 1.160 K2 2.5 mm, 11.5 and 14.6 mrad in) are told by RETURN_FREE_TURN_*
+RETURN_SHALLOW_TURN_SHARE = 0.15
+#: ... and a turn counts as a bounce only when the motor did not run free through it: the motor equation in angle
+#: form fitted over RETURN_FREE_TURN_HALF rows each side of the turn leaves more than RETURN_FREE_TURN_RMS x delta's
+#: quantum / sqrt 12 (second drive 2^13: its turn without contact (J1 1.160 K2 2.5 mm forward) 0.96, its shallow
+#: bounces 2.15, its deep ones 4.8-7.4; with 15 or 25 rows each side a turn and a shallow bounce overlap) -- chosen on
+#: the second drive, tested on the others
+RETURN_FREE_TURN_HALF = 35
+RETURN_FREE_TURN_RMS = 1.5
+#: ... the rest depth (RETURN_REST_DEPARTURES) after a shallow bounce (its excursion not beyond 2 x RETURN_TURN_SHARE
+#: of the span: a contact at a lower torque, less to untwist; the second drive's shallow bounce's traversal back +6 at
+#: 2, -1 at 1) -- chosen on the second drive's one such recording (clean and 30 dB), so fitted to it
+RETURN_SHALLOW_REST_DEPARTURES = 1.0
+
+#: On a coarse encoder (delta's smallest step / sqrt 12 beyond FREE_MAX_NOISE_RAD: 2^13), a window's own departure
+#: counts from where delta left its flank by this many counts (:meth:`FlankDetector._coarse_departure`): a contact on
+#: one count has sigma 0 and its threshold min_departure_rad (2 counts of 2^13), and the DOL drive's coupling untwists
+#: 4.8 counts (3.7 mrad under 187 N m) before its contact is lost: its 2^13 slip drops and slip reversals departing
+#: from such a contact were entered 4-5 samples early (those from a contact dithering over two counts, threshold 3.2
+#: counts: -2 ... -1) -- chosen on the DOL drive, tested on the second drive, the vector drive, ours and the variants
+COARSE_DEPARTURE_QUANTA = 3.5
+#: ... searched this many samples from the departure (the untwist's counts come within 6 samples on the DOL drive)
+COARSE_DEPARTURE_SEARCH = 8
+
+
 #: single_mass_run fits m_el = J acc + c (True) or m_el = J acc (False).
 SINGLE_MASS_OFFSET = True
 #: ... with |c| at most this share of the run's median |m_el| or of the steady |m_el| before the departure, the
@@ -1257,9 +1285,9 @@ class FlankDetector(BacklashDetector):
     def _track(self, d: np.ndarray, look: np.ndarray, aux: Optional[np.ndarray] = None) -> list:
         """Run the contact tracker over the delta values ``d`` of the rows handed on (``look``: the next
         ``confirm_samples - 1`` values, to confirm a departure); returns in order ("entry", row, flank level it
-        left, contact sigma) and ("cancel", row): the excursion of the last entry ended in a new contact at
-        that row without ever reaching ``min_travel_rad`` from the flank it left (a same-flank torque change,
-        not a backlash entry).  Vectorised per stretch."""
+        left, contact sigma) and ("cancel", row): the excursion of the last entry ended in a new contact at that row
+        without ever reaching ``min_travel_rad`` from the flank it left (a same-flank torque change, not a backlash
+        entry).  Vectorised per stretch."""
         events = []
         i, n, L = 0, d.size, self.contact_samples
         if self._skip:                              # the rest of a spike that began in the previous rows
@@ -1618,44 +1646,49 @@ class FlankDetector(BacklashDetector):
         unsure = 0.5 * max(abs(d[g] - d[g - 1]), margin)
         if g + RETURN_REST_SAMPLES > d.size or np.any(depth[g:g + RETURN_REST_SAMPLES] > unsure):
             return          # no contact on the re-contact edge after it (a misread excursion: edges not trusted)
-        # a contact as the tracker takes it (contact_samples within contact_tolerance_rad) ending at each sample
-        L = self.contact_samples
-        steady = np.zeros(d.size, bool)
-        if d.size >= L:
-            steady[L - 1:] = np.ptp(np.lib.stride_tricks.sliding_window_view(d, L), axis=1) <= self.contact_tolerance_rad
+        steady, quantum = self._scan_profile(d, margin)
+        coarse, L = quantum > 0.0, self.contact_samples
         known = [c.start_row + c.departure_row for c in self._caps + self._new_caps]
         k, n, at_out, last_out = g + 1, d.size, True, g
         near = RETURN_TURN_SHARE * abs(span)
-        # a coarse encoder's delta (its smallest step, as _refine's, beyond FREE_MAX_NOISE_RAD sqrt 12: 2^13), where
-        # the traversal back's walk and coupling model are off and this scan's start is its entry (RETURN_TURN_SHARE)
-        steps = np.abs(np.diff(d))
-        steps = steps[(steps > 1e-9) & (steps < margin)]
-        coarse = bool(steps.size) and float(steps.min()) / math.sqrt(12.0) > FREE_MAX_NOISE_RAD
         rest = 0.0                                 # depth up to which delta rests at the re-contact edge
         deep, low, low_k = False, math.inf, -1     # this excursion: went beyond `near`; its least depth since then
+        peak = 0.0                                 # ... and its greatest depth
+        free_until = 0                             # a still run up to here was a turn the motor ran free through
         while k < n:
             if at_out:                             # resting at (or beyond) the re-contact edge
                 if depth[k] <= rest:
                     last_out = k
                 elif depth[k] > (margin if rest == 0.0 else rest) and to_in[k] > margin:
-                    at_out, deep, low = False, False, math.inf     # left it into the zone
+                    at_out, deep, low, peak = False, False, math.inf, 0.0     # left it into the zone
                 k += 1
                 continue
-            if depth[k] < -unsure or (steady[k] and depth[k] < 0.5 * abs(span)):
+            if steady[k] and depth[k] >= -unsure and depth[k] < 0.5 * abs(span) and coarse and k >= free_until \
+                    and self._turned_free(data, e0 + k - L // 2, quantum):
+                # the motor ran free through delta's still run (RETURN_FREE_TURN_*): a turn inside the zone, no contact
+                free_until = k + L
+            if depth[k] < -unsure or (steady[k] and depth[k] < 0.5 * abs(span) and k >= free_until):
                 # back beyond the re-contact edge, or a contact nearer to it than to the entry edge (the edge from
                 # the window's re-contact row may be a few mrad off: 5 mrad on the vector drive's 2^13 JointState
                 # recordings): a bounce
                 at_out, last_out, rest = True, k, 0.0
                 k += 1
                 continue
-            deep = deep or depth[k] > 2.0 * near
+            deep = deep or depth[k] > (RETURN_SHALLOW_TURN_SHARE if coarse else 2.0 * RETURN_TURN_SHARE) * abs(span)
+            peak = max(peak, float(depth[k]))
             if deep and depth[k] < low:
                 low, low_k = float(depth[k]), k
             if coarse and deep and low < near and depth[k] > low + margin:
+                if self._turned_free(data, e0 + low_k, quantum):
+                    # the motor ran free through the turn (the motor equation explains alpha1 across it): a turn
+                    # inside the zone, no contact; this excursion goes on (RETURN_FREE_TURN_*)
+                    deep, low, k = False, math.inf, k + 1
+                    continue
                 # back near the re-contact edge and leaving it again, shorter than a contact (RETURN_TURN_SHARE): a
                 # bounce; delta rests there until it leaves its turning depth by RETURN_REST_DEPARTURES departure
                 # thresholds, where a traversal back from it starts
-                at_out, rest = True, low + RETURN_REST_DEPARTURES * margin
+                rests = RETURN_REST_DEPARTURES if peak > 2.0 * near else RETURN_SHALLOW_REST_DEPARTURES
+                at_out, rest = True, low + rests * margin
                 last_out = low_k + int(np.nonzero(depth[low_k:k + 1] <= rest)[0][-1])
                 continue
             if to_in[k] > margin:
@@ -1673,6 +1706,34 @@ class FlankDetector(BacklashDetector):
                 continue                                # the contact rule found it already
             if self._open_return(cap, data, row, reached, float(edge_out)):
                 known.append(abs_row)
+
+    def _scan_profile(self, d: np.ndarray, margin: float) -> tuple:
+        """For :meth:`_scan_returns`: (whether a contact as the tracker takes it, contact_samples within
+        contact_tolerance_rad, ends at each sample; delta's quantum on a coarse encoder, else 0: its smallest step, as
+        _refine's, beyond FREE_MAX_NOISE_RAD sqrt 12 (2^13), where the traversal back's walk and coupling model are off
+        and the scan's start is its entry, RETURN_TURN_SHARE)."""
+        L = self.contact_samples
+        steady = np.zeros(d.size, bool)
+        if d.size >= L:
+            steady[L - 1:] = np.ptp(np.lib.stride_tricks.sliding_window_view(d, L), axis=1) <= self.contact_tolerance_rad
+        steps = np.abs(np.diff(d))
+        steps = steps[(steps > 1e-9) & (steps < margin)]
+        coarse = bool(steps.size) and float(steps.min()) / math.sqrt(12.0) > FREE_MAX_NOISE_RAD
+        return steady, float(steps.min()) if coarse else 0.0
+
+    def _turned_free(self, data: np.ndarray, row: int, quantum_rad: float) -> bool:
+        """Whether the motor ran free through a turn of delta at capture row ``row``: the motor equation in angle form
+        (alpha1 = a + v k + Phi / J + c k^2, :func:`_free_columns`) fitted over RETURN_FREE_TURN_HALF rows each side
+        leaves an rms within RETURN_FREE_TURN_RMS x ``quantum_rad`` / sqrt 12 (delta's smallest step: the encoder's).
+        False without m_el or rows enough (the turn is then taken for a bounce, as before)."""
+        a, z = row - RETURN_FREE_TURN_HALF, row + RETURN_FREE_TURN_HALF
+        if "m_el" not in self.channels or a < 0 or z > data.shape[0]:
+            return False
+        alpha1 = np.asarray(data[a:z, self._i_a1], float)
+        phi = _double_integral(data[a:z, self.channels.index("m_el")], self.sample_period_s)
+        rss, _ = _lstsq_rss(_free_columns(np.arange(a, z, dtype=float) - row, phi), alpha1 - alpha1[0])
+        rms = math.sqrt(rss / max(z - a - 4, 1))
+        return rms <= RETURN_FREE_TURN_RMS * quantum_rad / math.sqrt(12.0)
 
     def _open_return(self, cap: _FlankCapture, data: np.ndarray, row: int, reached: int, edge_out: float) -> bool:
         """A capture for the traversal back entering at capture row ``row`` of ``cap`` (reaching the entry edge at
@@ -1736,6 +1797,29 @@ class FlankDetector(BacklashDetector):
                                self.contact_tolerance_rad)
 
     def _refine(self, data: np.ndarray, dep: int):
+        """(samples from the departure to the entry sample, re-contact row or None): :meth:`_refine_from` the
+        departure moved on to where delta left its flank by COARSE_DEPARTURE_QUANTA counts (:meth:`_coarse_departure`)."""
+        moved = self._coarse_departure(data, dep)
+        shift, recontact = self._refine_from(data, moved)
+        return shift + moved - dep, recontact
+
+    def _coarse_departure(self, data: np.ndarray, dep: int) -> int:
+        """On a coarse encoder (delta's quantum / sqrt 12 beyond FREE_MAX_NOISE_RAD: its smallest step in the
+        UNTWIST_FIT_BEFORE rows before the departure, below the departure threshold, as :meth:`_untwist_move`), a
+        window's own departure whose threshold was below COARSE_DEPARTURE_QUANTA counts moves on to the first sample
+        beyond that many counts from the flank, within COARSE_DEPARTURE_SEARCH samples; else ``dep``."""
+        flank, thr = getattr(self, "_cap_flank", (math.nan, math.nan))
+        if getattr(self, "_cap_returning", False) or not math.isfinite(flank) or self.detector_name != "flank":
+            return dep
+        delta = self._delta(data)
+        quantum = _delta_quantum(delta, dep, self.angle_quantum_rad, max(dep - UNTWIST_FIT_BEFORE, 0), thr)
+        if not quantum / math.sqrt(12.0) > FREE_MAX_NOISE_RAD or thr >= COARSE_DEPARTURE_QUANTA * quantum:
+            return dep
+        beyond = np.nonzero(np.abs(delta[dep:dep + COARSE_DEPARTURE_SEARCH] - flank)
+                            > COARSE_DEPARTURE_QUANTA * quantum)[0]
+        return dep + int(beyond[0]) if beyond.size else dep
+
+    def _refine_from(self, data: np.ndarray, dep: int):
         """(samples from the departure to the entry sample, re-contact row or None) from the dynamics
         (:func:`single_mass_run`), (0, None) without m_el, a motor acceleration or J1_nom.  Without a1: first moved
         back to delta's free curvature when delta drifted off its flank before the departure (:func:`free_departure`;
