@@ -193,3 +193,7 @@ def test_jittered_instants_stamps_and_reported_units(step_down, monkeypatch):
     np.testing.assert_allclose(units["omega1"] * 60 / (2 * math.pi), np.round(units["omega1"] * 60 / (2 * math.pi)),
                                atol=1e-9)
     assert np.max(np.abs(units["m_el"] - base["m_el"])) <= q / 2 + 1e-9
+    rev = build(load_encoder_sign=-1.0)                                   # a load encoder counting the other way
+    np.testing.assert_array_equal(rev["omega2"], -base["omega2"])
+    d_base, d_rev = np.diff(base["alpha2"]), np.diff(rev["alpha2"])
+    assert np.max(np.abs(d_rev + d_base)) <= 2 * 2 * math.pi / 65536 + 1e-12 and np.abs(d_base).sum() > 0

@@ -65,7 +65,8 @@ SENSOR_VARIANTS = {"sampling jitter 25 µs": {"sample_jitter_s": 25e-6}, "sampli
                    "stamping jitter 50 µs": {"stamp_jitter_s": 50e-6},
                    "CiA 402 units": {"torque_quantum_rel_rated": 1e-3, "speed_quantum_rad_s": 2 * np.pi / 60},
                    "coarse torque": {"torque_quantum_rel_rated": 1e-2},
-                   "2^14 encoders": {"encoder_counts": 2 ** 14}, "2^20 encoders": {"encoder_counts": 2 ** 20}}
+                   "2^14 encoders": {"encoder_counts": 2 ** 14}, "2^20 encoders": {"encoder_counts": 2 ** 20},
+                   "load encoder reversed": {"load_encoder_sign": -1.0}}
 
 
 def system_for(name: str, p: DriveParams):
@@ -132,6 +133,7 @@ def variants() -> list:
         ("coarse torque", "the torque estimate in 1 % of rated (2.4 N m)", b, {}),
         ("2^14 encoders", "both encoders 16384 counts/rev (in place of 65536)", b, {}),
         ("2^20 encoders", "both encoders 1048576 counts/rev (in place of 65536)", b, {}),
+        ("load encoder reversed", "the load encoder counts the other way, diagnosed with gear_ratio -1", b, {}),
         ("small drive, 3:1 gear", "docs/your_drive.md's example: 2.2 kW, J1 0.03 kg m^2, J2 0.54 behind a 3:1 gear, "
          "K2 1.5 mm at r 0.03 m, its torque estimate 3-4 % off; diagnosed with its drive file "
          "(docs/examples/profiles/small_drive.yaml)", small_drive(), _declared_by_file("small drive, 3:1 gear")),
@@ -153,8 +155,9 @@ def generate(out: Path, log=print, names=None) -> dict:
                 sensors = vd_record.Sensors(**{"encoder_counts": counts, "snr_db": snr, **SENSOR_VARIANTS.get(name, {})})
                 counts = sensors.encoder_counts
                 r = vd_record.build(p, ev, "forward", sensors, seed=23, cache_dir=out / "cache")
-                recs.append((label, zoo.vector_recording(r, ev, "forward", p.mechanics.motor_inertia_kgm2, counts, snr,
-                                                         sub, (fmt,))))
+                zr = zoo.vector_recording(r, ev, "forward", p.mechanics.motor_inertia_kgm2, counts, snr, sub, (fmt,))
+                zr.gear_ratio *= sensors.load_encoder_sign        # what its user declares for a reversed encoder
+                recs.append((label, zr))
                 if time.perf_counter() - t0 > 2:
                     log(f"{name}: simulated {r.name} ({time.perf_counter() - t0:.0f} s)")
         got[name] = recs

@@ -56,6 +56,9 @@ class Sensors:
     #: 0x606C velocity actual value in rpm); applied after the noise
     torque_quantum_rel_rated: float = 0.0
     speed_quantum_rad_s: float = 0.0
+    #: -1: the load encoder counts the other way (a reversing gear stage, an encoder facing the motor's): alpha2 and
+    #: omega2 change sign (diagnosed with a negative gear_ratio)
+    load_encoder_sign: float = 1.0
 
 
 def _jittered(st: dict, jitter_s: float, seed: int) -> tuple:
@@ -179,8 +182,8 @@ def _sensed(st: dict, p, sensors: Sensors, seed: int) -> tuple:
     r = mech.reference_radius_m
     sig = {"t": stamps,
            "alpha1": encoder(st["theta_M"], o1, sensors.encoder_counts),
-           "alpha2": encoder(st["theta_L"], o2, sensors.encoder_counts),
-           "omega1": st["w_fbk"].copy(), "omega2": st["w_L_fbk"].copy(),
+           "alpha2": encoder(sensors.load_encoder_sign * st["theta_L"], o2, sensors.encoder_counts),
+           "omega1": st["w_fbk"].copy(), "omega2": sensors.load_encoder_sign * st["w_L_fbk"],
            "m_el": st["tau_est"].copy(), "a1": r * st["dw_M"]}
     if sensors.snr_db is not None:
         for k in NOISY_CHANNELS:
