@@ -45,6 +45,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from jident_ros.stream.detector import stream_batches
 from jident_ros.stream.layout import KNOWN_CHANNELS
 from jident_ros.stream.stamps import StampGrid
 
@@ -256,7 +257,7 @@ class JointStateAdapter:
             self.grid = StampGrid(self.sample_period_s, self.channels.index("alpha1") if "alpha1" in self.channels
                                    else None)
         rows = self.grid.feed(batch)
-        return [(rows[i:i + self.batch_size], self.channels) for i in range(0, rows.shape[0], self.batch_size)]
+        return [(b, self.channels) for b in stream_batches(rows, self.batch_size)]
 
     def flush(self) -> list:
         """The samples left (pending IMU matches given up): at most one short batch."""
@@ -465,7 +466,7 @@ class CsvStream:
         self.grid = StampGrid(sample_period_s, self.channels.index("alpha1") if "alpha1" in self.channels else None)
         for block in self.blocks():
             rows = self.grid.feed(block)
-            yield from (rows[i:i + batch_rows] for i in range(0, rows.shape[0], batch_rows))
+            yield from stream_batches(rows, batch_rows)
 
     def blocks(self):
         """The rows as arrays (n <= block_rows, channels); closes the file at the end."""
