@@ -45,8 +45,8 @@ def test_dynamics_detector_on_joint_states_without_a_load_encoder(node_env, libr
     windows = ros.collect(Float64MultiArray, "/dyn/drive/window", qos_latched(10))
     diags = ros.collect(DiagnosticArray, "/diagnostics", qos_diagnostics())
     est = ros.collect(Float64, "/dyn/inertia_estimate", qos_latched(10))
-    pub = ros.node.create_publisher(JointState, "/dyn/joint_states", qos_signals(5000))
-    pub_imu = ros.node.create_publisher(Imu, "/dyn/imu", qos_signals(5000))
+    pub = ros.node.create_publisher(JointState, "/dyn/joint_states", qos_signals(len(data) + 10))
+    pub_imu = ros.node.create_publisher(Imu, "/dyn/imu", qos_signals(len(data) + 10))
     ns = ["-r", "__ns:=/dyn"]
     diag = Proc(node_env, tmp_path, "diagnostic", *ns, "-p", f"pattern_library:={library}", "-p", "record:=false",
                 "-p", "stale_after_s:=0.0",

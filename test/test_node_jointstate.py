@@ -32,7 +32,9 @@ def test_joint_states_input_windows_and_j1(node_env, library, ros, procs, tmp_pa
     col = {c: i for i, c in enumerate(DEFAULT_CHANNELS)}
     diags = ros.collect(DiagnosticArray, "/diagnostics", qos_diagnostics())
     est = ros.collect(Float64, "/js/inertia_estimate", qos_latched(10))
-    pub = ros.node.create_publisher(JointState, "/js/joint_states", qos_signals(1000))
+    # the writer keeps every message until acknowledged: a reliable KEEP_LAST writer whose history is shorter than
+    # the burst overwrites what a busy subscriber has not taken yet (CI lost 5 messages that way at t = 1.2 s)
+    pub = ros.node.create_publisher(JointState, "/js/joint_states", qos_signals(len(stream) + 10))
     ns = ["-r", "__ns:=/js"]
     diag = Proc(node_env, tmp_path, "diagnostic", *ns, "-p", f"pattern_library:={library}", "-p", "record:=false",
                 "-p", "stale_after_s:=0.0")
