@@ -1009,3 +1009,34 @@ def test_on_a_fine_encoder_the_angle_models_rms_gates_count_from_their_model_flo
     monkeypatch.setattr(flank, "ANGLE_MODEL_FLOOR_RAD", 0.0)
     assert det._free_departure_entry(data, dep) - true > 20
     assert det_b._angle_walk_entry(data_b, dep_b) - true_b > 10
+
+
+@pytest.mark.parametrize("key, old", [("clean", 13), ("noisy", 14)])
+def test_without_a1_the_ramp_model_s_ties_are_broken_by_delta_s_untwist(key, old, monkeypatch):
+    """The DOL drive's light load reversals on 2^16 encoders without a1 (test/data/dol_light_reversal_jointstate.npz:
+    J1 1.16, forward clean and reverse at 30 dB; the detector's captures up to 64 rows after the departure, 13-14
+    samples after the contact loss).  Its coupling torque does not fall linearly, and alpha1 fixes only the torque's
+    mean time of fall: the ramp's end e and its length trade off along a valley of equal fits (-7 ... -1 within 2 %),
+    the best at -1 with a gain of 1.84-1.97 over the departure, below the old gate 2: the departure stayed.  Among the
+    candidates alpha1 cannot tell apart (RAMP_TIE_VARIANCES) the one whose untwist model (a hinge at s, the free
+    parabola from e) explains delta best, and the gate at RAMP_MIN_GAIN = 1.5 (the light load reversals >= 1.76, every
+    other event <= 1.25 on the zoo, the DOL zoo and the variants), put both within 1 sample (old code: +13, +14)."""
+    from pathlib import Path
+
+    import jident_ros.stream.flank as flank
+    d = np.load(Path(__file__).parent / "data" / "dol_light_reversal_jointstate.npz")
+    a1, a2 = d[f"{key}_alpha1"], d[f"{key}_alpha2"]
+    data = np.column_stack([np.arange(a1.size) * 5e-4, a1, a2, d[f"{key}_m_el"].astype(float)])
+    dep, true, level, thr, sigma = d[f"{key}_meta"]
+    dep, true = int(dep), int(true)
+    e, gain, scale = flank.ramp_entry(a1, data[:, 3], dep, 1.16, 5e-4, a1 - a2)
+    assert abs(e - true) <= 1 and gain >= flank.RAMP_MIN_GAIN, (e - true, gain)
+    assert abs(scale - 1) <= flank.RAMP_MAX_SCALE_DEVIATION
+    det = _variant_detector(float(level), float(thr), float(sigma), False, 65536)
+    shift, _ = det._refine(data, dep)
+    assert abs(dep + shift - true) <= 1, (dep + shift - true, old)
+    monkeypatch.setattr(flank, "RAMP_JOINT", False)         # alpha1's best alone: -1 at a gain below 2
+    e1, gain1, _ = flank.ramp_entry(a1, data[:, 3], dep, 1.16, 5e-4)
+    assert gain1 < 2.0
+    monkeypatch.setattr(flank, "RAMP_MIN_GAIN", 2.0)
+    assert det._refine(data, dep)[0] + dep - true == old

@@ -917,19 +917,34 @@ RAMP_SEARCH = 48
 RAMP_MAX_SAMPLES = 60
 #: ... taken, for a window's own entry on a fine encoder, when it lies SPRING_MIN_MOVE or more before the departure,
 #: explains alpha1 RAMP_MIN_GAIN times better than the best fit with e at the departure and T0 lies within
-#: RAMP_MAX_SCALE_DEVIATION of the steady m_el before the ramp (the values of the damped spring's gates, DAMPED_*,
-#: not tuned again).  Gains on the vector drive (the base model, where it was checked): light load reversals 5.5-6.2
-#: (0/-1 -> -1/+1), heavy ones 1.4-1.6, speed steps and reversals 1.0-1.1 (not taken: a fast departure's ramp is no
-#: better than a kink there)
-RAMP_MIN_GAIN = 2.0
+#: RAMP_MAX_SCALE_DEVIATION of the steady m_el before the ramp (the damped spring's DAMPED_MAX_SCALE_DEVIATION).
+#: Gains at the candidate taken (RAMP_JOINT): the light load reversals >= 1.76 (the DOL drive's 1.84-2.5, the vector
+#: drive's light load variant 1.76/1.82, the others 2.2-32), every other event <= 1.25 (speed steps and reversals,
+#: slip events, heavy load reversals; the stiff coupling's heavy ones 13-20, taken before as now) over the zoo, the DOL
+#: zoo and the variants' captures on 2^16 -- chosen on the DOL zoo, checked on the others (until the eighth round 2.0,
+#: the damped spring's DAMPED_MIN_GAIN: the DOL drive's J1 1.16 light reversals, 1.84-1.97, stayed 13-14 samples late)
+RAMP_MIN_GAIN = 1.5
 RAMP_MAX_SCALE_DEVIATION = 0.2
+#: alpha1 fixes the coupling torque's mean time of fall better than where it ends: along a valley of the RSS the ramp's
+#: end e and its length trade off (the DOL drive's light load reversals, whose coupling torque falls faster towards the
+#: contact loss than a line: -7 ... -1 within 2 % of RSS, J1_nom 8 % above the drive's J1 moved the best to -3/-4).
+#: With RAMP_JOINT, among the candidates whose alpha1 RSS lies within RAMP_TIE_VARIANCES residual variances of the best
+#: (RSS <= best (1 + RAMP_TIE_VARIANCES / (n - 5)), the 63 % profile-likelihood region of (s, e)), the one whose
+#: untwist model of delta (:func:`untwist_entry`'s: at rest, a hinge at s, the free parabola from e) fits best is taken:
+#: the DOL drive's light reversals on 2^16 -7 ... +14 -> -4 ... -1.  A joint sum of both RSS instead pulled the
+#: vector drive's stiff coupling and slow speed loop 5-9 samples late (their relative acceleration grows from zero
+#: after the contact loss, no parabola); a set of 6 variances (the 95 % region) put the fast speed loop's at -4 and
+#: the DOL drive's all within 2, of 4 the fast loop's -3 and one DOL 30 dB -3: 2 was chosen on both
+RAMP_JOINT = True
+RAMP_TIE_VARIANCES = 2.0
 
 
 def ramp_entry(alpha1: np.ndarray, m_el: np.ndarray, departure: int, inertia_kgm2: float,
-               sample_period_s: float) -> tuple:
+               sample_period_s: float, delta: Optional[np.ndarray] = None) -> tuple:
     """(e, gain, scale) of :data:`RAMP_MIN_GAIN`'s model around ``departure``: the contact loss e of the best fit, the
     gain RSS(best with e = departure) / RSS(best) and T0 / the median m_el over the first 20 fitted rows;
-    (``departure``, 1.0, nan) when the rows are not there."""
+    (``departure``, 1.0, nan) when the rows are not there.  With ``delta`` the RSS is the joint one of alpha1's and
+    delta's models with the same s and e (:data:`RAMP_JOINT`)."""
     lo, hi = departure - RAMP_SEARCH - RAMP_FIT_BEFORE, departure + RAMP_FIT_AFTER
     if lo < 0 or hi > alpha1.size:
         return departure, 1.0, math.nan
@@ -961,9 +976,38 @@ def ramp_entry(alpha1: np.ndarray, m_el: np.ndarray, departure: int, inertia_kgm
     at_dep = float(np.min(gain_rss[e == departure]))
     if not (np.isfinite(gain_rss[best]) and gain_rss[best] > 0):
         return departure, 1.0, math.nan
+    if delta is not None:
+        # among the candidates alpha1 cannot tell from its best (RSS within RAMP_TIE_VARIANCES residual variances of
+        # it), the one whose untwist model explains delta best
+        tie = gain_rss <= gain_rss[best] * (1.0 + RAMP_TIE_VARIANCES / max(y.size - 5, 1))
+        rd = _untwist_rss(np.asarray(delta[lo:hi], float), k, c, es, ie, is_)
+        if np.any(tie & np.isfinite(rd)):
+            best = int(np.argmin(np.where(tie, rd, np.inf)))
     t0 = -float(zy[best] / zz[best]) * inertia_kgm2                 # alpha1 carries -T0 Phi(shape) / J
     steady = float(np.median(m_el[lo:lo + 20]))
     return int(e[best]), at_dep / float(gain_rss[best]), (t0 / steady if steady != 0 else math.nan)
+
+
+def _untwist_rss(d: np.ndarray, k: np.ndarray, c: np.ndarray, es: np.ndarray, i_e: np.ndarray,
+                 i_s: np.ndarray) -> np.ndarray:
+    """RSS of delta = F + v (k - s)_+ + a (k - e)_+^2 (:func:`untwist_entry`'s model) over the rows ``k`` for every
+    candidate pair (s, e) = (c[i_s], c[i_e]), e in ``es``: from the Gram sums of the hinges (k - c)_+ and the
+    parabolas (k - e)_+^2, centred (F free)."""
+    scale = float(max(k[-1] - k[0], 1.0))
+    h = np.clip(k[None, :] - c[:, None], 0.0, None) / scale
+    p = np.clip(k[None, :] - es[:, None], 0.0, None) ** 2 / scale ** 2
+    h -= h.mean(axis=1, keepdims=True)
+    p -= p.mean(axis=1, keepdims=True)
+    y = d - d.mean()
+    j = i_e - (es[0] - c[0])                                        # parabola rows of e
+    a11, a22 = np.einsum("ij,ij->i", h, h)[i_s], np.einsum("ij,ij->i", p, p)[j]
+    a12 = (h @ p.T)[i_s, j]
+    b1, b2 = (h @ y)[i_s], (p @ y)[j]
+    det = a11 * a22 - a12 * a12
+    ok = det > 1e-12 * a11 * a22
+    fit = (a22 * b1 * b1 - 2.0 * a12 * b1 * b2 + a11 * b2 * b2) / np.where(ok, det, 1.0)
+    return np.where(ok, float(y @ y) - fit, np.inf)
+
 
 def _noise(x: np.ndarray) -> float:
     """White-noise standard deviation of a steady stretch, robust to a few samples of a starting transient
@@ -2012,7 +2056,8 @@ class FlankDetector(BacklashDetector):
         if not quantum / math.sqrt(12.0) <= FREE_MAX_NOISE_RAD:
             return None
         e, gain, scale = ramp_entry(data[:, self._i_a1], data[:, self.channels.index("m_el")], departure,
-                                    self.nominal_inertia_kgm2, self.sample_period_s)
+                                    self.nominal_inertia_kgm2, self.sample_period_s,
+                                    self._delta(data) if RAMP_JOINT else None)
         if e <= departure - SPRING_MIN_MOVE and gain >= RAMP_MIN_GAIN \
                 and abs(scale - 1.0) <= RAMP_MAX_SCALE_DEVIATION:
             return e
