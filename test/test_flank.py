@@ -1017,26 +1017,60 @@ def test_without_a1_the_ramp_model_s_ties_are_broken_by_delta_s_untwist(key, old
     J1 1.16, forward clean and reverse at 30 dB; the detector's captures up to 64 rows after the departure, 13-14
     samples after the contact loss).  Its coupling torque does not fall linearly, and alpha1 fixes only the torque's
     mean time of fall: the ramp's end e and its length trade off along a valley of equal fits (-7 ... -1 within 2 %),
-    the best at -1 with a gain of 1.84-1.97 over the departure, below the old gate 2: the departure stayed.  Among the
+    the best at -1 with a gain of 1.84-1.97 over the departure, below RAMP_MIN_GAIN: the departure stayed.  Among the
     candidates alpha1 cannot tell apart (RAMP_TIE_VARIANCES) the one whose untwist model (a hinge at s, the free
-    parabola from e) explains delta best, and the gate at RAMP_MIN_GAIN = 1.5 (the light load reversals >= 1.76, every
-    other event <= 1.25 on the zoo, the DOL zoo and the variants), put both within 1 sample (old code: +13, +14)."""
-    from pathlib import Path
-
+    parabola from e) explains delta best; a gain >= RAMP_TIED_MIN_GAIN on alpha1 with a joint gain >= RAMP_MIN_GAIN
+    (5.6-5.8 here) is taken: both within 1 sample (old code: +13, +14)."""
     import jident_ros.stream.flank as flank
+    data, dep, true, level, thr, sigma = _dol_cut(key)
+    a1, a2 = data[:, 1], data[:, 2]
+    e, gain, scale, both = flank.ramp_entry(a1, data[:, 3], dep, 1.16, 5e-4, a1 - a2, True)
+    assert abs(e - true) <= 1 and flank.RAMP_TIED_MIN_GAIN <= gain < flank.RAMP_MIN_GAIN <= both, (e - true, gain)
+    assert abs(scale - 1) <= flank.RAMP_MAX_SCALE_DEVIATION
+    det = _variant_detector(level, thr, sigma, False, 65536)
+    shift, _ = det._refine(data, dep)
+    assert abs(dep + shift - true) <= 1, (dep + shift - true, old)
+    monkeypatch.setattr(flank, "RAMP_TIED_MIN_GAIN", flank.RAMP_MIN_GAIN)     # the old gate: the departure stays
+    assert det._refine(data, dep)[0] + dep - true == old
+
+
+def _dol_cut(key: str):
+    """A cut of test/data/dol_light_reversal_jointstate.npz (rows t, alpha1, alpha2, m_el; departure row, true first
+    row in the zone, flank level, departure threshold, contact sigma)."""
+    from pathlib import Path
     d = np.load(Path(__file__).parent / "data" / "dol_light_reversal_jointstate.npz")
     a1, a2 = d[f"{key}_alpha1"], d[f"{key}_alpha2"]
     data = np.column_stack([np.arange(a1.size) * 5e-4, a1, a2, d[f"{key}_m_el"].astype(float)])
     dep, true, level, thr, sigma = d[f"{key}_meta"]
-    dep, true = int(dep), int(true)
-    e, gain, scale = flank.ramp_entry(a1, data[:, 3], dep, 1.16, 5e-4, a1 - a2)
-    assert abs(e - true) <= 1 and gain >= flank.RAMP_MIN_GAIN, (e - true, gain)
-    assert abs(scale - 1) <= flank.RAMP_MAX_SCALE_DEVIATION
-    det = _variant_detector(float(level), float(thr), float(sigma), False, 65536)
+    return data, int(dep), int(true), float(level), float(thr), float(sigma)
+
+
+def test_on_a_coarse_encoder_the_ramp_model_is_taken_when_alpha1_and_delta_agree(monkeypatch):
+    """The DOL drive's light load reversal at 30 dB on 2^13 encoders without a1 (key 'coarse'): the coupling untwists
+    less than a count, the coarse-encoder rule (untwist_entry) left it 19 samples late.  alpha1 alone cannot place the
+    ramp there (its gains 1.0-1.14), but with delta's untwist on the same s and e the joint RSS falls by a factor
+    >= RAMP_COARSE_MIN_JOINT_GAIN (the DOL drive's 2^13 light reversals 1.23-1.42, the vector drive's 1.35-1.63; every
+    other event of the zoo and the DOL zoo <= 1.22): within 2 samples (old code, or the rule off: +19)."""
+    import jident_ros.stream.flank as flank
+    data, dep, true, level, thr, sigma = _dol_cut("coarse")
+    det = _variant_detector(level, thr, sigma, False, 8192)
     shift, _ = det._refine(data, dep)
-    assert abs(dep + shift - true) <= 1, (dep + shift - true, old)
-    monkeypatch.setattr(flank, "RAMP_JOINT", False)         # alpha1's best alone: -1 at a gain below 2
-    e1, gain1, _ = flank.ramp_entry(a1, data[:, 3], dep, 1.16, 5e-4)
-    assert gain1 < 2.0
-    monkeypatch.setattr(flank, "RAMP_MIN_GAIN", 2.0)
-    assert det._refine(data, dep)[0] + dep - true == old
+    assert abs(dep + shift - true) <= 2, dep + shift - true
+    monkeypatch.setattr(flank, "RAMP_COARSE_MIN_JOINT_GAIN", 0.0)
+    assert det._refine(data, dep)[0] + dep - true == 19
+
+
+def test_a_ramp_alpha1_alone_explains_below_the_old_gate_needs_delta_s_agreement(monkeypatch):
+    """The DOL slip sweep's stiff coupling, slip reversal at 30 dB, J1 1.073 (key 'slip'): the contact is lost at once,
+    the departure lies 1 sample after it.  The ramp model's best, 5 samples before the departure, explains alpha1
+    1.77 times better (above RAMP_TIED_MIN_GAIN) but delta's untwist does not support it (joint gain 1.30 <
+    RAMP_MIN_GAIN): not taken (with the gate at 1.5 on alpha1 alone: -4)."""
+    import jident_ros.stream.flank as flank
+    data, dep, true, level, thr, sigma = _dol_cut("slip")
+    e, gain, scale, both = flank.ramp_entry(data[:, 1], data[:, 3], dep, 1.16, 5e-4, data[:, 1] - data[:, 2], True)
+    assert flank.RAMP_TIED_MIN_GAIN <= gain < flank.RAMP_MIN_GAIN and both < flank.RAMP_MIN_GAIN, (gain, both)
+    det = _variant_detector(level, thr, sigma, False, 65536)
+    shift, _ = det._refine(data, dep)
+    assert abs(dep + shift - true) <= 2, dep + shift - true
+    monkeypatch.setattr(flank, "RAMP_MIN_GAIN", flank.RAMP_TIED_MIN_GAIN)
+    assert det._refine(data, dep)[0] + dep - true == e - true == -4

@@ -917,17 +917,21 @@ RAMP_SEARCH = 48
 RAMP_MAX_SAMPLES = 60
 #: ... taken, for a window's own entry on a fine encoder, when it lies SPRING_MIN_MOVE or more before the departure,
 #: explains alpha1 RAMP_MIN_GAIN times better than the best fit with e at the departure and T0 lies within
-#: RAMP_MAX_SCALE_DEVIATION of the steady m_el before the ramp (the damped spring's DAMPED_MAX_SCALE_DEVIATION).
-#: Gains at the candidate taken (RAMP_JOINT): the light load reversals >= 1.76 (the DOL drive's 1.84-2.5, the vector
-#: drive's light load variant 1.76/1.82, the others 2.2-32), every other event <= 1.25 (speed steps and reversals,
-#: slip events, heavy load reversals; the stiff coupling's heavy ones 13-20, taken before as now) over the zoo, the DOL
-#: zoo and the variants' captures on 2^16 -- chosen on the DOL zoo, checked on the others (until the eighth round 2.0,
-#: the damped spring's DAMPED_MIN_GAIN: the DOL drive's J1 1.16 light reversals, 1.84-1.97, stayed 13-14 samples late)
-RAMP_MIN_GAIN = 1.5
+#: RAMP_MAX_SCALE_DEVIATION of the steady m_el before the ramp (the values of the damped spring's gates, DAMPED_*,
+#: not tuned again).  Gains on the vector drive (the base model, where it was checked): light load reversals 5.5-6.2
+#: (0/-1 -> -1/+1), heavy ones 1.4-1.6, speed steps and reversals 1.0-1.1 (not taken: a fast departure's ramp is no
+#: better than a kink there).  Also taken at a gain >= RAMP_TIED_MIN_GAIN when delta's untwist agrees: the joint RSS
+#: of alpha1's and delta's models (RAMP_JOINT) falls RAMP_MIN_GAIN times or more from the departure to e (the DOL
+#: drive's J1 1.16 light load reversals: alpha1 1.84-1.97, joint 5.6-5.8, 13-14 samples late before; the vector
+#: drive's light load variant 1.76/1.82, joint 6.1/7.7; the DOL slip sweep's stiff coupling slip reversal at 30 dB
+#: alpha1 1.77 but joint 1.30: not taken, it would go from +2 to -4; every other event of the zoo, the DOL zoo and the
+#: variants on 2^16 <= 1.25 on alpha1) -- RAMP_TIED_MIN_GAIN chosen on the DOL zoo, checked on the others
+RAMP_MIN_GAIN = 2.0
+RAMP_TIED_MIN_GAIN = 1.5
 RAMP_MAX_SCALE_DEVIATION = 0.2
 #: alpha1 fixes the coupling torque's mean time of fall better than where it ends: along a valley of the RSS the ramp's
 #: end e and its length trade off (the DOL drive's light load reversals, whose coupling torque falls faster towards the
-#: contact loss than a line: -7 ... -1 within 2 % of RSS, J1_nom 8 % above the drive's J1 moved the best to -3/-4).
+#: contact loss than a line: -7 ... -1 within 2 % of RSS; J1_nom 8 % above the drive's J1 moved the best to -3/-4).
 #: With RAMP_JOINT, among the candidates whose alpha1 RSS lies within RAMP_TIE_VARIANCES residual variances of the best
 #: (RSS <= best (1 + RAMP_TIE_VARIANCES / (n - 5)), the 63 % profile-likelihood region of (s, e)), the one whose
 #: untwist model of delta (:func:`untwist_entry`'s: at rest, a hinge at s, the free parabola from e) fits best is taken:
@@ -937,17 +941,26 @@ RAMP_MAX_SCALE_DEVIATION = 0.2
 #: the DOL drive's all within 2, of 4 the fast loop's -3 and one DOL 30 dB -3: 2 was chosen on both
 RAMP_JOINT = True
 RAMP_TIE_VARIANCES = 2.0
+#: On a coarse encoder (delta's quantum / sqrt 12 beyond FREE_MAX_NOISE_RAD: 2^13) alpha1 alone does not place the ramp
+#: (the DOL drive's 2^13 light load reversals: gains 1.0-1.14, as every other event's); the joint RSS of alpha1's and
+#: delta's models does: taken when it falls RAMP_COARSE_MIN_JOINT_GAIN times or more from the departure to e (the DOL
+#: drive's 2^13 light reversals 1.23-1.42, +4 ... +19 -> -2 ... +3; its slip events and heavy reversals <= 1.05;
+#: chosen there) -- tested on the zoo: the vector drive's 2^13 light reversals 1.35-1.63 (+2 ... +16 -> +1 ... +3), its
+#: speed reversals 1.11-1.22, speed steps <= 1.12, heavy reversals 1.00, the second drive's speed steps <= 1.09, ours'
+#: slips <= 1.04; 0 (off) is the rule before the eighth round
+RAMP_COARSE_MIN_JOINT_GAIN = 1.25
 
 
 def ramp_entry(alpha1: np.ndarray, m_el: np.ndarray, departure: int, inertia_kgm2: float,
-               sample_period_s: float, delta: Optional[np.ndarray] = None) -> tuple:
+               sample_period_s: float, delta: Optional[np.ndarray] = None, joint_gain: bool = False) -> tuple:
     """(e, gain, scale) of :data:`RAMP_MIN_GAIN`'s model around ``departure``: the contact loss e of the best fit, the
     gain RSS(best with e = departure) / RSS(best) and T0 / the median m_el over the first 20 fitted rows;
     (``departure``, 1.0, nan) when the rows are not there.  With ``delta`` the RSS is the joint one of alpha1's and
-    delta's models with the same s and e (:data:`RAMP_JOINT`)."""
+    delta's models with the same s and e (:data:`RAMP_JOINT`); ``joint_gain``: a fourth value, the gain of the sum of
+    both RSS (at the departure's best / at e; 1.0 without ``delta``)."""
     lo, hi = departure - RAMP_SEARCH - RAMP_FIT_BEFORE, departure + RAMP_FIT_AFTER
     if lo < 0 or hi > alpha1.size:
-        return departure, 1.0, math.nan
+        return (departure, 1.0, math.nan) + ((1.0,) if joint_gain else ())
     k = np.arange(lo, hi, dtype=float)
     x = (k - departure) / RAMP_FIT_AFTER
     Q, _ = np.linalg.qr(np.column_stack([np.ones_like(x), x, x * x]))
@@ -975,7 +988,7 @@ def ramp_entry(alpha1: np.ndarray, m_el: np.ndarray, departure: int, inertia_kgm
     best = int(np.argmin(gain_rss))
     at_dep = float(np.min(gain_rss[e == departure]))
     if not (np.isfinite(gain_rss[best]) and gain_rss[best] > 0):
-        return departure, 1.0, math.nan
+        return (departure, 1.0, math.nan) + ((1.0,) if joint_gain else ())
     if delta is not None:
         # among the candidates alpha1 cannot tell from its best (RSS within RAMP_TIE_VARIANCES residual variances of
         # it), the one whose untwist model explains delta best
@@ -985,7 +998,11 @@ def ramp_entry(alpha1: np.ndarray, m_el: np.ndarray, departure: int, inertia_kgm
             best = int(np.argmin(np.where(tie, rd, np.inf)))
     t0 = -float(zy[best] / zz[best]) * inertia_kgm2                 # alpha1 carries -T0 Phi(shape) / J
     steady = float(np.median(m_el[lo:lo + 20]))
-    return int(e[best]), at_dep / float(gain_rss[best]), (t0 / steady if steady != 0 else math.nan)
+    got = int(e[best]), at_dep / float(gain_rss[best]), (t0 / steady if steady != 0 else math.nan)
+    if not joint_gain:
+        return got
+    both = gain_rss + rd if delta is not None else gain_rss
+    return got + (float(np.min(both[e == departure]) / both[best]) if both[best] > 0 else 1.0,)
 
 
 def _untwist_rss(d: np.ndarray, k: np.ndarray, c: np.ndarray, es: np.ndarray, i_e: np.ndarray,
@@ -2053,13 +2070,15 @@ class FlankDetector(BacklashDetector):
             return None
         quantum = _delta_quantum(self._delta(data), departure, self.angle_quantum_rad,
                                  max(departure - UNTWIST_FIT_BEFORE, 0), self.min_departure_rad)
-        if not quantum / math.sqrt(12.0) <= FREE_MAX_NOISE_RAD:
+        coarse = not quantum / math.sqrt(12.0) <= FREE_MAX_NOISE_RAD
+        if coarse and not RAMP_COARSE_MIN_JOINT_GAIN:
             return None
-        e, gain, scale = ramp_entry(data[:, self._i_a1], data[:, self.channels.index("m_el")], departure,
-                                    self.nominal_inertia_kgm2, self.sample_period_s,
-                                    self._delta(data) if RAMP_JOINT else None)
-        if e <= departure - SPRING_MIN_MOVE and gain >= RAMP_MIN_GAIN \
-                and abs(scale - 1.0) <= RAMP_MAX_SCALE_DEVIATION:
+        e, gain, scale, both = ramp_entry(data[:, self._i_a1], data[:, self.channels.index("m_el")], departure,
+                                          self.nominal_inertia_kgm2, self.sample_period_s,
+                                          self._delta(data) if RAMP_JOINT or coarse else None, joint_gain=True)
+        clear = both >= RAMP_COARSE_MIN_JOINT_GAIN if coarse else \
+            gain >= RAMP_MIN_GAIN or (gain >= RAMP_TIED_MIN_GAIN and both >= RAMP_MIN_GAIN)
+        if e <= departure - SPRING_MIN_MOVE and clear and abs(scale - 1.0) <= RAMP_MAX_SCALE_DEVIATION:
             return e
         return None
 
