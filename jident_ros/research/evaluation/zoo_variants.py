@@ -215,6 +215,11 @@ def markdown(res: dict, command: str, commit: str) -> str:
               f"10 % off**; the 95 % interval covers {tot['cov']}/{tot['with']} "
               f"({zoo._pct(tot['cov'], tot['with'])}); another class named {tot['wrong']}, 'between classes' "
               f"{tot['between']}; false entries {tot['false']}.", ""]
+    periods = {n: p.sample_period_s for n, _, p, _ in variants() if n in RATE_VARIANTS and n in res["rows"]}
+    if periods:     # the entry within +-1 ms: +-2 samples at 2 kHz, the same time at the other rates
+        lines += ["Entry within ±1 ms of the contact loss (±2 samples at 2 kHz) at the other rates: " + "; ".join(
+            f"{n} {sum(1 for o in res['rows'][n].get('offsets', []) if abs(o) * ts <= 1e-3 + 1e-12)}/"
+            f"{len(res['rows'][n].get('offsets', []))}" for n, ts in periods.items()) + ".", ""]
     return "\n".join(lines) + "\n"
 
 
