@@ -468,9 +468,14 @@ def back_to_load(m_el: np.ndarray, acc: np.ndarray, entry: int, first: int, iner
 
     k = entry
     first = max(int(first), block)
+    # the block spans BACK_BLOCK samples at 2 kHz; its limit is a mean's over at most BACK_BLOCK samples: the
+    # residual's model error (J at its seed, the offset fitted over the gap) does not average down with more samples
+    # per block (the vector drive's light load reversal with a1 at 4 kHz stopped 34 samples late with sqrt(2 BACK_BLOCK)),
+    # a block of fewer samples (1 kHz: 2) has the larger noise of its mean
+    root = math.sqrt(min(block, BACK_BLOCK))
     while k > first:
         blk = slice(k - block, k)
-        lim = max(BACK_Z * sigma / math.sqrt(block), rel_tol * float(np.mean(np.abs(m_el[blk]))))
+        lim = max(BACK_Z * sigma / root, rel_tol * float(np.mean(np.abs(m_el[blk]))))
         if abs(float(np.mean(res[blk]))) > lim:
             return k
         k -= 1
