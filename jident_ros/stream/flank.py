@@ -85,6 +85,11 @@ bounce, a slip's excursion, a traversal back) keep the acceleration's row.
 Same batch API, events and drop reasons as :class:`~jident_ros.stream.detector.BacklashDetector` (which it
 extends), so the windowing node and ``jident diagnose`` take either.  The result does not depend on how a
 stream is cut into batches (tested).
+
+Every sample count below that is a duration (the module constants, ``contact_samples``, ``refine_samples``) is
+given in samples at 2 kHz, where it was chosen, and converted to the detector's ``sample_period_s``
+(:mod:`jident_ros.stream.rate`: identical at 0.5 ms); noise quanta, shares, factors and counts of rounds stay as they
+are.
 """
 from __future__ import annotations
 

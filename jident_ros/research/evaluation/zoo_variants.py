@@ -56,7 +56,8 @@ DRIVE_FILES = {"small drive, 3:1 gear": Path(__file__).resolve().parents[3] / "d
 
 #: Variants recorded at another rate (their DriveParams.sample_period_s), diagnosed with that sample period and a
 #: window of the same length in time (1 s from the entry), the 48 samples before it kept (docs/your_drive.md): the
-#: detector's and the gap stage's constants that count samples were chosen at 2 kHz.
+#: constants that count samples were chosen at 2 kHz; the detectors' are durations converted to the sample period
+#: (jident_ros/stream/rate.py), the gap stage's are not.
 RATE_VARIANTS = ("recorded at 1 kHz", "recorded at 4 kHz")
 
 
