@@ -444,3 +444,28 @@ def test_a1_vetoes_a_steady_entry_that_still_carries_a_contact_torque():
     assert steady_entry_contact({"a1": exact, "m_el": np.full(n, 150.0)}, off, 0.0, r, GapModel()) is None
     assert steady_entry_contact({"a1": exact, "m_el": np.full(n, 150.0)}, replace(off, inertia_kgm2=1.05 * j1), 0.0, r,
                                 GapModel()) is not None      # 5 % off: ten of its standard errors
+
+
+def test_a_gap_the_encoder_does_not_resolve_is_refused_naming_the_counts():
+    """gap.encoder_resolved: a quantised alpha1 whose gap torque curves it by fewer than MIN_CURVATURE_COUNTS counts
+    over the fitted rows is refused as 'gap fit undetermined' (a resolution reason), with the count; the same rows
+    with 10x the torque (10 counts) pass; an unquantised angle is left to the fit's own noise."""
+    from jident_ros.identify.gap import MIN_CURVATURE_COUNTS, encoder_resolved, resolution_limited
+    ts, j1, n = 5e-4, 1.16, 40
+    q = 2 * np.pi / 8192
+    t = np.arange(n) * ts
+    for torque, refused in ((20.0, True), (200.0, False)):
+        # the displacement over the 20 fitted rows: 0.5 (torque / J1) (19 ts)^2, in counts
+        counts = 0.5 * torque / j1 * (19 * ts) ** 2 / q
+        assert (counts < MIN_CURVATURE_COUNTS) == refused, counts
+        alpha = 3.0 + 50.0 * t + 0.5 * torque / j1 * t * t
+        quantised = np.round(alpha / q) * q
+        m = np.full(n, torque)
+        if refused:
+            with pytest.raises(NoGapError) as err:
+                encoder_resolved(quantised, m, (20, 40), j1, ts)
+            msg = str(err.value)
+            assert resolution_limited(msg) and f"{counts:.2g} encoder counts over its 20 rows" in msg, msg
+        else:
+            encoder_resolved(quantised, m, (20, 40), j1, ts)
+        encoder_resolved(alpha, m, (20, 40), j1, ts)          # continuous: no count, no refusal
