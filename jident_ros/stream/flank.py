@@ -337,6 +337,12 @@ def single_mass_run(m_el: np.ndarray, acc: np.ndarray, departure: int, inertia_s
     pre = slice(lo, max(departure - 1, lo + 2))
     lag = samples(1, sample_period_s)      # differences over 0.5 ms: the filtered acceleration's correlation as at 2 kHz
     sm, sa = _noise(m_el[pre], lag), _noise(acc[pre], lag)
+    # the run's end (2 samples outside the tolerance) and least length (3) are durations at 2 kHz: the acceleration
+    # from alpha1 is filtered over the same time at any rate, its excursions span as many ms (at 4 kHz two samples
+    # outside ended the second drive's 2^13 runs 1.75 ms early, the re-contact row with them, and its traversals back
+    # were scanned from a wrong edge: 60-70 ms late).  Its start stays 3 samples within the tolerance, the earliest
+    # the run can be seen (3 samples at 8 kHz put the vector drive's heavy load reversal at +1, 12 at +19)
+    n_ok, n_bad, n_min = 3, samples(2, sample_period_s, 2), samples(3, sample_period_s)
     pre_load = abs(float(np.median(m_el[pre])))      # the steady torque before the departure, N m
     j = float(inertia_seed_kgm2)
     c = 0.0
@@ -347,15 +353,16 @@ def single_mass_run(m_el: np.ndarray, acc: np.ndarray, departure: int, inertia_s
         res = np.abs(m_el[departure:stop] - j * acc[departure:stop] - c)
         tol = np.maximum(k_sigma * math.hypot(sm, j * sa), tol_rel * np.abs(m_el[departure:stop]))
         ok = res <= tol
-        run3 = ok[:-2] & ok[1:-1] & ok[2:]
+        run3 = np.lib.stride_tricks.sliding_window_view(ok, n_ok).all(axis=1) if ok.size >= n_ok else ok[:0]
         if not run3[:max_shift + 1].any():
             return None
         e = int(np.argmax(run3[:max_shift + 1]))
-        bad2 = ~ok[e:-1] & ~ok[e + 1:]
+        bad2 = (np.lib.stride_tricks.sliding_window_view(~ok[e:], n_bad).all(axis=1) if ok.size - e >= n_bad
+                else ok[:0])
         if not bad2.any():
             return None
         g = e + int(np.argmax(bad2))
-        if g - e < 3:
+        if g - e < n_min:
             return None
         a, b = departure + e, departure + g
         aa = acc[a:b]
