@@ -29,7 +29,9 @@ def test_the_detector_s_default_counts_are_durations():
     det = FlankDetector(0.1, 2.5e-4, contact_samples=32, refine_samples=10)     # given: kept
     assert (det.contact_samples, det.refine_samples) == (32, 10)
     ch = ("t", "alpha1", "alpha2", "m_el")
-    assert FlankDetector(0.1, 2.5e-4, channels=ch, nominal_inertia_kgm2=1.16).history_extra == 2 * 128
+    # the reach back (128 at 2 kHz) and the window's 48 rows before the entry counted as the 24 ms they span at 2 kHz
+    assert FlankDetector(0.1, 2.5e-4, channels=ch, nominal_inertia_kgm2=1.16).history_extra == 2 * 128 + 48
+    assert FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16).history_extra == 128
 
 
 def _untwisting(ts, seed=0, counts=65536, loss_s=0.3, ramp_s=0.01, drift_rad_s=-0.06, acc_rel=-10.0, length_s=1.5):

@@ -908,14 +908,17 @@ def untwist_entry(delta: np.ndarray, departure: int, sample_period_s: float = RE
     y = y - y.mean()
     first = lo + samples(5, sample_period_s)
     c = np.arange(first, departure + samples(UNTWIST_SEARCH_AFTER, sample_period_s) + 1, dtype=float)  # change points
-    d = np.clip(t[None, :] - c[:, None], 0.0, None)
+    # (k - c)_+ in samples at 2 kHz (x T_s / 0.5 ms): the sums of its 4th power over 4 x the rows at 8 kHz left the
+    # determinant test below failing on every one-kink fit (a gain of inf: the 2^13 entries went 1.5-2 ms late)
+    scale = sample_period_s / REFERENCE_SAMPLE_PERIOD_S
+    d = np.clip(t[None, :] - c[:, None], 0.0, None) * scale
     S = [np.sum(d ** p, axis=1) for p in range(5)]                             # sums of (k - c)_+^p
     dy, d2y = d @ y, (d * d) @ y
     pairs = np.array([(si, ei) for si in range(departure + 1 - first) for ei in range(si, c.size)])
     i, j = pairs[:, 0], pairs[:, 1]
     # the normal equations of (1, a, b), a = (k - s)_+, b = (k - e)_+^2, from the sums: sum a b over k >= e is
     # sum (k - e)^3 + (e - s) (k - e)^2
-    ab = S[3][j] + (j - i) * S[2][j]
+    ab = S[3][j] + (j - i) * scale * S[2][j]
     XtX = np.stack([np.stack([np.full(i.size, float(t.size)), S[1][i], S[2][j]], -1),
                     np.stack([S[1][i], S[2][i], ab], -1), np.stack([S[2][j], ab, S[4][j]], -1)], -2)
     Xty = np.stack([np.full(i.size, float(y.sum())), dy[i], d2y[j]], -1)
@@ -1241,11 +1244,11 @@ class FlankDetector(BacklashDetector):
         self._i_m_el = self.channels.index("m_el") if "m_el" in self.channels and self.detector_name == "flank" else -1
         if self.nominal_inertia_kgm2 is not None and "m_el" in self.channels and "a1" in self.channels:
             # the entry sample may move back from the departure (back_to_load): the history holds it
-            self.history_extra = self._n(REFINE_BACK_SAMPLES)
+            self.history_extra = self._history(REFINE_BACK_SAMPLES)
         elif self.detector_name == "flank" and "a1" not in self.channels and "m_el" in self.channels:
-            self.history_extra = self._n(REFINE_BACK_SAMPLES)   # ... or to where the motor ran free (free_motion_start)
+            self.history_extra = self._history(REFINE_BACK_SAMPLES)   # ... or to where the motor ran free (free_motion_start)
         elif self.detector_name == "flank" and "a1" not in self.channels:
-            self.history_extra = self._n(DRIFT_BACK_SAMPLES)    # ... or to delta's free curvature (free_departure)
+            self.history_extra = self._history(DRIFT_BACK_SAMPLES)    # ... or to delta's free curvature (free_departure)
         self.min_travel_rad = float(min_travel_rad)
         #: departures back on their flank within confirm_samples (an encoder spike; not entries, counted)
         self.spikes = 0
@@ -1264,6 +1267,14 @@ class FlankDetector(BacklashDetector):
         """A duration of ``n_ref`` samples at 2 kHz (a module constant) in this detector's samples
         (:func:`jident_ros.stream.rate.samples`; ``n_ref`` itself at 0.5 ms)."""
         return samples(n_ref, self.sample_period_s)
+
+    def _history(self, n_ref: int) -> int:
+        """Rows kept beyond samples_before_entry for a reach of ``n_ref`` samples at 2 kHz before the departure, with
+        the window's samples_before_entry rows counted as the time they span at 2 kHz: at a higher rate those rows span
+        less time and the difference is kept too (at 8 kHz the 48 rows are 6 ms, not 24: the second drive's traversal
+        back walked back to 22 ms from the capture's start, short of the coupling model's 26 ms fit, +72 samples);
+        ``n_ref`` itself at 0.5 ms."""
+        return self._n(n_ref) + max(0, self._n(self.samples_before_entry) - self.samples_before_entry)
 
     # ------------------------------------------------------------- state
     @property
