@@ -144,3 +144,17 @@ def test_the_coupling_model_searches_as_far_in_time_at_4_khz():
     assert entry - dep > 12                       # farther than the unconverted search
     e, gain, rms = coupling_entry(data[:, 1], d, data[:, 3], dep, 1.0 if d[dep] >= flank else -1.0, 2.5e-4)
     assert abs(e - entry) * 2.5e-4 <= 1e-3 and gain > 1.0 and rms < 1e-4, (e - entry, gain)     # within 1 ms
+
+
+def test_the_untwist_model_keeps_its_one_kink_fits_at_8_khz():
+    """untwist_entry (a coarse encoder's untwist: delta at rest, untwisting at a constant rate, then free) at 8 kHz:
+    its change-point sums are taken in samples at 2 kHz; in 8 kHz samples the 4th powers over 4 x the rows failed the
+    determinant test on every one-kink fit (a gain of inf, the entry 12-17 samples late on the second drive's 2^13)."""
+    from jident_ros.stream.flank import untwist_entry
+    for ts in (5e-4, 1.25e-4):
+        data, ch, x = _untwisting(ts, counts=8192, loss_s=0.3, ramp_s=0.004, drift_rad_s=-0.5, acc_rel=-60.0)
+        d = data[:, 1] - data[:, 2]
+        dep = int(np.argmax(np.abs(d - d[x - int(round(0.05 / ts))]) > 3e-3))
+        e, gain = untwist_entry(d, dep, ts)
+        assert math.isfinite(gain) and gain >= 1.0, (ts, gain)
+        assert abs(e - x) * ts <= 1.5e-3, (ts, e - x)
