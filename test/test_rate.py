@@ -158,3 +158,20 @@ def test_the_untwist_model_keeps_its_one_kink_fits_at_8_khz():
         e, gain = untwist_entry(d, dep, ts)
         assert math.isfinite(gain) and gain >= 1.0, (ts, gain)
         assert abs(e - x) * ts <= 1.5e-3, (ts, e - x)
+
+
+def test_a_short_excursion_of_the_acceleration_does_not_end_the_gap_at_4_khz():
+    """single_mass_run's gap run ends at 2 samples outside its tolerance at 2 kHz (1 ms): at 4 kHz the same 0.5 ms
+    excursion of a filtered acceleration is 2 samples and ended the run there (the second drive's 2^13 re-contact
+    1.75 ms early); converted, the run ends at the re-contact, at 2 kHz as at 4 kHz."""
+    from jident_ros.stream.flank import single_mass_run
+    for ts in (5e-4, 2.5e-4):
+        f = int(round(5e-4 / ts))
+        n, dep, end = 400 * f, 100 * f, 160 * f              # a gap of 30 ms from the departure
+        rng = np.random.default_rng(1)
+        m_el = np.where((np.arange(n) >= dep) & (np.arange(n) < end), -20.0, 40.0) + rng.normal(0, 0.05, n)
+        acc = np.where((np.arange(n) >= dep) & (np.arange(n) < end), -20.0 / 1.16, 0.0) + rng.normal(0, 0.01, n)
+        mid = (dep + end) // 2
+        acc[mid:mid + f] += 3.0                              # 0.5 ms off the motor equation
+        run = single_mass_run(m_el, acc, dep, 1.16, 48, 16 * f, sample_period_s=ts)
+        assert run is not None and run[0] == dep and abs(run[1] - end) <= f, (ts, run)
