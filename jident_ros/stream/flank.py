@@ -556,6 +556,14 @@ FREE_HINGE_FWD = 24
 #: quantum / sqrt 12), a 2^13 one 2.1-2.3e-4, whose walk on the vector drive ran 51 samples back through a light
 #: contact it could not see (a false entry) -- chosen on the vector drive, checked on the second drive
 FREE_MAX_NOISE_RAD = 1.0e-4
+#: The angle models' own error (rad): the free motor (free_motion_walk) and delta's free curvature (free_departure)
+#: hold the samples no better than this however fine the encoder, so their rms gates count from it at least.  Their
+#: factors were chosen on 2^16 encoders, where the quantum / sqrt 12 (2.8e-5) stood for it; the free fits' rms there
+#: is 2.5-2.8e-5 (above).  On 2^20 encoders (the vector drive's variant, 1.7e-6) the gates counted from the quantum
+#: and failed on the models' own error: the light load reversal's line-then-parabola (rms 2.5e-5) was refused, +23,
+#: and the traversal back's walk stopped 17 samples late (both 0 with the floor).  The value is the lower end of the
+#: 2^16 rms, not tuned; on a 2^16 encoder whose quantum is configured it changes nothing
+ANGLE_MODEL_FLOOR_RAD = 2.5e-5
 
 
 def _double_integral(m_el: np.ndarray, sample_period_s: float) -> np.ndarray:
@@ -612,7 +620,7 @@ def free_motion_walk(alpha1: np.ndarray, m_el: np.ndarray, departure: int, first
     rss = np.maximum(yy[:m] - np.einsum("ki,ki->k", b, q[:m]), 0.0)
     dof = (end - rows[:m] - 4).astype(float)
     rms = np.sqrt(rss / np.maximum(dof, 1.0))
-    noise = max(float(rms[-1]), quantum_rad / math.sqrt(12.0))
+    noise = max(float(rms[-1]), quantum_rad / math.sqrt(12.0), ANGLE_MODEL_FLOOR_RAD)
     if not noise <= FREE_MAX_NOISE_RAD:
         return departure, departure        # a coarse encoder: a light contact's load is below its resolution
     limit = FREE_RMS_FACTOR * noise
@@ -932,6 +940,73 @@ def untwist_entry(delta: np.ndarray, departure: int, sample_period_s: float = RE
         return departure, 1.0
     return int(c[j[k]]), float(np.min(one) / rss[k])
 
+
+#: Without a1, a window's own contact loss from the motor equation with the coupling torque ramping to zero
+#: (:func:`ramp_entry`): in contact the coupling carries T0 (constant), from s it falls linearly to zero at the
+#: contact loss e, and from e on the motor runs free: alpha1 = a + v k + c k^2 + (Phi(m_el) - T0 Phi(shape)) / J1_nom,
+#: shape = 1 before s, (e - k) / (e - s) on [s, e), 0 from e (a, v, c -- friction, the torque estimate's offset -- and
+#: T0 linear; s and e by least squares).  Unlike the spring models it does not read delta's untwist, which a stiff
+#: coupling keeps below a count: a light load reversal's coupling lets go while the load torque still ramps and delta
+#: creeps off its flank from rest, so its departure comes 12-38 samples late on the vector drive's variants (stiff
+#: coupling, fast and slow speed loops, light load, 2^20 encoders).  Fitted over RAMP_FIT_BEFORE rows before the
+#: earliest candidate e (RAMP_SEARCH before the departure) to RAMP_FIT_AFTER after the departure, ramps up to
+#: RAMP_MAX_SAMPLES long (52 and 32 as the coupling model's; 48 and 60 cover the variants' late departures, +38, and
+#: ramps, 13-29 samples: first values tried, not tuned) ...
+RAMP_FIT_BEFORE = 52
+RAMP_FIT_AFTER = 32
+RAMP_SEARCH = 48
+RAMP_MAX_SAMPLES = 60
+#: ... taken, for a window's own entry on a fine encoder, when it lies SPRING_MIN_MOVE or more before the departure,
+#: explains alpha1 RAMP_MIN_GAIN times better than the best fit with e at the departure and T0 lies within
+#: RAMP_MAX_SCALE_DEVIATION of the steady m_el before the ramp (the values of the damped spring's gates, DAMPED_*,
+#: not tuned again).  Gains on the vector drive (the base model, where it was checked): light load reversals 5.5-6.2
+#: (0/-1 -> -1/+1), heavy ones 1.4-1.6, speed steps and reversals 1.0-1.1 (not taken: a fast departure's ramp is no
+#: better than a kink there)
+RAMP_MIN_GAIN = 2.0
+RAMP_MAX_SCALE_DEVIATION = 0.2
+
+
+def ramp_entry(alpha1: np.ndarray, m_el: np.ndarray, departure: int, inertia_kgm2: float,
+               sample_period_s: float) -> tuple:
+    """(e, gain, scale) of :data:`RAMP_MIN_GAIN`'s model around ``departure``: the contact loss e of the best fit, the
+    gain RSS(best with e = departure) / RSS(best) and T0 / the median m_el over the first 20 fitted rows;
+    (``departure``, 1.0, nan) when the rows are not there."""
+    ts = sample_period_s          # durations: samples at 2 kHz, converted to ts's (jident_ros.stream.rate)
+    search, fit_after, max_ramp = samples(RAMP_SEARCH, ts), samples(RAMP_FIT_AFTER, ts), samples(RAMP_MAX_SAMPLES, ts)
+    lo, hi = departure - search - samples(RAMP_FIT_BEFORE, ts), departure + fit_after
+    if lo < 0 or hi > alpha1.size:
+        return departure, 1.0, math.nan
+    k = np.arange(lo, hi, dtype=float)
+    x = (k - departure) / fit_after
+    Q, _ = np.linalg.qr(np.column_stack([np.ones_like(x), x, x * x]))
+    y = np.asarray(alpha1[lo:hi], float) - _double_integral(m_el[lo:hi], sample_period_s) / inertia_kgm2
+    y = y - Q @ (Q.T @ y)
+    # shape = ((e - k)_+ - (s - k)_+) / (e - s), a step (k < e) for s = e: every candidate's double integral from
+    # those of the hinges (c - k)_+ and the steps, projected off (1, k, k^2) once; then Gram sums
+    c = np.arange(departure - search - max_ramp, departure + 1)
+    cols = np.concatenate([np.clip(c[:, None] - k[None, :], 0.0, None), (k[None, :] < c[-search - 1:, None])])
+    v = np.cumsum(cols, axis=1) * sample_period_s
+    z = np.zeros_like(v)
+    z[:, 1:] = np.cumsum(v[:, :-1], axis=1) * sample_period_s
+    z = z - (z @ Q) @ Q.T
+    G, zy_all = z @ z.T, z @ y
+    es = np.arange(departure - search, departure + 1)
+    rs = np.arange(0, max_ramp + 1)
+    e, r = np.repeat(es, rs.size), np.tile(rs, es.size)
+    ie, is_ = e - c[0], e - r - c[0]                                  # hinge columns of e and s
+    istep = c.size + (e - es[0])                                      # step columns
+    rr = np.maximum(r, 1).astype(float)
+    zz = np.where(r == 0, G[istep, istep], (G[ie, ie] - 2.0 * G[ie, is_] + G[is_, is_]) / (rr * rr))
+    zy = np.where(r == 0, zy_all[istep], (zy_all[ie] - zy_all[is_]) / rr)
+    ok = zz > 1e-300
+    gain_rss = np.where(ok, float(y @ y) - zy * zy / np.where(ok, zz, 1.0), np.inf)
+    best = int(np.argmin(gain_rss))
+    at_dep = float(np.min(gain_rss[e == departure]))
+    if not (np.isfinite(gain_rss[best]) and gain_rss[best] > 0):
+        return departure, 1.0, math.nan
+    t0 = -float(zy[best] / zz[best]) * inertia_kgm2                 # alpha1 carries -T0 Phi(shape) / J
+    steady = float(np.median(m_el[lo:lo + samples(20, ts)]))
+    return int(e[best]), at_dep / float(gain_rss[best]), (t0 / steady if steady != 0 else math.nan)
 
 def _noise(x: np.ndarray, lag: int = 1) -> float:
     """White-noise standard deviation of a steady stretch, robust to a few samples of a starting transient
@@ -1907,6 +1982,11 @@ class FlankDetector(BacklashDetector):
         # vector drive's 2^13 speed steps the move took return entries 10-40 samples back, one before its gap)
         if self.detector_name == "flank" and "a1" not in self.channels and not jumped \
                 and not getattr(self, "_cap_returning", False):
+            e = self._ramp_move(data, dep)
+            if e is not None:
+                # the motor equation's contact loss with the coupling torque ramping to zero (RAMP_*): before
+                # free_departure, whose line-then-parabola fits delta of the base drive's light load reversal only
+                return e - dep, None
             e = self._free_departure_entry(data, dep)
             if e < dep:
                 return e - dep, None
@@ -1996,6 +2076,24 @@ class FlankDetector(BacklashDetector):
         e, gain = untwist_entry(delta, departure, self.sample_period_s)
         return e if gain >= UNTWIST_MIN_GAIN else None
 
+    def _ramp_move(self, data: np.ndarray, departure: int) -> Optional[int]:
+        """:func:`ramp_entry`'s contact loss when it lies SPRING_MIN_MOVE or more before ``departure`` at a gain >=
+        RAMP_MIN_GAIN with T0 within RAMP_MAX_SCALE_DEVIATION of the steady m_el, on a fine encoder (delta's quantum,
+        the configured one else its smallest step before the departure, / sqrt 12 within FREE_MAX_NOISE_RAD, as
+        :meth:`_untwist_move`'s gate the other way); else None."""
+        if "m_el" not in self.channels or self.nominal_inertia_kgm2 is None:
+            return None
+        quantum = _delta_quantum(self._delta(data), departure, self.angle_quantum_rad,
+                                 max(departure - self._n(UNTWIST_FIT_BEFORE), 0), self.min_departure_rad)
+        if not quantum / math.sqrt(12.0) <= FREE_MAX_NOISE_RAD:
+            return None
+        e, gain, scale = ramp_entry(data[:, self._i_a1], data[:, self.channels.index("m_el")], departure,
+                                    self.nominal_inertia_kgm2, self.sample_period_s)
+        if e <= departure - self._n(SPRING_MIN_MOVE) and gain >= RAMP_MIN_GAIN \
+                and abs(scale - 1.0) <= RAMP_MAX_SCALE_DEVIATION:
+            return e
+        return None
+
     def _free_departure_entry(self, data: np.ndarray, dep: int) -> int:
         """:func:`free_departure`'s entry for the capture ``data`` departing at ``dep``; its noise: the contact's sigma,
         at least the quantisation (the configured encoder's, else the smallest step delta makes before the departure,
@@ -2005,7 +2103,7 @@ class FlankDetector(BacklashDetector):
                                  max(dep - self._n(DRIFT_BACK_SAMPLES) - self._n(DRIFT_PRE_SAMPLES), 0),
                                  self.min_departure_rad)
         sigma = float(getattr(self, "_cap_sigma", 0.0))
-        noise = max(sigma if math.isfinite(sigma) else 0.0, quantum / math.sqrt(12.0))
+        noise = max(sigma if math.isfinite(sigma) else 0.0, quantum / math.sqrt(12.0), ANGLE_MODEL_FLOOR_RAD)
         return free_departure(delta, dep, self.samples_before_entry, noise, sample_period_s=self.sample_period_s)
 
     def _damped_move(self, data: np.ndarray, departure: int, entry: Optional[int] = None) -> Optional[int]:
