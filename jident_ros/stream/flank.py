@@ -1012,8 +1012,8 @@ def _noise(x: np.ndarray, lag: int = 1) -> float:
     """White-noise standard deviation of a steady stretch, robust to a few samples of a starting transient
     (the drive may act just before the clutch leaves its flank): 1.4826 MAD of the differences over ``lag`` samples /
     sqrt 2.  (The acceleration from alpha1 is a Savitzky-Golay output over the same 3.5 ms at any rate: its samples
-    1 apart at 4 kHz are twice as correlated as at 2 kHz and their differences read half the noise; ``lag`` =
-    0.5 ms in samples keeps the estimate, the tolerances built on it, as at 2 kHz.)"""
+    1 apart at 4 kHz are more alike than at 2 kHz and their differences read less noise; ``lag`` = 0.5 ms in samples
+    keeps the estimate, the tolerances built on it, as at 2 kHz.)"""
     if x.size < 5:
         return 0.0
     dx = x[lag:] - x[:-lag] if 0 < lag < x.size else np.diff(x)
