@@ -1667,7 +1667,10 @@ class FlankDetector(BacklashDetector):
         """Rows to every running capture (each up to its length); the windows completed by them, in order."""
         events = []
         for cap in list(self._caps):
-            events += self._feed_one(cap, rows)
+            # a capture completed before it in this loop may have replaced it (_open_return: a traversal back
+            # found late by the contact rule); a whole recording in one batch reaches that (it raised ValueError)
+            if any(c is cap for c in self._caps):
+                events += self._feed_one(cap, rows)
         return events
 
     def _feed_one(self, cap: _FlankCapture, rows: np.ndarray) -> list:
@@ -1691,7 +1694,8 @@ class FlankDetector(BacklashDetector):
         events = [] if ev is None else [ev]
         opened, self._new_caps = self._new_caps, []
         for new in opened:
-            events += self._feed_one(new, rows[take:])
+            if any(c is new for c in self._caps):
+                events += self._feed_one(new, rows[take:])
         return events
 
     def finish(self) -> list:
