@@ -43,6 +43,7 @@ import numpy as np
 from jident_ros.stream.detector import _positive
 from jident_ros.stream.filters import savgol_coeffs
 from jident_ros.stream.flank import FlankDetector, motor_acceleration, single_mass_run
+from jident_ros.stream.rate import odd_samples
 
 #: Without a1 the entry row is searched from this many samples before the departure less the look-ahead on
 #: (:func:`angle_entry`; a soft contact unloads before the flanks part).
@@ -58,11 +59,13 @@ class DynamicsDetector(FlankDetector):
     encoder_counts_per_rev, refine_samples : as :class:`~jident_ros.stream.flank.FlankDetector`
     nominal_inertia_kgm2 : float   J1_nom in T_L = m_el - J1_nom dω1/dt (required, > 0)
     channels : must hold t, m_el and a1 or alpha1 (a1 is used when both are there); alpha2 is optional
-    contact_samples : int          run length that makes a contact (32 = 16 ms)
+    contact_samples : int          run length that makes a contact (default: 16 ms, 32 samples at 2 kHz)
     k_sigma : float                contact: |mu| > k_sigma sigma; entry: a drop of more than k_sigma sigma (8)
     drop_fraction : float          ... and of more than this share of the load level (0.5)
     flank_time_constant_s : float  drift tracking of the load level (0.05 s)
-    acceleration_window_samples : int   Savitzky-Golay window of the encoder's second difference (odd, >= 5; 15)
+    acceleration_window_samples : int   Savitzky-Golay window of the encoder's second difference (odd, >= 5;
+                                   default 7.5 ms: 15 samples at 2 kHz, the odd count of the same span at T_s, as
+                                   the module's other sample counts, durations at 2 kHz: :mod:`jident_ros.stream.rate`)
     """
 
     detector_name = "dynamics"
@@ -78,14 +81,16 @@ class DynamicsDetector(FlankDetector):
     def __init__(self, wheel_radius_m: float, sample_period_s: float, channels: Sequence[str] = (),
                  nominal_inertia_kgm2: Optional[float] = None, samples_before_entry: int = 48,
                  samples_from_entry: int = 2000, gap_tolerance: float = 1.5, gear_ratio: float = 1.0,
-                 contact_samples: int = 32, k_sigma: float = 8.0, drop_fraction: float = 0.5,
-                 flank_time_constant_s: float = 0.05, encoder_counts_per_rev: int = 0, refine_samples: int = 16,
-                 acceleration_window_samples: int = 15):
+                 contact_samples: Optional[int] = None, k_sigma: float = 8.0, drop_fraction: float = 0.5,
+                 flank_time_constant_s: float = 0.05, encoder_counts_per_rev: int = 0,
+                 refine_samples: Optional[int] = None, acceleration_window_samples: Optional[int] = None):
         if not _positive(nominal_inertia_kgm2):
             raise ValueError(f"nominal_inertia_kgm2: the dynamics detector needs J1_nom, a finite number > 0, got "
                              f"{nominal_inertia_kgm2!r}")
         if not _positive(drop_fraction) or drop_fraction >= 1.0:
             raise ValueError(f"drop_fraction: must be a number > 0 and < 1, got {drop_fraction!r}")
+        if acceleration_window_samples is None and _positive(sample_period_s):
+            acceleration_window_samples = odd_samples(15, sample_period_s)
         w = acceleration_window_samples
         if isinstance(w, bool) or int(w) != w or w < 5 or int(w) % 2 == 0:
             raise ValueError(f"acceleration_window_samples: must be an odd integer >= 5, got {w!r}")
@@ -102,7 +107,7 @@ class DynamicsDetector(FlankDetector):
         self.acceleration_source = "a1" if "a1" in self.channels else "alpha1"
         self.lookahead = 0 if self.acceleration_source == "a1" else int(w) // 2
         self._sg2 = savgol_coeffs(2 * self.lookahead + 1, 2, deriv=2, use="dot")[::-1] if self.lookahead else None
-        self.history_extra = self.lookahead + ANGLE_ENTRY_EARLY if self.lookahead else 0
+        self.history_extra = self.lookahead + self._n(ANGLE_ENTRY_EARLY) if self.lookahead else 0
         self._i_m = self.channels.index("m_el")
         self._i_acc = self.channels.index(self.acceleration_source)
         self.reset()
@@ -206,13 +211,15 @@ class DynamicsDetector(FlankDetector):
         start = max(dep - self.lookahead, 1)
         if self.acceleration_source == "alpha1":
             entry = angle_entry(wd["alpha1"], wd["m_el"], self.sample_period_s,
-                                dep - self.lookahead - ANGLE_ENTRY_EARLY, dep + self.lookahead + 2)
+                                dep - self.lookahead - self._n(ANGLE_ENTRY_EARLY), dep + self.lookahead + self._n(2),
+                                self._n(40), self._n(12))
             if entry is None:
                 return 0, None
-            run = single_mass_run(wd["m_el"], acc, entry, self.nominal_inertia_kgm2, self.samples_before_entry, 3)
+            run = single_mass_run(wd["m_el"], acc, entry, self.nominal_inertia_kgm2, self.samples_before_entry,
+                                  self._n(3), sample_period_s=self.sample_period_s)
             return entry - dep, (None if run is None else run[1])
         run = single_mass_run(wd["m_el"], acc, start, self.nominal_inertia_kgm2, self.samples_before_entry,
-                              self.refine_samples + self.lookahead)
+                              self.refine_samples + self.lookahead, sample_period_s=self.sample_period_s)
         if run is None:
             return 0, None
         return run[0] - dep, run[1]

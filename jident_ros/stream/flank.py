@@ -85,6 +85,11 @@ bounce, a slip's excursion, a traversal back) keep the acceleration's row.
 Same batch API, events and drop reasons as :class:`~jident_ros.stream.detector.BacklashDetector` (which it
 extends), so the windowing node and ``jident diagnose`` take either.  The result does not depend on how a
 stream is cut into batches (tested).
+
+Every sample count below that is a duration (the module constants, ``contact_samples``, ``refine_samples``) is
+given in samples at 2 kHz, where it was chosen, and converted to the detector's ``sample_period_s``
+(:mod:`jident_ros.stream.rate`: identical at 0.5 ms); noise quanta, shares, factors and counts of rounds stay as they
+are.
 """
 from __future__ import annotations
 
@@ -98,6 +103,7 @@ import numpy as np
 from jident_ros.stream.detector import BacklashDetector, Event, _positive
 from jident_ros.stream.filters import first_order_lowpass, savgol_filter
 from jident_ros.stream.layout import DEFAULT_CHANNELS, FLAG_SECOND_ENTRY, Window
+from jident_ros.stream.rate import REFERENCE_SAMPLE_PERIOD_S, odd_samples, samples, samples_float
 
 #: Detector names of the ``detector`` parameter.
 DETECTORS = ("flank", "paper", "dynamics")
@@ -131,14 +137,17 @@ class _FlankCapture:
 
 def motor_acceleration(window: dict, wheel_radius_m: float, sample_period_s: float):
     """(dω1/dt in rad/s^2 per sample, source) from a1 (a1/r), else the smoothed second difference of
-    alpha1, else the smoothed difference of omega1 (Savitzky-Golay, 7 samples, quadratic); (None, '')
-    when the window has none of them."""
+    alpha1, else the smoothed difference of omega1 (Savitzky-Golay, 7 samples at 2 kHz, quadratic); (None, '')
+    when the window has none of them.  At another rate the filter spans the same time (odd samples, at least 5:
+    15 at 4 kHz, 5 at 1 kHz): a second difference over 7 samples at 4 kHz would carry 2^4 x the noise of an angle
+    quantum in rad/s^2 over half the time, the filter over the same 3.5 ms keeps it near 2 kHz's."""
     if "a1" in window:
         return np.asarray(window["a1"], float) / wheel_radius_m, "a1"
-    if "alpha1" in window and len(window["alpha1"]) >= 7:
-        return savgol_filter(np.asarray(window["alpha1"], float), 7, 2, deriv=2) / sample_period_s ** 2, "alpha1"
-    if "omega1" in window and len(window["omega1"]) >= 7:
-        return savgol_filter(np.asarray(window["omega1"], float), 7, 2, deriv=1) / sample_period_s, "omega1"
+    w = odd_samples(7, sample_period_s)
+    if "alpha1" in window and len(window["alpha1"]) >= w:
+        return savgol_filter(np.asarray(window["alpha1"], float), w, 2, deriv=2) / sample_period_s ** 2, "alpha1"
+    if "omega1" in window and len(window["omega1"]) >= w:
+        return savgol_filter(np.asarray(window["omega1"], float), w, 2, deriv=1) / sample_period_s, "omega1"
     return None, ""
 
 
@@ -192,17 +201,20 @@ DRIFT_MAX_RMS_SIGMAS = 3.0
 
 
 def free_departure(delta: np.ndarray, departure: int, first: int, noise_rad: float,
-                   back: int = DRIFT_BACK_SAMPLES) -> int:
+                   back: Optional[int] = None, sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S) -> int:
     """The entry row moved back from ``departure`` (not before ``first``) to where delta's free curvature starts,
     without a1 (module docstring): delta over [e - DRIFT_PRE_SAMPLES, departure + DRIFT_POST_SAMPLES) is fitted by a
     line that turns C1 into a parabola at e (delta = a + v (t - e) + c/2 (t - e)_+^2: in contact a torque ramping
     through zero untwists the coupling at a constant rate; in the gap the relative motion is free, constant relative
     acceleration), e by least squares over [departure - back, departure]; the move is taken when the line's speed v
     is at least DRIFT_MIN_SPEED_SHARE of the departure speed v + c (departure - e), in its direction, with
-    z >= DRIFT_MIN_Z, and the fit's rms is within DRIFT_MAX_RMS_SIGMAS x ``noise_rad``.  Else ``departure``."""
-    lo_e = max(departure - back, first, DRIFT_PRE_SAMPLES + 2)
-    lo, hi = lo_e - DRIFT_PRE_SAMPLES, min(departure + DRIFT_POST_SAMPLES, delta.size)
-    if lo_e >= departure or hi - departure < DRIFT_POST_SAMPLES // 2:
+    z >= DRIFT_MIN_Z, and the fit's rms is within DRIFT_MAX_RMS_SIGMAS x ``noise_rad``.  Else ``departure``.
+    (Durations: samples at 2 kHz, converted to ``sample_period_s``'s; ``back`` default DRIFT_BACK_SAMPLES.)"""
+    back = samples(DRIFT_BACK_SAMPLES, sample_period_s) if back is None else back
+    pre, post = samples(DRIFT_PRE_SAMPLES, sample_period_s), samples(DRIFT_POST_SAMPLES, sample_period_s)
+    lo_e = max(departure - back, first, pre + 2)
+    lo, hi = lo_e - pre, min(departure + post, delta.size)
+    if lo_e >= departure or hi - departure < post // 2:
         return departure
     t = np.arange(lo, hi, dtype=float)
     y = np.asarray(delta[lo:hi], float)
@@ -308,7 +320,7 @@ SINGLE_MASS_OFFSET_MAX = 0.15
 
 def single_mass_run(m_el: np.ndarray, acc: np.ndarray, departure: int, inertia_seed_kgm2: float,
                     pre_samples: int = 48, max_shift: int = 16, rel_tol: float = 0.01, k_sigma: float = 4.0,
-                    iterations: int = 4):
+                    iterations: int = 4, sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S):
     """(entry row, re-contact row, J1 fitted) of the backlash gap from the dynamics, or None.
 
     Inside the zone the load torque on the motor is zero: m_el = J1 dω1/dt, one J1 for every sample (the
@@ -323,26 +335,34 @@ def single_mass_run(m_el: np.ndarray, acc: np.ndarray, departure: int, inertia_s
     n = m_el.size
     lo = max(departure - pre_samples, 0)
     pre = slice(lo, max(departure - 1, lo + 2))
-    sm, sa = _noise(m_el[pre]), _noise(acc[pre])
+    lag = samples(1, sample_period_s)      # differences over 0.5 ms: the filtered acceleration's correlation as at 2 kHz
+    sm, sa = _noise(m_el[pre], lag), _noise(acc[pre], lag)
+    # the run's end (2 samples outside the tolerance) and least length (3) are durations at 2 kHz: the acceleration
+    # from alpha1 is filtered over the same time at any rate, its excursions span as many ms (at 4 kHz two samples
+    # outside ended the second drive's 2^13 runs 1.75 ms early, the re-contact row with them, and its traversals back
+    # were scanned from a wrong edge: 60-70 ms late).  Its start stays 3 samples within the tolerance, the earliest
+    # the run can be seen (3 samples at 8 kHz put the vector drive's heavy load reversal at +1, 12 at +19)
+    n_ok, n_bad, n_min = 3, samples(2, sample_period_s, 2), samples(3, sample_period_s)
     pre_load = abs(float(np.median(m_el[pre])))      # the steady torque before the departure, N m
     j = float(inertia_seed_kgm2)
     c = 0.0
     tol_rel = 0.25
     entry = end = None
-    stop = min(n, departure + 4000)
+    stop = min(n, departure + samples(4000, sample_period_s))
     for it in range(iterations + 1):
         res = np.abs(m_el[departure:stop] - j * acc[departure:stop] - c)
         tol = np.maximum(k_sigma * math.hypot(sm, j * sa), tol_rel * np.abs(m_el[departure:stop]))
         ok = res <= tol
-        run3 = ok[:-2] & ok[1:-1] & ok[2:]
+        run3 = np.lib.stride_tricks.sliding_window_view(ok, n_ok).all(axis=1) if ok.size >= n_ok else ok[:0]
         if not run3[:max_shift + 1].any():
             return None
         e = int(np.argmax(run3[:max_shift + 1]))
-        bad2 = ~ok[e:-1] & ~ok[e + 1:]
+        bad2 = (np.lib.stride_tricks.sliding_window_view(~ok[e:], n_bad).all(axis=1) if ok.size - e >= n_bad
+                else ok[:0])
         if not bad2.any():
             return None
         g = e + int(np.argmax(bad2))
-        if g - e < 3:
+        if g - e < n_min:
             return None
         a, b = departure + e, departure + g
         aa = acc[a:b]
@@ -423,7 +443,8 @@ def _resolved(X: np.ndarray, y: np.ndarray, j_seed: float) -> bool:
 
 
 def back_to_load(m_el: np.ndarray, acc: np.ndarray, entry: int, first: int, inertia_seed_kgm2: float,
-                 rel_tol: float = None, end: Optional[int] = None) -> int:
+                 rel_tol: float = None, end: Optional[int] = None,
+                 sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S) -> int:
     """The entry sample moved back from ``entry`` (a sample in the gap), not before ``first``, to where the motor
     equation stops explaining the samples (the load torque is back): a departure that delta shows late (a coupling
     that leaves its flank with no relative speed -- a light load reversal, a return traversal resting at the flank
@@ -434,17 +455,19 @@ def back_to_load(m_el: np.ndarray, acc: np.ndarray, entry: int, first: int, iner
     max(BACK_Z standard errors, rel_tol |m_el|).  Reaching ``first`` means no load was found: ``entry`` is
     returned unchanged."""
     rel_tol = BACK_REL_TOL if rel_tol is None else float(rel_tol)
-    m = min(BACK_FIT, m_el.size - entry, (end - entry) if end is not None else BACK_FIT)
+    fit, block = samples(BACK_FIT, sample_period_s), samples(BACK_BLOCK, sample_period_s)
+    m = min(fit, m_el.size - entry, (end - entry) if end is not None else fit)
     if m < 4 or first >= entry:
         return entry
     y, x = m_el[entry:entry + m], acc[entry:entry + m]
     dm = np.gradient(m_el)          # a relative lag tau of m_el and dω1/dt: m_el(t) = m(t - tau) ~ m - tau dm/dt
+    max_lag = samples_float(BACK_MAX_LAG_SAMPLES, sample_period_s)      # tau in samples, bounded as a duration
     j = float(inertia_seed_kgm2)
     c, lag = float(np.mean(y - j * x)), 0.0
     if np.ptp(x) > 0:
         X = np.column_stack([x, np.ones(m), dm[entry:entry + m]])
         (jf, cf, lf), *_ = np.linalg.lstsq(X, y, rcond=None)
-        if 0.5 * j <= jf <= 2.0 * j and abs(lf) <= BACK_MAX_LAG_SAMPLES and _resolved(X, y, j):
+        if 0.5 * j <= jf <= 2.0 * j and abs(lf) <= max_lag and _resolved(X, y, j):
             j, c, lag = float(jf), float(cf), float(lf)
         else:
             (jf, cf), *_ = np.linalg.lstsq(X[:, :2], y, rcond=None)
@@ -456,10 +479,15 @@ def back_to_load(m_el: np.ndarray, acc: np.ndarray, entry: int, first: int, iner
     sigma = float(np.std(res[entry:entry + m], ddof=3)) if m > 3 else 0.0
 
     k = entry
-    first = max(int(first), BACK_BLOCK)
+    first = max(int(first), block)
+    # the block spans BACK_BLOCK samples at 2 kHz; its limit is a mean's over at most BACK_BLOCK samples: the
+    # residual's model error (J at its seed, the offset fitted over the gap) does not average down with more samples
+    # per block (the vector drive's light load reversal with a1 at 4 kHz stopped 34 samples late with sqrt(2 BACK_BLOCK)),
+    # a block of fewer samples (1 kHz: 2) has the larger noise of its mean
+    root = math.sqrt(min(block, BACK_BLOCK))
     while k > first:
-        blk = slice(k - BACK_BLOCK, k)
-        lim = max(BACK_Z * sigma / math.sqrt(BACK_BLOCK), rel_tol * float(np.mean(np.abs(m_el[blk]))))
+        blk = slice(k - block, k)
+        lim = max(BACK_Z * sigma / root, rel_tol * float(np.mean(np.abs(m_el[blk]))))
         if abs(float(np.mean(res[blk]))) > lim:
             return k
         k -= 1
@@ -489,18 +517,20 @@ def _profile(candidates, fit, default: int, ref: int | None = None) -> tuple:
     return best, best_val, best_extra, at_ref
 
 
-def load_hinge(m_el: np.ndarray, acc: np.ndarray, entry: int, inertia_kgm2: float) -> tuple:
+def load_hinge(m_el: np.ndarray, acc: np.ndarray, entry: int, inertia_kgm2: float,
+               sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S) -> tuple:
     """(row, gain) of where the load torque's ramp ends near ``entry`` (LOAD_HINGE_* constants): r = m_el - J1 dω1/dt
     fitted by c + h (e - k)_+ over the fixed rows [entry - LOAD_HINGE_BEFORE, entry + LOAD_HINGE_AFTER), for e within
     +-LOAD_HINGE_SEARCH of ``entry``; the e of the least residual sum of squares (the first of equal ones) and the gain
     RSS(entry) / RSS(e).  (``entry``, 1.0) when the rows are not there."""
-    lo, hi = entry - LOAD_HINGE_BEFORE, entry + LOAD_HINGE_AFTER
+    lo, hi = entry - samples(LOAD_HINGE_BEFORE, sample_period_s), entry + samples(LOAD_HINGE_AFTER, sample_period_s)
+    search = samples(LOAD_HINGE_SEARCH, sample_period_s)
     if lo < 0 or hi > m_el.size:
         return entry, 1.0
     k = np.arange(lo, hi, dtype=float)
     y = np.asarray(m_el[lo:hi], float) - float(inertia_kgm2) * np.asarray(acc[lo:hi], float)
     best, best_rss, _, rss_entry = _profile(
-        range(max(entry - LOAD_HINGE_SEARCH, lo + 1), min(entry + LOAD_HINGE_SEARCH, hi - 2) + 1),
+        range(max(entry - search, lo + 1), min(entry + search, hi - 2) + 1),
         lambda e: _lstsq_rss(np.column_stack([np.ones(k.size), np.clip(e - k, 0.0, None)]), y), entry, entry)
     return best, (rss_entry / best_rss if best_rss > 0 else 1.0)
 
@@ -566,9 +596,10 @@ def free_motion_walk(alpha1: np.ndarray, m_el: np.ndarray, departure: int, first
     (walk's end, entry); (``departure``, ``departure``) when the walk does not move (the samples before it carry
     load)."""
     n = alpha1.size
-    end = min(departure + FREE_FIT_SAMPLES, n)
-    lo = max(int(first), FREE_HINGE_PRE)
-    if end - departure < FREE_FIT_SAMPLES // 2 or lo >= departure:
+    fit, pre = samples(FREE_FIT_SAMPLES, sample_period_s), samples(FREE_HINGE_PRE, sample_period_s)
+    end = min(departure + fit, n)
+    lo = max(int(first), pre)
+    if end - departure < fit // 2 or lo >= departure:
         return departure, departure
     phi_all = _double_integral(m_el, sample_period_s)
     rows = np.arange(lo, end)
@@ -603,14 +634,15 @@ def free_motion_walk(alpha1: np.ndarray, m_el: np.ndarray, departure: int, first
     # integrated) over [e - FREE_HINGE_PRE, e + FREE_FIT_SAMPLES), e from FREE_HINGE_BACK before the walk's end to
     # FREE_HINGE_FWD after it (not past the departure); the e of the least mean square residual
     def hinge(e):
-        a, z = e - FREE_HINGE_PRE, min(e + FREE_FIT_SAMPLES, n)
+        a, z = e - pre, min(e + fit, n)
         kk = np.arange(a, z, dtype=float) - e
         Xh = np.column_stack([_free_columns(kk, phi_all[a:z] - phi_all[e]),
-                              (np.clip(-kk, 0.0, None) / FREE_HINGE_PRE) ** 3])
+                              (np.clip(-kk, 0.0, None) / pre) ** 3])
         rss, _ = _lstsq_rss(Xh, np.asarray(alpha1[a:z], float) - float(alpha1[e]))
         return rss / max(z - a - 5, 1), None
 
-    best = _profile(range(max(start - FREE_HINGE_BACK, lo), min(start + FREE_HINGE_FWD, departure) + 1), hinge,
+    best = _profile(range(max(start - samples(FREE_HINGE_BACK, sample_period_s), lo),
+                          min(start + samples(FREE_HINGE_FWD, sample_period_s), departure) + 1), hinge,
                     departure)[0]
     return start, best
 
@@ -664,10 +696,11 @@ def _coupling_fit(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, centr
                   sample_period_s: float):
     """(best candidate, its RSS, the RSS at ``centre``, samples in the fit) of :func:`coupling_entry`'s search
     around ``centre``; None when the rows are not there."""
-    lo, hi = centre - COUPLING_FIT_BEFORE, centre + COUPLING_FIT_AFTER
-    if lo < 1 or hi > alpha1.size or centre - COUPLING_SEARCH < lo + 2:
-        return None
     ts = sample_period_s
+    search = samples(COUPLING_SEARCH, ts)
+    lo, hi = centre - samples(COUPLING_FIT_BEFORE, ts), centre + samples(COUPLING_FIT_AFTER, ts)
+    if lo < 1 or hi > alpha1.size or centre - search < lo + 2:
+        return None
     k = np.arange(lo, hi, dtype=float) - centre
     base = _free_columns(k, _double_integral(m_el[lo:hi], ts))
     y = np.asarray(alpha1[lo:hi], float)
@@ -681,7 +714,7 @@ def _coupling_fit(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, centr
         cols = [_double_integral(pen, ts), _double_integral(rate * (pen > 0), ts)]
         return _lstsq_rss(np.column_stack([base] + [c / (float(np.abs(c).max()) or 1.0) for c in cols]), y)
 
-    best, best_rss, _, rss_centre = _profile(range(centre - COUPLING_SEARCH, centre + COUPLING_SEARCH + 1), coupling,
+    best, best_rss, _, rss_centre = _profile(range(centre - search, centre + search + 1), coupling,
                                              centre, centre)
     return best, best_rss, rss_centre, y.size
 
@@ -701,16 +734,16 @@ def coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, depa
     if got is None:
         return departure, 1.0, math.inf
     rss_dep = got[2]
-    centre = departure
+    centre, search = departure, samples(COUPLING_SEARCH, sample_period_s)
     for _ in range(int(rounds) - 1):
-        if got[0] != centre + COUPLING_SEARCH or not got[2] >= COUPLING_MIN_GAIN * got[1]:
+        if got[0] != centre + search or not got[2] >= COUPLING_MIN_GAIN * got[1]:
             break           # not on the forward edge, or not a clear gain there (the speed reversals: 1.02-1.2)
         nxt = _coupling_fit(alpha1, delta, m_el, got[0], side, sample_period_s)
         if nxt is None:
             break
         centre, got = got[0], nxt
     best, best_rss, rss_centre, n = got
-    if not best_rss < rss_centre * (1.0 - 1e-9) or abs(best - centre) >= COUPLING_SEARCH:
+    if not best_rss < rss_centre * (1.0 - 1e-9) or abs(best - centre) >= search:
         # no candidate explains alpha1 better, or the best lies on the search's edge (the minimum is beyond it: the
         # model locates nothing there; a traversal back 76 samples late went to +88)
         return departure, 1.0, math.sqrt(rss_dep / max(n - 6, 1))
@@ -749,14 +782,16 @@ def spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, depart
                  sample_period_s: float) -> tuple:
     """(entry row, gain, J) of the spring model's contact loss near ``departure`` (SPRING_* constants); (departure, 1.0,
     nan) when the rows are not there or delta does not leave its flank."""
-    lo, hi = departure - SPRING_FIT_BEFORE, departure + SPRING_FIT_AFTER
-    t_lo, t_hi = departure - SPRING_TORQUE_ROWS[0], departure - SPRING_TORQUE_ROWS[1]
-    if min(lo, t_lo) < 0 or hi > alpha1.size or departure - SPRING_SEARCH < lo + 2:
+    fit_after, search = samples(SPRING_FIT_AFTER, sample_period_s), samples(SPRING_SEARCH, sample_period_s)
+    torque_rows = samples(SPRING_TORQUE_ROWS, sample_period_s)
+    lo, hi = departure - samples(SPRING_FIT_BEFORE, sample_period_s), departure + fit_after
+    t_lo, t_hi = departure - torque_rows[0], departure - torque_rows[1]
+    if min(lo, t_lo) < 0 or hi > alpha1.size or departure - search < lo + 2:
         return departure, 1.0, math.nan
     side = 1.0 if delta[departure] >= flank_rad else -1.0
     t0 = float(np.median(m_el[t_lo:t_hi]))
     rows = np.arange(lo, hi)
-    k = (rows - departure) / float(SPRING_FIT_AFTER)
+    k = (rows - departure) / float(fit_after)
     phi = _double_integral(m_el[lo:hi], sample_period_s)
     y = np.asarray(alpha1[lo:hi], float)
     y = y - y.mean()
@@ -769,7 +804,7 @@ def spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, depart
         rss, coef = _lstsq_rss(np.column_stack([base, phi - _double_integral(torque, sample_period_s)]), y)
         return rss, (1.0 / coef[3] if coef[3] != 0 else math.nan)
 
-    best, best_rss, best_j, rss_dep = _profile(range(departure - SPRING_SEARCH, departure + SPRING_SEARCH + 1), spring,
+    best, best_rss, best_j, rss_dep = _profile(range(departure - search, departure + search + 1), spring,
                                                departure, departure)
     if not best_rss > 0:
         return departure, 1.0, math.nan
@@ -810,15 +845,16 @@ def damped_spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray,
     constants; the gain RSS(``ref``) / RSS(entry), ``ref`` the departure by default); (departure, 1.0, nan) when the
     rows are not there or delta does not leave its flank."""
     ref = departure if ref is None else int(ref)
-    lo, hi = departure - DAMPED_FIT_BEFORE, departure + DAMPED_FIT_AFTER
-    t_lo, t_hi = departure - SPRING_TORQUE_ROWS[0], departure - SPRING_TORQUE_ROWS[1]
+    fit_after, torque_rows = samples(DAMPED_FIT_AFTER, sample_period_s), samples(SPRING_TORQUE_ROWS, sample_period_s)
+    lo, hi = departure - samples(DAMPED_FIT_BEFORE, sample_period_s), departure + fit_after
+    t_lo, t_hi = departure - torque_rows[0], departure - torque_rows[1]
     if min(lo, t_lo) < 0 or hi > alpha1.size or not inertia_kgm2 > 0:
         return departure, 1.0, math.nan
     ts = sample_period_s
     side = 1.0 if delta[departure] >= flank_rad else -1.0
     t0 = float(np.median(m_el[t_lo:t_hi]))
     rows = np.arange(lo, hi)
-    k = (rows - departure) / float(DAMPED_FIT_AFTER)
+    k = (rows - departure) / float(fit_after)
     y = np.asarray(alpha1[lo:hi], float) - _double_integral(m_el[lo:hi], ts) / float(inertia_kgm2)
     y = y - y.mean()
     u = side * (np.asarray(delta[lo:hi], float) - flank_rad)
@@ -838,7 +874,8 @@ def damped_spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray,
         rss, coef = _lstsq_rss(cols, y)
         return rss, -coef[3] * 1e6 * float(inertia_kgm2)      # the torque scale s, N m
 
-    cand = range(max(departure - DAMPED_SEARCH, lo + 2), min(departure + DAMPED_SEARCH, hi - 4) + 1)
+    search = samples(DAMPED_SEARCH, ts)
+    cand = range(max(departure - search, lo + 2), min(departure + search, hi - 4) + 1)
     best, best_rss, scale, rss_dep = _profile(cand, damped, departure, ref)
     if not best_rss > 0 or not math.isfinite(rss_dep) or t0 == 0:
         return departure, 1.0, math.nan
@@ -867,25 +904,29 @@ UNTWIST_SEARCH_AFTER = 5
 UNTWIST_MIN_GAIN = 1.12
 
 
-def untwist_entry(delta: np.ndarray, departure: int) -> tuple:
+def untwist_entry(delta: np.ndarray, departure: int, sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S) -> tuple:
     """(e, gain) of :data:`UNTWIST_MIN_GAIN`'s model around ``departure``: the contact loss e of the best fit and
     the gain RSS(best with e = s) / RSS(best); (``departure``, 1.0) when the rows are not there."""
-    lo, hi = departure - UNTWIST_FIT_BEFORE, departure + UNTWIST_FIT_AFTER
+    lo = departure - samples(UNTWIST_FIT_BEFORE, sample_period_s)
+    hi = departure + samples(UNTWIST_FIT_AFTER, sample_period_s)
     if lo < 0 or hi > delta.size:
         return departure, 1.0
     t = np.arange(lo, hi, dtype=float)
     y = np.asarray(delta[lo:hi], float)
     y = y - y.mean()
-    first = lo + 5
-    c = np.arange(first, departure + UNTWIST_SEARCH_AFTER + 1, dtype=float)     # the change points' rows
-    d = np.clip(t[None, :] - c[:, None], 0.0, None)
+    first = lo + samples(5, sample_period_s)
+    c = np.arange(first, departure + samples(UNTWIST_SEARCH_AFTER, sample_period_s) + 1, dtype=float)  # change points
+    # (k - c)_+ in samples at 2 kHz (x T_s / 0.5 ms): the sums of its 4th power over 4 x the rows at 8 kHz left the
+    # determinant test below failing on every one-kink fit (a gain of inf: the 2^13 entries went 1.5-2 ms late)
+    scale = sample_period_s / REFERENCE_SAMPLE_PERIOD_S
+    d = np.clip(t[None, :] - c[:, None], 0.0, None) * scale
     S = [np.sum(d ** p, axis=1) for p in range(5)]                             # sums of (k - c)_+^p
     dy, d2y = d @ y, (d * d) @ y
     pairs = np.array([(si, ei) for si in range(departure + 1 - first) for ei in range(si, c.size)])
     i, j = pairs[:, 0], pairs[:, 1]
     # the normal equations of (1, a, b), a = (k - s)_+, b = (k - e)_+^2, from the sums: sum a b over k >= e is
     # sum (k - e)^3 + (e - s) (k - e)^2
-    ab = S[3][j] + (j - i) * S[2][j]
+    ab = S[3][j] + (j - i) * scale * S[2][j]
     XtX = np.stack([np.stack([np.full(i.size, float(t.size)), S[1][i], S[2][j]], -1),
                     np.stack([S[1][i], S[2][i], ab], -1), np.stack([S[2][j], ab, S[4][j]], -1)], -2)
     Xty = np.stack([np.full(i.size, float(y.sum())), dy[i], d2y[j]], -1)
@@ -958,25 +999,27 @@ def ramp_entry(alpha1: np.ndarray, m_el: np.ndarray, departure: int, inertia_kgm
     (``departure``, 1.0, nan) when the rows are not there.  With ``delta`` the RSS is the joint one of alpha1's and
     delta's models with the same s and e (:data:`RAMP_JOINT`); ``joint_gain``: a fourth value, the gain of the sum of
     both RSS (at the departure's best / at e; 1.0 without ``delta``)."""
-    lo, hi = departure - RAMP_SEARCH - RAMP_FIT_BEFORE, departure + RAMP_FIT_AFTER
+    ts = sample_period_s          # durations: samples at 2 kHz, converted to ts's (jident_ros.stream.rate)
+    search, fit_after, max_ramp = samples(RAMP_SEARCH, ts), samples(RAMP_FIT_AFTER, ts), samples(RAMP_MAX_SAMPLES, ts)
+    lo, hi = departure - search - samples(RAMP_FIT_BEFORE, ts), departure + fit_after
     if lo < 0 or hi > alpha1.size:
         return (departure, 1.0, math.nan) + ((1.0,) if joint_gain else ())
     k = np.arange(lo, hi, dtype=float)
-    x = (k - departure) / RAMP_FIT_AFTER
+    x = (k - departure) / fit_after
     Q, _ = np.linalg.qr(np.column_stack([np.ones_like(x), x, x * x]))
     y = np.asarray(alpha1[lo:hi], float) - _double_integral(m_el[lo:hi], sample_period_s) / inertia_kgm2
     y = y - Q @ (Q.T @ y)
     # shape = ((e - k)_+ - (s - k)_+) / (e - s), a step (k < e) for s = e: every candidate's double integral from
     # those of the hinges (c - k)_+ and the steps, projected off (1, k, k^2) once; then Gram sums
-    c = np.arange(departure - RAMP_SEARCH - RAMP_MAX_SAMPLES, departure + 1)
-    cols = np.concatenate([np.clip(c[:, None] - k[None, :], 0.0, None), (k[None, :] < c[-RAMP_SEARCH - 1:, None])])
+    c = np.arange(departure - search - max_ramp, departure + 1)
+    cols = np.concatenate([np.clip(c[:, None] - k[None, :], 0.0, None), (k[None, :] < c[-search - 1:, None])])
     v = np.cumsum(cols, axis=1) * sample_period_s
     z = np.zeros_like(v)
     z[:, 1:] = np.cumsum(v[:, :-1], axis=1) * sample_period_s
     z = z - (z @ Q) @ Q.T
     G, zy_all = z @ z.T, z @ y
-    es = np.arange(departure - RAMP_SEARCH, departure + 1)
-    rs = np.arange(0, RAMP_MAX_SAMPLES + 1)
+    es = np.arange(departure - search, departure + 1)
+    rs = np.arange(0, max_ramp + 1)
     e, r = np.repeat(es, rs.size), np.tile(rs, es.size)
     ie, is_ = e - c[0], e - r - c[0]                                  # hinge columns of e and s
     istep = c.size + (e - es[0])                                      # step columns
@@ -997,7 +1040,7 @@ def ramp_entry(alpha1: np.ndarray, m_el: np.ndarray, departure: int, inertia_kgm
         if np.any(tie & np.isfinite(rd)):
             best = int(np.argmin(np.where(tie, rd, np.inf)))
     t0 = -float(zy[best] / zz[best]) * inertia_kgm2                 # alpha1 carries -T0 Phi(shape) / J
-    steady = float(np.median(m_el[lo:lo + 20]))
+    steady = float(np.median(m_el[lo:lo + samples(20, ts)]))
     got = int(e[best]), at_dep / float(gain_rss[best]), (t0 / steady if steady != 0 else math.nan)
     if not joint_gain:
         return got
@@ -1026,12 +1069,15 @@ def _untwist_rss(d: np.ndarray, k: np.ndarray, c: np.ndarray, es: np.ndarray, i_
     return np.where(ok, float(y @ y) - fit, np.inf)
 
 
-def _noise(x: np.ndarray) -> float:
+def _noise(x: np.ndarray, lag: int = 1) -> float:
     """White-noise standard deviation of a steady stretch, robust to a few samples of a starting transient
-    (the drive may act just before the clutch leaves its flank): 1.4826 MAD of the first differences / sqrt 2."""
+    (the drive may act just before the clutch leaves its flank): 1.4826 MAD of the differences over ``lag`` samples /
+    sqrt 2.  (The acceleration from alpha1 is a Savitzky-Golay output over the same 3.5 ms at any rate: its samples
+    1 apart at 4 kHz are more alike than at 2 kHz and their differences read less noise; ``lag`` = 0.5 ms in samples
+    keeps the estimate, the tolerances built on it, as at 2 kHz.)"""
     if x.size < 5:
         return 0.0
-    dx = np.diff(x)
+    dx = x[lag:] - x[:-lag] if 0 < lag < x.size else np.diff(x)
     return float(1.4826 * np.median(np.abs(dx - np.median(dx))) / math.sqrt(2.0))
 
 
@@ -1066,9 +1112,10 @@ RECONTACT_MIN_TRAVEL_QUANTA = 30.0
 RECONTACT_RETURN_SHARE = 0.2
 
 
-def _travel(d: np.ndarray, e: int) -> np.ndarray:
-    """The travel of delta from the entry row on, positive in the direction it left in (RECONTACT_SPAN rows decide)."""
-    side = 1.0 if d[min(e + RECONTACT_SPAN, d.size - 1)] >= d[e] else -1.0
+def _travel(d: np.ndarray, e: int, span: int = RECONTACT_SPAN) -> np.ndarray:
+    """The travel of delta from the entry row on, positive in the direction it left in (``span`` rows decide:
+    RECONTACT_SPAN at 2 kHz)."""
+    side = 1.0 if d[min(e + span, d.size - 1)] >= d[e] else -1.0
     return side * (d[e:] - d[e])
 
 
@@ -1093,12 +1140,14 @@ def _comes_back(D: np.ndarray, angle_quantum_rad: float) -> bool:
     return bool(np.any((D <= RECONTACT_RETURN_SHARE * run) & (run > RECONTACT_MIN_QUANTA * max(angle_quantum_rad, 1e-12))))
 
 
-def _delta_arrived(d: np.ndarray, e: int, g: int, angle_quantum_rad: float) -> bool:
+def _delta_arrived(d: np.ndarray, e: int, g: int, angle_quantum_rad: float,
+                   sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S) -> bool:
     """Whether a re-contact row g found from the motor's acceleration has delta at the far side: its travel from the
     entry at least RECONTACT_MIN_TRAVEL_SHARE of its farthest in the window (False: delta still crossing the zone)."""
-    if not e < g < d.size or d.size - e < RECONTACT_SPAN + 6:
+    span = samples(RECONTACT_SPAN, sample_period_s)
+    if not e < g < d.size or d.size - e < span + 6:
         return True                 # nothing to check against: the acceleration's row (or none) stands
-    D = _travel(d, e)
+    D = _travel(d, e, span)
     if _comes_back(D, angle_quantum_rad):
         return True
     far = float(np.max(D))
@@ -1107,19 +1156,23 @@ def _delta_arrived(d: np.ndarray, e: int, g: int, angle_quantum_rad: float) -> b
     return bool(D[g - e] >= RECONTACT_MIN_TRAVEL_SHARE * far)
 
 
-def delta_recontact(delta: np.ndarray, entry_index: int, angle_quantum_rad: float = 0.0) -> int:
+def delta_recontact(delta: np.ndarray, entry_index: int, angle_quantum_rad: float = 0.0,
+                    sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S) -> int:
     """Row of the first contact sample after the entry from the relative angle delta = alpha1 - N alpha2 (raw
     offsets cancel in its differences; RECONTACT_* constants): where delta's travel across the zone is stopped.
     -1 when delta does not move across the zone or never stops in the window (the caller falls back on the motor's
     acceleration, :func:`recontact_index`).  Chosen on the DOL drive's and the vector drive's traversals (the motor's
     acceleration there changes inside the gap: a line-fed motor's torque falls as it speeds up, so the acceleration
-    rule put the re-contact 30-140 samples early and K2 73-92 % off), tested on the second drive and ours."""
+    rule put the re-contact 30-140 samples early and K2 73-92 % off), tested on the second drive and ours.
+    (Spans, holds and fits: samples at 2 kHz, converted to ``sample_period_s``'s; RECONTACT_MIN_QUANTA is per span,
+    a span of the same duration.)"""
     d = np.asarray(delta, float)
     e = int(entry_index)
-    span = RECONTACT_SPAN
+    span, hold = samples(RECONTACT_SPAN, sample_period_s), samples(RECONTACT_HOLD, sample_period_s)
+    fit, search = samples(RECONTACT_FIT, sample_period_s), samples(RECONTACT_SEARCH, sample_period_s)
     if d.size - e < span + 6:
         return -1
-    D = _travel(d, e)
+    D = _travel(d, e, span)
     if _comes_back(D, angle_quantum_rad) or not float(np.max(D)) > RECONTACT_MIN_TRAVEL_QUANTA * max(angle_quantum_rad,
                                                                                                       1e-12):
         return -1
@@ -1139,8 +1192,8 @@ def delta_recontact(delta: np.ndarray, entry_index: int, angle_quantum_rad: floa
         # coupling's untwist at the contact loss, after which delta goes on across the zone, nor a free turning
         # point, after which it goes back)
         at = i + span
-        after = D[at:at + RECONTACT_HOLD]
-        if after.size < RECONTACT_HOLD:
+        after = D[at:at + hold]
+        if after.size < hold:
             break
         tol = max(RECONTACT_HOLD_SHARE * D[at], tol_floor)
         if D[at] >= travel and float(np.max(np.abs(after - D[at]))) <= tol:
@@ -1148,9 +1201,9 @@ def delta_recontact(delta: np.ndarray, entry_index: int, angle_quantum_rad: floa
             break
     if i0 < 0:
         return -1
-    lo, hi = i0 - RECONTACT_FIT[0], i0 + span + RECONTACT_FIT[1]
+    lo, hi = i0 - fit[0], i0 + span + fit[1]
     lo, hi = max(lo, e), min(hi, d.size)
-    cands = range(max(i0 - RECONTACT_SEARCH[0], lo + 4, e + 2), min(i0 + span + RECONTACT_SEARCH[1], hi - 3))
+    cands = range(max(i0 - search[0], lo + 4, e + 2), min(i0 + span + search[1], hi - 3))
     if hi - lo < 10 or len(cands) == 0:
         return i0 + span // 2
     k = np.arange(lo, hi, dtype=float)
@@ -1184,7 +1237,7 @@ def estimate_width(window: dict, entry_index: int, wheel_radius_m: float, sample
     f_entry = float(np.mean(d[:e])) if flank_rad is None else float(flank_rad)
     if recontact is None:
         acc, _ = motor_acceleration(window, wheel_radius_m, sample_period_s)
-        recontact = recontact_index(acc, e) if acc is not None else -1
+        recontact = recontact_index(acc, e, min_samples=samples(3, sample_period_s)) if acc is not None else -1
     g = int(recontact)
     r = float(wheel_radius_m)
     q2 = angle_quantum_rad ** 2 / 6.0               # two encoders, uniform quantisation error each
@@ -1204,9 +1257,10 @@ def estimate_width(window: dict, entry_index: int, wheel_radius_m: float, sample
         width = r * abs(f_after - d[e])
         se = r * math.sqrt(float(np.var(tail, ddof=1)) + step_after ** 2 / 12.0 + q2)
         return WidthResult(width, se, "same_flank", g)
-    if RECONTACT_FROM_DELTA and not _delta_arrived(d, e, g, q_delta := _delta_quantum(d, e, angle_quantum_rad)):
+    if RECONTACT_FROM_DELTA and not _delta_arrived(d, e, g, q_delta := _delta_quantum(d, e, angle_quantum_rad),
+                                                   sample_period_s):
         # the motor's acceleration fell while delta was still crossing the zone: delta's own stop
-        g_delta = delta_recontact(d, e, q_delta)
+        g_delta = delta_recontact(d, e, q_delta, sample_period_s)
         g = g_delta if g_delta >= 0 else g
     if g <= e + 2:
         return WidthResult(math.nan, math.nan, "no re-contact found", g)
@@ -1233,14 +1287,16 @@ class FlankDetector(BacklashDetector):
     samples_before_entry, samples_from_entry, gap_tolerance : as BacklashDetector (48, 2000, 1.5)
     gear_ratio : float             N in delta = alpha1 - N alpha2 (motor turns per load-encoder turn), 1
     nominal_inertia_kgm2 : float   J1_nom for the load-torque refinement of the entry sample; None = off
-    contact_samples : int          run length that makes a contact (32 = 16 ms)
+    contact_samples : int          run length that makes a contact (default: 16 ms, 32 samples at 2 kHz)
     contact_tolerance_rad : float  largest spread of delta over such a run (2 mrad)
     k_sigma : float                departure threshold in contact-noise standard deviations (8)
     min_departure_rad : float      departure threshold floor (1.5 mrad: 16 counts of a 2^16 encoder;
                                    the grid's smallest half-zone is 25 mrad)
     flank_time_constant_s : float  drift tracking of the flank level (0.05 s)
     encoder_counts_per_rev : int   for the width uncertainty (quantisation), 0 = ideal angles
-    refine_samples : int           the entry sample may move this far past the departure (16)
+    refine_samples : int           the entry sample may move this far past the departure (default: 8 ms, 16 at
+                                   2 kHz; the module's sample counts are durations at 2 kHz, converted to T_s's:
+                                   :mod:`jident_ros.stream.rate`)
     load_drop_fraction : float     ... while T_L keeps more than this share of the steady load (0.5)
     unwrap_angles : bool           undo the wraps of positions reported in [-pi, pi) (BacklashDetector), True
     confirm_samples : int          a departure is an entry only when this many samples in a row (it and the next
@@ -1279,10 +1335,10 @@ class FlankDetector(BacklashDetector):
     def __init__(self, wheel_radius_m: float, sample_period_s: float,
                  channels: Sequence[str] = DEFAULT_CHANNELS, samples_before_entry: int = 48,
                  samples_from_entry: int = 2000, gap_tolerance: float = 1.5, gear_ratio: float = 1.0,
-                 nominal_inertia_kgm2: Optional[float] = None, contact_samples: int = 32,
+                 nominal_inertia_kgm2: Optional[float] = None, contact_samples: Optional[int] = None,
                  contact_tolerance_rad: float = 2e-3, k_sigma: float = 8.0, min_departure_rad: float = 1.5e-3,
                  flank_time_constant_s: float = 0.05, encoder_counts_per_rev: int = 0,
-                 refine_samples: int = 16, load_drop_fraction: float = 0.5, unwrap_angles: bool = True,
+                 refine_samples: Optional[int] = None, load_drop_fraction: float = 0.5, unwrap_angles: bool = True,
                  confirm_samples: int = 3, min_travel_rad: float = 5e-3, deeper_travel_factor: float = 4.0):
         if isinstance(gear_ratio, bool) or not (math.isfinite(float(gear_ratio)) and gear_ratio != 0):
             raise ValueError(f"gear_ratio: must be a finite non-zero number (negative: the load encoder counts the "
@@ -1295,6 +1351,11 @@ class FlankDetector(BacklashDetector):
                 raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
         if nominal_inertia_kgm2 is not None and not _positive(nominal_inertia_kgm2):
             raise ValueError(f"nominal_inertia_kgm2: must be a finite number > 0 or None, got {nominal_inertia_kgm2!r}")
+        if contact_samples is None or refine_samples is None:       # durations at 2 kHz in T_s's samples
+            if not _positive(sample_period_s):
+                raise ValueError(f"sample_period_s: must be a finite number > 0, got {sample_period_s!r}")
+            contact_samples = samples(32, sample_period_s, 4) if contact_samples is None else contact_samples
+            refine_samples = samples(16, sample_period_s) if refine_samples is None else refine_samples
         if isinstance(min_travel_rad, bool) or not (math.isfinite(float(min_travel_rad)) and min_travel_rad >= 0):
             raise ValueError(f"min_travel_rad: must be a finite number >= 0, got {min_travel_rad!r}")
         for name, v, lo in (("contact_samples", contact_samples, 4), ("encoder_counts_per_rev", encoder_counts_per_rev, 0),
@@ -1319,11 +1380,11 @@ class FlankDetector(BacklashDetector):
         self._i_m_el = self.channels.index("m_el") if "m_el" in self.channels and self.detector_name == "flank" else -1
         if self.nominal_inertia_kgm2 is not None and "m_el" in self.channels and "a1" in self.channels:
             # the entry sample may move back from the departure (back_to_load): the history holds it
-            self.history_extra = REFINE_BACK_SAMPLES
+            self.history_extra = self._history(REFINE_BACK_SAMPLES)
         elif self.detector_name == "flank" and "a1" not in self.channels and "m_el" in self.channels:
-            self.history_extra = REFINE_BACK_SAMPLES         # ... or to where the motor ran free (free_motion_start)
+            self.history_extra = self._history(REFINE_BACK_SAMPLES)   # ... or to where the motor ran free (free_motion_start)
         elif self.detector_name == "flank" and "a1" not in self.channels:
-            self.history_extra = DRIFT_BACK_SAMPLES          # ... or to delta's free curvature (free_departure)
+            self.history_extra = self._history(DRIFT_BACK_SAMPLES)    # ... or to delta's free curvature (free_departure)
         self.min_travel_rad = float(min_travel_rad)
         #: departures back on their flank within confirm_samples (an encoder spike; not entries, counted)
         self.spikes = 0
@@ -1337,6 +1398,19 @@ class FlankDetector(BacklashDetector):
         #: entries inside a running window that got a window of their own (a traversal back)
         self.return_windows = 0
         self.reset()
+
+    def _n(self, n_ref):
+        """A duration of ``n_ref`` samples at 2 kHz (a module constant) in this detector's samples
+        (:func:`jident_ros.stream.rate.samples`; ``n_ref`` itself at 0.5 ms)."""
+        return samples(n_ref, self.sample_period_s)
+
+    def _history(self, n_ref: int) -> int:
+        """Rows kept beyond samples_before_entry for a reach of ``n_ref`` samples at 2 kHz before the departure, with
+        the window's samples_before_entry rows counted as the time they span at 2 kHz: at a higher rate those rows span
+        less time and the difference is kept too (at 8 kHz the 48 rows are 6 ms, not 24: the second drive's traversal
+        back walked back to 22 ms from the capture's start, short of the coupling model's 26 ms fit, +72 samples);
+        ``n_ref`` itself at 0.5 ms."""
+        return self._n(n_ref) + max(0, self._n(self.samples_before_entry) - self.samples_before_entry)
 
     # ------------------------------------------------------------- state
     @property
@@ -1368,7 +1442,7 @@ class FlankDetector(BacklashDetector):
         the coupling model's searches after them (a soft coupling's contact loss came 22 samples after its
         departure: its window lacked those rows, refused as short)."""
         if self.detector_name == "flank" and "a1" not in self.channels and "m_el" in self.channels:
-            return self.refine_samples + COUPLING_SEARCH * COUPLING_FORWARD_ROUNDS
+            return self.refine_samples + self._n(COUPLING_SEARCH) * COUPLING_FORWARD_ROUNDS
         return self.refine_samples
 
     @property
@@ -1584,7 +1658,7 @@ class FlankDetector(BacklashDetector):
                     pos = max(pos, k + 1)
                 if last is not None and last.pending and last in self._caps:
                     if abs(rest[0] - last.flank_rad) > max(self.min_travel_rad, self.threshold_for(last)) \
-                            and travel >= MIN_TRAVERSAL_SAMPLES and not self._came_back(last) \
+                            and travel >= self._n(MIN_TRAVERSAL_SAMPLES) and not self._came_back(last) \
                             and self._crossed_zone(last, rest[0]):
                         last.pending = False
                         self.return_windows += 1
@@ -1654,7 +1728,10 @@ class FlankDetector(BacklashDetector):
         """Rows to every running capture (each up to its length); the windows completed by them, in order."""
         events = []
         for cap in list(self._caps):
-            events += self._feed_one(cap, rows)
+            # a capture completed before it in this loop may have replaced it (_open_return: a traversal back
+            # found late by the contact rule); a whole recording in one batch reaches that (it raised ValueError)
+            if any(c is cap for c in self._caps):
+                events += self._feed_one(cap, rows)
         return events
 
     def _feed_one(self, cap: _FlankCapture, rows: np.ndarray) -> list:
@@ -1678,7 +1755,8 @@ class FlankDetector(BacklashDetector):
         events = [] if ev is None else [ev]
         opened, self._new_caps = self._new_caps, []
         for new in opened:
-            events += self._feed_one(new, rows[take:])
+            if any(c is new for c in self._caps):
+                events += self._feed_one(new, rows[take:])
         return events
 
     def finish(self) -> list:
@@ -1712,7 +1790,7 @@ class FlankDetector(BacklashDetector):
         self._cap_flank = (cap.flank_rad, self.threshold_for(cap))
         shift, recontact = self._refine(data, dep)
         entry_row = cap.start_row + dep + shift
-        if any(abs(entry_row - r) <= DUPLICATE_ENTRY_SAMPLES for r in self._emitted_entry_rows):
+        if any(abs(entry_row - r) <= self._n(DUPLICATE_ENTRY_SAMPLES) for r in self._emitted_entry_rows):
             # the same traversal by two rules (a returning capture from a window's edge scan and the contact rule's:
             # docs/your_drive.md's small drive gave its traversal back twice, at the same sample)
             self.counts["duplicate_entry"] += 1
@@ -1778,7 +1856,8 @@ class FlankDetector(BacklashDetector):
         # the edge lies between the samples around the contact instant: beyond it by less than half that step is
         # no proof of a contact (the second drive's slow return traversal dips 0.8 mrad past the estimate)
         unsure = 0.5 * max(abs(d[g] - d[g - 1]), margin)
-        if g + RETURN_REST_SAMPLES > d.size or np.any(depth[g:g + RETURN_REST_SAMPLES] > unsure):
+        rest_rows = self._n(RETURN_REST_SAMPLES)
+        if g + rest_rows > d.size or np.any(depth[g:g + rest_rows] > unsure):
             return          # no contact on the re-contact edge after it (a misread excursion: edges not trusted)
         steady, quantum = self._scan_profile(d, margin)
         coarse, L = quantum > 0.0, self.contact_samples
@@ -1836,7 +1915,7 @@ class FlankDetector(BacklashDetector):
             last_out = k
             row = e0 + start                            # capture row of the return traversal's entry
             abs_row = cap.start_row + row
-            if any(abs(abs_row - r) <= RETURN_MATCH_SAMPLES for r in known):
+            if any(abs(abs_row - r) <= self._n(RETURN_MATCH_SAMPLES) for r in known):
                 continue                                # the contact rule found it already
             if self._open_return(cap, data, row, reached, float(edge_out)):
                 known.append(abs_row)
@@ -1860,7 +1939,7 @@ class FlankDetector(BacklashDetector):
         (alpha1 = a + v k + Phi / J + c k^2, :func:`_free_columns`) fitted over RETURN_FREE_TURN_HALF rows each side
         leaves an rms within RETURN_FREE_TURN_RMS x ``quantum_rad`` / sqrt 12 (delta's smallest step: the encoder's).
         False without m_el or rows enough (the turn is then taken for a bounce, as before)."""
-        a, z = row - RETURN_FREE_TURN_HALF, row + RETURN_FREE_TURN_HALF
+        a, z = row - self._n(RETURN_FREE_TURN_HALF), row + self._n(RETURN_FREE_TURN_HALF)
         if "m_el" not in self.channels or a < 0 or z > data.shape[0]:
             return False
         alpha1 = np.asarray(data[a:z, self._i_a1], float)
@@ -1946,10 +2025,10 @@ class FlankDetector(BacklashDetector):
         if getattr(self, "_cap_returning", False) or not math.isfinite(flank) or self.detector_name != "flank":
             return dep
         delta = self._delta(data)
-        quantum = _delta_quantum(delta, dep, self.angle_quantum_rad, max(dep - UNTWIST_FIT_BEFORE, 0), thr)
+        quantum = _delta_quantum(delta, dep, self.angle_quantum_rad, max(dep - self._n(UNTWIST_FIT_BEFORE), 0), thr)
         if not quantum / math.sqrt(12.0) > FREE_MAX_NOISE_RAD or thr >= COARSE_DEPARTURE_QUANTA * quantum:
             return dep
-        beyond = np.nonzero(np.abs(delta[dep:dep + COARSE_DEPARTURE_SEARCH] - flank)
+        beyond = np.nonzero(np.abs(delta[dep:dep + self._n(COARSE_DEPARTURE_SEARCH)] - flank)
                             > COARSE_DEPARTURE_QUANTA * quantum)[0]
         return dep + int(beyond[0]) if beyond.size else dep
 
@@ -1994,15 +2073,16 @@ class FlankDetector(BacklashDetector):
         if acc is None:
             return 0, None
         run = single_mass_run(wd["m_el"], acc, dep, self.nominal_inertia_kgm2, self.samples_before_entry,
-                              self.refine_samples)
+                              self.refine_samples, sample_period_s=self.sample_period_s)
         entry, recontact = (dep, None) if run is None else run[:2]
         if src == "a1" and self.history_extra:
             first = max(entry - self.history_extra, self.samples_before_entry)     # the history there is
-            entry = back_to_load(wd["m_el"], acc, entry, first, self.nominal_inertia_kgm2, end=recontact)
+            entry = back_to_load(wd["m_el"], acc, entry, first, self.nominal_inertia_kgm2, end=recontact,
+                                 sample_period_s=self.sample_period_s)
             if not getattr(self, "_cap_returning", False) and not jumped:
                 # forward (never back) to the end of the load torque's ramp (LOAD_HINGE_*; not after a jump of delta,
                 # our simulator's slip: its contact is lost at the jump, no ramp -- the hinge put it 1-4 samples late)
-                hinge, gain = load_hinge(wd["m_el"], acc, entry, self.nominal_inertia_kgm2)
+                hinge, gain = load_hinge(wd["m_el"], acc, entry, self.nominal_inertia_kgm2, self.sample_period_s)
                 entry = hinge if hinge > entry and gain >= LOAD_HINGE_MIN_GAIN else entry
                 if entry == dep:
                     # nothing moved the departure (a1 unresolved or noisy at a fast departure, as without it: the
@@ -2012,7 +2092,7 @@ class FlankDetector(BacklashDetector):
                 # a traversal back: the coupling model's contact loss near back_to_load's entry
                 entry = self._coupling_move(data, entry + off, dep + off, 1.0, 1.0) - off
                 walk = self._angle_walk_entry(data, dep + off) - off
-                if walk <= entry - RETURN_ANGLE_WALK_MIN_LEAD:
+                if walk <= entry - self._n(RETURN_ANGLE_WALK_MIN_LEAD):
                     entry = walk
         elif src != "a1" and self.detector_name == "flank" and not getattr(self, "_cap_returning", False):
             untwist = self._untwist_move(data, dep + off)
@@ -2025,7 +2105,7 @@ class FlankDetector(BacklashDetector):
                 # nothing moved the departure (a coupling that untwisted off its flank moved forward, SPRING_*)
                 entry = self._spring_move(data, entry + off, dep + off) - off
             damped = self._damped_move(data, dep + off, entry + off)
-            if damped is not None and abs(damped - off - entry) >= SPRING_MIN_MOVE:
+            if damped is not None and abs(damped - off - entry) >= self._n(SPRING_MIN_MOVE):
                 # the damped spring's contact loss at a clear gain and a plausible torque scale (DAMPED_*), when it
                 # lies SPRING_MIN_MOVE or more from the entry so far (it finds where the coupling torque vanishes,
                 # before the zone entry by about the damping's c/k: the soft coupling variant's heavy load reversals
@@ -2054,11 +2134,11 @@ class FlankDetector(BacklashDetector):
         """:func:`untwist_entry`'s contact loss at a gain >= UNTWIST_MIN_GAIN on a coarse encoder (delta's quantum, the
         configured one else its smallest step before the departure, / sqrt 12 beyond FREE_MAX_NOISE_RAD); else None."""
         delta = self._delta(data)
-        quantum = _delta_quantum(delta, departure, self.angle_quantum_rad, max(departure - UNTWIST_FIT_BEFORE, 0),
+        quantum = _delta_quantum(delta, departure, self.angle_quantum_rad, max(departure - self._n(UNTWIST_FIT_BEFORE), 0),
                                  self.min_departure_rad)
         if not quantum / math.sqrt(12.0) > FREE_MAX_NOISE_RAD:
             return None
-        e, gain = untwist_entry(delta, departure)
+        e, gain = untwist_entry(delta, departure, self.sample_period_s)
         return e if gain >= UNTWIST_MIN_GAIN else None
 
     def _ramp_move(self, data: np.ndarray, departure: int) -> Optional[int]:
@@ -2069,7 +2149,7 @@ class FlankDetector(BacklashDetector):
         if "m_el" not in self.channels or self.nominal_inertia_kgm2 is None:
             return None
         quantum = _delta_quantum(self._delta(data), departure, self.angle_quantum_rad,
-                                 max(departure - UNTWIST_FIT_BEFORE, 0), self.min_departure_rad)
+                                 max(departure - self._n(UNTWIST_FIT_BEFORE), 0), self.min_departure_rad)
         coarse = not quantum / math.sqrt(12.0) <= FREE_MAX_NOISE_RAD
         if coarse and not RAMP_COARSE_MIN_JOINT_GAIN:
             return None
@@ -2078,7 +2158,7 @@ class FlankDetector(BacklashDetector):
                                           self._delta(data) if RAMP_JOINT or coarse else None, joint_gain=True)
         clear = both >= RAMP_COARSE_MIN_JOINT_GAIN if coarse else \
             gain >= RAMP_MIN_GAIN or (gain >= RAMP_TIED_MIN_GAIN and both >= RAMP_MIN_GAIN)
-        if e <= departure - SPRING_MIN_MOVE and clear and abs(scale - 1.0) <= RAMP_MAX_SCALE_DEVIATION:
+        if e <= departure - self._n(SPRING_MIN_MOVE) and clear and abs(scale - 1.0) <= RAMP_MAX_SCALE_DEVIATION:
             return e
         return None
 
@@ -2087,11 +2167,12 @@ class FlankDetector(BacklashDetector):
         at least the quantisation (the configured encoder's, else the smallest step delta makes before the departure,
         below the departure threshold)."""
         delta = self._delta(data)
-        quantum = _delta_quantum(delta, dep, self.angle_quantum_rad, max(dep - DRIFT_BACK_SAMPLES - DRIFT_PRE_SAMPLES, 0),
+        quantum = _delta_quantum(delta, dep, self.angle_quantum_rad,
+                                 max(dep - self._n(DRIFT_BACK_SAMPLES) - self._n(DRIFT_PRE_SAMPLES), 0),
                                  self.min_departure_rad)
         sigma = float(getattr(self, "_cap_sigma", 0.0))
         noise = max(sigma if math.isfinite(sigma) else 0.0, quantum / math.sqrt(12.0), ANGLE_MODEL_FLOOR_RAD)
-        return free_departure(delta, dep, self.samples_before_entry, noise)
+        return free_departure(delta, dep, self.samples_before_entry, noise, sample_period_s=self.sample_period_s)
 
     def _damped_move(self, data: np.ndarray, departure: int, entry: Optional[int] = None) -> Optional[int]:
         """:func:`damped_spring_entry`'s contact loss when it explains alpha1 DAMPED_MIN_GAIN times better than
@@ -2119,7 +2200,7 @@ class FlankDetector(BacklashDetector):
         e, gain, j = spring_entry(data[:, self._i_a1], self._delta(data), data[:, self.channels.index("m_el")],
                                   departure, flank, self.sample_period_s)
         if gain >= SPRING_MIN_GAIN and abs(j / self.nominal_inertia_kgm2 - 1.0) <= SPRING_MAX_J_DEVIATION \
-                and e <= entry - SPRING_MIN_MOVE:
+                and e <= entry - self._n(SPRING_MIN_MOVE):
             return e
         return entry
 
@@ -2137,7 +2218,7 @@ class FlankDetector(BacklashDetector):
         # traversal back's departure row lies on the re-contact edge its capture takes for the flank, where the sign of
         # delta - flank is rounding: a 5e-13 rad change of the angles turned the side and moved the vector drive's
         # traversal back with a1 from 0 to -6, test_flank's cut of it)
-        after = delta[departure:departure + COUPLING_FIT_AFTER] - flank
+        after = delta[departure:departure + self._n(COUPLING_FIT_AFTER)] - flank
         side = 1.0 if after.size and after[int(np.argmax(np.abs(after)))] >= 0 else -1.0
         e, gain, rms = coupling_entry(data[:, self._i_a1], delta, data[:, self.channels.index("m_el")], entry, side,
                                       self.sample_period_s, rounds)

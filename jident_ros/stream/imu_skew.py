@@ -17,27 +17,34 @@ from typing import Optional
 
 import numpy as np
 
+from jident_ros.stream import rate
+
 __all__ = ["IMU_SKEW_MIN_CORRELATION", "IMU_SKEW_TOLERANCE_SAMPLES", "ImuSkewGuard",
            "SKEW_REFEED_MARGIN_SAMPLES", "check_imu_skew", "imu_skew", "skew_line"]
 
 #: Imu a1 may be this many sample periods out of step with the encoder before a1 is left out of a window.
 IMU_SKEW_TOLERANCE_SAMPLES = 0.5
 #: A window whose a1 is out of step is detected again without a1 from this many samples before its first sample
-#: (the new detector learns the flank level there: contact_samples 32 and the confirmation)
+#: (the new detector learns the flank level there: contact_samples 32 and the confirmation; samples at 2 kHz, the
+#: same 32 ms at another rate: jident_ros.stream.rate)
 SKEW_REFEED_MARGIN_SAMPLES = 64
 #: The smallest correlation of a1 with the encoder's acceleration at which a skew estimate is trusted.
 IMU_SKEW_MIN_CORRELATION = 0.5
 
 
-def imu_skew(a1, sample_period_s: float, alpha1=None, omega1=None, max_lag_samples: int = 40,
-             smooth_samples: int = 15) -> Optional[dict]:
+def imu_skew(a1, sample_period_s: float, alpha1=None, omega1=None, max_lag_samples: Optional[int] = None,
+             smooth_samples: Optional[int] = None) -> Optional[dict]:
     """How far a1 lags the motor encoder, estimated from the data (the stamps may agree while the data do
     not): the lag maximising the correlation of a1 with the encoder's acceleration (the second difference of
     alpha1 when it correlates, else the first difference of omega1 -- the drive's speed feedback, which may lag;
     both signals smoothed alike by a ``smooth_samples`` moving average), refined by a parabola through the peak.
     Returns ``{"skew_s", "skew_samples", "correlation", "reference": "omega1"|"alpha1"}`` (skew > 0: a1 comes late)
     or None when no encoder channel is given, the data are too short or flat, or the peak correlation is below
-    :data:`IMU_SKEW_MIN_CORRELATION` (no estimate)."""
+    :data:`IMU_SKEW_MIN_CORRELATION` (no estimate).  ``max_lag_samples`` and ``smooth_samples`` default to 20 ms and
+    7.5 ms (40 and 15 samples at 2 kHz; the moving average over the same time keeps the second difference's noise
+    as at 2 kHz)."""
+    max_lag_samples = rate.samples(40, sample_period_s) if max_lag_samples is None else max_lag_samples
+    smooth_samples = rate.samples(15, sample_period_s) if smooth_samples is None else smooth_samples
     a = np.asarray(a1, dtype=float)
     found = []
     if omega1 is not None:
@@ -178,7 +185,8 @@ class ImuSkewGuard:
         if not (self.adapter is not None and self.adapter.use_imu):
             return detector, self._seen(detector.push(arr, channels))
         if self.keep_rows <= 0:
-            self.keep_rows = 2 * int(detector.window_length) + SKEW_REFEED_MARGIN_SAMPLES
+            self.keep_rows = 2 * int(detector.window_length) + rate.samples(SKEW_REFEED_MARGIN_SAMPLES,
+                                                                            detector.sample_period_s)
         self._keep(arr, channels)
         events = detector.push(arr, channels)
         for k, ev in enumerate(events):
@@ -223,7 +231,7 @@ class ImuSkewGuard:
         # from the margin before the skewed window, even inside the window given out before it (a traversal back
         # lies inside the window of the traversal before it: started after that window's end, the vector drive's
         # speed steps lost 3 of them); a window found again at or before that window's entry is a duplicate, dropped
-        start = float(t[0]) - SKEW_REFEED_MARGIN_SAMPLES * ts
+        start = float(t[0]) - rate.samples(SKEW_REFEED_MARGIN_SAMPLES, ts) * ts
         ids = old.windows_captured - 1          # the window comes out again under its own id
         samples, batches, counts = old.samples_seen, old.batches_seen, dict(getattr(old, "counts", {}))
         new.windows_captured = ids

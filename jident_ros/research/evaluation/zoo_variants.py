@@ -56,7 +56,8 @@ DRIVE_FILES = {"small drive, 3:1 gear": Path(__file__).resolve().parents[3] / "d
 
 #: Variants recorded at another rate (their DriveParams.sample_period_s), diagnosed with that sample period and a
 #: window of the same length in time (1 s from the entry), the 48 samples before it kept (docs/your_drive.md): the
-#: detector's and the gap stage's constants that count samples were chosen at 2 kHz.
+#: constants that count samples were chosen at 2 kHz; the detectors' are durations converted to the sample period
+#: (jident_ros/stream/rate.py), the gap stage's are not.
 RATE_VARIANTS = ("recorded at 1 kHz", "recorded at 4 kHz")
 
 
@@ -215,6 +216,11 @@ def markdown(res: dict, command: str, commit: str) -> str:
               f"10 % off**; the 95 % interval covers {tot['cov']}/{tot['with']} "
               f"({zoo._pct(tot['cov'], tot['with'])}); another class named {tot['wrong']}, 'between classes' "
               f"{tot['between']}; false entries {tot['false']}.", ""]
+    periods = {n: p.sample_period_s for n, _, p, _ in variants() if n in RATE_VARIANTS and n in res["rows"]}
+    if periods:     # the entry within +-1 ms: +-2 samples at 2 kHz, the same time at the other rates
+        lines += ["Entry within ±1 ms of the contact loss (±2 samples at 2 kHz) at the other rates: " + "; ".join(
+            f"{n} {sum(1 for o in res['rows'][n].get('offsets', []) if abs(o) * ts <= 1e-3 + 1e-12)}/"
+            f"{len(res['rows'][n].get('offsets', []))}" for n, ts in periods.items()) + ".", ""]
     return "\n".join(lines) + "\n"
 
 
