@@ -1074,3 +1074,18 @@ def test_a_ramp_alpha1_alone_explains_below_the_old_gate_needs_delta_s_agreement
     assert abs(dep + shift - true) <= 2, dep + shift - true
     monkeypatch.setattr(flank, "RAMP_MIN_GAIN", flank.RAMP_TIED_MIN_GAIN)
     assert det._refine(data, dep)[0] + dep - true == e - true == -4
+
+
+def test_the_travel_s_direction_is_delta_s_first_move_when_it_has_not_moved_over_the_span():
+    """A coarse encoder's delta, entered at the contact loss, flickers within a count for several samples before it
+    runs off (the vector drive's 2^13 light load reversal, entered at +1 after the eighth round's ramp model): the
+    direction read RECONTACT_SPAN rows on saw no move (a 1e-14 rad rounding) and took the wrong side; the travel came
+    out negative, and the acceleration's re-contact row 5 samples after the entry stood (K2 1.9e-5 m for 5 mm).  The
+    first move decides then."""
+    from jident_ros.stream.flank import RECONTACT_MIN_TRAVEL_QUANTA, _delta_arrived, _travel
+    q = 2 * np.pi / 8192
+    d = np.concatenate([np.zeros(10), [0.0, -q, 1e-14, 0.0, -q, -q, 0.0], -q * np.arange(1, 200) ** 1.5 / 20])
+    e = 10
+    D = _travel(d, e, 4)
+    assert D.max() > RECONTACT_MIN_TRAVEL_QUANTA * q and D[-1] > 0
+    assert not _delta_arrived(d, e, e + 5, q)          # the acceleration's early row is not taken

@@ -1114,8 +1114,15 @@ RECONTACT_RETURN_SHARE = 0.2
 
 def _travel(d: np.ndarray, e: int, span: int = RECONTACT_SPAN) -> np.ndarray:
     """The travel of delta from the entry row on, positive in the direction it left in (``span`` rows decide:
-    RECONTACT_SPAN at 2 kHz)."""
-    side = 1.0 if d[min(e + span, d.size - 1)] >= d[e] else -1.0
+    RECONTACT_SPAN at 2 kHz; when delta has not moved over them, its first move: a coarse encoder's delta creeps off
+    its flank within a count for several samples after an entry placed at the contact loss, and the side taken from
+    no move turned the travel negative, so the acceleration's re-contact row 5 samples after the entry stood: K2
+    1.9e-5 m for 5 mm on the vector drive's 2^13 light load reversal)."""
+    ref = d[min(e + span, d.size - 1)]
+    if abs(ref - d[e]) <= 1e-9:                     # no move but a float rounding (as _delta_quantum's steps)
+        moved = np.nonzero(np.abs(d[e + 1:] - d[e]) > 1e-9)[0]
+        ref = d[e + 1 + int(moved[0])] if moved.size else ref
+    side = 1.0 if ref >= d[e] else -1.0
     return side * (d[e:] - d[e])
 
 
