@@ -1084,7 +1084,7 @@ def test_the_travel_s_direction_is_delta_s_first_move_when_it_has_not_moved_over
     first move decides then."""
     from jident_ros.stream.flank import RECONTACT_MIN_TRAVEL_QUANTA, _delta_arrived, _travel
     q = 2 * np.pi / 8192
-    d = np.concatenate([np.zeros(10), [0.0, -q, 1e-14, 0.0, -q, -q, 0.0], -q * np.arange(1, 200) ** 1.5 / 20])
+    d = np.concatenate([np.zeros(10), [0.0, -q, 0.0, -q, 1e-14, -q, 0.0], -q * np.arange(1, 200) ** 1.5 / 20])
     e = 10
     D = _travel(d, e, 4)
     assert D.max() > RECONTACT_MIN_TRAVEL_QUANTA * q and D[-1] > 0
