@@ -265,6 +265,21 @@ def spin(node, executor, stop: StopFlag, period_s: float = SPIN_PERIOD_S) -> Non
             executor.spin_once(timeout_sec=period_s)
 
 
+def _half_built_node(exc: BaseException):
+    """The node whose constructor raised ``exc`` (``self`` of a frame of its traceback), or None.  It is destroyed
+    before rcl shuts down: a node left to the garbage collector after rclpy.shutdown can hang the interpreter's exit
+    (ros2/launch#124, ros2/rclpy#456); a simulator refusing ``batch_size:=fifty`` hung for 180 s once in ten runs of
+    test_nodes' bad-parameter test on a loaded machine."""
+    from rclpy.node import Node
+    tb = exc.__traceback__
+    while tb is not None:
+        obj = tb.tb_frame.f_locals.get("self")
+        if isinstance(obj, Node):
+            return obj
+        tb = tb.tb_next
+    return None
+
+
 def main(factory: Callable[..., Any], prog: str, args=None) -> int:
     """Run a node: init, build (``factory(args)``), spin, stop; returns the exit status.
 
@@ -280,7 +295,7 @@ def main(factory: Callable[..., Any], prog: str, args=None) -> int:
     args = sys.argv if args is None else args
     early = take_early_flag()          # installed by the entry point before the heavy imports (nodes/entry.py)
     stop = early or StopFlag().install()
-    node = executor = None
+    node = executor = half = None
     code = 0
     try:
         if stop.set:                   # stopped before rcl started: nothing to finalise
@@ -307,10 +322,12 @@ def main(factory: Callable[..., Any], prog: str, args=None) -> int:
         except ParameterError as exc:
             print(f"{prog}: {exc}", file=sys.stderr, flush=True)
             code = EXIT_BAD_PARAMETER
+            half = None if node is not None else _half_built_node(exc)
         except Exception as exc:
             if node is None and type(exc).__module__.startswith("rclpy"):  # e.g. a bad remapping
                 print(f"{prog}: {rcl_error_line(exc)}", file=sys.stderr, flush=True)
                 code = EXIT_BAD_PARAMETER
+                half = _half_built_node(exc)
             else:
                 raise
     finally:
@@ -322,6 +339,12 @@ def main(factory: Callable[..., Any], prog: str, args=None) -> int:
                 executor.shutdown(timeout_sec=1.0)
             if node is not None:
                 node.destroy_node()
+            elif half is not None:
+                try:
+                    half.destroy_node()
+                except Exception as exc:  # half-built: what it holds may be incomplete; rcl shuts down anyway
+                    print(f"{prog}: destroying the node that refused its parameters: {exc}", file=sys.stderr,
+                          flush=True)
             rclpy.try_shutdown()
             if early is None:
                 stop.restore()         # the entry point keeps its handlers until the interpreter exits

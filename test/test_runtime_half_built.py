@@ -1,0 +1,45 @@
+"""A node that refuses its parameters in its constructor is destroyed before rcl shuts down
+(nodes/runtime._half_built_node): left to the garbage collector after rclpy.shutdown, such a node can hang the
+interpreter's exit (ros2/launch#124); a simulator refusing ``batch_size:=fifty`` hung 180 s once on a loaded machine."""
+from __future__ import annotations
+
+import pytest
+
+
+@pytest.mark.ros
+def test_a_node_refusing_its_parameters_is_destroyed_before_shutdown(capsys):
+    from rclpy.node import Node
+
+    from jident_ros.nodes import runtime
+    from jident_ros.nodes.params import ParameterError
+    seen = {}
+
+    class Refusing(Node):
+        def __init__(self):
+            super().__init__("jident_refusing_test")
+            self.helper = object()
+            raise ParameterError("parameter batch_size: must be an integer, got 'fifty'")
+
+        def destroy_node(self):
+            import rclpy
+            seen["context_ok"] = rclpy.ok()           # destroyed while rcl is still up
+            return super().destroy_node()
+
+    code = runtime.main(lambda argv: Refusing(), "refusing", ["refusing"])
+    assert code == runtime.EXIT_BAD_PARAMETER
+    assert seen == {"context_ok": True}
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["refusing: parameter batch_size: must be an integer, got 'fifty'"], err
+
+
+def test_the_half_built_node_is_found_in_the_traceback_not_elsewhere():
+    pytest.importorskip("rclpy")
+    from jident_ros.nodes.runtime import _half_built_node
+
+    def build():
+        x = object()  # noqa: F841 (a frame without a node)
+        raise ValueError("no node here")
+    try:
+        build()
+    except ValueError as exc:
+        assert _half_built_node(exc) is None
