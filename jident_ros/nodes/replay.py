@@ -23,7 +23,6 @@ from pathlib import Path
 
 from rclpy.clock import Clock as RosClock
 from rclpy.clock import ClockType
-from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from rclpy.utilities import remove_ros_args
@@ -40,7 +39,7 @@ from jident_ros.nodes.ros_io import (
     qos_latched,
     qos_signals,
 )
-from jident_ros.nodes.runtime import ProgressGate, RunnableNode, tick
+from jident_ros.nodes.runtime import ProgressGate, RunnableNode, drain, tick
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import REPLAY, REPLAY_PARAMS
 
@@ -288,12 +287,9 @@ class ReplayNode(RunnableNode, Node):
         self.done = True
 
     def finish(self, stopping) -> None:
-        """After the spin: give reliable readers the last messages."""
-        for pub in self.pubs.values():
-            try:
-                pub.wait_for_all_acked(Duration(seconds=5.0))
-            except Exception:
-                time.sleep(0.5)
+        """After the spin: give reliable readers the last messages (runtime.drain: a WARN names a topic not
+        acknowledged in time)."""
+        drain(list(self.pubs.values()), self.get_logger(), stopping)
 
     @staticmethod
     def _last_t(msg):

@@ -24,7 +24,6 @@ import time
 import numpy as np
 from rclpy.clock import Clock as RosClock
 from rclpy.clock import ClockType
-from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64, Float64MultiArray
@@ -32,7 +31,7 @@ from std_msgs.msg import Float64, Float64MultiArray
 from jident_ros.nodes import params as node_params
 from jident_ros.nodes.params import ParameterError
 from jident_ros.nodes.ros_io import clock_msg, multiarray_from_array, qos_clock, qos_latched, qos_signals
-from jident_ros.nodes.runtime import ProgressGate, RunnableNode, tick
+from jident_ros.nodes.runtime import ProgressGate, RunnableNode, drain, tick
 from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import SIMULATOR, SIMULATOR_PARAMS
 from jident_ros.sim import Case, check_stable, paper_grid_cases, simulate_grid
@@ -265,9 +264,10 @@ class SimulatorNode(RunnableNode, Node):
             self.done = True
 
     def finish(self, stopping) -> None:
-        """After the spin (the cases are done): give reliable readers the last batches."""
+        """After the spin (the cases are done): give reliable readers the last batches (runtime.drain: a WARN names
+        a topic not acknowledged in time)."""
         if self.exit_code == 0:
-            self._drain()
+            drain((self.pub_signals, self.pub_case, self.pub_inertia, self.pub_width), self.get_logger(), stopping)
 
     def _publish_case(self, i, case, entry_t):
         self.pub_inertia.publish(Float64(data=case.inertia_kgm2))
@@ -277,14 +277,6 @@ class SimulatorNode(RunnableNode, Node):
         self.get_logger().info(f"case {i + 1}/{len(self.cases)}: J1 = {case.inertia_kgm2:g} kg m^2, "
                                f"K2 = {case.backlash_width_m:g} m, eta_k = {case.consistency_pa_sn:g} "
                                f"Pa s^n (entry at t = {entry_t:.4f} s)")
-
-    def _drain(self):
-        """Give reliable readers the last batches before the node goes away."""
-        try:
-            for pub in (self.pub_signals, self.pub_case, self.pub_inertia, self.pub_width):
-                pub.wait_for_all_acked(Duration(seconds=5.0))
-        except Exception:  # not supported by every rmw
-            time.sleep(0.5)
 
 
 def main(args=None) -> int:
