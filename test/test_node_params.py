@@ -33,14 +33,26 @@ from test_nodes import (  # noqa: F401
     statuses,
 )
 
+#: Read-only parameter services: their request is sent again when no answer came within READ_RETRY_S.  A response
+#: can be lost when the request goes out as soon as the service is discovered, before the server has matched the
+#: client's response reader (a CI run: list_parameters of a windowing node never answered in 60 s); a read is safe
+#: to repeat, a set is not (it would apply twice).
+READ_SERVICES = ("ListParameters", "DescribeParameters", "GetParameters")
+READ_RETRY_S = 10.0
+
 
 def _call(ros, srv_type, name, request, timeout=TIMEOUT):
+    import time
     client = ros.node.create_client(srv_type, name)
     try:
         assert ros.spin_until(client.service_is_ready, timeout), f"{name}: no service"
-        fut = client.call_async(request)
-        assert ros.spin_until(fut.done, timeout), f"{name}: no answer"
-        return fut.result()
+        end = time.monotonic() + timeout
+        step = READ_RETRY_S if srv_type.__name__ in READ_SERVICES else timeout
+        while True:
+            fut = client.call_async(request)
+            if ros.spin_until(fut.done, max(min(step, end - time.monotonic()), 0.0)):
+                return fut.result()
+            assert time.monotonic() < end, f"{name}: no answer"
     finally:
         ros.node.destroy_client(client)
 
