@@ -35,8 +35,8 @@ from test_nodes import (  # noqa: F401
 
 #: Read-only parameter services: their request is sent again when no answer came within READ_RETRY_S.  A response
 #: can be lost when the request goes out as soon as the service is discovered, before the server has matched the
-#: client's response reader (a CI run: list_parameters of a windowing node never answered in 60 s); a read is safe
-#: to repeat, a set is not (it would apply twice).
+#: client's response reader (ros2/demos#304, ros2/rmw_fastrtps#238; a CI run: list_parameters of a windowing node
+#: never answered in 60 s); a read is safe to repeat, a set is not (it would apply twice).
 READ_SERVICES = ("ListParameters", "DescribeParameters", "GetParameters")
 READ_RETRY_S = 10.0
 
