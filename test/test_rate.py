@@ -107,30 +107,11 @@ def test_with_an_accelerometer_the_late_departure_moves_back_as_far_in_time_at_4
     assert abs(got[0] - t_ref[0]) <= 1e-3, (got[0] - t_ref[0]) / 2.5e-4
 
 
-def _two_mass(ts, j1=1.16, j2=2.0, k=5e4, c=40.0, half=0.05, load0=200.0, ramp=(0.1, 0.112), length_s=0.21,
-              step_s=2.5e-5, counts=65536):
+def _two_mass(ts, length_s=0.21, step_s=2.5e-5):
     """test_flank's two-mass drive whose coupling untwists off its flank as its load reverses, sampled every ``ts``
     (integrated at ``step_s``): (t, alpha1, alpha2, m_el) and the first row in the zone."""
-    sub, n = int(round(ts / step_s)), int(round(length_s / ts))
-    th1, w1, th2, w2 = half + load0 / k, 50.0, 0.0, 50.0
-    out, free = np.zeros((n, 4)), np.zeros(n, bool)
-    for i in range(n):
-        for _ in range(sub):
-            f = min(max((i * ts - ramp[0]) / (ramp[1] - ramp[0]), 0.0), 1.0)
-            m = load0 + (-50.0 - load0) * f + 20.0 * math.sin(2 * math.pi * 9 * i * ts)
-            pen = abs(th1 - th2) - half
-            tc = math.copysign(max(k * pen + c * math.copysign(1.0, th1 - th2) * (w1 - w2), 0.0), th1 - th2) \
-                if pen > 0 else 0.0
-            w1 += step_s * (m - tc) / j1
-            th1 += step_s * w1
-            w2 += step_s * (tc - (load0 - 350.0 * f)) / j2
-            th2 += step_s * w2
-        out[i] = (i * ts, th1, th2, m)
-        free[i] = abs(th1 - th2) <= half
-    q = 2 * math.pi / counts
-    out[:, 1] = np.round(out[:, 1] / q) * q
-    out[:, 2] = np.round((out[:, 2] + 0.3) / q) * q
-    return out, int(np.argmax(free))
+    from test_flank import _untwisting_two_mass
+    return _untwisting_two_mass(n=int(round(length_s / ts)), ts=ts, sub=int(round(ts / step_s)))
 
 
 def test_the_coupling_model_searches_as_far_in_time_at_4_khz():

@@ -94,7 +94,7 @@ from jident_ros.identify.gap_free import (
     kink_terms,
 )
 from jident_ros.identify.gap_load import LOAD_ANGLE_KEY, load_free_bounds
-from jident_ros.identify.gap_numerics import _diff2, _median, _quantum
+from jident_ros.identify.gap_numerics import _cumtrapz, _diff2, _median, _quantum
 from jident_ros.stream.filters import savgol_coeffs, savgol_filter
 
 #: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
@@ -159,8 +159,7 @@ def encoder_resolved(alpha1: np.ndarray, torque: np.ndarray, span: tuple, j1: fl
         return
     m = np.asarray(torque, float)[s:e]
     ts = float(sample_period_s)
-    speed = np.concatenate([[0.0], np.cumsum(0.5 * (m[1:] + m[:-1])) * ts])       # ∫ m dt, N m s
-    disp = float(np.sum(0.5 * (speed[1:] + speed[:-1])) * ts) / j1                  # ∬ m dt² / J1, rad
+    disp = float(_cumtrapz(_cumtrapz(m, ts), ts)[-1]) / j1                          # ∬ m dt² / J1, rad
     counts = abs(disp) / q
     if counts < MIN_CURVATURE_COUNTS:
         raise NoGapError(f"gap fit undetermined: the gap's torque moves the motor by {counts:.2g} encoder counts "

@@ -149,6 +149,17 @@ def gen_ours(out: Path, system, quick: bool, log) -> list:
     return recs
 
 
+def second_recording(tr: dict, counts: int, noise: str, snr) -> "ZooRecording":
+    """The :class:`ZooRecording` (no files yet) of one second-drive recording's truth ``tr`` (sd_record's), recorded
+    with ``counts`` per revolution at noise ``noise`` (a NOISE label) = ``snr`` dB."""
+    name = f"second_{tr['name']}_{counts}c_{noise.replace(' ', '')}"
+    gl = [{"entry_index": g["entry_index"], "recontact_index": g["end_index"] if g["end_time_s"] is not None
+           else None, "traversal": g["from_flank"] != g["to_flank"]} for g in tr["gaps"]]
+    return ZooRecording("second drive", name, "speed step down", True, tr["direction"], tr["inertia_kgm2"],
+                        tr["backlash_width_m"], tr["reference_radius_m"], tr["gear_ratio"], counts, snr,
+                        tr["sample_period_s"], tr["event"]["index"], gl)
+
+
 def gen_second(out: Path, quick: bool, log) -> list:
     params = SecondParams()
     inertias, widths = (INERTIAS[:1], WIDTHS[:1]) if quick else (INERTIAS, WIDTHS)
@@ -159,13 +170,8 @@ def gen_second(out: Path, quick: bool, log) -> list:
             sensors = sd_record.SensorConfig(encoder_counts=counts, snr_db=snr)
             for r in sd_record.build_grid(params, cases, sensors, steady_s=1.0, post_s=1.3, seed=7):
                 tr = r.truth
-                name = f"second_{tr['name']}_{counts}c_{noise.replace(' ', '')}"
-                gl = [{"entry_index": g["entry_index"], "recontact_index": g["end_index"] if g["end_time_s"] is not None
-                       else None, "traversal": g["from_flank"] != g["to_flank"]} for g in tr["gaps"]]
-                zr = ZooRecording("second drive", name, "speed step down", True, tr["direction"], tr["inertia_kgm2"],
-                                  tr["backlash_width_m"], tr["reference_radius_m"], tr["gear_ratio"], counts, snr,
-                                  tr["sample_period_s"], tr["event"]["index"], gl)
-                zr.files = {f: _write(out, name, r.signals, f) for f in _formats(counts)}
+                zr = second_recording(tr, counts, noise, snr)
+                zr.files = {f: _write(out, zr.name, r.signals, f) for f in _formats(counts)}
                 recs.append(zr)
         log(f"second drive: {len(recs)} recordings")
     return recs

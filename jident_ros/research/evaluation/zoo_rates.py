@@ -63,14 +63,8 @@ def second_items(ts: float, system, out: Path) -> list:
         for noise, snr in zoo.NOISE:
             sensors = sd_record.SensorConfig(encoder_counts=counts, snr_db=snr)
             for r in sd_record.build_grid(params, cases, sensors, steady_s=1.0, post_s=1.3, seed=7):
-                tr = r.truth
-                name = f"second_{tr['name']}_{counts}c_{noise.replace(' ', '')}"
-                gl = [{"entry_index": g["entry_index"], "recontact_index": g["end_index"] if g["end_time_s"] is not None
-                       else None, "traversal": g["from_flank"] != g["to_flank"]} for g in tr["gaps"]]
-                zr = zoo.ZooRecording("second drive", name, "speed step down", True, tr["direction"],
-                                      tr["inertia_kgm2"], tr["backlash_width_m"], tr["reference_radius_m"],
-                                      tr["gear_ratio"], counts, snr, tr["sample_period_s"], tr["event"]["index"], gl)
-                zr.files = {"jointstate": zoo._write(out, name, r.signals, "jointstate")}
+                zr = zoo.second_recording(r.truth, counts, noise, snr)
+                zr.files = {"jointstate": zoo._write(out, zr.name, r.signals, "jointstate")}
                 items.append((zr, zoo.diagnose_one(zr, "jointstate", system, declare=True)))
     return items
 
