@@ -420,18 +420,18 @@ def test_free_motion_start_finds_where_the_motor_ran_free(noise_nm, late):
 
 
 def test_free_motion_start_keeps_the_departure_of_a_coarse_encoder():
-    """A coarse encoder (2^13: a light contact's load is below its resolution, FREE_MAX_NOISE_RAD; its walk ran 51
+    """A coarse encoder (2^13: a light contact's load is below its resolution, FREE_WALK_MAX_NOISE_RAD; its walk ran 51
     samples back on the vector drive, a false entry): the departure is kept."""
     from jident_ros.stream import flank
     alpha1, m_el, q = _free_motor(counts=8192, load_nm=20.0, ramp=60)
     assert flank.free_motion_start(alpha1, m_el, 240, 48, 5e-4, q) == 240
     # the guard is what keeps it: without it the coarse encoder's walk moves the entry
-    saved = flank.FREE_MAX_NOISE_RAD
+    saved = flank.FREE_WALK_MAX_NOISE_RAD
     try:
-        flank.FREE_MAX_NOISE_RAD = 1.0
+        flank.FREE_WALK_MAX_NOISE_RAD = 1.0
         assert flank.free_motion_start(alpha1, m_el, 240, 48, 5e-4, q) < 200 - 20
     finally:
-        flank.FREE_MAX_NOISE_RAD = saved
+        flank.FREE_WALK_MAX_NOISE_RAD = saved
 
 
 def test_free_motion_start_only_for_traversals_back_without_a1():
@@ -1089,3 +1089,38 @@ def test_the_travel_s_direction_is_delta_s_first_move_when_it_has_not_moved_over
     D = _travel(d, e, 4)
     assert D.max() > RECONTACT_MIN_TRAVEL_QUANTA * q and D[-1] > 0
     assert not _delta_arrived(d, e, e + 5, q)          # the acceleration's early row is not taken
+
+
+def _vd_2e14_return():
+    """A cut of the vector drive's 2^14 variant (clean speed step down, JointState, encoders not configured), the
+    contact rule's capture of its traversal back up to 150 rows after the departure: rows (t, alpha1, alpha2, m_el),
+    the departure row (56 samples after the contact loss: a contact learnt while delta settled on the far flank, its
+    threshold 4.7 mrad), the true first row in the zone, the flank level and its contact sigma."""
+    from pathlib import Path
+    d = np.load(Path(__file__).parent / "data" / "vd_2e14_return_traversal_jointstate.npz")
+    q = 2.0 * math.pi / 16384
+    a1 = float(d["alpha10"]) + q * d["alpha1_counts"]
+    a2 = float(d["alpha20"]) + q * d["alpha2_counts"]
+    data = np.column_stack([float(d["t0"]) + np.arange(a1.size) * 5e-4, a1, a2, d["m_el"].astype(float)])
+    return data, int(d["departure"]), int(d["entry"]), float(d["flank"]), float(d["sigma"])
+
+
+@pytest.mark.parametrize("gate", ["walk", "old"])
+def test_a_2e14_encoder_s_traversal_back_is_walked(monkeypatch, gate):
+    """On a 2^14 encoder the free fit's rms is its quantum / sqrt 12 (1.1e-4 rad), and scatters over 0.99-1.13e-4 from
+    one departure to the next: against FREE_MAX_NOISE_RAD (1.0e-4) the walk was refused for one capture of a traversal
+    back (+56, the report's window) and taken for the other (+1).  The walk's own gate, FREE_WALK_MAX_NOISE_RAD, lies
+    between 2^14's and 2^13's quantisation ('old': the gate at FREE_MAX_NOISE_RAD, the departure stays)."""
+    from jident_ros.stream import flank
+    if gate == "old":
+        monkeypatch.setattr(flank, "FREE_WALK_MAX_NOISE_RAD", flank.FREE_MAX_NOISE_RAD)
+    data, dep, true, level, sigma = _vd_2e14_return()
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
+    det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), True, sigma
+    shift, _ = det._refine(data, dep)
+    if gate == "walk":
+        assert abs(dep + shift - true) <= 2, dep + shift - true
+        # a 2^13 encoder's walk stays refused (test_free_motion_start_keeps_the_departure_of_a_coarse_encoder)
+        assert 2 * math.pi / 8192 / math.sqrt(12.0) > flank.FREE_WALK_MAX_NOISE_RAD > 2 * math.pi / 16384 / math.sqrt(12.0)
+    else:
+        assert dep + shift - true >= 50, dep + shift - true
