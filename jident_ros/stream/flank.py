@@ -599,7 +599,8 @@ def free_motion_walk(alpha1: np.ndarray, m_el: np.ndarray, departure: int, first
     without a1 (module constants FREE_*): alpha1 = a + v k + Phi(k) / J + c k^2 / 2 (Phi the double integral of m_el;
     a, v, 1/J and c -- friction, the torque estimate's offset -- free) fitted over [s, departure + FREE_FIT_SAMPLES);
     s walks back while the rms stays within FREE_RMS_FACTOR x the rms from the departure (at least the quantum /
-    sqrt 12); the entry is then refined by a hinge (a contact torque ramping to zero at e) around the walk's end.
+    sqrt 12; with the torque estimate's white noise through Phi / J, which grows with the fit's length, added); the
+    entry is then refined by a hinge (a contact torque ramping to zero at e) around the walk's end.
     (walk's end, entry); (``departure``, ``departure``) when the walk does not move (the samples before it carry
     load)."""
     n = alpha1.size
@@ -630,7 +631,16 @@ def free_motion_walk(alpha1: np.ndarray, m_el: np.ndarray, departure: int, first
     noise = max(float(rms[-1]), quantum_rad / math.sqrt(12.0), ANGLE_MODEL_FLOOR_RAD)
     if not noise <= FREE_WALK_MAX_NOISE_RAD:
         return departure, departure        # a coarse encoder: a light contact's load is below its resolution
-    limit = FREE_RMS_FACTOR * noise
+    # the torque estimate's white noise enters alpha1 through Phi / J, double-integrated: after the free fit's (1, k,
+    # k^2) its residual's mean square grows as the fit's length L cubed (an integrated random walk detrended by a
+    # quadratic: sigma^2 T_s^4 L^3 / 2520 / J^2), so the limit counts that growth beyond the departure's own fit (at
+    # 30 dB a fit twice as long read 1.3 x the departure's rms with no contact in it: the walk stopped in the gap, and
+    # the vector drive's traversals back went +17 ... +23)
+    inv_j = abs(float(beta[2] + b[-1][2])) / max(float(np.abs(phi_all[lo:end] - phi_all[departure]).max()), 1e-300)
+    torque_rad = _noise(np.asarray(m_el[departure:end], float)) * inv_j * sample_period_s ** 2
+    length = (end - rows[:m]).astype(float)
+    limit = FREE_RMS_FACTOR * np.sqrt(noise * noise + torque_rad ** 2 * np.maximum(length ** 3 - (end - departure) ** 3,
+                                                                                      0.0) / 2520.0)
     bad = np.nonzero(rms > limit)[0]
     if bad.size == 0:
         return departure, departure        # no load seen before the departure within reach: nothing says where the gap began
