@@ -252,6 +252,12 @@ DUPLICATE_ENTRY_SAMPLES = 2
 #: exists with its entry this close (the contact rule found it already); one whose entry lies later, up to where the
 #: traversal reached the other flank, is replaced
 RETURN_MATCH_SAMPLES = 8
+#: ... or when a capture's departure lies earlier in the same excursion (after the scan was last re-armed at the
+#: re-contact edge, before the scan's start): the contact rule left a contact it had learnt while delta rested near the
+#: re-contact edge, where the scan still saw delta resting, so the two captures of one traversal lay more than
+#: RETURN_MATCH_SAMPLES apart and gave two windows (the vector drive's 2^14 variant: +56 and +1; docs/your_drive.md's
+#: small drive at 30 dB: -2 and a false entry 24 samples before the gap; the ninth round).  False: the rule before
+RETURN_SAME_EXCURSION = True
 #: ... and scans only a window whose delta stays at (or beyond) its re-contact edge this many samples after the
 #: re-contact (a contact there; our simulator's slip excursion with a skewed Imu read as a 'traversal' rang around
 #: the edge and gave two false windows)
@@ -1886,7 +1892,7 @@ class FlankDetector(BacklashDetector):
         steady, quantum = self._scan_profile(d, margin)
         coarse, L = quantum > 0.0, self.contact_samples
         known = [c.start_row + c.departure_row for c in self._caps + self._new_caps]
-        k, n, at_out, last_out = g + 1, d.size, True, g
+        k, n, at_out, last_out, armed = g + 1, d.size, True, g, cap.start_row + e0 + g
         near = RETURN_TURN_SHARE * abs(span)
         rest = 0.0                                 # depth up to which delta rests at the re-contact edge
         deep, low, low_k = False, math.inf, -1     # this excursion: went beyond `near`; its least depth since then
@@ -1935,12 +1941,12 @@ class FlankDetector(BacklashDetector):
             reached = cap.start_row + e0 + k
             while k < n and depth[k] > 0:          # re-armed only once back at the re-contact edge
                 k += 1
-            at_out, start, rest = True, last_out + 1, 0.0
+            at_out, start, rest, since, armed = True, last_out + 1, 0.0, armed, cap.start_row + e0 + k
             last_out = k
             row = e0 + start                            # capture row of the return traversal's entry
             abs_row = cap.start_row + row
-            if any(abs(abs_row - r) <= self._n(RETURN_MATCH_SAMPLES) for r in known):
-                continue                                # the contact rule found it already
+            if any(abs(abs_row - r) <= self._n(RETURN_MATCH_SAMPLES) or RETURN_SAME_EXCURSION and since < r < abs_row for r in known):
+                continue                                # the contact rule found it already (RETURN_SAME_EXCURSION)
             if self._open_return(cap, data, row, reached, float(edge_out)):
                 known.append(abs_row)
 
