@@ -67,7 +67,9 @@ SENSOR_VARIANTS = {"sampling jitter 25 µs": {"sample_jitter_s": 25e-6}, "sampli
                    "CiA 402 units": {"torque_quantum_rel_rated": 1e-3, "speed_quantum_rad_s": 2 * np.pi / 60},
                    "coarse torque": {"torque_quantum_rel_rated": 1e-2},
                    "2^14 encoders": {"encoder_counts": 2 ** 14}, "2^20 encoders": {"encoder_counts": 2 ** 20},
-                   "load encoder reversed": {"load_encoder_sign": -1.0}}
+                   "load encoder reversed": {"load_encoder_sign": -1.0},
+                   "encoder disc errors": {"encoder_error_rad": 2e-4},
+                   "torque one sample late": {"torque_delay_samples": 1}}
 
 
 def system_for(name: str, p: DriveParams):
@@ -135,6 +137,10 @@ def variants() -> list:
         ("2^14 encoders", "both encoders 16384 counts/rev (in place of 65536)", b, {}),
         ("2^20 encoders", "both encoders 1048576 counts/rev (in place of 65536)", b, {}),
         ("load encoder reversed", "the load encoder counts the other way, diagnosed with gear_ratio -1", b, {}),
+        ("encoder disc errors", "both encoders with a once-per-revolution angle error of 0.2 mrad (41 arc s, a disc "
+         "off centre) and a twice-per-revolution one of 0.1 mrad", b, {}),
+        ("torque one sample late", "the torque estimate reported one sample (0.5 ms) after the angles (the drive "
+         "publishes its previous cycle's estimate); declared as the base drive (lag within 1 ms)", b, {}),
         ("small drive, 3:1 gear", "docs/your_drive.md's example: 2.2 kW, J1 0.03 kg m^2, J2 0.54 behind a 3:1 gear, "
          "K2 1.5 mm at r 0.03 m, its torque estimate 3-4 % off; diagnosed with its drive file "
          "(docs/examples/profiles/small_drive.yaml)", small_drive(), _declared_by_file("small drive, 3:1 gear")),
