@@ -188,3 +188,26 @@ def test_a_steady_entry_on_the_edge_of_the_search_is_not_located(ours_window):
     assert "j1" in ok and abs(ok["j1"] / 1.131 - 1) < 0.01, ok["choice"]
     early = anchored(e - 8)
     assert "j1" not in early and "on the edge" in early["choice"], early["choice"]
+
+
+def test_the_change_point_search_is_a_duration_at_any_sample_rate():
+    """The gap stage's sample counts that are durations (the change-point search, its trims, the steady-entry fit's
+    spans) are counted at 2 kHz and converted (stream/rate.py): at 4 kHz a detector's entry 7.5 ms late (30 rows) is
+    searched back to the change point the exact entry gives, as at 2 kHz (unconverted, the 25-row search stopped 5
+    rows after the true entry and J1 moved by +0.4 %)."""
+    from dataclasses import replace
+    assert [GapModel().search_rows(ts) for ts in (5e-4, 2.5e-4, 1.25e-4, 1e-3)] == [25, 50, 100, 13]
+    assert GapModel(changepoint_search_samples=0).search_rows(2.5e-4) == 0
+    ts = 2.5e-4
+    d = StressDrive(j1_kgm2=1.16)
+    rec = simulate(replace(d, sample_period_s=ts, substeps=max(1, d.substeps // 2)), "speed_step", seed=3)
+    w = dict(rec["window"])
+    w.pop("a1", None)
+
+    def fit(entry_offset):
+        return estimate_inertia(w, rec["entry"] + entry_offset, 0.005, R, ts, method="angle",
+                                recontact_index=rec["recontact"], model=GapModel(coulomb_friction_max_nm=1.5))
+    exact, late = fit(0), fit(30)
+    assert late.fit_start == exact.fit_start < rec["entry"], (late.fit_start, exact.fit_start, rec["entry"])
+    assert late.inertia_kgm2 == pytest.approx(exact.inertia_kgm2, rel=2e-3)
+    assert late.ci95_kgm2[0] <= 1.16 <= late.ci95_kgm2[1]

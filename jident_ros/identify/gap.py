@@ -85,17 +85,15 @@ from jident_ros.identify import lapack
 from jident_ros.identify.distributions import f_survival, t_quantile
 from jident_ros.identify.gap_free import (
     FREE_REL_SE_FLOOR,
-    KINK_PRE_SAMPLES,
-    KINK_SEARCH,
     FreeFitError,
     GapModel,
     free_angle_fit,
-    kink_locate,
-    kink_terms,
 )
+from jident_ros.identify.gap_kink import KINK_PRE_SAMPLES, KINK_SEARCH, kink_locate, kink_terms
 from jident_ros.identify.gap_load import LOAD_ANGLE_KEY, load_free_bounds
 from jident_ros.identify.gap_numerics import _cumtrapz, _diff2, _median, _quantum
 from jident_ros.stream.filters import savgol_coeffs, savgol_filter
+from jident_ros.stream.rate import samples as rate_samples
 
 #: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
 GAP_QUADRATIC_MIN = 12
@@ -428,12 +426,11 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         if "alpha1" not in window:
             raise NoGapError("method 'angle' needs alpha1 (use 'speed' with omega1)")
         torque = _net_torque(window, bearing_friction_nms_per_rad)
-        bounds = load_free_bounds(window.get(LOAD_ANGLE_KEY, window.get("alpha2")), start, end,
-                                  int(model.changepoint_search_samples))
+        search = model.search_rows(sample_period_s)
+        bounds = load_free_bounds(window.get(LOAD_ANGLE_KEY, window.get("alpha2")), start, end, search)
         ff, anchored = _angle_fits(np.asarray(window["alpha1"], float), torque, sample_period_s, start, end, model,
                                    bounds)
-        if bounds is not None and (bounds[0] > start - model.changepoint_search_samples
-                                   or bounds[1] < end + model.changepoint_search_samples):
+        if bounds is not None and (bounds[0] > start - search or bounds[1] < end + search):
             choice = "; ".join(x for x in (choice, f"the load angle free in rows {bounds[0]}..{bounds[1]}") if x)
         j, se, res, dof = ff["j1"], ff["se_stat"], ff["residual"], ff["dof"]
         model_error = ff["change_point_error"]
@@ -640,19 +637,23 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     smaller: the free fit is its check.  Returns {} and a 'choice' phrase otherwise."""
     s, e = coarse
     lo, hi = min(s, ff["start"]), max(s, ff["start"])
-    test = pre_entry_steady(torque[:max(lo - KINK_SEARCH, 0)])
+    # durations counted at 2 kHz, in the recording's rows (jident_ros/stream/rate.py; unchanged at 0.5 ms)
+    k_search = rate_samples(KINK_SEARCH, sample_period_s)
+    k_pre = rate_samples(KINK_PRE_SAMPLES, sample_period_s)
+    k_agree = rate_samples(KINK_FREE_AGREE_SAMPLES, sample_period_s)
+    test = pre_entry_steady(torque[:max(lo - k_search, 0)])
     if not test.steady:
         return {"choice": f"angle (free): {test.reason}"}
     end = min(e, ff["end"])
     try:
         # its standard error only once the checks below have kept it (most steady-entry fits are refused there)
-        kf = kink_locate(alpha1, torque, sample_period_s, range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1),
+        kf = kink_locate(alpha1, torque, sample_period_s, range(max(lo - k_search, 1), hi + k_search + 1),
                          end)
     except (FreeFitError, np.linalg.LinAlgError) as exc:
         return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
     # a profile minimum on the edge of the searched rows has not located the entry: the change point may lie
     # beyond it (the vector drive's heavy load reversal at 30 dB: the edge row, 13 samples early, J1 +29 %)
-    cand = range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1)
+    cand = range(max(lo - k_search, 1), hi + k_search + 1)
     if kf["start"] in (cand[0], cand[-1]) and cand[0] > 1:
         return {"choice": f"angle (free): the steady-entry fit's entry row {kf['start']} is on the edge of the rows "
                           f"searched ({cand[0]}..{cand[-1]}): not located"}
@@ -663,25 +664,25 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     # detector's (the same window with the detector's entry 2 samples later and an Imu: the kink 10 samples before
     # it, J1 +26 %)
     for what, row in (("the free fit's", ff["start"]), ("the detector's", s)):
-        if abs(kf["start"] - row) > KINK_FREE_AGREE_SAMPLES:
+        if abs(kf["start"] - row) > k_agree:
             return {"choice": f"angle (free): the steady-entry fit's entry row {kf['start']} is "
                               f"{abs(kf['start'] - row)} samples from {what} ({row}): not the same change point"}
     # the torque steady right up to the estimated entry (a speed controller acting just before it is not): its
     # last KINK_SEARCH samples within 5 robust noise levels (or 1e-3 of the level) of the steady stretch's median
     sb = kf["start"]
-    ref = torque[max(0, sb - KINK_PRE_SAMPLES):sb - KINK_SEARCH]
-    last = torque[sb - KINK_SEARCH:sb]
+    ref = torque[max(0, sb - k_pre):sb - k_search]
+    last = torque[sb - k_search:sb]
     level = float(_median(np.asarray(ref, float)))
     tol = max(5.0 * _robust_noise(ref), 1e-3 * abs(level))
     if float(np.abs(last - level).max()) > tol:
-        return {"choice": f"angle (free): the torque changes in the {KINK_SEARCH} samples before the entry row {sb} "
+        return {"choice": f"angle (free): the torque changes in the {k_search} samples before the entry row {sb} "
                           f"(by {float(np.max(np.abs(last - level))):.3g} N m): not a steady drive's entry"}
     # ... and it stays near its level through the first samples after it (a machine on line: the flux is
     # continuous; a speed controller reacting to an event moves it at once, and the kink is then the event)
-    first = torque[sb:sb + KINK_SEARCH]
+    first = torque[sb:sb + k_search]
     if float(np.abs(first - level).max()) > max(tol, KINK_TORQUE_AFTER_REL * abs(level)):
         return {"choice": f"angle (free): the torque moves by {float(np.max(np.abs(first - level))):.3g} N m in the "
-                          f"{KINK_SEARCH} samples after the entry row {sb}: not a steady drive's entry"}
+                          f"{k_search} samples after the entry row {sb}: not a steady drive's entry"}
     try:
         # the re-contact row: moved in by 1 and 2 (contact after it is not modelled); fitted once the checks above
         # have kept the steady-entry fit (a speed controller's entry is refused there: 2 of its 3 fits saved)
@@ -705,7 +706,8 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
             "res": res, "dof": dof, "model_error": model_error, "terms": terms, "span": (kf["start"], kf["end"])}
 
 
-#: Steady-entry fit: its entry row within this many samples of the free fit's and of the detector's (chosen on our
+#: Steady-entry fit: its entry row within this many samples (at 2 kHz; converted by stream/rate.py) of the free fit's
+#: and of the detector's (chosen on our
 #: simulator's zoo windows with the detector's entry moved by -3..+3 samples: |difference| <= 4 and <= 3; tested on the
 #: vector drive: its heavy load reversal's wrong kinks lie 13-15 and 10-16 samples off)
 KINK_FREE_AGREE_SAMPLES = 6
