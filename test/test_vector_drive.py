@@ -207,3 +207,10 @@ def test_jittered_instants_stamps_and_reported_units(step_down, monkeypatch):
     late = build(torque_delay_samples=1)
     np.testing.assert_array_equal(late["m_el"][1:], base["m_el"][:-1])
     assert late["m_el"][0] == base["m_el"][0] and np.array_equal(late["alpha1"], base["alpha1"])
+    # the torque estimate smoothed by the drive ('smoothed torque 2 ms'): a first-order lag that starts at rest
+    smooth = build(torque_filter_s=2e-3)
+    a = math.exp(-ts / 2e-3)
+    assert smooth["m_el"][0] == pytest.approx(base["m_el"][0])
+    np.testing.assert_allclose(smooth["m_el"][1:], a * smooth["m_el"][:-1] + (1 - a) * base["m_el"][1:], rtol=1e-12,
+                               atol=1e-9)
+    assert np.max(np.abs(smooth["m_el"] - base["m_el"])) > 1.0          # the event's torque step is smoothed

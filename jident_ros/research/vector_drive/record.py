@@ -28,6 +28,7 @@ from typing import Optional
 
 import numpy as np
 from scipy.interpolate import CubicSpline
+from scipy.signal import lfilter
 
 from jident_ros.research.second_drive.record import write_csv, write_jointstate
 
@@ -66,6 +67,9 @@ class Sensors:
     #: the torque estimate reported this many samples late (a drive that publishes the previous cycle's estimate
     #: beside the current angles)
     torque_delay_samples: int = 0
+    #: time constant of a first-order low-pass on the reported torque estimate, s (drives often smooth their "actual
+    #: torque" value for display; 0: unfiltered), applied at the sample rate before the delay
+    torque_filter_s: float = 0.0
 
 
 def _jittered(st: dict, jitter_s: float, seed: int) -> tuple:
@@ -195,6 +199,9 @@ def _sensed(st: dict, p, sensors: Sensors, seed: int) -> tuple:
     ph = (np.random.default_rng([seed, 9]).uniform(0.0, 2 * math.pi, 4) if sensors.encoder_error_rad
           else np.zeros(4))
     m_el = st["tau_est"].copy()
+    if sensors.torque_filter_s > 0:
+        a = math.exp(-ts / sensors.torque_filter_s)
+        m_el = lfilter([1.0 - a], [1.0, -a], m_el, zi=[a * m_el[0]])[0]
     if sensors.torque_delay_samples:
         k = int(sensors.torque_delay_samples)
         m_el = np.concatenate([np.full(k, m_el[0]), m_el[:-k]])
