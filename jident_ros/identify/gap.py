@@ -85,6 +85,7 @@ from jident_ros.identify import lapack
 from jident_ros.identify.distributions import f_survival, t_quantile
 from jident_ros.identify.gap_free import (
     FREE_REL_SE_FLOOR,
+    NONPHYSICAL_Z,
     FreeFitError,
     GapModel,
     free_angle_fit,
@@ -380,7 +381,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         fit = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction)
         kappa = fit["kappa"]
         if not kappa > 0:
-            raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa!r}")
+            raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa:.4g}")
         j = wheel_radius_m / kappa
         alt = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction,
                          linear_term=True, warm=fit, kappa_only=True)
@@ -404,7 +405,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         smm = float(m_hat @ m_hat)
         kappa = float(a @ m_hat) / smm
         if not kappa > 0:
-            raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa!r}")
+            raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa:.4g}")
         j = wheel_radius_m / kappa
         res = (a - kappa * m_hat) / kappa
         dof = n - 1
@@ -454,7 +455,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     else:
         raise ValueError(f"method: expected one of {', '.join(FITS)} (or None: the model choice), got {method!r}")
     if not np.isfinite(j) or j <= 0:
-        raise NoGapError(f"gap fit gave a non-physical J1 = {j!r}")
+        raise NoGapError(f"gap fit gave a non-physical J1 = {j:.4g}")
     if "std_error_terms" in free_extra:
         # the angle fits: gap_free raises se to FREE_REL_SE_FLOOR J1 where the data would allow less; that floor
         # is a part too (the only way se exceeds its parts there)
@@ -839,7 +840,7 @@ def speed_fit(omega1: np.ndarray, torque: np.ndarray, sample_period_s: float, la
     coef, A = slope(omega1, y, tq)
     kappa = float(coef[1])
     if not kappa > 0:
-        raise NoGapError(f"gap fit gave a non-physical J1 = 1/{kappa!r} (dω1 against ∫m_el dt)")
+        raise NoGapError(f"gap fit gave a non-physical J1 = 1/{kappa:.4g} (dω1 against ∫m_el dt)")
     res = omega1 - A @ coef
     dof = n - A.shape[1]
     rho = float(res[1:] @ res[:-1]) / float(res @ res) if float(res @ res) > 0 else 0.0
@@ -952,6 +953,22 @@ def _origin_slope(y: np.ndarray, x: np.ndarray, sy: float, sx: float) -> float:
     return (q + np.sqrt(q * q + 4.0 * d * sxy * sxy)) / (2.0 * sxy)
 
 
+def _nonpositive_slope(j: float, torque: np.ndarray, acc: np.ndarray) -> str:
+    """The reason of a 'gap_only' J1 at or below zero: "gap fit undetermined" (resolution-limited) when the torque
+    and the acceleration over the fitted rows are not correlated beyond NONPHYSICAL_Z (the t statistic of their
+    correlation through the origin), else "non-physical" with what to check."""
+    y, x = np.asarray(torque, float), np.asarray(acc, float)
+    n = y.size
+    sxx, syy, sxy = float(x @ x), float(y @ y), float(x @ y)
+    r = sxy / np.sqrt(sxx * syy) if sxx > 0 and syy > 0 else 0.0
+    t = r * np.sqrt(max(n - 1, 1)) / np.sqrt(max(1.0 - r * r, 1e-12))
+    if math.isfinite(t) and t >= -NONPHYSICAL_Z:
+        return (f"gap fit undetermined: m_el and a1 are not correlated over the gap's {n} rows (t = {t:.2g}): the "
+                f"gap's torque does not accelerate the motor measurably")
+    return (f"gap fit gave a non-physical J1 = {j:.4g} (m_el against a1 over the gap: they are anti-correlated, "
+            f"t = {t:.2g}; check the sign of m_el against a1 and the joint names)")
+
+
 def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
                  trim_sigma: float = GAP_ONLY_TRIM_SIGMA, trim_rel: float = GAP_ONLY_TRIM_REL,
                  max_trim: tuple = GAP_ONLY_MAX_TRIM) -> dict:
@@ -981,7 +998,7 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
     core = (start + 2, end - 2) if end - start >= 10 else (start, end)
     j = slope(*core)
     if not math.isfinite(j) or j <= 0:
-        raise NoGapError(f"gap fit gave a non-physical J1 = {j!r} (m_el against a1 over the gap)")
+        raise NoGapError(_nonpositive_slope(j, y_all[core[0]:core[1]], x_all[core[0]:core[1]]))
     lo, hi = start, end
     level = float(_median(np.abs(y_all[start:end])))
     for it in range(4):
@@ -997,7 +1014,7 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
         lo, hi = new_lo, new_hi
         j = slope(lo, hi)
         if not math.isfinite(j) or j <= 0:
-            raise NoGapError(f"gap fit gave a non-physical J1 = {j!r} (m_el against a1 over the gap)")
+            raise NoGapError(_nonpositive_slope(j, y_all[lo:hi], x_all[lo:hi]))
     n = hi - lo
     if n < 3:
         raise NoGapError(f"gap too short: {n} samples in the zone by the dynamics, need >= 3")
@@ -1200,7 +1217,7 @@ def _angle_fit(alpha1: np.ndarray, m_el: np.ndarray, start: int, end: int, sampl
     dof = end - 3
     kappa = float(coef[2])     # 1/J1
     if not kappa > 0 or dof < 1:
-        raise NoGapError(f"gap fit gave a non-physical 1/J1 = {kappa!r} from alpha1")
+        raise NoGapError(f"gap fit gave a non-physical 1/J1 = {kappa:.4g} from alpha1")
     row = np.linalg.pinv(A)[2]
     zrow = row @ H
     var_kappa = float(res @ res) / dof * float(row @ row) + kappa ** 2 * float(zrow @ cov_beta @ zrow)

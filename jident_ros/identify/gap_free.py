@@ -390,10 +390,12 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             return np.where(kappa > 0, 1.0 / kappa, np.inf)
 
     best = None
+    first = None
     for with_coulomb in (False, True):
         if with_coulomb and (e_est - s_est < FREE_MIN_SAMPLES + 2 or not model.coulomb_friction_max_nm):
             continue
         f = fit(s_est, e_est, with_coulomb)
+        first = f if first is None else first
         if not f["kappa"] > 0:
             continue
         j1 = 1.0 / f["kappa"]
@@ -428,8 +430,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         if best is None or se_stat < best["se_stat"]:
             best = cand
     if best is None:
-        raise FreeFitError("gap fit gave a non-physical 1/J1 from alpha1 (the angle does not curve with the "
-                           "torque's double integral over the gap)")
+        raise FreeFitError(_no_positive_kappa(first, phi_scale))
     j1 = best["j1"]
     terms = dict(best["terms"])
     terms["torque_accuracy"] = j1 * model.torque_rel_se()
@@ -441,6 +442,30 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     return {"j1": j1, "se": se, "se_stat": best["se_stat"], "terms": terms, "start": int(s_est), "end": int(e_est),
             "friction": friction, "coulomb_nm": float(f["fc"]), "residual": f["res"], "dof": f["X"].shape[0] - f["X"].shape[1],
             "change_point_error": float(terms["change_points"])}
+
+
+#: A fit's 1/J1 at or below zero within this many of its standard errors of zero: the gap's torque does not curve the
+#: angle measurably (resolution-limited, no J1 from the window); farther below, the angle curves against the torque
+#: (a sign or configuration problem). 3, the cross-check's and the friction band's z (no model was tuned on it).
+NONPHYSICAL_Z = 3.0
+
+
+def _no_positive_kappa(f: dict, phi_scale: float) -> str:
+    """The reason of a free fit without a positive 1/J1 (``f``: the fit without a Coulomb column): "gap fit
+    undetermined" (resolution-limited) when its 1/J1 is within NONPHYSICAL_Z statistical standard errors of zero, else
+    "non-physical" with what to check."""
+    kappa, res, X = f["kappa"], f["res"], f["X"]
+    dof = X.shape[0] - X.shape[1]
+    row = f["pinv"][2] / phi_scale
+    rr = float(res @ res)
+    rho = min(max(float(res[1:] @ res[:-1]) / rr, 0.0), 0.99) if rr > 0 else 0.0
+    se = float(np.sqrt(rr / max(dof, 1) * float(row @ row) * (1.0 + rho) / (1.0 - rho)))
+    if np.isfinite(kappa) and kappa >= -NONPHYSICAL_Z * se:
+        return (f"gap fit undetermined: 1/J1 = {kappa:.3g} ± {se:.2g} 1/(kg m^2) from alpha1, not distinguishable from "
+                f"0: the gap's torque does not curve the angle measurably over its {X.shape[0]} rows")
+    return (f"gap fit gave a non-physical 1/J1 = {kappa:.3g} ± {se:.2g} 1/(kg m^2) from alpha1 (the angle curves "
+            "against the torque's double integral over the gap: check the sign of m_el against alpha1, the joint "
+            "names and gear_ratio)")
 
 
 def drift_term(row: np.ndarray, tt: np.ndarray, j1: float, offset_nm: float) -> float:

@@ -113,7 +113,7 @@ def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, 
     rss_list, kappa_list = rss_all.tolist(), kappa_all.tolist()
     rss_min, kappa, s_best = rss_list[k], kappa_list[k], entries[k]
     if not kappa > 0:
-        raise FreeFitError(f"kink fit: non-physical 1/J1 = {kappa!r}")
+        raise FreeFitError(f"kink fit: non-physical 1/J1 = {kappa:.4g}")
     dof = end - P - 3
     q = _quantum(a[P:end])
     s2 = max(rss_min / max(dof, 1), q * q / 12.0, 1e-30)
