@@ -7,7 +7,8 @@ Issue 20 says the estimator will be checked on drive models we do not have.  The
 drive; this sweep takes the third-party one (jident_ros/research/vector_drive, docs/vector_drive.md) and changes one
 property per variant -- the coupling's stiffness, the load inertia, the speed loop's bandwidth, the drive's
 observer mismatch (its torque estimate's error), the backlash width, the speed, J1, the bearing friction, the
-speed feedback's filter, the sample rate (1 and 4 kHz), the sampling instants' jitter, the reported units, the encoders -- over
+speed feedback's filter, the sample rate (1 and 4 kHz), the sampling instants' jitter, the reported units, the encoders
+(their resolution and a real disc's angle errors), a torque estimate reported late or smoothed -- over
 the traversing events (speed step down, speed reversal, light and heavy load reversal) and one same-flank event
 (speed step up: no entry may be found), forward, each recorded as JointState 2^16 (clean and 30 dB) and
 JointState + Imu 2^16 (30 dB).  Every file goes through the zoo's diagnosis
@@ -56,8 +57,8 @@ DRIVE_FILES = {"small drive, 3:1 gear": Path(__file__).resolve().parents[3] / "d
 
 #: Variants recorded at another rate (their DriveParams.sample_period_s), diagnosed with that sample period and a
 #: window of the same length in time (1 s from the entry), the 48 samples before it kept (docs/your_drive.md): the
-#: constants that count samples were chosen at 2 kHz; the detectors' are durations converted to the sample period
-#: (jident_ros/stream/rate.py), the gap stage's are not.
+#: constants that count samples were chosen at 2 kHz; the detectors' and the gap stage's durations are converted to
+#: the sample period (jident_ros/stream/rate.py).
 RATE_VARIANTS = ("recorded at 1 kHz", "recorded at 4 kHz")
 
 
