@@ -33,7 +33,8 @@ def _plain(d: dict) -> dict:
 
 def stress(out_path: str) -> None:
     from jident_ros.identify.gap import NoGapError, estimate_inertia
-    from jident_ros.identify.gap_free import FreeFitError, GapModel, free_angle_fit, kink_fit
+    from jident_ros.identify.gap_free import FreeFitError, GapModel, free_angle_fit
+    from jident_ros.identify.gap_kink import kink_fit
     from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
     if STRESS_CACHE.exists():
         recs = pickle.loads(STRESS_CACHE.read_bytes())

@@ -2,7 +2,7 @@
 
 `jident evaluate` runs the gap estimator ~40,000 times; three shortcuts cut its cost without changing a number:
 the fit cache (identify.gap.fit_cache: the channel sets of one window share its angle fits and steadiness test),
-the kink fit's candidates in one stacked solve (gap_free.kink_fit), and the signature interval's Savitzky-Golay
+the kink fit's candidates in one stacked solve (gap_kink.kink_fit), and the signature interval's Savitzky-Golay
 derivative without scipy's edge fits where they are not read (gap._savgol_for_gap).  Issue 20's per-window budget
 (bench/bench_gap.py) added more, each checked here against numpy or its plain form: numpy.linalg's gufuncs without
 their wrapper (identify.lapack), np.diff/np.gradient/np.std re-expressed as numpy's own steps, the change-point
@@ -13,9 +13,10 @@ import pytest
 from scipy.signal import savgol_filter
 
 from jident_ros.config import load_system_config
-from jident_ros.identify import gap, gap_free, gap_numerics
+from jident_ros.identify import gap, gap_free, gap_kink, gap_numerics
 from jident_ros.identify.gap import NoGapError, estimate_inertia, fit_cache
-from jident_ros.identify.gap_free import GapModel, kink_fit
+from jident_ros.identify.gap_free import GapModel
+from jident_ros.identify.gap_kink import kink_fit
 from jident_ros.identify.gap_numerics import _cumtrapz
 from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
 from jident_ros.research.evaluation.robustness import CHANNEL_SETS
@@ -69,7 +70,7 @@ def test_the_fit_cache_changes_no_number(windows, model, monkeypatch):
 
 def _kink_reference(alpha1, torque, ts, entries, end):
     """The kink fit's candidate loop, one entry at a time (its first implementation): (rss, 1/J1, residual)."""
-    P = max(0, entries[0] - gap_free.KINK_PRE_SAMPLES)
+    P = max(0, entries[0] - gap_kink.KINK_PRE_SAMPLES)
     rows = np.arange(P, end)
     y = alpha1[P:end] - alpha1[entries[0]]
     out = []
@@ -105,13 +106,13 @@ def test_kink_fit_matches_the_loop_on_grid_windows(windows, monkeypatch):
     """The kink fits the steady-entry check makes on clean, noisy and quantised grid windows (the trims' fits on
     the plausible entries too)."""
     calls = []
-    real = gap_free.kink_fit
+    real = gap_kink.kink_fit
     locate = gap.kink_locate          # the steady-entry check's kink fits (their standard error added after its checks)
     monkeypatch.setattr(gap, "kink_locate", lambda *a, **k: calls.append(a) or locate(*a, **k))
     _all_sets(windows)
     checked = 0
     for alpha1, m_el, ts, entries, end, *_ in calls:
-        entries = sorted(int(x) for x in entries if end - int(x) >= gap_free.KINK_MIN_GAP_SAMPLES)
+        entries = sorted(int(x) for x in entries if end - int(x) >= gap_kink.KINK_MIN_GAP_SAMPLES)
         try:
             real(alpha1, m_el, ts, entries, end)
         except gap_free.FreeFitError:
@@ -228,9 +229,9 @@ def test_the_kink_fit_located_then_its_terms_is_the_kink_fit():
     args = (rec["window"]["alpha1"], rec["window"]["m_el"], 5e-4, list(range(rec["entry"] - 4, rec["entry"] + 5)),
             rec["recontact"])
     full = kink_fit(*args, 0.5, 0.2, 1e-3)
-    part = gap_free.kink_locate(*args)
+    part = gap_kink.kink_locate(*args)
     assert "terms" not in part and part["j1"] == full["j1"] and part["start"] == full["start"]
-    done = gap_free.kink_terms(part, 0.5, 0.2, 1e-3)
+    done = gap_kink.kink_terms(part, 0.5, 0.2, 1e-3)
     assert done.keys() == full.keys()
     for k in full:
         a, b = done[k], full[k]

@@ -197,3 +197,20 @@ def test_jittered_instants_stamps_and_reported_units(step_down, monkeypatch):
     np.testing.assert_array_equal(rev["omega2"], -base["omega2"])
     d_base, d_rev = np.diff(base["alpha2"]), np.diff(rev["alpha2"])
     assert np.max(np.abs(d_rev + d_base)) <= 2 * 2 * math.pi / 65536 + 1e-12 and np.abs(d_base).sum() > 0
+    # a disc off centre (zoo_variants' 'encoder disc errors'): the reading departs from the ideal one by up to 1.5
+    # the once-per-revolution amplitude, periodic in the angle, and the load encoder's error is its own
+    disc = build(encoder_error_rad=2e-4)
+    err1 = disc["alpha1"] - base["alpha1"]
+    assert 1.2e-4 < np.max(np.abs(err1)) <= 1.5 * 2e-4 + 2 * 2 * math.pi / 65536
+    assert np.std(err1) > 5e-5 and not np.allclose(err1[:50], (disc["alpha2"] - base["alpha2"])[:50], atol=2e-5)
+    # the torque estimate reported a sample late ('torque one sample late'): the same series one row later
+    late = build(torque_delay_samples=1)
+    np.testing.assert_array_equal(late["m_el"][1:], base["m_el"][:-1])
+    assert late["m_el"][0] == base["m_el"][0] and np.array_equal(late["alpha1"], base["alpha1"])
+    # the torque estimate smoothed by the drive ('smoothed torque 2 ms'): a first-order lag that starts at rest
+    smooth = build(torque_filter_s=2e-3)
+    a = math.exp(-ts / 2e-3)
+    assert smooth["m_el"][0] == pytest.approx(base["m_el"][0])
+    np.testing.assert_allclose(smooth["m_el"][1:], a * smooth["m_el"][:-1] + (1 - a) * base["m_el"][1:], rtol=1e-12,
+                               atol=1e-9)
+    assert np.max(np.abs(smooth["m_el"] - base["m_el"])) > 1.0          # the event's torque step is smoothed

@@ -85,17 +85,16 @@ from jident_ros.identify import lapack
 from jident_ros.identify.distributions import f_survival, t_quantile
 from jident_ros.identify.gap_free import (
     FREE_REL_SE_FLOOR,
-    KINK_PRE_SAMPLES,
-    KINK_SEARCH,
+    NONPHYSICAL_Z,
     FreeFitError,
     GapModel,
     free_angle_fit,
-    kink_locate,
-    kink_terms,
 )
+from jident_ros.identify.gap_kink import KINK_PRE_SAMPLES, KINK_SEARCH, kink_locate, kink_terms
 from jident_ros.identify.gap_load import LOAD_ANGLE_KEY, load_free_bounds
 from jident_ros.identify.gap_numerics import _cumtrapz, _diff2, _median, _quantum
 from jident_ros.stream.filters import savgol_coeffs, savgol_filter
+from jident_ros.stream.rate import samples as rate_samples
 
 #: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
 GAP_QUADRATIC_MIN = 12
@@ -382,7 +381,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         fit = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction)
         kappa = fit["kappa"]
         if not kappa > 0:
-            raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa!r}")
+            raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa:.4g}")
         j = wheel_radius_m / kappa
         alt = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction,
                          linear_term=True, warm=fit, kappa_only=True)
@@ -406,7 +405,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         smm = float(m_hat @ m_hat)
         kappa = float(a @ m_hat) / smm
         if not kappa > 0:
-            raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa!r}")
+            raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa:.4g}")
         j = wheel_radius_m / kappa
         res = (a - kappa * m_hat) / kappa
         dof = n - 1
@@ -428,12 +427,11 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         if "alpha1" not in window:
             raise NoGapError("method 'angle' needs alpha1 (use 'speed' with omega1)")
         torque = _net_torque(window, bearing_friction_nms_per_rad)
-        bounds = load_free_bounds(window.get(LOAD_ANGLE_KEY, window.get("alpha2")), start, end,
-                                  int(model.changepoint_search_samples))
+        search = model.search_rows(sample_period_s)
+        bounds = load_free_bounds(window.get(LOAD_ANGLE_KEY, window.get("alpha2")), start, end, search)
         ff, anchored = _angle_fits(np.asarray(window["alpha1"], float), torque, sample_period_s, start, end, model,
                                    bounds)
-        if bounds is not None and (bounds[0] > start - model.changepoint_search_samples
-                                   or bounds[1] < end + model.changepoint_search_samples):
+        if bounds is not None and (bounds[0] > start - search or bounds[1] < end + search):
             choice = "; ".join(x for x in (choice, f"the load angle free in rows {bounds[0]}..{bounds[1]}") if x)
         j, se, res, dof = ff["j1"], ff["se_stat"], ff["residual"], ff["dof"]
         model_error = ff["change_point_error"]
@@ -457,7 +455,7 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     else:
         raise ValueError(f"method: expected one of {', '.join(FITS)} (or None: the model choice), got {method!r}")
     if not np.isfinite(j) or j <= 0:
-        raise NoGapError(f"gap fit gave a non-physical J1 = {j!r}")
+        raise NoGapError(f"gap fit gave a non-physical J1 = {j:.4g}")
     if "std_error_terms" in free_extra:
         # the angle fits: gap_free raises se to FREE_REL_SE_FLOOR J1 where the data would allow less; that floor
         # is a part too (the only way se exceeds its parts there)
@@ -640,19 +638,23 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     smaller: the free fit is its check.  Returns {} and a 'choice' phrase otherwise."""
     s, e = coarse
     lo, hi = min(s, ff["start"]), max(s, ff["start"])
-    test = pre_entry_steady(torque[:max(lo - KINK_SEARCH, 0)])
+    # durations counted at 2 kHz, in the recording's rows (jident_ros/stream/rate.py; unchanged at 0.5 ms)
+    k_search = rate_samples(KINK_SEARCH, sample_period_s)
+    k_pre = rate_samples(KINK_PRE_SAMPLES, sample_period_s)
+    k_agree = rate_samples(KINK_FREE_AGREE_SAMPLES, sample_period_s)
+    test = pre_entry_steady(torque[:max(lo - k_search, 0)])
     if not test.steady:
         return {"choice": f"angle (free): {test.reason}"}
     end = min(e, ff["end"])
     try:
         # its standard error only once the checks below have kept it (most steady-entry fits are refused there)
-        kf = kink_locate(alpha1, torque, sample_period_s, range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1),
+        kf = kink_locate(alpha1, torque, sample_period_s, range(max(lo - k_search, 1), hi + k_search + 1),
                          end)
     except (FreeFitError, np.linalg.LinAlgError) as exc:
         return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
     # a profile minimum on the edge of the searched rows has not located the entry: the change point may lie
     # beyond it (the vector drive's heavy load reversal at 30 dB: the edge row, 13 samples early, J1 +29 %)
-    cand = range(max(lo - KINK_SEARCH, 1), hi + KINK_SEARCH + 1)
+    cand = range(max(lo - k_search, 1), hi + k_search + 1)
     if kf["start"] in (cand[0], cand[-1]) and cand[0] > 1:
         return {"choice": f"angle (free): the steady-entry fit's entry row {kf['start']} is on the edge of the rows "
                           f"searched ({cand[0]}..{cand[-1]}): not located"}
@@ -663,25 +665,25 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     # detector's (the same window with the detector's entry 2 samples later and an Imu: the kink 10 samples before
     # it, J1 +26 %)
     for what, row in (("the free fit's", ff["start"]), ("the detector's", s)):
-        if abs(kf["start"] - row) > KINK_FREE_AGREE_SAMPLES:
+        if abs(kf["start"] - row) > k_agree:
             return {"choice": f"angle (free): the steady-entry fit's entry row {kf['start']} is "
                               f"{abs(kf['start'] - row)} samples from {what} ({row}): not the same change point"}
     # the torque steady right up to the estimated entry (a speed controller acting just before it is not): its
     # last KINK_SEARCH samples within 5 robust noise levels (or 1e-3 of the level) of the steady stretch's median
     sb = kf["start"]
-    ref = torque[max(0, sb - KINK_PRE_SAMPLES):sb - KINK_SEARCH]
-    last = torque[sb - KINK_SEARCH:sb]
+    ref = torque[max(0, sb - k_pre):sb - k_search]
+    last = torque[sb - k_search:sb]
     level = float(_median(np.asarray(ref, float)))
     tol = max(5.0 * _robust_noise(ref), 1e-3 * abs(level))
     if float(np.abs(last - level).max()) > tol:
-        return {"choice": f"angle (free): the torque changes in the {KINK_SEARCH} samples before the entry row {sb} "
+        return {"choice": f"angle (free): the torque changes in the {k_search} samples before the entry row {sb} "
                           f"(by {float(np.max(np.abs(last - level))):.3g} N m): not a steady drive's entry"}
     # ... and it stays near its level through the first samples after it (a machine on line: the flux is
     # continuous; a speed controller reacting to an event moves it at once, and the kink is then the event)
-    first = torque[sb:sb + KINK_SEARCH]
+    first = torque[sb:sb + k_search]
     if float(np.abs(first - level).max()) > max(tol, KINK_TORQUE_AFTER_REL * abs(level)):
         return {"choice": f"angle (free): the torque moves by {float(np.max(np.abs(first - level))):.3g} N m in the "
-                          f"{KINK_SEARCH} samples after the entry row {sb}: not a steady drive's entry"}
+                          f"{k_search} samples after the entry row {sb}: not a steady drive's entry"}
     try:
         # the re-contact row: moved in by 1 and 2 (contact after it is not modelled); fitted once the checks above
         # have kept the steady-entry fit (a speed controller's entry is refused there: 2 of its 3 fits saved)
@@ -705,7 +707,8 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
             "res": res, "dof": dof, "model_error": model_error, "terms": terms, "span": (kf["start"], kf["end"])}
 
 
-#: Steady-entry fit: its entry row within this many samples of the free fit's and of the detector's (chosen on our
+#: Steady-entry fit: its entry row within this many samples (at 2 kHz; converted by stream/rate.py) of the free fit's
+#: and of the detector's (chosen on our
 #: simulator's zoo windows with the detector's entry moved by -3..+3 samples: |difference| <= 4 and <= 3; tested on the
 #: vector drive: its heavy load reversal's wrong kinks lie 13-15 and 10-16 samples off)
 KINK_FREE_AGREE_SAMPLES = 6
@@ -837,7 +840,7 @@ def speed_fit(omega1: np.ndarray, torque: np.ndarray, sample_period_s: float, la
     coef, A = slope(omega1, y, tq)
     kappa = float(coef[1])
     if not kappa > 0:
-        raise NoGapError(f"gap fit gave a non-physical J1 = 1/{kappa!r} (dω1 against ∫m_el dt)")
+        raise NoGapError(f"gap fit gave a non-physical J1 = 1/{kappa:.4g} (dω1 against ∫m_el dt)")
     res = omega1 - A @ coef
     dof = n - A.shape[1]
     rho = float(res[1:] @ res[:-1]) / float(res @ res) if float(res @ res) > 0 else 0.0
@@ -950,6 +953,22 @@ def _origin_slope(y: np.ndarray, x: np.ndarray, sy: float, sx: float) -> float:
     return (q + np.sqrt(q * q + 4.0 * d * sxy * sxy)) / (2.0 * sxy)
 
 
+def _nonpositive_slope(j: float, torque: np.ndarray, acc: np.ndarray) -> str:
+    """The reason of a 'gap_only' J1 at or below zero: "gap fit undetermined" (resolution-limited) when the torque
+    and the acceleration over the fitted rows are not correlated beyond NONPHYSICAL_Z (the t statistic of their
+    correlation through the origin), else "non-physical" with what to check."""
+    y, x = np.asarray(torque, float), np.asarray(acc, float)
+    n = y.size
+    sxx, syy, sxy = float(x @ x), float(y @ y), float(x @ y)
+    r = sxy / np.sqrt(sxx * syy) if sxx > 0 and syy > 0 else 0.0
+    t = r * np.sqrt(max(n - 1, 1)) / np.sqrt(max(1.0 - r * r, 1e-12))
+    if math.isfinite(t) and t >= -NONPHYSICAL_Z:
+        return (f"gap fit undetermined: m_el and a1 are not correlated over the gap's {n} rows (t = {t:.2g}): the "
+                f"gap's torque does not accelerate the motor measurably")
+    return (f"gap fit gave a non-physical J1 = {j:.4g} (m_el against a1 over the gap: they are anti-correlated, "
+            f"t = {t:.2g}; check the sign of m_el against a1 and the joint names)")
+
+
 def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
                  trim_sigma: float = GAP_ONLY_TRIM_SIGMA, trim_rel: float = GAP_ONLY_TRIM_REL,
                  max_trim: tuple = GAP_ONLY_MAX_TRIM) -> dict:
@@ -979,7 +998,7 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
     core = (start + 2, end - 2) if end - start >= 10 else (start, end)
     j = slope(*core)
     if not math.isfinite(j) or j <= 0:
-        raise NoGapError(f"gap fit gave a non-physical J1 = {j!r} (m_el against a1 over the gap)")
+        raise NoGapError(_nonpositive_slope(j, y_all[core[0]:core[1]], x_all[core[0]:core[1]]))
     lo, hi = start, end
     level = float(_median(np.abs(y_all[start:end])))
     for it in range(4):
@@ -995,7 +1014,7 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
         lo, hi = new_lo, new_hi
         j = slope(lo, hi)
         if not math.isfinite(j) or j <= 0:
-            raise NoGapError(f"gap fit gave a non-physical J1 = {j!r} (m_el against a1 over the gap)")
+            raise NoGapError(_nonpositive_slope(j, y_all[lo:hi], x_all[lo:hi]))
     n = hi - lo
     if n < 3:
         raise NoGapError(f"gap too short: {n} samples in the zone by the dynamics, need >= 3")
@@ -1198,7 +1217,7 @@ def _angle_fit(alpha1: np.ndarray, m_el: np.ndarray, start: int, end: int, sampl
     dof = end - 3
     kappa = float(coef[2])     # 1/J1
     if not kappa > 0 or dof < 1:
-        raise NoGapError(f"gap fit gave a non-physical 1/J1 = {kappa!r} from alpha1")
+        raise NoGapError(f"gap fit gave a non-physical 1/J1 = {kappa:.4g} from alpha1")
     row = np.linalg.pinv(A)[2]
     zrow = row @ H
     var_kappa = float(res @ res) / dof * float(row @ row) + kappa ** 2 * float(zrow @ cov_beta @ zrow)

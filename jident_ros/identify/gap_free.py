@@ -36,7 +36,6 @@ Plain numpy; never imports rclpy.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 
@@ -52,8 +51,10 @@ from jident_ros.identify.gap_numerics import (
     _sym3_inverse,
     _trim_rows,
 )
+from jident_ros.stream.rate import samples as rate_samples
 
-#: Change-point search: rows around the detector's entry and re-contact rows that may be the gap's ends.
+#: Change-point search: rows around the detector's entry and re-contact rows that may be the gap's ends (counted at
+#: 2 kHz: a duration, converted by GapModel.search_rows).
 CHANGEPOINT_SEARCH_SAMPLES = 25
 #: Fewest samples of a candidate gap interval.
 FREE_MIN_SAMPLES = 8
@@ -64,8 +65,9 @@ CHANGEPOINT_FORECAST_SAMPLES = 3
 #: Relative floor of the standard error (the model's own error: trapezoid double integral of a sampled torque).
 FREE_REL_SE_FLOOR = 5e-4
 #: Samples taken off an end for the change-point term of the standard error (while at least half the interval
-#: stays): a contaminated end moves J1 as it is cut back; on a light-load reversal the coupling torque before the
-#: entry is too small for the residual test and the first 1-2 samples, yet biases J1 by 3 % (gap_stress).
+#: stays; counted at 2 kHz, converted to the recording's rows by jident_ros/stream/rate.py): a contaminated end
+#: moves J1 as it is cut back; on a light-load reversal the coupling torque before the entry is too small for the
+#: residual test and the first 1-2 samples, yet biases J1 by 3 % (gap_stress).
 CHANGEPOINT_TRIMS = (1, 2, 4, 8)
 #: A long coarse interval's core: its earliest third whose residual variance is within this factor of the tightest
 #: third's (the tightest alone took a long return traversal's quiet end, where a torque offset is all but inseparable
@@ -119,7 +121,8 @@ class GapModel:
     torque_lag_s : bound of the torque estimate's unknown lag (or lead) behind the shaft's torque, s: m_el(t) is
         the torque at t ∓ τ, |τ| <= this, uniform; a term J1 |r_κ · ∫m_el dt| this/√3 (a torque ramping through the
         gap: the vector drive's estimate lags by ≈ 0.7 ms)
-    changepoint_search_samples : rows around the detector's entry and re-contact searched for the change points
+    changepoint_search_samples : rows around the detector's entry and re-contact searched for the change points,
+        counted at 2 kHz (a duration: :meth:`search_rows` converts it to the recording's sample period)
     """
 
     torque_accuracy: float = 0.0
@@ -142,6 +145,11 @@ class GapModel:
         if isinstance(c, bool) or not isinstance(c, (int, np.integer)) or not 0 <= c <= 1000:
             out.append(("changepoint_search_samples", "an integer in [0, 1000]"))
         return out
+
+    def search_rows(self, sample_period_s: float) -> int:
+        """The change-point search span in rows at ``sample_period_s``: ``changepoint_search_samples`` is a duration
+        counted at 2 kHz (jident_ros/stream/rate.py; unchanged at 0.5 ms)."""
+        return rate_samples(int(self.changepoint_search_samples), sample_period_s, minimum=0)
 
     def torque_rel_se(self) -> float:
         """Relative standard uncertainty of J1 from the torque accuracy (a uniform scale error)."""
@@ -182,7 +190,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     m_all = np.asarray(torque, float)
     n_all = a.size
     ts = float(sample_period_s)
-    W = 0 if fixed else int(model.changepoint_search_samples)
+    W = 0 if fixed else model.search_rows(ts)
     L, R = max(0, start - W), min(n_all, end + W)
     if bounds is not None:
         L, R = max(L, int(bounds[0])), min(R, int(bounds[1]))
@@ -382,10 +390,12 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             return np.where(kappa > 0, 1.0 / kappa, np.inf)
 
     best = None
+    first = None
     for with_coulomb in (False, True):
         if with_coulomb and (e_est - s_est < FREE_MIN_SAMPLES + 2 or not model.coulomb_friction_max_nm):
             continue
         f = fit(s_est, e_est, with_coulomb)
+        first = f if first is None else first
         if not f["kappa"] > 0:
             continue
         j1 = 1.0 / f["kappa"]
@@ -410,7 +420,8 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             # sum of squares (rounding is monotone): it cannot be chosen, its refits are not needed
             continue
         n = e_est - s_est
-        trims = [k for k in CHANGEPOINT_TRIMS if n - k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)]
+        trims = [k for k in sorted(set(rate_samples(CHANGEPOINT_TRIMS, ts)))
+                 if n - k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)]
         terms["change_points"] = float(np.abs(j_trims(f, with_coulomb, trims) - j1).max()) \
             if trims else 0.0
         se_stat = float(np.sqrt(sum(v * v for v in terms.values())))
@@ -419,8 +430,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         if best is None or se_stat < best["se_stat"]:
             best = cand
     if best is None:
-        raise FreeFitError("gap fit gave a non-physical 1/J1 from alpha1 (the angle does not curve with the "
-                           "torque's double integral over the gap)")
+        raise FreeFitError(_no_positive_kappa(first, phi_scale))
     j1 = best["j1"]
     terms = dict(best["terms"])
     terms["torque_accuracy"] = j1 * model.torque_rel_se()
@@ -432,6 +442,30 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     return {"j1": j1, "se": se, "se_stat": best["se_stat"], "terms": terms, "start": int(s_est), "end": int(e_est),
             "friction": friction, "coulomb_nm": float(f["fc"]), "residual": f["res"], "dof": f["X"].shape[0] - f["X"].shape[1],
             "change_point_error": float(terms["change_points"])}
+
+
+#: A fit's 1/J1 at or below zero within this many of its standard errors of zero: the gap's torque does not curve the
+#: angle measurably (resolution-limited, no J1 from the window); farther below, the angle curves against the torque
+#: (a sign or configuration problem). 3, the cross-check's and the friction band's z (no model was tuned on it).
+NONPHYSICAL_Z = 3.0
+
+
+def _no_positive_kappa(f: dict, phi_scale: float) -> str:
+    """The reason of a free fit without a positive 1/J1 (``f``: the fit without a Coulomb column): "gap fit
+    undetermined" (resolution-limited) when its 1/J1 is within NONPHYSICAL_Z statistical standard errors of zero, else
+    "non-physical" with what to check."""
+    kappa, res, X = f["kappa"], f["res"], f["X"]
+    dof = X.shape[0] - X.shape[1]
+    row = f["pinv"][2] / phi_scale
+    rr = float(res @ res)
+    rho = min(max(float(res[1:] @ res[:-1]) / rr, 0.0), 0.99) if rr > 0 else 0.0
+    se = float(np.sqrt(rr / max(dof, 1) * float(row @ row) * (1.0 + rho) / (1.0 - rho)))
+    if np.isfinite(kappa) and kappa >= -NONPHYSICAL_Z * se:
+        return (f"gap fit undetermined: 1/J1 = {kappa:.3g} ± {se:.2g} 1/(kg m^2) from alpha1, not distinguishable from "
+                f"0: the gap's torque does not curve the angle measurably over its {X.shape[0]} rows")
+    return (f"gap fit gave a non-physical 1/J1 = {kappa:.3g} ± {se:.2g} 1/(kg m^2) from alpha1 (the angle curves "
+            "against the torque's double integral over the gap: check the sign of m_el against alpha1, the joint "
+            "names and gear_ratio)")
 
 
 def drift_term(row: np.ndarray, tt: np.ndarray, j1: float, offset_nm: float) -> float:
@@ -447,153 +481,3 @@ def drift_term(row: np.ndarray, tt: np.ndarray, j1: float, offset_nm: float) -> 
     dur = max(float(t0[-1]), 1e-300)
     col = (2.0 / dur) * (t0 ** 3 / 6.0 - 0.5 * dur * t0 ** 2 / 2.0)
     return float(j1 * abs(float(row @ col)) * offset_nm / np.sqrt(3.0))
-
-
-#: Kink fit: steady pre-entry samples used before the earliest candidate entry row, and the candidate rows
-#: searched around the free fit's and the detector's entry rows.
-KINK_PRE_SAMPLES = 40
-KINK_SEARCH = 4
-#: Kink fit: fewest gap samples after a candidate entry (the steady samples before it carry ω0).
-KINK_MIN_GAP_SAMPLES = 6
-#: Kink fit: the pre-entry angle's t² term must not be significant beyond this t statistic.
-KINK_STEADY_T = 3.0
-#: Kink fit: entry rows whose profile residual is within this χ²₁ quantile (95 %) of the best one are plausible.
-KINK_CHI2_1 = 3.841
-
-
-def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, y: np.ndarray) -> tuple:
-    """:func:`kink_fit`'s least-squares fit over rows [P, end) for every candidate entry row: arrays over the
-    candidates of the residual sum of squares and 1/J1, the residuals (candidate, row), the least-squares solutions
-    (XᵀX)⁻¹Xᵀ (candidate, column, row) and the Φ column's scales (1/J1 = row 2 of the solution / scale)."""
-    rows = np.arange(P, end)
-    # every candidate's design at once, (entry, row, column): numpy's stacked matmul and solve call the same
-    # BLAS/LAPACK routine per candidate as the 2-D calls (bit for bit the same numbers, a fraction of the calls)
-    # Φ_s of every candidate: the double trapezoid from its row, as rows of one cumulative sum (zeros before the
-    # row: a sum that starts with zeros adds the same numbers in the same order as one started at the row)
-    s_arr = np.asarray(entries)
-    n = end - P
-    keep = np.arange(n - 1)[None, :] >= (s_arr - P)[:, None]
-    half = np.where(keep, 0.5 * (m[P + 1:end] + m[P:end - 1])[None, :], 0.0)
-    c1 = np.zeros((s_arr.size, n))
-    half.cumsum(axis=1, out=c1[:, 1:])
-    c1 *= ts
-    phi = np.zeros((s_arr.size, n))
-    (0.5 * (c1[:, 1:] + c1[:, :-1])).cumsum(axis=1, out=phi[:, 1:])
-    phi *= ts
-    scales = np.maximum(np.abs(phi).max(axis=1), 1e-300)
-    X = np.empty((s_arr.size, n, 3))
-    X[:, :, 0] = 1.0
-    X[:, :, 1] = (rows[None, :] - s_arr[:, None]) * ts / np.maximum((end - s_arr) * ts, ts)[:, None]
-    X[:, :, 2] = phi / scales[:, None]
-    XT = X.transpose(0, 2, 1)
-    pinv = lapack.solve(XT @ X, XT)
-    coef = pinv @ y
-    res = y - (X @ coef[:, :, None])[:, :, 0]
-    rss_all = (res[:, None, :] @ res[:, :, None])[:, 0, 0]
-    return rss_all, coef[:, 2] / scales, res, pinv, scales
-
-
-@lru_cache(maxsize=64)
-def _kink_pre_design(n_pre: int) -> tuple:
-    """The kink fit's pre-entry steadiness test: the design (1, t, t²) over n_pre samples (t centred, over n_pre)
-    and the (2, 2) element of (XᵀX)⁻¹ (read-only: shared)."""
-    tt = (np.arange(n_pre) - n_pre / 2.0) / max(n_pre, 1)
-    Xp = np.column_stack([np.ones(n_pre), tt, tt * tt])
-    Xp.flags.writeable = False
-    return Xp, float(lapack.inv(Xp.T @ Xp)[2, 2])
-
-
-def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int,
-             coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0, torque_lag_s: float = 0.0) -> dict:
-    """J1 with the entry row as a change point of a steady drive (profile likelihood).
-
-    Before the entry the drive turns at constant speed (steady, in contact); from the entry row s on it is free:
-    α1(t) = θ0 + ω0 (t − t_s) + [t ≥ t_s] Φ_s(t)/J1, Φ_s the double integral of the torque from t_s (zero value
-    and slope at t_s: angle and speed are continuous).  The same rows [P, end) for every candidate s in
-    ``entries``, so the residual sums compare: s* minimises it; the plausible entries are those within
-    KINK_CHI2_1 σ̂² of it, and the largest change of J1 over them is the change-point term.  Returns j1, se_stat
-    (statistical, torque noise and change points in quadrature), terms, start (s*), end, residual, dof; raises
-    FreeFitError.  :func:`kink_locate` and :func:`kink_terms`, its two halves, for a caller that may still refuse the
-    fit or needs only J1."""
-    return kink_terms(kink_locate(alpha1, torque, sample_period_s, entries, end), coulomb_max_nm, torque_offset_nm,
-                      torque_lag_s)
-
-
-def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int) -> dict:
-    """:func:`kink_fit` without its standard error: the entry row, J1 and the fit's checks (FreeFitError) — j1,
-    start, end, residual, dof, plausible_entries (:func:`kink_terms` adds se_stat and terms)."""
-    a = np.asarray(alpha1, float)
-    m = np.asarray(torque, float)
-    ts = float(sample_period_s)
-    entries = sorted(int(x) for x in entries if end - int(x) >= KINK_MIN_GAP_SAMPLES)
-    if not entries:
-        raise FreeFitError(f"kink fit: fewer than {KINK_MIN_GAP_SAMPLES} samples after every candidate entry")
-    P = max(0, entries[0] - KINK_PRE_SAMPLES)
-    if entries[0] - P < 10:
-        raise FreeFitError("kink fit: fewer than 10 steady samples before the entry")
-    y = a[P:end] - a[entries[0]]
-    rss_all, kappa_all, res_all, pinv, scales = _kink_candidates(m, ts, entries, P, end, y)
-    k = int(np.argmin(rss_all))
-    rss_list, kappa_list = rss_all.tolist(), kappa_all.tolist()
-    rss_min, kappa, s_best = rss_list[k], kappa_list[k], entries[k]
-    if not kappa > 0:
-        raise FreeFitError(f"kink fit: non-physical 1/J1 = {kappa!r}")
-    dof = end - P - 3
-    q = _quantum(a[P:end])
-    s2 = max(rss_min / max(dof, 1), q * q / 12.0, 1e-30)
-    # the model's premise: constant speed before the entry (a speed controller's drive is not): the pre-entry
-    # angle gets a t² term, refused when it is significant (t statistic > KINK_STEADY_T)
-    n_pre = s_best - P
-    Xp, xtx_inv_22 = _kink_pre_design(n_pre)
-    cp_ = lapack.lstsq(Xp, a[P:s_best])
-    rp = a[P:s_best] - Xp @ cp_
-    s2p = max(float(rp @ rp) / max(n_pre - 3, 1), q * q / 12.0, 1e-30)
-    t_quad = abs(float(cp_[2])) / float(np.sqrt(s2p * xtx_inv_22))
-    if t_quad > KINK_STEADY_T:
-        raise FreeFitError(f"kink fit: the speed before the entry is not constant (t = {t_quad:.3g} for a t² term "
-                           f"over {n_pre} samples)")
-    j1 = 1.0 / kappa
-    plausible = [q_ for q_ in range(len(entries)) if rss_list[q_] - rss_min <= KINK_CHI2_1 * s2 and kappa_list[q_] > 0]
-    fit = {"j1": j1, "start": int(s_best), "end": int(end), "residual": res_all[k], "dof": dof,
-           "plausible_entries": [entries[q_] for q_ in plausible],
-           "_state": (m, ts, P, kappa, pinv[k, 2] / scales[k], s2, [kappa_list[q_] for q_ in plausible])}
-    return fit
-
-
-def kink_terms(fit: dict, coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0,
-               torque_lag_s: float = 0.0) -> dict:
-    """:func:`kink_fit`'s result with its standard error (se_stat, terms), from :func:`kink_locate`'s."""
-    m, ts, P, kappa, row, s2, plausible_kappa = fit["_state"]
-    j1, res, s_best, end = fit["j1"], fit["residual"], fit["start"], fit["end"]
-    cp = max(abs(1.0 / k - j1) for k in plausible_kappa)
-    rr = float(res @ res)
-    rho = float(res[1:] @ res[:-1]) / rr if rr > 0 else 0.0
-    infl = (1.0 + max(rho, 0.0)) / max(1.0 - max(rho, 0.0), 1e-6)
-    var_stat = s2 * float(row @ row) * infl
-    i = s_best - P
-    g = _double_trapz_adjoint(row[i:], ts)
-    sm = _robust_noise(m[s_best:end])
-    terms = {"statistical": j1 * j1 * float(np.sqrt(var_stat)),
-             "torque_noise": j1 * j1 * kappa * sm * float(np.sqrt(g @ g)), "change_points": float(cp)}
-    if coulomb_max_nm:
-        # an unmodelled Coulomb friction F in [0, F_max] is a torque offset in the gap: C = (t − t_s)²/2 after
-        # the entry; J1 moves by J1 F (r_κ · C); a uniform term of half-width F_max (not centred: a drive without
-        # friction is not biased)
-        c_col = np.zeros(end - P)
-        c_col[i:] = 0.5 * ((np.arange(end - s_best)) * ts) ** 2
-        terms["coulomb_band"] = j1 * abs(float(row @ c_col)) * float(coulomb_max_nm) / np.sqrt(3.0)
-    if torque_offset_nm:
-        # an unknown constant torque T in [-torque_offset_nm, +torque_offset_nm] in the gap: the same column, symmetric
-        c_col = np.zeros(end - P)
-        c_col[i:] = 0.5 * ((np.arange(end - s_best)) * ts) ** 2
-        terms["torque_offset"] = j1 * abs(float(row @ c_col)) * float(torque_offset_nm) / np.sqrt(3.0)
-        # ... and one that drifts across the gap (drift_term), zero before the entry
-        terms["torque_drift"] = drift_term(row[i:], np.arange(end - s_best) * ts, j1, float(torque_offset_nm))
-    if torque_lag_s:
-        # the torque estimate's bounded lag: τ ∫m_el dt from the entry (free_angle_fit's term)
-        l_col = np.zeros(end - P)
-        l_col[i:] = _cumtrapz(m[s_best:end], ts)
-        terms["torque_lag"] = j1 * abs(float(row @ l_col)) * float(torque_lag_s) / np.sqrt(3.0)
-    se = float(np.sqrt(sum(v * v for v in terms.values())))
-    return {"j1": j1, "se_stat": max(se, FREE_REL_SE_FLOOR * j1), "terms": terms, "start": int(s_best),
-            "end": int(end), "residual": res, "dof": fit["dof"], "plausible_entries": fit["plausible_entries"]}

@@ -7,7 +7,8 @@ Issue 20 says the estimator will be checked on drive models we do not have.  The
 drive; this sweep takes the third-party one (jident_ros/research/vector_drive, docs/vector_drive.md) and changes one
 property per variant -- the coupling's stiffness, the load inertia, the speed loop's bandwidth, the drive's
 observer mismatch (its torque estimate's error), the backlash width, the speed, J1, the bearing friction, the
-speed feedback's filter, the sample rate (1 and 4 kHz), the sampling instants' jitter, the reported units, the encoders -- over
+speed feedback's filter, the sample rate (1 and 4 kHz), the sampling instants' jitter, the reported units, the encoders
+(their resolution and a real disc's angle errors), a torque estimate reported late or smoothed -- over
 the traversing events (speed step down, speed reversal, light and heavy load reversal) and one same-flank event
 (speed step up: no entry may be found), forward, each recorded as JointState 2^16 (clean and 30 dB) and
 JointState + Imu 2^16 (30 dB).  Every file goes through the zoo's diagnosis
@@ -56,8 +57,8 @@ DRIVE_FILES = {"small drive, 3:1 gear": Path(__file__).resolve().parents[3] / "d
 
 #: Variants recorded at another rate (their DriveParams.sample_period_s), diagnosed with that sample period and a
 #: window of the same length in time (1 s from the entry), the 48 samples before it kept (docs/your_drive.md): the
-#: constants that count samples were chosen at 2 kHz; the detectors' are durations converted to the sample period
-#: (jident_ros/stream/rate.py), the gap stage's are not.
+#: constants that count samples were chosen at 2 kHz; the detectors' and the gap stage's durations are converted to
+#: the sample period (jident_ros/stream/rate.py).
 RATE_VARIANTS = ("recorded at 1 kHz", "recorded at 4 kHz")
 
 
@@ -67,7 +68,10 @@ SENSOR_VARIANTS = {"sampling jitter 25 µs": {"sample_jitter_s": 25e-6}, "sampli
                    "CiA 402 units": {"torque_quantum_rel_rated": 1e-3, "speed_quantum_rad_s": 2 * np.pi / 60},
                    "coarse torque": {"torque_quantum_rel_rated": 1e-2},
                    "2^14 encoders": {"encoder_counts": 2 ** 14}, "2^20 encoders": {"encoder_counts": 2 ** 20},
-                   "load encoder reversed": {"load_encoder_sign": -1.0}}
+                   "load encoder reversed": {"load_encoder_sign": -1.0},
+                   "encoder disc errors": {"encoder_error_rad": 2e-4},
+                   "torque one sample late": {"torque_delay_samples": 1},
+                   "smoothed torque 2 ms": {"torque_filter_s": 2e-3}}
 
 
 def system_for(name: str, p: DriveParams):
@@ -135,6 +139,12 @@ def variants() -> list:
         ("2^14 encoders", "both encoders 16384 counts/rev (in place of 65536)", b, {}),
         ("2^20 encoders", "both encoders 1048576 counts/rev (in place of 65536)", b, {}),
         ("load encoder reversed", "the load encoder counts the other way, diagnosed with gear_ratio -1", b, {}),
+        ("encoder disc errors", "both encoders with a once-per-revolution angle error of 0.2 mrad (41 arc s, a disc "
+         "off centre) and a twice-per-revolution one of 0.1 mrad", b, {}),
+        ("torque one sample late", "the torque estimate reported one sample (0.5 ms) after the angles (the drive "
+         "publishes its previous cycle's estimate); declared as the base drive (lag within 1 ms)", b, {}),
+        ("smoothed torque 2 ms", "the torque estimate reported through a 2 ms first-order low-pass (a drive's "
+         "smoothed 'actual torque'); declared as the base drive (lag within 1 ms: a user who did not know)", b, {}),
         ("small drive, 3:1 gear", "docs/your_drive.md's example: 2.2 kW, J1 0.03 kg m^2, J2 0.54 behind a 3:1 gear, "
          "K2 1.5 mm at r 0.03 m, its torque estimate 3-4 % off; diagnosed with its drive file "
          "(docs/examples/profiles/small_drive.yaml)", small_drive(), _declared_by_file("small drive, 3:1 gear")),

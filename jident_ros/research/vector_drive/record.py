@@ -28,6 +28,7 @@ from typing import Optional
 
 import numpy as np
 from scipy.interpolate import CubicSpline
+from scipy.signal import lfilter
 
 from jident_ros.research.second_drive.record import write_csv, write_jointstate
 
@@ -59,6 +60,16 @@ class Sensors:
     #: -1: the load encoder counts the other way (a reversing gear stage, an encoder facing the motor's): alpha2 and
     #: omega2 change sign (diagnosed with a negative gear_ratio)
     load_encoder_sign: float = 1.0
+    #: amplitude of each encoder's once-per-revolution angle error, rad (a disc mounted off centre; real optical
+    #: encoders: tens of arc seconds), with a twice-per-revolution error of half of it (an elliptic disc); the phases
+    #: are drawn per encoder.  0: an ideal disc
+    encoder_error_rad: float = 0.0
+    #: the torque estimate reported this many samples late (a drive that publishes the previous cycle's estimate
+    #: beside the current angles)
+    torque_delay_samples: int = 0
+    #: time constant of a first-order low-pass on the reported torque estimate, s (drives often smooth their "actual
+    #: torque" value for display; 0: unfiltered), applied at the sample rate before the delay
+    torque_filter_s: float = 0.0
 
 
 def _jittered(st: dict, jitter_s: float, seed: int) -> tuple:
@@ -91,8 +102,13 @@ def draw_offsets(rng, gear_ratio: float, min_off_centre_rad: float = 0.5):
             return o1, o2
 
 
-def encoder(angle, offset, counts):
+def encoder(angle, offset, counts, error_rad=0.0, phases=(0.0, 0.0)):
+    """What an encoder of ``counts`` per revolution reads for the shaft ``angle`` (rad, its own zero at
+    ``offset``): floor-quantised, with a once-per-revolution error of ``error_rad`` and a twice-per-revolution one of
+    half of it at ``phases`` (rad)."""
     x = np.asarray(angle, float) + offset
+    if error_rad:
+        x = x + error_rad * np.sin(x + phases[0]) + 0.5 * error_rad * np.sin(2.0 * x + phases[1])
     if not counts:
         return x
     q = 2 * math.pi / counts
@@ -180,11 +196,21 @@ def _sensed(st: dict, p, sensors: Sensors, seed: int) -> tuple:
     rng = np.random.default_rng([seed, sensors.encoder_counts, 0 if sensors.snr_db is None else int(sensors.snr_db)])
     o1, o2 = draw_offsets(rng, mech.gear_ratio, sensors.min_off_centre_rad)
     r = mech.reference_radius_m
+    ph = (np.random.default_rng([seed, 9]).uniform(0.0, 2 * math.pi, 4) if sensors.encoder_error_rad
+          else np.zeros(4))
+    m_el = st["tau_est"].copy()
+    if sensors.torque_filter_s > 0:
+        a = math.exp(-ts / sensors.torque_filter_s)
+        m_el = lfilter([1.0 - a], [1.0, -a], m_el, zi=[a * m_el[0]])[0]
+    if sensors.torque_delay_samples:
+        k = int(sensors.torque_delay_samples)
+        m_el = np.concatenate([np.full(k, m_el[0]), m_el[:-k]])
     sig = {"t": stamps,
-           "alpha1": encoder(st["theta_M"], o1, sensors.encoder_counts),
-           "alpha2": encoder(sensors.load_encoder_sign * st["theta_L"], o2, sensors.encoder_counts),
+           "alpha1": encoder(st["theta_M"], o1, sensors.encoder_counts, sensors.encoder_error_rad, ph[:2]),
+           "alpha2": encoder(sensors.load_encoder_sign * st["theta_L"], o2, sensors.encoder_counts,
+                             sensors.encoder_error_rad, ph[2:]),
            "omega1": st["w_fbk"].copy(), "omega2": sensors.load_encoder_sign * st["w_L_fbk"],
-           "m_el": st["tau_est"].copy(), "a1": r * st["dw_M"]}
+           "m_el": m_el, "a1": r * st["dw_M"]}
     if sensors.snr_db is not None:
         for k in NOISY_CHANNELS:
             sig[k] = awgn_measured(sig[k], sensors.snr_db, rng)
