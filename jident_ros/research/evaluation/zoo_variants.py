@@ -71,7 +71,8 @@ SENSOR_VARIANTS = {"sampling jitter 25 µs": {"sample_jitter_s": 25e-6}, "sampli
                    "load encoder reversed": {"load_encoder_sign": -1.0},
                    "encoder disc errors": {"encoder_error_rad": 2e-4},
                    "torque one sample late": {"torque_delay_samples": 1},
-                   "smoothed torque 2 ms": {"torque_filter_s": 2e-3}}
+                   "smoothed torque 2 ms": {"torque_filter_s": 2e-3},
+                   "resolver-grade angles": {"encoder_error_rad": 1e-3}}
 
 
 def system_for(name: str, p: DriveParams):
@@ -145,6 +146,9 @@ def variants() -> list:
          "publishes its previous cycle's estimate); declared as the base drive (lag within 1 ms)", b, {}),
         ("smoothed torque 2 ms", "the torque estimate reported through a 2 ms first-order low-pass (a drive's "
          "smoothed 'actual torque'); declared as the base drive (lag within 1 ms: a user who did not know)", b, {}),
+        ("resolver-grade angles", "both encoders with a once-per-revolution angle error of 1 mrad and a twice-per-"
+         "revolution one of 0.5 mrad (3.4 arc min: a resolver, a cheap encoder); declared encoder_accuracy_rad 1e-3",
+         b, {"encoder_accuracy_rad": 1e-3}),
         ("small drive, 3:1 gear", "docs/your_drive.md's example: 2.2 kW, J1 0.03 kg m^2, J2 0.54 behind a 3:1 gear, "
          "K2 1.5 mm at r 0.03 m, its torque estimate 3-4 % off; diagnosed with its drive file "
          "(docs/examples/profiles/small_drive.yaml)", small_drive(), _declared_by_file("small drive, 3:1 gear")),
