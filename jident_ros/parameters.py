@@ -299,6 +299,10 @@ DIAGNOSTIC_PARAMS = {
     "torque_lag_max_s": Param(0.0, "the drive's torque estimate m_el lags (or leads) the shaft's torque by at "
                               "most this, s: a bounded term of the gap interval", min=0.0, max=1.0, read_only=False,
                               unit="s"),
+    "encoder_accuracy_rad": Param(0.0, "the motor encoder's angle error is at most this, rad, once and twice per "
+                                  "revolution (its data sheet's accuracy; a resolver +-10 arc min = 2.9e-3): a bounded "
+                                  "term of the gap interval (0 = an exact disc)", min=0.0, max=0.1, read_only=False,
+                                  unit="rad"),
     "assume_typical_drive": Param(True, "a drive that declares none of torque_accuracy, coulomb_friction_max_nm, "
                                   "viscous_friction_band_nms_per_rad, torque_lag_max_s, motor.bearing_friction_nms_per_rad "
                                   "is taken, on windows of raw encoder angles (a real drive's recording: flank or "
@@ -316,7 +320,7 @@ DIAGNOSTIC_PARAMS = {
 #: max_torque_factor, max_speed_factor) stay the node's only.
 POLICY_CLI_FLAGS = ("image_min_margin", "plausible_min_ratio", "plausible_max_ratio", "torque_accuracy",
                     "coulomb_friction_max_nm", "viscous_friction_band_nms_per_rad", "torque_offset_rel_base",
-                    "torque_lag_max_s", "assume_typical_drive", "publish_ambiguous")
+                    "torque_lag_max_s", "encoder_accuracy_rad", "assume_typical_drive", "publish_ambiguous")
 
 #: The replay node.  Everything is fixed at start: read-only.
 REPLAY_PARAMS = {

@@ -264,3 +264,34 @@ def test_a_negative_one_over_j1_within_its_noise_is_undetermined_and_a_significa
                 break
     else:
         pytest.fail("uncorrelated torque never refused as undetermined")
+
+
+def test_the_encoder_accuracy_term_is_the_spread_of_j1_over_the_errors_phases(step):
+    """encoder_accuracy_rad A (GapModel.encoder_error_rad): a once- and a twice-per-revolution angle error of amplitude
+    A, phases unknown.  Its term is J1's standard deviation over the phases (Monte Carlo through the same fit), it
+    scales with A, and a recording with that error is covered by the interval that declares it."""
+    from jident_ros.identify.gap_free import encoder_error_term
+    w = dict(step["window"])
+    w.pop("a1", None)
+    model = GapModel(coulomb_friction_max_nm=1.5, changepoint_search_samples=0)
+    g0 = _fit(step, model=model)
+    g1 = _fit(step, model=GapModel(coulomb_friction_max_nm=1.5, changepoint_search_samples=0, encoder_error_rad=1e-3))
+    t0, t1 = dict(g0.std_error_terms), dict(g1.std_error_terms)
+    assert "encoder_error" not in t0 and t1["encoder_error"] > 0.002 * g1.inertia_kgm2
+    assert g1.std_error_kgm2 > g0.std_error_kgm2
+    # the term against the spread of J1 over drawn phases, through the fit's own rows (fixed interval)
+    a = np.asarray(w["alpha1"], float)
+    rng = np.random.default_rng(0)
+    j1s = []
+    for _ in range(300):
+        ph = rng.uniform(0.0, 2 * np.pi, 2)
+        e = 1e-3 * np.sin(a + ph[0]) + 1e-3 * np.sin(2 * a + ph[1])
+        g = _fit(step, window=dict(w, alpha1=a + e), model=GapModel(coulomb_friction_max_nm=1.5,
+                                                                    changepoint_search_samples=0))
+        j1s.append(g.inertia_kgm2)
+    assert np.std(j1s) == pytest.approx(t1["encoder_error"], rel=0.2), (np.std(j1s), t1["encoder_error"])
+    # zero error, zero term; twice the accuracy, twice the term
+    row = np.linspace(-1.0, 1.0, 30)
+    assert encoder_error_term(row, np.linspace(0, 2, 30), 1.2, 0.0) == 0.0
+    assert encoder_error_term(row, np.linspace(0, 2, 30), 1.2, 2e-3) == pytest.approx(
+        2 * encoder_error_term(row, np.linspace(0, 2, 30), 1.2, 1e-3))

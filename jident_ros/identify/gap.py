@@ -690,7 +690,8 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
         trims = [kink_locate(alpha1, torque, sample_period_s, kf["plausible_entries"], end - k)["j1"] for k in (1, 2)]
     except (FreeFitError, np.linalg.LinAlgError) as exc:
         return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
-    kf = kink_terms(kf, model.coulomb_friction_max_nm, model.torque_offset_nm, model.torque_lag_s)
+    kf = kink_terms(kf, model.coulomb_friction_max_nm, model.torque_offset_nm, model.torque_lag_s,
+                    model.encoder_error_rad)
     j, res, dof = kf["j1"], kf["residual"], kf["dof"]
     cp_end = max(abs(x - j) for x in trims)
     terms = dict(kf["terms"])

@@ -86,6 +86,7 @@ STD_ERROR_TERM_SOURCES = {
     "torque_offset": ("an unknown constant torque in the gap (the torque estimate's offset)", "torque_offset_rel_base"),
     "torque_drift": ("a drift of that unknown torque across the gap", "torque_offset_rel_base"),
     "torque_lag": ("the torque estimate's lag", "torque_lag_max_s"),
+    "encoder_error": ("the motor encoder's angle error (once and twice per revolution)", "encoder_accuracy_rad"),
     "change_points": ("where the gap begins and ends (the change points)", None),
     "model_form": ("the fit's model form (with and without a constant torque term)", None),
     "model_floor": ("the model's own error (a floor: the sampled torque's double integral)", None),
@@ -121,6 +122,9 @@ class GapModel:
     torque_lag_s : bound of the torque estimate's unknown lag (or lead) behind the shaft's torque, s: m_el(t) is
         the torque at t ∓ τ, |τ| <= this, uniform; a term J1 |r_κ · ∫m_el dt| this/√3 (a torque ramping through the
         gap: the vector drive's estimate lags by ≈ 0.7 ms)
+    encoder_error_rad : the motor encoder's accuracy, rad: a once- and a twice-per-revolution angle error, each of
+        amplitude up to this (a disc off centre or elliptic, a resolver's), phases unknown; a term
+        J1² this √((ρ₁² + ρ₂²)/2) with ρ_k = |(r_κ·sin kα1, r_κ·cos kα1)|
     changepoint_search_samples : rows around the detector's entry and re-contact searched for the change points,
         counted at 2 kHz (a duration: :meth:`search_rows` converts it to the recording's sample period)
     """
@@ -130,12 +134,13 @@ class GapModel:
     viscous_friction_band_nms_per_rad: float = 0.0
     torque_offset_nm: float = 0.0
     torque_lag_s: float = 0.0
+    encoder_error_rad: float = 0.0
     changepoint_search_samples: int = CHANGEPOINT_SEARCH_SAMPLES
 
     def problems(self) -> list:
         out = []
         for name in ("torque_accuracy", "coulomb_friction_max_nm", "viscous_friction_band_nms_per_rad",
-                     "torque_offset_nm", "torque_lag_s"):
+                     "torque_offset_nm", "torque_lag_s", "encoder_error_rad"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
                 out.append((name, "a finite number >= 0"))
@@ -357,6 +362,8 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             # τ ∫m_el dt (and a linear term, absorbed): J1 moves by J1 τ (r_κ · ∫m_el dt)
             psi = _cumtrapz(m[f["i"]:f["j"]], ts)
             terms["torque_lag"] = j1 * abs(float(row @ psi)) * float(model.torque_lag_s) / np.sqrt(3.0)
+        if model.encoder_error_rad:
+            terms["encoder_error"] = encoder_error_term(row, a[L + f["i"]:L + f["j"]], j1, float(model.encoder_error_rad))
         return terms
 
     def j_trims(f: dict, with_coulomb: bool, trims: list) -> np.ndarray:
@@ -466,6 +473,19 @@ def _no_positive_kappa(f: dict, phi_scale: float) -> str:
     return (f"gap fit gave a non-physical 1/J1 = {kappa:.3g} ± {se:.2g} 1/(kg m^2) from alpha1 (the angle curves "
             "against the torque's double integral over the gap: check the sign of m_el against alpha1, the joint "
             "names and gear_ratio)")
+
+
+def encoder_error_term(row: np.ndarray, alpha1: np.ndarray, j1: float, error_rad: float) -> float:
+    """J1's standard uncertainty from the motor encoder's angle error: e(α) = A₁ sin(α + φ₁) + A₂ sin(2α + φ₂), each
+    amplitude ``error_rad`` (the encoder's accuracy: a disc off centre, an elliptic one, a resolver's error), the
+    phases unknown and uniform.  The fit's 1/J1 = row·α1 moves by row·e: for one harmonic A(cos φ row·sin kα + sin φ
+    row·cos kα), of variance A² ρ_k²/2, ρ_k = |(row·sin kα1, row·cos kα1)| (the encoder's zero, unknown, only shifts
+    φ); J1 moves by J1² that.  A fast gap sweeps the error's curvature: 1 mrad on the vector drive's speed events
+    is 2 % (once) and 5-8 % (twice per revolution) of J1 (docs/results.md stop 26)."""
+    if not error_rad or alpha1.size < 2:
+        return 0.0
+    rho2 = sum(float(row @ np.sin(k * alpha1)) ** 2 + float(row @ np.cos(k * alpha1)) ** 2 for k in (1, 2))
+    return float(j1 * j1 * error_rad * np.sqrt(rho2 / 2.0))
 
 
 def drift_term(row: np.ndarray, tt: np.ndarray, j1: float, offset_nm: float) -> float:

@@ -15,7 +15,7 @@ from functools import lru_cache
 import numpy as np
 
 from jident_ros.identify import lapack
-from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, FreeFitError, drift_term
+from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, FreeFitError, drift_term, encoder_error_term
 from jident_ros.identify.gap_numerics import (
     _cumtrapz,
     _double_trapz_adjoint,
@@ -80,7 +80,8 @@ def _kink_pre_design(n_pre: int) -> tuple:
 
 
 def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int,
-             coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0, torque_lag_s: float = 0.0) -> dict:
+             coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0, torque_lag_s: float = 0.0,
+             encoder_error_rad: float = 0.0) -> dict:
     """J1 with the entry row as a change point of a steady drive (profile likelihood).
 
     Before the entry the drive turns at constant speed (steady, in contact); from the entry row s on it is free:
@@ -92,7 +93,7 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
     FreeFitError.  :func:`kink_locate` and :func:`kink_terms`, its two halves, for a caller that may still refuse the
     fit or needs only J1."""
     return kink_terms(kink_locate(alpha1, torque, sample_period_s, entries, end), coulomb_max_nm, torque_offset_nm,
-                      torque_lag_s)
+                      torque_lag_s, encoder_error_rad)
 
 
 def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int) -> dict:
@@ -132,14 +133,14 @@ def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, 
     plausible = [q_ for q_ in range(len(entries)) if rss_list[q_] - rss_min <= KINK_CHI2_1 * s2 and kappa_list[q_] > 0]
     fit = {"j1": j1, "start": int(s_best), "end": int(end), "residual": res_all[k], "dof": dof,
            "plausible_entries": [entries[q_] for q_ in plausible],
-           "_state": (m, ts, P, kappa, pinv[k, 2] / scales[k], s2, [kappa_list[q_] for q_ in plausible])}
+           "_state": (m, ts, P, kappa, pinv[k, 2] / scales[k], s2, [kappa_list[q_] for q_ in plausible], a[P:end])}
     return fit
 
 
 def kink_terms(fit: dict, coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0,
-               torque_lag_s: float = 0.0) -> dict:
+               torque_lag_s: float = 0.0, encoder_error_rad: float = 0.0) -> dict:
     """:func:`kink_fit`'s result with its standard error (se_stat, terms), from :func:`kink_locate`'s."""
-    m, ts, P, kappa, row, s2, plausible_kappa = fit["_state"]
+    m, ts, P, kappa, row, s2, plausible_kappa, angles = fit["_state"]
     j1, res, s_best, end = fit["j1"], fit["residual"], fit["start"], fit["end"]
     cp = max(abs(1.0 / k - j1) for k in plausible_kappa)
     rr = float(res @ res)
@@ -170,6 +171,9 @@ def kink_terms(fit: dict, coulomb_max_nm: float = 0.0, torque_offset_nm: float =
         l_col = np.zeros(end - P)
         l_col[i:] = _cumtrapz(m[s_best:end], ts)
         terms["torque_lag"] = j1 * abs(float(row @ l_col)) * float(torque_lag_s) / np.sqrt(3.0)
+    if encoder_error_rad:
+        # the motor encoder's angle error over every fitted row (before the entry too: free_angle_fit's term)
+        terms["encoder_error"] = encoder_error_term(row, angles, j1, float(encoder_error_rad))
     se = float(np.sqrt(sum(v * v for v in terms.values())))
     return {"j1": j1, "se_stat": max(se, FREE_REL_SE_FLOOR * j1), "terms": terms, "start": int(s_best),
             "end": int(end), "residual": res, "dof": fit["dof"], "plausible_entries": fit["plausible_entries"]}

@@ -89,6 +89,9 @@ class VerdictPolicy:
         every gap fit's standard error (GapModel.torque_offset_nm)
     torque_lag_max_s : the torque estimate lags (or leads) the shaft's torque by at most this, s: a bounded term
         of the angle and a1 fits' standard error (GapModel.torque_lag_s; the speed fit fits its own lag)
+    encoder_accuracy_rad : the motor encoder's angle error is at most this, rad, once and twice per revolution (its
+        data sheet's accuracy: an optical encoder tens of arc seconds, a resolver ± 10 arc minutes = 2.9e-3): a
+        bounded term of the angle fits' standard error (GapModel.encoder_error_rad; 0: an exact disc)
     publish_ambiguous : a gap J1 whose 95 % interval (within ± MAX_CI95_HALF_WIDTH_REL) holds two or more
         classes is published as a continuous J1 with its interval, no class named (status 'ambiguous'); False:
         nothing is published for it (issue 12's first reading: a plotted J1 looks like a result).  The J1 is what
@@ -108,6 +111,7 @@ class VerdictPolicy:
     viscous_friction_band_nms_per_rad: float = 0.0
     torque_offset_rel_base: float = 0.01   # chosen on the vector drive (docs/method.md "Torque offset")
     torque_lag_max_s: float = 0.0
+    encoder_accuracy_rad: float = 0.0
     assume_typical_drive: bool = True
     publish_ambiguous: bool = True
 
@@ -118,7 +122,8 @@ class VerdictPolicy:
                         coulomb_friction_max_nm=float(self.coulomb_friction_max_nm),
                         viscous_friction_band_nms_per_rad=float(self.viscous_friction_band_nms_per_rad),
                         torque_offset_nm=float(self.torque_offset_rel_base) * abs(float(base_torque_nm)),
-                        torque_lag_s=float(self.torque_lag_max_s))
+                        torque_lag_s=float(self.torque_lag_max_s),
+                        encoder_error_rad=float(self.encoder_accuracy_rad))
 
     def drive_model(self, raw_angles: bool, motor) -> GapModel:
         """The gap fits' model of a window (``raw_angles``: a flank- or dynamics-detector window, a real drive's
@@ -192,6 +197,8 @@ class VerdictPolicy:
             out.append(("torque_offset_rel_base", "a fraction in [0, 1)"))
         if not 0 <= self.torque_lag_max_s <= 1:
             out.append(("torque_lag_max_s", "a time in [0, 1] s"))
+        if not 0 <= self.encoder_accuracy_rad <= 0.1:
+            out.append(("encoder_accuracy_rad", "an angle in [0, 0.1] rad"))
         return out
 
     def check(self) -> None:
