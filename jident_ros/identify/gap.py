@@ -638,10 +638,9 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     smaller: the free fit is its check.  Returns {} and a 'choice' phrase otherwise."""
     s, e = coarse
     lo, hi = min(s, ff["start"]), max(s, ff["start"])
-    # durations counted at 2 kHz, in the recording's rows (jident_ros/stream/rate.py; unchanged at 0.5 ms)
-    k_search = rate_samples(KINK_SEARCH, sample_period_s)
-    k_pre = rate_samples(KINK_PRE_SAMPLES, sample_period_s)
-    k_agree = rate_samples(KINK_FREE_AGREE_SAMPLES, sample_period_s)
+    # durations counted at 2 kHz, in the recording's rows (stream/rate.py; unchanged at 0.5 ms)
+    k_search, k_pre, k_agree = (rate_samples(k, sample_period_s) for k in (KINK_SEARCH, KINK_PRE_SAMPLES,
+                                                                          KINK_FREE_AGREE_SAMPLES))
     test = pre_entry_steady(torque[:max(lo - k_search, 0)])
     if not test.steady:
         return {"choice": f"angle (free): {test.reason}"}

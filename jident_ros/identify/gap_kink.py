@@ -80,8 +80,7 @@ def _kink_pre_design(n_pre: int) -> tuple:
 
 
 def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int,
-             coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0, torque_lag_s: float = 0.0,
-             encoder_error_rad: float = 0.0) -> dict:
+             coulomb_max_nm: float = 0.0, torque_offset_nm: float = 0.0, torque_lag_s: float = 0.0) -> dict:
     """J1 with the entry row as a change point of a steady drive (profile likelihood).
 
     Before the entry the drive turns at constant speed (steady, in contact); from the entry row s on it is free:
@@ -93,7 +92,7 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
     FreeFitError.  :func:`kink_locate` and :func:`kink_terms`, its two halves, for a caller that may still refuse the
     fit or needs only J1."""
     return kink_terms(kink_locate(alpha1, torque, sample_period_s, entries, end), coulomb_max_nm, torque_offset_nm,
-                      torque_lag_s, encoder_error_rad)
+                      torque_lag_s)
 
 
 def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int) -> dict:
