@@ -1202,3 +1202,51 @@ def test_a_traversal_back_the_contact_rule_found_earlier_in_its_excursion_gets_n
     rows = [int(round((e.window.entry_time_s - float(d["t0"])) / 5e-4)) + int(d["first_row"]) for e in evs
             if e.kind == "window"]
     assert len(rows) == 2 and all(abs(r - g) <= 2 for r, g in zip(rows, d["entries"])), (rows, list(d["entries"]))
+
+
+@pytest.mark.parametrize("lag_free", [True, False])
+def test_without_a1_a_torque_estimate_one_sample_late_does_not_move_the_damped_spring_s_entry(lag_free, monkeypatch):
+    """The vector drive's 'torque one sample late' variant (m_el reported 0.5 ms after the angles), JointState 2^16
+    clean speed step down (test/data/vd_torque_late_jointstate.npz, the detector's capture up to 64 rows after the
+    departure, 2 before the contact loss): the coupling model puts the entry at -1; the damped spring, with J1_nom
+    fixed, read the late m_el as coupling torque held longer and took it to -4 at a gain of 2.14 over -1.  With the
+    lag of m_el free in its fit (a column dPhi/dt, DAMPED_LAG_FREE) alpha1 tells -4 from -1 only 1.10 times: the entry
+    stays at -1 (lag not free: -4)."""
+    from pathlib import Path
+
+    import jident_ros.stream.flank as fl
+    monkeypatch.setattr(fl, "DAMPED_LAG_FREE", lag_free)
+    d = np.load(Path(__file__).parent / "data" / "vd_torque_late_jointstate.npz")
+    a1 = d["step_alpha1"]
+    data = np.column_stack([np.arange(a1.size) * 5e-4, a1, d["step_alpha2"], d["step_m_el"].astype(float)])
+    dep, true, level, thr, sigma = d["step_meta"]
+    dep, true = int(dep), int(true)
+    det = _variant_detector(level, thr, sigma, False, 65536)
+    shift, _ = det._refine(data, dep)
+    e, gain, scale = fl.damped_spring_entry(a1, det._delta(data), data[:, 3], dep, level, 1.16, 5e-4, dep + 1)
+    assert abs(scale - 1.0) <= fl.DAMPED_MAX_SCALE_DEVIATION            # the torque scale, not the lag's coefficient
+    if lag_free:
+        assert abs(dep + shift - true) <= 1 and gain < fl.DAMPED_MIN_GAIN, (dep + shift - true, gain)
+    else:
+        assert dep + shift - true == -4 and gain >= fl.DAMPED_MIN_GAIN, (dep + shift - true, gain)
+
+
+def test_a_first_order_lag_of_the_torque_is_one_column_of_its_double_integral():
+    """m = m_true through a first-order low-pass of tau: m_true = m + tau dm/dt, so Phi(m_true) = Phi(m) + tau dPhi(m)/dt
+    (the column DAMPED_LAG_FREE adds, with tau free): fitted, tau comes back within 5 % (a sign flip or a column of Phi
+    itself would not)."""
+    from jident_ros.stream.flank import _double_integral, _lag_column
+    ts, tau = 5e-4, 2e-3
+    t = np.arange(400) * ts
+    m_true = np.where(t < 0.08, 100.0, -300.0) + 50.0 * np.sin(2 * math.pi * 15 * t)
+    m = np.empty_like(m_true)
+    m[0] = m_true[0]
+    a = ts / (tau + ts)                        # backward Euler of tau m' + m = m_true
+    for i in range(1, m.size):
+        m[i] = m[i - 1] + a * (m_true[i] - m[i - 1])
+    phi, phi_true = _double_integral(m, ts), _double_integral(m_true, ts)
+    col = _lag_column(phi)
+    X = np.column_stack([np.ones(t.size), t, t * t, col])
+    coef = np.linalg.lstsq(X, phi_true - phi, rcond=None)[0]
+    scale = float(np.abs(np.gradient(phi)).max()) / ts          # the column's scaling back to dPhi/dt
+    assert coef[3] / scale == pytest.approx(tau, rel=0.05)
