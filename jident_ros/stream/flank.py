@@ -862,23 +862,6 @@ DAMPED_MIN_GAIN = 2.0
 DAMPED_MAX_SCALE_DEVIATION = 0.2
 
 
-#: The drive's torque estimate lags the angles: a first-order low-pass of time constant tau reports m with m_true = m +
-#: tau dm/dt exactly, a delay tau to first order, so Phi(m_true) = Phi(m) + tau dPhi/dt.  The damped spring's fit, whose
-#: J is J1_nom and not free, carries that column with tau free (DAMPED_LAG_FREE), so its contact loss is placed by
-#: alpha1's and delta's shapes and not by m_el's timing: with the vector drive's torque estimate one sample (0.5 ms)
-#: late it moved the speed steps' entries from -1 to -4/-5 (the coupling model had them at -1).  The same column in the
-#: coupling model (1/J free) put the second drive's JointState speed steps 3-4 samples late, in the ramp model the
-#: vector drive's 2^13 light load reversals 10-16 late, in the spring model the vector drive's speed reversals at their
-#: departure (+3): left out there (docs/results.md, "Entry placement, tenth round")
-DAMPED_LAG_FREE = True
-
-
-def _lag_column(phi: np.ndarray) -> np.ndarray:
-    """The change of m_el's double integral under a small lag of m_el: d Phi / dk, scaled to order 1."""
-    g = np.gradient(np.asarray(phi, float)) if phi.size > 1 else np.zeros(phi.size)
-    return g / max(float(np.abs(g).max()), 1e-300)
-
-
 def damped_spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, departure: int, flank_rad: float,
                         inertia_kgm2: float, sample_period_s: float, ref: Optional[int] = None) -> tuple:
     """(entry row, gain, torque scale / T0) of the damped spring's contact loss near ``departure`` (DAMPED_*
@@ -895,12 +878,11 @@ def damped_spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray,
     t0 = float(np.median(m_el[t_lo:t_hi]))
     rows = np.arange(lo, hi)
     k = (rows - departure) / float(fit_after)
-    phi = _double_integral(m_el[lo:hi], ts)
-    y = np.asarray(alpha1[lo:hi], float) - phi / float(inertia_kgm2)
+    y = np.asarray(alpha1[lo:hi], float) - _double_integral(m_el[lo:hi], ts) / float(inertia_kgm2)
     y = y - y.mean()
     u = side * (np.asarray(delta[lo:hi], float) - flank_rad)
     du = np.gradient(u) / ts
-    base = np.column_stack([np.ones(k.size), k, k * k] + ([_lag_column(phi)] if DAMPED_LAG_FREE else []))
+    base = np.column_stack([np.ones(k.size), k, k * k])
     idx = np.arange(k.size)
 
     def damped(e):
@@ -913,7 +895,7 @@ def damped_spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray,
         frac = np.where(contact, np.clip(1.0 - u / ue, 0.0, None), 0.0)
         cols = np.column_stack([base, _double_integral(frac, ts) * 1e6, _double_integral(np.where(contact, du, 0.0), ts) * 1e3])
         rss, coef = _lstsq_rss(cols, y)
-        return rss, -coef[base.shape[1]] * 1e6 * float(inertia_kgm2)      # the torque scale s, N m
+        return rss, -coef[3] * 1e6 * float(inertia_kgm2)      # the torque scale s, N m
 
     search = samples(DAMPED_SEARCH, ts)
     cand = range(max(departure - search, lo + 2), min(departure + search, hi - 4) + 1)
