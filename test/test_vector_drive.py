@@ -214,3 +214,18 @@ def test_jittered_instants_stamps_and_reported_units(step_down, monkeypatch):
     np.testing.assert_allclose(smooth["m_el"][1:], a * smooth["m_el"][:-1] + (1 - a) * base["m_el"][1:], rtol=1e-12,
                                atol=1e-9)
     assert np.max(np.abs(smooth["m_el"] - base["m_el"])) > 1.0          # the event's torque step is smoothed
+
+
+def test_the_separation_is_where_a_damped_contacts_torque_reaches_zero():
+    """record._separation: the first sample of the run of zero coupling torque that ends at the zone entry b (a damped
+    contact lets go when k x + c x' reaches zero, before x does); b itself when the torque is not zero right before b;
+    the search stops SEPARATION_SEARCH_SAMPLES before b."""
+    from jident_ros.research.vector_drive.record import SEPARATION_SEARCH_SAMPLES, _separation
+    tau = np.r_[np.linspace(300.0, 10.0, 50), np.zeros(5), np.zeros(30)]      # zone entry at 55: zero from 50 on
+    assert _separation(tau, 55) == 50
+    tau2 = np.r_[np.linspace(300.0, 10.0, 55), np.zeros(30)]                  # an undamped contact: zero from 55
+    assert _separation(tau2, 55) == 55
+    tau3 = np.r_[np.full(10, 5.0), np.zeros(100)]
+    assert _separation(tau3, 100) == 100 - SEPARATION_SEARCH_SAMPLES
+    tau4 = np.r_[np.linspace(300.0, 10.0, 50), np.full(5, 1e-12), np.zeros(30)]   # interpolated: zero to 1e-9
+    assert _separation(tau4, 55) == 50

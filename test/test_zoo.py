@@ -175,11 +175,12 @@ def test_zoo_variants_each_change_one_thing_and_refuse_bad_names(tmp_path, capsy
 
 def test_zoo_variants_markdown_totals_follow_the_rows():
     from jident_ros.research.evaluation import zoo_variants as zv
-    row = {"found": 3, "traversals": 4, "offsets": [0, 1, 5], "trav_published": 2, "trav_windows": 3,
-           "published_off": 1, "err_median": 0.01, "err_max": 0.12, "covered": 1, "with_interval": 2,
+    row = {"found": 3, "traversals": 4, "offsets": [0, 1, 5], "sep_offsets": [3, 4, 8], "trav_published": 2,
+           "trav_windows": 3, "published_off": 1, "err_median": 0.01, "err_max": 0.12, "covered": 1, "with_interval": 2,
            "wrong_class": 0, "between_on_class": 1, "false_same_flank": 2}
     md = zv.markdown({"rows": {"base": row, "soft coupling": dict(row, published_off=0)}, "elapsed_s": 1.0}, "cmd", "abc")
-    assert "| base | docs/vector_drive.md's drive | 3/4 | 67 % | 2/3 | 1 | 1.0 % / 12.0 % | 1/2 | 0 / 1 | 2 |" in md
+    # the entry counted from the zone (67 %) and from the coupling's separation (0 %: 3, 4 and 8 samples after it)
+    assert "| base | docs/vector_drive.md's drive | 3/4 | 67 % | 0 % | 2/3 | 1 | 1.0 % / 12.0 % | 1/2 | 0 / 1 | 2 |" in md
     assert "published 4/6 traversal windows; **1 more than 10 % off**; the 95 % interval covers 2/4 (50 %)" in md
 
 

@@ -190,8 +190,8 @@ def vector_recording(r, event: str, direction: str, j1: float, counts: int, snr,
     """The ZooRecording of one vector-drive recording ``r`` (:func:`vd_record.build`), its ``formats`` written
     under ``out`` (the zoo's and zoo_variants' recordings)."""
     tr = r.truth
-    gl = [{"entry_index": g["entry_index"], "recontact_index": g["recontact_index"], "traversal": g["traversal"]}
-          for g in tr["gaps"]]
+    gl = [{"entry_index": g["entry_index"], "recontact_index": g["recontact_index"], "traversal": g["traversal"],
+           "separation_index": g.get("separation_index", g["entry_index"])} for g in tr["gaps"]]
     zr = ZooRecording("vector drive", r.name, event.replace("_", " "), event in TRAVERSING_EVENTS, direction, j1,
                       tr["backlash_width_m"], tr["reference_radius_m"], tr["gear_ratio"], counts, snr,
                       tr["sample_period_s"], tr["event"]["index"], gl)
@@ -401,6 +401,7 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
     s = Counter()
     offsets, errs, k2errs, oracle, oracle_f = [], [], [], [], []
     gap_offsets = []        # the entry the gap estimator used (its change point) minus the true one
+    sep_offsets = []        # the detector's entry minus the coupling's separation (a damped contact's force at zero)
     reasons = Counter()
     covered = []
     for zr, res in items:
@@ -421,6 +422,7 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
         for k in trav:
             if k in first:
                 offsets.append(first[k] - zr.gaps[k]["entry_index"])
+                sep_offsets.append(first[k] - zr.gaps[k].get("separation_index", zr.gaps[k]["entry_index"]))
         est = {}
         for w in res["windows"]:
             if w["gap"] is not None and w["gap"] not in est:
@@ -484,6 +486,7 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
     out = dict(s)
     out["offsets"] = offsets
     out["gap_offsets"] = gap_offsets
+    out["sep_offsets"] = sep_offsets
     out["within2"] = sum(1 for o in offsets if abs(o) <= 2)
     out["err_median"] = float(np.median(errs)) if errs else None
     out["err_max"] = float(np.max(errs)) if errs else None
@@ -530,9 +533,10 @@ def _pct(a, b):
     return "–" if not b else f"{100 * a / b:.0f} %"
 
 
-def variant_rows(rows: dict, what: dict, wrong_first: bool = True) -> tuple:
+def variant_rows(rows: dict, what: dict, wrong_first: bool = True, separation: bool = False) -> tuple:
     """(table lines, totals) of drives varied one property at a time (zoo_variants, zoo_dol's sweep) from
-    :func:`summarise`'s counts per variant; ``wrong_first``: the class column as 'another class / between classes'."""
+    :func:`summarise`'s counts per variant; ``wrong_first``: the class column as 'another class / between classes';
+    ``separation``: a column after the entry's, within ±2 of the coupling's separation instead of the zone entry."""
     lines, tot = [], dict.fromkeys(("off", "cov", "with", "pub", "win", "wrong", "between", "false"), 0)
     for name, s in rows.items():
         off = s.get("offsets", [])
@@ -541,6 +545,8 @@ def variant_rows(rows: dict, what: dict, wrong_first: bool = True) -> tuple:
         classes = (s.get("wrong_class", 0), s.get("between_on_class", 0))[::1 if wrong_first else -1]
         lines.append(f"| {name} | {what[name]} | {s.get('found', 0)}/{s.get('traversals', 0)} | "
                      f"{_pct(sum(1 for o in off if abs(o) <= 2), len(off))} | "
+                     + (f"{_pct(sum(1 for o in s.get('sep_offsets', []) if abs(o) <= 2), len(s.get('sep_offsets', [])))} | "
+                        if separation else "") +
                      f"{s.get('trav_published', 0)}/{s.get('trav_windows', 0)} | {s.get('published_off', 0)} | {err} | "
                      f"{s.get('covered', 0)}/{s.get('with_interval', 0)} | {classes[0]} / {classes[1]} | {false} |")
         for k, key in (("off", "published_off"), ("cov", "covered"), ("with", "with_interval"), ("pub", "trav_published"),

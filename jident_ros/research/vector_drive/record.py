@@ -162,6 +162,23 @@ def _t(x):
     return round(float(x), 9)
 
 
+#: How far before the zone entry the coupling's separation is looked for, samples.
+SEPARATION_SEARCH_SAMPLES = 40
+
+
+def _separation(tau_c: np.ndarray, b: int) -> int:
+    """The first sample of the run, ending at the zone entry ``b``, in which the coupling transmits no torque: a damped
+    contact separates when its force k·x + c·ẋ reaches zero, before x does (the zone entry, the truth's entry_index),
+    and from there both masses run free (docs/vector_drive.md).  ``b`` itself for an undamped coupling (or a
+    torque that is not zero right before b).  Zero: |T_c| at most 1e-9 of its largest (the interpolated states of
+    a jittered recording are not exactly zero)."""
+    tol = 1e-9 * max(float(np.max(np.abs(tau_c))), 1e-300)
+    k = b
+    while k > max(b - SEPARATION_SEARCH_SAMPLES, 1) and abs(float(tau_c[k - 1])) <= tol:
+        k -= 1
+    return int(k)
+
+
 def _gap_torques(st: dict, b: int, e: int) -> dict:
     """What the gap's samples hold: the true air-gap torque, the drive's estimate's error against it and the
     motor's bearing friction (means over the gap, N m)."""
@@ -236,6 +253,7 @@ def build(p: DriveParams, event: str, direction: str, sensors: Sensors, seed: in
                  "from_flank": int(np.sign(delta[b - 1])) if b > 0 else 0,
                  "to_flank": int(np.sign(delta[e])) if e < n else 0,
                  "traversal": bool(b > 0 and e < n and np.sign(delta[b - 1]) != np.sign(delta[e])),
+                 "separation_index": _separation(st["tau_c"], b),
                  "samples": e - b, **_gap_torques(st, b, e)} for b, e in gl]
     steady = slice(min(int(0.1 / ts), k_ev // 2), k_ev)   # the start of the log is the pre-roll's end
     tau = st["tau_M"]
