@@ -198,3 +198,13 @@ def test_zoo_variants_undeclared_says_so_and_drops_the_declarations(tmp_path, ca
     assert "| observer mismatch | R_R estimate x0.7, L_M estimate x1.1 (its torque estimate 2.3-2.8 % off) |" in und
     assert zv.main(["--report", "--undeclared", "--out", str(tmp_path)]) == 2
     assert "--undeclared" in capsys.readouterr().err and not list(tmp_path.iterdir())
+
+
+def test_zoo_variants_names_may_hold_a_comma():
+    """--variants 'base,small drive, 3:1 gear' selects both (the second name holds a comma); an unknown name stays as
+    given, for the argument check to name it."""
+    from jident_ros.research.evaluation.zoo_variants import variant_names
+    assert variant_names("base,small drive, 3:1 gear") == ["base", "small drive, 3:1 gear"]
+    assert variant_names("small drive, 3:1 gear,soft coupling") == ["small drive, 3:1 gear", "soft coupling"]
+    assert variant_names("base, soft coupling,") == ["base", "soft coupling"]
+    assert variant_names("small drive,nonsense") == ["small drive", "nonsense"]

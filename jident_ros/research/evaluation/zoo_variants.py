@@ -84,6 +84,22 @@ SENSOR_VARIANTS = {"sampling jitter 25 µs": {"sample_jitter_s": 25e-6}, "sampli
 UNDECLARED_LIMITS = ("smoothed torque 5 ms undeclared", "resolver-grade angles undeclared")
 
 
+def variant_names(text: str) -> list:
+    """The comma-separated ``--variants`` list, a name that holds a comma ("small drive, 3:1 gear") kept whole: parts
+    are joined back while they make the start of a known name."""
+    known = [n for n, _, _, _ in variants()]
+    parts = [p.strip() for p in text.split(",")]
+    out, i = [], 0
+    while i < len(parts):
+        name, j = parts[i], i + 1
+        while name not in known and j < len(parts) and any(k.startswith(f"{name}, {parts[j]}") for k in known):
+            name, j = f"{name}, {parts[j]}", j + 1
+        if name:
+            out.append(name)
+        i = j
+    return out
+
+
 def system_for(name: str, p: DriveParams):
     """The system configuration a variant is diagnosed with: its drive file's, or config/system.yaml's, at the
     variant's sample period."""
@@ -295,7 +311,7 @@ def main(argv=None) -> int:
     if reason:
         sys.stderr.write(f"zoo_variants: error: the vector drive needs motulator: {reason}\n")
         return 2
-    names = [n.strip() for n in a.variants.split(",") if n.strip()]
+    names = variant_names(a.variants)
     problem = zoo.argument_problem("--variants", names, [n for n, _, _, _ in variants()], a.results)
     if problem:
         sys.stderr.write(f"zoo_variants: error: {problem}\n")
