@@ -966,7 +966,8 @@ def _nonpositive_slope(j: float, torque: np.ndarray, acc: np.ndarray) -> str:
         return (f"gap fit undetermined: m_el and a1 are not correlated over the gap's {n} rows (t = {t:.2g}): the "
                 f"gap's torque does not accelerate the motor measurably")
     return (f"gap fit gave a non-physical J1 = {j:.4g} (m_el against a1 over the gap: they are anti-correlated, "
-            f"t = {t:.2g}; check the sign of m_el against a1 and the joint names)")
+            f"t = {t:.2g}; check the sign of m_el against a1 and the joint names, or a torque estimate smoothed or late "
+            f"beyond torque_lag_max_s)")
 
 
 def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,

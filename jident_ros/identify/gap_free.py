@@ -472,7 +472,7 @@ def _no_positive_kappa(f: dict, phi_scale: float) -> str:
                 f"0: the gap's torque does not curve the angle measurably over its {X.shape[0]} rows")
     return (f"gap fit gave a non-physical 1/J1 = {kappa:.3g} ± {se:.2g} 1/(kg m^2) from alpha1 (the angle curves "
             "against the torque's double integral over the gap: check the sign of m_el against alpha1, the joint "
-            "names and gear_ratio)")
+            "names and gear_ratio, or a torque estimate smoothed or late beyond torque_lag_max_s)")
 
 
 def encoder_error_term(row: np.ndarray, alpha1: np.ndarray, j1: float, error_rad: float) -> float:
