@@ -110,7 +110,10 @@ def test_sweep_varies_one_property_from_the_zoo_drive():
         changed = [k for k in ("slip_load_ratio", "wheel_inertia_kgm2") if getattr(p, k) != getattr(base, k)]
         changed += [k for k in ("backlash_width_m", "stiffness_nm_per_rad") if getattr(p.mechanics, k) !=
                     getattr(base.mechanics, k)]
+        # a sensor variant keeps the drive and changes its sensors (and, declared, what its user declares)
+        changed += list(zoo_dol.SWEEP_SENSOR_VARIANTS.get(name, {}))
         assert len(changed) == 1, name
+    assert set(zoo_dol.SWEEP_DECLARED) <= set(zoo_dol.SWEEP_SENSOR_VARIANTS)
 
 
 def test_sweep_misses_of_the_base_drive_are_listed_once():
