@@ -92,7 +92,7 @@ from jident_ros.identify.gap_free import (
 )
 from jident_ros.identify.gap_kink import KINK_PRE_SAMPLES, KINK_SEARCH, kink_locate, kink_terms
 from jident_ros.identify.gap_load import LOAD_ANGLE_KEY, load_free_bounds
-from jident_ros.identify.gap_numerics import _cumtrapz, _diff2, _median, _quantum
+from jident_ros.identify.gap_numerics import _ar1_inflation, _cumtrapz, _diff2, _median, _quantum
 from jident_ros.stream.filters import savgol_coeffs, savgol_filter
 from jident_ros.stream.rate import samples as rate_samples
 
@@ -708,9 +708,9 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
 
 
 #: Steady-entry fit: its entry row within this many samples (at 2 kHz; converted by stream/rate.py) of the free fit's
-#: and of the detector's (chosen on our
-#: simulator's zoo windows with the detector's entry moved by -3..+3 samples: |difference| <= 4 and <= 3; tested on the
-#: vector drive: its heavy load reversal's wrong kinks lie 13-15 and 10-16 samples off)
+#: and of the detector's (chosen on our simulator's zoo windows with the detector's entry moved by -3..+3 samples:
+#: |difference| <= 4 and <= 3; tested on the vector drive: its heavy load reversal's wrong kinks lie 13-15 and 10-16
+#: samples off)
 KINK_FREE_AGREE_SAMPLES = 6
 #: Steady-entry fit: the torque may move by at most this fraction of its level in the first samples after the
 #: entry (our simulator: 0.3 %; the stress bench's speed step: 100 % within 2 samples).
@@ -843,9 +843,7 @@ def speed_fit(omega1: np.ndarray, torque: np.ndarray, sample_period_s: float, la
         raise NoGapError(f"gap fit gave a non-physical J1 = 1/{kappa:.4g} (dω1 against ∫m_el dt)")
     res = omega1 - A @ coef
     dof = n - A.shape[1]
-    rho = float(res[1:] @ res[:-1]) / float(res @ res) if float(res @ res) > 0 else 0.0
-    inflation = (1.0 + max(rho, 0.0)) / max(1.0 - max(rho, 0.0), 1e-6)
-    cov = (res @ res) / dof * np.linalg.pinv(A.T @ A) * inflation
+    cov = (res @ res) / dof * np.linalg.pinv(A.T @ A) * _ar1_inflation(res)
     j = 1.0 / kappa
     se_stat = float(np.sqrt(cov[1, 1])) / kappa ** 2
     model_error = 0.0

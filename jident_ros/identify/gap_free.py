@@ -42,6 +42,7 @@ import numpy as np
 from jident_ros.identify import lapack
 from jident_ros.identify.distributions import normal_isf
 from jident_ros.identify.gap_numerics import (
+    _ar1_inflation,
     _cumtrapz,
     _double_trapz_adjoint,
     _gradient_sign,
@@ -331,11 +332,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         if dof < 1 or not kappa > 0:
             return {}
         row = f["pinv"][2] / phi_scale                 # 1/J1 = row · y
-        rr = float(res @ res)
-        s2r = rr / dof
-        rho = float(res[1:] @ res[:-1]) / rr if rr > 0 else 0.0
-        infl = (1.0 + max(rho, 0.0)) / max(1.0 - max(rho, 0.0), 1e-6)
-        var_stat = s2r * float(row @ row) * infl
+        var_stat = float(res @ res) / dof * float(row @ row) * _ar1_inflation(res)
         # torque noise through Φ: δκ = −κ row·(W n_m), W the double trapezoid from the interval's first row
         key = (f["i"], f["j"])
         if key not in torque_noise:                   # both fits (with and without a Coulomb column) share it
@@ -464,9 +461,7 @@ def _no_positive_kappa(f: dict, phi_scale: float) -> str:
     kappa, res, X = f["kappa"], f["res"], f["X"]
     dof = X.shape[0] - X.shape[1]
     row = f["pinv"][2] / phi_scale
-    rr = float(res @ res)
-    rho = min(max(float(res[1:] @ res[:-1]) / rr, 0.0), 0.99) if rr > 0 else 0.0
-    se = float(np.sqrt(rr / max(dof, 1) * float(row @ row) * (1.0 + rho) / (1.0 - rho)))
+    se = float(np.sqrt(float(res @ res) / max(dof, 1) * float(row @ row) * _ar1_inflation(res)))
     if np.isfinite(kappa) and kappa >= -NONPHYSICAL_Z * se:
         return (f"gap fit undetermined: 1/J1 = {kappa:.3g} ± {se:.2g} 1/(kg m^2) from alpha1, not distinguishable from "
                 f"0: the gap's torque does not curve the angle measurably over its {X.shape[0]} rows")

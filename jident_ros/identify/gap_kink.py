@@ -17,6 +17,7 @@ import numpy as np
 from jident_ros.identify import lapack
 from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, FreeFitError, drift_term, encoder_error_term
 from jident_ros.identify.gap_numerics import (
+    _ar1_inflation,
     _cumtrapz,
     _double_trapz_adjoint,
     _quantum,
@@ -142,10 +143,7 @@ def kink_terms(fit: dict, coulomb_max_nm: float = 0.0, torque_offset_nm: float =
     m, ts, P, kappa, row, s2, plausible_kappa, angles = fit["_state"]
     j1, res, s_best, end = fit["j1"], fit["residual"], fit["start"], fit["end"]
     cp = max(abs(1.0 / k - j1) for k in plausible_kappa)
-    rr = float(res @ res)
-    rho = float(res[1:] @ res[:-1]) / rr if rr > 0 else 0.0
-    infl = (1.0 + max(rho, 0.0)) / max(1.0 - max(rho, 0.0), 1e-6)
-    var_stat = s2 * float(row @ row) * infl
+    var_stat = s2 * float(row @ row) * _ar1_inflation(res)
     i = s_best - P
     g = _double_trapz_adjoint(row[i:], ts)
     sm = _robust_noise(m[s_best:end])

@@ -61,6 +61,14 @@ def _trim_rows(n: int, trims: tuple) -> tuple:
     return lo, hi
 
 
+def _ar1_inflation(res: np.ndarray) -> float:
+    """The variance factor (1 + ρ)/(1 − ρ) of a least-squares slope whose residual ``res`` has lag-1 autocorrelation
+    ρ > 0 (quantisation at low speed, a misfit; ρ <= 0 is not credited; 1 − ρ at least 1e-6)."""
+    rr = float(res @ res)
+    rho = max(float(res[1:] @ res[:-1]) / rr, 0.0) if rr > 0 else 0.0
+    return (1.0 + rho) / max(1.0 - rho, 1e-6)
+
+
 def _diff2(x: np.ndarray) -> np.ndarray:
     """``np.diff(x, 2)`` of a 1-D array: the same two subtractions, without np.diff's generic set-up."""
     d = x[1:] - x[:-1]
