@@ -742,6 +742,46 @@ def _coupling_fit(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, centr
     return best, best_rss, rss_centre, y.size
 
 
+
+
+#: Without a1, a window's own entry is placed by the motor-equation models (coupling, spring, damped spring, ramp),
+#: which take the torque estimate's timing for the angles': their gates were chosen on drives whose m_el lags alpha1 by
+#: about TORQUE_LAG_REF samples (where the coupling fit's RSS over a shift of m_el is least on the vector drive's speed
+#: events: 0-0.5).  A drive that reports its torque a sample later moved the coupling model's entry forward and the
+#: damped spring's back (the 'torque one sample late' variant's speed reversals +6/+7, speed steps -4/-5).  So, on a
+#: fine encoder and not after a jump of delta, the coupling fit of :func:`coupling_entry` around the departure is made
+#: with m_el shifted by TORQUE_LAG_REF and by TORQUE_LAG_REF + 1 sample (:func:`torque_late_gain`); when the second
+#: explains alpha1 TORQUE_LATE_MIN_GAIN times better, m_el is advanced by one sample before the rules run ...
+TORQUE_LAG_REF = 0.5
+#: ... (gains on 'torque one sample late', where it was chosen: speed steps 1.11/1.13, speed reversals 1.13/1.38, load
+#: reversals <= 1.02 (a load reversal's m_el hardly changes through the fit: nothing to time); elsewhere on fine
+#: encoders at most 1.06 -- 1 kHz's 30 dB speed step, the reversed load encoder's speed reversal 1.05, the DOL drive's
+#: slip drops <= 1.04 -- but the smoothed torques' speed events 1.06-1.82: a 2 ms filter lags by more than a sample;
+#: advancing m_el by 2-3 samples put the 5 ms filter's speed reversals 0/+1 -> +20/+21, so one sample is all that is
+#: advanced: docs/results.md, "Entry placement, eleventh round")
+TORQUE_LATE_MIN_GAIN = 1.1
+
+
+def shifted(x: np.ndarray, lag: float) -> np.ndarray:
+    """x(k + lag) by linear interpolation (the last value held beyond the end)."""
+    n = np.arange(np.size(x), dtype=float)
+    return np.interp(n + float(lag), n, np.asarray(x, float))
+
+
+def torque_late_gain(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, departure: int, side: float,
+                     sample_period_s: float) -> float:
+    """RSS of :func:`coupling_entry`'s fit around ``departure`` (its best candidate) with m_el shifted by
+    TORQUE_LAG_REF (samples at 2 kHz) / the same with m_el one sample later still; 1.0 when the rows are not
+    there."""
+    ref = samples_float(TORQUE_LAG_REF, sample_period_s)
+    rss = []
+    for lag in (ref, ref + 1.0):
+        got = _coupling_fit(alpha1, delta, shifted(m_el, lag), departure, side, sample_period_s)
+        if got is None or not got[1] > 0:
+            return 1.0
+        rss.append(got[1])
+    return rss[0] / rss[1]
+
 def coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, departure: int, side: float,
                    sample_period_s: float, rounds: int = 1) -> tuple:
     """(entry row, gain, rms) of a coupling model's contact loss near ``departure`` (COUPLING_* constants): for each
@@ -2043,8 +2083,33 @@ class FlankDetector(BacklashDetector):
         """(samples from the departure to the entry sample, re-contact row or None): :meth:`_refine_from` the
         departure moved on to where delta left its flank by COARSE_DEPARTURE_QUANTA counts (:meth:`_coarse_departure`)."""
         moved = self._coarse_departure(data, dep)
-        shift, recontact = self._refine_from(data, moved)
+        shift, recontact = self._refine_from(self._torque_aligned(data, moved), moved)
         return shift + moved - dep, recontact
+
+    def _torque_aligned(self, data: np.ndarray, dep: int) -> np.ndarray:
+        """``data`` with m_el advanced by one sample when it reads a sample late (:func:`torque_late_gain` at least
+        TORQUE_LATE_MIN_GAIN), for a window's own entry without a1, on a fine encoder (delta's quantum, the configured
+        one else its smallest step before the departure, / sqrt 12 within FREE_MAX_NOISE_RAD, as :meth:`_ramp_move`)
+        and not after a jump of delta (a slip: the rules do not run); else ``data`` itself."""
+        flank = getattr(self, "_cap_flank", (math.nan, math.nan))[0]
+        if not TORQUE_LATE_MIN_GAIN or self.detector_name != "flank" or "a1" in self.channels \
+                or "m_el" not in self.channels or getattr(self, "_cap_returning", False) or not math.isfinite(flank) \
+                or self._jumped(data, dep):
+            return data
+        delta = self._delta(data)
+        quantum = _delta_quantum(delta, dep, self.angle_quantum_rad, max(dep - self._n(UNTWIST_FIT_BEFORE), 0),
+                                 self.min_departure_rad)
+        if not quantum / math.sqrt(12.0) <= FREE_MAX_NOISE_RAD:
+            return data
+        after = delta[dep:dep + self._n(COUPLING_FIT_AFTER)] - flank
+        side = 1.0 if after.size and after[int(np.argmax(np.abs(after)))] >= 0 else -1.0
+        i_m = self.channels.index("m_el")
+        if not torque_late_gain(data[:, self._i_a1], delta, data[:, i_m], dep, side,
+                                self.sample_period_s) >= TORQUE_LATE_MIN_GAIN:
+            return data
+        out = np.array(data, float, copy=True)
+        out[:, i_m] = shifted(data[:, i_m], 1.0)
+        return out
 
     def _coarse_departure(self, data: np.ndarray, dep: int) -> int:
         """On a coarse encoder (delta's quantum / sqrt 12 beyond FREE_MAX_NOISE_RAD: its smallest step in the
