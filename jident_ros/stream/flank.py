@@ -787,18 +787,22 @@ def torque_late_gain(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, de
 #: the 'encoder disc errors' variant, 4-7 times a 2^16 count's quantisation noise) bend alpha1 and delta over the
 #: rules' fits, which take them for the motor's and the coupling's motion (that variant's light load reversal -11, heavy
 #: -7, traversal back +24).  The error is a function of the encoder's own angle, the same every revolution: before the
-#: rules, each angle (alpha1, alpha2) is fitted over the longest of two stretches of the capture where it turns
-#: steadily -- the rows before the departure, and the last DISC_TAIL_SAMPLES rows (the contact after the event) -- by a
-#: polynomial of degree DISC_DEGREE in time plus sin/cos of the angle and of twice the angle (:func:`disc_error`), on a
-#: stretch of DISC_MIN_REVOLUTIONS or more that turns one way (its net turn at least DISC_MIN_NET_SHARE of its path),
-#: and the harmonics are subtracted where they explain the stretch DISC_MIN_GAIN times better (rms without / with them)
-#: and leave no more than DISC_MAX_RMS_FLOORS x the encoder's own noise (its quantum / sqrt 12, the quantum the
-#: smallest step of the angle's second difference, at least ANGLE_MODEL_FLOOR_RAD): a stretch that is smooth motion
-#: plus the disc error, not a transient the harmonics absorb (the small drive's speed reversal: its load encoder's
-#: last 1000 rows, 2 revolutions, 'explained' 1.9 times better by a 38 mrad harmonic)
+#: rules, each angle (alpha1, alpha2) is fitted over the capture's last DISC_TAIL_SAMPLES rows (the contact after the
+#: event, the drive running steadily again) by a polynomial of degree DISC_DEGREE in time plus sin/cos of the angle and
+#: of twice the angle (:func:`disc_error`), when those rows turn DISC_MIN_REVOLUTIONS or more one way (the net turn at
+#: least DISC_MIN_NET_SHARE of the path: a cubic cannot bend like three periods of a sine), and the harmonics are
+#: subtracted over the whole capture where they explain those rows DISC_MIN_GAIN times better (rms without / with
+#: them) and leave no more than DISC_MAX_RMS_FLOORS x the encoder's own noise (its quantum / sqrt 12, the quantum the
+#: smallest step of the angle's second difference, at least ANGLE_MODEL_FLOOR_RAD): smooth motion plus the disc error,
+#: not a transient the harmonics absorb.  With 1.3-2 revolutions they absorbed transients: the rows before the
+#: departure of every light load reversal of the vector drive and its variants (1.3-1.4 revolutions, the load torque
+#: ramping: 220-400 urad at the noise floor with no disc error), the small drive's speed reversal's last 1000 rows (its
+#: load encoder's 2 revolutions 'explained' 1.9 times better by a 38 mrad harmonic; the rms gate refuses that one
+#: too).  Chosen on the 'encoder disc errors' variant (its last 1000 rows: 6.4-7.9 revolutions, gain 5.7, rms at the
+#: floor); tested on the zoo, the DOL zoo and the other variants (docs/results.md, "Entry placement, eleventh round")
 DISC_TAIL_SAMPLES = 1000
 DISC_DEGREE = 3
-DISC_MIN_REVOLUTIONS = 1.25
+DISC_MIN_REVOLUTIONS = 3.0
 DISC_MIN_NET_SHARE = 0.9
 DISC_MIN_GAIN = 1.5
 DISC_MAX_RMS_FLOORS = 2.0
@@ -808,23 +812,18 @@ def _disc_columns(angle: np.ndarray) -> np.ndarray:
     return np.column_stack([np.sin(angle), np.cos(angle), np.sin(2.0 * angle), np.cos(2.0 * angle)])
 
 
-def disc_error(angle: np.ndarray, stretches) -> Optional[np.ndarray]:
+def disc_error(angle: np.ndarray, first: int, end: int) -> Optional[np.ndarray]:
     """The coefficients of sin/cos(angle), sin/cos(2 angle) of an encoder's disc error (DISC_* constants) fitted over
-    the longest qualifying stretch (a (first, end) row pair) of ``angle``; None when no stretch qualifies or the
-    harmonics do not explain it DISC_MIN_GAIN times better than the polynomial alone."""
+    rows ``first`` .. ``end`` of ``angle``; None when those rows do not qualify or the harmonics do not explain them."""
     x = np.asarray(angle, float)
-    best, turns = None, 0.0
-    for a, z in stretches:
-        a, z = max(int(a), 0), min(int(z), x.size)
-        if z - a < 4 * (DISC_DEGREE + 5):
-            continue
-        path = float(np.sum(np.abs(np.diff(x[a:z])))) / (2.0 * math.pi)
-        net = abs(float(x[z - 1] - x[a])) / (2.0 * math.pi)
-        if net >= DISC_MIN_REVOLUTIONS and net >= DISC_MIN_NET_SHARE * path and net > turns:
-            best, turns = (a, z), net
-    if best is None:
+    first, end = max(int(first), 0), min(int(end), x.size)
+    if end - first < 4 * (DISC_DEGREE + 5):
         return None
-    seg = x[best[0]:best[1]]
+    path = float(np.sum(np.abs(np.diff(x[first:end])))) / (2.0 * math.pi)
+    net = abs(float(x[end - 1] - x[first])) / (2.0 * math.pi)
+    if not (net >= DISC_MIN_REVOLUTIONS and net >= DISC_MIN_NET_SHARE * path):
+        return None
+    seg = x[first:end]
     t = np.linspace(-1.0, 1.0, seg.size)
     P = np.column_stack([t ** p for p in range(DISC_DEGREE + 1)])
     rss_poly, _ = _lstsq_rss(P, seg)
@@ -2139,20 +2138,19 @@ class FlankDetector(BacklashDetector):
         """(samples from the departure to the entry sample, re-contact row or None): :meth:`_refine_from` the
         departure moved on to where delta left its flank by COARSE_DEPARTURE_QUANTA counts (:meth:`_coarse_departure`)."""
         moved = self._coarse_departure(data, dep)
-        shift, recontact = self._refine_from(self._torque_aligned(self._disc_corrected(data, moved), moved), moved)
+        shift, recontact = self._refine_from(self._torque_aligned(self._disc_corrected(data), moved), moved)
         return shift + moved - dep, recontact
 
-    def _disc_corrected(self, data: np.ndarray, dep: int) -> np.ndarray:
-        """``data`` with each encoder's disc error (:func:`disc_error`, fitted over the rows before ``dep`` and the
-        last DISC_TAIL_SAMPLES rows) subtracted from its angle; ``data`` itself when neither shows one."""
+    def _disc_corrected(self, data: np.ndarray) -> np.ndarray:
+        """``data`` with each encoder's disc error (:func:`disc_error`, fitted over the last DISC_TAIL_SAMPLES rows)
+        subtracted from its angle; ``data`` itself when neither shows one."""
         if not DISC_MIN_GAIN or self.detector_name != "flank":
             return data
-        stretches = ((0, dep - self._n(8)), (data.shape[0] - self._n(DISC_TAIL_SAMPLES), data.shape[0]))
         out = data
         for j in (self._i_a1, self._i_a2):
             if j < 0:
                 continue
-            coef = disc_error(data[:, j], stretches)
+            coef = disc_error(data[:, j], data.shape[0] - self._n(DISC_TAIL_SAMPLES), data.shape[0])
             if coef is not None:
                 out = np.array(data, float, copy=True) if out is data else out
                 out[:, j] = data[:, j] - _disc_columns(np.asarray(data[:, j], float)) @ coef
