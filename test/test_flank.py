@@ -1202,3 +1202,83 @@ def test_a_traversal_back_the_contact_rule_found_earlier_in_its_excursion_gets_n
     rows = [int(round((e.window.entry_time_s - float(d["t0"])) / 5e-4)) + int(d["first_row"]) for e in evs
             if e.kind == "window"]
     assert len(rows) == 2 and all(abs(r - g) <= 2 for r, g in zip(rows, d["entries"])), (rows, list(d["entries"]))
+
+
+def _vd_own_cut(name):
+    """A window's own capture cut from a vector-drive variant (JointState 2^16, encoders not configured): rows (t,
+    alpha1, alpha2, m_el), its departure row, the true first row in the zone, the flank level and its contact sigma."""
+    return _vd_return_cut(name, 65536)
+
+
+def _own_entry(data, dep, level, sigma):
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
+    det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), False, sigma
+    shift, _ = det._refine(data, dep)
+    return det, dep + shift
+
+
+@pytest.mark.parametrize("aligned", [True, False])
+def test_a_torque_estimate_a_sample_late_is_advanced_before_the_rules(monkeypatch, aligned):
+    """The 'torque one sample late' variant's clean speed reversal (test/data/vd_torque_late_speed_reversal_
+    jointstate.npz, 100 rows past the departure): the coupling fit explains alpha1 1.38 times better with m_el one sample
+    later than the vector drive's own lag (TORQUE_LAG_REF), so m_el is advanced by a sample and the rules place the
+    entry as on the base drive (-1); not aligned, the coupling model's forward move took it to +6.  The same capture with
+    m_el read on time (advanced by hand) is not moved again."""
+    from jident_ros.stream import flank
+    if not aligned:
+        monkeypatch.setattr(flank, "TORQUE_LATE_MIN_GAIN", 0.0)
+    data, dep, true, level, sigma = _vd_own_cut("vd_torque_late_speed_reversal_jointstate.npz")
+    det, entry = _own_entry(data, dep, level, sigma)
+    if aligned:
+        assert abs(entry - true) <= 2, entry - true
+        on_time = data.copy()
+        on_time[:, 3] = flank.shifted(data[:, 3], 1.0)
+        assert det._torque_aligned(data, dep) is not data and det._torque_aligned(on_time, dep) is on_time
+    else:
+        assert entry - true >= 5, entry - true
+
+
+@pytest.mark.parametrize("corrected", [True, False])
+def test_an_encoder_s_disc_errors_are_fitted_after_the_event_and_removed_before_the_rules(monkeypatch, corrected):
+    """The 'encoder disc errors' variant's clean light load reversal (test/data/vd_disc_errors_light_reversal_
+    jointstate.npz, the whole capture): both encoders carry 0.2 mrad once and 0.1 mrad twice per revolution; fitted over
+    the capture's last 1000 rows (7.9 revolutions) they come out at their size, and with them removed the entry lies on
+    the contact loss; left in, the ramp model fitted their curvature (a gain of 19) and put it 11 samples early."""
+    from jident_ros.stream import flank
+    if not corrected:
+        monkeypatch.setattr(flank, "DISC_MIN_GAIN", 0.0)
+    data, dep, true, level, sigma = _vd_own_cut("vd_disc_errors_light_reversal_jointstate.npz")
+    det, entry = _own_entry(data, dep, level, sigma)
+    if corrected:
+        assert abs(entry - true) <= 2, entry - true
+        for j in (1, 2):
+            coef = flank.disc_error(data[:, j], data.shape[0] - 1000, data.shape[0])
+            assert np.hypot(coef[0], coef[1]) == pytest.approx(2e-4, rel=0.05)
+            assert np.hypot(coef[2], coef[3]) == pytest.approx(1e-4, rel=0.05)
+    else:
+        assert entry - true <= -8, entry - true
+
+
+def test_disc_error_needs_three_revolutions_one_way_and_the_encoder_s_own_noise_left(monkeypatch):
+    """disc_error on a 2^16 encoder turning steadily (a cubic in time): 0.2 / 0.1 mrad harmonics over 4 revolutions are
+    found; none without them; none over 2 revolutions (a cubic and a sine are too alike there), nor back and forth, nor
+    where a transient that is no function of the angle is left in the rows (the rms gate)."""
+    from jident_ros.stream.flank import disc_error
+    q = 2.0 * math.pi / 65536
+    t = np.linspace(0.0, 0.5, 1000)
+
+    def read(revs, error=2e-4, extra=0.0):
+        x = 0.7 + 2.0 * math.pi * revs * (t / 0.5 + 0.1 * (t / 0.5) ** 3) / 1.1 + extra
+        x = x + error * np.sin(x + 0.4) + 0.5 * error * np.sin(2.0 * x + 1.3)
+        return np.floor(x / q) * q
+
+    coef = disc_error(read(4.0), 0, t.size)
+    assert coef is not None and np.hypot(coef[0], coef[1]) == pytest.approx(2e-4, rel=0.05)
+    assert disc_error(read(4.0, error=0.0), 0, t.size) is None
+    assert disc_error(read(2.0), 0, t.size) is None
+    assert disc_error(read(4.0) * np.sign(np.cos(2 * math.pi * t / 0.5)), 0, t.size) is None
+    ringing = read(4.0, extra=1e-4 * np.sin(2 * math.pi * 37.0 * t))      # the harmonics explain it 2.3 times better
+    assert disc_error(ringing, 0, t.size) is None
+    from jident_ros.stream import flank
+    monkeypatch.setattr(flank, "DISC_MAX_RMS_FLOORS", math.inf)
+    assert disc_error(ringing, 0, t.size) is not None
