@@ -48,7 +48,9 @@ and on what the clutch does, not on inequality (1):
   coupling's untwist (:func:`untwist_entry`: delta at rest, untwisting at a constant rate, then free) when that model
   clearly beats one kink (UNTWIST_*).  With a1, a traversal back takes the angle walk's entry (the no-a1 path) when that
   lies RETURN_ANGLE_WALK_MIN_LEAD samples or more before the a1 path's (back_to_load's J, fitted over a gap of nearly
-  constant torque, stops late).
+  constant torque, stops late).  Before all these rules an encoder's disc error (once and twice per revolution), fitted
+  over the capture's last rows where the drive turns steadily, is subtracted from its angle (:func:`disc_error`), and,
+  without a1, a torque estimate that reads a sample late is advanced by that sample (:func:`torque_late_gain`).
 * **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
   ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
   (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry
