@@ -366,3 +366,27 @@ def test_the_steady_entry_fit_searches_how_long_the_coupling_takes_to_let_go():
     only0 = kink_locate(a, m, TS, range(46, 60), 100, (0,))
     plain = kink_locate(a, m, TS, range(46, 60), 100)
     assert only0["j1"] == plain["j1"] and only0["start"] == plain["start"] and only0["unload_rows"] == 0
+
+
+def test_the_declared_coupling_release_bounds_the_unloading_search():
+    """coupling_release_max_s (the diagnostic node's key, 4 ms by default) reaches the steady-entry fit as
+    GapModel.coupling_release_s: a drive whose coupling lets go over 4 rows from row 90 is located at (90, 4) with the
+    default and at the kink alone (R = 0) when the drive declares a rigid contact (0)."""
+    from jident_ros.identify.gap import _anchored_angle
+    from jident_ros.identify.verdict import VerdictPolicy
+    assert VerdictPolicy().gap_model(200.0).coupling_release_s == 4e-3
+    assert VerdictPolicy.from_params({"coupling_release_max_s": 0.0}).gap_model(200.0).coupling_release_s == 0.0
+    fine, n = 20, 200
+    tf = np.arange(n * fine) * TS / fine
+    coupling = 400.0 * (1 - np.clip((tf - 90 * TS) / (4 * TS), 0.0, 1.0))
+    w1 = 150.0 + np.cumsum((400.0 - coupling) / 1.1) * TS / fine
+    q = 2 * np.pi / 2 ** 16
+    a = np.floor((np.cumsum(w1) * TS / fine)[::fine] / q) * q
+    m = 400.0 + np.random.default_rng(1).normal(0, 0.2, n)
+    choices = {}
+    for release in (0.0, VerdictPolicy().coupling_release_max_s):
+        model = GapModel(coupling_release_s=release)
+        ff = free_angle_fit(a, m, TS, 94, 150, model)
+        choices[release] = _anchored_angle(a, m, ff, (94, 150), TS, model)["choice"]
+    assert "steady drive at row 90 (the coupling unloading over 4 rows from it)" in choices[4e-3], choices
+    assert "steady entry" in choices[0.0] and "unloading" not in choices[0.0], choices
