@@ -303,6 +303,10 @@ DIAGNOSTIC_PARAMS = {
                                   "revolution (its data sheet's accuracy; a resolver +-10 arc min = 2.9e-3): a bounded "
                                   "term of the gap interval (0 = an exact disc)", min=0.0, max=0.1, read_only=False,
                                   unit="rad"),
+    "coupling_release_max_s": Param(4e-3, "the coupling lets go of the motor within this time after its torque starts "
+                                    "to fall, s (about a quarter period of the load on the coupling, "
+                                    "(pi/2) sqrt(J_load/k); 0 = a rigid contact, lost at once): the steady-entry fit "
+                                    "searches the unloading times up to it", min=0.0, max=1.0, read_only=False, unit="s"),
     "assume_typical_drive": Param(True, "a drive that declares none of torque_accuracy, coulomb_friction_max_nm, "
                                   "viscous_friction_band_nms_per_rad, torque_lag_max_s, motor.bearing_friction_nms_per_rad "
                                   "is taken, on windows of raw encoder angles (a real drive's recording: flank or "
@@ -320,7 +324,8 @@ DIAGNOSTIC_PARAMS = {
 #: max_torque_factor, max_speed_factor) stay the node's only.
 POLICY_CLI_FLAGS = ("image_min_margin", "plausible_min_ratio", "plausible_max_ratio", "torque_accuracy",
                     "coulomb_friction_max_nm", "viscous_friction_band_nms_per_rad", "torque_offset_rel_base",
-                    "torque_lag_max_s", "encoder_accuracy_rad", "assume_typical_drive", "publish_ambiguous")
+                    "torque_lag_max_s", "encoder_accuracy_rad", "coupling_release_max_s", "assume_typical_drive",
+                    "publish_ambiguous")
 
 #: The replay node.  Everything is fixed at start: read-only.
 REPLAY_PARAMS = {

@@ -113,7 +113,7 @@ def test_the_zoo_declares_each_drive_as_a_user_would():
     from jident_ros.research.evaluation.zoo import declared
     from jident_ros.research.second_drive.model import DriveParams as SecondParams
     from jident_ros.research.vector_drive.model import DriveParams as VectorParams
-    assert declared("ours") == {"assume_typical_drive": False}          # our simulator: an exact torque
+    assert declared("ours") == {"assume_typical_drive": False, "coupling_release_max_s": 0.0}  # exact torque, rigid contact
     assert declared("second drive") == {"bearing_friction_nms_per_rad": SecondParams().motor.bearing_friction_nms}
     v = declared("vector drive")
     mech = VectorParams().mechanics

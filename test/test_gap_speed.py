@@ -108,11 +108,15 @@ def test_kink_fit_matches_the_loop_on_grid_windows(windows, monkeypatch):
     calls = []
     real = gap_kink.kink_fit
     locate = gap.kink_locate          # the steady-entry check's kink fits (their standard error added after its checks)
-    monkeypatch.setattr(gap, "kink_locate", lambda *a, **k: calls.append(a) or locate(*a, **k))
+    monkeypatch.setattr(gap, "kink_locate", lambda *a, **k: calls.append((a, k)) or locate(*a, **k))
     _all_sets(windows)
     checked = 0
-    for alpha1, m_el, ts, entries, end, *_ in calls:
+    for (alpha1, m_el, ts, entries, end, *_), kw in calls:
+        if "pairs" in kw:       # the trims' and the lag's fits over given (row, unloading rows) pairs: their R = 0 rows
+            entries = [s for s, r in kw["pairs"] if r == 0]
         entries = sorted(int(x) for x in entries if end - int(x) >= gap_kink.KINK_MIN_GAP_SAMPLES)
+        if not entries:
+            continue
         try:
             real(alpha1, m_el, ts, entries, end)
         except gap_free.FreeFitError:

@@ -90,7 +90,15 @@ from jident_ros.identify.gap_free import (
     GapModel,
     free_angle_fit,
 )
-from jident_ros.identify.gap_kink import KINK_PRE_SAMPLES, KINK_SEARCH, kink_locate, kink_terms
+from jident_ros.identify.gap_kink import (
+    KINK_LAG_ROWS,
+    KINK_PRE_SAMPLES,
+    KINK_SEARCH,
+    KINK_UNLOAD_ROWS,
+    kink_lag_spread,
+    kink_locate,
+    kink_terms,
+)
 from jident_ros.identify.gap_load import LOAD_ANGLE_KEY, load_free_bounds
 from jident_ros.identify.gap_numerics import _ar1_inflation, _cumtrapz, _diff2, _median, _quantum
 from jident_ros.stream.filters import savgol_coeffs, savgol_filter
@@ -641,6 +649,9 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     # durations counted at 2 kHz, in the recording's rows (stream/rate.py; unchanged at 0.5 ms)
     k_search, k_pre, k_agree = (rate_samples(k, sample_period_s) for k in (KINK_SEARCH, KINK_PRE_SAMPLES,
                                                                           KINK_FREE_AGREE_SAMPLES))
+    # the coupling's unloading times searched: those within the declared bound (GapModel.coupling_release_s)
+    unload = tuple(sorted({r for r in rate_samples(KINK_UNLOAD_ROWS, sample_period_s)
+                           if r * sample_period_s <= float(model.coupling_release_s) * (1 + 1e-9)})) or (0,)
     test = pre_entry_steady(torque[:max(lo - k_search, 0)])
     if not test.steady:
         return {"choice": f"angle (free): {test.reason}"}
@@ -648,7 +659,7 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     try:
         # its standard error only once the checks below have kept it (most steady-entry fits are refused there)
         kf = kink_locate(alpha1, torque, sample_period_s, range(max(lo - k_search, 1), hi + k_search + 1),
-                         end)
+                         end, unload)
     except (FreeFitError, np.linalg.LinAlgError) as exc:
         return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
     # a profile minimum on the edge of the searched rows has not located the entry: the change point may lie
@@ -657,36 +668,22 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     if kf["start"] in (cand[0], cand[-1]) and cand[0] > 1:
         return {"choice": f"angle (free): the steady-entry fit's entry row {kf['start']} is on the edge of the rows "
                           f"searched ({cand[0]}..{cand[-1]}): not located"}
-    # the steady-entry fit and the free fit must locate the same change point: a steady drive's entry is sharp, and
-    # both see it; a kink far from the free fit's entry is the steady model taking contact samples for free motion
-    # (the vector drive's heavy load reversal at 30 dB with the detector's entry 1 sample earlier: the kink 15
-    # samples before the free fit's entry, 12 before the true one, J1 +27.5 % published within ± 6 %), and the
-    # detector's (the same window with the detector's entry 2 samples later and an Imu: the kink 10 samples before
-    # it, J1 +26 %)
+    # the steady-entry fit, the free fit and the detector must locate the same change point (a kink far from them is
+    # the steady model taking contact samples for free motion: the vector drive's heavy load reversal at 30 dB, the
+    # kink 10-15 samples early, J1 +26 … +27.5 % within ± 6 %); the kink row + R is where an unloading coupling lets go
+    sep = kf["start"] + kf["unload_rows"]
     for what, row in (("the free fit's", ff["start"]), ("the detector's", s)):
-        if abs(kf["start"] - row) > k_agree:
-            return {"choice": f"angle (free): the steady-entry fit's entry row {kf['start']} is "
-                              f"{abs(kf['start'] - row)} samples from {what} ({row}): not the same change point"}
-    # the torque steady right up to the estimated entry (a speed controller acting just before it is not): its
-    # last KINK_SEARCH samples within 5 robust noise levels (or 1e-3 of the level) of the steady stretch's median
-    sb = kf["start"]
-    ref = torque[max(0, sb - k_pre):sb - k_search]
-    last = torque[sb - k_search:sb]
-    level = float(_median(np.asarray(ref, float)))
-    tol = max(5.0 * _robust_noise(ref), 1e-3 * abs(level))
-    if float(np.abs(last - level).max()) > tol:
-        return {"choice": f"angle (free): the torque changes in the {k_search} samples before the entry row {sb} "
-                          f"(by {float(np.max(np.abs(last - level))):.3g} N m): not a steady drive's entry"}
-    # ... and it stays near its level through the first samples after it (a machine on line: the flux is
-    # continuous; a speed controller reacting to an event moves it at once, and the kink is then the event)
-    first = torque[sb:sb + k_search]
-    if float(np.abs(first - level).max()) > max(tol, KINK_TORQUE_AFTER_REL * abs(level)):
-        return {"choice": f"angle (free): the torque moves by {float(np.max(np.abs(first - level))):.3g} N m in the "
-                          f"{k_search} samples after the entry row {sb}: not a steady drive's entry"}
+        if abs(sep - row) > k_agree:
+            return {"choice": f"angle (free): the steady-entry fit's entry row {sep} is "
+                              f"{abs(sep - row)} samples from {what} ({row}): not the same change point"}
+    unsteady = _unsteady_torque_at(torque, kf["start"], k_pre, k_search)
+    if unsteady:
+        return {"choice": f"angle (free): {unsteady}"}
     try:
         # the re-contact row: moved in by 1 and 2 (contact after it is not modelled); fitted once the checks above
         # have kept the steady-entry fit (a speed controller's entry is refused there: 2 of its 3 fits saved)
-        trims = [kink_locate(alpha1, torque, sample_period_s, kf["plausible_entries"], end - k)["j1"] for k in (1, 2)]
+        trims = [kink_locate(alpha1, torque, sample_period_s, (), end - k, pairs=kf["plausible"], j1_only=True)["j1"]
+                 for k in (1, 2)]
     except (FreeFitError, np.linalg.LinAlgError) as exc:
         return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
     kf = kink_terms(kf, model.coulomb_friction_max_nm, model.torque_offset_nm, model.torque_lag_s,
@@ -694,6 +691,16 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     j, res, dof = kf["j1"], kf["residual"], kf["dof"]
     cp_end = max(abs(x - j) for x in trims)
     terms = dict(kf["terms"])
+    if model.torque_lag_s:
+        # the declared lag moves the kink too: J1 with the torque moved by ± the lag and the entry located again near
+        # the plausible pairs (kink_lag_spread), a uniform term like the linear one it bounds from below
+        d_rows = rate_samples(KINK_LAG_ROWS, sample_period_s)
+        near = sorted({(s_ + d, r_) for s_, r_ in kf["plausible"] for d in range(-d_rows, d_rows + 1) if s_ + d >= cand[0]})
+        try:
+            spread = kink_lag_spread(alpha1, torque, sample_period_s, near, end, j, model.torque_lag_s)
+        except (FreeFitError, np.linalg.LinAlgError) as exc:
+            return {"choice": f"angle (free): the steady-entry fit fails with the torque moved by the declared lag ({exc})"}
+        terms["torque_lag"] = max(terms.get("torque_lag", 0.0), spread / np.sqrt(3.0))
     terms["change_points"] = float(np.hypot(terms["change_points"], cp_end))
     model_error = terms["change_points"]
     se = max(float(np.sqrt(sum(v * v for v in terms.values()))), FREE_REL_SE_FLOOR * j)
@@ -702,9 +709,30 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
         return {"choice": f"angle (free): the steady-entry fit (J1 = {j:.4g}) disagrees by {z:.1f} standard errors"}
     if se >= ff["se_stat"]:
         return {"choice": f"angle (free): the steady-entry fit is no more precise (J1 = {j:.4g} ± {se:.2g})"}
-    return {"choice": f"{STEADY_ENTRY_CHOICE}: the entry a change point of a steady drive at row {kf['start']}, "
+    unloads = f" (the coupling unloading over {kf['unload_rows']} rows from it)" if kf["unload_rows"] else ""
+    return {"choice": f"{STEADY_ENTRY_CHOICE}: the entry a change point of a steady drive at row {kf['start']}{unloads}, "
                       f"agrees with the free fit (J1 = {ff['j1']:.4g}, {z:.1f} standard errors)", "j1": j, "se": se,
             "res": res, "dof": dof, "model_error": model_error, "terms": terms, "span": (kf["start"], kf["end"])}
+
+
+def _unsteady_torque_at(torque: np.ndarray, sb: int, k_pre: int, k_search: int) -> str:
+    """Why m_el is not a steady drive's at the steady-entry fit's entry row ``sb`` ('' when it is): it must be steady
+    right up to it (a speed controller acting just before it is not: its last ``k_search`` samples within 5 robust
+    noise levels, or 1e-3 of the level, of the steady stretch's median) and stay near its level through the first
+    samples after it (a machine on line: the flux is continuous; a speed controller reacting to an event moves it at
+    once, and the kink is then the event)."""
+    ref = torque[max(0, sb - k_pre):sb - k_search]
+    last = torque[sb - k_search:sb]
+    level = float(_median(np.asarray(ref, float)))
+    tol = max(5.0 * _robust_noise(ref), 1e-3 * abs(level))
+    if float(np.abs(last - level).max()) > tol:
+        return (f"the torque changes in the {k_search} samples before the entry row {sb} "
+                f"(by {float(np.max(np.abs(last - level))):.3g} N m): not a steady drive's entry")
+    first = torque[sb:sb + k_search]
+    if float(np.abs(first - level).max()) > max(tol, KINK_TORQUE_AFTER_REL * abs(level)):
+        return (f"the torque moves by {float(np.max(np.abs(first - level))):.3g} N m in the {k_search} samples after "
+                f"the entry row {sb}: not a steady drive's entry")
+    return ""
 
 
 #: Steady-entry fit: its entry row within this many samples (at 2 kHz; converted by stream/rate.py) of the free fit's

@@ -126,6 +126,9 @@ class GapModel:
     encoder_error_rad : the motor encoder's accuracy, rad: a once- and a twice-per-revolution angle error, each of
         amplitude up to this (a disc off centre or elliptic, a resolver's), phases unknown; a term
         J1² this √((ρ₁² + ρ₂²)/2) with ρ_k = |(r_κ·sin kα1, r_κ·cos kα1)|
+    coupling_release_s : bound of the time the coupling takes to let go of the motor after its torque starts to fall,
+        s (about a quarter period of the load on the coupling; 0: the contact is lost at once): the steady-entry fit
+        searches the unloading times up to it (gap_kink.KINK_UNLOAD_ROWS)
     changepoint_search_samples : rows around the detector's entry and re-contact searched for the change points,
         counted at 2 kHz (a duration: :meth:`search_rows` converts it to the recording's sample period)
     """
@@ -136,12 +139,13 @@ class GapModel:
     torque_offset_nm: float = 0.0
     torque_lag_s: float = 0.0
     encoder_error_rad: float = 0.0
+    coupling_release_s: float = 0.0
     changepoint_search_samples: int = CHANGEPOINT_SEARCH_SAMPLES
 
     def problems(self) -> list:
         out = []
         for name in ("torque_accuracy", "coulomb_friction_max_nm", "viscous_friction_band_nms_per_rad",
-                     "torque_offset_nm", "torque_lag_s", "encoder_error_rad"):
+                     "torque_offset_nm", "torque_lag_s", "encoder_error_rad", "coupling_release_s"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
                 out.append((name, "a finite number >= 0"))

@@ -36,12 +36,25 @@ KINK_MIN_GAP_SAMPLES = 6
 KINK_STEADY_T = 3.0
 #: Kink fit: entry rows whose profile residual is within this χ²₁ quantile (95 %) of the best one are plausible.
 KINK_CHI2_1 = 3.841
+#: Kink fit: the coupling's unloading times searched with the entry row, in rows at 2 kHz (converted by
+#: jident_ros/stream/rate.py): a compliant coupling lets go over about a quarter period of the load on its spring, so
+#: the torque it transmits falls from its steady level to zero over R rows after the kink, not at once (the DOL
+#: drive's slip drop: the wheel of 0.12 kg m^2 on 50 000 N m/rad, 2.4 ms = 5 rows; our simulator's entry: at once).
+#: Up to 4 ms; those within the drive's coupling_release_max_s are searched (0 alone: the model before stop 27).
+KINK_UNLOAD_ROWS = (0, 1, 2, 3, 4, 5, 6, 8)
+#: Kink fit under a declared torque lag: the entry is located again over the plausible (row, R) pairs with the row
+#: moved by up to this many rows at 2 kHz (the DOL drive's slip reversals: half a sample of lag moved it by one).
+KINK_LAG_ROWS = 2
+#: Kink fit with an unloading coupling: its steady torque T0 is m_el's mean over this many rows before the kink row.
+KINK_T0_ROWS = 4
 
 
-def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, y: np.ndarray) -> tuple:
-    """:func:`kink_fit`'s least-squares fit over rows [P, end) for every candidate entry row: arrays over the
-    candidates of the residual sum of squares and 1/J1, the residuals (candidate, row), the least-squares solutions
-    (XᵀX)⁻¹Xᵀ (candidate, column, row) and the Φ column's scales (1/J1 = row 2 of the solution / scale)."""
+def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, y: np.ndarray,
+                     unload=None) -> tuple:
+    """:func:`kink_fit`'s least-squares fit over rows [P, end) for every candidate entry row (and unloading time
+    ``unload``, rows per candidate, None: all 0): arrays over the candidates of the residual sum of squares and 1/J1,
+    the residuals (candidate, row), the least-squares solutions (XᵀX)⁻¹Xᵀ (candidate, column, row) and the Φ
+    column's scales (1/J1 = row 2 of the solution / scale)."""
     rows = np.arange(P, end)
     # every candidate's design at once, (entry, row, column): numpy's stacked matmul and solve call the same
     # BLAS/LAPACK routine per candidate as the 2-D calls (bit for bit the same numbers, a fraction of the calls)
@@ -51,6 +64,17 @@ def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, 
     n = end - P
     keep = np.arange(n - 1)[None, :] >= (s_arr - P)[:, None]
     half = np.where(keep, 0.5 * (m[P + 1:end] + m[P:end - 1])[None, :], 0.0)
+    if unload is not None and np.any(np.asarray(unload) > 0):
+        # an unloading coupling: from the kink row on it still carries T0 (1 − w), T0 its steady torque (m_el's mean
+        # over the KINK_T0_ROWS rows before the kink: the drive was balanced there) and w rising from 0 at the kink
+        # row to 1 R rows after it; the motor's free torque is m_el − T0 (1 − w)
+        r_arr = np.asarray(unload)[:, None]
+        w = np.clip((rows[None, :] - s_arr[:, None]) / np.maximum(r_arr, 1), 0.0, 1.0)
+        csum = np.concatenate([[0.0], np.cumsum(m[P:end])])
+        k0 = np.minimum(KINK_T0_ROWS, s_arr - P)
+        t0 = (csum[s_arr - P] - csum[s_arr - P - k0]) / k0
+        free = np.where(rows[None, :] >= s_arr[:, None], m[P:end][None, :] - t0[:, None] * (1.0 - w), 0.0)
+        half = np.where(r_arr > 0, 0.5 * (free[:, 1:] + free[:, :-1]), half)
     c1 = np.zeros((s_arr.size, n))
     half.cumsum(axis=1, out=c1[:, 1:])
     c1 *= ts
@@ -62,12 +86,37 @@ def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, 
     X[:, :, 0] = 1.0
     X[:, :, 1] = (rows[None, :] - s_arr[:, None]) * ts / np.maximum((end - s_arr) * ts, ts)[:, None]
     X[:, :, 2] = phi / scales[:, None]
-    XT = X.transpose(0, 2, 1)
-    pinv = lapack.solve(XT @ X, XT)
-    coef = pinv @ y
-    res = y - (X @ coef[:, :, None])[:, :, 0]
-    rss_all = (res[:, None, :] @ res[:, :, None])[:, 0, 0]
-    return rss_all, coef[:, 2] / scales, res, pinv, scales
+    r_all = np.zeros(s_arr.size, int) if unload is None else np.asarray(unload)
+    i0, i1 = np.flatnonzero(r_all == 0), np.flatnonzero(r_all > 0)
+    rss_all, kappa_all = np.empty(s_arr.size), np.empty(s_arr.size)
+    res, pinv = np.empty((s_arr.size, n)), np.full((s_arr.size, 3, n), np.nan)
+    if i0.size:
+        # the coupling letting go at once: (XᵀX)⁻¹Xᵀ per candidate, as before the unloading search (the same numbers)
+        X0 = X[i0]
+        XT = X0.transpose(0, 2, 1)
+        pinv[i0] = p0 = lapack.solve(XT @ X0, XT)
+        coef = p0 @ y
+        res[i0] = r0 = y - (X0 @ coef[:, :, None])[:, :, 0]
+        rss_all[i0] = (r0[:, None, :] @ r0[:, :, None])[:, 0, 0]
+        kappa_all[i0] = coef[:, 2] / scales[i0]
+    if i1.size:
+        # the unloading ones from their normal equations (cheaper: no (XᵀX)⁻¹Xᵀ); the chosen one's solution is
+        # computed as above by kink_locate (_kink_solution)
+        X1 = X[i1]
+        XT = X1.transpose(0, 2, 1)
+        coef = lapack.solve(XT @ X1, (XT @ y)[:, :, None])[:, :, 0]
+        res[i1] = r1 = y - (X1 @ coef[:, :, None])[:, :, 0]
+        rss_all[i1] = (r1[:, None, :] @ r1[:, :, None])[:, 0, 0]
+        kappa_all[i1] = coef[:, 2] / scales[i1]
+    return rss_all, kappa_all, res, pinv, scales, X
+
+
+def _kink_solution(X: np.ndarray, y: np.ndarray, scale: float) -> tuple:
+    """One candidate's least-squares fit as :func:`_kink_candidates` computes the coupling letting go at once: (1/J1,
+    residual, row 2 of (XᵀX)⁻¹Xᵀ over the Φ column's scale)."""
+    p = lapack.solve(X.T @ X, X.T)
+    coef = p @ y
+    return float(coef[2]) / scale, y - X @ coef, p[2] / scale
 
 
 @lru_cache(maxsize=64)
@@ -86,7 +135,8 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
 
     Before the entry the drive turns at constant speed (steady, in contact); from the entry row s on it is free:
     α1(t) = θ0 + ω0 (t − t_s) + [t ≥ t_s] Φ_s(t)/J1, Φ_s the double integral of the torque from t_s (zero value
-    and slope at t_s: angle and speed are continuous).  The same rows [P, end) for every candidate s in
+    and slope at t_s: angle and speed are continuous).  (:func:`kink_locate` with ``unload_rows``: the coupling lets
+    go over R rows from s, docs/method.md "A coupling that lets go over time".)  The same rows [P, end) for every candidate s in
     ``entries``, so the residual sums compare: s* minimises it; the plausible entries are those within
     KINK_CHI2_1 σ̂² of it, and the largest change of J1 over them is the change-point term.  Returns j1, se_stat
     (statistical, torque noise and change points in quadrature), terms, start (s*), end, residual, dof; raises
@@ -96,25 +146,41 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
                       torque_lag_s)
 
 
-def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int) -> dict:
+def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int,
+                unload_rows=(0,), pairs=None, j1_only: bool = False) -> dict:
     """:func:`kink_fit` without its standard error: the entry row, J1 and the fit's checks (FreeFitError) — j1,
-    start, end, residual, dof, plausible_entries (:func:`kink_terms` adds se_stat and terms)."""
+    start, end, residual, dof, plausible_entries, unload_rows (the best candidate's unloading time, rows) and
+    plausible (the plausible (entry row, unloading rows) pairs; :func:`kink_terms` adds se_stat and terms).
+    ``unload_rows``: the coupling's unloading times to search with every entry row (rows; KINK_UNLOAD_ROWS);
+    ``pairs``: the (entry row, unloading rows) candidates themselves instead (``entries`` and ``unload_rows`` unused);
+    ``j1_only``: {"j1": ...} alone, without the steadiness test (a refit of a fit that passed it: the change-point
+    and lag terms' refits)."""
     a = np.asarray(alpha1, float)
     m = np.asarray(torque, float)
     ts = float(sample_period_s)
-    entries = sorted(int(x) for x in entries if end - int(x) >= KINK_MIN_GAP_SAMPLES)
-    if not entries:
+    if pairs is None:
+        pairs = [(x, r) for x in entries for r in set(unload_rows)]
+    pairs = sorted({(int(x), int(r)) for x, r in pairs if end - int(x) - int(r) >= KINK_MIN_GAP_SAMPLES})
+    if not pairs:
         raise FreeFitError(f"kink fit: fewer than {KINK_MIN_GAP_SAMPLES} samples after every candidate entry")
+    entries = [p_[0] for p_ in pairs]
     P = max(0, entries[0] - rate_samples(KINK_PRE_SAMPLES, ts))
     if entries[0] - P < 10:
         raise FreeFitError("kink fit: fewer than 10 steady samples before the entry")
     y = a[P:end] - a[entries[0]]
-    rss_all, kappa_all, res_all, pinv, scales = _kink_candidates(m, ts, entries, P, end, y)
-    k = int(np.argmin(rss_all))
+    unload = [p_[1] for p_ in pairs]
+    rss_all, kappa_all, res_all, pinv, scales, X = _kink_candidates(m, ts, entries, P, end, y,
+                                                                 unload if any(unload) else None)
     rss_list, kappa_list = rss_all.tolist(), kappa_all.tolist()
+    k = int(np.argmin(rss_all))
+    if unload[k]:
+        kappa_list[k], res_all[k], pinv[k, 2] = _kink_solution(X[k], y, scales[k])
+        pinv[k, 2] *= scales[k]
     rss_min, kappa, s_best = rss_list[k], kappa_list[k], entries[k]
     if not kappa > 0:
         raise FreeFitError(f"kink fit: non-physical 1/J1 = {kappa:.4g}")
+    if j1_only:
+        return {"j1": 1.0 / kappa}
     dof = end - P - 3
     q = _quantum(a[P:end])
     s2 = max(rss_min / max(dof, 1), q * q / 12.0, 1e-30)
@@ -130,9 +196,10 @@ def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, 
         raise FreeFitError(f"kink fit: the speed before the entry is not constant (t = {t_quad:.3g} for a t² term "
                            f"over {n_pre} samples)")
     j1 = 1.0 / kappa
-    plausible = [q_ for q_ in range(len(entries)) if rss_list[q_] - rss_min <= KINK_CHI2_1 * s2 and kappa_list[q_] > 0]
+    plausible = [q_ for q_ in range(len(pairs)) if rss_list[q_] - rss_min <= KINK_CHI2_1 * s2 and kappa_list[q_] > 0]
     fit = {"j1": j1, "start": int(s_best), "end": int(end), "residual": res_all[k], "dof": dof,
-           "plausible_entries": [entries[q_] for q_ in plausible],
+           "plausible_entries": sorted({entries[q_] for q_ in plausible}), "unload_rows": int(unload[k]),
+           "plausible": [pairs[q_] for q_ in plausible],
            "_state": (m, ts, P, kappa, pinv[k, 2] / scales[k], s2, [kappa_list[q_] for q_ in plausible], a[P:end])}
     return fit
 
@@ -164,13 +231,38 @@ def kink_terms(fit: dict, coulomb_max_nm: float = 0.0, torque_offset_nm: float =
         # ... and one that drifts across the gap (drift_term), zero before the entry
         terms["torque_drift"] = drift_term(row[i:], np.arange(end - s_best) * ts, j1, float(torque_offset_nm))
     if torque_lag_s:
-        # the torque estimate's bounded lag: τ ∫m_el dt from the entry (free_angle_fit's term)
+        # the torque estimate's bounded lag: m_el(t + τ) ≈ m_el + τ dm_el/dt adds τ ∫(m_el − m_el(t_s)) dt from the
+        # entry (free_angle_fit's τ ∫m_el dt, whose m_el(t_s) (t − t_s) part the free fit's speed absorbs: here the
+        # speed at the entry is pinned by the steady samples before it: with ∫m_el, a decaying torque one sample late
+        # moved J1 by +5.7 % and the term said 1.4 %; with this column, 5.0 % at 1.5 samples declared)
         l_col = np.zeros(end - P)
-        l_col[i:] = _cumtrapz(m[s_best:end], ts)
+        l_col[i:] = _cumtrapz(m[s_best:end] - m[s_best], ts)
         terms["torque_lag"] = j1 * abs(float(row @ l_col)) * float(torque_lag_s) / np.sqrt(3.0)
     if encoder_error_rad:
         # the motor encoder's angle error over every fitted row (before the entry too: free_angle_fit's term)
         terms["encoder_error"] = encoder_error_term(row, angles, j1, float(encoder_error_rad))
     se = float(np.sqrt(sum(v * v for v in terms.values())))
     return {"j1": j1, "se_stat": max(se, FREE_REL_SE_FLOOR * j1), "terms": terms, "start": int(s_best),
-            "end": int(end), "residual": res, "dof": fit["dof"], "plausible_entries": fit["plausible_entries"]}
+            "end": int(end), "residual": res, "dof": fit["dof"], "plausible_entries": fit["plausible_entries"],
+            "unload_rows": fit.get("unload_rows", 0), "plausible": fit.get("plausible", [])}
+
+
+def kink_lag_spread(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, pairs, end: int, j1: float,
+                    torque_lag_s: float) -> float:
+    """The largest change of the steady-entry fit's J1 when the torque is moved by ± ``torque_lag_s`` (linear
+    interpolation between samples) and the entry row located again (:func:`kink_locate` over the (entry row,
+    unloading rows) ``pairs``: the plausible ones and their rows moved by up to KINK_LAG_ROWS).
+
+    A torque estimate that lags the angles moves the kink the profile finds, not only Φ at a fixed entry row
+    (:func:`kink_terms`' linear τ∫m term): on the DOL drive's slip reversals at 2^13 counts, half a sample of lag
+    moved the located entry by one row and J1 by 2.5-4 %, the linear term by under 1 %.  Raises FreeFitError when a
+    moved torque gives no physical fit."""
+    m = np.asarray(torque, float)
+    t = np.arange(m.size, dtype=float)
+    k = float(torque_lag_s) / float(sample_period_s)
+    spread = 0.0
+    for shift in (-k, k):
+        moved = np.interp(t + shift, t, m)
+        spread = max(spread, abs(kink_locate(alpha1, moved, sample_period_s, (), end, pairs=pairs, j1_only=True)["j1"]
+                                 - j1))
+    return spread

@@ -92,6 +92,9 @@ class VerdictPolicy:
     encoder_accuracy_rad : the motor encoder's angle error is at most this, rad, once and twice per revolution (its
         data sheet's accuracy: an optical encoder tens of arc seconds, a resolver ± 10 arc minutes = 2.9e-3): a
         bounded term of the angle fits' standard error (GapModel.encoder_error_rad; 0: an exact disc)
+    coupling_release_max_s : the coupling lets go of the motor within this time after its torque starts to fall, s
+        (about a quarter period of the load on the coupling, (π/2)·√(J_load/k); 0: a rigid contact, lost at once):
+        the steady-entry fit searches the unloading times up to it (GapModel.coupling_release_s; docs/method.md)
     publish_ambiguous : a gap J1 whose 95 % interval (within ± MAX_CI95_HALF_WIDTH_REL) holds two or more
         classes is published as a continuous J1 with its interval, no class named (status 'ambiguous'); False:
         nothing is published for it (issue 12's first reading: a plotted J1 looks like a result).  The J1 is what
@@ -112,6 +115,7 @@ class VerdictPolicy:
     torque_offset_rel_base: float = 0.01   # chosen on the vector drive (docs/method.md "Torque offset")
     torque_lag_max_s: float = 0.0
     encoder_accuracy_rad: float = 0.0
+    coupling_release_max_s: float = 4e-3   # gap_kink.KINK_UNLOAD_ROWS' longest (docs/method.md)
     assume_typical_drive: bool = True
     publish_ambiguous: bool = True
 
@@ -123,7 +127,8 @@ class VerdictPolicy:
                         viscous_friction_band_nms_per_rad=float(self.viscous_friction_band_nms_per_rad),
                         torque_offset_nm=float(self.torque_offset_rel_base) * abs(float(base_torque_nm)),
                         torque_lag_s=float(self.torque_lag_max_s),
-                        encoder_error_rad=float(self.encoder_accuracy_rad))
+                        encoder_error_rad=float(self.encoder_accuracy_rad),
+                        coupling_release_s=float(self.coupling_release_max_s))
 
     def drive_model(self, raw_angles: bool, motor) -> GapModel:
         """The gap fits' model of a window (``raw_angles``: a flank- or dynamics-detector window, a real drive's
@@ -199,6 +204,8 @@ class VerdictPolicy:
             out.append(("torque_lag_max_s", "a time in [0, 1] s"))
         if not 0 <= self.encoder_accuracy_rad <= 0.1:
             out.append(("encoder_accuracy_rad", "an angle in [0, 0.1] rad"))
+        if not 0 <= self.coupling_release_max_s <= 1:
+            out.append(("coupling_release_max_s", "a time in [0, 1] s"))
         return out
 
     def check(self) -> None:

@@ -86,8 +86,9 @@ def declared(model: str) -> dict:
                 # within 1 % of the rated torque, response (lag) within 1 ms
                 "torque_accuracy": 0.01, "torque_offset_rel_base": 0.01, "torque_lag_max_s": 1.0e-3}
     # ours: config/system.yaml is its config (b1 = 0: the paper's model), and its user knows its torque is exact (our
-    # simulator's): not a typical drive (verdict.TYPICAL_DRIVE, which an undeclared drive is taken for)
-    return {"assume_typical_drive": False}
+    # simulator's): not a typical drive (verdict.TYPICAL_DRIVE, which an undeclared drive is taken for); its contact is
+    # lost at the slip's instant (a rigid contact: coupling_release_max_s 0)
+    return {"assume_typical_drive": False, "coupling_release_max_s": 0.0}
 
 
 @dataclass
