@@ -390,3 +390,14 @@ def test_the_declared_coupling_release_bounds_the_unloading_search():
         choices[release] = _anchored_angle(a, m, ff, (94, 150), TS, model)["choice"]
     assert "steady drive at row 90 (the coupling unloading over 4 rows from it)" in choices[4e-3], choices
     assert "steady entry" in choices[0.0] and "unloading" not in choices[0.0], choices
+
+
+def test_the_change_point_trims_move_each_end_and_both_at_once():
+    """The change-point term refits with the start moved in by k, the end moved in by k and (stop 27) both at once: a
+    gap grown into contact at both ends (the DOL slip drop at 2^13 counts, 30 dB) moves J1 little at either end
+    alone."""
+    from jident_ros.identify.gap_numerics import _trim_rows
+    lo, hi = _trim_rows(20, (1, 4), (1, 4))
+    assert list(zip(lo.tolist(), hi.tolist())) == [(1, 20), (4, 20), (0, 19), (0, 16), (1, 19), (4, 16)]
+    lo, hi = _trim_rows(20, (1, 4))
+    assert list(zip(lo.tolist(), hi.tolist())) == [(1, 20), (4, 20), (0, 19), (0, 16)]

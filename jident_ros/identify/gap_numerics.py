@@ -54,10 +54,11 @@ def _sym3_inverse(U: np.ndarray) -> np.ndarray:
 
 
 @lru_cache(maxsize=256)
-def _trim_rows(n: int, trims: tuple) -> tuple:
-    """Row bounds (lo, hi) of the intervals [k, n) and [0, n - k) for k in ``trims`` (the change-point term)."""
-    lo = np.array([k for k in trims] + [0 for _ in trims], dtype=np.intp)
-    hi = np.array([n for _ in trims] + [n - k for k in trims], dtype=np.intp)
+def _trim_rows(n: int, trims: tuple, both: tuple = ()) -> tuple:
+    """Row bounds (lo, hi) of the intervals [k, n) and [0, n - k) for k in ``trims``, and [k, n - k) for k in ``both``
+    (the change-point term)."""
+    lo = np.array([k for k in trims] + [0 for _ in trims] + list(both), dtype=np.intp)
+    hi = np.array([n for _ in trims] + [n - k for k in trims] + [n - k for k in both], dtype=np.intp)
     return lo, hi
 
 
