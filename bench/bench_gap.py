@@ -84,12 +84,8 @@ def main(argv=None):
             if with_load:  # the load side's bound (identify/gap_load.py), as a JointState window with both joints
                 w[LOAD_ANGLE_KEY] = rec["load_angle"]
             e0, r0 = rec["entry"] - 5, rec["recontact"] + 2
-            times, cpu = [], []
-            for _ in range(a.repeats):
-                t0, c0 = time.perf_counter(), time.process_time()
-                estimate_inertia(w, e0, 0.005, 0.08, 5e-4, recontact_index=r0, model=model)
-                times.append((time.perf_counter() - t0) * 1e3)
-                cpu.append((time.process_time() - c0) * 1e3)
+            times, cpu = _timed(a.repeats, lambda: estimate_inertia(w, e0, 0.005, 0.08, 5e-4, recontact_index=r0,
+                                                                    model=model))
             print(f"{event:>14} {label:<26} gap {rec['recontact'] - rec['entry']:>3} samples: wall median "
                   f"{np.median(times):.3f} ms, p90 {np.percentile(times, 90):.3f} ms; CPU median {np.median(cpu):.3f} ms "
                   f"({a.repeats} runs)")

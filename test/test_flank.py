@@ -1101,13 +1101,7 @@ def _vd_2e14_return():
     contact rule's capture of its traversal back up to 150 rows after the departure: rows (t, alpha1, alpha2, m_el),
     the departure row (56 samples after the contact loss: a contact learnt while delta settled on the far flank, its
     threshold 4.7 mrad), the true first row in the zone, the flank level and its contact sigma."""
-    from pathlib import Path
-    d = np.load(Path(__file__).parent / "data" / "vd_2e14_return_traversal_jointstate.npz")
-    q = 2.0 * math.pi / 16384
-    a1 = float(d["alpha10"]) + q * d["alpha1_counts"]
-    a2 = float(d["alpha20"]) + q * d["alpha2_counts"]
-    data = np.column_stack([float(d["t0"]) + np.arange(a1.size) * 5e-4, a1, a2, d["m_el"].astype(float)])
-    return data, int(d["departure"]), int(d["entry"]), float(d["flank"]), float(d["sigma"])
+    return _vd_return_cut("vd_2e14_return_traversal_jointstate.npz", 16384)
 
 
 @pytest.mark.parametrize("gate", ["walk", "old"])

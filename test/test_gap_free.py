@@ -368,6 +368,17 @@ def test_the_steady_entry_fit_searches_how_long_the_coupling_takes_to_let_go():
     assert only0["j1"] == plain["j1"] and only0["start"] == plain["start"] and only0["unload_rows"] == 0
 
 
+def _released_coupling_drive():
+    """A drive on line at 150 rad/s under a steady 400 N m (0.2 N m noise) whose coupling lets go linearly over 4 rows
+    from row 90, J1 1.1, a 2^16 encoder: (alpha1, m_el) over 200 rows."""
+    fine, n = 20, 200
+    tf = np.arange(n * fine) * TS / fine
+    coupling = 400.0 * (1 - np.clip((tf - 90 * TS) / (4 * TS), 0.0, 1.0))
+    w1 = 150.0 + np.cumsum((400.0 - coupling) / 1.1) * TS / fine
+    q = 2 * np.pi / 2 ** 16
+    return np.floor((np.cumsum(w1) * TS / fine)[::fine] / q) * q, 400.0 + np.random.default_rng(1).normal(0, 0.2, n)
+
+
 def test_the_declared_coupling_release_bounds_the_unloading_search():
     """coupling_release_max_s (the diagnostic node's key, 4 ms by default) reaches the steady-entry fit as
     GapModel.coupling_release_s: a drive whose coupling lets go over 4 rows from row 90 is located at (90, 4) with the
@@ -376,13 +387,7 @@ def test_the_declared_coupling_release_bounds_the_unloading_search():
     from jident_ros.identify.verdict import VerdictPolicy
     assert VerdictPolicy().gap_model(200.0).coupling_release_s == 4e-3
     assert VerdictPolicy.from_params({"coupling_release_max_s": 0.0}).gap_model(200.0).coupling_release_s == 0.0
-    fine, n = 20, 200
-    tf = np.arange(n * fine) * TS / fine
-    coupling = 400.0 * (1 - np.clip((tf - 90 * TS) / (4 * TS), 0.0, 1.0))
-    w1 = 150.0 + np.cumsum((400.0 - coupling) / 1.1) * TS / fine
-    q = 2 * np.pi / 2 ** 16
-    a = np.floor((np.cumsum(w1) * TS / fine)[::fine] / q) * q
-    m = 400.0 + np.random.default_rng(1).normal(0, 0.2, n)
+    a, m = _released_coupling_drive()
     choices = {}
     for release in (0.0, VerdictPolicy().coupling_release_max_s):
         model = GapModel(coupling_release_s=release)
@@ -401,3 +406,31 @@ def test_the_change_point_trims_move_each_end_and_both_at_once():
     assert list(zip(lo.tolist(), hi.tolist())) == [(1, 20), (4, 20), (0, 19), (0, 16), (1, 19), (4, 16)]
     lo, hi = _trim_rows(20, (1, 4))
     assert list(zip(lo.tolist(), hi.tolist())) == [(1, 20), (4, 20), (0, 19), (0, 16)]
+
+
+def test_the_free_fit_s_change_point_term_moves_both_ends_at_once(step, monkeypatch):
+    """free_angle_fit passes the trims for both ends at once to the change-point refits (not only each end alone)."""
+    from jident_ros.identify import gap_free
+    seen = []
+    real = gap_free._trim_rows
+    monkeypatch.setattr(gap_free, "_trim_rows", lambda n, trims, both=(): seen.append((trims, both)) or real(n, trims, both))
+    _fit(step)
+    assert seen and all(set(both) and set(both) <= set(trims) for trims, both in seen), seen
+
+
+def test_the_steady_entry_fit_takes_the_lag_s_relocated_spread_into_its_term(monkeypatch):
+    """_anchored_angle's lag term is at least the spread of J1 with the torque moved by the declared lag and the entry
+    located again (kink_lag_spread, over √3): on a steady torque the linear term is nil and the spread is the term; a
+    spread made large makes the steady-entry fit no more precise than the free fit."""
+    from jident_ros.identify import gap
+    a, m = _released_coupling_drive()
+    model = GapModel(torque_lag_s=5e-4, coupling_release_s=4e-3)
+    ff = free_angle_fit(a, m, TS, 94, 150, model)
+    spreads = []
+    real = gap.kink_lag_spread
+    monkeypatch.setattr(gap, "kink_lag_spread", lambda *args: spreads.append(real(*args)) or spreads[-1])
+    base = gap._anchored_angle(a, m, ff, (94, 150), TS, model)
+    assert "j1" in base and base["terms"]["torque_lag"] == pytest.approx(spreads[0] / np.sqrt(3.0)), base["choice"]
+    monkeypatch.setattr(gap, "kink_lag_spread", lambda *args: 0.5)
+    big = gap._anchored_angle(a, m, ff, (94, 150), TS, model)
+    assert "j1" not in big and "no more precise" in big["choice"], big["choice"]

@@ -113,10 +113,10 @@ def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, 
 
 def _kink_solution(X: np.ndarray, y: np.ndarray, scale: float) -> tuple:
     """One candidate's least-squares fit as :func:`_kink_candidates` computes the coupling letting go at once: (1/J1,
-    residual, row 2 of (XᵀX)⁻¹Xᵀ over the Φ column's scale)."""
+    residual, row 2 of (XᵀX)⁻¹Xᵀ)."""
     p = lapack.solve(X.T @ X, X.T)
     coef = p @ y
-    return float(coef[2]) / scale, y - X @ coef, p[2] / scale
+    return float(coef[2]) / scale, y - X @ coef, p[2]
 
 
 @lru_cache(maxsize=64)
@@ -175,7 +175,6 @@ def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, 
     k = int(np.argmin(rss_all))
     if unload[k]:
         kappa_list[k], res_all[k], pinv[k, 2] = _kink_solution(X[k], y, scales[k])
-        pinv[k, 2] *= scales[k]
     rss_min, kappa, s_best = rss_list[k], kappa_list[k], entries[k]
     if not kappa > 0:
         raise FreeFitError(f"kink fit: non-physical 1/J1 = {kappa:.4g}")
