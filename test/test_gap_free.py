@@ -420,17 +420,40 @@ def test_the_free_fit_s_change_point_term_moves_both_ends_at_once(step, monkeypa
 
 def test_the_steady_entry_fit_takes_the_lag_s_relocated_spread_into_its_term(monkeypatch):
     """_anchored_angle's lag term is at least the spread of J1 with the torque moved by the declared lag and the entry
-    located again (kink_lag_spread, over √3): on a steady torque the linear term is nil and the spread is the term; a
-    spread made large makes the steady-entry fit no more precise than the free fit."""
+    located again (its refits after the two trims of the end, in one kink_best_j1 call; over √3): on a steady torque
+    the linear term is nil and the spread is the term, and it equals kink_lag_spread's; a spread made large makes the
+    steady-entry fit no more precise than the free fit."""
     from jident_ros.identify import gap
+    from jident_ros.identify.gap_kink import kink_lag_spread
     a, m = _released_coupling_drive()
     model = GapModel(torque_lag_s=5e-4, coupling_release_s=4e-3)
     ff = free_angle_fit(a, m, TS, 94, 150, model)
-    spreads = []
-    real = gap.kink_lag_spread
-    monkeypatch.setattr(gap, "kink_lag_spread", lambda *args: spreads.append(real(*args)) or spreads[-1])
+    seen = []
+    real = gap.kink_best_j1
+    monkeypatch.setattr(gap, "kink_best_j1", lambda *args: seen.append((args, real(*args))) or seen[-1][1])
     base = gap._anchored_angle(a, m, ff, (94, 150), TS, model)
-    assert "j1" in base and base["terms"]["torque_lag"] == pytest.approx(spreads[0] / np.sqrt(3.0)), base["choice"]
-    monkeypatch.setattr(gap, "kink_lag_spread", lambda *args: 0.5)
+    assert "j1" in base, base["choice"]
+    (_, _, variants), fits = seen[0]
+    assert len(fits) == 4 and [v[2] for v in variants[:2]] == [variants[2][2] - 1, variants[2][2] - 2]
+    spread = max(abs(x - base["j1"]) for x in fits[2:])
+    assert spread > 0 and base["terms"]["torque_lag"] == pytest.approx(spread / np.sqrt(3.0))
+    assert kink_lag_spread(a, m, TS, variants[2][1], variants[2][2], base["j1"], 5e-4) == pytest.approx(spread, rel=1e-9)
+    monkeypatch.setattr(gap, "kink_best_j1", lambda *args: [x + (0.5 if i >= 2 else 0.0)
+                                                           for i, x in enumerate(real(*args))])
     big = gap._anchored_angle(a, m, ff, (94, 150), TS, model)
     assert "j1" not in big and "no more precise" in big["choice"], big["choice"]
+
+
+def test_the_stacked_refits_are_each_variant_s_own_fit():
+    """kink_best_j1 fits variants of other ends and torques in one stacked solve, each over its own rows: each J1 equals
+    kink_locate's over the same pairs (to rounding), and a variant without a fit gives its reason."""
+    from jident_ros.identify.gap_kink import kink_best_j1, kink_locate
+    a, m = _released_coupling_drive()
+    m2 = m * 1.01 + np.linspace(0.0, 3.0, m.size)
+    pairs = [(s, r) for s in range(86, 95) for r in (0, 2, 4)]
+    variants = [(m, pairs, 149), (m2, pairs[:6], 140), (m, [(88, 0), (90, 4)], 130), (m, [(90, 0)], 94)]
+    fits = kink_best_j1(a, TS, variants)
+    for (torque, p_, end), j in zip(variants[:3], fits):
+        assert j == pytest.approx(kink_locate(a, torque, TS, (), end, pairs=p_)["j1"], rel=1e-10)
+    assert len({round(x, 9) for x in fits[:3]}) == 3
+    assert "fewer than" in fits[3]

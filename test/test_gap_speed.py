@@ -103,17 +103,17 @@ def test_kink_fit_matches_the_one_entry_at_a_time_loop(scenario, seed):
 
 
 def test_kink_fit_matches_the_loop_on_grid_windows(windows, monkeypatch):
-    """The kink fits the steady-entry check makes on clean, noisy and quantised grid windows (the trims' fits on
-    the plausible entries too)."""
-    calls = []
+    """The kink fits the steady-entry check makes on clean, noisy and quantised grid windows bit for bit, and its refits
+    (the end moved in, gap_kink.kink_best_j1's stacked fits over the plausible entries) to rounding."""
+    calls, refits = [], []
     real = gap_kink.kink_fit
     locate = gap.kink_locate          # the steady-entry check's kink fits (their standard error added after its checks)
+    best = gap.kink_best_j1
     monkeypatch.setattr(gap, "kink_locate", lambda *a, **k: calls.append((a, k)) or locate(*a, **k))
+    monkeypatch.setattr(gap, "kink_best_j1", lambda *a: refits.append((a, best(*a))) or refits[-1][1])
     _all_sets(windows)
     checked = 0
     for (alpha1, m_el, ts, entries, end, *_), kw in calls:
-        if "pairs" in kw:       # the trims' and the lag's fits over given (row, unloading rows) pairs: their R = 0 rows
-            entries = [s for s, r in kw["pairs"] if r == 0]
         entries = sorted(int(x) for x in entries if end - int(x) >= gap_kink.KINK_MIN_GAP_SAMPLES)
         if not entries:
             continue
@@ -123,7 +123,18 @@ def test_kink_fit_matches_the_loop_on_grid_windows(windows, monkeypatch):
             continue
         _check_kink(alpha1, m_el, ts, entries, end)
         checked += 1
-    assert checked >= 10
+    assert checked >= 5
+    refitted = 0
+    for (alpha1, ts, variants), fits in refits:
+        for (m_el, pairs, end), j1 in zip(variants, fits):
+            entries = sorted(s_ for s_, r_ in pairs if end - s_ >= gap_kink.KINK_MIN_GAP_SAMPLES)
+            if isinstance(j1, str) or any(r_ for _, r_ in pairs) or not entries:
+                continue
+            ref = _kink_reference(np.asarray(alpha1, float), np.asarray(m_el, float), ts, entries, end)
+            # the same candidate; its J1 from the stacked normal equations (not (XᵀX)⁻¹Xᵀ): equal to rounding
+            assert j1 == pytest.approx(1.0 / ref[int(np.argmin([r[0] for r in ref]))][1], rel=1e-9)
+            refitted += 1
+    assert refitted >= 10
 
 
 def test_the_signature_derivative_reads_what_savgol_filter_gives():

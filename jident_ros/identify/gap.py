@@ -95,7 +95,8 @@ from jident_ros.identify.gap_kink import (
     KINK_PRE_SAMPLES,
     KINK_SEARCH,
     KINK_UNLOAD_ROWS,
-    kink_lag_spread,
+    kink_best_j1,
+    kink_lag_variants,
     kink_locate,
     kink_terms,
 )
@@ -679,28 +680,18 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     unsteady = _unsteady_torque_at(torque, kf["start"], k_pre, k_search)
     if unsteady:
         return {"choice": f"angle (free): {unsteady}"}
-    try:
-        # the re-contact row: moved in by 1 and 2 (contact after it is not modelled); fitted once the checks above
-        # have kept the steady-entry fit (a speed controller's entry is refused there: 2 of its 3 fits saved)
-        trims = [kink_locate(alpha1, torque, sample_period_s, (), end - k, pairs=kf["plausible"], j1_only=True)["j1"]
-                 for k in (1, 2)]
-    except (FreeFitError, np.linalg.LinAlgError) as exc:
-        return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
+    # fitted once the checks above have kept the steady-entry fit (a speed controller's entry is refused there)
+    refits = _kink_refits(alpha1, torque, sample_period_s, kf, (cand[0], end), model.torque_lag_s)
+    if isinstance(refits, str):
+        return {"choice": f"angle (free): the steady-entry fit {refits}"}
     kf = kink_terms(kf, model.coulomb_friction_max_nm, model.torque_offset_nm, model.torque_lag_s,
                     model.encoder_error_rad)
     j, res, dof = kf["j1"], kf["residual"], kf["dof"]
-    cp_end = max(abs(x - j) for x in trims)
+    cp_end = max(abs(x - j) for x in refits[:2])
     terms = dict(kf["terms"])
     if model.torque_lag_s:
-        # the declared lag moves the kink too: J1 with the torque moved by ± the lag and the entry located again near
-        # the plausible pairs (kink_lag_spread), a uniform term like the linear one it bounds from below
-        d_rows = rate_samples(KINK_LAG_ROWS, sample_period_s)
-        near = sorted({(s_ + d, r_) for s_, r_ in kf["plausible"] for d in range(-d_rows, d_rows + 1) if s_ + d >= cand[0]})
-        try:
-            spread = kink_lag_spread(alpha1, torque, sample_period_s, near, end, j, model.torque_lag_s)
-        except (FreeFitError, np.linalg.LinAlgError) as exc:
-            return {"choice": f"angle (free): the steady-entry fit fails with the torque moved by the declared lag ({exc})"}
-        terms["torque_lag"] = max(terms.get("torque_lag", 0.0), spread / np.sqrt(3.0))
+        # the lag's relocated spread, a uniform term like the linear one it bounds from below (kink_lag_spread)
+        terms["torque_lag"] = max(terms.get("torque_lag", 0.0), max(abs(x - j) for x in refits[2:]) / np.sqrt(3.0))
     terms["change_points"] = float(np.hypot(terms["change_points"], cp_end))
     model_error = terms["change_points"]
     se = max(float(np.sqrt(sum(v * v for v in terms.values()))), FREE_REL_SE_FLOOR * j)
@@ -713,6 +704,29 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     return {"choice": f"{STEADY_ENTRY_CHOICE}: the entry a change point of a steady drive at row {kf['start']}{unloads}, "
                       f"agrees with the free fit (J1 = {ff['j1']:.4g}, {z:.1f} standard errors)", "j1": j, "se": se,
             "res": res, "dof": dof, "model_error": model_error, "terms": terms, "span": (kf["start"], kf["end"])}
+
+
+def _kink_refits(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, kf: dict, rows: tuple,
+                 torque_lag_s: float):
+    """The steady-entry fit's refits (:func:`kink_best_j1`, one stacked solve) for its terms: J1 with the re-contact
+    row moved in by 1 and 2 (contact after it is not modelled) and, under a declared lag (which moves the kink too),
+    with the torque moved by ± the lag and the entry located again near the plausible pairs (kink_lag_variants; over
+    ``rows`` = (the first candidate row, the end row)).  A list of J1 (the trims', then the lag's), or why not (str)."""
+    first, end = rows
+    variants = [(torque, kf["plausible"], end - k) for k in (1, 2)]
+    if torque_lag_s:
+        d_rows = rate_samples(KINK_LAG_ROWS, sample_period_s)
+        near = sorted({(s_ + d, r_) for s_, r_ in kf["plausible"] for d in range(-d_rows, d_rows + 1) if s_ + d >= first})
+        variants += kink_lag_variants(torque, sample_period_s, near, end, torque_lag_s)
+    try:
+        refits = kink_best_j1(alpha1, sample_period_s, variants)
+    except np.linalg.LinAlgError as exc:
+        return f"failed ({exc})"
+    failed = [x for x in refits if isinstance(x, str)]
+    if failed:
+        lagged = not any(isinstance(x, str) for x in refits[:2])
+        return f"{'fails with the torque moved by the declared lag' if lagged else 'failed'} ({failed[0]})"
+    return refits
 
 
 def _unsteady_torque_at(torque: np.ndarray, sb: int, k_pre: int, k_search: int) -> str:

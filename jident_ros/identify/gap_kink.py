@@ -50,30 +50,37 @@ KINK_T0_ROWS = 4
 
 
 def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, y: np.ndarray,
-                     unload=None) -> tuple:
+                     unload=None, bounds=None) -> tuple:
     """:func:`kink_fit`'s least-squares fit over rows [P, end) for every candidate entry row (and unloading time
-    ``unload``, rows per candidate, None: all 0): arrays over the candidates of the residual sum of squares and 1/J1,
-    the residuals (candidate, row), the least-squares solutions (XᵀX)⁻¹Xᵀ (candidate, column, row) and the Φ
-    column's scales (1/J1 = row 2 of the solution / scale)."""
+    ``unload``, rows per candidate, None: all 0): arrays over the candidates of the residual sum of squares and 1/J1
+    (from the 3 x 3 normal equations, whose sums are formed column by column: no (candidate, row, column) design),
+    and the design's two candidate-dependent columns (candidate, row): the time from the entry row (scaled) and
+    the Φ column (scaled by its largest magnitude, ``scales``).  The chosen candidate's fit: :func:`_kink_solution`.
+    ``m``: the torque (N,), or one per candidate (candidates, N); ``bounds``: (lo, hi) per candidate, the rows each
+    fits within [P, end) (the others weigh nothing: :func:`kink_best_j1`'s fits of several ends and torques at once;
+    None: all)."""
     rows = np.arange(P, end)
-    # every candidate's design at once, (entry, row, column): numpy's stacked matmul and solve call the same
-    # BLAS/LAPACK routine per candidate as the 2-D calls (bit for bit the same numbers, a fraction of the calls)
     # Φ_s of every candidate: the double trapezoid from its row, as rows of one cumulative sum (zeros before the
     # row: a sum that starts with zeros adds the same numbers in the same order as one started at the row)
     s_arr = np.asarray(entries)
     n = end - P
+    mm = m[..., P:end]
     keep = np.arange(n - 1)[None, :] >= (s_arr - P)[:, None]
-    half = np.where(keep, 0.5 * (m[P + 1:end] + m[P:end - 1])[None, :], 0.0)
+    half = np.where(keep, 0.5 * (mm[..., 1:] + mm[..., :-1]), 0.0)
     if unload is not None and np.any(np.asarray(unload) > 0):
         # an unloading coupling: from the kink row on it still carries T0 (1 − w), T0 its steady torque (m_el's mean
         # over the KINK_T0_ROWS rows before the kink: the drive was balanced there) and w rising from 0 at the kink
         # row to 1 R rows after it; the motor's free torque is m_el − T0 (1 − w)
         r_arr = np.asarray(unload)[:, None]
         w = np.clip((rows[None, :] - s_arr[:, None]) / np.maximum(r_arr, 1), 0.0, 1.0)
-        csum = np.concatenate([[0.0], np.cumsum(m[P:end])])
+        csum = np.concatenate([np.zeros(mm.shape[:-1] + (1,)), np.cumsum(mm, axis=-1)], axis=-1)
         k0 = np.minimum(KINK_T0_ROWS, s_arr - P)
-        t0 = (csum[s_arr - P] - csum[s_arr - P - k0]) / k0
-        free = np.where(rows[None, :] >= s_arr[:, None], m[P:end][None, :] - t0[:, None] * (1.0 - w), 0.0)
+        if mm.ndim == 1:
+            t0 = (csum[s_arr - P] - csum[s_arr - P - k0]) / k0
+        else:
+            c_idx = np.arange(s_arr.size)
+            t0 = (csum[c_idx, s_arr - P] - csum[c_idx, s_arr - P - k0]) / k0
+        free = np.where(rows[None, :] >= s_arr[:, None], mm - t0[:, None] * (1.0 - w), 0.0)
         half = np.where(r_arr > 0, 0.5 * (free[:, 1:] + free[:, :-1]), half)
     c1 = np.zeros((s_arr.size, n))
     half.cumsum(axis=1, out=c1[:, 1:])
@@ -81,39 +88,38 @@ def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, 
     phi = np.zeros((s_arr.size, n))
     (0.5 * (c1[:, 1:] + c1[:, :-1])).cumsum(axis=1, out=phi[:, 1:])
     phi *= ts
+    hi = np.full(s_arr.size, end) if bounds is None else np.asarray(bounds[1])
+    u = (rows[None, :] - s_arr[:, None]) * ts / np.maximum((hi - s_arr) * ts, ts)[:, None]
+    n_rows = np.full(s_arr.size, float(n))
+    y_sum = np.full(s_arr.size, y.sum())
+    if bounds is not None:
+        inside = (rows[None, :] >= np.asarray(bounds[0])[:, None]) & (rows[None, :] < hi[:, None])
+        phi = np.where(inside, phi, 0.0)
+        u = np.where(inside, u, 0.0)
+        n_rows = inside.sum(axis=1).astype(float)
+        y_sum = np.where(inside, y[None, :], 0.0).sum(axis=1)
     scales = np.maximum(np.abs(phi).max(axis=1), 1e-300)
-    X = np.empty((s_arr.size, n, 3))
-    X[:, :, 0] = 1.0
-    X[:, :, 1] = (rows[None, :] - s_arr[:, None]) * ts / np.maximum((end - s_arr) * ts, ts)[:, None]
-    X[:, :, 2] = phi / scales[:, None]
-    r_all = np.zeros(s_arr.size, int) if unload is None else np.asarray(unload)
-    i0, i1 = np.flatnonzero(r_all == 0), np.flatnonzero(r_all > 0)
-    rss_all, kappa_all = np.empty(s_arr.size), np.empty(s_arr.size)
-    res, pinv = np.empty((s_arr.size, n)), np.full((s_arr.size, 3, n), np.nan)
-    if i0.size:
-        # the coupling letting go at once: (XᵀX)⁻¹Xᵀ per candidate, as before the unloading search (the same numbers)
-        X0 = X[i0]
-        XT = X0.transpose(0, 2, 1)
-        pinv[i0] = p0 = lapack.solve(XT @ X0, XT)
-        coef = p0 @ y
-        res[i0] = r0 = y - (X0 @ coef[:, :, None])[:, :, 0]
-        rss_all[i0] = (r0[:, None, :] @ r0[:, :, None])[:, 0, 0]
-        kappa_all[i0] = coef[:, 2] / scales[i0]
-    if i1.size:
-        # the unloading ones from their normal equations (cheaper: no (XᵀX)⁻¹Xᵀ); the chosen one's solution is
-        # computed as above by kink_locate (_kink_solution)
-        X1 = X[i1]
-        XT = X1.transpose(0, 2, 1)
-        coef = lapack.solve(XT @ X1, (XT @ y)[:, :, None])[:, :, 0]
-        res[i1] = r1 = y - (X1 @ coef[:, :, None])[:, :, 0]
-        rss_all[i1] = (r1[:, None, :] @ r1[:, :, None])[:, 0, 0]
-        kappa_all[i1] = coef[:, 2] / scales[i1]
-    return rss_all, kappa_all, res, pinv, scales, X
+    f = phi / scales[:, None]
+    # the normal equations of the design (1, u, f) per candidate: XᵀX from the columns' sums and products
+    g = np.empty((s_arr.size, 3, 3))
+    g[:, 0, 0] = n_rows
+    g[:, 0, 1] = g[:, 1, 0] = u.sum(axis=1)
+    g[:, 0, 2] = g[:, 2, 0] = f.sum(axis=1)
+    g[:, 1, 1] = np.einsum("ij,ij->i", u, u)
+    g[:, 1, 2] = g[:, 2, 1] = np.einsum("ij,ij->i", u, f)
+    g[:, 2, 2] = np.einsum("ij,ij->i", f, f)
+    xty = np.stack([y_sum, u @ y, f @ y], axis=1)
+    coef = lapack.solve(g, xty[:, :, None])[:, :, 0]
+    res = y[None, :] - coef[:, :1] - coef[:, 1:2] * u - coef[:, 2:] * f
+    if bounds is not None:
+        res = np.where(inside, res, 0.0)
+    return np.einsum("ij,ij->i", res, res), coef[:, 2] / scales, u, f, scales
 
 
-def _kink_solution(X: np.ndarray, y: np.ndarray, scale: float) -> tuple:
-    """One candidate's least-squares fit as :func:`_kink_candidates` computes the coupling letting go at once: (1/J1,
-    residual, row 2 of (XᵀX)⁻¹Xᵀ)."""
+def _kink_solution(u: np.ndarray, f: np.ndarray, y: np.ndarray, scale: float) -> tuple:
+    """One candidate's least-squares fit from its design (1, ``u``, ``f``) by (XᵀX)⁻¹Xᵀ (the solution whose row 2 the
+    standard error needs): (1/J1, residual, row 2 of (XᵀX)⁻¹Xᵀ)."""
+    X = np.column_stack([np.ones(u.size), u, f])
     p = lapack.solve(X.T @ X, X.T)
     coef = p @ y
     return float(coef[2]) / scale, y - X @ coef, p[2]
@@ -146,40 +152,79 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
                       torque_lag_s)
 
 
+def _kink_pairs(pairs, end: int, ts: float) -> tuple:
+    """The (entry row, unloading rows) candidates that leave KINK_MIN_GAP_SAMPLES after the unloading, sorted; the
+    first row fitted (KINK_PRE_SAMPLES before the earliest entry); why no fit can be made ('' when one can)."""
+    pairs = sorted({(int(x), int(r)) for x, r in pairs if end - int(x) - int(r) >= KINK_MIN_GAP_SAMPLES})
+    if not pairs:
+        return pairs, 0, f"kink fit: fewer than {KINK_MIN_GAP_SAMPLES} samples after every candidate entry"
+    P = max(0, pairs[0][0] - rate_samples(KINK_PRE_SAMPLES, ts))
+    if pairs[0][0] - P < 10:
+        return pairs, P, "kink fit: fewer than 10 steady samples before the entry"
+    return pairs, P, ""
+
+
+def kink_best_j1(alpha1: np.ndarray, sample_period_s: float, variants) -> list:
+    """J1 of each variant's best candidate, the variants fitted together in one stacked solve: a variant is (torque,
+    (entry row, unloading rows) pairs, end row), its J1 :func:`kink_locate`'s over those pairs without its checks
+    (the refits of a fit that passed them: the change-point term's with the end moved in, the lag term's with the
+    torque moved).  An item is the reason (str) where that variant gives no physical fit.  Each variant's rows are
+    its own ([KINK_PRE_SAMPLES before its earliest entry, its end)): the others' weigh nothing in its sums."""
+    a = np.asarray(alpha1, float)
+    ts = float(sample_period_s)
+    out: list = [None] * len(variants)
+    groups = []
+    for v, (torque, pairs, end) in enumerate(variants):
+        pairs, P, problem = _kink_pairs(pairs, int(end), ts)
+        if problem:
+            out[v] = problem
+        else:
+            groups.append((v, np.asarray(torque, float), pairs, P, int(end)))
+    if not groups:
+        return out
+    P0, E = min(g[3] for g in groups), max(g[4] for g in groups)
+    cand = [(gi, s_, r_, g[3], g[4]) for gi, g in enumerate(groups) for s_, r_ in g[2]]
+    gi_arr, s_arr, r_arr, lo, hi = (np.array(c) for c in zip(*cand))
+    torques = np.stack([g[1] for g in groups])
+    same = all(t is groups[0][1] or np.array_equal(t, groups[0][1]) for t in (g[1] for g in groups))
+    m = torques[0] if same else torques[gi_arr]
+    rss, kappa_all, u, f, scales = _kink_candidates(m, ts, s_arr, P0, E, a[P0:E] - a[P0],
+                                                    r_arr if r_arr.any() else None, (lo, hi))
+    for gi, (v, _, pairs, P, end) in enumerate(groups):
+        idx = np.flatnonzero(gi_arr == gi)
+        kappa = float(kappa_all[idx[np.argmin(rss[idx])]])
+        out[v] = 1.0 / kappa if kappa > 0 else f"kink fit: non-physical 1/J1 = {kappa:.4g}"
+    return out
+
+
 def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, entries, end: int,
-                unload_rows=(0,), pairs=None, j1_only: bool = False) -> dict:
+                unload_rows=(0,), pairs=None) -> dict:
     """:func:`kink_fit` without its standard error: the entry row, J1 and the fit's checks (FreeFitError) — j1,
     start, end, residual, dof, plausible_entries, unload_rows (the best candidate's unloading time, rows) and
     plausible (the plausible (entry row, unloading rows) pairs; :func:`kink_terms` adds se_stat and terms).
     ``unload_rows``: the coupling's unloading times to search with every entry row (rows; KINK_UNLOAD_ROWS);
-    ``pairs``: the (entry row, unloading rows) candidates themselves instead (``entries`` and ``unload_rows`` unused);
-    ``j1_only``: {"j1": ...} alone, without the steadiness test (a refit of a fit that passed it: the change-point
-    and lag terms' refits)."""
+    ``pairs``: the (entry row, unloading rows) candidates themselves instead (``entries`` and ``unload_rows`` unused).
+    The refits of a fit that passed its checks (the change-point and lag terms'): :func:`kink_best_j1`."""
     a = np.asarray(alpha1, float)
     m = np.asarray(torque, float)
     ts = float(sample_period_s)
     if pairs is None:
         pairs = [(x, r) for x in entries for r in set(unload_rows)]
-    pairs = sorted({(int(x), int(r)) for x, r in pairs if end - int(x) - int(r) >= KINK_MIN_GAP_SAMPLES})
-    if not pairs:
-        raise FreeFitError(f"kink fit: fewer than {KINK_MIN_GAP_SAMPLES} samples after every candidate entry")
+    pairs, P, problem = _kink_pairs(pairs, end, ts)
+    if problem:
+        raise FreeFitError(problem)
     entries = [p_[0] for p_ in pairs]
-    P = max(0, entries[0] - rate_samples(KINK_PRE_SAMPLES, ts))
-    if entries[0] - P < 10:
-        raise FreeFitError("kink fit: fewer than 10 steady samples before the entry")
     y = a[P:end] - a[entries[0]]
     unload = [p_[1] for p_ in pairs]
-    rss_all, kappa_all, res_all, pinv, scales, X = _kink_candidates(m, ts, entries, P, end, y,
-                                                                 unload if any(unload) else None)
+    rss_all, kappa_all, u, f, scales = _kink_candidates(m, ts, entries, P, end, y, unload if any(unload) else None)
     rss_list, kappa_list = rss_all.tolist(), kappa_all.tolist()
     k = int(np.argmin(rss_all))
-    if unload[k]:
-        kappa_list[k], res_all[k], pinv[k, 2] = _kink_solution(X[k], y, scales[k])
-    rss_min, kappa, s_best = rss_list[k], kappa_list[k], entries[k]
+    # the chosen candidate's fit by (XᵀX)⁻¹Xᵀ: its 1/J1, residual and the solution's row 2 (the standard error's)
+    kappa_list[k], res_k, row_k = _kink_solution(u[k], f[k], y, scales[k])
+    rss_list[k] = rss_min = float(res_k @ res_k)
+    kappa, s_best = kappa_list[k], entries[k]
     if not kappa > 0:
         raise FreeFitError(f"kink fit: non-physical 1/J1 = {kappa:.4g}")
-    if j1_only:
-        return {"j1": 1.0 / kappa}
     dof = end - P - 3
     q = _quantum(a[P:end])
     s2 = max(rss_min / max(dof, 1), q * q / 12.0, 1e-30)
@@ -196,10 +241,10 @@ def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, 
                            f"over {n_pre} samples)")
     j1 = 1.0 / kappa
     plausible = [q_ for q_ in range(len(pairs)) if rss_list[q_] - rss_min <= KINK_CHI2_1 * s2 and kappa_list[q_] > 0]
-    fit = {"j1": j1, "start": int(s_best), "end": int(end), "residual": res_all[k], "dof": dof,
+    fit = {"j1": j1, "start": int(s_best), "end": int(end), "residual": res_k, "dof": dof,
            "plausible_entries": sorted({entries[q_] for q_ in plausible}), "unload_rows": int(unload[k]),
            "plausible": [pairs[q_] for q_ in plausible],
-           "_state": (m, ts, P, kappa, pinv[k, 2] / scales[k], s2, [kappa_list[q_] for q_ in plausible], a[P:end])}
+           "_state": (m, ts, P, kappa, row_k / scales[k], s2, [kappa_list[q_] for q_ in plausible], a[P:end])}
     return fit
 
 
@@ -246,6 +291,15 @@ def kink_terms(fit: dict, coulomb_max_nm: float = 0.0, torque_offset_nm: float =
             "unload_rows": fit.get("unload_rows", 0), "plausible": fit.get("plausible", [])}
 
 
+def kink_lag_variants(torque: np.ndarray, sample_period_s: float, pairs, end: int, torque_lag_s: float) -> list:
+    """:func:`kink_best_j1`'s variants of :func:`kink_lag_spread`: the torque moved by − and + ``torque_lag_s``
+    (linear interpolation between samples), each over ``pairs`` to ``end``."""
+    m = np.asarray(torque, float)
+    t = np.arange(m.size, dtype=float)
+    k = float(torque_lag_s) / float(sample_period_s)
+    return [(np.interp(t + shift, t, m), pairs, end) for shift in (-k, k)]
+
+
 def kink_lag_spread(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, pairs, end: int, j1: float,
                     torque_lag_s: float) -> float:
     """The largest change of the steady-entry fit's J1 when the torque is moved by ± ``torque_lag_s`` (linear
@@ -255,13 +309,9 @@ def kink_lag_spread(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: flo
     A torque estimate that lags the angles moves the kink the profile finds, not only Φ at a fixed entry row
     (:func:`kink_terms`' linear τ∫m term): on the DOL drive's slip reversals at 2^13 counts, half a sample of lag
     moved the located entry by one row and J1 by 2.5-4 %, the linear term by under 1 %.  Raises FreeFitError when a
-    moved torque gives no physical fit."""
-    m = np.asarray(torque, float)
-    t = np.arange(m.size, dtype=float)
-    k = float(torque_lag_s) / float(sample_period_s)
-    spread = 0.0
-    for shift in (-k, k):
-        moved = np.interp(t + shift, t, m)
-        spread = max(spread, abs(kink_locate(alpha1, moved, sample_period_s, (), end, pairs=pairs, j1_only=True)["j1"]
-                                 - j1))
-    return spread
+    moved torque gives no physical fit.  (gap._anchored_angle fits these with its other refits at once.)"""
+    fits = kink_best_j1(alpha1, sample_period_s, kink_lag_variants(torque, sample_period_s, pairs, end, torque_lag_s))
+    for x in fits:
+        if isinstance(x, str):
+            raise FreeFitError(x)
+    return max(abs(x - j1) for x in fits)
