@@ -52,13 +52,13 @@ KINK_T0_ROWS = 4
 def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, y: np.ndarray,
                      unload=None, bounds=None) -> tuple:
     """:func:`kink_fit`'s least-squares fit over rows [P, end) for every candidate entry row (and unloading time
-    ``unload``, rows per candidate, None: all 0): arrays over the candidates of the residual sum of squares and 1/J1
-    (from the 3 x 3 normal equations, whose sums are formed column by column: no (candidate, row, column) design),
-    and the design's two candidate-dependent columns (candidate, row): the time from the entry row (scaled) and
-    the Φ column (scaled by its largest magnitude, ``scales``).  The chosen candidate's fit: :func:`_kink_solution`.
-    ``m``: the torque (N,), or one per candidate (candidates, N); ``bounds``: (lo, hi) per candidate, the rows each
-    fits within [P, end) (the others weigh nothing: :func:`kink_best_j1`'s fits of several ends and torques at once;
-    None: all)."""
+    ``unload``, rows per candidate; None: all 0, as the callers pass it then): arrays over the candidates of the
+    residual sum of squares and 1/J1 (from the 3 x 3 normal equations, whose sums are formed column by column: no
+    (candidate, row, column) design), and the design's two candidate-dependent columns (candidate, row): the time
+    from the entry row (scaled) and the Φ column (scaled by its largest magnitude, ``scales``).  The chosen
+    candidate's fit: :func:`_kink_solution`.  ``m``: the torque (N,), or one per candidate (candidates, N);
+    ``bounds``: (lo, hi) per candidate, the rows each fits within [P, end) (the others weigh nothing:
+    :func:`kink_best_j1`'s fits of several ends and torques at once; None: all)."""
     rows = np.arange(P, end)
     # Φ_s of every candidate: the double trapezoid from its row, as rows of one cumulative sum (zeros before the
     # row: a sum that starts with zeros adds the same numbers in the same order as one started at the row)
@@ -67,7 +67,7 @@ def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, 
     mm = m[..., P:end]
     keep = np.arange(n - 1)[None, :] >= (s_arr - P)[:, None]
     half = np.where(keep, 0.5 * (mm[..., 1:] + mm[..., :-1]), 0.0)
-    if unload is not None and np.any(np.asarray(unload) > 0):
+    if unload is not None:
         # an unloading coupling: from the kink row on it still carries T0 (1 − w), T0 its steady torque (m_el's mean
         # over the KINK_T0_ROWS rows before the kink: the drive was balanced there) and w rising from 0 at the kink
         # row to 1 R rows after it; the motor's free torque is m_el − T0 (1 − w)
@@ -108,8 +108,9 @@ def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, 
     g[:, 1, 1] = np.einsum("ij,ij->i", u, u)
     g[:, 1, 2] = g[:, 2, 1] = np.einsum("ij,ij->i", u, f)
     g[:, 2, 2] = np.einsum("ij,ij->i", f, f)
-    xty = np.stack([y_sum, u @ y, f @ y], axis=1)
-    coef = lapack.solve(g, xty[:, :, None])[:, :, 0]
+    xty = np.empty((s_arr.size, 3, 1))
+    xty[:, 0, 0], xty[:, 1, 0], xty[:, 2, 0] = y_sum, u @ y, f @ y
+    coef = lapack.solve(g, xty)[:, :, 0]
     res = y[None, :] - coef[:, :1] - coef[:, 1:2] * u - coef[:, 2:] * f
     if bounds is not None:
         res = np.where(inside, res, 0.0)
@@ -183,14 +184,17 @@ def kink_best_j1(alpha1: np.ndarray, sample_period_s: float, variants) -> list:
     if not groups:
         return out
     P0, E = min(g[3] for g in groups), max(g[4] for g in groups)
-    cand = [(gi, s_, r_, g[3], g[4]) for gi, g in enumerate(groups) for s_, r_ in g[2]]
-    gi_arr, s_arr, r_arr, lo, hi = (np.array(c) for c in zip(*cand))
-    torques = np.stack([g[1] for g in groups])
-    same = all(t is groups[0][1] or np.array_equal(t, groups[0][1]) for t in (g[1] for g in groups))
-    m = torques[0] if same else torques[gi_arr]
-    rss, kappa_all, u, f, scales = _kink_candidates(m, ts, s_arr, P0, E, a[P0:E] - a[P0],
-                                                    r_arr if r_arr.any() else None, (lo, hi))
-    for gi, (v, _, pairs, P, end) in enumerate(groups):
+    # every candidate: (variant, entry row, unloading rows, first row, end row), its rows counted from P0
+    cand = np.array([(gi, s_, r_, g[3], g[4]) for gi, g in enumerate(groups) for s_, r_ in g[2]])
+    gi_arr = cand[:, 0]
+    first = groups[0][1]
+    # one torque for all (the trims'), or each candidate its variant's (the lag's moved ones)
+    m = (first[P0:E] if all(g[1] is first for g in groups)
+         else np.stack([g[1][P0:E] for g in groups])[gi_arr])
+    rss, kappa_all, _, _, _ = _kink_candidates(m, ts, cand[:, 1] - P0, 0, E - P0, a[P0:E] - a[P0],
+                                               cand[:, 2] if cand[:, 2].any() else None,
+                                               (cand[:, 3] - P0, cand[:, 4] - P0))
+    for gi, (v, *_) in enumerate(groups):
         idx = np.flatnonzero(gi_arr == gi)
         kappa = float(kappa_all[idx[np.argmin(rss[idx])]])
         out[v] = 1.0 / kappa if kappa > 0 else f"kink fit: non-physical 1/J1 = {kappa:.4g}"
