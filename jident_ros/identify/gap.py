@@ -85,10 +85,14 @@ from jident_ros.identify import lapack
 from jident_ros.identify.distributions import f_survival, t_quantile
 from jident_ros.identify.gap_free import (
     FREE_REL_SE_FLOOR,
+    LAG_MAX_FRACTION,
+    LAG_MIN_SAMPLES,
+    LAG_Z,
     NONPHYSICAL_Z,
     FreeFitError,
     GapModel,
     free_angle_fit,
+    torque_lag_estimate,
 )
 from jident_ros.identify.gap_kink import (
     KINK_LAG_ROWS,
@@ -340,7 +344,63 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
                      bearing_friction_nms_per_rad: float = 0.0, recontact_index: int | None = None,
                      entry_uncertainty_samples: int = 0, model: GapModel | None = None,
                      cross_check: bool = True) -> GapEstimate:
-    """Least-squares J1 over the gap; raises :class:`NoGapError` with a reason.  ``recontact_index``: see
+    """Least-squares J1 over the gap (:func:`_estimate_inertia`, whose arguments these are), with the torque's lag
+    checked against the drive's declaration (:func:`_lag_beyond_declared`) on the free angle fit: where the motor angle
+    shows the torque estimate lagging by more than the declared ``model.torque_lag_s``, the fits are made again
+    with the lag the data show, and the model_choice says so.  Raises :class:`NoGapError` with a reason."""
+    model = GapModel() if model is None else model
+    if (method is None or method == "auto") and "a1" in window and "alpha1" in window and cross_check:
+        return _cross_checked((window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s),
+                              bearing_friction_nms_per_rad, recontact_index, entry_uncertainty_samples, model)
+    args = (window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s, method,
+            bearing_friction_nms_per_rad, recontact_index, entry_uncertainty_samples)
+    est = _estimate_inertia(*args, model=model, cross_check=cross_check)
+    lag = _lag_beyond_declared(window, bearing_friction_nms_per_rad, est, sample_period_s, model) \
+        if est.method == "angle" else None
+    if lag is None:
+        return est
+    try:
+        again = _estimate_inertia(*args, model=replace(model, torque_lag_s=lag[0]), cross_check=cross_check)
+    except NoGapError as exc:
+        raise NoGapError(f"{exc}; {lag[1]}") from None
+    return _lag_noted(again, lag[1])
+
+
+def _lag_noted(est: GapEstimate, note: str) -> GapEstimate:
+    """``est`` (fitted with the lag the data show) with ``note`` in its model_choice and its lag term named as the lag
+    the angle shows ('torque_lag_seen': the data's, not the declaration's)."""
+    terms = tuple(("torque_lag_seen" if k == "torque_lag" else k, v) for k, v in est.std_error_terms)
+    return replace(est, model_choice=f"{est.model_choice or est.method}; {note}", std_error_terms=terms)
+
+
+def _lag_beyond_declared(window: dict, b1: float, fit: GapEstimate, sample_period_s: float,
+                         model: GapModel) -> tuple | None:
+    """(the lag bound the data call for, s; the phrase saying so) when the motor angle over ``fit``'s rows shows the
+    torque estimate lagging (or leading) by more than the declared ``model.torque_lag_s`` (:func:`torque_lag_estimate`:
+    |τ̂| more than LAG_Z of its standard errors and LAG_MIN_SAMPLES sample periods above it, and at most
+    LAG_MAX_FRACTION of the rows' duration: a drive's smoothed 'actual torque' its user did not declare); None
+    otherwise.  The bound is |τ̂| + 1.96 se: the interval holds the
+    lag the data show, not only the one declared."""
+    tau, se_tau = torque_lag_estimate(window["alpha1"], _net_torque(window, b1), sample_period_s,
+                                      fit.fit_start, fit.fit_end)
+    declared = float(model.torque_lag_s)
+    duration = (fit.fit_end - fit.fit_start) * sample_period_s
+    if not (np.isfinite(tau) and abs(tau) - declared > max(LAG_Z * se_tau, LAG_MIN_SAMPLES * sample_period_s)
+            and abs(tau) <= LAG_MAX_FRACTION * duration):
+        return None
+    bound = abs(tau) + 1.96 * se_tau
+    return bound, (f"the torque lags the motor angle by {tau * 1e3:.3g} ± {se_tau * 1e3:.2g} ms over rows "
+                   f"{fit.fit_start}..{fit.fit_end}, beyond the declared {declared * 1e3:g} ms "
+                   f"(torque_lag_max_s; docs/your_drive.md): the interval takes {bound * 1e3:.3g} ms")
+
+
+def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
+                      sample_period_s: float, method: str | None = None,
+                      bearing_friction_nms_per_rad: float = 0.0, recontact_index: int | None = None,
+                      entry_uncertainty_samples: int = 0, model: GapModel | None = None,
+                      cross_check: bool = True) -> GapEstimate:
+    """Least-squares J1 over the gap, the drive's declared lag taken as it is; raises :class:`NoGapError` with a reason.
+    ``recontact_index``: see
     :func:`gap_interval`.  ``entry_uncertainty_samples`` k > 0: the entry row is known only to +-k samples
     (the dynamics detector without a1); J1 is refitted with the entry moved by -k and +k and the larger change
     is added to the standard error in quadrature (as a model error), so that a fit that depends on the entry
@@ -485,8 +545,8 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
         moved = []
         for e in (entry_index - k, entry_index + k):
             try:
-                moved.append(estimate_inertia(window, e, backlash_width_m, wheel_radius_m, sample_period_s, method,
-                                              bearing_friction_nms_per_rad, recontact_index).inertia_kgm2)
+                moved.append(_estimate_inertia(window, e, backlash_width_m, wheel_radius_m, sample_period_s, method,
+                                               bearing_friction_nms_per_rad, recontact_index).inertia_kgm2)
             except NoGapError:
                 moved.append(np.inf)
         entry_error = max(abs(x - j) for x in moved)
@@ -807,22 +867,34 @@ def _stat_se(g: GapEstimate, model: GapModel) -> float:
 
 
 def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_samples: int,
-                   model: GapModel) -> GapEstimate:
+                   model: GapModel, lag_check: bool = True) -> GapEstimate:
     """The model choice when the window has a1 and alpha1 (an Imu beside the encoder): the a1 fit (the joint
     or gap_only fit, :func:`pre_entry_steady`) and the free angle fit, cross-checked; the one with the smaller
     standard error is returned when they agree within CROSS_CHECK_Z combined standard errors, else NoGapError
     names both.  One that fails alone leaves the other, with the failure in its model_choice.  ``args``: the
-    window, entry index, K2, r and T_s of :func:`estimate_inertia`."""
+    window, entry index, K2, r and T_s of :func:`estimate_inertia`.  ``lag_check``: both fits again with the lag the
+    angle fit shows where it is beyond the declared one (:func:`_lag_beyond_declared`)."""
     kw = dict(bearing_friction_nms_per_rad=b1, recontact_index=recontact_index, model=model)
     fits, why = {}, {}
     for name, method in (("angle", "angle"), ("a1", None)):
         # each over its own interval (the a1 fit's from the detector, the angle fit's estimated): a shared
         # interval would make their errors common and the check weaker
         try:
-            fits[name] = estimate_inertia(*args, method=method, entry_uncertainty_samples=entry_uncertainty_samples,
-                                          cross_check=False, **kw)
+            fits[name] = _estimate_inertia(*args, method=method, entry_uncertainty_samples=entry_uncertainty_samples,
+                                           cross_check=False, **kw)
         except NoGapError as exc:
             why[name] = str(exc)
+    # over either fit's rows (the a1 fit's may be the longer: a smoothed torque showed over them alone)
+    lags = [x for x in (_lag_beyond_declared(args[0], b1, fits[k], args[4], model) for k in fits if lag_check) if x]
+    lag = max(lags) if lags else None
+    if lag is not None:
+        # the fits again with the lag the angle shows (once: the check is not repeated on the refits)
+        try:
+            again = _cross_checked(args, b1, recontact_index, entry_uncertainty_samples,
+                                   replace(model, torque_lag_s=lag[0]), lag_check=False)
+        except NoGapError as exc:
+            raise NoGapError(f"{exc}; {lag[1]}") from None
+        return _lag_noted(again, lag[1])
     if "angle" in fits:
         contact = steady_entry_contact(args[0], fits["angle"], b1, args[3], model)
         if contact is not None:      # the angle fit's premise is false: it neither wins nor checks the a1 fit

@@ -59,9 +59,10 @@ def _finite(*v) -> bool:
 
 #: The parts of a gap J1's standard error (``GapEstimate.std_error_terms``) that are constants of the drive, not of
 #: the window: the torque estimate's scale error ('torque_accuracy'), its bounded offset ('torque_offset') and lag
-#: ('torque_lag'), and the Coulomb band ('coulomb_band': the drive's friction).  Each moves the drive's J1 estimates
-#: alike (the same window shape, the same bias) and cancels in J1 relative to the drive's own baseline.
-DRIVE_CONSTANT_TERMS = ("torque_accuracy", "torque_offset", "torque_lag", "coulomb_band")
+#: ('torque_lag', and 'torque_lag_seen': the lag the angle shows beyond the declared one), and the Coulomb band
+#: ('coulomb_band': the drive's friction).  Each moves the drive's J1 estimates alike (the same window shape, the same
+#: bias) and cancels in J1 relative to the drive's own baseline.
+DRIVE_CONSTANT_TERMS = ("torque_accuracy", "torque_offset", "torque_lag", "torque_lag_seen", "coulomb_band")
 
 
 def _gap_se(g) -> float:
