@@ -382,7 +382,7 @@ def _lag_beyond_declared(window: dict, b1: float, fit: GapEstimate, sample_perio
     otherwise.  The bound is |τ̂| + 1.96 se: the interval holds the
     lag the data show, not only the one declared."""
     tau, se_tau = torque_lag_estimate(window["alpha1"], _net_torque(window, b1), sample_period_s,
-                                      fit.fit_start, fit.fit_end)
+                                      fit.fit_start, fit.fit_end, 0.5 * float(model.coulomb_friction_max_nm))
     declared = float(model.torque_lag_s)
     duration = (fit.fit_end - fit.fit_start) * sample_period_s
     if not (np.isfinite(tau) and abs(tau) - declared > max(LAG_Z * se_tau, LAG_MIN_SAMPLES * sample_period_s)

@@ -476,22 +476,25 @@ LAG_MAX_FRACTION = 0.5
 
 
 def torque_lag_estimate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, start: int,
-                        end: int) -> tuple:
+                        end: int, coulomb_nm: float = 0.0) -> tuple:
     """(τ̂, its standard error), s: the lag of the torque estimate behind the shaft's torque as the motor angle
     sees it over the free rows [start, end).  A torque reported τ late is m(t + τ) ≈ m + τ ṁ at the shaft, whose
     double integral adds τ ∫m dt to the free angle: α1 = θ0 + ω0 t + κ Φ + λ Ψ (Φ = ∫∫m, Ψ = ∫m, κ = 1/J1,
     λ = κ τ), so τ̂ = λ̂/κ̂ with its delta-method standard error (the statistical one: the residual's variance,
     at least a quantum's, with the AR(1) inflation).  Where m is constant over the rows Ψ is linear in t and τ is
-    neither seen nor matters (a large standard error); (nan, inf) when the fit is not physical.  No constant-torque
-    column: with one (t², a Coulomb friction or offset) the 5 ms smoothed torque's windows no longer showed their
-    lag; without it, a friction-dominated gap (the stress bench's light load reversal) reads a few ms of lag, which
-    only widens an interval."""
+    neither seen nor matters (a large standard error); (nan, inf) when the fit is not physical.  ``coulomb_nm``: an
+    assumed Coulomb friction taken off the torque first (the middle of the declared band, as the free fit's scan
+    does: without it the stress bench's friction-dominated light load reversal read a few ms of lag).  No
+    constant-torque column: with one (t²) the 5 ms smoothed torque's windows no longer showed their lag."""
     a = np.asarray(alpha1, float)[start:end]
     m = np.asarray(torque, float)[start:end]
     n = a.size
     if n < FREE_MIN_SAMPLES + 1:
         return float("nan"), float("inf")
     ts = float(sample_period_s)
+    if coulomb_nm:
+        # the assumed Coulomb friction taken off, as the free fit's scan does (the middle of the declared band)
+        m = m - float(coulomb_nm) * _gradient_sign(a)
     psi = _cumtrapz(m, ts)
     phi = _cumtrapz(psi, ts)
     sp, sq = max(float(np.abs(phi).max()), 1e-300), max(float(np.abs(psi).max()), 1e-300)
