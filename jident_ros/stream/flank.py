@@ -839,6 +839,15 @@ def disc_error(angle: np.ndarray, first: int, end: int) -> Optional[np.ndarray]:
     return coef[DISC_DEGREE + 1:]
 
 
+def disc_corrected(angle: np.ndarray, sample_period_s: float) -> tuple:
+    """(``angle`` with its encoder's disc error taken off, the coefficients (:func:`disc_error` over the last
+    DISC_TAIL_SAMPLES rows at 2 kHz, converted to the recording's rows)), or (``angle``, None) where it shows none:
+    the gap stage's use (jident_ros/identify/gap.py), the detector's own in FlankDetector._disc_corrected."""
+    x = np.asarray(angle, float)
+    coef = disc_error(x, x.size - samples(DISC_TAIL_SAMPLES, sample_period_s), x.size)
+    return (x, None) if coef is None else (x - _disc_columns(x) @ coef, coef)
+
+
 def coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, departure: int, side: float,
                    sample_period_s: float, rounds: int = 1) -> tuple:
     """(entry row, gain, rms) of a coupling model's contact loss near ``departure`` (COUPLING_* constants): for each
