@@ -1297,7 +1297,7 @@ def test_a_damped_coupling_s_entry_moves_from_its_separation_to_the_zone_edge(ga
     at 0 nothing moves."""
     from jident_ros.stream import flank
     d, rows, delta, side = _zone_cut("vd_soft_speed_reversal_zone_30db.npz")
-    kj, ck, rse = flank.far_contact_model(rows[:, 1], delta, rows[:, 3], int(d["recontact"]), 5e-4)
+    kj, ck, rse, _ = flank.far_contact_model(rows[:, 1], delta, rows[:, 3], int(d["recontact"]), 5e-4)
     assert ck / 5e-4 == pytest.approx(40.0 / 15000.0 / 5e-4, rel=0.05) and rse < 0.02
     assert kj * float(d["J"]) == pytest.approx(15000.0, rel=0.15)
     if gate == "off":
@@ -1313,7 +1313,7 @@ def test_a_ringing_re_contact_does_not_move_the_entry():
     c/k is 1.6), so the entry stays at the departure (-2 against the zone, 0 against the separation)."""
     from jident_ros.stream import flank
     d, rows, delta, side = _zone_cut("vd_speed_step_ringing_recontact_clean.npz")
-    _, _, rse = flank.far_contact_model(rows[:, 1], delta, rows[:, 3], int(d["recontact"]), 5e-4)
+    _, _, rse, _ = flank.far_contact_model(rows[:, 1], delta, rows[:, 3], int(d["recontact"]), 5e-4)
     assert rse > 1.0
     entry, _ = flank.zone_edge_entry(rows[:, 1], delta, rows[:, 3], (int(d["entry"]), int(d["departure"]),
                                      int(d["recontact"])), side, float(d["J"]), 5e-4)

@@ -1025,13 +1025,17 @@ ZONE_MAX_CK_REL_SE = 0.1
 #: 30 dB speed step departs 3 samples before the separation: c/k + 3; forward only: a rule that found the zone entry
 #: itself, the coupling model's, moves by a sample or not at all)
 ZONE_MOVE_SLACK = 3
+#: ... and delta crosses the edge by more per sample (over the 3 samples around the crossing) than the edge's
+#: uncertainty: ZONE_K_SIGMAS standard errors of k on the twist plus delta's quantum (2, not tuned: the DOL drive's light
+#: load reversals drift across a 0.58 mrad twist by one 2^16 count per sample, and a k 8 % low put them +3/+4)
+ZONE_K_SIGMAS = 2.0
 
 
 def far_contact_model(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, recontact: int,
                       sample_period_s: float) -> Optional[tuple]:
-    """(K/J in 1/s^2 per rad of delta, c/k in s, c/k's relative standard error) of the coupling over the re-contact
-    on the far flank near row ``recontact`` (ZONE_* constants, see ZONE_FIT_BEFORE); None when the rows are not
-    there."""
+    """(K/J in 1/s^2 per rad of delta, c/k in s, the relative standard errors of c/k and of K) of the coupling over the
+    re-contact on the far flank near row ``recontact`` (ZONE_* constants, see ZONE_FIT_BEFORE); None when the rows are
+    not there."""
     ts = sample_period_s
     pre, post = samples(ZONE_FIT_BEFORE, ts), samples(ZONE_FIT_AFTER, ts)
     search = samples(ZONE_RECONTACT_SEARCH, ts)
@@ -1062,31 +1066,37 @@ def far_contact_model(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, r
     g = np.zeros(X.shape[1])
     g[4], g[5] = -ratio / coef[4], 1.0 / coef[4]
     rse = math.sqrt(max(float(g @ cov @ g), 0.0)) / abs(ratio) if ratio != 0 else math.inf
-    return -into * coef[4] / scale[0], ratio * scale[0] / scale[1], rse
+    return -into * coef[4] / scale[0], ratio * scale[0] / scale[1], rse, math.sqrt(max(float(cov[4, 4]), 0.0)) / abs(coef[4])
 
 
 def zone_edge_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, rows: tuple, side: float,
-                    inertia_kgm2: float, sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S) -> tuple:
+                    inertia_kgm2: float, sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S,
+                    quantum_rad: float = 0.0) -> tuple:
     """(entry row, c/k in samples or NaN) of a traversal, ``rows`` = (the rules' entry, the departure, the re-contact
     row): the first row after the entry where delta is beyond the zone's edge (on ``side``, the direction it departs
     to), F + side |T0| / k, within c/k + ZONE_MOVE_SLACK samples, when :func:`far_contact_model` near the re-contact
-    gives K > 0, c/k >= 0 within ZONE_MAX_CK_REL_SE (ZONE_* constants); else the entry itself."""
+    gives K > 0, c/k >= 0 within ZONE_MAX_CK_REL_SE and delta crosses the edge by more than its uncertainty per sample
+    (ZONE_K_SIGMAS x K's relative standard error x the twist, plus delta's quantum ``quantum_rad``; ZONE_* constants);
+    else the entry itself."""
     ts = sample_period_s
     entry, departure, recontact = (int(r) for r in rows)
     got = far_contact_model(alpha1, delta, m_el, recontact, ts) if recontact > entry else None
     if got is None:
         return entry, math.nan
-    kj, ck, rse = got
+    kj, ck, rse, rse_k = got
     ck_samples = ck / ts
     a, b = departure - samples(ZONE_STEADY_ROWS[0], ts), departure - samples(ZONE_STEADY_ROWS[1], ts)
     if not (kj > 0 and ck >= 0 and rse <= ZONE_MAX_CK_REL_SE) or a < 0:
         return entry, ck_samples
     d = np.asarray(delta, float)
-    edge = float(np.mean(d[a:b])) + side * abs(float(np.mean(np.asarray(m_el, float)[a:b]))) / (kj * inertia_kgm2)
+    twist = abs(float(np.mean(np.asarray(m_el, float)[a:b]))) / (kj * inertia_kgm2)
+    edge = float(np.mean(d[a:b])) + side * twist
     hi = entry + int(math.ceil(ck_samples + samples_float(ZONE_MOVE_SLACK, ts)))
     beyond = np.flatnonzero(side * (d[entry:hi + 1] - edge) > 0)
     z = entry + int(beyond[0]) if beyond.size else entry
-    return max(z, entry), ck_samples
+    if z <= entry or z + 2 > d.size or abs(d[z + 1] - d[z - 2]) / 3.0 < ZONE_K_SIGMAS * rse_k * twist + quantum_rad:
+        return entry, ck_samples        # no crossing, or one delta does not resolve (a light load reversal's drift)
+    return z, ck_samples
 
 
 #: On a coarse encoder (delta's quantum / sqrt 12 beyond FREE_MAX_NOISE_RAD: 2^13, where the coupling, spring and
@@ -2409,8 +2419,10 @@ class FlankDetector(BacklashDetector):
         delta = self._delta(data)
         after = delta[dep:dep + self._n(COUPLING_FIT_AFTER)] - cap.flank_rad
         side = 1.0 if after.size and after[int(np.argmax(np.abs(after)))] >= 0 else -1.0
+        quantum = _delta_quantum(delta, dep, self.angle_quantum_rad, max(dep - self._n(UNTWIST_FIT_BEFORE), 0),
+                                 self.min_departure_rad)
         z, _ = zone_edge_entry(data[:, self._i_a1], delta, data[:, self.channels.index("m_el")], (entry, dep, recontact),
-                               side, self.nominal_inertia_kgm2, self.sample_period_s)
+                               side, self.nominal_inertia_kgm2, self.sample_period_s, quantum)
         return z
 
     def _untwist_move(self, data: np.ndarray, departure: int) -> Optional[int]:
