@@ -50,7 +50,10 @@ and on what the clutch does, not on inequality (1):
   lies RETURN_ANGLE_WALK_MIN_LEAD samples or more before the a1 path's (back_to_load's J, fitted over a gap of nearly
   constant torque, stops late).  Before all these rules an encoder's disc error (once and twice per revolution), fitted
   over the capture's last rows where the drive turns steadily, is subtracted from its angle (:func:`disc_error`), and,
-  without a1, a torque estimate that reads a sample late is advanced by that sample (:func:`torque_late_gain`).
+  without a1, a torque estimate that reads a sample late is advanced by that sample (:func:`torque_late_gain`).  After
+  them a window's own traversal moves forward from a damped coupling's separation (its torque k x + c x' at zero, about
+  c/k before the zone) to where delta crosses the zone's edge, the steady twist |T0| / k from the flank level, k and c/k
+  from the re-contact on the far flank (:func:`zone_edge_entry`).
 * **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
   ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
   (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry
