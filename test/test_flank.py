@@ -1276,3 +1276,45 @@ def test_disc_error_needs_three_revolutions_one_way_and_the_encoder_s_own_noise_
     from jident_ros.stream import flank
     monkeypatch.setattr(flank, "DISC_MAX_RMS_FLOORS", math.inf)
     assert disc_error(ringing, 0, t.size) is not None
+
+
+def _zone_cut(name: str):
+    from pathlib import Path
+    d = np.load(Path(__file__).parent / "data" / name)
+    rows = d["rows"]
+    delta = rows[:, 1] - float(d["gear"]) * rows[:, 2]
+    after = delta[int(d["departure"]):int(d["departure"]) + 32] - float(d["flank"])
+    side = 1.0 if after[int(np.argmax(np.abs(after)))] >= 0 else -1.0
+    return d, rows, delta, side
+
+
+@pytest.mark.parametrize("gate", ["on", "off"])
+def test_a_damped_coupling_s_entry_moves_from_its_separation_to_the_zone_edge(gate, monkeypatch):
+    """The soft coupling variant's 30 dB speed reversal (test/data/vd_soft_speed_reversal_zone_30db.npz, the detector's
+    capture cut from the departure - 100 to the re-contact + 60; k 15000 N m/rad, c 40 N m s/rad: c/k 5.3 samples): the
+    coupling separates at 98, delta departs at 100 (the rules' entry), the zone is entered at 102.  The re-contact on the
+    far flank gives c/k 5.4 samples within 1 % and k within 15 %; delta crosses F + |T0| / k at 102.  With the c/k gate
+    at 0 nothing moves."""
+    from jident_ros.stream import flank
+    d, rows, delta, side = _zone_cut("vd_soft_speed_reversal_zone_30db.npz")
+    kj, ck, rse, _ = flank.far_contact_model(rows[:, 1], delta, rows[:, 3], int(d["recontact"]), 5e-4)
+    assert ck / 5e-4 == pytest.approx(40.0 / 15000.0 / 5e-4, rel=0.05) and rse < 0.02
+    assert kj * float(d["J"]) == pytest.approx(15000.0, rel=0.15)
+    if gate == "off":
+        monkeypatch.setattr(flank, "ZONE_MAX_CK_REL_SE", 0.0)
+    entry, _ = flank.zone_edge_entry(rows[:, 1], delta, rows[:, 3], (int(d["entry"]), int(d["departure"]),
+                                     int(d["recontact"])), side, float(d["J"]), 5e-4)
+    assert entry - int(d["true_entry"]) == (0 if gate == "on" else -2)
+
+
+def test_a_ringing_re_contact_does_not_move_the_entry():
+    """The base drive's clean speed step down (test/data/vd_speed_step_ringing_recontact_clean.npz): the re-contact's fit
+    gives c/k 12 samples with a relative standard error above 1 (ZONE_MAX_CK_REL_SE 0.1: the move would be +12, the true
+    c/k is 1.6), so the entry stays at the departure (-2 against the zone, 0 against the separation)."""
+    from jident_ros.stream import flank
+    d, rows, delta, side = _zone_cut("vd_speed_step_ringing_recontact_clean.npz")
+    _, _, rse, _ = flank.far_contact_model(rows[:, 1], delta, rows[:, 3], int(d["recontact"]), 5e-4)
+    assert rse > 1.0
+    entry, _ = flank.zone_edge_entry(rows[:, 1], delta, rows[:, 3], (int(d["entry"]), int(d["departure"]),
+                                     int(d["recontact"])), side, float(d["J"]), 5e-4)
+    assert entry == int(d["entry"])

@@ -50,7 +50,10 @@ and on what the clutch does, not on inequality (1):
   lies RETURN_ANGLE_WALK_MIN_LEAD samples or more before the a1 path's (back_to_load's J, fitted over a gap of nearly
   constant torque, stops late).  Before all these rules an encoder's disc error (once and twice per revolution), fitted
   over the capture's last rows where the drive turns steadily, is subtracted from its angle (:func:`disc_error`), and,
-  without a1, a torque estimate that reads a sample late is advanced by that sample (:func:`torque_late_gain`).
+  without a1, a torque estimate that reads a sample late is advanced by that sample (:func:`torque_late_gain`).  After
+  them a window's own traversal moves forward from a damped coupling's separation (its torque k x + c x' at zero, about
+  c/k before the zone) to where delta crosses the zone's edge, the steady twist |T0| / k from the flank level, k and c/k
+  from the re-contact on the far flank (:func:`zone_edge_entry`).
 * **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
   ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
   (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry
@@ -1011,6 +1014,103 @@ def damped_spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray,
     return best, rss_dep / best_rss, float(scale) / t0
 
 
+#: A damped coupling separates before the zone: its torque k x + c x' reaches zero while the twist x is still c/k x'
+#: (docs/vector_drive.md), and from there both masses run free.  The motor-equation rules above find that separation;
+#: the window's entry is the first sample in the zone (x = 0), about c/k later (the soft coupling variant's c/k is 5.3
+#: samples: its speed steps -7/-8, its entries with a1 -5/-6; the base drive's 1.6: -2 on its speed steps).  So after
+#: the rules a traversal's entry (a window's own, fine encoder, not after a jump of delta) moves forward to where delta
+#: crosses the zone's edge (:func:`zone_edge_entry`): the steady contact's twist |T0| / k from the flank level F (both
+#: means over the ZONE_STEADY_ROWS before the departure, as SPRING_TORQUE_ROWS), k and c/k from the motor equation over
+#: the re-contact on the far flank, where the twist changes by more than the steady one (:func:`far_contact_model`:
+#: alpha1 = a + v k + c k^2 + b0 Phi(m_el) - (K Psi(pen) + D Psi(pen') + B Psi(1)) / J over ZONE_FIT_BEFORE rows before
+#: the re-contact row and ZONE_FIT_AFTER from it, the row itself within +-ZONE_RECONTACT_SEARCH by least squares; pen
+#: delta's penetration beyond its value at that row, B the edge's rounding to the row; k = K/J x J1_nom) ...
+ZONE_FIT_BEFORE = 16
+ZONE_FIT_AFTER = 40
+ZONE_RECONTACT_SEARCH = 3
+ZONE_STEADY_ROWS = (80, 30)
+#: ... when c/k is determined within this relative standard error -- chosen on the soft coupling variant (its fits
+#: 0.008-0.098; on the base drive's, the heavy and the fast speed loop variants' clean speed steps, whose re-contact
+#: rings, 1.0-1.3 with c/k 12-31 samples, and its light load reversals 0.3-0.7) ...
+ZONE_MAX_CK_REL_SE = 0.1
+#: ... and the crossing lies no further than c/k plus this many samples after the rules' entry (the soft coupling's
+#: 30 dB speed step departs 3 samples before the separation: c/k + 3; forward only: a rule that found the zone entry
+#: itself, the coupling model's, moves by a sample or not at all)
+ZONE_MOVE_SLACK = 3
+#: ... and delta crosses the edge by more per sample (over the 3 samples around the crossing) than the edge's
+#: uncertainty: ZONE_K_SIGMAS standard errors of k on the twist plus delta's quantum (2, not tuned: the DOL drive's light
+#: load reversals drift across a 0.58 mrad twist by one 2^16 count per sample, and a k 8 % low put them +3/+4)
+ZONE_K_SIGMAS = 2.0
+
+
+def far_contact_model(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, recontact: int,
+                      sample_period_s: float) -> Optional[tuple]:
+    """(K/J in 1/s^2 per rad of delta, c/k in s, the relative standard errors of c/k and of K) of the coupling over the
+    re-contact on the far flank near row ``recontact`` (ZONE_* constants, see ZONE_FIT_BEFORE); None when the rows are
+    not there."""
+    ts = sample_period_s
+    pre, post = samples(ZONE_FIT_BEFORE, ts), samples(ZONE_FIT_AFTER, ts)
+    search = samples(ZONE_RECONTACT_SEARCH, ts)
+    a1, d_all, m = (np.asarray(x, float) for x in (alpha1, delta, m_el))
+    best = None
+    for r in range(int(recontact) - search, int(recontact) + search + 1):
+        lo, hi = r - pre, r + post
+        if lo < 1 or hi > a1.size:
+            continue
+        k = np.arange(lo, hi, dtype=float) - r
+        d = d_all[lo:hi]
+        into = 1.0 if d_all[r + 1] >= d_all[r - 1] else -1.0       # the direction delta enters the far flank
+        pen = np.clip(into * (d - 0.5 * (d_all[r - 1] + d_all[r])), 0.0, None)
+        pen[:r - lo] = 0.0
+        cols = [_double_integral(c, ts) for c in (pen, into * np.gradient(d) / ts * (pen > 0), (k >= 0).astype(float))]
+        scale = [float(np.abs(c).max()) or 1.0 for c in cols]
+        X = np.column_stack([_free_columns(k, _double_integral(m[lo:hi], ts))] + [c / s for c, s in zip(cols, scale)])
+        rss, coef = _lstsq_rss(X, a1[lo:hi])
+        if best is None or rss < best[0]:
+            best = (rss, X, coef, scale, into)
+    if best is None:
+        return None
+    rss, X, coef, scale, into = best
+    if not coef[4] != 0:
+        return None
+    ratio = coef[5] / coef[4]
+    cov = np.linalg.pinv(X.T @ X) * rss / max(X.shape[0] - X.shape[1], 1)
+    g = np.zeros(X.shape[1])
+    g[4], g[5] = -ratio / coef[4], 1.0 / coef[4]
+    rse = math.sqrt(max(float(g @ cov @ g), 0.0)) / abs(ratio) if ratio != 0 else math.inf
+    return -into * coef[4] / scale[0], ratio * scale[0] / scale[1], rse, math.sqrt(max(float(cov[4, 4]), 0.0)) / abs(coef[4])
+
+
+def zone_edge_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, rows: tuple, side: float,
+                    inertia_kgm2: float, sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S,
+                    quantum_rad: float = 0.0) -> tuple:
+    """(entry row, c/k in samples or NaN) of a traversal, ``rows`` = (the rules' entry, the departure, the re-contact
+    row): the first row after the entry where delta is beyond the zone's edge (on ``side``, the direction it departs
+    to), F + side |T0| / k, within c/k + ZONE_MOVE_SLACK samples, when :func:`far_contact_model` near the re-contact
+    gives K > 0, c/k >= 0 within ZONE_MAX_CK_REL_SE and delta crosses the edge by more than its uncertainty per sample
+    (ZONE_K_SIGMAS x K's relative standard error x the twist, plus delta's quantum ``quantum_rad``; ZONE_* constants);
+    else the entry itself."""
+    ts = sample_period_s
+    entry, departure, recontact = (int(r) for r in rows)
+    got = far_contact_model(alpha1, delta, m_el, recontact, ts) if recontact > entry else None
+    if got is None:
+        return entry, math.nan
+    kj, ck, rse, rse_k = got
+    ck_samples = ck / ts
+    a, b = departure - samples(ZONE_STEADY_ROWS[0], ts), departure - samples(ZONE_STEADY_ROWS[1], ts)
+    if not (kj > 0 and ck >= 0 and rse <= ZONE_MAX_CK_REL_SE) or a < 0:
+        return entry, ck_samples
+    d = np.asarray(delta, float)
+    twist = abs(float(np.mean(np.asarray(m_el, float)[a:b]))) / (kj * inertia_kgm2)
+    edge = float(np.mean(d[a:b])) + side * twist
+    hi = entry + int(math.ceil(ck_samples + samples_float(ZONE_MOVE_SLACK, ts)))
+    beyond = np.flatnonzero(side * (d[entry:hi + 1] - edge) > 0)
+    z = entry + int(beyond[0]) if beyond.size else entry
+    if z <= entry or z + 2 > d.size or abs(d[z + 1] - d[z - 2]) / 3.0 < ZONE_K_SIGMAS * rse_k * twist + quantum_rad:
+        return entry, ck_samples        # no crossing, or one delta does not resolve (a light load reversal's drift)
+    return z, ck_samples
+
+
 #: On a coarse encoder (delta's quantum / sqrt 12 beyond FREE_MAX_NOISE_RAD: 2^13, where the coupling, spring and
 #: damped spring models are off) a window's own entry without a1 goes to the end of the coupling's untwist
 #: (:func:`untwist_entry`): delta = F + v (k - s)_+ + c (k - e)_+^2 -- at rest on its flank, then untwisting at a
@@ -1924,7 +2024,10 @@ class FlankDetector(BacklashDetector):
         self._cap_sigma = cap.flank_sigma_rad      # the entry flank's contact noise (free_departure)
         self._cap_returning = cap.returning
         self._cap_flank = (cap.flank_rad, self.threshold_for(cap))
+        self._prepared = None
         shift, recontact = self._refine(data, dep)
+        shift = self._zone_move(self._prepared if self._prepared is not None else data, dep, dep + shift, cap,
+                                recontact) - dep
         entry_row = cap.start_row + dep + shift
         if any(abs(entry_row - r) <= self._n(DUPLICATE_ENTRY_SAMPLES) for r in self._emitted_entry_rows):
             # the same traversal by two rules (a returning capture from a window's edge scan and the contact rule's:
@@ -1932,15 +2035,8 @@ class FlankDetector(BacklashDetector):
             self.counts["duplicate_entry"] += 1
             return None
         self._emitted_entry_rows.append(entry_row)
-        e0 = dep + shift - self.samples_before_entry
-        win = data[e0:e0 + self.window_length]
+        e0, win, rc, res = self._width(data, dep + shift, cap, recontact)
         e = self.samples_before_entry
-        wd = {c: win[:, j] for j, c in enumerate(self.channels)}
-        rc = None if recontact is None or recontact - e0 >= self.window_length else recontact - e0
-        res = estimate_width(wd, e, self.wheel_radius_m, self.sample_period_s, self.gear_ratio,
-                             flank_rad=cap.flank_rad, recontact=rc, angle_quantum_rad=self.angle_quantum_rad,
-                             contact_samples=self.contact_samples,
-                             contact_tolerance_rad=self.contact_tolerance_rad)
         self.last_width = res
         if self.second_windows and res.how == "traversal" and res.recontact_index > e:
             self._scan_returns(cap, data, self._delta(win), e0, e, res.recontact_index)
@@ -1974,6 +2070,18 @@ class FlankDetector(BacklashDetector):
                                     f"{res.width_m:.6g} m ({res.how}){swallowed}", window=w)
         self.last_event = ev
         return ev
+
+    def _width(self, data: np.ndarray, entry: int, cap: _FlankCapture, recontact: Optional[int]) -> tuple:
+        """(the window's first capture row, the window, its re-contact row from the rules or None, :func:`estimate_width`)
+        of the window with its entry at capture row ``entry``."""
+        e0 = entry - self.samples_before_entry
+        win = data[e0:e0 + self.window_length]
+        wd = {c: win[:, j] for j, c in enumerate(self.channels)}
+        rc = None if recontact is None or recontact - e0 >= self.window_length else recontact - e0
+        res = estimate_width(wd, self.samples_before_entry, self.wheel_radius_m, self.sample_period_s, self.gear_ratio,
+                             flank_rad=cap.flank_rad, recontact=rc, angle_quantum_rad=self.angle_quantum_rad,
+                             contact_samples=self.contact_samples, contact_tolerance_rad=self.contact_tolerance_rad)
+        return e0, win, rc, res
 
     def _scan_returns(self, cap: _FlankCapture, data: np.ndarray, d: np.ndarray, e0: int, e: int, g: int) -> None:
         """Return traversals inside a traversal window that no contact announced (the contacts between them are
@@ -2149,7 +2257,8 @@ class FlankDetector(BacklashDetector):
         """(samples from the departure to the entry sample, re-contact row or None): :meth:`_refine_from` the
         departure moved on to where delta left its flank by COARSE_DEPARTURE_QUANTA counts (:meth:`_coarse_departure`)."""
         moved = self._coarse_departure(data, dep)
-        shift, recontact = self._refine_from(self._torque_aligned(self._disc_corrected(data), moved), moved)
+        self._prepared = self._torque_aligned(self._disc_corrected(data), moved)
+        shift, recontact = self._refine_from(self._prepared, moved)
         return shift + moved - dep, recontact
 
     def _disc_corrected(self, data: np.ndarray) -> np.ndarray:
@@ -2305,6 +2414,28 @@ class FlankDetector(BacklashDetector):
             return dep
         e2 = self._coupling_move(data, walk, dep, 1.0, 1.0)
         return min(e2 if e2 > walk else self._coupling_move(data, e, dep, 1.0, 1.0), dep)
+
+    def _zone_move(self, data: np.ndarray, dep: int, entry: int, cap: _FlankCapture, recontact: Optional[int]) -> int:
+        """``entry`` moved forward to the zone's edge (:func:`zone_edge_entry`, ZONE_*) for a window's own traversal
+        (its re-contact the window's, :func:`estimate_width`'s, from the rules' ``recontact`` or delta) with m_el and
+        J1_nom on a fine encoder (FREE_MAX_NOISE_RAD, as :meth:`_spring_move`), not after a jump of delta (a slip: the
+        contact is lost at the jump); else ``entry``."""
+        if not ZONE_MAX_CK_REL_SE or self.detector_name != "flank" or cap.returning or "m_el" not in self.channels \
+                or self.nominal_inertia_kgm2 is None or not math.isfinite(cap.flank_rad) \
+                or not self.angle_quantum_rad / math.sqrt(12.0) <= FREE_MAX_NOISE_RAD or self._jumped(data, dep):
+            return entry
+        e0, _, _, res = self._width(data, entry, cap, recontact)
+        if res.how != "traversal" or not res.recontact_index > self.samples_before_entry:
+            return entry
+        recontact = e0 + res.recontact_index
+        delta = self._delta(data)
+        after = delta[dep:dep + self._n(COUPLING_FIT_AFTER)] - cap.flank_rad
+        side = 1.0 if after.size and after[int(np.argmax(np.abs(after)))] >= 0 else -1.0
+        quantum = _delta_quantum(delta, dep, self.angle_quantum_rad, max(dep - self._n(UNTWIST_FIT_BEFORE), 0),
+                                 self.min_departure_rad)
+        z, _ = zone_edge_entry(data[:, self._i_a1], delta, data[:, self.channels.index("m_el")], (entry, dep, recontact),
+                               side, self.nominal_inertia_kgm2, self.sample_period_s, quantum)
+        return z
 
     def _untwist_move(self, data: np.ndarray, departure: int) -> Optional[int]:
         """:func:`untwist_entry`'s contact loss at a gain >= UNTWIST_MIN_GAIN on a coarse encoder (delta's quantum, the
