@@ -1,0 +1,43 @@
+"""The motor encoder's disc error taken off alpha1 before the gap fits (gap._disc_taken_off with
+jident_ros.stream.flank.disc_corrected): a resolver-grade angle error its user did not declare."""
+import numpy as np
+import pytest
+
+from jident_ros.identify import gap
+from jident_ros.identify.gap import estimate_inertia
+from jident_ros.identify.gap_free import GapModel
+
+TS = 5e-4
+
+
+def _drive(disc_rad: float, n: int = 1400, entry: int = 60, recontact: int = 150, j1: float = 1.1):
+    """150 rad/s in contact, free over [entry, recontact) under a torque swinging ± 300 N m, in contact again after it
+    (0.6 s, 14 revolutions: what the window's last rows turn); the encoder (2^16) reads the angle plus a disc error
+    of ``disc_rad`` once and half of it twice per revolution."""
+    fine = 20
+    tf = np.arange(n * fine) * TS / fine
+    free = (tf >= entry * TS) & (tf < recontact * TS)
+    m = np.where(free, 100.0 + 300.0 * np.sin(2 * np.pi * (tf - entry * TS) / 0.03), 100.0)
+    w1 = 150.0 + np.cumsum(np.where(free, m, 0.0) / j1) * TS / fine
+    theta = (np.cumsum(w1) * TS / fine + 0.3)[::fine]
+    theta = theta + disc_rad * (np.sin(theta + 0.3) + 0.5 * np.sin(2 * theta + 1.0))
+    q = 2 * np.pi / 2 ** 16
+    return {"alpha1": np.floor(theta / q) * q, "m_el": m[::fine]}
+
+
+def _fit(window):
+    return estimate_inertia(window, 60, 0.005, 0.08, TS, recontact_index=150, model=GapModel())
+
+
+def test_an_undeclared_disc_error_is_fitted_and_taken_off(monkeypatch):
+    """1 and 0.5 mrad: fitted to 1 % of their amplitudes, taken off (said in the model_choice), J1 as without the
+    error; left on, J1 is 20 % off.  An exact disc: nothing fitted, nothing said."""
+    g = _fit(_drive(1e-3))
+    assert "disc error (1001 and 499 µrad" in g.model_choice or "disc error (1000 and 500 µrad" in g.model_choice, \
+        g.model_choice
+    exact = _fit(_drive(0.0))
+    assert "disc error" not in exact.model_choice
+    assert g.inertia_kgm2 == pytest.approx(exact.inertia_kgm2, rel=2e-3)
+    assert exact.inertia_kgm2 == pytest.approx(1.1, rel=5e-3)
+    monkeypatch.setattr(gap, "disc_corrected", lambda x, ts: (np.asarray(x, float), None))
+    assert abs(_fit(_drive(1e-3)).inertia_kgm2 / 1.1 - 1) > 0.1
