@@ -350,6 +350,8 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     shows the torque estimate lagging by more than the declared ``model.torque_lag_s``, the fits are made again
     with the lag the data show, and the model_choice says so.  Raises :class:`NoGapError` with a reason."""
     model = GapModel() if model is None else model
+    if "m_el" not in window:
+        raise NoGapError("no electromagnetic torque: the gap fit needs m_el")
     window, disc = _disc_taken_off(window, sample_period_s)
     try:
         est = _lag_checked((window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s, method,
@@ -408,8 +410,7 @@ def _lag_beyond_declared(window: dict, b1: float, fit: GapEstimate, sample_perio
     torque estimate lagging (or leading) by more than the declared ``model.torque_lag_s`` (:func:`torque_lag_estimate`:
     |τ̂| more than LAG_Z of its standard errors and LAG_MIN_SAMPLES sample periods above it, and at most
     LAG_MAX_FRACTION of the rows' duration: a drive's smoothed 'actual torque' its user did not declare); None
-    otherwise.  The bound is |τ̂| + 1.96 se: the interval holds the
-    lag the data show, not only the one declared."""
+    otherwise.  The bound is |τ̂| + 1.96 se: the interval holds the lag the data show, not only the one declared."""
     tau, se_tau = torque_lag_estimate(window["alpha1"], _net_torque(window, b1), sample_period_s,
                                       fit.fit_start, fit.fit_end, 0.5 * float(model.coulomb_friction_max_nm))
     declared = float(model.torque_lag_s)
@@ -428,9 +429,9 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
                       bearing_friction_nms_per_rad: float = 0.0, recontact_index: int | None = None,
                       entry_uncertainty_samples: int = 0, model: GapModel | None = None,
                       cross_check: bool = True) -> GapEstimate:
-    """Least-squares J1 over the gap, the drive's declared lag taken as it is; raises :class:`NoGapError` with a reason.
-    ``recontact_index``: see
-    :func:`gap_interval`.  ``entry_uncertainty_samples`` k > 0: the entry row is known only to +-k samples
+    """Least-squares J1 over the gap, the drive's declared lag taken as it is (:func:`estimate_inertia` checks it);
+    raises :class:`NoGapError` with a reason.  ``recontact_index``: see :func:`gap_interval`.
+    ``entry_uncertainty_samples`` k > 0: the entry row is known only to +-k samples
     (the dynamics detector without a1); J1 is refitted with the entry moved by -k and +k and the larger change
     is added to the standard error in quadrature (as a model error), so that a fit that depends on the entry
     row is refused or its interval widened, never published narrow.  ``method``: one of :data:`FITS`, or None /
