@@ -865,7 +865,7 @@ def _poly_basis(n: int) -> np.ndarray:
 def disc_corrected(angle: np.ndarray, sample_period_s: float) -> tuple:
     """(``angle`` with its encoder's disc error taken off, the coefficients (:func:`disc_error` over the last
     DISC_TAIL_SAMPLES rows at 2 kHz, converted to the recording's rows)), or (``angle``, None) where it shows none:
-    the gap stage's use (jident_ros/identify/gap.py), the detector's own in FlankDetector._disc_corrected."""
+    the gap stage's (jident_ros/identify/gap.py) and the detector's (FlankDetector._disc_corrected)."""
     x = np.asarray(angle, float)
     coef = disc_error(x, x.size - samples(DISC_TAIL_SAMPLES, sample_period_s), x.size)
     return (x, None) if coef is None else (x - _disc_columns(x) @ coef, coef)
@@ -2290,10 +2290,10 @@ class FlankDetector(BacklashDetector):
         for j in (self._i_a1, self._i_a2):
             if j < 0:
                 continue
-            coef = disc_error(data[:, j], data.shape[0] - self._n(DISC_TAIL_SAMPLES), data.shape[0])
+            corrected, coef = disc_corrected(data[:, j], self.sample_period_s)
             if coef is not None:
                 out = np.array(data, float, copy=True) if out is data else out
-                out[:, j] = data[:, j] - _disc_columns(np.asarray(data[:, j], float)) @ coef
+                out[:, j] = corrected
         return out
 
     def _torque_aligned(self, data: np.ndarray, dep: int) -> np.ndarray:
