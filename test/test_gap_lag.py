@@ -88,3 +88,33 @@ def test_the_cross_checked_fits_check_the_lag_over_both_fits_rows(monkeypatch):
                          model=GapModel())
     assert {"angle"} < set(seen) and len(seen) == 2, seen
     assert "beyond the declared 0 ms" in g.model_choice, g.model_choice
+
+
+def test_a_lag_under_half_a_sample_is_not_a_delay(monkeypatch):
+    """A torque smoothed by 0.1 ms (a fifth of a sample): τ̂ 0.12 ms at z 13, under LAG_MIN_SAMPLES: nothing said; with
+    the floor off it would be."""
+    from types import SimpleNamespace
+    alpha1, m = _drive(1e-4)
+    tau, se = torque_lag_estimate(alpha1, m, TS, 62, 110)
+    assert 4 * se < tau < 0.5 * TS
+    rows = SimpleNamespace(fit_start=62, fit_end=110)
+    window = {"alpha1": alpha1, "m_el": m}
+    assert gap._lag_beyond_declared(window, 0.0, rows, TS, GapModel()) is None
+    monkeypatch.setattr(gap, "LAG_MIN_SAMPLES", 0.0)
+    assert gap._lag_beyond_declared(window, 0.0, rows, TS, GapModel())[0] > tau
+
+
+def test_the_declared_coulomb_friction_is_taken_off_before_the_lag_is_read():
+    """A motor with 20 N m of Coulomb friction and a torque on time reads as a 0.4 ms lag (z 10) when the friction is
+    left in m_el; taken off (coulomb_nm, the middle of the declared band), as none."""
+    fine, n, entry = 20, 200, 60
+    tf = np.arange(n * fine) * TS / fine
+    free = tf >= entry * TS
+    m = np.where(free, 100.0 + 300.0 * np.sin(2 * np.pi * (tf - entry * TS) / 0.03), 100.0)
+    w1 = 150.0 + np.cumsum(np.where(free, m - 20.0, 0.0) / 1.1) * TS / fine
+    q = 2 * np.pi / 2 ** 16
+    alpha1 = np.floor((np.cumsum(w1) * TS / fine + 0.3)[::fine] / q) * q
+    tau, se = torque_lag_estimate(alpha1, m[::fine], TS, 62, 110)
+    assert tau > 4 * se and tau > 2e-4
+    tau, se = torque_lag_estimate(alpha1, m[::fine], TS, 62, 110, coulomb_nm=20.0)
+    assert abs(tau) < 3 * se and abs(tau) < 5e-5
