@@ -208,3 +208,33 @@ def test_zoo_variants_names_may_hold_a_comma():
     assert variant_names("small drive, 3:1 gear,soft coupling") == ["small drive, 3:1 gear", "soft coupling"]
     assert variant_names("base, soft coupling,") == ["base", "soft coupling"]
     assert variant_names("small drive,nonsense") == ["small drive", "nonsense"]
+
+
+def test_torque_truth_reads_the_truth_file_and_splits_published_from_refused(tmp_path):
+    """The refused windows' torque (the truth's estimate error and friction over the true gap, relative to the
+    gap's true torque) is read per gap from ``<name>.truth.json`` beside the recording and counted apart for
+    published and refused traversal windows; a bounce or a model without the file adds nothing."""
+    import json
+    gaps = [{"entry_index": 200, "recontact_index": 250, "traversal": True},
+            {"entry_index": 300, "recontact_index": 340, "traversal": False},
+            {"entry_index": 400, "recontact_index": 450, "traversal": True}]
+    truth = {"gaps": [{"true_torque_mean_nm": -200.0, "torque_estimate_error_mean_nm": 2.0, "bearing_friction_mean_nm": 3.0},
+                      {"true_torque_mean_nm": 50.0, "torque_estimate_error_mean_nm": 40.0, "bearing_friction_mean_nm": 3.0},
+                      {"true_torque_mean_nm": 20.0, "torque_estimate_error_mean_nm": -2.0, "bearing_friction_mean_nm": 3.0}]}
+    r = ZooRecording("vector drive", "rec", "speed step down", True, "forward", 1.16, 0.005, 0.1, 1.0, 65536, None,
+                     5e-4, 100, gaps, files={"csv": str(tmp_path / "rec.csv")})
+    (tmp_path / "rec.truth.json").write_text(json.dumps(truth))
+    assert zoo.truth_gap_torque(r, 0) == pytest.approx((0.01, 0.015))
+    assert zoo.truth_gap_torque(r, 2) == pytest.approx((0.1, 0.15))
+    res = {"windows": [_win(200, 0), _win(301, 1, published=False, reason="x"), _win(400, 2, published=False, reason="y")],
+           "cut_off": []}
+    s = summarise([(r, res)])
+    assert s["torque_truth_published"] == [pytest.approx((0.01, 0.015))]
+    assert s["torque_truth_unpublished"] == [pytest.approx((0.1, 0.15))]
+    table = "\n".join(zoo.torque_truth_table([("vector drive", s)], "CSV 2^16"))
+    assert "| vector drive | published | 1 | 1.0 % / 1.0 % | 0/1 | 1.5 % / 1.5 % |" in table
+    assert "| vector drive | not published | 1 | 10.0 % / 10.0 % | 1/1 | 15.0 % / 15.0 % |" in table
+    other = ZooRecording("ours", "none", "slip entry", True, "forward", 1.16, 0.005, 0.1, 1.0, 65536, None, 5e-4, 100,
+                         gaps, files={"csv": str(tmp_path / "none.csv")})
+    assert zoo.truth_gap_torque(other, 0) is None
+    assert zoo.torque_truth_table([("ours", summarise([(other, res)]))], "CSV 2^16") == []

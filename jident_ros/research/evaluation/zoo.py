@@ -380,6 +380,33 @@ def oracle_errors(zr: ZooRecording, friction: bool = False) -> list:
 _T0_CACHE: dict = {}
 
 
+@functools.lru_cache(maxsize=512)
+def _truth_json(path: str) -> Optional[dict]:
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def truth_gap_torque(zr: ZooRecording, k: int) -> Optional[tuple]:
+    """What the truth says of gap ``k``'s torque, where the drive model writes it (the vector drive, its DOL mode
+    and their variants: ``<name>.truth.json`` beside the recording): (|mean error of the drive's torque estimate|,
+    |mean bearing friction|), each relative to |the mean true motor torque| over the true gap rows; None
+    elsewhere. The share of the gap's torque a J1 from the torque estimate cannot know without a declared band."""
+    files = [v for v in zr.files.values() if v]
+    if not files:
+        return None
+    doc = _truth_json(str(Path(files[0]).parent / f"{zr.name}.truth.json"))
+    gaps = (doc or {}).get("gaps") or []
+    if k >= len(gaps) or "torque_estimate_error_mean_nm" not in gaps[k]:
+        return None
+    g = gaps[k]
+    torque = abs(float(g["true_torque_mean_nm"]))
+    if not torque > 0:
+        return None
+    return (abs(float(g["torque_estimate_error_mean_nm"])) / torque, abs(float(g.get("bearing_friction_mean_nm", 0.0))) / torque)
+
+
 def _first_time(zr: ZooRecording, fmt: str) -> float:
     """The recording's first t (the CSV's first row; the bags carry the same clock)."""
     key = zr.name
@@ -405,6 +432,7 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
     sep_offsets = []        # the detector's entry minus the coupling's separation (a damped contact's force at zero)
     reasons = Counter()
     covered = []
+    torque_pub, torque_unpub = [], []     # truth_gap_torque of the traversals' first windows, published or not
     for zr, res in items:
         s["recordings"] += 1
         if res.get("error"):
@@ -457,6 +485,9 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
                 s[f"level_{w['level']}{'_nominal' if nominal else ''}"] += 1
             if w["k2"] is not None and math.isfinite(w["k2"]) and kind == "trav":
                 k2errs.append(abs(w["k2"] / zr.backlash_width_m - 1))
+            truth = truth_gap_torque(zr, k) if kind == "trav" else None
+            if truth is not None:
+                (torque_pub if w["published"] else torque_unpub).append(truth)
             if w["published"]:
                 s[f"{kind}_published"] += 1
                 e = w["j1"] / zr.inertia_kgm2 - 1
@@ -498,6 +529,8 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
     out["reasons"] = dict(reasons.most_common())
     out["oracle"] = oracle
     out["oracle_friction"] = oracle_f
+    out["torque_truth_published"] = torque_pub
+    out["torque_truth_unpublished"] = torque_unpub
     return out
 
 
@@ -731,7 +764,45 @@ def targets(res: dict) -> list:
               f"{100 * OFF:g} %, the declared model terms (torque offset and drift, friction bands, lag, change points, "
               f"torque accuracy) give one above {100 * OFF:g} %: a limit of the data or of what the drive declares, "
               "not of the estimator; other: refused by the policy.)", ""]
-    return lines
+    return lines + torque_truth(res)
+
+
+def _share(values: list) -> str:
+    if not values:
+        return "–"
+    v = 100 * np.asarray(values, float)
+    return f"{np.median(v):.1f} % / {np.max(v):.1f} %"
+
+
+def torque_truth(res: dict, label: str = "JointState 2^16") -> list:
+    """What the torque estimate holds over the true gaps of the ``label`` traversal windows, published or not
+    (:func:`truth_gap_torque`; models whose truth records it): why a window is refused for its declared terms."""
+    return torque_truth_table([(model, _merge([s for (m, lab, _), s in res["totals"].items() if m == model and lab == label]))
+                               for model in MODELS], label)
+
+
+def torque_truth_table(merged: list, label: str) -> list:
+    """The table of :func:`torque_truth` over (model name, merged summary) pairs."""
+    rows = []
+    for model, a in merged:
+        pub, unpub = a.get("torque_truth_published", []), a.get("torque_truth_unpublished", [])
+        if not pub and not unpub:
+            continue
+        for name, v in (("published", pub), ("not published", unpub)):
+            big = sum(1 for e, _ in v if e > OFF / 2)
+            rows.append(f"| {model} | {name} | {len(v)} | {_share([e for e, _ in v])} | {big}/{len(v)} | "
+                        f"{_share([f for _, f in v])} |")
+    if not rows:
+        return []
+    return ["### The torque the refused windows hold (the truth's, over the true gap rows)", "",
+            f"{label} traversal windows (first per gap, clean and 30 dB): the mean error of the drive's torque estimate "
+            "and the mean bearing friction over the true gap rows, each relative to the mean true motor torque there "
+            "(from the recording's truth file; `truth_gap_torque`). The estimator cannot know these errors beyond the "
+            f"drive's declared bands: where the estimate is off by more than {100 * OFF / 2:g} % of the gap's torque "
+            f"(half the ± {100 * OFF:g} % the policy publishes), an honest interval cannot be that narrow unless the "
+            "drive declares a tighter torque accuracy.", "",
+            "| model | windows | n | torque estimate off: median / max | off by more than "
+            f"{100 * OFF / 2:g} % | bearing friction: median / max |", "|---|---|---|---|---|---|"] + rows + [""]
 
 
 def replace_section(text: str, section: str) -> str:
