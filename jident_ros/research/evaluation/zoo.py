@@ -778,7 +778,7 @@ def torque_truth(res: dict, label: str = "JointState 2^16") -> list:
     """What the torque estimate holds over the true gaps of the ``label`` traversal windows, published or not
     (:func:`truth_gap_torque`; models whose truth records it): why a window is refused for its declared terms."""
     return torque_truth_table([(model, _merge([s for (m, lab, _), s in res["totals"].items() if m == model and lab == label]))
-                               for model in MODELS], label)
+                               for model in MODELS], f"{label} (clean and 30 dB)")
 
 
 def torque_truth_table(merged: list, label: str) -> list:
@@ -795,7 +795,7 @@ def torque_truth_table(merged: list, label: str) -> list:
     if not rows:
         return []
     return ["### The torque the refused windows hold (the truth's, over the true gap rows)", "",
-            f"{label} traversal windows (first per gap, clean and 30 dB): the mean error of the drive's torque estimate "
+            f"{label} traversal windows (the first per gap): the mean error of the drive's torque estimate "
             "and the mean bearing friction over the true gap rows, each relative to the mean true motor torque there "
             "(from the recording's truth file; `truth_gap_torque`). The estimator cannot know these errors beyond the "
             f"drive's declared bands: where the estimate is off by more than {100 * OFF / 2:g} % of the gap's torque "

@@ -348,7 +348,7 @@ def markdown(res: dict, command: str, commit: str) -> str:
     for (label, noise), s in sorted(res["totals"].items(), key=lambda kv: _key_order(kv[0])):
         if s["reasons"]:
             lines.append(f"* {label}, {noise}: " + "; ".join(f"{n}× {r}" for r, n in s["reasons"].items()))
-    lines += [""] + zoo.torque_truth_table([(MODEL, jsall)], "JointState 2^16")
+    lines += [""] + zoo.torque_truth_table([(MODEL, jsall)], "JointState 2^16 (clean and 30 dB)")
     if res.get("sweep"):
         lines += sweep_markdown(res["sweep"])
     lines += ["", "### Published windows more than 10 % off or whose 95 % interval misses the truth", "",
