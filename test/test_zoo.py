@@ -238,3 +238,13 @@ def test_torque_truth_reads_the_truth_file_and_splits_published_from_refused(tmp
                          gaps, files={"csv": str(tmp_path / "none.csv")})
     assert zoo.truth_gap_torque(other, 0) is None
     assert zoo.torque_truth_table([("ours", summarise([(other, res)]))], "CSV 2^16") == []
+
+
+def test_speed_fallback_table_follows_its_counts():
+    """The speed fit alone's table (gap_method speed, JointState 2^16) prints each model x noise row from its own
+    summary: published, errors, > 10 % off and coverage; nothing when the run measured no fallback."""
+    r = _rec(GAPS[:1])
+    s = summarise([(r, {"windows": [_win(200, 0, j1=1.16 * 1.15, ci=(1.2, 1.4))], "cut_off": []})])
+    lines = zoo.speed_fallback({"speed_fallback": {("vector drive", "clean"): s}})
+    assert "| vector drive | clean | 1/1 | 15.0 % / 15.0 % | 1 | 0/1 |" in lines
+    assert zoo.speed_fallback({}) == []

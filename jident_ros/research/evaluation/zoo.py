@@ -273,9 +273,11 @@ def _declared_text() -> str:
     return "each drive declared as a user would (`zoo.declared`; " + "; ".join(parts) + "; the rest the node's defaults)"
 
 
-def diagnose_one(zr: ZooRecording, fmt: str, system, declare: bool = True, extra: Optional[dict] = None) -> dict:
+def diagnose_one(zr: ZooRecording, fmt: str, system, declare: bool = True, extra: Optional[dict] = None,
+                 gap_method: Optional[str] = None) -> dict:
     """Windows of one file, each matched to the truth (``declare``: with the drive's :func:`declared` keys;
-    ``extra``: keys that replace or add to them, e.g. a drive variant's own friction)."""
+    ``extra``: keys that replace or add to them, e.g. a drive variant's own friction; ``gap_method``: the
+    diagnostic node's ``gap_method`` (default: its default, auto))."""
     keys = dict(declared(zr.model)) if declare else {}
     keys.update(extra or {})
     b1 = keys.pop("bearing_friction_nms_per_rad", system.motor.bearing_friction_nms_per_rad)
@@ -283,7 +285,8 @@ def diagnose_one(zr: ZooRecording, fmt: str, system, declare: bool = True, extra
                    motor=replace(system.motor, bearing_friction_nms_per_rad=b1))
     try:
         res = diagnose_samples(zr.files[fmt], system=sysr, image_method=False, detector="flank",
-                               gear_ratio=zr.gear_ratio, policy=default_policy(**keys))
+                               gear_ratio=zr.gear_ratio, policy=default_policy(**keys),
+                               **({"gap_method": gap_method} if gap_method else {}))
     except OfflineError as exc:
         return {"error": str(exc), "windows": [], "cut_off": []}
     ts = zr.sample_period_s
@@ -539,7 +542,7 @@ def run(out: Path, quick: bool = False, log=print, models=MODELS, declare: bool 
     recs = generate(out, quick, log, models)
     t_gen = time.perf_counter() - t0
     system = load_system_config()
-    groups = defaultdict(list)
+    groups, speed = defaultdict(list), defaultdict(list)
     n = 0
     for zr in recs:
         for label, fmt, counts in INPUTS:
@@ -552,6 +555,8 @@ def run(out: Path, quick: bool = False, log=print, models=MODELS, declare: bool 
             n += 1
             noise = "clean" if zr.snr_db is None else f"{zr.snr_db:g} dB"
             groups[(zr.model, label, zr.event, noise)].append((zr, res))
+            if label == SPEED_FALLBACK_INPUT:
+                speed[(zr.model, noise)].append((zr, diagnose_one(zr, fmt, system, declare, gap_method="speed")))
         if n and n % 40 == 0:
             log(f"diagnosed {n} files ({time.perf_counter() - t0:.0f} s)")
     table = {k: summarise(v) for k, v in groups.items()}
@@ -559,6 +564,7 @@ def run(out: Path, quick: bool = False, log=print, models=MODELS, declare: bool 
     for (model, label, _, noise), v in groups.items():
         totals[(model, label, noise)] += v
     return {"rows": table, "totals": {k: summarise(v) for k, v in totals.items()}, "files": n,
+            "speed_fallback": {k: summarise(v) for k, v in speed.items()},
             "recordings": len(recs), "generate_s": t_gen, "elapsed_s": time.perf_counter() - t0, "declared": declare}
 
 
@@ -651,6 +657,7 @@ def markdown(res: dict, command: str, commit: str) -> str:
              "simulator and the stress bench).", ""]
     lines += targets(res)
     lines += entry_offsets(res)
+    lines += speed_fallback(res)
     lines += ["### Totals per model × input × noise (all events)", "",
               "| model | input | noise " + HEAD, "|" + "---|" * 16]
     for (model, label, noise), s in sorted(res["totals"].items(), key=lambda kv: (MODELS.index(kv[0][0]),
@@ -674,6 +681,28 @@ def markdown(res: dict, command: str, commit: str) -> str:
 
 
 SPEED_EVENTS = ("speed step down", "speed reversal")
+#: the input the speed fit alone (``gap_method: speed``, a user's fallback without a1) is measured on
+SPEED_FALLBACK_INPUT = "JointState 2^16"
+
+
+def speed_fallback(res: dict) -> list:
+    """The speed fit alone on :data:`SPEED_FALLBACK_INPUT` per model x noise: what a user who sets
+    ``gap_method: speed`` gets (issue 20: that fallback covered the truth in 0 of 9 windows on the drive's lagging
+    speed feedback)."""
+    rows = res.get("speed_fallback") or {}
+    if not rows:
+        return []
+    lines = ["### The speed fit alone (`gap_method: speed`, a user's fallback without a1)", "",
+             f"{SPEED_FALLBACK_INPUT}, every event, the same windows and declarations as above, J1 from "
+             "the drive's speed feedback alone, ω1 = ω0 + (1/J1) ∫m_el dt − (τ/J1) m_el with the feedback's lag τ "
+             "fitted (`gap.speed_fit`).", "",
+             "| model | noise | published (traversal windows) | median / max abs error | > 10 % off | 95 % CI covers |",
+             "|---|---|---|---|---|---|"]
+    for (model, noise), s in sorted(rows.items(), key=lambda kv: (MODELS.index(kv[0][0]), kv[0][1])):
+        lines.append(f"| {model} | {noise} | {s.get('trav_published', 0)}/{s.get('trav_windows', 0)} | "
+                     f"{_e(s.get('err_median'))} / {_e(s.get('err_max'))} | {s.get('published_off', 0)} | "
+                     f"{s.get('covered', 0)}/{s.get('with_interval', 0)} |")
+    return lines + [""]
 
 
 def entry_offsets(res: dict) -> list:
