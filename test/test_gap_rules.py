@@ -256,6 +256,48 @@ def test_gap_only_drops_the_out_of_zone_end_samples():
     assert abs(capped["j1"] / 1.2 - 1) > 1e-3
 
 
+def test_gap_only_trims_a_detector_entry_early_by_the_change_point_search_span():
+    """A detector's entry 12 samples early (the zoo's second drive, --entry-shift -12: the 4-sample cap left contact
+    rows in the fit, J1 +14.7 % with an interval missing the truth): the a1 fit through estimate_inertia drops end
+    samples up to the change-point search span (25 rows at 2 kHz), so it fits the zone alone; the cap itself
+    follows the search span (none searched: GAP_ONLY_MAX_TRIM)."""
+    from dataclasses import replace as dc_replace
+
+    from jident_ros.identify.gap import GAP_ONLY_MAX_TRIM, gap_only_max_trim
+    from jident_ros.identify.gap_free import GapModel
+    assert gap_only_max_trim(GapModel(), 5e-4) == (25, 25)
+    assert gap_only_max_trim(dc_replace(GapModel(), changepoint_search_samples=0), 5e-4) == GAP_ONLY_MAX_TRIM
+    assert gap_only_max_trim(GapModel(), 2.5e-4) == (50, 50)                   # the same duration at 4 kHz
+    torque, acc, a, b = trimmed_window(n_pre=60)
+    r = 0.1
+    window = {"m_el": torque, "a1": acc * r}
+    g = estimate_inertia(window, a - 12, float("nan"), r, 5e-4, recontact_index=b)
+    assert g.method == "gap_only" and (g.fit_start, g.fit_end) == (a, b)
+    assert g.inertia_kgm2 == pytest.approx(1.2, rel=1e-9)
+    capped = gap_only_fit(torque, acc, a - 12, b)                               # the old cap: contact rows kept
+    assert capped["start"] == a - 8 and abs(capped["j1"] / 1.2 - 1) > 0.05
+
+
+def test_a1_fit_leaves_the_steady_entry_model_when_the_detector_entry_is_in_contact():
+    """A steady drive (m_el = m0, no acceleration: the contact carries the load) whose contact is lost at row a, the
+    torque then moving the motor alone: the joint ('acceleration') fit takes m_el steady up to the entry row. With
+    the detector's entry 8 rows early, 8 contact rows (a1 = 0 at m_el = m0) would be fitted as free motion: the a1
+    fit is then 'gap_only' over the rows where the motor equation holds, J1 exact; with the detector's entry right,
+    the joint fit as before."""
+    j1, r, n_pre, n_zone = 1.16, 0.1, 60, 40
+    tau = np.arange(n_zone) / n_zone
+    m_gap = 200.0 + 30.0 * tau ** 2 - 10.0 * tau ** 3
+    m_el = np.concatenate([np.full(n_pre, 200.0), m_gap, np.full(20, 150.0)])
+    a1 = np.concatenate([np.zeros(n_pre), r * m_gap / j1, np.full(20, -30.0)])
+    window = {"m_el": m_el, "a1": a1}
+    right = estimate_inertia(window, n_pre, float("nan"), r, 5e-4, recontact_index=n_pre + n_zone)
+    assert right.method == "acceleration" and right.inertia_kgm2 == pytest.approx(j1, rel=1e-6)
+    early = estimate_inertia(window, n_pre - 8, float("nan"), r, 5e-4, recontact_index=n_pre + n_zone)
+    assert early.method == "gap_only" and (early.fit_start, early.fit_end) == (n_pre, n_pre + n_zone)
+    assert early.inertia_kgm2 == pytest.approx(j1, rel=1e-9)
+    assert "not from the detector's rows" in early.model_choice
+
+
 def test_gap_only_model_error_is_the_change_with_one_more_sample_off_each_end():
     torque, acc, a, b = trimmed_window()
     rng = np.random.default_rng(12)

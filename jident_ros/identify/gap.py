@@ -144,7 +144,10 @@ STEADY_REL_TOL = 1e-4
 GAP_ONLY_TRIM_SIGMA = 3.0
 #: ... or this fraction of the median |m_el| over the gap (the floor for noise-free windows) ...
 GAP_ONLY_TRIM_REL = 0.005
-#: ... at most this many samples at the entry end and at the re-contact end.
+#: ... at most this many samples at the entry end and at the re-contact end (at 2 kHz), or the change-point search's
+#: span where that is the larger (:func:`gap_only_max_trim`): a detector's entry early by more than 4 samples left
+#: contact rows in the fit (the zoo's second drive with the entry moved 12 samples early: J1 +14.7 %, its interval
+#: missing the truth; `python -m jident_ros.research.evaluation.zoo --report --results - --entry-shift -12`).
 GAP_ONLY_MAX_TRIM = (4, 3)
 #: 'gap_only' fit: relative floor of the standard error (noise-free: the samples' own rounding).
 GAP_ONLY_REL_SE_FLOOR = 2e-4
@@ -459,6 +462,10 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
             test = pre_entry_steady(np.asarray(window["m_el"], float)[:start])
             method = "acceleration" if test.steady else "gap_only"
             choice = test.describe()
+            contact = _a1_contact_rows(window, start, end, wheel_radius_m, bearing_friction_nms_per_rad, model,
+                                       sample_period_s) if test.steady else ""
+            if contact:
+                method, choice = "gap_only", f"gap_only: {contact}"
         else:
             method = "angle" if "alpha1" in window else "speed"
             choice = f"{method}: no a1 in the window"
@@ -468,7 +475,8 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
         if "a1" not in window:
             raise NoGapError("method 'gap_only' needs a1 (use 'speed' with omega1)")
         mf = _net_torque(window, bearing_friction_nms_per_rad)
-        fit = gap_only_fit(mf, np.asarray(window["a1"], float) / wheel_radius_m, start, end)
+        fit = gap_only_fit(mf, np.asarray(window["a1"], float) / wheel_radius_m, start, end,
+                           max_trim=gap_only_max_trim(model, sample_period_s))
         j, se, res, dof, model_error = fit["j1"], fit["se"], fit["residual"], fit["dof"], fit["model_error"]
         fit_span = (fit["start"], fit["end"])
     elif method == "acceleration":
@@ -1110,6 +1118,33 @@ def _nonpositive_slope(j: float, torque: np.ndarray, acc: np.ndarray) -> str:
     return (f"gap fit gave a non-physical J1 = {j:.4g} (m_el against a1 over the gap: they are anti-correlated, "
             f"t = {t:.2g}; check the sign of m_el against a1 and the joint names, or a torque estimate smoothed or late "
             f"beyond torque_lag_max_s)")
+
+
+def _a1_contact_rows(window: dict, start: int, end: int, wheel_radius_m: float, b1: float, model: GapModel,
+                     sample_period_s: float) -> str:
+    """Why the joint ('acceleration') fit's premise fails at the detector's rows, or "": the motor equation
+    m_el − b1 ω1 = J1 a1/r (the 'gap_only' fit's in-zone trim) leaves more than GAP_ONLY_MAX_TRIM rows at an end of
+    [start, end) out of the zone, so the detector's entry or re-contact is off by more than the joint fit, which
+    takes m_el steady up to the entry row, can hold (the DOL drive with the entry 6-8 samples early: +9 % with an
+    interval missing the truth; `zoo.entry_shift`).  Then the 'gap_only' fit over its own rows is the a1 fit."""
+    try:
+        fit = gap_only_fit(_net_torque(window, b1), np.asarray(window["a1"], float) / wheel_radius_m, start, end,
+                           max_trim=gap_only_max_trim(model, sample_period_s))
+    except NoGapError:
+        return ""
+    early, late = fit["start"] - start, end - fit["end"]
+    if early <= GAP_ONLY_MAX_TRIM[0] and late <= GAP_ONLY_MAX_TRIM[1]:
+        return ""
+    return (f"the motor equation holds from row {fit['start']} to {fit['end']}, not from the detector's rows "
+            f"{start}..{end} (a contact still loaded at an end): no steady entry at the detector's row")
+
+
+def gap_only_max_trim(model: GapModel, sample_period_s: float) -> tuple:
+    """The 'gap_only' fit's most samples dropped at (the entry end, the re-contact end): GAP_ONLY_MAX_TRIM or the
+    change-point search span (GapModel.search_rows), whichever is larger: the same rows around the detector's
+    entry and re-contact that the angle fit searches for its change points."""
+    search = model.search_rows(sample_period_s)
+    return tuple(max(int(k), search) for k in GAP_ONLY_MAX_TRIM)
 
 
 def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,

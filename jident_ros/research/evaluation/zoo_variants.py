@@ -187,8 +187,8 @@ def variants() -> list:
         # no threshold was chosen on or after this one: a drive that differs from the base in many ways at once, as
         # a drive nobody modelled for us would, declared as its user would from its data sheet
         ("several at once", "k x0.6, J2 x1.5, motor Coulomb 2 N m and b1 0.03 N m s/rad (declared), speed bandwidth "
-         "2 pi 8 rad/s, speed filter 1 ms, R_R estimate x0.75 (its torque estimate 2.6-3.2 % off; declared torque_accuracy 0.03), 2^14 encoders, CiA 402 "
-         "units, the torque one sample late, sampling jitter 25 µs",
+         "2 pi 8 rad/s, speed filter 1 ms, R_R estimate x0.75 (its torque estimate 2.6-3.2 % off; declared "
+         "torque_accuracy 0.03), 2^14 encoders, CiA 402 units, the torque one sample late, sampling jitter 25 µs",
          _ctrl(_mech(b, stiffness_nm_per_rad=0.6 * m.stiffness_nm_per_rad, load_inertia_kgm2=1.5 * m.load_inertia_kgm2,
                      motor_coulomb_nm=2.0, motor_viscous_nms_per_rad=0.03),
                speed_bandwidth_rad_s=2 * np.pi * 8, speed_filter_s=1e-3, rotor_resistance_estimate_ratio=0.75),
