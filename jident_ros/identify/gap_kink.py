@@ -59,46 +59,36 @@ def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, 
     candidate's fit: :func:`_kink_solution`.  ``m``: the torque (N,), or one per candidate (candidates, N);
     ``bounds``: (lo, hi) per candidate, the rows each fits within [P, end) (the others weigh nothing:
     :func:`kink_best_j1`'s fits of several ends and torques at once; None: all)."""
-    rows = np.arange(P, end)
-    # Φ_s of every candidate: the double trapezoid from its row, as rows of one cumulative sum (zeros before the
-    # row: a sum that starts with zeros adds the same numbers in the same order as one started at the row)
     s_arr = np.asarray(entries)
     n = end - P
+    d = np.arange(P, end)[None, :] - s_arr[:, None]         # (candidate, row): the row counted from the entry row
     mm = m[..., P:end]
-    keep = np.arange(n - 1)[None, :] >= (s_arr - P)[:, None]
-    half = np.where(keep, 0.5 * (mm[..., 1:] + mm[..., :-1]), 0.0)
+    # Φ_s of every candidate: the double trapezoid from its row, as rows of one cumulative sum (zeros before the
+    # row: a sum that starts with zeros adds the same numbers in the same order as one started at the row).  Every
+    # candidate's trapezoid terms are zero before column j0 (the earliest entry row's, less one: an unloading
+    # coupling's first term), and so are its running sums there: the sums are formed from j0 on (the same numbers)
+    j0 = max(int(s_arr.min()) - P - 1, 0)
+    half = np.where(d[:, j0:-1] >= 0, 0.5 * (mm[..., j0 + 1:] + mm[..., j0:-1]), 0.0)
     if unload is not None:
-        # an unloading coupling: from the kink row on it still carries T0 (1 − w), T0 its steady torque (m_el's mean
-        # over the KINK_T0_ROWS rows before the kink: the drive was balanced there) and w rising from 0 at the kink
-        # row to 1 R rows after it; the motor's free torque is m_el − T0 (1 − w)
-        r_arr = np.asarray(unload)[:, None]
-        w = np.clip((rows[None, :] - s_arr[:, None]) / np.maximum(r_arr, 1), 0.0, 1.0)
-        csum = np.concatenate([np.zeros(mm.shape[:-1] + (1,)), np.cumsum(mm, axis=-1)], axis=-1)
-        k0 = np.minimum(KINK_T0_ROWS, s_arr - P)
-        if mm.ndim == 1:
-            t0 = (csum[s_arr - P] - csum[s_arr - P - k0]) / k0
-        else:
-            c_idx = np.arange(s_arr.size)
-            t0 = (csum[c_idx, s_arr - P] - csum[c_idx, s_arr - P - k0]) / k0
-        free = np.where(rows[None, :] >= s_arr[:, None], mm - t0[:, None] * (1.0 - w), 0.0)
-        half = np.where(r_arr > 0, 0.5 * (free[:, 1:] + free[:, :-1]), half)
-    c1 = np.zeros((s_arr.size, n))
+        _unloading_terms(half, mm, d, s_arr - P, np.asarray(unload), j0)
+    c1 = np.zeros((s_arr.size, n - j0))
     half.cumsum(axis=1, out=c1[:, 1:])
     c1 *= ts
     phi = np.zeros((s_arr.size, n))
-    (0.5 * (c1[:, 1:] + c1[:, :-1])).cumsum(axis=1, out=phi[:, 1:])
-    phi *= ts
+    (0.5 * (c1[:, 1:] + c1[:, :-1])).cumsum(axis=1, out=phi[:, j0 + 1:])
+    phi[:, j0 + 1:] *= ts
     hi = np.full(s_arr.size, end) if bounds is None else np.asarray(bounds[1])
-    u = (rows[None, :] - s_arr[:, None]) * ts / np.maximum((hi - s_arr) * ts, ts)[:, None]
+    u = d * ts / np.maximum((hi - s_arr) * ts, ts)[:, None]
     n_rows = np.full(s_arr.size, float(n))
     y_sum = np.full(s_arr.size, y.sum())
     if bounds is not None:
+        rows = np.arange(P, end)
         inside = (rows[None, :] >= np.asarray(bounds[0])[:, None]) & (rows[None, :] < hi[:, None])
         phi = np.where(inside, phi, 0.0)
         u = np.where(inside, u, 0.0)
         n_rows = inside.sum(axis=1).astype(float)
         y_sum = np.where(inside, y[None, :], 0.0).sum(axis=1)
-    scales = np.maximum(np.abs(phi).max(axis=1), 1e-300)
+    scales = np.maximum(np.abs(phi[:, j0:]).max(axis=1), 1e-300)
     f = phi / scales[:, None]
     # the normal equations of the design (1, u, f) per candidate: XᵀX from the columns' sums and products
     g = np.empty((s_arr.size, 3, 3))
@@ -115,6 +105,41 @@ def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, 
     if bounds is not None:
         res = np.where(inside, res, 0.0)
     return np.einsum("ij,ij->i", res, res), coef[:, 2] / scales, u, f, scales
+
+
+def _unloading_terms(half: np.ndarray, mm: np.ndarray, d: np.ndarray, s_rel: np.ndarray, r_arr: np.ndarray,
+                     j0: int) -> None:
+    """:func:`_kink_candidates`' trapezoid terms (``half``, its columns from ``j0`` on) of the candidates whose
+    coupling unloads over R = ``r_arr`` > 0 rows, written in place.  From the kink row on the coupling still carries
+    T0 (1 − w), T0 its steady torque (m_el's mean over the KINK_T0_ROWS rows before the kink: the drive was balanced
+    there) and w rising from 0 at the kink row to 1 R rows after it; the motor's free torque is m_el − T0 (1 − w), zero
+    before the kink row.  Only the R + 1 terms from the one before the kink row differ from the rigid coupling's:
+    from R rows after it on, m_el − T0 · 0 is m_el (``test_gap_kink_unload``: the full (candidate, row) computation)."""
+    idx = np.flatnonzero(r_arr > 0)
+    if not idx.size:
+        return
+    s_u, r_u = s_rel[idx], r_arr[idx]
+    k0 = np.minimum(KINK_T0_ROWS, s_u)
+    two_d = mm.ndim > 1
+    top = int(s_u.max())
+    csum = np.zeros(mm.shape[:-1] + (top + 1,))
+    np.cumsum(mm[..., :top], axis=-1, out=csum[..., 1:])
+    if two_d:
+        t0 = (csum[idx, s_u] - csum[idx, s_u - k0]) / k0
+    else:
+        t0 = (csum[s_u] - csum[s_u - k0]) / k0
+    # the terms j = s − 1 .. s + R − 1 of each (R + 1 of them), over the rows j and j + 1
+    width = r_u + 1
+    c_of = np.repeat(np.arange(idx.size), width)
+    j = s_u[c_of] - 1 + (np.arange(int(width.sum())) - np.repeat(np.cumsum(width) - width, width))
+    ci = idx[c_of]
+    rr = r_u[c_of][:, None]
+    jj = np.stack([j, j + 1], axis=1)                                   # (term, 2): its two rows
+    dd = d[ci[:, None], jj]
+    w = np.clip(dd / np.maximum(rr, 1), 0.0, 1.0)
+    m2 = mm[ci[:, None], jj] if two_d else mm[jj]
+    free = np.where(dd >= 0, m2 - t0[c_of][:, None] * (1.0 - w), 0.0)
+    half[ci, j - j0] = 0.5 * (free[:, 1] + free[:, 0])
 
 
 def _kink_solution(u: np.ndarray, f: np.ndarray, y: np.ndarray, scale: float) -> tuple:
@@ -297,11 +322,20 @@ def kink_terms(fit: dict, coulomb_max_nm: float = 0.0, torque_offset_nm: float =
 
 def kink_lag_variants(torque: np.ndarray, sample_period_s: float, pairs, end: int, torque_lag_s: float) -> list:
     """:func:`kink_best_j1`'s variants of :func:`kink_lag_spread`: the torque moved by − and + ``torque_lag_s``
-    (linear interpolation between samples), each over ``pairs`` to ``end``."""
+    (linear interpolation between samples), each over ``pairs`` to ``end``.  Only the rows a fit over those pairs
+    reads are moved (from KINK_PRE_SAMPLES before the earliest pair's entry row to ``end``: np.interp's value at a row
+    is its own, the same numbers as the whole array's); the rows outside them are NaN."""
     m = np.asarray(torque, float)
     t = np.arange(m.size, dtype=float)
     k = float(torque_lag_s) / float(sample_period_s)
-    return [(np.interp(t + shift, t, m), pairs, end) for shift in (-k, k)]
+    lo = max(0, min((int(x) for x, _ in pairs), default=0) - rate_samples(KINK_PRE_SAMPLES, float(sample_period_s)))
+    hi = max(lo, min(int(end), m.size))
+    out = []
+    for shift in (-k, k):
+        moved = np.full(m.size, np.nan)
+        moved[lo:hi] = np.interp(t[lo:hi] + shift, t, m)
+        out.append((moved, pairs, end))
+    return out
 
 
 def kink_lag_spread(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, pairs, end: int, j1: float,
