@@ -61,7 +61,8 @@ def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, 
     :func:`kink_best_j1`'s fits of several ends and torques at once; None: all)."""
     s_arr = np.asarray(entries)
     n = end - P
-    d = np.arange(P, end)[None, :] - s_arr[:, None]         # (candidate, row): the row counted from the entry row
+    # (candidate, row): the row counted from the entry row (whole numbers as floats: exact)
+    d = np.arange(P, end, dtype=float)[None, :] - s_arr[:, None]
     mm = m[..., P:end]
     # Φ_s of every candidate: the double trapezoid from its row, as rows of one cumulative sum (zeros before the
     # row: a sum that starts with zeros adds the same numbers in the same order as one started at the row).  Every
@@ -107,6 +108,9 @@ def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, 
     return np.einsum("ij,ij->i", res, res), coef[:, 2] / scales, u, f, scales
 
 
+_TERM_ROWS = np.array([0, 1])
+
+
 def _unloading_terms(half: np.ndarray, mm: np.ndarray, d: np.ndarray, s_rel: np.ndarray, r_arr: np.ndarray,
                      j0: int) -> None:
     """:func:`_kink_candidates`' trapezoid terms (``half``, its columns from ``j0`` on) of the candidates whose
@@ -122,11 +126,15 @@ def _unloading_terms(half: np.ndarray, mm: np.ndarray, d: np.ndarray, s_rel: np.
     k0 = np.minimum(KINK_T0_ROWS, s_u)
     two_d = mm.ndim > 1
     top = int(s_u.max())
-    csum = np.zeros(mm.shape[:-1] + (top + 1,))
-    np.cumsum(mm[..., :top], axis=-1, out=csum[..., 1:])
+    # T0 from the running sum of m_el from the window's first row (each candidate's row of it, when 2-D)
     if two_d:
-        t0 = (csum[idx, s_u] - csum[idx, s_u - k0]) / k0
+        csum = np.zeros((idx.size, top + 1))
+        np.cumsum(mm[idx, :top], axis=-1, out=csum[:, 1:])
+        c_ix = np.arange(idx.size)
+        t0 = (csum[c_ix, s_u] - csum[c_ix, s_u - k0]) / k0
     else:
+        csum = np.zeros(top + 1)
+        np.cumsum(mm[:top], out=csum[1:])
         t0 = (csum[s_u] - csum[s_u - k0]) / k0
     # the terms j = s − 1 .. s + R − 1 of each (R + 1 of them), over the rows j and j + 1
     width = r_u + 1
@@ -134,7 +142,7 @@ def _unloading_terms(half: np.ndarray, mm: np.ndarray, d: np.ndarray, s_rel: np.
     j = s_u[c_of] - 1 + (np.arange(int(width.sum())) - np.repeat(np.cumsum(width) - width, width))
     ci = idx[c_of]
     rr = r_u[c_of][:, None]
-    jj = np.stack([j, j + 1], axis=1)                                   # (term, 2): its two rows
+    jj = j[:, None] + _TERM_ROWS                                        # (term, 2): its two rows
     dd = d[ci[:, None], jj]
     w = np.clip(dd / np.maximum(rr, 1), 0.0, 1.0)
     m2 = mm[ci[:, None], jj] if two_d else mm[jj]
@@ -145,7 +153,10 @@ def _unloading_terms(half: np.ndarray, mm: np.ndarray, d: np.ndarray, s_rel: np.
 def _kink_solution(u: np.ndarray, f: np.ndarray, y: np.ndarray, scale: float) -> tuple:
     """One candidate's least-squares fit from its design (1, ``u``, ``f``) by (XᵀX)⁻¹Xᵀ (the solution whose row 2 the
     standard error needs): (1/J1, residual, row 2 of (XᵀX)⁻¹Xᵀ)."""
-    X = np.column_stack([np.ones(u.size), u, f])
+    X = np.empty((u.size, 3))                 # np.column_stack([np.ones(u.size), u, f]), written in place
+    X[:, 0] = 1.0
+    X[:, 1] = u
+    X[:, 2] = f
     p = lapack.solve(X.T @ X, X.T)
     coef = p @ y
     return float(coef[2]) / scale, y - X @ coef, p[2]
@@ -181,7 +192,8 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
 def _kink_pairs(pairs, end: int, ts: float) -> tuple:
     """The (entry row, unloading rows) candidates that leave KINK_MIN_GAP_SAMPLES after the unloading, sorted; the
     first row fitted (KINK_PRE_SAMPLES before the earliest entry); why no fit can be made ('' when one can)."""
-    pairs = sorted({(int(x), int(r)) for x, r in pairs if end - int(x) - int(r) >= KINK_MIN_GAP_SAMPLES})
+    last = end - KINK_MIN_GAP_SAMPLES
+    pairs = sorted({(int(x), int(r)) for x, r in pairs if x + r <= last})
     if not pairs:
         return pairs, 0, f"kink fit: fewer than {KINK_MIN_GAP_SAMPLES} samples after every candidate entry"
     P = max(0, pairs[0][0] - rate_samples(KINK_PRE_SAMPLES, ts))
@@ -210,18 +222,25 @@ def kink_best_j1(alpha1: np.ndarray, sample_period_s: float, variants) -> list:
         return out
     P0, E = min(g[3] for g in groups), max(g[4] for g in groups)
     # every candidate: (variant, entry row, unloading rows, first row, end row), its rows counted from P0
-    cand = np.array([(gi, s_, r_, g[3], g[4]) for gi, g in enumerate(groups) for s_, r_ in g[2]])
-    gi_arr = cand[:, 0]
+    # (each variant's candidates one after the other)
+    cand = np.array([(s_, r_, g[3], g[4]) for g in groups for s_, r_ in g[2]])
+    sizes = [len(g[2]) for g in groups]
     first = groups[0][1]
     # one torque for all (the trims'), or each candidate its variant's (the lag's moved ones)
-    m = (first[P0:E] if all(g[1] is first for g in groups)
-         else np.stack([g[1][P0:E] for g in groups])[gi_arr])
-    rss, kappa_all, _, _, _ = _kink_candidates(m, ts, cand[:, 1] - P0, 0, E - P0, a[P0:E] - a[P0],
-                                               cand[:, 2] if cand[:, 2].any() else None,
-                                               (cand[:, 3] - P0, cand[:, 4] - P0))
-    for gi, (v, *_) in enumerate(groups):
-        idx = np.flatnonzero(gi_arr == gi)
-        kappa = float(kappa_all[idx[np.argmin(rss[idx])]])
+    if all(g[1] is first for g in groups):
+        m = first[P0:E]
+    else:
+        m = np.empty((len(groups), E - P0))
+        for gi, g in enumerate(groups):
+            m[gi] = g[1][P0:E]
+        m = m[np.repeat(np.arange(len(groups)), sizes)]
+    rss, kappa_all, _, _, _ = _kink_candidates(m, ts, cand[:, 0] - P0, 0, E - P0, a[P0:E] - a[P0],
+                                               cand[:, 1] if cand[:, 1].any() else None,
+                                               (cand[:, 2] - P0, cand[:, 3] - P0))
+    lo = 0
+    for (v, *_), size in zip(groups, sizes):
+        kappa = float(kappa_all[lo + int(np.argmin(rss[lo:lo + size]))])
+        lo += size
         out[v] = 1.0 / kappa if kappa > 0 else f"kink fit: non-physical 1/J1 = {kappa:.4g}"
     return out
 
