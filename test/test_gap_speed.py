@@ -307,3 +307,30 @@ def test_lapack_fast_path_checks_itself_and_falls_back(monkeypatch):
     monkeypatch.setattr(lapack, "_SOLVE1", lambda *x, **k: (_ for _ in ()).throw(TypeError("moved")), raising=False)
     monkeypatch.setattr(lapack, "_gufuncs", object())
     assert not lapack._self_check()                       # a moved calling convention is caught by the probe
+
+
+def test_einsum_without_its_wrapper_and_the_prebuilt_error_state():
+    """gap_numerics._einsum (numpy's c_einsum, what np.einsum calls with optimize=False) gives np.einsum's numbers bit for
+    bit on the gap stage's subscripts; identify.lapack's prebuilt floating-point error state raises LinAlgError on a
+    singular matrix as np.errstate(call=...) did and leaves the caller's error state as it was, after a raise too."""
+    from jident_ros.identify import lapack
+    rng = np.random.default_rng(5)
+    X, A, D = rng.standard_normal((70, 4)), rng.standard_normal((30, 4, 4)), rng.standard_normal((30, 4))
+    xt = rng.standard_normal((30, 2, 4))
+    for sub, ops in (("ki,kj->kij", (X, X)), ("kij,kj->ki", (A, D)), ("ki,ki->k", (D, D)),
+                     ("ckp,cp->ck", (xt, D)), ("ckq,ckq->ck", (xt, xt)), ("ij,ij->i", (X, X))):
+        assert np.array_equal(gap_numerics._einsum(sub, *ops), np.einsum(sub, *ops))
+    out_a, out_b = np.empty(70), np.empty(70)
+    gap_numerics._einsum("ij,ij->i", X, X, out=out_a)
+    np.einsum("ij,ij->i", X, X, out=out_b)
+    assert np.array_equal(out_a, out_b)
+    before = np.geterr()
+    with np.errstate(divide="raise"):
+        inner = np.geterr()
+        with pytest.raises(np.linalg.LinAlgError):
+            lapack.solve(np.zeros((3, 3)), np.ones(3))
+        with pytest.raises(np.linalg.LinAlgError):
+            lapack.inv(np.zeros((2, 3, 3)))
+        lapack.lstsq(np.ones((4, 2)), np.ones(4))
+        assert np.geterr() == inner
+    assert np.geterr() == before

@@ -45,6 +45,7 @@ from jident_ros.identify.gap_numerics import (
     _ar1_inflation,
     _cumtrapz,
     _double_trapz_adjoint,
+    _einsum,
     _gradient_sign,
     _quantum,
     _robust_noise,
@@ -269,12 +270,12 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             c = lo_rows.size
             D = sums[np.concatenate([hi_rows, ihi])] - sums[np.concatenate([lo_rows, ilo])]
             Ainv = _sym3_inverse(D[:, :6])
-            sol = np.einsum("kij,kj->ki", Ainv, D[:, 6:9])
-            rss = D[:c, 9] - np.einsum("ki,ki->k", D[:c, 6:9], sol[:c])
+            sol = _einsum("kij,kj->ki", Ainv, D[:, 6:9])
+            rss = D[:c, 9] - _einsum("ki,ki->k", D[:c, 6:9], sol[:c])
             ok = rss <= chi_bound[hi_rows - lo_rows]
             xt = Xs[test]                                             # (cand, k_f, p)
-            pred = np.einsum("ckp,cp->ck", xt, sol[c:])
-            lev = np.einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)          # x A⁻¹ xᵀ of each test row
+            pred = _einsum("ckp,cp->ck", xt, sol[c:])
+            lev = _einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)          # x A⁻¹ xᵀ of each test row
             stat = ((r[test] - pred) ** 2 / (s2 * (1.0 + lev))).sum(axis=1)
             bad = np.flatnonzero(~(ok & ((ihi - ilo < p + 2) | (stat <= _CHI2_FORECAST))))
             return int(bad[0]) if bad.size else None
@@ -378,7 +379,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         # running sums as three separate cumsums
         Z = np.empty((n + 1, p * p + 2 * p))
         Z[0] = 0.0
-        np.einsum("ki,kj->kij", X, X, out=Z[1:, :p * p].reshape(n, p, p))
+        _einsum("ki,kj->kij", X, X, out=Z[1:, :p * p].reshape(n, p, p))
         np.multiply(X, y[i:j, None], out=Z[1:, p * p:p * p + p])
         np.multiply(X, Cc[i:j, None], out=Z[1:, p * p + p:])
         Z[1:].cumsum(axis=0, out=Z[1:])

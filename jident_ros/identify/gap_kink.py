@@ -20,6 +20,7 @@ from jident_ros.identify.gap_numerics import (
     _ar1_inflation,
     _cumtrapz,
     _double_trapz_adjoint,
+    _einsum,
     _quantum,
     _robust_noise,
 )
@@ -113,7 +114,7 @@ def _kink_candidates(m: np.ndarray, ts: float, entries, P: int, end: int, y: np.
         W[:, :2] = t[:, None] ** _POWERS
         W[:, 2] = y_perp
         np.matmul(ph, W, out=S[c0:c0 + rows, :3])
-        np.einsum("ij,ij->i", ph, ph, out=S[c0:c0 + rows, 3])
+        _einsum("ij,ij->i", ph, ph, out=S[c0:c0 + rows, 3])
         per_run.append((hi - lo, st, float(y_perp @ y_perp)))
         c0 += rows
     k, st, yy = np.repeat(np.array(per_run), [r[0] for r in runs], axis=0).T
