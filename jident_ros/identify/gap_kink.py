@@ -237,7 +237,8 @@ def _kink_pairs(pairs, end: int, ts: float) -> tuple:
     """The (entry row, unloading rows) candidates that leave KINK_MIN_GAP_SAMPLES after the unloading, sorted; the
     first row fitted (KINK_PRE_SAMPLES before the earliest entry); why no fit can be made ('' when one can)."""
     last = end - KINK_MIN_GAP_SAMPLES
-    pairs = sorted({(int(x), int(r)) for x, r in pairs if x + r <= last})
+    pairs = sorted({p if type(p) is tuple and type(p[0]) is int is type(p[1]) else (int(p[0]), int(p[1]))
+                    for p in pairs if p[0] + p[1] <= last})
     if not pairs:
         return pairs, 0, f"kink fit: fewer than {KINK_MIN_GAP_SAMPLES} samples after every candidate entry"
     P = max(0, pairs[0][0] - rate_samples(KINK_PRE_SAMPLES, ts))
