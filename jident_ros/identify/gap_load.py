@@ -24,7 +24,7 @@ import numpy as np
 
 from jident_ros.identify import lapack
 from jident_ros.identify.distributions import normal_isf
-from jident_ros.identify.gap_free import _FORECAST_ROWS, CHANGEPOINT_FORECAST_SAMPLES, FREE_MIN_SAMPLES
+from jident_ros.identify.gap_free import _FORECAST_ROWS, CHANGEPOINT_FORECAST_SAMPLES, FREE_MIN_SAMPLES, _chi2_bounds
 from jident_ros.identify.gap_free import _chi2_upper as _chi2_upper_at
 from jident_ros.identify.gap_numerics import _einsum, _quantum, _robust_noise
 
@@ -89,7 +89,7 @@ class _Scan:
         n, p = X.shape
         c0 = lapack.lstsq(X[core[0]:core[1]], y[core[0]:core[1]])
         self.X, self.r, self.s2, self.p, self.n = X, y - X @ c0, s2, p, n
-        self.chi_bound = s2 * _chi2_upper(np.maximum(np.arange(n + 1) - p, 1))
+        self.chi_bound = s2 * _chi2_bounds(n, p, _Z_LOAD)
         Z = np.zeros((n + 1, p * p + p + 1))       # cumulative x xᵀ, x r and r² (a zero row in front)
         Z[1:, :p * p] = _einsum("ki,kj->kij", X, X).reshape(n, p * p)
         Z[1:, p * p:p * p + p] = X * self.r[:, None]
