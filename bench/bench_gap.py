@@ -5,10 +5,12 @@ light-load reversal (evaluation/gap_stress.py).
 
     nice -n 10 .venv/bin/python bench/bench_gap.py [--repeats 200]
 
-Prints the commit measured (with "+ uncommitted changes" when jident_ros/ differs from it) and the machine's load
-average before and after, then the wall-clock median and 90th percentile and the CPU-time median per window, ms.  On a
-loaded machine the CPU time is the closer measure of the idle cost (the wall clock includes waiting for a core); a
-load above the core count still slows it (shared caches, frequency).
+Prints the commit measured (with "+ uncommitted changes" when jident_ros/ differs from it) and the checkout it is
+imported from (a venv with an editable install imports its own checkout, not the current directory's: run another
+worktree's with ``PYTHONPATH=.``), the machine's load average before and after, then the wall-clock median and 90th
+percentile and the CPU-time median per window, ms.  On a loaded machine the CPU time is the closer measure of the
+idle cost (the wall clock includes waiting for a core); a load above the core count still slows it (shared caches,
+frequency).
 """
 import argparse
 import os
@@ -38,7 +40,7 @@ def commit() -> str:
                                text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown (not a git checkout)"
-    return head + (" + uncommitted changes in jident_ros/" if dirty else "")
+    return head + (" + uncommitted changes in jident_ros/" if dirty else "") + f" (jident_ros from {repo})"
 
 
 def load() -> str:
