@@ -310,15 +310,15 @@ def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, 
     y = a[P:end] - a[entries[0]]
     unload = [p_[1] for p_ in pairs]
     rss_all, kappa_all, phi = _kink_candidates(m, ts, entries, P, end, y, unload if any(unload) else None)
-    rss_list, kappa_list = rss_all.tolist(), kappa_all.tolist()
     k = int(np.argmin(rss_all))
     # the chosen candidate's fit by (XᵀX)⁻¹Xᵀ on its design (1, u, Φ/max|Φ|), u the time from its entry row over the
     # rows after it: its 1/J1, residual and the solution's row 2 (the standard error's)
     scale_k = np.maximum(np.abs(phi[k]).max(), 1e-300)
     u_k = (np.arange(P, end, dtype=float) - entries[k]) * ts / max((end - entries[k]) * ts, ts)
-    kappa_list[k], res_k, row_k = _kink_solution(u_k, phi[k] / scale_k, y, scale_k)
-    rss_list[k] = rss_min = float(res_k @ res_k)
-    kappa, s_best = kappa_list[k], entries[k]
+    kappa, res_k, row_k = _kink_solution(u_k, phi[k] / scale_k, y, scale_k)
+    rss_all[k] = rss_min = float(res_k @ res_k)
+    kappa_all[k] = kappa
+    s_best = entries[k]
     if not kappa > 0:
         raise FreeFitError(f"kink fit: non-physical 1/J1 = {kappa:.4g}")
     dof = end - P - 3
@@ -336,11 +336,14 @@ def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, 
         raise FreeFitError(f"kink fit: the speed before the entry is not constant (t = {t_quad:.3g} for a t² term "
                            f"over {n_pre} samples)")
     j1 = 1.0 / kappa
-    plausible = [q_ for q_ in range(len(pairs)) if rss_list[q_] - rss_min <= KINK_CHI2_1 * s2 and kappa_list[q_] > 0]
+    plausible = np.flatnonzero((rss_all - rss_min <= KINK_CHI2_1 * s2) & (kappa_all > 0)).tolist()
+    kappa_list = kappa_all[plausible].tolist()
+    if k in plausible:                              # the chosen candidate's own κ (its type: np.float64) as before
+        kappa_list[plausible.index(k)] = kappa
     fit = {"j1": j1, "start": int(s_best), "end": int(end), "residual": res_k, "dof": dof,
            "plausible_entries": sorted({entries[q_] for q_ in plausible}), "unload_rows": int(unload[k]),
            "plausible": [pairs[q_] for q_ in plausible],
-           "_state": (m, ts, P, kappa, row_k / scale_k, s2, [kappa_list[q_] for q_ in plausible], a[P:end])}
+           "_state": (m, ts, P, kappa, row_k / scale_k, s2, kappa_list, a[P:end])}
     return fit
 
 
