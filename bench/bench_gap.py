@@ -5,10 +5,13 @@ light-load reversal (evaluation/gap_stress.py).
 
     nice -n 10 .venv/bin/python bench/bench_gap.py [--repeats 200]
 
-Prints the commit measured (with "+ uncommitted changes" when jident_ros/ differs from it) and the machine's load
-average before and after, then the wall-clock median and 90th percentile and the CPU-time median per window, ms.  On a
-loaded machine the CPU time is the closer measure of the idle cost (the wall clock includes waiting for a core); a
-load above the core count still slows it (shared caches, frequency).
+Prints the commit measured (with "+ uncommitted changes" when jident_ros/ differs from it) and the checkout it is
+imported from (a venv with an editable install imports its own checkout, not the current directory's: run another
+worktree's with ``PYTHONPATH=.``), the machine's load average before and after, then the wall-clock median and 90th
+percentile and the CPU-time median and 10th percentile per window, ms.  On a loaded machine the CPU time is the
+closer measure of the idle cost (the wall clock includes waiting for a core); a load above the core count still slows
+it (shared caches, frequency), and its 10th percentile (the least disturbed runs) moves less from run to run than its
+median.
 """
 import argparse
 import os
@@ -38,7 +41,7 @@ def commit() -> str:
                                text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown (not a git checkout)"
-    return head + (" + uncommitted changes in jident_ros/" if dirty else "")
+    return head + (" + uncommitted changes in jident_ros/" if dirty else "") + f" (jident_ros from {repo})"
 
 
 def load() -> str:
@@ -87,8 +90,8 @@ def main(argv=None):
             times, cpu = _timed(a.repeats, lambda: estimate_inertia(w, e0, 0.005, 0.08, 5e-4, recontact_index=r0,
                                                                     model=model))
             print(f"{event:>14} {label:<26} gap {rec['recontact'] - rec['entry']:>3} samples: wall median "
-                  f"{np.median(times):.3f} ms, p90 {np.percentile(times, 90):.3f} ms; CPU median {np.median(cpu):.3f} ms "
-                  f"({a.repeats} runs)")
+                  f"{np.median(times):.3f} ms, p90 {np.percentile(times, 90):.3f} ms; CPU median {np.median(cpu):.3f} ms, "
+                  f"p10 {np.percentile(cpu, 10):.3f} ms ({a.repeats} runs)")
     # a drive steady before the entry (the steady-entry fit), with the node's defaults for a drive that declares
     # nothing (a typical drive's 1 ms lag, the coupling's release searched up to 4 ms) and with neither
     w = _steady_entry_window()
@@ -99,7 +102,8 @@ def main(argv=None):
         times, cpu = _timed(a.repeats, lambda: estimate_inertia(d, w.entry_index, w.backlash_width_m, w.wheel_radius_m,
                                                                 5e-4, recontact_index=w.recontact_index, model=m))
         print(f"{'steady entry':>14} {label:<26} wall median {np.median(times):.3f} ms, p90 "
-              f"{np.percentile(times, 90):.3f} ms; CPU median {np.median(cpu):.3f} ms ({a.repeats} runs)")
+              f"{np.percentile(times, 90):.3f} ms; CPU median {np.median(cpu):.3f} ms, p10 "
+              f"{np.percentile(cpu, 10):.3f} ms ({a.repeats} runs)")
     print(f"after: {load()}")
 
 

@@ -1,6 +1,7 @@
 """Every gap estimate, as text, to compare two versions of the gap stage bit for bit (a speed change must change none).
 
     .venv/bin/python bench/gap_outputs.py stress OUT.txt            # the stress bench's windows (~10 s)
+    .venv/bin/python bench/gap_outputs.py steady OUT.txt            # steady entries, the node's defaults (~20 s)
     .venv/bin/python bench/gap_outputs.py zoo OUT.txt [zoo options]   # every estimate_inertia call of the zoo report
 
 ``stress``: 24 stress-bench recordings (gap_stress.simulate: speed step, speed reversal, light and heavy load reversal;
@@ -8,6 +9,11 @@ J1 1.16 and 1.073; clean, 30 dB, 2^13 and 2^16 counts; cached in out/gap_outputs
 with an Imu, the detector's rows moved by six offsets, three drive declarations (GapModel), with and without bearing
 friction, every fit of ``estimate_inertia`` (the model choice, 'angle', 'acceleration', 'gap_only'), and the free and
 kink fits alone: one line per call, the GapEstimate's repr (every float to the last bit) or the refusal's text.
+``steady``: our simulator's slip as a JointState drive records it (bench_gap.py's steady-entry window: raw 2^16 and
+2^13 encoders, clean and 30 dB, the flank detector's windows; J1 0.9, 1.131 and 1.4 kg m^2, two backlash widths),
+the detector's entry moved by -2..+2 rows, five drive declarations (the node's defaults for a drive that declares
+nothing, lag and release alone, none, the offset and drift bands): the steady-entry fit with its unloading and lag
+refits, which the stress windows never take.
 ``zoo``: runs ``python -m jident_ros.research.evaluation.zoo`` with the options after OUT (e.g. ``--report --results -
 --json out/zoo.json``; recordings cached under out/zoo) and writes one line per estimate_inertia call: a hash of the
 window, the arguments, the result or the refusal.  Compare two runs with ``cmp``: run the old version with its tree on
@@ -87,6 +93,45 @@ def stress(out_path: str) -> None:
     print(f"{len(recs)} recordings, {len(lines)} results -> {out_path}")
 
 
+def steady(out_path: str) -> None:
+    from jident_ros.config import load_system_config
+    from jident_ros.identify.gap import NoGapError, estimate_inertia
+    from jident_ros.identify.gap_free import GapModel
+    from jident_ros.identify.monitor import DetectorConfig, make_detector
+    from jident_ros.research.evaluation.raw_inputs import raw_recordings, run_detector, without
+    system = load_system_config()
+    models = [GapModel(torque_accuracy=0.03, coulomb_friction_max_nm=1.5, torque_lag_s=1e-3, coupling_release_s=4e-3),
+              GapModel(torque_lag_s=5e-4, coupling_release_s=2e-3), GapModel(coupling_release_s=4e-3),
+              GapModel(torque_accuracy=0.03, coulomb_friction_max_nm=1.5),
+              GapModel(torque_accuracy=0.02, coulomb_friction_max_nm=0.5, torque_offset_nm=0.5, torque_lag_s=1e-3,
+                       coupling_release_s=3e-3)]
+    lines, n_win = [], 0
+    for counts, snr in ((65536, None), (8192, None), (65536, 30.0)):
+        for seed in (12, 13):
+            recs = raw_recordings(system, [0.9, 1.131, 1.4], [0.003, 0.0075], steady_s=0.2, seed=seed, counts=counts,
+                                  snr_db=snr)
+            for ri, rec in enumerate(recs):
+                rec = without(rec, ("a1", "a2", "v2"))
+                det = make_detector(system, DetectorConfig("flank", channels=rec.channels,
+                                                           encoder_counts_per_rev=counts))
+                for w in [e.window for e in run_detector(det, rec) if e.kind == "window"][:1]:
+                    n_win += 1
+                    d = w.as_dict()
+                    for off in (-2, -1, 0, 1, 2):
+                        for mi, model in enumerate(models):
+                            tag = f"c{counts} snr={snr} s{seed} r{ri} off={off} m{mi}"
+                            try:
+                                g = estimate_inertia(d, w.entry_index + off, w.backlash_width_m, w.wheel_radius_m,
+                                                     w.sample_period_s, recontact_index=w.recontact_index,
+                                                     model=model)
+                                lines.append(f"{tag} -> {g!r}")
+                            except NoGapError as exc:
+                                lines.append(f"{tag} -> NoGapError {exc}")
+    Path(out_path).write_text("\n".join(lines) + "\n")
+    print(f"{n_win} windows, {len(lines)} results ({sum('steady entry' in x for x in lines)} steady entries) "
+          f"-> {out_path}")
+
+
 def zoo(out_path: str, argv: list) -> int:
     import jident_ros.identify.gap as gap
     real = gap.estimate_inertia
@@ -115,12 +160,15 @@ def zoo(out_path: str, argv: list) -> int:
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    if len(argv) < 2 or argv[0] not in ("stress", "zoo"):
-        print(__doc__.strip().splitlines()[0] + "\nusage: gap_outputs.py stress OUT.txt | zoo OUT.txt [zoo options]",
+    if len(argv) < 2 or argv[0] not in ("stress", "steady", "zoo"):
+        print(__doc__.strip().splitlines()[0] + "\nusage: gap_outputs.py stress OUT.txt | steady OUT.txt | zoo OUT.txt [zoo options]",
               file=sys.stderr)
         return 2
     if argv[0] == "stress":
         stress(argv[1])
+        return 0
+    if argv[0] == "steady":
+        steady(argv[1])
         return 0
     return zoo(argv[1], argv[2:])
 

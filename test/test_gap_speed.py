@@ -307,3 +307,89 @@ def test_lapack_fast_path_checks_itself_and_falls_back(monkeypatch):
     monkeypatch.setattr(lapack, "_SOLVE1", lambda *x, **k: (_ for _ in ()).throw(TypeError("moved")), raising=False)
     monkeypatch.setattr(lapack, "_gufuncs", object())
     assert not lapack._self_check()                       # a moved calling convention is caught by the probe
+
+
+def test_einsum_without_its_wrapper_and_the_prebuilt_error_state():
+    """gap_numerics._einsum (numpy's c_einsum, what np.einsum calls with optimize=False) gives np.einsum's numbers bit for
+    bit on the gap stage's subscripts; identify.lapack's prebuilt floating-point error state raises LinAlgError on a
+    singular matrix as np.errstate(call=...) did and leaves the caller's error state as it was, after a raise too."""
+    from jident_ros.identify import lapack
+    rng = np.random.default_rng(5)
+    X, A, D = rng.standard_normal((70, 4)), rng.standard_normal((30, 4, 4)), rng.standard_normal((30, 4))
+    xt = rng.standard_normal((30, 2, 4))
+    for sub, ops in (("ki,kj->kij", (X, X)), ("kij,kj->ki", (A, D)), ("ki,ki->k", (D, D)),
+                     ("ckp,cp->ck", (xt, D)), ("ckq,ckq->ck", (xt, xt)), ("ij,ij->i", (X, X))):
+        assert np.array_equal(gap_numerics._einsum(sub, *ops), np.einsum(sub, *ops))
+    out_a, out_b = np.empty(70), np.empty(70)
+    gap_numerics._einsum("ij,ij->i", X, X, out=out_a)
+    np.einsum("ij,ij->i", X, X, out=out_b)
+    assert np.array_equal(out_a, out_b)
+    before = np.geterr()
+    with np.errstate(divide="raise"):
+        inner = np.geterr()
+        with pytest.raises(np.linalg.LinAlgError):
+            lapack.solve(np.zeros((3, 3)), np.ones(3))
+        with pytest.raises(np.linalg.LinAlgError):
+            lapack.inv(np.zeros((2, 3, 3)))
+        lapack.lstsq(np.ones((4, 2)), np.ones(4))
+        assert np.geterr() == inner
+    assert np.geterr() == before
+
+
+def _plain_disc_error(angle, first, end):
+    """stream.flank.disc_error as fe4eda0 computed it (every sine from the angle itself)."""
+    import math
+
+    from jident_ros.stream import flank
+    x = np.asarray(angle, float)
+    first, end = max(int(first), 0), min(int(end), x.size)
+    if end - first < 4 * (flank.DISC_DEGREE + 5):
+        return None
+    path = float(np.sum(np.abs(np.diff(x[first:end])))) / (2.0 * math.pi)
+    net = abs(float(x[end - 1] - x[first])) / (2.0 * math.pi)
+    if not (net >= flank.DISC_MIN_REVOLUTIONS and net >= flank.DISC_MIN_NET_SHARE * path):
+        return None
+    seg = x[first:end]
+    Q = flank._poly_basis(seg.size)
+    r = seg - Q @ (Q.T @ seg)
+    rss_poly = float(r @ r)
+    D = flank._disc_columns(seg)
+    D -= Q @ (Q.T @ D)
+    try:
+        coef = np.linalg.solve(D.T @ D, D.T @ r)
+    except np.linalg.LinAlgError:
+        return None
+    res = r - D @ coef
+    rss = float(res @ res)
+    steps = np.abs(np.diff(seg, 2))
+    steps = steps[steps > 1e-9]
+    floor = max(float(steps.min()) / math.sqrt(12.0) if steps.size else 0.0, flank.ANGLE_MODEL_FLOOR_RAD)
+    if not rss > 0 or not rss_poly >= flank.DISC_MIN_GAIN ** 2 * rss \
+            or not math.sqrt(rss / seg.size) <= flank.DISC_MAX_RMS_FLOORS * floor:
+        return None
+    return coef
+
+
+def test_the_disc_error_decided_on_double_angle_columns_is_the_plain_fits():
+    """stream.flank.disc_error refuses on the double-angle columns only beyond rounding and fits on the sines: the
+    plain computation's answer bit for bit (None, or the same coefficients), on angles with disc errors of 0 to 1 mrad
+    (quantised at 2^13-2^20 counts, with noise), turning 2-9 revolutions over the rows, and at the gates' edges."""
+    from jident_ros.stream import flank
+    rng = np.random.default_rng(3)
+    seen = {True: 0, False: 0}
+    for trial in range(300):
+        n = 1000
+        revs = float(rng.uniform(2.0, 9.0))
+        t = np.linspace(0.0, 1.0, n)
+        ang = 2 * np.pi * revs * (t + 0.05 * rng.standard_normal() * t * t) + float(rng.uniform(0, 100))
+        amp = float(rng.choice([0.0, 2e-5, 5e-5, 1e-4, 2e-4, 1e-3]))
+        meas = ang + amp * np.sin(ang + 0.3) + 0.5 * amp * np.cos(2 * ang - 1.0)
+        meas = meas + float(rng.choice([0.0, 1e-6, 1e-5])) * rng.standard_normal(n)
+        q = 2 * np.pi / 2 ** int(rng.integers(13, 21))
+        meas = np.round(meas / q) * q
+        got, plain = flank.disc_error(meas, 0, n), _plain_disc_error(meas, 0, n)
+        assert (got is None) == (plain is None), trial
+        if got is not None:
+            assert np.array_equal(got, plain)
+        seen[got is None] += 1
+    assert seen[True] > 30 and seen[False] > 30, seen

@@ -36,6 +36,7 @@ Plain numpy; never imports rclpy.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -45,6 +46,7 @@ from jident_ros.identify.gap_numerics import (
     _ar1_inflation,
     _cumtrapz,
     _double_trapz_adjoint,
+    _einsum,
     _gradient_sign,
     _quantum,
     _robust_noise,
@@ -179,6 +181,21 @@ def _chi2_upper(dof: np.ndarray, z: float = _Z_CHANGEPOINT) -> np.ndarray:
     return v * (1.0 - c + z * np.sqrt(c)) ** 3
 
 
+@lru_cache(maxsize=64)
+def _chi2_bounds(n: int, p: int, z: float = _Z_CHANGEPOINT) -> np.ndarray:
+    """:func:`_chi2_upper` of max(k - p, 1) degrees of freedom for k = 0 .. n, the χ² test's quantile for every
+    interval length (read-only: shared)."""
+    out = _chi2_upper(np.maximum(np.arange(n + 1) - p, 1), z)
+    out.flags.writeable = False
+    return out
+
+
+@lru_cache(maxsize=16)
+def _trims_at(ts: float) -> tuple:
+    """CHANGEPOINT_TRIMS in rows at the sample period ``ts`` (stream/rate.py), sorted, without repeats."""
+    return tuple(sorted(set(rate_samples(CHANGEPOINT_TRIMS, ts))))
+
+
 #: The forecast test's rows relative to its first one, and its χ² bound.
 _FORECAST_ROWS = np.arange(CHANGEPOINT_FORECAST_SAMPLES)
 _CHI2_FORECAST = float(_chi2_upper(np.array([CHANGEPOINT_FORECAST_SAMPLES]))[0])
@@ -226,7 +243,10 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     # offset torque would let the fit take a slowly changing coupling torque for friction)
     u = tau / D
     phi_mid = Phi - coulomb_mid * Cc
-    Xs = np.column_stack([np.ones(R - L), u, phi_mid / max(float(np.abs(phi_mid).max()), 1e-300)])
+    Xs = np.empty((R - L, 3))              # np.column_stack([1, u, Φ_mid/scale]), written in place
+    Xs[:, 0] = 1.0
+    Xs[:, 1] = u
+    np.divide(phi_mid, max(float(np.abs(phi_mid).max()), 1e-300), out=Xs[:, 2])
     q = _quantum(a[L:R])
     s_est, e_est = start, end
     if not fixed:
@@ -253,7 +273,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         k_f = CHANGEPOINT_FORECAST_SAMPLES
         sums = _scan_sums(Xs, r)                  # shared by every scan below
         # the χ² test's bound s2 · χ²(1 - CHANGEPOINT_P; n - p) for every interval length n (at least 1 dof)
-        chi_bound = s2 * _chi2_upper(np.maximum(np.arange(R - L + 1) - p, 1))
+        chi_bound = s2 * _chi2_bounds(R - L, p)
 
         def first_failure(lo_rows, hi_rows, side):
             """Index of the first candidate interval [lo, hi) that is not accepted (None: all are).  Accepted: the
@@ -269,12 +289,12 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             c = lo_rows.size
             D = sums[np.concatenate([hi_rows, ihi])] - sums[np.concatenate([lo_rows, ilo])]
             Ainv = _sym3_inverse(D[:, :6])
-            sol = np.einsum("kij,kj->ki", Ainv, D[:, 6:9])
-            rss = D[:c, 9] - np.einsum("ki,ki->k", D[:c, 6:9], sol[:c])
+            sol = _einsum("kij,kj->ki", Ainv, D[:, 6:9])
+            rss = D[:c, 9] - _einsum("ki,ki->k", D[:c, 6:9], sol[:c])
             ok = rss <= chi_bound[hi_rows - lo_rows]
             xt = Xs[test]                                             # (cand, k_f, p)
-            pred = np.einsum("ckp,cp->ck", xt, sol[c:])
-            lev = np.einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)          # x A⁻¹ xᵀ of each test row
+            pred = _einsum("ckp,cp->ck", xt, sol[c:])
+            lev = _einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)          # x A⁻¹ xᵀ of each test row
             stat = ((r[test] - pred) ** 2 / (s2 * (1.0 + lev))).sum(axis=1)
             bad = np.flatnonzero(~(ok & ((ihi - ilo < p + 2) | (stat <= _CHI2_FORECAST))))
             return int(bad[0]) if bad.size else None
@@ -378,7 +398,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         # running sums as three separate cumsums
         Z = np.empty((n + 1, p * p + 2 * p))
         Z[0] = 0.0
-        np.einsum("ki,kj->kij", X, X, out=Z[1:, :p * p].reshape(n, p, p))
+        _einsum("ki,kj->kij", X, X, out=Z[1:, :p * p].reshape(n, p, p))
         np.multiply(X, y[i:j, None], out=Z[1:, p * p:p * p + p])
         np.multiply(X, Cc[i:j, None], out=Z[1:, p * p + p:])
         Z[1:].cumsum(axis=0, out=Z[1:])
@@ -429,12 +449,12 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             # sum of squares (rounding is monotone): it cannot be chosen, its refits are not needed
             continue
         n = e_est - s_est
-        trims = [k for k in sorted(set(rate_samples(CHANGEPOINT_TRIMS, ts)))
+        trims = [k for k in _trims_at(ts)
                  if n - k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)]
         # ... and both ends moved in at once (a gap grown into contact on both sides: the DOL drive's slip drop at
         # 2^13 counts and 30 dB, 9 rows before the entry and 6 past the re-contact, the light wheel still coupled:
         # J1 +8.3 % with ± 7.8 %, +10.8 % undeclared; either end alone moved J1 by 1-2 %)
-        both = [k for k in sorted(set(rate_samples(CHANGEPOINT_TRIMS, ts)))
+        both = [k for k in _trims_at(ts)
                 if n - 2 * k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)]
         terms["change_points"] = float(np.abs(j_trims(f, with_coulomb, trims, both) - j1).max()) \
             if trims else 0.0
@@ -498,7 +518,11 @@ def torque_lag_estimate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s:
     psi = _cumtrapz(m, ts)
     phi = _cumtrapz(psi, ts)
     sp, sq = max(float(np.abs(phi).max()), 1e-300), max(float(np.abs(psi).max()), 1e-300)
-    X = np.column_stack([np.ones(n), np.arange(n) / max(n - 1, 1), phi / sp, psi / sq])
+    X = np.empty((n, 4))                   # np.column_stack([1, t, Φ/sp, Ψ/sq]), written in place
+    X[:, 0] = 1.0
+    np.divide(np.arange(n), max(n - 1, 1), out=X[:, 1])
+    np.divide(phi, sp, out=X[:, 2])
+    np.divide(psi, sq, out=X[:, 3])
     y = a - a[0]
     try:
         xtx_inv = lapack.inv(X.T @ X)

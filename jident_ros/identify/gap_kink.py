@@ -20,6 +20,7 @@ from jident_ros.identify.gap_numerics import (
     _ar1_inflation,
     _cumtrapz,
     _double_trapz_adjoint,
+    _einsum,
     _quantum,
     _robust_noise,
 )
@@ -49,78 +50,157 @@ KINK_LAG_ROWS = 2
 KINK_T0_ROWS = 4
 
 
-def _kink_candidates(m: np.ndarray, ts: float, entries: list, P: int, end: int, y: np.ndarray,
-                     unload=None, bounds=None) -> tuple:
-    """:func:`kink_fit`'s least-squares fit over rows [P, end) for every candidate entry row (and unloading time
-    ``unload``, rows per candidate; None: all 0, as the callers pass it then): arrays over the candidates of the
-    residual sum of squares and 1/J1 (from the 3 x 3 normal equations, whose sums are formed column by column: no
-    (candidate, row, column) design), and the design's two candidate-dependent columns (candidate, row): the time
-    from the entry row (scaled) and the Φ column (scaled by its largest magnitude, ``scales``).  The chosen
-    candidate's fit: :func:`_kink_solution`.  ``m``: the torque (N,), or one per candidate (candidates, N);
-    ``bounds``: (lo, hi) per candidate, the rows each fits within [P, end) (the others weigh nothing:
-    :func:`kink_best_j1`'s fits of several ends and torques at once; None: all)."""
-    rows = np.arange(P, end)
-    # Φ_s of every candidate: the double trapezoid from its row, as rows of one cumulative sum (zeros before the
-    # row: a sum that starts with zeros adds the same numbers in the same order as one started at the row)
-    s_arr = np.asarray(entries)
+def _kink_phi(m: np.ndarray, ts: float, s_arr: np.ndarray, P: int, end: int, unload=None) -> np.ndarray:
+    """Φ_s of every candidate entry row ``s_arr`` (and unloading time ``unload``, rows per candidate; None: all 0) over
+    rows [P, end), (candidate, row): the double trapezoid of the motor's free torque from its row (zeros before it).
+    ``m``: the torque (N,), or one per candidate (candidates, N)."""
     n = end - P
+    s_rel = s_arr - P
     mm = m[..., P:end]
-    keep = np.arange(n - 1)[None, :] >= (s_arr - P)[:, None]
-    half = np.where(keep, 0.5 * (mm[..., 1:] + mm[..., :-1]), 0.0)
+    # the double trapezoid from each candidate's row, as rows of one cumulative sum (zeros before the row: a sum that
+    # starts with zeros adds the same numbers in the same order as one started at the row).  Every candidate's
+    # trapezoid terms are zero before column j0 (the earliest entry row's, less one: an unloading coupling's first
+    # term), and so are its running sums there: the sums are formed from j0 on (the same numbers)
+    j0 = max(int(s_rel.min()) - 1, 0)
+    half = np.where(np.arange(j0, n - 1, dtype=float)[None, :] >= s_rel[:, None],
+                    0.5 * (mm[..., j0 + 1:] + mm[..., j0:-1]), 0.0)
     if unload is not None:
-        # an unloading coupling: from the kink row on it still carries T0 (1 − w), T0 its steady torque (m_el's mean
-        # over the KINK_T0_ROWS rows before the kink: the drive was balanced there) and w rising from 0 at the kink
-        # row to 1 R rows after it; the motor's free torque is m_el − T0 (1 − w)
-        r_arr = np.asarray(unload)[:, None]
-        w = np.clip((rows[None, :] - s_arr[:, None]) / np.maximum(r_arr, 1), 0.0, 1.0)
-        csum = np.concatenate([np.zeros(mm.shape[:-1] + (1,)), np.cumsum(mm, axis=-1)], axis=-1)
-        k0 = np.minimum(KINK_T0_ROWS, s_arr - P)
-        if mm.ndim == 1:
-            t0 = (csum[s_arr - P] - csum[s_arr - P - k0]) / k0
-        else:
-            c_idx = np.arange(s_arr.size)
-            t0 = (csum[c_idx, s_arr - P] - csum[c_idx, s_arr - P - k0]) / k0
-        free = np.where(rows[None, :] >= s_arr[:, None], mm - t0[:, None] * (1.0 - w), 0.0)
-        half = np.where(r_arr > 0, 0.5 * (free[:, 1:] + free[:, :-1]), half)
-    c1 = np.zeros((s_arr.size, n))
+        _unloading_terms(half, mm, s_rel, np.asarray(unload), j0)
+    c1 = np.zeros((s_arr.size, n - j0))
     half.cumsum(axis=1, out=c1[:, 1:])
     c1 *= ts
     phi = np.zeros((s_arr.size, n))
-    (0.5 * (c1[:, 1:] + c1[:, :-1])).cumsum(axis=1, out=phi[:, 1:])
-    phi *= ts
-    hi = np.full(s_arr.size, end) if bounds is None else np.asarray(bounds[1])
-    u = (rows[None, :] - s_arr[:, None]) * ts / np.maximum((hi - s_arr) * ts, ts)[:, None]
-    n_rows = np.full(s_arr.size, float(n))
-    y_sum = np.full(s_arr.size, y.sum())
-    if bounds is not None:
-        inside = (rows[None, :] >= np.asarray(bounds[0])[:, None]) & (rows[None, :] < hi[:, None])
-        phi = np.where(inside, phi, 0.0)
-        u = np.where(inside, u, 0.0)
-        n_rows = inside.sum(axis=1).astype(float)
-        y_sum = np.where(inside, y[None, :], 0.0).sum(axis=1)
-    scales = np.maximum(np.abs(phi).max(axis=1), 1e-300)
-    f = phi / scales[:, None]
-    # the normal equations of the design (1, u, f) per candidate: XᵀX from the columns' sums and products
-    g = np.empty((s_arr.size, 3, 3))
-    g[:, 0, 0] = n_rows
-    g[:, 0, 1] = g[:, 1, 0] = u.sum(axis=1)
-    g[:, 0, 2] = g[:, 2, 0] = f.sum(axis=1)
-    g[:, 1, 1] = np.einsum("ij,ij->i", u, u)
-    g[:, 1, 2] = g[:, 2, 1] = np.einsum("ij,ij->i", u, f)
-    g[:, 2, 2] = np.einsum("ij,ij->i", f, f)
-    xty = np.empty((s_arr.size, 3, 1))
-    xty[:, 0, 0], xty[:, 1, 0], xty[:, 2, 0] = y_sum, u @ y, f @ y
-    coef = lapack.solve(g, xty)[:, :, 0]
-    res = y[None, :] - coef[:, :1] - coef[:, 1:2] * u - coef[:, 2:] * f
-    if bounds is not None:
-        res = np.where(inside, res, 0.0)
-    return np.einsum("ij,ij->i", res, res), coef[:, 2] / scales, u, f, scales
+    (0.5 * (c1[:, 1:] + c1[:, :-1])).cumsum(axis=1, out=phi[:, j0 + 1:])
+    phi[:, j0 + 1:] *= ts
+    return phi
+
+
+def _kink_candidates(m: np.ndarray, ts: float, entries, P: int, end: int, y: np.ndarray, unload=None,
+                     runs=None) -> tuple:
+    """:func:`kink_fit`'s least-squares fit α1 = θ0 + ω0 t + κ Φ_s for every candidate entry row (and unloading time
+    ``unload``, rows per candidate; None: all 0): arrays over the candidates of the residual sum of squares and κ =
+    1/J1, and Φ (candidate, row) over rows [P, end) (:func:`_kink_phi`).  ``runs``: (rows, lo, hi) per run of
+    consecutive candidates fitted over the same rows [lo, hi) (counted from P; :func:`kink_best_j1`'s variants, each
+    over its own rows); None: all candidates over every row.
+
+    The fit's (1, t) columns are common to the candidates of a run: they are projected out of α1 once and out of
+    each Φ_s by its two sums (1 and t centred are orthogonal), so that κ = Φ_s·α1⊥ / |Φ_s⊥|² and the residual sum
+    of squares |α1⊥|² − (Φ_s·α1⊥)²/|Φ_s⊥|² come from one product of Φ with (1, t, α1⊥) and the row sums of Φ²: the
+    least squares of the per-candidate 3 x 3 normal equations (fe4eda0; the same fit: the span of (1, t) is that of
+    (1, u)), to rounding (test_gap_kink_speed.py).  The chosen candidate's own fit: :func:`_kink_solution`.  Raises
+    LinAlgError where a candidate's Φ_s lies in the span of (1, t) (a singular fit)."""
+    s_arr = np.asarray(entries)
+    phi = _kink_phi(m, ts, s_arr, P, end, unload)
+    if runs is None:
+        runs = [(s_arr.size, 0, end - P)]
+    else:                                         # consecutive runs over the same rows as one
+        merged = [list(runs[0])]
+        for rows, lo, hi in runs[1:]:
+            if (lo, hi) == tuple(merged[-1][1:]):
+                merged[-1][0] += rows
+            else:
+                merged.append([rows, lo, hi])
+        runs = merged
+    S = np.empty((s_arr.size, 4))                 # per candidate: Φ·1, Φ·t, Φ·α1⊥ and Φ·Φ over its run's rows
+    per_run = []
+    c0 = 0
+    for rows, lo, hi in runs:
+        ph = phi[c0:c0 + rows, lo:hi]
+        t, st = _centred_time(hi - lo)
+        yr = y[lo:hi]
+        yc = yr - float(yr.sum()) / (hi - lo)
+        y_perp = yc - (float(yc @ t) / st) * t
+        W = np.empty((hi - lo, 3))
+        W[:, :2] = t[:, None] ** _POWERS
+        W[:, 2] = y_perp
+        np.matmul(ph, W, out=S[c0:c0 + rows, :3])
+        _einsum("ij,ij->i", ph, ph, out=S[c0:c0 + rows, 3])
+        per_run.append((hi - lo, st, float(y_perp @ y_perp)))
+        c0 += rows
+    k, st, yy = np.repeat(np.array(per_run), [r[0] for r in runs], axis=0).T
+    a = S[:, 3] - S[:, 0] * S[:, 0] / k - S[:, 1] * S[:, 1] / st
+    if not a.min() > 0:
+        raise np.linalg.LinAlgError("Singular matrix")
+    b = S[:, 2]
+    return yy - b * b / a, b / a, phi
+
+
+_POWERS = np.array([0.0, 1.0])
+
+
+@lru_cache(maxsize=64)
+def _centred_time(k: int) -> tuple:
+    """The rows 0..k-1 centred and over k (orthogonal to 1), read-only, and their sum of squares."""
+    t = (np.arange(k) - 0.5 * (k - 1)) / k
+    t.flags.writeable = False
+    return t, float(t @ t)
+
+
+_TERM_ROWS = np.array([0, 1])
+
+
+def _unloading_terms(half: np.ndarray, mm: np.ndarray, s_rel: np.ndarray, r_arr: np.ndarray, j0: int) -> None:
+    """:func:`_kink_phi`'s trapezoid terms (``half``, its columns from ``j0`` on) of the candidates whose
+    coupling unloads over R = ``r_arr`` > 0 rows, written in place.  From the kink row on the coupling still carries
+    T0 (1 − w), T0 its steady torque (m_el's mean over the KINK_T0_ROWS rows before the kink: the drive was balanced
+    there) and w rising from 0 at the kink row to 1 R rows after it; the motor's free torque is m_el − T0 (1 − w), zero
+    before the kink row.  Only the R + 1 terms from the one before the kink row differ from the rigid coupling's:
+    from R rows after it on, m_el − T0 · 0 is m_el (test_gap_kink_speed.py: the full (candidate, row) computation)."""
+    s_rel = np.asarray(s_rel, dtype=np.int64)
+    r_arr = np.asarray(r_arr, dtype=np.int64)
+    geo = _unloading_geometry(s_rel.tobytes(), r_arr.tobytes())
+    if geo is None:
+        return
+    idx, s_u, k0, c_of, ci, j, jj, w, after = geo
+    top = int(s_u.max())
+    # T0 from the running sum of m_el from the window's first row (each candidate's row of it, when 2-D)
+    if mm.ndim > 1:
+        csum = np.zeros((idx.size, top + 1))
+        np.cumsum(mm[idx, :top], axis=-1, out=csum[:, 1:])
+        c_ix = np.arange(idx.size)
+        t0 = (csum[c_ix, s_u] - csum[c_ix, s_u - k0]) / k0
+        m2 = mm[ci[:, None], jj]
+    else:
+        csum = np.zeros(top + 1)
+        np.cumsum(mm[:top], out=csum[1:])
+        t0 = (csum[s_u] - csum[s_u - k0]) / k0
+        m2 = mm[jj]
+    free = np.where(after, m2 - t0[c_of][:, None] * (1.0 - w), 0.0)
+    half[ci, j - j0] = 0.5 * (free[:, 1] + free[:, 0])
+
+
+@lru_cache(maxsize=256)
+def _unloading_geometry(s_bytes: bytes, r_bytes: bytes):
+    """:func:`_unloading_terms`' index arrays, from the candidates' entry rows (counted from the first row fitted) and
+    unloading rows (int64 bytes; the same for every window searched over the same rows: cached): the unloading
+    candidates, their entry rows, T0's rows, each term's candidate (among them and among all), its rows j and (j, j + 1),
+    w at those rows and whether they are at or after the kink row (read-only); None: no candidate unloads."""
+    s_rel, r_arr = np.frombuffer(s_bytes, np.int64), np.frombuffer(r_bytes, np.int64)
+    idx = np.flatnonzero(r_arr > 0)
+    if not idx.size:
+        return None
+    s_u, r_u = s_rel[idx], r_arr[idx]
+    k0 = np.minimum(KINK_T0_ROWS, s_u)
+    # the terms j = s − 1 .. s + R − 1 of each (R + 1 of them), over the rows j and j + 1
+    width = r_u + 1
+    c_of = np.repeat(np.arange(idx.size), width)
+    j = s_u[c_of] - 1 + (np.arange(int(width.sum())) - np.repeat(np.cumsum(width) - width, width))
+    jj = j[:, None] + _TERM_ROWS                                        # (term, 2): its two rows
+    dd = jj - s_u[c_of][:, None]                                        # the rows counted from the kink row
+    w = np.clip(dd / np.maximum(r_u[c_of][:, None], 1), 0.0, 1.0)
+    out = (idx, s_u, k0, c_of, idx[c_of], j, jj, w, dd >= 0)
+    for x in out:
+        x.flags.writeable = False
+    return out
 
 
 def _kink_solution(u: np.ndarray, f: np.ndarray, y: np.ndarray, scale: float) -> tuple:
     """One candidate's least-squares fit from its design (1, ``u``, ``f``) by (XᵀX)⁻¹Xᵀ (the solution whose row 2 the
     standard error needs): (1/J1, residual, row 2 of (XᵀX)⁻¹Xᵀ)."""
-    X = np.column_stack([np.ones(u.size), u, f])
+    X = np.empty((u.size, 3))                 # np.column_stack([np.ones(u.size), u, f]), written in place
+    X[:, 0] = 1.0
+    X[:, 1] = u
+    X[:, 2] = f
     p = lapack.solve(X.T @ X, X.T)
     coef = p @ y
     return float(coef[2]) / scale, y - X @ coef, p[2]
@@ -156,7 +236,9 @@ def kink_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ent
 def _kink_pairs(pairs, end: int, ts: float) -> tuple:
     """The (entry row, unloading rows) candidates that leave KINK_MIN_GAP_SAMPLES after the unloading, sorted; the
     first row fitted (KINK_PRE_SAMPLES before the earliest entry); why no fit can be made ('' when one can)."""
-    pairs = sorted({(int(x), int(r)) for x, r in pairs if end - int(x) - int(r) >= KINK_MIN_GAP_SAMPLES})
+    last = end - KINK_MIN_GAP_SAMPLES
+    pairs = sorted({p if type(p) is tuple and type(p[0]) is int is type(p[1]) else (int(p[0]), int(p[1]))
+                    for p in pairs if p[0] + p[1] <= last})
     if not pairs:
         return pairs, 0, f"kink fit: fewer than {KINK_MIN_GAP_SAMPLES} samples after every candidate entry"
     P = max(0, pairs[0][0] - rate_samples(KINK_PRE_SAMPLES, ts))
@@ -185,18 +267,25 @@ def kink_best_j1(alpha1: np.ndarray, sample_period_s: float, variants) -> list:
         return out
     P0, E = min(g[3] for g in groups), max(g[4] for g in groups)
     # every candidate: (variant, entry row, unloading rows, first row, end row), its rows counted from P0
-    cand = np.array([(gi, s_, r_, g[3], g[4]) for gi, g in enumerate(groups) for s_, r_ in g[2]])
-    gi_arr = cand[:, 0]
+    # (each variant's candidates one after the other)
+    cand = np.array([(s_, r_, g[3], g[4]) for g in groups for s_, r_ in g[2]])
+    sizes = [len(g[2]) for g in groups]
     first = groups[0][1]
     # one torque for all (the trims'), or each candidate its variant's (the lag's moved ones)
-    m = (first[P0:E] if all(g[1] is first for g in groups)
-         else np.stack([g[1][P0:E] for g in groups])[gi_arr])
-    rss, kappa_all, _, _, _ = _kink_candidates(m, ts, cand[:, 1] - P0, 0, E - P0, a[P0:E] - a[P0],
-                                               cand[:, 2] if cand[:, 2].any() else None,
-                                               (cand[:, 3] - P0, cand[:, 4] - P0))
-    for gi, (v, *_) in enumerate(groups):
-        idx = np.flatnonzero(gi_arr == gi)
-        kappa = float(kappa_all[idx[np.argmin(rss[idx])]])
+    if all(g[1] is first for g in groups):
+        m = first[P0:E]
+    else:
+        m = np.empty((len(groups), E - P0))
+        for gi, g in enumerate(groups):
+            m[gi] = g[1][P0:E]
+        m = m[np.repeat(np.arange(len(groups)), sizes)]
+    rss, kappa_all, _ = _kink_candidates(m, ts, cand[:, 0] - P0, 0, E - P0, a[P0:E] - a[P0],
+                                         cand[:, 1] if cand[:, 1].any() else None,
+                                         [(size, g[3] - P0, g[4] - P0) for g, size in zip(groups, sizes)])
+    lo = 0
+    for (v, *_), size in zip(groups, sizes):
+        kappa = float(kappa_all[lo + int(np.argmin(rss[lo:lo + size]))])
+        lo += size
         out[v] = 1.0 / kappa if kappa > 0 else f"kink fit: non-physical 1/J1 = {kappa:.4g}"
     return out
 
@@ -220,13 +309,16 @@ def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, 
     entries = [p_[0] for p_ in pairs]
     y = a[P:end] - a[entries[0]]
     unload = [p_[1] for p_ in pairs]
-    rss_all, kappa_all, u, f, scales = _kink_candidates(m, ts, entries, P, end, y, unload if any(unload) else None)
-    rss_list, kappa_list = rss_all.tolist(), kappa_all.tolist()
+    rss_all, kappa_all, phi = _kink_candidates(m, ts, entries, P, end, y, unload if any(unload) else None)
     k = int(np.argmin(rss_all))
-    # the chosen candidate's fit by (XᵀX)⁻¹Xᵀ: its 1/J1, residual and the solution's row 2 (the standard error's)
-    kappa_list[k], res_k, row_k = _kink_solution(u[k], f[k], y, scales[k])
-    rss_list[k] = rss_min = float(res_k @ res_k)
-    kappa, s_best = kappa_list[k], entries[k]
+    # the chosen candidate's fit by (XᵀX)⁻¹Xᵀ on its design (1, u, Φ/max|Φ|), u the time from its entry row over the
+    # rows after it: its 1/J1, residual and the solution's row 2 (the standard error's)
+    scale_k = np.maximum(np.abs(phi[k]).max(), 1e-300)
+    u_k = (np.arange(P, end, dtype=float) - entries[k]) * ts / max((end - entries[k]) * ts, ts)
+    kappa, res_k, row_k = _kink_solution(u_k, phi[k] / scale_k, y, scale_k)
+    rss_all[k] = rss_min = float(res_k @ res_k)
+    kappa_all[k] = kappa
+    s_best = entries[k]
     if not kappa > 0:
         raise FreeFitError(f"kink fit: non-physical 1/J1 = {kappa:.4g}")
     dof = end - P - 3
@@ -244,11 +336,14 @@ def kink_locate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, 
         raise FreeFitError(f"kink fit: the speed before the entry is not constant (t = {t_quad:.3g} for a t² term "
                            f"over {n_pre} samples)")
     j1 = 1.0 / kappa
-    plausible = [q_ for q_ in range(len(pairs)) if rss_list[q_] - rss_min <= KINK_CHI2_1 * s2 and kappa_list[q_] > 0]
+    plausible = np.flatnonzero((rss_all - rss_min <= KINK_CHI2_1 * s2) & (kappa_all > 0)).tolist()
+    kappa_list = kappa_all[plausible].tolist()
+    if k in plausible:                              # the chosen candidate's own κ (its type: np.float64) as before
+        kappa_list[plausible.index(k)] = kappa
     fit = {"j1": j1, "start": int(s_best), "end": int(end), "residual": res_k, "dof": dof,
            "plausible_entries": sorted({entries[q_] for q_ in plausible}), "unload_rows": int(unload[k]),
            "plausible": [pairs[q_] for q_ in plausible],
-           "_state": (m, ts, P, kappa, row_k / scales[k], s2, [kappa_list[q_] for q_ in plausible], a[P:end])}
+           "_state": (m, ts, P, kappa, row_k / scale_k, s2, kappa_list, a[P:end])}
     return fit
 
 
@@ -297,11 +392,20 @@ def kink_terms(fit: dict, coulomb_max_nm: float = 0.0, torque_offset_nm: float =
 
 def kink_lag_variants(torque: np.ndarray, sample_period_s: float, pairs, end: int, torque_lag_s: float) -> list:
     """:func:`kink_best_j1`'s variants of :func:`kink_lag_spread`: the torque moved by − and + ``torque_lag_s``
-    (linear interpolation between samples), each over ``pairs`` to ``end``."""
+    (linear interpolation between samples), each over ``pairs`` to ``end``.  Only the rows a fit over those pairs
+    reads are moved (from KINK_PRE_SAMPLES before the earliest pair's entry row to ``end``: np.interp's value at a row
+    is its own, the same numbers as the whole array's); the rows outside them are NaN."""
     m = np.asarray(torque, float)
     t = np.arange(m.size, dtype=float)
     k = float(torque_lag_s) / float(sample_period_s)
-    return [(np.interp(t + shift, t, m), pairs, end) for shift in (-k, k)]
+    lo = max(0, min((int(x) for x, _ in pairs), default=0) - rate_samples(KINK_PRE_SAMPLES, float(sample_period_s)))
+    hi = max(lo, min(int(end), m.size))
+    out = []
+    for shift in (-k, k):
+        moved = np.full(m.size, np.nan)
+        moved[lo:hi] = np.interp(t[lo:hi] + shift, t, m)
+        out.append((moved, pairs, end))
+    return out
 
 
 def kink_lag_spread(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, pairs, end: int, j1: float,

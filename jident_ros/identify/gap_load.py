@@ -24,9 +24,9 @@ import numpy as np
 
 from jident_ros.identify import lapack
 from jident_ros.identify.distributions import normal_isf
-from jident_ros.identify.gap_free import _FORECAST_ROWS, CHANGEPOINT_FORECAST_SAMPLES, FREE_MIN_SAMPLES
+from jident_ros.identify.gap_free import _FORECAST_ROWS, CHANGEPOINT_FORECAST_SAMPLES, FREE_MIN_SAMPLES, _chi2_bounds
 from jident_ros.identify.gap_free import _chi2_upper as _chi2_upper_at
-from jident_ros.identify.gap_numerics import _quantum, _robust_noise
+from jident_ros.identify.gap_numerics import _einsum, _quantum, _robust_noise
 
 #: The window key of the load angle the gap stage reads for the bound (the detector windows' raw alpha2: the gap
 #: stage must not read it as inequality 1's zone-centred angle).
@@ -89,9 +89,9 @@ class _Scan:
         n, p = X.shape
         c0 = lapack.lstsq(X[core[0]:core[1]], y[core[0]:core[1]])
         self.X, self.r, self.s2, self.p, self.n = X, y - X @ c0, s2, p, n
-        self.chi_bound = s2 * _chi2_upper(np.maximum(np.arange(n + 1) - p, 1))
+        self.chi_bound = s2 * _chi2_bounds(n, p, _Z_LOAD)
         Z = np.zeros((n + 1, p * p + p + 1))       # cumulative x xᵀ, x r and r² (a zero row in front)
-        Z[1:, :p * p] = np.einsum("ki,kj->kij", X, X).reshape(n, p * p)
+        Z[1:, :p * p] = _einsum("ki,kj->kij", X, X).reshape(n, p * p)
         Z[1:, p * p:p * p + p] = X * self.r[:, None]
         Z[1:, -1] = self.r * self.r
         np.cumsum(Z, axis=0, out=Z)
@@ -120,12 +120,12 @@ class _Scan:
         c = lo_rows.size
         D = self.Z[np.concatenate([hi_rows, ihi])] - self.Z[np.concatenate([lo_rows, ilo])]
         Ainv = lapack.inv(D[:, :p * p].reshape(-1, p, p))
-        sol = np.einsum("kij,kj->ki", Ainv, D[:, p * p:p * p + p])
-        rss = D[:c, -1] - np.einsum("ki,ki->k", D[:c, p * p:p * p + p], sol[:c])
+        sol = _einsum("kij,kj->ki", Ainv, D[:, p * p:p * p + p])
+        rss = D[:c, -1] - _einsum("ki,ki->k", D[:c, p * p:p * p + p], sol[:c])
         ok = rss <= self.chi_bound[hi_rows - lo_rows]
         xt = self.X[test]
-        pred = np.einsum("ckp,cp->ck", xt, sol[c:])
-        lev = np.einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)
+        pred = _einsum("ckp,cp->ck", xt, sol[c:])
+        lev = _einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)
         stat = ((self.r[test] - pred) ** 2 / (self.s2 * (1.0 + lev))).sum(axis=1)
         bad = np.flatnonzero(~(ok & ((ihi - ilo < p + 2) | (stat <= _CHI2_FORECAST))))
         return int(bad[0]) if bad.size else None

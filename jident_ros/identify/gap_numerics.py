@@ -10,6 +10,13 @@ from functools import lru_cache
 
 import numpy as np
 
+try:
+    # np.einsum without its Python wrapper: with optimize=False (its default) np.einsum passes its operands (and out)
+    # to this very function
+    from numpy._core._multiarray_umath import c_einsum as _einsum
+except ImportError:                                      # pragma: no cover - another numpy
+    _einsum = np.einsum
+
 
 def _cumtrapz(x: np.ndarray, ts: float) -> np.ndarray:
     out = np.empty(x.size)

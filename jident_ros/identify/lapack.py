@@ -34,6 +34,20 @@ def _no_convergence(err, flag):
     raise np.linalg.LinAlgError("SVD did not converge in Linear Least Squares")
 
 
+try:
+    # np.errstate(call=..., invalid="call", over/divide/under="ignore") as numpy's errstate.__enter__ sets it, built once
+    # (errstate builds its state object on every entry: ~1 us a call, as much as a small solve)
+    from numpy._core import _ufunc_config
+
+    _CONTEXT = _ufunc_config._extobj_contextvar
+    _STATE_SINGULAR = _ufunc_config._make_extobj(call=_singular, invalid="call", over="ignore", divide="ignore",
+                                                 under="ignore")
+    _STATE_NO_CONVERGENCE = _ufunc_config._make_extobj(call=_no_convergence, invalid="call", over="ignore",
+                                                       divide="ignore", under="ignore")
+except (ImportError, AttributeError, TypeError):          # pragma: no cover - another numpy: np.errstate itself
+    _CONTEXT = None
+
+
 def _float64(a, b=None) -> bool:
     """Whether the gufuncs apply: float64 ndarrays (and the module found)."""
     if _gufuncs is None or type(a) is not np.ndarray or a.dtype != _F8:
@@ -45,16 +59,28 @@ def solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``np.linalg.solve(a, b)``: a (..., M, M), b (M,) or (..., M, K)."""
     if not _float64(a, b):
         return np.linalg.solve(a, b)
-    with np.errstate(call=_singular, invalid="call", over="ignore", divide="ignore", under="ignore"):
+    if _CONTEXT is None:                                  # pragma: no cover - another numpy
+        with np.errstate(call=_singular, invalid="call", over="ignore", divide="ignore", under="ignore"):
+            return (_SOLVE1 if b.ndim == 1 else _SOLVE)(a, b, signature="dd->d")
+    token = _CONTEXT.set(_STATE_SINGULAR)
+    try:
         return (_SOLVE1 if b.ndim == 1 else _SOLVE)(a, b, signature="dd->d")
+    finally:
+        _CONTEXT.reset(token)
 
 
 def inv(a: np.ndarray) -> np.ndarray:
     """``np.linalg.inv(a)``: a (..., M, M)."""
     if not _float64(a):
         return np.linalg.inv(a)
-    with np.errstate(call=_singular, invalid="call", over="ignore", divide="ignore", under="ignore"):
+    if _CONTEXT is None:                                  # pragma: no cover - another numpy
+        with np.errstate(call=_singular, invalid="call", over="ignore", divide="ignore", under="ignore"):
+            return _INV(a, signature="d->d")
+    token = _CONTEXT.set(_STATE_SINGULAR)
+    try:
         return _INV(a, signature="d->d")
+    finally:
+        _CONTEXT.reset(token)
 
 
 def lstsq(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -62,8 +88,15 @@ def lstsq(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     if not _float64(a, b) or a.ndim != 2 or b.ndim != 1 or a.shape[0] == 0:
         return np.linalg.lstsq(a, b, rcond=None)[0]
     m, n = a.shape
-    with np.errstate(call=_no_convergence, invalid="call", over="ignore", divide="ignore", under="ignore"):
+    if _CONTEXT is None:                                  # pragma: no cover - another numpy
+        with np.errstate(call=_no_convergence, invalid="call", over="ignore", divide="ignore", under="ignore"):
+            x = _LSTSQ(a, b[:, None], _EPS * max(n, m), signature="ddd->ddid")[0]
+        return x[:, 0]
+    token = _CONTEXT.set(_STATE_NO_CONVERGENCE)
+    try:
         x = _LSTSQ(a, b[:, None], _EPS * max(n, m), signature="ddd->ddid")[0]
+    finally:
+        _CONTEXT.reset(token)
     return x[:, 0]
 
 

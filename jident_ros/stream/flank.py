@@ -836,21 +836,48 @@ def disc_error(angle: np.ndarray, first: int, end: int) -> Optional[np.ndarray]:
     Q = _poly_basis(seg.size)
     r = seg - Q @ (Q.T @ seg)
     rss_poly = float(r @ r)
-    D = _disc_columns(seg)
+    steps = np.abs(np.diff(seg, 2))
+    steps = steps[steps > 1e-9]
+    floor = max(float(steps.min()) / math.sqrt(12.0) if steps.size else 0.0, ANGLE_MODEL_FLOOR_RAD)
+    # first with the twice-per-revolution columns from the once-per-revolution ones (2 sin cos, cos² − sin²: equal
+    # to the sines of twice the angle to rounding, two of the four sines saved): a fit its gates refuse beyond
+    # rounding (1e-6) is refused; any other is fitted on the sines themselves, the coefficients it returns
+    for approx in (True, False):
+        got = _disc_fit(seg, Q, r, approx)
+        if got is None:
+            if approx:
+                continue
+            return None
+        coef, rss = got
+        slack = 1.0 + 1e-6 if approx else 1.0
+        if rss > 0 and (rss_poly * slack < DISC_MIN_GAIN ** 2 * rss
+                        or math.sqrt(rss / seg.size) > DISC_MAX_RMS_FLOORS * floor * slack):
+            return None
+    if not rss > 0 or not rss_poly >= DISC_MIN_GAIN ** 2 * rss \
+            or not math.sqrt(rss / seg.size) <= DISC_MAX_RMS_FLOORS * floor:
+        return None
+    return coef
+
+
+def _disc_fit(seg: np.ndarray, Q: np.ndarray, r: np.ndarray, approx: bool):
+    """:func:`disc_error`'s harmonics fitted to ``r`` (``seg`` with the polynomial projected out): (coefficients,
+    residual sum of squares), None where singular; ``approx``: the twice-per-revolution columns by the double-angle
+    formulas."""
+    if approx:
+        sn, cs = np.sin(seg), np.cos(seg)
+        D = np.empty((seg.size, 4))
+        D[:, 0], D[:, 1] = sn, cs
+        np.multiply(2.0 * sn, cs, out=D[:, 2])
+        np.multiply(cs - sn, cs + sn, out=D[:, 3])
+    else:
+        D = _disc_columns(seg)
     D -= Q @ (Q.T @ D)
     try:
         coef = np.linalg.solve(D.T @ D, D.T @ r)
     except np.linalg.LinAlgError:
         return None
     res = r - D @ coef
-    rss = float(res @ res)
-    steps = np.abs(np.diff(seg, 2))
-    steps = steps[steps > 1e-9]
-    floor = max(float(steps.min()) / math.sqrt(12.0) if steps.size else 0.0, ANGLE_MODEL_FLOOR_RAD)
-    if not rss > 0 or not rss_poly >= DISC_MIN_GAIN ** 2 * rss \
-            or not math.sqrt(rss / seg.size) <= DISC_MAX_RMS_FLOORS * floor:
-        return None
-    return coef
+    return coef, float(res @ res)
 
 
 @functools.lru_cache(maxsize=8)
