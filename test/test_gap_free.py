@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from jident_ros.identify.gap import NoGapError, estimate_inertia
-from jident_ros.identify.gap_free import GapModel, _double_trapz_adjoint, free_angle_fit
+from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, GapModel, _double_trapz_adjoint, free_angle_fit
 from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
 
 TS, R = 5e-4, 0.08
@@ -395,6 +395,35 @@ def test_the_declared_coupling_release_bounds_the_unloading_search():
         choices[release] = _anchored_angle(a, m, ff, (94, 150), TS, model)["choice"]
     assert "steady drive at row 90 (the coupling unloading over 4 rows from it)" in choices[4e-3], choices
     assert "steady entry" in choices[0.0] and "unloading" not in choices[0.0], choices
+
+
+def test_the_steady_entry_fit_is_taken_only_where_the_free_fit_supports_its_premise(ours_window, monkeypatch):
+    """Hausman's test of the steady-entry premise (KINK_PREMISE_Z): with the free fit's standard error twice the
+    steady-entry fit's, their difference has the standard error √3 se under the premise; a free J1 4 se away (within
+    the combined 3-standard-error check, √5 se) rejects the steady-entry fit, one 3 se away keeps it (the DOL drive
+    with the detector's entry 6-12 samples early: the steady-entry fit +4 … +10 % outside its interval).  A standard
+    error on its floor (a noise-free window) is no variance: no test."""
+    from jident_ros.identify import gap
+    assert gap.KINK_PREMISE_Z == pytest.approx(1.96)
+    w = ours_window
+    d = w.as_dict()
+    e, r = w.entry_index, w.recontact_index
+    alpha, torque = np.asarray(d["alpha1"], float), gap._net_torque(d, 0.0)
+
+    def anchored(j1, se_free):
+        return gap._anchored_angle(alpha, torque, {"start": e, "end": r, "j1": j1, "se_stat": se_free}, (e, r), TS,
+                                   GapModel())
+    base = anchored(1.131, 1.0)
+    assert "j1" in base, base["choice"]
+    j, se = base["j1"], base["se"]
+    assert se > 2 * FREE_REL_SE_FLOOR * j                       # the window's own noise, not the floor
+    monkeypatch.setattr(gap, "FREE_REL_SE_FLOOR", 1.5 * se / j)  # its standard error on a floor: no variance, no test
+    assert "j1" in anchored(j + 4 * se, 2 * se)
+    monkeypatch.undo()
+    far = anchored(j + 4 * se, 2 * se)
+    assert "j1" not in far and "standard errors of their difference" in far["choice"], far["choice"]
+    near = anchored(j - 3 * se, 2 * se)
+    assert "j1" in near and near["j1"] == j, near["choice"]
 
 
 def test_the_change_point_trims_move_each_end_and_both_at_once():
