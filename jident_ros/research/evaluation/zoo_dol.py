@@ -380,7 +380,13 @@ def main(argv=None) -> int:
     p.add_argument("--undeclared", action="store_true",
                    help="declare nothing (b1 = 0 and the node's defaults): what a user who configures nothing gets "
                         "(with --results -)")
+    p.add_argument("--entry-shift", type=int, default=0,
+                   help="stress the gap stage: the flank detector's entry sample moved by this many samples (an "
+                        "experiment, not a product setting; with --results -)")
     a = p.parse_args(argv)
+    if a.entry_shift and a.results != "-":
+        sys.stderr.write("zoo_dol: error: argument --entry-shift: an experiment, print it with --results -\n")
+        return 2
     if a.undeclared and a.results != "-":
         sys.stderr.write("zoo_dol: error: argument --undeclared: print it with --results -\n")
         return 2
@@ -396,9 +402,11 @@ def main(argv=None) -> int:
         sys.stderr.write(f"zoo_dol: error: {problem}\n")
         return 2
     commit = zoo._commit()
-    res = run(Path(a.out), log=lambda t: print(t, file=sys.stderr, flush=True), quick=a.quick, undeclared=a.undeclared)
+    with zoo.entry_shift(a.entry_shift):
+        res = run(Path(a.out), log=lambda t: print(t, file=sys.stderr, flush=True), quick=a.quick,
+                  undeclared=a.undeclared)
     cmd = ("python -m jident_ros.research.evaluation.zoo_dol --report" + (" --quick" if a.quick else "")
-           + (" --undeclared" if a.undeclared else ""))
+           + (" --undeclared" if a.undeclared else "") + (f" --entry-shift {a.entry_shift}" if a.entry_shift else ""))
     md = markdown(res, cmd, commit)
     if a.json:
         Path(a.json).write_text(json.dumps({"rows": {" | ".join(k): v for k, v in res["rows"].items()},
