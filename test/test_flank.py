@@ -1318,3 +1318,26 @@ def test_a_ringing_re_contact_does_not_move_the_entry():
     entry, _ = flank.zone_edge_entry(rows[:, 1], delta, rows[:, 3], (int(d["entry"]), int(d["departure"]),
                                      int(d["recontact"])), side, float(d["J"]), 5e-4)
     assert entry == int(d["entry"])
+
+
+@pytest.mark.parametrize("name", ["small_drive_speed_reversal_jointstate.npz",
+                                  "small_drive_speed_reversal_jointstate_30db.npz"])
+@pytest.mark.parametrize("tight", [True, False])
+def test_a_light_motor_s_speed_reversal_takes_the_spring_fit_with_its_own_j1(monkeypatch, name, tight):
+    """docs/your_drive.md's small drive (J1 0.03 kg m^2 behind a 3:1 gear), its speed reversal clean and at 30 dB
+    (test/data/small_drive_speed_reversal_jointstate*.npz, the capture up to 100 rows past the departure): delta
+    leaves its flank with no relative speed and crosses the departure threshold 6 samples after the contact loss; the
+    spring fit explains alpha1 only 1.24 / 1.39 times better (below SPRING_MIN_GAIN) but with J1 within 0.5 % of the
+    nominal, 2 / 1 samples from the contact loss: taken (SPRING_TIGHT_*); without that path the entry stays at +6."""
+    from jident_ros.stream import flank
+    if not tight:
+        monkeypatch.setattr(flank, "SPRING_TIGHT_MIN_GAIN", 0.0)
+    data, dep, true, level, sigma = _vd_return_cut(name, 65536)
+    det = FlankDetector(0.03, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), gear_ratio=3.0,
+                        nominal_inertia_kgm2=0.03)
+    det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), False, sigma
+    shift, _ = det._refine(data, dep)
+    if tight:
+        assert abs(dep + shift - true) <= 2, dep + shift - true
+    else:
+        assert dep + shift - true == 6, dep + shift - true
