@@ -1341,3 +1341,22 @@ def test_a_light_motor_s_speed_reversal_takes_the_spring_fit_with_its_own_j1(mon
         assert abs(dep + shift - true) <= 2, dep + shift - true
     else:
         assert dep + shift - true == 6, dep + shift - true
+
+
+@pytest.mark.parametrize("a1_fit", [True, False])
+def test_with_a1_the_coupling_at_the_re_contact_is_read_from_the_torque_balance(monkeypatch, a1_fit):
+    """The soft coupling variant's 30 dB heavy load reversal with an Imu (test/data/vd_soft_heavy_reversal_zone_imu_30db
+    .npz: the capture from the departure - 100 to the re-contact + 60, t alpha1 alpha2 m_el a1; k 15000 N m/rad, c/k
+    5.3 samples): J1_nom a1 - m_el = -(k pen + c pen') after the re-contact gives k within 5 % and c/k within 5 %, and
+    the entry moves from the separation (-6) to the zone (0).  The angle form's k is 52 % high (K/J 19674): its edge lies
+    before the entry and nothing moves (ZONE_A1_FIT off: -6)."""
+    from jident_ros.stream import flank
+    if not a1_fit:
+        monkeypatch.setattr(flank, "ZONE_A1_FIT", False)
+    d, rows, delta, side = _zone_cut("vd_soft_heavy_reversal_zone_imu_30db.npz")
+    acc = rows[:, 4] / float(d["radius"])
+    kj, ck, rse, _ = flank.far_contact_model_a1(acc, delta, rows[:, 3], int(d["recontact"]), 1.16, 5e-4)
+    assert kj * 1.16 == pytest.approx(15000.0, rel=0.05) and ck / 5e-4 == pytest.approx(5.3, rel=0.05) and rse < 0.05
+    entry, _ = flank.zone_edge_entry((rows[:, 1], acc), delta, rows[:, 3], (int(d["entry"]), int(d["departure"]),
+                                     int(d["recontact"])), side, 1.16, 5e-4, 2.0 * math.pi / 65536)
+    assert entry - int(d["true_entry"]) == (0 if a1_fit else -6)

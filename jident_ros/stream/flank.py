@@ -1115,6 +1115,53 @@ def far_contact_model(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, r
     return -into * coef[4] / scale[0], ratio * scale[0] / scale[1], rse, math.sqrt(max(float(cov[4, 4]), 0.0)) / abs(coef[4])
 
 
+#: With a1 (an Imu) the coupling's torque at the re-contact is read, not double-integrated: J1_nom a1 - m_el = -(k pen +
+#: c pen') over the ZONE_FIT_AFTER rows from the re-contact row (searched within +-ZONE_RECONTACT_SEARCH by least
+#: squares; pen as in :func:`far_contact_model`, a constant for the torque estimate's offset) --
+#: :func:`far_contact_model_a1`.  On the soft coupling variant's 30 dB Imu recordings (where it was chosen) it gives k
+#: 14400 / 15100 / 15000 N m/rad (true 15000) and c/k 5.0 / 5.1 / 5.4 samples (true 5.3) with relative standard errors
+#: 0.01-0.02 on the light and heavy load reversals and the speed reversal, where the angle form gave k 19600 (c/k
+#: undetermined, relative standard error 0.74) / 22800 / 15000; on the base drive's heavy load reversal 52100 and 1.50
+#: samples (true 50000, 1.6).  The steady torque T0 is then m_el less J1_nom a1 (the coupling's share).  Over the 33
+#: variants (detector replay) it moved the soft coupling's Imu heavy reversal -6 -> 0, the heavy load variant's -3 -> +1,
+#: '4 kHz read at 2 kHz' +3 -> +1, 'smoothed torque 2 ms' -3 -> +1, and 'sampling jitter 50 us' Imu light reversal -1 ->
+#: +3 (its edge from T0 includes the motor's friction, about 2.7 N m of 25.7: no friction is known to the detector);
+#: docs/results.md, "Entry placement, thirteenth round".  False turns it off.
+ZONE_A1_FIT = True
+
+
+def far_contact_model_a1(acc: np.ndarray, delta: np.ndarray, m_el: np.ndarray, recontact: int, inertia_kgm2: float,
+                         sample_period_s: float) -> Optional[tuple]:
+    """:func:`far_contact_model`'s (K/J, c/k in s, relative standard errors of c/k and of K) from the torque balance
+    with the motor's acceleration ``acc`` in rad/s^2 (ZONE_A1_FIT); None when the rows are not there."""
+    ts = sample_period_s
+    post, search = samples(ZONE_FIT_AFTER, ts), samples(ZONE_RECONTACT_SEARCH, ts)
+    acc, d_all, m = (np.asarray(x, float) for x in (acc, delta, m_el))
+    best = None
+    for r in range(int(recontact) - search, int(recontact) + search + 1):
+        hi = r + post
+        if r < 2 or hi + 1 > d_all.size:
+            continue
+        into = 1.0 if d_all[r + 1] >= d_all[r - 1] else -1.0       # the direction delta enters the far flank
+        pen = np.clip(into * (d_all[r:hi] - 0.5 * (d_all[r - 1] + d_all[r])), 0.0, None)
+        rate = into * np.gradient(d_all[r - 1:hi + 1])[1:-1] / ts * (pen > 0)
+        X = np.column_stack([pen, rate, np.ones(hi - r)])
+        rss, coef = _lstsq_rss(X, inertia_kgm2 * acc[r:hi] - m[r:hi])
+        if best is None or rss < best[0]:
+            best = (rss, X, coef, into)
+    if best is None:
+        return None
+    rss, X, coef, into = best
+    k = -into * coef[0]
+    if not coef[0] != 0:
+        return None
+    ratio = coef[1] / coef[0]
+    cov = np.linalg.pinv(X.T @ X) * rss / max(X.shape[0] - X.shape[1], 1)
+    g = np.array([-ratio / coef[0], 1.0 / coef[0], 0.0])
+    rse = math.sqrt(max(float(g @ cov @ g), 0.0)) / abs(ratio) if ratio != 0 else math.inf
+    return k / inertia_kgm2, ratio, rse, math.sqrt(max(float(cov[0, 0]), 0.0)) / abs(coef[0])
+
+
 def zone_edge_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, rows: tuple, side: float,
                     inertia_kgm2: float, sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S,
                     quantum_rad: float = 0.0) -> tuple:
@@ -1123,10 +1170,17 @@ def zone_edge_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, row
     to), F + side |T0| / k, within c/k + ZONE_MOVE_SLACK samples, when :func:`far_contact_model` near the re-contact
     gives K > 0, c/k >= 0 within ZONE_MAX_CK_REL_SE and delta crosses the edge by more than its uncertainty per sample
     (ZONE_K_SIGMAS x K's relative standard error x the twist, plus delta's quantum ``quantum_rad``; ZONE_* constants);
-    else the entry itself."""
+    else the entry itself.  ``alpha1`` may be a pair (alpha1, the motor's acceleration from a1 in rad/s^2): then k and
+    c/k come from :func:`far_contact_model_a1` and J1_nom a1 is taken off the steady torque (ZONE_A1_FIT)."""
     ts = sample_period_s
+    alpha1, acc = alpha1 if isinstance(alpha1, tuple) else (alpha1, None)
     entry, departure, recontact = (int(r) for r in rows)
-    got = far_contact_model(alpha1, delta, m_el, recontact, ts) if recontact > entry else None
+    if recontact <= entry:
+        got = None
+    elif acc is not None and ZONE_A1_FIT:
+        got = far_contact_model_a1(acc, delta, m_el, recontact, inertia_kgm2, ts)
+    else:
+        got = far_contact_model(alpha1, delta, m_el, recontact, ts)
     if got is None:
         return entry, math.nan
     kj, ck, rse, rse_k = got
@@ -1135,7 +1189,10 @@ def zone_edge_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, row
     if not (kj > 0 and ck >= 0 and rse <= ZONE_MAX_CK_REL_SE) or a < 0:
         return entry, ck_samples
     d = np.asarray(delta, float)
-    twist = abs(float(np.mean(np.asarray(m_el, float)[a:b]))) / (kj * inertia_kgm2)
+    torque = np.asarray(m_el, float)[a:b]
+    if acc is not None and ZONE_A1_FIT:
+        torque = torque - inertia_kgm2 * np.asarray(acc, float)[a:b]     # the coupling's share: less J1 a1
+    twist = abs(float(np.mean(torque))) / (kj * inertia_kgm2)
     edge = float(np.mean(d[a:b])) + side * twist
     hi = entry + int(math.ceil(ck_samples + samples_float(ZONE_MOVE_SLACK, ts)))
     beyond = np.flatnonzero(side * (d[entry:hi + 1] - edge) > 0)
@@ -2467,7 +2524,9 @@ class FlankDetector(BacklashDetector):
         side = 1.0 if after.size and after[int(np.argmax(np.abs(after)))] >= 0 else -1.0
         quantum = _delta_quantum(delta, dep, self.angle_quantum_rad, max(dep - self._n(UNTWIST_FIT_BEFORE), 0),
                                  self.min_departure_rad)
-        z, _ = zone_edge_entry(data[:, self._i_a1], delta, data[:, self.channels.index("m_el")], (entry, dep, recontact),
+        acc = data[:, self.channels.index("a1")] / self.wheel_radius_m if "a1" in self.channels else None
+        motor = (data[:, self._i_a1], acc) if acc is not None else data[:, self._i_a1]
+        z, _ = zone_edge_entry(motor, delta, data[:, self.channels.index("m_el")], (entry, dep, recontact),
                                side, self.nominal_inertia_kgm2, self.sample_period_s, quantum)
         return z
 
