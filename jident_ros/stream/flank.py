@@ -40,9 +40,11 @@ and on what the clutch does, not on inequality (1):
   own entry that nothing moved, without a1, goes back to where a spring carrying the steady m_el loses its contact
   (:func:`spring_entry`: a fast departure crosses the threshold after the contact loss, the vector drive's speed
   reversals 3 samples); with a1 it goes forward to the end of the load torque's ramp (:func:`load_hinge`: a noisy run
-  starts early) -- both at a clear gain (SPRING_*, LOAD_HINGE_*).  Without a1, a window's own entry then goes to a
-  damped spring's contact loss (:func:`damped_spring_entry`: the torque scale and damping fitted, a re-contact on the
-  flank it left inside the fit) when that explains alpha1 clearly better and lies 3 samples or more away (DAMPED_*;
+  starts early) -- both at a clear gain (SPRING_*, LOAD_HINGE_*), the spring also at a lower gain when its J lies
+  within 2 % of J1_nom (SPRING_TIGHT_*: a light motor's speed reversal, whose motor equation hardly changes there).
+  Without a1, a window's own entry then goes to a damped spring's contact loss (:func:`damped_spring_entry`: the torque
+  scale and damping fitted, a re-contact on the flank it left inside the fit) when that explains alpha1 clearly better
+  and lies 3 samples or more away (DAMPED_*;
   the DOL drive's slip drop, whose departure precedes its contact loss and whose gap lasts 17 samples).  On a coarse
   encoder (2^13), where those models are off, a window's own entry without a1 goes instead to the end of the
   coupling's untwist (:func:`untwist_entry`: delta at rest, untwisting at a constant rate, then free) when that model
@@ -53,7 +55,8 @@ and on what the clutch does, not on inequality (1):
   without a1, a torque estimate that reads a sample late is advanced by that sample (:func:`torque_late_gain`).  After
   them a window's own traversal moves forward from a damped coupling's separation (its torque k x + c x' at zero, about
   c/k before the zone) to where delta crosses the zone's edge, the steady twist |T0| / k from the flank level, k and c/k
-  from the re-contact on the far flank (:func:`zone_edge_entry`).
+  from the re-contact on the far flank (:func:`zone_edge_entry`; with a1 from its torque balance there,
+  :func:`far_contact_model_a1`, and T0 less J1_nom a1).
 * **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
   ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
   (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry
