@@ -1360,3 +1360,22 @@ def test_with_a1_the_coupling_at_the_re_contact_is_read_from_the_torque_balance(
     entry, _ = flank.zone_edge_entry((rows[:, 1], acc), delta, rows[:, 3], (int(d["entry"]), int(d["departure"]),
                                      int(d["recontact"])), side, 1.16, 5e-4, 2.0 * math.pi / 65536)
     assert entry - int(d["true_entry"]) == (0 if a1_fit else -6)
+
+
+@pytest.mark.parametrize("friction", [True, False])
+def test_with_a1_the_gap_s_friction_comes_off_the_steady_torque(monkeypatch, friction):
+    """The 'sampling jitter 50 us' variant's 30 dB light load reversal with an Imu (test/data/vd_jitter50_light_reversal
+    _zone_imu_30db.npz: the zone step's inputs from the departure - 100 to its re-contact + 60: alpha1, a1 / r, delta,
+    m_el): the steady rows' m_el - J1 a1 is 25.7 N m, but 3.3 N m of it is the motor's friction, which the gap shows
+    (m_el - J1 a1 there); with it taken off, the edge is crossed at the zone entry (0), left in at +3."""
+    from pathlib import Path
+
+    from jident_ros.stream import flank
+    if not friction:
+        monkeypatch.setattr(flank, "ZONE_A1_FRICTION", False)
+    d = np.load(Path(__file__).parent / "data" / "vd_jitter50_light_reversal_zone_imu_30db.npz")
+    entry, ck = flank.zone_edge_entry((d["alpha1"], d["acc"]), d["delta"], d["m_el"],
+                                      (int(d["entry"]), int(d["departure"]), int(d["recontact"])), float(d["side"]),
+                                      1.16, 5e-4, float(d["quantum"]))
+    assert ck == pytest.approx(1.57, abs=0.05)
+    assert entry - int(d["true_entry"]) == (0 if friction else 3)

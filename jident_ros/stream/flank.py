@@ -1128,9 +1128,16 @@ def far_contact_model(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, r
 #: samples (true 50000, 1.6).  The steady torque T0 is then m_el less J1_nom a1 (the coupling's share).  Over the 33
 #: variants (detector replay) it moved the soft coupling's Imu heavy reversal -6 -> 0, the heavy load variant's -3 -> +1,
 #: '4 kHz read at 2 kHz' +3 -> +1, 'smoothed torque 2 ms' -3 -> +1, and 'sampling jitter 50 us' Imu light reversal -1 ->
-#: +3 (its edge from T0 includes the motor's friction, about 2.7 N m of 25.7: no friction is known to the detector);
-#: docs/results.md, "Entry placement, thirteenth round".  False turns it off.
+#: +3 (its edge from T0 included the motor's friction: ZONE_A1_FRICTION below);
+#: docs/results.md, "Entry placement, thirteenth round".  False turns it off ...
 ZONE_A1_FIT = True
+#: ... and with a1 the motor's friction (and the torque estimate's offset) comes off T0 too: the mean of m_el - J1_nom
+#: a1 over up to 40 rows of the gap (from c/k + 2 samples after the later of the entry and the departure, ending 2
+#: before the re-contact), when alpha1 runs the same way there as over the steady rows (a Coulomb friction keeps its
+#: sign).  Without it the light reversal of 'sampling jitter 50 us' with an Imu went -1 -> +3: T0 25.7 N m, the gap's
+#: offset 3.3 N m, the true edge's torque 23.0 N m.  From the departure on instead, the soft coupling's heavy reversal
+#: (departing 23 samples before its contact loss) read the contact as friction (33 N m) and went 0 -> -3.
+ZONE_A1_FRICTION = True
 
 
 def far_contact_model_a1(acc: np.ndarray, delta: np.ndarray, m_el: np.ndarray, recontact: int, inertia_kgm2: float,
@@ -1174,7 +1181,8 @@ def zone_edge_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, row
     gives K > 0, c/k >= 0 within ZONE_MAX_CK_REL_SE and delta crosses the edge by more than its uncertainty per sample
     (ZONE_K_SIGMAS x K's relative standard error x the twist, plus delta's quantum ``quantum_rad``; ZONE_* constants);
     else the entry itself.  ``alpha1`` may be a pair (alpha1, the motor's acceleration from a1 in rad/s^2): then k and
-    c/k come from :func:`far_contact_model_a1` and J1_nom a1 is taken off the steady torque (ZONE_A1_FIT)."""
+    c/k come from :func:`far_contact_model_a1`, and J1_nom a1 and the gap's friction are taken off the steady torque
+    (ZONE_A1_FIT, ZONE_A1_FRICTION)."""
     ts = sample_period_s
     alpha1, acc = alpha1 if isinstance(alpha1, tuple) else (alpha1, None)
     entry, departure, recontact = (int(r) for r in rows)
@@ -1193,9 +1201,16 @@ def zone_edge_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, row
         return entry, ck_samples
     d = np.asarray(delta, float)
     torque = np.asarray(m_el, float)[a:b]
+    offset = 0.0
     if acc is not None and ZONE_A1_FIT:
-        torque = torque - inertia_kgm2 * np.asarray(acc, float)[a:b]     # the coupling's share: less J1 a1
-    twist = abs(float(np.mean(torque))) / (kj * inertia_kgm2)
+        acc = np.asarray(acc, float)
+        torque = torque - inertia_kgm2 * acc[a:b]     # the coupling's share: less J1 a1
+        g0 = max(departure, entry) + int(math.ceil(ck_samples)) + 2
+        g1 = min(g0 + 40, recontact - 2)
+        x1 = np.asarray(alpha1, float)
+        if ZONE_A1_FRICTION and g1 - g0 >= 8 and (x1[b] - x1[a]) * (x1[g1] - x1[g0]) > 0:
+            offset = float(np.mean(np.asarray(m_el, float)[g0:g1] - inertia_kgm2 * acc[g0:g1]))
+    twist = abs(float(np.mean(torque)) - offset) / (kj * inertia_kgm2)
     edge = float(np.mean(d[a:b])) + side * twist
     hi = entry + int(math.ceil(ck_samples + samples_float(ZONE_MOVE_SLACK, ts)))
     beyond = np.flatnonzero(side * (d[entry:hi + 1] - edge) > 0)
