@@ -1318,3 +1318,64 @@ def test_a_ringing_re_contact_does_not_move_the_entry():
     entry, _ = flank.zone_edge_entry(rows[:, 1], delta, rows[:, 3], (int(d["entry"]), int(d["departure"]),
                                      int(d["recontact"])), side, float(d["J"]), 5e-4)
     assert entry == int(d["entry"])
+
+
+@pytest.mark.parametrize("name", ["small_drive_speed_reversal_jointstate.npz",
+                                  "small_drive_speed_reversal_jointstate_30db.npz"])
+@pytest.mark.parametrize("tight", [True, False])
+def test_a_light_motor_s_speed_reversal_takes_the_spring_fit_with_its_own_j1(monkeypatch, name, tight):
+    """docs/your_drive.md's small drive (J1 0.03 kg m^2 behind a 3:1 gear), its speed reversal clean and at 30 dB
+    (test/data/small_drive_speed_reversal_jointstate*.npz, the capture up to 100 rows past the departure): delta
+    leaves its flank with no relative speed and crosses the departure threshold 6 samples after the contact loss; the
+    spring fit explains alpha1 only 1.24 / 1.39 times better (below SPRING_MIN_GAIN) but with J1 within 0.5 % of the
+    nominal, 2 / 1 samples from the contact loss: taken (SPRING_TIGHT_*); without that path the entry stays at +6."""
+    from jident_ros.stream import flank
+    if not tight:
+        monkeypatch.setattr(flank, "SPRING_TIGHT_MIN_GAIN", 0.0)
+    data, dep, true, level, sigma = _vd_return_cut(name, 65536)
+    det = FlankDetector(0.03, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), gear_ratio=3.0,
+                        nominal_inertia_kgm2=0.03)
+    det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), False, sigma
+    shift, _ = det._refine(data, dep)
+    if tight:
+        assert abs(dep + shift - true) <= 2, dep + shift - true
+    else:
+        assert dep + shift - true == 6, dep + shift - true
+
+
+@pytest.mark.parametrize("a1_fit", [True, False])
+def test_with_a1_the_coupling_at_the_re_contact_is_read_from_the_torque_balance(monkeypatch, a1_fit):
+    """The soft coupling variant's 30 dB heavy load reversal with an Imu (test/data/vd_soft_heavy_reversal_zone_imu_30db
+    .npz: the capture from the departure - 100 to the re-contact + 60, t alpha1 alpha2 m_el a1; k 15000 N m/rad, c/k
+    5.3 samples): J1_nom a1 - m_el = -(k pen + c pen') after the re-contact gives k within 5 % and c/k within 5 %, and
+    the entry moves from the separation (-6) to the zone (0).  The angle form's k is 52 % high (K/J 19674): its edge lies
+    before the entry and nothing moves (ZONE_A1_FIT off: -6)."""
+    from jident_ros.stream import flank
+    if not a1_fit:
+        monkeypatch.setattr(flank, "ZONE_A1_FIT", False)
+    d, rows, delta, side = _zone_cut("vd_soft_heavy_reversal_zone_imu_30db.npz")
+    acc = rows[:, 4] / float(d["radius"])
+    kj, ck, rse, _ = flank.far_contact_model_a1(acc, delta, rows[:, 3], int(d["recontact"]), 1.16, 5e-4)
+    assert kj * 1.16 == pytest.approx(15000.0, rel=0.05) and ck / 5e-4 == pytest.approx(5.3, rel=0.05) and rse < 0.05
+    entry, _ = flank.zone_edge_entry((rows[:, 1], acc), delta, rows[:, 3], (int(d["entry"]), int(d["departure"]),
+                                     int(d["recontact"])), side, 1.16, 5e-4, 2.0 * math.pi / 65536)
+    assert entry - int(d["true_entry"]) == (0 if a1_fit else -6)
+
+
+@pytest.mark.parametrize("friction", [True, False])
+def test_with_a1_the_gap_s_friction_comes_off_the_steady_torque(monkeypatch, friction):
+    """The 'sampling jitter 50 us' variant's 30 dB light load reversal with an Imu (test/data/vd_jitter50_light_reversal
+    _zone_imu_30db.npz: the zone step's inputs from the departure - 100 to its re-contact + 60: alpha1, a1 / r, delta,
+    m_el): the steady rows' m_el - J1 a1 is 25.7 N m, but 3.3 N m of it is the motor's friction, which the gap shows
+    (m_el - J1 a1 there); with it taken off, the edge is crossed at the zone entry (0), left in at +3."""
+    from pathlib import Path
+
+    from jident_ros.stream import flank
+    if not friction:
+        monkeypatch.setattr(flank, "ZONE_A1_FRICTION", False)
+    d = np.load(Path(__file__).parent / "data" / "vd_jitter50_light_reversal_zone_imu_30db.npz")
+    entry, ck = flank.zone_edge_entry((d["alpha1"], d["acc"]), d["delta"], d["m_el"],
+                                      (int(d["entry"]), int(d["departure"]), int(d["recontact"])), float(d["side"]),
+                                      1.16, 5e-4, float(d["quantum"]))
+    assert ck == pytest.approx(1.57, abs=0.05)
+    assert entry - int(d["true_entry"]) == (0 if friction else 3)

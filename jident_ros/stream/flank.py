@@ -40,9 +40,11 @@ and on what the clutch does, not on inequality (1):
   own entry that nothing moved, without a1, goes back to where a spring carrying the steady m_el loses its contact
   (:func:`spring_entry`: a fast departure crosses the threshold after the contact loss, the vector drive's speed
   reversals 3 samples); with a1 it goes forward to the end of the load torque's ramp (:func:`load_hinge`: a noisy run
-  starts early) -- both at a clear gain (SPRING_*, LOAD_HINGE_*).  Without a1, a window's own entry then goes to a
-  damped spring's contact loss (:func:`damped_spring_entry`: the torque scale and damping fitted, a re-contact on the
-  flank it left inside the fit) when that explains alpha1 clearly better and lies 3 samples or more away (DAMPED_*;
+  starts early) -- both at a clear gain (SPRING_*, LOAD_HINGE_*), the spring also at a lower gain when its J lies
+  within 2 % of J1_nom (SPRING_TIGHT_*: a light motor's speed reversal, whose motor equation hardly changes there).
+  Without a1, a window's own entry then goes to a damped spring's contact loss (:func:`damped_spring_entry`: the torque
+  scale and damping fitted, a re-contact on the flank it left inside the fit) when that explains alpha1 clearly better
+  and lies 3 samples or more away (DAMPED_*;
   the DOL drive's slip drop, whose departure precedes its contact loss and whose gap lasts 17 samples).  On a coarse
   encoder (2^13), where those models are off, a window's own entry without a1 goes instead to the end of the
   coupling's untwist (:func:`untwist_entry`: delta at rest, untwisting at a constant rate, then free) when that model
@@ -53,7 +55,8 @@ and on what the clutch does, not on inequality (1):
   without a1, a torque estimate that reads a sample late is advanced by that sample (:func:`torque_late_gain`).  After
   them a window's own traversal moves forward from a damped coupling's separation (its torque k x + c x' at zero, about
   c/k before the zone) to where delta crosses the zone's edge, the steady twist |T0| / k from the flank level, k and c/k
-  from the re-contact on the far flank (:func:`zone_edge_entry`).
+  from the re-contact on the far flank (:func:`zone_edge_entry`; with a1 from its torque balance there,
+  :func:`far_contact_model_a1`, and T0 less J1_nom a1).
 * **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
   ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
   (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry
@@ -955,6 +958,20 @@ SPRING_MAX_J_DEVIATION = 0.15
 #: what it resolves (the vector drive's J1 1.073 speed step clean moved -1 -> -3, the second drive's speed steps
 #: -1 -> -2 and -3 -> -2; the speed reversals move 4-5 samples back)
 SPRING_MIN_MOVE = 3
+#: A spring fit whose J lies within SPRING_TIGHT_J of J1_nom is taken at the lower gain SPRING_TIGHT_MIN_GAIN, when it
+#: moves the entry SPRING_TIGHT_MIN_MOVE samples or more back and delta's measured quantum is fine (its smallest step
+#: before the departure / sqrt 12 within FREE_MAX_NOISE_RAD, as :meth:`FlankDetector._ramp_move`).  A drive whose
+#: motor is light against its load torque (docs/your_drive.md's small drive, J1 0.03 kg m^2 behind a 3:1 gear) leaves
+#: its flank with no relative speed in a speed reversal: delta crosses the departure threshold (1.5 mrad) 6 samples
+#: after the contact loss; the motor equation changes little there (the coupling torque ramps through zero), so the
+#: spring fit explains alpha1 only 1.24 / 1.39 times better (clean / 30 dB), below SPRING_MIN_GAIN, but with J1
+#: 0.0302 / 0.0300 (0.5 % / 0.0 % off J1_nom) at 2 / 1 samples from the contact loss.  Chosen on that variant; tested
+#: on the others, the zoo and the DOL zoo (docs/results.md, "Entry placement, thirteenth round"): the soft coupling's
+#: clean speed reversal (J 0.9 % off, gain 1.81) is a move of 3 to its separation, c/k before the zone (-2 -> -5),
+#: hence the move of 4; the vector drive's 2^13 30 dB speed step lost one entry without the quantum gate (0 = off)
+SPRING_TIGHT_J = 0.02
+SPRING_TIGHT_MIN_GAIN = 1.2
+SPRING_TIGHT_MIN_MOVE = 4
 
 
 def spring_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, departure: int, flank_rad: float,
@@ -1128,6 +1145,60 @@ def far_contact_model(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, r
     return -into * coef[4] / scale[0], ratio * scale[0] / scale[1], rse, math.sqrt(max(float(cov[4, 4]), 0.0)) / abs(coef[4])
 
 
+#: With a1 (an Imu) the coupling's torque at the re-contact is read, not double-integrated: J1_nom a1 - m_el = -(k pen +
+#: c pen') over the ZONE_FIT_AFTER rows from the re-contact row (searched within +-ZONE_RECONTACT_SEARCH by least
+#: squares; pen as in :func:`far_contact_model`, a constant for the torque estimate's offset) --
+#: :func:`far_contact_model_a1`.  On the soft coupling variant's 30 dB Imu recordings (where it was chosen) it gives k
+#: 14400 / 15100 / 15000 N m/rad (true 15000) and c/k 5.0 / 5.1 / 5.4 samples (true 5.3) with relative standard errors
+#: 0.01-0.02 on the light and heavy load reversals and the speed reversal, where the angle form gave k 19600 (c/k
+#: undetermined, relative standard error 0.74) / 22800 / 15000; on the base drive's heavy load reversal 52100 and 1.50
+#: samples (true 50000, 1.6).  The steady torque T0 is then m_el less J1_nom a1 (the coupling's share).  Over the 33
+#: variants (detector replay) it moved the soft coupling's Imu heavy reversal -6 -> 0, the heavy load variant's -3 -> +1,
+#: '4 kHz read at 2 kHz' +3 -> +1, 'smoothed torque 2 ms' -3 -> +1, and 'sampling jitter 50 us' Imu light reversal -1 ->
+#: +3 (its edge from T0 included the motor's friction: ZONE_A1_FRICTION below);
+#: docs/results.md, "Entry placement, thirteenth round".  False turns it off ...
+ZONE_A1_FIT = True
+#: ... and with a1 the motor's friction (and the torque estimate's offset) comes off T0 too: the mean of m_el - J1_nom
+#: a1 over up to 40 rows of the gap (from c/k + 2 samples after the later of the entry and the departure, ending 2
+#: before the re-contact), when alpha1 runs the same way there as over the steady rows (a Coulomb friction keeps its
+#: sign).  Without it the light reversal of 'sampling jitter 50 us' with an Imu went -1 -> +3: T0 25.7 N m, the gap's
+#: offset 3.3 N m, the true edge's torque 23.0 N m.  From the departure on instead, the soft coupling's heavy reversal
+#: (departing 23 samples before its contact loss) read the contact as friction (33 N m) and went 0 -> -3.
+ZONE_A1_FRICTION = True
+
+
+def far_contact_model_a1(acc: np.ndarray, delta: np.ndarray, m_el: np.ndarray, recontact: int, inertia_kgm2: float,
+                         sample_period_s: float) -> Optional[tuple]:
+    """:func:`far_contact_model`'s (K/J, c/k in s, relative standard errors of c/k and of K) from the torque balance
+    with the motor's acceleration ``acc`` in rad/s^2 (ZONE_A1_FIT); None when the rows are not there."""
+    ts = sample_period_s
+    post, search = samples(ZONE_FIT_AFTER, ts), samples(ZONE_RECONTACT_SEARCH, ts)
+    acc, d_all, m = (np.asarray(x, float) for x in (acc, delta, m_el))
+    best = None
+    for r in range(int(recontact) - search, int(recontact) + search + 1):
+        hi = r + post
+        if r < 2 or hi + 1 > d_all.size:
+            continue
+        into = 1.0 if d_all[r + 1] >= d_all[r - 1] else -1.0       # the direction delta enters the far flank
+        pen = np.clip(into * (d_all[r:hi] - 0.5 * (d_all[r - 1] + d_all[r])), 0.0, None)
+        rate = into * np.gradient(d_all[r - 1:hi + 1])[1:-1] / ts * (pen > 0)
+        X = np.column_stack([pen, rate, np.ones(hi - r)])
+        rss, coef = _lstsq_rss(X, inertia_kgm2 * acc[r:hi] - m[r:hi])
+        if best is None or rss < best[0]:
+            best = (rss, X, coef, into)
+    if best is None:
+        return None
+    rss, X, coef, into = best
+    k = -into * coef[0]
+    if not coef[0] != 0:
+        return None
+    ratio = coef[1] / coef[0]
+    cov = np.linalg.pinv(X.T @ X) * rss / max(X.shape[0] - X.shape[1], 1)
+    g = np.array([-ratio / coef[0], 1.0 / coef[0], 0.0])
+    rse = math.sqrt(max(float(g @ cov @ g), 0.0)) / abs(ratio) if ratio != 0 else math.inf
+    return k / inertia_kgm2, ratio, rse, math.sqrt(max(float(cov[0, 0]), 0.0)) / abs(coef[0])
+
+
 def zone_edge_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, rows: tuple, side: float,
                     inertia_kgm2: float, sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S,
                     quantum_rad: float = 0.0) -> tuple:
@@ -1136,10 +1207,18 @@ def zone_edge_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, row
     to), F + side |T0| / k, within c/k + ZONE_MOVE_SLACK samples, when :func:`far_contact_model` near the re-contact
     gives K > 0, c/k >= 0 within ZONE_MAX_CK_REL_SE and delta crosses the edge by more than its uncertainty per sample
     (ZONE_K_SIGMAS x K's relative standard error x the twist, plus delta's quantum ``quantum_rad``; ZONE_* constants);
-    else the entry itself."""
+    else the entry itself.  ``alpha1`` may be a pair (alpha1, the motor's acceleration from a1 in rad/s^2): then k and
+    c/k come from :func:`far_contact_model_a1`, and J1_nom a1 and the gap's friction are taken off the steady torque
+    (ZONE_A1_FIT, ZONE_A1_FRICTION)."""
     ts = sample_period_s
+    alpha1, acc = alpha1 if isinstance(alpha1, tuple) else (alpha1, None)
     entry, departure, recontact = (int(r) for r in rows)
-    got = far_contact_model(alpha1, delta, m_el, recontact, ts) if recontact > entry else None
+    if recontact <= entry:
+        got = None
+    elif acc is not None and ZONE_A1_FIT:
+        got = far_contact_model_a1(acc, delta, m_el, recontact, inertia_kgm2, ts)
+    else:
+        got = far_contact_model(alpha1, delta, m_el, recontact, ts)
     if got is None:
         return entry, math.nan
     kj, ck, rse, rse_k = got
@@ -1148,7 +1227,17 @@ def zone_edge_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, row
     if not (kj > 0 and ck >= 0 and rse <= ZONE_MAX_CK_REL_SE) or a < 0:
         return entry, ck_samples
     d = np.asarray(delta, float)
-    twist = abs(float(np.mean(np.asarray(m_el, float)[a:b]))) / (kj * inertia_kgm2)
+    torque = np.asarray(m_el, float)[a:b]
+    offset = 0.0
+    if acc is not None and ZONE_A1_FIT:
+        acc = np.asarray(acc, float)
+        torque = torque - inertia_kgm2 * acc[a:b]     # the coupling's share: less J1 a1
+        g0 = max(departure, entry) + int(math.ceil(ck_samples)) + 2
+        g1 = min(g0 + 40, recontact - 2)
+        x1 = np.asarray(alpha1, float)
+        if ZONE_A1_FRICTION and g1 - g0 >= 8 and (x1[b] - x1[a]) * (x1[g1] - x1[g0]) > 0:
+            offset = float(np.mean(np.asarray(m_el, float)[g0:g1] - inertia_kgm2 * acc[g0:g1]))
+    twist = abs(float(np.mean(torque)) - offset) / (kj * inertia_kgm2)
     edge = float(np.mean(d[a:b])) + side * twist
     hi = entry + int(math.ceil(ck_samples + samples_float(ZONE_MOVE_SLACK, ts)))
     beyond = np.flatnonzero(side * (d[entry:hi + 1] - edge) > 0)
@@ -2480,7 +2569,9 @@ class FlankDetector(BacklashDetector):
         side = 1.0 if after.size and after[int(np.argmax(np.abs(after)))] >= 0 else -1.0
         quantum = _delta_quantum(delta, dep, self.angle_quantum_rad, max(dep - self._n(UNTWIST_FIT_BEFORE), 0),
                                  self.min_departure_rad)
-        z, _ = zone_edge_entry(data[:, self._i_a1], delta, data[:, self.channels.index("m_el")], (entry, dep, recontact),
+        acc = data[:, self.channels.index("a1")] / self.wheel_radius_m if "a1" in self.channels else None
+        motor = (data[:, self._i_a1], acc) if acc is not None else data[:, self._i_a1]
+        z, _ = zone_edge_entry(motor, delta, data[:, self.channels.index("m_el")], (entry, dep, recontact),
                                side, self.nominal_inertia_kgm2, self.sample_period_s, quantum)
         return z
 
@@ -2546,16 +2637,25 @@ class FlankDetector(BacklashDetector):
 
     def _spring_move(self, data: np.ndarray, entry: int, departure: int) -> int:
         """``entry`` moved to :func:`spring_entry`'s contact loss at a clear gain with a plausible J, by SPRING_MIN_MOVE
-        samples or more (SPRING_*), on a fine encoder (FREE_MAX_NOISE_RAD, as the coupling model); else ``entry``."""
+        samples or more (SPRING_*), on a fine encoder (FREE_MAX_NOISE_RAD, as the coupling model); or at the lower gain
+        with J close to J1_nom by SPRING_TIGHT_MIN_MOVE samples or more on a measured fine quantum (SPRING_TIGHT_*);
+        else ``entry``."""
         flank = getattr(self, "_cap_flank", (math.nan, math.nan))[0]
         if not math.isfinite(flank) or "m_el" not in self.channels or self.nominal_inertia_kgm2 is None \
                 or not self.angle_quantum_rad / math.sqrt(12.0) <= FREE_MAX_NOISE_RAD:
             return entry
         e, gain, j = spring_entry(data[:, self._i_a1], self._delta(data), data[:, self.channels.index("m_el")],
                                   departure, flank, self.sample_period_s)
-        if gain >= SPRING_MIN_GAIN and abs(j / self.nominal_inertia_kgm2 - 1.0) <= SPRING_MAX_J_DEVIATION \
-                and e <= entry - self._n(SPRING_MIN_MOVE):
+        dev = abs(j / self.nominal_inertia_kgm2 - 1.0)
+        if gain >= SPRING_MIN_GAIN and dev <= SPRING_MAX_J_DEVIATION and e <= entry - self._n(SPRING_MIN_MOVE):
             return e
+        if SPRING_TIGHT_MIN_GAIN and gain >= SPRING_TIGHT_MIN_GAIN and dev <= SPRING_TIGHT_J \
+                and e <= entry - self._n(SPRING_TIGHT_MIN_MOVE):
+            delta = self._delta(data)
+            quantum = _delta_quantum(delta, departure, self.angle_quantum_rad,
+                                     max(departure - self._n(UNTWIST_FIT_BEFORE), 0), self.min_departure_rad)
+            if quantum / math.sqrt(12.0) <= FREE_MAX_NOISE_RAD:
+                return e
         return entry
 
     def _coupling_move(self, data: np.ndarray, entry: int, departure: int,
