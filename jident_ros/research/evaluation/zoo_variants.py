@@ -264,9 +264,10 @@ def markdown(res: dict, command: str, commit: str) -> str:
                  if res.get("undeclared") else
                  "diagnosed as the zoo diagnoses the vector drive (declared as there, the friction variant with its "
                  "own friction, the observer variant with its torque accuracy, the small drive with its drive "
-                 "file)") + ". One threshold was chosen on one of these drives: the flank detector's traversal-back "
-             "walk noise gate FREE_WALK_MAX_NOISE_RAD, on the 2^14 encoders (docs/results.md, ninth round); no "
-             "other.", "",
+                 "file)") + ". Four of the flank detector's thresholds were chosen on one of these drives each "
+             "(docs/results.md): the traversal-back walk noise gate FREE_WALK_MAX_NOISE_RAD on the 2^14 encoders "
+             "(ninth round), SPRING_TIGHT_* on the small drive, ZONE_A1_FIT on the soft coupling and ZONE_A1_FRICTION "
+             "on 'sampling jitter 50 µs' (thirteenth round); no other, none on 'several at once'.", "",
              "'Entry within ±2' counts from the first sample in the zone (the truth's entry, issue 20's target); "
              "'… of the separation' from the first sample in which the coupling transmits no torque: a damped contact "
              "separates when its force k·x + c·ẋ reaches zero, c/k before the zone (the soft coupling: 5 samples), "
