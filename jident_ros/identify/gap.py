@@ -456,7 +456,6 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
     choice = ""
     fit_span = (start, end)
     free_extra: dict = {}
-    auto_joint = False
     if method is None or method == "auto":
         method = None
         if "a1" in window:
@@ -467,7 +466,6 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
                                        sample_period_s) if test.steady else ""
             if contact:
                 method, choice = "gap_only", f"gap_only: {contact}"
-            auto_joint = method == "acceleration"
         else:
             method = "angle" if "alpha1" in window else "speed"
             choice = f"{method}: no a1 in the window"
@@ -653,36 +651,8 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
     half = _t975(max(int(dof), 1)) * se
     # the residual's RMS: np.mean's own reduction (np.add.reduce, divided by the count)
     rms = float(np.sqrt(np.add.reduce(res ** 2) / res.size))
-    est = GapEstimate(j, se, (j - half, j + half), rms, start, end, method, how,
-                      float(model_error), choice, int(fit_span[0]), int(fit_span[1]), **free_extra)
-    if auto_joint:
-        return _joint_premise_checked(est, (window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s),
-                                      dict(bearing_friction_nms_per_rad=bearing_friction_nms_per_rad,
-                                           recontact_index=recontact_index,
-                                           entry_uncertainty_samples=entry_uncertainty_samples, model=model))
-    return est
-
-
-def _joint_premise_checked(joint: GapEstimate, args: tuple, kw: dict) -> GapEstimate:
-    """The joint ('acceleration') fit where it is more precise than the 'gap_only' fit over the same window, else the
-    'gap_only' fit: the joint fit assumes more (a steady m_el before the entry row, the torque smooth through it) and
-    is taken for the precision that buys; where it buys none, its premise is likely false (the DOL drive at 30 dB: a
-    steady-looking m_el before a load reversal, the joint fit +4 … +8 % at ± 2.8 %, 'gap_only' +1.3 … +1.6 % at
-    ± 1.8 %; `python -m jident_ros.research.evaluation.zoo_dol --report`).  Standard errors without the torque
-    accuracy both share; one on its floor (a noise-free window) tells nothing: the joint fit is kept.  (Hausman's
-    test of the difference, as the steady-entry angle fit has, also rejected our simulator's joint fit at 30 dB,
-    z 2.1: not used here.)"""
-    try:
-        other = _estimate_inertia(*args, method="gap_only", cross_check=False, **kw)
-    except NoGapError:
-        return joint
-    a, b = _stat_se(joint, kw["model"]), _stat_se(other, kw["model"])
-    if a <= FREE_REL_SE_FLOOR * joint.inertia_kgm2 * (1 + 1e-9) or b <= FREE_REL_SE_FLOOR * other.inertia_kgm2 * (1 + 1e-9):
-        return joint
-    if a < b:
-        return joint
-    return replace(other, model_choice=f"gap_only: the joint fit (J1 = {joint.inertia_kgm2:.4g} ± {a:.2g} kg m^2) is "
-                                       f"no more precise; {joint.model_choice}")
+    return GapEstimate(j, se, (j - half, j + half), rms, start, end, method, how,
+                       float(model_error), choice, int(fit_span[0]), int(fit_span[1]), **free_extra)
 
 
 #: Memo of the angle fits (:func:`_angle_fits`), :func:`_joint_fit` and :func:`pre_entry_steady` while
