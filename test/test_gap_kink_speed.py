@@ -13,8 +13,8 @@ from jident_ros.identify import gap_kink, lapack
 from jident_ros.identify.gap_kink import KINK_T0_ROWS
 
 
-def _plain_candidates(m, ts, entries, P, end, y, unload=None, bounds=None):
-    """gap_kink._kink_candidates as fe4eda0 computed it: every (candidate, row) array over all rows [P, end)."""
+def _plain_phi(m, ts, entries, P, end, unload=None):
+    """fe4eda0's Φ (candidate, row) of _plain_candidates: the torque's double trapezoid from each entry row."""
     rows = np.arange(P, end)
     s_arr = np.asarray(entries)
     n = end - P
@@ -26,11 +26,9 @@ def _plain_candidates(m, ts, entries, P, end, y, unload=None, bounds=None):
         w = np.clip((rows[None, :] - s_arr[:, None]) / np.maximum(r_arr, 1), 0.0, 1.0)
         csum = np.concatenate([np.zeros(mm.shape[:-1] + (1,)), np.cumsum(mm, axis=-1)], axis=-1)
         k0 = np.minimum(KINK_T0_ROWS, s_arr - P)
-        if mm.ndim == 1:
-            t0 = (csum[s_arr - P] - csum[s_arr - P - k0]) / k0
-        else:
-            c_idx = np.arange(s_arr.size)
-            t0 = (csum[c_idx, s_arr - P] - csum[c_idx, s_arr - P - k0]) / k0
+        c_idx = np.arange(s_arr.size)
+        t0 = ((csum[s_arr - P] - csum[s_arr - P - k0]) if mm.ndim == 1
+              else (csum[c_idx, s_arr - P] - csum[c_idx, s_arr - P - k0])) / k0
         free = np.where(rows[None, :] >= s_arr[:, None], mm - t0[:, None] * (1.0 - w), 0.0)
         half = np.where(r_arr > 0, 0.5 * (free[:, 1:] + free[:, :-1]), half)
     c1 = np.zeros((s_arr.size, n))
@@ -38,7 +36,15 @@ def _plain_candidates(m, ts, entries, P, end, y, unload=None, bounds=None):
     c1 *= ts
     phi = np.zeros((s_arr.size, n))
     (0.5 * (c1[:, 1:] + c1[:, :-1])).cumsum(axis=1, out=phi[:, 1:])
-    phi *= ts
+    return phi * ts
+
+
+def _plain_candidates(m, ts, entries, P, end, y, unload=None, bounds=None):
+    """gap_kink._kink_candidates as fe4eda0 computed it: every (candidate, row) array over all rows [P, end)."""
+    rows = np.arange(P, end)
+    s_arr = np.asarray(entries)
+    n = end - P
+    phi = _plain_phi(m, ts, entries, P, end, unload)
     hi = np.full(s_arr.size, end) if bounds is None else np.asarray(bounds[1])
     u = (rows[None, :] - s_arr[:, None]) * ts / np.maximum((hi - s_arr) * ts, ts)[:, None]
     n_rows = np.full(s_arr.size, float(n))
@@ -65,32 +71,6 @@ def _plain_candidates(m, ts, entries, P, end, y, unload=None, bounds=None):
     if bounds is not None:
         res = np.where(inside, res, 0.0)
     return np.einsum("ij,ij->i", res, res), coef[:, 2] / scales, u, f, scales
-
-
-def _plain_phi(m, ts, entries, P, end, unload=None):
-    """fe4eda0's Φ (candidate, row) of _plain_candidates: the torque's double trapezoid from each entry row."""
-    rows = np.arange(P, end)
-    s_arr = np.asarray(entries)
-    n = end - P
-    mm = m[..., P:end]
-    keep = np.arange(n - 1)[None, :] >= (s_arr - P)[:, None]
-    half = np.where(keep, 0.5 * (mm[..., 1:] + mm[..., :-1]), 0.0)
-    if unload is not None:
-        r_arr = np.asarray(unload)[:, None]
-        w = np.clip((rows[None, :] - s_arr[:, None]) / np.maximum(r_arr, 1), 0.0, 1.0)
-        csum = np.concatenate([np.zeros(mm.shape[:-1] + (1,)), np.cumsum(mm, axis=-1)], axis=-1)
-        k0 = np.minimum(KINK_T0_ROWS, s_arr - P)
-        c_idx = np.arange(s_arr.size)
-        t0 = ((csum[s_arr - P] - csum[s_arr - P - k0]) if mm.ndim == 1
-              else (csum[c_idx, s_arr - P] - csum[c_idx, s_arr - P - k0])) / k0
-        free = np.where(rows[None, :] >= s_arr[:, None], mm - t0[:, None] * (1.0 - w), 0.0)
-        half = np.where(r_arr > 0, 0.5 * (free[:, 1:] + free[:, :-1]), half)
-    c1 = np.zeros((s_arr.size, n))
-    half.cumsum(axis=1, out=c1[:, 1:])
-    c1 *= ts
-    phi = np.zeros((s_arr.size, n))
-    (0.5 * (c1[:, 1:] + c1[:, :-1])).cumsum(axis=1, out=phi[:, 1:])
-    return phi * ts
 
 
 def _check(m, entries, P, end, y, unload=None, runs=None):
