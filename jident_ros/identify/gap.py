@@ -1146,18 +1146,20 @@ def _a1_contact_rows(window: dict, start: int, end: int, wheel_radius_m: float, 
     except NoGapError:
         return ""
     early, late = fit["start"] - start, end - fit["end"]
-    if early <= GAP_ONLY_MAX_TRIM[0] and late <= GAP_ONLY_MAX_TRIM[1]:
+    cap = tuple(rate_samples(int(k), sample_period_s) for k in GAP_ONLY_MAX_TRIM)     # durations counted at 2 kHz
+    if early <= cap[0] and late <= cap[1]:
         return ""
     return (f"the motor equation holds from row {fit['start']} to {fit['end']}, not from the detector's rows "
             f"{start}..{end} (a contact still loaded at an end): no steady entry at the detector's row")
 
 
 def gap_only_max_trim(model: GapModel, sample_period_s: float) -> tuple:
-    """The 'gap_only' fit's most samples dropped at (the entry end, the re-contact end): GAP_ONLY_MAX_TRIM or the
-    change-point search span (GapModel.search_rows), whichever is larger: the same rows around the detector's
-    entry and re-contact that the angle fit searches for its change points."""
+    """The 'gap_only' fit's most samples dropped at (the entry end, the re-contact end): GAP_ONLY_MAX_TRIM (rows at
+    2 kHz, converted to ``sample_period_s``'s) or the change-point search span (GapModel.search_rows), whichever is
+    larger: the same rows around the detector's entry and re-contact that the angle fit searches for its change
+    points."""
     search = model.search_rows(sample_period_s)
-    return tuple(max(int(k), search) for k in GAP_ONLY_MAX_TRIM)
+    return tuple(max(rate_samples(int(k), sample_period_s), search) for k in GAP_ONLY_MAX_TRIM)
 
 
 def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
