@@ -268,6 +268,8 @@ def test_gap_only_trims_a_detector_entry_early_by_the_change_point_search_span()
     assert gap_only_max_trim(GapModel(), 5e-4) == (25, 25)
     assert gap_only_max_trim(dc_replace(GapModel(), changepoint_search_samples=0), 5e-4) == GAP_ONLY_MAX_TRIM
     assert gap_only_max_trim(GapModel(), 2.5e-4) == (50, 50)                   # the same duration at 4 kHz
+    no_search = dc_replace(GapModel(), changepoint_search_samples=0)
+    assert gap_only_max_trim(no_search, 2.5e-4) == (8, 6)                     # 4 and 3 rows at 2 kHz, counted at 4 kHz
     torque, acc, a, b = trimmed_window(n_pre=60)
     r = 0.1
     window = {"m_el": torque, "a1": acc * r}

@@ -248,3 +248,12 @@ def test_speed_fallback_table_follows_its_counts():
     lines = zoo.speed_fallback({"speed_fallback": {("vector drive", "clean"): s}})
     assert "| vector drive | clean | 1/1 | 15.0 % / 15.0 % | 1 | 0/1 |" in lines
     assert zoo.speed_fallback({}) == []
+
+
+def test_zoo_dol_entry_shift_is_an_experiment_printed_only(tmp_path, capsys):
+    """zoo_dol --entry-shift (the gap stage under a detector moved by N samples) is refused, in one line naming the
+    argument and before any work, unless the report is printed (--results -): it never writes docs/results.md."""
+    from jident_ros.research.evaluation import zoo_dol
+    assert zoo_dol.main(["--report", "--entry-shift", "-6", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "--entry-shift" in err and err.count("\n") == 1 and not list(tmp_path.iterdir())
