@@ -456,16 +456,18 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
     choice = ""
     fit_span = (start, end)
     free_extra: dict = {}
+    gap_only = None                  # the 'gap_only' fit where the model choice has already made it
     if method is None or method == "auto":
         method = None
         if "a1" in window:
             test = pre_entry_steady(np.asarray(window["m_el"], float)[:start])
             method = "acceleration" if test.steady else "gap_only"
             choice = test.describe()
-            contact = _a1_contact_rows(window, start, end, wheel_radius_m, bearing_friction_nms_per_rad, model,
-                                       sample_period_s) if test.steady else ""
-            if contact:
-                method, choice = "gap_only", f"gap_only: {contact}"
+            if test.steady:
+                contact, in_zone = _a1_contact_rows(window, start, end, wheel_radius_m, bearing_friction_nms_per_rad,
+                                                    model, sample_period_s)
+                if contact:          # its gap-only fit is the one the 'gap_only' branch below would make again
+                    method, choice, gap_only = "gap_only", f"gap_only: {contact}", in_zone
         else:
             method = "angle" if "alpha1" in window else "speed"
             choice = f"{method}: no a1 in the window"
@@ -475,8 +477,9 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
         if "a1" not in window:
             raise NoGapError("method 'gap_only' needs a1 (use 'speed' with omega1)")
         mf = _net_torque(window, bearing_friction_nms_per_rad)
-        fit = gap_only_fit(mf, np.asarray(window["a1"], float) / wheel_radius_m, start, end,
-                           max_trim=gap_only_max_trim(model, sample_period_s))
+        fit = gap_only if gap_only is not None else gap_only_fit(
+            mf, np.asarray(window["a1"], float) / wheel_radius_m, start, end,
+            max_trim=gap_only_max_trim(model, sample_period_s))
         j, se, res, dof, model_error = fit["j1"], fit["se"], fit["residual"], fit["dof"], fit["model_error"]
         fit_span = (fit["start"], fit["end"])
     elif method == "acceleration":
@@ -1134,8 +1137,9 @@ def _nonpositive_slope(j: float, torque: np.ndarray, acc: np.ndarray) -> str:
 
 
 def _a1_contact_rows(window: dict, start: int, end: int, wheel_radius_m: float, b1: float, model: GapModel,
-                     sample_period_s: float) -> str:
-    """Why the joint ('acceleration') fit's premise fails at the detector's rows, or "": the motor equation
+                     sample_period_s: float) -> tuple:
+    """(why the joint ('acceleration') fit's premise fails at the detector's rows, or "", the 'gap_only' fit that
+    shows it, or None): the motor equation
     m_el − b1 ω1 = J1 a1/r (the 'gap_only' fit's in-zone trim) leaves more than GAP_ONLY_MAX_TRIM rows at an end of
     [start, end) out of the zone, so the detector's entry or re-contact is off by more than the joint fit, which
     takes m_el steady up to the entry row, can hold (the DOL drive with the entry 6-8 samples early: +9 % with an
@@ -1144,13 +1148,13 @@ def _a1_contact_rows(window: dict, start: int, end: int, wheel_radius_m: float, 
         fit = gap_only_fit(_net_torque(window, b1), np.asarray(window["a1"], float) / wheel_radius_m, start, end,
                            max_trim=gap_only_max_trim(model, sample_period_s))
     except NoGapError:
-        return ""
+        return "", None
     early, late = fit["start"] - start, end - fit["end"]
     cap = tuple(rate_samples(int(k), sample_period_s) for k in GAP_ONLY_MAX_TRIM)     # durations counted at 2 kHz
     if early <= cap[0] and late <= cap[1]:
-        return ""
+        return "", None
     return (f"the motor equation holds from row {fit['start']} to {fit['end']}, not from the detector's rows "
-            f"{start}..{end} (a contact still loaded at an end): no steady entry at the detector's row")
+            f"{start}..{end} (a contact still loaded at an end): no steady entry at the detector's row"), fit
 
 
 def gap_only_max_trim(model: GapModel, sample_period_s: float) -> tuple:
