@@ -199,28 +199,32 @@ def variants() -> list:
     ]
 
 
-def generate(out: Path, log=print, names=None) -> dict:
-    """{variant name: [ZooRecording]} (the simulations cached under ``out``/cache)."""
+def recordings(name: str, p: DriveParams, sensor_fields: dict, out: Path, log=print, direction: str = "forward",
+               seed: int = 23) -> list:
+    """[(sensor label, ZooRecording)] of one drive ``p`` over :data:`EVENTS` x :data:`SENSORS` in ``direction``, the
+    sensors changed by ``sensor_fields`` (record.Sensors fields), written under ``out``/<name> (the simulations
+    cached under ``out``/cache); zoo_draws' drives too."""
     out = Path(out)
-    got = {}
-    for name, _, p, _ in variants():
-        if names and name not in names:
-            continue
-        sub = out / name.replace(" ", "_")
-        recs = []
-        for ev in EVENTS:
-            for label, fmt, counts, snr in SENSORS:
-                t0 = time.perf_counter()
-                sensors = vd_record.Sensors(**{"encoder_counts": counts, "snr_db": snr, **SENSOR_VARIANTS.get(name, {})})
-                counts = sensors.encoder_counts
-                r = vd_record.build(p, ev, "forward", sensors, seed=23, cache_dir=out / "cache")
-                zr = zoo.vector_recording(r, ev, "forward", p.mechanics.motor_inertia_kgm2, counts, snr, sub, (fmt,))
-                zr.gear_ratio *= sensors.load_encoder_sign        # what its user declares for a reversed encoder
-                recs.append((label, zr))
-                if time.perf_counter() - t0 > 2:
-                    log(f"{name}: simulated {r.name} ({time.perf_counter() - t0:.0f} s)")
-        got[name] = recs
-    return got
+    sub = out / name.replace(" ", "_")
+    recs = []
+    for ev in EVENTS:
+        for label, fmt, counts, snr in SENSORS:
+            t0 = time.perf_counter()
+            sensors = vd_record.Sensors(**{"encoder_counts": counts, "snr_db": snr, **sensor_fields})
+            counts = sensors.encoder_counts
+            r = vd_record.build(p, ev, direction, sensors, seed=seed, cache_dir=out / "cache")
+            zr = zoo.vector_recording(r, ev, direction, p.mechanics.motor_inertia_kgm2, counts, snr, sub, (fmt,))
+            zr.gear_ratio *= sensors.load_encoder_sign        # what its user declares for a reversed encoder
+            recs.append((label, zr))
+            if time.perf_counter() - t0 > 2:
+                log(f"{name}: simulated {r.name} ({time.perf_counter() - t0:.0f} s)")
+    return recs
+
+
+def generate(out: Path, log=print, names=None) -> dict:
+    """{variant name: [(sensor label, ZooRecording)]} (the simulations cached under ``out``/cache)."""
+    return {name: recordings(name, p, SENSOR_VARIANTS.get(name, {}), out, log)
+            for name, _, p, _ in variants() if not names or name in names}
 
 
 def run(out: Path, log=print, names=None, undeclared: bool = False) -> dict:
