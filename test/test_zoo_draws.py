@@ -5,7 +5,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from jident_ros.research.evaluation import zoo, zoo_draws as zd
+from jident_ros.research.evaluation import zoo
+from jident_ros.research.evaluation import zoo_draws as zd
 from jident_ros.research.vector_drive import record as vd_record
 
 
@@ -79,3 +80,31 @@ def test_bad_arguments_get_one_line_and_write_nothing(tmp_path, capsys):
     assert zd.main(["--report", "--draws", "0", "--results", "-", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 2 and "--undeclared" in err and "got 0" in err and not list(tmp_path.iterdir())
+
+
+def test_jittered_instants_keep_a_channel_the_model_lacks():
+    """The DOL mode logs no speed or torque reference (NaN throughout): sampling it at jittered instants keeps it NaN
+    and moves the other channels to those instants (zoo_draws' DOL drives with jitter failed on it)."""
+    t = np.arange(200) * 5e-4
+    st = {"t": t, "alpha1": np.sin(7 * t), "w_ref": np.full(t.size, np.nan)}
+    out, stamps = vd_record._jittered(st, 25e-6, 3)
+    assert np.isnan(out["w_ref"]).all() and not np.allclose(stamps, t - t[0])
+    np.testing.assert_allclose(out["alpha1"], np.sin(7 * (stamps + t[0])), atol=1e-6)
+
+
+def test_dol_drives_are_drawn_apart_and_declare_their_chains_lag():
+    """A DOL drive of the same set and index is another drive (its own streams); its user, who computes the torque
+    estimate, declares the chain's lag: zoo_dol's 0.25 ms plus the drawn sample late and smoothing."""
+    from jident_ros.research.evaluation import zoo_dol
+    from jident_ros.research.vector_drive.dol import DolParams
+    d = zd.draw(1, 1, "dol")
+    assert d == zd.draw(1, 1, "dol") and d.name == "d1-01" and isinstance(d.params, DolParams)
+    assert d.values["backlash_width_m"] != zd.draw(1, 1).values["backlash_width_m"]
+    assert {x.field for x in zd.space("dol")} >= {"slip_load_ratio", "stator_resistance_estimate_ratio", "sample_jitter_s"}
+    for i in range(1, 30):
+        d = zd.draw(2, i, "dol")
+        dec = zd.declaration(d)
+        lag = 2.5e-4 + d.values["torque_delay_samples"] * 5e-4 + d.values["torque_filter_s"]
+        assert dec["torque_lag_max_s"] == pytest.approx(lag)
+        assert dec["torque_accuracy"] == zoo_dol.declared()["torque_accuracy"]
+        assert d.params.mechanics.load_inertia_kgm2 > d.params.wheel_inertia_kgm2     # the wheel is part of J2

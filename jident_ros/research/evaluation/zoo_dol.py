@@ -119,24 +119,34 @@ SWEEP_DECLARED = {"encoder disc errors declared": {"encoder_accuracy_rad": 2e-4}
                   "torque one sample late declared": {"torque_lag_max_s": 7.5e-4}}
 
 
+def recordings(name: str, p: DolParams, sensor_fields: dict, out: Path, cache: Path, log=print,
+               direction: str = "forward", events=SWEEP_EVENTS) -> list:
+    """[(sensor label, ZooRecording)] of one DOL drive ``p`` over ``events`` x :data:`SWEEP_SENSORS` in ``direction``, the sensors
+    changed by ``sensor_fields`` (record.Sensors fields), written under ``out``, the simulations cached under
+    ``cache`` (the slip sweep's and zoo_draws' drives)."""
+    recs = []
+    for ev in events:
+        for label, fmt, counts, snr in SWEEP_SENSORS:
+            t0 = time.perf_counter()
+            sens = vd_record.Sensors(**{"encoder_counts": counts, "snr_db": snr, **sensor_fields})
+            r = vd_record.build_dol(p, ev, direction, sens, seed=SEED, cache_dir=cache)
+            recs.append((label, _recording(r, ev, direction, p.mechanics.motor_inertia_kgm2, sens.encoder_counts, snr,
+                                           Path(out), (fmt,))))
+            if time.perf_counter() - t0 > 2:
+                log(f"{name}: simulated {r.name} ({time.perf_counter() - t0:.0f} s)")
+    return recs
+
+
 def generate_sweep(out: Path, log=print) -> dict:
     """{variant name: [(sensor label, ZooRecording)]} (simulations cached under ``out``/cache)."""
     out = Path(out)
     got = {}
     for name, _, p0 in sweep():
-        recs = []
+        got[name] = []
         for j1 in INERTIAS:
-            p = vd_record.with_inertia(p0, j1)
-            for ev in SWEEP_EVENTS:
-                for label, fmt, counts, snr in SWEEP_SENSORS:
-                    t0 = time.perf_counter()
-                    sensors = vd_record.Sensors(counts, snr, **SWEEP_SENSOR_VARIANTS.get(name, {}))
-                    r = vd_record.build_dol(p, ev, "forward", sensors, seed=SEED, cache_dir=out / "cache")
-                    recs.append((label, _recording(r, ev, "forward", j1, counts, snr,
-                                                   out / "sweep" / name.replace(" ", "_"), (fmt,))))
-                    if time.perf_counter() - t0 > 2:
-                        log(f"sweep {name}: simulated {r.name} ({time.perf_counter() - t0:.0f} s)")
-        got[name] = recs
+            sub = out / "sweep" / name.replace(" ", "_")
+            got[name] += recordings(f"sweep {name}", vd_record.with_inertia(p0, j1), SWEEP_SENSOR_VARIANTS.get(name, {}),
+                                    sub, out / "cache", log)
     return got
 
 

@@ -33,7 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from jident_ros.config import load_system_config
-from jident_ros.research.evaluation import zoo, zoo_variants
+from jident_ros.research.evaluation import zoo, zoo_dol, zoo_variants
+from jident_ros.research.vector_drive.dol import DOL_TRAVERSING_EVENTS, DolParams
 from jident_ros.research.vector_drive.model import DriveParams, motulator_available
 
 #: The torque accuracy a drive's data sheet typically states for sensored vector control, relative: what a user who
@@ -46,6 +47,7 @@ class Dim:
     """One drawn property: where it lives (``mechanics``, ``controller``, ``drive``, ``sensors``, ``direction``), its
     field, how it is drawn (``log``: log-uniform on [low, high]; ``lin``: uniform; ``choice``: one of ``values``), its
     unit and a short label for the report."""
+
     part: str
     field: str
     how: str
@@ -59,27 +61,8 @@ class Dim:
     shown: str = ""
 
 
-#: Every drawn property, in draw order (each from its own stream: changing one range moves no other draw).
-SPACE = (
-    Dim("mechanics", "motor_inertia_kgm2", "choice", values=(1.16, 1.131, 1.102, 1.073, 0.957, 1.189, 1.218),
-        unit="kg m^2", label="J1"),
-    Dim("mechanics", "load_inertia_kgm2", "log", 0.7, 5.0, unit="kg m^2", label="J2"),
-    Dim("mechanics", "backlash_width_m", "log", 2.5e-3, 10e-3, unit="m", label="K2", factor=1e3, shown="mm"),
-    Dim("mechanics", "stiffness_nm_per_rad", "log", 1.5e4, 2.0e5, unit="N m/rad", label="k"),
-    Dim("mechanics", "damping_nms_per_rad", "log", 15.0, 80.0, unit="N m s/rad", label="c"),
-    Dim("mechanics", "motor_coulomb_nm", "lin", 0.3, 3.0, unit="N m", label="Coulomb1"),
-    Dim("mechanics", "motor_viscous_nms_per_rad", "lin", 0.005, 0.05, unit="N m s/rad", label="b1"),
-    Dim("mechanics", "load_coulomb_nm", "lin", 2.0, 10.0, unit="N m", label="Coulomb2"),
-    Dim("controller", "speed_bandwidth_rad_s", "log", 2 * np.pi * 2.5, 2 * np.pi * 12, unit="rad/s", label="speed bw", factor=1 / (2 * np.pi), shown="Hz"),
-    Dim("controller", "speed_filter_s", "lin", 0.2e-3, 1.5e-3, unit="s", label="speed filter", factor=1e3, shown="ms"),
-    Dim("controller", "rotor_resistance_estimate_ratio", "lin", 0.8, 1.1, label="R_R est"),
-    Dim("controller", "magnetizing_inductance_estimate_ratio", "lin", 0.95, 1.1, label="L_M est"),
-    Dim("controller", "inertia_estimate_ratio", "lin", 0.8, 1.25, label="J est"),
-    Dim("drive", "speed_rad_s", "lin", 60.0, 150.0, unit="rad/s", label="speed"),
-    Dim("drive", "base_load_ratio", "lin", 0.15, 0.45, label="load"),
-    Dim("drive", "light_load_ratio", "lin", 0.05, 0.15, label="light"),
-    Dim("drive", "heavy_load_ratio", "lin", 0.6, 0.9, label="heavy"),
-    Dim("drive", "speed_step_ratio", "lin", 0.1, 0.3, label="step"),
+#: The sensors' drawn properties (both models).
+SENSOR_DIMS = (
     Dim("sensors", "encoder_counts", "choice", values=(2 ** 14, 2 ** 16, 2 ** 17, 2 ** 20), label="counts"),
     Dim("sensors", "torque_delay_samples", "choice", values=(0, 1), label="torque late"),
     Dim("sensors", "torque_filter_s", "choice", values=(0.0, 0.2e-3, 0.5e-3), unit="s", label="torque filter", factor=1e3,
@@ -90,19 +73,74 @@ SPACE = (
         factor=60 / (2 * np.pi), shown="rpm"),
     Dim("sensors", "encoder_error_rad", "choice", values=(0.0, 5e-5, 2e-4), unit="rad", label="disc error", factor=1e3,
         shown="mrad"),
+)
+
+#: Every drawn property of a vector drive, in draw order (each from its own stream: changing one range moves no other draw).
+SPACE = (
+    Dim("mechanics", "motor_inertia_kgm2", "choice", values=(1.16, 1.131, 1.102, 1.073, 0.957, 1.189, 1.218),
+        unit="kg m^2", label="J1"),
+    Dim("mechanics", "load_inertia_kgm2", "log", 0.7, 5.0, unit="kg m^2", label="J2"),
+    Dim("mechanics", "backlash_width_m", "log", 2.5e-3, 10e-3, unit="m", label="K2", factor=1e3, shown="mm"),
+    Dim("mechanics", "stiffness_nm_per_rad", "log", 1.5e4, 2.0e5, unit="N m/rad", label="k"),
+    Dim("mechanics", "damping_nms_per_rad", "log", 15.0, 80.0, unit="N m s/rad", label="c"),
+    Dim("mechanics", "motor_coulomb_nm", "lin", 0.3, 3.0, unit="N m", label="Coulomb1"),
+    Dim("mechanics", "motor_viscous_nms_per_rad", "lin", 0.005, 0.05, unit="N m s/rad", label="b1"),
+    Dim("mechanics", "load_coulomb_nm", "lin", 2.0, 10.0, unit="N m", label="Coulomb2"),
+    Dim("controller", "speed_bandwidth_rad_s", "log", 2 * np.pi * 2.5, 2 * np.pi * 12, unit="rad/s", label="speed bw",
+        factor=1 / (2 * np.pi), shown="Hz"),
+    Dim("controller", "speed_filter_s", "lin", 0.2e-3, 1.5e-3, unit="s", label="speed filter", factor=1e3, shown="ms"),
+    Dim("controller", "rotor_resistance_estimate_ratio", "lin", 0.8, 1.1, label="R_R est"),
+    Dim("controller", "magnetizing_inductance_estimate_ratio", "lin", 0.95, 1.1, label="L_M est"),
+    Dim("controller", "inertia_estimate_ratio", "lin", 0.8, 1.25, label="J est"),
+    Dim("drive", "speed_rad_s", "lin", 60.0, 150.0, unit="rad/s", label="speed"),
+    Dim("drive", "base_load_ratio", "lin", 0.15, 0.45, label="load"),
+    Dim("drive", "light_load_ratio", "lin", 0.05, 0.15, label="light"),
+    Dim("drive", "heavy_load_ratio", "lin", 0.6, 0.9, label="heavy"),
+    Dim("drive", "speed_step_ratio", "lin", 0.1, 0.3, label="step"),
+    *SENSOR_DIMS,
     Dim("direction", "direction", "choice", values=("forward", "reverse"), label="direction"),
 )
+
+_J1_CLASSES = SPACE[0]
+
+#: Every drawn property of a DOL drive (jident_ros/research/vector_drive/dol.py: the machine on the grid, the torque
+#: estimated from its voltages and currents, the paper's slip among the events), in draw order.
+DOL_SPACE = (
+    _J1_CLASSES,
+    Dim("mechanics", "load_inertia_kgm2", "log", 0.35, 1.5, unit="kg m^2", label="J2"),
+    *SPACE[2:8],
+    Dim("drive", "stator_resistance_estimate_ratio", "lin", 0.8, 1.0, label="R_s est"),
+    Dim("drive", "flux_highpass_hz", "log", 0.5, 2.0, unit="Hz", label="flux high-pass"),
+    Dim("drive", "speed_filter_s", "lin", 0.2e-3, 1.5e-3, unit="s", label="speed filter", factor=1e3, shown="ms"),
+    Dim("drive", "base_load_ratio", "lin", 0.15, 0.45, label="load"),
+    Dim("drive", "slip_load_ratio", "lin", 0.4, 1.0, label="slip load"),
+    Dim("drive", "light_load_ratio", "lin", 0.05, 0.15, label="light"),
+    Dim("drive", "heavy_load_ratio", "lin", 0.6, 0.9, label="heavy"),
+    Dim("drive", "slip_ramp_s", "log", 0.5e-3, 3e-3, unit="s", label="slip ramp", factor=1e3, shown="ms"),
+    Dim("drive", "wheel_inertia_kgm2", "log", 0.06, 0.3, unit="kg m^2", label="wheel"),
+    Dim("drive", "sliding_load_ratio", "lin", 0.0, 0.2, label="sliding load"),
+    *SENSOR_DIMS,
+    Dim("direction", "direction", "choice", values=("forward", "reverse"), label="direction"),
+)
+
+#: The drive models drawn: their space, the stream's last key (so a vector and a DOL drive of the same index differ)
+#: and the name prefix.
+MODELS = {"vector": ("SPACE", (), "s"), "dol": ("DOL_SPACE", (1,), "d")}
+#: The DOL drives' events (zoo_dol's traversing ones and a same-flank torque change).
+DOL_EVENTS = (*DOL_TRAVERSING_EVENTS, "load_step_same_flank")
 
 
 @dataclass(frozen=True)
 class Draw:
-    """One drawn drive: ``name`` ('s<seed>-<index>'), the drawn ``values`` {field: value}, its DriveParams, the
-    record.Sensors fields, the direction."""
+    """One drawn drive: ``name`` ('s<seed>-<index>', DOL drives 'd<seed>-<index>'), the drawn ``values`` {field:
+    value}, its DriveParams (a vector drive) or DolParams, the record.Sensors fields, the direction, the model."""
+
     name: str
     values: dict
-    params: DriveParams
+    params: object
     sensor_fields: dict
     direction: str
+    model: str = "vector"
 
 
 def _value(dim: Dim, rng: np.random.Generator):
@@ -115,29 +153,42 @@ def _value(dim: Dim, rng: np.random.Generator):
     return float(dim.low + u * (dim.high - dim.low))
 
 
-def draw(seed: int, index: int) -> Draw:
-    """Drive ``index`` of set ``seed``: each :data:`SPACE` property from its own stream ``[seed, index, k]``."""
-    values = {d.field: _value(d, np.random.default_rng([seed, index, k])) for k, d in enumerate(SPACE)}
-    b = DriveParams()
-    parts = {part: {d.field: values[d.field] for d in SPACE if d.part == part}
+def space(model: str = "vector") -> tuple:
+    """The drawn properties of ``model`` (:data:`MODELS`)."""
+    return globals()[MODELS[model][0]]
+
+
+def draw(seed: int, index: int, model: str = "vector") -> Draw:
+    """Drive ``index`` of set ``seed``: each property of :func:`space` from its own stream ``[seed, index, k]`` (DOL
+    drives ``[seed, index, k, 1]``)."""
+    dims, tag, prefix = space(model), MODELS[model][1], MODELS[model][2]
+    values = {d.field: _value(d, np.random.default_rng([seed, index, k, *tag])) for k, d in enumerate(dims)}
+    parts = {part: {d.field: values[d.field] for d in dims if d.part == part}
              for part in ("mechanics", "controller", "drive", "sensors")}
-    p = replace(b, mechanics=replace(b.mechanics, **parts["mechanics"]),
-                controller=replace(b.controller, **parts["controller"]), **parts["drive"])
-    return Draw(f"s{seed}-{index:02d}", values, p, parts["sensors"], values["direction"])
+    b = DriveParams() if model == "vector" else DolParams()
+    p = replace(b, mechanics=replace(b.mechanics, **parts["mechanics"]), **parts["drive"],
+                **({"controller": replace(b.controller, **parts["controller"])} if parts["controller"] else {}))
+    return Draw(f"{prefix}{seed}-{index:02d}", values, p, parts["sensors"], values["direction"], model)
 
 
 def declaration(d: Draw) -> dict:
-    """What the drawn drive's user declares (beside :func:`zoo.declared`'s vector drive keys): its friction from a
-    coast-down test and a data sheet's torque accuracy."""
+    """What the drawn drive's user declares: its friction from a coast-down test (b1, a Coulomb band of 1.25 x its
+    Coulomb friction) and, for a vector drive (beside :func:`zoo.declared`'s keys), a data sheet's torque accuracy;
+    for a DOL drive, whose torque estimate its user computes, zoo_dol's declaration with the lag the user's chain has
+    (its 0.25 ms, the sample it reports late, its smoothing)."""
     m = d.params.mechanics
-    return {"bearing_friction_nms_per_rad": m.motor_viscous_nms_per_rad, "coulomb_friction_max_nm": 1.25 * m.motor_coulomb_nm,
-            "torque_accuracy": DATA_SHEET_TORQUE_ACCURACY}
+    friction = {"bearing_friction_nms_per_rad": m.motor_viscous_nms_per_rad, "coulomb_friction_max_nm": 1.25 * m.motor_coulomb_nm}
+    if d.model == "vector":
+        return {**friction, "torque_accuracy": DATA_SHEET_TORQUE_ACCURACY}
+    lag = (zoo_dol.declared()["torque_lag_max_s"] + d.sensor_fields.get("torque_delay_samples", 0) * d.params.sample_period_s
+           + d.sensor_fields.get("torque_filter_s", 0.0))
+    return {**zoo_dol.declared(), **friction, "torque_lag_max_s": lag}
 
 
 def describe(d: Draw) -> str:
     """The drawn values, short (each in its :data:`SPACE` entry's shown unit)."""
     out = []
-    for dim in SPACE:
+    for dim in space(d.model):
         v = d.values[dim.field]
         if isinstance(v, str):
             out.append(v)
@@ -164,15 +215,23 @@ def torque_error(zrs: list) -> str:
     return "–" if not vals else f"{100 * max(vals):.1f} %"
 
 
-def run(out: Path, seed: int, count: int, log=print, undeclared: bool = False) -> dict:
-    """Draw ``count`` drives of set ``seed``, simulate (cached), diagnose each file as zoo_variants does."""
+def recordings(d: Draw, out: Path, log=print) -> list:
+    """[(sensor label, ZooRecording)] of drawn drive ``d`` (simulations cached under ``out``/cache)."""
+    if d.model == "vector":
+        return zoo_variants.recordings(d.name, d.params, d.sensor_fields, out, log, direction=d.direction)
+    return zoo_dol.recordings(d.name, d.params, d.sensor_fields, Path(out) / d.name, Path(out) / "cache", log,
+                              direction=d.direction, events=DOL_EVENTS)
+
+
+def run(out: Path, seed: int, count: int, log=print, undeclared: bool = False, model: str = "vector") -> dict:
+    """Draw ``count`` ``model`` drives of set ``seed``, simulate (cached), diagnose each file as zoo_variants does."""
     t0 = time.perf_counter()
     system = load_system_config()
     rows, what, failed = {}, {}, {}
     for i in range(1, count + 1):
-        d = draw(seed, i)
+        d = draw(seed, i, model)
         try:
-            zrs = zoo_variants.recordings(d.name, d.params, d.sensor_fields, out, log, direction=d.direction)
+            zrs = recordings(d, out, log)
         except Exception as exc:   # noqa: BLE001 -- a drawn drive the simulator cannot run is reported, not fatal
             failed[d.name] = f"{type(exc).__name__}: {exc}"
             log(f"{d.name}: simulation failed: {failed[d.name]}")
@@ -181,38 +240,50 @@ def run(out: Path, seed: int, count: int, log=print, undeclared: bool = False) -
         for _, zr in zrs:
             fmt = next(iter(zr.files))
             items.append((zr, zoo.diagnose_one(zr, fmt, system, declare=False, extra={"bearing_friction_nms_per_rad": 0.0})
-                          if undeclared else zoo.diagnose_one(zr, fmt, system, declare=True, extra=declaration(d))))
+                          if undeclared else zoo.diagnose_one(zr, fmt, system, declare=d.model == "vector",
+                                                              extra=declaration(d))))
         rows[d.name] = zoo.summarise(items, nominal_kgm2=system.motor.nominal_inertia_kgm2)
         what[d.name] = describe(d) + f"; torque estimate off ≤ {torque_error(zrs)}"
         log(f"{d.name}: diagnosed {len(items)} files ({time.perf_counter() - t0:.0f} s)")
-    return {"rows": rows, "what": what, "failed": failed, "seed": seed, "count": count,
+    return {"rows": rows, "what": what, "failed": failed, "seed": seed, "count": count, "model": model,
             "elapsed_s": time.perf_counter() - t0, "undeclared": undeclared}
 
 
 def markdown(res: dict, command: str, commit: str) -> str:
-    rows, tot = zoo.variant_rows(res["rows"], res["what"], separation=True)
-    lines = [f"## Blind draws, set {res['seed']}: vector drives drawn at random (`{command}`)", "",
+    vector = res.get("model", "vector") == "vector"
+    events = zoo_variants.EVENTS if vector else DOL_EVENTS
+    sensors = zoo_variants.SENSORS if vector else zoo_dol.SWEEP_SENSORS
+    declared = (f"declared as its user would: the vector drive's torque limits, a data sheet's ± "
+                f"{100 * DATA_SHEET_TORQUE_ACCURACY:g} % torque accuracy, its b1 and 1.25 x its Coulomb friction" if vector
+                else "declared as its user would: zoo_dol's declaration (the user computes the torque estimate and knows its "
+                "chain's lag: 0.25 ms, plus the drawn sample late and smoothing), its b1 and 1.25 x its Coulomb friction")
+    rows, tot = zoo.variant_rows(res["rows"], res["what"], separation=vector)
+    lines = [f"## Blind draws, set {res['seed']}: {'vector' if vector else 'DOL'} drives drawn at random (`{command}`)", "",
              f"Measured on commit {commit} ({res['elapsed_s']:.0f} s; set {res['seed']}, {res['count']} drives; simulations "
-             "cached under out/zoo_draws). jident_ros/research/evaluation/zoo_draws.py: every property of its SPACE "
-             "drawn at once per drive (mechanics, control, the observer's parameter errors, operating point, sensors, "
-             "direction), events " + ", ".join(e.replace("_", " ") for e in zoo_variants.EVENTS) + ", each as "
-             + ", ".join(s[0] for s in zoo_variants.SENSORS) + " (the drawn encoder resolution in place of 2^16); "
-             + ("diagnosed with nothing declared (b1 = 0 and the node's defaults)" if res.get("undeclared") else
-                f"declared as its user would: the vector drive's torque limits, a data sheet's ± "
-                f"{100 * DATA_SHEET_TORQUE_ACCURACY:g} % torque accuracy, its b1 and 1.25 x its Coulomb friction")
+             "cached under out/zoo_draws). jident_ros/research/evaluation/zoo_draws.py: every property of its "
+             + ("SPACE" if vector else "DOL_SPACE") + " drawn at once per drive ("
+             + ("mechanics, control, the observer's parameter errors" if vector else
+                "mechanics, the stator resistance the torque estimate uses, its flux integrator, the slip") +
+             ", operating point, sensors, direction), events " + ", ".join(e.replace("_", " ") for e in events) + ", each as "
+             + ", ".join(s[0] for s in sensors) + " (the drawn encoder resolution in place of 2^16); "
+             + ("diagnosed with nothing declared (b1 = 0 and the node's defaults)" if res.get("undeclared") else declared)
              + ". No threshold was chosen on any draw. The zoo's counting (docs/results.md, 'The zoo').", "",
-             "| drive | drawn | traversals found | entry within ±2 | entry within ±2 of the separation | "
-             "published (traversal windows) | published > 10 % off | median / max abs error | 95 % CI covers | "
+             "| drive | drawn | traversals found | entry within ±2 | " + ("entry within ±2 of the separation | " if vector else "")
+             + "published (traversal windows) | published > 10 % off | median / max abs error | 95 % CI covers | "
              "another class named / 'between classes', on the drive's class | false entries |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"] + rows
-    lines += ["", f"Over the {len(res['rows'])} drives: published {tot['pub']}/{tot['win']} traversal windows; "
+             "|---|---|---|---|" + ("---|" if vector else "") + "---|---|---|---|---|---|"] + rows
+    found = sum(s.get("found", 0) for s in res["rows"].values())
+    trav = sum(s.get("traversals", 0) for s in res["rows"].values())
+    offs = [o for s in res["rows"].values() for o in s.get("offsets", [])]
+    lines += ["", f"Over the {len(res['rows'])} drives: traversals found {found}/{trav}; entry within ±2 "
+              f"{sum(1 for o in offs if abs(o) <= 2)}/{len(offs)} ({zoo._pct(sum(1 for o in offs if abs(o) <= 2), len(offs))}); "
+              f"published {tot['pub']}/{tot['win']} traversal windows; "
               f"**{tot['off']} more than 10 % off**; the 95 % interval covers {tot['cov']}/{tot['with']} "
               f"({zoo._pct(tot['cov'], tot['with'])}); another class named {tot['wrong']}, 'between classes' "
               f"{tot['between']}; false entries {tot['false']}."]
     if res["failed"]:
         lines += ["", "Not simulated: " + "; ".join(f"{n}: {w}" for n, w in res["failed"].items()) + "."]
-    lines += [""] + zoo.torque_truth_table([("all drives", zoo._merge(res["rows"].values()))],
-                                           ", ".join(s[0] for s in zoo_variants.SENSORS))
+    lines += [""] + zoo.torque_truth_table([("all drives", zoo._merge(res["rows"].values()))], ", ".join(s[0] for s in sensors))
     return "\n".join(lines) + "\n"
 
 
@@ -222,6 +293,7 @@ def main(argv=None) -> int:
     p.add_argument("--report", action="store_true", help="draw, simulate (or reuse), diagnose, write the section")
     p.add_argument("--seed", type=int, default=1, help="the set of draws (default 1)")
     p.add_argument("--draws", type=int, default=12, help="drives drawn (default 12)")
+    p.add_argument("--model", choices=sorted(MODELS), default="vector", help="the drive model drawn (default vector)")
     p.add_argument("--out", default="out/zoo_draws", help="recordings and the simulation cache")
     p.add_argument("--results", default="docs/results.md", help="results file to update ('-' prints)")
     p.add_argument("--undeclared", action="store_true", help="declare nothing (with --results -)")
@@ -239,8 +311,9 @@ def main(argv=None) -> int:
     if reason:
         sys.stderr.write(f"zoo_draws: error: the vector drive needs motulator: {reason}\n")
         return 2
-    res = run(Path(a.out), a.seed, a.draws, log=lambda t: print(t, file=sys.stderr, flush=True), undeclared=a.undeclared)
-    cmd = (f"python -m jident_ros.research.evaluation.zoo_draws --report --seed {a.seed} --draws {a.draws}"
+    res = run(Path(a.out), a.seed, a.draws, log=lambda t: print(t, file=sys.stderr, flush=True), undeclared=a.undeclared,
+              model=a.model)
+    cmd = (f"python -m jident_ros.research.evaluation.zoo_draws --report --model {a.model} --seed {a.seed} --draws {a.draws}"
            + (" --undeclared" if a.undeclared else ""))
     zoo.write_section(markdown(res, cmd, zoo._commit()), a.results, f"{res['elapsed_s']:.0f} s")
     return 0

@@ -79,8 +79,9 @@ def _jittered(st: dict, jitter_s: float, seed: int) -> tuple:
     n = t.size
     e = np.clip(np.random.default_rng([seed, 7]).normal(0.0, jitter_s, n), -3 * jitter_s, 3 * jitter_s)
     tj = np.clip(t + e, t[0], t[-1])
-    out = {k: (CubicSpline(t, v)(tj) if k != "t" and isinstance(v, np.ndarray) and v.shape == (n,) else v)
-           for k, v in st.items()}
+    # a channel the model does not have is NaN throughout (the DOL mode's speed and torque references): kept as it is
+    out = {k: (CubicSpline(t, v)(tj) if k != "t" and isinstance(v, np.ndarray) and v.shape == (n,)
+               and np.isfinite(v).all() else v) for k, v in st.items()}
     return out, tj - t[0]
 
 
