@@ -427,6 +427,70 @@ def _lag_beyond_declared(window: dict, b1: float, fit: GapEstimate, sample_perio
                    f"(torque_lag_max_s; docs/your_drive.md): the interval takes {bound * 1e3:.3g} ms")
 
 
+def _shape_terms(x: np.ndarray, mt: np.ndarray | None, model: GapModel) -> dict:
+    """The a1 fits' bounded torque errors that vary through the gap, as terms of J1 (kg m^2), for the regressor ``x``
+    (dω1/dt over the fitted rows; centred for a fit with a constant beside J1, which only the variation of x holds):
+    'torque_drift', the estimate's error drifting linearly across the rows, -T..+T (T the offset band;
+    gap_free.drift_term): J1 moves by Σ x T(t) / Σ x²; 'torque_lag', its bounded lag τ (the shaft's torque is
+    m_el + τ dm_el/dt, ``mt`` the net torque's derivative over the rows): J1 moves by τ Σ x ṁ / Σ x²."""
+    out = {}
+    if model.torque_offset_nm and x.size > 1:
+        ramp = np.linspace(-1.0, 1.0, x.size)
+        out["torque_drift"] = abs(float(x @ ramp)) / max(float(x @ x), 1e-300) * model.torque_offset_nm / np.sqrt(3.0)
+    if model.torque_lag_s and mt is not None:
+        out["torque_lag"] = abs(float(x @ mt)) / max(float(x @ x), 1e-300) * model.torque_lag_s / np.sqrt(3.0)
+    return out
+
+
+def _gap_only_constant(fit: dict, torque: np.ndarray, xm: tuple, model: GapModel, bounded: list, current: tuple,
+                       terms: dict, entry_error: float = 0.0) -> tuple:
+    """The 'gap_only' fit's unknown constant torque (the Coulomb band, the torque offset: ``bounded``, [(term, its
+    bound N m)]): (j, se, res, dof, terms, friction note) from ``current`` (j, se, res, dof), its ``terms`` and
+    ``xm`` (dω1/dt and the net torque's derivative over the fitted rows, :func:`_shape_terms`; ``entry_error``: the
+    entry's uncertainty, kg m^2, a part of both fits' change-point term).
+
+    Each bound enters as a uniform term (half-width its bound, / sqrt 3) through the fit's own estimator -- J1
+    refitted with the torque moved by ± the bound, not the first-order F Σx/Σx² of a least-squares slope: where the
+    torque is exact and the acceleration noisy the Deming slope is the reverse regression, whose bias grows with F²
+    (a DOL drive's light load reversal, zoo_draws d1-01: +17 % with a 2.5 N m constant against a ± 8 % interval).
+    J1 is also fitted with the constant beside it (:func:`_constant_fit`); its drift and lag terms are those of the
+    centred regressor (only the variation of dω1/dt holds J1 there: a gap whose acceleration ramps, a vector drive's
+    traversal back, reads a drift of the estimate's error as inertia).  Where its total standard error is the
+    smaller, that fit is taken and the bounds leave the interval (issue 20 item 3: friction fitted where the torque
+    varies enough to separate it from J1)."""
+    j, se, res, dof = current
+    x, mt = xm
+    lo, hi = fit["start"], fit["end"]
+    y = torque[lo:hi]
+    sy, sx = fit["noise"]
+    bound_terms = {}
+    for name, v in bounded:
+        moved = [_origin_slope(y - s * v, x, sy, sx) for s in (-1.0, 1.0)]
+        bound_terms[name] = max((abs(m - j) if math.isfinite(m) else np.inf) for m in moved) / np.sqrt(3.0)
+    bound_terms.update(_shape_terms(x, mt, model))
+    se_bounded = se
+    for v in bound_terms.values():
+        se_bounded = float(np.hypot(se_bounded, v))
+    free = fit.get("free")
+    if free is not None:
+        change = float(np.hypot(free["model_error"], entry_error))
+        stat = max(free["se_stat"], GAP_ONLY_REL_SE_FLOOR * free["j1"])
+        shape = _shape_terms(x - x.mean(), mt, model)
+        se_free = float(np.sqrt(stat ** 2 + change ** 2 + sum(v ** 2 for v in shape.values())))
+        if se_free < se_bounded:
+            out = {k: v for k, v in terms.items() if k not in ("statistical", "change_points")}
+            out["statistical"] = stat
+            if change:
+                out["change_points"] = change
+            out.update(shape)
+            note = (f"fitted: a constant torque {free['constant_nm']:+.3g} N m beside J1 (the Coulomb friction and the "
+                    f"torque offset together; J1 through the origin with them bounded: {j:.4g} ± {se_bounded:.2g} "
+                    "kg m^2)")
+            return free["j1"], se_free, free["residual"], free["dof"], out, note
+    terms.update(bound_terms)
+    return j, se_bounded, res, dof, terms, ""
+
+
 def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
                       sample_period_s: float, method: str | None = None,
                       bearing_friction_nms_per_rad: float = 0.0, recontact_index: int | None = None,
@@ -582,6 +646,7 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
             own["change_points" if method == "gap_only" else "model_form"] = float(model_error)
         free_extra["std_error_terms"] = tuple(own.items())
     k = int(entry_uncertainty_samples)
+    entry_error = 0.0
     if k > 0:
         moved = []
         for e in (entry_index - k, entry_index + k):
@@ -619,22 +684,21 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
         x = np.asarray(window["a1"], float)[fit_span[0]:fit_span[1]] / wheel_radius_m
         sens = abs(float(x.sum())) / max(float(x @ x), 1e-300)
         terms = dict(free_extra.get("std_error_terms", ()))
-        for name, v in bounded:
-            terms[name] = sens * v / np.sqrt(3.0)
-            se = float(np.hypot(se, terms[name]))
-        if model.torque_offset_nm and x.size > 1:
-            # ... and a torque error drifting linearly across the fitted samples, -T..+T (gap_free.drift_term):
-            # J1 moves by sum x T(t) / sum x^2
-            ramp = np.linspace(-1.0, 1.0, x.size)
-            terms["torque_drift"] = abs(float(x @ ramp)) / max(float(x @ x), 1e-300) * model.torque_offset_nm \
-                / np.sqrt(3.0)
-            se = float(np.hypot(se, terms["torque_drift"]))
-        if model.torque_lag_s:
-            # the torque estimate's bounded lag τ: the shaft's torque is m_el + τ dm_el/dt, which moves J1 by
-            # τ Σ x ṁ / Σx²
-            mt = np.gradient(_net_torque(window, bearing_friction_nms_per_rad), sample_period_s)[fit_span[0]:fit_span[1]]
-            terms["torque_lag"] = abs(float(x @ mt)) / max(float(x @ x), 1e-300) * model.torque_lag_s / np.sqrt(3.0)
-            se = float(np.hypot(se, terms["torque_lag"]))
+        mt = (np.gradient(_net_torque(window, bearing_friction_nms_per_rad), sample_period_s)[fit_span[0]:fit_span[1]]
+              if model.torque_lag_s else None)
+        if method == "gap_only" and bounded:
+            j, se, res, dof, terms, note = _gap_only_constant(fit, mf, (x, mt), model, bounded, (j, se, res, dof), terms,
+                                                              entry_error)
+            if note:
+                free_extra["friction"] = note
+                model_error = float(terms.get("change_points", 0.0))
+        else:
+            for name, v in bounded:
+                terms[name] = sens * v / np.sqrt(3.0)
+                se = float(np.hypot(se, terms[name]))
+            for name, v in _shape_terms(x, mt, model).items():
+                terms[name] = v
+                se = float(np.hypot(se, v))
         free_extra["std_error_terms"] = tuple(terms.items())
     # every fit: the model's own error as a floor, then the drive's torque accuracy (a scale error of m_el
     # is one of J1: all fits of m_el share it)
@@ -1222,7 +1286,30 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
     model_error = abs(slope(lo + 1, hi - 1) - j) if n >= 6 else 0.0
     se = max(float(np.hypot(se_stat, model_error)), GAP_ONLY_REL_SE_FLOOR * j)
     return {"j1": float(j), "se": se, "model_error": float(model_error), "residual": res, "dof": dof,
-            "start": int(lo), "end": int(hi), "noise": (sy, sx)}
+            "start": int(lo), "end": int(hi), "noise": (sy, sx), "free": _constant_fit(y_all, x_all, lo, hi, sy, sx)}
+
+
+def _constant_fit(y_all: np.ndarray, x_all: np.ndarray, lo: int, hi: int, sy: float, sx: float) -> dict | None:
+    """The 'gap_only' fit with a constant torque F fitted beside J1: torque = J1 acc + F over rows [lo, hi) (the
+    motor's Coulomb friction and the torque estimate's offset together; issue 20 item 3: friction fitted where the
+    torque varies enough to separate it from J1).  The Deming slope of the centred samples; se from the residual
+    with two parameters, and the model error as in :func:`gap_only_fit` (one more sample off each end).  None when
+    fewer than 6 samples or J1 is not positive."""
+    def fit(a, b):
+        x, y = x_all[a:b], y_all[a:b]
+        xc, yc = x - x.mean(), y - y.mean()
+        j = _origin_slope(yc, xc, sy, sx)
+        return j, float(y.mean() - j * x.mean()), y - j * x - float(y.mean() - j * x.mean()), float(xc @ xc)
+    if hi - lo < 6:
+        return None
+    j, f, res, sxx = fit(lo, hi)
+    if not (math.isfinite(j) and j > 0 and sxx > 0):
+        return None
+    j_in = fit(lo + 1, hi - 1)[0]
+    se_stat = float(np.sqrt(float(res @ res) / (hi - lo - 2) / sxx))
+    model_error = abs(j_in - j) if math.isfinite(j_in) else np.inf
+    return {"j1": float(j), "constant_nm": f, "se": float(np.hypot(se_stat, model_error)), "se_stat": se_stat,
+            "model_error": float(model_error), "residual": res, "dof": hi - lo - 2}
 
 
 def _torque_powers(n_gap: int, linear_term: bool = False) -> tuple:
