@@ -257,3 +257,24 @@ def test_zoo_dol_entry_shift_is_an_experiment_printed_only(tmp_path, capsys):
     assert zoo_dol.main(["--report", "--entry-shift", "-6", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "--entry-shift" in err and err.count("\n") == 1 and not list(tmp_path.iterdir())
+
+
+def test_a_j1_published_on_a_false_entry_is_counted_and_shown():
+    """A window that matches no true gap and publishes a J1 misleads whatever its value (blind DOL drives: a slip
+    that leaves the wheel on the coupling published J1 + the wheel's share, +11 … +33 %): summarise keeps its error,
+    and the variants' and draws' tables show it beside the false entries ('published > 10 % off' is over matched
+    windows only)."""
+    from jident_ros.research.evaluation import zoo_draws as zd
+    from jident_ros.research.evaluation.zoo import false_text, variant_rows
+    gaps = [{"entry_index": 200, "recontact_index": 250, "traversal": True}]
+    res = {"windows": [_win(120, None, published=True, j1=1.16 * 1.25),     # after the event, no gap: false
+                       _win(201, 0, published=True, j1=1.16)], "cut_off": []}
+    s = summarise([(_rec(gaps, event_index=100), res)])
+    assert s["false_other"] == 1 and s["published_on_false"] == 1
+    assert s["false_published_errors"] == [pytest.approx(0.25)] and s.get("published_off", 0) == 0
+    assert false_text(s) == "1 (**1 published: +25 … +25 %**)"
+    rows, tot = variant_rows({"d": s}, {"d": "drawn"})
+    assert rows[0].endswith("| 1 (**1 published: +25 … +25 %**) |") and tot["false_published"] == 1
+    md = zd.markdown({"rows": {"d": s}, "what": {"d": "drawn"}, "failed": {}, "seed": 9, "count": 1, "elapsed_s": 1.0,
+                      "model": "dol"}, "cmd", "abc")
+    assert "false entries 1, **1 of them published a J1**" in md

@@ -280,7 +280,9 @@ def markdown(res: dict, command: str, commit: str) -> str:
               f"published {tot['pub']}/{tot['win']} traversal windows; "
               f"**{tot['off']} more than 10 % off**; the 95 % interval covers {tot['cov']}/{tot['with']} "
               f"({zoo._pct(tot['cov'], tot['with'])}); another class named {tot['wrong']}, 'between classes' "
-              f"{tot['between']}; false entries {tot['false']}."]
+              f"{tot['between']}; false entries {tot['false']}"
+              + (f", **{tot['false_published']} of them published a J1** (a J1 where the truth has no gap misleads "
+                 "whatever its value)" if tot["false_published"] else "") + "."]
     if res["failed"]:
         lines += ["", "Not simulated: " + "; ".join(f"{n}: {w}" for n, w in res["failed"].items()) + "."]
     lines += [""] + zoo.torque_truth_table([("all drives", zoo._merge(res["rows"].values()))], ", ".join(s[0] for s in sensors))
