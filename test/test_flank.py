@@ -1379,3 +1379,44 @@ def test_with_a1_the_gap_s_friction_comes_off_the_steady_torque(monkeypatch, fri
                                       1.16, 5e-4, float(d["quantum"]))
     assert ck == pytest.approx(1.57, abs=0.05)
     assert entry - int(d["true_entry"]) == (0 if friction else 3)
+
+
+@pytest.mark.parametrize("nominal", [True, False])
+def test_a_traversal_back_s_walk_stops_where_the_motor_equation_with_j1_nom_fails(monkeypatch, nominal):
+    """'several at once' (a validation drive: k x 0.6, 2^14 encoders, the torque a sample late, ...), its clean speed
+    step down's traversal back (test/data/vd_several_return_traversal_jointstate.npz, the contact rule's capture up to
+    150 rows after its departure, 18 samples before the zone: the coupling untwists from a loaded flank level while the
+    braking torque relaxes).  The walk's free fit takes J 2.7 x J1_nom and walks back across the untwist (-37: outside
+    the zoo's match, a false entry); the coupling model with J1_nom fixed fails there by a gain of 2.7 and moves forward
+    to the contact loss ('nominal': within +-2; off: the walk's -37).  No threshold was chosen on this drive."""
+    from jident_ros.stream import flank
+    if not nominal:
+        monkeypatch.setattr(flank, "RETURN_NOMINAL_J", False)
+    data, dep, true, level, sigma = _vd_return_cut("vd_several_return_traversal_jointstate.npz", 16384)
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
+    det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), True, sigma
+    shift, _ = det._refine(data, dep)
+    if nominal:
+        assert abs(dep + shift - true) <= 2, dep + shift - true
+    else:
+        assert dep + shift - true <= -30, dep + shift - true
+
+
+@pytest.mark.parametrize("lag", [True, False])
+def test_the_nominal_j_coupling_fit_leaves_the_torque_estimate_s_lag_free(monkeypatch, lag):
+    """'torque one sample late', its 30 dB speed step down's traversal back (test/data/vd_torque_late_return_traversal_
+    jointstate_30db.npz, the contact rule's capture, departure 53 after the zone): the walk and the coupling model put
+    the entry at -1; with J fixed and m_el a sample late, the fit misses wherever m_el moves fast and the nominal-J
+    search walked into the gap (+22).  With the lag's first-order column free it stays ('lag'; off: NOMINAL_J_FREE_LAG
+    False)."""
+    from jident_ros.stream import flank
+    if not lag:
+        monkeypatch.setattr(flank, "NOMINAL_J_FREE_LAG", False)
+    data, dep, true, level, sigma = _vd_return_cut("vd_torque_late_return_traversal_jointstate_30db.npz", 65536)
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
+    det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), True, sigma
+    shift, _ = det._refine(data, dep)
+    if lag:
+        assert abs(dep + shift - true) <= 2, dep + shift - true
+    else:
+        assert dep + shift - true >= 10, dep + shift - true

@@ -690,6 +690,21 @@ def free_motion_walk(alpha1: np.ndarray, m_el: np.ndarray, departure: int, first
 #: 12-24), tested on the second drive, the DOL drive (no such traversal), ours and the 15 variants (docs/results.md,
 #: "Entry placement, fifth round")
 RETURN_ANGLE_WALK_MIN_LEAD = 8
+#: A traversal back's walk (:meth:`FlankDetector._angle_walk_entry`) then moves forward to where the motor equation with
+#: the nominal J1 holds (:func:`nominal_coupling_entry`): the walk's free fit takes J free, and a soft coupling that
+#: untwists while the braking torque relaxes (the coupling still carries 230 -> 0 N m over 35 samples) is explained by
+#: a J 2.5-3.3 times J1_nom, so the walk took the untwist for free motion ('several at once': the return traversal's
+#: entry 37 samples before the zone, outside the zoo's 20-sample match: 3 false entries).  With J fixed the untwist
+#: rows fail the coupling model clearly (a gain of 2.5-6.5 at the walk's end) and the search stops at the contact loss.
+#: No threshold of its own: the first move needs COUPLING_MIN_GAIN (chosen on the vector drive), later moves a better
+#: fit (COUPLING_MIN_GAIN_FORWARD's rule), the rms gate is the walk's FREE_WALK_MAX_NOISE_RAD (the 2^14 variant), the
+#: reach the window's forward room.  Nothing was chosen on 'several at once' (a validation drive: tested there only)
+RETURN_NOMINAL_J = True
+#: ... with the torque estimate's lag free in that fit: Phi(m_el(t - tau)) = Phi(m_el) - tau S(m_el) to first order (S
+#: the single integral), a column with a free coefficient.  With J fixed and no lag term, a torque estimate a sample late
+#: or smoothed by 2 ms misfits wherever m_el moves fast (the speed step's transient), and the search walked into the gap:
+#: 'torque one sample late' -1 -> +22 (30 dB), 'smoothed torque 2 ms' -2 -> +34 -- chosen on those two variants
+NOMINAL_J_FREE_LAG = True
 
 
 #: Without a1, a window's own entry that delta left gradually (a coupling untwisting as its load falls, so delta
@@ -725,17 +740,25 @@ COUPLING_FORWARD_ROUNDS = 3
 
 
 def _coupling_fit(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, centre: int, side: float,
-                  sample_period_s: float):
+                  sample_period_s: float, inertia_kgm2: Optional[float] = None):
     """(best candidate, its RSS, the RSS at ``centre``, samples in the fit) of :func:`coupling_entry`'s search
-    around ``centre``; None when the rows are not there."""
+    around ``centre``; None when the rows are not there.  ``inertia_kgm2``: J fixed there (Phi / J taken off alpha1,
+    the Phi column dropped; the torque's lag free, NOMINAL_J_FREE_LAG), else free."""
     ts = sample_period_s
     search = samples(COUPLING_SEARCH, ts)
     lo, hi = centre - samples(COUPLING_FIT_BEFORE, ts), centre + samples(COUPLING_FIT_AFTER, ts)
     if lo < 1 or hi > alpha1.size or centre - search < lo + 2:
         return None
     k = np.arange(lo, hi, dtype=float) - centre
-    base = _free_columns(k, _double_integral(m_el[lo:hi], ts))
+    phi = _double_integral(m_el[lo:hi], ts)
+    base = _free_columns(k, phi)
     y = np.asarray(alpha1[lo:hi], float)
+    if inertia_kgm2 is not None:
+        base, y = base[:, [0, 1, 3]], y - phi / inertia_kgm2
+        if NOMINAL_J_FREE_LAG:      # the torque estimate's lag, free (first order: its single integral)
+            lag = np.cumsum(np.asarray(m_el[lo:hi], float)) * ts
+            lag = lag - lag.mean()
+            base = np.column_stack([base, lag / (float(np.abs(lag).max()) or 1.0)])
     y = y - base @ np.linalg.lstsq(base, y, rcond=None)[0]
     d = np.asarray(delta[lo:hi], float)
     rate = np.gradient(d) / ts
@@ -931,6 +954,25 @@ def coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, depa
         return departure, 1.0, math.sqrt(rss_dep / max(n - 6, 1))
     gain = rss_centre / best_rss if best_rss > 0 else 1.0
     return best, gain, math.sqrt(best_rss / max(n - 6, 1))
+
+
+def nominal_coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, start: int, side: float,
+                           inertia_kgm2: float, sample_period_s: float, reach: int) -> tuple:
+    """(entry row, rms): the coupling model's contact loss with the motor's J fixed at ``inertia_kgm2``
+    (:func:`_coupling_fit`) searched forward from ``start``: the first search must explain alpha1 COUPLING_MIN_GAIN
+    times better than ``start`` (the motor equation fails there), then the search moves on to its best while that
+    lies later and explains alpha1 better, not beyond ``reach`` samples; (``start``, inf) when it does not move."""
+    centre, search, rms = start, samples(COUPLING_SEARCH, sample_period_s), math.inf
+    for i in range(int(reach) // max(search, 1) + 2):
+        got = _coupling_fit(alpha1, delta, m_el, centre, side, sample_period_s, inertia_kgm2)
+        if got is None:
+            return (start, math.inf) if centre == start else (centre, rms)
+        best, best_rss, rss_centre, n = got
+        rms = math.sqrt(rss_centre / max(n - 6, 1))
+        if best <= centre or best > start + reach or not best_rss * (COUPLING_MIN_GAIN if i == 0 else 1.0) < rss_centre:
+            break
+        centre = best
+    return (start, math.inf) if centre == start else (centre, rms)
 
 
 #: Without a1, a window's own entry that delta's departure threshold placed after the contact loss (a fast departure:
@@ -2462,7 +2504,7 @@ class FlankDetector(BacklashDetector):
         if self.detector_name == "flank" and "a1" not in self.channels and "m_el" in self.channels \
                 and getattr(self, "_cap_returning", False):
             e = self._angle_walk_entry(data, dep)
-            if e < dep:
+            if e != dep:            # back, or forward past the departure (RETURN_NOMINAL_J)
                 return e - dep, None
         # not in a traversal back (delta rings at the other flank after the impact before it leaves it again: on the
         # vector drive's 2^13 speed steps the move took return entries 10-40 samples back, one before its gap)
@@ -2541,7 +2583,8 @@ class FlankDetector(BacklashDetector):
         traversal back turns inside the zone and rests 1 mrad off the flank it left before leaving it again, one gap;
         a guard that stopped the walk where delta was last inside the zone left 3 of them 88-92 samples late), then
         the coupling model's contact loss: forward from the walk's end (the walk stops where the contact's load
-        becomes visible, before the contact loss), else near the hinge's entry."""
+        becomes visible, before the contact loss), else near the hinge's entry; then forward to where the motor
+        equation with J1_nom holds (:meth:`_nominal_j_move`, RETURN_NOMINAL_J: possibly past the departure)."""
         if "m_el" not in self.channels:
             return dep
         walk, e = free_motion_walk(data[:, self._i_a1], data[:, self.channels.index("m_el")], dep,
@@ -2549,7 +2592,23 @@ class FlankDetector(BacklashDetector):
         if e >= dep:
             return dep
         e2 = self._coupling_move(data, walk, dep, 1.0, 1.0)
-        return min(e2 if e2 > walk else self._coupling_move(data, e, dep, 1.0, 1.0), dep)
+        return self._nominal_j_move(data, min(e2 if e2 > walk else self._coupling_move(data, e, dep, 1.0, 1.0), dep),
+                                    dep)
+
+    def _nominal_j_move(self, data: np.ndarray, entry: int, dep: int) -> int:
+        """A traversal back's ``entry`` (the walk's) moved forward to :func:`nominal_coupling_entry`'s contact loss, the
+        coupling model with J1_nom (RETURN_NOMINAL_J), within the window's forward room from ``dep``, on an encoder the
+        walk resolves (its fit's rms and the configured quantum / sqrt 12 within FREE_WALK_MAX_NOISE_RAD); else
+        ``entry``."""
+        flank = getattr(self, "_cap_flank", (math.nan, math.nan))[0]
+        if not RETURN_NOMINAL_J or self.nominal_inertia_kgm2 is None or not math.isfinite(flank):
+            return entry
+        delta = self._delta(data)
+        after = delta[dep:dep + self._n(COUPLING_FIT_AFTER)] - flank
+        side = 1.0 if after.size and after[int(np.argmax(np.abs(after)))] >= 0 else -1.0
+        e, rms = nominal_coupling_entry(data[:, self._i_a1], delta, data[:, self.channels.index("m_el")], entry, side,
+                                        self.nominal_inertia_kgm2, self.sample_period_s, dep - entry + self._forward_room)
+        return e if e > entry and max(rms, self.angle_quantum_rad / math.sqrt(12.0)) <= FREE_WALK_MAX_NOISE_RAD else entry
 
     def _zone_move(self, data: np.ndarray, dep: int, entry: int, cap: _FlankCapture, recontact: Optional[int]) -> int:
         """``entry`` moved forward to the zone's edge (:func:`zone_edge_entry`, ZONE_*) for a window's own traversal
