@@ -1420,3 +1420,20 @@ def test_the_nominal_j_coupling_fit_leaves_the_torque_estimate_s_lag_free(monkey
         assert abs(dep + shift - true) <= 2, dep + shift - true
     else:
         assert dep + shift - true >= 10, dep + shift - true
+
+
+@pytest.mark.parametrize("name, max_move, offset", [
+    ("vd_base_return_traversal_jointstate_30db.npz", 4, 0), ("vd_base_return_traversal_jointstate_30db.npz", 0, -3),
+    ("vd_torque_late_return_traversal_jointstate.npz", 4, 0), ("vd_torque_late_return_traversal_jointstate.npz", 6, 6)])
+def test_the_nominal_j_search_goes_on_a_few_samples_with_the_lag_left_out(monkeypatch, name, max_move, offset):
+    """The base drive's 30 dB speed step down, its traversal back (test/data/vd_base_return_traversal_jointstate_30db.npz):
+    with the torque's lag free the nominal-J fit reads the contact's last 3 samples as a lag (-3); without it, within
+    NOMINAL_J_UNLAGGED_MAX_MOVE (4), at the zone (0; 0: off, -3).  'torque one sample late', clean (test/data/
+    vd_torque_late_return_traversal_jointstate.npz): the lag-free search would go 6 samples on (+6 at a cap of 6; 0 at 4)."""
+    from jident_ros.stream import flank
+    monkeypatch.setattr(flank, "NOMINAL_J_UNLAGGED_MAX_MOVE", max_move)
+    data, dep, true, level, sigma = _vd_return_cut(name, 65536)
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
+    det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), True, sigma
+    shift, _ = det._refine(data, dep)
+    assert dep + shift - true == offset

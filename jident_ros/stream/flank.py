@@ -705,6 +705,13 @@ RETURN_NOMINAL_J = True
 #: or smoothed by 2 ms misfits wherever m_el moves fast (the speed step's transient), and the search walked into the gap:
 #: 'torque one sample late' -1 -> +22 (30 dB), 'smoothed torque 2 ms' -2 -> +34 -- chosen on those two variants
 NOMINAL_J_FREE_LAG = True
+#: ... then on with the lag left out (m_el as read), by this many samples at most: over a few samples a contact torque
+#: ramping to zero and a torque estimate's lag look alike, and the lag's column took the base drive's last 3 samples of
+#: contact (its 30 dB traversal back: -3; without the lag column 0, as on the 'stamping jitter 50 µs', 'CiA 402 units'
+#: and 'coarse torque' variants), while a lag the variants declare move the lag-free search 6 samples or more ('torque
+#: one sample late', 'smoothed torque 2 ms': clean traversals back -1 -> +6, 0 -> +6 at 6).  4 chosen on the base drive
+#: (3) and those two (6); 5 also took 'narrow backlash''s 30 dB traversal back (-4 -> +1), a sample's margin: not taken
+NOMINAL_J_UNLAGGED_MAX_MOVE = 4
 
 
 #: Without a1, a window's own entry that delta left gradually (a coupling untwisting as its load falls, so delta
@@ -740,10 +747,10 @@ COUPLING_FORWARD_ROUNDS = 3
 
 
 def _coupling_fit(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, centre: int, side: float,
-                  sample_period_s: float, inertia_kgm2: Optional[float] = None):
+                  sample_period_s: float, inertia_kgm2: Optional[float] = None, free_lag: bool = True):
     """(best candidate, its RSS, the RSS at ``centre``, samples in the fit) of :func:`coupling_entry`'s search
     around ``centre``; None when the rows are not there.  ``inertia_kgm2``: J fixed there (Phi / J taken off alpha1,
-    the Phi column dropped; the torque's lag free, NOMINAL_J_FREE_LAG), else free."""
+    the Phi column dropped; the torque's lag free with ``free_lag`` and NOMINAL_J_FREE_LAG), else free."""
     ts = sample_period_s
     search = samples(COUPLING_SEARCH, ts)
     lo, hi = centre - samples(COUPLING_FIT_BEFORE, ts), centre + samples(COUPLING_FIT_AFTER, ts)
@@ -755,7 +762,7 @@ def _coupling_fit(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, centr
     y = np.asarray(alpha1[lo:hi], float)
     if inertia_kgm2 is not None:
         base, y = base[:, [0, 1, 3]], y - phi / inertia_kgm2
-        if NOMINAL_J_FREE_LAG:      # the torque estimate's lag, free (first order: its single integral)
+        if NOMINAL_J_FREE_LAG and free_lag:      # the torque estimate's lag, free (first order: its single integral)
             lag = np.cumsum(np.asarray(m_el[lo:hi], float)) * ts
             lag = lag - lag.mean()
             base = np.column_stack([base, lag / (float(np.abs(lag).max()) or 1.0)])
@@ -957,14 +964,15 @@ def coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, depa
 
 
 def nominal_coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, start: int, side: float,
-                           inertia_kgm2: float, sample_period_s: float, reach: int) -> tuple:
-    """(entry row, rms): the coupling model's contact loss with the motor's J fixed at ``inertia_kgm2``
-    (:func:`_coupling_fit`) searched forward from ``start``: the first search must explain alpha1 COUPLING_MIN_GAIN
-    times better than ``start`` (the motor equation fails there), then the search moves on to its best while that
-    lies later and explains alpha1 better, not beyond ``reach`` samples; (``start``, inf) when it does not move."""
+                           fixed: tuple, sample_period_s: float, reach: int) -> tuple:
+    """(entry row, rms): the coupling model's contact loss with the motor's J fixed, ``fixed`` = (J, whether the
+    torque's lag is free) (:func:`_coupling_fit`), searched forward from ``start``: the first search must explain alpha1
+    COUPLING_MIN_GAIN times better than ``start`` (the motor equation fails there), then the search moves on to its
+    best while that lies later and explains alpha1 better, not beyond ``reach`` samples; (``start``, inf) when it does
+    not move."""
     centre, search, rms = start, samples(COUPLING_SEARCH, sample_period_s), math.inf
     for i in range(int(reach) // max(search, 1) + 2):
-        got = _coupling_fit(alpha1, delta, m_el, centre, side, sample_period_s, inertia_kgm2)
+        got = _coupling_fit(alpha1, delta, m_el, centre, side, sample_period_s, *fixed)
         if got is None:
             return (start, math.inf) if centre == start else (centre, rms)
         best, best_rss, rss_centre, n = got
@@ -2606,9 +2614,15 @@ class FlankDetector(BacklashDetector):
         delta = self._delta(data)
         after = delta[dep:dep + self._n(COUPLING_FIT_AFTER)] - flank
         side = 1.0 if after.size and after[int(np.argmax(np.abs(after)))] >= 0 else -1.0
-        e, rms = nominal_coupling_entry(data[:, self._i_a1], delta, data[:, self.channels.index("m_el")], entry, side,
-                                        self.nominal_inertia_kgm2, self.sample_period_s, dep - entry + self._forward_room)
-        return e if e > entry and max(rms, self.angle_quantum_rad / math.sqrt(12.0)) <= FREE_WALK_MAX_NOISE_RAD else entry
+        motor, m_el, floor = data[:, self._i_a1], data[:, self.channels.index("m_el")], self.angle_quantum_rad / math.sqrt(12)
+        for free_lag, reach in ((True, dep - entry + self._forward_room), (False, self._n(NOMINAL_J_UNLAGGED_MAX_MOVE))):
+            if not free_lag and not (NOMINAL_J_FREE_LAG and NOMINAL_J_UNLAGGED_MAX_MOVE):
+                break
+            # with the lag free, then (a few samples at most) without it
+            e, rms = nominal_coupling_entry(motor, delta, m_el, entry, side, (self.nominal_inertia_kgm2, free_lag),
+                                            self.sample_period_s, reach)
+            entry = e if entry < e <= entry + reach and max(rms, floor) <= FREE_WALK_MAX_NOISE_RAD else entry
+        return entry
 
     def _zone_move(self, data: np.ndarray, dep: int, entry: int, cap: _FlankCapture, recontact: Optional[int]) -> int:
         """``entry`` moved forward to the zone's edge (:func:`zone_edge_entry`, ZONE_*) for a window's own traversal
