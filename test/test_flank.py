@@ -760,12 +760,12 @@ def test_a_turn_inside_the_zone_on_a_fine_encoder_is_not_a_bounce():
     assert len(entries) == 1 and abs(entries[0] - 2094) <= 2, entries
 
 
-def _vd_return_with_a1():
+def _vd_return_with_a1(name="vd_return_traversal_a1_clean.npz"):
     """A cut of the vector drive's clean speed step down as CSV 2^16 (with a1) gives it, up to 150 rows after the
     departure of its traversal back: rows (t, alpha1, alpha2, m_el, a1), the departure row, the true first row in the
     zone, the flank level and its contact sigma."""
     from pathlib import Path
-    d = np.load(Path(__file__).parent / "data" / "vd_return_traversal_a1_clean.npz")
+    d = np.load(Path(__file__).parent / "data" / name)
     q = 2.0 * math.pi / 65536
     a1 = float(d["alpha10"]) + q * d["alpha1_counts"]
     a2 = float(d["alpha20"]) + q * d["alpha2_counts"]
@@ -1437,3 +1437,20 @@ def test_the_nominal_j_search_goes_on_a_few_samples_with_the_lag_left_out(monkey
     det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), True, sigma
     shift, _ = det._refine(data, dep)
     assert dep + shift - true == offset
+
+
+@pytest.mark.parametrize("nominal", [True, False])
+def test_with_an_accelerometer_a_traversal_back_s_entry_moves_to_where_the_motor_equation_with_j1_nom_holds(
+        monkeypatch, nominal):
+    """The base drive's 30 dB speed step down with an Imu, its traversal back (test/data/vd_base_return_traversal_imu_
+    30db.npz, the capture up to 150 rows after its departure): back_to_load and the coupling model stop 3 samples before
+    the zone, the angle walk leads by less than RETURN_ANGLE_WALK_MIN_LEAD; the nominal-J search (as after the walk)
+    moves it on to the zone (0; RETURN_NOMINAL_J off: -3)."""
+    from jident_ros.stream import flank
+    if not nominal:
+        monkeypatch.setattr(flank, "RETURN_NOMINAL_J", False)
+    data, dep, true, level, sigma = _vd_return_with_a1("vd_base_return_traversal_imu_30db.npz")
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el", "a1"), nominal_inertia_kgm2=1.16)
+    det._cap_flank, det._cap_returning, det._cap_sigma = (level, 1.5e-3), True, sigma
+    shift, _ = det._refine(data, dep)
+    assert dep + shift - true == (0 if nominal else -3)

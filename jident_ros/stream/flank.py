@@ -698,7 +698,10 @@ RETURN_ANGLE_WALK_MIN_LEAD = 8
 #: rows fail the coupling model clearly (a gain of 2.5-6.5 at the walk's end) and the search stops at the contact loss.
 #: No threshold of its own: the first move needs COUPLING_MIN_GAIN (chosen on the vector drive), later moves a better
 #: fit (COUPLING_MIN_GAIN_FORWARD's rule), the rms gate is the walk's FREE_WALK_MAX_NOISE_RAD (the 2^14 variant), the
-#: reach the window's forward room.  Nothing was chosen on 'several at once' (a validation drive: tested there only)
+#: reach the window's forward room.  Nothing was chosen on 'several at once' (a validation drive: tested there only).
+#: With a1 the same search follows back_to_load's and the coupling model's entry when the walk does not lead by
+#: RETURN_ANGLE_WALK_MIN_LEAD (the base drive's 30 dB traversal back -3 -> 0, with 'stamping jitter 50 µs', 'CiA 402
+#: units', 'coarse torque', 'load encoder reversed'; no variant lower)
 RETURN_NOMINAL_J = True
 #: ... with the torque estimate's lag free in that fit: Phi(m_el(t - tau)) = Phi(m_el) - tau S(m_el) to first order (S
 #: the single integral), a column with a free coefficient.  With J fixed and no lag term, a torque estimate a sample late
@@ -2562,9 +2565,9 @@ class FlankDetector(BacklashDetector):
             if getattr(self, "_cap_returning", False):
                 # a traversal back: the coupling model's contact loss near back_to_load's entry
                 entry = self._coupling_move(data, entry + off, dep + off, 1.0, 1.0) - off
-                walk = self._angle_walk_entry(data, dep + off) - off
-                if walk <= entry - self._n(RETURN_ANGLE_WALK_MIN_LEAD):
-                    entry = walk
+                walk = self._angle_walk_entry(data, dep + off) - off     # if it leads clearly, else on to where
+                entry = walk if walk <= entry - self._n(RETURN_ANGLE_WALK_MIN_LEAD) else \
+                    self._nominal_j_move(data, entry + off, dep + off) - off    # J1_nom holds (RETURN_NOMINAL_J)
         elif src != "a1" and self.detector_name == "flank" and not getattr(self, "_cap_returning", False):
             untwist = self._untwist_move(data, dep + off)
             if untwist is not None:
