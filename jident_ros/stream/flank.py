@@ -690,6 +690,31 @@ def free_motion_walk(alpha1: np.ndarray, m_el: np.ndarray, departure: int, first
 #: 12-24), tested on the second drive, the DOL drive (no such traversal), ours and the 15 variants (docs/results.md,
 #: "Entry placement, fifth round")
 RETURN_ANGLE_WALK_MIN_LEAD = 8
+#: A traversal back's walk (:meth:`FlankDetector._angle_walk_entry`) then moves forward to where the motor equation with
+#: the nominal J1 holds (:func:`nominal_coupling_entry`): the walk's free fit takes J free, and a soft coupling that
+#: untwists while the braking torque relaxes (the coupling still carries 230 -> 0 N m over 35 samples) is explained by
+#: a J 2.5-3.3 times J1_nom, so the walk took the untwist for free motion ('several at once': the return traversal's
+#: entry 37 samples before the zone, outside the zoo's 20-sample match: 3 false entries).  With J fixed the untwist
+#: rows fail the coupling model clearly (a gain of 2.5-6.5 at the walk's end) and the search stops at the contact loss.
+#: No threshold of its own: the first move needs COUPLING_MIN_GAIN (chosen on the vector drive), later moves a better
+#: fit (COUPLING_MIN_GAIN_FORWARD's rule), the rms gate is the walk's FREE_WALK_MAX_NOISE_RAD (the 2^14 variant), the
+#: reach the window's forward room.  Nothing was chosen on 'several at once' (a validation drive: tested there only).
+#: With a1 the same search follows back_to_load's and the coupling model's entry when the walk does not lead by
+#: RETURN_ANGLE_WALK_MIN_LEAD (the base drive's 30 dB traversal back -3 -> 0, with 'stamping jitter 50 µs', 'CiA 402
+#: units', 'coarse torque', 'load encoder reversed'; no variant lower)
+RETURN_NOMINAL_J = True
+#: ... with the torque estimate's lag free in that fit: Phi(m_el(t - tau)) = Phi(m_el) - tau S(m_el) to first order (S
+#: the single integral), a column with a free coefficient.  With J fixed and no lag term, a torque estimate a sample late
+#: or smoothed by 2 ms misfits wherever m_el moves fast (the speed step's transient), and the search walked into the gap:
+#: 'torque one sample late' -1 -> +22 (30 dB), 'smoothed torque 2 ms' -2 -> +34 -- chosen on those two variants
+NOMINAL_J_FREE_LAG = True
+#: ... then on with the lag left out (m_el as read), by this many samples at most: over a few samples a contact torque
+#: ramping to zero and a torque estimate's lag look alike, and the lag's column took the base drive's last 3 samples of
+#: contact (its 30 dB traversal back: -3; without the lag column 0, as on the 'stamping jitter 50 µs', 'CiA 402 units'
+#: and 'coarse torque' variants), while a lag the variants declare move the lag-free search 6 samples or more ('torque
+#: one sample late', 'smoothed torque 2 ms': clean traversals back -1 -> +6, 0 -> +6 at 6).  4 chosen on the base drive
+#: (3) and those two (6); 5 also took 'narrow backlash''s 30 dB traversal back (-4 -> +1), a sample's margin: not taken
+NOMINAL_J_UNLAGGED_MAX_MOVE = 4
 
 
 #: Without a1, a window's own entry that delta left gradually (a coupling untwisting as its load falls, so delta
@@ -725,17 +750,25 @@ COUPLING_FORWARD_ROUNDS = 3
 
 
 def _coupling_fit(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, centre: int, side: float,
-                  sample_period_s: float):
+                  sample_period_s: float, inertia_kgm2: Optional[float] = None, free_lag: bool = True):
     """(best candidate, its RSS, the RSS at ``centre``, samples in the fit) of :func:`coupling_entry`'s search
-    around ``centre``; None when the rows are not there."""
+    around ``centre``; None when the rows are not there.  ``inertia_kgm2``: J fixed there (Phi / J taken off alpha1,
+    the Phi column dropped; the torque's lag free with ``free_lag`` and NOMINAL_J_FREE_LAG), else free."""
     ts = sample_period_s
     search = samples(COUPLING_SEARCH, ts)
     lo, hi = centre - samples(COUPLING_FIT_BEFORE, ts), centre + samples(COUPLING_FIT_AFTER, ts)
     if lo < 1 or hi > alpha1.size or centre - search < lo + 2:
         return None
     k = np.arange(lo, hi, dtype=float) - centre
-    base = _free_columns(k, _double_integral(m_el[lo:hi], ts))
+    phi = _double_integral(m_el[lo:hi], ts)
+    base = _free_columns(k, phi)
     y = np.asarray(alpha1[lo:hi], float)
+    if inertia_kgm2 is not None:
+        base, y = base[:, [0, 1, 3]], y - phi / inertia_kgm2
+        if NOMINAL_J_FREE_LAG and free_lag:      # the torque estimate's lag, free (first order: its single integral)
+            lag = np.cumsum(np.asarray(m_el[lo:hi], float)) * ts
+            lag = lag - lag.mean()
+            base = np.column_stack([base, lag / (float(np.abs(lag).max()) or 1.0)])
     y = y - base @ np.linalg.lstsq(base, y, rcond=None)[0]
     d = np.asarray(delta[lo:hi], float)
     rate = np.gradient(d) / ts
@@ -931,6 +964,26 @@ def coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, depa
         return departure, 1.0, math.sqrt(rss_dep / max(n - 6, 1))
     gain = rss_centre / best_rss if best_rss > 0 else 1.0
     return best, gain, math.sqrt(best_rss / max(n - 6, 1))
+
+
+def nominal_coupling_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, start: int, side: float,
+                           fixed: tuple, sample_period_s: float, reach: int) -> tuple:
+    """(entry row, rms): the coupling model's contact loss with the motor's J fixed, ``fixed`` = (J, whether the
+    torque's lag is free) (:func:`_coupling_fit`), searched forward from ``start``: the first search must explain alpha1
+    COUPLING_MIN_GAIN times better than ``start`` (the motor equation fails there), then the search moves on to its
+    best while that lies later and explains alpha1 better, not beyond ``reach`` samples; (``start``, inf) when it does
+    not move."""
+    centre, search, rms = start, samples(COUPLING_SEARCH, sample_period_s), math.inf
+    for i in range(int(reach) // max(search, 1) + 2):
+        got = _coupling_fit(alpha1, delta, m_el, centre, side, sample_period_s, *fixed)
+        if got is None:
+            return (start, math.inf) if centre == start else (centre, rms)
+        best, best_rss, rss_centre, n = got
+        rms = math.sqrt(rss_centre / max(n - 6, 1))
+        if best <= centre or best > start + reach or not best_rss * (COUPLING_MIN_GAIN if i == 0 else 1.0) < rss_centre:
+            break
+        centre = best
+    return (start, math.inf) if centre == start else (centre, rms)
 
 
 #: Without a1, a window's own entry that delta's departure threshold placed after the contact loss (a fast departure:
@@ -2462,7 +2515,7 @@ class FlankDetector(BacklashDetector):
         if self.detector_name == "flank" and "a1" not in self.channels and "m_el" in self.channels \
                 and getattr(self, "_cap_returning", False):
             e = self._angle_walk_entry(data, dep)
-            if e < dep:
+            if e != dep:            # back, or forward past the departure (RETURN_NOMINAL_J)
                 return e - dep, None
         # not in a traversal back (delta rings at the other flank after the impact before it leaves it again: on the
         # vector drive's 2^13 speed steps the move took return entries 10-40 samples back, one before its gap)
@@ -2512,9 +2565,9 @@ class FlankDetector(BacklashDetector):
             if getattr(self, "_cap_returning", False):
                 # a traversal back: the coupling model's contact loss near back_to_load's entry
                 entry = self._coupling_move(data, entry + off, dep + off, 1.0, 1.0) - off
-                walk = self._angle_walk_entry(data, dep + off) - off
-                if walk <= entry - self._n(RETURN_ANGLE_WALK_MIN_LEAD):
-                    entry = walk
+                walk = self._angle_walk_entry(data, dep + off) - off     # if it leads clearly, else on to where
+                entry = walk if walk <= entry - self._n(RETURN_ANGLE_WALK_MIN_LEAD) else \
+                    self._nominal_j_move(data, entry + off, dep + off) - off    # J1_nom holds (RETURN_NOMINAL_J)
         elif src != "a1" and self.detector_name == "flank" and not getattr(self, "_cap_returning", False):
             untwist = self._untwist_move(data, dep + off)
             if untwist is not None:
@@ -2541,7 +2594,8 @@ class FlankDetector(BacklashDetector):
         traversal back turns inside the zone and rests 1 mrad off the flank it left before leaving it again, one gap;
         a guard that stopped the walk where delta was last inside the zone left 3 of them 88-92 samples late), then
         the coupling model's contact loss: forward from the walk's end (the walk stops where the contact's load
-        becomes visible, before the contact loss), else near the hinge's entry."""
+        becomes visible, before the contact loss), else near the hinge's entry; then forward to where the motor
+        equation with J1_nom holds (:meth:`_nominal_j_move`, RETURN_NOMINAL_J: possibly past the departure)."""
         if "m_el" not in self.channels:
             return dep
         walk, e = free_motion_walk(data[:, self._i_a1], data[:, self.channels.index("m_el")], dep,
@@ -2549,7 +2603,29 @@ class FlankDetector(BacklashDetector):
         if e >= dep:
             return dep
         e2 = self._coupling_move(data, walk, dep, 1.0, 1.0)
-        return min(e2 if e2 > walk else self._coupling_move(data, e, dep, 1.0, 1.0), dep)
+        return self._nominal_j_move(data, min(e2 if e2 > walk else self._coupling_move(data, e, dep, 1.0, 1.0), dep),
+                                    dep)
+
+    def _nominal_j_move(self, data: np.ndarray, entry: int, dep: int) -> int:
+        """A traversal back's ``entry`` (the walk's) moved forward to :func:`nominal_coupling_entry`'s contact loss, the
+        coupling model with J1_nom (RETURN_NOMINAL_J), within the window's forward room from ``dep``, on an encoder the
+        walk resolves (its fit's rms and the configured quantum / sqrt 12 within FREE_WALK_MAX_NOISE_RAD); else
+        ``entry``."""
+        flank = getattr(self, "_cap_flank", (math.nan, math.nan))[0]
+        if not RETURN_NOMINAL_J or self.nominal_inertia_kgm2 is None or not math.isfinite(flank):
+            return entry
+        delta = self._delta(data)
+        after = delta[dep:dep + self._n(COUPLING_FIT_AFTER)] - flank
+        side = 1.0 if after.size and after[int(np.argmax(np.abs(after)))] >= 0 else -1.0
+        motor, m_el, floor = data[:, self._i_a1], data[:, self.channels.index("m_el")], self.angle_quantum_rad / math.sqrt(12)
+        for free_lag, reach in ((True, dep - entry + self._forward_room), (False, self._n(NOMINAL_J_UNLAGGED_MAX_MOVE))):
+            if not free_lag and not (NOMINAL_J_FREE_LAG and NOMINAL_J_UNLAGGED_MAX_MOVE):
+                break
+            # with the lag free, then (a few samples at most) without it
+            e, rms = nominal_coupling_entry(motor, delta, m_el, entry, side, (self.nominal_inertia_kgm2, free_lag),
+                                            self.sample_period_s, reach)
+            entry = e if entry < e <= entry + reach and max(rms, floor) <= FREE_WALK_MAX_NOISE_RAD else entry
+        return entry
 
     def _zone_move(self, data: np.ndarray, dep: int, entry: int, cap: _FlankCapture, recontact: Optional[int]) -> int:
         """``entry`` moved forward to the zone's edge (:func:`zone_edge_entry`, ZONE_*) for a window's own traversal
