@@ -268,10 +268,12 @@ def markdown(res: dict, command: str, commit: str) -> str:
                  if res.get("undeclared") else
                  "diagnosed as the zoo diagnoses the vector drive (declared as there, the friction variant with its "
                  "own friction, the observer variant with its torque accuracy, the small drive with its drive "
-                 "file)") + ". Four of the flank detector's thresholds were chosen on one of these drives each "
+                 "file)") + ". Six of the flank detector's thresholds were chosen on these drives "
              "(docs/results.md): the traversal-back walk noise gate FREE_WALK_MAX_NOISE_RAD on the 2^14 encoders "
              "(ninth round), SPRING_TIGHT_* on the small drive, ZONE_A1_FIT on the soft coupling and ZONE_A1_FRICTION "
-             "on 'sampling jitter 50 µs' (thirteenth round); no other, none on 'several at once'.", "",
+             "on 'sampling jitter 50 µs' (thirteenth round), NOMINAL_J_FREE_LAG on 'torque one sample late' and "
+             "'smoothed torque 2 ms', NOMINAL_J_UNLAGGED_MAX_MOVE on the base drive and those two (fourteenth round); "
+             "no other, none on 'several at once'.", "",
              "'Entry within ±2' counts from the first sample in the zone (the truth's entry, issue 20's target); "
              "'… of the separation' from the first sample in which the coupling transmits no torque: a damped contact "
              "separates when its force k·x + c·ẋ reaches zero, c/k before the zone (the soft coupling: 5 samples), "
