@@ -1381,6 +1381,16 @@ def test_with_a1_the_gap_s_friction_comes_off_the_steady_torque(monkeypatch, fri
     assert entry - int(d["true_entry"]) == (0 if friction else 3)
 
 
+def _return_refined(name: str, counts: int) -> tuple:
+    """(departure, the refine's shift, the true entry) of a traversal back's capture cut (:func:`_vd_return_cut`) through
+    a JointState flank detector at the vector drive's J1_nom."""
+    data, dep, true, level, sigma = _vd_return_cut(name, counts)
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
+    det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), True, sigma
+    shift, _ = det._refine(data, dep)
+    return dep, shift, true
+
+
 @pytest.mark.parametrize("nominal", [True, False])
 def test_a_traversal_back_s_walk_stops_where_the_motor_equation_with_j1_nom_fails(monkeypatch, nominal):
     """'several at once' (a validation drive: k x 0.6, 2^14 encoders, the torque a sample late, ...), its clean speed
@@ -1392,10 +1402,7 @@ def test_a_traversal_back_s_walk_stops_where_the_motor_equation_with_j1_nom_fail
     from jident_ros.stream import flank
     if not nominal:
         monkeypatch.setattr(flank, "RETURN_NOMINAL_J", False)
-    data, dep, true, level, sigma = _vd_return_cut("vd_several_return_traversal_jointstate.npz", 16384)
-    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
-    det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), True, sigma
-    shift, _ = det._refine(data, dep)
+    dep, shift, true = _return_refined("vd_several_return_traversal_jointstate.npz", 16384)
     if nominal:
         assert abs(dep + shift - true) <= 2, dep + shift - true
     else:
@@ -1412,10 +1419,7 @@ def test_the_nominal_j_coupling_fit_leaves_the_torque_estimate_s_lag_free(monkey
     from jident_ros.stream import flank
     if not lag:
         monkeypatch.setattr(flank, "NOMINAL_J_FREE_LAG", False)
-    data, dep, true, level, sigma = _vd_return_cut("vd_torque_late_return_traversal_jointstate_30db.npz", 65536)
-    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
-    det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), True, sigma
-    shift, _ = det._refine(data, dep)
+    dep, shift, true = _return_refined("vd_torque_late_return_traversal_jointstate_30db.npz", 65536)
     if lag:
         assert abs(dep + shift - true) <= 2, dep + shift - true
     else:
