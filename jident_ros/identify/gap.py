@@ -471,7 +471,7 @@ def _gap_only_constant(fit: dict, torque: np.ndarray, xm: tuple, model: GapModel
     se_bounded = se
     for v in bound_terms.values():
         se_bounded = float(np.hypot(se_bounded, v))
-    free = fit.get("free")
+    free = _constant_fit(y, x, 0, hi - lo, sy, sx)       # made here only: a drive that declares no bound never needs it
     if free is not None:
         change = float(np.hypot(free["model_error"], entry_error))
         stat = max(free["se_stat"], GAP_ONLY_REL_SE_FLOOR * free["j1"])
@@ -1286,7 +1286,7 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
     model_error = abs(slope(lo + 1, hi - 1) - j) if n >= 6 else 0.0
     se = max(float(np.hypot(se_stat, model_error)), GAP_ONLY_REL_SE_FLOOR * j)
     return {"j1": float(j), "se": se, "model_error": float(model_error), "residual": res, "dof": dof,
-            "start": int(lo), "end": int(hi), "noise": (sy, sx), "free": _constant_fit(y_all, x_all, lo, hi, sy, sx)}
+            "start": int(lo), "end": int(hi), "noise": (sy, sx)}
 
 
 def _constant_fit(y_all: np.ndarray, x_all: np.ndarray, lo: int, hi: int, sy: float, sx: float) -> dict | None:
