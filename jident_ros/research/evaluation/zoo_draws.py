@@ -313,6 +313,10 @@ def main(argv=None) -> int:
     if reason:
         sys.stderr.write(f"zoo_draws: error: the vector drive needs motulator: {reason}\n")
         return 2
+    problem = zoo.argument_problem("--model", [], [], a.results)
+    if problem:
+        sys.stderr.write(f"zoo_draws: error: {problem}\n")
+        return 2
     res = run(Path(a.out), a.seed, a.draws, log=lambda t: print(t, file=sys.stderr, flush=True), undeclared=a.undeclared,
               model=a.model)
     cmd = (f"python -m jident_ros.research.evaluation.zoo_draws --report --model {a.model} --seed {a.seed} --draws {a.draws}"
