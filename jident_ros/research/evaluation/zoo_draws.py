@@ -24,7 +24,6 @@ limits (:func:`zoo.declared`: offset 1 % of rated, lag within 1 ms) with a data 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -75,17 +74,24 @@ SENSOR_DIMS = (
         shown="mrad"),
 )
 
-#: Every drawn property of a vector drive, in draw order (each from its own stream: changing one range moves no other draw).
-SPACE = (
-    Dim("mechanics", "motor_inertia_kgm2", "choice", values=(1.16, 1.131, 1.102, 1.073, 0.957, 1.189, 1.218),
-        unit="kg m^2", label="J1"),
-    Dim("mechanics", "load_inertia_kgm2", "log", 0.7, 5.0, unit="kg m^2", label="J2"),
+#: J1, one of the classes of config/system.yaml (the paper's seven): a drive on its class is the zoo's case.
+J1_DIM = Dim("mechanics", "motor_inertia_kgm2", "choice", values=tuple(load_system_config().grid.inertia_classes_kgm2),
+             unit="kg m^2", label="J1")
+#: The coupling and the friction, drawn alike for both models (after J1 and J2 in each space).
+COUPLING_DIMS = (
     Dim("mechanics", "backlash_width_m", "log", 2.5e-3, 10e-3, unit="m", label="K2", factor=1e3, shown="mm"),
     Dim("mechanics", "stiffness_nm_per_rad", "log", 1.5e4, 2.0e5, unit="N m/rad", label="k"),
     Dim("mechanics", "damping_nms_per_rad", "log", 15.0, 80.0, unit="N m s/rad", label="c"),
     Dim("mechanics", "motor_coulomb_nm", "lin", 0.3, 3.0, unit="N m", label="Coulomb1"),
     Dim("mechanics", "motor_viscous_nms_per_rad", "lin", 0.005, 0.05, unit="N m s/rad", label="b1"),
     Dim("mechanics", "load_coulomb_nm", "lin", 2.0, 10.0, unit="N m", label="Coulomb2"),
+)
+
+#: Every drawn property of a vector drive, in draw order (each from its own stream: changing one range moves no other draw).
+SPACE = (
+    J1_DIM,
+    Dim("mechanics", "load_inertia_kgm2", "log", 0.7, 5.0, unit="kg m^2", label="J2"),
+    *COUPLING_DIMS,
     Dim("controller", "speed_bandwidth_rad_s", "log", 2 * np.pi * 2.5, 2 * np.pi * 12, unit="rad/s", label="speed bw",
         factor=1 / (2 * np.pi), shown="Hz"),
     Dim("controller", "speed_filter_s", "lin", 0.2e-3, 1.5e-3, unit="s", label="speed filter", factor=1e3, shown="ms"),
@@ -101,14 +107,12 @@ SPACE = (
     Dim("direction", "direction", "choice", values=("forward", "reverse"), label="direction"),
 )
 
-_J1_CLASSES = SPACE[0]
-
 #: Every drawn property of a DOL drive (jident_ros/research/vector_drive/dol.py: the machine on the grid, the torque
 #: estimated from its voltages and currents, the paper's slip among the events), in draw order.
 DOL_SPACE = (
-    _J1_CLASSES,
+    J1_DIM,
     Dim("mechanics", "load_inertia_kgm2", "log", 0.35, 1.5, unit="kg m^2", label="J2"),
-    *SPACE[2:8],
+    *COUPLING_DIMS,
     Dim("drive", "stator_resistance_estimate_ratio", "lin", 0.8, 1.0, label="R_s est"),
     Dim("drive", "flux_highpass_hz", "log", 0.5, 2.0, unit="Hz", label="flux high-pass"),
     Dim("drive", "speed_filter_s", "lin", 0.2e-3, 1.5e-3, unit="s", label="speed filter", factor=1e3, shown="ms"),
@@ -205,11 +209,8 @@ def torque_error(zrs: list) -> str:
     the rows above 20 % of rated; the largest over its recordings)."""
     vals = []
     for _, zr in zrs:
-        path = Path(next(iter(zr.files.values()))).parent / f"{zr.name}.truth.json"
-        try:
-            v = json.loads(path.read_text())["torque_estimate_error"]["median_abs_relative_where_loaded"]
-        except (OSError, ValueError, KeyError):
-            continue
+        doc = zoo._truth_json(str(Path(next(iter(zr.files.values()))).parent / f"{zr.name}.truth.json")) or {}
+        v = (doc.get("torque_estimate_error") or {}).get("median_abs_relative_where_loaded")
         if v is not None:
             vals.append(float(v))
     return "–" if not vals else f"{100 * max(vals):.1f} %"
