@@ -682,7 +682,6 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
         # the a1 fits: a constant torque F moves J1 (the slope of the torque on dω1/dt) by F Σx/Σx² over the
         # fitted samples
         x = np.asarray(window["a1"], float)[fit_span[0]:fit_span[1]] / wheel_radius_m
-        sens = abs(float(x.sum())) / max(float(x @ x), 1e-300)
         terms = dict(free_extra.get("std_error_terms", ()))
         mt = (np.gradient(_net_torque(window, bearing_friction_nms_per_rad), sample_period_s)[fit_span[0]:fit_span[1]]
               if model.torque_lag_s else None)
@@ -693,6 +692,7 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
                 free_extra["friction"] = note
                 model_error = float(terms.get("change_points", 0.0))
         else:
+            sens = abs(float(x.sum())) / max(float(x @ x), 1e-300)
             for name, v in bounded:
                 terms[name] = sens * v / np.sqrt(3.0)
                 se = float(np.hypot(se, terms[name]))
