@@ -1458,3 +1458,33 @@ def test_with_an_accelerometer_a_traversal_back_s_entry_moves_to_where_the_motor
     det._cap_flank, det._cap_returning, det._cap_sigma = (level, 1.5e-3), True, sigma
     shift, _ = det._refine(data, dep)
     assert dep + shift - true == (0 if nominal else -3)
+
+
+@pytest.mark.parametrize("key, on", [("untwist", True), ("untwist", False), ("gap", True)])
+def test_a_slip_that_leaves_the_coupling_twisted_is_no_entry(monkeypatch, key, on):
+    """DOL set 1's d1-07 (zoo_draws --model dol --seed 1), its slip drop as JointState 2^16 clean gives it
+    (test/data/dol_draws_slip_drop_untwist_jointstate.npz, rows 1000-3399): the line slips but the wheel keeps
+    the coupling on its flank, 166 -> 20 N m; delta untwists 8.3 mrad and settles, 1 mrad short of the zero-twist
+    point (9.4 mrad); no gap in the truth.  The detector gave a window (a false entry, 1222); with UNTWIST_* it is a
+    same-flank torque change (``flank_shifts``; off: the window).  d1-11 ('gap'), a real slip gap of 12 samples whose
+    delta passes its zero-twist point by 1.3 mrad (14 %) and comes back to the flank it left, keeps its window."""
+    from pathlib import Path
+
+    from jident_ros.stream import flank
+    if not on:
+        monkeypatch.setattr(flank, "UNTWIST_MAX_TORQUE_SHARE", -1.0)
+    d = np.load(Path(__file__).parent / "data" / "dol_draws_slip_drop_untwist_jointstate.npz")
+    q = 2.0 * math.pi / 65536
+    a1 = float(d[f"{key}_alpha10"]) + q * d[f"{key}_alpha1_counts"]
+    a2 = float(d[f"{key}_alpha20"]) + q * d[f"{key}_alpha2_counts"]
+    ch = ("t", "alpha1", "alpha2", "m_el")
+    data = np.column_stack([np.arange(a1.size) * 5e-4, a1, a2, d[f"{key}_m_el"].astype(float)])
+    det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16, encoder_counts_per_rev=65536)
+    wins = [e.window for e in det.push(data, ch) + det.finish() if getattr(e, "window", None) is not None]
+    if key == "gap":
+        true = int(d["gap_entry"])
+        assert len(wins) == 1 and abs(round(wins[0].entry_time_s / 5e-4) - true) <= 12 and det.flank_shifts == 0
+    elif on:
+        assert wins == [] and det.flank_shifts == 1
+    else:
+        assert len(wins) == 1 and det.flank_shifts == 0

@@ -254,6 +254,24 @@ def free_departure(delta: np.ndarray, departure: int, first: int, noise_rad: flo
     return departure
 
 
+#: A slip that leaves part of the load on the coupling (the line slips on the wheel; the wheel stays) lets the coupling
+#: untwist toward a new, smaller twist on the same flank without opening the gap: delta moves by (T0 - T1) / k and
+#: settles there, the coupling torque never 0.  A real one-sided excursion carries delta past the zero-twist point
+#: into the zone and back.  So a window's own entry (not a traversal back) whose excursion settles on the flank it
+#: left, the coupling now carrying the same sign of torque and at most UNTWIST_MAX_TORQUE_SHARE of the steady T0
+#: (a slip drop, not a return to the load it had), is dropped as a same-flank torque change (``flank_shifts``) when
+#: delta's farthest travel never passes the zero-twist point z by UNTWIST_PAST_SHARE of z.  z comes from the two
+#: steady contacts, the SPRING_TORQUE_ROWS before the departure (T0, the flank level F0) and the capture's last
+#: UNTWIST_TAIL_ROWS (T1, F1): k = (T0 - T1) / (F1 - F0), z = T0 / k = (F1 - F0) T0 / (T0 - T1) (m_el's gain cancels;
+#: on DOL set 1's d1-07 and set 2's untwists within 1 % of the truth's T0 / k).  The share: DOL set 1's untwist
+#: d1-07 peaks 9-12 % short of z, its real slip gap d1-11 14 % past it, the DOL zoo's slip drops 40-66 % past it and
+#: its slip sweep's soft coupling 7-11 % past it: 0.05, the order of the torque estimate's accuracy and of the motor
+#: friction that z leaves in T0 -- chosen on DOL set 1 and the DOL zoo (slip sweep included)
+UNTWIST_PAST_SHARE = 0.05
+UNTWIST_MAX_TORQUE_SHARE = 0.5
+UNTWIST_TAIL_ROWS = 200
+
+
 #: Two windows whose entries (absolute rows) lie this close are one traversal's: the second is not given out.
 DUPLICATE_ENTRY_SAMPLES = 2
 
@@ -2210,6 +2228,9 @@ class FlankDetector(BacklashDetector):
         """The window of a complete capture; None when a window with this entry went out already (counted)."""
         data = np.concatenate(cap.rows)
         dep = cap.departure_row
+        if not cap.returning and self._untwisted(data, dep, cap.flank_rad):
+            self.flank_shifts += 1                 # a slip that left the coupling twisted (UNTWIST_*): no entry
+            return None
         self._cap_sigma = cap.flank_sigma_rad      # the entry flank's contact noise (free_departure)
         self._cap_returning = cap.returning
         self._cap_flank = (cap.flank_rad, self.threshold_for(cap))
@@ -2259,6 +2280,31 @@ class FlankDetector(BacklashDetector):
                                     f"{res.width_m:.6g} m ({res.how}){swallowed}", window=w)
         self.last_event = ev
         return ev
+
+    def _untwisted(self, data: np.ndarray, dep: int, flank_rad: float) -> bool:
+        """Whether a capture's excursion only untwisted the coupling on the flank it left (UNTWIST_* constants): it
+        settled there with the coupling carrying at most UNTWIST_MAX_TORQUE_SHARE of the steady torque of the same
+        sign, and delta never passed the zero-twist point of the two contacts by UNTWIST_PAST_SHARE of it."""
+        if self._i_m_el < 0 or not math.isfinite(flank_rad):
+            return False
+        rows = samples(SPRING_TORQUE_ROWS, self.sample_period_s)
+        tail = self._n(UNTWIST_TAIL_ROWS)
+        if dep - rows[0] < 0 or data.shape[0] - tail <= dep:
+            return False
+        d = self._delta(data)
+        m = data[:, self._i_m_el]
+        t0 = float(np.median(m[dep - rows[0]:dep - rows[1]]))
+        t1 = float(np.mean(m[-tail:]))
+        if not (t0 != 0.0 and 0.0 <= t1 / t0 <= UNTWIST_MAX_TORQUE_SHARE):
+            return False
+        if np.ptp(d[-tail:]) > self.contact_tolerance_rad:
+            return False                            # not settled in a contact
+        side = 1.0 if d[dep] >= flank_rad else -1.0
+        moved = side * (float(np.mean(d[-tail:])) - flank_rad)
+        if not moved > 0:
+            return False
+        z = moved * t0 / (t0 - t1)                  # the zero-twist point's distance from the flank level
+        return float(np.max(side * (d[dep:] - flank_rad))) < (1.0 + UNTWIST_PAST_SHARE) * z
 
     def _width(self, data: np.ndarray, entry: int, cap: _FlankCapture, recontact: Optional[int]) -> tuple:
         """(the window's first capture row, the window, its re-contact row from the rules or None, :func:`estimate_width`)
