@@ -17,7 +17,8 @@ diagnosis (:func:`zoo.diagnose_one`: ``jident diagnose``'s own function, flank d
 off) with the drive declared by :func:`declared`, and the zoo's counts (:func:`zoo.summarise`) per input x event x
 noise.  Then the slip sweep (:func:`sweep`): the two slip events, forward, both J1, on drives varied one property at a
 time (the load before the slip, the wheel that stays, K2, the coupling's stiffness), each as :data:`SWEEP_SENSORS`.
-Nothing is chosen here.
+One threshold was chosen partly here: the flank detector's UNTWIST_PAST_SHARE (fifteenth round; with the DOL draws'
+set 1), on the slip drops and the sweep's soft coupling; nothing else.
 
 Counted as the zoo counts, with one difference: slip_drop's gap leaves the driving flank and comes back to it (the
 paper's case: the line slips, the motor runs into the zone and meets the same flank again), so it is no flank-to-flank
