@@ -987,9 +987,9 @@ def _stat_se(g: GapEstimate, model: GapModel) -> float:
 #: The bounded terms of the torque both fits of a window read (a constant torque beside m_el: friction, the
 #: estimate's offset; the estimate's lag): one such error moves both J1 the same way (the same m_el over overlapping
 #: rows), so their difference by the difference of the two terms, not by their sum in quadrature.  Taken in
-#: quadrature, a typical drive's friction band (verdict.TYPICAL_FRICTION_REL_BASE) and its 1 ms lag let the second
-#: drive's a1 fit, 25 % off, pass at 2.9 standard errors (scripts/golden.py, second_drive_signals: the a1 fit's lag
-#: term 0.049, the angle fit's 0.046 kg m^2).
+#: quadrature, a friction band of 3 % of M_b (tried as the typical drive's in stop 31) and the typical 1 ms lag let the
+#: second drive's a1 fit, 25 % off, pass at 2.9 standard errors (scripts/golden.py, second_drive_signals: the a1 fit's
+#: lag term 0.049, the angle fit's 0.046 kg m^2); as their difference, 4.5: refused.
 COMMON_TORQUE_TERMS = ("coulomb_band", "viscous_band", "torque_offset", "torque_lag", "torque_lag_seen")
 
 
