@@ -76,12 +76,13 @@ def test_markdown_names_the_seed_and_totals_follow_the_rows():
 
 
 def test_bad_arguments_get_one_line_and_write_nothing(tmp_path, capsys):
+    from jident_ros.research.vector_drive.model import motulator_available
     assert zd.main(["--report", "--undeclared", "--out", str(tmp_path)]) == 2
     assert zd.main(["--report", "--draws", "0", "--results", "-", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 2 and "--undeclared" in err and "got 0" in err and not list(tmp_path.iterdir())
     # a results file that is not there: refused before any drive is simulated
-    if zd.motulator_available() is None:
+    if motulator_available() is None:
         assert zd.main(["--report", "--results", str(tmp_path / "nope.md"), "--out", str(tmp_path)]) == 2
         err = capsys.readouterr().err
         assert "--results: no such file" in err and err.count("\n") == 1 and not list(tmp_path.iterdir())

@@ -911,6 +911,30 @@ def argument_problem(flag: str, given, known, results: str) -> str:
     return ""
 
 
+PRINT_IT = "print it with --results -"
+
+
+def report_refusal(prog: str, parser, a, drive: str, flag: str = "--models", given=(), known=(),
+                   print_only=()) -> int | None:
+    """The motulator reports' shared start (zoo_dol, zoo_variants, zoo_draws), in order: a flag of ``print_only``
+    ((flag, phrase) pairs) set while --results is a file; no --report (the help, 0); motulator missing (``drive``
+    names what needs it); :func:`argument_problem` over ``flag``'s ``given`` names and the results file.  None when the
+    report may run, else the exit code, its reason in one line on stderr."""
+    for name, phrase in print_only:
+        if getattr(a, name.lstrip("-").replace("-", "_")) and a.results != "-":
+            sys.stderr.write(f"{prog}: error: argument {name}: {phrase}\n")
+            return 2
+    if not a.report:
+        parser.print_help()
+        return 0
+    reason = motulator_available()
+    problem = (f"{drive} needs motulator: {reason}" if reason else argument_problem(flag, given, known, a.results))
+    if problem:
+        sys.stderr.write(f"{prog}: error: {problem}\n")
+        return 2
+    return None
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m jident_ros.research.evaluation.zoo", description=__doc__.split("\n\n")[0])
     p.add_argument("--report", action="store_true", help="generate/reuse the recordings, diagnose, write the section")

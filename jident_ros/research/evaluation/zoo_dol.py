@@ -41,7 +41,6 @@ from jident_ros.config import load_system_config
 from jident_ros.research.evaluation import zoo
 from jident_ros.research.vector_drive import record as vd_record
 from jident_ros.research.vector_drive.dol import DOL_EVENTS, DOL_TRAVERSING_EVENTS, SLIP_EVENTS, DolParams
-from jident_ros.research.vector_drive.model import motulator_available
 
 MODEL = "DOL drive"
 #: (J1, event, direction) of the recordings
@@ -395,23 +394,10 @@ def main(argv=None) -> int:
                    help="stress the gap stage: the flank detector's entry sample moved by this many samples (an "
                         "experiment, not a product setting; with --results -)")
     a = p.parse_args(argv)
-    if a.entry_shift and a.results != "-":
-        sys.stderr.write("zoo_dol: error: argument --entry-shift: an experiment, print it with --results -\n")
-        return 2
-    if a.undeclared and a.results != "-":
-        sys.stderr.write("zoo_dol: error: argument --undeclared: print it with --results -\n")
-        return 2
-    if not a.report:
-        p.print_help()
-        return 0
-    reason = motulator_available()
-    if reason:
-        sys.stderr.write(f"zoo_dol: error: the DOL drive needs motulator: {reason}\n")
-        return 2
-    problem = zoo.argument_problem("--models", [], [], a.results)
-    if problem:
-        sys.stderr.write(f"zoo_dol: error: {problem}\n")
-        return 2
+    code = zoo.report_refusal("zoo_dol", p, a, "the DOL drive", print_only=(
+        ("--entry-shift", f"an experiment, {zoo.PRINT_IT}"), ("--undeclared", zoo.PRINT_IT)))
+    if code is not None:
+        return code
     commit = zoo._commit()
     with zoo.entry_shift(a.entry_shift):
         res = run(Path(a.out), log=lambda t: print(t, file=sys.stderr, flush=True), quick=a.quick,

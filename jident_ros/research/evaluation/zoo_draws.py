@@ -34,7 +34,7 @@ import numpy as np
 from jident_ros.config import load_system_config
 from jident_ros.research.evaluation import zoo, zoo_dol, zoo_variants
 from jident_ros.research.vector_drive.dol import DOL_TRAVERSING_EVENTS, DolParams
-from jident_ros.research.vector_drive.model import DriveParams, motulator_available
+from jident_ros.research.vector_drive.model import DriveParams
 
 #: The torque accuracy a drive's data sheet typically states for sensored vector control, relative: what a user who
 #: has nothing better declares (docs/your_drive.md).  The draws' observer errors give 0.5-3 % (the truth files).
@@ -301,23 +301,12 @@ def main(argv=None) -> int:
     p.add_argument("--results", default="docs/results.md", help="results file to update ('-' prints)")
     p.add_argument("--undeclared", action="store_true", help="declare nothing (with --results -)")
     a = p.parse_args(argv)
-    if a.undeclared and a.results != "-":
-        sys.stderr.write("zoo_draws: error: argument --undeclared: print it with --results -\n")
-        return 2
     if a.draws < 1:
         sys.stderr.write(f"zoo_draws: error: argument --draws: must be at least 1, got {a.draws}\n")
         return 2
-    if not a.report:
-        p.print_help()
-        return 0
-    reason = motulator_available()
-    if reason:
-        sys.stderr.write(f"zoo_draws: error: the vector drive needs motulator: {reason}\n")
-        return 2
-    problem = zoo.argument_problem("--model", [], [], a.results)
-    if problem:
-        sys.stderr.write(f"zoo_draws: error: {problem}\n")
-        return 2
+    code = zoo.report_refusal("zoo_draws", p, a, f"the {a.model} drive", print_only=(("--undeclared", zoo.PRINT_IT),))
+    if code is not None:
+        return code
     res = run(Path(a.out), a.seed, a.draws, log=lambda t: print(t, file=sys.stderr, flush=True), undeclared=a.undeclared,
               model=a.model)
     cmd = (f"python -m jident_ros.research.evaluation.zoo_draws --report --model {a.model} --seed {a.seed} --draws {a.draws}"

@@ -39,7 +39,7 @@ from jident_ros.cli.drive_file import read_drive_file
 from jident_ros.config import load_system_config
 from jident_ros.research.evaluation import zoo
 from jident_ros.research.vector_drive import record as vd_record
-from jident_ros.research.vector_drive.model import DriveParams, motulator_available, small_drive
+from jident_ros.research.vector_drive.model import DriveParams, small_drive
 
 #: The events of every variant (forward): the traversing ones and a same-flank torque change.
 EVENTS = ("speed_step_down", "speed_reversal", "load_reversal_light", "load_reversal_heavy", "speed_step_up")
@@ -322,21 +322,11 @@ def main(argv=None) -> int:
                    help="declare nothing (b1 = 0 and the node's defaults): what a user who configures nothing gets "
                         "(with --results -)")
     a = p.parse_args(argv)
-    if a.undeclared and a.results != "-":
-        sys.stderr.write("zoo_variants: error: argument --undeclared: print it with --results -\n")
-        return 2
-    if not a.report:
-        p.print_help()
-        return 0
-    reason = motulator_available()
-    if reason:
-        sys.stderr.write(f"zoo_variants: error: the vector drive needs motulator: {reason}\n")
-        return 2
     names = variant_names(a.variants)
-    problem = zoo.argument_problem("--variants", names, [n for n, _, _, _ in variants()], a.results)
-    if problem:
-        sys.stderr.write(f"zoo_variants: error: {problem}\n")
-        return 2
+    code = zoo.report_refusal("zoo_variants", p, a, "the vector drive", "--variants", names,
+                              [n for n, _, _, _ in variants()], print_only=(("--undeclared", zoo.PRINT_IT),))
+    if code is not None:
+        return code
     commit = zoo._commit()
     res = run(Path(a.out), log=lambda t: print(t, file=sys.stderr, flush=True), names=names or None,
               undeclared=a.undeclared)
