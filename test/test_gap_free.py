@@ -486,3 +486,18 @@ def test_the_stacked_refits_are_each_variant_s_own_fit():
         assert j == pytest.approx(kink_locate(a, torque, TS, (), end, pairs=p_)["j1"], rel=1e-10)
     assert len({round(x, 9) for x in fits[:3]}) == 3
     assert "fewer than" in fits[3]
+
+
+def test_a_rest_before_the_gap_does_not_take_the_free_fit():
+    """A blind DOL draw's slip reversal (d3-10, J1 1.218, JointState 2^16 30 dB; docs/results.md "Entry placement,
+    sixteenth round"): a soft coupling touches zero, springs back to 5-23 N m and rests in rows ~50..98 of this cut;
+    the gap is rows 98..213.  The detector's coarse gap is 48..212.  The earliest quiet third of it lies in the rest
+    and grew into rows 52..126, a fitted Coulomb friction of 3.4 N m taking the rest's torque: J1 +26 %, published.
+    Every quiet third now grows its own interval and the longest is the gap."""
+    from pathlib import Path
+    cut = np.load(Path(__file__).parent / "data" / "dol_draws_soft_rest_free_fit.npz")
+    model = GapModel(torque_accuracy=0.01, coulomb_friction_max_nm=0.626, torque_offset_nm=2.12, torque_lag_s=7.5e-4,
+                     coupling_release_s=0.004)
+    f = free_angle_fit(cut["alpha1"], cut["torque"], 5e-4, 48, 212, model, bounds=(23, 206))
+    assert f["start"] >= 85 and f["end"] - f["start"] >= 90, f
+    assert abs(f["j1"] / 1.218 - 1) < 0.1 and abs(f["j1"] - 1.218) <= 1.96 * f["se"], f

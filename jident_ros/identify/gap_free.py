@@ -263,59 +263,77 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             for a0, b0 in subs:
                 rs = y[a0:b0] - Xs[a0:b0] @ lapack.lstsq(Xs[a0:b0], y[a0:b0])
                 var.append(float(rs @ rs) / (third - Xs.shape[1]))
-            core = subs[next(k for k in range(3) if var[k] <= CORE_VAR_RATIO * min(var))]
-        c0 = lapack.lstsq(Xs[core[0]:core[1]], y[core[0]:core[1]])
-        r = y - Xs @ c0
-        rc = r[core[0]:core[1]]
-        s2 = max(float(rc @ rc) / max(rc.size - Xs.shape[1], 1), q * q / 12.0, 1e-30)
-        p = Xs.shape[1]
+            quiet = [k for k in range(3) if var[k] <= CORE_VAR_RATIO * min(var)]
+            cores = [subs[k] for k in quiet]
+        else:
+            cores = [core]
 
-        k_f = CHANGEPOINT_FORECAST_SAMPLES
-        sums = _scan_sums(Xs, r)                  # shared by every scan below
-        # the χ² test's bound s2 · χ²(1 - CHANGEPOINT_P; n - p) for every interval length n (at least 1 dof)
-        chi_bound = s2 * _chi2_bounds(R - L, p)
+        def grown(cr):
+            """The interval grown from the core rows ``cr`` (e, s, e again; the noise from the core's fit)."""
+            c0 = lapack.lstsq(Xs[cr[0]:cr[1]], y[cr[0]:cr[1]])
+            r = y - Xs @ c0
+            rc = r[cr[0]:cr[1]]
+            s2 = max(float(rc @ rc) / max(rc.size - Xs.shape[1], 1), q * q / 12.0, 1e-30)
+            p = Xs.shape[1]
 
-        def first_failure(lo_rows, hi_rows, side):
-            """Index of the first candidate interval [lo, hi) that is not accepted (None: all are).  Accepted: the
-            whole interval's residual is noise (χ² test) and its k_f end rows on ``side`` are predicted by the fit
-            without them (Chow's forecast test: a contaminated end shows in the extrapolation first).  Every
-            candidate's two fits (over [lo, hi) and over the interval without the k_f rows) in one batch: normal
-            matrices from the cumulative sums, inverted in closed form (a decision, not a published number: the
-            inverse's product where the earlier code solved, the same test to rounding)."""
-            if side == "end":
-                ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + _FORECAST_ROWS
-            else:
-                ilo, ihi, test = lo_rows + k_f, hi_rows, lo_rows[:, None] + _FORECAST_ROWS
-            c = lo_rows.size
-            D = sums[np.concatenate([hi_rows, ihi])] - sums[np.concatenate([lo_rows, ilo])]
-            Ainv = _sym3_inverse(D[:, :6])
-            sol = _einsum("kij,kj->ki", Ainv, D[:, 6:9])
-            rss = D[:c, 9] - _einsum("ki,ki->k", D[:c, 6:9], sol[:c])
-            ok = rss <= chi_bound[hi_rows - lo_rows]
-            xt = Xs[test]                                             # (cand, k_f, p)
-            pred = _einsum("ckp,cp->ck", xt, sol[c:])
-            lev = _einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)          # x A⁻¹ xᵀ of each test row
-            stat = ((r[test] - pred) ** 2 / (s2 * (1.0 + lev))).sum(axis=1)
-            bad = np.flatnonzero(~(ok & ((ihi - ilo < p + 2) | (stat <= _CHI2_FORECAST))))
-            return int(bad[0]) if bad.size else None
+            k_f = CHANGEPOINT_FORECAST_SAMPLES
+            sums = _scan_sums(Xs, r)                  # shared by every scan below
+            # the χ² test's bound s2 · χ²(1 - CHANGEPOINT_P; n - p) for every interval length n (at least 1 dof)
+            chi_bound = s2 * _chi2_bounds(R - L, p)
 
-        def grow_end(s_row, e_from):
-            cand = np.arange(max(s_row + FREE_MIN_SAMPLES, e_from), min(hi_c + W, R - L) + 1)
-            if cand.size == 0:
-                return e_from
-            k = first_failure(np.full(cand.size, s_row), cand, "end")
-            return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
+            def first_failure(lo_rows, hi_rows, side):
+                """Index of the first candidate interval [lo, hi) that is not accepted (None: all are).  Accepted: the
+                whole interval's residual is noise (χ² test) and its k_f end rows on ``side`` are predicted by the fit
+                without them (Chow's forecast test: a contaminated end shows in the extrapolation first).  Every
+                candidate's two fits (over [lo, hi) and over the interval without the k_f rows) in one batch: normal
+                matrices from the cumulative sums, inverted in closed form (a decision, not a published number: the
+                inverse's product where the earlier code solved, the same test to rounding)."""
+                if side == "end":
+                    ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + _FORECAST_ROWS
+                else:
+                    ilo, ihi, test = lo_rows + k_f, hi_rows, lo_rows[:, None] + _FORECAST_ROWS
+                c = lo_rows.size
+                D = sums[np.concatenate([hi_rows, ihi])] - sums[np.concatenate([lo_rows, ilo])]
+                Ainv = _sym3_inverse(D[:, :6])
+                sol = _einsum("kij,kj->ki", Ainv, D[:, 6:9])
+                rss = D[:c, 9] - _einsum("ki,ki->k", D[:c, 6:9], sol[:c])
+                ok = rss <= chi_bound[hi_rows - lo_rows]
+                xt = Xs[test]                                             # (cand, k_f, p)
+                pred = _einsum("ckp,cp->ck", xt, sol[c:])
+                lev = _einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)          # x A⁻¹ xᵀ of each test row
+                stat = ((r[test] - pred) ** 2 / (s2 * (1.0 + lev))).sum(axis=1)
+                bad = np.flatnonzero(~(ok & ((ihi - ilo < p + 2) | (stat <= _CHI2_FORECAST))))
+                return int(bad[0]) if bad.size else None
 
-        def grow_start(e_row, s_from):
-            cand = np.arange(min(e_row - FREE_MIN_SAMPLES, s_from), max(lo_c - W, 0) - 1, -1)
-            if cand.size == 0:
-                return s_from
-            k = first_failure(cand, np.full(cand.size, e_row), "start")
-            return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
+            def grow_end(s_row, e_from):
+                cand = np.arange(max(s_row + FREE_MIN_SAMPLES, e_from), min(hi_c + W, R - L) + 1)
+                if cand.size == 0:
+                    return e_from
+                k = first_failure(np.full(cand.size, s_row), cand, "end")
+                return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
 
-        e_row = grow_end(core[0], core[1])
-        s_row = grow_start(e_row, core[0])
-        e_row = grow_end(s_row, core[1] if core[1] <= e_row else e_row)
+            def grow_start(e_row, s_from):
+                cand = np.arange(min(e_row - FREE_MIN_SAMPLES, s_from), max(lo_c - W, 0) - 1, -1)
+                if cand.size == 0:
+                    return s_from
+                k = first_failure(cand, np.full(cand.size, e_row), "start")
+                return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
+
+            e_row = grow_end(cr[0], cr[1])
+            s_row = grow_start(e_row, cr[0])
+            e_row = grow_end(s_row, cr[1] if cr[1] <= e_row else e_row)
+            return s_row, e_row
+
+        # every quiet third grows its own interval; the longest is the gap (the earliest on a tie).  A core in a rest
+        # where the coupling still carries a small torque (a soft coupling that touched zero and sprang back before
+        # the gap opened) grows into a short interval whose J1 takes that torque; the gap's own core grows over it
+        s_row, e_row = grown(cores[0])
+        for other in cores[1:]:
+            if s_row <= other[0] and other[1] <= e_row:
+                continue                      # inside the interval grown already: the same interval
+            s_o, e_o = grown(other)
+            if e_o - s_o > e_row - s_row:
+                s_row, e_row = s_o, e_o
         s_est, e_est = L + s_row, L + e_row
     if e_est - s_est < FREE_MIN_SAMPLES:
         raise FreeFitError(f"gap too short: {e_est - s_est} samples consistent with a free motor, need >= "
