@@ -278,3 +278,25 @@ def test_a_j1_published_on_a_false_entry_is_counted_and_shown():
     md = zd.markdown({"rows": {"d": s}, "what": {"d": "drawn"}, "failed": {}, "seed": 9, "count": 1, "elapsed_s": 1.0,
                       "model": "dol"}, "cmd", "abc")
     assert "false entries 1, **1 of them published a J1**" in md
+
+
+def test_a_j1_from_an_early_entry_whose_gap_fit_found_the_true_gap_is_told_apart():
+    """A soft coupling's rest makes the detector enter 50 samples before the gap (a false entry: blind DOL d3-10); the
+    gap stage's change points then find the gap's rows.  Its J1 is the traversal's, shown apart from a J1 where the
+    truth has no gap (bold only when more than 10 % off), and the totals count it apart."""
+    from jident_ros.research.evaluation import zoo_draws as zd
+    from jident_ros.research.evaluation.zoo import false_text, variant_rows
+    gaps = [{"entry_index": 200, "recontact_index": 300, "traversal": True}]
+    early = dict(_win(150, None, published=True, j1=1.16 * 0.95), gap_entry=196)
+    wrong = dict(_win(120, None, published=True, j1=1.16 * 1.25), gap_entry=125)
+    s = summarise([(_rec(gaps, event_index=100), {"windows": [early, _win(201, 0)], "cut_off": []})])
+    assert s["false_other"] == 1 and s.get("published_on_false", 0) == 0
+    assert s["false_in_gap_errors"] == [pytest.approx(-0.05)] and not s["false_published_errors"]
+    assert false_text(s) == "1 (1 published from the true gap's rows: -5 … -5 %)"
+    s2 = summarise([(_rec(gaps, event_index=100), {"windows": [early, wrong], "cut_off": []})])
+    assert false_text(s2) == "2 (**1 published: +25 … +25 %**; 1 published from the true gap's rows: -5 … -5 %)"
+    _, tot = variant_rows({"d": s2}, {"d": "drawn"})
+    assert tot["false_published"] == 1 and tot["false_in_gap"] == 1 and tot["false_in_gap_off"] == 0
+    md = zd.markdown({"rows": {"d": s2}, "what": {"d": "drawn"}, "failed": {}, "seed": 9, "count": 1, "elapsed_s": 1.0,
+                      "model": "dol"}, "cmd", "abc")
+    assert "**1 of them published a J1**" in md and "1 J1 published on an early entry whose gap fit" in md

@@ -283,7 +283,9 @@ def markdown(res: dict, command: str, commit: str) -> str:
               f"({zoo._pct(tot['cov'], tot['with'])}); another class named {tot['wrong']}, 'between classes' "
               f"{tot['between']}; false entries {tot['false']}"
               + (f", **{tot['false_published']} of them published a J1** (a J1 where the truth has no gap misleads "
-                 "whatever its value)" if tot["false_published"] else "") + "."]
+                 "whatever its value)" if tot["false_published"] else "")
+              + (f"; {tot['false_in_gap']} J1 published on an early entry whose gap fit lies in a true traversal's rows "
+                 f"({tot['false_in_gap_off']} of them more than 10 % off)" if tot["false_in_gap"] else "") + "."]
     if res["failed"]:
         lines += ["", "Not simulated: " + "; ".join(f"{n}: {w}" for n, w in res["failed"].items()) + "."]
     lines += [""] + zoo.torque_truth_table([("all drives", zoo._merge(res["rows"].values()))], ", ".join(s[0] for s in sensors))
