@@ -1,5 +1,5 @@
 """The torque's lag as the motor angle shows it (issue 20 item 3: an interval holds what the data cannot pin down):
-jident_ros.identify.gap_free.torque_lag_estimate and the check estimate_inertia makes with it against the declared
+jident_ros.identify.gap_lag.torque_lag_estimate and the check estimate_inertia makes with it against the declared
 torque_lag_max_s (gap._lag_beyond_declared)."""
 import numpy as np
 import pytest
@@ -7,7 +7,8 @@ from scipy.signal import lfilter
 
 from jident_ros.identify import gap
 from jident_ros.identify.gap import estimate_inertia
-from jident_ros.identify.gap_free import STD_ERROR_TERM_SOURCES, GapModel, torque_lag_estimate
+from jident_ros.identify.gap_free import STD_ERROR_TERM_SOURCES, GapModel
+from jident_ros.identify.gap_lag import torque_lag_estimate
 
 TS = 5e-4
 

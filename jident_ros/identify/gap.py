@@ -85,14 +85,10 @@ from jident_ros.identify import lapack
 from jident_ros.identify.distributions import f_survival, t_quantile
 from jident_ros.identify.gap_free import (
     FREE_REL_SE_FLOOR,
-    LAG_MAX_FRACTION,
-    LAG_MIN_SAMPLES,
-    LAG_Z,
     NONPHYSICAL_Z,
     FreeFitError,
     GapModel,
     free_angle_fit,
-    torque_lag_estimate,
 )
 from jident_ros.identify.gap_kink import (
     KINK_LAG_ROWS,
@@ -104,6 +100,7 @@ from jident_ros.identify.gap_kink import (
     kink_locate,
     kink_terms,
 )
+from jident_ros.identify.gap_lag import LAG_MAX_FRACTION, LAG_MIN_SAMPLES, LAG_Z, torque_lag_estimate
 from jident_ros.identify.gap_load import LOAD_ANGLE_KEY, load_free_bounds
 from jident_ros.identify.gap_numerics import _ar1_inflation, _cumtrapz, _diff2, _median, _quantum
 from jident_ros.stream.filters import savgol_coeffs, savgol_filter

@@ -249,6 +249,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     np.divide(phi_mid, max(float(np.abs(phi_mid).max()), 1e-300), out=Xs[:, 2])
     q = _quantum(a[L:R])
     s_est, e_est = start, end
+    intervals = []                  # the candidate intervals (window rows), the first one's first
     if not fixed:
         lo_c, hi_c = start - L, end - L
         k_in = min(W // 2, max((hi_c - lo_c) // 4, 0))
@@ -324,17 +325,19 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             e_row = grow_end(s_row, cr[1] if cr[1] <= e_row else e_row)
             return s_row, e_row
 
-        # every quiet third grows its own interval; the longest is the gap (the earliest on a tie).  A core in a rest
-        # where the coupling still carries a small torque (a soft coupling that touched zero and sprang back before
-        # the gap opened) grows into a short interval whose J1 takes that torque; the gap's own core grows over it
+        # every quiet third grows its own interval (one inside an interval grown already is not grown again); of the
+        # intervals the one whose J1 is the most precise is the gap (below).  A core in a rest where the coupling
+        # still carries a small torque (a soft coupling that touched zero and sprang back before the gap opened)
+        # grows into a short interval whose J1 takes that torque; the gap's own core grows over the gap
         s_row, e_row = grown(cores[0])
+        intervals = [(L + s_row, L + e_row)]
         for other in cores[1:]:
-            if s_row <= other[0] and other[1] <= e_row:
-                continue                      # inside the interval grown already: the same interval
+            if any(a0 <= L + other[0] and L + other[1] <= b0 for a0, b0 in intervals):
+                continue
             s_o, e_o = grown(other)
-            if e_o - s_o > e_row - s_row:
-                s_row, e_row = s_o, e_o
-        s_est, e_est = L + s_row, L + e_row
+            if e_o - s_o >= FREE_MIN_SAMPLES and (L + s_o, L + e_o) not in intervals:
+                intervals.append((L + s_o, L + e_o))
+        s_est, e_est = intervals[0]
     if e_est - s_est < FREE_MIN_SAMPLES:
         raise FreeFitError(f"gap too short: {e_est - s_est} samples consistent with a free motor, need >= "
                            f"{FREE_MIN_SAMPLES}")
@@ -436,51 +439,62 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         with np.errstate(divide="ignore"):
             return np.where(kappa > 0, 1.0 / kappa, np.inf)
 
-    best = None
-    first = None
-    for with_coulomb in (False, True):
-        if with_coulomb and (e_est - s_est < FREE_MIN_SAMPLES + 2 or not model.coulomb_friction_max_nm):
-            continue
-        f = fit(s_est, e_est, with_coulomb)
-        first = f if first is None else first
-        if not f["kappa"] > 0:
-            continue
-        j1 = 1.0 / f["kappa"]
-        terms = se_terms(f)
-        if not terms:
-            continue
-        if with_coulomb:
-            # fitted friction only inside its band (within 3 of its standard errors): else it is taking a
-            # coupling torque, a wrong interval, for friction
-            X = f["X"]
-            res = f["res"]
-            # (a decision, not a published number: (XᵀX)⁻¹ as the product of the fit's (XᵀX)⁻¹Xᵀ with its
-            # transpose, where a pseudo-inverse was computed: the same to rounding)
-            xtx_inv_33 = float(f["pinv"][3] @ f["pinv"][3])
-            cov_33 = float(res @ res) / max(X.shape[0] - X.shape[1], 1) * xtx_inv_33
-            se_fc = np.sqrt(max(cov_33, 0.0)) / f["c_scale"] / f["kappa"]
-            if not (-3 * se_fc <= f["fc"] <= model.coulomb_friction_max_nm + 3 * se_fc):
+    def most_precise(s_est: int, e_est: int) -> tuple:
+        """(best, first): the fit over [s_est, e_est) with the smallest standard error (without the torque accuracy),
+        None when none is physical; the first fit made (for the refusal's reason)."""
+        best = None
+        first = None
+        for with_coulomb in (False, True):
+            if with_coulomb and (e_est - s_est < FREE_MIN_SAMPLES + 2 or not model.coulomb_friction_max_nm):
                 continue
-        if best is not None and max(float(np.sqrt(sum(v * v for v in terms.values()))), FREE_REL_SE_FLOOR * j1) \
-                >= best["se_stat"]:
-            # already no more precise than the fit before it without the change-point term, which only adds to the
-            # sum of squares (rounding is monotone): it cannot be chosen, its refits are not needed
-            continue
-        n = e_est - s_est
-        trims = [k for k in _trims_at(ts)
-                 if n - k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)]
-        # ... and both ends moved in at once (a gap grown into contact on both sides: the DOL drive's slip drop at
-        # 2^13 counts and 30 dB, 9 rows before the entry and 6 past the re-contact, the light wheel still coupled:
-        # J1 +8.3 % with ± 7.8 %, +10.8 % undeclared; either end alone moved J1 by 1-2 %)
-        both = [k for k in _trims_at(ts)
-                if n - 2 * k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)]
-        terms["change_points"] = float(np.abs(j_trims(f, with_coulomb, trims, both) - j1).max()) \
-            if trims else 0.0
-        se_stat = float(np.sqrt(sum(v * v for v in terms.values())))
-        se_stat = max(se_stat, FREE_REL_SE_FLOOR * j1)
-        cand = {"j1": j1, "se_stat": se_stat, "terms": terms, "fit": f, "coulomb": with_coulomb}
-        if best is None or se_stat < best["se_stat"]:
-            best = cand
+            f = fit(s_est, e_est, with_coulomb)
+            first = f if first is None else first
+            if not f["kappa"] > 0:
+                continue
+            j1 = 1.0 / f["kappa"]
+            terms = se_terms(f)
+            if not terms:
+                continue
+            if with_coulomb:
+                # fitted friction only inside its band (within 3 of its standard errors): else it is taking a
+                # coupling torque, a wrong interval, for friction
+                X = f["X"]
+                res = f["res"]
+                # (a decision, not a published number: (XᵀX)⁻¹ as the product of the fit's (XᵀX)⁻¹Xᵀ with its
+                # transpose, where a pseudo-inverse was computed: the same to rounding)
+                xtx_inv_33 = float(f["pinv"][3] @ f["pinv"][3])
+                cov_33 = float(res @ res) / max(X.shape[0] - X.shape[1], 1) * xtx_inv_33
+                se_fc = np.sqrt(max(cov_33, 0.0)) / f["c_scale"] / f["kappa"]
+                if not (-3 * se_fc <= f["fc"] <= model.coulomb_friction_max_nm + 3 * se_fc):
+                    continue
+            if best is not None and max(float(np.sqrt(sum(v * v for v in terms.values()))), FREE_REL_SE_FLOOR * j1) \
+                    >= best["se_stat"]:
+                # already no more precise than the fit before it without the change-point term, which only adds to the
+                # sum of squares (rounding is monotone): it cannot be chosen, its refits are not needed
+                continue
+            n = e_est - s_est
+            trims = [k for k in _trims_at(ts)
+                     if n - k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)]
+            # ... and both ends moved in at once (a gap grown into contact on both sides: the DOL drive's slip drop at
+            # 2^13 counts and 30 dB, 9 rows before the entry and 6 past the re-contact, the light wheel still coupled:
+            # J1 +8.3 % with ± 7.8 %, +10.8 % undeclared; either end alone moved J1 by 1-2 %)
+            both = [k for k in _trims_at(ts)
+                    if n - 2 * k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)]
+            terms["change_points"] = float(np.abs(j_trims(f, with_coulomb, trims, both) - j1).max()) \
+                if trims else 0.0
+            se_stat = float(np.sqrt(sum(v * v for v in terms.values())))
+            se_stat = max(se_stat, FREE_REL_SE_FLOOR * j1)
+            cand = {"j1": j1, "se_stat": se_stat, "terms": terms, "fit": f, "coulomb": with_coulomb}
+            if best is None or se_stat < best["se_stat"]:
+                best = cand
+        return best, first
+
+    best, first = most_precise(s_est, e_est)
+    for s_c, e_c in intervals[1:]:
+        # a candidate interval of another quiet third (above): taken when its J1 is the more precise
+        other, _ = most_precise(s_c, e_c)
+        if other is not None and (best is None or other["se_stat"] < best["se_stat"]):
+            best, s_est, e_est = other, s_c, e_c
     if best is None:
         raise FreeFitError(_no_positive_kappa(first, phi_scale))
     j1 = best["j1"]
@@ -494,67 +508,6 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     return {"j1": j1, "se": se, "se_stat": best["se_stat"], "terms": terms, "start": int(s_est), "end": int(e_est),
             "friction": friction, "coulomb_nm": float(f["fc"]), "residual": f["res"], "dof": f["X"].shape[0] - f["X"].shape[1],
             "change_point_error": float(terms["change_points"])}
-
-
-#: The torque's lag seen in the angle (:func:`torque_lag_estimate`) exceeds the drive's declared bound when |τ̂| is
-#: more than this many of its standard errors above it.  Chosen on the vector drive smoothed by 5 ms and declared 1 ms
-#: (zoo_variants' 'smoothed torque 5 ms undeclared': the window that must trigger, J1 -8.1 % outside its interval,
-#: shows the lag at z 4.7); tested on the zoo's drives as declared (the largest z where no lag is: ours 3.3 on a
-#: 10 ms gap, the second drive 3.8, the vector drive's published windows 2.4; on the DOL drive: docs/results.md).
-LAG_Z = 4.0
-#: ... and by more than this many sample periods: a lag well under a sample is how a sampled torque's trapezoid differs
-#: from the shaft's continuous one, not a drive's delay (our simulator, exact: τ̂ = 1.7 µs at z 5 on the demo's
-#: drive; the smallest undeclared lag the zoo's variants have is one sample)
-LAG_MIN_SAMPLES = 0.5
-#: ... and by at most this fraction of the fitted rows' duration: the lag's term m(t + τ) ≈ m + τ ṁ holds for a lag
-#: short against the torque's changes in the gap; a τ̂ of 34-556 ms over 10-28 ms of rows (ours' short clean gaps,
-#: test_gap_load's contact rows) is the angle's misfit taken up by the column, not a delay (the change-point and
-#: friction terms hold that); the 5 ms smoothed torque showed 4.2-6.1 ms over 13-29 ms
-LAG_MAX_FRACTION = 0.5
-
-
-def torque_lag_estimate(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, start: int,
-                        end: int, coulomb_nm: float = 0.0) -> tuple:
-    """(τ̂, its standard error), s: the lag of the torque estimate behind the shaft's torque as the motor angle
-    sees it over the free rows [start, end).  A torque reported τ late is m(t + τ) ≈ m + τ ṁ at the shaft, whose
-    double integral adds τ ∫m dt to the free angle: α1 = θ0 + ω0 t + κ Φ + λ Ψ (Φ = ∫∫m, Ψ = ∫m, κ = 1/J1,
-    λ = κ τ), so τ̂ = λ̂/κ̂ with its delta-method standard error (the statistical one: the residual's variance,
-    at least a quantum's, with the AR(1) inflation).  Where m is constant over the rows Ψ is linear in t and τ is
-    neither seen nor matters (a large standard error); (nan, inf) when the fit is not physical.  ``coulomb_nm``: an
-    assumed Coulomb friction taken off the torque first (the middle of the declared band, as the free fit's scan
-    does: without it the stress bench's friction-dominated light load reversal read a few ms of lag).  No
-    constant-torque column: with one (t²) the 5 ms smoothed torque's windows no longer showed their lag."""
-    a = np.asarray(alpha1, float)[start:end]
-    m = np.asarray(torque, float)[start:end]
-    n = a.size
-    if n < FREE_MIN_SAMPLES + 1:
-        return float("nan"), float("inf")
-    ts = float(sample_period_s)
-    if coulomb_nm:
-        # the assumed Coulomb friction taken off, as the free fit's scan does (the middle of the declared band)
-        m = m - float(coulomb_nm) * _gradient_sign(a)
-    psi = _cumtrapz(m, ts)
-    phi = _cumtrapz(psi, ts)
-    sp, sq = max(float(np.abs(phi).max()), 1e-300), max(float(np.abs(psi).max()), 1e-300)
-    X = np.empty((n, 4))                   # np.column_stack([1, t, Φ/sp, Ψ/sq]), written in place
-    X[:, 0] = 1.0
-    np.divide(np.arange(n), max(n - 1, 1), out=X[:, 1])
-    np.divide(phi, sp, out=X[:, 2])
-    np.divide(psi, sq, out=X[:, 3])
-    y = a - a[0]
-    try:
-        xtx_inv = lapack.inv(X.T @ X)
-    except np.linalg.LinAlgError:
-        return float("nan"), float("inf")
-    coef = xtx_inv @ (X.T @ y)
-    res = y - X @ coef
-    q = _quantum(a)
-    s2 = max(float(res @ res) / (n - X.shape[1]), q * q / 12.0, 1e-30) * _ar1_inflation(res)
-    kappa, lam = coef[2] / sp, coef[3] / sq
-    if not kappa > 0:
-        return float("nan"), float("inf")
-    g = np.array([0.0, 0.0, -lam / kappa ** 2 / sp, 1.0 / kappa / sq])
-    return float(lam / kappa), float(np.sqrt(max(float(g @ xtx_inv @ g) * s2, 0.0)))
 
 
 #: A fit's 1/J1 at or below zero within this many of its standard errors of zero: the gap's torque does not curve the
