@@ -123,9 +123,10 @@ def test_a_fine_encoder_tests_against_a_2_16_quantum_not_its_own():
 def test_a_contact_that_fades_smoothly_does_not_bound_the_load_s_free_rows():
     """A blind DOL draw's slip reversal (d4-05, JointState 2^16 clean): a soft damped coupling lets go of the load
     over rows 48..83 of this cut (its torque fades from 160 N m, which a cubic follows over 16 rows); the gap is rows
-    83..181.  The first free core lay in the fading contact and its interval ended at row 117: the motor's fit, kept
-    inside it, took the contact and published J1 +6.3 %.  The coarse gap's rows after that interval get their own
-    core, whose interval ends at the re-contact."""
+    83..181.  The first free core lay in the fading contact and its interval ended at row 117, 64 rows inside the gap
+    (the motor's fit, kept inside it, published J1 +6.3 % outside its interval).  The coarse gap's rows after that
+    interval get their own core, whose interval shares more than a core's rows with the first: the bound is their
+    hull, to the re-contact (the motor's own test decides inside it)."""
     from pathlib import Path
     a2 = np.load(Path(__file__).parent / "data" / "dol_draws_soft_release_load_angle.npz")["alpha2"]
     lo, hi = load_free_bounds(a2, 48, 183, 25)
