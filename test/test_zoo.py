@@ -287,14 +287,14 @@ def test_a_j1_from_an_early_entry_whose_gap_fit_found_the_true_gap_is_told_apart
     from jident_ros.research.evaluation import zoo_draws as zd
     from jident_ros.research.evaluation.zoo import false_text, variant_rows
     gaps = [{"entry_index": 200, "recontact_index": 300, "traversal": True}]
-    early = dict(_win(150, None, published=True, j1=1.16 * 0.95), gap_entry=196)
+    early = dict(_win(150, None, published=True, j1=1.16 * 0.95), gap_entry=196)   # its interval (1.1, 1.2) covers
     wrong = dict(_win(120, None, published=True, j1=1.16 * 1.25), gap_entry=125)
     s = summarise([(_rec(gaps, event_index=100), {"windows": [early, _win(201, 0)], "cut_off": []})])
     assert s["false_other"] == 1 and s.get("published_on_false", 0) == 0
     assert s["false_in_gap_errors"] == [pytest.approx(-0.05)] and not s["false_published_errors"]
-    assert false_text(s) == "1 (1 published from the true gap's rows: -5 … -5 %)"
+    assert false_text(s) == "1 (1 published from the true gap's rows: -5 … -5 %, 1/1 covered)"
     s2 = summarise([(_rec(gaps, event_index=100), {"windows": [early, wrong], "cut_off": []})])
-    assert false_text(s2) == "2 (**1 published: +25 … +25 %**; 1 published from the true gap's rows: -5 … -5 %)"
+    assert false_text(s2) == "2 (**1 published: +25 … +25 %**; 1 published from the true gap's rows: -5 … -5 %, 1/1 covered)"
     _, tot = variant_rows({"d": s2}, {"d": "drawn"})
     assert tot["false_published"] == 1 and tot["false_in_gap"] == 1 and tot["false_in_gap_off"] == 0
     md = zd.markdown({"rows": {"d": s2}, "what": {"d": "drawn"}, "failed": {}, "seed": 9, "count": 1, "elapsed_s": 1.0,

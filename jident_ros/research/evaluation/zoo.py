@@ -480,6 +480,8 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
                         # the detector entered early, but the gap stage's change points found the true gap's rows:
                         # its J1 is that traversal's (judged by its error, not as a J1 where the truth has no gap)
                         false_in_gap.append(w["j1"] / zr.inertia_kgm2 - 1)
+                        ci = w.get("ci95")
+                        s["false_in_gap_covered"] += bool(ci and ci[0] <= zr.inertia_kgm2 <= ci[1])
                         continue
                     # a J1 published where the truth has no gap: it misleads whatever its value (counted beside
                     # 'published > 10 % off', which is over matched windows)
@@ -558,7 +560,8 @@ def false_text(s: dict) -> str:
     if errs:
         parts.append(f"**{len(errs)} published: {100 * min(errs):+.0f} … {100 * max(errs):+.0f} %**")
     if in_gap:
-        text = f"{len(in_gap)} published from the true gap's rows: {100 * min(in_gap):+.0f} … {100 * max(in_gap):+.0f} %"
+        text = (f"{len(in_gap)} published from the true gap's rows: {100 * min(in_gap):+.0f} … {100 * max(in_gap):+.0f} %, "
+                f"{s.get('false_in_gap_covered', 0)}/{len(in_gap)} covered")
         parts.append(f"**{text}**" if max(abs(e) for e in in_gap) > 0.1 else text)
     return f"{n} ({'; '.join(parts)})" if parts else str(n)
 
