@@ -311,7 +311,8 @@ DIAGNOSTIC_PARAMS = {
                                   "viscous_friction_band_nms_per_rad, torque_lag_max_s, motor.bearing_friction_nms_per_rad "
                                   "is taken, on windows of raw encoder angles (a real drive's recording: flank or "
                                   "dynamics detector), for a typical drive: torque accuracy 3 %, offset band 2 % of M_b, "
-                                  "lag 1 ms (jident_ros.identify.verdict.TYPICAL_DRIVE); false: as declared (0 = exact)",
+                                  "lag 1 ms, bearing friction in [0, 3 % of M_b] (jident_ros.identify.verdict.TYPICAL_DRIVE, "
+                                  "TYPICAL_FRICTION_REL_BASE); false: as declared (0 = exact)",
                                   read_only=False),
     "publish_ambiguous": Param(True, "publish the gap J1 (with its interval on inertia_estimate/detail) when its 95 % "
                                "interval, within +-10 %, holds two or more classes: no class named, status "

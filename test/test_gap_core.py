@@ -55,15 +55,17 @@ def test_typical_drive_for_raw_angles_only_when_nothing_is_declared():
     as declared."""
     from types import SimpleNamespace
 
-    from jident_ros.identify.verdict import TYPICAL_DRIVE, VerdictPolicy
+    from jident_ros.identify.verdict import TYPICAL_DRIVE, TYPICAL_FRICTION_REL_BASE, VerdictPolicy
     motor = SimpleNamespace(bearing_friction_nms_per_rad=0.0, base=SimpleNamespace(torque_nm=200.0))
     m = VerdictPolicy().drive_model(True, motor)
     assert m.torque_accuracy == TYPICAL_DRIVE["torque_accuracy"]
+    # the motor's bearing friction is there whether declared or not: a band of M_b (6 N m of 200)
+    assert m.coulomb_friction_max_nm == pytest.approx(TYPICAL_FRICTION_REL_BASE * 200.0) and m.coulomb_friction_max_nm > 0
     assert m.torque_lag_s == TYPICAL_DRIVE["torque_lag_max_s"]
     assert m.torque_offset_nm == pytest.approx(TYPICAL_DRIVE["torque_offset_rel_base"] * 200.0)
     assert VerdictPolicy(torque_offset_rel_base=0.05).drive_model(True, motor).torque_offset_nm == pytest.approx(10.0)
     exact = VerdictPolicy().drive_model(False, motor)
-    assert exact.torque_accuracy == 0.0 and exact.torque_lag_s == 0.0
+    assert exact.torque_accuracy == 0.0 and exact.torque_lag_s == 0.0 and exact.coulomb_friction_max_nm == 0.0
     assert VerdictPolicy(assume_typical_drive=False).drive_model(True, motor).torque_accuracy == 0.0
     declared = VerdictPolicy(torque_accuracy=0.01).drive_model(True, motor)
     assert declared.torque_accuracy == 0.01 and declared.torque_lag_s == 0.0
@@ -88,9 +90,8 @@ def test_raw_angles_from_the_detector_alone():
 def test_cross_check_takes_the_shared_torque_terms_as_a_difference():
     """The a1 and angle fits of one window read the same m_el: a friction band, an offset or a lag moves both J1 the
     same way, so the cross-check's standard error of their difference holds the difference of those terms, not their
-    sum in quadrature (the second drive's a1 fit, 25 % off, passed at 2.9 standard errors with a friction band of
-    3 % of M_b and the 1 ms lag in quadrature: scripts/golden.py second_drive_signals, stop 31).  The fits' own terms
-    stay in quadrature."""
+    sum in quadrature (the second drive's a1 fit, 25 % off, passed at 2.9 standard errors with a typical drive's
+    band and lag in quadrature: scripts/golden.py second_drive_signals).  The fits' own terms stay in quadrature."""
     import math
 
     from jident_ros.identify.gap import COMMON_TORQUE_TERMS, GapEstimate, GapModel, _difference_se

@@ -232,6 +232,17 @@ class GapEstimate:
     friction : str                  'angle': how the motor's bearing friction was treated (fitted or bounded)
     std_error_terms : tuple         ((term, kg m^2), ...): the parts of std_error_kgm2, in quadrature
                                     (statistical, torque noise, change points, friction band, torque accuracy)
+    trend_fit : tuple               (J1 kg m^2, its standard error kg m^2, its std_error_terms) of the fit the
+                                    trend reads (trend_status.trend_inputs) where it is not this one, () where it
+                                    is: a J1 whose bias is a constant of the drive, the motor's Coulomb friction
+                                    F_c (J1 dω1/dt = m_el − F_c sgn ω1 − b1 ω1) taken as 0 with the band a term, as
+                                    the a1 fits and the steady-entry fit take it.  The free angle fit under a
+                                    Coulomb band (F_c fitted free or at the band's middle): its rows at F_c = 0
+                                    (:func:`_angle_trend_refit`); the gap-only fit with its constant free: that fit
+                                    through the origin.  Cross-checked (a1 and alpha1): the other fit's where its
+                                    standard error without the drive's constant terms (:func:`within_drive_se`) is
+                                    the smaller (a friction band's term can make the a1 fit lose the publication to
+                                    the angle fit, whose J1 scatters more)
     """
 
     inertia_kgm2: float
@@ -249,6 +260,7 @@ class GapEstimate:
     change_point_error_kgm2: float = 0.0
     friction: str = ""
     std_error_terms: tuple = ()
+    trend_fit: tuple = ()
 
     @property
     def n_samples(self) -> int:
@@ -454,7 +466,8 @@ def _gap_only_constant(fit: dict, torque: np.ndarray, xm: tuple, model: GapModel
     centred regressor (only the variation of dω1/dt holds J1 there: a gap whose acceleration ramps, a vector drive's
     traversal back, reads a drift of the estimate's error as inertia).  Where its total standard error is the
     smaller, that fit is taken and the bounds leave the interval (issue 20 item 3: friction fitted where the torque
-    varies enough to separate it from J1)."""
+    varies enough to separate it from J1); the bounded fit is then the trend's (GapEstimate.trend_fit), the 7th
+    element (j, se, terms; () where the bounded fit is taken)."""
     j, se, res, dof = current
     x, mt = xm
     lo, hi = fit["start"], fit["end"]
@@ -483,9 +496,21 @@ def _gap_only_constant(fit: dict, torque: np.ndarray, xm: tuple, model: GapModel
             note = (f"fitted: a constant torque {free['constant_nm']:+.3g} N m beside J1 (the Coulomb friction and the "
                     f"torque offset together; J1 through the origin with them bounded: {j:.4g} ± {se_bounded:.2g} "
                     "kg m^2)")
-            return free["j1"], se_free, free["residual"], free["dof"], out, note
+            return free["j1"], se_free, free["residual"], free["dof"], out, note, (j, se_bounded, {**terms, **bound_terms})
     terms.update(bound_terms)
-    return j, se_bounded, res, dof, terms, ""
+    return j, se_bounded, res, dof, terms, "", ()
+
+
+def _trend_finished(j: float, se: float, terms: dict, model: GapModel) -> tuple:
+    """A trend fit (GapEstimate.trend_fit) as the published fits end: the model's floor, then the torque accuracy."""
+    terms = dict(terms)
+    if float(se) < FREE_REL_SE_FLOOR * j:
+        terms["model_floor"] = float(np.sqrt((FREE_REL_SE_FLOOR * j) ** 2 - float(se) ** 2))
+        se = FREE_REL_SE_FLOOR * j
+    if model.torque_accuracy:
+        terms["torque_accuracy"] = j * model.torque_rel_se()
+        se = float(np.hypot(se, terms["torque_accuracy"]))
+    return float(j), float(se), tuple((k, float(v)) for k, v in terms.items())
 
 
 def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
@@ -611,6 +636,8 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
                       "std_error_terms": tuple((k, float(v)) for k, v in ff["terms"].items())}
         entry_uncertainty_samples = 0        # the change-point search has taken the entry's uncertainty
         choice = "; ".join(x for x in (choice, anchored.pop("choice")) if x)
+        if not anchored and model.coulomb_friction_max_nm:
+            free_extra["trend_fit"] = _angle_trend_refit(window["alpha1"], torque, sample_period_s, ff)
         if anchored:
             j, se, res, dof, model_error = (anchored[k] for k in ("j1", "se", "res", "dof", "model_error"))
             free_extra["std_error_terms"] = tuple(anchored["terms"].items())
@@ -683,10 +710,11 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
         mt = (np.gradient(_net_torque(window, bearing_friction_nms_per_rad), sample_period_s)[fit_span[0]:fit_span[1]]
               if model.torque_lag_s else None)
         if method == "gap_only" and bounded:
-            j, se, res, dof, terms, note = _gap_only_constant(fit, mf, (x, mt), model, bounded, (j, se, res, dof), terms,
-                                                              entry_error)
+            j, se, res, dof, terms, note, trend = _gap_only_constant(fit, mf, (x, mt), model, bounded, (j, se, res, dof),
+                                                                     terms, entry_error)
             if note:
                 free_extra["friction"] = note
+                free_extra["trend_fit"] = _trend_finished(*trend, model)
                 model_error = float(terms.get("change_points", 0.0))
         else:
             sens = abs(float(x.sum())) / max(float(x @ x), 1e-300)
@@ -794,6 +822,29 @@ def _angle_fits(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, 
     if key is not None:
         _FIT_CACHE[key] = (ff, anchored)
     return ff, dict(anchored)
+
+
+def _angle_trend_refit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ff: dict) -> tuple:
+    """The trend's J1 (GapEstimate.trend_fit) of a free angle fit ``ff`` under a Coulomb band: its rows [start, end)
+    fitted with F_c = 0 (the design [1, t, Φ] of gap_free.free_angle_fit without the Coulomb column, the angle not
+    moved by F_mid C: the same J1 to rounding as that function with a zero band and ``fixed``), as every other fit
+    takes it (the a1 fits, the gap-only fit through the origin, the steady-entry fit: F_c = 0 with the band as a
+    term).  The free angle fit takes F_c free or at the band's middle, whichever has the smaller standard error, and a
+    free F_c's J1 scatters from window to window; at F_c = 0 the bias, F_c through the window's shape, is a constant of
+    the drive and the same assumption as the fits a drive's other windows publish.  Its standard error and terms:
+    ``ff``'s, scaled by the ratio of the two J1 (the rows and their regressors are the same; a full refit, its terms
+    and change-point trims, cost 0.5 ms a window).  () where 1/J1 is not positive (the trend then reads ``ff``)."""
+    s, e = int(ff["start"]), int(ff["end"])
+    n = e - s
+    phi = _cumtrapz(_cumtrapz(np.asarray(torque, float)[s:e], sample_period_s), sample_period_s)
+    scale = max(float(np.abs(phi).max()), 1e-300)
+    X = np.column_stack([np.ones(n), np.arange(n) / max(n - 1, 1), phi / scale])
+    kappa = float(lapack.lstsq(X, np.asarray(alpha1, float)[s:e] - float(alpha1[s]))[2]) / scale
+    if not (kappa > 0 and np.isfinite(kappa)):
+        return ()
+    ratio = (1.0 / kappa) / float(ff["j1"])
+    return (1.0 / kappa, float(ff["se"]) * ratio,
+            tuple((k, float(v) * ratio) for k, v in ff["terms"].items()))
 
 
 def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tuple, sample_period_s: float,
@@ -1001,6 +1052,40 @@ def _difference_se(a: GapEstimate, b: GapEstimate, model: GapModel) -> float:
     return float(np.sqrt(max(var, 0.0)))
 
 
+#: The parts of a gap J1's standard error (``GapEstimate.std_error_terms``) that are constants of the drive, not of
+#: the window: the torque estimate's scale error ('torque_accuracy'), its bounded offset ('torque_offset') and lag
+#: ('torque_lag', and 'torque_lag_seen': the lag the angle shows beyond the declared one), and the Coulomb band
+#: ('coulomb_band': the drive's friction).  Each moves the drive's J1 estimates alike (the same window shape, the same
+#: bias) and cancels in J1 relative to the drive's own baseline (the trend: trend_status).
+DRIVE_CONSTANT_TERMS = ("torque_accuracy", "torque_offset", "torque_lag", "torque_lag_seen", "coulomb_band")
+
+
+def within_drive_se(se: float, std_error_terms) -> float:
+    """``se`` (kg m^2) without the :data:`DRIVE_CONSTANT_TERMS` among ``std_error_terms`` ((term, kg m^2), ...), in
+    quadrature: what scatters from window to window of one drive; ``se`` itself where they are all of it."""
+    terms = dict(std_error_terms or ())
+    common = 0.0
+    for name in DRIVE_CONSTANT_TERMS:
+        v = terms.get(name, 0.0)
+        if v and math.isfinite(float(v)) and float(v) > 0.0:
+            common += float(v) ** 2
+    if 0.0 < common < float(se) ** 2:
+        return math.sqrt(float(se) ** 2 - common)
+    return float(se)
+
+
+def _trend_choice(best: GapEstimate, other: GapEstimate) -> GapEstimate:
+    """``best`` (the cross-check's published fit) with the trend's fit (GapEstimate.trend_fit) the other's where that
+    one's standard error without the drive's constant terms (:func:`within_drive_se`) is the smaller: the a1 fit's
+    Coulomb band term (first order, F Σx/Σx²) is larger than the angle fit's and can make it lose the publication,
+    while its J1 scatters less from window to window."""
+    mine = best.trend_fit or (best.inertia_kgm2, best.std_error_kgm2, best.std_error_terms)
+    theirs = other.trend_fit or (other.inertia_kgm2, other.std_error_kgm2, other.std_error_terms)
+    if within_drive_se(theirs[1], theirs[2]) < within_drive_se(mine[1], mine[2]):
+        return replace(best, trend_fit=tuple(theirs))
+    return best
+
+
 def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_samples: int,
                    model: GapModel, lag_check: bool = True) -> GapEstimate:
     """The model choice when the window has a1 and alpha1 (an Imu beside the encoder): the a1 fit (the joint
@@ -1051,6 +1136,7 @@ def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_sa
                          f"lagging signal")
     best = a if a.std_error_kgm2 <= b.std_error_kgm2 else b
     other = b if best is a else a
+    best = _trend_choice(best, other)
     return replace(best, model_choice=f"{best.model_choice or best.method}; cross-checked with the "
                                       f"{other.method} fit (J1 = {other.inertia_kgm2:.4g}, {z:.1f} standard errors)")
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from typing import Any, NamedTuple, Optional
 
+from jident_ros.identify.gap import DRIVE_CONSTANT_TERMS, within_drive_se
 from jident_ros.identify.trend import SECONDS_PER_DAY, TrendUpdate
 
 #: Name of the DiagnosticStatus (the diagnostic node's periodic task "trend").
@@ -57,34 +58,30 @@ def _finite(*v) -> bool:
     return all(x is not None and math.isfinite(float(x)) for x in v)
 
 
-#: The parts of a gap J1's standard error (``GapEstimate.std_error_terms``) that are constants of the drive, not of
-#: the window: the torque estimate's scale error ('torque_accuracy'), its bounded offset ('torque_offset') and lag
-#: ('torque_lag', and 'torque_lag_seen': the lag the angle shows beyond the declared one), and the Coulomb band
-#: ('coulomb_band': the drive's friction).  Each moves the drive's J1 estimates alike (the same window shape, the same
-#: bias) and cancels in J1 relative to the drive's own baseline.
-DRIVE_CONSTANT_TERMS = ("torque_accuracy", "torque_offset", "torque_lag", "torque_lag_seen", "coulomb_band")
+def _trend_fit(g) -> tuple:
+    """(J1, se) the trend reads of gap estimate ``g``: its ``trend_fit`` where it has one (a J1 whose bias is a
+    constant of the drive: the fit with the motor's Coulomb friction at 0, the band a term, where ``g`` is the free
+    angle fit under a band or the gap-only fit with its constant free, or the cross-check's other fit where that one
+    scatters less from window to window; GapEstimate.trend_fit), else its own J1; the standard error without the
+    drive's constant terms (gap.within_drive_se, :func:`_gap_se`)."""
+    tf = getattr(g, "trend_fit", ()) or ()
+    if len(tf) == 3:
+        return float(tf[0]), within_drive_se(float(tf[1]), tf[2])
+    return float(g.inertia_kgm2), _gap_se(g)
 
 
 def _gap_se(g) -> float:
     """The gap J1's standard error for the trend: the fit's (else from its 95 % interval) WITHOUT the terms that are
-    constants of the drive (:data:`DRIVE_CONSTANT_TERMS`): they move every J1 of the drive alike and cancel in J1
-    relative to its own baseline, which is what the trend tests; the absolute J1 gets the torque accuracy back
-    (TrendConfig.torque_accuracy_pct).  If they do not cancel on a drive (windows of very different shapes), its
-    windows scatter more than this se says, and the tracker's error scale, learnt from the drive's own windows,
-    widens the band (docs/trend.md, "The drive's error scale")."""
+    constants of the drive (:data:`DRIVE_CONSTANT_TERMS`, gap.within_drive_se): they move every J1 of the drive alike
+    and cancel in J1 relative to its own baseline, which is what the trend tests; the absolute J1 gets the torque
+    accuracy back (TrendConfig.torque_accuracy_pct).  If they do not cancel on a drive (windows of very different
+    shapes), its windows scatter more than this se says, and the tracker's error scale, learnt from the drive's own
+    windows, widens the band (docs/trend.md, "The drive's error scale")."""
     se = g.std_error_kgm2
     if se is None or not math.isfinite(float(se)):
         lo, hi = (float(v) for v in g.ci95_kgm2)
         se = (hi - lo) / (2 * Z95)
-    terms = dict(getattr(g, "std_error_terms", ()) or ())
-    common = 0.0
-    for name in DRIVE_CONSTANT_TERMS:
-        v = terms.get(name, 0.0)
-        if v and math.isfinite(float(v)) and float(v) > 0.0:
-            common += float(v) ** 2
-    if 0.0 < common < float(se) ** 2:
-        se = math.sqrt(float(se) ** 2 - common)
-    return float(se)
+    return within_drive_se(float(se), getattr(g, "std_error_terms", ()))
 
 
 def refusal_kind(diagnosis) -> Optional[str]:
@@ -101,7 +98,10 @@ def refusal_kind(diagnosis) -> Optional[str]:
     if status == "refused":
         return "outside_band" if "plausible band" in (getattr(diagnosis, "refused_reason", "") or "") \
             else "inconsistent"
-    if not _finite(g.inertia_kgm2) or not _finite(_gap_se(g)) or not _gap_se(g) > 0.0:
+    if not _finite(g.inertia_kgm2):
+        return "no_gap"
+    j, se = _trend_fit(g)
+    if not _finite(j, se) or not se > 0.0:
         return "no_gap"
     return None
 
@@ -112,8 +112,10 @@ def trend_inputs(diagnosis, width_se_floor_m: float = 0.0, window=None) -> Trend
 
     J1: the gap estimate whenever physics allows it (:func:`refusal_kind`), published or not (an 'ambiguous'
     window, whose interval holds two classes, still carries its J1 and standard error: twenty such windows
-    can name a change that one cannot); its standard error is the fit's, else (high - low) / (2 x 1.96) of its
-    95 % interval; a J1 of the image method alone has no standard error and is not used.  The width K2, in
+    can name a change that one cannot): its ``trend_fit`` where it has one (a J1 whose bias is a constant of the
+    drive, :func:`_trend_fit`), else its own; its standard error is the fit's, else (high - low) / (2 x 1.96) of
+    its 95 % interval, without the drive's constant terms; a J1 of the image method alone has no standard error
+    and is not used.  The width K2, in
     this order of preference (``width_source``):
 
     * 'flank': the flank detector's flank-to-flank estimate of the window (``window``'s
@@ -128,7 +130,7 @@ def trend_inputs(diagnosis, width_se_floor_m: float = 0.0, window=None) -> Trend
     kind = refusal_kind(diagnosis)
     g = getattr(diagnosis, "gap", None)
     if kind is None:
-        j, jse = float(g.inertia_kgm2), _gap_se(g)
+        j, jse = _trend_fit(g)
     if kind in ("outside_band", "inconsistent"):
         return TrendInputs(None, None, None, None, None, kind)
     est = getattr(window, "backlash_width_estimate_m", None)
@@ -203,5 +205,5 @@ def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
     return int(u.level), u.message, vals
 
 
-__all__ = ["REFUSAL_KINDS", "TREND_STATUS_NAME", "TrendInputs", "WIDTH_SOURCES", "refusal_kind",
+__all__ = ["DRIVE_CONSTANT_TERMS", "REFUSAL_KINDS", "TREND_STATUS_NAME", "TrendInputs", "WIDTH_SOURCES", "refusal_kind",
            "trend_inputs", "trend_status"]
