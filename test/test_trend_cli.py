@@ -423,3 +423,14 @@ def test_the_torque_accuracy_term_is_left_out_of_the_relative_test_and_given_to_
     assert cfg.torque_accuracy_pct == pytest.approx(2.0 / m.sqrt(3.0))
     assert TrendConfig.from_parameters({"torque_accuracy": 0.02, "trend_torque_accuracy_pct": 1.5}).torque_accuracy_pct \
         == 1.5
+
+
+def test_a_trend_fit_s_own_interval_is_written_beside_its_j1():
+    """Where the trend reads another fit than the published one (GapEstimate.trend_fit), trend.csv's interval is that
+    fit's (J1 ± 1.96 se), not the published one, which belongs to another J1."""
+    from jident_ros.cli.trend import trend_window
+    d = _diagnosis("deviating", "gap")
+    d.gap.trend_fit = (1.25, 0.02, ())
+    tw = trend_window(_offline_window(d), "rec")
+    assert tw.inertia_kgm2 == pytest.approx(1.25)
+    assert (tw.inertia_ci_low_kgm2, tw.inertia_ci_high_kgm2) == (pytest.approx(1.2108), pytest.approx(1.2892))

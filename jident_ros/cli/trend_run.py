@@ -35,6 +35,9 @@ CSV_COLUMNS = ("time_s", "recording", "window_id", "inertia_kgm2", "inertia_se_k
 
 # --------------------------------------------------------------------------- per-window input
 
+#: The normal quantile of the 95 % interval written beside a trend fit's J1 (GapEstimate.trend_fit).
+TREND_FIT_Z = 1.96
+
 @dataclass(frozen=True)
 class TrendWindow:
     """What the trend needs of one diagnosed window.
@@ -42,7 +45,8 @@ class TrendWindow:
     time_s : drive clock t of the entry sample, s
     inertia_kgm2, inertia_se_kgm2 : the gap J1 and its standard error, kg m^2, published or not (None: refused
         for a physical reason, image method only or no gap; ``skip_reason`` and ``refused_kind`` say why)
-    inertia_ci_low_kgm2, inertia_ci_high_kgm2 : its 95 % interval, kg m^2
+    inertia_ci_low_kgm2, inertia_ci_high_kgm2 : its 95 % interval, kg m^2 (the published one; where the trend reads
+        another fit, GapEstimate.trend_fit, that fit's J1 ± TREND_FIT_Z of its standard error)
     width_m, width_se_m : backlash width K2 of the window and its standard uncertainty, m
     width_source : 'flank' (the flank detector's flank-to-flank estimate), 'gap' (the gap estimator's width
         at re-contact: the fallback when the window has no flank estimate) or None
@@ -76,6 +80,10 @@ def trend_window(ow, recording: str, width_se_floor_m: float = 0.0) -> TrendWind
     lo = hi = reason = None
     if ti.inertia_kgm2 is not None:
         lo, hi = (float(v) for v in d.gap.ci95_kgm2)
+        if getattr(d.gap, "trend_fit", ()):
+            # the trend reads another fit than the published one (GapEstimate.trend_fit): its own interval beside it
+            j_t, se_t = (float(v) for v in d.gap.trend_fit[:2])
+            lo, hi = j_t - TREND_FIT_Z * se_t, j_t + TREND_FIT_Z * se_t
     elif d.inertia_kgm2 is not None:
         reason = f"J1 {d.inertia_kgm2:.5g} kg m^2 from the {d.source} method has no standard error"
     elif d.gap is not None:
