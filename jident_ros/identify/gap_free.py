@@ -65,6 +65,11 @@ FREE_MIN_SAMPLES = 8
 CHANGEPOINT_P = 1e-3
 #: Chow forecast test of a candidate's end rows: this many rows predicted by the fit without them.
 CHANGEPOINT_FORECAST_SAMPLES = 3
+#: The other quiet thirds of a long coarse gap grow their own intervals only where the first one covers less than
+#: this share of the coarse gap: a cost rule, each costs about 0.6 ms (the bench's load reversal, its first interval
+#: 66 % of the coarse gap, took 2.1 ms with them, 1.5 without).  The blind DOL draw d3-10's rests before the gap left
+#: the first intervals 47 and 49 %, DOL set 1's d1-10 heavy reversal (30 dB) 30 %.
+OTHER_CORES_BELOW = 0.6
 #: Relative floor of the standard error (the model's own error: trapezoid double integral of a sampled torque).
 FREE_REL_SE_FLOOR = 5e-4
 #: Samples taken off an end for the change-point term of the standard error (while at least half the interval
@@ -331,7 +336,8 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         # grows into a short interval whose J1 takes that torque; the gap's own core grows over the gap
         s_row, e_row = grown(cores[0])
         intervals = [(L + s_row, L + e_row)]
-        for other in cores[1:]:
+        covered = min(e_row, hi_c) - max(s_row, lo_c)
+        for other in cores[1:] if covered < OTHER_CORES_BELOW * (hi_c - lo_c) else ():
             if any(a0 <= L + other[0] and L + other[1] <= b0 for a0, b0 in intervals):
                 continue
             s_o, e_o = grown(other)
@@ -439,9 +445,10 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         with np.errstate(divide="ignore"):
             return np.where(kappa > 0, 1.0 / kappa, np.inf)
 
-    def most_precise(s_est: int, e_est: int) -> tuple:
+    def most_precise(s_est: int, e_est: int, bar: float = np.inf) -> tuple:
         """(best, first): the fit over [s_est, e_est) with the smallest standard error (without the torque accuracy),
-        None when none is physical; the first fit made (for the refusal's reason)."""
+        None when none is physical or none is below ``bar`` (another interval's: its change-point refits are then
+        not needed); the first fit made (for the refusal's reason)."""
         best = None
         first = None
         for with_coulomb in (False, True):
@@ -467,8 +474,8 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
                 se_fc = np.sqrt(max(cov_33, 0.0)) / f["c_scale"] / f["kappa"]
                 if not (-3 * se_fc <= f["fc"] <= model.coulomb_friction_max_nm + 3 * se_fc):
                     continue
-            if best is not None and max(float(np.sqrt(sum(v * v for v in terms.values()))), FREE_REL_SE_FLOOR * j1) \
-                    >= best["se_stat"]:
+            if max(float(np.sqrt(sum(v * v for v in terms.values()))), FREE_REL_SE_FLOOR * j1) \
+                    >= (bar if best is None else min(bar, best["se_stat"])):
                 # already no more precise than the fit before it without the change-point term, which only adds to the
                 # sum of squares (rounding is monotone): it cannot be chosen, its refits are not needed
                 continue
@@ -492,7 +499,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     best, first = most_precise(s_est, e_est)
     for s_c, e_c in intervals[1:]:
         # a candidate interval of another quiet third (above): taken when its J1 is the more precise
-        other, _ = most_precise(s_c, e_c)
+        other, _ = most_precise(s_c, e_c, np.inf if best is None else best["se_stat"])
         if other is not None and (best is None or other["se_stat"] < best["se_stat"]):
             best, s_est, e_est = other, s_c, e_c
     if best is None:
