@@ -37,7 +37,9 @@ from jident_ros.research.vector_drive.dol import DOL_TRAVERSING_EVENTS, DolParam
 from jident_ros.research.vector_drive.model import DriveParams
 
 #: The torque accuracy a drive's data sheet typically states for sensored vector control, relative: what a user who
-#: has nothing better declares (docs/your_drive.md).  The draws' observer errors give 0.5-3 % (the truth files).
+#: has nothing better declares (docs/your_drive.md).  The draws' observer errors give 0.5-3 % (the truth files) on sets
+#: 1-4; vector set 5's s5-05 (R_R est 0.81, L_M est 1.1, both near their ranges' edges) 3.9 % over its gaps and 5-8 N m
+#: (5-15 %) over the rows of its return traversal's fit: beyond this declaration, 3 J1 published +11 … +13 % (stop 32).
 DATA_SHEET_TORQUE_ACCURACY = 0.03
 
 
