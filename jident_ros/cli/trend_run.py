@@ -22,7 +22,7 @@ from jident_ros.bag.reader import bag_files
 from jident_ros.cli.offline import OfflineError, diagnose_recording
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.library import default_library_path, load_pattern_library
-from jident_ros.identify.trend import TrendConfig, TrendTracker
+from jident_ros.identify.trend import Z95, TrendConfig, TrendTracker
 from jident_ros.identify.trend_status import trend_inputs
 
 CSV_COLUMNS = ("time_s", "recording", "window_id", "inertia_kgm2", "inertia_se_kgm2", "inertia_ci_low_kgm2",
@@ -35,9 +35,6 @@ CSV_COLUMNS = ("time_s", "recording", "window_id", "inertia_kgm2", "inertia_se_k
 
 # --------------------------------------------------------------------------- per-window input
 
-#: The normal quantile of the 95 % interval written beside a trend fit's J1 (GapEstimate.trend_fit).
-TREND_FIT_Z = 1.96
-
 @dataclass(frozen=True)
 class TrendWindow:
     """What the trend needs of one diagnosed window.
@@ -46,7 +43,7 @@ class TrendWindow:
     inertia_kgm2, inertia_se_kgm2 : the gap J1 and its standard error, kg m^2, published or not (None: refused
         for a physical reason, image method only or no gap; ``skip_reason`` and ``refused_kind`` say why)
     inertia_ci_low_kgm2, inertia_ci_high_kgm2 : its 95 % interval, kg m^2 (the published one; where the trend reads
-        another fit, GapEstimate.trend_fit, that fit's J1 ± TREND_FIT_Z of its standard error)
+        another fit, GapEstimate.trend_fit, that fit's J1 ± Z95 of its standard error)
     width_m, width_se_m : backlash width K2 of the window and its standard uncertainty, m
     width_source : 'flank' (the flank detector's flank-to-flank estimate), 'gap' (the gap estimator's width
         at re-contact: the fallback when the window has no flank estimate) or None
@@ -83,7 +80,7 @@ def trend_window(ow, recording: str, width_se_floor_m: float = 0.0) -> TrendWind
         if getattr(d.gap, "trend_fit", ()):
             # the trend reads another fit than the published one (GapEstimate.trend_fit): its own interval beside it
             j_t, se_t = (float(v) for v in d.gap.trend_fit[:2])
-            lo, hi = j_t - TREND_FIT_Z * se_t, j_t + TREND_FIT_Z * se_t
+            lo, hi = j_t - Z95 * se_t, j_t + Z95 * se_t
     elif d.inertia_kgm2 is not None:
         reason = f"J1 {d.inertia_kgm2:.5g} kg m^2 from the {d.source} method has no standard error"
     elif d.gap is not None:

@@ -16,13 +16,10 @@ import math
 from typing import Any, NamedTuple, Optional
 
 from jident_ros.identify.gap import DRIVE_CONSTANT_TERMS, within_drive_se
-from jident_ros.identify.trend import SECONDS_PER_DAY, TrendUpdate
+from jident_ros.identify.trend import SECONDS_PER_DAY, Z95, TrendUpdate
 
 #: Name of the DiagnosticStatus (the diagnostic node's periodic task "trend").
 TREND_STATUS_NAME = "jident_diagnostic: trend"
-
-#: z of the two-sided 95 % interval (a standard error from the interval when the fit gave none).
-Z95 = 1.959963984540054
 
 
 class TrendInputs(NamedTuple):
