@@ -53,6 +53,9 @@ def test_the_user_declares_the_drawn_friction_and_a_data_sheets_torque_accuracy(
     assert dec["bearing_friction_nms_per_rad"] == d.values["motor_viscous_nms_per_rad"]
     assert dec["coulomb_friction_max_nm"] == pytest.approx(1.25 * d.values["motor_coulomb_nm"])
     assert dec["torque_accuracy"] == zd.DATA_SHEET_TORQUE_ACCURACY == 0.03
+    # a data sheet's "± 3 % of rated torque" is also the offset band (docs/your_drive.md's worked example), not the
+    # vector drive's 1 % of rated that zoo.declared gives
+    assert dec["torque_offset_rel_base"] == 0.03 != zoo.declared("vector drive")["torque_offset_rel_base"]
     text = zd.describe(d)
     assert f"J1 {d.values['motor_inertia_kgm2']:.3g} kg m^2" in text and d.direction in text
     assert f"K2 {1e3 * d.values['backlash_width_m']:.3g} mm" in text
