@@ -282,6 +282,45 @@ def test_gap_only_trims_a_detector_entry_early_by_the_change_point_search_span()
         gap_only_fit(torque, acc, a - 12, b)                                     # (before stop 33: J1 > 5 % off)
 
 
+def _fading_contact(n_contact: int, dip_row: int, j1=1.16, n_pre=48, n_gap=120):
+    """A gap whose first ``n_contact`` rows after the detector's entry (row n_pre) still carry a fading coupling
+    torque (40 -> 2 N m; vector set 6's s6-08: a damped coupling's torque fades for 40 rows before the zone), one of
+    them (``dip_row`` rows in) at 0.1 N m, as a 30 dB sample dips within the noise; then the motor is free."""
+    n = n_pre + n_gap + 20
+    k = np.arange(n)
+    torque = 150.0 + 30.0 * np.cos(k / 15.0)
+    load = np.zeros(n)
+    load[n_pre:n_pre + n_contact] = np.linspace(40.0, 2.0, n_contact)
+    load[n_pre + dip_row] = 0.1
+    acc = (torque - load) / j1
+    acc[:n_pre] = 0.0
+    acc[n_pre + n_gap:] = -100.0
+    return torque, acc, n_pre, n_pre + n_gap
+
+
+def test_a_fading_contact_s_row_within_the_noise_does_not_stop_the_trim(monkeypatch):
+    """The trim walks on past a contact row whose load torque dips within the tolerance while the next rows exceed it
+    (TRIM_PERSIST): the fit starts where the contact ends and J1 is exact; with the walk stopping at the first row
+    within the tolerance (stop 32's rule) it starts at the dip and J1 takes 10 rows of contact."""
+    from jident_ros.identify import gap
+    torque, acc, a, b = _fading_contact(n_contact=14, dip_row=4)
+    g = gap_only_fit(torque, acc, a, b, max_trim=(25, 25))
+    assert g["start"] == a + 14 and g["j1"] == pytest.approx(1.16, rel=1e-9)
+    monkeypatch.setattr(gap, "TRIM_PERSIST", 0)
+    old = gap_only_fit(torque, acc, a, b, max_trim=(25, 25))
+    assert old["start"] == a + 4 and old["j1"] / 1.16 - 1 > 0.004          # +0.55 %: the contact carries load
+
+
+def test_a_contact_longer_than_the_trim_refuses_the_a1_fit():
+    """A detector's entry further before the gap than the trim may drop (30 contact rows, 25 trimmed at most): the
+    rows kept would begin in contact, so the a1 fit refuses, naming the end; a contact within the trim does not."""
+    torque, acc, a, b = _fading_contact(n_contact=30, dip_row=10)
+    with pytest.raises(NoGapError, match="entry end is still in contact after 25 rows trimmed"):
+        gap_only_fit(torque, acc, a, b, max_trim=(25, 25))
+    torque, acc, a, b = _fading_contact(n_contact=20, dip_row=10)
+    assert gap_only_fit(torque, acc, a, b, max_trim=(25, 25))["start"] == a + 20
+
+
 def test_a1_fit_leaves_the_steady_entry_model_when_the_detector_entry_is_in_contact():
     """A steady drive (m_el = m0, no acceleration: the contact carries the load) whose contact is lost at row a, the
     torque then moving the motor alone: the joint ('acceleration') fit takes m_el steady up to the entry row. With
