@@ -151,7 +151,9 @@ GAP_ONLY_MAX_TRIM = (4, 3)
 #: the trim stopped at an 11.5 N m row with 21-30 N m on the next five, J1 +11 %).  Noise alone exceeds 3 sigma on
 #: 0.3 % of rows.  Not at the re-contact end: a torque smoothed beyond its declared lag leaves a load torque there that
 #: is no contact (zoo_variants' 'smoothed torque 5 ms undeclared', its speed reversal with an Imu at 30 dB: the walk on
-#: from the re-contact end kept 10 rows, J1 -12.6 %; stop 32's rule kept 30, -3.1 %).
+#: from the re-contact end kept 10 rows, J1 -12.6 %; stop 32's rule kept 30, -3.1 %).  The entry end's walk reads
+#: the load torque from the free rows' level (:func:`_free_level`): read from 0, the vector drive's bearing friction
+#: with the persistence walked 25 rows into 6 of the zoo's Imu gaps (their J1 then undetermined).
 TRIM_PERSIST = 2
 #: ... and the rows kept after the most rows trimmed begin in contact where the rows the trim stopped at carry a load
 #: torque beyond 3 sigma of their mean and beyond this many times the kept rows' median |load torque| (noise alone: the
@@ -1381,11 +1383,12 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
         res = y_all[start:end] - j * x_all[start:end]
         tol = max(trim_sigma * float(np.hypot(sy, j * sx)), trim_rel * level)
         new_lo, new_hi = start, end
-        off = np.abs(res) > tol                     # rows whose load torque the noise does not explain
-        # at the entry end a row within the tolerance stops the walk only with the next TRIM_PERSIST rows
+        # at the entry end the load torque from the free rows' level (a friction or offset over every row is no
+        # contact), and a row within the tolerance stops the walk only with the next TRIM_PERSIST rows
+        off = np.abs(res - _free_level(res, max_trim)) > tol
         while new_lo - start < max_trim[0] and new_hi - new_lo > 3 and off[new_lo - start:][:1 + TRIM_PERSIST].any():
             new_lo += 1
-        while end - new_hi < max_trim[1] and new_hi - new_lo > 3 and off[new_hi - 1 - start]:
+        while end - new_hi < max_trim[1] and new_hi - new_lo > 3 and abs(res[new_hi - 1 - start]) > tol:
             new_hi -= 1
         if (new_lo, new_hi) == (lo, hi) and it > 0:
             break
