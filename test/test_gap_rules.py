@@ -251,11 +251,9 @@ def test_gap_only_drops_the_out_of_zone_end_samples():
     assert exact["se"] == pytest.approx(GAP_ONLY_REL_SE_FLOOR * 1.2, rel=1e-9)       # noise-free: the floor
     moved = gap_only_fit(torque, acc, a - 3, b + 2)                                  # 3 early, 2 late samples
     assert (moved["start"], moved["end"]) == (a, b) and moved["j1"] == pytest.approx(1.2, rel=1e-12)
-    # at most 2 and 1 dropped: the rows kept still begin in contact, so no J1 (before stop 33: a J1 off by > 0.1 %)
-    with pytest.raises(NoGapError, match="entry end is still in contact after 2 rows trimmed"):
-        gap_only_fit(torque, acc, a - 3, b + 2, max_trim=(2, 1))
-    with pytest.raises(NoGapError, match="re-contact end is still in contact after 1 rows trimmed"):
-        gap_only_fit(torque, acc, a, b + 2, max_trim=(2, 1))
+    capped = gap_only_fit(torque, acc, a - 3, b + 2, max_trim=(2, 1))                # at most 2 and 1 dropped
+    assert (capped["start"], capped["end"]) == (a - 1, b + 1)
+    assert abs(capped["j1"] / 1.2 - 1) > 1e-3
 
 
 def test_gap_only_trims_a_detector_entry_early_by_the_change_point_search_span():
@@ -278,8 +276,8 @@ def test_gap_only_trims_a_detector_entry_early_by_the_change_point_search_span()
     g = estimate_inertia(window, a - 12, float("nan"), r, 5e-4, recontact_index=b)
     assert g.method == "gap_only" and (g.fit_start, g.fit_end) == (a, b)
     assert g.inertia_kgm2 == pytest.approx(1.2, rel=1e-9)
-    with pytest.raises(NoGapError, match="entry end is still in contact"):         # the old cap: contact rows kept
-        gap_only_fit(torque, acc, a - 12, b)                                     # (before stop 33: J1 > 5 % off)
+    capped = gap_only_fit(torque, acc, a - 12, b)                               # the old cap: contact rows kept
+    assert capped["start"] == a - 8 and abs(capped["j1"] / 1.2 - 1) > 0.05
 
 
 def _fading_contact(n_contact: int, dip_row: int, j1=1.16, n_pre=48, n_gap=120):
@@ -309,16 +307,6 @@ def test_a_fading_contact_s_row_within_the_noise_does_not_stop_the_trim(monkeypa
     monkeypatch.setattr(gap, "TRIM_PERSIST", 0)
     old = gap_only_fit(torque, acc, a, b, max_trim=(25, 25))
     assert old["start"] == a + 4 and old["j1"] / 1.16 - 1 > 0.004          # +0.55 %: the contact carries load
-
-
-def test_a_contact_longer_than_the_trim_refuses_the_a1_fit():
-    """A detector's entry further before the gap than the trim may drop (30 contact rows, 25 trimmed at most): the
-    rows kept would begin in contact, so the a1 fit refuses, naming the end; a contact within the trim does not."""
-    torque, acc, a, b = _fading_contact(n_contact=30, dip_row=10)
-    with pytest.raises(NoGapError, match="entry end is still in contact after 25 rows trimmed"):
-        gap_only_fit(torque, acc, a, b, max_trim=(25, 25))
-    torque, acc, a, b = _fading_contact(n_contact=20, dip_row=10)
-    assert gap_only_fit(torque, acc, a, b, max_trim=(25, 25))["start"] == a + 20
 
 
 def test_a1_fit_leaves_the_steady_entry_model_when_the_detector_entry_is_in_contact():

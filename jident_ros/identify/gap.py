@@ -155,11 +155,6 @@ GAP_ONLY_MAX_TRIM = (4, 3)
 #: the load torque from the free rows' level (:func:`_free_level`): read from 0, the vector drive's bearing friction
 #: with the persistence walked 25 rows into 6 of the zoo's Imu gaps (their J1 then undetermined).
 TRIM_PERSIST = 2
-#: ... and the rows kept after the most rows trimmed begin in contact where the rows the trim stopped at carry a load
-#: torque beyond 3 sigma of their mean and beyond this many times the kept rows' median |load torque| (noise alone: the
-#: 3 sigma of a 3-row mean is 2.6 times the median |noise|; a model error over every row, e.g. a constant torque fitted
-#: through the origin, is as large in the middle as at the end).
-TRIM_CONTACT_RATIO = 3.0
 #: 'gap_only' fit: relative floor of the standard error (noise-free: the samples' own rounding).
 GAP_ONLY_REL_SE_FLOOR = 2e-4
 
@@ -1399,8 +1394,6 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
     n = hi - lo
     if n < 3:
         raise NoGapError(f"gap too short: {n} samples in the zone by the dynamics, need >= 3")
-    load = y_all[start:end] - j * x_all[start:end]
-    _contact_beyond_trim(load - _free_level(load, max_trim), (lo - start, hi - start), tol, max_trim)
     x, y = x_all[lo:hi], y_all[lo:hi]
     res = y - j * x
     dof = n - 1
@@ -1417,30 +1410,6 @@ def _free_level(load: np.ndarray, max_trim: tuple) -> float:
     0 when no row is left)."""
     mid = load[max_trim[0]:load.size - max_trim[1]]
     return float(_median(mid)) if mid.size else 0.0
-
-
-def _contact_beyond_trim(off: np.ndarray, kept: tuple, tol: float, max_trim: tuple) -> None:
-    """Raise NoGapError where the 'gap_only' fit's trim stopped at its most rows (``max_trim``) at an end of the
-    candidate rows with the rows it stopped at still carrying a load torque (``off``: m_el − b1 ω1 − J1 a1/r less the
-    free rows' level, :func:`_free_level`, over the candidate rows; its mean over the 1 + TRIM_PERSIST rows kept at
-    that end above ``tol`` / sqrt(1 + TRIM_PERSIST), 3 sigma of that mean): the detector's entry (or
-    re-contact) lies further from the gap than the fit may trim, the kept rows begin (or end) in contact, and J1 takes
-    the coupling's torque (vector set 6's s6-08 with an Imu at 30 dB: a damped coupling's 20-60 N m over the 40 rows
-    before the zone, J1 +11 % with an interval that missed).  A load torque that is no more than TRIM_CONTACT_RATIO
-    times the kept rows' median |off| is the fit's own model error (a constant or drifting torque through the origin,
-    over every row), not a contact at one end.  The free angle fit, which finds its own rows, is then
-    the window's fit (:func:`_cross_checked`)."""
-    lo, hi = kept
-    k = 1 + TRIM_PERSIST
-    bar = max(tol / np.sqrt(k), TRIM_CONTACT_RATIO * float(_median(np.abs(off[lo:hi]))))
-    for side, trimmed, rows, most in (("entry", lo, off[lo:lo + k], max_trim[0]),
-                                      ("re-contact", off.size - hi, off[max(hi - k, 0):hi], max_trim[1])):
-        level = float(rows.mean()) if rows.size else 0.0
-        if most and trimmed >= most and abs(level) > bar:
-            raise NoGapError(f"the a1 fit's {side} end is still in contact after {trimmed} rows trimmed (the most): "
-                             f"m_el − J1 a1/r = {level:.3g} N m off the free rows' level over the {rows.size} rows "
-                             f"there (> {bar:.3g} N m); "
-                             f"the detector's {side} is further off than the fit may trim")
 
 
 def _constant_fit(y_all: np.ndarray, x_all: np.ndarray, lo: int, hi: int, sy: float, sx: float) -> dict | None:
