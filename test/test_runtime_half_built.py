@@ -43,3 +43,27 @@ def test_the_half_built_node_is_found_in_the_traceback_not_elsewhere():
         build()
     except ValueError as exc:
         assert _half_built_node(exc) is None
+
+
+def test_the_entry_point_leaves_a_refused_start_with_the_bad_parameter_status(monkeypatch):
+    """A node that refused its parameters ends its process at once with status 2 (nodes/entry.py: no interpreter
+    finalisation after rcl shut down); the light module's copy of the status is the runtime's."""
+    import types
+
+    from jident_ros.nodes import entry
+    # _run installs its handlers and leaves both signals ignored as the interpreter exits: not in this process
+    monkeypatch.setattr(entry.signal, "signal", lambda sig, handler: None)
+    from jident_ros.nodes.params import EXIT_BAD_PARAMETER
+    assert entry.EXIT_BAD_PARAMETER == EXIT_BAD_PARAMETER
+    exits = []
+
+    def fake_exit(code):
+        exits.append(code)
+        raise SystemExit(code)
+    monkeypatch.setattr(entry.os, "_exit", fake_exit)
+    monkeypatch.setattr(entry.importlib, "import_module", lambda name: types.SimpleNamespace(main=lambda: 2))
+    with pytest.raises(SystemExit):
+        entry._run("jident_ros.nodes.replay", "replay")
+    assert exits == [2]
+    monkeypatch.setattr(entry.importlib, "import_module", lambda name: types.SimpleNamespace(main=lambda: 0))
+    assert entry._run("jident_ros.nodes.replay", "replay") == 0 and exits == [2]
