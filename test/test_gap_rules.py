@@ -309,6 +309,35 @@ def test_a_fading_contact_s_row_within_the_noise_does_not_stop_the_trim(monkeypa
     assert old["start"] == a + 4 and old["j1"] / 1.16 - 1 > 0.004          # +0.55 %: the contact carries load
 
 
+def test_a_friction_over_every_row_is_no_contact_for_the_entry_trim(monkeypatch):
+    """A constant torque over the whole gap (a bearing friction the fit through the origin leaves, 6 N m against
+    3 sigma = 2.4 N m of noise), the detector's entry exact: the entry trim reads the load torque from the free rows'
+    level and drops nothing; read from 0 (with TRIM_PERSIST) it walks its most, 25 rows (the zoo's vector drive with an
+    Imu: 6 gaps so trimmed, their J1 undetermined)."""
+    from jident_ros.identify import gap
+    j1, n_pre, n_gap = 1.16, 48, 120
+    k = np.arange(n_pre + n_gap + 20)
+    torque = 150.0 + 140.0 * np.cos(k / 25.0)
+    acc = (torque - 6.0) / j1
+    acc[:n_pre] = 0.0
+    acc[n_pre + n_gap:] = -100.0
+    torque = torque + 0.8 * np.random.default_rng(3).standard_normal(k.size)
+    assert gap_only_fit(torque, acc, n_pre, n_pre + n_gap, max_trim=(25, 25))["start"] == n_pre
+    monkeypatch.setattr(gap, "_free_level", lambda load, max_trim: 0.0)
+    assert gap_only_fit(torque, acc, n_pre, n_pre + n_gap, max_trim=(25, 25))["start"] == n_pre + 25
+
+
+def test_the_re_contact_trim_stops_at_a_row_within_the_noise():
+    """At the re-contact end the trim stops at the first row within the tolerance, as before stop 33 (a torque smoothed
+    beyond its declared lag leaves a load torque there that is no contact: walking on, zoo_variants' 'smoothed torque
+    5 ms undeclared' kept 10 rows and published -12.6 %): the fading contact of the entry test, reversed in time, is
+    trimmed up to its dip only."""
+    torque, acc, a, b = _fading_contact(n_contact=14, dip_row=4)
+    n = torque.size
+    g = gap_only_fit(torque[::-1].copy(), acc[::-1].copy(), n - b, n - a, max_trim=(25, 25))
+    assert g["end"] == n - a - 4
+
+
 def test_a1_fit_leaves_the_steady_entry_model_when_the_detector_entry_is_in_contact():
     """A steady drive (m_el = m0, no acceleration: the contact carries the load) whose contact is lost at row a, the
     torque then moving the motor alone: the joint ('acceleration') fit takes m_el steady up to the entry row. With
