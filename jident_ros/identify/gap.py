@@ -1350,14 +1350,13 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
     ``torque``: m_el − b1 ω1 over the whole window, N m; ``acc``: dω1/dt (a1/r), rad/s^2; [start, end): the
     candidate interval (the entry row to the re-contact row).  The noise levels of both come from the
     second differences of the pre-entry and candidate samples; J1 is the Deming slope through the origin.
-    The in-zone set: J1 fitted on the candidate's core (two samples off each end), then end samples whose
-    load torque |torque − J1 acc| exceeds max(trim_sigma x its standard deviation, trim_rel x the median
-    |torque|) are dropped (at most ``max_trim`` = (entry end, re-contact end); at the entry end the load torque from
-    the free rows' level, :func:`_free_level`, and while one of the next TRIM_PERSIST rows exceeds it too), J1
-    refitted, until the set stays the same.  Returns j1, se (kg m^2; residual standard error and model error in quadrature, at
-    least GAP_ONLY_REL_SE_FLOOR j1), model_error (|J1 with one more sample off each end − J1|), residual
-    (N m), dof, start, end (the fitted samples); raises NoGapError when fewer than 3 samples remain or J1
-    is not positive."""
+    The in-zone set: J1 fitted on the candidate's core (two samples off each end), then end samples whose load
+    torque |torque − J1 acc| exceeds max(trim_sigma x its standard deviation, trim_rel x the median |torque|) are
+    dropped (at most ``max_trim`` = (entry end, re-contact end); at the entry end the load torque from the free
+    rows' level, :func:`_free_level`, and while one of the next TRIM_PERSIST rows exceeds it too), J1 refitted,
+    until the set stays the same. Returns j1, se (kg m^2; residual standard error and model error in quadrature, at
+    least GAP_ONLY_REL_SE_FLOOR j1), model_error (|J1 with one more sample off each end − J1|), residual (N m), dof,
+    start, end (the fitted samples); raises NoGapError when fewer than 3 samples remain or J1 is not positive."""
     y_all, x_all = np.asarray(torque, float), np.asarray(acc, float)
     sy = _robust_noise(y_all[:start], y_all[start:end])
     sx = _robust_noise(x_all[:start], x_all[start:end])

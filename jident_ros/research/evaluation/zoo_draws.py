@@ -38,9 +38,8 @@ from jident_ros.research.evaluation import zoo, zoo_dol, zoo_variants
 from jident_ros.research.vector_drive.dol import DOL_TRAVERSING_EVENTS, DolParams
 from jident_ros.research.vector_drive.model import DriveParams
 
-#: What each report says of the protocol (the module docstring): which sets a rule or threshold was chosen on, or
-#: changed because of, the stop sections of docs/results.md say (DOL sets 1-4 and vector sets 1, 5 and 6 by stop
-#: 33); such a set is no longer blind, and its first run's numbers are the blind ones.
+#: What each report says of the protocol (the module docstring); a set named here is no longer blind, and its first
+#: run's numbers are the blind ones.
 PROTOCOL_NOTE = ("A set is a blind test only until something is changed because of it: docs/results.md's stop sections "
                  "say which sets rules were chosen on (DOL sets 1–4 and vector sets 1, 5, 6 by stop 33).")
 
