@@ -26,6 +26,7 @@ as ``torque_accuracy`` and as ``torque_offset_rel_base`` (since stop 33; before,
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -241,7 +242,7 @@ def run(out: Path, seed: int, count: int, log=print, undeclared: bool = False, m
     """Draw ``count`` ``model`` drives of set ``seed``, simulate (cached), diagnose each file as zoo_variants does."""
     t0 = time.perf_counter()
     system = load_system_config()
-    rows, what, failed = {}, {}, {}
+    rows, what, failed, groups = {}, {}, {}, {}
     for i in range(1, count + 1):
         d = draw(seed, i, model)
         try:
@@ -257,10 +258,14 @@ def run(out: Path, seed: int, count: int, log=print, undeclared: bool = False, m
                           if undeclared else zoo.diagnose_one(zr, fmt, system, declare=d.model == "vector",
                                                               extra=declaration(d))))
         rows[d.name] = zoo.summarise(items, nominal_kgm2=system.motor.nominal_inertia_kgm2)
+        for (label, zr), item in zip(zrs, items):
+            groups.setdefault(f"{label}|{zr.event}", []).append(item)
         what[d.name] = describe(d) + f"; torque estimate off ≤ {torque_error(zrs)}"
         log(f"{d.name}: diagnosed {len(items)} files ({time.perf_counter() - t0:.0f} s)")
     return {"rows": rows, "what": what, "failed": failed, "seed": seed, "count": count, "model": model,
-            "elapsed_s": time.perf_counter() - t0, "undeclared": undeclared}
+            "elapsed_s": time.perf_counter() - t0, "undeclared": undeclared,
+            # 'sensor label|event' -> the counts over every drive's recording of that input and event (draws_targets)
+            "groups": {k: zoo.summarise(v, nominal_kgm2=system.motor.nominal_inertia_kgm2) for k, v in groups.items()}}
 
 
 def markdown(res: dict, command: str, commit: str) -> str:
@@ -316,6 +321,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="out/zoo_draws", help="recordings and the simulation cache")
     p.add_argument("--results", default="docs/results.md", help="results file to update ('-' prints)")
     p.add_argument("--undeclared", action="store_true", help="declare nothing (with --results -)")
+    p.add_argument("--json", default="", help="also write the counts here (per drive and per input x event; "
+                                              "python -m jident_ros.research.evaluation.draws_targets reads them)")
     a = p.parse_args(argv)
     if a.draws < 1:
         sys.stderr.write(f"zoo_draws: error: argument --draws: must be at least 1, got {a.draws}\n")
@@ -327,7 +334,12 @@ def main(argv=None) -> int:
               model=a.model)
     cmd = (f"python -m jident_ros.research.evaluation.zoo_draws --report --model {a.model} --seed {a.seed} --draws {a.draws}"
            + (" --undeclared" if a.undeclared else ""))
-    zoo.write_section(markdown(res, cmd, zoo._commit()), a.results, f"{res['elapsed_s']:.0f} s")
+    commit = zoo._commit()
+    zoo.write_section(markdown(res, cmd, commit), a.results, f"{res['elapsed_s']:.0f} s")
+    if a.json:
+        Path(a.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(a.json).write_text(json.dumps({**res, "commit": commit, "command": cmd},
+                                           default=lambda o: o.item() if hasattr(o, "item") else str(o)))
     return 0
 
 

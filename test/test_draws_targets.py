@@ -1,0 +1,72 @@
+"""The blind draws' targets table (research/evaluation/draws_targets.py): what each column counts."""
+import json
+
+import pytest
+
+from jident_ros.research.evaluation import draws_targets
+
+
+def _summary(**kw):
+    base = {"found": 0, "traversals": 0, "trav_published": 0, "published_off": 0, "covered": 0, "with_interval": 0,
+            "offsets": [], "k2_errors": []}
+    return {**base, **kw}
+
+
+def _res(model="vector"):
+    speed, other = draws_targets.SPEED_EVENTS[model][0], "load reversal light"
+    groups = {
+        f"JointState 2^16 clean|{speed}": _summary(traversals=10, trav_published=9, k2_errors=[0.01, 0.02, 0.09]),
+        f"JointState 2^16 30 dB|{speed}": _summary(traversals=10, trav_published=4, k2_errors=[0.5]),
+        f"JointState 2^16 clean|{other}": _summary(traversals=10, trav_published=0, k2_errors=[0.03]),
+        f"JointState+Imu 2^16 30 dB|{speed}": _summary(traversals=10, trav_published=10),
+    }
+    rows = {"s9-01": _summary(found=39, traversals=40, offsets=[0, 1, -3, 2, 5], published_off=0, covered=9,
+                              with_interval=10, false_steady=0, false_same_flank=1, false_other=2,
+                              between_on_class=0, wrong_class=0)}
+    return {"model": model, "seed": 9, "rows": rows, "groups": groups, "commit": "abc1234"}
+
+
+def test_row_counts_each_target():
+    cells = draws_targets.row(_res())
+    assert cells["set"] == "vector 9 (1)"
+    assert cells["found"] == "**39/40 (98 %)**"              # every traversal: missed
+    assert cells["false"] == "**1** (2)"                     # steady + same flank, then the other false entries
+    assert cells["entry"] == "**3/5 (60 %)**"
+    assert cells["clean"] == "9/10 (90 %)"                   # speed events, JointState clean, no Imu
+    assert cells["noisy"] == "**4/10 (40 %)**"
+    assert cells["all"] == "**13/30 (43 %)**"              # every JointState (no Imu) traversal
+    assert cells["covers"] == "9/10 (90 %)"
+    assert cells["k2"] == "2.5 %"                            # median over the clean inputs: 0.01 0.02 0.03 0.09
+    assert cells["off"] == "0"
+
+
+def test_row_dol_speed_events_are_the_slips():
+    cells = draws_targets.row(_res("dol"))
+    assert cells["set"] == "DOL 9 (1)"
+    assert cells["clean"] == "9/10 (90 %)"
+
+
+def test_a_false_entry_j1_counts_as_off():
+    res = _res()
+    res["rows"]["s9-01"]["published_on_false"] = 1
+    assert draws_targets.row(res)["off"] == "**1**"
+
+
+def test_main_prints_and_refuses_old_files(tmp_path, capsys):
+    good, old = tmp_path / "v9.json", tmp_path / "old.json"
+    good.write_text(json.dumps(_res()))
+    old.write_text(json.dumps({k: v for k, v in _res().items() if k != "groups"}))
+    assert draws_targets.main([str(good), "--results", "-"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(draws_targets.TITLE) and "| vector 9 (1) |" in out
+    assert draws_targets.main([str(old), "--results", "-"]) == 2
+    assert "no 'groups'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("text", ["{", ""])
+def test_main_unreadable_file_one_line(tmp_path, capsys, text):
+    f = tmp_path / "bad.json"
+    f.write_text(text)
+    assert draws_targets.main([str(f), "--results", "-"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("draws_targets: error:") and err.count("\n") == 1
