@@ -299,6 +299,12 @@ DIAGNOSTIC_PARAMS = {
     "torque_lag_max_s": Param(0.0, "the drive's torque estimate m_el lags (or leads) the shaft's torque by at "
                               "most this, s: a bounded term of the gap interval", min=0.0, max=1.0, read_only=False,
                               unit="s"),
+    "torque_delay_s": Param(0.0, "the drive's torque estimate m_el is known to lag the shaft's torque by this, s "
+                            "(reported N drive cycles late: N x the cycle): m_el is advanced by it before the gap "
+                            "fits; torque_lag_max_s bounds what remains", min=0.0, max=1.0, read_only=False, unit="s"),
+    "torque_filter_s": Param(0.0, "the drive smooths its torque estimate m_el with a first-order low-pass of this time "
+                             "constant, s (a smoothed 'actual torque'): undone before the gap fits (m_el + this x "
+                             "dm_el/dt)", min=0.0, max=1.0, read_only=False, unit="s"),
     "encoder_accuracy_rad": Param(0.0, "the motor encoder's angle error is at most this, rad, once and twice per "
                                   "revolution (its data sheet's accuracy; a resolver +-10 arc min = 2.9e-3): a bounded "
                                   "term of the gap interval (0 = an exact disc)", min=0.0, max=0.1, read_only=False,
@@ -325,7 +331,9 @@ DIAGNOSTIC_PARAMS = {
 #: max_torque_factor, max_speed_factor) stay the node's only.
 POLICY_CLI_FLAGS = ("image_min_margin", "plausible_min_ratio", "plausible_max_ratio", "torque_accuracy",
                     "coulomb_friction_max_nm", "viscous_friction_band_nms_per_rad", "torque_offset_rel_base",
-                    "torque_lag_max_s", "encoder_accuracy_rad", "coupling_release_max_s", "assume_typical_drive",
+                    "torque_lag_max_s", "torque_delay_s", "torque_filter_s", "encoder_accuracy_rad",
+                    "coupling_release_max_s",
+                    "assume_typical_drive",
                     "publish_ambiguous")
 
 #: The replay node.  Everything is fixed at start: read-only.

@@ -117,3 +117,17 @@ def test_dol_drives_are_drawn_apart_and_declare_their_chains_lag():
         assert dec["torque_lag_max_s"] == pytest.approx(lag)
         assert dec["torque_accuracy"] == zoo_dol.declared()["torque_accuracy"]
         assert d.params.mechanics.load_inertia_kgm2 > d.params.wheel_inertia_kgm2     # the wheel is part of J2
+
+
+@pytest.mark.parametrize("model", ["vector", "dol"])
+def test_the_user_declares_the_known_delay_and_smoothing(model):
+    """Stop 34: the drawn torque estimate's sample late and its smoothing are what its user knows from the manual:
+    declared as torque_delay_s and torque_filter_s (the gap stage undoes them); the lag bound stays as before."""
+    seen = set()
+    for i in range(1, 30):
+        d = zd.draw(3, i, model)
+        dec = zd.declaration(d)
+        assert dec["torque_delay_s"] == pytest.approx(d.values["torque_delay_samples"] * d.params.sample_period_s)
+        assert dec["torque_filter_s"] == d.values["torque_filter_s"]
+        seen.add((dec["torque_delay_s"] > 0, dec["torque_filter_s"] > 0))
+    assert seen == {(False, False), (False, True), (True, False), (True, True)}

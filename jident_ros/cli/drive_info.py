@@ -34,7 +34,8 @@ def identification_lines(system, diagnostic: dict | None = None, windowing: dict
         f"  the drive's torque estimate and friction: torque_accuracy {dg['torque_accuracy']:g}, torque_offset_rel_base "
         f"{dg['torque_offset_rel_base']:g} (± {dg['torque_offset_rel_base'] * m.base.torque_nm:.3g} N m), "
         f"coulomb_friction_max_nm {dg['coulomb_friction_max_nm']:g}, viscous_friction_band_nms_per_rad "
-        f"{dg['viscous_friction_band_nms_per_rad']:g}, torque_lag_max_s {dg['torque_lag_max_s']:g}; the motor "
+        f"{dg['viscous_friction_band_nms_per_rad']:g}, torque_lag_max_s {dg['torque_lag_max_s']:g}, torque_delay_s "
+        f"{dg['torque_delay_s']:g}, torque_filter_s {dg['torque_filter_s']:g}; the motor "
         f"encoder's accuracy: encoder_accuracy_rad {dg['encoder_accuracy_rad']:g}; the coupling lets go within "
         f"coupling_release_max_s {dg['coupling_release_max_s']:g} (diagnostic node parameters; jident "
         f"diagnose --torque-accuracy, ...)",

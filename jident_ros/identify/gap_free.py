@@ -131,6 +131,12 @@ class GapModel:
     torque_lag_s : bound of the torque estimate's unknown lag (or lead) behind the shaft's torque, s: m_el(t) is
         the torque at t ∓ τ, |τ| <= this, uniform; a term J1 |r_κ · ∫m_el dt| this/√3 (a torque ramping through the
         gap: the vector drive's estimate lags by ≈ 0.7 ms)
+    torque_delay_s : the torque estimate's known delay behind the shaft's torque, s (a drive that reports m_el N
+        cycles late: N·T_s; a first-order smoothing of time constant τ: + τ): m_el is advanced by it before the gap
+        fits (:func:`jident_ros.identify.gap.estimate_inertia`); ``torque_lag_s`` bounds what remains
+    torque_filter_s : the time constant of a first-order low-pass the drive applies to its torque estimate, s: undone
+        before the gap fits (m_el + τ·dm_el/dt, the filter's exact inverse: a shift by τ leaves its attenuation, J1
+        2 % low on a torque swinging with a 30 ms period through a 1 ms filter)
     encoder_error_rad : the motor encoder's accuracy, rad: a once- and a twice-per-revolution angle error, each of
         amplitude up to this (a disc off centre or elliptic, a resolver's), phases unknown; a term
         J1² this √((ρ₁² + ρ₂²)/2) with ρ_k = |(r_κ·sin kα1, r_κ·cos kα1)|
@@ -148,12 +154,15 @@ class GapModel:
     torque_lag_s: float = 0.0
     encoder_error_rad: float = 0.0
     coupling_release_s: float = 0.0
+    torque_delay_s: float = 0.0
+    torque_filter_s: float = 0.0
     changepoint_search_samples: int = CHANGEPOINT_SEARCH_SAMPLES
 
     def problems(self) -> list:
         out = []
         for name in ("torque_accuracy", "coulomb_friction_max_nm", "viscous_friction_band_nms_per_rad",
-                     "torque_offset_nm", "torque_lag_s", "encoder_error_rad", "coupling_release_s"):
+                     "torque_offset_nm", "torque_lag_s", "encoder_error_rad", "coupling_release_s", "torque_delay_s",
+                     "torque_filter_s"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
                 out.append((name, "a finite number >= 0"))

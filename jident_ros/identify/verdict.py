@@ -99,6 +99,11 @@ class VerdictPolicy:
         every gap fit's standard error (GapModel.torque_offset_nm)
     torque_lag_max_s : the torque estimate lags (or leads) the shaft's torque by at most this, s: a bounded term
         of the angle and a1 fits' standard error (GapModel.torque_lag_s; the speed fit fits its own lag)
+    torque_delay_s : the torque estimate's known delay behind the shaft's torque, s (reported N drive cycles late:
+        N·T_s; smoothed by a first-order filter of time constant τ: + τ): m_el is advanced by it before the gap fits,
+        and torque_lag_max_s bounds what remains (GapModel.torque_delay_s)
+    torque_filter_s : the time constant of a first-order low-pass the drive applies to its torque estimate (a smoothed
+        'actual torque'), s: undone before the gap fits (GapModel.torque_filter_s)
     encoder_accuracy_rad : the motor encoder's angle error is at most this, rad, once and twice per revolution (its
         data sheet's accuracy: an optical encoder tens of arc seconds, a resolver ± 10 arc minutes = 2.9e-3): a
         bounded term of the angle fits' standard error (GapModel.encoder_error_rad; 0: an exact disc)
@@ -124,6 +129,8 @@ class VerdictPolicy:
     viscous_friction_band_nms_per_rad: float = 0.0
     torque_offset_rel_base: float = 0.01   # chosen on the vector drive (docs/method.md "Torque offset")
     torque_lag_max_s: float = 0.0
+    torque_delay_s: float = 0.0
+    torque_filter_s: float = 0.0
     encoder_accuracy_rad: float = 0.0
     coupling_release_max_s: float = 4e-3   # gap_kink.KINK_UNLOAD_ROWS' longest (docs/method.md)
     assume_typical_drive: bool = True
@@ -137,6 +144,8 @@ class VerdictPolicy:
                         viscous_friction_band_nms_per_rad=float(self.viscous_friction_band_nms_per_rad),
                         torque_offset_nm=float(self.torque_offset_rel_base) * abs(float(base_torque_nm)),
                         torque_lag_s=float(self.torque_lag_max_s),
+                        torque_delay_s=float(self.torque_delay_s),
+                        torque_filter_s=float(self.torque_filter_s),
                         encoder_error_rad=float(self.encoder_accuracy_rad),
                         coupling_release_s=float(self.coupling_release_max_s))
 

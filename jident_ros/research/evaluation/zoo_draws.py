@@ -189,18 +189,29 @@ def draw(seed: int, index: int, model: str = "vector") -> Draw:
 
 def declaration(d: Draw) -> dict:
     """What the drawn drive's user declares: its friction from a coast-down test (b1, a Coulomb band of 1.25 x its
-    Coulomb friction) and, for a vector drive (beside :func:`zoo.declared`'s keys), a data sheet's torque accuracy
+    Coulomb friction), the torque estimate's known lag (:func:`known_delay_s`) and, for a vector drive (beside
+    :func:`zoo.declared`'s keys), a data sheet's torque accuracy
     (:data:`DATA_SHEET_TORQUE_ACCURACY`, as the scale and as the offset band);
     for a DOL drive, whose torque estimate its user computes, zoo_dol's declaration with the lag the user's chain has
     (its 0.25 ms, the sample it reports late, its smoothing)."""
     m = d.params.mechanics
-    friction = {"bearing_friction_nms_per_rad": m.motor_viscous_nms_per_rad, "coulomb_friction_max_nm": 1.25 * m.motor_coulomb_nm}
+    friction = {"bearing_friction_nms_per_rad": m.motor_viscous_nms_per_rad, "coulomb_friction_max_nm": 1.25 * m.motor_coulomb_nm,
+                "torque_delay_s": d.sensor_fields.get("torque_delay_samples", 0) * d.params.sample_period_s,
+                "torque_filter_s": d.sensor_fields.get("torque_filter_s", 0.0)}
     if d.model == "vector":
         return {**friction, "torque_accuracy": DATA_SHEET_TORQUE_ACCURACY,
                 "torque_offset_rel_base": DATA_SHEET_TORQUE_ACCURACY}
-    lag = (zoo_dol.declared()["torque_lag_max_s"] + d.sensor_fields.get("torque_delay_samples", 0) * d.params.sample_period_s
-           + d.sensor_fields.get("torque_filter_s", 0.0))
+    lag = zoo_dol.declared()["torque_lag_max_s"] + known_delay_s(d)
     return {**zoo_dol.declared(), **friction, "torque_lag_max_s": lag}
+
+
+def known_delay_s(d: Draw) -> float:
+    """The torque estimate's lag the drawn drive's user knows from its manual, s: the samples it reports late and its
+    first-order smoothing's time constant, declared as ``torque_delay_s`` and ``torque_filter_s`` (since stop 34).
+    The bound ``torque_lag_max_s`` is kept as it was (for a DOL drive it still holds this sum): the draws declare the
+    known lag, not a narrower bound."""
+    return (d.sensor_fields.get("torque_delay_samples", 0) * d.params.sample_period_s
+            + d.sensor_fields.get("torque_filter_s", 0.0))
 
 
 def describe(d: Draw) -> str:
@@ -274,9 +285,11 @@ def markdown(res: dict, command: str, commit: str) -> str:
     sensors = zoo_variants.SENSORS if vector else zoo_dol.SWEEP_SENSORS
     declared = (f"declared as its user would: the vector drive's torque limits, a data sheet's ± "
                 f"{100 * DATA_SHEET_TORQUE_ACCURACY:g} % of rated torque (as torque_accuracy and torque_offset_rel_base), "
-                "its b1 and 1.25 x its Coulomb friction" if vector
+                "its b1, 1.25 x its Coulomb friction and the torque estimate's known lag (the samples it reports "
+                "late, torque_delay_s, and its smoothing's time constant, torque_filter_s)" if vector
                 else "declared as its user would: zoo_dol's declaration (the user computes the torque estimate and knows its "
-                "chain's lag: 0.25 ms, plus the drawn sample late and smoothing), its b1 and 1.25 x its Coulomb friction")
+                "chain's lag: 0.25 ms, plus the drawn sample late and smoothing, which it also declares as "
+                "torque_delay_s and torque_filter_s), its b1 and 1.25 x its Coulomb friction")
     rows, tot = zoo.variant_rows(res["rows"], res["what"], separation=vector)
     lines = [f"## Blind draws, set {res['seed']}: {'vector' if vector else 'DOL'} drives drawn at random (`{command}`)", "",
              f"Measured on commit {commit} ({res['elapsed_s']:.0f} s; set {res['seed']}, {res['count']} drives; simulations "
