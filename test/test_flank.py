@@ -1557,3 +1557,44 @@ def test_a_turn_inside_the_zone_after_a_window_s_entry_is_no_crossing_of_its_own
     det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16)
     got = [round(e.window.entry_time_s / 5e-4) for e in det.push(data, ch) + det.finish() if getattr(e, "window", None)]
     assert got == ([241] if share or after else [241, 222]) and abs(241 - int(d["gap_entry"])) <= 20
+
+
+@pytest.mark.parametrize("key, gaps, at_zero", [("gap", True, True), ("gap", False, True), ("gap", True, False),
+                                                ("untwist", True, True)])
+def test_a_slip_drop_s_shallow_gap_gets_its_window(monkeypatch, key, gaps, at_zero):
+    """DOL set 1's d1-05 and d1-03 (zoo_draws --model dol --seed 1), their slip drops as JointState 2^16 clean
+    (test/data/dol_draws_slip_drop_shallow_jointstate.npz, rows 1000-3399).  d1-05 ('gap'): the line slips, the
+    coupling lets go and the motor runs into the zone for 8 samples (the truth's gap at 207), then meets its flank
+    again; delta's whole excursion is 4.5 mrad, short of min_travel_rad, so the tracker took it for a same-flank
+    torque change and the gap got no window.  It passed the two contacts' zero-twist point (3.6 mrad) by 26 %: with
+    SHALLOW_* it keeps its window, the entry where delta crosses that point (207; with the rules' entry, +7; off: no
+    window, one flank shift).  d1-03 ('untwist'): the coupling only untwists, 9 % short of its zero-twist point, no
+    gap in the truth: no window, one flank shift.  Batches do not matter."""
+    from pathlib import Path
+
+    from jident_ros.stream import flank
+    monkeypatch.setattr(flank, "SHALLOW_GAPS", gaps)
+    monkeypatch.setattr(flank, "SHALLOW_AT_ZERO_TWIST", at_zero)
+    d = np.load(Path(__file__).parent / "data" / "dol_draws_slip_drop_shallow_jointstate.npz")
+    q = 2.0 * math.pi / 65536
+    a1 = float(d[f"{key}_alpha10"]) + q * d[f"{key}_alpha1_counts"]
+    a2 = float(d[f"{key}_alpha20"]) + q * d[f"{key}_alpha2_counts"]
+    ch = ("t", "alpha1", "alpha2", "m_el")
+    data = np.column_stack([np.arange(a1.size) * 5e-4, a1, a2, d[f"{key}_m_el"].astype(float)])
+    got = []
+    for batch in (data.shape[0], 137):
+        det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16, encoder_counts_per_rev=65536)
+        events = [e for k in range(0, data.shape[0], batch) for e in det.push(data[k:k + batch], ch)] + det.finish()
+        got.append(([round(e.window.entry_time_s / 5e-4) for e in events if getattr(e, "window", None)],
+                    det.flank_shifts))
+    assert got[0] == got[1]                                 # batches do not matter
+    wins, shifts = got[0]
+    true = int(d[f"{key}_gap_entry"])
+    if key == "untwist":
+        assert true < 0 and wins == [] and shifts == 1
+    elif not gaps:
+        assert wins == [] and shifts == 1
+    elif at_zero:
+        assert wins == [true] and shifts == 0
+    else:
+        assert len(wins) == 1 and wins[0] - true > 2 and shifts == 0

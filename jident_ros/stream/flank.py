@@ -68,7 +68,9 @@ and on what the clutch does, not on inequality (1):
   own excursion comes back to the flank it left for fewer than ``contact_samples`` samples (no contact learnt, no
   departure seen) and then crosses the zone gives the crossing a capture of its own, as a traversal back, from delta's
   deepest return toward that flank after the window's entry (:meth:`FlankDetector._scan_rebound`, REBOUND_*: a DOL
-  slip reversal's bounce and its crossing).
+  slip reversal's bounce and its crossing).  A window's own excursion that ends in a contact on the flank it left short
+  of ``min_travel_rad`` (a same-flank torque change) keeps its window when, with m_el, delta passed the coupling's
+  zero-twist point of the two contacts (SHALLOW_*: a slip drop's short gap), its entry and re-contact at that point.
 
 **Width estimate** (per window; docs/model.md's convention: theta_b = K2/r is the half-width, the flanks lie
 at +-K2/r from the centre):
@@ -147,6 +149,8 @@ class _FlankCapture:
     start_row: int = 0         # stream row of the capture's first row
     returning: bool = False    # a traversal back inside another window (its flank: the other window's re-contact)
     after_row: int = -1        # a crossing after a bounce (REBOUND_*): its entry must lie after this stream row
+    shallow: bool = False      # its excursion ended in a contact short of min_travel_rad (SHALLOW_*): a window only
+                               # when it passed the zero-twist point, decided when it is complete
 
 
 def motor_acceleration(window: dict, wheel_radius_m: float, sample_period_s: float):
@@ -275,6 +279,29 @@ def free_departure(delta: np.ndarray, departure: int, first: int, noise_rad: flo
 UNTWIST_PAST_SHARE = 0.05
 UNTWIST_MAX_TORQUE_SHARE = 0.5
 UNTWIST_TAIL_ROWS = 200
+
+#: A window's own excursion that ends in a contact on the flank it left short of min_travel_rad (the tracker's
+#: same-flank torque change) runs on as a capture (with m_el) and, when complete, keeps its window when delta's
+#: farthest travel passed the two contacts' zero-twist point z (UNTWIST_*'s z, its torque share and settled contact)
+#: by SHALLOW_PAST_SHARE of z and by SHALLOW_PAST_QUANTA quanta of delta (its smallest step before the departure, at
+#: least ANGLE_MODEL_FLOOR_RAD): the coupling let go and the motor ran into the zone, a slip drop's short gap, the
+#: paper's case.  Else it is dropped (``flank_shifts``), as before; a later entry while it runs drops it too.  Chosen
+#: on DOL set 1: its shallow slip drops' gaps (d1-01 30 dB, d1-05, d1-12: 7-8 samples) passed z by 20-40 %, its shallow
+#: untwists (d1-02, d1-03, d1-09, d1-10: no gap) stayed 9-25 % short of it; the share is UNTWIST_PAST_SHARE's, the
+#: quanta a floor for a coarse encoder, not tuned (delta's max is one quantum off at most; on the DOL zoo's slip sweep
+#: at 2^13, a 0.77 mrad step, it refuses slip drops 20-34 % past z: no window there, as before).  False: every such
+#: excursion dropped at its contact, as before
+SHALLOW_GAPS = True
+SHALLOW_PAST_SHARE = 0.05
+SHALLOW_PAST_QUANTA = 2.0
+#: ... its entry where delta first reaches z after the departure, its re-contact no later than where delta comes back
+#: inside z (the coupling's twist is zero at both; DOL set 1's d1-05 without a1: the rules' entry +7 (the damped
+#: spring's, DAMPED_*, fitted to a 17-sample gap), at z 0; DOL set 2's d2-11 with a1: the acceleration's and delta's
+#: re-contact 37 samples late, the gap fit then lay in contact, a J1 published +37 %, with z's 1213 (truth 1213)
+#: +1.3 %).  Only a bound: taken as the re-contact also where the rules put it earlier, it gave the DOL zoo's stiff
+#: coupling (8-sample gap, 30 dB) the true re-contact and a J1 published +22.9 % by the gap fit.  False: the rules'
+#: entry and re-contact
+SHALLOW_AT_ZERO_TWIST = True
 
 
 #: Two windows whose entries (absolute rows) lie this close are one traversal's: the second is not given out.
@@ -1772,7 +1799,9 @@ class FlankDetector(BacklashDetector):
     min_travel_rad : float         an entry whose excursion ends in a new contact less than this far from the
                                    flank it left was a same-flank torque change (the coupling twisting more or
                                    less), not a backlash entry: its window is dropped and counted in
-                                   ``flank_shifts`` (5 mrad; below the smallest half-zone K2/r you expect; 0: off);
+                                   ``flank_shifts`` (5 mrad; below the smallest half-zone K2/r you expect; 0: off)
+                                   unless, with m_el, delta passed the coupling's zero-twist point (a slip drop's
+                                   short gap, SHALLOW_*);
                                    the travel counts beyond the flank level before any same-flank move, in the
                                    direction delta left
     deeper_travel_factor : float   with m_el: delta moving *with* the torque the contact carries (sign of m_el
@@ -1855,7 +1884,7 @@ class FlankDetector(BacklashDetector):
         #: departures back on their flank within confirm_samples (an encoder spike; not entries, counted)
         self.spikes = 0
         #: entries whose excursion found a new contact within min_travel_rad of the flank left (a same-flank
-        #: torque change; their windows are dropped, counted)
+        #: torque change; their windows are dropped, counted; with m_el decided when the capture is complete, SHALLOW_*)
         self.flank_shifts = 0
         self._alpha = 1.0 - math.exp(-self.sample_period_s / self.flank_time_constant_s)
         self.backlash_width_m = math.nan
@@ -1895,7 +1924,7 @@ class FlankDetector(BacklashDetector):
     def capturing(self) -> bool:
         """True while a window is being captured (not counting an entry inside a window whose excursion is still
         undecided: a clock jump then restarts the detector, as outside a window)."""
-        return any(not c.skip and not c.pending for c in getattr(self, "_caps", ()))
+        return any(not c.skip and not c.pending and not c.shallow for c in getattr(self, "_caps", ()))
 
     @property
     def _extra_needed(self) -> int:
@@ -2102,16 +2131,11 @@ class FlankDetector(BacklashDetector):
         for kind, k, *rest in found:
             if kind == "cancel":
                 # the last entry was a same-flank torque change: its capture is dropped (counted) unless it was
-                # complete before the change was known; in other windows it is no longer a second entry
+                # complete before the change was known, or runs on as a shallow one (SHALLOW_*); in other windows it
+                # is no longer a second entry
                 events += self._feed(x[pos:k + 1])
                 pos = max(pos, k + 1)
-                self.flank_shifts += 1
-                last = self._last_cap
-                if last is not None and last in self._caps:
-                    self._caps.remove(last)
-                for c in self._caps:
-                    c.second_entry_rows = [e for e in c.second_entry_rows if e[1] != self._entry_id]
-                self._last_cap = None
+                self._cancel_last()
                 continue
             if kind == "contact":
                 # the last entry's excursion ended in a contact: an entry inside another window gets its own
@@ -2139,6 +2163,9 @@ class FlankDetector(BacklashDetector):
             flank, sigma = rest
             events += self._feed(x[pos:k])        # rows before k belong to the running captures
             pos = max(pos, k)
+            for c in [c for c in self._caps if c.shallow]:
+                self._caps.remove(c)               # a shallow excursion followed by an entry: dropped, as before
+                self.flank_shifts += 1
             self._entry_id += 1
             self._entry_row = self._rows_in + k
             hist = np.concatenate([self._tail, x[:k]])[-(self.samples_before_entry + extra):]
@@ -2172,6 +2199,22 @@ class FlankDetector(BacklashDetector):
         self._tail = np.concatenate([self._tail, x])[-(self.samples_before_entry + extra):]
         self._rows_in += x.shape[0]
         return events
+
+    def _cancel_last(self) -> None:
+        """The last entry's excursion ended in a contact short of min_travel_rad: a window's own capture runs on as a
+        shallow one (SHALLOW_*, decided when it is complete), any other is dropped (a same-flank torque change,
+        counted) and is no longer a second entry of the other windows."""
+        last = self._last_cap
+        self._last_cap = None
+        if SHALLOW_GAPS and last is not None and last in self._caps and not (
+                last.pending or last.returning or last.skip) and self._i_m_el >= 0:
+            last.shallow = True
+            return
+        self.flank_shifts += 1
+        if last is not None and last in self._caps:
+            self._caps.remove(last)
+        for c in self._caps:
+            c.second_entry_rows = [e for e in c.second_entry_rows if e[1] != self._entry_id]
 
     def _crossed_zone(self, cap: _FlankCapture, level: float) -> bool:
         """Whether a pending entry's excursion, ending in a contact at ``level``, crossed the zone: it travelled at
@@ -2240,7 +2283,8 @@ class FlankDetector(BacklashDetector):
         caps, self._caps, self._last_cap = self._caps, [], None
         events = []
         for cap in caps:
-            if cap.skip or cap.pending:
+            self.flank_shifts += int(cap.shallow)  # undecided: dropped as a same-flank torque change, as before
+            if cap.skip or cap.pending or cap.shallow:
                 continue
             data = np.concatenate(cap.rows)
             e = cap.departure_row
@@ -2251,6 +2295,9 @@ class FlankDetector(BacklashDetector):
         """The window of a complete capture; None when a window with this entry went out already (counted)."""
         data = np.concatenate(cap.rows)
         dep = cap.departure_row
+        if cap.shallow and not self._shallow_gap(data, dep, cap.flank_rad):
+            self.flank_shifts += 1                 # a same-flank torque change after all (SHALLOW_*): no entry
+            return None
         if not cap.returning and self._untwisted(data, dep, cap.flank_rad):
             self.flank_shifts += 1                 # a slip that left the coupling twisted (UNTWIST_*): no entry
             return None
@@ -2261,6 +2308,9 @@ class FlankDetector(BacklashDetector):
         shift, recontact = self._refine(data, dep)
         shift = self._zone_move(self._prepared if self._prepared is not None else data, dep, dep + shift, cap,
                                 recontact) - dep
+        shallow_rc = cap.shallow and SHALLOW_AT_ZERO_TWIST and self._shallow_entry is not None
+        if shallow_rc:
+            shift = self._shallow_entry - dep      # the contact lost where the coupling's twist is zero (SHALLOW_*)
         entry_row = cap.start_row + dep + shift
         if any(abs(entry_row - r) <= self._n(DUPLICATE_ENTRY_SAMPLES) for r in self._emitted_entry_rows) \
                 or entry_row <= cap.after_row:
@@ -2271,6 +2321,9 @@ class FlankDetector(BacklashDetector):
             return None
         self._emitted_entry_rows.append(entry_row)
         e0, win, rc, res = self._width(data, dep + shift, cap, recontact)
+        back = None if not shallow_rc or self._shallow_recontact is None else self._shallow_recontact - e0
+        if back is not None and back < self.window_length and not 0 <= res.recontact_index <= back:
+            res.recontact_index = back             # met again by the time delta is back at the zero twist (SHALLOW_*)
         e = self.samples_before_entry
         self.last_width = res
         if self.second_windows and res.how == "traversal" and res.recontact_index > e:
@@ -2312,26 +2365,51 @@ class FlankDetector(BacklashDetector):
         """Whether a capture's excursion only untwisted the coupling on the flank it left (UNTWIST_* constants): it
         settled there with the coupling carrying at most UNTWIST_MAX_TORQUE_SHARE of the steady torque of the same
         sign, and delta never passed the zero-twist point of the two contacts by UNTWIST_PAST_SHARE of it."""
-        if self._i_m_el < 0 or not math.isfinite(flank_rad):
+        zt = self._zero_twist(data, dep, flank_rad)
+        return zt is not None and zt[0] < (1.0 + UNTWIST_PAST_SHARE) * zt[1]
+
+    def _shallow_gap(self, data: np.ndarray, dep: int, flank_rad: float) -> bool:
+        """Whether a shallow excursion (SHALLOW_*: it ended short of min_travel_rad on the flank it left) passed the
+        zero-twist point of the two contacts by SHALLOW_PAST_SHARE of it and SHALLOW_PAST_QUANTA quanta of delta: the
+        coupling let go (a gap), not only untwisted."""
+        zt = self._zero_twist(data, dep, flank_rad)
+        self._shallow_entry = self._shallow_recontact = None
+        if zt is None:
             return False
+        d = self._delta(data)
+        side = 1.0 if d[dep] >= flank_rad else -1.0
+        past = np.nonzero(side * (d[dep:] - flank_rad) >= zt[1])[0]
+        self._shallow_entry = dep + int(past[0]) if past.size else None
+        back = np.nonzero(side * (d[self._shallow_entry:] - flank_rad) < zt[1])[0] if past.size else past
+        self._shallow_recontact = self._shallow_entry + int(back[0]) if back.size else None
+        q = max(_delta_quantum(self._delta(data), dep, self.angle_quantum_rad, max(dep - self._n(UNTWIST_FIT_BEFORE), 0),
+                               self.min_departure_rad), ANGLE_MODEL_FLOOR_RAD)
+        return zt[0] >= max((1.0 + SHALLOW_PAST_SHARE) * zt[1], zt[1] + SHALLOW_PAST_QUANTA * q)
+
+    def _zero_twist(self, data: np.ndarray, dep: int, flank_rad: float) -> Optional[tuple]:
+        """(delta's farthest travel from the flank level after the departure, the zero-twist point z's distance) of
+        an excursion that settled on the flank it left with the coupling carrying at most UNTWIST_MAX_TORQUE_SHARE of
+        the steady torque of the same sign (UNTWIST_*); None otherwise (no m_el, too short, not settled, ...)."""
+        if self._i_m_el < 0 or not math.isfinite(flank_rad):
+            return None
         rows = samples(SPRING_TORQUE_ROWS, self.sample_period_s)
         tail = self._n(UNTWIST_TAIL_ROWS)
         if dep - rows[0] < 0 or data.shape[0] - tail <= dep:
-            return False
+            return None
         d = self._delta(data)
         m = data[:, self._i_m_el]
         t0 = float(np.median(m[dep - rows[0]:dep - rows[1]]))
         t1 = float(np.mean(m[-tail:]))
         if not (t0 != 0.0 and 0.0 <= t1 / t0 <= UNTWIST_MAX_TORQUE_SHARE):
-            return False
+            return None
         if np.ptp(d[-tail:]) > self.contact_tolerance_rad:
-            return False                            # not settled in a contact
+            return None                             # not settled in a contact
         side = 1.0 if d[dep] >= flank_rad else -1.0
         moved = side * (float(np.mean(d[-tail:])) - flank_rad)
         if not moved > 0:
-            return False
+            return None
         z = moved * t0 / (t0 - t1)                  # the zero-twist point's distance from the flank level
-        return float(np.max(side * (d[dep:] - flank_rad))) < (1.0 + UNTWIST_PAST_SHARE) * z
+        return float(np.max(side * (d[dep:] - flank_rad))), z
 
     def _width(self, data: np.ndarray, entry: int, cap: _FlankCapture, recontact: Optional[int]) -> tuple:
         """(the window's first capture row, the window, its re-contact row from the rules or None, :func:`estimate_width`)
