@@ -224,7 +224,7 @@ def test_a_missing_k2_never_blocks_the_gap_j1(system, monkeypatch):
     its gap like any other: not refused 'backlash_width_m: ... got nan'.  Off it is refused."""
     import dataclasses
 
-    from jident_ros.identify import diagnosis
+    from jident_ros.identify import window_args as diagnosis  # detector_arguments' home (stop 34)
     rec = raw_recordings(system, (1.16,), (0.005,), steady_s=0.3, seed=4)[0]
     w = [e.window for e in run_detector(flank_detector(system), rec) if e.kind == "window"][0]
     ref = _diagnose(system, w)
@@ -238,6 +238,27 @@ def test_a_missing_k2_never_blocks_the_gap_j1(system, monkeypatch):
     d = _diagnose(system, no_k2)
     assert d.diagnosed and d.inertia_kgm2 == ref.inertia_kgm2, d.message
     assert "backlash_width_estimate_m" not in d.value_dict()          # no K2 read off raw angles instead
+
+
+def test_a_shallow_gap_window_gets_its_entry_and_k2_but_no_j1(system):
+    """A window the flank detector flags as a shallow gap (layout.FLAG_SHALLOW_GAP: a slip drop's few samples past the
+    coupling's zero twist, round 18) is diagnosed without a gap fit: no J1, the reason says why (DOL
+    draws set 6's d6-12, a 4-sample gap, published J1 +19 % outside its intervals when it was fitted)."""
+    import dataclasses
+
+    from jident_ros.identify.diagnosis import SHALLOW_GAP_REASON, WindowInput
+    from jident_ros.identify.gap import resolution_limited
+    from jident_ros.stream.layout import FLAG_SHALLOW_GAP, flag_names
+    rec = raw_recordings(system, (1.16,), (0.005,), steady_s=0.3, seed=4)[0]
+    w = [e.window for e in run_detector(flank_detector(system), rec) if e.kind == "window"][0]
+    assert _diagnose(system, w).inertia_kgm2 == pytest.approx(1.16, rel=0.02)
+    flagged = dataclasses.replace(w, flags=w.flags | FLAG_SHALLOW_GAP)
+    assert "shallow_gap" in flag_names(flagged.flags) and WindowInput.from_window(flagged).shallow_gap
+    d = _diagnose(system, flagged)
+    assert d.inertia_kgm2 is None and d.gap is None
+    assert SHALLOW_GAP_REASON in d.message or SHALLOW_GAP_REASON in (d.refused_reason or ""), d.message
+    assert resolution_limited(SHALLOW_GAP_REASON) and d.level_name == "OK", d.message   # this window's limit: no WARN
+    assert math.isfinite(flagged.backlash_width_estimate_m)              # the window's K2 (its detector's) stays
 
 
 def test_raw_angles_are_never_read_as_zone_centred(system):

@@ -11,7 +11,7 @@ from jident_ros.config import load_system_config
 from jident_ros.research.evaluation.raw_inputs import evaluate_condition, flank_detector, raw_recordings, run_detector
 from jident_ros.stream.detector import BacklashDetector, stream_batches
 from jident_ros.stream.flank import FlankDetector
-from jident_ros.stream.layout import FLAG_CUT_OFF, FLAG_SECOND_ENTRY, WINDOW_HEADER_1, Window, pack
+from jident_ros.stream.layout import FLAG_CUT_OFF, FLAG_SECOND_ENTRY, FLAG_SHALLOW_GAP, WINDOW_HEADER_1, Window, pack
 
 J1S = (1.16, 0.957)
 K2S = (0.0025, 0.01)
@@ -1587,6 +1587,8 @@ def test_a_slip_drop_s_shallow_gap_gets_its_window(monkeypatch, key, gaps, at_ze
         events = [e for k in range(0, data.shape[0], batch) for e in det.push(data[k:k + batch], ch)] + det.finish()
         got.append(([round(e.window.entry_time_s / 5e-4) for e in events if getattr(e, "window", None)],
                     det.flank_shifts))
+        # a shallow gap's window says so (layout.FLAG_SHALLOW_GAP): the diagnosis fits no J1 on it
+        assert all(e.window.flags & FLAG_SHALLOW_GAP for e in events if getattr(e, "window", None))
     assert got[0] == got[1]                                 # batches do not matter
     wins, shifts = got[0]
     true = int(d[f"{key}_gap_entry"])

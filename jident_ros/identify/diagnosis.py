@@ -34,6 +34,7 @@ import numpy as np
 
 from jident_ros.identify.fusion import BETWEEN_Z, Verdict, fuse_verdict
 from jident_ros.identify.gap import (
+    SHALLOW_GAP_REASON,
     GapEstimate,
     NoGapError,
     WidthEstimate,
@@ -54,10 +55,14 @@ from jident_ros.identify.verdict import (
     recontact_check,
     width_disagreement,
 )
+from jident_ros.identify.window_args import (  # noqa: F401 -- re-exported (tests, raw_inputs)
+    ENTRY_UNCERTAINTY_WITHOUT_A1,
+    FLANK_WINDOWS_WITHOUT_K2,
+    detector_arguments,
+)
 from jident_ros.method.patterns import Identification, PatternLibrary, identify_window
 from jident_ros.method.pipeline import SIGNALS
 from jident_ros.parameters import GAP_METHODS, NO_GAP, gap_method_problem
-from jident_ros.stream.layout import RAW_ANGLE_DETECTORS
 
 
 @dataclass
@@ -186,6 +191,7 @@ class WindowInput:
     recontact_index: Optional[int] = None
     width_estimate: Optional[WidthEstimate] = None
     raw_angles: bool = False
+    shallow_gap: bool = False       # the flank detector's shallow gap (layout.FLAG_SHALLOW_GAP): no gap fit
 
     @classmethod
     def from_window(cls, window) -> "WindowInput":
@@ -310,6 +316,10 @@ class _WindowRun:
         w, dg, method = self.win, self.dg, self.dg.config.gap_method
         # raw angles, own K2 or none: the gap from the detector's re-contact row, never |alpha1 - alpha2| < K2/r
         raw_angles = w.width_estimate is not None or self.k2_unknown
+        if w.shallow_gap:                   # layout.FLAG_SHALLOW_GAP: no gap fit (gap.SHALLOW_GAP_REASON)
+            self.gap_reason = SHALLOW_GAP_REASON
+            self.problems.append(f"gap: {SHALLOW_GAP_REASON}")
+            return self.recontact_step()
         data = {(LOAD_ANGLE_KEY if k == "alpha2" else k): v for k, v in w.data.items()} if raw_angles else w.data
         try:
             self.gap = estimate_inertia(data, w.entry_index, w.backlash_width_m, w.wheel_radius_m,
@@ -557,44 +567,6 @@ def rotation_sign(window_data: dict, entry_index: int) -> float:
 def mirrored(window_data: dict) -> dict:
     """Every channel but t with its sign changed: a reverse window as a forward one (docs/method.md, "Reverse rotation")."""
     return {k: (v if k == "t" else -np.asarray(v, float)) for k, v in window_data.items()}
-
-
-#: The dynamics detector's entry row without a1 (from the motor angle) is known to +- this many samples
-#: (docs/results.md, "Entries from the dynamics": -5 ... +1 on our simulator, -9 ... -3 on the second drive).
-ENTRY_UNCERTAINTY_WITHOUT_A1 = 10
-
-
-#: A flank window without a K2 estimate is diagnosed from its gap (True) or refused (False).  It was off until
-#: the gap fit's intervals were honest: on our simulator's JointState 30 dB recordings (no a1) it then published two
-#: such windows 36 % and 19 % off (0.688 for 1.073, 0.938 for 1.16: the angle fit over 17 samples; zoo report on the
-#: detector branch).  On since the estimator's branch (the torque offset band, the +-10 % interval cap): the zoo
-#: (`python -m jident_ros.research.evaluation.zoo --report`, declared and --undeclared) then refuses those windows
-#: for the gap's own reasons, with the same counts as with the switch off (0 published > 10 % off on all three
-#: models; coverage 36/36, 58/58, 34/34), and "backlash_width_m ... nan" is no longer a refusal (issue 20: a
-#: missing K2 never blocks a J1).
-FLANK_WINDOWS_WITHOUT_K2 = True
-
-
-def detector_arguments(window) -> dict:
-    """:class:`WindowInput`'s ``recontact_index`` and ``width_estimate`` for a captured
-    :class:`~jident_ros.stream.layout.Window`: a flank- or dynamics-detector window's own (and, for a dynamics
-    window without a1, ``entry_uncertainty_samples``); none for the paper detector's."""
-    kind = getattr(window, "detector", "paper")
-    if kind not in RAW_ANGLE_DETECTORS:
-        return {}
-    est = None
-    if math.isfinite(window.backlash_width_estimate_m):
-        est = WidthEstimate(float(window.backlash_width_estimate_m), float(window.backlash_width_se_m),
-                            int(window.recontact_index), "flank")
-    out = {"recontact_index": window.recontact_index if window.recontact_index >= 0 else None,
-           "width_estimate": est, "raw_angles": True}
-    if kind == "dynamics" and "a1" not in window.channels:
-        out["entry_uncertainty_samples"] = ENTRY_UNCERTAINTY_WITHOUT_A1
-    if not math.isfinite(window.backlash_width_m) and (kind == "dynamics" or FLANK_WINDOWS_WITHOUT_K2):
-        # no load encoder (dynamics), or no traversal in this window (a one-sided excursion): no K2, and a
-        # missing K2 does not block the gap's J1 (issue 20)
-        out["backlash_width_unknown"] = True
-    return out
 
 
 __all__ = ["GAP_METHODS", "Diagnoser", "DiagnosisConfig", "WindowDiagnosis", "WindowInput", "detector_arguments"]

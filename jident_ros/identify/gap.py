@@ -197,6 +197,15 @@ class NoGapError(ValueError):
     """The window holds no usable backlash gap."""
 
 
+#: Why a shallow gap's window (stream.layout.FLAG_SHALLOW_GAP) gets no gap fit (identify.diagnosis).  The flank
+#: detector keeps these windows for their entry and K2 (stop 34, round 18: the DOL draws' slip drops, 2-12 samples);
+#: the gap fits' change-point search (25 rows at 2 kHz) is longer than such a gap, and where the slipping load moves
+#: with the motor after the re-contact the fit ran on through 25 contact rows: DOL draws set 6's d6-12 (a 4-sample
+#: gap) published J1 +19 % on three inputs outside their intervals.
+SHALLOW_GAP_REASON = ("gap too short: a shallow gap (the motor ran only a few samples past the coupling's zero twist, a "
+                      "slip drop's short gap): its entry and K2 are reported, no J1 (the gap fits cannot tell so few "
+                      "free rows from the motor moving the slipping load)")
+
 #: How a NoGapError's message starts when the window's gap is there but cannot resolve J1 (too few samples in it,
 #: a standard error above MAX_RELATIVE_STD_ERROR): a fact about this window, not about the monitor's configuration
 #: or sensors (:func:`resolution_limited`).

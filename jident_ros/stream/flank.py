@@ -117,7 +117,7 @@ import numpy as np
 
 from jident_ros.stream.detector import BacklashDetector, Event, _positive
 from jident_ros.stream.filters import first_order_lowpass, savgol_filter
-from jident_ros.stream.layout import DEFAULT_CHANNELS, FLAG_SECOND_ENTRY, Window
+from jident_ros.stream.layout import DEFAULT_CHANNELS, FLAG_SECOND_ENTRY, FLAG_SHALLOW_GAP, Window
 from jident_ros.stream.rate import REFERENCE_SAMPLE_PERIOD_S, odd_samples, samples, samples_float
 
 #: Detector names of the ``detector`` parameter.
@@ -2330,7 +2330,7 @@ class FlankDetector(BacklashDetector):
             self._scan_returns(cap, data, self._delta(win), e0, e, res.recontact_index)
         if self.second_windows and REBOUND_MAX_SHARE and not cap.returning:
             self._scan_rebound(cap, data, dep + shift)
-        flags = 0
+        flags = FLAG_SHALLOW_GAP if cap.shallow else 0
         inside = [se for se in cap.second_entry_rows if dep + shift < se[0] < e0 + self.window_length]
         swallowed = ""
         if inside:

@@ -63,7 +63,10 @@ RAW_ANGLE_DETECTORS = ("flank", "dynamics")
 FLAG_SECOND_ENTRY = 1
 #: ... the data ended before the window was complete (a partial window, reported, never published).
 FLAG_CUT_OFF = 2
-FLAG_NAMES = {FLAG_SECOND_ENTRY: "second_entry", FLAG_CUT_OFF: "cut_off"}
+#: ... the flank detector's shallow gap (flank.SHALLOW_*: a slip drop's few samples past the coupling's zero twist):
+#: its entry and K2 count, its J1 is not fitted (identify.diagnosis.SHALLOW_GAP_REASON)
+FLAG_SHALLOW_GAP = 4
+FLAG_NAMES = {FLAG_SECOND_ENTRY: "second_entry", FLAG_CUT_OFF: "cut_off", FLAG_SHALLOW_GAP: "shallow_gap"}
 
 
 def flag_names(flags: int) -> list:
@@ -176,7 +179,7 @@ class Window:
     backlash_width_se_m : float    its standard uncertainty, m; NaN: none
     detector : str                 "paper" (inequality 1 with a given K2), "flank" (no K2 needed) or
                                    "dynamics" (no angles needed: the load-torque step)
-    flags : int                    FLAG_SECOND_ENTRY | FLAG_CUT_OFF bits
+    flags : int                    FLAG_SECOND_ENTRY | FLAG_CUT_OFF | FLAG_SHALLOW_GAP bits
     recontact_index : int          row where the flanks meet again (the first contact sample), -1: unknown
     """
 

@@ -42,7 +42,8 @@ from jident_ros.research.vector_drive.model import DriveParams
 #: What each report says of the protocol (the module docstring); a set named here is no longer blind, and its first
 #: run's numbers are the blind ones.
 PROTOCOL_NOTE = ("A set is a blind test only until something is changed because of it: docs/results.md's stop sections "
-                 "say which sets rules were chosen on (DOL sets 1–4 and vector sets 1, 5, 6 by stop 33).")
+                 "say which sets rules were chosen on (DOL sets 1–4 and vector sets 1, 5, 6 by stop 33; DOL set 7 in stop 34, "
+                 "the known torque delay and smoothing declared).")
 
 #: The torque accuracy a drive's data sheet typically states for sensored vector control, ± this of rated torque: what
 #: a user who has nothing better declares, as ``torque_accuracy`` and as ``torque_offset_rel_base``, the way
