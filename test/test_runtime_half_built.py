@@ -67,3 +67,55 @@ def test_the_entry_point_leaves_a_refused_start_with_the_bad_parameter_status(mo
     assert exits == [2]
     monkeypatch.setattr(entry.importlib, "import_module", lambda name: types.SimpleNamespace(main=lambda: 0))
     assert entry._run("jident_ros.nodes.replay", "replay") == 0 and exits == [2]
+
+
+@pytest.mark.ros
+def test_a_refused_start_in_its_own_process_leaves_before_any_teardown(capsys, monkeypatch):
+    """Started by its entry point (its own process: nodes/entry.leaves_at_once), a node that refuses its parameters
+    prints its one line and leaves at once with status 2: no half-built node destroyed, no rcl shutdown (where 10 nodes
+    refusing at once on a loaded machine died by SIGSEGV after their line, stops 33 and 34).  In a caller's process the
+    teardown runs (the test above)."""
+    import rclpy
+    from rclpy.node import Node
+
+    from jident_ros.nodes import runtime
+    from jident_ros.nodes.params import ParameterError
+    seen = []
+
+    class Refusing(Node):
+        def __init__(self):
+            super().__init__("jident_refusing_at_once_test")
+            raise ParameterError("parameter real_time_factor: must be >= 0 and <= 1000, got -2.0")
+
+        def destroy_node(self):
+            seen.append("destroyed")
+            return super().destroy_node()
+
+    def fake_exit(code):
+        seen.append(("exit", code))
+        raise SystemExit(code)
+    monkeypatch.setattr(runtime, "leaves_at_once", lambda: True)
+    monkeypatch.setattr(runtime.os, "_exit", fake_exit)
+    try:
+        with pytest.raises(SystemExit):
+            runtime.main(lambda argv: Refusing(), "refusing", ["refusing"])
+        # leaves before any destroy or shutdown (the real os._exit does not return; this one's SystemExit lets the
+        # finally run after it)
+        assert seen[0] == ("exit", runtime.EXIT_BAD_PARAMETER)
+        assert capsys.readouterr().err.strip().splitlines() == [
+            "refusing: parameter real_time_factor: must be >= 0 and <= 1000, got -2.0"]
+    finally:
+        rclpy.try_shutdown()                     # this process goes on (the test run): what os._exit would have left
+
+
+def test_only_an_entry_point_start_leaves_at_once(monkeypatch):
+    import types
+
+    from jident_ros.nodes import entry
+    assert entry.leaves_at_once() is False
+    monkeypatch.setattr(entry.signal, "signal", lambda sig, handler: None)
+    during = []
+    monkeypatch.setattr(entry.importlib, "import_module",
+                        lambda name: types.SimpleNamespace(main=lambda: during.append(entry.leaves_at_once()) or 0))
+    assert entry._run("jident_ros.nodes.replay", "replay") == 0
+    assert during == [True] and entry.leaves_at_once() is False

@@ -48,9 +48,17 @@ class StopFlag:
 
 
 _early: Optional[StopFlag] = None
+#: True while a node started by an entry point below runs (:func:`leaves_at_once`)
+_from_entry = False
 
 #: jident_ros.nodes.params.EXIT_BAD_PARAMETER (not imported: this module stays light, standard library only)
 EXIT_BAD_PARAMETER = 2
+
+
+def leaves_at_once() -> bool:
+    """Whether a start refused for its parameters leaves the process at once (jident_ros.nodes.runtime): only a node
+    started by an entry point below (its own process), never one run in a caller's process (the tests)."""
+    return _from_entry
 
 
 def take_early_flag() -> Optional[StopFlag]:
@@ -61,8 +69,9 @@ def take_early_flag() -> Optional[StopFlag]:
 
 
 def _run(module: str, prog: str) -> int:
-    global _early
+    global _early, _from_entry
     _early = flag = StopFlag().install()
+    _from_entry = True
     try:
         try:
             mod = importlib.import_module(module)
@@ -82,7 +91,7 @@ def _run(module: str, prog: str) -> int:
             os._exit(code)
         return code
     finally:
-        _early = None
+        _early, _from_entry = None, False
         for sig in (signal.SIGINT, signal.SIGTERM):   # the interpreter exits: a late signal changes nothing
             signal.signal(sig, signal.SIG_IGN)
 

@@ -13,6 +13,7 @@ window's diagnosis or the teardown itself), nothing is torn down under a running
 from __future__ import annotations
 
 import math
+import os
 import re
 import sys
 import time
@@ -21,7 +22,7 @@ from typing import Any, Callable, Mapping
 
 import yaml
 
-from jident_ros.nodes.entry import StopFlag, take_early_flag
+from jident_ros.nodes.entry import StopFlag, leaves_at_once, take_early_flag
 from jident_ros.nodes.params import EXIT_BAD_PARAMETER, ParameterError
 from jident_ros.nodes.ros_io import qos_signals
 
@@ -308,6 +309,21 @@ def _half_built_node(exc: BaseException):
     return None
 
 
+def _refused(prog: str, line: str, built: bool = False) -> int:
+    """A start refused for its parameters: its one line on stderr, then EXIT_BAD_PARAMETER.  A node that was never built
+    and runs in its own process (started by its entry point, :func:`jident_ros.nodes.entry.leaves_at_once`) leaves at
+    once, before any teardown: the half-built node's destruction and rcl's shutdown are where a clean clone's test run
+    saw a node that had printed its line die by SIGSEGV (status -11; stop 33 the replay node, stop 34 the simulator,
+    10 nodes refusing at once on the loaded 2-core machine); nothing was built to finalise, the process's exit frees
+    what rcl holds.  In a caller's process (the tests) the teardown runs, the half-built node destroyed before rcl's
+    shutdown (test_runtime_half_built)."""
+    print(f"{prog}: {line}", file=sys.stderr, flush=True)
+    if not built and leaves_at_once():
+        sys.stdout.flush()
+        os._exit(EXIT_BAD_PARAMETER)
+    return EXIT_BAD_PARAMETER
+
+
 def main(factory: Callable[..., Any], prog: str, args=None) -> int:
     """Run a node: init, build (``factory(args)``), spin, stop; returns the exit status.
 
@@ -332,11 +348,9 @@ def main(factory: Callable[..., Any], prog: str, args=None) -> int:
             check_params_files(args)
             rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
         except ParameterError as exc:
-            print(f"{prog}: {exc}", file=sys.stderr, flush=True)
-            return EXIT_BAD_PARAMETER
+            return _refused(prog, str(exc))
         except Exception as exc:  # RCLError: rcl refused the arguments before our code ran
-            print(f"{prog}: {rcl_error_line(exc)}", file=sys.stderr, flush=True)
-            return EXIT_BAD_PARAMETER
+            return _refused(prog, rcl_error_line(exc))
         try:
             node = factory(args)
             # a node may bring its own executor (the windowing node on JointState: one callback per sample)
@@ -348,13 +362,11 @@ def main(factory: Callable[..., Any], prog: str, args=None) -> int:
                 node.finish(lambda: stop.set)
             code = int(node.exit_code or 0)
         except ParameterError as exc:
-            print(f"{prog}: {exc}", file=sys.stderr, flush=True)
-            code = EXIT_BAD_PARAMETER
+            code = _refused(prog, str(exc), built=node is not None)
             half = None if node is not None else _half_built_node(exc)
         except Exception as exc:
             if node is None and type(exc).__module__.startswith("rclpy"):  # e.g. a bad remapping
-                print(f"{prog}: {rcl_error_line(exc)}", file=sys.stderr, flush=True)
-                code = EXIT_BAD_PARAMETER
+                code = _refused(prog, rcl_error_line(exc), built=False)
                 half = _half_built_node(exc)
             else:
                 raise
