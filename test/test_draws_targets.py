@@ -70,3 +70,14 @@ def test_main_unreadable_file_one_line(tmp_path, capsys, text):
     assert draws_targets.main([str(f), "--results", "-"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("draws_targets: error:") and err.count("\n") == 1
+
+
+def test_a_folder_of_json_files_is_named_as_one_pattern(tmp_path):
+    for name in ("a.json", "b.json", "c.json"):
+        (tmp_path / name).write_text("{}")
+    every = [str(tmp_path / n) for n in ("a.json", "b.json", "c.json")]
+    assert draws_targets._files_text(every) == f"{tmp_path}/*.json"
+    assert draws_targets._files_text(every[:2] + every[2:]) == f"{tmp_path}/*.json"
+    assert draws_targets._files_text(every[:2]) == " ".join(every[:2])      # two: as given
+    (tmp_path / "d.json").write_text("{}")
+    assert draws_targets._files_text(every) == " ".join(every)              # not every file of the folder

@@ -1468,17 +1468,11 @@ def test_a_slip_that_leaves_the_coupling_twisted_is_no_entry(monkeypatch, key, o
     point (9.4 mrad); no gap in the truth.  The detector gave a window (a false entry, 1222); with UNTWIST_* it is a
     same-flank torque change (``flank_shifts``; off: the window).  d1-11 ('gap'), a real slip gap of 12 samples whose
     delta passes its zero-twist point by 1.3 mrad (14 %) and comes back to the flank it left, keeps its window."""
-    from pathlib import Path
 
     from jident_ros.stream import flank
     if not on:
         monkeypatch.setattr(flank, "UNTWIST_MAX_TORQUE_SHARE", -1.0)
-    d = np.load(Path(__file__).parent / "data" / "dol_draws_slip_drop_untwist_jointstate.npz")
-    q = 2.0 * math.pi / 65536
-    a1 = float(d[f"{key}_alpha10"]) + q * d[f"{key}_alpha1_counts"]
-    a2 = float(d[f"{key}_alpha20"]) + q * d[f"{key}_alpha2_counts"]
-    ch = ("t", "alpha1", "alpha2", "m_el")
-    data = np.column_stack([np.arange(a1.size) * 5e-4, a1, a2, d[f"{key}_m_el"].astype(float)])
+    d, data, ch = _dol_draw_cut("dol_draws_slip_drop_untwist_jointstate.npz", key)
     det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16, encoder_counts_per_rev=65536)
     wins = [e.window for e in det.push(data, ch) + det.finish() if getattr(e, "window", None) is not None]
     if key == "gap":
@@ -1570,17 +1564,11 @@ def test_a_slip_drop_s_shallow_gap_gets_its_window(monkeypatch, key, gaps, at_ze
     SHALLOW_* it keeps its window, the entry where delta crosses that point (207; with the rules' entry, +7; off: no
     window, one flank shift).  d1-03 ('untwist'): the coupling only untwists, 9 % short of its zero-twist point, no
     gap in the truth: no window, one flank shift.  Batches do not matter."""
-    from pathlib import Path
 
     from jident_ros.stream import flank
     monkeypatch.setattr(flank, "SHALLOW_GAPS", gaps)
     monkeypatch.setattr(flank, "SHALLOW_AT_ZERO_TWIST", at_zero)
-    d = np.load(Path(__file__).parent / "data" / "dol_draws_slip_drop_shallow_jointstate.npz")
-    q = 2.0 * math.pi / 65536
-    a1 = float(d[f"{key}_alpha10"]) + q * d[f"{key}_alpha1_counts"]
-    a2 = float(d[f"{key}_alpha20"]) + q * d[f"{key}_alpha2_counts"]
-    ch = ("t", "alpha1", "alpha2", "m_el")
-    data = np.column_stack([np.arange(a1.size) * 5e-4, a1, a2, d[f"{key}_m_el"].astype(float)])
+    d, data, ch = _dol_draw_cut("dol_draws_slip_drop_shallow_jointstate.npz", key)
     got = []
     for batch in (data.shape[0], 137):
         det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16, encoder_counts_per_rev=65536)
@@ -1600,3 +1588,15 @@ def test_a_slip_drop_s_shallow_gap_gets_its_window(monkeypatch, key, gaps, at_ze
         assert wins == [true] and shifts == 0
     else:
         assert len(wins) == 1 and wins[0] - true > 2 and shifts == 0
+
+
+def _dol_draw_cut(name: str, key: str):
+    """(the npz, the stream rows, the channels) of a DOL draw's JointState 2^16 cut under test/data: its encoder counts
+    and offsets back to angles, t at 2 kHz, m_el."""
+    from pathlib import Path
+    d = np.load(Path(__file__).parent / "data" / name)
+    q = 2.0 * math.pi / 65536
+    a1 = float(d[f"{key}_alpha10"]) + q * d[f"{key}_alpha1_counts"]
+    a2 = float(d[f"{key}_alpha20"]) + q * d[f"{key}_alpha2_counts"]
+    ch = ("t", "alpha1", "alpha2", "m_el")
+    return d, np.column_stack([np.arange(a1.size) * 5e-4, a1, a2, d[f"{key}_m_el"].astype(float)]), ch

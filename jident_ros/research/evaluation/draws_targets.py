@@ -101,9 +101,20 @@ COLUMNS = (("set", "set (drives)"), ("found", "traversals found (all)"),
            ("commit", "measured on"))
 
 
+def _files_text(files: list) -> str:
+    """The files as the command line gave them, or ``DIR/*.json`` when they are every .json file of one folder."""
+    paths = [Path(f) for f in files]
+    folders = {p.parent for p in paths}
+    if len(paths) > 2 and len(folders) == 1:
+        folder = folders.pop()
+        if sorted(folder.glob("*.json")) == sorted(paths):
+            return f"{folder}/*.json"
+    return " ".join(str(f) for f in files)
+
+
 def markdown(results: list, files: list) -> str:
     """The section: one row per set (``results``: the --json files' contents, read from ``files``)."""
-    cmd = "python -m jident_ros.research.evaluation.draws_targets " + " ".join(str(f) for f in files)
+    cmd = "python -m jident_ros.research.evaluation.draws_targets " + _files_text(files)
     lines = [f"{TITLE} (`{cmd}`)", "",
              "Each set's counts from `python -m jident_ros.research.evaluation.zoo_draws --report --model M --seed S "
              "--draws 12 --json FILE` (its own section, 'Blind draws, set S', has the drives); this table reads those "
