@@ -132,8 +132,8 @@ class GapModel:
         the torque at t ∓ τ, |τ| <= this, uniform; a term J1 |r_κ · ∫m_el dt| this/√3 (a torque ramping through the
         gap: the vector drive's estimate lags by ≈ 0.7 ms)
     torque_delay_s : the torque estimate's known delay behind the shaft's torque, s (a drive that reports m_el N
-        cycles late: N·T_s; a first-order smoothing of time constant τ: + τ): m_el is advanced by it before the gap
-        fits (:func:`jident_ros.identify.gap.estimate_inertia`); ``torque_lag_s`` bounds what remains
+        cycles late: N·T_s): m_el is advanced by it before the gap fits (:func:`jident_ros.identify.gap.estimate_inertia`);
+        ``torque_lag_s`` bounds what remains
     torque_filter_s : the time constant of a first-order low-pass the drive applies to its torque estimate, s: undone
         before the gap fits (m_el + τ·dm_el/dt, the filter's exact inverse: a shift by τ leaves its attenuation, J1
         2 % low on a torque swinging with a 30 ms period through a 1 ms filter)

@@ -100,8 +100,8 @@ class VerdictPolicy:
     torque_lag_max_s : the torque estimate lags (or leads) the shaft's torque by at most this, s: a bounded term
         of the angle and a1 fits' standard error (GapModel.torque_lag_s; the speed fit fits its own lag)
     torque_delay_s : the torque estimate's known delay behind the shaft's torque, s (reported N drive cycles late:
-        N·T_s; smoothed by a first-order filter of time constant τ: + τ): m_el is advanced by it before the gap fits,
-        and torque_lag_max_s bounds what remains (GapModel.torque_delay_s)
+        N·T_s): m_el is advanced by it before the gap fits, and torque_lag_max_s bounds what remains
+        (GapModel.torque_delay_s)
     torque_filter_s : the time constant of a first-order low-pass the drive applies to its torque estimate (a smoothed
         'actual torque'), s: undone before the gap fits (GapModel.torque_filter_s)
     encoder_accuracy_rad : the motor encoder's angle error is at most this, rad, once and twice per revolution (its
