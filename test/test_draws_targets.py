@@ -81,3 +81,15 @@ def test_a_folder_of_json_files_is_named_as_one_pattern(tmp_path):
     assert draws_targets._files_text(every[:2]) == " ".join(every[:2])      # two: as given
     (tmp_path / "d.json").write_text("{}")
     assert draws_targets._files_text(every) == " ".join(every)              # not every file of the folder
+
+
+def test_the_columns_read_the_labels_and_events_the_draws_write():
+    """draws_targets picks zoo_draws' groups by sensor label and event name ('label|event', zoo_draws.run): a renamed
+    sensor or event would leave its columns at 0/0, so the names are checked against the draws' own."""
+    from jident_ros.research.evaluation import zoo_dol, zoo_draws, zoo_variants
+    for model, sensors, events in (("vector", zoo_variants.SENSORS, zoo_variants.EVENTS),
+                                   ("dol", zoo_dol.SWEEP_SENSORS, zoo_draws.DOL_EVENTS)):
+        assert set(draws_targets.SPEED_EVENTS[model]) <= {e.replace("_", " ") for e in events}, model
+        js = [s[0] for s in sensors if draws_targets._js(s[0])]
+        assert js and all("Imu" not in lab and "2^16" in lab for lab in js), (model, js)
+        assert any(lab.endswith("clean") for lab in js) and any(lab.endswith("30 dB") for lab in js), model

@@ -2295,7 +2295,8 @@ class FlankDetector(BacklashDetector):
         """The window of a complete capture; None when a window with this entry went out already (counted)."""
         data = np.concatenate(cap.rows)
         dep = cap.departure_row
-        if cap.shallow and not self._shallow_gap(data, dep, cap.flank_rad):
+        shallow = self._shallow_gap(data, dep, cap.flank_rad) if cap.shallow else None
+        if cap.shallow and shallow is None:
             self.flank_shifts += 1                 # a same-flank torque change after all (SHALLOW_*): no entry
             return None
         if not cap.returning and self._untwisted(data, dep, cap.flank_rad):
@@ -2308,9 +2309,9 @@ class FlankDetector(BacklashDetector):
         shift, recontact = self._refine(data, dep)
         shift = self._zone_move(self._prepared if self._prepared is not None else data, dep, dep + shift, cap,
                                 recontact) - dep
-        shallow_rc = cap.shallow and SHALLOW_AT_ZERO_TWIST and self._shallow_entry is not None
+        shallow_rc = shallow is not None and SHALLOW_AT_ZERO_TWIST
         if shallow_rc:
-            shift = self._shallow_entry - dep      # the contact lost where the coupling's twist is zero (SHALLOW_*)
+            shift = shallow[0] - dep               # the contact lost where the coupling's twist is zero (SHALLOW_*)
         entry_row = cap.start_row + dep + shift
         if any(abs(entry_row - r) <= self._n(DUPLICATE_ENTRY_SAMPLES) for r in self._emitted_entry_rows) \
                 or entry_row <= cap.after_row:
@@ -2321,7 +2322,7 @@ class FlankDetector(BacklashDetector):
             return None
         self._emitted_entry_rows.append(entry_row)
         e0, win, rc, res = self._width(data, dep + shift, cap, recontact)
-        back = None if not shallow_rc or self._shallow_recontact is None else self._shallow_recontact - e0
+        back = None if not shallow_rc or shallow[1] is None else shallow[1] - e0
         if back is not None and back < self.window_length and not 0 <= res.recontact_index <= back:
             res.recontact_index = back             # met again by the time delta is back at the zero twist (SHALLOW_*)
         e = self.samples_before_entry
@@ -2368,23 +2369,23 @@ class FlankDetector(BacklashDetector):
         zt = self._zero_twist(data, dep, flank_rad)
         return zt is not None and zt[0] < (1.0 + UNTWIST_PAST_SHARE) * zt[1]
 
-    def _shallow_gap(self, data: np.ndarray, dep: int, flank_rad: float) -> bool:
-        """Whether a shallow excursion (SHALLOW_*: it ended short of min_travel_rad on the flank it left) passed the
-        zero-twist point of the two contacts by SHALLOW_PAST_SHARE of it and SHALLOW_PAST_QUANTA quanta of delta: the
-        coupling let go (a gap), not only untwisted."""
+    def _shallow_gap(self, data: np.ndarray, dep: int, flank_rad: float) -> Optional[tuple]:
+        """(the row where delta first reaches the zero-twist point z, the row where it comes back inside z or None) of
+        a shallow excursion (SHALLOW_*: it ended short of min_travel_rad on the flank it left) that passed z of the two
+        contacts by SHALLOW_PAST_SHARE of it and SHALLOW_PAST_QUANTA quanta of delta: the coupling let go (a gap), not
+        only untwisted; None otherwise."""
         zt = self._zero_twist(data, dep, flank_rad)
-        self._shallow_entry = self._shallow_recontact = None
         if zt is None:
-            return False
+            return None
         d = self._delta(data)
-        side = 1.0 if d[dep] >= flank_rad else -1.0
-        past = np.nonzero(side * (d[dep:] - flank_rad) >= zt[1])[0]
-        self._shallow_entry = dep + int(past[0]) if past.size else None
-        back = np.nonzero(side * (d[self._shallow_entry:] - flank_rad) < zt[1])[0] if past.size else past
-        self._shallow_recontact = self._shallow_entry + int(back[0]) if back.size else None
-        q = max(_delta_quantum(self._delta(data), dep, self.angle_quantum_rad, max(dep - self._n(UNTWIST_FIT_BEFORE), 0),
+        q = max(_delta_quantum(d, dep, self.angle_quantum_rad, max(dep - self._n(UNTWIST_FIT_BEFORE), 0),
                                self.min_departure_rad), ANGLE_MODEL_FLOOR_RAD)
-        return zt[0] >= max((1.0 + SHALLOW_PAST_SHARE) * zt[1], zt[1] + SHALLOW_PAST_QUANTA * q)
+        if not zt[0] >= max((1.0 + SHALLOW_PAST_SHARE) * zt[1], zt[1] + SHALLOW_PAST_QUANTA * q):
+            return None
+        side = 1.0 if d[dep] >= flank_rad else -1.0
+        entry = dep + int(np.nonzero(side * (d[dep:] - flank_rad) >= zt[1])[0][0])   # zt[0] >= z: delta reaches z
+        back = np.nonzero(side * (d[entry:] - flank_rad) < zt[1])[0]
+        return entry, (entry + int(back[0]) if back.size else None)
 
     def _zero_twist(self, data: np.ndarray, dep: int, flank_rad: float) -> Optional[tuple]:
         """(delta's farthest travel from the flank level after the departure, the zero-twist point z's distance) of

@@ -190,29 +190,29 @@ def draw(seed: int, index: int, model: str = "vector") -> Draw:
 
 def declaration(d: Draw) -> dict:
     """What the drawn drive's user declares: its friction from a coast-down test (b1, a Coulomb band of 1.25 x its
-    Coulomb friction), the torque estimate's known lag (:func:`known_delay_s`) and, for a vector drive (beside
+    Coulomb friction), the torque estimate's known lag (:func:`known_lag`) and, for a vector drive (beside
     :func:`zoo.declared`'s keys), a data sheet's torque accuracy
     (:data:`DATA_SHEET_TORQUE_ACCURACY`, as the scale and as the offset band);
     for a DOL drive, whose torque estimate its user computes, zoo_dol's declaration with the lag the user's chain has
     (its 0.25 ms, the sample it reports late, its smoothing)."""
     m = d.params.mechanics
+    delay_s, filter_s = known_lag(d)
     friction = {"bearing_friction_nms_per_rad": m.motor_viscous_nms_per_rad, "coulomb_friction_max_nm": 1.25 * m.motor_coulomb_nm,
-                "torque_delay_s": d.sensor_fields.get("torque_delay_samples", 0) * d.params.sample_period_s,
-                "torque_filter_s": d.sensor_fields.get("torque_filter_s", 0.0)}
+                "torque_delay_s": delay_s, "torque_filter_s": filter_s}
     if d.model == "vector":
         return {**friction, "torque_accuracy": DATA_SHEET_TORQUE_ACCURACY,
                 "torque_offset_rel_base": DATA_SHEET_TORQUE_ACCURACY}
-    lag = zoo_dol.declared()["torque_lag_max_s"] + known_delay_s(d)
+    lag = zoo_dol.declared()["torque_lag_max_s"] + delay_s + filter_s
     return {**zoo_dol.declared(), **friction, "torque_lag_max_s": lag}
 
 
-def known_delay_s(d: Draw) -> float:
-    """The torque estimate's lag the drawn drive's user knows from its manual, s: the samples it reports late and its
-    first-order smoothing's time constant, declared as ``torque_delay_s`` and ``torque_filter_s`` (since stop 34).
-    The bound ``torque_lag_max_s`` is kept as it was (for a DOL drive it still holds this sum): the draws declare the
-    known lag, not a narrower bound."""
-    return (d.sensor_fields.get("torque_delay_samples", 0) * d.params.sample_period_s
-            + d.sensor_fields.get("torque_filter_s", 0.0))
+def known_lag(d: Draw) -> tuple:
+    """(delay, smoothing time constant), s: the torque estimate's lag the drawn drive's user knows from its manual --
+    the samples it reports late and its first-order smoothing -- declared as ``torque_delay_s`` and
+    ``torque_filter_s`` (since stop 34).  The bound ``torque_lag_max_s`` is kept as it was (for a DOL drive it still
+    holds their sum): the draws declare the known lag, not a narrower bound."""
+    return (d.sensor_fields.get("torque_delay_samples", 0) * d.params.sample_period_s,
+            d.sensor_fields.get("torque_filter_s", 0.0))
 
 
 def describe(d: Draw) -> str:
