@@ -101,6 +101,58 @@ COLUMNS = (("set", "set (drives)"), ("found", "traversals found (all)"),
            ("commit", "measured on"))
 
 
+#: A traversal missed whose true gap is at most this many samples long counts as a short one in the per-event table
+#: (2.5 ms at the draws' 2 kHz: a few samples of free motion, at the detector's resolution)
+SHORT_GAP_SAMPLES = 5
+#: An entry this many samples or more after the true contact loss counts as late in the per-event table
+LATE_SAMPLES = 8
+
+
+def _reason_text(reasons: dict) -> str:
+    """The most common refusal (its share), the '#' placeholders of the zoo's reason keys left as they are."""
+    if not reasons:
+        return "–"
+    top, n = max(reasons.items(), key=lambda kv: kv[1])
+    return f"{n}/{sum(reasons.values())}: {top.removeprefix('gap: ')[:90]}"
+
+
+def event_rows(results: list) -> list:
+    """One row per model x event over every set in ``results``: where the targets are missed (the traversals missed
+    and how long their gaps were, the entries within ±2 without and with an Imu and the late ones, JointState's
+    publication without an Imu and its most common refusal)."""
+    by: dict = {}
+    for res in results:
+        for key, s in res["groups"].items():
+            label, event = key.split("|")
+            by.setdefault((res["model"], event), []).append((label, s))
+    lines = []
+    for (model, event), items in sorted(by.items(), key=lambda kv: (kv[0][0] != "vector", kv[0][1])):
+        a = zoo._merge([s for _, s in items])
+        if not a.get("traversals"):
+            continue
+        missed = a.get("traversals", 0) - a.get("found", 0)
+        gaps = a.get("missed_gap_rows")
+        short = "–" if gaps is None or len(gaps) != missed else \
+            f"{sum(1 for n in gaps if 0 <= n <= SHORT_GAP_SAMPLES)}/{missed}"
+        js = zoo._merge([s for lab, s in items if not lab.startswith("JointState+Imu")])
+        imu = zoo._merge([s for lab, s in items if lab.startswith("JointState+Imu")])
+        off_js, off_imu = js.get("offsets", []), imu.get("offsets", [])
+        offsets = off_js + off_imu
+        reasons: dict = {}
+        for lab, s in items:
+            if not lab.startswith("JointState+Imu"):
+                for r, n in s.get("reasons", {}).items():
+                    reasons[r] = reasons.get(r, 0) + n
+        lines.append(f"| {'vector' if model == 'vector' else 'DOL'} | {event} | "
+                     f"{a.get('found', 0)}/{a['traversals']} ({zoo._pct(a.get('found', 0), a['traversals'])}) | {short} | "
+                     f"{zoo._pct(sum(1 for o in off_js if abs(o) <= 2), len(off_js))} / "
+                     f"{zoo._pct(sum(1 for o in off_imu if abs(o) <= 2), len(off_imu))} | "
+                     f"{zoo._pct(sum(1 for o in offsets if o >= LATE_SAMPLES), len(offsets))} | "
+                     f"{js.get('trav_published', 0)}/{js.get('traversals', 0)} "
+                     f"({zoo._pct(js.get('trav_published', 0), js.get('traversals', 0))}) | {_reason_text(reasons)} |")
+    return lines
+
+
 def _files_text(files: list) -> str:
     """The files as the command line gave them, or ``DIR/*.json`` when they are every .json file of one folder."""
     paths = [Path(f) for f in files]
@@ -126,6 +178,17 @@ def markdown(results: list, files: list) -> str:
     for res in order:
         cells = row(res)
         lines.append("| " + " | ".join(cells[key] for key, _ in COLUMNS) + " |")
+    lines += ["", "### Where the targets are missed, per event (every set above, every input)", "",
+              f"Traversals missed, and of them those whose true gap is at most {SHORT_GAP_SAMPLES} samples long "
+              "(entry to re-contact; '–': a file written before zoo_draws counted them); the entry within ±2 samples "
+              f"of the true contact loss on the inputs without and with an Imu, and {LATE_SAMPLES} or more samples "
+              "late on all; J1 published on the traversals of the inputs without an Imu, and their most common "
+              "refusal (its count over all their refusals, the zoo's reason with its numbers as #).", "",
+              "| model | event | traversals found | missed: gap ≤ "
+              f"{SHORT_GAP_SAMPLES} samples | entry within ±2: without / with Imu | entry ≥ {LATE_SAMPLES} late | "
+              "JointState without Imu: published | its most common refusal |",
+              "|---|---|---|---|---|---|---|---|"]
+    lines += event_rows(order)
     return "\n".join(lines) + "\n"
 
 

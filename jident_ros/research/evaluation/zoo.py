@@ -438,6 +438,7 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
     torque_pub, torque_unpub = [], []     # truth_gap_torque of the traversals' first windows, published or not
     false_errs = []         # J1 published on a false entry, relative to the drive's J1
     false_in_gap = []       # ... on a false entry whose gap fit lies in a true traversal's rows
+    missed_rows = []        # the true gap's length (samples, entry to re-contact; -1: unknown) of each traversal missed
     for zr, res in items:
         s["recordings"] += 1
         if res.get("error"):
@@ -449,6 +450,8 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
         oracle_f += res.get("oracle_friction", [])
         hits = {w["gap"] for w in res["windows"] + res["cut_off"] if w["gap"] is not None}
         s["found"] += sum(1 for k in trav if k in hits)
+        missed_rows += [-1 if zr.gaps[k]["recontact_index"] is None
+                        else zr.gaps[k]["recontact_index"] - zr.gaps[k]["entry_index"] for k in trav if k not in hits]
         first = {}
         for w in res["windows"] + res["cut_off"]:
             if w["gap"] is not None and w["gap"] not in first:
@@ -535,6 +538,7 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
     out["offsets"] = offsets
     out["gap_offsets"] = gap_offsets
     out["sep_offsets"] = sep_offsets
+    out["missed_gap_rows"] = missed_rows
     out["within2"] = sum(1 for o in offsets if abs(o) <= 2)
     out["err_median"] = float(np.median(errs)) if errs else None
     out["err_max"] = float(np.max(errs)) if errs else None
