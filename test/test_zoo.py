@@ -47,6 +47,13 @@ def test_summarise_counts_each_kind_once():
     assert s["covered"] == 1 and s["with_interval"] == 2
     assert s["false_steady"] == 1 and s["false_other"] == 1 and s.get("false_same_flank", 0) == 0
     assert s["published_on_false"] == 1
+    assert s["missed_gap_rows"] == []
+
+
+def test_summarise_gives_each_missed_traversal_its_gap_length():
+    r = _rec(GAPS)
+    s = summarise([(r, {"windows": [_win(301, 1)], "cut_off": []})])        # only the bounce (no traversal) found
+    assert s["found"] == 0 and s["missed_gap_rows"] == [50, -1]            # 250 - 200; the re-contact unknown
 
 
 def test_false_entry_after_a_same_flank_event():
