@@ -35,6 +35,7 @@ import numpy as np
 from jident_ros.identify.fusion import BETWEEN_Z, Verdict, fuse_verdict
 from jident_ros.identify.gap import (
     SHALLOW_GAP_REASON,
+    SHORT_BOUNCE_REASON,
     GapEstimate,
     NoGapError,
     WidthEstimate,
@@ -192,6 +193,7 @@ class WindowInput:
     width_estimate: Optional[WidthEstimate] = None
     raw_angles: bool = False
     shallow_gap: bool = False       # the flank detector's shallow gap (layout.FLAG_SHALLOW_GAP): no gap fit
+    bounce: bool = False            # ... its excursion came back to the flank it left (layout.FLAG_BOUNCE)
 
     @classmethod
     def from_window(cls, window) -> "WindowInput":
@@ -199,6 +201,15 @@ class WindowInput:
         return cls(window.as_dict(), window.entry_index, window.backlash_width_m, window.wheel_radius_m,
                    window.sample_period_s, window_id=window.window_id, entry_time_s=window.entry_time_s,
                    **detector_arguments(window))
+
+
+def _short_bounce(w: WindowInput, search_rows: int) -> Optional[str]:
+    """gap.SHORT_BOUNCE_REASON for a bounce's window (layout.FLAG_BOUNCE) whose gap, entry to re-contact row, is
+    shorter than the gap fit's change-point search; None otherwise."""
+    if not w.bounce or w.recontact_index is None:
+        return None
+    rows = int(w.recontact_index) - int(w.entry_index)
+    return SHORT_BOUNCE_REASON.format(rows=rows, search=search_rows) if 0 < rows < search_rows else None
 
 
 class Diagnoser:
@@ -316,9 +327,12 @@ class _WindowRun:
         w, dg, method = self.win, self.dg, self.dg.config.gap_method
         # raw angles, own K2 or none: the gap from the detector's re-contact row, never |alpha1 - alpha2| < K2/r
         raw_angles = w.width_estimate is not None or self.k2_unknown
-        if w.shallow_gap:                   # layout.FLAG_SHALLOW_GAP: no gap fit (gap.SHALLOW_GAP_REASON)
-            self.gap_reason = SHALLOW_GAP_REASON
-            self.problems.append(f"gap: {SHALLOW_GAP_REASON}")
+        model = dg.policy.drive_model(w.raw_angles, dg.system.motor)
+        # layout.FLAG_SHALLOW_GAP, or a bounce shorter than the change-point search (FLAG_BOUNCE): no gap fit
+        no_fit = SHALLOW_GAP_REASON if w.shallow_gap else _short_bounce(w, model.search_rows(w.sample_period_s))
+        if no_fit is not None:
+            self.gap_reason = no_fit
+            self.problems.append(f"gap: {no_fit}")
             return self.recontact_step()
         data = {(LOAD_ANGLE_KEY if k == "alpha2" else k): v for k, v in w.data.items()} if raw_angles else w.data
         try:
@@ -328,7 +342,7 @@ class _WindowRun:
                                         recontact_index=w.recontact_index,
                                         entry_uncertainty_samples=w.entry_uncertainty_samples,
                                         # torque accuracy, friction band, offset (x M_b); a real drive's: TYPICAL_DRIVE
-                                        model=dg.policy.drive_model(w.raw_angles, dg.system.motor))
+                                        model=model)
         except NoGapError as exc:
             self.gap_reason = str(exc)
             self.problems.append(f"gap: {exc}")

@@ -117,11 +117,15 @@ import numpy as np
 
 from jident_ros.stream.detector import BacklashDetector, Event, _positive
 from jident_ros.stream.filters import first_order_lowpass, savgol_filter
-from jident_ros.stream.layout import DEFAULT_CHANNELS, FLAG_SECOND_ENTRY, FLAG_SHALLOW_GAP, Window
+from jident_ros.stream.layout import DEFAULT_CHANNELS, FLAG_BOUNCE, FLAG_SECOND_ENTRY, FLAG_SHALLOW_GAP, Window
 from jident_ros.stream.rate import REFERENCE_SAMPLE_PERIOD_S, odd_samples, samples, samples_float
 
 #: Detector names of the ``detector`` parameter.
 DETECTORS = ("flank", "paper", "dynamics")
+
+
+#: :class:`WidthResult`'s ``how`` of an excursion that came back to the flank it left (the window gets FLAG_BOUNCE)
+BOUNCE_HOW = "bounce back to the same flank (width not observable)"
 
 
 @dataclass
@@ -1759,7 +1763,7 @@ def estimate_width(window: dict, entry_index: int, wheel_radius_m: float, sample
         return WidthResult(math.nan, math.nan, "no re-contact found", g)
     s = 1.0 if d[e] >= f_entry else -1.0          # direction in which delta left its flank
     if (d[g - 1] - d[g - 3]) * s <= 0:
-        return WidthResult(math.nan, math.nan, "bounce back to the same flank (width not observable)", g)
+        return WidthResult(math.nan, math.nan, BOUNCE_HOW, g)
     # a traversal: 2 K2/r from flank to flank, each end bracketed by the samples around the contact instant
     p_e, b_e = 0.5 * (d[e - 1] + d[e]), abs(step_in)
     p_g, b_g = 0.5 * (d[g - 1] + d[g]), abs(d[g] - d[g - 1])
@@ -2331,7 +2335,7 @@ class FlankDetector(BacklashDetector):
             self._scan_returns(cap, data, self._delta(win), e0, e, res.recontact_index)
         if self.second_windows and REBOUND_MAX_SHARE and not cap.returning:
             self._scan_rebound(cap, data, dep + shift)
-        flags = FLAG_SHALLOW_GAP if cap.shallow else 0
+        flags = (FLAG_SHALLOW_GAP if cap.shallow else 0) | (FLAG_BOUNCE if res.how == BOUNCE_HOW else 0)
         inside = [se for se in cap.second_entry_rows if dep + shift < se[0] < e0 + self.window_length]
         swallowed = ""
         if inside:

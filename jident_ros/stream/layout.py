@@ -66,7 +66,12 @@ FLAG_CUT_OFF = 2
 #: ... the flank detector's shallow gap (flank.SHALLOW_*: a slip drop's few samples past the coupling's zero twist):
 #: its entry and K2 count, its J1 is not fitted (identify.diagnosis.SHALLOW_GAP_REASON)
 FLAG_SHALLOW_GAP = 4
-FLAG_NAMES = {FLAG_SECOND_ENTRY: "second_entry", FLAG_CUT_OFF: "cut_off", FLAG_SHALLOW_GAP: "shallow_gap"}
+#: ... the flank detector's excursion came back to the flank it left (a bounce, no traversal: K2 not observable);
+#: nothing but the motor's own fit shows that the coupling let go (identify.diagnosis: a short one gets no J1,
+#: gap.SHORT_BOUNCE_REASON)
+FLAG_BOUNCE = 8
+FLAG_NAMES = {FLAG_SECOND_ENTRY: "second_entry", FLAG_CUT_OFF: "cut_off", FLAG_SHALLOW_GAP: "shallow_gap",
+              FLAG_BOUNCE: "bounce"}
 
 
 def flag_names(flags: int) -> list:
