@@ -194,6 +194,7 @@ class WindowInput:
     raw_angles: bool = False
     shallow_gap: bool = False       # the flank detector's shallow gap (layout.FLAG_SHALLOW_GAP): no gap fit
     bounce: bool = False            # ... its excursion came back to the flank it left (layout.FLAG_BOUNCE)
+    second_entry: bool = False      # ... another entry lies inside the window (layout.FLAG_SECOND_ENTRY)
 
     @classmethod
     def from_window(cls, window) -> "WindowInput":
@@ -204,9 +205,9 @@ class WindowInput:
 
 
 def _short_bounce(w: WindowInput, search_rows: int) -> Optional[str]:
-    """gap.SHORT_BOUNCE_REASON for a bounce's window (layout.FLAG_BOUNCE) whose gap, entry to re-contact row, is
-    shorter than the gap fit's change-point search; None otherwise."""
-    if not w.bounce or w.recontact_index is None:
+    """gap.SHORT_BOUNCE_REASON for a bounce's window (layout.FLAG_BOUNCE) that holds another entry (FLAG_SECOND_ENTRY)
+    and whose gap, entry to re-contact row, is shorter than the gap fit's change-point search; None otherwise."""
+    if not (w.bounce and w.second_entry) or w.recontact_index is None:
         return None
     rows = int(w.recontact_index) - int(w.entry_index)
     return SHORT_BOUNCE_REASON.format(rows=rows, search=search_rows) if 0 < rows < search_rows else None
@@ -328,7 +329,7 @@ class _WindowRun:
         # raw angles, own K2 or none: the gap from the detector's re-contact row, never |alpha1 - alpha2| < K2/r
         raw_angles = w.width_estimate is not None or self.k2_unknown
         model = dg.policy.drive_model(w.raw_angles, dg.system.motor)
-        # layout.FLAG_SHALLOW_GAP, or a bounce shorter than the change-point search (FLAG_BOUNCE): no gap fit
+        # layout.FLAG_SHALLOW_GAP, or a bounce before another entry, shorter than the change-point search: no gap fit
         no_fit = SHALLOW_GAP_REASON if w.shallow_gap else _short_bounce(w, model.search_rows(w.sample_period_s))
         if no_fit is not None:
             self.gap_reason = no_fit

@@ -206,16 +206,19 @@ SHALLOW_GAP_REASON = ("gap too short: a shallow gap (the motor ran only a few sa
                       "slip drop's short gap): its entry and K2 are reported, no J1 (the gap fits cannot tell so few "
                       "free rows from the motor moving the slipping load)")
 
-#: Why a short bounce's window (stream.layout.FLAG_BOUNCE: the excursion came back to the flank it left, no traversal)
-#: gets no gap fit (identify.diagnosis), formatted with its rows and the change-point search's.  A traversal shows by
-#: its geometry that the coupling let go (delta crossed the zone); a bounce shows it only by the motor's own fit, and
-#: over fewer rows than the fit's change-point search that fit cannot tell a free motor from one still held by a
-#: swinging coupling: DOL draws set 8's d8-02 (a soft coupling, k 3.1e4 N m/rad, in a slip reversal) swung back 0.7
-#: mrad short of the zone, 40 samples before its gap; the detector saw a bounce of 9 rows (19 with an Imu) and the gap
-#: stage published J1 +24 ... +34 % on three inputs, outside their intervals (docs/results.md, "Stop 35").
-SHORT_BOUNCE_REASON = ("gap too short: a bounce of {rows} rows (the motor came back to the flank it left: no traversal "
-                       "shows that the coupling let go) is shorter than the gap fit's change-point search ({search} "
-                       "rows): the fit cannot tell free rows from a coupling still swinging")
+#: Why a short bounce's window that holds another entry (stream.layout.FLAG_BOUNCE and FLAG_SECOND_ENTRY: the
+#: excursion came back toward the flank it left, no traversal, then went on to another entry inside the window) gets
+#: no gap fit (identify.diagnosis), formatted with its rows and the change-point search's.  A traversal shows by its
+#: geometry that the coupling let go (delta crossed the zone); a bounce shows it only by the motor's own fit, and over
+#: fewer rows than the fit's change-point search that fit cannot tell a free motor from one still held by a swinging
+#: coupling.  DOL draws set 8's d8-02 (a soft coupling, k 3.1e4 N m/rad, in a slip reversal) swung back 0.7 mrad
+#: short of the zone, 40 samples before its gap; the detector saw a bounce of 9 rows (19 with an Imu), the crossing
+#: after it a window of its own, and the gap stage published J1 +24 ... +34 % on three inputs, outside their
+#: intervals.  Every short bounce without the second entry was tried: it also took the J1 of the DOL zoo's slip drops
+#: (their only window, within 2.4 %) and 1-11 per DOL draws set (docs/results.md, "Stop 35").
+SHORT_BOUNCE_REASON = ("gap too short: a bounce of {rows} rows that goes on to another entry in its window is shorter "
+                       "than the gap fit's change-point search ({search} rows): the fit cannot tell free rows from the "
+                       "coupling's swing before that crossing (which has a window of its own)")
 
 #: How a NoGapError's message starts when the window's gap is there but cannot resolve J1 (too few samples in it,
 #: a standard error above MAX_RELATIVE_STD_ERROR): a fact about this window, not about the monitor's configuration

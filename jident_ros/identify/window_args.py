@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 
 from jident_ros.identify.gap import WidthEstimate
-from jident_ros.stream.layout import FLAG_BOUNCE, FLAG_SHALLOW_GAP, RAW_ANGLE_DETECTORS
+from jident_ros.stream.layout import FLAG_BOUNCE, FLAG_SECOND_ENTRY, FLAG_SHALLOW_GAP, RAW_ANGLE_DETECTORS
 
 #: The dynamics detector's entry row without a1 (from the motor angle) is known to +- this many samples
 #: (docs/results.md, "Entries from the dynamics": -5 ... +1 on our simulator, -9 ... -3 on the second drive).
@@ -38,7 +38,8 @@ def detector_arguments(window) -> dict:
     out = {"recontact_index": window.recontact_index if window.recontact_index >= 0 else None,
            "width_estimate": est, "raw_angles": True,
            "shallow_gap": bool(int(getattr(window, "flags", 0)) & FLAG_SHALLOW_GAP),
-           "bounce": bool(int(getattr(window, "flags", 0)) & FLAG_BOUNCE)}
+           "bounce": bool(int(getattr(window, "flags", 0)) & FLAG_BOUNCE),
+           "second_entry": bool(int(getattr(window, "flags", 0)) & FLAG_SECOND_ENTRY)}
     if kind == "dynamics" and "a1" not in window.channels:
         out["entry_uncertainty_samples"] = ENTRY_UNCERTAINTY_WITHOUT_A1
     if not math.isfinite(window.backlash_width_m) and (kind == "dynamics" or FLANK_WINDOWS_WITHOUT_K2):

@@ -67,8 +67,8 @@ FLAG_CUT_OFF = 2
 #: its entry and K2 count, its J1 is not fitted (identify.diagnosis.SHALLOW_GAP_REASON)
 FLAG_SHALLOW_GAP = 4
 #: ... the flank detector's excursion came back to the flank it left (a bounce, no traversal: K2 not observable);
-#: nothing but the motor's own fit shows that the coupling let go (identify.diagnosis: a short one gets no J1,
-#: gap.SHORT_BOUNCE_REASON)
+#: nothing but the motor's own fit shows that the coupling let go (identify.diagnosis: a short one that goes on to
+#: another entry in the window, FLAG_SECOND_ENTRY, gets no J1: gap.SHORT_BOUNCE_REASON)
 FLAG_BOUNCE = 8
 FLAG_NAMES = {FLAG_SECOND_ENTRY: "second_entry", FLAG_CUT_OFF: "cut_off", FLAG_SHALLOW_GAP: "shallow_gap",
               FLAG_BOUNCE: "bounce"}
