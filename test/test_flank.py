@@ -1494,19 +1494,12 @@ def test_a_slip_reversal_s_crossing_after_a_short_re_contact_gets_its_own_window
     entry the rules put in gap 0 (223) without a1.  With REBOUND_* the crossing gets its own window (244, -1); off: one
     window.  With a1 the capture's entry lies in the crossing (259): the rule opens nothing (gap 0 stays without a
     window, docs/results.md's seventeenth round)."""
-    from pathlib import Path
+    from draws_cuts import draws_cut
 
     from jident_ros.stream import flank
     if not on:
         monkeypatch.setattr(flank, "REBOUND_MAX_SHARE", 0.0)
-    d = np.load(Path(__file__).parent / "data" / "dol_draws_slip_reversal_rebound.npz")
-    q = 2.0 * math.pi / 2 ** 20
-    cols = [float(d[f"{key}_alpha10"]) + q * d[f"{key}_alpha1_counts"],
-            float(d[f"{key}_alpha20"]) + q * d[f"{key}_alpha2_counts"], d[f"{key}_m_el"].astype(float)]
-    ch = ("t", "alpha1", "alpha2", "m_el") + (("a1",) if f"{key}_a1" in d else ())
-    if "a1" in ch:
-        cols.append(d[f"{key}_a1"].astype(float))
-    data = np.column_stack([np.arange(cols[0].size) * 5e-4] + cols)
+    data, ch, d = draws_cut("dol_draws_slip_reversal_rebound.npz", key)
     got = []
     for batch in (data.shape[0], 137):
         det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16)

@@ -7,10 +7,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from draws_cuts import DATA, draws_cut
 
 from jident_ros.cli.offline import default_policy
 from jident_ros.config import load_method_config, load_system_config
@@ -20,8 +20,6 @@ from jident_ros.research.evaluation.raw_inputs import flank_detector, raw_record
 from jident_ros.stream.flank import FlankDetector
 from jident_ros.stream.layout import FLAG_BOUNCE, FLAG_SECOND_ENTRY, flag_names
 
-DATA = Path(__file__).parent / "data"
-
 
 @pytest.fixture(scope="module")
 def system():
@@ -29,15 +27,7 @@ def system():
 
 
 def _recording(name: str, key: str) -> tuple:
-    """(samples, channels) of a cut of a blind draw's recording (2^20-count encoders, as counts from the first row)."""
-    d = np.load(DATA / name)
-    q = 2.0 * math.pi / 2 ** 20
-    cols = [float(d[f"{key}_alpha10"]) + q * d[f"{key}_alpha1_counts"],
-            float(d[f"{key}_alpha20"]) + q * d[f"{key}_alpha2_counts"], d[f"{key}_m_el"].astype(float)]
-    ch = ("t", "alpha1", "alpha2", "m_el") + (("a1",) if f"{key}_a1" in d else ())
-    if "a1" in ch:
-        cols.append(d[f"{key}_a1"].astype(float))
-    return np.column_stack([np.arange(cols[0].size) * 5e-4] + cols), ch
+    return draws_cut(name, key)[:2]
 
 
 def _windows(data, ch) -> list:
