@@ -215,7 +215,7 @@ SHALLOW_GAP_REASON = ("gap too short: a shallow gap (the motor ran only a few sa
 #: short of the zone, 40 samples before its gap; the detector saw a bounce of 9 rows (19 with an Imu), the crossing
 #: after it a window of its own, and the gap stage published J1 +24 ... +34 % on three inputs, outside their
 #: intervals.  Every short bounce without the second entry was tried: it also took the J1 of the DOL zoo's slip drops
-#: (their only window, within 2.4 %) and 1-11 per DOL draws set (docs/results.md, "Stop 35").
+#: (their only window, within 2.4 %) and 1-11 on each of DOL draws sets 1-5 (docs/results.md, "Stop 35").
 SHORT_BOUNCE_REASON = ("gap too short: a bounce of {rows} rows that goes on to another entry in its window is shorter "
                        "than the gap fit's change-point search ({search} rows): the fit cannot tell free rows from the "
                        "coupling's swing before that crossing (which has a window of its own)")
