@@ -35,11 +35,10 @@ def detector_arguments(window) -> dict:
     if math.isfinite(window.backlash_width_estimate_m):
         est = WidthEstimate(float(window.backlash_width_estimate_m), float(window.backlash_width_se_m),
                             int(window.recontact_index), "flank")
+    flags = int(getattr(window, "flags", 0))
     out = {"recontact_index": window.recontact_index if window.recontact_index >= 0 else None,
-           "width_estimate": est, "raw_angles": True,
-           "shallow_gap": bool(int(getattr(window, "flags", 0)) & FLAG_SHALLOW_GAP),
-           "bounce": bool(int(getattr(window, "flags", 0)) & FLAG_BOUNCE),
-           "second_entry": bool(int(getattr(window, "flags", 0)) & FLAG_SECOND_ENTRY)}
+           "width_estimate": est, "raw_angles": True, "shallow_gap": bool(flags & FLAG_SHALLOW_GAP),
+           "bounce": bool(flags & FLAG_BOUNCE), "second_entry": bool(flags & FLAG_SECOND_ENTRY)}
     if kind == "dynamics" and "a1" not in window.channels:
         out["entry_uncertainty_samples"] = ENTRY_UNCERTAINTY_WITHOUT_A1
     if not math.isfinite(window.backlash_width_m) and (kind == "dynamics" or FLANK_WINDOWS_WITHOUT_K2):
