@@ -105,3 +105,15 @@ def test_only_a_bounce_shorter_than_the_search_before_another_entry_loses_its_fi
     assert resolution_limited(SHORT_BOUNCE_REASON)
     for one in (FLAG_BOUNCE, FLAG_SECOND_ENTRY):
         assert dg.diagnose(dataclasses.replace(w, flags=w.flags | one)).inertia_kgm2 == ref
+
+
+@pytest.mark.parametrize("rows, refused", [(1, True), (24, True), (25, False), (0, False)])
+def test_the_search_length_is_the_boundary(system, rows, refused):
+    """A bounce before another entry is refused up to 24 rows (the search is 25 at 2 kHz) and fitted from 25 on; a
+    re-contact at the entry row itself is no gap length (the gap stage's own reason, not this rule's)."""
+    rec = raw_recordings(system, (1.16,), (0.005,), steady_s=0.3, seed=4)[0]
+    w = [e.window for e in run_detector(flank_detector(system), rec) if e.kind == "window"][0]
+    marked = dataclasses.replace(w, flags=w.flags | FLAG_BOUNCE | FLAG_SECOND_ENTRY,
+                                 recontact_index=w.entry_index + rows)
+    r = Diagnoser(system, load_method_config(), DiagnosisConfig(image_method=False)).diagnose(marked)
+    assert (SHORT_BOUNCE_REASON.format(rows=rows, search=25) in (r.refused_reason or "")) is refused
