@@ -41,3 +41,31 @@ def test_an_undeclared_disc_error_is_fitted_and_taken_off(monkeypatch):
     assert exact.inertia_kgm2 == pytest.approx(1.1, rel=5e-3)
     monkeypatch.setattr(gap, "disc_corrected", lambda x, ts: (np.asarray(x, float), None))
     assert abs(_fit(_drive(1e-3)).inertia_kgm2 / 1.1 - 1) > 0.1
+
+
+def _swinging_tail(disc_rad: float, n: int = 1400, tau_s: float = 0.05):
+    """150 rad/s with a speed swing of 3 rad/s at 15 Hz decaying with ``tau_s`` from row 150 (a drive on line after a
+    slip reversal's re-contact), read by a 2^16 encoder with a disc error of ``disc_rad`` once and half of it twice per
+    revolution."""
+    t = np.arange(n) * TS
+    swing = np.where(t > 0.075, 3.0 * np.exp(-(t - 0.075) / tau_s) * np.sin(2 * np.pi * 15.0 * (t - 0.075)), 0.0)
+    theta = 0.3 + np.cumsum(150.0 + swing) * TS
+    theta = theta + disc_rad * (np.sin(theta + 0.3) + 0.5 * np.sin(2 * theta + 1.0))
+    q = 2 * np.pi / 2 ** 16
+    return np.floor(theta / q) * q
+
+
+def test_a_swinging_tail_leaves_the_disc_error_to_the_last_rows_that_turn_steadily(monkeypatch):
+    """The last 1000 rows still swing (the cubic cannot follow them: refused); the last 600 or 400 turn steadily and
+    give the disc's 200 / 100 µrad (DOL set 10's d10-04, whose J1 went out 11 % off with the error left on alpha1).
+    Without the shorter tails nothing is fitted; without a disc error the swing invents none."""
+    from jident_ros.stream import flank
+    x = _swinging_tail(2e-4)
+    _, coef = flank.disc_corrected(x, TS)
+    assert coef is not None
+    assert np.hypot(coef[0], coef[1]) == pytest.approx(2e-4, rel=0.05)
+    assert np.hypot(coef[2], coef[3]) == pytest.approx(1e-4, rel=0.1)
+    assert flank.disc_error(x, x.size - 1000, x.size) is None
+    assert flank.disc_corrected(_swinging_tail(0.0), TS)[1] is None
+    monkeypatch.setattr(flank, "DISC_SHORTER_TAILS", ())
+    assert flank.disc_corrected(x, TS)[1] is None

@@ -920,6 +920,13 @@ DISC_MIN_REVOLUTIONS = 3.0
 DISC_MIN_NET_SHARE = 0.9
 DISC_MIN_GAIN = 1.5
 DISC_MAX_RMS_FLOORS = 2.0
+#: Where the last DISC_TAIL_SAMPLES rows do not qualify, the last DISC_SHORTER_TAILS rows are tried, in order (each
+#: still DISC_MIN_REVOLUTIONS or more, the same gates): a slip reversal of a drive on line swings its speed for
+#: hundreds of rows after the re-contact, which the cubic cannot follow over 1000 rows, while its last 400-600 turn
+#: steadily (DOL set 10's d10-04: the last 1000 rows 295 urad rms about the cubic, refused; the last 600 the disc's
+#: 200 / 100 urad at the floor; left on alpha1, the gap fit's 19 rows published J1 -11 %).  Chosen on that window;
+#: tested on the zoo, the DOL zoo, the variants and the draws (docs/results.md, stop 36)
+DISC_SHORTER_TAILS = (600, 400)
 
 
 def _disc_columns(angle: np.ndarray) -> np.ndarray:
@@ -999,10 +1006,15 @@ def _poly_basis(n: int) -> np.ndarray:
 
 def disc_corrected(angle: np.ndarray, sample_period_s: float) -> tuple:
     """(``angle`` with its encoder's disc error taken off, the coefficients (:func:`disc_error` over the last
-    DISC_TAIL_SAMPLES rows at 2 kHz, converted to the recording's rows)), or (``angle``, None) where it shows none:
+    DISC_TAIL_SAMPLES rows at 2 kHz, converted to the recording's rows, else the last DISC_SHORTER_TAILS rows)), or
+    (``angle``, None) where it shows none:
     the gap stage's (jident_ros/identify/gap.py) and the detector's (FlankDetector._disc_corrected)."""
     x = np.asarray(angle, float)
-    coef = disc_error(x, x.size - samples(DISC_TAIL_SAMPLES, sample_period_s), x.size)
+    coef = None
+    for tail in (DISC_TAIL_SAMPLES, *DISC_SHORTER_TAILS):
+        coef = disc_error(x, x.size - samples(tail, sample_period_s), x.size)
+        if coef is not None:
+            break
     return (x, None) if coef is None else (x - _disc_columns(x) @ coef, coef)
 
 
