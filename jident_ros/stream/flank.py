@@ -1006,9 +1006,9 @@ def _poly_basis(n: int) -> np.ndarray:
 
 def disc_corrected(angle: np.ndarray, sample_period_s: float) -> tuple:
     """(``angle`` with its encoder's disc error taken off, the coefficients (:func:`disc_error` over the last
-    DISC_TAIL_SAMPLES rows at 2 kHz, converted to the recording's rows, else the last DISC_SHORTER_TAILS rows)), or
-    (``angle``, None) where it shows none:
-    the gap stage's (jident_ros/identify/gap.py) and the detector's (FlankDetector._disc_corrected)."""
+    DISC_TAIL_SAMPLES rows at 2 kHz, converted to the recording's rows, else over the last DISC_SHORTER_TAILS rows)),
+    or (``angle``, None) where it shows none: the gap stage's (jident_ros/identify/gap.py) and the detector's
+    (FlankDetector._disc_corrected)."""
     x = np.asarray(angle, float)
     coef = None
     for tail in (DISC_TAIL_SAMPLES, *DISC_SHORTER_TAILS):
