@@ -152,7 +152,9 @@ class _FlankCapture:
                                # other flank (a traversal), decided at the next contact
     start_row: int = 0         # stream row of the capture's first row
     returning: bool = False    # a traversal back inside another window (its flank: the other window's re-contact)
-    after_row: int = -1        # a crossing after a bounce (REBOUND_*): its entry must lie after this stream row
+    after_row: int = -1        # a crossing after a bounce (REBOUND_*): its entry must lie after this stream row ...
+    turn_row: int = -1         # ... and not before the bounce's re-contact (its deepest return, stream row); else at
+    level_row: int = -1        # this stream row, where delta passes the window's entry level again (REBOUND_*)
     shallow: bool = False      # its excursion ended in a contact short of min_travel_rad (SHALLOW_*): a window only
                                # when it passed the zero-twist point, decided when it is complete
 
@@ -371,8 +373,10 @@ RETURN_SHALLOW_REST_DEPARTURES = 1.0
 
 #: A window's own excursion (after its entry) that left its flank by at most this share of the zone delta then crosses
 #: in the window (:meth:`FlankDetector._scan_rebound`: a slip's bounce, not a traversal; RETURN_TURN_SHARE's 0.1, not
-#: tuned: the DOL draws' slip reversals' bounces 0.008-0.034 of their zones: d1-01, d1-06, d3-03, d4-02, d4-04) ...
-REBOUND_MAX_SHARE = 0.1
+#: tuned: the DOL draws' slip reversals' bounces 0.008-0.034 of their zones: d1-01, d1-06, d3-03, d4-02, d4-04; a soft
+#: coupling's untwist counts in the excursion: d11-03's, k 3.0e4 N m/rad, 0.101, its crossing missed; 0.15 since stop 37,
+#: chosen on DOL set 11) ...
+REBOUND_MAX_SHARE = 0.15
 #: ... came back toward it by at least this many quanta of delta (its smallest step, at least ANGLE_MODEL_FLOOR_RAD and
 #: the white noise of the contact before the window's entry: the contact's dither on those drives' other events 1-4
 #: quanta, the slip reversals' returns 1.1-2.5 mrad, 13-54 quanta: chosen on d4-02 and d4-04, DOL set 4) ...
@@ -384,8 +388,10 @@ REBOUND_MIN_QUANTA = 4.0
 REBOUND_MIN_DEPARTURE_SHARE = 0.5
 #: ... to within this share of its farthest move off the flank (a re-contact on the flank it left, at a lower torque:
 #: d4-02's coupling carries 50 N m there against 123 before; the slip reversals' -0.11 ... 0.44 on d1-01, d1-06, d3-03,
-#: d4-02, d4-04) -- chosen on DOL set 4 (d4-02, d4-04) and looked at on sets 1 and 3, tested on sets 5 and 6
-REBOUND_BACK_SHARE = 0.5
+#: d4-02, d4-04) -- chosen on DOL set 4 (d4-02, d4-04) and looked at on sets 1 and 3, tested on sets 5 and 6; 0.5 missed
+#: the crossings of d5-12, d9-04, d10-07 and d11-03 (0.50-0.63: a soft coupling's untwist is most of the excursion, and
+#: the re-contact twists it back only partly), 0.7 since stop 37, chosen on DOL sets 5, 9, 10, 11
+REBOUND_BACK_SHARE = 0.7
 
 #: On a coarse encoder (delta's smallest step / sqrt 12 beyond FREE_MAX_NOISE_RAD: 2^13), a window's own departure
 #: counts from where delta left its flank by this many counts (:meth:`FlankDetector._coarse_departure`): a contact on
@@ -2329,6 +2335,9 @@ class FlankDetector(BacklashDetector):
         if shallow_rc:
             shift = shallow[0] - dep               # the contact lost where the coupling's twist is zero (SHALLOW_*)
         entry_row = cap.start_row + dep + shift
+        if entry_row < cap.turn_row:
+            shift = cap.level_row - cap.start_row - dep     # a crossing after a bounce walked back through its turn
+            entry_row = cap.level_row
         if any(abs(entry_row - r) <= self._n(DUPLICATE_ENTRY_SAMPLES) for r in self._emitted_entry_rows) \
                 or entry_row <= cap.after_row:
             # the same traversal by two rules (a returning capture from a window's edge scan and the contact rule's:
@@ -2549,7 +2558,15 @@ class FlankDetector(BacklashDetector):
             return                                  # the contact rule found it already
         if self._open_return(cap, data, lo + t, cap.start_row + lo + far, float(d[lo + t])):
             # its entry must come after the window's own: one its rules walk back to it is the window's excursion
-            self._new_caps[-1].after_row = cap.start_row + entry + self._n(RETURN_MATCH_SAMPLES)
+            new = self._new_caps[-1]
+            new.after_row = cap.start_row + entry + self._n(RETURN_MATCH_SAMPLES)
+            # ... and not before the turn, where delta was back in contact: one the traversal-back walk puts there (a
+            # soft coupling's re-contact twists it again, and the walk ran through the turn: d11-03 24 samples early)
+            # lies where delta passes the level it left its flank at in the window's own entry (the zero twist of
+            # the coupling, where the bounce let go: d11-03 +1; the rules' entries, kept otherwise, -2 ... +4)
+            past = np.nonzero((1.0 if off[far] > 0 else -1.0) * (d[lo + t:lo + far + 1] - d[entry]) >= 0)[0]
+            new.turn_row = cap.start_row + lo + t
+            new.level_row = new.turn_row + int(past[0]) if past.size else new.turn_row
 
     def _scan_profile(self, d: np.ndarray, margin: float) -> tuple:
         """For :meth:`_scan_returns`: (whether a contact as the tracker takes it, contact_samples within
