@@ -2335,8 +2335,9 @@ class FlankDetector(BacklashDetector):
         if shallow_rc:
             shift = shallow[0] - dep               # the contact lost where the coupling's twist is zero (SHALLOW_*)
         entry_row = cap.start_row + dep + shift
-        if entry_row < cap.turn_row:
-            shift = cap.level_row - cap.start_row - dep     # a crossing after a bounce walked back through its turn
+        if cap.after_row < entry_row < cap.turn_row:
+            # a crossing after a bounce walked back through its turn, not to the window's own entry (REBOUND_*)
+            shift = cap.level_row - cap.start_row - dep
             entry_row = cap.level_row
         if any(abs(entry_row - r) <= self._n(DUPLICATE_ENTRY_SAMPLES) for r in self._emitted_entry_rows) \
                 or entry_row <= cap.after_row:
