@@ -307,3 +307,24 @@ def test_a_j1_from_an_early_entry_whose_gap_fit_found_the_true_gap_is_told_apart
     md = zd.markdown({"rows": {"d": s2}, "what": {"d": "drawn"}, "failed": {}, "seed": 9, "count": 1, "elapsed_s": 1.0,
                       "model": "dol"}, "cmd", "abc")
     assert "**1 of them published a J1**" in md and "1 J1 published on an early entry whose gap fit" in md
+
+
+def test_a_second_window_of_a_gap_has_its_j1_judged_and_shown():
+    """A rule that opens one more capture inside a gap that has a window (a turn inside the zone taken for a bounce's
+    re-contact: blind DOL d3-06) gives the traversal a second window.  Its J1 was skipped by the counts; it is judged
+    now: kept apart from the first window's, shown in the draws' summary, and more than 10 % off counts as off in the
+    targets table."""
+    from jident_ros.research.evaluation import draws_targets
+    from jident_ros.research.evaluation import zoo_draws as zd
+    gaps = [{"entry_index": 200, "recontact_index": 300, "traversal": True}]
+    wins = [_win(199, 0), _win(231, 0, j1=1.16 * 1.12, ci=(1.2, 1.4)), _win(260, 0, published=False)]
+    s = summarise([(_rec(gaps), {"windows": wins, "cut_off": []})])
+    assert s["repeat_windows"] == 2 and s["repeat_published"] == 1 and s["repeat_off"] == 1
+    assert s["repeat_errors"] == [pytest.approx(0.12)] and s.get("repeat_covered", 0) == 0
+    assert s["trav_published"] == 1 and s.get("published_off", 0) == 0 and s["covered"] == 1     # the first window's
+    md = zd.markdown({"rows": {"d": s}, "what": {"d": "drawn"}, "failed": {}, "seed": 9, "count": 1, "elapsed_s": 1.0,
+                      "model": "dol"}, "cmd", "abc")
+    assert "; 2 second windows of a gap (1 published, their J1 +12.0 … +12.0 %, 0/1 covering, **1 more than 10 % off**)" in md
+    cells = draws_targets.row({"model": "dol", "seed": 9, "rows": {"d": s}, "commit": "abc",
+                               "groups": {"JointState 2^16 clean|slip drop": s}})
+    assert cells["off"] == "**1**" and cells["false"] == "0 (0; 2 second windows of a gap)"

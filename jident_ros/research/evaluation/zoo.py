@@ -438,6 +438,7 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
     torque_pub, torque_unpub = [], []     # truth_gap_torque of the traversals' first windows, published or not
     false_errs = []         # J1 published on a false entry, relative to the drive's J1
     false_in_gap = []       # ... on a false entry whose gap fit lies in a true traversal's rows
+    repeat_errs = []        # J1 published by a second window of a gap, relative to the drive's J1
     missed_rows = []        # the true gap's length (samples, entry to re-contact; -1: unknown) of each traversal missed
     for zr, res in items:
         s["recordings"] += 1
@@ -492,7 +493,15 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
                     false_errs.append(w["j1"] / zr.inertia_kgm2 - 1)
                 continue
             if k in seen:
+                # a second window of the same gap (a rule that opened one more capture in it): its J1 is judged too
                 s["repeat_windows"] += 1
+                if w["published"]:
+                    s["repeat_published"] += 1
+                    e = w["j1"] / zr.inertia_kgm2 - 1
+                    repeat_errs.append(e)
+                    s["repeat_off"] += abs(e) > OFF
+                    ci = w.get("ci95")
+                    s["repeat_covered"] += bool(ci and ci[0] <= zr.inertia_kgm2 <= ci[1])
                 continue
             seen.add(k)
             kind = "trav" if zr.gaps[k]["traversal"] else "bounce"
@@ -537,6 +546,7 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
     out = dict(s)
     out["offsets"] = offsets
     out["gap_offsets"] = gap_offsets
+    out["repeat_errors"] = repeat_errs
     out["sep_offsets"] = sep_offsets
     out["missed_gap_rows"] = missed_rows
     out["within2"] = sum(1 for o in offsets if abs(o) <= 2)

@@ -319,11 +319,30 @@ def markdown(res: dict, command: str, commit: str) -> str:
               + (f", **{tot['false_published']} of them published a J1** (a J1 where the truth has no gap misleads "
                  "whatever its value)" if tot["false_published"] else "")
               + (f"; {tot['false_in_gap']} J1 published on an early entry whose gap fit lies in a true traversal's rows "
-                 f"({tot['false_in_gap_off']} of them more than 10 % off)" if tot["false_in_gap"] else "") + "."]
+                 f"({tot['false_in_gap_off']} of them more than 10 % off)" if tot["false_in_gap"] else "")
+              + _repeat_text(res["rows"].values()) + "."]
     if res["failed"]:
         lines += ["", "Not simulated: " + "; ".join(f"{n}: {w}" for n, w in res["failed"].items()) + "."]
     lines += [""] + zoo.torque_truth_table([("all drives", zoo._merge(res["rows"].values()))], ", ".join(s[0] for s in sensors))
     return "\n".join(lines) + "\n"
+
+
+def _repeat_text(rows) -> str:
+    """'; N second windows of a gap (P published, their J1 -a … +b %, C covering)' over the drives' summaries, '' without
+    any: a rule that opened one more capture inside a gap that has a window; its J1 is judged as the first's (an
+    error beyond 10 % counts as off in draws_targets)."""
+    n = sum(s.get("repeat_windows", 0) for s in rows)
+    errs = [e for s in rows for e in s.get("repeat_errors", [])]
+    if not n:
+        return ""
+    text = f"; {n} second window{'s' if n != 1 else ''} of a gap"
+    if errs:
+        cov = sum(s.get("repeat_covered", 0) for s in rows)
+        span = f"{100 * min(errs):+.1f} … {100 * max(errs):+.1f} %"
+        off = sum(1 for e in errs if abs(e) > zoo.OFF)
+        text += f" ({len(errs)} published, their J1 {span}, {cov}/{len(errs)} covering" + (
+            f", **{off} more than 10 % off**)" if off else ")")
+    return text
 
 
 def main(argv=None) -> int:
