@@ -324,7 +324,7 @@ def test_a_second_window_of_a_gap_has_its_j1_judged_and_shown():
     assert s["trav_published"] == 1 and s.get("published_off", 0) == 0 and s["covered"] == 1     # the first window's
     md = zd.markdown({"rows": {"d": s}, "what": {"d": "drawn"}, "failed": {}, "seed": 9, "count": 1, "elapsed_s": 1.0,
                       "model": "dol"}, "cmd", "abc")
-    assert "; 2 second windows of a gap (1 published, their J1 +12.0 … +12.0 %, 0/1 covering, **1 more than 10 % off**)" in md
+    assert "; 2 second windows of a gap (1 published, its J1 +12.0 %, 0/1 covering, **1 more than 10 % off**)" in md
     cells = draws_targets.row({"model": "dol", "seed": 9, "rows": {"d": s}, "commit": "abc",
                                "groups": {"JointState 2^16 clean|slip drop": s}})
     assert cells["off"] == "**1**" and cells["false"] == "0 (0; 2 second windows of a gap)"

@@ -338,9 +338,10 @@ def _repeat_text(rows) -> str:
     text = f"; {n} second window{'s' if n != 1 else ''} of a gap"
     if errs:
         cov = sum(s.get("repeat_covered", 0) for s in rows)
-        span = f"{100 * min(errs):+.1f} … {100 * max(errs):+.1f} %"
+        span = (f"its J1 {100 * errs[0]:+.1f} %" if len(errs) == 1 else
+                f"their J1 {100 * min(errs):+.1f} … {100 * max(errs):+.1f} %")
         off = sum(1 for e in errs if abs(e) > zoo.OFF)
-        text += f" ({len(errs)} published, their J1 {span}, {cov}/{len(errs)} covering" + (
+        text += f" ({len(errs)} published, {span}, {cov}/{len(errs)} covering" + (
             f", **{off} more than 10 % off**)" if off else ")")
     return text
 
