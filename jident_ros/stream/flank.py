@@ -1618,6 +1618,10 @@ RECONTACT_MIN_TRAVEL_QUANTA = 30.0
 #: delta back within this share of its farthest travel so far is a bounce's return to the flank it left: the search
 #: ends there.
 RECONTACT_RETURN_SHARE = 0.2
+#: A move below this share of delta's farthest in the window decides nothing: not the side it left in over
+#: RECONTACT_SPAN rows (:func:`_travel`), nor a return toward the flank (:func:`_first_return`) -- not tuned: a count's
+#: flicker against a traversal of tens or hundreds of counts
+RECONTACT_SIDE_SHARE = 0.02
 
 
 def _travel(d: np.ndarray, e: int, span: int = RECONTACT_SPAN) -> np.ndarray:
@@ -1645,14 +1649,27 @@ def _delta_quantum(d: np.ndarray, e: int, angle_quantum_rad: float, first: int =
     return float(steps.min()) if steps.size else 0.0
 
 
-def _comes_back(D: np.ndarray, angle_quantum_rad: float) -> bool:
-    """Whether delta comes back near the flank it left in the window (within RECONTACT_RETURN_SHARE of its farthest
-    travel so far): a bounce (the second drive's 2^13 bounce windows, whose traversal back across the zone followed:
-    read as their contact, J1 was fitted over 24 contact rows, +2.8 % and another class named), a slip's excursion (the
-    DOL sweep's soft coupling at 2^13: its slow turning point held still, +11.2 % published), or a traversal and a
-    traversal back.  The delta rule does not read those windows: the acceleration's row stands."""
+def _first_return(D: np.ndarray, angle_quantum_rad: float) -> Optional[int]:
+    """The first row (from the entry) where delta comes back near the flank it left (within RECONTACT_RETURN_SHARE of
+    its farthest travel so far, that travel beyond RECONTACT_MIN_QUANTA quanta and RECONTACT_SIDE_SHARE of its farthest
+    in the window: a count's flicker at the entry is no return), None when it never does: a bounce (the second drive's
+    2^13 bounce windows, whose traversal back across the zone followed: read as their contact, J1 was fitted over 24
+    contact rows, +2.8 % and another class named), a slip's excursion (the DOL sweep's soft coupling at 2^13: its slow
+    turning point held still, +11.2 % published), or a traversal and a traversal back."""
     run = np.maximum.accumulate(D)
-    return bool(np.any((D <= RECONTACT_RETURN_SHARE * run) & (run > RECONTACT_MIN_QUANTA * max(angle_quantum_rad, 1e-12))))
+    floor = max(RECONTACT_MIN_QUANTA * max(angle_quantum_rad, 1e-12), RECONTACT_SIDE_SHARE * float(np.max(D)))
+    back = np.flatnonzero((D <= RECONTACT_RETURN_SHARE * run) & (run > floor))
+    return int(back[0]) if back.size else None
+
+
+def _before_return(D: np.ndarray, angle_quantum_rad: float) -> np.ndarray:
+    """D up to delta's first return toward the flank it left (:func:`_first_return`): the delta rule reads only the
+    rows before it.  Before stop 37 it read no window with a return, and the acceleration's row stood: a traversal and
+    a traversal back in one window kept it (vector set 11's s11-12, a speed step down at 2^14: 68 mrad across, then
+    back; the row 8 samples after the entry, the gap fit undetermined, the return scan without edges).  A bounce's or a
+    slip's excursion before its return stays below RECONTACT_MIN_TRAVEL_QUANTA: still not read."""
+    r = _first_return(D, angle_quantum_rad)
+    return D if r is None else D[:r]
 
 
 def _delta_arrived(d: np.ndarray, e: int, g: int, angle_quantum_rad: float,
@@ -1662,9 +1679,9 @@ def _delta_arrived(d: np.ndarray, e: int, g: int, angle_quantum_rad: float,
     span = samples(RECONTACT_SPAN, sample_period_s)
     if not e < g < d.size or d.size - e < span + 6:
         return True                 # nothing to check against: the acceleration's row (or none) stands
-    D = _travel(d, e, span)
-    if _comes_back(D, angle_quantum_rad):
-        return True
+    D = _before_return(_travel(d, e, span), angle_quantum_rad)
+    if g - e >= D.size:
+        return True                 # a re-contact row after delta came back: the acceleration's row stands
     far = float(np.max(D))
     if not far > RECONTACT_MIN_TRAVEL_QUANTA * max(angle_quantum_rad, 1e-12):
         return True
@@ -1687,10 +1704,10 @@ def delta_recontact(delta: np.ndarray, entry_index: int, angle_quantum_rad: floa
     fit, search = samples(RECONTACT_FIT, sample_period_s), samples(RECONTACT_SEARCH, sample_period_s)
     if d.size - e < span + 6:
         return -1
-    D = _travel(d, e, span)
-    if _comes_back(D, angle_quantum_rad) or not float(np.max(D)) > RECONTACT_MIN_TRAVEL_QUANTA * max(angle_quantum_rad,
-                                                                                                      1e-12):
+    D = _before_return(_travel(d, e, span), angle_quantum_rad)
+    if D.size < span + 6 or not float(np.max(D)) > RECONTACT_MIN_TRAVEL_QUANTA * max(angle_quantum_rad, 1e-12):
         return -1
+    d = d[:e + D.size]
     v = (D[span:] - D[:-span]) / span                      # v[i]: delta's speed toward the far flank over i..i+span
     vmax = np.maximum.accumulate(v)
     floor = RECONTACT_MIN_QUANTA * max(angle_quantum_rad, 1e-12) / span
