@@ -1618,10 +1618,10 @@ RECONTACT_MIN_TRAVEL_QUANTA = 30.0
 #: delta back within this share of its farthest travel so far is a bounce's return to the flank it left: the search
 #: ends there.
 RECONTACT_RETURN_SHARE = 0.2
-#: A move below this share of delta's farthest in the window decides nothing: not the side it left in over
-#: RECONTACT_SPAN rows (:func:`_travel`), nor a return toward the flank (:func:`_first_return`) -- not tuned: a count's
-#: flicker against a traversal of tens or hundreds of counts
-RECONTACT_SIDE_SHARE = 0.02
+#: delta's travel before its first return at least this share of its farthest in the window: a traversal and its
+#: traversal back, whose traversal the delta rule reads (:func:`_before_return`); less, a bounce or a slip's excursion
+#: before a crossing, not read -- not tuned: the half of the window's farthest travel
+RECONTACT_RETURN_TRAVERSAL_SHARE = 0.5
 
 
 def _travel(d: np.ndarray, e: int, span: int = RECONTACT_SPAN) -> np.ndarray:
@@ -1651,25 +1651,29 @@ def _delta_quantum(d: np.ndarray, e: int, angle_quantum_rad: float, first: int =
 
 def _first_return(D: np.ndarray, angle_quantum_rad: float) -> Optional[int]:
     """The first row (from the entry) where delta comes back near the flank it left (within RECONTACT_RETURN_SHARE of
-    its farthest travel so far, that travel beyond RECONTACT_MIN_QUANTA quanta and RECONTACT_SIDE_SHARE of its farthest
-    in the window: a count's flicker at the entry is no return), None when it never does: a bounce (the second drive's
+    its farthest travel so far, that travel beyond RECONTACT_MIN_QUANTA quanta), None when it never does: a bounce (the
+    second drive's
     2^13 bounce windows, whose traversal back across the zone followed: read as their contact, J1 was fitted over 24
     contact rows, +2.8 % and another class named), a slip's excursion (the DOL sweep's soft coupling at 2^13: its slow
     turning point held still, +11.2 % published), or a traversal and a traversal back."""
     run = np.maximum.accumulate(D)
-    floor = max(RECONTACT_MIN_QUANTA * max(angle_quantum_rad, 1e-12), RECONTACT_SIDE_SHARE * float(np.max(D)))
-    back = np.flatnonzero((D <= RECONTACT_RETURN_SHARE * run) & (run > floor))
+    back = np.flatnonzero((D <= RECONTACT_RETURN_SHARE * run) & (run > RECONTACT_MIN_QUANTA * max(angle_quantum_rad, 1e-12)))
     return int(back[0]) if back.size else None
 
 
 def _before_return(D: np.ndarray, angle_quantum_rad: float) -> np.ndarray:
-    """D up to delta's first return toward the flank it left (:func:`_first_return`): the delta rule reads only the
-    rows before it.  Before stop 37 it read no window with a return, and the acceleration's row stood: a traversal and
-    a traversal back in one window kept it (vector set 11's s11-12, a speed step down at 2^14: 68 mrad across, then
-    back; the row 8 samples after the entry, the gap fit undetermined, the return scan without edges).  A bounce's or a
-    slip's excursion before its return stays below RECONTACT_MIN_TRAVEL_QUANTA: still not read."""
+    """The rows of D the delta rule reads: all of them when delta never comes back toward the flank it left
+    (:func:`_first_return`); those before the return when the travel before it is a traversal, at least
+    RECONTACT_RETURN_TRAVERSAL_SHARE of delta's farthest in the window (a traversal and its traversal back); none
+    otherwise (a bounce or a slip's excursion, then a crossing: the acceleration's row stands, as it did for every
+    window with a return before stop 37).  Why: a traversal and its traversal back kept the acceleration's row (vector
+    set 11's s11-12, a speed step down at 2^14: 68 mrad across, then back; the row 8 samples after the entry, the gap
+    fit undetermined, the return scan without edges); read on all its rows, a bounce before a crossing took the
+    crossing's far flank for its re-contact (DOL set 3's d3-03: its J1 +1 % lost)."""
     r = _first_return(D, angle_quantum_rad)
-    return D if r is None else D[:r]
+    if r is None:
+        return D
+    return D[:r] if float(np.max(D[:r])) >= RECONTACT_RETURN_TRAVERSAL_SHARE * float(np.max(D)) else D[:0]
 
 
 def _delta_arrived(d: np.ndarray, e: int, g: int, angle_quantum_rad: float,
