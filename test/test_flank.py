@@ -1557,6 +1557,40 @@ def test_a_soft_coupling_s_crossing_after_its_bounce_gets_its_own_window_not_bef
         assert len(got[0]) == 2 and abs(got[0][1] - g1) <= 3
 
 
+@pytest.mark.parametrize("key, rule", [("js", "on"), ("imu", "on"), ("js", "off")])
+def test_a_traversal_and_its_traversal_back_in_one_window_read_the_re_contact_from_delta(monkeypatch, key, rule):
+    """Vector set 11's s11-12 (zoo_draws --model vector --seed 11), its speed step down as JointState 2^16 clean ('js')
+    and JointState+Imu 2^16 30 dB ('imu') (test/data/vector_draws_step_down_return.npz, rows 1000-3599 as fed to the
+    detector, its 2^14 encoders as 2^20 counts): delta crosses 68 mrad (gap 0, rows 215-284), rests 28 samples at the far
+    flank and crosses back (gap 1, 312-386), one window.  Without a1 the motor's acceleration drops 8 samples after the
+    entry; the delta rule did not read a window in which delta comes back ('off'), so that row stood: K2 0.2 mm for
+    2.97, and the return scan, which needs the traversal's edges, found no traversal back.  Read up to delta's first
+    return, the re-contact lies at the far flank (281) and the traversal back has its window (308, true 312); with a1
+    the same as before."""
+    from draws_cuts import draws_cut
+
+    from jident_ros.stream import flank
+    if rule == "off":
+        monkeypatch.setattr(flank, "_before_return",
+                            lambda D, q: D[:0] if flank._first_return(D, q) is not None else D)
+    data, ch, d = draws_cut("vector_draws_step_down_return.npz", key)
+    got = []
+    for batch in (data.shape[0], 137):
+        det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16)
+        events = [e for k in range(0, data.shape[0], batch) for e in det.push(data[k:k + batch], ch)] + det.finish()
+        got.append([(round(e.window.entry_time_s / 5e-4), e.window.recontact_index - e.window.entry_index,
+                     e.window.backlash_width_estimate_m) for e in events if getattr(e, "window", None)])
+    assert [g[:2] for g in got[0]] == [g[:2] for g in got[1]]          # batches do not matter
+    g0, g1 = (int(x) for x in d["gap_entries"])
+    (e0, rc0, k2), *rest = got[0]
+    assert abs(e0 - g0) <= 6
+    if rule == "off":
+        assert rc0 == 8 and k2 < 5e-4 and rest == []
+    else:
+        assert abs(e0 + rc0 - 284) <= 3 and abs(k2 / 2.97e-3 - 1) < 0.08
+        assert len(rest) == 1 and abs(rest[0][0] - g1) <= 5
+
+
 @pytest.mark.parametrize("share, after", [(True, True), (False, True), (True, False), (False, False)])
 def test_a_turn_inside_the_zone_after_a_window_s_entry_is_no_crossing_of_its_own(monkeypatch, share, after):
     """Vector set 1's s1-02 (zoo_draws --model vector --seed 1), its light load reversal as JointState 2^16 clean

@@ -1618,6 +1618,10 @@ RECONTACT_MIN_TRAVEL_QUANTA = 30.0
 #: delta back within this share of its farthest travel so far is a bounce's return to the flank it left: the search
 #: ends there.
 RECONTACT_RETURN_SHARE = 0.2
+#: delta's travel before its first return at least this share of its farthest in the window: a traversal and its
+#: traversal back, whose traversal the delta rule reads (:func:`_before_return`); less, a bounce or a slip's excursion
+#: before a crossing, not read -- not tuned: the half of the window's farthest travel
+RECONTACT_RETURN_TRAVERSAL_SHARE = 0.5
 
 
 def _travel(d: np.ndarray, e: int, span: int = RECONTACT_SPAN) -> np.ndarray:
@@ -1645,14 +1649,31 @@ def _delta_quantum(d: np.ndarray, e: int, angle_quantum_rad: float, first: int =
     return float(steps.min()) if steps.size else 0.0
 
 
-def _comes_back(D: np.ndarray, angle_quantum_rad: float) -> bool:
-    """Whether delta comes back near the flank it left in the window (within RECONTACT_RETURN_SHARE of its farthest
-    travel so far): a bounce (the second drive's 2^13 bounce windows, whose traversal back across the zone followed:
-    read as their contact, J1 was fitted over 24 contact rows, +2.8 % and another class named), a slip's excursion (the
-    DOL sweep's soft coupling at 2^13: its slow turning point held still, +11.2 % published), or a traversal and a
-    traversal back.  The delta rule does not read those windows: the acceleration's row stands."""
+def _first_return(D: np.ndarray, angle_quantum_rad: float) -> Optional[int]:
+    """The first row (from the entry) where delta comes back near the flank it left (within RECONTACT_RETURN_SHARE of
+    its farthest travel so far, that travel beyond RECONTACT_MIN_QUANTA quanta), None when it never does: a bounce (the
+    second drive's
+    2^13 bounce windows, whose traversal back across the zone followed: read as their contact, J1 was fitted over 24
+    contact rows, +2.8 % and another class named), a slip's excursion (the DOL sweep's soft coupling at 2^13: its slow
+    turning point held still, +11.2 % published), or a traversal and a traversal back."""
     run = np.maximum.accumulate(D)
-    return bool(np.any((D <= RECONTACT_RETURN_SHARE * run) & (run > RECONTACT_MIN_QUANTA * max(angle_quantum_rad, 1e-12))))
+    back = np.flatnonzero((D <= RECONTACT_RETURN_SHARE * run) & (run > RECONTACT_MIN_QUANTA * max(angle_quantum_rad, 1e-12)))
+    return int(back[0]) if back.size else None
+
+
+def _before_return(D: np.ndarray, angle_quantum_rad: float) -> np.ndarray:
+    """The rows of D the delta rule reads: all of them when delta never comes back toward the flank it left
+    (:func:`_first_return`); those before the return when the travel before it is a traversal, at least
+    RECONTACT_RETURN_TRAVERSAL_SHARE of delta's farthest in the window (a traversal and its traversal back); none
+    otherwise (a bounce or a slip's excursion, then a crossing: the acceleration's row stands, as it did for every
+    window with a return before stop 37).  Why: a traversal and its traversal back kept the acceleration's row (vector
+    set 11's s11-12, a speed step down at 2^14: 68 mrad across, then back; the row 8 samples after the entry, the gap
+    fit undetermined, the return scan without edges); read on all its rows, a bounce before a crossing took the
+    crossing's far flank for its re-contact (DOL set 3's d3-03: its J1 +1 % lost)."""
+    r = _first_return(D, angle_quantum_rad)
+    if r is None:
+        return D
+    return D[:r] if float(np.max(D[:r])) >= RECONTACT_RETURN_TRAVERSAL_SHARE * float(np.max(D)) else D[:0]
 
 
 def _delta_arrived(d: np.ndarray, e: int, g: int, angle_quantum_rad: float,
@@ -1662,9 +1683,9 @@ def _delta_arrived(d: np.ndarray, e: int, g: int, angle_quantum_rad: float,
     span = samples(RECONTACT_SPAN, sample_period_s)
     if not e < g < d.size or d.size - e < span + 6:
         return True                 # nothing to check against: the acceleration's row (or none) stands
-    D = _travel(d, e, span)
-    if _comes_back(D, angle_quantum_rad):
-        return True
+    D = _before_return(_travel(d, e, span), angle_quantum_rad)
+    if g - e >= D.size:
+        return True                 # a re-contact row after delta came back: the acceleration's row stands
     far = float(np.max(D))
     if not far > RECONTACT_MIN_TRAVEL_QUANTA * max(angle_quantum_rad, 1e-12):
         return True
@@ -1687,10 +1708,10 @@ def delta_recontact(delta: np.ndarray, entry_index: int, angle_quantum_rad: floa
     fit, search = samples(RECONTACT_FIT, sample_period_s), samples(RECONTACT_SEARCH, sample_period_s)
     if d.size - e < span + 6:
         return -1
-    D = _travel(d, e, span)
-    if _comes_back(D, angle_quantum_rad) or not float(np.max(D)) > RECONTACT_MIN_TRAVEL_QUANTA * max(angle_quantum_rad,
-                                                                                                      1e-12):
+    D = _before_return(_travel(d, e, span), angle_quantum_rad)
+    if D.size < span + 6 or not float(np.max(D)) > RECONTACT_MIN_TRAVEL_QUANTA * max(angle_quantum_rad, 1e-12):
         return -1
+    d = d[:e + D.size]
     v = (D[span:] - D[:-span]) / span                      # v[i]: delta's speed toward the far flank over i..i+span
     vmax = np.maximum.accumulate(v)
     floor = RECONTACT_MIN_QUANTA * max(angle_quantum_rad, 1e-12) / span
