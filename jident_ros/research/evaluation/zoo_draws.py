@@ -44,7 +44,9 @@ from jident_ros.research.vector_drive.model import DriveParams
 PROTOCOL_NOTE = ("A set is a blind test only until something is changed because of it: docs/results.md's stop sections "
                  "say which sets rules were chosen on (DOL sets 1–4 and vector sets 1, 5, 6 by stop 33; DOL set 7 in stop 34, "
                  "the known torque delay and smoothing declared; DOL set 8 in stop 35, a short bounce before a crossing "
-                 "not fitted; DOL set 10 in stop 36, an encoder's disc error fitted over shorter tails).")
+                 "not fitted; DOL set 10 in stop 36, an encoder's disc error fitted over shorter tails; DOL sets 5, 9, 10 "
+                 "and 11 in stop 37, a crossing after a soft coupling's bounce, and vector set 11 and DOL set 3, the "
+                 "re-contact of a traversal and its traversal back read from delta).")
 
 #: The torque accuracy a drive's data sheet typically states for sensored vector control, ± this of rated torque: what
 #: a user who has nothing better declares, as ``torque_accuracy`` and as ``torque_offset_rel_base``, the way
