@@ -78,7 +78,8 @@ def row(res: dict) -> dict:
         "found": _frac(alls.get("found", 0), alls.get("traversals", 0), 1.0),
         "false": (f"{false_target}" if not false_target else f"**{false_target}**")
         + f" ({alls.get('false_other', 0)}"
-        + (f"; {alls['repeat_windows']} second windows of a gap" if alls.get("repeat_windows") else "") + ")",
+        + (f"; {alls['repeat_windows']} second window{'s' if alls['repeat_windows'] != 1 else ''} of a gap"
+           if alls.get("repeat_windows") else "") + ")",
         "entry": _frac(within, len(offsets), 0.9),
         "clean": _frac(clean.get("trav_published", 0), clean.get("traversals", 0), 0.8),
         "noisy": _frac(noisy.get("trav_published", 0), noisy.get("traversals", 0), 0.5),
