@@ -1484,6 +1484,18 @@ def test_a_slip_that_leaves_the_coupling_twisted_is_no_entry(monkeypatch, key, o
         assert len(wins) == 1 and det.flank_shifts == 0
 
 
+def _cut_windows(data: np.ndarray, ch: tuple) -> list:
+    """The windows of a draws cut (test/draws_cuts.py) through the flank detector, the rows pushed at once; pushed in
+    batches of 137 rows the windows are the same (entries and re-contact rows: batches do not matter)."""
+    got = []
+    for batch in (data.shape[0], 137):
+        det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16)
+        events = [e for k in range(0, data.shape[0], batch) for e in det.push(data[k:k + batch], ch)] + det.finish()
+        got.append([e.window for e in events if getattr(e, "window", None)])
+    assert [(w.entry_time_s, w.recontact_index) for w in got[0]] == [(w.entry_time_s, w.recontact_index) for w in got[1]]
+    return got[0]
+
+
 @pytest.mark.parametrize("key, on", [("js", True), ("js", False), ("imu", True)])
 def test_a_slip_reversal_s_crossing_after_a_short_re_contact_gets_its_own_window(monkeypatch, key, on):
     """DOL set 4's d4-02 (zoo_draws --model dol --seed 4), its slip reversal as JointState 2^16 clean ('js') and as
@@ -1500,12 +1512,7 @@ def test_a_slip_reversal_s_crossing_after_a_short_re_contact_gets_its_own_window
     if not on:
         monkeypatch.setattr(flank, "REBOUND_MAX_SHARE", 0.0)
     data, ch, d = draws_cut("dol_draws_slip_reversal_rebound.npz", key)
-    got = []
-    for batch in (data.shape[0], 137):
-        det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16)
-        events = [e for k in range(0, data.shape[0], batch) for e in det.push(data[k:k + batch], ch)] + det.finish()
-        got.append([round(e.window.entry_time_s / 5e-4) for e in events if getattr(e, "window", None)])
-    assert got[0] == got[1]                                 # batches do not matter
+    got = [[round(w.entry_time_s / 5e-4) for w in _cut_windows(data, ch)]]
     g0, g1 = (int(x) for x in d["gap_entries"])
     if key == "imu":
         assert got[0] == [259] and 0 < 259 - g1 <= 20
@@ -1540,12 +1547,7 @@ def test_a_soft_coupling_s_crossing_after_its_bounce_gets_its_own_window_not_bef
             return finish(self, cap)
         monkeypatch.setattr(flank.FlankDetector, "_finish_flank", no_turn)
     data, ch, d = draws_cut("dol_draws_soft_rebound.npz", key)
-    got = []
-    for batch in (data.shape[0], 137):
-        det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16)
-        events = [e for k in range(0, data.shape[0], batch) for e in det.push(data[k:k + batch], ch)] + det.finish()
-        got.append([round(e.window.entry_time_s / 5e-4) for e in events if getattr(e, "window", None)])
-    assert got[0] == got[1]                                 # batches do not matter
+    got = [[round(w.entry_time_s / 5e-4) for w in _cut_windows(data, ch)]]
     g0, g1 = (int(x) for x in d["gap_entries"])
     first = 233 if key == "js" else 223
     assert got[0][0] == first and abs(first - g0) <= 5
@@ -1574,13 +1576,8 @@ def test_a_traversal_and_its_traversal_back_in_one_window_read_the_re_contact_fr
         monkeypatch.setattr(flank, "_before_return",
                             lambda D, q: D[:0] if flank._first_return(D, q) is not None else D)
     data, ch, d = draws_cut("vector_draws_step_down_return.npz", key)
-    got = []
-    for batch in (data.shape[0], 137):
-        det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16)
-        events = [e for k in range(0, data.shape[0], batch) for e in det.push(data[k:k + batch], ch)] + det.finish()
-        got.append([(round(e.window.entry_time_s / 5e-4), e.window.recontact_index - e.window.entry_index,
-                     e.window.backlash_width_estimate_m) for e in events if getattr(e, "window", None)])
-    assert [g[:2] for g in got[0]] == [g[:2] for g in got[1]]          # batches do not matter
+    got = [[(round(w.entry_time_s / 5e-4), w.recontact_index - w.entry_index, w.backlash_width_estimate_m)
+            for w in _cut_windows(data, ch)]]
     g0, g1 = (int(x) for x in d["gap_entries"])
     (e0, rc0, k2), *rest = got[0]
     assert abs(e0 - g0) <= 6
