@@ -1652,10 +1652,9 @@ def _delta_quantum(d: np.ndarray, e: int, angle_quantum_rad: float, first: int =
 def _first_return(D: np.ndarray, angle_quantum_rad: float) -> Optional[int]:
     """The first row (from the entry) where delta comes back near the flank it left (within RECONTACT_RETURN_SHARE of
     its farthest travel so far, that travel beyond RECONTACT_MIN_QUANTA quanta), None when it never does: a bounce (the
-    second drive's
-    2^13 bounce windows, whose traversal back across the zone followed: read as their contact, J1 was fitted over 24
-    contact rows, +2.8 % and another class named), a slip's excursion (the DOL sweep's soft coupling at 2^13: its slow
-    turning point held still, +11.2 % published), or a traversal and a traversal back."""
+    second drive's 2^13 bounce windows, whose traversal back across the zone followed: read as their contact, J1 was
+    fitted over 24 contact rows, +2.8 % and another class named), a slip's excursion (the DOL sweep's soft coupling at
+    2^13: its slow turning point held still, +11.2 % published), or a traversal and a traversal back."""
     run = np.maximum.accumulate(D)
     back = np.flatnonzero((D <= RECONTACT_RETURN_SHARE * run) & (run > RECONTACT_MIN_QUANTA * max(angle_quantum_rad, 1e-12)))
     return int(back[0]) if back.size else None
