@@ -93,8 +93,9 @@ samples) — the rule of :func:`jident_ros.identify.gap.gap_interval`'s "signatu
 that keeps its acceleration across the gap; a line-fed motor's torque falls as it speeds up, and a coarse encoder's
 second difference is noise.  So a traversal's row is checked against delta itself (:func:`delta_recontact`): where
 delta has not yet come near its farthest travel at that row (still crossing the zone), the contact is where delta's
-travel stops and holds, located at the kink there.  Windows in which delta comes back to the flank it left (a
-bounce, a slip's excursion, a traversal back) keep the acceleration's row.
+travel stops and holds, located at the kink there.  Windows in which delta comes back to the flank it left keep the
+acceleration's row (a bounce, a slip's excursion before a crossing), except a traversal and its traversal back, read
+up to the return (:func:`_before_return`).
 
 Same batch API, events and drop reasons as :class:`~jident_ros.stream.detector.BacklashDetector` (which it
 extends), so the windowing node and ``jident diagnose`` take either.  The result does not depend on how a
