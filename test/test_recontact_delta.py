@@ -121,3 +121,37 @@ def test_travel_of_a_few_quanta_is_not_read():
     assert flank.delta_recontact(small, e, q) == -1
     assert flank._delta_arrived(small, e, e + 5, q)
     assert abs(flank.delta_recontact(d, e, q) - contact) <= 2
+
+
+def _there_and_back():
+    """_traversal's window, then delta crosses back to the flank it left (from row 260, 100 rows) and rests there: a
+    traversal and its traversal back in one window (vector set 11's s11-12)."""
+    d, e, contact = _traversal(rows=260)
+    back = d[-1] - (d[-1] - d[e - 1]) * np.sin(np.linspace(0.0, np.pi / 2, 100)) ** 2
+    return np.concatenate([d, back, np.full(100, d[e - 1])]), e, contact
+
+
+def test_a_traversal_and_its_traversal_back_are_read_up_to_the_return(monkeypatch):
+    """delta comes back to its flank, but the travel before the return is the window's farthest: the delta rule reads
+    the rows before the return (the re-contact at the far flank, not the acceleration's early row); with
+    RECONTACT_RETURN_TRAVERSAL_SHARE above 1 (no such window read, the rule before stop 37) it gives none."""
+    d, e, contact = _there_and_back()
+    assert flank._first_return(flank._travel(d, e), 0.0) is not None
+    assert abs(flank.delta_recontact(d, e, 0.0) - contact) <= 2
+    assert not flank._delta_arrived(d, e, e + 8, 0.0)
+    monkeypatch.setattr(flank, "RECONTACT_RETURN_TRAVERSAL_SHARE", 1.01)
+    assert flank.delta_recontact(d, e, 0.0) == -1
+    assert flank._delta_arrived(d, e, e + 8, 0.0)
+
+
+def test_a_bounce_before_a_crossing_is_not_read_at_any_share_below_its_own(monkeypatch):
+    """The bounce of test_bounce_then_traversal_back_is_not_the_contact travels 0.02 of the crossing's 0.1 before its
+    return: below RECONTACT_RETURN_TRAVERSAL_SHARE, so nothing is read (-1; DOL set 3's d3-03 lost its J1 when every
+    window with a return was read).  With the share at 0 the bounce's rows are read and its turn inside the zone is
+    taken for the contact."""
+    d, e, contact = _traversal()
+    bounce = np.concatenate([np.zeros(60), 0.02 * np.sin(np.linspace(0, np.pi, 40)), np.zeros(20)])
+    d2 = np.concatenate([bounce, d[e:] + 0.0])
+    assert flank.delta_recontact(d2, 60, 0.0) == -1
+    monkeypatch.setattr(flank, "RECONTACT_RETURN_TRAVERSAL_SHARE", 0.0)
+    assert 60 < flank.delta_recontact(d2, 60, 0.0) < 100                # inside the bounce, 20 rows long
