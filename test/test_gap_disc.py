@@ -10,6 +10,13 @@ from jident_ros.identify.gap_free import GapModel
 TS = 5e-4
 
 
+def _speed_swing(t: np.ndarray, start_s: float, tau_s: float) -> np.ndarray:
+    """A drive on line after a slip reversal's re-contact: its speed swings by 3 rad/s at 15 Hz from ``start_s`` on,
+    decaying with ``tau_s``."""
+    after = np.maximum(t - start_s, 0.0)
+    return np.where(t >= start_s, 3.0 * np.exp(-after / tau_s) * np.sin(2 * np.pi * 15.0 * after), 0.0)
+
+
 def _drive(disc_rad: float, n: int = 1400, entry: int = 60, recontact: int = 150, j1: float = 1.1,
            swing_tau_s: float = 0.0):
     """150 rad/s in contact, free over [entry, recontact) under a torque swinging ± 300 N m, in contact again after it
@@ -22,9 +29,7 @@ def _drive(disc_rad: float, n: int = 1400, entry: int = 60, recontact: int = 150
     m = np.where(free, 100.0 + 300.0 * np.sin(2 * np.pi * (tf - entry * TS) / 0.03), 100.0)
     w1 = 150.0 + np.cumsum(np.where(free, m, 0.0) / j1) * TS / fine
     if swing_tau_s:
-        after = np.maximum(tf - recontact * TS, 0.0)
-        w1 = w1 + np.where(tf >= recontact * TS, 3.0 * np.exp(-after / swing_tau_s) * np.sin(2 * np.pi * 15.0 * after),
-                           0.0)
+        w1 = w1 + _speed_swing(tf, recontact * TS, swing_tau_s)
     theta = (np.cumsum(w1) * TS / fine + 0.3)[::fine]
     theta = theta + disc_rad * (np.sin(theta + 0.3) + 0.5 * np.sin(2 * theta + 1.0))
     q = 2 * np.pi / 2 ** 16
@@ -54,8 +59,7 @@ def _swinging_tail(disc_rad: float, n: int = 1400, tau_s: float = 0.05):
     slip reversal's re-contact), read by a 2^16 encoder with a disc error of ``disc_rad`` once and half of it twice per
     revolution."""
     t = np.arange(n) * TS
-    swing = np.where(t > 0.075, 3.0 * np.exp(-(t - 0.075) / tau_s) * np.sin(2 * np.pi * 15.0 * (t - 0.075)), 0.0)
-    theta = 0.3 + np.cumsum(150.0 + swing) * TS
+    theta = 0.3 + np.cumsum(150.0 + _speed_swing(t, 0.075, tau_s)) * TS
     theta = theta + disc_rad * (np.sin(theta + 0.3) + 0.5 * np.sin(2 * theta + 1.0))
     q = 2 * np.pi / 2 ** 16
     return np.floor(theta / q) * q
