@@ -1668,3 +1668,26 @@ def _dol_draw_cut(name: str, key: str):
     a2 = float(d[f"{key}_alpha20"]) + q * d[f"{key}_alpha2_counts"]
     ch = ("t", "alpha1", "alpha2", "m_el")
     return d, np.column_stack([np.arange(a1.size) * 5e-4, a1, a2, d[f"{key}_m_el"].astype(float)]), ch
+
+
+@pytest.mark.parametrize("key, on", [("js", True), ("imu", True), ("js", False), ("imu", False)])
+def test_a_soft_coupling_s_twist_under_a_speed_step_up_is_no_entry(monkeypatch, key, on):
+    """Vector set 14's s14-01 (zoo_draws --model vector --seed 14), its speed step up as JointState 2^16 clean ('js') and
+    JointState+Imu 2^16 30 dB ('imu') (test/data/vector_draws_step_up_soft_twist.npz, rows 1000-3599 as fed to the
+    detector): the torque steps from -86 N m to the drive's limit, -359 N m, and the softest coupling drawn (k 1.57e4
+    N m/rad) twists 24 mrad deeper into its flank (beyond deeper_travel_factor x min_travel_rad, 20 mrad), rings at
+    21 Hz, and untwists 13 mrad when the torque falls back at row ~1050.  No gap (the zone is 31 mrad and the coupling
+    never lets go).  With DEEPER_CONTACTS the deeper contact (m_el -359 N m, 4 x the contact it left) is a same-flank
+    change, and the ring's swing back and the untwist count their travel from the level before the step: no window.
+    Off: 2 and 3 false entries, as before."""
+    from draws_cuts import draws_cut
+
+    from jident_ros.stream import flank
+    monkeypatch.setattr(flank, "DEEPER_CONTACTS", on)
+    data, ch, d = draws_cut("vector_draws_step_up_soft_twist.npz", key)
+    assert d["gap_entries"].size == 0
+    got = [round(w.entry_time_s / 5e-4) for w in _cut_windows(data, ch)]
+    if on:
+        assert got == []
+    else:
+        assert len(got) == (2 if key == "js" else 3) and got[0] > 200 and got[-1] > 1000

@@ -311,6 +311,19 @@ SHALLOW_PAST_QUANTA = 2.0
 SHALLOW_AT_ZERO_TWIST = True
 
 
+#: With m_el, a move deeper into the flank (delta moving with the torque its contact carries) that ends in a contact
+#: deeper on that flank carrying m_el of the same sign, the contact it left at most UNTWIST_MAX_TORQUE_SHARE of it (the
+#: untwist rule's share, mirrored: the torque at least doubled), is a same-flank torque change however far delta went:
+#: the coupling twisted more under more torque (the tracker's deeper_travel_factor x min_travel_rad alone let a soft
+#: coupling's 24 mrad twist under a speed step up through: vector set 14's s14-01, k 1.57e4 N m/rad, m_el -86 ->
+#: -359 N m, the torque limit).  The level before the move stays the reference of the moves back while the contacts
+#: lie deeper than it by more than the departure threshold (a ringing twist's swings back, and its untwist when the
+#: torque falls back, count their travel from there).  The share, not "any more torque": our simulator's traversal
+#: (the slip lets the motor run through the zone with its own torque) ends in a contact with 4 % more m_el of the
+#: same sign (test_flank's raw recordings).  Chosen on vector set 14 (s14-01) and our simulator; False:
+#: deeper_travel_factor alone, as before
+DEEPER_CONTACTS = True
+
 #: Two windows whose entries (absolute rows) lie this close are one traversal's: the second is not given out.
 DUPLICATE_ENTRY_SAMPLES = 2
 
@@ -2012,10 +2025,12 @@ class FlankDetector(BacklashDetector):
         self._held_x = np.empty((0, len(self.channels)))     # rows waiting for their confirmation rows
         self._held_d = np.empty(0)
         self._skip = 0                          # samples of a spike still to skip
-        self._tent: Optional[tuple] = None      # (reference level, side, travel needed) of the last entry
+        self._tent: Optional[tuple] = None      # (reference level, side, travel needed, m_el of the contact left
+        #                                         on a move deeper into the flank, else None) of the last entry
         self._travelled = False
         self._recent_aux = np.empty(0)          # m_el of the _recent rows (the contact's torque sign)
         self._torque_sign = 0.0                 # sign of m_el over the current contact (0: not significant)
+        self._torque_nm = 0.0                   # m_el over the current contact (0: not significant)
         self._ref_flank: Optional[float] = None  # the flank level before a same-flank move deeper into the flank
         self._last_entry_captured = False
 
@@ -2061,24 +2076,29 @@ class FlankDetector(BacklashDetector):
                         self._recent_aux = seq_aux[-(L - 1):]
                     return events
                 k = int(np.argmax(ok))
-                cancelled = False
-                if self._tent is not None:
-                    if not self._note_travel(seq[:k + L]):
-                        events.append(("cancel", i + k + L - carried - 1))
-                        cancelled = True
-                        if self._tent[1] != self._torque_sign:     # back from a deeper move: reference done
-                            self._ref_flank = None
-                    else:
-                        self._ref_flank = None
-                    self._tent = None
-                if not cancelled:
-                    events.append(("contact", i + k + L - carried - 1, float(runs[k].mean())))
-                self._torque_sign = 0.0
+                level = float(runs[k].mean())
+                torque = 0.0                        # m_el over the new contact (0: not significant or no m_el)
                 if seq_aux is not None:
                     ra = seq_aux[k:k + L]
                     mu = float(ra.mean())
                     if abs(mu) > self.k_sigma * float(ra.std(ddof=1)) / math.sqrt(L):
-                        self._torque_sign = 1.0 if mu > 0 else -1.0
+                        torque = mu
+                cancelled = False
+                if self._tent is not None:
+                    if not self._note_travel(seq[:k + L]) or self._deeper_contact(level, torque):
+                        events.append(("cancel", i + k + L - carried - 1))
+                        cancelled = True
+                        if self._tent[1] != self._torque_sign and (
+                                not DEEPER_CONTACTS or self._ref_flank is None
+                                or self._torque_sign * (level - self._ref_flank) <= self.threshold_rad):
+                            self._ref_flank = None          # back from a deeper move: reference done
+                    else:
+                        self._ref_flank = None
+                    self._tent = None
+                if not cancelled:
+                    events.append(("contact", i + k + L - carried - 1, level))
+                self._torque_sign = 0.0 if torque == 0.0 else math.copysign(1.0, torque)
+                self._torque_nm = torque
                 self._recent_aux = np.empty(0)
                 self._flank = float(runs[k].mean())
                 self._sigma = float(runs[k].std(ddof=1))
@@ -2121,10 +2141,11 @@ class FlankDetector(BacklashDetector):
                     # it stays the reference of the move back
                     if self._ref_flank is None:
                         self._ref_flank = float(prev[k])
-                    self._tent = (float(prev[k]), side, self.deeper_travel_factor * self.min_travel_rad)
+                    self._tent = (float(prev[k]), side, self.deeper_travel_factor * self.min_travel_rad,
+                                  self._torque_nm)
                 else:
                     ref = float(prev[k]) if self._ref_flank is None else self._ref_flank
-                    self._tent = (ref, side, self.min_travel_rad)
+                    self._tent = (ref, side, self.min_travel_rad, None)
             else:
                 self._tent = None
             self._travelled = False
@@ -2133,11 +2154,22 @@ class FlankDetector(BacklashDetector):
             i += k + 1      # the departure sample itself cannot be part of the next contact run
         return events
 
+    def _deeper_contact(self, level: float, torque: float) -> bool:
+        """Whether the last entry's move deeper into the flank (with the torque its contact carried) ended in a
+        contact deeper on that flank carrying m_el of the same sign, the contact it left at most
+        UNTWIST_MAX_TORQUE_SHARE of it (DEEPER_CONTACTS): the coupling twisted more under more torque, a same-flank
+        torque change, however far delta went."""
+        if not DEEPER_CONTACTS or self._tent is None or self._tent[3] is None:
+            return False
+        ref, side, _, before = self._tent
+        return before * torque > 0.0 and abs(before) <= UNTWIST_MAX_TORQUE_SHARE * abs(torque) \
+            and side * (level - ref) > 0.0
+
     def _note_travel(self, seq: np.ndarray) -> bool:
         """Whether the excursion of the last entry has gone the travel it needs beyond its reference level, in
         the direction it left (so far)."""
         if self._tent is not None and not self._travelled and seq.size:
-            ref, side, need = self._tent
+            ref, side, need = self._tent[:3]
             self._travelled = bool(np.max(side * (seq - ref)) >= need)
         return self._travelled
 
