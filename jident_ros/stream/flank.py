@@ -71,6 +71,10 @@ and on what the clutch does, not on inequality (1):
   slip reversal's bounce and its crossing).  A window's own excursion that ends in a contact on the flank it left short
   of ``min_travel_rad`` (a same-flank torque change) keeps its window when, with m_el, delta passed the coupling's
   zero-twist point of the two contacts (SHALLOW_*: a slip drop's short gap), its entry and re-contact at that point.
+  With m_el, a move deeper into the flank (with the torque its contact carries) needs ``deeper_travel_factor`` x
+  ``min_travel_rad``, and is no entry however far it went when it ends in a contact carrying at least twice the torque
+  of the same sign (DEEPER_CONTACTS: a soft coupling twisting under a speed step up); the moves back count their
+  travel from the level before it while the contacts stay deeper.
 
 **Width estimate** (per window; docs/model.md's convention: theta_b = K2/r is the half-width, the flanks lie
 at +-K2/r from the centre):
@@ -1862,7 +1866,8 @@ class FlankDetector(BacklashDetector):
                                    direction delta left
     deeper_travel_factor : float   with m_el: delta moving *with* the torque the contact carries (sign of m_el
                                    over the contact, when significant) goes deeper into the flank (more torque,
-                                   more twist): an entry only after this many min_travel_rad (4: 20 mrad)
+                                   more twist): an entry only after this many min_travel_rad (4: 20 mrad), and
+                                   not when its next contact carries at least twice that torque (DEEPER_CONTACTS)
     """
 
     #: The window header's ``detector`` field.
