@@ -229,6 +229,14 @@ DRIFT_MIN_Z = 3.0
 DRIFT_MAX_RMS_SIGMAS = 3.0
 
 
+#: free_departure's least squares at the first candidate of its search (DRIFT_BACK_SAMPLES before the departure, the
+#: history allowing) locates no turn: the line runs through the whole search, whatever lies before it (the DOL drive's
+#: light load reversal d6-03: delta flickers one count on its flank, untwists from 23 samples before the contact loss,
+#: and the fit's edge, 40 before the departure, put the entry 33 early, a false entry, the traversal missed); the
+#: departure stands.  Chosen on d6-03; False: the edge taken, as before
+DRIFT_NOT_AT_EDGE = True
+
+
 def free_departure(delta: np.ndarray, departure: int, first: int, noise_rad: float,
                    back: Optional[int] = None, sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S) -> int:
     """The entry row moved back from ``departure`` (not before ``first``) to where delta's free curvature starts,
@@ -262,6 +270,8 @@ def free_departure(delta: np.ndarray, departure: int, first: int, noise_rad: flo
     rss, e, coef, X = float(rss_all[k]), int(cand[k]), coefs[k], X[k]
     if e >= departure or not math.sqrt(rss / y.size) <= DRIFT_MAX_RMS_SIGMAS * noise_rad:
         return departure
+    if DRIFT_NOT_AT_EDGE and k == 0 and lo_e > first:
+        return departure                          # the least squares at the search's edge: no turn located (below)
     v, c2 = float(coef[1]), float(coef[2])
     v_dep = v + 2.0 * c2 * (departure - e)
     side = 1.0 if v_dep >= 0 else -1.0
