@@ -1677,24 +1677,12 @@ def _travel(d: np.ndarray, e: int, span: int = RECONTACT_SPAN) -> np.ndarray:
 def _delta_quantum(d: np.ndarray, e: int, angle_quantum_rad: float, first: int = 0, below: float = math.inf) -> float:
     """The quantum of delta: the configured encoders', else the smallest step delta makes in rows first..e (before the
     entry: whole counts of a quantised angle at rest on its flank; a continuous angle's is tiny and guards nothing),
-    not a float rounding, below ``below`` (not a jump) and at least QUANTUM_MEDIAN_SHARE of the median step (not an
-    interpolated fraction of a count)."""
+    not a float rounding, and below ``below`` (not a jump)."""
     if angle_quantum_rad > 0:
         return float(angle_quantum_rad)
     steps = np.abs(np.diff(d[first:e]))
     steps = steps[(steps > 1e-9) & (steps < below)]
-    if not steps.size:
-        return 0.0
-    return float(steps[steps >= QUANTUM_MEDIAN_SHARE * np.median(steps)].min())
-
-
-#: :func:`_delta_quantum` reads the smallest step of delta at least this share of its median step: stamps interpolated
-#: onto the sample grid (a jittered clock) leave sub-count steps where a count changes between two stamps (vector set
-#: 10's s10-01, 2^14 counts: 0.5-3 µrad beside 370-381 µrad), and the re-contact rules took a one-count flicker for a
-#: return (its re-contact 2 rows after the entry, gap 109 rows).  0.05: far below a count's share of the median step at
-#: rest on a flank (one count, 1), far above the interpolation's (0.01); on continuous noise it doubles the smallest
-#: step, still a small fraction of the noise.  Chosen on s10-01
-QUANTUM_MEDIAN_SHARE = 0.05
+    return float(steps.min()) if steps.size else 0.0
 
 
 def _first_return(D: np.ndarray, angle_quantum_rad: float) -> Optional[int]:
