@@ -1717,3 +1717,25 @@ def test_an_entry_inside_a_traversal_s_gap_gets_no_second_window(monkeypatch, ke
         assert len(got) == 1 and det.counts["entry_in_gap"] == 1
     else:
         assert got == [first, 227] and det.counts["entry_in_gap"] == 0
+
+
+@pytest.mark.parametrize("on", [True, False])
+def test_free_departure_at_the_edge_of_its_search_locates_no_turn(monkeypatch, on):
+    """DOL set 6's d6-03 (zoo_draws --model dol --seed 6), its light load reversal as JointState 2^16 clean
+    (test/data/dol_draws_light_reversal_flicker.npz, rows 1000-3599 as fed to the detector): delta flickers one count
+    on its flank, untwists from about row 209 and loses contact at 232 (gap to 535); the departure is 239.
+    free_departure's line-then-parabola fit took the first candidate of its search, 40 rows before the departure:
+    the entry 199, before delta moved, a false entry with its re-contact 2 rows later, and the traversal missed
+    ('off').  With DRIFT_NOT_AT_EDGE the departure stands: 239, +7, the traversal found."""
+    from draws_cuts import draws_cut
+
+    from jident_ros.stream import flank
+    monkeypatch.setattr(flank, "DRIFT_NOT_AT_EDGE", on)
+    data, ch, d = draws_cut("dol_draws_light_reversal_flicker.npz", "js")
+    wins = _cut_windows(data, ch)
+    got = [(round(w.entry_time_s / 5e-4), w.recontact_index) for w in wins]
+    g = int(d["gap_entries"][0])
+    if on:
+        assert len(got) == 1 and 0 < got[0][0] - g <= 8 and got[0][1] > 300
+    else:
+        assert got == [(199, 50)] and g - 199 > 30
