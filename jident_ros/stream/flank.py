@@ -2416,17 +2416,7 @@ class FlankDetector(BacklashDetector):
             # a crossing after a bounce walked back through its turn, not to the window's own entry (REBOUND_*)
             shift = cap.level_row - cap.start_row - dep
             entry_row = cap.level_row
-        if ENTRY_IN_GAP and any(e + self._n(DUPLICATE_ENTRY_SAMPLES) < entry_row < g - self._n(DUPLICATE_ENTRY_SAMPLES)
-                                for e, g in self._emitted_gaps):
-            # inside the gap of a traversal given out before: the same gap's second window (ENTRY_IN_GAP)
-            self.counts["entry_in_gap"] += 1
-            return None
-        if any(abs(entry_row - r) <= self._n(DUPLICATE_ENTRY_SAMPLES) for r in self._emitted_entry_rows) \
-                or entry_row <= cap.after_row:
-            # the same traversal by two rules (a returning capture from a window's edge scan and the contact rule's:
-            # docs/your_drive.md's small drive gave its traversal back twice, at the same sample), or a crossing after a
-            # bounce (REBOUND_*) whose rules walked it back to the window's own entry
-            self.counts["duplicate_entry"] += 1
+        if self._repeated(entry_row, cap):
             return None
         self._emitted_entry_rows.append(entry_row)
         e0, win, rc, res = self._width(data, dep + shift, cap, recontact)
@@ -2471,6 +2461,22 @@ class FlankDetector(BacklashDetector):
                                     f"{res.width_m:.6g} m ({res.how}){swallowed}", window=w)
         self.last_event = ev
         return ev
+
+    def _repeated(self, entry_row: int, cap: _FlankCapture) -> bool:
+        """Whether a window entering at stream row ``entry_row`` repeats one given out (counted): inside the gap of a
+        traversal given out before (its second window, ENTRY_IN_GAP), the same entry found by two rules, or a
+        crossing after a bounce walked back to the bounce's own entry."""
+        dup = self._n(DUPLICATE_ENTRY_SAMPLES)
+        if ENTRY_IN_GAP and any(e + dup < entry_row < g - dup for e, g in self._emitted_gaps):
+            self.counts["entry_in_gap"] += 1
+            return True
+        if any(abs(entry_row - r) <= dup for r in self._emitted_entry_rows) or entry_row <= cap.after_row:
+            # the same traversal by two rules (a returning capture from a window's edge scan and the contact rule's:
+            # docs/your_drive.md's small drive gave its traversal back twice, at the same sample), or a crossing after a
+            # bounce (REBOUND_*) whose rules walked it back to the window's own entry
+            self.counts["duplicate_entry"] += 1
+            return True
+        return False
 
     def _untwisted(self, data: np.ndarray, dep: int, flank_rad: float) -> bool:
         """Whether a capture's excursion only untwisted the coupling on the flank it left (UNTWIST_* constants): it
