@@ -52,8 +52,6 @@ REASONS = {
                        "goes out, flagged; the entry inside it gets no window of its own",
     "duplicate_entry": "a traversal's entry found twice, by the contact rule and by a window's edge scan (flank "
                        "detector): one window goes out (reported only: nothing lost)",
-    "entry_in_gap": "an entry inside the gap of a traversal window given out before (flank detector): that gap's "
-                    "second window, not given out (reported only: the gap's J1 went out with the first)",
 }
 
 

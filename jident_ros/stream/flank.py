@@ -338,14 +338,6 @@ SHALLOW_AT_ZERO_TWIST = True
 #: deeper_travel_factor alone, as before
 DEEPER_CONTACTS = True
 
-#: A window whose entry lies inside the gap of a traversal window given out before (after its entry, before its
-#: re-contact row, by more than DUPLICATE_ENTRY_SAMPLES) is that gap's second window: not given out, counted
-#: (``entry_in_gap``).  Its J1 is the same gap's (33 such windows on the blind draws of stop 37, 27 published, all
-#: within 1.4 % of the first's truth): given out, a trend counted the traversal twice.  They come from a contact learnt
-#: inside a wide zone where delta crawls for contact_samples (DOL d10-05's slip reversal: a "contact" 45 rows into its
-#: 138-row gap, left again 30 rows later as a traversal back).  False: given out, as before
-ENTRY_IN_GAP = True
-
 #: Two windows whose entries (absolute rows) lie this close are one traversal's: the second is not given out.
 DUPLICATE_ENTRY_SAMPLES = 2
 
@@ -2043,7 +2035,6 @@ class FlankDetector(BacklashDetector):
         self._new_caps: list = []               # captures opened by a window's edge scan, fed from its end on
         self._rows_in = 0                       # rows handed to the captures so far
         self._emitted_entry_rows: deque = deque(maxlen=8)    # stream rows of the last windows' entries
-        self._emitted_gaps: deque = deque(maxlen=8)          # (entry, re-contact) stream rows of the last traversals
         if not hasattr(self, "_seen"):          # what the stream showed, for no_entry_reason (kept over resets)
             self._seen = {"contacts": 0, "spread_min": math.inf, "departure_max": 0.0, "threshold": math.nan}
         self._held_x = np.empty((0, len(self.channels)))     # rows waiting for their confirmation rows
@@ -2423,8 +2414,6 @@ class FlankDetector(BacklashDetector):
         back = None if not shallow_rc or shallow[1] is None else shallow[1] - e0
         if back is not None and back < self.window_length and not 0 <= res.recontact_index <= back:
             res.recontact_index = back             # met again by the time delta is back at the zero twist (SHALLOW_*)
-        if res.how == "traversal" and res.recontact_index > self.samples_before_entry:
-            self._emitted_gaps.append((entry_row, cap.start_row + e0 + res.recontact_index))
         e = self.samples_before_entry
         self.last_width = res
         if self.second_windows and res.how == "traversal" and res.recontact_index > e:
@@ -2463,13 +2452,9 @@ class FlankDetector(BacklashDetector):
         return ev
 
     def _repeated(self, entry_row: int, cap: _FlankCapture) -> bool:
-        """Whether a window entering at stream row ``entry_row`` repeats one given out (counted): inside the gap of a
-        traversal given out before (its second window, ENTRY_IN_GAP), the same entry found by two rules, or a
-        crossing after a bounce walked back to the bounce's own entry."""
+        """Whether a window entering at stream row ``entry_row`` repeats one given out (counted, ``duplicate_entry``):
+        the same entry found by two rules, or a crossing after a bounce walked back to the bounce's own entry."""
         dup = self._n(DUPLICATE_ENTRY_SAMPLES)
-        if ENTRY_IN_GAP and any(e + dup < entry_row < g - dup for e, g in self._emitted_gaps):
-            self.counts["entry_in_gap"] += 1
-            return True
         if any(abs(entry_row - r) <= dup for r in self._emitted_entry_rows) or entry_row <= cap.after_row:
             # the same traversal by two rules (a returning capture from a window's edge scan and the contact rule's:
             # docs/your_drive.md's small drive gave its traversal back twice, at the same sample), or a crossing after a

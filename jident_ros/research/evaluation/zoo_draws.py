@@ -47,8 +47,8 @@ PROTOCOL_NOTE = ("A set is a blind test only until something is changed because 
                  "not fitted; DOL set 10 in stop 36, an encoder's disc error fitted over shorter tails; DOL sets 5, 9, 10 "
                  "and 11 in stop 37, a crossing after a soft coupling's bounce, and vector set 11 and DOL set 3, the "
                  "re-contact of a traversal and its traversal back read from delta; vector set 14 in stop 38, a move "
-                 "deeper into the flank under twice the torque no entry, DOL set 6, an entry not at the edge of "
-                 "free_departure's search, and DOL set 10, an entry inside a traversal's gap no second window).")
+                 "deeper into the flank under twice the torque no entry, and DOL set 6, an entry not at the edge of "
+                 "free_departure's search).")
 
 #: The torque accuracy a drive's data sheet typically states for sensored vector control, ± this of rated torque: what
 #: a user who has nothing better declares, as ``torque_accuracy`` and as ``torque_offset_rel_base``, the way
