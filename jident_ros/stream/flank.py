@@ -233,7 +233,9 @@ DRIFT_MAX_RMS_SIGMAS = 3.0
 #: history allowing) locates no turn: the line runs through the whole search, whatever lies before it (the DOL drive's
 #: light load reversal d6-03: delta flickers one count on its flank, untwists from 23 samples before the contact loss,
 #: and the fit's edge, 40 before the departure, put the entry 33 early, a false entry, the traversal missed); the
-#: departure stands.  Chosen on d6-03; False: the edge taken, as before
+#: departure stands.  Chosen on d6-03; over the thirty blind sets (docs/results.md, stop 38) found +7 vector and +9 DOL,
+#: false entries -7 and -9, no J1 changed; vector s5-03's light load reversal went from 8 early to 32 late.  (A search
+#: twice as far back at the edge gave the same entries on four drives: not kept.)  False: the edge taken, as before
 DRIFT_NOT_AT_EDGE = True
 
 
