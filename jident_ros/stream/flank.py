@@ -116,7 +116,7 @@ import functools
 import math
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
+from typing import NamedTuple, Optional, Sequence
 
 import numpy as np
 
@@ -142,6 +142,17 @@ class WidthResult:
     se_m: float
     how: str
     recontact_index: int = -1
+
+
+class _Tent(NamedTuple):
+    """The excursion of the tracker's last entry: it counts as travelled once delta is ``need_rad`` beyond
+    ``ref_rad`` on ``side``; ``deeper_from_nm``: the m_el of the contact it left when it moves deeper into the flank
+    (with that torque; DEEPER_CONTACTS), else None."""
+
+    ref_rad: float
+    side: float
+    need_rad: float
+    deeper_from_nm: Optional[float] = None
 
 
 @dataclass
@@ -2042,11 +2053,9 @@ class FlankDetector(BacklashDetector):
         self._held_x = np.empty((0, len(self.channels)))     # rows waiting for their confirmation rows
         self._held_d = np.empty(0)
         self._skip = 0                          # samples of a spike still to skip
-        self._tent: Optional[tuple] = None      # (reference level, side, travel needed, m_el of the contact left
-        #                                         on a move deeper into the flank, else None) of the last entry
+        self._tent: Optional[_Tent] = None      # the last entry's excursion (its travel's reference, side, need)
         self._travelled = False
         self._recent_aux = np.empty(0)          # m_el of the _recent rows (the contact's torque sign)
-        self._torque_sign = 0.0                 # sign of m_el over the current contact (0: not significant)
         self._torque_nm = 0.0                   # m_el over the current contact (0: not significant)
         self._ref_flank: Optional[float] = None  # the flank level before a same-flank move deeper into the flank
         self._last_entry_captured = False
@@ -2105,7 +2114,7 @@ class FlankDetector(BacklashDetector):
                     if not self._note_travel(seq[:k + L]) or self._deeper_contact(level, torque):
                         events.append(("cancel", i + k + L - carried - 1))
                         cancelled = True
-                        if self._tent[1] != self._torque_sign and (
+                        if self._tent.side != self._torque_sign and (
                                 not DEEPER_CONTACTS or self._ref_flank is None
                                 or self._torque_sign * (level - self._ref_flank) <= self.threshold_rad):
                             self._ref_flank = None          # back from a deeper move: reference done
@@ -2114,10 +2123,9 @@ class FlankDetector(BacklashDetector):
                     self._tent = None
                 if not cancelled:
                     events.append(("contact", i + k + L - carried - 1, level))
-                self._torque_sign = 0.0 if torque == 0.0 else math.copysign(1.0, torque)
                 self._torque_nm = torque
                 self._recent_aux = np.empty(0)
-                self._flank = float(runs[k].mean())
+                self._flank = level
                 self._sigma = float(runs[k].std(ddof=1))
                 self._seen["contacts"] += 1
                 self._recent = np.empty(0)
@@ -2158,11 +2166,11 @@ class FlankDetector(BacklashDetector):
                     # it stays the reference of the move back
                     if self._ref_flank is None:
                         self._ref_flank = float(prev[k])
-                    self._tent = (float(prev[k]), side, self.deeper_travel_factor * self.min_travel_rad,
-                                  self._torque_nm)
+                    self._tent = _Tent(float(prev[k]), side, self.deeper_travel_factor * self.min_travel_rad,
+                                       self._torque_nm)
                 else:
                     ref = float(prev[k]) if self._ref_flank is None else self._ref_flank
-                    self._tent = (ref, side, self.min_travel_rad, None)
+                    self._tent = _Tent(ref, side, self.min_travel_rad)
             else:
                 self._tent = None
             self._travelled = False
@@ -2171,23 +2179,29 @@ class FlankDetector(BacklashDetector):
             i += k + 1      # the departure sample itself cannot be part of the next contact run
         return events
 
+    @property
+    def _torque_sign(self) -> float:
+        """Sign of m_el over the current contact (0: not significant)."""
+        return 0.0 if self._torque_nm == 0.0 else math.copysign(1.0, self._torque_nm)
+
     def _deeper_contact(self, level: float, torque: float) -> bool:
         """Whether the last entry's move deeper into the flank (with the torque its contact carried) ended in a
         contact deeper on that flank carrying m_el of the same sign, the contact it left at most
         UNTWIST_MAX_TORQUE_SHARE of it (DEEPER_CONTACTS): the coupling twisted more under more torque, a same-flank
         torque change, however far delta went."""
-        if not DEEPER_CONTACTS or self._tent is None or self._tent[3] is None:
+        t = self._tent
+        if not DEEPER_CONTACTS or t is None or t.deeper_from_nm is None:
             return False
-        ref, side, _, before = self._tent
+        before = t.deeper_from_nm
         return before * torque > 0.0 and abs(before) <= UNTWIST_MAX_TORQUE_SHARE * abs(torque) \
-            and side * (level - ref) > 0.0
+            and t.side * (level - t.ref_rad) > 0.0
 
     def _note_travel(self, seq: np.ndarray) -> bool:
         """Whether the excursion of the last entry has gone the travel it needs beyond its reference level, in
         the direction it left (so far)."""
         if self._tent is not None and not self._travelled and seq.size:
-            ref, side, need = self._tent[:3]
-            self._travelled = bool(np.max(side * (seq - ref)) >= need)
+            t = self._tent
+            self._travelled = bool(np.max(t.side * (seq - t.ref_rad)) >= t.need_rad)
         return self._travelled
 
     def _contact_runs(self, runs: np.ndarray) -> np.ndarray:
