@@ -548,6 +548,62 @@ def test_a1_vetoes_a_steady_entry_that_still_carries_a_contact_torque():
                                 GapModel()) is not None      # 5 % off: ten of its standard errors
 
 
+def test_a1_rows_before_the_angle_fit_s_entry_are_tested_for_a_contact_torque():
+    """gap.a1_rows_contact: the a1 fit's rows before the angle fit's change-point entry, beyond the a1 fit's own trim,
+    fail when the motor equation (with J1 of a1 over the angle fit's rows) leaves more load there than in the gap:
+    free rows pass, 15 N m of a still loaded contact does not, an entry within the trim is not checked, nor is
+    anything with the rule off."""
+    from dataclasses import replace
+
+    from jident_ros.identify import gap as G
+    from jident_ros.identify.gap import GapEstimate, a1_rows_contact
+    from jident_ros.identify.gap_free import GapModel
+    rng = np.random.default_rng(5)
+    n, s0, s1, end, j1, r, ts = 220, 48, 92, 190, 1.07, 0.1, 5e-4
+    m = 40.0 * np.sin(np.linspace(0.0, 3.0, n)) + 5.0 + rng.normal(0.0, 3.0, n)   # a varying torque, 5 N m friction
+    a1 = r * (m - 5.0) / j1
+    model = GapModel(torque_accuracy=0.01, changepoint_search_samples=25)
+    a1_fit = GapEstimate(1.16, 0.03, (1.1, 1.22), 0.0, s0, end, "gap_only", "detector", fit_start=s0, fit_end=end)
+    angle = GapEstimate(j1, 0.04, (1.0, 1.15), 0.0, s1, end, "angle", "detector", fit_start=s1, fit_end=end)
+    assert a1_rows_contact({"a1": a1, "m_el": m}, a1_fit, angle, 0.0, r, model, ts) is None
+    loaded = a1.copy()
+    loaded[s0:s1] -= r * 15.0 / j1                  # the contact still carries 15 N m before the angle fit's entry
+    why = a1_rows_contact({"a1": loaded, "m_el": m}, a1_fit, angle, 0.0, r, model, ts)
+    assert why is not None and f"rows {s0}..{s1}" in why
+    near = replace(angle, fit_start=s0 + 20)         # within the a1 fit's trim (25 rows): its own trim's business
+    assert a1_rows_contact({"a1": loaded, "m_el": m}, a1_fit, near, 0.0, r, model, ts) is None
+    try:
+        G.A1_ROWS_FROM_ANGLE = False
+        assert a1_rows_contact({"a1": loaded, "m_el": m}, a1_fit, angle, 0.0, r, model, ts) is None
+    finally:
+        G.A1_ROWS_FROM_ANGLE = True
+
+
+@pytest.mark.parametrize("rule", [True, False])
+def test_a_loaded_rest_before_the_gap_does_not_enter_the_a1_fit(rule, monkeypatch):
+    """DOL blind draw d16-12 (a slip reversal, soft coupling): the detector's entry 49 rows early, on a rest whose
+    coupling still carries 15-25 N m; an Imu at 30 dB.  The a1 fit over the detector's rows took the rest for free
+    motion, J1 +8.2 % outside its interval, and passed the cross-check with the angle fit (whose change point found
+    the gap, row 92) at 2.7 standard errors.  With the a1 fit made again from the angle fit's entry: J1 within 6 %,
+    covered, from row >= 85 (rule off: the old +8.2 %)."""
+    from pathlib import Path
+
+    from jident_ros.identify import gap as G
+    from jident_ros.identify.gap_free import GapModel
+    monkeypatch.setattr(G, "A1_ROWS_FROM_ANGLE", rule)
+    w = dict(np.load(Path(__file__).parent / "data" / "dol_draws_loaded_rest_imu_30db.npz"))
+    model = GapModel(torque_accuracy=0.01, coulomb_friction_max_nm=2.19, torque_offset_nm=2.12, torque_lag_s=9.5e-4,
+                     coupling_release_s=0.004, torque_delay_s=5e-4, torque_filter_s=2e-4)
+    g = G.estimate_inertia(w, 48, 0.00394, 0.1, 5e-4, bearing_friction_nms_per_rad=0.0167, recontact_index=189,
+                           model=model)
+    truth = 1.073
+    if rule:
+        assert g.fit_start >= 85 and abs(g.inertia_kgm2 / truth - 1) < 0.06, g
+        assert g.ci95_kgm2[0] <= truth <= g.ci95_kgm2[1], g
+    else:
+        assert g.fit_start == 48 and g.inertia_kgm2 / truth - 1 > 0.07 and g.ci95_kgm2[0] > truth, g
+
+
 def test_a_gap_the_encoder_does_not_resolve_is_refused_naming_the_counts():
     """gap.encoder_resolved: a quantised alpha1 whose gap torque curves it by fewer than MIN_CURVATURE_COUNTS counts
     over the fitted rows is refused as 'gap fit undetermined' (a resolution reason), with the count; the same rows
