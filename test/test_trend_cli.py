@@ -399,6 +399,40 @@ def test_the_drive_monitor_feeds_an_ambiguous_j1_and_counts_a_refused_one():
     assert r.trend is None and mon.tracker.inertia_refused == {"outside_band": 1}
 
 
+def test_a_second_window_of_one_traversal_goes_to_the_trend_once():
+    """An early entry whose gap fit found the traversal's rows, then the traversal's own window over the same rows
+    (DOL draw d16-12): the trend takes the traversal once and counts the second window as 'same_traversal'; a window
+    whose gap fit reads later rows goes in again, and a window without gap fit rows is not compared."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from jident_ros.identify.monitor import DriveMonitor
+    from jident_ros.identify.trend import TrendConfig, TrendTracker
+    from jident_ros.identify.trend_status import REFUSAL_KINDS, SAME_TRAVERSAL
+    from jident_ros.stream.layout import Window
+    assert SAME_TRAVERSAL in REFUSAL_KINDS
+
+    def window(wid, t0, fit):
+        d = _diagnosis("ambiguous", None)
+        d.gap.fit_start, d.gap.fit_end = fit
+        t = t0 + np.arange(200) * 5e-4
+        win = Window(np.column_stack([t, np.zeros(200)]), ("t", "alpha1"), 48, float(t[48]), float("nan"), 0.1, 5e-4,
+                     window_id=wid)
+        return win, d
+
+    wins = [window(1, 0.0, (92, 190)), window(2, 0.025, (42, 140)), window(3, 0.2, (48, 150)),
+            window(4, 0.23, (-1, -1))]
+    diagnoses = iter([d for _, d in wins])
+    mon = DriveMonitor(None, SimpleNamespace(diagnose=lambda win, **kw: next(diagnoses)),
+                       TrendTracker(TrendConfig(commissioning_windows=3)))
+    r = [mon.window(w) for w, _ in wins]
+    assert [x.same_traversal_as for x in r] == [None, 1, None, None]
+    assert r[1].trend is None and mon.tracker.inertia_refused == {SAME_TRAVERSAL: 1}
+    assert r[0].trend.inertia_windows_fed == 1 and r[2].trend.inertia_windows_fed == 2
+    assert r[3].trend.inertia_windows_fed == 3       # no fit rows: nothing to compare, fed
+
+
 def test_the_torque_accuracy_term_is_left_out_of_the_relative_test_and_given_to_the_absolute_j1():
     """A scale error of the drive's torque estimate moves every J1 alike: the gap's 'torque_accuracy' term is
     taken out of the se the trend tests the drift with; the drive's declared torque_accuracy (a uniform bound)

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Optional, Sequence
 
 from jident_ros.identify.diagnosis import Diagnoser, WindowDiagnosis
-from jident_ros.identify.trend_status import trend_inputs
+from jident_ros.identify.trend_status import SAME_TRAVERSAL, trend_inputs
 from jident_ros.stream.detector import BacklashDetector
 from jident_ros.stream.dynamics import DynamicsDetector
 from jident_ros.stream.flank import DETECTORS, FlankDetector
@@ -93,6 +93,7 @@ class MonitorResult:
     diagnosis: WindowDiagnosis
     trend: Any = None
     trend_source: Optional[str] = None    # where the trend's width came from: flank, gap or None
+    same_traversal_as: Optional[int] = None   # the window id whose gap fit read the same traversal (trend: once)
 
 
 @dataclass
@@ -113,6 +114,8 @@ class DriveMonitor:
     tracker: Any = None
     on_error: Optional[Callable[[Any, Exception], WindowDiagnosis]] = None
     events: list = field(default_factory=list)      # the detector's other events (drops), in order
+    # the drive-clock span (first, last) of the last gap fit's rows and its window id (:meth:`_same_traversal`)
+    _last_gap: Optional[tuple] = field(default=None, repr=False)
 
     def feed(self, batch, channels: Sequence[str]) -> list:
         """One batch (n x c samples, ``channels`` its column names) -> a :class:`MonitorResult` per window
@@ -135,7 +138,12 @@ class DriveMonitor:
                 raise
             d = self.on_error(win, exc)
         result = MonitorResult(win, d)
-        if self.tracker is not None:
+        result.same_traversal_as = self._same_traversal(win, d)
+        if self.tracker is not None and result.same_traversal_as is not None:
+            # a second window of one traversal (an early entry whose gap fit found the same rows): its J1 and K2 are
+            # that traversal's again, and the trend takes each traversal once (counted by reason on /diagnostics)
+            self.tracker.count_refused(SAME_TRAVERSAL)
+        elif self.tracker is not None:
             j, jse, w, wse, source, refused = trend_inputs(d, self.tracker.config.width_se_floor_m, win)
             result.trend_source = source
             if j is not None or w is not None:
@@ -143,6 +151,25 @@ class DriveMonitor:
             elif refused is not None:   # no estimate at all: counted by reason (the trend status says it)
                 self.tracker.count_refused(refused)
         return result
+
+    def _same_traversal(self, win, d) -> Optional[int]:
+        """The id of the window before when this window's gap fit covers instants of the drive's clock that the gap
+        fit of the window before covered too (both windows read one traversal), else None; remembers this window's
+        span for the next one (a window without a gap fit leaves the last one).  The clock is the trend's: the
+        window's entry_time_s, its rows sample_period_s apart."""
+        g = getattr(d, "gap", None)
+        lo, hi = getattr(g, "fit_start", None), getattr(g, "fit_end", None)
+        entry, ts = getattr(win, "entry_time_s", None), getattr(win, "sample_period_s", None)
+        row0 = getattr(win, "entry_index", None)
+        if None in (lo, hi, entry, row0) or not ts or not 0 <= int(lo) < int(hi):
+            return None
+        at = lambda row: float(entry) + (int(row) - int(row0)) * float(ts)  # noqa: E731
+        span = (at(lo), at(int(hi) - 1))
+        prev, self._last_gap = self._last_gap, (span, getattr(win, "window_id", 0))
+        if prev is not None and span[0] <= prev[0][1] and prev[0][0] <= span[1]:
+            self._last_gap = ((min(span[0], prev[0][0]), max(span[1], prev[0][1])), prev[1])
+            return prev[1]
+        return None
 
     def finish(self) -> list:
         """The end of the data: the detector's closing events (a window cut off by the end of the data)."""

@@ -48,7 +48,10 @@ REFUSAL_KINDS = {
     "no_gap": "no gap estimate (undetermined, too short, no usable fit)",
     "input": "the window's input was refused",
     "no_std_error": "a J1 without a standard error (the image method's class alone)",
+    "same_traversal": "the gap fit read the rows the window before's did (one traversal, given to the trend once)",
 }
+#: The REFUSAL_KINDS key of a second window of one traversal (identify.monitor.DriveMonitor).
+SAME_TRAVERSAL = "same_traversal"
 
 
 def _finite(*v) -> bool:
@@ -202,5 +205,5 @@ def trend_status(u: TrendUpdate) -> tuple[int, str, list]:
     return int(u.level), u.message, vals
 
 
-__all__ = ["DRIVE_CONSTANT_TERMS", "REFUSAL_KINDS", "TREND_STATUS_NAME", "TrendInputs", "WIDTH_SOURCES", "refusal_kind",
+__all__ = ["DRIVE_CONSTANT_TERMS", "REFUSAL_KINDS", "SAME_TRAVERSAL", "TREND_STATUS_NAME", "TrendInputs", "WIDTH_SOURCES", "refusal_kind",
            "trend_inputs", "trend_status"]
