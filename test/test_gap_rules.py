@@ -627,3 +627,28 @@ def test_a_gap_the_encoder_does_not_resolve_is_refused_naming_the_counts():
         else:
             encoder_resolved(quantised, m, (20, 40), j1, ts)
         encoder_resolved(alpha, m, (20, 40), j1, ts)          # continuous: no count, no refusal
+
+
+@pytest.mark.parametrize("trims", [(1, 2, 4, 8, 16), (1, 2, 4, 8)])
+def test_a_gap_grown_into_a_weak_contact_widens_the_interval_by_a_16_row_trim(trims, monkeypatch):
+    """DOL blind draw d17-09 (J1 1.189 kg m^2), its slip reversal as JointState 2^16 clean: the free angle fit's
+    change-point search grew the gap from row 45, 11 rows before the contact loss (56), into a contact carrying little
+    torque: J1 +3.2 %.  With the 8-row trims alone the interval missed the truth (a class named wrong, WARN); the
+    16-row trim (a quarter of its 91 rows at most, CHANGEPOINT_TRIM_FULL) carries the change point's uncertainty."""
+    from pathlib import Path
+
+    from jident_ros.identify import gap_free
+    from jident_ros.identify.gap import estimate_inertia
+    from jident_ros.identify.gap_free import GapModel
+    monkeypatch.setattr(gap_free, "CHANGEPOINT_TRIMS", trims)
+    gap_free._trims_at.cache_clear()
+    try:
+        w = dict(np.load(Path(__file__).parent / "data" / "dol_draws_slip_reversal_grown_gap.npz"))
+        model = GapModel(torque_accuracy=0.01, coulomb_friction_max_nm=1.375, torque_offset_nm=2.119,
+                         torque_lag_s=2.5e-4, coupling_release_s=0.004)
+        g = estimate_inertia(w, 48, 0.003634, 0.1, 5e-4, bearing_friction_nms_per_rad=0.0263, recontact_index=136,
+                             model=model)
+    finally:
+        gap_free._trims_at.cache_clear()
+    assert g.fit_start == 45 and g.inertia_kgm2 / 1.189 - 1 == pytest.approx(0.032, abs=0.003), g
+    assert (g.ci95_kgm2[0] <= 1.189) == (16 in trims), g.ci95_kgm2
