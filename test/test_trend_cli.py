@@ -433,6 +433,21 @@ def test_a_second_window_of_one_traversal_goes_to_the_trend_once():
     assert r[3].trend.inertia_windows_fed == 3       # no fit rows: nothing to compare, fed
 
 
+def test_jident_trend_takes_a_second_window_of_one_traversal_once_as_the_node_does():
+    """cli.trend_run.trend_window (jident trend, replay): a window that offline's DriveMonitor marked as reading the
+    traversal of the window before gives the tracker no J1 and no width, counted as 'same_traversal' (replay = live)."""
+    from dataclasses import replace
+
+    from jident_ros.cli.offline import OfflineWindow
+    from jident_ros.cli.trend_run import trend_window
+    from jident_ros.identify.trend_status import SAME_TRAVERSAL
+    ow = OfflineWindow(4, 7.0, 0.005, None, _diagnosis("ambiguous", None), 0.0051, 3e-6, "flank")
+    assert trend_window(ow, "rec").inertia_kgm2 == 1.3
+    tw = trend_window(replace(ow, same_traversal_as=3), "rec")
+    assert tw.inertia_kgm2 is None and tw.width_m is None and tw.refused_kind == SAME_TRAVERSAL
+    assert "window 3" in tw.skip_reason
+
+
 def test_the_torque_accuracy_term_is_left_out_of_the_relative_test_and_given_to_the_absolute_j1():
     """A scale error of the drive's torque estimate moves every J1 alike: the gap's 'torque_accuracy' term is
     taken out of the se the trend tests the drift with; the drive's declared torque_accuracy (a uniform bound)

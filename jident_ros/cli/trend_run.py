@@ -23,7 +23,7 @@ from jident_ros.cli.offline import OfflineError, diagnose_recording
 from jident_ros.config import load_method_config, load_system_config
 from jident_ros.identify.library import default_library_path, load_pattern_library
 from jident_ros.identify.trend import Z95, TrendConfig, TrendTracker
-from jident_ros.identify.trend_status import trend_inputs
+from jident_ros.identify.trend_status import SAME_TRAVERSAL, trend_inputs
 
 CSV_COLUMNS = ("time_s", "recording", "window_id", "inertia_kgm2", "inertia_se_kgm2", "inertia_ci_low_kgm2",
                "inertia_ci_high_kgm2", "backlash_width_m", "backlash_width_se_m", "true_inertia_kgm2",
@@ -73,6 +73,12 @@ def trend_window(ow, recording: str, width_se_floor_m: float = 0.0) -> TrendWind
     it was refused as implausible or inconsistent, or the window has no gap estimate; the width from the flank
     detector when the window has its estimate, else from the gap estimator (none when the gap was refused)."""
     d = ow.diagnosis
+    same = getattr(ow, "same_traversal_as", None)
+    if same is not None:
+        # the node's chain (identify.monitor.DriveMonitor): a second window of one traversal goes to the trend once
+        return TrendWindow(float(ow.entry_time_s), recording, int(ow.window_id), None, None, None, None, None, None,
+                           f"the gap fit read the traversal of window {same} again", ow.true_inertia_kgm2, None,
+                           SAME_TRAVERSAL)
     ti = trend_inputs(d, width_se_floor_m, ow)
     lo = hi = reason = None
     if ti.inertia_kgm2 is not None:
