@@ -1074,13 +1074,14 @@ def steady_entry_contact(window: dict, g: GapEstimate, b1: float, wheel_radius_m
 
 
 #: With a1 beside the encoder: where the angle fit's change point puts the entry more than the a1 fit's own trim
-#: (:func:`gap_only_max_trim`) after the a1 fit's first row, the rows between are tested by the motor equation with the
-#: angle fit's J1: their mean load torque (m_el − b1 ω1 − J1 a1/r) against the angle fit's own rows' (the friction and
-#: offset both share) beyond A1_ROWS_CONTACT_Z of its noise, the fit's J1 uncertainty and the torque accuracy is a
-#: contact still loaded, and the a1 fit is made again from the angle fit's entry.  DOL d16-12 (a soft coupling's loaded
-#: rest before a slip reversal's traversal, the detector's entry 49 early): the a1 fit over 44 loaded rows gave +8.2 %
-#: outside its interval, cross-checked at 2.7 standard errors; the rows' load torque 15-25 N m against the gap's 5.
-#: The z is KINK_PREMISE_Z's companion STEADY_ENTRY_A1_Z (5), not tuned.
+#: (:func:`gap_only_max_trim`) after the a1 fit's first row, the rows between are tested by the motor equation: J1 and a
+#: constant (the friction and offset both stretches share) fitted to a1 over the angle fit's rows, the rows' mean load
+#: torque (m_el − b1 ω1 − J1 a1/r − the constant) beyond A1_ROWS_CONTACT_Z times its noise and that J1's error times the
+#: acceleration's lever, plus the torque accuracy, is a contact still loaded, and the a1 fit is made again from the
+#: angle fit's entry.  DOL d16-12 (a soft coupling's loaded rest before a slip reversal's traversal, the detector's entry
+#: 49 early): the a1 fit over 44 loaded rows gave +8.2 % outside its interval, cross-checked at 2.7 standard errors; the
+#: rows' load torque 15-25 N m against the gap's 5.  The z is the steady-entry a1 check's (STEADY_ENTRY_A1_Z, 5), not
+#: tuned.
 A1_ROWS_CONTACT_Z = STEADY_ENTRY_A1_Z
 #: Set False to leave the a1 fit on the detector's rows whatever the angle fit's change point says.
 A1_ROWS_FROM_ANGLE = True
