@@ -308,9 +308,7 @@ def diagnose_recording(path, options: Optional[OfflineOptions] = None, *,
                          make_detector=make_detector, log=log, unpacked=unpacked)
     ts = float(setup.system.sampling.sample_period_s)
     for win in replay.windows(messages):
-        r = monitor.window(win)
-        _add_window(result, win, r.diagnosis, replay.true_inertia(win.entry_time_s, ts)[0], on_window,
-                    r.same_traversal_as)
+        _add_window(result, monitor.window(win), replay.true_inertia(win.entry_time_s, ts)[0], on_window)
     dropped = replay.dropped_before_start
     if replay.detector is None:
         if dropped:
@@ -397,15 +395,14 @@ def _internal_error(win, exc) -> WindowDiagnosis:
     return WindowDiagnosis(ERROR, f"window could not be diagnosed: internal error {type(exc).__name__}: {exc}", [])
 
 
-def _add_window(result, win, d, true_j1, on_window, same_traversal_as=None):
-    est = getattr(win, "backlash_width_estimate_m", math.nan)
-    rc = getattr(win, "recontact_index", -1)
-    ow = OfflineWindow(win.window_id, win.entry_time_s, win.backlash_width_m, true_j1, d,
-                       est if math.isfinite(est) else None,
-                       win.backlash_width_se_m if math.isfinite(est) else None, win.detector,
-                       tuple(win.flag_names),
+def _add_window(result, r, true_j1, on_window):
+    """One diagnosed window (a :class:`~jident_ros.identify.monitor.MonitorResult`) into ``result``."""
+    win, est, rc = r.window, getattr(r.window, "backlash_width_estimate_m", math.nan), getattr(r.window, "recontact_index", -1)
+    ow = OfflineWindow(win.window_id, win.entry_time_s, win.backlash_width_m, true_j1, r.diagnosis,
+                       est if math.isfinite(est) else None, win.backlash_width_se_m if math.isfinite(est) else None,
+                       win.detector, tuple(win.flag_names),
                        win.entry_time_s + (rc - win.entry_index) * win.sample_period_s if rc >= 0 else None,
-                       same_traversal_as)
+                       r.same_traversal_as)
     result.windows.append(ow)
     if on_window is not None:
         on_window(ow)
@@ -505,8 +502,7 @@ def diagnose_samples(path, options: Optional[OfflineOptions] = None, *,
                 if ev.kind != "window":
                     monitor.events.append(ev)
                 else:
-                    r = monitor.window(ev.window)
-                    _add_window(result, r.window, r.diagnosis, None, on_window, r.same_traversal_as)
+                    _add_window(result, monitor.window(ev.window), None, on_window)
     except InputError as exc:   # a CSV read block by block: its errors come while streaming
         raise OfflineError(str(exc)) from None
     if monitor.detector is None:
