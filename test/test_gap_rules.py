@@ -652,3 +652,31 @@ def test_a_gap_grown_into_a_weak_contact_widens_the_interval_by_a_16_row_trim(tr
         gap_free._trims_at.cache_clear()
     assert g.fit_start == 45 and g.inertia_kgm2 / 1.189 - 1 == pytest.approx(0.032, abs=0.003), g
     assert (g.ci95_kgm2[0] <= 1.189) == (16 in trims), g.ci95_kgm2
+
+
+@pytest.mark.parametrize("rule", [True, False])
+def test_a_short_detector_gap_does_not_grow_past_its_re_contact(rule, monkeypatch):
+    """DOL blind draw d18-02 (J1 0.957 kg m^2), its slip reversal as JointState 2^16 clean: the motor crosses the zone
+    in a 4-sample gap (rows 46-50); the detector's window holds 7 rows (48-55, its re-contact 5 late), fewer than the
+    free angle fit's 8, the fit keeps the detector's entry and grew past the re-contact into contact (48-57): J1 +13 …
+    +16 %, its interval missing the truth.  With SHORT_GAP_NOT_PAST_CONTACT: 'gap too short' (test_gap_load's late
+    entry, whose fit moves the entry back, keeps its rows)."""
+    from pathlib import Path
+
+    from jident_ros.identify import gap_free
+    from jident_ros.identify.gap import NoGapError, estimate_inertia
+    from jident_ros.identify.gap_free import GapModel
+    monkeypatch.setattr(gap_free, "SHORT_GAP_NOT_PAST_CONTACT", rule)
+    w = dict(np.load(Path(__file__).parent / "data" / "dol_draws_four_sample_gap.npz"))
+    model = GapModel(torque_accuracy=0.01, coulomb_friction_max_nm=1.761, torque_offset_nm=2.119, torque_lag_s=4.5e-4,
+                     coupling_release_s=0.004, torque_filter_s=2e-4)
+
+    def fit():
+        return estimate_inertia(w, 48, float("nan"), 0.1, 5e-4, bearing_friction_nms_per_rad=0.0423,
+                                recontact_index=55, model=model)
+    if rule:
+        with pytest.raises(NoGapError, match="gap too short: 7 rows from the detector's entry to its re-contact"):
+            fit()
+    else:
+        g = fit()
+        assert g.fit_end > 55 and g.inertia_kgm2 / 0.957 - 1 > 0.1 and g.ci95_kgm2[0] > 0.957, g
