@@ -474,6 +474,8 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         with np.errstate(divide="ignore"):
             return np.where(kappa > 0, 1.0 / kappa, np.inf)
 
+    full = rate_samples(CHANGEPOINT_TRIM_FULL, ts)     # the trims taken on up to half the interval
+
     def most_precise(s_est: int, e_est: int, bar: float = np.inf) -> tuple:
         """(best, first): the fit over [s_est, e_est) with the smallest standard error (without the torque accuracy),
         None when none is physical or none is below ``bar`` (another interval's: its change-point refits are then
@@ -509,7 +511,6 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
                 # sum of squares (rounding is monotone): it cannot be chosen, its refits are not needed
                 continue
             n = e_est - s_est
-            full = rate_samples(CHANGEPOINT_TRIM_FULL, ts)
             trims = [k for k in _trims_at(ts)
                      if n - k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)
                      and (k <= full or k <= n // 4)]
