@@ -37,3 +37,15 @@ def test_the_comparison_sees_a_changed_digit(tmp_path):
     changed = text.replace("1.16", "1.17", 1)
     assert changed != text
     assert golden.compare({name: changed}, golden.GOLDEN) and not golden.compare({name: text}, golden.GOLDEN)
+
+
+def test_the_comparison_takes_rounding_and_nothing_more():
+    """Another machine's BLAS moves the last digits (1e-15 … 1e-8 relative, stop 40): the same output; a number moved
+    by 1e-5 relative, or a word changed, is not."""
+    golden = _golden_module()
+    assert golden.same_text('{"j": 1.077415111130998, "m": 80.88823102639056}',
+                            '{"j": 1.0774151111309966, "m": 80.88823095569668}')
+    assert not golden.same_text('{"j": 1.077415111130998}', '{"j": 1.077426111130998}')
+    assert not golden.same_text('{"se": 0.0097365}', '{"se": 0.0097375}')
+    assert not golden.same_text('{"level": "OK", "j": 1.0}', '{"level": "WARN", "j": 1.0}')
+    assert not golden.same_text("1,2,3", "1,2")
