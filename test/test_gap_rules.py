@@ -696,3 +696,34 @@ def test_a_short_detector_gap_may_grow_to_the_fits_minimum(case, channels):
                          CFG.motor.bearing_friction_nms_per_rad)
     assert abs(g.inertia_kgm2 / case.inertia_kgm2 - 1) < 5e-4, g
     assert g.ci95_kgm2[0] <= case.inertia_kgm2 <= g.ci95_kgm2[1]
+
+
+@pytest.mark.parametrize(("scan", "offset"), [(True, True), (False, True), (True, False)])
+def test_a_constant_torque_is_fitted_over_the_whole_gap(scan, offset, monkeypatch):
+    """DOL blind draw d1-05 (J1 1.102 kg m^2), its light load reversal as JointState 2^16 clean: a 130-row gap whose
+    torque swings from -36 to +9 N m, a constant torque of 2.8-3.0 N m over it (the Coulomb friction 2.12 and the
+    estimate's offset).  The scan with the friction band's middle (1.33 N m) stopped after 36 and 58 rows; the
+    fitted constant was refused for lying beyond the friction band (2.65 N m) though within friction + offset
+    (4.77).  Both rules on: the gap's 114 rows with the constant fitted, J1 within 1 %, its interval covering.
+    Either off: the short interval's J1 (+7.8 %, bounded friction) or the long one's refused constant."""
+    from pathlib import Path
+
+    from jident_ros.identify import gap_free
+    from jident_ros.identify.gap import NoGapError, estimate_inertia
+    from jident_ros.identify.gap_free import GapModel
+    monkeypatch.setattr(gap_free, "FITTED_CONSTANT_SCAN", scan)
+    monkeypatch.setattr(gap_free, "FITTED_CONSTANT_OFFSET", offset)
+    w = dict(np.load(Path(__file__).parent / "data" / "dol_draws_light_reversal_constant.npz"))
+    model = GapModel(torque_accuracy=0.01, coulomb_friction_max_nm=2.65, torque_offset_nm=2.119, torque_lag_s=4.5e-4,
+                     coupling_release_s=0.004, torque_filter_s=2e-4)
+    truth = 1.102
+    try:
+        g = estimate_inertia(w, 48, 0.00323, 0.1, 5e-4, bearing_friction_nms_per_rad=0.02048, recontact_index=178,
+                             model=model)
+    except NoGapError:
+        g = None
+    if scan and offset:
+        assert g.fit_end - g.fit_start >= 100 and g.friction.startswith("fitted"), g
+        assert abs(g.inertia_kgm2 / truth - 1) < 0.01 and g.ci95_kgm2[0] <= truth <= g.ci95_kgm2[1], g
+    else:
+        assert g is None or (g.fit_end - g.fit_start < 60 or not g.friction.startswith("fitted")), g

@@ -490,7 +490,7 @@ def _shape_terms(x: np.ndarray, mt: np.ndarray | None, model: GapModel) -> dict:
     """The a1 fits' bounded torque errors that vary through the gap, as terms of J1 (kg m^2), for the regressor ``x``
     (dω1/dt over the fitted rows; centred for a fit with a constant beside J1, which only the variation of x holds):
     'torque_drift', the estimate's error drifting linearly across the rows, -T..+T (T the offset band;
-    gap_free.drift_term): J1 moves by Σ x T(t) / Σ x²; 'torque_lag', its bounded lag τ (the shaft's torque is
+    gap_terms.drift_term): J1 moves by Σ x T(t) / Σ x²; 'torque_lag', its bounded lag τ (the shaft's torque is
     m_el + τ dm_el/dt, ``mt`` the net torque's derivative over the rows): J1 moves by τ Σ x ṁ / Σ x²."""
     out = {}
     if model.torque_offset_nm and x.size > 1:

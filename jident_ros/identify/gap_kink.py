@@ -15,7 +15,7 @@ from functools import lru_cache
 import numpy as np
 
 from jident_ros.identify import lapack
-from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, FreeFitError, drift_term, encoder_error_term
+from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, FreeFitError
 from jident_ros.identify.gap_numerics import (
     _ar1_inflation,
     _cumtrapz,
@@ -24,6 +24,7 @@ from jident_ros.identify.gap_numerics import (
     _quantum,
     _robust_noise,
 )
+from jident_ros.identify.gap_terms import drift_term, encoder_error_term
 from jident_ros.stream.rate import samples as rate_samples
 
 #: Kink fit: steady pre-entry samples used before the earliest candidate entry row, and the candidate rows

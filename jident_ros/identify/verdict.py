@@ -34,7 +34,8 @@ from typing import Mapping, Optional
 import numpy as np
 
 from jident_ros.identify.gap import GapEstimate, NoGapError, gap_interval
-from jident_ros.identify.gap_free import STD_ERROR_TERM_SOURCES, GapModel, largest_term
+from jident_ros.identify.gap_free import GapModel
+from jident_ros.identify.gap_terms import STD_ERROR_TERM_SOURCES, largest_term
 
 #: Window channels whose magnitude is bounded (see :func:`input_bounds`).
 BOUNDED = ("m_el", "omega1", "omega2", "a1", "a2", "v2")
@@ -430,7 +431,7 @@ def decide_gap(gap: GapEstimate, classes, nominal_kgm2: float, policy: VerdictPo
 
 def widest_term(gap: GapEstimate) -> str:
     """'; the largest part: ...' for an undetermined gap J1: which part of its standard error
-    (:data:`~jident_ros.identify.gap_free.STD_ERROR_TERM_SOURCES`) widens its interval most, as ± % of J1 (the
+    (:data:`~jident_ros.identify.gap_terms.STD_ERROR_TERM_SOURCES`) widens its interval most, as ± % of J1 (the
     interval's half-width times that part's share of the standard error), and the parameter that bounds it: a
     drive declared too loosely can be declared tighter there; a part only the data narrow says so.  '' when the
     estimate carries no parts."""

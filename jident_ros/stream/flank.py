@@ -1903,7 +1903,7 @@ class FlankDetector(BacklashDetector):
     #: An entry inside a running window gets a window of its own when its excursion ends on the other flank (a
     #: return traversal: the second drive's and the vector drive's speed steps re-cross the zone 130-270 samples
     #: after the first traversal, inside its window).  On since stop 20: the gap stage now carries a torque error
-    #: drifting across the gap (gap_free.drift_term), which refuses the return traversals' low-torque J1 that went out
+    #: drifting across the gap (gap_terms.drift_term), which refuses the return traversals' low-torque J1 that went out
     #: +12 % before (a fitted Coulomb term had absorbed the estimate's constant error, not its drift; docs/results.md
     #: "Zoo: return traversals on").  False: one window per excursion, as before.
     second_windows = True
