@@ -270,7 +270,7 @@ def test_the_encoder_accuracy_term_is_the_spread_of_j1_over_the_errors_phases(st
     """encoder_accuracy_rad A (GapModel.encoder_error_rad): a once- and a twice-per-revolution angle error of amplitude
     A, phases unknown.  Its term is J1's standard deviation over the phases (Monte Carlo through the same fit), it
     scales with A, and a recording with that error is covered by the interval that declares it."""
-    from jident_ros.identify.gap_free import encoder_error_term
+    from jident_ros.identify.gap_terms import encoder_error_term
     w = dict(step["window"])
     w.pop("a1", None)
     model = GapModel(coulomb_friction_max_nm=1.5, changepoint_search_samples=0)

@@ -7,8 +7,9 @@ from scipy.signal import lfilter
 
 from jident_ros.identify import gap
 from jident_ros.identify.gap import estimate_inertia
-from jident_ros.identify.gap_free import STD_ERROR_TERM_SOURCES, GapModel
+from jident_ros.identify.gap_free import GapModel
 from jident_ros.identify.gap_lag import torque_lag_estimate
+from jident_ros.identify.gap_terms import STD_ERROR_TERM_SOURCES
 
 TS = 5e-4
 

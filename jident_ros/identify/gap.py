@@ -1216,14 +1216,15 @@ def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_sa
         if contact is not None:      # the angle fit's premise is false: it neither wins nor checks the a1 fit
             why["angle"] = contact
             del fits["angle"]
+    a1_refit = ""
     if "angle" in fits and "a1" in fits:
         contact = a1_rows_contact(args[0], fits["a1"], fits["angle"], b1, args[3], model, args[4])
         if contact is not None:      # the a1 fit again from the angle fit's entry (its own trim goes on from there)
             moved = (args[0], int(fits["angle"].fit_start)) + tuple(args[2:])
             try:
                 g = _estimate_inertia(*moved, method=None, entry_uncertainty_samples=0, cross_check=False, **kw)
-                fits["a1"] = replace(g, model_choice=f"{g.model_choice or g.method}; {contact}: fitted from row "
-                                                     f"{fits['angle'].fit_start}")
+                a1_refit = f"{contact}: fitted from row {fits['angle'].fit_start}"
+                fits["a1"] = replace(g, model_choice=f"{g.model_choice or g.method}; {a1_refit}")
             except NoGapError as exc:
                 why["a1"] = f"{contact}; from the angle fit's entry: {exc}"
                 del fits["a1"]
@@ -1244,8 +1245,11 @@ def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_sa
     best = a if a.std_error_kgm2 <= b.std_error_kgm2 else b
     other = b if best is a else a
     best = _trend_choice(best, other)
+    # the a1 fit made again from the angle fit's entry says so where the angle fit is the one published, too
+    refit = f": {a1_refit}" if a1_refit and best is b else ""
     return replace(best, model_choice=f"{best.model_choice or best.method}; cross-checked with the "
-                                      f"{other.method} fit (J1 = {other.inertia_kgm2:.4g}, {z:.1f} standard errors)")
+                                      f"{other.method} fit (J1 = {other.inertia_kgm2:.4g}, {z:.1f} standard errors"
+                                      f"{refit})")
 
 
 #: The speed fit's model error: J1 refitted with this many samples dropped at each end of the interval.
