@@ -50,3 +50,9 @@ def test_within_reach(row, reach):
 def test_seed_lists():
     assert O._seeds("1-3,7") == [1, 2, 3, 7]
     assert O.main(["--seeds", "x"]) == 2
+
+
+def test_the_two_models_sections_have_their_own_headings():
+    """docs/results.md holds one section per model: zoo.replace_section finds a section by its heading up to '('."""
+    heads = {O.markdown([], m, [1], {}, "cmd", "abc", 1.0).splitlines()[0].split("(")[0] for m in ("vector", "dol")}
+    assert len(heads) == 2

@@ -165,7 +165,8 @@ def _median(errs: list) -> str:
 
 def markdown(rows: list, model: str, seeds: list, published: dict, command: str, commit: str, elapsed: float) -> str:
     events = sorted({r[1] for r in rows})
-    lines = [f"## What the blind draws' data hold: J1 over the true gap rows ({model}; `{command}`)", "",
+    name = "vector" if model == "vector" else "DOL"
+    lines = [f"## What the blind draws' data hold, {name} drives: J1 over the true gap rows (`{command}`)", "",
              f"Measured on commit {commit} ({elapsed:.0f} s; sets {seeds[0]}–{seeds[-1]}, the recordings zoo_draws "
              "cached). jident_ros/research/evaluation/draws_oracle.py: on each traversal of a JointState recording "
              f"without an Imu whose true gap holds at least {zoo.ORACLE_MIN_SAMPLES} rows, J1 from the motor encoder "
