@@ -1,7 +1,8 @@
 """The gap stage's cost per window (issue 20: <= 2 ms): estimate_inertia on JointState-like windows (motor encoder,
 torque, no a1; the free angle fit with its change-point search), with an Imu (a1 fit and angle fit, cross-checked)
 and with the load encoder too (the load side's bound, identify/gap_load.py), on the stress bench's speed step and
-light-load reversal (evaluation/gap_stress.py).
+light-load reversal (evaluation/gap_stress.py), and a DOL blind draw's long light-load reversal whose constant torque
+is fitted over the whole gap (test/data/dol_draws_light_reversal_constant.npz; skipped where a checkout lacks it).
 
     nice -n 10 .venv/bin/python bench/bench_gap.py [--repeats 200]
 
@@ -102,6 +103,18 @@ def main(argv=None):
         times, cpu = _timed(a.repeats, lambda: estimate_inertia(d, w.entry_index, w.backlash_width_m, w.wheel_radius_m,
                                                                 5e-4, recontact_index=w.recontact_index, model=m))
         print(f"{'steady entry':>14} {label:<26} wall median {np.median(times):.3f} ms, p90 "
+              f"{np.percentile(times, 90):.3f} ms; CPU median {np.median(cpu):.3f} ms, p10 "
+              f"{np.percentile(cpu, 10):.3f} ms ({a.repeats} runs)")
+    # a long light-load reversal whose constant torque (friction + the estimate's offset) is fitted over the whole gap
+    # (DOL blind draw d1-05's window, test/data; stop 40's FITTED_CONSTANT_SCAN grows the quiet cores again there)
+    path = Path(__file__).resolve().parents[1] / "test" / "data" / "dol_draws_light_reversal_constant.npz"
+    if path.exists():
+        d = dict(np.load(path))
+        m = GapModel(torque_accuracy=0.01, coulomb_friction_max_nm=2.65, torque_offset_nm=2.119, torque_lag_s=4.5e-4,
+                     coupling_release_s=0.004, torque_filter_s=2e-4)
+        times, cpu = _timed(a.repeats, lambda: estimate_inertia(d, 48, 0.00323, 0.1, 5e-4, bearing_friction_nms_per_rad=0.02048,
+                                                                recontact_index=178, model=m))
+        print(f"{'light reversal':>14} {'DOL d1-05 (130-row gap)':<26} wall median {np.median(times):.3f} ms, p90 "
               f"{np.percentile(times, 90):.3f} ms; CPU median {np.median(cpu):.3f} ms, p10 "
               f"{np.percentile(cpu, 10):.3f} ms ({a.repeats} runs)")
     print(f"after: {load()}")
