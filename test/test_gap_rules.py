@@ -728,3 +728,34 @@ def test_a_constant_torque_is_fitted_over_the_whole_gap(scan, offset, monkeypatc
         assert abs(g.inertia_kgm2 / truth - 1) < 0.01 and g.ci95_kgm2[0] <= truth <= g.ci95_kgm2[1], g
     else:
         assert g is None or (g.fit_end - g.fit_start < 60 or not g.friction.startswith("fitted")), g
+
+
+def test_the_kept_scan_gives_the_same_fit_and_follows_the_flags():
+    """gap_free keeps a window's change-point scan for its lag check's second fit (the scan does not depend on the
+    lag): a call with the scan kept equals one made afresh, and a scan flag's change is not served a kept scan."""
+    from dataclasses import replace as dreplace
+    from pathlib import Path
+
+    from jident_ros.identify import gap_free
+    from jident_ros.identify.gap import estimate_inertia
+    from jident_ros.identify.gap_free import GapModel
+    w = dict(np.load(Path(__file__).parent / "data" / "dol_draws_light_reversal_constant.npz"))
+    model = GapModel(torque_accuracy=0.01, coulomb_friction_max_nm=2.65, torque_offset_nm=2.119, torque_lag_s=4.5e-4,
+                     coupling_release_s=0.004, torque_filter_s=2e-4)
+
+    def fit(m=model):
+        return estimate_inertia(w, 48, 0.00323, 0.1, 5e-4, bearing_friction_nms_per_rad=0.02048, recontact_index=178,
+                                model=m)
+    gap_free._INTERVAL_MEMO.clear()
+    first = fit()
+    assert gap_free._INTERVAL_MEMO                                   # kept ...
+    assert fit() == first                                          # ... and the same fit from it
+    assert fit(dreplace(model, torque_lag_s=1e-3)).fit_start == first.fit_start   # the lag is not in the scan
+    gap_free._INTERVAL_MEMO.clear()
+    assert fit() == first
+    try:
+        gap_free.FITTED_CONSTANT_SCAN = False                        # in the key: scanned again, the short interval
+        assert fit().fit_end - fit().fit_start < 60
+    finally:
+        gap_free.FITTED_CONSTANT_SCAN = True
+    assert len(gap_free._INTERVAL_MEMO) <= gap_free._INTERVAL_MEMO_SIZE

@@ -94,6 +94,10 @@ FITTED_CONSTANT_OFFSET = True
 #: friction band's middle (stop 40, DOL draw d1-05: the intervals stopped 20 and 60 rows short of a 130-row gap,
 #: where the assumed friction's 1.6 N m error had curved the angle).  False: the band's middle alone.
 FITTED_CONSTANT_SCAN = True
+#: The change-point scan's candidate intervals of the last few windows (free_angle_fit: a window's lag check fits it
+#: twice with the same torque, stop 40).
+_INTERVAL_MEMO: dict = {}
+_INTERVAL_MEMO_SIZE = 8
 #: Samples taken off an end for the change-point term of the standard error (while at least half the interval
 #: stays; counted at 2 kHz, converted to the recording's rows by jident_ros/stream/rate.py): a contaminated end
 #: moves J1 as it is cut back; on a light-load reversal the coupling torque before the entry is too small for the
@@ -266,114 +270,128 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     s_est, e_est = start, end
     intervals = []                  # the candidate intervals (window rows), the first one's first
     if not fixed:
-        lo_c, hi_c = start - L, end - L
-        k_in = min(W // 2, max((hi_c - lo_c) // 4, 0))
-        core = (lo_c + k_in, hi_c - k_in) if hi_c - lo_c - 2 * k_in >= FREE_MIN_SAMPLES else (lo_c, hi_c)
-        if core[1] - core[0] < FREE_MIN_SAMPLES:
-            core = (max(0, min(lo_c, R - L - FREE_MIN_SAMPLES)), max(0, min(lo_c, R - L - FREE_MIN_SAMPLES))
-                    + FREE_MIN_SAMPLES)
-        # a long coarse interval may hold contact (a later flank's re-contact row): its core is a third (CORE_VAR_RATIO)
-        third = (core[1] - core[0]) // 3
-        if third >= 2 * FREE_MIN_SAMPLES:
-            subs, var = [(core[0] + k * third, core[0] + (k + 1) * third) for k in range(3)], []
-            for a0, b0 in subs:
-                rs = y[a0:b0] - Xs[a0:b0] @ lapack.lstsq(Xs[a0:b0], y[a0:b0])
-                var.append(float(rs @ rs) / (third - Xs.shape[1]))
-            quiet = [k for k in range(3) if var[k] <= CORE_VAR_RATIO * min(var)]
-            cores = [subs[k] for k in quiet]
-        else:
-            cores = [core]
+        # the scan does not depend on the torque lag: the lag check's second round (gap._lag_checked) finds the
+        # same intervals, kept here for it (a decision's inputs as the key, so the result is the same either way)
+        key = (a[L:R].tobytes(), m.tobytes(), start, end, L, R, ts, coulomb_mid, float(model.torque_offset_nm),
+               W, FITTED_CONSTANT_SCAN, OTHER_CORES_BELOW, CORE_VAR_RATIO, CHANGEPOINT_FORECAST_SAMPLES,
+               FREE_MIN_SAMPLES, _CHI2_FORECAST)
+        intervals = _INTERVAL_MEMO.get(key)
+        if intervals is None:
+            lo_c, hi_c = start - L, end - L
+            k_in = min(W // 2, max((hi_c - lo_c) // 4, 0))
+            core = (lo_c + k_in, hi_c - k_in) if hi_c - lo_c - 2 * k_in >= FREE_MIN_SAMPLES else (lo_c, hi_c)
+            if core[1] - core[0] < FREE_MIN_SAMPLES:
+                core = (max(0, min(lo_c, R - L - FREE_MIN_SAMPLES)), max(0, min(lo_c, R - L - FREE_MIN_SAMPLES))
+                        + FREE_MIN_SAMPLES)
+            # a long coarse interval may hold contact (a later flank's re-contact row): its core is a third (CORE_VAR_RATIO)
+            third = (core[1] - core[0]) // 3
+            if third >= 2 * FREE_MIN_SAMPLES:
+                subs, var = [(core[0] + k * third, core[0] + (k + 1) * third) for k in range(3)], []
+                for a0, b0 in subs:
+                    rs = y[a0:b0] - Xs[a0:b0] @ lapack.lstsq(Xs[a0:b0], y[a0:b0])
+                    var.append(float(rs @ rs) / (third - Xs.shape[1]))
+                quiet = [k for k in range(3) if var[k] <= CORE_VAR_RATIO * min(var)]
+                cores = [subs[k] for k in quiet]
+            else:
+                cores = [core]
 
-        def grown(cr, Xs=Xs):
-            """The interval grown from the core rows ``cr`` (e, s, e again; the noise from the core's fit)."""
-            c0 = lapack.lstsq(Xs[cr[0]:cr[1]], y[cr[0]:cr[1]])
-            r = y - Xs @ c0
-            rc = r[cr[0]:cr[1]]
-            s2 = max(float(rc @ rc) / max(rc.size - Xs.shape[1], 1), q * q / 12.0, 1e-30)
-            p = Xs.shape[1]
+            def grown(cr, Xs=Xs):
+                """The interval grown from the core rows ``cr`` (e, s, e again; the noise from the core's fit)."""
+                c0 = lapack.lstsq(Xs[cr[0]:cr[1]], y[cr[0]:cr[1]])
+                r = y - Xs @ c0
+                rc = r[cr[0]:cr[1]]
+                s2 = max(float(rc @ rc) / max(rc.size - Xs.shape[1], 1), q * q / 12.0, 1e-30)
+                p = Xs.shape[1]
 
-            k_f = CHANGEPOINT_FORECAST_SAMPLES
-            sums = _scan_sums(Xs, r)                  # shared by every scan below
-            # the χ² test's bound s2 · χ²(1 - CHANGEPOINT_P; n - p) for every interval length n (at least 1 dof)
-            chi_bound = s2 * _chi2_bounds(R - L, p)
+                k_f = CHANGEPOINT_FORECAST_SAMPLES
+                sums = _scan_sums(Xs, r)                  # shared by every scan below
+                # the χ² test's bound s2 · χ²(1 - CHANGEPOINT_P; n - p) for every interval length n (at least 1 dof)
+                chi_bound = s2 * _chi2_bounds(R - L, p)
 
-            def first_failure(lo_rows, hi_rows, side):
-                """Index of the first candidate interval [lo, hi) that is not accepted (None: all are).  Accepted: the
-                whole interval's residual is noise (χ² test) and its k_f end rows on ``side`` are predicted by the fit
-                without them (Chow's forecast test: a contaminated end shows in the extrapolation first).  Every
-                candidate's two fits (over [lo, hi) and over the interval without the k_f rows) in one batch: normal
-                matrices from the cumulative sums, inverted in closed form (a decision, not a published number: the
-                inverse's product where the earlier code solved, the same test to rounding)."""
-                if side == "end":
-                    ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + _FORECAST_ROWS
-                else:
-                    ilo, ihi, test = lo_rows + k_f, hi_rows, lo_rows[:, None] + _FORECAST_ROWS
-                c = lo_rows.size
-                D = sums[np.concatenate([hi_rows, ihi])] - sums[np.concatenate([lo_rows, ilo])]
-                Ainv = _sym3_inverse(D[:, :6])
-                sol = _einsum("kij,kj->ki", Ainv, D[:, 6:9])
-                rss = D[:c, 9] - _einsum("ki,ki->k", D[:c, 6:9], sol[:c])
-                ok = rss <= chi_bound[hi_rows - lo_rows]
-                xt = Xs[test]                                             # (cand, k_f, p)
-                pred = _einsum("ckp,cp->ck", xt, sol[c:])
-                lev = _einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)          # x A⁻¹ xᵀ of each test row
-                stat = ((r[test] - pred) ** 2 / (s2 * (1.0 + lev))).sum(axis=1)
-                bad = np.flatnonzero(~(ok & ((ihi - ilo < p + 2) | (stat <= _CHI2_FORECAST))))
-                return int(bad[0]) if bad.size else None
+                def first_failure(lo_rows, hi_rows, side):
+                    """Index of the first candidate interval [lo, hi) that is not accepted (None: all are).  Accepted: the
+                    whole interval's residual is noise (χ² test) and its k_f end rows on ``side`` are predicted by the fit
+                    without them (Chow's forecast test: a contaminated end shows in the extrapolation first).  Every
+                    candidate's two fits (over [lo, hi) and over the interval without the k_f rows) in one batch: normal
+                    matrices from the cumulative sums, inverted in closed form (a decision, not a published number: the
+                    inverse's product where the earlier code solved, the same test to rounding)."""
+                    if side == "end":
+                        ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + _FORECAST_ROWS
+                    else:
+                        ilo, ihi, test = lo_rows + k_f, hi_rows, lo_rows[:, None] + _FORECAST_ROWS
+                    c = lo_rows.size
+                    D = sums[np.concatenate([hi_rows, ihi])] - sums[np.concatenate([lo_rows, ilo])]
+                    Ainv = _sym3_inverse(D[:, :6])
+                    sol = _einsum("kij,kj->ki", Ainv, D[:, 6:9])
+                    rss = D[:c, 9] - _einsum("ki,ki->k", D[:c, 6:9], sol[:c])
+                    ok = rss <= chi_bound[hi_rows - lo_rows]
+                    xt = Xs[test]                                             # (cand, k_f, p)
+                    pred = _einsum("ckp,cp->ck", xt, sol[c:])
+                    lev = _einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)          # x A⁻¹ xᵀ of each test row
+                    stat = ((r[test] - pred) ** 2 / (s2 * (1.0 + lev))).sum(axis=1)
+                    bad = np.flatnonzero(~(ok & ((ihi - ilo < p + 2) | (stat <= _CHI2_FORECAST))))
+                    return int(bad[0]) if bad.size else None
 
-            def grow_end(s_row, e_from):
-                cand = np.arange(max(s_row + FREE_MIN_SAMPLES, e_from), min(hi_c + W, R - L) + 1)
-                if cand.size == 0:
-                    return e_from
-                k = first_failure(np.full(cand.size, s_row), cand, "end")
-                return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
+                def grow_end(s_row, e_from):
+                    cand = np.arange(max(s_row + FREE_MIN_SAMPLES, e_from), min(hi_c + W, R - L) + 1)
+                    if cand.size == 0:
+                        return e_from
+                    k = first_failure(np.full(cand.size, s_row), cand, "end")
+                    return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
 
-            def grow_start(e_row, s_from):
-                cand = np.arange(min(e_row - FREE_MIN_SAMPLES, s_from), max(lo_c - W, 0) - 1, -1)
-                if cand.size == 0:
-                    return s_from
-                k = first_failure(cand, np.full(cand.size, e_row), "start")
-                return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
+                def grow_start(e_row, s_from):
+                    cand = np.arange(min(e_row - FREE_MIN_SAMPLES, s_from), max(lo_c - W, 0) - 1, -1)
+                    if cand.size == 0:
+                        return s_from
+                    k = first_failure(cand, np.full(cand.size, e_row), "start")
+                    return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
 
-            e_row = grow_end(cr[0], cr[1])
-            s_row = grow_start(e_row, cr[0])
-            e_row = grow_end(s_row, cr[1] if cr[1] <= e_row else e_row)
-            return s_row, e_row
+                e_row = grow_end(cr[0], cr[1])
+                s_row = grow_start(e_row, cr[0])
+                e_row = grow_end(s_row, cr[1] if cr[1] <= e_row else e_row)
+                return s_row, e_row
 
-        # every quiet third grows its own interval (one inside an interval grown already is not grown again); of the
-        # intervals the one whose J1 is the most precise is the gap (below).  A core in a rest where the coupling
-        # still carries a small torque (a soft coupling that touched zero and sprang back before the gap opened)
-        # grows into a short interval whose J1 takes that torque; the gap's own core grows over the gap
-        s_row, e_row = grown(cores[0])
-        intervals = [(L + s_row, L + e_row)]
-        covered = min(e_row, hi_c) - max(s_row, lo_c)
-        for other in cores[1:] if covered < OTHER_CORES_BELOW * (hi_c - lo_c) else ():
-            if any(a0 <= L + other[0] and L + other[1] <= b0 for a0, b0 in intervals):
-                continue
-            s_o, e_o = grown(other)
-            if e_o - s_o >= FREE_MIN_SAMPLES and (L + s_o, L + e_o) not in intervals:
-                intervals.append((L + s_o, L + e_o))
-        if FITTED_CONSTANT_SCAN and covered < OTHER_CORES_BELOW * (hi_c - lo_c) \
-                and (model.coulomb_friction_max_nm or model.torque_offset_nm):
-            # the scan's assumed friction (the band's middle) is not the gap's constant torque (the friction and the
-            # estimate's offset): the intervals stop where that difference has curved the angle; the constant fitted
-            # over the coarse gap's core, kept within its bands, and the quiet cores grown again with it
-            X4 = np.column_stack([Xs[core[0]:core[1], :2], Phi[core[0]:core[1]] / phi_scale,
-                                  Cc[core[0]:core[1]] / max(float(np.abs(Cc[core[0]:core[1]]).max()), 1e-300)])
-            c4 = lapack.lstsq(X4, y[core[0]:core[1]])
-            if c4[2] > 0:
-                f_hat = -float(c4[3]) / max(float(np.abs(Cc[core[0]:core[1]]).max()), 1e-300) / (c4[2] / phi_scale)
-                f_hat = min(max(f_hat, -float(model.torque_offset_nm)),
-                            float(model.coulomb_friction_max_nm) + float(model.torque_offset_nm))
-                phi_hat = Phi - f_hat * Cc
-                X3 = np.column_stack([Xs[:, :2], phi_hat / max(float(np.abs(phi_hat).max()), 1e-300)])
-                # only an interval longer than every one before by the fit's minimum: the rows the assumed friction
-                # cut off, not the same gap moved by a few rows (DOL d16-12's 94 rows beside the 98 grown before)
-                longest = max(b0 - a0 for a0, b0 in intervals)
-                for cr in cores:
-                    s_o, e_o = grown(cr, X3)
-                    if e_o - s_o >= longest + FREE_MIN_SAMPLES and (L + s_o, L + e_o) not in intervals:
-                        intervals.append((L + s_o, L + e_o))
+            # every quiet third grows its own interval (one inside an interval grown already is not grown again); of the
+            # intervals the one whose J1 is the most precise is the gap (below).  A core in a rest where the coupling
+            # still carries a small torque (a soft coupling that touched zero and sprang back before the gap opened)
+            # grows into a short interval whose J1 takes that torque; the gap's own core grows over the gap
+            s_row, e_row = grown(cores[0])
+            intervals = [(L + s_row, L + e_row)]
+            covered = min(e_row, hi_c) - max(s_row, lo_c)
+            for other in cores[1:] if covered < OTHER_CORES_BELOW * (hi_c - lo_c) else ():
+                if any(a0 <= L + other[0] and L + other[1] <= b0 for a0, b0 in intervals):
+                    continue
+                s_o, e_o = grown(other)
+                if e_o - s_o >= FREE_MIN_SAMPLES and (L + s_o, L + e_o) not in intervals:
+                    intervals.append((L + s_o, L + e_o))
+            if FITTED_CONSTANT_SCAN and covered < OTHER_CORES_BELOW * (hi_c - lo_c) \
+                    and (model.coulomb_friction_max_nm or model.torque_offset_nm):
+                # the scan's assumed friction (the band's middle) is not the gap's constant torque (the friction and the
+                # estimate's offset): the intervals stop where that difference has curved the angle; the constant fitted
+                # over the coarse gap's core, kept within its bands, and the quiet cores grown again with it
+                X4 = np.column_stack([Xs[core[0]:core[1], :2], Phi[core[0]:core[1]] / phi_scale,
+                                      Cc[core[0]:core[1]] / max(float(np.abs(Cc[core[0]:core[1]]).max()), 1e-300)])
+                c4 = lapack.lstsq(X4, y[core[0]:core[1]])
+                if c4[2] > 0:
+                    f_hat = -float(c4[3]) / max(float(np.abs(Cc[core[0]:core[1]]).max()), 1e-300) / (c4[2] / phi_scale)
+                    f_hat = min(max(f_hat, -float(model.torque_offset_nm)),
+                                float(model.coulomb_friction_max_nm) + float(model.torque_offset_nm))
+                    phi_hat = Phi - f_hat * Cc
+                    X3 = np.column_stack([Xs[:, :2], phi_hat / max(float(np.abs(phi_hat).max()), 1e-300)])
+                    # only an interval longer than every one before by the fit's minimum: the rows the assumed friction
+                    # cut off, not the same gap moved by a few rows (DOL d16-12's 94 rows beside the 98 grown before)
+                    # (a core inside one grown already is not grown again, as above)
+                    longest, again = max(b0 - a0 for a0, b0 in intervals), []
+                    for cr in cores:
+                        if any(a0 <= cr[0] and cr[1] <= b0 for a0, b0 in again):
+                            continue
+                        s_o, e_o = grown(cr, X3)
+                        again.append((s_o, e_o))
+                        if e_o - s_o >= longest + FREE_MIN_SAMPLES and (L + s_o, L + e_o) not in intervals:
+                            intervals.append((L + s_o, L + e_o))
+            if len(_INTERVAL_MEMO) >= _INTERVAL_MEMO_SIZE:
+                _INTERVAL_MEMO.clear()
+            _INTERVAL_MEMO[key] = intervals = tuple(intervals)
         s_est, e_est = intervals[0]
         if (SHORT_GAP_NOT_PAST_CONTACT and s_est >= start and end - s_est < FREE_MIN_SAMPLES
                 and e_est > max(end, s_est + FREE_MIN_SAMPLES)):
