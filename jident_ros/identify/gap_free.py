@@ -369,11 +369,12 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
                 # the scan's assumed friction (the band's middle) is not the gap's constant torque (the friction and the
                 # estimate's offset): the intervals stop where that difference has curved the angle; the constant fitted
                 # over the coarse gap's core, kept within its bands, and the quiet cores grown again with it
-                X4 = np.column_stack([Xs[core[0]:core[1], :2], Phi[core[0]:core[1]] / phi_scale,
-                                      Cc[core[0]:core[1]] / max(float(np.abs(Cc[core[0]:core[1]]).max()), 1e-300)])
+                cc_core = Cc[core[0]:core[1]]
+                c_core = max(float(np.abs(cc_core).max()), 1e-300)
+                X4 = np.column_stack([Xs[core[0]:core[1], :2], Phi[core[0]:core[1]] / phi_scale, cc_core / c_core])
                 c4 = lapack.lstsq(X4, y[core[0]:core[1]])
                 if c4[2] > 0:
-                    f_hat = -float(c4[3]) / max(float(np.abs(Cc[core[0]:core[1]]).max()), 1e-300) / (c4[2] / phi_scale)
+                    f_hat = -float(c4[3]) / c_core / (c4[2] / phi_scale)
                     f_hat = min(max(f_hat, -float(model.torque_offset_nm)),
                                 float(model.coulomb_friction_max_nm) + float(model.torque_offset_nm))
                     phi_hat = Phi - f_hat * Cc

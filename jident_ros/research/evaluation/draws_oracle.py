@@ -69,21 +69,14 @@ def offset_band_nm(d, zr, system) -> float:
     """The torque offset band F (N m) drawn drive ``d``'s declaration gives the gap fits of recording ``zr``, as
     zoo_draws configures them (zoo.diagnose_one: a vector drive's zoo keys and the draw's declaration on our motor's
     M_b)."""
-    keys = dict(zoo.declared(zr.model)) if d.model == "vector" else {}
-    keys.update(zoo_draws.declaration(d))
-    keys.pop("bearing_friction_nms_per_rad", None)
+    keys, _ = zoo.policy_keys(zr, d.model == "vector", zoo_draws.declaration(d), 0.0)
     return float(default_policy(**keys).drive_model(True, system.motor).torque_offset_nm)
 
 
 def constant_fit(t, alpha1, torque, first: int, end: int) -> tuple:
     """(J1, its relative standard error) of zoo.oracle_fit with a constant torque fitted beside J1 (the same
     columns), the standard error from the residual (None, inf where 1/J1 is not positive)."""
-    tt = np.asarray(t[first:end], float) - float(t[first])
-    m = np.asarray(torque[first:end], float)
-    i1 = np.concatenate([[0.0], np.cumsum(0.5 * (m[1:] + m[:-1]) * np.diff(tt))])
-    i2 = np.concatenate([[0.0], np.cumsum(0.5 * (i1[1:] + i1[:-1]) * np.diff(tt))])
-    X = np.column_stack([np.ones_like(tt), tt, i2, 0.5 * tt * tt])
-    y = np.asarray(alpha1[first:end], float)
+    X, y = zoo.oracle_design(t, alpha1, torque, first, end, friction=True)
     coef, *_ = np.linalg.lstsq(X, y, rcond=None)
     if not coef[2] > 0:
         return None, math.inf

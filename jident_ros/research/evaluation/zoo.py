@@ -273,14 +273,20 @@ def _declared_text() -> str:
     return "each drive declared as a user would (`zoo.declared`; " + "; ".join(parts) + "; the rest the node's defaults)"
 
 
+def policy_keys(zr: "ZooRecording", declare: bool, extra: Optional[dict], default_b1: float) -> tuple:
+    """(the policy's keys, b1) :func:`diagnose_one` configures a recording with: :func:`declared`'s keys for its
+    model where ``declare``, ``extra`` over them, b1 taken out (``default_b1`` where none is given)."""
+    keys = dict(declared(zr.model)) if declare else {}
+    keys.update(extra or {})
+    return keys, keys.pop("bearing_friction_nms_per_rad", default_b1)
+
+
 def diagnose_one(zr: ZooRecording, fmt: str, system, declare: bool = True, extra: Optional[dict] = None,
                  gap_method: Optional[str] = None) -> dict:
     """Windows of one file, each matched to the truth (``declare``: with the drive's :func:`declared` keys;
     ``extra``: keys that replace or add to them, e.g. a drive variant's own friction; ``gap_method``: the
     diagnostic node's ``gap_method`` (default: its default, auto))."""
-    keys = dict(declared(zr.model)) if declare else {}
-    keys.update(extra or {})
-    b1 = keys.pop("bearing_friction_nms_per_rad", system.motor.bearing_friction_nms_per_rad)
+    keys, b1 = policy_keys(zr, declare, extra, system.motor.bearing_friction_nms_per_rad)
     sysr = replace(system, load=replace(system.load, wheel_radius_m=zr.radius_m),
                    motor=replace(system.motor, bearing_friction_nms_per_rad=b1))
     try:
@@ -350,13 +356,20 @@ def oracle_fit(t, alpha1, m_el, first: int, end: int, friction: bool = False) ->
     where m_el varies in the gap). What the data hold; None for a gap of fewer than ORACLE_MIN_SAMPLES samples."""
     if end - first < ORACLE_MIN_SAMPLES:
         return None
+    X, y = oracle_design(t, alpha1, m_el, first, end, friction)
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    return float(1.0 / coef[2]) if coef[2] > 0 else None
+
+
+def oracle_design(t, alpha1, m_el, first: int, end: int, friction: bool = False) -> tuple:
+    """(X, y) of :func:`oracle_fit` over rows first..end-1: columns 1, t − t_first, the trapezoidal double integral of
+    m_el (its coefficient 1/J1) and, with ``friction``, t²/2; y the motor angle."""
     tt = np.asarray(t[first:end], float) - float(t[first])
     m = np.asarray(m_el[first:end], float)
     i1 = np.concatenate([[0.0], np.cumsum(0.5 * (m[1:] + m[:-1]) * np.diff(tt))])
     i2 = np.concatenate([[0.0], np.cumsum(0.5 * (i1[1:] + i1[:-1]) * np.diff(tt))])
     cols = [np.ones_like(tt), tt, i2] + ([0.5 * tt * tt] if friction else [])
-    coef, *_ = np.linalg.lstsq(np.column_stack(cols), np.asarray(alpha1[first:end], float), rcond=None)
-    return float(1.0 / coef[2]) if coef[2] > 0 else None
+    return np.column_stack(cols), np.asarray(alpha1[first:end], float)
 
 
 def oracle_errors(zr: ZooRecording, friction: bool = False) -> list:
