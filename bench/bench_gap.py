@@ -67,7 +67,7 @@ def _steady_entry_window():
 
 def _timed(repeats: int, fn) -> tuple:
     times, cpu = [], []
-    memo = getattr(gap_free, "_INTERVAL_MEMO", None)   # stop 40: a window's scan is kept for its lag check's second fit
+    memo = getattr(gap_free, "_INTERVAL_MEMO", None)   # stop 40's kept scan (a checkout before 41's window_memo)
     for _ in range(repeats):
         if memo is not None:
             memo.clear()                                  # every run a new window's cost, not the kept scan's

@@ -730,13 +730,14 @@ def test_a_constant_torque_is_fitted_over_the_whole_gap(scan, offset, monkeypatc
         assert g is None or (g.fit_end - g.fit_start < 60 or not g.friction.startswith("fitted")), g
 
 
-def test_the_kept_scan_gives_the_same_fit_and_follows_the_flags():
-    """gap_free keeps a window's change-point scan for its lag check's second fit (the scan does not depend on the
-    lag): a call with the scan kept equals one made afresh, and a scan flag's change is not served a kept scan."""
-    from dataclasses import replace as dreplace
+def test_the_window_memo_fits_the_lag_checks_second_round_once_and_changes_nothing(monkeypatch):
+    """A window's lag check fits its rows again with the lag the angle shows: the change-point scan, the load side's
+    bound and the fits (whose terms read the lag only through its own term) are kept for it while the window is
+    estimated (gap_numerics.window_memo), so the second round scans nothing and refits nothing; the estimate is the
+    one made with nothing kept, and nothing outlives the call (a flag changed between two windows is followed)."""
     from pathlib import Path
 
-    from jident_ros.identify import gap_free
+    from jident_ros.identify import gap_free, gap_load, gap_numerics
     from jident_ros.identify.gap import estimate_inertia
     from jident_ros.identify.gap_free import GapModel
     w = dict(np.load(Path(__file__).parent / "data" / "dol_draws_light_reversal_constant.npz"))
@@ -746,16 +747,33 @@ def test_the_kept_scan_gives_the_same_fit_and_follows_the_flags():
     def fit(m=model):
         return estimate_inertia(w, 48, 0.00323, 0.1, 5e-4, bearing_friction_nms_per_rad=0.02048, recontact_index=178,
                                 model=m)
-    gap_free._INTERVAL_MEMO.clear()
-    first = fit()
-    assert gap_free._INTERVAL_MEMO                                   # kept ...
-    assert fit() == first                                          # ... and the same fit from it
-    assert fit(dreplace(model, torque_lag_s=1e-3)).fit_start == first.fit_start   # the lag is not in the scan
-    gap_free._INTERVAL_MEMO.clear()
-    assert fit() == first
+    calls = {"scan": 0, "load": 0, "fit": 0}
+
+    def counted(name, fn):
+        def wrapper(*a, **k):
+            calls[name] += 1
+            return fn(*a, **k)
+        return wrapper
+    monkeypatch.setattr(gap_free, "_scan_sums", counted("scan", gap_free._scan_sums))
+    monkeypatch.setattr(gap_load, "_Scan", counted("load", gap_load._Scan))
+    monkeypatch.setattr(gap_free.lapack, "solve", counted("fit", gap_free.lapack.solve))
+    kept = fit()
+    assert "the torque lags the motor angle" in kept.model_choice        # the lag check's second round ran
+    assert gap_numerics._WINDOW_MEMO is None                             # nothing outlives the window
+    with_memo = dict(calls)
     try:
-        gap_free.FITTED_CONSTANT_SCAN = False                        # in the key: scanned again, the short interval
-        assert fit().fit_end - fit().fit_start < 60
+        gap_free.FITTED_CONSTANT_SCAN = False                            # a flag changed between two windows
+        short = fit()
+        assert short.fit_end - short.fit_start < 60
     finally:
         gap_free.FITTED_CONSTANT_SCAN = True
-    assert len(gap_free._INTERVAL_MEMO) <= gap_free._INTERVAL_MEMO_SIZE
+    for k in calls:
+        calls[k] = 0
+    monkeypatch.setattr(gap_numerics, "_WINDOW_MEMO", None)
+    monkeypatch.setattr(gap_numerics, "memo_get", lambda key: None)
+    for mod in (gap_free, gap_load):
+        monkeypatch.setattr(mod, "memo_get", lambda key: None)
+    afresh = fit()
+    assert afresh == kept                                                # the same estimate, term for term
+    assert with_memo["scan"] * 2 == calls["scan"] and with_memo["load"] * 2 == calls["load"], (with_memo, calls)
+    assert with_memo["fit"] < calls["fit"], (with_memo, calls)          # the second round's fits are kept ones

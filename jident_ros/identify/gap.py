@@ -102,7 +102,7 @@ from jident_ros.identify.gap_kink import (
 )
 from jident_ros.identify.gap_lag import LAG_MAX_FRACTION, LAG_MIN_SAMPLES, LAG_Z, torque_lag_estimate
 from jident_ros.identify.gap_load import LOAD_ANGLE_KEY, load_free_bounds
-from jident_ros.identify.gap_numerics import _ar1_inflation, _cumtrapz, _diff2, _median, _quantum
+from jident_ros.identify.gap_numerics import _ar1_inflation, _cumtrapz, _diff2, _median, _quantum, window_memo
 from jident_ros.stream.filters import savgol_coeffs, savgol_filter
 from jident_ros.stream.flank import disc_corrected
 from jident_ros.stream.rate import samples as rate_samples
@@ -399,9 +399,10 @@ def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wh
     window = _delay_taken_off(window, model.torque_delay_s, model.torque_filter_s, sample_period_s)
     window, disc = _disc_taken_off(window, sample_period_s)
     try:
-        est = _lag_checked((window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s, method,
-                            bearing_friction_nms_per_rad, recontact_index, entry_uncertainty_samples), model,
-                           cross_check)
+        with window_memo():       # the lag check and the cross-check fit the same rows again: decisions kept
+            est = _lag_checked((window, entry_index, backlash_width_m, wheel_radius_m, sample_period_s, method,
+                                bearing_friction_nms_per_rad, recontact_index, entry_uncertainty_samples), model,
+                               cross_check)
     except NoGapError as exc:
         raise NoGapError(f"{exc}; {disc}" if disc else str(exc)) from None
     return replace(est, model_choice=f"{est.model_choice or est.method}; {disc}") if disc else est

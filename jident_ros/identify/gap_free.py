@@ -35,7 +35,7 @@ Plain numpy; never imports rclpy.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -53,6 +53,10 @@ from jident_ros.identify.gap_numerics import (
     _scan_sums,
     _sym3_inverse,
     _trim_rows,
+    chi2_bounds,
+    chi2_upper,
+    memo_get,
+    memo_put,
 )
 from jident_ros.identify.gap_terms import drift_term, encoder_error_term
 from jident_ros.stream.rate import samples as rate_samples
@@ -94,10 +98,6 @@ FITTED_CONSTANT_OFFSET = True
 #: friction band's middle (stop 40, DOL draw d1-05: the intervals stopped 20 and 60 rows short of a 130-row gap,
 #: where the assumed friction's 1.6 N m error had curved the angle).  False: the band's middle alone.
 FITTED_CONSTANT_SCAN = True
-#: The change-point scan's candidate intervals of the last few windows (free_angle_fit: a window's lag check fits it
-#: twice with the same torque, stop 40).
-_INTERVAL_MEMO: dict = {}
-_INTERVAL_MEMO_SIZE = 8
 #: Samples taken off an end for the change-point term of the standard error (while at least half the interval
 #: stays; counted at 2 kHz, converted to the recording's rows by jident_ros/stream/rate.py): a contaminated end
 #: moves J1 as it is cut back; on a light-load reversal the coupling torque before the entry is too small for the
@@ -191,24 +191,6 @@ class GapModel:
 _Z_CHANGEPOINT = float(normal_isf(CHANGEPOINT_P))
 
 
-def _chi2_upper(dof: np.ndarray, z: float = _Z_CHANGEPOINT) -> np.ndarray:
-    """The (1 - CHANGEPOINT_P) quantile of χ² with ``dof`` degrees of freedom (Wilson-Hilferty: within 1 % of
-    scipy's from 3 degrees of freedom on; a scipy call per scan cost more than the scan); ``z``: the normal quantile
-    of another level (gap_load's)."""
-    v = np.asarray(dof, float)
-    c = 2.0 / (9.0 * v)
-    return v * (1.0 - c + z * np.sqrt(c)) ** 3
-
-
-@lru_cache(maxsize=64)
-def _chi2_bounds(n: int, p: int, z: float = _Z_CHANGEPOINT) -> np.ndarray:
-    """:func:`_chi2_upper` of max(k - p, 1) degrees of freedom for k = 0 .. n, the χ² test's quantile for every
-    interval length (read-only: shared)."""
-    out = _chi2_upper(np.maximum(np.arange(n + 1) - p, 1), z)
-    out.flags.writeable = False
-    return out
-
-
 @lru_cache(maxsize=16)
 def _trims_at(ts: float) -> tuple:
     """CHANGEPOINT_TRIMS in rows at the sample period ``ts`` (stream/rate.py), sorted, without repeats."""
@@ -217,7 +199,7 @@ def _trims_at(ts: float) -> tuple:
 
 #: The forecast test's rows relative to its first one, and its χ² bound.
 _FORECAST_ROWS = np.arange(CHANGEPOINT_FORECAST_SAMPLES)
-_CHI2_FORECAST = float(_chi2_upper(np.array([CHANGEPOINT_FORECAST_SAMPLES]))[0])
+_CHI2_FORECAST = float(chi2_upper(np.array([CHANGEPOINT_FORECAST_SAMPLES]), _Z_CHANGEPOINT)[0])
 
 
 def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, start: int, end: int,
@@ -271,11 +253,10 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     intervals = []                  # the candidate intervals (window rows), the first one's first
     if not fixed:
         # the scan does not depend on the torque lag: the lag check's second round (gap._lag_checked) finds the
-        # same intervals, kept here for it (a decision's inputs as the key, so the result is the same either way)
-        key = (a[L:R].tobytes(), m.tobytes(), start, end, L, R, ts, coulomb_mid, float(model.torque_offset_nm),
-               W, FITTED_CONSTANT_SCAN, OTHER_CORES_BELOW, CORE_VAR_RATIO, CHANGEPOINT_FORECAST_SAMPLES,
-               FREE_MIN_SAMPLES, _CHI2_FORECAST)
-        intervals = _INTERVAL_MEMO.get(key)
+        # same intervals, kept for it while the window is estimated (gap_numerics.window_memo; its inputs as the key)
+        key = ("free_intervals", a[L:R].tobytes(), m.tobytes(), start, end, L, R, ts, coulomb_mid,
+               float(model.torque_offset_nm), W)
+        intervals = memo_get(key)
         if intervals is None:
             lo_c, hi_c = start - L, end - L
             k_in = min(W // 2, max((hi_c - lo_c) // 4, 0))
@@ -306,7 +287,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
                 k_f = CHANGEPOINT_FORECAST_SAMPLES
                 sums = _scan_sums(Xs, r)                  # shared by every scan below
                 # the χ² test's bound s2 · χ²(1 - CHANGEPOINT_P; n - p) for every interval length n (at least 1 dof)
-                chi_bound = s2 * _chi2_bounds(R - L, p)
+                chi_bound = s2 * chi2_bounds(R - L, p, _Z_CHANGEPOINT)
 
                 def first_failure(lo_rows, hi_rows, side):
                     """Index of the first candidate interval [lo, hi) that is not accepted (None: all are).  Accepted: the
@@ -390,9 +371,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
                         again.append((s_o, e_o))
                         if e_o - s_o >= longest + FREE_MIN_SAMPLES and (L + s_o, L + e_o) not in intervals:
                             intervals.append((L + s_o, L + e_o))
-            if len(_INTERVAL_MEMO) >= _INTERVAL_MEMO_SIZE:
-                _INTERVAL_MEMO.clear()
-            _INTERVAL_MEMO[key] = intervals = tuple(intervals)
+            intervals = memo_put(key, tuple(intervals))
         s_est, e_est = intervals[0]
         if (SHORT_GAP_NOT_PAST_CONTACT and s_est >= start and end - s_est < FREE_MIN_SAMPLES
                 and e_est > max(end, s_est + FREE_MIN_SAMPLES)):
@@ -462,14 +441,39 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             tt = tau[f["i"]:f["j"]]
             terms["torque_offset"] = j1 * abs(float(row @ (0.5 * tt * tt))) * float(model.torque_offset_nm) / np.sqrt(3.0)
             terms["torque_drift"] = drift_term(row, tt, j1, float(model.torque_offset_nm))
-        if model.torque_lag_s:
-            # m_el lagging by τ: the shaft's torque is m_el(t + τ) ≈ m_el + τ dm_el/dt, whose double integral adds
-            # τ ∫m_el dt (and a linear term, absorbed): J1 moves by J1 τ (r_κ · ∫m_el dt)
-            psi = _cumtrapz(m[f["i"]:f["j"]], ts)
-            terms["torque_lag"] = j1 * abs(float(row @ psi)) * float(model.torque_lag_s) / np.sqrt(3.0)
+        # m_el lagging by τ: the shaft's torque is m_el(t + τ) ≈ m_el + τ dm_el/dt, whose double integral adds
+        # τ ∫m_el dt (and a linear term, absorbed): J1 moves by J1 τ (r_κ · ∫m_el dt); here J1 (r_κ · ∫m_el dt), the
+        # declared τ applied in fitted() (the lag check's second round: another τ, the same fit)
+        terms["torque_lag"] = j1 * abs(float(row @ _cumtrapz(m[f["i"]:f["j"]], ts)))
         if model.encoder_error_rad:
             terms["encoder_error"] = encoder_error_term(row, a[L + f["i"]:L + f["j"]], j1, float(model.encoder_error_rad))
         return terms
+
+    # the fits and their terms do not read the declared lag but through its term: kept while the window is estimated
+    # (gap_numerics.window_memo) for its lag check's second round, keyed by the rows and the model without the lag
+    fit_key = ("free_fit", a[L:R].tobytes(), m.tobytes(), L, R, start, end, ts, replace(model, torque_lag_s=0.0))
+
+    def fitted(s_row: int, e_row: int, with_coulomb: bool) -> tuple:
+        """(fit, its standard error's terms) over [s_row, e_row), the lag term at the declared lag."""
+        key = fit_key + (s_row, e_row, with_coulomb)
+        kept = memo_get(key)
+        if kept is None:
+            f = fit(s_row, e_row, with_coulomb)
+            kept = memo_put(key, (f, se_terms(f)))
+        f, terms = kept[0], dict(kept[1])
+        if terms and model.torque_lag_s:
+            terms["torque_lag"] = terms["torque_lag"] * float(model.torque_lag_s) / np.sqrt(3.0)
+        else:
+            terms.pop("torque_lag", None)
+        return f, terms
+
+    def change_points(f: dict, j1: float, with_coulomb: bool, trims: list, both: list) -> float:
+        """The change-point term: J1's largest move under the trims (:func:`j_trims`), kept with the fit."""
+        key = fit_key + (f["i"], f["j"], with_coulomb, "trims")
+        kept = memo_get(key)
+        if kept is None:
+            kept = memo_put(key, float(np.abs(j_trims(f, with_coulomb, trims, both) - j1).max()) if trims else 0.0)
+        return kept
 
     def j_trims(f: dict, with_coulomb: bool, trims: list, both: list = ()) -> np.ndarray:
         """J1 alone over [s_row + k, e_row) and [s_row, e_row - k) for each k in ``trims`` (batched normal
@@ -512,12 +516,11 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         for with_coulomb in (False, True):
             if with_coulomb and (e_est - s_est < FREE_MIN_SAMPLES + 2 or not model.coulomb_friction_max_nm):
                 continue
-            f = fit(s_est, e_est, with_coulomb)
+            f, terms = fitted(s_est, e_est, with_coulomb)
             first = f if first is None else first
             if not f["kappa"] > 0:
                 continue
             j1 = 1.0 / f["kappa"]
-            terms = se_terms(f)
             if not terms:
                 continue
             if with_coulomb:
@@ -548,8 +551,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             both = [k for k in _trims_at(ts)
                     if n - 2 * k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)
                     and (k <= full or 2 * k <= n // 4)]
-            terms["change_points"] = float(np.abs(j_trims(f, with_coulomb, trims, both) - j1).max()) \
-                if trims else 0.0
+            terms["change_points"] = change_points(f, j1, with_coulomb, trims, both)
             se_stat = float(np.sqrt(sum(v * v for v in terms.values())))
             se_stat = max(se_stat, FREE_REL_SE_FLOOR * j1)
             cand = {"j1": j1, "se_stat": se_stat, "terms": terms, "fit": f, "coulomb": with_coulomb}

@@ -24,9 +24,8 @@ import numpy as np
 
 from jident_ros.identify import lapack
 from jident_ros.identify.distributions import normal_isf
-from jident_ros.identify.gap_free import _FORECAST_ROWS, CHANGEPOINT_FORECAST_SAMPLES, FREE_MIN_SAMPLES, _chi2_bounds
-from jident_ros.identify.gap_free import _chi2_upper as _chi2_upper_at
-from jident_ros.identify.gap_numerics import _einsum, _quantum, _robust_noise
+from jident_ros.identify.gap_free import _FORECAST_ROWS, CHANGEPOINT_FORECAST_SAMPLES, FREE_MIN_SAMPLES
+from jident_ros.identify.gap_numerics import _einsum, _quantum, _robust_noise, chi2_bounds, chi2_upper, memo_get, memo_put
 
 #: The window key of the load angle the gap stage reads for the bound (the detector windows' raw alpha2: the gap
 #: stage must not read it as inequality 1's zone-centred angle).
@@ -59,7 +58,7 @@ _Z_LOAD = float(normal_isf(LOAD_CHANGEPOINT_P))
 
 def _chi2_upper(dof) -> np.ndarray:
     """The (1 - LOAD_CHANGEPOINT_P) quantile of χ² with ``dof`` degrees of freedom (gap_free's Wilson-Hilferty)."""
-    return _chi2_upper_at(dof, _Z_LOAD)
+    return chi2_upper(dof, _Z_LOAD)
 
 
 _CHI2_FORECAST = float(_chi2_upper(np.array([CHANGEPOINT_FORECAST_SAMPLES]))[0])
@@ -91,7 +90,7 @@ class _Scan:
         n, p = X.shape
         c0 = lapack.lstsq(X[core[0]:core[1]], y[core[0]:core[1]])
         self.X, self.r, self.s2, self.p, self.n = X, y - X @ c0, s2, p, n
-        self.chi_bound = s2 * _chi2_bounds(n, p, _Z_LOAD)
+        self.chi_bound = s2 * chi2_bounds(n, p, _Z_LOAD)
         Z = np.zeros((n + 1, p * p + p + 1))       # cumulative x xᵀ, x r and r² (a zero row in front)
         Z[1:, :p * p] = _einsum("ki,kj->kij", X, X).reshape(n, p * p)
         Z[1:, p * p:p * p + p] = X * self.r[:, None]
@@ -155,6 +154,16 @@ def load_free_bounds(alpha2, start: int, end: int, search: int) -> tuple | None:
     a = np.asarray(alpha2, float)
     n_all = a.size
     L, R = max(0, start - search), min(n_all, end + search)
+    # the same rows give the same bound: kept while the window is estimated (its lag check fits it again)
+    key = ("load_free_bounds", a[L:R].tobytes(), L, R, start, end, search)
+    kept = memo_get(key)
+    if kept is None:
+        kept = memo_put(key, (_free_bounds(a, L, R, start, end, search),))
+    return kept[0]
+
+
+def _free_bounds(a: np.ndarray, L: int, R: int, start: int, end: int, search: int) -> tuple | None:
+    """:func:`load_free_bounds` over the rows [L, R) of the load angle ``a``."""
     if R - L < CORE_SAMPLES + FREE_MIN_SAMPLES or not np.all(np.isfinite(a[L:R])):
         return None
     y = a[L:R] - a[start]

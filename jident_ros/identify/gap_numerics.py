@@ -1,11 +1,13 @@
 """The gap fits' numerical kernels (identify/gap_free.py's, issue 20's per-window budget): cumulative trapezoids, the
 change-point scans' cumulative sums and closed-form 3 x 3 inverse, the change-point refits' row pairs, numpy's
 np.diff(x, 2), np.sign(np.gradient(x)) and np.median as their own steps, the robust noise scale, the encoder quantum and
-the double trapezoid's adjoint.  Each gives numpy's numbers bit for bit, or (the closed-form inverse, a decision
-only) LAPACK's to rounding; test/test_gap_speed.py checks them.  Plain numpy; never imports rclpy.
+the double trapezoid's adjoint; and the memo of one window's torque-independent decisions.  Each kernel gives numpy's
+numbers bit for bit, or (the closed-form inverse, a decision only) LAPACK's to rounding; test/test_gap_speed.py checks
+them.  Plain numpy; never imports rclpy.
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
 from functools import lru_cache
 
 import numpy as np
@@ -148,3 +150,55 @@ def _double_trapz_adjoint(row: np.ndarray, ts: float) -> np.ndarray:
         out *= ts
         return out
     return t_adj(t_adj(row))
+
+
+def chi2_upper(dof: np.ndarray, z: float) -> np.ndarray:
+    """The quantile of χ² with ``dof`` degrees of freedom at the normal quantile ``z`` (gap_free's CHANGEPOINT_P,
+    gap_load's LOAD_CHANGEPOINT_P) by Wilson-Hilferty: within 1 % of scipy's from 3 degrees of freedom on; a scipy
+    call per scan cost more than the scan."""
+    v = np.asarray(dof, float)
+    c = 2.0 / (9.0 * v)
+    return v * (1.0 - c + z * np.sqrt(c)) ** 3
+
+
+@lru_cache(maxsize=64)
+def chi2_bounds(n: int, p: int, z: float) -> np.ndarray:
+    """:func:`chi2_upper` of max(k - p, 1) degrees of freedom for k = 0 .. n, a χ² test's quantile for every interval
+    length (read-only: shared)."""
+    out = chi2_upper(np.maximum(np.arange(n + 1) - p, 1), z)
+    out.flags.writeable = False
+    return out
+
+
+#: The decisions kept while one window is estimated (:func:`window_memo`; None outside it).
+_WINDOW_MEMO: dict | None = None
+
+
+@contextmanager
+def window_memo():
+    """Keep the torque-independent decisions of one window's fits (the free angle fit's candidate intervals, the load
+    side's free bound) while active: a window's lag check (gap._lag_checked) and its cross-check fit the same rows
+    again with another declared lag, and these decisions do not read the lag.  Scoped to one call of
+    gap.estimate_inertia, so nothing is kept from one window (or one monkeypatched constant) to the next.  Nested
+    uses share the outer one's memo."""
+    global _WINDOW_MEMO
+    outer = _WINDOW_MEMO
+    if outer is None:
+        _WINDOW_MEMO = {}
+    try:
+        yield
+    finally:
+        if outer is None:
+            _WINDOW_MEMO = None
+
+
+def memo_get(key):
+    """The value kept under ``key`` in the active :func:`window_memo` (None: none kept, or no memo active)."""
+    return None if _WINDOW_MEMO is None else _WINDOW_MEMO.get(key)
+
+
+def memo_put(key, value):
+    """Keep ``value`` under ``key`` in the active :func:`window_memo` (nothing outside one); returns ``value``."""
+    if _WINDOW_MEMO is not None:
+        _WINDOW_MEMO[key] = value
+    return value
