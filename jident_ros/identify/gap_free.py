@@ -441,10 +441,11 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             tt = tau[f["i"]:f["j"]]
             terms["torque_offset"] = j1 * abs(float(row @ (0.5 * tt * tt))) * float(model.torque_offset_nm) / np.sqrt(3.0)
             terms["torque_drift"] = drift_term(row, tt, j1, float(model.torque_offset_nm))
-        # m_el lagging by τ: the shaft's torque is m_el(t + τ) ≈ m_el + τ dm_el/dt, whose double integral adds
-        # τ ∫m_el dt (and a linear term, absorbed): J1 moves by J1 τ (r_κ · ∫m_el dt); here J1 (r_κ · ∫m_el dt), the
-        # declared τ applied in fitted() (the lag check's second round: another τ, the same fit)
-        terms["torque_lag"] = j1 * abs(float(row @ _cumtrapz(m[f["i"]:f["j"]], ts)))
+        if model.torque_lag_s:
+            # m_el lagging by τ: the shaft's torque is m_el(t + τ) ≈ m_el + τ dm_el/dt, whose double integral adds
+            # τ ∫m_el dt (and a linear term, absorbed): J1 moves by J1 τ (r_κ · ∫m_el dt); here J1 (r_κ · ∫m_el dt),
+            # the declared τ applied in fitted() (the lag check's second round: another τ, the same fit)
+            terms["torque_lag"] = j1 * abs(float(row @ _cumtrapz(m[f["i"]:f["j"]], ts)))
         if model.encoder_error_rad:
             terms["encoder_error"] = encoder_error_term(row, a[L + f["i"]:L + f["j"]], j1, float(model.encoder_error_rad))
         return terms
@@ -457,8 +458,9 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         """(fit, its standard error's terms) over [s_row, e_row), the lag term at the declared lag."""
         key = fit_key + (s_row, e_row, with_coulomb)
         kept = memo_get(key)
-        if kept is None:
-            f = fit(s_row, e_row, with_coulomb)
+        if kept is None or (model.torque_lag_s and kept[1] and "torque_lag" not in kept[1]):
+            # (kept from a round without a declared lag: its terms again, with the lag's)
+            f = fit(s_row, e_row, with_coulomb) if kept is None else kept[0]
             kept = memo_put(key, (f, se_terms(f)))
         f, terms = kept[0], dict(kept[1])
         if terms and model.torque_lag_s:
