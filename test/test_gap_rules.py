@@ -737,7 +737,7 @@ def test_the_window_memo_fits_the_lag_checks_second_round_once_and_changes_nothi
     one made with nothing kept, and nothing outlives the call (a flag changed between two windows is followed)."""
     from pathlib import Path
 
-    from jident_ros.identify import gap_free, gap_load, gap_numerics
+    from jident_ros.identify import gap_free, gap_load, gap_numerics, gap_scan
     from jident_ros.identify.gap import estimate_inertia
     from jident_ros.identify.gap_free import GapModel
     w = dict(np.load(Path(__file__).parent / "data" / "dol_draws_light_reversal_constant.npz"))
@@ -754,7 +754,7 @@ def test_the_window_memo_fits_the_lag_checks_second_round_once_and_changes_nothi
             calls[name] += 1
             return fn(*a, **k)
         return wrapper
-    monkeypatch.setattr(gap_free, "_scan_sums", counted("scan", gap_free._scan_sums))
+    monkeypatch.setattr(gap_scan, "_scan_sums", counted("scan", gap_scan._scan_sums))
     monkeypatch.setattr(gap_load, "_Scan", counted("load", gap_load._Scan))
     monkeypatch.setattr(gap_free.lapack, "solve", counted("fit", gap_free.lapack.solve))
     kept = fit()

@@ -27,8 +27,9 @@ EXCEPTIONS = {
                        "(issue 20); to be split into the state machine and its rules",
     "stream/flank.py:_track": "the flank state machine's one transition function (issue 20 added the spike and "
                               "same-flank states); to be split with the file",
-    "identify/gap_free.py:free_angle_fit": "the change-point scan and the fits share the span's design as closures; "
-                                           "estimator helper's file (issue 20), to be split into a class",
+    "identify/gap_free.py:free_angle_fit": "the fits, their terms and change-point trims share the span's design as "
+                                           "closures (the scan is gap_scan.IntervalScan since stop 41); to be split "
+                                           "into a class as the scan was (issue 20)",
     "identify/verdict.py:input_refusal": "9: the window's five header fields + config, policy, nominal, width_unknown; "
                                          "estimator helper's file",
     # numerics kernels

@@ -50,14 +50,12 @@ from jident_ros.identify.gap_numerics import (
     _gradient_sign,
     _quantum,
     _robust_noise,
-    _scan_sums,
-    _sym3_inverse,
     _trim_rows,
-    chi2_bounds,
     chi2_upper,
     memo_get,
     memo_put,
 )
+from jident_ros.identify.gap_scan import IntervalScan, ScanRules
 from jident_ros.identify.gap_terms import drift_term, encoder_error_term
 from jident_ros.stream.rate import samples as rate_samples
 
@@ -258,120 +256,11 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
                float(model.torque_offset_nm), W)
         intervals = memo_get(key)
         if intervals is None:
-            lo_c, hi_c = start - L, end - L
-            k_in = min(W // 2, max((hi_c - lo_c) // 4, 0))
-            core = (lo_c + k_in, hi_c - k_in) if hi_c - lo_c - 2 * k_in >= FREE_MIN_SAMPLES else (lo_c, hi_c)
-            if core[1] - core[0] < FREE_MIN_SAMPLES:
-                core = (max(0, min(lo_c, R - L - FREE_MIN_SAMPLES)), max(0, min(lo_c, R - L - FREE_MIN_SAMPLES))
-                        + FREE_MIN_SAMPLES)
-            # a long coarse interval may hold contact (a later flank's re-contact row): its core is a third (CORE_VAR_RATIO)
-            third = (core[1] - core[0]) // 3
-            if third >= 2 * FREE_MIN_SAMPLES:
-                subs, var = [(core[0] + k * third, core[0] + (k + 1) * third) for k in range(3)], []
-                for a0, b0 in subs:
-                    rs = y[a0:b0] - Xs[a0:b0] @ lapack.lstsq(Xs[a0:b0], y[a0:b0])
-                    var.append(float(rs @ rs) / (third - Xs.shape[1]))
-                quiet = [k for k in range(3) if var[k] <= CORE_VAR_RATIO * min(var)]
-                cores = [subs[k] for k in quiet]
-            else:
-                cores = [core]
-
-            def grown(cr, Xs=Xs):
-                """The interval grown from the core rows ``cr`` (e, s, e again; the noise from the core's fit)."""
-                c0 = lapack.lstsq(Xs[cr[0]:cr[1]], y[cr[0]:cr[1]])
-                r = y - Xs @ c0
-                rc = r[cr[0]:cr[1]]
-                s2 = max(float(rc @ rc) / max(rc.size - Xs.shape[1], 1), q * q / 12.0, 1e-30)
-                p = Xs.shape[1]
-
-                k_f = CHANGEPOINT_FORECAST_SAMPLES
-                sums = _scan_sums(Xs, r)                  # shared by every scan below
-                # the χ² test's bound s2 · χ²(1 - CHANGEPOINT_P; n - p) for every interval length n (at least 1 dof)
-                chi_bound = s2 * chi2_bounds(R - L, p, _Z_CHANGEPOINT)
-
-                def first_failure(lo_rows, hi_rows, side):
-                    """Index of the first candidate interval [lo, hi) that is not accepted (None: all are).  Accepted: the
-                    whole interval's residual is noise (χ² test) and its k_f end rows on ``side`` are predicted by the fit
-                    without them (Chow's forecast test: a contaminated end shows in the extrapolation first).  Every
-                    candidate's two fits (over [lo, hi) and over the interval without the k_f rows) in one batch: normal
-                    matrices from the cumulative sums, inverted in closed form (a decision, not a published number: the
-                    inverse's product where the earlier code solved, the same test to rounding)."""
-                    if side == "end":
-                        ilo, ihi, test = lo_rows, hi_rows - k_f, hi_rows[:, None] - k_f + _FORECAST_ROWS
-                    else:
-                        ilo, ihi, test = lo_rows + k_f, hi_rows, lo_rows[:, None] + _FORECAST_ROWS
-                    c = lo_rows.size
-                    D = sums[np.concatenate([hi_rows, ihi])] - sums[np.concatenate([lo_rows, ilo])]
-                    Ainv = _sym3_inverse(D[:, :6])
-                    sol = _einsum("kij,kj->ki", Ainv, D[:, 6:9])
-                    rss = D[:c, 9] - _einsum("ki,ki->k", D[:c, 6:9], sol[:c])
-                    ok = rss <= chi_bound[hi_rows - lo_rows]
-                    xt = Xs[test]                                             # (cand, k_f, p)
-                    pred = _einsum("ckp,cp->ck", xt, sol[c:])
-                    lev = _einsum("ckq,ckq->ck", xt @ Ainv[c:], xt)          # x A⁻¹ xᵀ of each test row
-                    stat = ((r[test] - pred) ** 2 / (s2 * (1.0 + lev))).sum(axis=1)
-                    bad = np.flatnonzero(~(ok & ((ihi - ilo < p + 2) | (stat <= _CHI2_FORECAST))))
-                    return int(bad[0]) if bad.size else None
-
-                def grow_end(s_row, e_from):
-                    cand = np.arange(max(s_row + FREE_MIN_SAMPLES, e_from), min(hi_c + W, R - L) + 1)
-                    if cand.size == 0:
-                        return e_from
-                    k = first_failure(np.full(cand.size, s_row), cand, "end")
-                    return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
-
-                def grow_start(e_row, s_from):
-                    cand = np.arange(min(e_row - FREE_MIN_SAMPLES, s_from), max(lo_c - W, 0) - 1, -1)
-                    if cand.size == 0:
-                        return s_from
-                    k = first_failure(cand, np.full(cand.size, e_row), "start")
-                    return int(cand[-1]) if k is None else int(cand[max(k - 1, 0)])
-
-                e_row = grow_end(cr[0], cr[1])
-                s_row = grow_start(e_row, cr[0])
-                e_row = grow_end(s_row, cr[1] if cr[1] <= e_row else e_row)
-                return s_row, e_row
-
-            # every quiet third grows its own interval (one inside an interval grown already is not grown again); of the
-            # intervals the one whose J1 is the most precise is the gap (below).  A core in a rest where the coupling
-            # still carries a small torque (a soft coupling that touched zero and sprang back before the gap opened)
-            # grows into a short interval whose J1 takes that torque; the gap's own core grows over the gap
-            s_row, e_row = grown(cores[0])
-            intervals = [(L + s_row, L + e_row)]
-            covered = min(e_row, hi_c) - max(s_row, lo_c)
-            for other in cores[1:] if covered < OTHER_CORES_BELOW * (hi_c - lo_c) else ():
-                if any(a0 <= L + other[0] and L + other[1] <= b0 for a0, b0 in intervals):
-                    continue
-                s_o, e_o = grown(other)
-                if e_o - s_o >= FREE_MIN_SAMPLES and (L + s_o, L + e_o) not in intervals:
-                    intervals.append((L + s_o, L + e_o))
-            if FITTED_CONSTANT_SCAN and covered < OTHER_CORES_BELOW * (hi_c - lo_c) \
-                    and (model.coulomb_friction_max_nm or model.torque_offset_nm):
-                # the scan's assumed friction (the band's middle) is not the gap's constant torque (the friction and the
-                # estimate's offset): the intervals stop where that difference has curved the angle; the constant fitted
-                # over the coarse gap's core, kept within its bands, and the quiet cores grown again with it
-                cc_core = Cc[core[0]:core[1]]
-                c_core = max(float(np.abs(cc_core).max()), 1e-300)
-                X4 = np.column_stack([Xs[core[0]:core[1], :2], Phi[core[0]:core[1]] / phi_scale, cc_core / c_core])
-                c4 = lapack.lstsq(X4, y[core[0]:core[1]])
-                if c4[2] > 0:
-                    f_hat = -float(c4[3]) / c_core / (c4[2] / phi_scale)
-                    f_hat = min(max(f_hat, -float(model.torque_offset_nm)),
-                                float(model.coulomb_friction_max_nm) + float(model.torque_offset_nm))
-                    phi_hat = Phi - f_hat * Cc
-                    X3 = np.column_stack([Xs[:, :2], phi_hat / max(float(np.abs(phi_hat).max()), 1e-300)])
-                    # only an interval longer than every one before by the fit's minimum: the rows the assumed friction
-                    # cut off, not the same gap moved by a few rows (DOL d16-12's 94 rows beside the 98 grown before)
-                    # (a core inside one grown already is not grown again, as above)
-                    longest, again = max(b0 - a0 for a0, b0 in intervals), []
-                    for cr in cores:
-                        if any(a0 <= cr[0] and cr[1] <= b0 for a0, b0 in again):
-                            continue
-                        s_o, e_o = grown(cr, X3)
-                        again.append((s_o, e_o))
-                        if e_o - s_o >= longest + FREE_MIN_SAMPLES and (L + s_o, L + e_o) not in intervals:
-                            intervals.append((L + s_o, L + e_o))
-            intervals = memo_put(key, tuple(intervals))
+            scan = IntervalScan(y, Xs, q, start - L, end - L, W, ScanRules(
+                FREE_MIN_SAMPLES, CHANGEPOINT_FORECAST_SAMPLES, _CHI2_FORECAST, _Z_CHANGEPOINT, CORE_VAR_RATIO,
+                OTHER_CORES_BELOW, FITTED_CONSTANT_SCAN))
+            intervals = memo_put(key, scan.intervals(L, Phi, Cc, phi_scale, float(model.coulomb_friction_max_nm),
+                                                     float(model.torque_offset_nm)))
         s_est, e_est = intervals[0]
         if (SHORT_GAP_NOT_PAST_CONTACT and s_est >= start and end - s_est < FREE_MIN_SAMPLES
                 and e_est > max(end, s_est + FREE_MIN_SAMPLES)):
