@@ -272,7 +272,35 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         raise FreeFitError(f"gap too short: {e_est - s_est} samples consistent with a free motor, need >= "
                            f"{FREE_MIN_SAMPLES}")
 
-    def fit(s_row: int, e_row: int, with_coulomb: bool) -> dict:
+    # the fits and their terms do not read the declared lag but through its term: kept while the window is estimated
+    # (gap_numerics.window_memo) for its lag check's second round, keyed by the rows and the model without the lag
+    fits = _SpanFits(dict(a=a, m=m, y=y, Phi=Phi, Cc=Cc, Vv=Vv, u=u, tau=tau, L=L, ts=ts, phi_scale=phi_scale,
+                          coulomb_mid=coulomb_mid), model,
+                     ("free_fit", a[L:R].tobytes(), m.tobytes(), L, R, start, end, ts, replace(model, torque_lag_s=0.0)))
+    return fits.result((s_est, e_est), intervals[1:])
+
+
+class _SpanFits:
+    """The fits of :func:`free_angle_fit` over intervals of its rows [L, R): each fit's design and 1/J1
+    (:meth:`fit`), its standard error's terms (:meth:`se_terms`), both kept while the window is estimated
+    (:meth:`fitted`, gap_numerics.window_memo), the change-point term (:meth:`change_points`, :meth:`j_trims`) and the
+    most precise fit over an interval (:meth:`most_precise`).  ``span``: free_angle_fit's columns over the rows (``y``
+    the angle from the coarse gap's first row, ``m`` the torque, ``Phi``, ``Cc``, ``Vv`` the double integrals of the
+    torque and of the motion's sign and the angle's integral, ``u`` and ``tau`` the time scaled and in s), ``a`` the
+    angle over the window, ``L``, ``ts``, ``phi_scale`` and ``coulomb_mid`` (the friction band's middle); ``key``: the
+    memo key of the rows (their inputs and the model without its lag).  free_angle_fit's closures until stop 41."""
+
+    def __init__(self, span: dict, model: GapModel, key: tuple):
+        self.a, self.m, self.y, self.Phi, self.Cc, self.Vv, self.u, self.tau = (
+            span["a"], span["m"], span["y"], span["Phi"], span["Cc"], span["Vv"], span["u"], span["tau"])
+        self.L, self.ts, self.phi_scale, self.coulomb_mid = span["L"], span["ts"], span["phi_scale"], span["coulomb_mid"]
+        self.model, self.key = model, key
+        self.torque_noise: dict = {}                  # the torque's noise per row span (shared by a span's fits)
+        self.full = rate_samples(CHANGEPOINT_TRIM_FULL, self.ts)     # the trims taken on up to half the interval
+
+    def fit(self, s_row: int, e_row: int, with_coulomb: bool) -> dict:
+        L, Cc, u, Phi, phi_scale, y, coulomb_mid = (self.L, self.Cc, self.u, self.Phi, self.phi_scale, self.y,
+                                                    self.coulomb_mid)
         i, j = s_row - L, e_row - L
         c_scale = max(float(np.abs(Cc[i:j]).max()), 1e-300)
         # the design [1, u, Φ/scale(, C/scale)] (what np.column_stack builds, written in place)
@@ -299,9 +327,9 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         return {"kappa": kappa, "coef": coef, "pinv": pinv, "res": yy - X @ coef, "X": X, "fc": fc, "i": i, "j": j,
                 "c_scale": c_scale}
 
-    torque_noise: dict = {}
-
-    def se_terms(f: dict) -> dict:
+    def se_terms(self, f: dict) -> dict:
+        model, m, ts, a, L, Cc, Vv, tau = self.model, self.m, self.ts, self.a, self.L, self.Cc, self.Vv, self.tau
+        phi_scale, coulomb_mid = self.phi_scale, self.coulomb_mid
         kappa, res, X = f["kappa"], f["res"], f["X"]
         n, p = X.shape
         dof = n - p
@@ -311,9 +339,9 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         var_stat = float(res @ res) / dof * float(row @ row) * _ar1_inflation(res)
         # torque noise through Φ: δκ = −κ row·(W n_m), W the double trapezoid from the interval's first row
         key = (f["i"], f["j"])
-        if key not in torque_noise:                   # both fits (with and without a Coulomb column) share it
-            torque_noise[key] = _robust_noise(m[f["i"]:f["j"]])
-        sm = torque_noise[key]
+        if key not in self.torque_noise:                   # both fits (with and without a Coulomb column) share it
+            self.torque_noise[key] = _robust_noise(m[f["i"]:f["j"]])
+        sm = self.torque_noise[key]
         g = _double_trapz_adjoint(row, ts)
         var_eiv = (kappa * sm) ** 2 * float(g @ g)
         j1 = 1.0 / kappa
@@ -339,18 +367,16 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             terms["encoder_error"] = encoder_error_term(row, a[L + f["i"]:L + f["j"]], j1, float(model.encoder_error_rad))
         return terms
 
-    # the fits and their terms do not read the declared lag but through its term: kept while the window is estimated
-    # (gap_numerics.window_memo) for its lag check's second round, keyed by the rows and the model without the lag
-    fit_key = ("free_fit", a[L:R].tobytes(), m.tobytes(), L, R, start, end, ts, replace(model, torque_lag_s=0.0))
 
-    def fitted(s_row: int, e_row: int, with_coulomb: bool) -> tuple:
+    def fitted(self, s_row: int, e_row: int, with_coulomb: bool) -> tuple:
         """(fit, its standard error's terms) over [s_row, e_row), the lag term at the declared lag."""
-        key = fit_key + (s_row, e_row, with_coulomb)
+        model = self.model
+        key = self.key + (s_row, e_row, with_coulomb)
         kept = memo_get(key)
         if kept is None or (model.torque_lag_s and kept[1] and "torque_lag" not in kept[1]):
             # (kept from a round without a declared lag: its terms again, with the lag's)
-            f = fit(s_row, e_row, with_coulomb) if kept is None else kept[0]
-            kept = memo_put(key, (f, se_terms(f)))
+            f = self.fit(s_row, e_row, with_coulomb) if kept is None else kept[0]
+            kept = memo_put(key, (f, self.se_terms(f)))
         f, terms = kept[0], dict(kept[1])
         if terms and model.torque_lag_s:
             terms["torque_lag"] = terms["torque_lag"] * float(model.torque_lag_s) / np.sqrt(3.0)
@@ -358,17 +384,18 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             terms.pop("torque_lag", None)
         return f, terms
 
-    def change_points(f: dict, j1: float, with_coulomb: bool, trims: list, both: list) -> float:
+    def change_points(self, f: dict, j1: float, with_coulomb: bool, trims: list, both: list) -> float:
         """The change-point term: J1's largest move under the trims (:func:`j_trims`), kept with the fit."""
-        key = fit_key + (f["i"], f["j"], with_coulomb, "trims")
+        key = self.key + (f["i"], f["j"], with_coulomb, "trims")
         kept = memo_get(key)
         if kept is None:
-            kept = memo_put(key, float(np.abs(j_trims(f, with_coulomb, trims, both) - j1).max()) if trims else 0.0)
+            kept = memo_put(key, float(np.abs(self.j_trims(f, with_coulomb, trims, both) - j1).max()) if trims else 0.0)
         return kept
 
-    def j_trims(f: dict, with_coulomb: bool, trims: list, both: list = ()) -> np.ndarray:
+    def j_trims(self, f: dict, with_coulomb: bool, trims: list, both: list = ()) -> np.ndarray:
         """J1 alone over [s_row + k, e_row) and [s_row, e_row - k) for each k in ``trims`` (batched normal
         equations on cumulative sums: the change-point term).  ``f``: the fit over [s_row, e_row) (its design)."""
+        y, Cc, phi_scale, coulomb_mid = self.y, self.Cc, self.phi_scale, self.coulomb_mid
         i, j = f["i"], f["j"]
         X = f["X"]
         n, p = X.shape
@@ -396,18 +423,17 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
         with np.errstate(divide="ignore"):
             return np.where(kappa > 0, 1.0 / kappa, np.inf)
 
-    full = rate_samples(CHANGEPOINT_TRIM_FULL, ts)     # the trims taken on up to half the interval
-
-    def most_precise(s_est: int, e_est: int, bar: float = np.inf) -> tuple:
+    def most_precise(self, s_est: int, e_est: int, bar: float = np.inf) -> tuple:
         """(best, first): the fit over [s_est, e_est) with the smallest standard error (without the torque accuracy),
         None when none is physical or none is below ``bar`` (another interval's: its change-point refits are then
         not needed); the first fit made (for the refusal's reason)."""
+        model, ts = self.model, self.ts
         best = None
         first = None
         for with_coulomb in (False, True):
             if with_coulomb and (e_est - s_est < FREE_MIN_SAMPLES + 2 or not model.coulomb_friction_max_nm):
                 continue
-            f, terms = fitted(s_est, e_est, with_coulomb)
+            f, terms = self.fitted(s_est, e_est, with_coulomb)
             first = f if first is None else first
             if not f["kappa"] > 0:
                 continue
@@ -435,14 +461,14 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
             n = e_est - s_est
             trims = [k for k in _trims_at(ts)
                      if n - k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)
-                     and (k <= full or k <= n // 4)]
+                     and (k <= self.full or k <= n // 4)]
             # ... and both ends moved in at once (a gap grown into contact on both sides: the DOL drive's slip drop at
             # 2^13 counts and 30 dB, 9 rows before the entry and 6 past the re-contact, the light wheel still coupled:
             # J1 +8.3 % with ± 7.8 %, +10.8 % undeclared; either end alone moved J1 by 1-2 %)
             both = [k for k in _trims_at(ts)
                     if n - 2 * k >= max(FREE_MIN_SAMPLES + (1 if with_coulomb else 0), n // 2)
-                    and (k <= full or 2 * k <= n // 4)]
-            terms["change_points"] = change_points(f, j1, with_coulomb, trims, both)
+                    and (k <= self.full or 2 * k <= n // 4)]
+            terms["change_points"] = self.change_points(f, j1, with_coulomb, trims, both)
             se_stat = float(np.sqrt(sum(v * v for v in terms.values())))
             se_stat = max(se_stat, FREE_REL_SE_FLOOR * j1)
             cand = {"j1": j1, "se_stat": se_stat, "terms": terms, "fit": f, "coulomb": with_coulomb}
@@ -450,25 +476,31 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
                 best = cand
         return best, first
 
-    best, first = most_precise(s_est, e_est)
-    for s_c, e_c in intervals[1:]:
-        # a candidate interval of another quiet third (above): taken when its J1 is the more precise
-        other, _ = most_precise(s_c, e_c, np.inf if best is None else best["se_stat"])
-        if other is not None and (best is None or other["se_stat"] < best["se_stat"]):
-            best, s_est, e_est = other, s_c, e_c
-    if best is None:
-        raise FreeFitError(_no_positive_kappa(first, phi_scale))
-    j1 = best["j1"]
-    terms = dict(best["terms"])
-    terms["torque_accuracy"] = j1 * model.torque_rel_se()
-    se = float(np.hypot(best["se_stat"], terms["torque_accuracy"]))
-    f = best["fit"]
-    friction = (f"fitted F_c = {f['fc']:.3g} N m" if best["coulomb"] else
-                f"bounded (F_c = {coulomb_mid:.3g} ± {coulomb_mid:.3g} N m, b ± "
-                f"{model.viscous_friction_band_nms_per_rad:.3g} N m s/rad)")
-    return {"j1": j1, "se": se, "se_stat": best["se_stat"], "terms": terms, "start": int(s_est), "end": int(e_est),
-            "friction": friction, "coulomb_nm": float(f["fc"]), "residual": f["res"], "dof": f["X"].shape[0] - f["X"].shape[1],
-            "change_point_error": float(terms["change_points"])}
+
+    def result(self, first_interval: tuple, others) -> dict:
+        """free_angle_fit's result: the most precise fit over ``first_interval`` or one of the ``others`` (the candidate
+        intervals of the other quiet thirds: taken when its J1 is the more precise); raises FreeFitError when none
+        is physical."""
+        model, phi_scale, coulomb_mid = self.model, self.phi_scale, self.coulomb_mid
+        s_est, e_est = first_interval
+        best, first = self.most_precise(s_est, e_est)
+        for s_c, e_c in others:
+            other, _ = self.most_precise(s_c, e_c, np.inf if best is None else best["se_stat"])
+            if other is not None and (best is None or other["se_stat"] < best["se_stat"]):
+                best, s_est, e_est = other, s_c, e_c
+        if best is None:
+            raise FreeFitError(_no_positive_kappa(first, phi_scale))
+        j1 = best["j1"]
+        terms = dict(best["terms"])
+        terms["torque_accuracy"] = j1 * model.torque_rel_se()
+        se = float(np.hypot(best["se_stat"], terms["torque_accuracy"]))
+        f = best["fit"]
+        friction = (f"fitted F_c = {f['fc']:.3g} N m" if best["coulomb"] else
+                    f"bounded (F_c = {coulomb_mid:.3g} ± {coulomb_mid:.3g} N m, b ± "
+                    f"{model.viscous_friction_band_nms_per_rad:.3g} N m s/rad)")
+        return {"j1": j1, "se": se, "se_stat": best["se_stat"], "terms": terms, "start": int(s_est), "end": int(e_est),
+                "friction": friction, "coulomb_nm": float(f["fc"]), "residual": f["res"], "dof": f["X"].shape[0] - f["X"].shape[1],
+                "change_point_error": float(terms["change_points"])}
 
 
 #: A fit's 1/J1 at or below zero within this many of its standard errors of zero: the gap's torque does not curve the
