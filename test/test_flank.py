@@ -3,6 +3,7 @@ against inequality 1, the width estimate, batching, format-2 windows, cut-off wi
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -1713,3 +1714,36 @@ def test_free_departure_at_the_edge_of_its_search_locates_no_turn(monkeypatch, o
         assert len(got) == 1 and 0 < got[0][0] - g <= 8 and got[0][1] > 300
     else:
         assert got == [(199, 50)] and g - 199 > 30
+
+
+def test_back_to_load_takes_no_constant_torque_beyond_a_tenth_of_the_base_torque():
+    """With an Imu at 30 dB the vector drive's speed reversals (blind draws s7-10 and s20-08) fitted J and the constant
+    over a gap whose acceleration barely varies, J 1.39 for 1.22 with c 56 N m, and the entry walked 26 rows back from
+    the dynamics' entry into the steady running before the speed command (false entries in steady running).  A
+    constant beyond BACK_CONSTANT_MAX_REL_BASE x M_b is no friction: J at the seed (s7-10: one row back), or, where the
+    seed's constant is beyond it too (s20-08), the entry not moved.  The windows' m_el and Imu acceleration as
+    back_to_load got them (test/data)."""
+    from jident_ros.stream.flank import BACK_CONSTANT_MAX_REL_BASE, back_to_load
+    d = np.load(Path(__file__).parent / "data" / "vd_draws_imu_30db_speed_reversal_back.npz")
+    bound = BACK_CONSTANT_MAX_REL_BASE * 211.87485338163722           # the default drive's M_b, as make_detector's
+    for key, moved in (("s7_10", 1), ("s20_8", 0)):
+        m, acc = d[f"{key}_m_el"], d[f"{key}_acc"]
+        entry, first, end = (int(v) for v in d[f"{key}_rows"])
+        free = back_to_load(m, acc, entry, first, 1.16, end=end, sample_period_s=5e-4)
+        assert entry - free >= 20, key                                   # the failure without the bound
+        assert back_to_load(m, acc, entry, first, 1.16, end=end, sample_period_s=5e-4,
+                            constant_max_nm=bound) == entry - moved, key
+        # a bound no fit reaches changes nothing
+        assert back_to_load(m, acc, entry, first, 1.16, end=end, sample_period_s=5e-4, constant_max_nm=1e6) == free
+
+
+def test_the_flank_detector_bounds_the_constant_by_the_motors_base_torque():
+    from jident_ros.config import load_system_config
+    from jident_ros.identify.monitor import DetectorConfig, make_detector
+    from jident_ros.stream.flank import BACK_CONSTANT_MAX_REL_BASE
+    system = load_system_config()
+    det = make_detector(system, DetectorConfig("flank", channels=("t", "alpha1", "alpha2", "m_el", "a1")))
+    assert det.back_constant_max_nm == pytest.approx(BACK_CONSTANT_MAX_REL_BASE * system.motor.base.torque_nm)
+    assert FlankDetector(0.1, 5e-4).back_constant_max_nm is None
+    with pytest.raises(ValueError, match="base_torque_nm"):
+        FlankDetector(0.1, 5e-4, base_torque_nm=0.0)

@@ -72,9 +72,14 @@ def make_detector(system, config: DetectorConfig, wheel_radius_m: Optional[float
     common = dict(channels=tuple(config.channels), samples_before_entry=s.samples_before_entry,
                   samples_from_entry=s.samples_from_entry, gap_tolerance=config.gap_tolerance)
     if config.kind in ("flank", "dynamics"):
-        cls = DynamicsDetector if config.kind == "dynamics" else FlankDetector
-        return cls(r, ts, gear_ratio=config.gear_ratio, nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2,
-                   encoder_counts_per_rev=config.encoder_counts_per_rev, **common)
+        if config.kind == "dynamics":
+            return DynamicsDetector(r, ts, gear_ratio=config.gear_ratio,
+                                    nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2,
+                                    encoder_counts_per_rev=config.encoder_counts_per_rev, **common)
+        # the motor's M_b bounds the constant torque the entry's motor-equation fit may take (BACK_CONSTANT_MAX_REL_BASE)
+        return FlankDetector(r, ts, gear_ratio=config.gear_ratio, nominal_inertia_kgm2=system.motor.nominal_inertia_kgm2,
+                             encoder_counts_per_rev=config.encoder_counts_per_rev,
+                             base_torque_nm=system.motor.base.torque_nm, **common)
     if config.kind != "paper":
         raise ValueError(f"detector: expected one of {', '.join(DETECTORS)}, got {config.kind!r}")
     return BacklashDetector(config.backlash_width_m, r, ts, **common)

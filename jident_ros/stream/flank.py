@@ -544,6 +544,16 @@ BACK_MAX_LAG_SAMPLES = 4.0
 #: 0.1 equal there); 0.05 put the J1 1.073 variant's speed reversal at 30 dB 16 samples early (the seed 8 % off the
 #: drive's J1 walked back into the contact), 0.1 not: the seed's error bounds what this can give, see results.md
 BACK_J_MAX_REL_SE = 0.1
+#: ... and the fitted constant c (the gap's friction and the torque estimate's offset) within this share of the motor's
+#: base torque M_b (FlankDetector's ``base_torque_nm``; friction and windage are 0.5-3 % of M_b, a torque estimate's
+#: offset a few %): a larger one is J and c traded off over a gap whose dω1/dt barely varies, not friction, and J goes
+#: back to the seed; where the seed's own c is beyond it too, the motor equation over the gap is not credible and the
+#: entry is not moved.  At 30 dB with an Imu the vector drive's speed reversals fitted J 1.39 for 1.22 with c 56 N m
+#: (26 % of M_b; the seed's c 22 N m, 10 %), which explained the coupled rows and the steady running before the speed
+#: command: the entry walked 26 rows back into it (vector draws s7-10 and s20-08, false entries in steady running).
+#: Chosen on vector draws set 7 (the bound) and set 20 (the seed's c beyond it too), tested on the other 38 sets and
+#: the zoos (docs/results.md, stop 41)
+BACK_CONSTANT_MAX_REL_BASE = 0.10
 #: With a1, a window's own entry then moves forward (never back) to the end of the load torque's ramp: the residual
 #: m_el - J1_nom dω1/dt is fitted by c + h (e - k)_+ (a contact torque falling linearly to zero at e, then the gap's
 #: friction and offset) over the LOAD_HINGE_BEFORE samples before the entry and LOAD_HINGE_AFTER from it, e within
@@ -578,16 +588,17 @@ def _resolved(X: np.ndarray, y: np.ndarray, j_seed: float) -> bool:
 
 def back_to_load(m_el: np.ndarray, acc: np.ndarray, entry: int, first: int, inertia_seed_kgm2: float,
                  rel_tol: float = None, end: Optional[int] = None,
-                 sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S) -> int:
+                 sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S, constant_max_nm: Optional[float] = None) -> int:
     """The entry sample moved back from ``entry`` (a sample in the gap), not before ``first``, to where the motor
     equation stops explaining the samples (the load torque is back): a departure that delta shows late (a coupling
     that leaves its flank with no relative speed -- a light load reversal, a return traversal resting at the flank
     -- or a stiff coupling's unloading twist below the threshold).  The equation m_el = J dω1/dt + c - tau dm_el/dt
     is fitted to the BACK_FIT samples from ``entry`` (before ``end``, the re-contact, when known; without tau when
     it leaves +-BACK_MAX_LAG_SAMPLES, J kept at the seed when dω1/dt does not vary there or the fit leaves 0.5..2 x
-    the seed); the entry moves back while the BACK_BLOCK residuals before it average within
-    max(BACK_Z standard errors, rel_tol |m_el|).  Reaching ``first`` means no load was found: ``entry`` is
-    returned unchanged."""
+    the seed; with ``constant_max_nm``, N m, J at the seed where the fitted constant is beyond it, and ``entry``
+    unchanged where the seed's constant is too: BACK_CONSTANT_MAX_REL_BASE); the entry moves back while the BACK_BLOCK
+    residuals before it average within max(BACK_Z standard errors, rel_tol |m_el|).  Reaching ``first`` means no load
+    was found: ``entry`` is returned unchanged."""
     rel_tol = BACK_REL_TOL if rel_tol is None else float(rel_tol)
     fit, block = samples(BACK_FIT, sample_period_s), samples(BACK_BLOCK, sample_period_s)
     m = min(fit, m_el.size - entry, (end - entry) if end is not None else fit)
@@ -609,6 +620,12 @@ def back_to_load(m_el: np.ndarray, acc: np.ndarray, entry: int, first: int, iner
                 j, c = float(jf), float(cf)
             else:
                 c = float(np.mean(y - j * x))      # J not resolved: the seed, the offset fitted with it
+    if constant_max_nm is not None and abs(c) > constant_max_nm:
+        # no friction that large: J traded against the constant (BACK_CONSTANT_MAX_REL_BASE); the seed's, else no move
+        j, lag = float(inertia_seed_kgm2), 0.0
+        c = float(np.mean(y - j * x))
+        if abs(c) > constant_max_nm:
+            return entry
     res = m_el - j * acc - c - lag * dm
     sigma = float(np.std(res[entry:entry + m], ddof=3)) if m > 3 else 0.0
 
@@ -1918,7 +1935,8 @@ class FlankDetector(BacklashDetector):
                  contact_tolerance_rad: float = 2e-3, k_sigma: float = 8.0, min_departure_rad: float = 1.5e-3,
                  flank_time_constant_s: float = 0.05, encoder_counts_per_rev: int = 0,
                  refine_samples: Optional[int] = None, load_drop_fraction: float = 0.5, unwrap_angles: bool = True,
-                 confirm_samples: int = 3, min_travel_rad: float = 5e-3, deeper_travel_factor: float = 4.0):
+                 confirm_samples: int = 3, min_travel_rad: float = 5e-3, deeper_travel_factor: float = 4.0,
+                 base_torque_nm: Optional[float] = None):
         if isinstance(gear_ratio, bool) or not (math.isfinite(float(gear_ratio)) and gear_ratio != 0):
             raise ValueError(f"gear_ratio: must be a finite non-zero number (negative: the load encoder counts the "
                              f"other way), got {gear_ratio!r}")
@@ -1930,6 +1948,8 @@ class FlankDetector(BacklashDetector):
                 raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
         if nominal_inertia_kgm2 is not None and not _positive(nominal_inertia_kgm2):
             raise ValueError(f"nominal_inertia_kgm2: must be a finite number > 0 or None, got {nominal_inertia_kgm2!r}")
+        if base_torque_nm is not None and not _positive(base_torque_nm):
+            raise ValueError(f"base_torque_nm: must be a finite number > 0 or None, got {base_torque_nm!r}")
         if contact_samples is None or refine_samples is None:       # durations at 2 kHz in T_s's samples
             if not _positive(sample_period_s):
                 raise ValueError(f"sample_period_s: must be a finite number > 0, got {sample_period_s!r}")
@@ -1946,6 +1966,8 @@ class FlankDetector(BacklashDetector):
                          samples_from_entry, gap_tolerance, unwrap_angles)
         self.gear_ratio = float(gear_ratio)
         self.nominal_inertia_kgm2 = None if nominal_inertia_kgm2 is None else float(nominal_inertia_kgm2)
+        # the largest constant torque back_to_load's gap fit may take for friction and offset (None: no bound)
+        self.back_constant_max_nm = None if base_torque_nm is None else BACK_CONSTANT_MAX_REL_BASE * float(base_torque_nm)
         self.contact_samples = int(contact_samples)
         self.contact_tolerance_rad = float(contact_tolerance_rad)
         self.k_sigma = float(k_sigma)
@@ -2859,7 +2881,7 @@ class FlankDetector(BacklashDetector):
         if src == "a1" and self.history_extra:
             first = max(entry - self.history_extra, self.samples_before_entry)     # the history there is
             entry = back_to_load(wd["m_el"], acc, entry, first, self.nominal_inertia_kgm2, end=recontact,
-                                 sample_period_s=self.sample_period_s)
+                                 sample_period_s=self.sample_period_s, constant_max_nm=self.back_constant_max_nm)
             if not getattr(self, "_cap_returning", False) and not jumped:
                 # forward (never back) to the end of the load torque's ramp (LOAD_HINGE_*; not after a jump of delta,
                 # our simulator's slip: its contact is lost at the jump, no ramp -- the hinge put it 1-4 samples late)

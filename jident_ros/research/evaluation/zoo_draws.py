@@ -48,7 +48,10 @@ PROTOCOL_NOTE = ("A set is a blind test only until something is changed because 
                  "and 11 in stop 37, a crossing after a soft coupling's bounce, and vector set 11 and DOL set 3, the "
                  "re-contact of a traversal and its traversal back read from delta; vector set 14 in stop 38, a move "
                  "deeper into the flank under twice the torque no entry, and DOL set 6, an entry not at the edge of "
-                 "free_departure's search).")
+                 "free_departure's search; DOL sets 15–17 in stop 39, a 16-row change-point trim, and DOL set 18, a "
+                 "short gap not grown into contact; DOL set 1 in stop 40, the constant torque fitted over the whole "
+                 "gap; vector sets 7 and 20 in stop 41, no constant torque beyond a tenth of M_b where the entry walks "
+                 "back with an Imu).")
 
 #: The torque accuracy a drive's data sheet typically states for sensored vector control, ± this of rated torque: what
 #: a user who has nothing better declares, as ``torque_accuracy`` and as ``torque_offset_rel_base``, the way
