@@ -1747,3 +1747,19 @@ def test_the_flank_detector_bounds_the_constant_by_the_motors_base_torque():
     assert FlankDetector(0.1, 5e-4).back_constant_max_nm is None
     with pytest.raises(ValueError, match="base_torque_nm"):
         FlankDetector(0.1, 5e-4, base_torque_nm=0.0)
+
+
+def test_back_to_load_leaves_a_constant_torque_friction_and_offset_can_make_to_the_fit():
+    """The bound is not tighter than friction and an offset can be: vector draw s1-09's speed reversal (JointState+Imu
+    at 30 dB) fits a constant between 6 and 7 % of M_b, and its entry walks back 6 rows as without the bound (a bound
+    of 5 % of M_b would keep it at the dynamics' entry)."""
+    from jident_ros.stream.flank import BACK_CONSTANT_MAX_REL_BASE, back_to_load
+    d = np.load(Path(__file__).parent / "data" / "vd_draws_imu_30db_speed_reversal_back.npz")
+    m, acc = d["s1_9_m_el"], d["s1_9_acc"]
+    entry, first, end = (int(v) for v in d["s1_9_rows"])
+    mb = 211.87485338163722
+    free = back_to_load(m, acc, entry, first, 1.16, end=end, sample_period_s=5e-4)
+    assert free == entry - 6
+    assert back_to_load(m, acc, entry, first, 1.16, end=end, sample_period_s=5e-4,
+                        constant_max_nm=BACK_CONSTANT_MAX_REL_BASE * mb) == free
+    assert back_to_load(m, acc, entry, first, 1.16, end=end, sample_period_s=5e-4, constant_max_nm=0.05 * mb) == entry
