@@ -247,13 +247,13 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     Xs[:, 1] = u
     np.divide(phi_mid, max(float(np.abs(phi_mid).max()), 1e-300), out=Xs[:, 2])
     q = _quantum(a[L:R])
+    rows_key = (a[L:R].tobytes(), m.tobytes(), start, end, L, R, ts)   # the rows' inputs: the memo keys' common part
     s_est, e_est = start, end
     intervals = []                  # the candidate intervals (window rows), the first one's first
     if not fixed:
         # the scan does not depend on the torque lag: the lag check's second round (gap._lag_checked) finds the
         # same intervals, kept for it while the window is estimated (gap_numerics.window_memo; its inputs as the key)
-        key = ("free_intervals", a[L:R].tobytes(), m.tobytes(), start, end, L, R, ts, coulomb_mid,
-               float(model.torque_offset_nm), W)
+        key = ("free_intervals",) + rows_key + (coulomb_mid, float(model.torque_offset_nm), W)
         intervals = memo_get(key)
         if intervals is None:
             scan = IntervalScan(y, Xs, q, start - L, end - L, W, ScanRules(
@@ -276,7 +276,7 @@ def free_angle_fit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: floa
     # (gap_numerics.window_memo) for its lag check's second round, keyed by the rows and the model without the lag
     fits = _SpanFits(dict(a=a, m=m, y=y, Phi=Phi, Cc=Cc, Vv=Vv, u=u, tau=tau, L=L, ts=ts, phi_scale=phi_scale,
                           coulomb_mid=coulomb_mid), model,
-                     ("free_fit", a[L:R].tobytes(), m.tobytes(), L, R, start, end, ts, replace(model, torque_lag_s=0.0)))
+                     ("free_fit",) + rows_key + (replace(model, torque_lag_s=0.0),))
     return fits.result((s_est, e_est), intervals[1:])
 
 

@@ -599,7 +599,6 @@ def back_to_load(m_el: np.ndarray, acc: np.ndarray, entry: int, first: int, iner
     unchanged where the seed's constant is too: BACK_CONSTANT_MAX_REL_BASE); the entry moves back while the BACK_BLOCK
     residuals before it average within max(BACK_Z standard errors, BACK_REL_TOL |m_el|).  Reaching ``first`` means no
     load was found: ``entry`` is returned unchanged (its ``rel_tol`` keyword, never passed, went in stop 41)."""
-    rel_tol = BACK_REL_TOL
     fit, block = samples(BACK_FIT, sample_period_s), samples(BACK_BLOCK, sample_period_s)
     m = min(fit, m_el.size - entry, (end - entry) if end is not None else fit)
     if m < 4 or first >= entry:
@@ -638,7 +637,7 @@ def back_to_load(m_el: np.ndarray, acc: np.ndarray, entry: int, first: int, iner
     root = math.sqrt(min(block, BACK_BLOCK))
     while k > first:
         blk = slice(k - block, k)
-        lim = max(BACK_Z * sigma / root, rel_tol * float(np.mean(np.abs(m_el[blk]))))
+        lim = max(BACK_Z * sigma / root, BACK_REL_TOL * float(np.mean(np.abs(m_el[blk]))))
         if abs(float(np.mean(res[blk]))) > lim:
             return k
         k -= 1
