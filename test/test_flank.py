@@ -423,16 +423,16 @@ def test_free_motion_start_finds_where_the_motor_ran_free(noise_nm, late):
 def test_free_motion_start_keeps_the_departure_of_a_coarse_encoder():
     """A coarse encoder (2^13: a light contact's load is below its resolution, FREE_WALK_MAX_NOISE_RAD; its walk ran 51
     samples back on the vector drive, a false entry): the departure is kept."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank, flank_free
     alpha1, m_el, q = _free_motor(counts=8192, load_nm=20.0, ramp=60)
     assert flank.free_motion_start(alpha1, m_el, 240, 48, 5e-4, q) == 240
     # the guard is what keeps it: without it the coarse encoder's walk moves the entry
-    saved = flank.FREE_WALK_MAX_NOISE_RAD
+    saved = flank_free.FREE_WALK_MAX_NOISE_RAD
     try:
-        flank.FREE_WALK_MAX_NOISE_RAD = 1.0
+        flank_free.FREE_WALK_MAX_NOISE_RAD = 1.0
         assert flank.free_motion_start(alpha1, m_el, 240, 48, 5e-4, q) < 200 - 20
     finally:
-        flank.FREE_WALK_MAX_NOISE_RAD = saved
+        flank_free.FREE_WALK_MAX_NOISE_RAD = saved
 
 
 def test_free_motion_start_only_for_traversals_back_without_a1():
@@ -515,7 +515,7 @@ def test_a_soft_coupling_untwisting_beyond_the_search_is_entered_at_its_contact_
     the search's forward edge, the entry kept); searching on from that edge (COUPLING_FORWARD_ROUNDS) finds the
     contact loss (the vector drive with k x 0.3, heavy load reversal: -22 -> -1).  With one search the detector's
     window stays early."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank, flank_coupling
     data, entry = _untwisting_two_mass(k=1.5e4, c=10.0)
     d = data[:, 1] - data[:, 2]
     level = float(np.median(d[120:190]))
@@ -529,8 +529,8 @@ def test_a_soft_coupling_untwisting_beyond_the_search_is_entered_at_its_contact_
     wins, _ = _windows(data, ch, nominal_inertia_kgm2=1.16, encoder_counts_per_rev=65536)
     assert len(wins) == 1 and abs(round(wins[0].entry_time_s / 5e-4) - entry) <= 2
     assert len(wins[0]) == 48 + 2000                     # the capture held the rows the move needs (not cut short)
-    monkeypatch.setattr(flank, "COUPLING_FORWARD_ROUNDS", 1)
-    monkeypatch.setattr(flank, "DAMPED_MIN_GAIN", math.inf)   # the damped spring alone (below) puts this one at -4
+    monkeypatch.setattr(flank_coupling, "COUPLING_FORWARD_ROUNDS", 1)
+    monkeypatch.setattr(flank_coupling, "DAMPED_MIN_GAIN", math.inf)   # the damped spring alone (below) puts this one at -4
     wins, _ = _windows(data, ch, nominal_inertia_kgm2=1.16, encoder_counts_per_rev=65536)
     assert len(wins) == 1 and round(wins[0].entry_time_s / 5e-4) < entry - 10
 
@@ -1005,14 +1005,14 @@ def test_on_a_fine_encoder_the_angle_models_rms_gates_count_from_their_model_flo
     models' own error (2.5e-5 rad over the light load reversal's fit, as a 2^16 encoder's quantisation) failed them:
     the light load reversal stayed on its departure (+23) and the traversal back's walk stopped 17 samples late.
     Counted from ANGLE_MODEL_FLOOR_RAD: free_departure -> 0, the walk -> 0 (old code, or the floor 0: +23, +17)."""
-    import jident_ros.stream.flank as flank
+    from jident_ros.stream import flank_free
     data, dep, true, level, thr, sigma = _vd_variant_cut("fine")
     det = _variant_detector(level, thr, sigma, False, 2 ** 20)
     assert abs(det._free_departure_entry(data, dep) - true) <= 2
     data_b, dep_b, true_b, level_b, thr_b, sigma_b = _vd_variant_cut("fine_back")
     det_b = _variant_detector(level_b, thr_b, sigma_b, True, 2 ** 20)
     assert abs(det_b._angle_walk_entry(data_b, dep_b) - true_b) <= 2
-    monkeypatch.setattr(flank, "ANGLE_MODEL_FLOOR_RAD", 0.0)
+    monkeypatch.setattr(flank_free, "ANGLE_MODEL_FLOOR_RAD", 0.0)
     assert det._free_departure_entry(data, dep) - true > 20
     assert det_b._angle_walk_entry(data_b, dep_b) - true_b > 10
 
@@ -1028,6 +1028,7 @@ def test_without_a1_the_ramp_model_s_ties_are_broken_by_delta_s_untwist(key, old
     parabola from e) explains delta best; a gain >= RAMP_TIED_MIN_GAIN on alpha1 with a joint gain >= RAMP_MIN_GAIN
     (5.6-5.8 here) is taken: both within 1 sample (old code: +13, +14)."""
     import jident_ros.stream.flank as flank
+    from jident_ros.stream import flank_zone
     data, dep, true, level, thr, sigma = _dol_cut(key)
     a1, a2 = data[:, 1], data[:, 2]
     e, gain, scale, both = flank.ramp_entry(a1, data[:, 3], dep, 1.16, 5e-4, a1 - a2, True)
@@ -1036,7 +1037,7 @@ def test_without_a1_the_ramp_model_s_ties_are_broken_by_delta_s_untwist(key, old
     det = _variant_detector(level, thr, sigma, False, 65536)
     shift, _ = det._refine(data, dep)
     assert abs(dep + shift - true) <= 1, (dep + shift - true, old)
-    monkeypatch.setattr(flank, "RAMP_TIED_MIN_GAIN", flank.RAMP_MIN_GAIN)     # the old gate: the departure stays
+    monkeypatch.setattr(flank_zone, "RAMP_TIED_MIN_GAIN", flank.RAMP_MIN_GAIN)     # the old gate: the departure stays
     assert det._refine(data, dep)[0] + dep - true == old
 
 
@@ -1057,12 +1058,12 @@ def test_on_a_coarse_encoder_the_ramp_model_is_taken_when_alpha1_and_delta_agree
     ramp there (its gains 1.0-1.14), but with delta's untwist on the same s and e the joint RSS falls by a factor
     >= RAMP_COARSE_MIN_JOINT_GAIN (the DOL drive's 2^13 light reversals 1.23-1.42, the vector drive's 1.35-1.63; every
     other event of the zoo and the DOL zoo <= 1.22): within 2 samples (old code, or the rule off: +19)."""
-    import jident_ros.stream.flank as flank
+    from jident_ros.stream import flank_zone
     data, dep, true, level, thr, sigma = _dol_cut("coarse")
     det = _variant_detector(level, thr, sigma, False, 8192)
     shift, _ = det._refine(data, dep)
     assert abs(dep + shift - true) <= 2, dep + shift - true
-    monkeypatch.setattr(flank, "RAMP_COARSE_MIN_JOINT_GAIN", 0.0)
+    monkeypatch.setattr(flank_zone, "RAMP_COARSE_MIN_JOINT_GAIN", 0.0)
     assert det._refine(data, dep)[0] + dep - true == 19
 
 
@@ -1072,13 +1073,14 @@ def test_a_ramp_alpha1_alone_explains_below_the_old_gate_needs_delta_s_agreement
     1.77 times better (above RAMP_TIED_MIN_GAIN) but delta's untwist does not support it (joint gain 1.30 <
     RAMP_MIN_GAIN): not taken (with the gate at 1.5 on alpha1 alone: -4)."""
     import jident_ros.stream.flank as flank
+    from jident_ros.stream import flank_zone
     data, dep, true, level, thr, sigma = _dol_cut("slip")
     e, gain, scale, both = flank.ramp_entry(data[:, 1], data[:, 3], dep, 1.16, 5e-4, data[:, 1] - data[:, 2], True)
     assert flank.RAMP_TIED_MIN_GAIN <= gain < flank.RAMP_MIN_GAIN and both < flank.RAMP_MIN_GAIN, (gain, both)
     det = _variant_detector(level, thr, sigma, False, 65536)
     shift, _ = det._refine(data, dep)
     assert abs(dep + shift - true) <= 2, dep + shift - true
-    monkeypatch.setattr(flank, "RAMP_MIN_GAIN", flank.RAMP_TIED_MIN_GAIN)
+    monkeypatch.setattr(flank_zone, "RAMP_MIN_GAIN", flank.RAMP_TIED_MIN_GAIN)
     assert det._refine(data, dep)[0] + dep - true == e - true == -4
 
 
@@ -1111,9 +1113,9 @@ def test_a_2e14_encoder_s_traversal_back_is_walked(monkeypatch, gate):
     one departure to the next: against FREE_MAX_NOISE_RAD (1.0e-4) the walk was refused for one capture of a traversal
     back (+56, the report's window) and taken for the other (+1).  The walk's own gate, FREE_WALK_MAX_NOISE_RAD, lies
     between 2^14's and 2^13's quantisation ('old': the gate at FREE_MAX_NOISE_RAD, the departure stays)."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank, flank_free
     if gate == "old":
-        monkeypatch.setattr(flank, "FREE_WALK_MAX_NOISE_RAD", flank.FREE_MAX_NOISE_RAD)
+        monkeypatch.setattr(flank_free, "FREE_WALK_MAX_NOISE_RAD", flank.FREE_MAX_NOISE_RAD)
     data, dep, true, level, sigma = _vd_2e14_return()
     det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
     det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), True, sigma
@@ -1146,9 +1148,9 @@ def test_at_30_db_the_walk_counts_the_torque_noise_its_longer_fits_carry(monkeyp
     grows as its length cubed, so a fit twice the departure's length read 1.3 x its rms with no contact in it and the
     walk stopped in the gap (+7; the entry +23).  Its limit counts that growth ('ignored': the noise read as 0, the
     rule before)."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank, flank_free
     if torque_noise == "ignored":
-        monkeypatch.setattr(flank, "_noise", lambda x, lag=1: 0.0)
+        monkeypatch.setattr(flank_free, "_noise", lambda x, lag=1: 0.0)
     data, dep, true, level, sigma = _vd_return_cut("vd_stiff_return_traversal_jointstate_30db.npz", 65536)
     det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
     det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), True, sigma
@@ -1219,9 +1221,9 @@ def test_a_torque_estimate_a_sample_late_is_advanced_before_the_rules(monkeypatc
     later than the vector drive's own lag (TORQUE_LAG_REF), so m_el is advanced by a sample and the rules place the
     entry as on the base drive (-1); not aligned, the coupling model's forward move took it to +6.  The same capture with
     m_el read on time (advanced by hand) is not moved again."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank, flank_coupling
     if not aligned:
-        monkeypatch.setattr(flank, "TORQUE_LATE_MIN_GAIN", 0.0)
+        monkeypatch.setattr(flank_coupling, "TORQUE_LATE_MIN_GAIN", 0.0)
     data, dep, true, level, sigma = _vd_own_cut("vd_torque_late_speed_reversal_jointstate.npz")
     det, entry = _own_entry(data, dep, level, sigma)
     if aligned:
@@ -1239,9 +1241,9 @@ def test_an_encoder_s_disc_errors_are_fitted_after_the_event_and_removed_before_
     jointstate.npz, the whole capture): both encoders carry 0.2 mrad once and 0.1 mrad twice per revolution; fitted over
     the capture's last 1000 rows (7.9 revolutions) they come out at their size, and with them removed the entry lies on
     the contact loss; left in, the ramp model fitted their curvature (a gain of 19) and put it 11 samples early."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank, flank_disc
     if not corrected:
-        monkeypatch.setattr(flank, "DISC_MIN_GAIN", 0.0)
+        monkeypatch.setattr(flank_disc, "DISC_MIN_GAIN", 0.0)
     data, dep, true, level, sigma = _vd_own_cut("vd_disc_errors_light_reversal_jointstate.npz")
     det, entry = _own_entry(data, dep, level, sigma)
     if corrected:
@@ -1274,8 +1276,8 @@ def test_disc_error_needs_three_revolutions_one_way_and_the_encoder_s_own_noise_
     assert disc_error(read(4.0) * np.sign(np.cos(2 * math.pi * t / 0.5)), 0, t.size) is None
     ringing = read(4.0, extra=1e-4 * np.sin(2 * math.pi * 37.0 * t))      # the harmonics explain it 2.3 times better
     assert disc_error(ringing, 0, t.size) is None
-    from jident_ros.stream import flank
-    monkeypatch.setattr(flank, "DISC_MAX_RMS_FLOORS", math.inf)
+    from jident_ros.stream import flank_disc
+    monkeypatch.setattr(flank_disc, "DISC_MAX_RMS_FLOORS", math.inf)
     assert disc_error(ringing, 0, t.size) is not None
 
 
@@ -1296,13 +1298,13 @@ def test_a_damped_coupling_s_entry_moves_from_its_separation_to_the_zone_edge(ga
     coupling separates at 98, delta departs at 100 (the rules' entry), the zone is entered at 102.  The re-contact on the
     far flank gives c/k 5.4 samples within 1 % and k within 15 %; delta crosses F + |T0| / k at 102.  With the c/k gate
     at 0 nothing moves."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank, flank_zone
     d, rows, delta, side = _zone_cut("vd_soft_speed_reversal_zone_30db.npz")
     kj, ck, rse, _ = flank.far_contact_model(rows[:, 1], delta, rows[:, 3], int(d["recontact"]), 5e-4)
     assert ck / 5e-4 == pytest.approx(40.0 / 15000.0 / 5e-4, rel=0.05) and rse < 0.02
     assert kj * float(d["J"]) == pytest.approx(15000.0, rel=0.15)
     if gate == "off":
-        monkeypatch.setattr(flank, "ZONE_MAX_CK_REL_SE", 0.0)
+        monkeypatch.setattr(flank_zone, "ZONE_MAX_CK_REL_SE", 0.0)
     entry, _ = flank.zone_edge_entry(rows[:, 1], delta, rows[:, 3], (int(d["entry"]), int(d["departure"]),
                                      int(d["recontact"])), side, float(d["J"]), 5e-4)
     assert entry - int(d["true_entry"]) == (0 if gate == "on" else -2)
@@ -1330,9 +1332,9 @@ def test_a_light_motor_s_speed_reversal_takes_the_spring_fit_with_its_own_j1(mon
     leaves its flank with no relative speed and crosses the departure threshold 6 samples after the contact loss; the
     spring fit explains alpha1 only 1.24 / 1.39 times better (below SPRING_MIN_GAIN) but with J1 within 0.5 % of the
     nominal, 2 / 1 samples from the contact loss: taken (SPRING_TIGHT_*); without that path the entry stays at +6."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank_coupling
     if not tight:
-        monkeypatch.setattr(flank, "SPRING_TIGHT_MIN_GAIN", 0.0)
+        monkeypatch.setattr(flank_coupling, "SPRING_TIGHT_MIN_GAIN", 0.0)
     data, dep, true, level, sigma = _vd_return_cut(name, 65536)
     det = FlankDetector(0.03, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), gear_ratio=3.0,
                         nominal_inertia_kgm2=0.03)
@@ -1351,9 +1353,9 @@ def test_with_a1_the_coupling_at_the_re_contact_is_read_from_the_torque_balance(
     5.3 samples): J1_nom a1 - m_el = -(k pen + c pen') after the re-contact gives k within 5 % and c/k within 5 %, and
     the entry moves from the separation (-6) to the zone (0).  The angle form's k is 52 % high (K/J 19674): its edge lies
     before the entry and nothing moves (ZONE_A1_FIT off: -6)."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank, flank_zone
     if not a1_fit:
-        monkeypatch.setattr(flank, "ZONE_A1_FIT", False)
+        monkeypatch.setattr(flank_zone, "ZONE_A1_FIT", False)
     d, rows, delta, side = _zone_cut("vd_soft_heavy_reversal_zone_imu_30db.npz")
     acc = rows[:, 4] / float(d["radius"])
     kj, ck, rse, _ = flank.far_contact_model_a1(acc, delta, rows[:, 3], int(d["recontact"]), 1.16, 5e-4)
@@ -1371,9 +1373,9 @@ def test_with_a1_the_gap_s_friction_comes_off_the_steady_torque(monkeypatch, fri
     (m_el - J1 a1 there); with it taken off, the edge is crossed at the zone entry (0), left in at +3."""
     from pathlib import Path
 
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank, flank_zone
     if not friction:
-        monkeypatch.setattr(flank, "ZONE_A1_FRICTION", False)
+        monkeypatch.setattr(flank_zone, "ZONE_A1_FRICTION", False)
     d = np.load(Path(__file__).parent / "data" / "vd_jitter50_light_reversal_zone_imu_30db.npz")
     entry, ck = flank.zone_edge_entry((d["alpha1"], d["acc"]), d["delta"], d["m_el"],
                                       (int(d["entry"]), int(d["departure"]), int(d["recontact"])), float(d["side"]),
@@ -1400,9 +1402,9 @@ def test_a_traversal_back_s_walk_stops_where_the_motor_equation_with_j1_nom_fail
     braking torque relaxes).  The walk's free fit takes J 2.7 x J1_nom and walks back across the untwist (-37: outside
     the zoo's match, a false entry); the coupling model with J1_nom fixed fails there by a gain of 2.7 and moves forward
     to the contact loss ('nominal': within +-2; off: the walk's -37).  No threshold was chosen on this drive."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank_coupling
     if not nominal:
-        monkeypatch.setattr(flank, "RETURN_NOMINAL_J", False)
+        monkeypatch.setattr(flank_coupling, "RETURN_NOMINAL_J", False)
     dep, shift, true = _return_refined("vd_several_return_traversal_jointstate.npz", 16384)
     if nominal:
         assert abs(dep + shift - true) <= 2, dep + shift - true
@@ -1417,9 +1419,9 @@ def test_the_nominal_j_coupling_fit_leaves_the_torque_estimate_s_lag_free(monkey
     the entry at -1; with J fixed and m_el a sample late, the fit misses wherever m_el moves fast and the nominal-J
     search walked into the gap (+22).  With the lag's first-order column free it stays ('lag'; off: NOMINAL_J_FREE_LAG
     False)."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank_coupling
     if not lag:
-        monkeypatch.setattr(flank, "NOMINAL_J_FREE_LAG", False)
+        monkeypatch.setattr(flank_coupling, "NOMINAL_J_FREE_LAG", False)
     dep, shift, true = _return_refined("vd_torque_late_return_traversal_jointstate_30db.npz", 65536)
     if lag:
         assert abs(dep + shift - true) <= 2, dep + shift - true
@@ -1435,8 +1437,8 @@ def test_the_nominal_j_search_goes_on_a_few_samples_with_the_lag_left_out(monkey
     with the torque's lag free the nominal-J fit reads the contact's last 3 samples as a lag (-3); without it, within
     NOMINAL_J_UNLAGGED_MAX_MOVE (4), at the zone (0; 0: off, -3).  'torque one sample late', clean (test/data/
     vd_torque_late_return_traversal_jointstate.npz): the lag-free search would go 6 samples on (+6 at a cap of 6; 0 at 4)."""
-    from jident_ros.stream import flank
-    monkeypatch.setattr(flank, "NOMINAL_J_UNLAGGED_MAX_MOVE", max_move)
+    from jident_ros.stream import flank_coupling
+    monkeypatch.setattr(flank_coupling, "NOMINAL_J_UNLAGGED_MAX_MOVE", max_move)
     data, dep, true, level, sigma = _vd_return_cut(name, 65536)
     det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
     det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), True, sigma
@@ -1451,9 +1453,9 @@ def test_with_an_accelerometer_a_traversal_back_s_entry_moves_to_where_the_motor
     30db.npz, the capture up to 150 rows after its departure): back_to_load and the coupling model stop 3 samples before
     the zone, the angle walk leads by less than RETURN_ANGLE_WALK_MIN_LEAD; the nominal-J search (as after the walk)
     moves it on to the zone (0; RETURN_NOMINAL_J off: -3)."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank_coupling
     if not nominal:
-        monkeypatch.setattr(flank, "RETURN_NOMINAL_J", False)
+        monkeypatch.setattr(flank_coupling, "RETURN_NOMINAL_J", False)
     data, dep, true, level, sigma = _vd_return_with_a1("vd_base_return_traversal_imu_30db.npz")
     det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el", "a1"), nominal_inertia_kgm2=1.16)
     det._cap_flank, det._cap_returning, det._cap_sigma = (level, 1.5e-3), True, sigma
@@ -1572,9 +1574,9 @@ def test_a_traversal_and_its_traversal_back_in_one_window_read_the_re_contact_fr
     the same as before."""
     from draws_cuts import draws_cut
 
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank, flank_delta
     if rule == "off":
-        monkeypatch.setattr(flank, "_before_return",
+        monkeypatch.setattr(flank_delta, "_before_return",
                             lambda D, q: D[:0] if flank._first_return(D, q) is not None else D)
     data, ch, d = draws_cut("vector_draws_step_down_return.npz", key)
     got = [[(round(w.entry_time_s / 5e-4), w.recontact_index - w.entry_index, w.backlash_width_estimate_m)
@@ -1704,8 +1706,8 @@ def test_free_departure_at_the_edge_of_its_search_locates_no_turn(monkeypatch, o
     ('off').  With DRIFT_NOT_AT_EDGE the departure stands: 239, +7, the traversal found."""
     from draws_cuts import draws_cut
 
-    from jident_ros.stream import flank
-    monkeypatch.setattr(flank, "DRIFT_NOT_AT_EDGE", on)
+    from jident_ros.stream import flank_free
+    monkeypatch.setattr(flank_free, "DRIFT_NOT_AT_EDGE", on)
     data, ch, d = draws_cut("dol_draws_light_reversal_flicker.npz", "js")
     wins = _cut_windows(data, ch)
     got = [(round(w.entry_time_s / 5e-4), w.recontact_index) for w in wins]

@@ -69,7 +69,7 @@ def test_a_swinging_tail_leaves_the_disc_error_to_the_last_rows_that_turn_steadi
     """The last 1000 rows still swing (the cubic cannot follow them: refused); the last 600 or 400 turn steadily and
     give the disc's 200 / 100 µrad (DOL set 10's d10-04, whose J1 went out 11 % off with the error left on alpha1).
     Without the shorter tails nothing is fitted; without a disc error the swing invents none."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank, flank_disc
     x = _swinging_tail(2e-4)
     _, coef = flank.disc_corrected(x, TS)
     assert coef is not None
@@ -77,7 +77,7 @@ def test_a_swinging_tail_leaves_the_disc_error_to_the_last_rows_that_turn_steadi
     assert np.hypot(coef[2], coef[3]) == pytest.approx(1e-4, rel=0.1)
     assert flank.disc_error(x, x.size - 1000, x.size) is None
     assert flank.disc_corrected(_swinging_tail(0.0), TS)[1] is None
-    monkeypatch.setattr(flank, "DISC_SHORTER_TAILS", ())
+    monkeypatch.setattr(flank_disc, "DISC_SHORTER_TAILS", ())
     assert flank.disc_corrected(x, TS)[1] is None
 
 
@@ -91,8 +91,8 @@ def test_the_gap_fit_takes_off_a_disc_error_behind_a_swinging_tail(monkeypatch):
     exact, fixed = fit(0.0), fit(2e-4)
     assert "disc error (19" in fixed.model_choice or "disc error (20" in fixed.model_choice, fixed.model_choice
     assert fixed.inertia_kgm2 == pytest.approx(exact.inertia_kgm2, rel=2e-3)
-    from jident_ros.stream import flank
-    monkeypatch.setattr(flank, "DISC_SHORTER_TAILS", ())
+    from jident_ros.stream import flank_disc
+    monkeypatch.setattr(flank_disc, "DISC_SHORTER_TAILS", ())
     left = fit(2e-4)
     assert "disc error" not in left.model_choice
     assert abs(left.inertia_kgm2 / exact.inertia_kgm2 - 1) > 0.01

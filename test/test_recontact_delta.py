@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import jident_ros.stream.flank as flank
+from jident_ros.stream import flank_delta
 
 DATA = Path(__file__).parent / "data" / "dol_light_reversal_recontact.npz"
 
@@ -33,7 +34,7 @@ def test_dol_light_reversal_k2_from_delta():
 
 def test_dol_light_reversal_without_the_delta_rule_is_wrong(monkeypatch):
     """The same window read from the acceleration alone (the rule before): the test above would catch its loss."""
-    monkeypatch.setattr(flank, "RECONTACT_FROM_DELTA", False)
+    monkeypatch.setattr(flank_delta, "RECONTACT_FROM_DELTA", False)
     window, z = _cut()
     res = _width(window, z)
     assert res.recontact_index < int(z["true_recontact"]) - 40
@@ -81,7 +82,7 @@ def test_delta_recontact_synthetic(untwist, q):
 
 def test_delta_recontact_travel_share_guards_the_untwist(monkeypatch):
     """Without the travel-share guard the untwist's rest is read as the contact."""
-    monkeypatch.setattr(flank, "RECONTACT_MIN_TRAVEL_SHARE", 0.0)
+    monkeypatch.setattr(flank_delta, "RECONTACT_MIN_TRAVEL_SHARE", 0.0)
     d, e, contact = _traversal(15)
     assert flank.delta_recontact(d, e, 0.0) < contact - 50
 
@@ -105,7 +106,7 @@ def test_bounce_then_traversal_back_is_not_the_contact():
 
 
 def test_return_guard_matters(monkeypatch):
-    monkeypatch.setattr(flank, "RECONTACT_RETURN_SHARE", -1.0)
+    monkeypatch.setattr(flank_delta, "RECONTACT_RETURN_SHARE", -1.0)
     d, e, contact = _traversal()
     bounce = np.concatenate([np.zeros(60), 0.02 * np.sin(np.linspace(0, np.pi, 40)), np.zeros(20)])
     d2 = np.concatenate([bounce, d[e:] + 0.0])
@@ -139,7 +140,7 @@ def test_a_traversal_and_its_traversal_back_are_read_up_to_the_return(monkeypatc
     assert flank._first_return(flank._travel(d, e), 0.0) is not None
     assert abs(flank.delta_recontact(d, e, 0.0) - contact) <= 2
     assert not flank._delta_arrived(d, e, e + 8, 0.0)
-    monkeypatch.setattr(flank, "RECONTACT_RETURN_TRAVERSAL_SHARE", 1.01)
+    monkeypatch.setattr(flank_delta, "RECONTACT_RETURN_TRAVERSAL_SHARE", 1.01)
     assert flank.delta_recontact(d, e, 0.0) == -1
     assert flank._delta_arrived(d, e, e + 8, 0.0)
 
@@ -153,5 +154,5 @@ def test_a_bounce_before_a_crossing_is_not_read_at_any_share_below_its_own(monke
     bounce = np.concatenate([np.zeros(60), 0.02 * np.sin(np.linspace(0, np.pi, 40)), np.zeros(20)])
     d2 = np.concatenate([bounce, d[e:] + 0.0])
     assert flank.delta_recontact(d2, 60, 0.0) == -1
-    monkeypatch.setattr(flank, "RECONTACT_RETURN_TRAVERSAL_SHARE", 0.0)
+    monkeypatch.setattr(flank_delta, "RECONTACT_RETURN_TRAVERSAL_SHARE", 0.0)
     assert 60 < flank.delta_recontact(d2, 60, 0.0) < 100                # inside the bounce, 20 rows long
