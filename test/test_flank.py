@@ -540,7 +540,7 @@ def test_a_swing_on_the_flank_reached_is_not_a_traversal_back(monkeypatch):
     the contact level learnt there (its torque falling back): beyond min_travel_rad, but 0.06 of the zone the window
     crossed, not a traversal back (RETURN_MIN_SPAN_SHARE; the vector drive with k x 0.3: a false entry, J1 outside the
     plausible band).  A traversal back to the first flank still gets its window; without the rule the swing got one."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank_window
     swing = [(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (920, -0.094)]
     data, ch = _excursions(swing)
     wins, det = _windows(data, ch)
@@ -548,7 +548,7 @@ def test_a_swing_on_the_flank_reached_is_not_a_traversal_back(monkeypatch):
     data, ch = _excursions([(0, 0.0), (500, 0.0), (530, -0.1), (900, -0.1), (940, 0.0)])
     wins, det = _windows(data, ch)
     assert [round((w.entry_time_s - 1.0) / 5e-4) for w in wins] == [501, 901] and det.return_windows == 1
-    monkeypatch.setattr(flank, "RETURN_MIN_SPAN_SHARE", 0.0)
+    monkeypatch.setattr(flank_window, "RETURN_MIN_SPAN_SHARE", 0.0)
     data, ch = _excursions(swing)
     wins, det = _windows(data, ch)
     assert len(wins) == 2 and det.return_windows == 1
@@ -655,9 +655,9 @@ def test_a_traversal_found_by_two_rules_gives_one_window(tmp_path, monkeypatch, 
     excursion, RETURN_SAME_EXCURSION); with that rule off the duplicate is caught as before."""
     from pathlib import Path
 
-    import jident_ros.stream.flank as flank
     from jident_ros.cli.offline import diagnose_samples
-    monkeypatch.setattr(flank, "RETURN_SAME_EXCURSION", same_excursion)
+    from jident_ros.stream import flank_scan
+    monkeypatch.setattr(flank_scan, "RETURN_SAME_EXCURSION", same_excursion)
     from jident_ros.config import load_system_config
     d = np.load(Path(__file__).parent / "data" / "small_drive_step_down_jointstate.npz")
     n = d["alpha1"].size
@@ -781,9 +781,9 @@ def test_with_an_accelerometer_a_traversal_back_takes_the_angle_walk_when_it_lea
     nearly constant torque, stops 24 samples after the contact loss; the angle walk (the no-a1 path) finds it.  Taken
     when it lies RETURN_ANGLE_WALK_MIN_LEAD samples or more before the a1 path's entry (old code, or the rule off:
     +24)."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank_refine
     if min_lead is not None:
-        monkeypatch.setattr(flank, "RETURN_ANGLE_WALK_MIN_LEAD", min_lead)
+        monkeypatch.setattr(flank_refine, "RETURN_ANGLE_WALK_MIN_LEAD", min_lead)
     data, dep, true, level, sigma = _vd_return_with_a1()
     det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el", "a1"), nominal_inertia_kgm2=1.16,
                         encoder_counts_per_rev=65536)
@@ -887,11 +887,12 @@ def test_a_shallow_bounce_on_a_coarse_encoder_is_a_bounce(monkeypatch):
     the traversal had no window); with the old depth (2 x RETURN_TURN_SHARE) or the old rest (RETURN_REST_DEPARTURES
     after it, +6) it fails."""
     import jident_ros.stream.flank as fl
+    from jident_ros.stream import flank_scan
     entries = _second_drive_turn_scan("bounce")
     assert len(entries) == 1 and abs(entries[0] - 2196) <= 2, entries
-    monkeypatch.setattr(fl, "RETURN_SHALLOW_REST_DEPARTURES", fl.RETURN_REST_DEPARTURES)
+    monkeypatch.setattr(flank_scan, "RETURN_SHALLOW_REST_DEPARTURES", fl.RETURN_REST_DEPARTURES)
     assert abs(_second_drive_turn_scan("bounce")[0] - 2196) > 2
-    monkeypatch.setattr(fl, "RETURN_SHALLOW_TURN_SHARE", 2.0 * fl.RETURN_TURN_SHARE)
+    monkeypatch.setattr(flank_scan, "RETURN_SHALLOW_TURN_SHARE", 2.0 * fl.RETURN_TURN_SHARE)
     assert abs(_second_drive_turn_scan("bounce")[0] - 2196) > 2
 
 
@@ -901,10 +902,10 @@ def test_a_turn_the_motor_runs_free_through_is_no_bounce_and_no_contact(monkeypa
     motor running free through it (RETURN_FREE_TURN_*): the traversal back enters at its true start, 2135 ('still':
     at 2131, -4, delta's edge from the first impact), not at the turn's end (with every turn taken for a bounce or a
     contact: +90 / +92)."""
-    import jident_ros.stream.flank as fl
+    from jident_ros.stream import flank_scan
     entries = _second_drive_turn_scan(tag)
     assert len(entries) == 1 and abs(entries[0] - 2135) <= 4, entries
-    monkeypatch.setattr(fl, "RETURN_FREE_TURN_RMS", 0.0)
+    monkeypatch.setattr(flank_scan, "RETURN_FREE_TURN_RMS", 0.0)
     assert abs(_second_drive_turn_scan(tag)[0] - 2135) > 50
 
 
@@ -930,7 +931,7 @@ def test_on_a_coarse_encoder_the_departure_counts_from_a_few_counts_off_the_flan
     coupling untwists 4.8 counts before its contact is lost: the departure was 5 samples early.  Moved on to where
     delta left the flank by COARSE_DEPARTURE_QUANTA counts (delta's quantum from its steps before the departure) the
     entry is within 2 samples, in any batching; on a 2^16 encoder (the same counts) nothing moves."""
-    import jident_ros.stream.flank as fl
+    from jident_ros.stream import flank_refine
     data, ch, x = _coarse_untwist()
     for batch in (50, 1):
         det = FlankDetector(0.1, 5e-4, channels=ch)
@@ -940,7 +941,7 @@ def test_on_a_coarse_encoder_the_departure_counts_from_a_few_counts_off_the_flan
         assert abs(round((wins[0].entry_time_s - 1.0) / 5e-4) - x) <= 2, wins[0].entry_time_s
     fine, ch, x = _coarse_untwist(counts=65536)
     before = [w.entry_time_s for w in _windows(fine, ch)[0]]
-    monkeypatch.setattr(fl, "COARSE_DEPARTURE_QUANTA", 0.0)
+    monkeypatch.setattr(flank_refine, "COARSE_DEPARTURE_QUANTA", 0.0)
     wins, _ = _windows(data, ch)
     assert round((wins[0].entry_time_s - 1.0) / 5e-4) - x == -5
     assert [w.entry_time_s for w in _windows(fine, ch)[0]] == before
@@ -1472,9 +1473,9 @@ def test_a_slip_that_leaves_the_coupling_twisted_is_no_entry(monkeypatch, key, o
     same-flank torque change (``flank_shifts``; off: the window).  d1-11 ('gap'), a real slip gap of 12 samples whose
     delta passes its zero-twist point by 1.3 mrad (14 %) and comes back to the flank it left, keeps its window."""
 
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank_window
     if not on:
-        monkeypatch.setattr(flank, "UNTWIST_MAX_TORQUE_SHARE", -1.0)
+        monkeypatch.setattr(flank_window, "UNTWIST_MAX_TORQUE_SHARE", -1.0)
     d, data, ch = _dol_draw_cut("dol_draws_slip_drop_untwist_jointstate.npz", key)
     det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16, encoder_counts_per_rev=65536)
     wins = [e.window for e in det.push(data, ch) + det.finish() if getattr(e, "window", None) is not None]
@@ -1511,9 +1512,9 @@ def test_a_slip_reversal_s_crossing_after_a_short_re_contact_gets_its_own_window
     window, docs/results.md's seventeenth round)."""
     from draws_cuts import draws_cut
 
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank_scan
     if not on:
-        monkeypatch.setattr(flank, "REBOUND_MAX_SHARE", 0.0)
+        monkeypatch.setattr(flank_scan, "REBOUND_MAX_SHARE", 0.0)
     data, ch, d = draws_cut("dol_draws_slip_reversal_rebound.npz", key)
     got = [[round(w.entry_time_s / 5e-4) for w in _cut_windows(data, ch)]]
     g0, g1 = (int(x) for x in d["gap_entries"])
@@ -1538,10 +1539,10 @@ def test_a_soft_coupling_s_crossing_after_its_bounce_gets_its_own_window_not_bef
     274)."""
     from draws_cuts import draws_cut
 
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank, flank_scan
     if rule == "old shares":
-        monkeypatch.setattr(flank, "REBOUND_MAX_SHARE", 0.1)
-        monkeypatch.setattr(flank, "REBOUND_BACK_SHARE", 0.5)
+        monkeypatch.setattr(flank_scan, "REBOUND_MAX_SHARE", 0.1)
+        monkeypatch.setattr(flank_scan, "REBOUND_BACK_SHARE", 0.5)
     if rule == "no turn":
         finish = flank.FlankDetector._finish_flank
 
@@ -1604,9 +1605,9 @@ def test_a_turn_inside_the_zone_after_a_window_s_entry_is_no_crossing_of_its_own
     since stop 37; still a second window in the gap)."""
     from pathlib import Path
 
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank, flank_scan
     if not share:
-        monkeypatch.setattr(flank, "REBOUND_MIN_DEPARTURE_SHARE", 0.0)
+        monkeypatch.setattr(flank_scan, "REBOUND_MIN_DEPARTURE_SHARE", 0.0)
     if not after:
         finish = flank.FlankDetector._finish_flank
 
@@ -1636,9 +1637,9 @@ def test_a_slip_drop_s_shallow_gap_gets_its_window(monkeypatch, key, gaps, at_ze
     window, one flank shift).  d1-03 ('untwist'): the coupling only untwists, 9 % short of its zero-twist point, no
     gap in the truth: no window, one flank shift.  Batches do not matter."""
 
-    from jident_ros.stream import flank
-    monkeypatch.setattr(flank, "SHALLOW_GAPS", gaps)
-    monkeypatch.setattr(flank, "SHALLOW_AT_ZERO_TWIST", at_zero)
+    from jident_ros.stream import flank_window
+    monkeypatch.setattr(flank_window, "SHALLOW_GAPS", gaps)
+    monkeypatch.setattr(flank_window, "SHALLOW_AT_ZERO_TWIST", at_zero)
     d, data, ch = _dol_draw_cut("dol_draws_slip_drop_shallow_jointstate.npz", key)
     got = []
     for batch in (data.shape[0], 137):

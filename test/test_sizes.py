@@ -23,10 +23,8 @@ EXCEPTIONS = {
     "identify/gap.py:estimate_inertia": "the public entry: _estimate_inertia's arguments, passed through",
     "identify/gap.py:_estimate_inertia": "the per-method branches of the fit choice; to become one function per fit",
     "identify/gap.py:_joint_fit": "the a1 + m_el errors-in-variables fit in one piece (its algebra reads as one)",
-    "stream/flank.py": "over 600 lines: the flank state machine plus unwrap, spike confirmation and same-flank rules "
-                       "(issue 20); to be split into the state machine and its rules",
     "stream/flank.py:_track": "the flank state machine's one transition function (issue 20 added the spike and "
-                              "same-flank states); to be split with the file",
+                              "same-flank states); the file's split left it whole, the state machine flank.py keeps",
     "identify/verdict.py:input_refusal": "9: the window's five header fields + config, policy, nominal, width_unknown; "
                                          "estimator helper's file",
     # numerics kernels
