@@ -1766,3 +1766,28 @@ def test_back_to_load_leaves_a_constant_torque_friction_and_offset_can_make_to_t
     assert back_to_load(m, acc, entry, first, 1.16, end=end, sample_period_s=5e-4,
                         constant_max_nm=BACK_CONSTANT_MAX_REL_BASE * mb) == free
     assert back_to_load(m, acc, entry, first, 1.16, end=end, sample_period_s=5e-4, constant_max_nm=0.05 * mb) == entry
+
+
+@pytest.mark.parametrize("on", [True, False])
+def test_a_ringing_coupling_s_crossing_after_its_second_dip_gets_its_own_window(monkeypatch, on):
+    """DOL set 21's d21-04 (zoo_draws --model dol --seed 21), its slip reversal as JointState 2^16 clean
+    (test/data/dol_draws_ringing_slip_reversal.npz, rows 1000-3599, the drawn 2^20 encoders): a stiff, lightly damped
+    coupling (k 1.8e5 N m/rad, c 16.5 N m s/rad) rings after the slip; delta dips 0.2-0.4 mrad past the zero twist twice
+    (rows 212-219 and 236-248, twisted again 0.9 mrad between and after) before the motor crosses the zone (262-346).
+    One capture departs in the crossing and the rules put its entry in the second dip (238).  The crossing's own window
+    comes from REBOUND_*, whose deepest return toward the flank is now looked for after the window's entry
+    (REBOUND_AFTER_ENTRY): from the window's first rows it was the first dip's return, before the entry, and the
+    crossing had no window (its traversal missed)."""
+    from draws_cuts import draws_cut
+
+    from jident_ros.stream import flank_scan
+    if not on:
+        monkeypatch.setattr(flank_scan, "REBOUND_AFTER_ENTRY", False)
+    data, ch, d = draws_cut("dol_draws_ringing_slip_reversal.npz", "js")
+    got = [round(w.entry_time_s / 5e-4) for w in _cut_windows(data, ch)]
+    _, bounce, crossing = (int(x) for x in d["gap_entries"])
+    assert bounce <= got[0] < crossing - 20
+    if on:
+        assert len(got) == 2 and abs(got[1] - crossing) <= 2
+    else:
+        assert len(got) == 1

