@@ -1703,8 +1703,9 @@ def test_free_departure_at_the_edge_of_its_search_locates_no_turn(monkeypatch, o
     (test/data/dol_draws_light_reversal_flicker.npz, rows 1000-3599 as fed to the detector): delta flickers one count
     on its flank, untwists from about row 209 and loses contact at 232 (gap to 535); the departure is 239.
     free_departure's line-then-parabola fit took the first candidate of its search, 40 rows before the departure:
-    the entry 199, before delta moved, a false entry with its re-contact 2 rows later, and the traversal missed
-    ('off').  With DRIFT_NOT_AT_EDGE the departure stands: 239, +7, the traversal found."""
+    the entry 199, before delta moved, a false entry, and the traversal missed ('off'; its re-contact was read 2 rows
+    later until TRAVEL_SIDE_FROM_FARTHEST: delta's first move a count back, now the far flank's, 535).  With
+    DRIFT_NOT_AT_EDGE the departure stands: 239, +7, the traversal found."""
     from draws_cuts import draws_cut
 
     from jident_ros.stream import flank_free
@@ -1716,7 +1717,7 @@ def test_free_departure_at_the_edge_of_its_search_locates_no_turn(monkeypatch, o
     if on:
         assert len(got) == 1 and 0 < got[0][0] - g <= 8 and got[0][1] > 300
     else:
-        assert got == [(199, 50)] and g - 199 > 30
+        assert got == [(199, 385)] and g - 199 > 30         # the re-contact at row 151 + 385 = 536
 
 
 def test_back_to_load_takes_no_constant_torque_beyond_a_tenth_of_the_base_torque():
@@ -1791,3 +1792,25 @@ def test_a_ringing_coupling_s_crossing_after_its_second_dip_gets_its_own_window(
         assert len(got) == 2 and abs(got[1] - crossing) <= 2
     else:
         assert len(got) == 1
+
+
+@pytest.mark.parametrize("on", [True, False])
+def test_a_count_of_dither_after_a_slow_departure_does_not_turn_the_travel_back(monkeypatch, on):
+    """DOL set 21's d21-12 (zoo_draws --model dol --seed 21), its heavy load reversal as JointState 2^16 30 dB (the
+    drawn 2^14 encoders), the window as the flank detector handed it to estimate_width
+    (test/data/dol_draws_heavy_reversal_dither_window.npz: entry row 48, the truth's re-contact at row 144, a 98-row
+    gap).  delta leaves its flank slowly; it steps one count back toward the flank at the entry's second row and holds
+    over RECONTACT_SPAN rows.  The travel's side came from that first move, so delta never seemed to cross and the motor
+    acceleration's re-contact, 2 rows after the entry, stood: the window was refused as a gap too short.  With
+    TRAVEL_SIDE_FROM_FARTHEST the side is that of delta's farthest point and the re-contact is read from delta."""
+    from jident_ros.stream import flank_delta
+    monkeypatch.setattr(flank_delta, "TRAVEL_SIDE_FROM_FARTHEST", on)
+    d = np.load(Path(__file__).parent / "data" / "dol_draws_heavy_reversal_dither_window.npz")
+    window = {c: d[c] for c in ("t", "alpha1", "alpha2", "omega1", "omega2", "m_el")}
+    e, truth = int(d["entry_index"]), int(d["truth_recontact"])
+    res = flank_delta.estimate_width(window, e, 0.1, 5e-4, flank_rad=float(d["flank_rad"]))
+    if on:
+        assert res.how == "traversal" and abs(res.recontact_index - truth) <= 2
+        assert res.width_m == pytest.approx(5.07e-3, rel=0.02)          # the drawn K2
+    else:
+        assert res.how == "no re-contact found" and res.recontact_index - e <= 2

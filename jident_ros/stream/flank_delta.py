@@ -124,16 +124,29 @@ RECONTACT_RETURN_SHARE = 0.2
 RECONTACT_RETURN_TRAVERSAL_SHARE = 0.5
 
 
+#: Where delta has not moved over RECONTACT_SPAN rows after the entry, the side it left in is that of its farthest
+#: point from the entry in the window (a traversal's far flank, a bounce's deepest point), not of its first move: a
+#: coarse encoder's delta dithers a count back toward the flank after a slow departure (DOL draw d21-12's 2^14 heavy
+#: load reversal at 30 dB: one count back at the entry's second row turned the travel negative, the acceleration's
+#: re-contact 2 rows after the entry stood, the window refused as a gap too short for a 98-row gap) -- chosen there
+#: (blind DOL set 21).  False: the first move, as before
+TRAVEL_SIDE_FROM_FARTHEST = True
+
+
 def _travel(d: np.ndarray, e: int, span: int = RECONTACT_SPAN) -> np.ndarray:
     """The travel of delta from the entry row on, positive in the direction it left in (``span`` rows decide:
     RECONTACT_SPAN at 2 kHz; when delta has not moved over them, its first move: a coarse encoder's delta creeps off
     its flank within a count for several samples after an entry placed at the contact loss, and the side taken from
     no move turned the travel negative, so the acceleration's re-contact row 5 samples after the entry stood: K2
-    1.9e-5 m for 5 mm on the vector drive's 2^13 light load reversal)."""
+    1.9e-5 m for 5 mm on the vector drive's 2^13 light load reversal); its farthest point from the entry in the rows
+    given where its first move is a count back (TRAVEL_SIDE_FROM_FARTHEST)."""
     ref = d[min(e + span, d.size - 1)]
     if abs(ref - d[e]) <= 1e-9:                     # no move but a float rounding (as _delta_quantum's steps)
-        moved = np.nonzero(np.abs(d[e + 1:] - d[e]) > 1e-9)[0]
-        ref = d[e + 1 + int(moved[0])] if moved.size else ref
+        if TRAVEL_SIDE_FROM_FARTHEST and d.size > e + 1:
+            ref = d[e + 1 + int(np.argmax(np.abs(d[e + 1:] - d[e])))]
+        else:
+            moved = np.nonzero(np.abs(d[e + 1:] - d[e]) > 1e-9)[0]
+            ref = d[e + 1 + int(moved[0])] if moved.size else ref
     side = 1.0 if ref >= d[e] else -1.0
     return side * (d[e:] - d[e])
 
