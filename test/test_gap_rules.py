@@ -759,7 +759,7 @@ def test_the_window_memo_fits_the_lag_checks_second_round_once_and_changes_nothi
     monkeypatch.setattr(gap_free.lapack, "solve", counted("fit", gap_free.lapack.solve))
     kept = fit()
     assert "the torque lags the motor angle" in kept.model_choice        # the lag check's second round ran
-    assert gap_numerics._WINDOW_MEMO is None                             # nothing outlives the window
+    assert gap_numerics.WINDOW_MEMO.memo is None                         # nothing outlives the window
     with_memo = dict(calls)
     try:
         gap_free.FITTED_CONSTANT_SCAN = False                            # a flag changed between two windows
@@ -769,7 +769,7 @@ def test_the_window_memo_fits_the_lag_checks_second_round_once_and_changes_nothi
         gap_free.FITTED_CONSTANT_SCAN = True
     for k in calls:
         calls[k] = 0
-    monkeypatch.setattr(gap_numerics, "_WINDOW_MEMO", None)
+    monkeypatch.setattr(gap_numerics.WINDOW_MEMO, "memo", None)
     monkeypatch.setattr(gap_numerics, "memo_get", lambda key: None)
     for mod in (gap_free, gap_load):
         monkeypatch.setattr(mod, "memo_get", lambda key: None)

@@ -65,7 +65,7 @@ def test_the_fit_cache_changes_no_number(windows, model, monkeypatch):
     assert len(calls) == n_first                          # the second pass computed no angle fit
     n_windows = sum(len(w.cases) for w in windows)
     assert n_first <= 2 * n_windows                       # 'angles' and 'angle_eq1' share one, 'angle' its own
-    assert gap._FIT_CACHE is None
+    assert gap_numerics.FIT_MEMO.memo is None
 
 
 def _kink_reference(alpha1, torque, ts, entries, end):

@@ -74,9 +74,8 @@ residual RMS.
 from __future__ import annotations
 
 import math
-from contextlib import contextmanager
 from dataclasses import dataclass, replace
-from functools import lru_cache, wraps
+from functools import lru_cache
 
 import numpy as np
 from scipy.ndimage import convolve1d
@@ -102,7 +101,17 @@ from jident_ros.identify.gap_kink import (
 )
 from jident_ros.identify.gap_lag import LAG_MAX_FRACTION, LAG_MIN_SAMPLES, LAG_Z, torque_lag_estimate
 from jident_ros.identify.gap_load import LOAD_ANGLE_KEY, load_free_bounds
-from jident_ros.identify.gap_numerics import _ar1_inflation, _cumtrapz, _diff2, _median, _quantum, window_memo
+from jident_ros.identify.gap_numerics import (  # noqa: F401  (fit_cache re-exported)
+    FIT_MEMO,
+    _ar1_inflation,
+    _cumtrapz,
+    _diff2,
+    _median,
+    _memoised,
+    _quantum,
+    fit_cache,
+    window_memo,
+)
 from jident_ros.stream.filters import savgol_coeffs, savgol_filter
 from jident_ros.stream.flank import disc_corrected
 from jident_ros.stream.rate import samples as rate_samples
@@ -798,67 +807,16 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
                        float(model_error), choice, int(fit_span[0]), int(fit_span[1]), **free_extra)
 
 
-#: Memo of the angle fits (:func:`_angle_fits`), :func:`_joint_fit` and :func:`pre_entry_steady` while
-#: :func:`fit_cache` is active (None: off, the default).
-_FIT_CACHE: dict | None = None
-
-
-@contextmanager
-def fit_cache():
-    """Memoise the angle fits (free angle fit and steady-entry fit), the joint a1 fit and the pre-entry steadiness
-    test by their inputs while active.
-
-    An evaluation runs several channel sets on one window: the cross-checked model choice ('auto' with a1 and
-    alpha1) and the 'angle' fit over the same alpha1, torque and gap interval do the same angle fits, and the a1
-    fits of two channel sets (the interval from the angles and from the a1 signature) test the same pre-entry
-    torque and often fit the same interval; with the cache the second is a lookup (the same
-    inputs give the same numbers: pure functions of them).  Off by
-    default (the runtime path sees each window once); the research evaluation turns it on around a sweep."""
-    global _FIT_CACHE
-    outer = _FIT_CACHE
-    if outer is None:
-        _FIT_CACHE = {}
-    try:
-        yield
-    finally:
-        if outer is None:
-            _FIT_CACHE = None
-
-
-def _memoised(fn):
-    """``fn`` memoised by its arguments' values while :func:`fit_cache` is active (arrays by their bytes)."""
-    def key_of(v):
-        if isinstance(v, np.ndarray):
-            return v.dtype.str, v.shape, v.tobytes()
-        if isinstance(v, dict):
-            return tuple((k, key_of(x)) for k, x in sorted(v.items()))
-        if isinstance(v, (tuple, list)):
-            return type(v).__name__, tuple(key_of(x) for x in v)
-        return v
-
-    @wraps(fn)
-    def wrapper(*args, **kwargs):
-        if _FIT_CACHE is None:
-            return fn(*args, **kwargs)
-        key = (fn.__name__, tuple(key_of(a) for a in args), tuple((k, key_of(v)) for k, v in sorted(kwargs.items())))
-        try:
-            return _FIT_CACHE[key]
-        except KeyError:
-            out = _FIT_CACHE[key] = fn(*args, **kwargs)
-            return out
-    return wrapper
-
-
 def _angle_fits(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, start: int, end: int,
                 model: GapModel, bounds: tuple | None = None) -> tuple:
     """(free angle fit, steady-entry fit) of the 'angle' method: :func:`free_angle_fit` (NoGapError when it
     fails; inside the load side's free ``bounds``, gap_load.py) and :func:`_anchored_angle` (a fresh dict: the
     caller pops from it); memoised under :func:`fit_cache`."""
     key = None
-    if _FIT_CACHE is not None:
+    if FIT_MEMO.memo is not None:
         key = ("angle_fits", alpha1.tobytes(), torque.tobytes(), float(sample_period_s), int(start), int(end), model,
                bounds)
-        hit = _FIT_CACHE.get(key)
+        hit = FIT_MEMO.memo.get(key)
         if hit is not None:
             if isinstance(hit, str):
                 raise NoGapError(hit)
@@ -867,11 +825,11 @@ def _angle_fits(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, 
         ff = free_angle_fit(alpha1, torque, sample_period_s, start, end, model, bounds=bounds)
     except FreeFitError as exc:
         if key is not None:
-            _FIT_CACHE[key] = str(exc)
+            FIT_MEMO.memo[key] = str(exc)
         raise NoGapError(str(exc)) from None
     anchored = _anchored_angle(alpha1, torque, ff, (start, end), sample_period_s, model)
     if key is not None:
-        _FIT_CACHE[key] = (ff, anchored)
+        FIT_MEMO.memo[key] = (ff, anchored)
     return ff, dict(anchored)
 
 
