@@ -78,7 +78,6 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
-from scipy.ndimage import convolve1d
 
 from jident_ros.identify import lapack
 from jident_ros.identify.distributions import f_survival, t_quantile
@@ -89,6 +88,7 @@ from jident_ros.identify.gap_free import (
     GapModel,
     free_angle_fit,
 )
+from jident_ros.identify.gap_interval import _savgol_7_2, _savgol_for_gap, gap_interval  # noqa: F401  (re-exported)
 from jident_ros.identify.gap_kink import (
     KINK_LAG_ROWS,
     KINK_PRE_SAMPLES,
@@ -112,7 +112,14 @@ from jident_ros.identify.gap_numerics import (  # noqa: F401  (fit_cache re-expo
     fit_cache,
     window_memo,
 )
-from jident_ros.stream.filters import savgol_coeffs, savgol_filter
+from jident_ros.identify.gap_types import GapEstimate, NoGapError, _net_torque  # noqa: F401  (re-exported)
+from jident_ros.identify.gap_width import (  # noqa: F401  (re-exported)
+    CONTACT_FIT_PREFERENCE,
+    CONTACT_FIT_REL_FLOOR,
+    CONTACT_FIT_SAMPLES,
+    WidthEstimate,
+    estimate_backlash_width,
+)
 from jident_ros.stream.flank import disc_corrected
 from jident_ros.stream.rate import samples as rate_samples
 
@@ -202,10 +209,6 @@ def encoder_resolved(alpha1: np.ndarray, torque: np.ndarray, span: tuple, j1: fl
 FITS = ("acceleration", "gap_only", "anchored", "angle", "speed")
 
 
-class NoGapError(ValueError):
-    """The window holds no usable backlash gap."""
-
-
 #: Why a shallow gap's window (stream.layout.FLAG_SHALLOW_GAP) gets no gap fit (identify.diagnosis).  The flank
 #: detector keeps these windows for their entry and K2 (stop 34, round 18: the DOL draws' slip drops, 2-12 samples);
 #: the gap fits' change-point search (25 rows at 2 kHz) is longer than such a gap, and where the slipping load moves
@@ -244,153 +247,6 @@ def resolution_limited(reason: str) -> bool:
     else:
         parts = [text]
     return all(p.startswith(RESOLUTION_REASONS) for p in parts)
-
-
-@dataclass(frozen=True)
-class GapEstimate:
-    """J1 from the gap.
-
-    Attributes
-    ----------
-    inertia_kgm2 : float            J1 estimate, kg m^2
-    std_error_kgm2 : float          standard error, kg m^2
-    ci95_kgm2 : (float, float)      95 % confidence interval, kg m^2
-    residual_rms : float            RMS of the fit residual: of a1 expressed as torque, (a1 - (r/J1) m_hat) J1/r,
-                                    in N m for 'acceleration' and 'anchored'; N m s for 'speed'; rad of α1
-                                    for 'angle'
-    model_error_kgm2 : float        'acceleration': |J1 with a linear torque term - J1|; 'angle': the same for
-                                    its torque model; included in std_error_kgm2 (0 for the other fits)
-    gap_start, gap_end : int        the gap interval's sample indices (entry row, re-contact row = end exclusive), as
-                                    ``interval`` found it; the width estimate reads the re-contact at gap_end
-    method : str                    'acceleration', 'gap_only', 'anchored', 'angle' or 'speed'
-    interval : str                  'angles', 'signature' or 'detector' (how the gap interval was found)
-    fit_start, fit_end : int        the samples the fit used ('gap_only' drops end samples of the interval that the
-                                    dynamics show to be out of the zone; -1: the gap interval itself)
-    model_choice : str              how the fit was chosen: '' when the caller named it, else the
-                                    pre-entry steadiness test's verdict (:func:`pre_entry_steady`)
-    change_point_error_kgm2 : float 'angle': the change of J1 when the estimated gap interval loses 1 or 2
-                                    samples at an end (included in std_error_kgm2)
-    friction : str                  'angle': how the motor's bearing friction was treated (fitted or bounded)
-    std_error_terms : tuple         ((term, kg m^2), ...): the parts of std_error_kgm2, in quadrature
-                                    (statistical, torque noise, change points, friction band, torque accuracy)
-    trend_fit : tuple               (J1 kg m^2, its standard error kg m^2, its std_error_terms) of the fit the
-                                    trend reads (trend_status.trend_inputs) where it is not this one, () where it
-                                    is: a J1 whose bias is a constant of the drive, the motor's Coulomb friction
-                                    F_c (J1 dω1/dt = m_el − F_c sgn ω1 − b1 ω1) taken as 0 with the band a term, as
-                                    the a1 fits and the steady-entry fit take it.  The free angle fit under a
-                                    Coulomb band (F_c fitted free or at the band's middle): its rows at F_c = 0
-                                    (:func:`_angle_trend_refit`); the gap-only fit with its constant free: that fit
-                                    through the origin.  Cross-checked (a1 and alpha1): the other fit's where its
-                                    standard error without the drive's constant terms (:func:`within_drive_se`) is
-                                    the smaller (a friction band's term can make the a1 fit lose the publication to
-                                    the angle fit, whose J1 scatters more)
-    """
-
-    inertia_kgm2: float
-    std_error_kgm2: float
-    ci95_kgm2: tuple
-    residual_rms: float
-    gap_start: int
-    gap_end: int
-    method: str
-    interval: str
-    model_error_kgm2: float = 0.0
-    model_choice: str = ""
-    fit_start: int = -1
-    fit_end: int = -1
-    change_point_error_kgm2: float = 0.0
-    friction: str = ""
-    std_error_terms: tuple = ()
-    trend_fit: tuple = ()
-
-    @property
-    def n_samples(self) -> int:
-        return self.gap_end - self.gap_start
-
-
-def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
-                 drop: float = 0.6, min_samples: int = 3, recontact_index: int | None = None) -> tuple[int, int, str]:
-    """(start, end, how) of the first gap run from the entry sample.
-
-    ``recontact_index``: the first contact row as the detector found it (the flank detector, whose
-    windows hold raw encoder angles that inequality 1 cannot read); how = "detector"."""
-    n = len(next(iter(window.values())))
-    if not 0 <= entry_index < n - 1:
-        raise NoGapError(f"entry_index: must be inside the window [0, {n - 2}], got {entry_index}")
-    if recontact_index is not None and recontact_index >= 0:
-        end = int(recontact_index)
-        if not entry_index < end <= n:
-            raise NoGapError(f"recontact_index {recontact_index}: not after the entry row {entry_index}")
-        how = "detector"
-    elif "alpha1" in window and "alpha2" in window:
-        rel = np.abs(np.asarray(window["alpha1"], float) - np.asarray(window["alpha2"], float))
-        inside = rel[entry_index:] < backlash_width_m / wheel_radius_m
-        if not inside[0]:
-            raise NoGapError(f"no backlash gap: |alpha1 - alpha2| = {rel[entry_index]:.4g} rad at the entry sample "
-                             f"is not below K2/r = {backlash_width_m / wheel_radius_m:.4g} rad")
-        if inside.all():
-            raise NoGapError(f"no re-contact: |alpha1 - alpha2| stays below K2/r = "
-                             f"{backlash_width_m / wheel_radius_m:.4g} rad to the end of the window (a wrong K2, "
-                             f"or not a backlash entry)")
-        end = entry_index + int(np.argmin(inside))
-        how = "angles"
-    else:
-        if "a1" in window:
-            acc = np.asarray(window["a1"], float)
-        elif "alpha1" in window or "omega1" in window:
-            if "alpha1" in window:   # a motor encoder: acceleration per sample^2
-                acc = _savgol_for_gap(np.asarray(window["alpha1"], float), 2, entry_index, drop)
-            else:
-                acc = _savgol_for_gap(np.asarray(window["omega1"], float), 1, entry_index, drop)
-        else:
-            raise NoGapError("no gap signal: the window needs alpha1+alpha2, a1, alpha1 or omega1")
-        a0 = acc[entry_index]
-        if not abs(a0) > 0:
-            raise NoGapError(f"no backlash gap: the motor does not accelerate at the entry sample (a1 = {a0:.4g})")
-        # sign-invariant: either direction of rotation, accelerating or braking through the zone
-        below = np.sign(a0) * acc[entry_index:] < drop * abs(a0)
-        if not below.any():
-            raise NoGapError(f"no re-contact: the acceleration never drops below {drop:g} x its entry value "
-                             f"to the end of the window (not a backlash entry?)")
-        end = entry_index + int(np.argmax(below))
-        end -= 1  # the flanks meet between samples: the last sample before the drop may already carry load
-        how = "signature"
-    if end - entry_index < min_samples:
-        by = {"detector": "to the detector's re-contact row",
-              "angles": "while |alpha1 - alpha2| < K2/r",
-              "signature": f"until the motor's acceleration falls below {drop:g} x its entry value: a short gap, or a "
-                           f"motor that hardly accelerates in it, as in a load-driven traversal"}[how]
-        raise NoGapError(f"gap too short: {end - entry_index} samples inside the zone ({by}), need >= {min_samples}")
-    return entry_index, end, how
-
-
-@lru_cache(maxsize=4)
-def _savgol_7_2(deriv: int) -> np.ndarray:
-    return savgol_coeffs(7, 2, deriv=deriv)
-
-
-def _savgol_for_gap(x: np.ndarray, deriv: int, entry_index: int, drop: float) -> np.ndarray:
-    """``savgol_filter(x, 7, 2, deriv=deriv)`` where :func:`gap_interval`'s signature test reads it: the
-    interior rows are scipy's own convolution with the same coefficients (bit for bit); the 3 rows at each end,
-    which scipy fills with polynomial fits (most of its cost), only when the test reaches them (an entry row
-    within 3 rows of an end, or no drop before the last 3 rows): then the whole savgol_filter."""
-    half = 3
-    n = x.size
-    if n < 7 or not half <= entry_index < n - half:
-        return savgol_filter(x, 7, 2, deriv=deriv)
-    y = convolve1d(x, _savgol_7_2(deriv), axis=-1, mode="constant")
-    a0 = y[entry_index]
-    if not abs(a0) > 0 or not (np.sign(a0) * y[entry_index:n - half] < drop * abs(a0)).any():
-        return savgol_filter(x, 7, 2, deriv=deriv)
-    return y
-
-
-def _net_torque(window: dict, bearing_friction_nms_per_rad: float) -> np.ndarray:
-    """m_el − b1·ω1 over the whole window: the torque that accelerates J1 (m_el alone without b1 or ω1)."""
-    torque = np.asarray(window["m_el"], float)
-    if bearing_friction_nms_per_rad and "omega1" in window:
-        torque = torque - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)
-    return torque
 
 
 def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
@@ -1710,76 +1566,3 @@ def nearest_class(inertia_kgm2: float, classes_kgm2) -> int:
     return int(np.argmin(np.abs(np.asarray(classes_kgm2, float) - inertia_kgm2)))
 
 
-#: Contact-torque width fit: samples after the first contact sample that it uses, and the
-#: factor by which its standard error must beat the sample bracket's to be preferred.
-CONTACT_FIT_SAMPLES = 6
-CONTACT_FIT_PREFERENCE = 3.0
-#: Relative floor of the contact fit's standard error (its model is a linear spring-damper).
-CONTACT_FIT_REL_FLOOR = 1e-3
-
-
-@dataclass(frozen=True)
-class WidthEstimate:
-    """Backlash zone width at the wheel circumference, m, with its standard uncertainty.
-
-    method: 'contact' (the clutch-torque fit after re-contact) or 'bracket' (the midpoint of
-    the relative angles of the last gap sample and the first contact sample)."""
-
-    width_m: float
-    std_m: float
-    recontact_index: int
-    method: str = "bracket"
-
-
-def estimate_backlash_width(window: dict, gap_end: int, wheel_radius_m: float, sample_period_s: float | None = None,
-                            inertia_kgm2: float | None = None) -> WidthEstimate:
-    """Width from the relative angle at re-contact.
-
-    The flanks meet where |alpha1 - alpha2| (measured from the zone centre, the
-    reading of inequality 1) reaches K2/r, somewhere between the last gap sample
-    and the first contact sample.
-
-    * 'bracket': the contact instant taken uniformly distributed in that sample
-      interval: width = r (|d_last| + |d_first|)/2, standard uncertainty
-      r (|d_first| - |d_last|)/sqrt(12).  Needs only the angles.
-    * 'contact' (with a1, m_el, the sample period and the gap's J1): after re-contact
-      the clutch torque on the motor side is T_c = J1 ((r/J1) m_el - a1)/r ∝ (r/J1) m_el - a1,
-      and a clutch in contact is a spring-damper, T_c = k_c (d - K2/r) + c_c d', with d the
-      relative angle and d' its rate (central differences).  Regressing (r/J1) m_el - a1
-      on (d, d', 1) over CONTACT_FIT_SAMPLES samples from the second contact sample on
-      (the first may hold the impact's transition) gives K2/r = -intercept/slope without
-      knowing k_c or c_c.  Used when it falls inside the bracket and its standard error
-      (delta method, floored at CONTACT_FIT_REL_FLOOR) is CONTACT_FIT_PREFERENCE times
-      smaller than the bracket's; else the bracket answer (docs/method.md, "Backlash width").
-    """
-    if "alpha1" not in window or "alpha2" not in window:
-        raise NoGapError("backlash width: needs both angles alpha1 and alpha2")
-    signed = np.asarray(window["alpha1"], float) - np.asarray(window["alpha2"], float)
-    rel = np.abs(signed)
-    if not 1 <= gap_end < rel.size:
-        raise NoGapError(f"backlash width: no re-contact inside the window (gap end {gap_end})")
-    a, b = rel[gap_end - 1], rel[gap_end]
-    # the flank met: +1 for delta = +K2/r, -1 for -K2/r (reverse rotation).  The clutch torque on the
-    # motor side, (r/J1) m_el - a1, has the flank's sign; times it, it grows with the penetration |delta|
-    # - K2/r on either flank (without it the fit's slope was negative in reverse and the coarse bracket
-    # was used: issue 12)
-    side = 1.0 if signed[gap_end] >= 0 else -1.0
-    mid, s_mid = 0.5 * (a + b), abs(b - a) / np.sqrt(12.0)
-    post = np.arange(gap_end + 1, gap_end + 1 + CONTACT_FIT_SAMPLES)
-    if ("a1" in window and "m_el" in window and sample_period_s and inertia_kgm2 and inertia_kgm2 > 0
-            and post[-1] + 1 < rel.size):
-        kappa = wheel_radius_m / inertia_kgm2
-        drop = side * (kappa * np.asarray(window["m_el"], float)[post] - np.asarray(window["a1"], float)[post])
-        rate = (rel[post + 1] - rel[post - 1]) / (2.0 * sample_period_s)
-        A = np.column_stack([rel[post], rate, np.ones(post.size)])
-        coef, *_ = np.linalg.lstsq(A, drop, rcond=None)
-        if coef[0] > 0:
-            theta = -coef[2] / coef[0]
-            res = drop - A @ coef
-            cov = float(res @ res) / (post.size - 3) * np.linalg.pinv(A.T @ A)
-            grad = np.array([coef[2] / coef[0] ** 2, 0.0, -1.0 / coef[0]])
-            s_fit = float(np.hypot(np.sqrt(max(grad @ cov @ grad, 0.0)), CONTACT_FIT_REL_FLOOR * theta))
-            if min(a, b) <= theta <= max(a, b) and CONTACT_FIT_PREFERENCE * s_fit < s_mid:
-                return WidthEstimate(float(wheel_radius_m * theta), float(wheel_radius_m * s_fit), int(gap_end),
-                                     "contact")
-    return WidthEstimate(float(wheel_radius_m * mid), float(wheel_radius_m * s_mid), int(gap_end), "bracket")
