@@ -74,13 +74,22 @@ residual RMS.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from functools import lru_cache
 
 import numpy as np
 
 from jident_ros.identify import lapack
-from jident_ros.identify.distributions import f_survival, t_quantile
+from jident_ros.identify.distributions import t_quantile
+from jident_ros.identify.gap_cross import (  # noqa: F401  (re-exported)
+    COMMON_TORQUE_TERMS,
+    CROSS_CHECK_Z,
+    DRIVE_CONSTANT_TERMS,
+    _difference_se,
+    _stat_se,
+    _trend_choice,
+    within_drive_se,
+)
 from jident_ros.identify.gap_free import (
     FREE_REL_SE_FLOOR,
     NONPHYSICAL_Z,
@@ -112,6 +121,8 @@ from jident_ros.identify.gap_numerics import (  # noqa: F401  (fit_cache re-expo
     fit_cache,
     window_memo,
 )
+from jident_ros.identify.gap_speed import SPEED_TRIM_SAMPLES, speed_fit  # noqa: F401  (re-exported)
+from jident_ros.identify.gap_steady import STEADY_P_VALUE, STEADY_REL_TOL, SteadinessTest, _steady_design, pre_entry_steady  # noqa: F401  (re-exported)
 from jident_ros.identify.gap_types import GapEstimate, NoGapError, _net_torque  # noqa: F401  (re-exported)
 from jident_ros.identify.gap_width import (  # noqa: F401  (re-exported)
     CONTACT_FIT_PREFERENCE,
@@ -143,14 +154,6 @@ ANGLE_REL_SE_FLOOR = 2e-4
 #: A gap fit whose standard error exceeds this fraction of J1 is refused (NoGapError): such a
 #: window carries no free acceleration (e.g. a steady state mistaken for an entry).
 MAX_RELATIVE_STD_ERROR = 0.25
-
-#: Model choice ('auto'): the pre-entry m_el is steady unless a quadratic in time explains it better
-#: than a constant at this significance (F test); then the joint fit's anchoring is not used.
-STEADY_P_VALUE = 1e-3
-#: ... and the fitted slope and curvature move it by more than this fraction of its level over the
-#: pre-entry samples (a practical significance: noise-free windows have no noise to compare with; our
-#: simulator's steady state still drifts by 3-6e-6 of the load, far below what biases the joint fit).
-STEADY_REL_TOL = 1e-4
 
 #: 'gap_only' fit: an end sample of the in-zone set is dropped while its load torque
 #: |m_el - b1 w1 - J1 a1/r| exceeds this many standard deviations of the per-sample residual ...
@@ -934,69 +937,6 @@ def a1_rows_contact(window: dict, a1_fit: GapEstimate, angle_fit: GapEstimate, b
             f"still loaded")
 
 
-#: Cross-check of two fits of one window (a1 and the motor angle): they disagree when their J1 differ by more
-#: than this many combined standard errors (without the torque-accuracy term, which both share).
-CROSS_CHECK_Z = 3.0
-
-
-def _stat_se(g: GapEstimate, model: GapModel) -> float:
-    return float(np.sqrt(max(g.std_error_kgm2 ** 2 - (g.inertia_kgm2 * model.torque_rel_se()) ** 2, 0.0)))
-
-
-#: The bounded terms of the torque both fits of a window read (a constant torque beside m_el: friction, the
-#: estimate's offset; the estimate's lag): one such error moves both J1 the same way (the same m_el over overlapping
-#: rows), so their difference by the difference of the two terms, not by their sum in quadrature.  Taken in
-#: quadrature, a friction band of 3 % of M_b (tried as the typical drive's in stop 31) and the typical 1 ms lag let the
-#: second drive's a1 fit, 25 % off, pass at 2.9 standard errors (scripts/golden.py, second_drive_signals: the a1 fit's
-#: lag term 0.049, the angle fit's 0.046 kg m^2); as their difference, 4.5: refused.
-COMMON_TORQUE_TERMS = ("coulomb_band", "viscous_band", "torque_offset", "torque_lag", "torque_lag_seen")
-
-
-def _difference_se(a: GapEstimate, b: GapEstimate, model: GapModel) -> float:
-    """The standard error of J1_a − J1_b of two fits of one window: each without the torque-accuracy term (both
-    share it), the :data:`COMMON_TORQUE_TERMS` as their difference, the other terms in quadrature."""
-    ta, tb = dict(a.std_error_terms), dict(b.std_error_terms)
-    common = [k for k in COMMON_TORQUE_TERMS if k in ta and k in tb]
-    var = _stat_se(a, model) ** 2 + _stat_se(b, model) ** 2
-    var -= sum(float(ta[k]) ** 2 + float(tb[k]) ** 2 for k in common)
-    var += sum((float(ta[k]) - float(tb[k])) ** 2 for k in common)
-    return float(np.sqrt(max(var, 0.0)))
-
-
-#: The parts of a gap J1's standard error (``GapEstimate.std_error_terms``) that are constants of the drive, not of
-#: the window: the torque estimate's scale error ('torque_accuracy'), its bounded offset ('torque_offset') and lag
-#: ('torque_lag', and 'torque_lag_seen': the lag the angle shows beyond the declared one), and the Coulomb band
-#: ('coulomb_band': the drive's friction).  Each moves the drive's J1 estimates alike (the same window shape, the same
-#: bias) and cancels in J1 relative to the drive's own baseline (the trend: trend_status).
-DRIVE_CONSTANT_TERMS = ("torque_accuracy", "torque_offset", "torque_lag", "torque_lag_seen", "coulomb_band")
-
-
-def within_drive_se(se: float, std_error_terms) -> float:
-    """``se`` (kg m^2) without the :data:`DRIVE_CONSTANT_TERMS` among ``std_error_terms`` ((term, kg m^2), ...), in
-    quadrature: what scatters from window to window of one drive; ``se`` itself where they are all of it."""
-    terms = dict(std_error_terms or ())
-    common = 0.0
-    for name in DRIVE_CONSTANT_TERMS:
-        v = terms.get(name, 0.0)
-        if v and math.isfinite(float(v)) and float(v) > 0.0:
-            common += float(v) ** 2
-    if 0.0 < common < float(se) ** 2:
-        return math.sqrt(float(se) ** 2 - common)
-    return float(se)
-
-
-def _trend_choice(best: GapEstimate, other: GapEstimate) -> GapEstimate:
-    """``best`` (the cross-check's published fit) with the trend's fit (GapEstimate.trend_fit) the other's where that
-    one's standard error without the drive's constant terms (:func:`within_drive_se`) is the smaller: the a1 fit's
-    Coulomb band term (first order, F Σx/Σx²) is larger than the angle fit's and can make it lose the publication,
-    while its J1 scatters less from window to window."""
-    mine = best.trend_fit or (best.inertia_kgm2, best.std_error_kgm2, best.std_error_terms)
-    theirs = other.trend_fit or (other.inertia_kgm2, other.std_error_kgm2, other.std_error_terms)
-    if within_drive_se(theirs[1], theirs[2]) < within_drive_se(mine[1], mine[2]):
-        return replace(best, trend_fit=tuple(theirs))
-    return best
-
-
 def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_samples: int,
                    model: GapModel, lag_check: bool = True) -> GapEstimate:
     """The model choice when the window has a1 and alpha1 (an Imu beside the encoder): the a1 fit (the joint
@@ -1065,125 +1005,6 @@ def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_sa
     return replace(best, model_choice=f"{best.model_choice or best.method}; cross-checked with the "
                                       f"{other.method} fit (J1 = {other.inertia_kgm2:.4g}, {z:.1f} standard errors"
                                       f"{refit})")
-
-
-#: The speed fit's model error: J1 refitted with this many samples dropped at each end of the interval.
-SPEED_TRIM_SAMPLES = (1, 2)
-
-
-def speed_fit(omega1: np.ndarray, torque: np.ndarray, sample_period_s: float, lag: bool = False) -> tuple:
-    """(J1, standard error, residual, degrees of freedom) of the ``"speed"`` fit over the gap samples.
-
-    In the gap ω1(t_k) = ω1(t_0) + Y_k / J1 with Y_k = ∫_{t0}^{tk} m_el dt (trapezoid).  The measured speed
-    carries white noise and the integral hardly any (it averages the torque noise), so ω1 is regressed on Y:
-    ordinary least squares for (ω1(t_0), 1/J1), J1 = 1 / slope.  The model check: the residual's lag-1
-    autocorrelation rho (a load torque left in the interval, a differenced encoder's correlated error) inflates
-    the slope's variance by (1 + rho) / (1 - rho) (the AR(1) factor; rho < 0 is not credited), and the change of
-    J1 when one or two samples are dropped at each end of the interval (the larger) is added in quadrature (the
-    interval's end rows: an entry found early, a re-contact row late).
-    Regressing Y on ω1 instead (the first release) put the speed noise in the regressor: on the second drive at
-    30 dB its interval was far too narrow and 52 of 84 published J1 were more than 10 % off (docs/results.md).
-
-    ``lag`` (estimate_inertia's 'speed' fit): the drive's speed feedback lags the shaft (a filter, a
-    differenced encoder): ω1_meas(t) ≈ ω1(t − τ) ≈ ω1(t) − τ dω1/dt = ω1_0 + Y/J1 − (τ/J1) m_el, so the torque
-    itself is a third regressor and τ is fitted with J1 (issue 20: −3 … −7 % with a 0.4 ms lag unmodelled)."""
-    n = omega1.size
-    y = np.concatenate([[0.0], np.cumsum(0.5 * (torque[1:] + torque[:-1])) * sample_period_s])
-
-    def slope(w, yy, mm=None):
-        A = np.column_stack([np.ones(w.size), yy] + ([] if mm is None else [mm]))
-        coef, *_ = np.linalg.lstsq(A, w, rcond=None)
-        return coef, A
-
-    if n < 6:
-        raise NoGapError(f"speed fit: {n} gap samples, at least 6 are needed")
-    tq = np.asarray(torque, float) if lag else None
-    coef, A = slope(omega1, y, tq)
-    kappa = float(coef[1])
-    if not kappa > 0:
-        raise NoGapError(f"gap fit gave a non-physical J1 = 1/{kappa:.4g} (dω1 against ∫m_el dt)")
-    res = omega1 - A @ coef
-    dof = n - A.shape[1]
-    cov = (res @ res) / dof * np.linalg.pinv(A.T @ A) * _ar1_inflation(res)
-    j = 1.0 / kappa
-    se_stat = float(np.sqrt(cov[1, 1])) / kappa ** 2
-    model_error = 0.0
-    for k in SPEED_TRIM_SAMPLES:
-        if n - 2 * k < 6:
-            break
-        trimmed, _ = slope(omega1[k:n - k], y[k:n - k] - y[k], None if tq is None else tq[k:n - k])
-        model_error = max(model_error, abs(1.0 / trimmed[1] - j) if trimmed[1] > 0 else np.inf)
-    return j, float(np.hypot(se_stat, model_error)), res * j, dof
-
-
-@dataclass(frozen=True)
-class SteadinessTest:
-    """Whether the torque before the entry is steady (the joint fit's assumption), :func:`pre_entry_steady`.
-
-    steady : bool          use the joint fit
-    f_statistic : float    F of a quadratic in time against a constant (slope and curvature); 0 for a
-                           constant to rounding, inf for an exact non-constant quadratic
-    p_value : float        its upper tail probability (F with 2 and n - 3 degrees of freedom)
-    n_samples : int        pre-entry samples tested
-    reason : str           why not steady ('' when steady)
-    """
-
-    steady: bool
-    f_statistic: float
-    p_value: float
-    n_samples: int
-    reason: str = ""
-
-    def describe(self) -> str:
-        """One phrase for GapEstimate.model_choice and the status."""
-        if self.steady:
-            return (f"acceleration: pre-entry m_el steady (F = {self.f_statistic:.3g}, p = {self.p_value:.3g} over "
-                    f"{self.n_samples} samples)")
-        return f"gap_only: {self.reason}"
-
-
-@lru_cache(maxsize=16)
-def _steady_design(n: int) -> np.ndarray:
-    """The steadiness test's design (1, t, t²), t from -1 to 1 over n samples (read-only: shared by every call; 16
-    lengths kept, 24 bytes a sample each: < 1 MB for windows of 2000 samples)."""
-    tt = np.linspace(-1.0, 1.0, n)
-    A = np.column_stack([np.ones(n), tt, tt * tt])
-    A.flags.writeable = False
-    return A
-
-
-@_memoised
-def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTest:
-    """Test the joint fit's assumption on the pre-entry m_el samples: a steady torque, m_el = m0 + white
-    noise.  Regress m_el on (1, t, t^2); not steady when the slope and curvature explain more than the noise
-    would (F test with 2 and n - 3 degrees of freedom, p < ``p_value``) and move it by more than
-    STEADY_REL_TOL of its level (so a noise-free window, with no noise to compare with, is steady when
-    its trend stays below that).  Fewer than 6 samples:
-    not steady (untestable, so the joint fit's anchoring is not used)."""
-    x = np.asarray(m_el_pre, float)
-    n = x.size
-    if n < 6:
-        return SteadinessTest(False, np.nan, np.nan, n, f"{n} pre-entry samples, too few to test a steady torque")
-    scale = max(float(np.maximum.reduce(np.abs(x), axis=None)), 1e-300)      # np.max's reduction
-    A = _steady_design(n)
-    coef = lapack.lstsq(A, x)
-    # np.sum and np.mean's own reductions (np.add.reduce over the array; the mean divided by the count)
-    rss0 = float(np.add.reduce((x - np.add.reduce(x) / n) ** 2))
-    rss2 = float(np.add.reduce((x - A @ coef) ** 2))
-    if rss2 <= (1e-12 * scale) ** 2 * n:               # an exact polynomial, no noise to compare with
-        f, p = (0.0, 1.0) if rss0 <= (1e-12 * scale) ** 2 * n else (np.inf, 0.0)
-    else:
-        f = max((rss0 - rss2) / 2.0 / (rss2 / (n - 3)), 0.0)
-        p = f_survival(f, 2, n - 3)
-    trend = A[:, 1:] @ coef[1:]
-    # np.ptp's reductions: slope and curvature move it by next to nothing
-    if np.maximum.reduce(trend, axis=None) - np.minimum.reduce(trend, axis=None) <= STEADY_REL_TOL * scale:
-        return SteadinessTest(True, float(f), p, n)
-    if p < p_value:
-        return SteadinessTest(False, float(f), p, n,
-                              f"pre-entry m_el not steady: slope and curvature over {n} samples, F = {f:.3g}, "
-                              f"p = {p:.2g} < {p_value:g} (range {np.ptp(x):.4g} N m)")
-    return SteadinessTest(True, float(f), p, n)
 
 
 def _robust_noise(*segments) -> float:
