@@ -300,11 +300,11 @@ def test_a_fading_contact_s_row_within_the_noise_does_not_stop_the_trim(monkeypa
     """The trim walks on past a contact row whose load torque dips within the tolerance while the next rows exceed it
     (TRIM_PERSIST): the fit starts where the contact ends and J1 is exact; with the walk stopping at the first row
     within the tolerance (stop 32's rule) it starts at the dip and J1 takes 10 rows of contact."""
-    from jident_ros.identify import gap
+    from jident_ros.identify import gap_a1
     torque, acc, a, b = _fading_contact(n_contact=14, dip_row=4)
     g = gap_only_fit(torque, acc, a, b, max_trim=(25, 25))
     assert g["start"] == a + 14 and g["j1"] == pytest.approx(1.16, rel=1e-9)
-    monkeypatch.setattr(gap, "TRIM_PERSIST", 0)
+    monkeypatch.setattr(gap_a1, "TRIM_PERSIST", 0)
     old = gap_only_fit(torque, acc, a, b, max_trim=(25, 25))
     assert old["start"] == a + 4 and old["j1"] / 1.16 - 1 > 0.004          # +0.55 %: the contact carries load
 
@@ -314,7 +314,7 @@ def test_a_friction_over_every_row_is_no_contact_for_the_entry_trim(monkeypatch)
     3 sigma = 2.4 N m of noise), the detector's entry exact: the entry trim reads the load torque from the free rows'
     level and drops nothing; read from 0 (with TRIM_PERSIST) it walks its most, 25 rows (the zoo's vector drive with an
     Imu: 6 gaps so trimmed, their J1 undetermined)."""
-    from jident_ros.identify import gap
+    from jident_ros.identify import gap_a1
     j1, n_pre, n_gap = 1.16, 48, 120
     k = np.arange(n_pre + n_gap + 20)
     torque = 150.0 + 140.0 * np.cos(k / 25.0)
@@ -323,7 +323,7 @@ def test_a_friction_over_every_row_is_no_contact_for_the_entry_trim(monkeypatch)
     acc[n_pre + n_gap:] = -100.0
     torque = torque + 0.8 * np.random.default_rng(3).standard_normal(k.size)
     assert gap_only_fit(torque, acc, n_pre, n_pre + n_gap, max_trim=(25, 25))["start"] == n_pre
-    monkeypatch.setattr(gap, "_free_level", lambda load, max_trim: 0.0)
+    monkeypatch.setattr(gap_a1, "_free_level", lambda load, max_trim: 0.0)
     assert gap_only_fit(torque, acc, n_pre, n_pre + n_gap, max_trim=(25, 25))["start"] == n_pre + 25
 
 

@@ -22,7 +22,7 @@ EXCEPTIONS = {
     "identify/gap.py": "over 600 lines: the a1, angle and speed fits and their choice; to be split by fit (issue 20)",
     "identify/gap.py:estimate_inertia": "the public entry: _estimate_inertia's arguments, passed through",
     "identify/gap.py:_estimate_inertia": "the per-method branches of the fit choice; to become one function per fit",
-    "identify/gap.py:_joint_fit": "the a1 + m_el errors-in-variables fit in one piece (its algebra reads as one)",
+    "identify/gap_a1.py:_joint_fit": "the a1 + m_el errors-in-variables fit in one piece (its algebra reads as one)",
     "stream/flank.py": "over 600 lines: the flank state machine plus unwrap, spike confirmation and same-flank rules "
                        "(issue 20); to be split into the state machine and its rules",
     "stream/flank.py:_track": "the flank state machine's one transition function (issue 20 added the spike and "
