@@ -555,7 +555,7 @@ def test_a1_rows_before_the_angle_fit_s_entry_are_tested_for_a_contact_torque():
     anything with the rule off."""
     from dataclasses import replace
 
-    from jident_ros.identify import gap as G
+    from jident_ros.identify import gap_angle
     from jident_ros.identify.gap import GapEstimate, a1_rows_contact
     from jident_ros.identify.gap_free import GapModel
     rng = np.random.default_rng(5)
@@ -573,10 +573,10 @@ def test_a1_rows_before_the_angle_fit_s_entry_are_tested_for_a_contact_torque():
     near = replace(angle, fit_start=s0 + 20)         # within the a1 fit's trim (25 rows): its own trim's business
     assert a1_rows_contact({"a1": loaded, "m_el": m}, a1_fit, near, 0.0, r, model, ts) is None
     try:
-        G.A1_ROWS_FROM_ANGLE = False
+        gap_angle.A1_ROWS_FROM_ANGLE = False
         assert a1_rows_contact({"a1": loaded, "m_el": m}, a1_fit, angle, 0.0, r, model, ts) is None
     finally:
-        G.A1_ROWS_FROM_ANGLE = True
+        gap_angle.A1_ROWS_FROM_ANGLE = True
 
 
 @pytest.mark.parametrize("rule", [True, False])
@@ -589,8 +589,9 @@ def test_a_loaded_rest_before_the_gap_does_not_enter_the_a1_fit(rule, monkeypatc
     from pathlib import Path
 
     from jident_ros.identify import gap as G
+    from jident_ros.identify import gap_angle
     from jident_ros.identify.gap_free import GapModel
-    monkeypatch.setattr(G, "A1_ROWS_FROM_ANGLE", rule)
+    monkeypatch.setattr(gap_angle, "A1_ROWS_FROM_ANGLE", rule)
     w = dict(np.load(Path(__file__).parent / "data" / "dol_draws_loaded_rest_imu_30db.npz"))
     model = GapModel(torque_accuracy=0.01, coulomb_friction_max_nm=2.19, torque_offset_nm=2.12, torque_lag_s=9.5e-4,
                      coupling_release_s=0.004, torque_delay_s=5e-4, torque_filter_s=2e-4)
