@@ -771,8 +771,7 @@ def test_the_window_memo_fits_the_lag_checks_second_round_once_and_changes_nothi
     for k in calls:
         calls[k] = 0
     monkeypatch.setattr(gap_numerics.WINDOW_MEMO, "memo", None)
-    monkeypatch.setattr(gap_numerics, "memo_get", lambda key: None)
-    for mod in (gap_free, gap_load):
+    for mod in (gap_free, gap_load):                                     # the modules that read memo_get
         monkeypatch.setattr(mod, "memo_get", lambda key: None)
     afresh = fit()
     assert afresh == kept                                                # the same estimate, term for term
