@@ -45,6 +45,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from jident_ros.identify import gap_cross
 from jident_ros.identify.distributions import t_quantile
 from jident_ros.identify.gap_a1 import (  # noqa: F401  (re-exported: the a1 fits' names the tests and research import)
     GAP_ONLY_MAX_TRIM,
@@ -76,7 +77,6 @@ from jident_ros.identify.gap_angle import (  # noqa: F401  (re-exported: the ang
 )
 from jident_ros.identify.gap_cross import (  # noqa: F401  (re-exported: trend_status and the tests)
     COMMON_TORQUE_TERMS,
-    CROSS_CHECK_Z,
     DRIVE_CONSTANT_TERMS,
     _difference_se,
     _trend_choice,
@@ -550,10 +550,10 @@ def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_sa
                                        f"({why[other]})")
     a, b = fits["a1"], fits["angle"]
     z = abs(a.inertia_kgm2 - b.inertia_kgm2) / max(_difference_se(a, b, model), 1e-300)
-    if z > CROSS_CHECK_Z:
+    if z > gap_cross.CROSS_CHECK_Z:
         raise NoGapError(f"the a1 fit ({a.method}: J1 = {a.inertia_kgm2:.4g} ± {a.std_error_kgm2:.2g} kg m^2) and "
                          f"the angle fit (J1 = {b.inertia_kgm2:.4g} ± {b.std_error_kgm2:.2g} kg m^2) disagree by "
-                         f"{z:.1f} standard errors (> {CROSS_CHECK_Z:g}): friction, a wrong gap interval or a "
+                         f"{z:.1f} standard errors (> {gap_cross.CROSS_CHECK_Z:g}): friction, a wrong gap interval or a "
                          f"lagging signal")
     best = a if a.std_error_kgm2 <= b.std_error_kgm2 else b
     other = b if best is a else a

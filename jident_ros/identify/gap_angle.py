@@ -23,9 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from jident_ros.identify import lapack
+from jident_ros.identify import gap_cross, lapack
 from jident_ros.identify.gap_a1 import _robust_noise, _torque_powers, gap_only_max_trim
-from jident_ros.identify.gap_cross import CROSS_CHECK_Z
 from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, FreeFitError, GapModel, free_angle_fit
 from jident_ros.identify.gap_kink import (
     KINK_LAG_ROWS,
@@ -190,7 +189,7 @@ def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tu
     model_error = terms["change_points"]
     se = max(float(np.sqrt(sum(v * v for v in terms.values()))), FREE_REL_SE_FLOOR * j)
     z = abs(j - ff["j1"]) / max(float(np.hypot(se, ff["se_stat"])), 1e-300)
-    if z > CROSS_CHECK_Z:
+    if z > gap_cross.CROSS_CHECK_Z:
         return {"choice": f"angle (free): the steady-entry fit (J1 = {j:.4g}) disagrees by {z:.1f} standard errors"}
     if se >= ff["se_stat"]:
         return {"choice": f"angle (free): the steady-entry fit is no more precise (J1 = {j:.4g} ± {se:.2g})"}

@@ -16,7 +16,9 @@ from jident_ros.identify.gap_free import GapModel
 from jident_ros.identify.gap_types import GapEstimate
 
 #: Cross-check of two fits of one window (a1 and the motor angle): they disagree when their J1 differ by more
-#: than this many combined standard errors (without the torque-accuracy term, which both share).
+#: than this many combined standard errors (without the torque-accuracy term, which both share).  Read as
+#: gap_cross.CROSS_CHECK_Z by gap._cross_checked and by gap_angle._anchored_angle (the steady-entry fit against the
+#: free fit), so that one patch here reaches both.
 CROSS_CHECK_Z = 3.0
 
 
