@@ -20,7 +20,8 @@ EXCEPTIONS = {
     "stream/flank.py:estimate_width": "detector helper's file (issue 20)",
     # the estimator (issue 20): gap.py split by fit (gap_a1, gap_angle, gap_speed, ...); its choice still one function
     "identify/gap.py:estimate_inertia": "the public entry: _estimate_inertia's arguments, passed through",
-    "identify/gap.py:_estimate_inertia": "the per-method branches of the fit choice; to become one function per fit",
+    "identify/gap.py:_estimate_inertia": "11 parameters: estimate_inertia's, passed on (one function per fit since the "
+                                          "split: gap_a1's, gap_angle's and gap_speed's _method_*)",
     "identify/gap_a1.py:_joint_fit": "the a1 + m_el errors-in-variables fit in one piece (its algebra reads as one)",
     "stream/flank.py": "over 600 lines: the flank state machine plus unwrap, spike confirmation and same-flank rules "
                        "(issue 20); to be split into the state machine and its rules",

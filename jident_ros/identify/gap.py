@@ -52,12 +52,15 @@ from jident_ros.identify.gap_a1 import (  # noqa: F401  (re-exported: the a1 fit
     GAP_ONLY_REL_SE_FLOOR,
     GAP_ONLY_TRIM_REL,
     GAP_ONLY_TRIM_SIGMA,
+    GAP_QUADRATIC_MIN,
+    _a1_bounded,
     _a1_contact_rows,
-    _gap_only_constant,
     _joint_fit,
+    _method_acceleration,
+    _method_anchored,
+    _method_gap_only,
     _origin_slope,
     _robust_noise,
-    _shape_terms,
     _std_ddof1,
     _torque_powers,
     gap_only_fit,
@@ -69,8 +72,7 @@ from jident_ros.identify.gap_angle import (  # noqa: F401  (re-exported: the ang
     MIN_CURVATURE_COUNTS,
     STEADY_ENTRY_CHOICE,
     _anchored_angle,
-    _angle_fits,
-    _angle_trend_refit,
+    _method_angle,
     a1_rows_contact,
     encoder_resolved,
     steady_entry_contact,
@@ -85,17 +87,12 @@ from jident_ros.identify.gap_cross import (  # noqa: F401  (re-exported: trend_s
 from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, GapModel
 from jident_ros.identify.gap_interval import _savgol_for_gap, gap_interval  # noqa: F401  (re-exported)
 from jident_ros.identify.gap_lag import LAG_MAX_FRACTION, LAG_MIN_SAMPLES, LAG_Z, torque_lag_estimate
-from jident_ros.identify.gap_load import LOAD_ANGLE_KEY, load_free_bounds
 from jident_ros.identify.gap_numerics import fit_cache, window_memo  # noqa: F401  (fit_cache re-exported)
-from jident_ros.identify.gap_speed import speed_fit
+from jident_ros.identify.gap_speed import _method_speed, _speed_bounded, speed_fit  # noqa: F401  (speed_fit re-exported)
 from jident_ros.identify.gap_steady import STEADY_P_VALUE, pre_entry_steady  # noqa: F401  (STEADY_P_VALUE re-exported)
-from jident_ros.identify.gap_types import GapEstimate, NoGapError, _net_torque
+from jident_ros.identify.gap_types import FitState, GapEstimate, NoGapError, _net_torque
 from jident_ros.identify.gap_width import WidthEstimate, estimate_backlash_width  # noqa: F401  (re-exported)
 from jident_ros.stream.flank import disc_corrected
-
-#: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
-GAP_QUADRATIC_MIN = 12
-
 
 #: A gap fit whose standard error exceeds this fraction of J1 is refused (NoGapError): such a
 #: window carries no free acceleration (e.g. a steady state mistaken for an entry).
@@ -249,18 +246,6 @@ def _lag_beyond_declared(window: dict, b1: float, fit: GapEstimate, sample_perio
                    f"(torque_lag_max_s; docs/your_drive.md): the interval takes {bound * 1e3:.3g} ms")
 
 
-def _trend_finished(j: float, se: float, terms: dict, model: GapModel) -> tuple:
-    """A trend fit (GapEstimate.trend_fit) as the published fits end: the model's floor, then the torque accuracy."""
-    terms = dict(terms)
-    if float(se) < FREE_REL_SE_FLOOR * j:
-        terms["model_floor"] = float(np.sqrt((FREE_REL_SE_FLOOR * j) ** 2 - float(se) ** 2))
-        se = FREE_REL_SE_FLOOR * j
-    if model.torque_accuracy:
-        terms["torque_accuracy"] = j * model.torque_rel_se()
-        se = float(np.hypot(se, terms["torque_accuracy"]))
-    return float(j), float(se), tuple((k, float(v)) for k, v in terms.items())
-
-
 def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
                       sample_period_s: float, method: str | None = None,
                       bearing_friction_nms_per_rad: float = 0.0, recontact_index: int | None = None,
@@ -277,7 +262,9 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
     drive's torque accuracy and friction band (:class:`~jident_ros.identify.gap_free.GapModel`; default: exact
     torque, no friction band): the torque-accuracy term J1 a/sqrt(3) goes into every fit's standard error.
     ``cross_check`` (the model choice with a1 and alpha1): the a1 fit and the free angle fit, cross-checked
-    (:func:`_cross_checked`); False: the a1 fit's model choice alone."""
+    (:func:`_cross_checked`); False: the a1 fit's model choice alone.  One function per fit (gap_a1's, gap_angle's and
+    gap_speed's ``_method_*``), then the steps every fit takes (the entry's uncertainty, the bounded torques, the
+    floor and the torque accuracy)."""
     model = GapModel() if model is None else model
     if "m_el" not in window:
         raise NoGapError("no electromagnetic torque: the gap fit needs m_el")
@@ -286,10 +273,57 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
                               bearing_friction_nms_per_rad, recontact_index, entry_uncertainty_samples, model)
     start, end, how = gap_interval(window, entry_index, backlash_width_m, wheel_radius_m,
                                    recontact_index=recontact_index)
-    m = _net_torque(window, bearing_friction_nms_per_rad)[start:end]
+    drive = (wheel_radius_m, bearing_friction_nms_per_rad, sample_period_s)
+    method, choice, gap_only = _model_choice(window, method, (start, end), drive, model)
+    f = _method_fit(window, method, (start, end), drive, model, gap_only)
+    if method == "angle":
+        choice = "; ".join(x for x in (choice, f.choice) if x)
+        entry_uncertainty_samples = 0        # the change-point search has taken the entry's uncertainty
+    if not np.isfinite(f.j) or f.j <= 0:
+        raise NoGapError(f"gap fit gave a non-physical J1 = {f.j:.4g}")
+    _own_terms(f, method)
+    k = int(entry_uncertainty_samples)
+    entry_error = 0.0
+    if k > 0:
+        moved = []
+        for e in (entry_index - k, entry_index + k):
+            try:
+                moved.append(_estimate_inertia(window, e, backlash_width_m, wheel_radius_m, sample_period_s, method,
+                                               bearing_friction_nms_per_rad, recontact_index).inertia_kgm2)
+            except NoGapError:
+                moved.append(np.inf)
+        entry_error = max(abs(x - f.j) for x in moved)
+        f.model_error = float(np.hypot(f.model_error, entry_error))
+        f.se = float(np.hypot(f.se, entry_error))
+        terms = dict(f.extra["std_error_terms"])
+        terms["change_points"] = float(np.hypot(terms.get("change_points", 0.0), entry_error))
+        f.extra["std_error_terms"] = tuple(terms.items())
+    # the bounded constant torques the speed and a1 fits do not model: the Coulomb band (F in [0, F_max], a
+    # uniform term of half-width F_max) and the torque offset (|T| <= torque_offset_nm, uniform)
+    bounded = [(name, v) for name, v in (("coulomb_band", model.coulomb_friction_max_nm),
+                                         ("torque_offset", model.torque_offset_nm)) if v]
+    if method == "speed" and bounded:
+        _speed_bounded(f, window["m_el"], (start, end), sample_period_s, bounded)
+    if method in ("gap_only", "acceleration", "anchored") and (bounded or model.torque_lag_s) and "a1" in window:
+        _a1_bounded(f, window, method, drive, model, bounded, entry_error)
+    _floored(f, model)
+    j, se = f.j, f.se
+    if not se <= MAX_RELATIVE_STD_ERROR * j:
+        raise NoGapError(f"gap fit undetermined: J1 = {j:.4g} kg m^2 with standard error {se:.3g} kg m^2 "
+                         f"(> {MAX_RELATIVE_STD_ERROR:.0%}); the window shows no free acceleration of the motor")
+    half = _t975(max(int(f.dof), 1)) * se
+    # the residual's RMS: np.mean's own reduction (np.add.reduce, divided by the count)
+    rms = float(np.sqrt(np.add.reduce(f.res ** 2) / f.res.size))
+    return GapEstimate(j, se, (j - half, j + half), rms, start, end, method, how,
+                       float(f.model_error), choice, int(f.span[0]), int(f.span[1]), **f.extra)
+
+
+def _model_choice(window: dict, method: str | None, rows: tuple, drive: tuple, model: GapModel) -> tuple:
+    """(the fit, the model choice's phrase, the 'gap_only' fit where the choice has already made it, or None) of
+    :func:`_estimate_inertia` over ``rows`` (start, end): ``method`` as named, or with None / 'auto' the model choice
+    (the module docstring).  ``drive``: (r, b1, T_s)."""
+    (start, end), (wheel_radius_m, bearing_friction_nms_per_rad, sample_period_s) = rows, drive
     choice = ""
-    fit_span = (start, end)
-    free_extra: dict = {}
     gap_only = None                  # the 'gap_only' fit where the model choice has already made it
     if method is None or method == "auto":
         method = None
@@ -300,108 +334,33 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
             if test.steady:
                 contact, in_zone = _a1_contact_rows(window, start, end, wheel_radius_m, bearing_friction_nms_per_rad,
                                                     model, sample_period_s)
-                if contact:          # its gap-only fit is the one the 'gap_only' branch below would make again
+                if contact:          # its gap-only fit is the one the 'gap_only' fit would make again
                     method, choice, gap_only = "gap_only", f"gap_only: {contact}", in_zone
         else:
             method = "angle" if "alpha1" in window else "speed"
             choice = f"{method}: no a1 in the window"
-    n = end - start
-    model_error = 0.0
+    return method, choice, gap_only
+
+
+def _method_fit(window: dict, method: str, rows: tuple, drive: tuple, model: GapModel, gap_only: dict | None):
+    """The fit ``method`` over ``rows`` (start, end), a :class:`~jident_ros.identify.gap_types.FitState`: one function
+    per fit (gap_a1's, gap_angle's and gap_speed's ``_method_*``).  ``drive``: (r, b1, T_s)."""
     if method == "gap_only":
-        if "a1" not in window:
-            raise NoGapError("method 'gap_only' needs a1 (use 'speed' with omega1)")
-        mf = _net_torque(window, bearing_friction_nms_per_rad)
-        fit = gap_only if gap_only is not None else gap_only_fit(
-            mf, np.asarray(window["a1"], float) / wheel_radius_m, start, end,
-            max_trim=gap_only_max_trim(model, sample_period_s))
-        j, se, res, dof, model_error = fit["j1"], fit["se"], fit["residual"], fit["dof"], fit["model_error"]
-        fit_span = (fit["start"], fit["end"])
-    elif method == "acceleration":
-        if "a1" not in window:
-            raise NoGapError("method 'acceleration' needs a1 (use 'speed' with omega1)")
-        friction = None
-        if bearing_friction_nms_per_rad and "omega1" in window:
-            friction = bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)[start:end]
-        fit = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction)
-        kappa = fit["kappa"]
-        if not kappa > 0:
-            raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa:.4g}")
-        j = wheel_radius_m / kappa
-        alt = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction,
-                         linear_term=True, warm=fit, kappa_only=True)
-        model_error = abs(wheel_radius_m / alt["kappa"] - j) if alt["kappa"] > 0 else np.inf
-        se = float(np.hypot(wheel_radius_m / kappa ** 2 * fit["kappa_se"], model_error))
-        res = fit["a1_residual"] / kappa
-        dof = fit["dof"]
-    elif method == "anchored":
-        # m_el is smooth through the gap (the fluxes are continuous) and constant before
-        # the entry (steady state): anchor it with the pre-entry mean and a quadratic in
-        # time over the gap, then fit a1 = (r/J1) m_el_hat through the origin.
-        # b1 ω1 comes off the pre-entry samples too: m0 anchors m_el − b1 ω1, the torque that accelerates J1
-        mf = _net_torque(window, bearing_friction_nms_per_rad)
-        a = np.asarray(window["a1"], float)[start:end]
-        t = np.arange(n) * sample_period_s
-        pre = mf[:start]
-        m0 = float(pre.mean()) if pre.size else float(m[0])
-        T = t[:, None] if n < GAP_QUADRATIC_MIN else np.column_stack([t, t * t])
-        coef, *_ = np.linalg.lstsq(T, m - m0, rcond=None)
-        m_hat = m0 + T @ coef
-        smm = float(m_hat @ m_hat)
-        kappa = float(a @ m_hat) / smm
-        if not kappa > 0:
-            raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa:.4g}")
-        j = wheel_radius_m / kappa
-        res = (a - kappa * m_hat) / kappa
-        dof = n - 1
-        var_k = (res @ res) / dof / smm if dof > 0 else np.inf
-        # uncertainty of m_hat = m0 (1 - P 1) + P m (P: projection on T's columns): the pre-entry mean's
-        # variance along u = 1 - P 1 and the gap m_el noise through P; its effect on J1 = r smm / (a . m_hat)
-        # by the delta method, gradient dJ1/dm_hat = J1 (2 m_hat/smm - a/(a . m_hat))
-        res_m = (m - m0) - T @ coef
-        s2m = float(res_m @ res_m) / max(n - T.shape[1], 1)
-        var_m0 = float(pre.var(ddof=1)) / pre.size if pre.size > 1 else s2m
-        P = T @ np.linalg.pinv(T)
-        u = 1.0 - P.sum(axis=1)
-        grad = 2.0 * m_hat / smm - a / float(a @ m_hat)                 # relative: dJ1/dm_hat / J1
-        rel_m2 = var_m0 * float(grad @ u) ** 2 + s2m * float(grad @ P @ grad)
-        # var_k is the RELATIVE variance of kappa (res is a1's residual over kappa), and J1 = r/kappa has the same
-        # relative variance (delta method): var(J1) = J1^2 var_k, plus m_hat's part in quadrature
-        se = float(j * np.sqrt(var_k + rel_m2))
-    elif method == "angle":
-        if "alpha1" not in window:
-            raise NoGapError("method 'angle' needs alpha1 (use 'speed' with omega1)")
-        torque = _net_torque(window, bearing_friction_nms_per_rad)
-        search = model.search_rows(sample_period_s)
-        bounds = load_free_bounds(window.get(LOAD_ANGLE_KEY, window.get("alpha2")), start, end, search)
-        ff, anchored = _angle_fits(np.asarray(window["alpha1"], float), torque, sample_period_s, start, end, model,
-                                   bounds)
-        if bounds is not None and (bounds[0] > start - search or bounds[1] < end + search):
-            choice = "; ".join(x for x in (choice, f"the load angle free in rows {bounds[0]}..{bounds[1]}") if x)
-        j, se, res, dof = ff["j1"], ff["se_stat"], ff["residual"], ff["dof"]
-        model_error = ff["change_point_error"]
-        fit_span = (ff["start"], ff["end"])
-        free_extra = {"change_point_error_kgm2": ff["change_point_error"], "friction": ff["friction"],
-                      "std_error_terms": tuple((k, float(v)) for k, v in ff["terms"].items())}
-        entry_uncertainty_samples = 0        # the change-point search has taken the entry's uncertainty
-        choice = "; ".join(x for x in (choice, anchored.pop("choice")) if x)
-        if not anchored and model.coulomb_friction_max_nm:
-            free_extra["trend_fit"] = _angle_trend_refit(window["alpha1"], torque, sample_period_s, ff)
-        if anchored:
-            j, se, res, dof, model_error = (anchored[k] for k in ("j1", "se", "res", "dof", "model_error"))
-            free_extra["std_error_terms"] = tuple(anchored["terms"].items())
-            free_extra["change_point_error_kgm2"] = float(anchored["terms"]["change_points"])
-            free_extra["friction"] = (f"bounded (F_c in [0, {model.coulomb_friction_max_nm:.3g}] N m, a term)"
-                                      if model.coulomb_friction_max_nm else "none declared")
-            fit_span = anchored["span"]
-        encoder_resolved(window["alpha1"], torque, fit_span, j, sample_period_s)
-    elif method == "speed":
-        if "omega1" not in window:
-            raise NoGapError("method 'speed' needs omega1")
-        j, se, res, dof = speed_fit(np.asarray(window["omega1"], float)[start:end], m, sample_period_s, lag=True)
-    else:
-        raise ValueError(f"method: expected one of {', '.join(FITS)} (or None: the model choice), got {method!r}")
-    if not np.isfinite(j) or j <= 0:
-        raise NoGapError(f"gap fit gave a non-physical J1 = {j:.4g}")
+        return _method_gap_only(window, rows, drive, model, gap_only)
+    if method == "acceleration":
+        return _method_acceleration(window, rows, drive)
+    if method == "anchored":
+        return _method_anchored(window, rows, drive)
+    if method == "angle":
+        return _method_angle(window, rows, drive, model)
+    if method == "speed":
+        return _method_speed(window, rows, drive)
+    raise ValueError(f"method: expected one of {', '.join(FITS)} (or None: the model choice), got {method!r}")
+
+
+def _own_terms(f: FitState, method: str) -> None:
+    """``f``'s std_error_terms made to account for its standard error in quadrature (``f`` changed in place)."""
+    free_extra, se, model_error = f.extra, f.se, f.model_error
     if "std_error_terms" in free_extra:
         # the angle fits: gap_free raises se to FREE_REL_SE_FLOOR J1 where the data would allow less; that floor
         # is a part too (the only way se exceeds its parts there)
@@ -417,64 +376,12 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
         if model_error:
             own["change_points" if method == "gap_only" else "model_form"] = float(model_error)
         free_extra["std_error_terms"] = tuple(own.items())
-    k = int(entry_uncertainty_samples)
-    entry_error = 0.0
-    if k > 0:
-        moved = []
-        for e in (entry_index - k, entry_index + k):
-            try:
-                moved.append(_estimate_inertia(window, e, backlash_width_m, wheel_radius_m, sample_period_s, method,
-                                               bearing_friction_nms_per_rad, recontact_index).inertia_kgm2)
-            except NoGapError:
-                moved.append(np.inf)
-        entry_error = max(abs(x - j) for x in moved)
-        model_error = float(np.hypot(model_error, entry_error))
-        se = float(np.hypot(se, entry_error))
-        terms = dict(free_extra["std_error_terms"])
-        terms["change_points"] = float(np.hypot(terms.get("change_points", 0.0), entry_error))
-        free_extra["std_error_terms"] = tuple(terms.items())
-    # the bounded constant torques the speed and a1 fits do not model: the Coulomb band (F in [0, F_max], a
-    # uniform term of half-width F_max) and the torque offset (|T| <= torque_offset_nm, uniform)
-    bounded = [(name, v) for name, v in (("coulomb_band", model.coulomb_friction_max_nm),
-                                         ("torque_offset", model.torque_offset_nm)) if v]
-    if method == "speed" and bounded:
-        # a constant torque F is F t in ∫m_el dt, which moves J1 by J1 F (r_κ · t) (r_κ: the least-squares row
-        # of 1/J1)
-        tq = np.asarray(window["m_el"], float)[start:end]
-        yint = np.concatenate([[0.0], np.cumsum(0.5 * (tq[1:] + tq[:-1])) * sample_period_s])
-        A = np.column_stack([np.ones(n), yint, tq])
-        row = np.linalg.pinv(A)[1]
-        sens = j * abs(float(row @ (np.arange(n) * sample_period_s)))
-        terms = dict(free_extra.get("std_error_terms", ()))
-        for name, v in bounded:
-            terms[name] = sens * v / np.sqrt(3.0)
-            se = float(np.hypot(se, terms[name]))
-        free_extra["std_error_terms"] = tuple(terms.items())
-    if method in ("gap_only", "acceleration", "anchored") and (bounded or model.torque_lag_s) and "a1" in window:
-        # the a1 fits: a constant torque F moves J1 (the slope of the torque on dω1/dt) by F Σx/Σx² over the
-        # fitted samples
-        x = np.asarray(window["a1"], float)[fit_span[0]:fit_span[1]] / wheel_radius_m
-        terms = dict(free_extra.get("std_error_terms", ()))
-        mt = (np.gradient(_net_torque(window, bearing_friction_nms_per_rad), sample_period_s)[fit_span[0]:fit_span[1]]
-              if model.torque_lag_s else None)
-        if method == "gap_only" and bounded:
-            j, se, res, dof, terms, note, trend = _gap_only_constant(fit, mf, (x, mt), model, bounded, (j, se, res, dof),
-                                                                     terms, entry_error)
-            if note:
-                free_extra["friction"] = note
-                free_extra["trend_fit"] = _trend_finished(*trend, model)
-                model_error = float(terms.get("change_points", 0.0))
-        else:
-            sens = abs(float(x.sum())) / max(float(x @ x), 1e-300)
-            for name, v in bounded:
-                terms[name] = sens * v / np.sqrt(3.0)
-                se = float(np.hypot(se, terms[name]))
-            for name, v in _shape_terms(x, mt, model).items():
-                terms[name] = v
-                se = float(np.hypot(se, v))
-        free_extra["std_error_terms"] = tuple(terms.items())
-    # every fit: the model's own error as a floor, then the drive's torque accuracy (a scale error of m_el
-    # is one of J1: all fits of m_el share it)
+
+
+def _floored(f: FitState, model: GapModel) -> None:
+    """Every fit: the model's own error as a floor, then the drive's torque accuracy (a scale error of m_el is one of
+    J1: all fits of m_el share it); ``f`` changed in place."""
+    j, se, free_extra = f.j, f.se, f.extra
     if float(se) < FREE_REL_SE_FLOOR * j:
         terms = dict(free_extra.get("std_error_terms", ()))
         terms["model_floor"] = float(np.sqrt((FREE_REL_SE_FLOOR * j) ** 2 - float(se) ** 2))
@@ -485,14 +392,7 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
         terms["torque_accuracy"] = j * model.torque_rel_se()
         free_extra["std_error_terms"] = tuple(terms.items())
         se = float(np.hypot(se, j * model.torque_rel_se()))
-    if not se <= MAX_RELATIVE_STD_ERROR * j:
-        raise NoGapError(f"gap fit undetermined: J1 = {j:.4g} kg m^2 with standard error {se:.3g} kg m^2 "
-                         f"(> {MAX_RELATIVE_STD_ERROR:.0%}); the window shows no free acceleration of the motor")
-    half = _t975(max(int(dof), 1)) * se
-    # the residual's RMS: np.mean's own reduction (np.add.reduce, divided by the count)
-    rms = float(np.sqrt(np.add.reduce(res ** 2) / res.size))
-    return GapEstimate(j, se, (j - half, j + half), rms, start, end, method, how,
-                       float(model_error), choice, int(fit_span[0]), int(fit_span[1]), **free_extra)
+    f.se = se
 
 
 def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_samples: int,

@@ -38,10 +38,13 @@ from functools import lru_cache
 import numpy as np
 
 from jident_ros.identify import lapack
-from jident_ros.identify.gap_free import NONPHYSICAL_Z, GapModel
+from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, NONPHYSICAL_Z, GapModel
 from jident_ros.identify.gap_numerics import _diff2, _median, _memoised
-from jident_ros.identify.gap_types import NoGapError, _net_torque
+from jident_ros.identify.gap_types import FitState, NoGapError, _net_torque
 from jident_ros.stream.rate import samples as rate_samples
+
+#: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
+GAP_QUADRATIC_MIN = 12
 
 #: 'acceleration' fit: gaps of at least this many samples model the gap torque as
 #: m0 + c2 τ^2 + c3 τ^3, shorter ones as m0 + c2 τ^2.
@@ -451,3 +454,125 @@ def _gap_only_constant(fit: dict, torque: np.ndarray, xm: tuple, model: GapModel
             return free["j1"], se_free, free["residual"], free["dof"], out, note, (j, se_bounded, {**terms, **bound_terms})
     terms.update(bound_terms)
     return j, se_bounded, res, dof, terms, "", ()
+
+
+def _trend_finished(j: float, se: float, terms: dict, model: GapModel) -> tuple:
+    """A trend fit (GapEstimate.trend_fit) as the published fits end: the model's floor, then the torque accuracy."""
+    terms = dict(terms)
+    if float(se) < FREE_REL_SE_FLOOR * j:
+        terms["model_floor"] = float(np.sqrt((FREE_REL_SE_FLOOR * j) ** 2 - float(se) ** 2))
+        se = FREE_REL_SE_FLOOR * j
+    if model.torque_accuracy:
+        terms["torque_accuracy"] = j * model.torque_rel_se()
+        se = float(np.hypot(se, terms["torque_accuracy"]))
+    return float(j), float(se), tuple((k, float(v)) for k, v in terms.items())
+
+
+def _method_gap_only(window: dict, rows: tuple, drive: tuple, model: GapModel, made: dict | None) -> FitState:
+    """gap._estimate_inertia's 'gap_only' fit over ``rows`` (start, end): :func:`gap_only_fit`, or ``made`` where the
+    model choice has already made it (:func:`_a1_contact_rows`).  ``drive``: (r, b1, T_s)."""
+    (start, end), (wheel_radius_m, bearing_friction_nms_per_rad, sample_period_s) = rows, drive
+    if "a1" not in window:
+        raise NoGapError("method 'gap_only' needs a1 (use 'speed' with omega1)")
+    mf = _net_torque(window, bearing_friction_nms_per_rad)
+    fit = made if made is not None else gap_only_fit(
+        mf, np.asarray(window["a1"], float) / wheel_radius_m, start, end,
+        max_trim=gap_only_max_trim(model, sample_period_s))
+    return FitState(fit["j1"], fit["se"], fit["residual"], fit["dof"], fit["model_error"], (fit["start"], fit["end"]),
+                    made=fit, torque=mf)
+
+
+def _method_acceleration(window: dict, rows: tuple, drive: tuple) -> FitState:
+    """gap._estimate_inertia's 'acceleration' fit over ``rows`` (start, end): the joint fit (:func:`_joint_fit`), its
+    model error the change of J1 with a linear torque term.  ``drive``: (r, b1, T_s)."""
+    (start, end), (wheel_radius_m, bearing_friction_nms_per_rad, _) = rows, drive
+    if "a1" not in window:
+        raise NoGapError("method 'acceleration' needs a1 (use 'speed' with omega1)")
+    friction = None
+    if bearing_friction_nms_per_rad and "omega1" in window:
+        friction = bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)[start:end]
+    fit = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction)
+    kappa = fit["kappa"]
+    if not kappa > 0:
+        raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa:.4g}")
+    j = wheel_radius_m / kappa
+    alt = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction,
+                     linear_term=True, warm=fit, kappa_only=True)
+    model_error = abs(wheel_radius_m / alt["kappa"] - j) if alt["kappa"] > 0 else np.inf
+    se = float(np.hypot(wheel_radius_m / kappa ** 2 * fit["kappa_se"], model_error))
+    res = fit["a1_residual"] / kappa
+    dof = fit["dof"]
+    return FitState(j, se, res, dof, model_error, (start, end))
+
+
+def _method_anchored(window: dict, rows: tuple, drive: tuple) -> FitState:
+    """gap._estimate_inertia's 'anchored' fit over ``rows`` (start, end): the first release's (gap.py's docstring).
+    ``drive``: (r, b1, T_s)."""
+    (start, end), (wheel_radius_m, bearing_friction_nms_per_rad, sample_period_s) = rows, drive
+    n = end - start
+    m = _net_torque(window, bearing_friction_nms_per_rad)[start:end]
+    # m_el is smooth through the gap (the fluxes are continuous) and constant before
+    # the entry (steady state): anchor it with the pre-entry mean and a quadratic in
+    # time over the gap, then fit a1 = (r/J1) m_el_hat through the origin.
+    # b1 ω1 comes off the pre-entry samples too: m0 anchors m_el − b1 ω1, the torque that accelerates J1
+    mf = _net_torque(window, bearing_friction_nms_per_rad)
+    a = np.asarray(window["a1"], float)[start:end]
+    t = np.arange(n) * sample_period_s
+    pre = mf[:start]
+    m0 = float(pre.mean()) if pre.size else float(m[0])
+    T = t[:, None] if n < GAP_QUADRATIC_MIN else np.column_stack([t, t * t])
+    coef, *_ = np.linalg.lstsq(T, m - m0, rcond=None)
+    m_hat = m0 + T @ coef
+    smm = float(m_hat @ m_hat)
+    kappa = float(a @ m_hat) / smm
+    if not kappa > 0:
+        raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa:.4g}")
+    j = wheel_radius_m / kappa
+    res = (a - kappa * m_hat) / kappa
+    dof = n - 1
+    var_k = (res @ res) / dof / smm if dof > 0 else np.inf
+    # uncertainty of m_hat = m0 (1 - P 1) + P m (P: projection on T's columns): the pre-entry mean's
+    # variance along u = 1 - P 1 and the gap m_el noise through P; its effect on J1 = r smm / (a . m_hat)
+    # by the delta method, gradient dJ1/dm_hat = J1 (2 m_hat/smm - a/(a . m_hat))
+    res_m = (m - m0) - T @ coef
+    s2m = float(res_m @ res_m) / max(n - T.shape[1], 1)
+    var_m0 = float(pre.var(ddof=1)) / pre.size if pre.size > 1 else s2m
+    P = T @ np.linalg.pinv(T)
+    u = 1.0 - P.sum(axis=1)
+    grad = 2.0 * m_hat / smm - a / float(a @ m_hat)                 # relative: dJ1/dm_hat / J1
+    rel_m2 = var_m0 * float(grad @ u) ** 2 + s2m * float(grad @ P @ grad)
+    # var_k is the RELATIVE variance of kappa (res is a1's residual over kappa), and J1 = r/kappa has the same
+    # relative variance (delta method): var(J1) = J1^2 var_k, plus m_hat's part in quadrature
+    se = float(j * np.sqrt(var_k + rel_m2))
+    return FitState(j, se, res, dof, 0.0, (start, end))
+
+
+def _a1_bounded(f: FitState, window: dict, method: str, drive: tuple, model: GapModel, bounded: list,
+                entry_error: float) -> None:
+    """gap._estimate_inertia's bounded torque terms of the a1 fits (``f`` changed in place; ``bounded``: [(term, its
+    bound N m)], ``entry_error``: the entry's uncertainty, kg m^2; ``drive``: (r, b1, T_s)): a constant torque F
+    moves J1 (the slope of the torque on dω1/dt) by F Σx/Σx² over the fitted samples; the 'gap_only' fit takes the
+    bounds through its own estimator or fits the constant (:func:`_gap_only_constant`); the drift and lag terms
+    (:func:`_shape_terms`)."""
+    wheel_radius_m, bearing_friction_nms_per_rad, sample_period_s = drive
+    fit_span = f.span
+    x = np.asarray(window["a1"], float)[fit_span[0]:fit_span[1]] / wheel_radius_m
+    terms = dict(f.extra.get("std_error_terms", ()))
+    mt = (np.gradient(_net_torque(window, bearing_friction_nms_per_rad), sample_period_s)[fit_span[0]:fit_span[1]]
+          if model.torque_lag_s else None)
+    if method == "gap_only" and bounded:
+        f.j, f.se, f.res, f.dof, terms, note, trend = _gap_only_constant(f.made, f.torque, (x, mt), model, bounded,
+                                                                         (f.j, f.se, f.res, f.dof), terms, entry_error)
+        if note:
+            f.extra["friction"] = note
+            f.extra["trend_fit"] = _trend_finished(*trend, model)
+            f.model_error = float(terms.get("change_points", 0.0))
+    else:
+        sens = abs(float(x.sum())) / max(float(x @ x), 1e-300)
+        for name, v in bounded:
+            terms[name] = sens * v / np.sqrt(3.0)
+            f.se = float(np.hypot(f.se, terms[name]))
+        for name, v in _shape_terms(x, mt, model).items():
+            terms[name] = v
+            f.se = float(np.hypot(f.se, v))
+    f.extra["std_error_terms"] = tuple(terms.items())

@@ -36,9 +36,10 @@ from jident_ros.identify.gap_kink import (
     kink_locate,
     kink_terms,
 )
+from jident_ros.identify.gap_load import LOAD_ANGLE_KEY, load_free_bounds
 from jident_ros.identify.gap_numerics import FIT_MEMO, _cumtrapz, _median, _quantum
 from jident_ros.identify.gap_steady import pre_entry_steady
-from jident_ros.identify.gap_types import GapEstimate, NoGapError, _net_torque
+from jident_ros.identify.gap_types import FitState, GapEstimate, NoGapError, _net_torque
 from jident_ros.stream.rate import samples as rate_samples
 
 #: 'angle' fit: relative floor of the standard error.  The torque model's own error (noise-free,
@@ -404,3 +405,37 @@ def _angle_fit(alpha1: np.ndarray, m_el: np.ndarray, start: int, end: int, sampl
         model_error = abs(j_lin - j)
     se = float(np.hypot(np.sqrt(max(var_kappa, 0.0)) / kappa ** 2, model_error))
     return j, max(se, ANGLE_REL_SE_FLOOR * j), res, max(dof_m - 3, 1), model_error
+
+
+def _method_angle(window: dict, rows: tuple, drive: tuple, model: GapModel) -> FitState:
+    """gap._estimate_inertia's 'angle' fit around ``rows`` (start, end: its change points are searched around them):
+    the free angle fit, or the steady-entry fit where :func:`_anchored_angle` takes it, inside the load side's free
+    bounds (gap_load.py); ``choice``: their phrases for the model choice.  ``drive``: (r, b1, T_s)."""
+    (start, end), (_, bearing_friction_nms_per_rad, sample_period_s) = rows, drive
+    choice = ""
+    if "alpha1" not in window:
+        raise NoGapError("method 'angle' needs alpha1 (use 'speed' with omega1)")
+    torque = _net_torque(window, bearing_friction_nms_per_rad)
+    search = model.search_rows(sample_period_s)
+    bounds = load_free_bounds(window.get(LOAD_ANGLE_KEY, window.get("alpha2")), start, end, search)
+    ff, anchored = _angle_fits(np.asarray(window["alpha1"], float), torque, sample_period_s, start, end, model,
+                               bounds)
+    if bounds is not None and (bounds[0] > start - search or bounds[1] < end + search):
+        choice = "; ".join(x for x in (choice, f"the load angle free in rows {bounds[0]}..{bounds[1]}") if x)
+    j, se, res, dof = ff["j1"], ff["se_stat"], ff["residual"], ff["dof"]
+    model_error = ff["change_point_error"]
+    fit_span = (ff["start"], ff["end"])
+    free_extra = {"change_point_error_kgm2": ff["change_point_error"], "friction": ff["friction"],
+                  "std_error_terms": tuple((k, float(v)) for k, v in ff["terms"].items())}
+    choice = "; ".join(x for x in (choice, anchored.pop("choice")) if x)
+    if not anchored and model.coulomb_friction_max_nm:
+        free_extra["trend_fit"] = _angle_trend_refit(window["alpha1"], torque, sample_period_s, ff)
+    if anchored:
+        j, se, res, dof, model_error = (anchored[k] for k in ("j1", "se", "res", "dof", "model_error"))
+        free_extra["std_error_terms"] = tuple(anchored["terms"].items())
+        free_extra["change_point_error_kgm2"] = float(anchored["terms"]["change_points"])
+        free_extra["friction"] = (f"bounded (F_c in [0, {model.coulomb_friction_max_nm:.3g}] N m, a term)"
+                                  if model.coulomb_friction_max_nm else "none declared")
+        fit_span = anchored["span"]
+    encoder_resolved(window["alpha1"], torque, fit_span, j, sample_period_s)
+    return FitState(j, se, res, dof, model_error, fit_span, free_extra, choice)

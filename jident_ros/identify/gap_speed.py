@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from jident_ros.identify.gap_numerics import _ar1_inflation
-from jident_ros.identify.gap_types import NoGapError
+from jident_ros.identify.gap_types import FitState, NoGapError, _net_torque
 
 #: The speed fit's model error: J1 refitted with this many samples dropped at each end of the interval.
 SPEED_TRIM_SAMPLES = (1, 2)
@@ -59,3 +59,32 @@ def speed_fit(omega1: np.ndarray, torque: np.ndarray, sample_period_s: float, la
         trimmed, _ = slope(omega1[k:n - k], y[k:n - k] - y[k], None if tq is None else tq[k:n - k])
         model_error = max(model_error, abs(1.0 / trimmed[1] - j) if trimmed[1] > 0 else np.inf)
     return j, float(np.hypot(se_stat, model_error)), res * j, dof
+
+
+def _method_speed(window: dict, rows: tuple, drive: tuple) -> FitState:
+    """gap._estimate_inertia's 'speed' fit over ``rows`` (start, end): :func:`speed_fit` with the speed feedback's lag
+    fitted.  ``drive``: (r, b1, T_s)."""
+    (start, end), (_, bearing_friction_nms_per_rad, sample_period_s) = rows, drive
+    if "omega1" not in window:
+        raise NoGapError("method 'speed' needs omega1")
+    m = _net_torque(window, bearing_friction_nms_per_rad)[start:end]
+    j, se, res, dof = speed_fit(np.asarray(window["omega1"], float)[start:end], m, sample_period_s, lag=True)
+    return FitState(j, se, res, dof, 0.0, (start, end))
+
+
+def _speed_bounded(f: FitState, m_el: np.ndarray, rows: tuple, sample_period_s: float, bounded: list) -> None:
+    """gap._estimate_inertia's bounded constant torques of the 'speed' fit (``f`` changed in place; ``bounded``:
+    [(term, its bound N m)]): a constant torque F is F t in ∫m_el dt, which moves J1 by J1 F (r_κ · t) (r_κ: the
+    least-squares row of 1/J1)."""
+    start, end = rows
+    n = end - start
+    tq = np.asarray(m_el, float)[start:end]
+    yint = np.concatenate([[0.0], np.cumsum(0.5 * (tq[1:] + tq[:-1])) * sample_period_s])
+    A = np.column_stack([np.ones(n), yint, tq])
+    row = np.linalg.pinv(A)[1]
+    sens = f.j * abs(float(row @ (np.arange(n) * sample_period_s)))
+    terms = dict(f.extra.get("std_error_terms", ()))
+    for name, v in bounded:
+        terms[name] = sens * v / np.sqrt(3.0)
+        f.se = float(np.hypot(f.se, terms[name]))
+    f.extra["std_error_terms"] = tuple(terms.items())

@@ -1,11 +1,12 @@
 """What the gap fits share (issue 20, gap.py split by fit): the estimate they return (:class:`GapEstimate`), the refusal
-they raise (:class:`NoGapError`) and the torque they fit (:func:`_net_torque`, m_el − b1 ω1).  Moved out of gap.py
-with its fits (gap_a1.py, gap_angle.py, gap_speed.py, gap_steady.py, gap_cross.py, gap_interval.py, gap_width.py),
-which import them from here and never import gap.py; gap.py re-exports them.  Plain numpy; never imports rclpy.
+they raise (:class:`NoGapError`), the torque they fit (:func:`_net_torque`, m_el − b1 ω1) and one fit's numbers while
+gap._estimate_inertia finishes them (:class:`FitState`).  Moved out of gap.py with its fits (gap_a1.py, gap_angle.py,
+gap_speed.py, gap_steady.py, gap_cross.py, gap_interval.py, gap_width.py), which import them from here and never import
+gap.py; gap.py re-exports them.  Plain numpy; never imports rclpy.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -82,3 +83,29 @@ def _net_torque(window: dict, bearing_friction_nms_per_rad: float) -> np.ndarray
     if bearing_friction_nms_per_rad and "omega1" in window:
         torque = torque - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)
     return torque
+
+
+@dataclass
+class FitState:
+    """One fit's numbers while gap._estimate_inertia finishes them: its locals until it became one function per fit
+    (gap_a1's, gap_angle's and gap_speed's ``_method_*``) and the steps after them (issue 20).
+
+    j, se : J1 and its standard error, kg m^2
+    res : the residual (GapEstimate.residual_rms's), dof : its degrees of freedom
+    model_error : GapEstimate.model_error_kgm2
+    span : the fitted rows (GapEstimate.fit_start, fit_end)
+    extra : GapEstimate's optional fields (change_point_error_kgm2, friction, std_error_terms, trend_fit)
+    choice : the 'angle' fit's phrases for the model choice
+    made, torque : the 'gap_only' fit's dict (gap_a1.gap_only_fit) and the net torque over the window it fitted
+    """
+
+    j: float
+    se: float
+    res: np.ndarray
+    dof: int
+    model_error: float = 0.0
+    span: tuple = (-1, -1)
+    extra: dict = field(default_factory=dict)
+    choice: str = ""
+    made: dict | None = None
+    torque: np.ndarray | None = None
