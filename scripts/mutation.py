@@ -86,7 +86,7 @@ TESTS = {
 #: issue 11 that survived the whole suite on main.
 TARGETED = [
     ("gap_speed", "j = 1.0 / kappa", "j = 1.002 / kappa", "0.2 % bias of the speed fit", "speed_fit"),
-    ("gap", "dof = n - 1", "dof = n - 2", "degrees of freedom of the anchored fit", "_estimate_inertia"),
+    ("gap_a1", "dof = n - 1", "dof = n - 2", "degrees of freedom of the anchored fit", "_method_anchored"),
     ("detector", "before[0] = True if self._prev_inside is None else self._prev_inside",
      "before[0] = False if self._prev_inside is None else self._prev_inside",
      "first sample of a stream taken as an entry", ""),
