@@ -11,7 +11,9 @@ are its sibling modules, which never import it: the gap interval (gap_interval.p
 angles or the a1 signature), the a1 fits (gap_a1.py), the angle fits (gap_angle.py, over gap_free.py's free angle fit
 and gap_kink.py's steady-entry fit), the speed fit (gap_speed.py), the steadiness test (gap_steady.py), the
 cross-check's statistics (gap_cross.py), the backlash width (gap_width.py) and what they share (gap_types.py:
-GapEstimate, NoGapError).  The names other modules and the tests import from here are re-exported.
+GapEstimate, NoGapError, FitState).  Each fit is one function of its module (``_method_*`` of gap_a1.py, gap_angle.py
+and gap_speed.py), which :func:`_estimate_inertia` calls and finishes.  The names other modules and the tests import
+from here are re-exported.
 
 Fits
 ----
@@ -24,7 +26,7 @@ Fits
   (:func:`pre_entry_steady`: a quadratic in time against a constant, F test).  Steady: the joint
   fit (``"acceleration"``); not steady (e.g. a speed controller swinging the torque just before
   the entry): ``"gap_only"``.  The estimate's ``model_choice`` says which and why.
-* ``"anchored"`` (the estimator of the first release, kept for comparison): m0 = the
+* ``"anchored"`` (the estimator of the first release, kept for comparison; gap_a1.py): m0 = the
   pre-entry mean (of m_el − b1 ω1, as in the gap), m_el ≈ m0 + b t + c t^2 fitted over the gap,
   then a1 = (r/J1) m_hat through the origin.  Uncertainty: the least-squares one of r/J1 (its
   relative variance is J1's), and in quadrature m_hat's error carried to J1 by the delta method.
