@@ -63,6 +63,9 @@ REPO = Path(__file__).resolve().parents[1]
 #: Module name -> (source file, selected tests: fastest and most specific first, so -x stops early).
 MODULES = {
     "gap": "jident_ros/identify/gap.py",
+    # gap.py's fits, split from it by fit (issue 20): the same selected tests as gap.py
+    **{m: f"jident_ros/identify/{m}.py" for m in ("gap_a1", "gap_angle", "gap_cross", "gap_interval", "gap_speed",
+                                                   "gap_steady", "gap_width")},
     "fusion": "jident_ros/identify/fusion.py",
     "khm": "jident_ros/method/khm.py",
     "khm_reference": "jident_ros/research/khm_reference.py",
@@ -70,6 +73,8 @@ MODULES = {
 }
 TESTS = {
     "gap": ["test/test_gap_rules.py", "test/test_gap_precision.py", "test/test_gap.py", "test/test_gap_second_drive.py"],
+    **{m: ["test/test_gap_rules.py", "test/test_gap_precision.py", "test/test_gap.py", "test/test_gap_second_drive.py"]
+       for m in ("gap_a1", "gap_angle", "gap_cross", "gap_interval", "gap_speed", "gap_steady", "gap_width")},
     "fusion": ["test/test_fusion_rules.py", "test/test_gap.py"],
     "khm": ["test/test_khm_rules.py", "test/test_khm.py", "test/test_method.py", "-k", "khm"],
     "khm_reference": ["test/test_khm_rules.py", "test/test_khm.py", "test/test_method.py", "-k", "khm"],
@@ -80,8 +85,8 @@ TESTS = {
 #: holds it or "" for anywhere in the module; the line must occur once there): the four one-line changes of
 #: issue 11 that survived the whole suite on main.
 TARGETED = [
-    ("gap", "j = 1.0 / kappa", "j = 1.002 / kappa", "0.2 % bias of the speed fit", "speed_fit"),
-    ("gap", "dof = n - 1", "dof = n - 2", "degrees of freedom of the anchored fit", "estimate_inertia"),
+    ("gap_speed", "j = 1.0 / kappa", "j = 1.002 / kappa", "0.2 % bias of the speed fit", "speed_fit"),
+    ("gap_a1", "dof = n - 1", "dof = n - 2", "degrees of freedom of the anchored fit", "_method_anchored"),
     ("detector", "before[0] = True if self._prev_inside is None else self._prev_inside",
      "before[0] = False if self._prev_inside is None else self._prev_inside",
      "first sample of a stream taken as an entry", ""),

@@ -3,7 +3,7 @@ verdict, and what the zoo declares per drive (issue 20 items 3 and 6)."""
 import numpy as np
 import pytest
 
-from jident_ros.identify import gap
+from jident_ros.identify import gap_a1
 from jident_ros.identify.gap import GapEstimate, estimate_inertia
 from jident_ros.identify.gap_free import GapModel
 from jident_ros.identify.verdict import MAX_CI95_HALF_WIDTH_REL, VerdictPolicy, decide_gap
@@ -240,7 +240,7 @@ def test_a_constant_torque_the_gap_only_fit_does_not_model_is_fitted_or_bounded_
     assert g.friction.startswith("fitted: a constant torque -2.5") and g.inertia_kgm2 == pytest.approx(1.16, rel=2e-3)
     assert g.ci95_kgm2[0] <= 1.16 <= g.ci95_kgm2[1]
     # the constant not fitted: the band's term through the Deming estimator itself holds the bias
-    monkeypatch.setattr(gap, "_constant_fit", lambda *a: None)
+    monkeypatch.setattr(gap_a1, "_constant_fit", lambda *a: None)
     b = estimate_inertia(w, 48, 0.005, R, TS, method="gap_only", recontact_index=248, model=model)
     assert abs(b.inertia_kgm2 / 1.16 - 1) > 0.03 and b.ci95_kgm2[0] <= 1.16 <= b.ci95_kgm2[1]
     assert not b.friction.startswith("fitted")

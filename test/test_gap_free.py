@@ -403,7 +403,7 @@ def test_the_steady_entry_fit_is_taken_only_where_the_free_fit_supports_its_prem
     the combined 3-standard-error check, √5 se) rejects the steady-entry fit, one 3 se away keeps it (the DOL drive
     with the detector's entry 6-12 samples early: the steady-entry fit +4 … +10 % outside its interval).  A standard
     error on its floor (a noise-free window) is no variance: no test."""
-    from jident_ros.identify import gap
+    from jident_ros.identify import gap, gap_angle
     assert gap.KINK_PREMISE_Z == pytest.approx(1.96)
     w = ours_window
     d = w.as_dict()
@@ -417,7 +417,7 @@ def test_the_steady_entry_fit_is_taken_only_where_the_free_fit_supports_its_prem
     assert "j1" in base, base["choice"]
     j, se = base["j1"], base["se"]
     assert se > 2 * FREE_REL_SE_FLOOR * j                       # the window's own noise, not the floor
-    monkeypatch.setattr(gap, "FREE_REL_SE_FLOOR", 1.5 * se / j)  # its standard error on a floor: no variance, no test
+    monkeypatch.setattr(gap_angle, "FREE_REL_SE_FLOOR", 1.5 * se / j)  # its standard error on a floor: no variance, no test
     assert "j1" in anchored(j + 4 * se, 2 * se)
     monkeypatch.undo()
     far = anchored(j + 4 * se, 2 * se)
@@ -452,14 +452,14 @@ def test_the_steady_entry_fit_takes_the_lag_s_relocated_spread_into_its_term(mon
     located again (its refits after the two trims of the end, in one kink_best_j1 call; over √3): on a steady torque
     the linear term is nil and the spread is the term, and it equals kink_lag_spread's; a spread made large makes the
     steady-entry fit no more precise than the free fit."""
-    from jident_ros.identify import gap
+    from jident_ros.identify import gap, gap_angle
     from jident_ros.identify.gap_kink import kink_lag_spread
     a, m = _released_coupling_drive()
     model = GapModel(torque_lag_s=5e-4, coupling_release_s=4e-3)
     ff = free_angle_fit(a, m, TS, 94, 150, model)
     seen = []
-    real = gap.kink_best_j1
-    monkeypatch.setattr(gap, "kink_best_j1", lambda *args: seen.append((args, real(*args))) or seen[-1][1])
+    real = gap_angle.kink_best_j1
+    monkeypatch.setattr(gap_angle, "kink_best_j1", lambda *args: seen.append((args, real(*args))) or seen[-1][1])
     base = gap._anchored_angle(a, m, ff, (94, 150), TS, model)
     assert "j1" in base, base["choice"]
     (_, _, variants), fits = seen[0]
@@ -467,8 +467,8 @@ def test_the_steady_entry_fit_takes_the_lag_s_relocated_spread_into_its_term(mon
     spread = max(abs(x - base["j1"]) for x in fits[2:])
     assert spread > 0 and base["terms"]["torque_lag"] == pytest.approx(spread / np.sqrt(3.0))
     assert kink_lag_spread(a, m, TS, variants[2][1], variants[2][2], base["j1"], 5e-4) == pytest.approx(spread, rel=1e-9)
-    monkeypatch.setattr(gap, "kink_best_j1", lambda *args: [x + (0.5 if i >= 2 else 0.0)
-                                                           for i, x in enumerate(real(*args))])
+    monkeypatch.setattr(gap_angle, "kink_best_j1", lambda *args: [x + (0.5 if i >= 2 else 0.0)
+                                                                 for i, x in enumerate(real(*args))])
     big = gap._anchored_angle(a, m, ff, (94, 150), TS, model)
     assert "j1" not in big and "no more precise" in big["choice"], big["choice"]
 

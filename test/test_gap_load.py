@@ -70,9 +70,9 @@ def test_no_bound_without_a_moving_load_angle():
 
 
 def test_a_load_angle_free_nowhere_in_the_detectors_gap_refuses_the_angle_fit(monkeypatch):
-    import jident_ros.identify.gap as gap
+    import jident_ros.identify.gap_angle as gap_angle
     w, a2, g0, g1 = slip_window()
-    monkeypatch.setattr(gap, "load_free_bounds", lambda *a: (0, g0 - 2))
+    monkeypatch.setattr(gap_angle, "load_free_bounds", lambda *a: (0, g0 - 2))
     with pytest.raises(NoGapError, match="the load angle is free in rows"):
         estimate_inertia(dict(w, **{LOAD_ANGLE_KEY: a2}), g0, 0.005, 0.1, TS, method="angle",
                          recontact_index=g1 + 20, model=GapModel())

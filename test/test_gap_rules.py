@@ -300,11 +300,11 @@ def test_a_fading_contact_s_row_within_the_noise_does_not_stop_the_trim(monkeypa
     """The trim walks on past a contact row whose load torque dips within the tolerance while the next rows exceed it
     (TRIM_PERSIST): the fit starts where the contact ends and J1 is exact; with the walk stopping at the first row
     within the tolerance (stop 32's rule) it starts at the dip and J1 takes 10 rows of contact."""
-    from jident_ros.identify import gap
+    from jident_ros.identify import gap_a1
     torque, acc, a, b = _fading_contact(n_contact=14, dip_row=4)
     g = gap_only_fit(torque, acc, a, b, max_trim=(25, 25))
     assert g["start"] == a + 14 and g["j1"] == pytest.approx(1.16, rel=1e-9)
-    monkeypatch.setattr(gap, "TRIM_PERSIST", 0)
+    monkeypatch.setattr(gap_a1, "TRIM_PERSIST", 0)
     old = gap_only_fit(torque, acc, a, b, max_trim=(25, 25))
     assert old["start"] == a + 4 and old["j1"] / 1.16 - 1 > 0.004          # +0.55 %: the contact carries load
 
@@ -314,7 +314,7 @@ def test_a_friction_over_every_row_is_no_contact_for_the_entry_trim(monkeypatch)
     3 sigma = 2.4 N m of noise), the detector's entry exact: the entry trim reads the load torque from the free rows'
     level and drops nothing; read from 0 (with TRIM_PERSIST) it walks its most, 25 rows (the zoo's vector drive with an
     Imu: 6 gaps so trimmed, their J1 undetermined)."""
-    from jident_ros.identify import gap
+    from jident_ros.identify import gap_a1
     j1, n_pre, n_gap = 1.16, 48, 120
     k = np.arange(n_pre + n_gap + 20)
     torque = 150.0 + 140.0 * np.cos(k / 25.0)
@@ -323,7 +323,7 @@ def test_a_friction_over_every_row_is_no_contact_for_the_entry_trim(monkeypatch)
     acc[n_pre + n_gap:] = -100.0
     torque = torque + 0.8 * np.random.default_rng(3).standard_normal(k.size)
     assert gap_only_fit(torque, acc, n_pre, n_pre + n_gap, max_trim=(25, 25))["start"] == n_pre
-    monkeypatch.setattr(gap, "_free_level", lambda load, max_trim: 0.0)
+    monkeypatch.setattr(gap_a1, "_free_level", lambda load, max_trim: 0.0)
     assert gap_only_fit(torque, acc, n_pre, n_pre + n_gap, max_trim=(25, 25))["start"] == n_pre + 25
 
 
@@ -555,7 +555,7 @@ def test_a1_rows_before_the_angle_fit_s_entry_are_tested_for_a_contact_torque():
     anything with the rule off."""
     from dataclasses import replace
 
-    from jident_ros.identify import gap as G
+    from jident_ros.identify import gap_angle
     from jident_ros.identify.gap import GapEstimate, a1_rows_contact
     from jident_ros.identify.gap_free import GapModel
     rng = np.random.default_rng(5)
@@ -573,10 +573,10 @@ def test_a1_rows_before_the_angle_fit_s_entry_are_tested_for_a_contact_torque():
     near = replace(angle, fit_start=s0 + 20)         # within the a1 fit's trim (25 rows): its own trim's business
     assert a1_rows_contact({"a1": loaded, "m_el": m}, a1_fit, near, 0.0, r, model, ts) is None
     try:
-        G.A1_ROWS_FROM_ANGLE = False
+        gap_angle.A1_ROWS_FROM_ANGLE = False
         assert a1_rows_contact({"a1": loaded, "m_el": m}, a1_fit, angle, 0.0, r, model, ts) is None
     finally:
-        G.A1_ROWS_FROM_ANGLE = True
+        gap_angle.A1_ROWS_FROM_ANGLE = True
 
 
 @pytest.mark.parametrize("rule", [True, False])
@@ -589,8 +589,9 @@ def test_a_loaded_rest_before_the_gap_does_not_enter_the_a1_fit(rule, monkeypatc
     from pathlib import Path
 
     from jident_ros.identify import gap as G
+    from jident_ros.identify import gap_angle
     from jident_ros.identify.gap_free import GapModel
-    monkeypatch.setattr(G, "A1_ROWS_FROM_ANGLE", rule)
+    monkeypatch.setattr(gap_angle, "A1_ROWS_FROM_ANGLE", rule)
     w = dict(np.load(Path(__file__).parent / "data" / "dol_draws_loaded_rest_imu_30db.npz"))
     model = GapModel(torque_accuracy=0.01, coulomb_friction_max_nm=2.19, torque_offset_nm=2.12, torque_lag_s=9.5e-4,
                      coupling_release_s=0.004, torque_delay_s=5e-4, torque_filter_s=2e-4)
@@ -759,7 +760,7 @@ def test_the_window_memo_fits_the_lag_checks_second_round_once_and_changes_nothi
     monkeypatch.setattr(gap_free.lapack, "solve", counted("fit", gap_free.lapack.solve))
     kept = fit()
     assert "the torque lags the motor angle" in kept.model_choice        # the lag check's second round ran
-    assert gap_numerics._WINDOW_MEMO is None                             # nothing outlives the window
+    assert gap_numerics.WINDOW_MEMO.memo is None                         # nothing outlives the window
     with_memo = dict(calls)
     try:
         gap_free.FITTED_CONSTANT_SCAN = False                            # a flag changed between two windows
@@ -769,9 +770,8 @@ def test_the_window_memo_fits_the_lag_checks_second_round_once_and_changes_nothi
         gap_free.FITTED_CONSTANT_SCAN = True
     for k in calls:
         calls[k] = 0
-    monkeypatch.setattr(gap_numerics, "_WINDOW_MEMO", None)
-    monkeypatch.setattr(gap_numerics, "memo_get", lambda key: None)
-    for mod in (gap_free, gap_load):
+    monkeypatch.setattr(gap_numerics.WINDOW_MEMO, "memo", None)
+    for mod in (gap_free, gap_load):                                     # the modules that read memo_get
         monkeypatch.setattr(mod, "memo_get", lambda key: None)
     afresh = fit()
     assert afresh == kept                                                # the same estimate, term for term

@@ -13,7 +13,7 @@ import pytest
 from scipy.signal import savgol_filter
 
 from jident_ros.config import load_system_config
-from jident_ros.identify import gap, gap_free, gap_kink, gap_numerics
+from jident_ros.identify import gap, gap_angle, gap_free, gap_kink, gap_numerics
 from jident_ros.identify.gap import NoGapError, estimate_inertia, fit_cache
 from jident_ros.identify.gap_free import GapModel
 from jident_ros.identify.gap_kink import kink_fit
@@ -54,8 +54,8 @@ def test_the_fit_cache_changes_no_number(windows, model, monkeypatch):
     cross-checked 'angles' ones are lookups; the cache is off again after the block."""
     plain = _all_sets(windows, model)
     calls = []
-    real = gap.free_angle_fit
-    monkeypatch.setattr(gap, "free_angle_fit", lambda *a, **k: calls.append(1) or real(*a, **k))
+    real = gap_angle.free_angle_fit
+    monkeypatch.setattr(gap_angle, "free_angle_fit", lambda *a, **k: calls.append(1) or real(*a, **k))
     with fit_cache():
         cached = _all_sets(windows, model)
         n_first = len(calls)
@@ -65,7 +65,7 @@ def test_the_fit_cache_changes_no_number(windows, model, monkeypatch):
     assert len(calls) == n_first                          # the second pass computed no angle fit
     n_windows = sum(len(w.cases) for w in windows)
     assert n_first <= 2 * n_windows                       # 'angles' and 'angle_eq1' share one, 'angle' its own
-    assert gap._FIT_CACHE is None
+    assert gap_numerics.FIT_MEMO.memo is None
 
 
 def _kink_reference(alpha1, torque, ts, entries, end):
@@ -107,10 +107,10 @@ def test_kink_fit_matches_the_loop_on_grid_windows(windows, monkeypatch):
     (the end moved in, gap_kink.kink_best_j1's stacked fits over the plausible entries) to rounding."""
     calls, refits = [], []
     real = gap_kink.kink_fit
-    locate = gap.kink_locate          # the steady-entry check's kink fits (their standard error added after its checks)
-    best = gap.kink_best_j1
-    monkeypatch.setattr(gap, "kink_locate", lambda *a, **k: calls.append((a, k)) or locate(*a, **k))
-    monkeypatch.setattr(gap, "kink_best_j1", lambda *a: refits.append((a, best(*a))) or refits[-1][1])
+    locate = gap_angle.kink_locate    # the steady-entry check's kink fits (their standard error added after its checks)
+    best = gap_angle.kink_best_j1
+    monkeypatch.setattr(gap_angle, "kink_locate", lambda *a, **k: calls.append((a, k)) or locate(*a, **k))
+    monkeypatch.setattr(gap_angle, "kink_best_j1", lambda *a: refits.append((a, best(*a))) or refits[-1][1])
     _all_sets(windows)
     checked = 0
     for (alpha1, m_el, ts, entries, end, *_), kw in calls:

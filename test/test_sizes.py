@@ -18,11 +18,11 @@ EXCEPTIONS = {
     "stream/flank.py:__init__": "the detector's tuning constants as keywords; detector helper's file",
     "stream/flank_free.py:single_mass_run": "detector helper's file (issue 20)",
     "stream/flank_delta.py:estimate_width": "detector helper's file (issue 20)",
-    # the estimator: issue 20 is still open on it; split gap.py by input (a1 / angle / speed fits) when it closes
-    "identify/gap.py": "over 600 lines: the a1, angle and speed fits and their choice; to be split by fit (issue 20)",
+    # the estimator (issue 20): gap.py split by fit (gap_a1, gap_angle, gap_speed, ...); its choice still one function
     "identify/gap.py:estimate_inertia": "the public entry: _estimate_inertia's arguments, passed through",
-    "identify/gap.py:_estimate_inertia": "the per-method branches of the fit choice; to become one function per fit",
-    "identify/gap.py:_joint_fit": "the a1 + m_el errors-in-variables fit in one piece (its algebra reads as one)",
+    "identify/gap.py:_estimate_inertia": "11 parameters: estimate_inertia's, passed on (one function per fit since the "
+                                          "split: gap_a1's, gap_angle's and gap_speed's _method_*)",
+    "identify/gap_a1.py:_joint_fit": "the a1 + m_el errors-in-variables fit in one piece (its algebra reads as one)",
     "stream/flank.py:_track": "the flank state machine's one transition function (issue 20 added the spike and "
                               "same-flank states); the file's split left it whole, the state machine flank.py keeps",
     "identify/verdict.py:input_refusal": "9: the window's five header fields + config, policy, nominal, width_unknown; "

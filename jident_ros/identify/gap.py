@@ -6,195 +6,103 @@ moment is zero, so the motor side is a single mass,
 and J1 follows from signals the window already holds, by least squares over the
 gap samples.  Plain numpy/scipy; never imports rclpy.
 
-Gap interval
-------------
-* ``"angles"``: when α1 and α2 are measured, the gap is the first run of
-  samples from the entry sample on with |α1 − α2| < K2/r (inequality 1).
-* ``"signature"``: with no angles, the gap ends at the first sample after the
-  entry where the load moment reappears.  In the gap, m_el/a1 = J1/r is constant;
-  the flank impact makes a1 drop sharply while m_el cannot (the flux is
-  continuous), so the gap ends where a1 falls below ``drop`` (default 0.6) times
-  a1 at the entry sample; the sample just before that drop is left out too (the
-  impact happens between samples).  Drives without a1 use the same test on the
-  smoothed second derivative of α1 (a motor encoder) or, failing that, on the
-  smoothed derivative of ω1 (Savitzky-Golay, 7 samples, quadratic).
+This module is the entry (:func:`estimate_inertia`) and the choice between the fits; split by fit (issue 20), the fits
+are its sibling modules, which never import it: the gap interval (gap_interval.py: from the detector's re-contact, the
+angles or the a1 signature), the a1 fits (gap_a1.py), the angle fits (gap_angle.py, over gap_free.py's free angle fit
+and gap_kink.py's steady-entry fit), the speed fit (gap_speed.py), the steadiness test (gap_steady.py), the
+cross-check's statistics (gap_cross.py), the backlash width (gap_width.py) and what they share (gap_types.py:
+GapEstimate, NoGapError, FitState).  Each fit is one function of its module (``_method_*`` of gap_a1.py, gap_angle.py
+and gap_speed.py), which :func:`_estimate_inertia` calls and finishes.  The names other modules and the tests import
+from here are re-exported.
 
 Fits
 ----
-* ``"acceleration"`` (a1 and m_el measured; the default): one weighted least-squares
-  fit of both channels together.  Before the entry the drive is in steady state, so
-  m_el = m0 there; through the gap m_el is smooth and, because its slope is continuous
-  at the entry (the fluxes and ω1 are), it starts with zero slope:
-  m_el(t) = m0 + c2 τ^2 + c3 τ^3 (τ = time since the entry over the gap length), and
-  a1(t) = (r/J1) m_el(t).  The pre-entry m_el samples, the gap m_el samples and the gap
-  a1 samples are fitted together for (r/J1, m0, c2, c3), each channel weighted by its
-  noise variance measured on the 48 pre-entry samples (a1 = 0 there).  The a1 samples,
-  whose noise is small relative to their gap value, fix the torque's shape; the m_el
-  samples before and inside the gap fix its level — so the level is no longer
-  anchored on the 48 pre-entry samples alone (docs/method.md, "Gap estimator").
-  Uncertainty: covariance of the least-squares solution with each channel's residual
-  variance (robust to a wrong noise ratio), plus, in quadrature, the change of J1 when
-  the torque model gets a linear term too (the model-form error).
-* ``"gap_only"`` (a1 and m_el measured; no assumption about the drive before the entry):
-  over the in-zone samples only, m_el − b1 ω1 = J1 a1/r sample by sample, the torque taken as
-  measured (no torque model, no pre-entry anchoring).  Both sides are noisy, so J1 is the
-  errors-in-variables (Deming) slope through the origin with the two noise levels measured on
-  the window (robust scale of second differences).  The in-zone sample set comes from the
-  dynamics: the interval's end samples whose load torque m_el − b1 ω1 − J1 a1/r is not zero
-  within its noise (GAP_ONLY_TRIM_SIGMA) are dropped — an entry found a sample or two early, or a
-  re-contact row one late, does not bias J1.  Uncertainty: the residual standard error, and in
-  quadrature the model error, the change of J1 when one more sample is dropped at each end of the
-  in-zone set.
+* ``"acceleration"`` (a1 and m_el measured; the default): one weighted least-squares fit of both channels together,
+  the torque steady before the entry (gap_a1.py, ``_joint_fit``; its module docstring).
+* ``"gap_only"`` (a1 and m_el measured; no assumption about the drive before the entry): over the in-zone samples
+  only, the errors-in-variables slope of m_el − b1 ω1 on a1/r (gap_a1.py, :func:`gap_only_fit`).
 * ``"auto"`` (``method=None`` with a1 in the window; the default): the **model choice**.  The joint
   fit's assumption, a steady torque before the entry, is tested on the pre-entry m_el samples
   (:func:`pre_entry_steady`: a quadratic in time against a constant, F test).  Steady: the joint
   fit (``"acceleration"``); not steady (e.g. a speed controller swinging the torque just before
   the entry): ``"gap_only"``.  The estimate's ``model_choice`` says which and why.
-* ``"anchored"`` (the estimator of the first release, kept for comparison): m0 = the
+* ``"anchored"`` (the estimator of the first release, kept for comparison; gap_a1.py): m0 = the
   pre-entry mean (of m_el − b1 ω1, as in the gap), m_el ≈ m0 + b t + c t^2 fitted over the gap,
   then a1 = (r/J1) m_hat through the origin.  Uncertainty: the least-squares one of r/J1 (its
   relative variance is J1's), and in quadrature m_hat's error carried to J1 by the delta method.
-* ``"angle"`` (α1 and m_el measured: a motor encoder and the drive's torque, no
-  accelerometer): double-integral form, no differentiation.  Before the entry the
-  motor turns at a constant speed, inside the gap J1 dω1/dt = m_el, so over the
-  pre-entry and gap samples α1(t) = α0 + ω0 t + Z(t)/J1 with Z the double integral of
-  m_el from the entry (0 before it).  m_el is first fitted with the joint fit's torque
-  model (m0, then m0 + c2 τ² + c3 τ³ in the gap), Z is its exact double integral, and
-  ordinary least squares give (α0, ω0, 1/J1); the torque fit's covariance and the
-  model error go into the uncertainty.  An encoder's quantisation error on a steadily
-  turning shaft is a deterministic sawtooth, not white noise: below ~2^18 counts/rev
-  the interval is too narrow (docs/method.md).
+* ``"angle"`` (α1 and m_el measured: a motor encoder and the drive's torque, no accelerometer): double-integral form,
+  no differentiation: the free angle fit, or the steady-entry fit where the drive was steady before the entry and the
+  free fit supports it (gap_angle.py; the first release's angle fit, ``_angle_fit``, is described there).
 * ``"speed"`` (ω1 and m_el measured, no accelerometer): integral form, no
   differentiation: ω1_k = ω1_0 + (1/J1) ∫_{t0}^{tk} m_el dt, ω1 regressed on the integral
-  (:func:`speed_fit`: the noisy speed is the regressand; the residual's autocorrelation
+  (:func:`speed_fit`, gap_speed.py: the noisy speed is the regressand; the residual's autocorrelation
   and the interval's end rows go into the uncertainty).
 All report J1, its standard error, a 95 % confidence interval (Student t) and the
 residual RMS.
 """
 from __future__ import annotations
 
-import math
-from contextlib import contextmanager
-from dataclasses import dataclass, replace
-from functools import lru_cache, wraps
+from dataclasses import replace
+from functools import lru_cache
 
 import numpy as np
-from scipy.ndimage import convolve1d
 
-from jident_ros.identify import lapack
-from jident_ros.identify.distributions import f_survival, t_quantile
-from jident_ros.identify.gap_free import (
-    FREE_REL_SE_FLOOR,
-    NONPHYSICAL_Z,
-    FreeFitError,
-    GapModel,
-    free_angle_fit,
+from jident_ros.identify import gap_cross
+from jident_ros.identify.distributions import t_quantile
+from jident_ros.identify.gap_a1 import (  # noqa: F401  (re-exported: the a1 fits' names the tests and research import)
+    GAP_ONLY_MAX_TRIM,
+    GAP_ONLY_REL_SE_FLOOR,
+    GAP_ONLY_TRIM_REL,
+    GAP_ONLY_TRIM_SIGMA,
+    GAP_QUADRATIC_MIN,
+    _a1_bounded,
+    _a1_contact_rows,
+    _joint_fit,
+    _method_acceleration,
+    _method_anchored,
+    _method_gap_only,
+    _origin_slope,
+    _robust_noise,
+    _std_ddof1,
+    _torque_powers,
+    gap_only_fit,
+    gap_only_max_trim,
 )
-from jident_ros.identify.gap_kink import (
-    KINK_LAG_ROWS,
-    KINK_PRE_SAMPLES,
-    KINK_SEARCH,
-    KINK_UNLOAD_ROWS,
-    kink_best_j1,
-    kink_lag_variants,
-    kink_locate,
-    kink_terms,
+from jident_ros.identify.gap_angle import (  # noqa: F401  (re-exported: the angle fits' names the tests import)
+    ANGLE_REL_SE_FLOOR,
+    KINK_PREMISE_Z,
+    MIN_CURVATURE_COUNTS,
+    STEADY_ENTRY_CHOICE,
+    _anchored_angle,
+    _method_angle,
+    a1_rows_contact,
+    encoder_resolved,
+    steady_entry_contact,
 )
+from jident_ros.identify.gap_cross import (  # noqa: F401  (re-exported: trend_status and the tests)
+    COMMON_TORQUE_TERMS,
+    DRIVE_CONSTANT_TERMS,
+    _difference_se,
+    _trend_choice,
+    within_drive_se,
+)
+from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, GapModel
+from jident_ros.identify.gap_interval import _savgol_for_gap, gap_interval  # noqa: F401  (re-exported)
 from jident_ros.identify.gap_lag import LAG_MAX_FRACTION, LAG_MIN_SAMPLES, LAG_Z, torque_lag_estimate
-from jident_ros.identify.gap_load import LOAD_ANGLE_KEY, load_free_bounds
-from jident_ros.identify.gap_numerics import _ar1_inflation, _cumtrapz, _diff2, _median, _quantum, window_memo
-from jident_ros.stream.filters import savgol_coeffs, savgol_filter
+from jident_ros.identify.gap_numerics import fit_cache, window_memo  # noqa: F401  (fit_cache re-exported)
+from jident_ros.identify.gap_speed import _method_speed, _speed_bounded, speed_fit  # noqa: F401  (speed_fit re-exported)
+from jident_ros.identify.gap_steady import STEADY_P_VALUE, pre_entry_steady  # noqa: F401  (STEADY_P_VALUE re-exported)
+from jident_ros.identify.gap_types import FitState, GapEstimate, NoGapError, _net_torque
+from jident_ros.identify.gap_width import WidthEstimate, estimate_backlash_width  # noqa: F401  (re-exported)
 from jident_ros.stream.flank import disc_corrected
-from jident_ros.stream.rate import samples as rate_samples
-
-#: 'anchored' fit: gaps shorter than this fit m_el with a straight line (fewer free parameters).
-GAP_QUADRATIC_MIN = 12
-
-#: 'acceleration' fit: gaps of at least this many samples model the gap torque as
-#: m0 + c2 τ^2 + c3 τ^3, shorter ones as m0 + c2 τ^2.
-GAP_CUBIC_MIN = 8
-
-#: 'acceleration' fit: the Newton iteration on the profile stops when J1 changes by less than this fraction.
-JOINT_FIT_TOL = 1e-9
-JOINT_FIT_MAX_ITER = 30
-
-
-#: 'angle' fit: relative floor of the standard error.  The torque model's own error (noise-free,
-#: grid: up to 0.03 % of J1) is not always seen by the model-error term; without the floor a
-#: noise-free window could be flagged 'between classes' at 4e-5 off its class.
-ANGLE_REL_SE_FLOOR = 2e-4
 
 #: A gap fit whose standard error exceeds this fraction of J1 is refused (NoGapError): such a
 #: window carries no free acceleration (e.g. a steady state mistaken for an entry).
 MAX_RELATIVE_STD_ERROR = 0.25
 
-#: Model choice ('auto'): the pre-entry m_el is steady unless a quadratic in time explains it better
-#: than a constant at this significance (F test); then the joint fit's anchoring is not used.
-STEADY_P_VALUE = 1e-3
-#: ... and the fitted slope and curvature move it by more than this fraction of its level over the
-#: pre-entry samples (a practical significance: noise-free windows have no noise to compare with; our
-#: simulator's steady state still drifts by 3-6e-6 of the load, far below what biases the joint fit).
-STEADY_REL_TOL = 1e-4
-
-#: 'gap_only' fit: an end sample of the in-zone set is dropped while its load torque
-#: |m_el - b1 w1 - J1 a1/r| exceeds this many standard deviations of the per-sample residual ...
-GAP_ONLY_TRIM_SIGMA = 3.0
-#: ... or this fraction of the median |m_el| over the gap (the floor for noise-free windows) ...
-GAP_ONLY_TRIM_REL = 0.005
-#: ... at most this many samples at the entry end and at the re-contact end (at 2 kHz), or the change-point search's
-#: span where that is the larger (:func:`gap_only_max_trim`): a detector's entry early by more than 4 samples left
-#: contact rows in the fit (the zoo's second drive with the entry moved 12 samples early: J1 +14.7 %, its interval
-#: missing the truth; `python -m jident_ros.research.evaluation.zoo --report --results - --entry-shift -12`).
-GAP_ONLY_MAX_TRIM = (4, 3)
-#: ... and at the entry end a row within the tolerance does not stop the trim while one of the next this many rows
-#: exceeds it: a fading contact's torque at 30 dB dips within 3 sigma on single rows (vector set 6's s6-08 with an Imu:
-#: the trim stopped at an 11.5 N m row with 21-30 N m on the next five, J1 +11 %).  Noise alone exceeds 3 sigma on
-#: 0.3 % of rows.  Not at the re-contact end: a torque smoothed beyond its declared lag leaves a load torque there that
-#: is no contact (zoo_variants' 'smoothed torque 5 ms undeclared', its speed reversal with an Imu at 30 dB: the walk on
-#: from the re-contact end kept 10 rows, J1 -12.6 %; stop 32's rule kept 30, -3.1 %).  The entry end's walk reads
-#: the load torque from the free rows' level (:func:`_free_level`): read from 0, the vector drive's bearing friction
-#: with the persistence walked 25 rows into 6 of the zoo's Imu gaps (their J1 then undetermined).
-TRIM_PERSIST = 2
-#: 'gap_only' fit: relative floor of the standard error (noise-free: the samples' own rounding).
-GAP_ONLY_REL_SE_FLOOR = 2e-4
-
-#: 'angle' fit: the gap's torque must move the motor by at least this many encoder counts from the free run its
-#: initial angle and speed set (|∬ m_el dt²| / J1 over the fitted rows).  J1 is read from that curvature; a count's
-#: rounding at either end of a displacement of D counts is up to 1/(2 D) of it: 10 % (the published interval's cap,
-#: verdict.MAX_CI95_HALF_WIDTH_REL) at 5 counts, and a fit over fewer rows than the sawtooth's period does not average
-#: it away.  A physical bound, not fitted: no published window of the zoo or the DOL zoo changes; it refuses,
-#: naming the counts, 2^13 windows that were refused with a standard error above 25 % or infinite (ours, the second
-#: drive).  It does not reach the DOL zoo's one 2^13 window whose interval misses (its
-#: fit spans 32 rows, 26 counts, of which 8 before the entry and 7 after the re-contact: docs/results.md).
-MIN_CURVATURE_COUNTS = 5.0
-
-
-def encoder_resolved(alpha1: np.ndarray, torque: np.ndarray, span: tuple, j1: float, sample_period_s: float) -> None:
-    """Raises NoGapError ('gap fit undetermined: ...') when the gap's torque moves the motor by fewer than
-    :data:`MIN_CURVATURE_COUNTS` encoder counts over the fitted rows ``span`` (a quantised alpha1 only: a continuous
-    or noisy angle has no count, its noise is the fit's)."""
-    s, e = int(span[0]), int(span[1])
-    if e - s < 2 or not j1 > 0:
-        return
-    q = _quantum(np.asarray(alpha1, float)[max(s - 20, 0):e])
-    if q <= 0.0:
-        return
-    m = np.asarray(torque, float)[s:e]
-    ts = float(sample_period_s)
-    disp = float(_cumtrapz(_cumtrapz(m, ts), ts)[-1]) / j1                          # ∬ m dt² / J1, rad
-    counts = abs(disp) / q
-    if counts < MIN_CURVATURE_COUNTS:
-        raise NoGapError(f"gap fit undetermined: the gap's torque moves the motor by {counts:.2g} encoder counts "
-                         f"over its {e - s} rows (J1 = {j1:.4g} kg m^2), need >= {MIN_CURVATURE_COUNTS:g}: the "
-                         f"encoder does not resolve J1 there")
-
 
 #: Fits of :func:`estimate_inertia` (None = the model choice, 'auto').
 FITS = ("acceleration", "gap_only", "anchored", "angle", "speed")
-
-
-class NoGapError(ValueError):
-    """The window holds no usable backlash gap."""
 
 
 #: Why a shallow gap's window (stream.layout.FLAG_SHALLOW_GAP) gets no gap fit (identify.diagnosis).  The flank
@@ -235,153 +143,6 @@ def resolution_limited(reason: str) -> bool:
     else:
         parts = [text]
     return all(p.startswith(RESOLUTION_REASONS) for p in parts)
-
-
-@dataclass(frozen=True)
-class GapEstimate:
-    """J1 from the gap.
-
-    Attributes
-    ----------
-    inertia_kgm2 : float            J1 estimate, kg m^2
-    std_error_kgm2 : float          standard error, kg m^2
-    ci95_kgm2 : (float, float)      95 % confidence interval, kg m^2
-    residual_rms : float            RMS of the fit residual: of a1 expressed as torque, (a1 - (r/J1) m_hat) J1/r,
-                                    in N m for 'acceleration' and 'anchored'; N m s for 'speed'; rad of α1
-                                    for 'angle'
-    model_error_kgm2 : float        'acceleration': |J1 with a linear torque term - J1|; 'angle': the same for
-                                    its torque model; included in std_error_kgm2 (0 for the other fits)
-    gap_start, gap_end : int        the gap interval's sample indices (entry row, re-contact row = end exclusive), as
-                                    ``interval`` found it; the width estimate reads the re-contact at gap_end
-    method : str                    'acceleration', 'gap_only', 'anchored', 'angle' or 'speed'
-    interval : str                  'angles', 'signature' or 'detector' (how the gap interval was found)
-    fit_start, fit_end : int        the samples the fit used ('gap_only' drops end samples of the interval that the
-                                    dynamics show to be out of the zone; -1: the gap interval itself)
-    model_choice : str              how the fit was chosen: '' when the caller named it, else the
-                                    pre-entry steadiness test's verdict (:func:`pre_entry_steady`)
-    change_point_error_kgm2 : float 'angle': the change of J1 when the estimated gap interval loses 1 or 2
-                                    samples at an end (included in std_error_kgm2)
-    friction : str                  'angle': how the motor's bearing friction was treated (fitted or bounded)
-    std_error_terms : tuple         ((term, kg m^2), ...): the parts of std_error_kgm2, in quadrature
-                                    (statistical, torque noise, change points, friction band, torque accuracy)
-    trend_fit : tuple               (J1 kg m^2, its standard error kg m^2, its std_error_terms) of the fit the
-                                    trend reads (trend_status.trend_inputs) where it is not this one, () where it
-                                    is: a J1 whose bias is a constant of the drive, the motor's Coulomb friction
-                                    F_c (J1 dω1/dt = m_el − F_c sgn ω1 − b1 ω1) taken as 0 with the band a term, as
-                                    the a1 fits and the steady-entry fit take it.  The free angle fit under a
-                                    Coulomb band (F_c fitted free or at the band's middle): its rows at F_c = 0
-                                    (:func:`_angle_trend_refit`); the gap-only fit with its constant free: that fit
-                                    through the origin.  Cross-checked (a1 and alpha1): the other fit's where its
-                                    standard error without the drive's constant terms (:func:`within_drive_se`) is
-                                    the smaller (a friction band's term can make the a1 fit lose the publication to
-                                    the angle fit, whose J1 scatters more)
-    """
-
-    inertia_kgm2: float
-    std_error_kgm2: float
-    ci95_kgm2: tuple
-    residual_rms: float
-    gap_start: int
-    gap_end: int
-    method: str
-    interval: str
-    model_error_kgm2: float = 0.0
-    model_choice: str = ""
-    fit_start: int = -1
-    fit_end: int = -1
-    change_point_error_kgm2: float = 0.0
-    friction: str = ""
-    std_error_terms: tuple = ()
-    trend_fit: tuple = ()
-
-    @property
-    def n_samples(self) -> int:
-        return self.gap_end - self.gap_start
-
-
-def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
-                 drop: float = 0.6, min_samples: int = 3, recontact_index: int | None = None) -> tuple[int, int, str]:
-    """(start, end, how) of the first gap run from the entry sample.
-
-    ``recontact_index``: the first contact row as the detector found it (the flank detector, whose
-    windows hold raw encoder angles that inequality 1 cannot read); how = "detector"."""
-    n = len(next(iter(window.values())))
-    if not 0 <= entry_index < n - 1:
-        raise NoGapError(f"entry_index: must be inside the window [0, {n - 2}], got {entry_index}")
-    if recontact_index is not None and recontact_index >= 0:
-        end = int(recontact_index)
-        if not entry_index < end <= n:
-            raise NoGapError(f"recontact_index {recontact_index}: not after the entry row {entry_index}")
-        how = "detector"
-    elif "alpha1" in window and "alpha2" in window:
-        rel = np.abs(np.asarray(window["alpha1"], float) - np.asarray(window["alpha2"], float))
-        inside = rel[entry_index:] < backlash_width_m / wheel_radius_m
-        if not inside[0]:
-            raise NoGapError(f"no backlash gap: |alpha1 - alpha2| = {rel[entry_index]:.4g} rad at the entry sample "
-                             f"is not below K2/r = {backlash_width_m / wheel_radius_m:.4g} rad")
-        if inside.all():
-            raise NoGapError(f"no re-contact: |alpha1 - alpha2| stays below K2/r = "
-                             f"{backlash_width_m / wheel_radius_m:.4g} rad to the end of the window (a wrong K2, "
-                             f"or not a backlash entry)")
-        end = entry_index + int(np.argmin(inside))
-        how = "angles"
-    else:
-        if "a1" in window:
-            acc = np.asarray(window["a1"], float)
-        elif "alpha1" in window or "omega1" in window:
-            if "alpha1" in window:   # a motor encoder: acceleration per sample^2
-                acc = _savgol_for_gap(np.asarray(window["alpha1"], float), 2, entry_index, drop)
-            else:
-                acc = _savgol_for_gap(np.asarray(window["omega1"], float), 1, entry_index, drop)
-        else:
-            raise NoGapError("no gap signal: the window needs alpha1+alpha2, a1, alpha1 or omega1")
-        a0 = acc[entry_index]
-        if not abs(a0) > 0:
-            raise NoGapError(f"no backlash gap: the motor does not accelerate at the entry sample (a1 = {a0:.4g})")
-        # sign-invariant: either direction of rotation, accelerating or braking through the zone
-        below = np.sign(a0) * acc[entry_index:] < drop * abs(a0)
-        if not below.any():
-            raise NoGapError(f"no re-contact: the acceleration never drops below {drop:g} x its entry value "
-                             f"to the end of the window (not a backlash entry?)")
-        end = entry_index + int(np.argmax(below))
-        end -= 1  # the flanks meet between samples: the last sample before the drop may already carry load
-        how = "signature"
-    if end - entry_index < min_samples:
-        by = {"detector": "to the detector's re-contact row",
-              "angles": "while |alpha1 - alpha2| < K2/r",
-              "signature": f"until the motor's acceleration falls below {drop:g} x its entry value: a short gap, or a "
-                           f"motor that hardly accelerates in it, as in a load-driven traversal"}[how]
-        raise NoGapError(f"gap too short: {end - entry_index} samples inside the zone ({by}), need >= {min_samples}")
-    return entry_index, end, how
-
-
-@lru_cache(maxsize=4)
-def _savgol_7_2(deriv: int) -> np.ndarray:
-    return savgol_coeffs(7, 2, deriv=deriv)
-
-
-def _savgol_for_gap(x: np.ndarray, deriv: int, entry_index: int, drop: float) -> np.ndarray:
-    """``savgol_filter(x, 7, 2, deriv=deriv)`` where :func:`gap_interval`'s signature test reads it: the
-    interior rows are scipy's own convolution with the same coefficients (bit for bit); the 3 rows at each end,
-    which scipy fills with polynomial fits (most of its cost), only when the test reaches them (an entry row
-    within 3 rows of an end, or no drop before the last 3 rows): then the whole savgol_filter."""
-    half = 3
-    n = x.size
-    if n < 7 or not half <= entry_index < n - half:
-        return savgol_filter(x, 7, 2, deriv=deriv)
-    y = convolve1d(x, _savgol_7_2(deriv), axis=-1, mode="constant")
-    a0 = y[entry_index]
-    if not abs(a0) > 0 or not (np.sign(a0) * y[entry_index:n - half] < drop * abs(a0)).any():
-        return savgol_filter(x, 7, 2, deriv=deriv)
-    return y
-
-
-def _net_torque(window: dict, bearing_friction_nms_per_rad: float) -> np.ndarray:
-    """m_el − b1·ω1 over the whole window: the torque that accelerates J1 (m_el alone without b1 or ω1)."""
-    torque = np.asarray(window["m_el"], float)
-    if bearing_friction_nms_per_rad and "omega1" in window:
-        torque = torque - bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)
-    return torque
 
 
 def estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
@@ -487,83 +248,6 @@ def _lag_beyond_declared(window: dict, b1: float, fit: GapEstimate, sample_perio
                    f"(torque_lag_max_s; docs/your_drive.md): the interval takes {bound * 1e3:.3g} ms")
 
 
-def _shape_terms(x: np.ndarray, mt: np.ndarray | None, model: GapModel) -> dict:
-    """The a1 fits' bounded torque errors that vary through the gap, as terms of J1 (kg m^2), for the regressor ``x``
-    (dω1/dt over the fitted rows; centred for a fit with a constant beside J1, which only the variation of x holds):
-    'torque_drift', the estimate's error drifting linearly across the rows, -T..+T (T the offset band;
-    gap_terms.drift_term): J1 moves by Σ x T(t) / Σ x²; 'torque_lag', its bounded lag τ (the shaft's torque is
-    m_el + τ dm_el/dt, ``mt`` the net torque's derivative over the rows): J1 moves by τ Σ x ṁ / Σ x²."""
-    out = {}
-    if model.torque_offset_nm and x.size > 1:
-        ramp = np.linspace(-1.0, 1.0, x.size)
-        out["torque_drift"] = abs(float(x @ ramp)) / max(float(x @ x), 1e-300) * model.torque_offset_nm / np.sqrt(3.0)
-    if model.torque_lag_s and mt is not None:
-        out["torque_lag"] = abs(float(x @ mt)) / max(float(x @ x), 1e-300) * model.torque_lag_s / np.sqrt(3.0)
-    return out
-
-
-def _gap_only_constant(fit: dict, torque: np.ndarray, xm: tuple, model: GapModel, bounded: list, current: tuple,
-                       terms: dict, entry_error: float = 0.0) -> tuple:
-    """The 'gap_only' fit's unknown constant torque (the Coulomb band, the torque offset: ``bounded``, [(term, its
-    bound N m)]): (j, se, res, dof, terms, friction note) from ``current`` (j, se, res, dof), its ``terms`` and
-    ``xm`` (dω1/dt and the net torque's derivative over the fitted rows, :func:`_shape_terms`; ``entry_error``: the
-    entry's uncertainty, kg m^2, a part of both fits' change-point term).
-
-    Each bound enters as a uniform term (half-width its bound, / sqrt 3) through the fit's own estimator -- J1
-    refitted with the torque moved by ± the bound, not the first-order F Σx/Σx² of a least-squares slope: where the
-    torque is exact and the acceleration noisy the Deming slope is the reverse regression, whose bias grows with F²
-    (a DOL drive's light load reversal, zoo_draws d1-01: +17 % with a 2.5 N m constant against a ± 8 % interval).
-    J1 is also fitted with the constant beside it (:func:`_constant_fit`); its drift and lag terms are those of the
-    centred regressor (only the variation of dω1/dt holds J1 there: a gap whose acceleration ramps, a vector drive's
-    traversal back, reads a drift of the estimate's error as inertia).  Where its total standard error is the
-    smaller, that fit is taken and the bounds leave the interval (issue 20 item 3: friction fitted where the torque
-    varies enough to separate it from J1); the bounded fit is then the trend's (GapEstimate.trend_fit), the 7th
-    element (j, se, terms; () where the bounded fit is taken)."""
-    j, se, res, dof = current
-    x, mt = xm
-    lo, hi = fit["start"], fit["end"]
-    y = torque[lo:hi]
-    sy, sx = fit["noise"]
-    bound_terms = {}
-    for name, v in bounded:
-        moved = [_origin_slope(y - s * v, x, sy, sx) for s in (-1.0, 1.0)]
-        bound_terms[name] = max((abs(m - j) if math.isfinite(m) else np.inf) for m in moved) / np.sqrt(3.0)
-    bound_terms.update(_shape_terms(x, mt, model))
-    se_bounded = se
-    for v in bound_terms.values():
-        se_bounded = float(np.hypot(se_bounded, v))
-    free = _constant_fit(y, x, 0, hi - lo, sy, sx)       # made here only: a drive that declares no bound never needs it
-    if free is not None:
-        change = float(np.hypot(free["model_error"], entry_error))
-        stat = max(free["se_stat"], GAP_ONLY_REL_SE_FLOOR * free["j1"])
-        shape = _shape_terms(x - x.mean(), mt, model)
-        se_free = float(np.sqrt(stat ** 2 + change ** 2 + sum(v ** 2 for v in shape.values())))
-        if se_free < se_bounded:
-            out = {k: v for k, v in terms.items() if k not in ("statistical", "change_points")}
-            out["statistical"] = stat
-            if change:
-                out["change_points"] = change
-            out.update(shape)
-            note = (f"fitted: a constant torque {free['constant_nm']:+.3g} N m beside J1 (the Coulomb friction and the "
-                    f"torque offset together; J1 through the origin with them bounded: {j:.4g} ± {se_bounded:.2g} "
-                    "kg m^2)")
-            return free["j1"], se_free, free["residual"], free["dof"], out, note, (j, se_bounded, {**terms, **bound_terms})
-    terms.update(bound_terms)
-    return j, se_bounded, res, dof, terms, "", ()
-
-
-def _trend_finished(j: float, se: float, terms: dict, model: GapModel) -> tuple:
-    """A trend fit (GapEstimate.trend_fit) as the published fits end: the model's floor, then the torque accuracy."""
-    terms = dict(terms)
-    if float(se) < FREE_REL_SE_FLOOR * j:
-        terms["model_floor"] = float(np.sqrt((FREE_REL_SE_FLOOR * j) ** 2 - float(se) ** 2))
-        se = FREE_REL_SE_FLOOR * j
-    if model.torque_accuracy:
-        terms["torque_accuracy"] = j * model.torque_rel_se()
-        se = float(np.hypot(se, terms["torque_accuracy"]))
-    return float(j), float(se), tuple((k, float(v)) for k, v in terms.items())
-
-
 def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, wheel_radius_m: float,
                       sample_period_s: float, method: str | None = None,
                       bearing_friction_nms_per_rad: float = 0.0, recontact_index: int | None = None,
@@ -580,7 +264,9 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
     drive's torque accuracy and friction band (:class:`~jident_ros.identify.gap_free.GapModel`; default: exact
     torque, no friction band): the torque-accuracy term J1 a/sqrt(3) goes into every fit's standard error.
     ``cross_check`` (the model choice with a1 and alpha1): the a1 fit and the free angle fit, cross-checked
-    (:func:`_cross_checked`); False: the a1 fit's model choice alone."""
+    (:func:`_cross_checked`); False: the a1 fit's model choice alone.  One function per fit (gap_a1's, gap_angle's and
+    gap_speed's ``_method_*``), then the steps every fit takes (the entry's uncertainty, the bounded torques, the
+    floor and the torque accuracy)."""
     model = GapModel() if model is None else model
     if "m_el" not in window:
         raise NoGapError("no electromagnetic torque: the gap fit needs m_el")
@@ -589,10 +275,57 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
                               bearing_friction_nms_per_rad, recontact_index, entry_uncertainty_samples, model)
     start, end, how = gap_interval(window, entry_index, backlash_width_m, wheel_radius_m,
                                    recontact_index=recontact_index)
-    m = _net_torque(window, bearing_friction_nms_per_rad)[start:end]
+    drive = (wheel_radius_m, bearing_friction_nms_per_rad, sample_period_s)
+    method, choice, gap_only = _model_choice(window, method, (start, end), drive, model)
+    f = _method_fit(window, method, (start, end), drive, model, gap_only)
+    if method == "angle":
+        choice = "; ".join(x for x in (choice, f.choice) if x)
+        entry_uncertainty_samples = 0        # the change-point search has taken the entry's uncertainty
+    if not np.isfinite(f.j) or f.j <= 0:
+        raise NoGapError(f"gap fit gave a non-physical J1 = {f.j:.4g}")
+    _own_terms(f, method)
+    k = int(entry_uncertainty_samples)
+    entry_error = 0.0
+    if k > 0:
+        moved = []
+        for e in (entry_index - k, entry_index + k):
+            try:
+                moved.append(_estimate_inertia(window, e, backlash_width_m, wheel_radius_m, sample_period_s, method,
+                                               bearing_friction_nms_per_rad, recontact_index).inertia_kgm2)
+            except NoGapError:
+                moved.append(np.inf)
+        entry_error = max(abs(x - f.j) for x in moved)
+        f.model_error = float(np.hypot(f.model_error, entry_error))
+        f.se = float(np.hypot(f.se, entry_error))
+        terms = dict(f.extra["std_error_terms"])
+        terms["change_points"] = float(np.hypot(terms.get("change_points", 0.0), entry_error))
+        f.extra["std_error_terms"] = tuple(terms.items())
+    # the bounded constant torques the speed and a1 fits do not model: the Coulomb band (F in [0, F_max], a
+    # uniform term of half-width F_max) and the torque offset (|T| <= torque_offset_nm, uniform)
+    bounded = [(name, v) for name, v in (("coulomb_band", model.coulomb_friction_max_nm),
+                                         ("torque_offset", model.torque_offset_nm)) if v]
+    if method == "speed" and bounded:
+        _speed_bounded(f, window["m_el"], (start, end), sample_period_s, bounded)
+    if method in ("gap_only", "acceleration", "anchored") and (bounded or model.torque_lag_s) and "a1" in window:
+        _a1_bounded(f, window, method, drive, model, bounded, entry_error)
+    _floored(f, model)
+    j, se = f.j, f.se
+    if not se <= MAX_RELATIVE_STD_ERROR * j:
+        raise NoGapError(f"gap fit undetermined: J1 = {j:.4g} kg m^2 with standard error {se:.3g} kg m^2 "
+                         f"(> {MAX_RELATIVE_STD_ERROR:.0%}); the window shows no free acceleration of the motor")
+    half = _t975(max(int(f.dof), 1)) * se
+    # the residual's RMS: np.mean's own reduction (np.add.reduce, divided by the count)
+    rms = float(np.sqrt(np.add.reduce(f.res ** 2) / f.res.size))
+    return GapEstimate(j, se, (j - half, j + half), rms, start, end, method, how,
+                       float(f.model_error), choice, int(f.span[0]), int(f.span[1]), **f.extra)
+
+
+def _model_choice(window: dict, method: str | None, rows: tuple, drive: tuple, model: GapModel) -> tuple:
+    """(the fit, the model choice's phrase, the 'gap_only' fit where the choice has already made it, or None) of
+    :func:`_estimate_inertia` over ``rows`` (start, end): ``method`` as named, or with None / 'auto' the model choice
+    (the module docstring).  ``drive``: (r, b1, T_s)."""
+    (start, end), (wheel_radius_m, bearing_friction_nms_per_rad, sample_period_s) = rows, drive
     choice = ""
-    fit_span = (start, end)
-    free_extra: dict = {}
     gap_only = None                  # the 'gap_only' fit where the model choice has already made it
     if method is None or method == "auto":
         method = None
@@ -603,108 +336,33 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
             if test.steady:
                 contact, in_zone = _a1_contact_rows(window, start, end, wheel_radius_m, bearing_friction_nms_per_rad,
                                                     model, sample_period_s)
-                if contact:          # its gap-only fit is the one the 'gap_only' branch below would make again
+                if contact:          # its gap-only fit is the one the 'gap_only' fit would make again
                     method, choice, gap_only = "gap_only", f"gap_only: {contact}", in_zone
         else:
             method = "angle" if "alpha1" in window else "speed"
             choice = f"{method}: no a1 in the window"
-    n = end - start
-    model_error = 0.0
+    return method, choice, gap_only
+
+
+def _method_fit(window: dict, method: str, rows: tuple, drive: tuple, model: GapModel, gap_only: dict | None):
+    """The fit ``method`` over ``rows`` (start, end), a :class:`~jident_ros.identify.gap_types.FitState`: one function
+    per fit (gap_a1's, gap_angle's and gap_speed's ``_method_*``).  ``drive``: (r, b1, T_s)."""
     if method == "gap_only":
-        if "a1" not in window:
-            raise NoGapError("method 'gap_only' needs a1 (use 'speed' with omega1)")
-        mf = _net_torque(window, bearing_friction_nms_per_rad)
-        fit = gap_only if gap_only is not None else gap_only_fit(
-            mf, np.asarray(window["a1"], float) / wheel_radius_m, start, end,
-            max_trim=gap_only_max_trim(model, sample_period_s))
-        j, se, res, dof, model_error = fit["j1"], fit["se"], fit["residual"], fit["dof"], fit["model_error"]
-        fit_span = (fit["start"], fit["end"])
-    elif method == "acceleration":
-        if "a1" not in window:
-            raise NoGapError("method 'acceleration' needs a1 (use 'speed' with omega1)")
-        friction = None
-        if bearing_friction_nms_per_rad and "omega1" in window:
-            friction = bearing_friction_nms_per_rad * np.asarray(window["omega1"], float)[start:end]
-        fit = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction)
-        kappa = fit["kappa"]
-        if not kappa > 0:
-            raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa:.4g}")
-        j = wheel_radius_m / kappa
-        alt = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction,
-                         linear_term=True, warm=fit, kappa_only=True)
-        model_error = abs(wheel_radius_m / alt["kappa"] - j) if alt["kappa"] > 0 else np.inf
-        se = float(np.hypot(wheel_radius_m / kappa ** 2 * fit["kappa_se"], model_error))
-        res = fit["a1_residual"] / kappa
-        dof = fit["dof"]
-    elif method == "anchored":
-        # m_el is smooth through the gap (the fluxes are continuous) and constant before
-        # the entry (steady state): anchor it with the pre-entry mean and a quadratic in
-        # time over the gap, then fit a1 = (r/J1) m_el_hat through the origin.
-        # b1 ω1 comes off the pre-entry samples too: m0 anchors m_el − b1 ω1, the torque that accelerates J1
-        mf = _net_torque(window, bearing_friction_nms_per_rad)
-        a = np.asarray(window["a1"], float)[start:end]
-        t = np.arange(n) * sample_period_s
-        pre = mf[:start]
-        m0 = float(pre.mean()) if pre.size else float(m[0])
-        T = t[:, None] if n < GAP_QUADRATIC_MIN else np.column_stack([t, t * t])
-        coef, *_ = np.linalg.lstsq(T, m - m0, rcond=None)
-        m_hat = m0 + T @ coef
-        smm = float(m_hat @ m_hat)
-        kappa = float(a @ m_hat) / smm
-        if not kappa > 0:
-            raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa:.4g}")
-        j = wheel_radius_m / kappa
-        res = (a - kappa * m_hat) / kappa
-        dof = n - 1
-        var_k = (res @ res) / dof / smm if dof > 0 else np.inf
-        # uncertainty of m_hat = m0 (1 - P 1) + P m (P: projection on T's columns): the pre-entry mean's
-        # variance along u = 1 - P 1 and the gap m_el noise through P; its effect on J1 = r smm / (a . m_hat)
-        # by the delta method, gradient dJ1/dm_hat = J1 (2 m_hat/smm - a/(a . m_hat))
-        res_m = (m - m0) - T @ coef
-        s2m = float(res_m @ res_m) / max(n - T.shape[1], 1)
-        var_m0 = float(pre.var(ddof=1)) / pre.size if pre.size > 1 else s2m
-        P = T @ np.linalg.pinv(T)
-        u = 1.0 - P.sum(axis=1)
-        grad = 2.0 * m_hat / smm - a / float(a @ m_hat)                 # relative: dJ1/dm_hat / J1
-        rel_m2 = var_m0 * float(grad @ u) ** 2 + s2m * float(grad @ P @ grad)
-        # var_k is the RELATIVE variance of kappa (res is a1's residual over kappa), and J1 = r/kappa has the same
-        # relative variance (delta method): var(J1) = J1^2 var_k, plus m_hat's part in quadrature
-        se = float(j * np.sqrt(var_k + rel_m2))
-    elif method == "angle":
-        if "alpha1" not in window:
-            raise NoGapError("method 'angle' needs alpha1 (use 'speed' with omega1)")
-        torque = _net_torque(window, bearing_friction_nms_per_rad)
-        search = model.search_rows(sample_period_s)
-        bounds = load_free_bounds(window.get(LOAD_ANGLE_KEY, window.get("alpha2")), start, end, search)
-        ff, anchored = _angle_fits(np.asarray(window["alpha1"], float), torque, sample_period_s, start, end, model,
-                                   bounds)
-        if bounds is not None and (bounds[0] > start - search or bounds[1] < end + search):
-            choice = "; ".join(x for x in (choice, f"the load angle free in rows {bounds[0]}..{bounds[1]}") if x)
-        j, se, res, dof = ff["j1"], ff["se_stat"], ff["residual"], ff["dof"]
-        model_error = ff["change_point_error"]
-        fit_span = (ff["start"], ff["end"])
-        free_extra = {"change_point_error_kgm2": ff["change_point_error"], "friction": ff["friction"],
-                      "std_error_terms": tuple((k, float(v)) for k, v in ff["terms"].items())}
-        entry_uncertainty_samples = 0        # the change-point search has taken the entry's uncertainty
-        choice = "; ".join(x for x in (choice, anchored.pop("choice")) if x)
-        if not anchored and model.coulomb_friction_max_nm:
-            free_extra["trend_fit"] = _angle_trend_refit(window["alpha1"], torque, sample_period_s, ff)
-        if anchored:
-            j, se, res, dof, model_error = (anchored[k] for k in ("j1", "se", "res", "dof", "model_error"))
-            free_extra["std_error_terms"] = tuple(anchored["terms"].items())
-            free_extra["change_point_error_kgm2"] = float(anchored["terms"]["change_points"])
-            free_extra["friction"] = (f"bounded (F_c in [0, {model.coulomb_friction_max_nm:.3g}] N m, a term)"
-                                      if model.coulomb_friction_max_nm else "none declared")
-            fit_span = anchored["span"]
-        encoder_resolved(window["alpha1"], torque, fit_span, j, sample_period_s)
-    elif method == "speed":
-        if "omega1" not in window:
-            raise NoGapError("method 'speed' needs omega1")
-        j, se, res, dof = speed_fit(np.asarray(window["omega1"], float)[start:end], m, sample_period_s, lag=True)
-    else:
-        raise ValueError(f"method: expected one of {', '.join(FITS)} (or None: the model choice), got {method!r}")
-    if not np.isfinite(j) or j <= 0:
-        raise NoGapError(f"gap fit gave a non-physical J1 = {j:.4g}")
+        return _method_gap_only(window, rows, drive, model, gap_only)
+    if method == "acceleration":
+        return _method_acceleration(window, rows, drive)
+    if method == "anchored":
+        return _method_anchored(window, rows, drive)
+    if method == "angle":
+        return _method_angle(window, rows, drive, model)
+    if method == "speed":
+        return _method_speed(window, rows, drive)
+    raise ValueError(f"method: expected one of {', '.join(FITS)} (or None: the model choice), got {method!r}")
+
+
+def _own_terms(f: FitState, method: str) -> None:
+    """``f``'s std_error_terms made to account for its standard error in quadrature (``f`` changed in place)."""
+    free_extra, se, model_error = f.extra, f.se, f.model_error
     if "std_error_terms" in free_extra:
         # the angle fits: gap_free raises se to FREE_REL_SE_FLOOR J1 where the data would allow less; that floor
         # is a part too (the only way se exceeds its parts there)
@@ -720,64 +378,12 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
         if model_error:
             own["change_points" if method == "gap_only" else "model_form"] = float(model_error)
         free_extra["std_error_terms"] = tuple(own.items())
-    k = int(entry_uncertainty_samples)
-    entry_error = 0.0
-    if k > 0:
-        moved = []
-        for e in (entry_index - k, entry_index + k):
-            try:
-                moved.append(_estimate_inertia(window, e, backlash_width_m, wheel_radius_m, sample_period_s, method,
-                                               bearing_friction_nms_per_rad, recontact_index).inertia_kgm2)
-            except NoGapError:
-                moved.append(np.inf)
-        entry_error = max(abs(x - j) for x in moved)
-        model_error = float(np.hypot(model_error, entry_error))
-        se = float(np.hypot(se, entry_error))
-        terms = dict(free_extra["std_error_terms"])
-        terms["change_points"] = float(np.hypot(terms.get("change_points", 0.0), entry_error))
-        free_extra["std_error_terms"] = tuple(terms.items())
-    # the bounded constant torques the speed and a1 fits do not model: the Coulomb band (F in [0, F_max], a
-    # uniform term of half-width F_max) and the torque offset (|T| <= torque_offset_nm, uniform)
-    bounded = [(name, v) for name, v in (("coulomb_band", model.coulomb_friction_max_nm),
-                                         ("torque_offset", model.torque_offset_nm)) if v]
-    if method == "speed" and bounded:
-        # a constant torque F is F t in ∫m_el dt, which moves J1 by J1 F (r_κ · t) (r_κ: the least-squares row
-        # of 1/J1)
-        tq = np.asarray(window["m_el"], float)[start:end]
-        yint = np.concatenate([[0.0], np.cumsum(0.5 * (tq[1:] + tq[:-1])) * sample_period_s])
-        A = np.column_stack([np.ones(n), yint, tq])
-        row = np.linalg.pinv(A)[1]
-        sens = j * abs(float(row @ (np.arange(n) * sample_period_s)))
-        terms = dict(free_extra.get("std_error_terms", ()))
-        for name, v in bounded:
-            terms[name] = sens * v / np.sqrt(3.0)
-            se = float(np.hypot(se, terms[name]))
-        free_extra["std_error_terms"] = tuple(terms.items())
-    if method in ("gap_only", "acceleration", "anchored") and (bounded or model.torque_lag_s) and "a1" in window:
-        # the a1 fits: a constant torque F moves J1 (the slope of the torque on dω1/dt) by F Σx/Σx² over the
-        # fitted samples
-        x = np.asarray(window["a1"], float)[fit_span[0]:fit_span[1]] / wheel_radius_m
-        terms = dict(free_extra.get("std_error_terms", ()))
-        mt = (np.gradient(_net_torque(window, bearing_friction_nms_per_rad), sample_period_s)[fit_span[0]:fit_span[1]]
-              if model.torque_lag_s else None)
-        if method == "gap_only" and bounded:
-            j, se, res, dof, terms, note, trend = _gap_only_constant(fit, mf, (x, mt), model, bounded, (j, se, res, dof),
-                                                                     terms, entry_error)
-            if note:
-                free_extra["friction"] = note
-                free_extra["trend_fit"] = _trend_finished(*trend, model)
-                model_error = float(terms.get("change_points", 0.0))
-        else:
-            sens = abs(float(x.sum())) / max(float(x @ x), 1e-300)
-            for name, v in bounded:
-                terms[name] = sens * v / np.sqrt(3.0)
-                se = float(np.hypot(se, terms[name]))
-            for name, v in _shape_terms(x, mt, model).items():
-                terms[name] = v
-                se = float(np.hypot(se, v))
-        free_extra["std_error_terms"] = tuple(terms.items())
-    # every fit: the model's own error as a floor, then the drive's torque accuracy (a scale error of m_el
-    # is one of J1: all fits of m_el share it)
+
+
+def _floored(f: FitState, model: GapModel) -> None:
+    """Every fit: the model's own error as a floor, then the drive's torque accuracy (a scale error of m_el is one of
+    J1: all fits of m_el share it); ``f`` changed in place."""
+    j, se, free_extra = f.j, f.se, f.extra
     if float(se) < FREE_REL_SE_FLOOR * j:
         terms = dict(free_extra.get("std_error_terms", ()))
         terms["model_floor"] = float(np.sqrt((FREE_REL_SE_FLOOR * j) ** 2 - float(se) ** 2))
@@ -788,399 +394,7 @@ def _estimate_inertia(window: dict, entry_index: int, backlash_width_m: float, w
         terms["torque_accuracy"] = j * model.torque_rel_se()
         free_extra["std_error_terms"] = tuple(terms.items())
         se = float(np.hypot(se, j * model.torque_rel_se()))
-    if not se <= MAX_RELATIVE_STD_ERROR * j:
-        raise NoGapError(f"gap fit undetermined: J1 = {j:.4g} kg m^2 with standard error {se:.3g} kg m^2 "
-                         f"(> {MAX_RELATIVE_STD_ERROR:.0%}); the window shows no free acceleration of the motor")
-    half = _t975(max(int(dof), 1)) * se
-    # the residual's RMS: np.mean's own reduction (np.add.reduce, divided by the count)
-    rms = float(np.sqrt(np.add.reduce(res ** 2) / res.size))
-    return GapEstimate(j, se, (j - half, j + half), rms, start, end, method, how,
-                       float(model_error), choice, int(fit_span[0]), int(fit_span[1]), **free_extra)
-
-
-#: Memo of the angle fits (:func:`_angle_fits`), :func:`_joint_fit` and :func:`pre_entry_steady` while
-#: :func:`fit_cache` is active (None: off, the default).
-_FIT_CACHE: dict | None = None
-
-
-@contextmanager
-def fit_cache():
-    """Memoise the angle fits (free angle fit and steady-entry fit), the joint a1 fit and the pre-entry steadiness
-    test by their inputs while active.
-
-    An evaluation runs several channel sets on one window: the cross-checked model choice ('auto' with a1 and
-    alpha1) and the 'angle' fit over the same alpha1, torque and gap interval do the same angle fits, and the a1
-    fits of two channel sets (the interval from the angles and from the a1 signature) test the same pre-entry
-    torque and often fit the same interval; with the cache the second is a lookup (the same
-    inputs give the same numbers: pure functions of them).  Off by
-    default (the runtime path sees each window once); the research evaluation turns it on around a sweep."""
-    global _FIT_CACHE
-    outer = _FIT_CACHE
-    if outer is None:
-        _FIT_CACHE = {}
-    try:
-        yield
-    finally:
-        if outer is None:
-            _FIT_CACHE = None
-
-
-def _memoised(fn):
-    """``fn`` memoised by its arguments' values while :func:`fit_cache` is active (arrays by their bytes)."""
-    def key_of(v):
-        if isinstance(v, np.ndarray):
-            return v.dtype.str, v.shape, v.tobytes()
-        if isinstance(v, dict):
-            return tuple((k, key_of(x)) for k, x in sorted(v.items()))
-        if isinstance(v, (tuple, list)):
-            return type(v).__name__, tuple(key_of(x) for x in v)
-        return v
-
-    @wraps(fn)
-    def wrapper(*args, **kwargs):
-        if _FIT_CACHE is None:
-            return fn(*args, **kwargs)
-        key = (fn.__name__, tuple(key_of(a) for a in args), tuple((k, key_of(v)) for k, v in sorted(kwargs.items())))
-        try:
-            return _FIT_CACHE[key]
-        except KeyError:
-            out = _FIT_CACHE[key] = fn(*args, **kwargs)
-            return out
-    return wrapper
-
-
-def _angle_fits(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, start: int, end: int,
-                model: GapModel, bounds: tuple | None = None) -> tuple:
-    """(free angle fit, steady-entry fit) of the 'angle' method: :func:`free_angle_fit` (NoGapError when it
-    fails; inside the load side's free ``bounds``, gap_load.py) and :func:`_anchored_angle` (a fresh dict: the
-    caller pops from it); memoised under :func:`fit_cache`."""
-    key = None
-    if _FIT_CACHE is not None:
-        key = ("angle_fits", alpha1.tobytes(), torque.tobytes(), float(sample_period_s), int(start), int(end), model,
-               bounds)
-        hit = _FIT_CACHE.get(key)
-        if hit is not None:
-            if isinstance(hit, str):
-                raise NoGapError(hit)
-            return hit[0], dict(hit[1])
-    try:
-        ff = free_angle_fit(alpha1, torque, sample_period_s, start, end, model, bounds=bounds)
-    except FreeFitError as exc:
-        if key is not None:
-            _FIT_CACHE[key] = str(exc)
-        raise NoGapError(str(exc)) from None
-    anchored = _anchored_angle(alpha1, torque, ff, (start, end), sample_period_s, model)
-    if key is not None:
-        _FIT_CACHE[key] = (ff, anchored)
-    return ff, dict(anchored)
-
-
-def _angle_trend_refit(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, ff: dict) -> tuple:
-    """The trend's J1 (GapEstimate.trend_fit) of a free angle fit ``ff`` under a Coulomb band: its rows [start, end)
-    fitted with F_c = 0 (the design [1, t, Φ] of gap_free.free_angle_fit without the Coulomb column, the angle not
-    moved by F_mid C: the same J1 to rounding as that function with a zero band and ``fixed``), as every other fit
-    takes it (the a1 fits, the gap-only fit through the origin, the steady-entry fit: F_c = 0 with the band as a
-    term).  The free angle fit takes F_c free or at the band's middle, whichever has the smaller standard error, and a
-    free F_c's J1 scatters from window to window; at F_c = 0 the bias, F_c through the window's shape, is a constant of
-    the drive and the same assumption as the fits a drive's other windows publish.  Its standard error and terms:
-    ``ff``'s, scaled by the ratio of the two J1 (the rows and their regressors are the same; a full refit, its terms
-    and change-point trims, cost 0.5 ms a window).  () where 1/J1 is not positive (the trend then reads ``ff``)."""
-    s, e = int(ff["start"]), int(ff["end"])
-    n = e - s
-    phi = _cumtrapz(_cumtrapz(np.asarray(torque, float)[s:e], sample_period_s), sample_period_s)
-    scale = max(float(np.abs(phi).max()), 1e-300)
-    X = np.column_stack([np.ones(n), np.arange(n) / max(n - 1, 1), phi / scale])
-    kappa = float(lapack.lstsq(X, np.asarray(alpha1, float)[s:e] - float(alpha1[s]))[2]) / scale
-    if not (kappa > 0 and np.isfinite(kappa)):
-        return ()
-    ratio = (1.0 / kappa) / float(ff["j1"])
-    return (1.0 / kappa, float(ff["se"]) * ratio,
-            tuple((k, float(v) * ratio) for k, v in ff["terms"].items()))
-
-
-def _anchored_angle(alpha1: np.ndarray, torque: np.ndarray, ff: dict, coarse: tuple, sample_period_s: float,
-                    model: GapModel) -> dict:
-    """The free angle fit's J1 with the pre-entry samples too, when the drive was steady before the entry.
-
-    A drive on line (our simulator, the paper's) turns at constant speed under a steady torque before the entry;
-    then the pre-entry samples pin ω0 and the torque level, and the first angle fit (:func:`_angle_fit`, over
-    [0, e) of the detector's ``coarse`` interval (s, e)) is several times more precise than the free fit on a short
-    gap (our simulator: 9-32 samples).  Used when the pre-entry m_el is steady (:func:`pre_entry_steady` on the
-    samples before both entries), its J1 agrees with the free fit's within CROSS_CHECK_Z combined standard errors
-    and its standard error (with a change-point term: the largest change of J1 with s or e moved in by 1 or 2) is the
-    smaller: the free fit is its check.  Returns {} and a 'choice' phrase otherwise."""
-    s, e = coarse
-    lo, hi = min(s, ff["start"]), max(s, ff["start"])
-    # durations counted at 2 kHz, in the recording's rows (stream/rate.py; unchanged at 0.5 ms)
-    k_search, k_pre, k_agree = (rate_samples(k, sample_period_s) for k in (KINK_SEARCH, KINK_PRE_SAMPLES,
-                                                                          KINK_FREE_AGREE_SAMPLES))
-    # the coupling's unloading times searched: those within the declared bound (GapModel.coupling_release_s)
-    unload = tuple(sorted({r for r in rate_samples(KINK_UNLOAD_ROWS, sample_period_s)
-                           if r * sample_period_s <= float(model.coupling_release_s) * (1 + 1e-9)})) or (0,)
-    test = pre_entry_steady(torque[:max(lo - k_search, 0)])
-    if not test.steady:
-        return {"choice": f"angle (free): {test.reason}"}
-    end = min(e, ff["end"])
-    try:
-        # its standard error only once the checks below have kept it (most steady-entry fits are refused there)
-        kf = kink_locate(alpha1, torque, sample_period_s, range(max(lo - k_search, 1), hi + k_search + 1),
-                         end, unload)
-    except (FreeFitError, np.linalg.LinAlgError) as exc:
-        return {"choice": f"angle (free): the steady-entry fit failed ({exc})"}
-    # a profile minimum on the edge of the searched rows has not located the entry: the change point may lie
-    # beyond it (the vector drive's heavy load reversal at 30 dB: the edge row, 13 samples early, J1 +29 %)
-    cand = range(max(lo - k_search, 1), hi + k_search + 1)
-    if kf["start"] in (cand[0], cand[-1]) and cand[0] > 1:
-        return {"choice": f"angle (free): the steady-entry fit's entry row {kf['start']} is on the edge of the rows "
-                          f"searched ({cand[0]}..{cand[-1]}): not located"}
-    # the steady-entry fit, the free fit and the detector must locate the same change point (a kink far from them is
-    # the steady model taking contact samples for free motion: the vector drive's heavy load reversal at 30 dB, the
-    # kink 10-15 samples early, J1 +26 … +27.5 % within ± 6 %); the kink row + R is where an unloading coupling lets go
-    sep = kf["start"] + kf["unload_rows"]
-    for what, row in (("the free fit's", ff["start"]), ("the detector's", s)):
-        if abs(sep - row) > k_agree:
-            return {"choice": f"angle (free): the steady-entry fit's entry row {sep} is "
-                              f"{abs(sep - row)} samples from {what} ({row}): not the same change point"}
-    unsteady = _unsteady_torque_at(torque, kf["start"], k_pre, k_search)
-    if unsteady:
-        return {"choice": f"angle (free): {unsteady}"}
-    # fitted once the checks above have kept the steady-entry fit (a speed controller's entry is refused there)
-    refits = _kink_refits(alpha1, torque, sample_period_s, kf, (cand[0], end), model.torque_lag_s)
-    if isinstance(refits, str):
-        return {"choice": f"angle (free): the steady-entry fit {refits}"}
-    kf = kink_terms(kf, model.coulomb_friction_max_nm, model.torque_offset_nm, model.torque_lag_s,
-                    model.encoder_error_rad)
-    j, res, dof = kf["j1"], kf["residual"], kf["dof"]
-    cp_end = max(abs(x - j) for x in refits[:2])
-    terms = dict(kf["terms"])
-    if model.torque_lag_s:
-        # the lag's relocated spread, a uniform term like the linear one it bounds from below (kink_lag_spread)
-        terms["torque_lag"] = max(terms.get("torque_lag", 0.0), max(abs(x - j) for x in refits[2:]) / np.sqrt(3.0))
-    terms["change_points"] = float(np.hypot(terms["change_points"], cp_end))
-    model_error = terms["change_points"]
-    se = max(float(np.sqrt(sum(v * v for v in terms.values()))), FREE_REL_SE_FLOOR * j)
-    z = abs(j - ff["j1"]) / max(float(np.hypot(se, ff["se_stat"])), 1e-300)
-    if z > CROSS_CHECK_Z:
-        return {"choice": f"angle (free): the steady-entry fit (J1 = {j:.4g}) disagrees by {z:.1f} standard errors"}
-    if se >= ff["se_stat"]:
-        return {"choice": f"angle (free): the steady-entry fit is no more precise (J1 = {j:.4g} ± {se:.2g})"}
-    # Hausman's test of the steady-entry premise: where it holds, both fits estimate J1 and the steady-entry fit is
-    # the more precise, so their difference has the variance se_free^2 - se^2 (smaller than the combined one above);
-    # a standard error on its floor (FREE_REL_SE_FLOOR: noise-free windows) is no variance, and there is no test
-    floors = (se <= FREE_REL_SE_FLOOR * j * (1 + 1e-9), ff["se_stat"] <= FREE_REL_SE_FLOOR * ff["j1"] * (1 + 1e-9))
-    z_h = 0.0 if any(floors) else abs(j - ff["j1"]) / float(np.sqrt(ff["se_stat"] ** 2 - se ** 2))
-    if z_h > KINK_PREMISE_Z:
-        return {"choice": f"angle (free): the steady-entry fit (J1 = {j:.4g}) differs from the free fit by {z_h:.1f} "
-                          f"standard errors of their difference (> {KINK_PREMISE_Z:g}): its steady entry is not the data's"}
-    unloads = f" (the coupling unloading over {kf['unload_rows']} rows from it)" if kf["unload_rows"] else ""
-    return {"choice": f"{STEADY_ENTRY_CHOICE}: the entry a change point of a steady drive at row {kf['start']}{unloads}, "
-                      f"agrees with the free fit (J1 = {ff['j1']:.4g}, {z:.1f} standard errors)", "j1": j, "se": se,
-            "res": res, "dof": dof, "model_error": model_error, "terms": terms, "span": (kf["start"], kf["end"])}
-
-
-def _kink_refits(alpha1: np.ndarray, torque: np.ndarray, sample_period_s: float, kf: dict, rows: tuple,
-                 torque_lag_s: float):
-    """The steady-entry fit's refits (:func:`kink_best_j1`, one stacked solve) for its terms: J1 with the re-contact
-    row moved in by 1 and 2 (contact after it is not modelled) and, under a declared lag (which moves the kink too),
-    with the torque moved by ± the lag and the entry located again near the plausible pairs (kink_lag_variants; over
-    ``rows`` = (the first candidate row, the end row)).  A list of J1 (the trims', then the lag's), or why not (str)."""
-    first, end = rows
-    variants = [(torque, kf["plausible"], end - k) for k in (1, 2)]
-    if torque_lag_s:
-        d_rows = rate_samples(KINK_LAG_ROWS, sample_period_s)
-        near = sorted({(s_ + d, r_) for s_, r_ in kf["plausible"] for d in range(-d_rows, d_rows + 1) if s_ + d >= first})
-        variants += kink_lag_variants(torque, sample_period_s, near, end, torque_lag_s)
-    try:
-        refits = kink_best_j1(alpha1, sample_period_s, variants)
-    except np.linalg.LinAlgError as exc:
-        return f"failed ({exc})"
-    failed = [x for x in refits if isinstance(x, str)]
-    if failed:
-        lagged = not any(isinstance(x, str) for x in refits[:2])
-        return f"{'fails with the torque moved by the declared lag' if lagged else 'failed'} ({failed[0]})"
-    return refits
-
-
-def _unsteady_torque_at(torque: np.ndarray, sb: int, k_pre: int, k_search: int) -> str:
-    """Why m_el is not a steady drive's at the steady-entry fit's entry row ``sb`` ('' when it is): it must be steady
-    right up to it (a speed controller acting just before it is not: its last ``k_search`` samples within 5 robust
-    noise levels, or 1e-3 of the level, of the steady stretch's median) and stay near its level through the first
-    samples after it (a machine on line: the flux is continuous; a speed controller reacting to an event moves it at
-    once, and the kink is then the event)."""
-    ref = torque[max(0, sb - k_pre):sb - k_search]
-    last = torque[sb - k_search:sb]
-    level = float(_median(np.asarray(ref, float)))
-    tol = max(5.0 * _robust_noise(ref), 1e-3 * abs(level))
-    if float(np.abs(last - level).max()) > tol:
-        return (f"the torque changes in the {k_search} samples before the entry row {sb} "
-                f"(by {float(np.max(np.abs(last - level))):.3g} N m): not a steady drive's entry")
-    first = torque[sb:sb + k_search]
-    if float(np.abs(first - level).max()) > max(tol, KINK_TORQUE_AFTER_REL * abs(level)):
-        return (f"the torque moves by {float(np.max(np.abs(first - level))):.3g} N m in the {k_search} samples after "
-                f"the entry row {sb}: not a steady drive's entry")
-    return ""
-
-
-#: Steady-entry fit: its entry row within this many samples (at 2 kHz; converted by stream/rate.py) of the free fit's
-#: and of the detector's (chosen on our simulator's zoo windows with the detector's entry moved by -3..+3 samples:
-#: |difference| <= 4 and <= 3; tested on the vector drive: its heavy load reversal's wrong kinks lie 13-15 and 10-16
-#: samples off)
-KINK_FREE_AGREE_SAMPLES = 6
-#: The steady-entry fit is taken only where its difference from the free fit is within this many standard errors of
-#: that difference (Hausman's test of its premise, :func:`_anchored_angle`): the two-sided 5 % point of the normal,
-#: not tuned (the DOL drive with the detector's entry 6-12 samples early: the steady-entry fit +4 … +10 %, its
-#: interval missing the truth, 2.0-2.8 such standard errors from the free fit).
-KINK_PREMISE_Z = 1.96
-#: Steady-entry fit: the torque may move by at most this fraction of its level in the first samples after the
-#: entry (our simulator: 0.3 %; the stress bench's speed step: 100 % within 2 samples).
-KINK_TORQUE_AFTER_REL = 0.02
-
-
-#: The model choice's phrase of an angle fit that took the steady-entry fit (:func:`_anchored_angle`).
-STEADY_ENTRY_CHOICE = "angle (steady entry)"
-#: With a1 beside the encoder: the steady-entry fit's entry is checked by the motor equation over this many rows after
-#: it -- their mean torque residual J1 a1/r - (m_el - b1 w1) within STEADY_ENTRY_A1_Z of its noise (_robust_noise of the
-#: pre-entry rows) plus the declared torque offset and Coulomb bands and the torque accuracy.  A slowly
-#: unloading contact, which m_el and the angle cannot show, leaves its torque there: the vector drive with a light
-#: load (zoo_variants, J2 x 0.3), heavy load reversal at 30 dB: -86 N m in the first 4 rows (z = 32), the fit's entry 8
-#: samples early and J1 +9.8 % published as another class.  No other window of the zoo or the variants took the
-#: steady-entry fit with a1 (chosen on that one; the rule cannot change any other published window of either).  The
-#: fit's own J1 uncertainty is part of the allowance (our simulator's noise-free entries: up to 2.2 of it).
-STEADY_ENTRY_A1_ROWS = 4
-STEADY_ENTRY_A1_Z = 5.0
-
-
-def steady_entry_contact(window: dict, g: GapEstimate, b1: float, wheel_radius_m: float, model: GapModel):
-    """None when a1 shows free motion right after a steady-entry fit's entry row (or there is nothing to check),
-    else the reason (one line): the motor equation leaves a contact torque there."""
-    if STEADY_ENTRY_CHOICE not in (g.model_choice or "") or "a1" not in window or g.fit_start < 2:
-        return None
-    s, k = int(g.fit_start), STEADY_ENTRY_A1_ROWS
-    net = _net_torque(window, b1)
-    res = g.inertia_kgm2 * np.asarray(window["a1"], float) / wheel_radius_m - net
-    pre = res[max(0, s - 200):s]
-    if pre.size < 8 or s + k > res.size:
-        return None
-    noise = _robust_noise(pre)
-    mean = float(np.mean(res[s:s + k]))
-    level = float(np.mean(np.abs(net[s:s + k])))
-    # the fit's own J1 uncertainty moves the residual by (se/J1) |net|: our simulator's noise-free steady entries
-    # leave up to 2.2 of those (jident evaluate's encoder sweep, 336 windows), a contact still loaded far more
-    allowed = (STEADY_ENTRY_A1_Z * (noise / np.sqrt(k) + g.std_error_kgm2 / g.inertia_kgm2 * level)
-               + model.torque_offset_nm + model.coulomb_friction_max_nm + model.torque_rel_se() * np.sqrt(3.0) * level)
-    if abs(mean) <= allowed:
-        return None
-    return (f"a1 contradicts the angle fit's steady entry at row {s}: the motor equation leaves {mean:.3g} N m in its "
-            f"first {k} rows (> {allowed:.3g} N m: noise and the declared torque bands), a contact still loaded")
-
-
-#: With a1 beside the encoder: where the angle fit's change point puts the entry more than the a1 fit's own trim
-#: (:func:`gap_only_max_trim`) after the a1 fit's first row, the rows between are tested by the motor equation: J1 and a
-#: constant (the friction and offset both stretches share) fitted to a1 over the angle fit's rows, the rows' mean load
-#: torque (m_el − b1 ω1 − J1 a1/r − the constant) beyond A1_ROWS_CONTACT_Z times its noise and that J1's error times the
-#: acceleration's lever, plus the torque accuracy, is a contact still loaded, and the a1 fit is made again from the
-#: angle fit's entry.  DOL d16-12 (a soft coupling's loaded rest before a slip reversal's traversal, the detector's entry
-#: 49 early): the a1 fit over 44 loaded rows gave +8.2 % outside its interval, cross-checked at 2.7 standard errors; the
-#: rows' load torque 15-25 N m against the gap's 5.  The z is the steady-entry a1 check's (STEADY_ENTRY_A1_Z, 5), not
-#: tuned.
-A1_ROWS_CONTACT_Z = STEADY_ENTRY_A1_Z
-#: Set False to leave the a1 fit on the detector's rows whatever the angle fit's change point says.
-A1_ROWS_FROM_ANGLE = True
-
-
-def a1_rows_contact(window: dict, a1_fit: GapEstimate, angle_fit: GapEstimate, b1: float, wheel_radius_m: float,
-                    model: GapModel, sample_period_s: float) -> str | None:
-    """None when the a1 fit's rows before the angle fit's change-point entry are free (or there is nothing to
-    check: the angle fit's entry within the a1 fit's own trim), else the reason (one line): the motor equation with
-    the angle fit's J1 leaves a contact torque there."""
-    s0, s1 = int(a1_fit.fit_start), int(angle_fit.fit_start)
-    e1 = min(int(angle_fit.fit_end), int(a1_fit.fit_end))
-    if not A1_ROWS_FROM_ANGLE or s1 - s0 <= gap_only_max_trim(model, sample_period_s)[0] or e1 - s1 < 8:
-        return None
-    net = _net_torque(window, b1)
-    acc = np.asarray(window["a1"], float) / wheel_radius_m
-    # J1 and a constant (friction and offset) from the a1 over the angle fit's rows, by least squares
-    design = np.column_stack([acc[s1:e1], np.ones(e1 - s1)])
-    coef, *_ = np.linalg.lstsq(design, net[s1:e1], rcond=None)
-    if not coef[0] > 0:
-        return None
-    free = net[s1:e1] - design @ coef
-    noise = float(np.sqrt(float(free @ free) / max(free.size - 2, 1)))
-    j_se = noise * float(np.sqrt(np.linalg.pinv(design.T @ design)[0, 0]))
-    diff = float(np.mean(net[s0:s1] - coef[0] * acc[s0:s1] - coef[1]))
-    k = s1 - s0
-    level = float(np.mean(np.abs(net[s0:s1])))
-    lever = abs(float(np.mean(acc[s0:s1]) - np.mean(acc[s1:e1])))
-    allowed = (A1_ROWS_CONTACT_Z * (noise * np.sqrt(1.0 / k + 1.0 / free.size) + j_se * lever)
-               + model.torque_rel_se() * np.sqrt(3.0) * level)
-    if abs(diff) <= allowed:
-        return None
-    return (f"the a1 fit's rows {s0}..{s1} before the angle fit's entry carry {diff:.3g} N m more load than the gap's "
-            f"(> {allowed:.3g} N m: noise, the J1 of a1 over the angle fit's rows and the torque accuracy), a contact "
-            f"still loaded")
-
-
-#: Cross-check of two fits of one window (a1 and the motor angle): they disagree when their J1 differ by more
-#: than this many combined standard errors (without the torque-accuracy term, which both share).
-CROSS_CHECK_Z = 3.0
-
-
-def _stat_se(g: GapEstimate, model: GapModel) -> float:
-    return float(np.sqrt(max(g.std_error_kgm2 ** 2 - (g.inertia_kgm2 * model.torque_rel_se()) ** 2, 0.0)))
-
-
-#: The bounded terms of the torque both fits of a window read (a constant torque beside m_el: friction, the
-#: estimate's offset; the estimate's lag): one such error moves both J1 the same way (the same m_el over overlapping
-#: rows), so their difference by the difference of the two terms, not by their sum in quadrature.  Taken in
-#: quadrature, a friction band of 3 % of M_b (tried as the typical drive's in stop 31) and the typical 1 ms lag let the
-#: second drive's a1 fit, 25 % off, pass at 2.9 standard errors (scripts/golden.py, second_drive_signals: the a1 fit's
-#: lag term 0.049, the angle fit's 0.046 kg m^2); as their difference, 4.5: refused.
-COMMON_TORQUE_TERMS = ("coulomb_band", "viscous_band", "torque_offset", "torque_lag", "torque_lag_seen")
-
-
-def _difference_se(a: GapEstimate, b: GapEstimate, model: GapModel) -> float:
-    """The standard error of J1_a − J1_b of two fits of one window: each without the torque-accuracy term (both
-    share it), the :data:`COMMON_TORQUE_TERMS` as their difference, the other terms in quadrature."""
-    ta, tb = dict(a.std_error_terms), dict(b.std_error_terms)
-    common = [k for k in COMMON_TORQUE_TERMS if k in ta and k in tb]
-    var = _stat_se(a, model) ** 2 + _stat_se(b, model) ** 2
-    var -= sum(float(ta[k]) ** 2 + float(tb[k]) ** 2 for k in common)
-    var += sum((float(ta[k]) - float(tb[k])) ** 2 for k in common)
-    return float(np.sqrt(max(var, 0.0)))
-
-
-#: The parts of a gap J1's standard error (``GapEstimate.std_error_terms``) that are constants of the drive, not of
-#: the window: the torque estimate's scale error ('torque_accuracy'), its bounded offset ('torque_offset') and lag
-#: ('torque_lag', and 'torque_lag_seen': the lag the angle shows beyond the declared one), and the Coulomb band
-#: ('coulomb_band': the drive's friction).  Each moves the drive's J1 estimates alike (the same window shape, the same
-#: bias) and cancels in J1 relative to the drive's own baseline (the trend: trend_status).
-DRIVE_CONSTANT_TERMS = ("torque_accuracy", "torque_offset", "torque_lag", "torque_lag_seen", "coulomb_band")
-
-
-def within_drive_se(se: float, std_error_terms) -> float:
-    """``se`` (kg m^2) without the :data:`DRIVE_CONSTANT_TERMS` among ``std_error_terms`` ((term, kg m^2), ...), in
-    quadrature: what scatters from window to window of one drive; ``se`` itself where they are all of it."""
-    terms = dict(std_error_terms or ())
-    common = 0.0
-    for name in DRIVE_CONSTANT_TERMS:
-        v = terms.get(name, 0.0)
-        if v and math.isfinite(float(v)) and float(v) > 0.0:
-            common += float(v) ** 2
-    if 0.0 < common < float(se) ** 2:
-        return math.sqrt(float(se) ** 2 - common)
-    return float(se)
-
-
-def _trend_choice(best: GapEstimate, other: GapEstimate) -> GapEstimate:
-    """``best`` (the cross-check's published fit) with the trend's fit (GapEstimate.trend_fit) the other's where that
-    one's standard error without the drive's constant terms (:func:`within_drive_se`) is the smaller: the a1 fit's
-    Coulomb band term (first order, F Σx/Σx²) is larger than the angle fit's and can make it lose the publication,
-    while its J1 scatters less from window to window."""
-    mine = best.trend_fit or (best.inertia_kgm2, best.std_error_kgm2, best.std_error_terms)
-    theirs = other.trend_fit or (other.inertia_kgm2, other.std_error_kgm2, other.std_error_terms)
-    if within_drive_se(theirs[1], theirs[2]) < within_drive_se(mine[1], mine[2]):
-        return replace(best, trend_fit=tuple(theirs))
-    return best
+    f.se = se
 
 
 def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_samples: int,
@@ -1238,10 +452,10 @@ def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_sa
                                        f"({why[other]})")
     a, b = fits["a1"], fits["angle"]
     z = abs(a.inertia_kgm2 - b.inertia_kgm2) / max(_difference_se(a, b, model), 1e-300)
-    if z > CROSS_CHECK_Z:
+    if z > gap_cross.CROSS_CHECK_Z:
         raise NoGapError(f"the a1 fit ({a.method}: J1 = {a.inertia_kgm2:.4g} ± {a.std_error_kgm2:.2g} kg m^2) and "
                          f"the angle fit (J1 = {b.inertia_kgm2:.4g} ± {b.std_error_kgm2:.2g} kg m^2) disagree by "
-                         f"{z:.1f} standard errors (> {CROSS_CHECK_Z:g}): friction, a wrong gap interval or a "
+                         f"{z:.1f} standard errors (> {gap_cross.CROSS_CHECK_Z:g}): friction, a wrong gap interval or a "
                          f"lagging signal")
     best = a if a.std_error_kgm2 <= b.std_error_kgm2 else b
     other = b if best is a else a
@@ -1253,494 +467,6 @@ def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_sa
                                       f"{refit})")
 
 
-#: The speed fit's model error: J1 refitted with this many samples dropped at each end of the interval.
-SPEED_TRIM_SAMPLES = (1, 2)
-
-
-def speed_fit(omega1: np.ndarray, torque: np.ndarray, sample_period_s: float, lag: bool = False) -> tuple:
-    """(J1, standard error, residual, degrees of freedom) of the ``"speed"`` fit over the gap samples.
-
-    In the gap ω1(t_k) = ω1(t_0) + Y_k / J1 with Y_k = ∫_{t0}^{tk} m_el dt (trapezoid).  The measured speed
-    carries white noise and the integral hardly any (it averages the torque noise), so ω1 is regressed on Y:
-    ordinary least squares for (ω1(t_0), 1/J1), J1 = 1 / slope.  The model check: the residual's lag-1
-    autocorrelation rho (a load torque left in the interval, a differenced encoder's correlated error) inflates
-    the slope's variance by (1 + rho) / (1 - rho) (the AR(1) factor; rho < 0 is not credited), and the change of
-    J1 when one or two samples are dropped at each end of the interval (the larger) is added in quadrature (the
-    interval's end rows: an entry found early, a re-contact row late).
-    Regressing Y on ω1 instead (the first release) put the speed noise in the regressor: on the second drive at
-    30 dB its interval was far too narrow and 52 of 84 published J1 were more than 10 % off (docs/results.md).
-
-    ``lag`` (estimate_inertia's 'speed' fit): the drive's speed feedback lags the shaft (a filter, a
-    differenced encoder): ω1_meas(t) ≈ ω1(t − τ) ≈ ω1(t) − τ dω1/dt = ω1_0 + Y/J1 − (τ/J1) m_el, so the torque
-    itself is a third regressor and τ is fitted with J1 (issue 20: −3 … −7 % with a 0.4 ms lag unmodelled)."""
-    n = omega1.size
-    y = np.concatenate([[0.0], np.cumsum(0.5 * (torque[1:] + torque[:-1])) * sample_period_s])
-
-    def slope(w, yy, mm=None):
-        A = np.column_stack([np.ones(w.size), yy] + ([] if mm is None else [mm]))
-        coef, *_ = np.linalg.lstsq(A, w, rcond=None)
-        return coef, A
-
-    if n < 6:
-        raise NoGapError(f"speed fit: {n} gap samples, at least 6 are needed")
-    tq = np.asarray(torque, float) if lag else None
-    coef, A = slope(omega1, y, tq)
-    kappa = float(coef[1])
-    if not kappa > 0:
-        raise NoGapError(f"gap fit gave a non-physical J1 = 1/{kappa:.4g} (dω1 against ∫m_el dt)")
-    res = omega1 - A @ coef
-    dof = n - A.shape[1]
-    cov = (res @ res) / dof * np.linalg.pinv(A.T @ A) * _ar1_inflation(res)
-    j = 1.0 / kappa
-    se_stat = float(np.sqrt(cov[1, 1])) / kappa ** 2
-    model_error = 0.0
-    for k in SPEED_TRIM_SAMPLES:
-        if n - 2 * k < 6:
-            break
-        trimmed, _ = slope(omega1[k:n - k], y[k:n - k] - y[k], None if tq is None else tq[k:n - k])
-        model_error = max(model_error, abs(1.0 / trimmed[1] - j) if trimmed[1] > 0 else np.inf)
-    return j, float(np.hypot(se_stat, model_error)), res * j, dof
-
-
-@dataclass(frozen=True)
-class SteadinessTest:
-    """Whether the torque before the entry is steady (the joint fit's assumption), :func:`pre_entry_steady`.
-
-    steady : bool          use the joint fit
-    f_statistic : float    F of a quadratic in time against a constant (slope and curvature); 0 for a
-                           constant to rounding, inf for an exact non-constant quadratic
-    p_value : float        its upper tail probability (F with 2 and n - 3 degrees of freedom)
-    n_samples : int        pre-entry samples tested
-    reason : str           why not steady ('' when steady)
-    """
-
-    steady: bool
-    f_statistic: float
-    p_value: float
-    n_samples: int
-    reason: str = ""
-
-    def describe(self) -> str:
-        """One phrase for GapEstimate.model_choice and the status."""
-        if self.steady:
-            return (f"acceleration: pre-entry m_el steady (F = {self.f_statistic:.3g}, p = {self.p_value:.3g} over "
-                    f"{self.n_samples} samples)")
-        return f"gap_only: {self.reason}"
-
-
-@lru_cache(maxsize=16)
-def _steady_design(n: int) -> np.ndarray:
-    """The steadiness test's design (1, t, t²), t from -1 to 1 over n samples (read-only: shared by every call; 16
-    lengths kept, 24 bytes a sample each: < 1 MB for windows of 2000 samples)."""
-    tt = np.linspace(-1.0, 1.0, n)
-    A = np.column_stack([np.ones(n), tt, tt * tt])
-    A.flags.writeable = False
-    return A
-
-
-@_memoised
-def pre_entry_steady(m_el_pre, p_value: float = STEADY_P_VALUE) -> SteadinessTest:
-    """Test the joint fit's assumption on the pre-entry m_el samples: a steady torque, m_el = m0 + white
-    noise.  Regress m_el on (1, t, t^2); not steady when the slope and curvature explain more than the noise
-    would (F test with 2 and n - 3 degrees of freedom, p < ``p_value``) and move it by more than
-    STEADY_REL_TOL of its level (so a noise-free window, with no noise to compare with, is steady when
-    its trend stays below that).  Fewer than 6 samples:
-    not steady (untestable, so the joint fit's anchoring is not used)."""
-    x = np.asarray(m_el_pre, float)
-    n = x.size
-    if n < 6:
-        return SteadinessTest(False, np.nan, np.nan, n, f"{n} pre-entry samples, too few to test a steady torque")
-    scale = max(float(np.maximum.reduce(np.abs(x), axis=None)), 1e-300)      # np.max's reduction
-    A = _steady_design(n)
-    coef = lapack.lstsq(A, x)
-    # np.sum and np.mean's own reductions (np.add.reduce over the array; the mean divided by the count)
-    rss0 = float(np.add.reduce((x - np.add.reduce(x) / n) ** 2))
-    rss2 = float(np.add.reduce((x - A @ coef) ** 2))
-    if rss2 <= (1e-12 * scale) ** 2 * n:               # an exact polynomial, no noise to compare with
-        f, p = (0.0, 1.0) if rss0 <= (1e-12 * scale) ** 2 * n else (np.inf, 0.0)
-    else:
-        f = max((rss0 - rss2) / 2.0 / (rss2 / (n - 3)), 0.0)
-        p = f_survival(f, 2, n - 3)
-    trend = A[:, 1:] @ coef[1:]
-    # np.ptp's reductions: slope and curvature move it by next to nothing
-    if np.maximum.reduce(trend, axis=None) - np.minimum.reduce(trend, axis=None) <= STEADY_REL_TOL * scale:
-        return SteadinessTest(True, float(f), p, n)
-    if p < p_value:
-        return SteadinessTest(False, float(f), p, n,
-                              f"pre-entry m_el not steady: slope and curvature over {n} samples, F = {f:.3g}, "
-                              f"p = {p:.2g} < {p_value:g} (range {np.ptp(x):.4g} N m)")
-    return SteadinessTest(True, float(f), p, n)
-
-
-def _robust_noise(*segments) -> float:
-    """White-noise standard deviation from the second differences of the segments (1.4826 MAD / sqrt 6):
-    blind to a smooth signal and to a few samples of a transient."""
-    d2 = np.concatenate([_diff2(np.asarray(x, float)) for x in segments if len(x) >= 3] or [np.zeros(0)])
-    if d2.size < 3:
-        return 0.0
-    return float(1.4826 * _median(np.abs(d2 - _median(d2))) / np.sqrt(6.0))
-
-
-def _origin_slope(y: np.ndarray, x: np.ndarray, sy: float, sx: float) -> float:
-    """Slope J of y = J x through the origin with errors in both variables (Deming regression with the
-    error-variance ratio (sy/sx)^2); ordinary least squares of y on x when x is exact (sx = 0)."""
-    sxx, syy, sxy = float(x @ x), float(y @ y), float(x @ y)
-    if not sxy:
-        return np.nan
-    if not sx > 0:
-        return sxy / sxx
-    if not sy > 0:
-        return syy / sxy
-    d = (sy / sx) ** 2
-    q = syy - d * sxx
-    # The maximum-likelihood root: the numerator is positive, so the slope has the sign of x . y (an
-    # anti-correlated gap gives a negative J1, which gap_only_fit refuses as non-physical).
-    return (q + np.sqrt(q * q + 4.0 * d * sxy * sxy)) / (2.0 * sxy)
-
-
-def _nonpositive_slope(j: float, torque: np.ndarray, acc: np.ndarray) -> str:
-    """The reason of a 'gap_only' J1 at or below zero: "gap fit undetermined" (resolution-limited) when the torque
-    and the acceleration over the fitted rows are not correlated beyond NONPHYSICAL_Z (the t statistic of their
-    correlation through the origin), else "non-physical" with what to check."""
-    y, x = np.asarray(torque, float), np.asarray(acc, float)
-    n = y.size
-    sxx, syy, sxy = float(x @ x), float(y @ y), float(x @ y)
-    r = sxy / np.sqrt(sxx * syy) if sxx > 0 and syy > 0 else 0.0
-    t = r * np.sqrt(max(n - 1, 1)) / np.sqrt(max(1.0 - r * r, 1e-12))
-    if math.isfinite(t) and t >= -NONPHYSICAL_Z:
-        return (f"gap fit undetermined: m_el and a1 are not correlated over the gap's {n} rows (t = {t:.2g}): the "
-                f"gap's torque does not accelerate the motor measurably")
-    return (f"gap fit gave a non-physical J1 = {j:.4g} (m_el against a1 over the gap: they are anti-correlated, "
-            f"t = {t:.2g}; check the sign of m_el against a1 and the joint names, or a torque estimate smoothed or late "
-            f"beyond torque_lag_max_s)")
-
-
-def _a1_contact_rows(window: dict, start: int, end: int, wheel_radius_m: float, b1: float, model: GapModel,
-                     sample_period_s: float) -> tuple:
-    """(why the joint ('acceleration') fit's premise fails at the detector's rows, or "", the 'gap_only' fit that
-    shows it, or None): the motor equation
-    m_el − b1 ω1 = J1 a1/r (the 'gap_only' fit's in-zone trim) leaves more than GAP_ONLY_MAX_TRIM rows at an end of
-    [start, end) out of the zone, so the detector's entry or re-contact is off by more than the joint fit, which
-    takes m_el steady up to the entry row, can hold (the DOL drive with the entry 6-8 samples early: +9 % with an
-    interval missing the truth; `zoo.entry_shift`).  Then the 'gap_only' fit over its own rows is the a1 fit."""
-    try:
-        fit = gap_only_fit(_net_torque(window, b1), np.asarray(window["a1"], float) / wheel_radius_m, start, end,
-                           max_trim=gap_only_max_trim(model, sample_period_s))
-    except NoGapError:
-        return "", None
-    early, late = fit["start"] - start, end - fit["end"]
-    cap = tuple(rate_samples(int(k), sample_period_s) for k in GAP_ONLY_MAX_TRIM)     # durations counted at 2 kHz
-    if early <= cap[0] and late <= cap[1]:
-        return "", None
-    return (f"the motor equation holds from row {fit['start']} to {fit['end']}, not from the detector's rows "
-            f"{start}..{end} (a contact still loaded at an end): no steady entry at the detector's row"), fit
-
-
-def gap_only_max_trim(model: GapModel, sample_period_s: float) -> tuple:
-    """The 'gap_only' fit's most samples dropped at (the entry end, the re-contact end): GAP_ONLY_MAX_TRIM (rows at
-    2 kHz, converted to ``sample_period_s``'s) or the change-point search span (GapModel.search_rows), whichever is
-    larger: the same rows around the detector's entry and re-contact that the angle fit searches for its change
-    points."""
-    search = model.search_rows(sample_period_s)
-    return tuple(max(rate_samples(int(k), sample_period_s), search) for k in GAP_ONLY_MAX_TRIM)
-
-
-def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
-                 trim_sigma: float = GAP_ONLY_TRIM_SIGMA, trim_rel: float = GAP_ONLY_TRIM_REL,
-                 max_trim: tuple = GAP_ONLY_MAX_TRIM) -> dict:
-    """The 'gap_only' fit (module docstring): J1 from torque[k] = J1 acc[k] over the in-zone samples.
-
-    ``torque``: m_el − b1 ω1 over the whole window, N m; ``acc``: dω1/dt (a1/r), rad/s^2; [start, end): the
-    candidate interval (the entry row to the re-contact row).  The noise levels of both come from the
-    second differences of the pre-entry and candidate samples; J1 is the Deming slope through the origin.
-    The in-zone set: J1 fitted on the candidate's core (two samples off each end), then end samples whose load
-    torque |torque − J1 acc| exceeds max(trim_sigma x its standard deviation, trim_rel x the median |torque|) are
-    dropped (at most ``max_trim`` = (entry end, re-contact end); at the entry end the load torque from the free
-    rows' level, :func:`_free_level`, and while one of the next TRIM_PERSIST rows exceeds it too), J1 refitted,
-    until the set stays the same. Returns j1, se (kg m^2; residual standard error and model error in quadrature, at
-    least GAP_ONLY_REL_SE_FLOOR j1), model_error (|J1 with one more sample off each end − J1|), residual (N m), dof,
-    start, end (the fitted samples); raises NoGapError when fewer than 3 samples remain or J1 is not positive."""
-    y_all, x_all = np.asarray(torque, float), np.asarray(acc, float)
-    sy = _robust_noise(y_all[:start], y_all[start:end])
-    sx = _robust_noise(x_all[:start], x_all[start:end])
-    if sx <= 1e-9 * float(np.abs(x_all[start:end]).max()):
-        sx = 0.0
-    if sy <= 1e-9 * float(np.abs(y_all[start:end]).max()):
-        sy = 0.0
-
-    def slope(a, b):
-        return _origin_slope(y_all[a:b], x_all[a:b], sy, sx)
-
-    core = (start + 2, end - 2) if end - start >= 10 else (start, end)
-    j = slope(*core)
-    if not math.isfinite(j) or j <= 0:
-        raise NoGapError(_nonpositive_slope(j, y_all[core[0]:core[1]], x_all[core[0]:core[1]]))
-    lo, hi = start, end
-    level = float(_median(np.abs(y_all[start:end])))
-    for it in range(4):
-        res = y_all[start:end] - j * x_all[start:end]
-        tol = max(trim_sigma * float(np.hypot(sy, j * sx)), trim_rel * level)
-        new_lo, new_hi = start, end
-        # at the entry end the load torque from the free rows' level (a friction or offset over every row is no
-        # contact), and a row within the tolerance stops the walk only with the next TRIM_PERSIST rows
-        off = np.abs(res - _free_level(res, max_trim)) > tol
-        while new_lo - start < max_trim[0] and new_hi - new_lo > 3 and off[new_lo - start:][:1 + TRIM_PERSIST].any():
-            new_lo += 1
-        while end - new_hi < max_trim[1] and new_hi - new_lo > 3 and abs(res[new_hi - 1 - start]) > tol:
-            new_hi -= 1
-        if (new_lo, new_hi) == (lo, hi) and it > 0:
-            break
-        lo, hi = new_lo, new_hi
-        j = slope(lo, hi)
-        if not math.isfinite(j) or j <= 0:
-            raise NoGapError(_nonpositive_slope(j, y_all[lo:hi], x_all[lo:hi]))
-    n = hi - lo
-    if n < 3:
-        raise NoGapError(f"gap too short: {n} samples in the zone by the dynamics, need >= 3")
-    x, y = x_all[lo:hi], y_all[lo:hi]
-    res = y - j * x
-    dof = n - 1
-    se_stat = float(np.sqrt(float(res @ res) / dof / float(x @ x)))
-    model_error = abs(slope(lo + 1, hi - 1) - j) if n >= 6 else 0.0
-    se = max(float(np.hypot(se_stat, model_error)), GAP_ONLY_REL_SE_FLOOR * j)
-    return {"j1": float(j), "se": se, "model_error": float(model_error), "residual": res, "dof": dof,
-            "start": int(lo), "end": int(hi), "noise": (sy, sx)}
-
-
-def _free_level(load: np.ndarray, max_trim: tuple) -> float:
-    """The load torque the 'gap_only' fit leaves where the motor is free: the median of ``load`` (m_el − b1 ω1 −
-    J1 a1/r over the candidate rows) beyond the rows its trim may drop (the friction and offset it does not model;
-    0 when no row is left)."""
-    mid = load[max_trim[0]:load.size - max_trim[1]]
-    return float(_median(mid)) if mid.size else 0.0
-
-
-def _constant_fit(y_all: np.ndarray, x_all: np.ndarray, lo: int, hi: int, sy: float, sx: float) -> dict | None:
-    """The 'gap_only' fit with a constant torque F fitted beside J1: torque = J1 acc + F over rows [lo, hi) (the
-    motor's Coulomb friction and the torque estimate's offset together; issue 20 item 3: friction fitted where the
-    torque varies enough to separate it from J1).  The Deming slope of the centred samples; se from the residual
-    with two parameters, and the model error as in :func:`gap_only_fit` (one more sample off each end).  None when
-    fewer than 6 samples or J1 is not positive."""
-    def fit(a, b):
-        x, y = x_all[a:b], y_all[a:b]
-        xc, yc = x - x.mean(), y - y.mean()
-        j = _origin_slope(yc, xc, sy, sx)
-        return j, float(y.mean() - j * x.mean()), y - j * x - float(y.mean() - j * x.mean()), float(xc @ xc)
-    if hi - lo < 6:
-        return None
-    j, f, res, sxx = fit(lo, hi)
-    if not (math.isfinite(j) and j > 0 and sxx > 0):
-        return None
-    j_in = fit(lo + 1, hi - 1)[0]
-    se_stat = float(np.sqrt(float(res @ res) / (hi - lo - 2) / sxx))
-    model_error = abs(j_in - j) if math.isfinite(j_in) else np.inf
-    return {"j1": float(j), "constant_nm": f, "se": float(np.hypot(se_stat, model_error)), "se_stat": se_stat,
-            "model_error": float(model_error), "residual": res, "dof": hi - lo - 2}
-
-
-def _torque_powers(n_gap: int, linear_term: bool = False) -> tuple:
-    """Powers of τ in the gap torque model m0 + Σ c_p τ^p shared by the 'acceleration' and 'angle' fits:
-    (2, 3), (2,) for gaps shorter than GAP_CUBIC_MIN samples, with 1 in front when ``linear_term``."""
-    powers = (2, 3) if n_gap >= GAP_CUBIC_MIN else (2,)
-    return (1,) + powers if linear_term else powers
-
-
-#: Floor of the joint fit's noise levels, relative to the channel's largest value: keeps a noise-free channel's
-#: weight finite and the normal equations conditioned (1e-9 let an exact a1 outweigh a noisy m_el by 1e15, below
-#: the m_el rows' round-off: kappa then stayed at its starting value, 1.5 % off; no accelerometer or torque
-#: estimate is better than 1 ppm of its reading)
-JOINT_NOISE_FLOOR_REL = 1e-6
-
-
-@lru_cache(maxsize=64)
-def _joint_design(n: int, linear_term: bool) -> np.ndarray:
-    """The joint fit's gap torque model's columns, 1 and τ^p (τ = k/n) over n gap samples (read-only: shared)."""
-    tau = np.arange(n) / n
-    G = np.column_stack([np.ones(n)] + [tau ** q for q in _torque_powers(n, linear_term)])
-    G.flags.writeable = False
-    return G
-
-
-@lru_cache(maxsize=64)
-def _joint_constants(n: int, linear_term: bool) -> tuple:
-    """The joint fit's constant blocks for n gap samples: e1 (the m0 coordinate), e1 e1ᵀ and GᵀG (read-only)."""
-    G = _joint_design(n, linear_term)
-    p = G.shape[1]
-    e1 = np.zeros(p)
-    e1[0] = 1.0
-    out = (e1, np.outer(e1, e1), G.T @ G)
-    for a in out:
-        a.flags.writeable = False
-    return out
-
-
-def _std_ddof1(x: np.ndarray) -> np.float64:
-    """``np.std(x, ddof=1)`` of a 1-D float array, bit for bit: numpy's own steps (the mean as the sum over the count,
-    the squared deviations' sum over n - 1, its square root) without its generic-axis set-up (most of its cost on the
-    joint fit's pre-entry samples)."""
-    n = x.size
-    d = x - np.add.reduce(x, axis=None, keepdims=True) / n
-    np.multiply(d, d, out=d)
-    return np.sqrt(np.add.reduce(d, axis=None) / max(n - 1, 0))
-
-
-@_memoised
-def _joint_fit(m_el: np.ndarray, a1: np.ndarray, start: int, end: int, friction=None,
-               linear_term: bool = False, warm: dict | None = None, kappa_only: bool = False) -> dict:
-    """Weighted joint least squares of m_el (pre-entry and gap) and a1 (gap); see the module docstring.
-
-    Parameters: kappa = r/J1 and beta = (m0, c_1.., c_q) of m_hat(τ) = m0 + Σ c_i τ^p_i,
-    τ = (k - start)/n over the n gap samples, powers (2, 3) ((2,) for gaps shorter than
-    GAP_CUBIC_MIN), with a linear term added when ``linear_term``.  Model:
-    m_el[k] = m0 (k < start), m_el[k] = m_hat (gap), a1[k] = kappa (m_hat - friction[k]) (gap).
-    Returns kappa, its standard error (sandwich covariance with per-channel residual
-    variances), the a1 residual over the gap, the degrees of freedom and the noise levels.
-    ``warm``: the result of the fit without the linear term, to start from (and reuse its
-    noise levels).  ``kappa_only``: {"kappa": ...} alone (the model-error fit's use: its residuals and covariance
-    are not computed).
-    """
-    n = end - start
-    pre = m_el[:start]
-    mg, ag = m_el[start:end], a1[start:end]
-    fr = np.zeros(n) if friction is None else np.asarray(friction, float)
-    G = _joint_design(n, linear_term)
-    p = G.shape[1]
-    # noise levels: pre-entry steady state (m_el = m0, a1 = 0); fall back on the gap's
-    # own m_el-only fit when there are too few pre-entry samples.  Floors keep noise-free
-    # windows finite (then both channels weigh by their size).
-    if warm is not None:
-        sm, sa = warm["noise"]
-    elif pre.size >= 5:
-        sm = float(_std_ddof1(pre))
-        sa = float(_std_ddof1(a1[:start]))
-    else:
-        cm, *_ = np.linalg.lstsq(G, mg, rcond=None)
-        sm = float(np.sqrt(np.sum((mg - G @ cm) ** 2) / max(n - p, 1)))
-        sa = sm * float(np.abs(ag).mean() / max(np.abs(mg).mean(), 1e-300))
-    sm = max(sm, JOINT_NOISE_FLOOR_REL * float(np.abs(mg).max()), 1e-300)
-    sa = max(sa, JOINT_NOISE_FLOOR_REL * float(np.abs(ag).max()), 1e-300)
-    # normal-equation form: every block reduces to p x p sums (the pre-entry block to its count and sum), so an
-    # iteration costs no n-length work.  Whitened model: pre m_el = m0, gap m_el = G beta (weight 1/sm^2);
-    # gap a1 = kappa (G beta - fr) (weight 1/sa^2).
-    na = pre.size
-    wm, wa = 1.0 / sm ** 2, 1.0 / sa ** 2
-    e1, e11, GG = _joint_constants(n, linear_term)
-    Gm, Ga, Gf = G.T @ mg, G.T @ ag, G.T @ fr
-    fa, ff = float(fr @ ag), float(fr @ fr)
-    s_pre = float(pre.sum())
-    Nm = wm * (na * e11 + GG)            # m_el blocks: J_m^T J_m for beta (kappa column is 0)
-    b_m = wm * (s_pre * e1 + Gm)
-    if warm is not None and linear_term:               # start from the fit without the linear term
-        kappa = warm["kappa"]
-    else:  # start: m_el alone (the pre-entry rows pin m0), then kappa through the origin (u = m_hat - friction)
-        b0 = lapack.solve(Nm, b_m)
-        kappa = float(b0 @ Ga - fa) / float(b0 @ GG @ b0 - 2.0 * b0 @ Gf + ff)
-    # the cost is quadratic in beta for a given kappa: beta(kappa) in closed form (one p x p solve), and the optimum
-    # is the root of h(kappa) = kappa - (the a1-on-u slope at beta(kappa)), found by Newton's method with a
-    # finite-difference slope (h is close to linear: 2-4 steps, 2 solves each), stopped on the step, not on h (with a
-    # nearly exact a1, h is ~1e-11 everywhere); Gauss-Newton on (kappa, beta) converged linearly (13-30 solves) and
-    # stopped unconverged after 30 iterations on the stress bench's load reversal
-
-    def profile(k: float) -> tuple:
-        b = lapack.solve(Nm + (wa * k * k) * GG, b_m + (wa * k) * (Ga + k * Gf))
-        uu_ = float(b @ GG @ b - 2.0 * float(b @ Gf) + ff)
-        return b, (k - float(b @ Ga - fa) / uu_) if uu_ > 0 else np.nan
-
-    beta, h = profile(kappa)
-    for _ in range(JOINT_FIT_MAX_ITER):
-        if not math.isfinite(h):
-            break
-        dk = 1e-4 * abs(kappa) if kappa else 1e-12
-        _, h2 = profile(kappa + dk)
-        slope = (h2 - h) / dk
-        if not math.isfinite(slope) or slope == 0.0:
-            break
-        step = -h / slope
-        kappa += step
-        beta, h = profile(kappa)
-        if abs(step) <= JOINT_FIT_TOL * abs(kappa):
-            break
-    if kappa_only:
-        return {"kappa": float(kappa)}
-    # residuals and the sandwich covariance at the solution
-    m_hat = G @ beta
-    r_a = ag - kappa * (m_hat - fr)
-    ss_m = float(np.add.reduce((pre - beta[0]) ** 2) + np.add.reduce((mg - m_hat) ** 2)) * wm    # np.sum's reduction
-    ss_a = float(r_a @ r_a) * wa
-    Gu = GG @ beta - Gf
-    uu = float(beta @ Gu - beta @ Gf + ff)
-    Fa = np.empty((p + 1, p + 1))                       # J_a^T J_a
-    Fa[0, 0] = wa * uu
-    Fa[0, 1:] = Fa[1:, 0] = wa * kappa * Gu
-    Fa[1:, 1:] = wa * kappa * kappa * GG
-    Fm = np.zeros((p + 1, p + 1))
-    Fm[1:, 1:] = Nm
-    F_inv = lapack.inv(Fa + Fm)
-    s2m = ss_m / max(na + n - p, 1)
-    s2a = ss_a / max(n - 1, 1)
-    cov = F_inv @ (s2m * Fm + s2a * Fa) @ F_inv
-    return {"kappa": float(kappa), "kappa_se": float(np.sqrt(max(cov[0, 0], 0.0))), "beta": beta,
-            "a1_residual": r_a, "dof": max(na - 1, 1) if na >= 5 else max(na + 2 * n - p - 1, 1),
-            "noise": (sm, sa)}
-
-
-def _angle_fit(alpha1: np.ndarray, m_el: np.ndarray, start: int, end: int, sample_period_s: float,
-               linear_term: bool = False):
-    """(J1, standard error, residual [rad], dof, model error) of the 'angle' fit (module docstring).
-
-    ``m_el``: the torque over [0, end) (bearing friction already taken off).  Two linear
-    least-squares steps:
-
-    1. the torque model of the joint fit, m0 before the entry and m0 + c2 τ² + c3 τ³ in
-       the gap (τ = time since the entry over the gap length; no c3 below GAP_CUBIC_MIN
-       samples; a c1 τ term too with ``linear_term``), fitted to the pre-entry and gap
-       m_el samples: the level m0 comes from all of them, and the noise of single
-       samples does not reach the double integral;
-    2. α1 against (1, t, Z) over the same samples, Z(t) the double integral of the
-       fitted torque from the entry (exact for the polynomial, 0 before the entry),
-       centred on the entry sample.
-
-    Standard error of 1/J1: the least-squares one of step 2 (noise on α1) and the effect
-    of the torque coefficients' covariance through Z, in quadrature; then the model error
-    (|J1 with the linear torque term − J1|) in quadrature, as for the joint fit; at least
-    ANGLE_REL_SE_FLOOR · J1.
-    """
-    ng = end - start
-    duration = ng * sample_period_s
-    tg = np.arange(ng) * sample_period_s
-    powers = _torque_powers(ng, linear_term)
-    G = np.zeros((end, 1 + len(powers)))      # torque model rows: [1, τ^p ...] (τ = 0 before the entry)
-    H = np.zeros((end, 1 + len(powers)))      # their double integrals from the entry
-    G[:, 0] = 1.0
-    H[start:, 0] = tg ** 2 / 2.0
-    for k, q in enumerate(powers, start=1):
-        G[start:, k] = (tg / duration) ** q
-        H[start:, k] = tg ** (q + 2) / ((q + 1) * (q + 2) * duration ** q)
-    beta, *_ = np.linalg.lstsq(G, m_el[:end], rcond=None)
-    r_m = m_el[:end] - G @ beta
-    dof_m = end - G.shape[1]
-    cov_beta = float(r_m @ r_m) / max(dof_m, 1) * np.linalg.pinv(G.T @ G)
-    A = np.column_stack([np.ones(end), (np.arange(end) - start) * sample_period_s, H @ beta])
-    y = alpha1[:end] - alpha1[start]
-    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-    res = y - A @ coef
-    dof = end - 3
-    kappa = float(coef[2])     # 1/J1
-    if not kappa > 0 or dof < 1:
-        raise NoGapError(f"gap fit gave a non-physical 1/J1 = {kappa:.4g} from alpha1")
-    row = np.linalg.pinv(A)[2]
-    zrow = row @ H
-    var_kappa = float(res @ res) / dof * float(row @ row) + kappa ** 2 * float(zrow @ cov_beta @ zrow)
-    j = 1.0 / kappa
-    model_error = 0.0
-    if not linear_term:
-        j_lin = _angle_fit(alpha1, m_el, start, end, sample_period_s, linear_term=True)[0] \
-            if ng >= 4 else j
-        model_error = abs(j_lin - j)
-    se = float(np.hypot(np.sqrt(max(var_kappa, 0.0)) / kappa ** 2, model_error))
-    return j, max(se, ANGLE_REL_SE_FLOOR * j), res, max(dof_m - 3, 1), model_error
-
-
 @lru_cache(maxsize=256)
 def _t975(dof: int) -> float:
     """Student t 97.5 % quantile (cached: scipy's ppf costs ~0.3 ms a call)."""
@@ -1750,78 +476,3 @@ def _t975(dof: int) -> float:
 def nearest_class(inertia_kgm2: float, classes_kgm2) -> int:
     """Index of the J1 class nearest to a continuous estimate."""
     return int(np.argmin(np.abs(np.asarray(classes_kgm2, float) - inertia_kgm2)))
-
-
-#: Contact-torque width fit: samples after the first contact sample that it uses, and the
-#: factor by which its standard error must beat the sample bracket's to be preferred.
-CONTACT_FIT_SAMPLES = 6
-CONTACT_FIT_PREFERENCE = 3.0
-#: Relative floor of the contact fit's standard error (its model is a linear spring-damper).
-CONTACT_FIT_REL_FLOOR = 1e-3
-
-
-@dataclass(frozen=True)
-class WidthEstimate:
-    """Backlash zone width at the wheel circumference, m, with its standard uncertainty.
-
-    method: 'contact' (the clutch-torque fit after re-contact) or 'bracket' (the midpoint of
-    the relative angles of the last gap sample and the first contact sample)."""
-
-    width_m: float
-    std_m: float
-    recontact_index: int
-    method: str = "bracket"
-
-
-def estimate_backlash_width(window: dict, gap_end: int, wheel_radius_m: float, sample_period_s: float | None = None,
-                            inertia_kgm2: float | None = None) -> WidthEstimate:
-    """Width from the relative angle at re-contact.
-
-    The flanks meet where |alpha1 - alpha2| (measured from the zone centre, the
-    reading of inequality 1) reaches K2/r, somewhere between the last gap sample
-    and the first contact sample.
-
-    * 'bracket': the contact instant taken uniformly distributed in that sample
-      interval: width = r (|d_last| + |d_first|)/2, standard uncertainty
-      r (|d_first| - |d_last|)/sqrt(12).  Needs only the angles.
-    * 'contact' (with a1, m_el, the sample period and the gap's J1): after re-contact
-      the clutch torque on the motor side is T_c = J1 ((r/J1) m_el - a1)/r ∝ (r/J1) m_el - a1,
-      and a clutch in contact is a spring-damper, T_c = k_c (d - K2/r) + c_c d', with d the
-      relative angle and d' its rate (central differences).  Regressing (r/J1) m_el - a1
-      on (d, d', 1) over CONTACT_FIT_SAMPLES samples from the second contact sample on
-      (the first may hold the impact's transition) gives K2/r = -intercept/slope without
-      knowing k_c or c_c.  Used when it falls inside the bracket and its standard error
-      (delta method, floored at CONTACT_FIT_REL_FLOOR) is CONTACT_FIT_PREFERENCE times
-      smaller than the bracket's; else the bracket answer (docs/method.md, "Backlash width").
-    """
-    if "alpha1" not in window or "alpha2" not in window:
-        raise NoGapError("backlash width: needs both angles alpha1 and alpha2")
-    signed = np.asarray(window["alpha1"], float) - np.asarray(window["alpha2"], float)
-    rel = np.abs(signed)
-    if not 1 <= gap_end < rel.size:
-        raise NoGapError(f"backlash width: no re-contact inside the window (gap end {gap_end})")
-    a, b = rel[gap_end - 1], rel[gap_end]
-    # the flank met: +1 for delta = +K2/r, -1 for -K2/r (reverse rotation).  The clutch torque on the
-    # motor side, (r/J1) m_el - a1, has the flank's sign; times it, it grows with the penetration |delta|
-    # - K2/r on either flank (without it the fit's slope was negative in reverse and the coarse bracket
-    # was used: issue 12)
-    side = 1.0 if signed[gap_end] >= 0 else -1.0
-    mid, s_mid = 0.5 * (a + b), abs(b - a) / np.sqrt(12.0)
-    post = np.arange(gap_end + 1, gap_end + 1 + CONTACT_FIT_SAMPLES)
-    if ("a1" in window and "m_el" in window and sample_period_s and inertia_kgm2 and inertia_kgm2 > 0
-            and post[-1] + 1 < rel.size):
-        kappa = wheel_radius_m / inertia_kgm2
-        drop = side * (kappa * np.asarray(window["m_el"], float)[post] - np.asarray(window["a1"], float)[post])
-        rate = (rel[post + 1] - rel[post - 1]) / (2.0 * sample_period_s)
-        A = np.column_stack([rel[post], rate, np.ones(post.size)])
-        coef, *_ = np.linalg.lstsq(A, drop, rcond=None)
-        if coef[0] > 0:
-            theta = -coef[2] / coef[0]
-            res = drop - A @ coef
-            cov = float(res @ res) / (post.size - 3) * np.linalg.pinv(A.T @ A)
-            grad = np.array([coef[2] / coef[0] ** 2, 0.0, -1.0 / coef[0]])
-            s_fit = float(np.hypot(np.sqrt(max(grad @ cov @ grad, 0.0)), CONTACT_FIT_REL_FLOOR * theta))
-            if min(a, b) <= theta <= max(a, b) and CONTACT_FIT_PREFERENCE * s_fit < s_mid:
-                return WidthEstimate(float(wheel_radius_m * theta), float(wheel_radius_m * s_fit), int(gap_end),
-                                     "contact")
-    return WidthEstimate(float(wheel_radius_m * mid), float(wheel_radius_m * s_mid), int(gap_end), "bracket")

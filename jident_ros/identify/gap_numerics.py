@@ -1,14 +1,15 @@
 """The gap fits' numerical kernels (identify/gap_free.py's, issue 20's per-window budget): cumulative trapezoids, the
 change-point scans' cumulative sums and closed-form 3 x 3 inverse, the change-point refits' row pairs, numpy's
 np.diff(x, 2), np.sign(np.gradient(x)) and np.median as their own steps, the robust noise scale, the encoder quantum and
-the double trapezoid's adjoint; and the memo of one window's torque-independent decisions.  Each kernel gives numpy's
-numbers bit for bit, or (the closed-form inverse, a decision only) LAPACK's to rounding; test/test_gap_speed.py checks
-them.  Plain numpy; never imports rclpy.
+the double trapezoid's adjoint; and the memos, each a :class:`ScopedMemo`: one window's torque-independent decisions
+(:func:`window_memo`) and an evaluation's fits (:func:`fit_cache`, moved here from gap.py when gap.py was split by fit,
+issue 20: the split-off fits memoise through it).  Each kernel gives numpy's numbers bit for bit, or (the closed-form
+inverse, a decision only) LAPACK's to rounding; test/test_gap_speed.py checks them.  Plain numpy; never imports rclpy.
 """
 from __future__ import annotations
 
 from contextlib import contextmanager
-from functools import lru_cache
+from functools import lru_cache, wraps
 
 import numpy as np
 
@@ -170,35 +171,93 @@ def chi2_bounds(n: int, p: int, z: float) -> np.ndarray:
     return out
 
 
-#: The decisions kept while one window is estimated (:func:`window_memo`; None outside it).
-_WINDOW_MEMO: dict | None = None
+class ScopedMemo:
+    """A memo (a dict) kept only while :meth:`scope` is active: ``memo`` is None outside it (nothing kept); nested
+    scopes share the outer one's dict, dropped when the outermost one ends.  :func:`window_memo`'s and
+    :func:`fit_cache`'s (one class for the two scoped dicts that were each a module global)."""
+
+    __slots__ = ("memo",)
+
+    def __init__(self):
+        self.memo: dict | None = None
+
+    @contextmanager
+    def scope(self):
+        outer = self.memo
+        if outer is None:
+            self.memo = {}
+        try:
+            yield
+        finally:
+            if outer is None:
+                self.memo = None
 
 
-@contextmanager
+#: The decisions kept while one window is estimated (:func:`window_memo`; its ``memo`` None outside it).
+WINDOW_MEMO = ScopedMemo()
+
+
 def window_memo():
     """Keep the torque-independent decisions of one window's fits (the free angle fit's candidate intervals, the load
     side's free bound) while active: a window's lag check (gap._lag_checked) and its cross-check fit the same rows
     again with another declared lag, and these decisions do not read the lag.  Scoped to one call of
     gap.estimate_inertia, so nothing is kept from one window (or one monkeypatched constant) to the next.  Nested
     uses share the outer one's memo."""
-    global _WINDOW_MEMO
-    outer = _WINDOW_MEMO
-    if outer is None:
-        _WINDOW_MEMO = {}
-    try:
-        yield
-    finally:
-        if outer is None:
-            _WINDOW_MEMO = None
+    return WINDOW_MEMO.scope()
 
 
 def memo_get(key):
     """The value kept under ``key`` in the active :func:`window_memo` (None: none kept, or no memo active)."""
-    return None if _WINDOW_MEMO is None else _WINDOW_MEMO.get(key)
+    memo = WINDOW_MEMO.memo
+    return None if memo is None else memo.get(key)
 
 
 def memo_put(key, value):
     """Keep ``value`` under ``key`` in the active :func:`window_memo` (nothing outside one); returns ``value``."""
-    if _WINDOW_MEMO is not None:
-        _WINDOW_MEMO[key] = value
+    memo = WINDOW_MEMO.memo
+    if memo is not None:
+        memo[key] = value
     return value
+
+
+#: Memo of the angle fits (gap_angle._angle_fits), gap_a1._joint_fit and gap_steady.pre_entry_steady while
+#: :func:`fit_cache` is active (its ``memo`` None: off, the default).
+FIT_MEMO = ScopedMemo()
+
+
+def fit_cache():
+    """Memoise the angle fits (free angle fit and steady-entry fit), the joint a1 fit and the pre-entry steadiness
+    test by their inputs while active.
+
+    An evaluation runs several channel sets on one window: the cross-checked model choice ('auto' with a1 and
+    alpha1) and the 'angle' fit over the same alpha1, torque and gap interval do the same angle fits, and the a1
+    fits of two channel sets (the interval from the angles and from the a1 signature) test the same pre-entry
+    torque and often fit the same interval; with the cache the second is a lookup (the same
+    inputs give the same numbers: pure functions of them).  Off by
+    default (the runtime path sees each window once); the research evaluation turns it on around a sweep."""
+    return FIT_MEMO.scope()
+
+
+def _memoised(fn):
+    """``fn`` memoised by its arguments' values while :func:`fit_cache` is active (arrays by their bytes)."""
+    def key_of(v):
+        if isinstance(v, np.ndarray):
+            return v.dtype.str, v.shape, v.tobytes()
+        if isinstance(v, dict):
+            return tuple((k, key_of(x)) for k, x in sorted(v.items()))
+        if isinstance(v, (tuple, list)):
+            return type(v).__name__, tuple(key_of(x) for x in v)
+        return v
+
+    @wraps(fn)
+    def wrapper(*args, **kwargs):
+        memo = FIT_MEMO.memo
+        if memo is None:
+            return fn(*args, **kwargs)
+        key = (fn.__name__, tuple(key_of(a) for a in args), tuple((k, key_of(v)) for k, v in sorted(kwargs.items())))
+        try:
+            return memo[key]
+        except KeyError:
+            out = memo[key] = fn(*args, **kwargs)
+            return out
+    return wrapper
