@@ -94,7 +94,7 @@ from jident_ros.identify.gap_speed import _method_speed, _speed_bounded, speed_f
 from jident_ros.identify.gap_steady import STEADY_P_VALUE, pre_entry_steady  # noqa: F401  (STEADY_P_VALUE re-exported)
 from jident_ros.identify.gap_types import FitState, GapEstimate, NoGapError, _net_torque
 from jident_ros.identify.gap_width import WidthEstimate, estimate_backlash_width  # noqa: F401  (re-exported)
-from jident_ros.stream.flank import disc_corrected
+from jident_ros.stream.flank_disc import disc_corrected
 
 #: A gap fit whose standard error exceeds this fraction of J1 is refused (NoGapError): such a
 #: window carries no free acceleration (e.g. a steady state mistaken for an entry).

@@ -42,7 +42,9 @@ import numpy as np
 
 from jident_ros.stream.detector import _positive
 from jident_ros.stream.filters import savgol_coeffs
-from jident_ros.stream.flank import FlankDetector, motor_acceleration, single_mass_run
+from jident_ros.stream.flank import FlankDetector
+from jident_ros.stream.flank_delta import motor_acceleration
+from jident_ros.stream.flank_free import single_mass_run
 from jident_ros.stream.rate import odd_samples
 
 #: Without a1 the entry row is searched from this many samples before the departure less the look-ahead on
