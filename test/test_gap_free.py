@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from jident_ros.identify.gap import NoGapError, estimate_inertia
+from jident_ros.identify.gap import NoGapError, estimate_inertia, resolution_limited
 from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, GapModel, _double_trapz_adjoint, free_angle_fit
 from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
 
@@ -501,3 +501,28 @@ def test_a_rest_before_the_gap_does_not_take_the_free_fit():
     f = free_angle_fit(cut["alpha1"], cut["torque"], 5e-4, 48, 212, model, bounds=(23, 206))
     assert f["start"] >= 85 and f["end"] - f["start"] >= 90, f
     assert abs(f["j1"] / 1.218 - 1) < 0.1 and abs(f["j1"] - 1.218) <= 1.96 * f["se"], f
+
+
+@pytest.mark.parametrize("centred", [True, False])
+def test_a_constant_torque_beyond_the_gap_s_swing_is_undetermined_not_a_sign_error(monkeypatch, centred):
+    """m_el and a1 anti-correlated through the origin because a constant torque the fit does not hold (friction, an
+    offset: 5 N m here) exceeds the gap's own torque (2 +- 1 N m): the swing still accelerates the motor the right way,
+    so it is "gap fit undetermined" (resolution-limited: no ERROR), not a non-physical J1 naming the sign of m_el
+    (NONPHYSICAL_CENTRED; off: as before).  m_el with its sign flipped stays non-physical either way."""
+    from jident_ros.identify import gap_a1
+    monkeypatch.setattr(gap_a1, "NONPHYSICAL_CENTRED", centred)
+    t = np.arange(400) * 5e-4
+    m = 2.0 + np.sin(2 * np.pi * 7 * t)
+    acc = (m - 5.0) / 1.2 + np.random.default_rng(3).normal(0.0, 0.05, t.size)
+    with pytest.raises(NoGapError) as exc:
+        gap_a1.gap_only_fit(m, acc, 0, t.size)
+    text = str(exc.value)
+    if centred:
+        assert text.startswith("gap fit undetermined") and "not about their means" in text and resolution_limited(text)
+    else:
+        assert "non-physical" in text and not resolution_limited(text)
+    # a sign error: the swing itself turned (m_el's sign flipped on a gap whose torque swings about zero)
+    swing = 3.0 * np.sin(2 * np.pi * 7 * t)
+    with pytest.raises(NoGapError) as exc:
+        gap_a1.gap_only_fit(-swing, swing / 1.2 + np.random.default_rng(4).normal(0.0, 0.05, t.size), 0, t.size)
+    assert "non-physical" in str(exc.value) and not resolution_limited(str(exc.value))
