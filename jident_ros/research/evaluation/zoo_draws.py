@@ -51,7 +51,9 @@ PROTOCOL_NOTE = ("A set is a blind test only until something is changed because 
                  "free_departure's search; DOL sets 15–17 in stop 39, a 16-row change-point trim, and DOL set 18, a "
                  "short gap not grown into contact; DOL set 1 in stop 40, the constant torque fitted over the whole "
                  "gap; vector sets 7 and 20 in stop 41, no constant torque beyond a tenth of M_b where the entry walks "
-                 "back with an Imu).")
+                 "back with an Imu; DOL set 21 in stop 42, a crossing after a ringing coupling's second dip and a count "
+                 "of dither after a slow departure, and vector set 1, m_el and a1 anti-correlated only through the "
+                 "origin).")
 
 #: The torque accuracy a drive's data sheet typically states for sensored vector control, ± this of rated torque: what
 #: a user who has nothing better declares, as ``torque_accuracy`` and as ``torque_offset_rel_base``, the way
