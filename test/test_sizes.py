@@ -6,6 +6,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+from test_patches import defined
+
 PKG = Path(__file__).resolve().parents[1] / "jident_ros"
 MAX_FUNCTION_LINES, MAX_PARAMETERS, MAX_FILE_LINES = 80, 8, 600
 
@@ -102,7 +104,6 @@ def test_every_exception_is_still_over_the_limits():
 
 # ---------------------------------------------------------------- the flank detector's modules (stream/flank*.py)
 STREAM = PKG / "stream"
-TESTS = Path(__file__).resolve().parent
 
 
 def _flank_modules() -> dict:
@@ -110,51 +111,11 @@ def _flank_modules() -> dict:
     return {p.stem: ast.parse(p.read_text()) for p in sorted(STREAM.glob("flank*.py"))}
 
 
-def _defined(tree: ast.Module) -> set:
-    """The names a module defines at its top level (assignments, functions, classes), not those it imports."""
-    out = set()
-    for node in tree.body:
-        if isinstance(node, ast.Assign):
-            out |= {t.id for t in node.targets if isinstance(t, ast.Name)}
-        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
-            out.add(node.target.id)
-        elif isinstance(node, (ast.FunctionDef, ast.ClassDef)):
-            out.add(node.name)
-    return out
-
-
 def _family_imports(tree: ast.Module, modules) -> list:
     """(module, name) of every ``from jident_ros.stream.<flank module> import name`` in a tree."""
     return [(node.module.rsplit(".", 1)[1], a.name) for node in ast.walk(tree)
             if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("jident_ros.stream.")
             and node.module.rsplit(".", 1)[1] in modules for a in node.names]
-
-
-def _module_aliases(tree: ast.Module, modules) -> dict:
-    """{alias: flank module} of a test file's imports of the flank modules (any scope)."""
-    out = {}
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom) and node.module == "jident_ros.stream":
-            out.update({a.asname or a.name: a.name for a in node.names if a.name in modules})
-        elif isinstance(node, ast.Import):
-            out.update({a.asname: a.name.rsplit(".", 1)[1] for a in node.names
-                        if a.asname and a.name.startswith("jident_ros.stream.") and a.name.rsplit(".", 1)[1] in modules})
-    return out
-
-
-def _patches(tree: ast.Module, aliases: dict) -> list:
-    """(line, flank module, name) of every ``monkeypatch.setattr(module, "NAME", ...)`` and ``module.NAME = ...``."""
-    out = []
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "setattr" \
-                and len(node.args) >= 2 and isinstance(node.args[0], ast.Name) and node.args[0].id in aliases \
-                and isinstance(node.args[1], ast.Constant) and isinstance(node.args[1].value, str):
-            out.append((node.lineno, aliases[node.args[0].id], node.args[1].value))
-        elif isinstance(node, (ast.Assign, ast.AugAssign)):
-            for t in node.targets if isinstance(node, ast.Assign) else [node.target]:
-                if isinstance(t, ast.Attribute) and isinstance(t.value, ast.Name) and t.value.id in aliases:
-                    out.append((node.lineno, aliases[t.value.id], t.attr))
-    return out
 
 
 def test_each_flank_constant_has_one_home_that_every_reader_looks_up():
@@ -165,28 +126,10 @@ def test_each_flank_constant_has_one_home_that_every_reader_looks_up():
     modules = _flank_modules()
     homes = {}
     for name, tree in modules.items():
-        for const in (n for n in _defined(tree) if n.isupper()):
+        for const in (n for n in defined(tree) if n.isupper()):
             homes.setdefault(const, []).append(name)
     assert not {c: m for c, m in homes.items() if len(m) > 1}, "constants defined twice"
     by_name = [(name, mod, n) for name, tree in modules.items() for mod, n in _family_imports(tree, modules)]
     assert not [x for x in by_name if x[2].isupper()], "a flank constant imported by name (read it as module.NAME)"
     assert not [x for x in by_name if x[1] == "flank"], "a flank_* module imports flank.py (a cycle)"
-    assert "REBOUND_MAX_SHARE" in homes and "FlankDetector" in _defined(modules["flank"])
-
-
-def test_the_tests_patch_each_flank_name_where_it_is_read():
-    """Every ``monkeypatch.setattr(<flank module>, "NAME", ...)`` (or ``module.NAME = ...``) in test/ names something
-    that module defines itself: flank.py finds the names of flank_*.py for reading, and a patch there would not reach
-    the code (the split moved the tests' patches to the modules that read the constants).  A patched function is
-    looked up in its module by its other readers too (not imported by name)."""
-    modules = _flank_modules()
-    defined = {name: _defined(tree) for name, tree in modules.items()}
-    imported = {n for tree in modules.values() for _, n in _family_imports(tree, modules)}
-    bad, seen = [], 0
-    for path in sorted(TESTS.glob("*.py")):
-        tree = ast.parse(path.read_text())
-        for line, mod, name in _patches(tree, _module_aliases(tree, modules)):
-            seen += 1
-            if name not in defined[mod] or name in imported:
-                bad.append(f"{path.name}:{line}: {mod}.{name}")
-    assert seen > 40 and not bad, "patched where the code does not read it: " + ", ".join(bad)
+    assert "REBOUND_MAX_SHARE" in homes and "FlankDetector" in defined(modules["flank"])

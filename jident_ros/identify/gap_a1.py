@@ -37,8 +37,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from jident_ros.identify import lapack
-from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, NONPHYSICAL_Z, GapModel
+from jident_ros.identify import gap_free, lapack
+from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, GapModel
 from jident_ros.identify.gap_numerics import _diff2, _median, _memoised
 from jident_ros.identify.gap_types import FitState, NoGapError, _net_torque
 from jident_ros.stream.rate import samples as rate_samples
@@ -131,11 +131,11 @@ def _nonpositive_slope(j: float, torque: np.ndarray, acc: np.ndarray) -> str:
     y, x = np.asarray(torque, float), np.asarray(acc, float)
     n = y.size
     t = _correlation_t(x, y)
-    if math.isfinite(t) and t >= -NONPHYSICAL_Z:
+    if math.isfinite(t) and t >= -gap_free.NONPHYSICAL_Z:
         return (f"gap fit undetermined: m_el and a1 are not correlated over the gap's {n} rows (t = {t:.2g}): the "
                 f"gap's torque does not accelerate the motor measurably")
     tc = _correlation_t(x - x.mean(), y - y.mean()) if n > 2 else math.nan
-    if NONPHYSICAL_CENTRED and math.isfinite(tc) and tc >= -NONPHYSICAL_Z:
+    if NONPHYSICAL_CENTRED and math.isfinite(tc) and tc >= -gap_free.NONPHYSICAL_Z:
         return (f"gap fit undetermined: m_el and a1 over the gap's {n} rows are anti-correlated through the origin "
                 f"(t = {t:.2g}) but not about their means (t = {tc:.2g}): a constant torque (friction, the estimate's "
                 f"offset) beyond the gap's own swing, which does not resolve J1")
