@@ -107,9 +107,9 @@ def _origin_slope(y: np.ndarray, x: np.ndarray, sy: float, sx: float) -> float:
 
 #: A 'gap_only' J1 at or below zero from m_el and a1 anti-correlated through the origin is "non-physical" (an ERROR
 #: that names the sign of m_el, the joint names, a late torque) only when they are anti-correlated about their means
-#: too: a constant torque the fit does not hold (the motor's Coulomb friction, the estimate's offset: within their
-#: declared bands) larger than the gap's own torque turns the slope through the origin negative while the torque's
-#: swing still accelerates the motor the right way (vector draws' light load reversals with an Imu at 30 dB: 44 ERROR
+#: too: a constant torque the fit does not hold (the motor's Coulomb friction, the estimate's offset; its size is not
+#: checked against their bands) larger than the gap's own torque turns the slope through the origin negative while the
+#: torque's swing still accelerates the motor the right way (vector draws' light load reversals, Imu, 30 dB: 44 ERROR
 #: windows over sets 1-20, "check the sign of m_el", on drives whose signs are right), whereas a sign error turns both.
 #: Then it is "gap fit undetermined" -- not tuned: NONPHYSICAL_Z about the means.  False: through the origin only
 NONPHYSICAL_CENTRED = True

@@ -135,11 +135,11 @@ TRAVEL_SIDE_FROM_FARTHEST = True
 
 def _travel(d: np.ndarray, e: int, span: int = RECONTACT_SPAN) -> np.ndarray:
     """The travel of delta from the entry row on, positive in the direction it left in (``span`` rows decide:
-    RECONTACT_SPAN at 2 kHz; when delta has not moved over them, its first move: a coarse encoder's delta creeps off
-    its flank within a count for several samples after an entry placed at the contact loss, and the side taken from
-    no move turned the travel negative, so the acceleration's re-contact row 5 samples after the entry stood: K2
-    1.9e-5 m for 5 mm on the vector drive's 2^13 light load reversal); its farthest point from the entry in the rows
-    given where its first move is a count back (TRAVEL_SIDE_FROM_FARTHEST)."""
+    RECONTACT_SPAN at 2 kHz; when delta has not moved over them, the side of its farthest point from the entry in the
+    rows given (TRAVEL_SIDE_FROM_FARTHEST; off: of its first move).  A coarse encoder's delta creeps off its flank
+    within a count for several samples after an entry placed at the contact loss: the side taken from no move turned
+    the travel negative, so the acceleration's re-contact row 5 samples after the entry stood (K2 1.9e-5 m for 5 mm on
+    the vector drive's 2^13 light load reversal), and so did a first move one count back (d21-12))."""
     ref = d[min(e + span, d.size - 1)]
     if abs(ref - d[e]) <= 1e-9:                     # no move but a float rounding (as _delta_quantum's steps)
         if TRAVEL_SIDE_FROM_FARTHEST and d.size > e + 1:
