@@ -1814,3 +1814,27 @@ def test_a_count_of_dither_after_a_slow_departure_does_not_turn_the_travel_back(
         assert res.width_m == pytest.approx(5.07e-3, rel=0.02)          # the drawn K2
     else:
         assert res.how == "no re-contact found" and res.recontact_index - e <= 2
+
+
+@pytest.mark.parametrize("on", [True, False])
+def test_an_entry_moved_forward_beyond_the_capture_keeps_a_whole_window(monkeypatch, on):
+    """The zone model moves a window's entry forward by up to c/k + ZONE_MOVE_SLACK after the rules' entry, beyond the
+    capture's forward room (refine_samples): vector draw s1-07's load reversal with an Imu had its window 3 rows short,
+    refused as ERROR ("samples: 2045 in the window, need >= 2048"); 19 such drives over the sets.  Here the zone move
+    is made to go 5 rows past the capture on DOL d21-04's cut (test/data): with WINDOW_FITS_CAPTURE the entry stops where the
+    capture still holds its whole window; off, the window comes out short."""
+    from draws_cuts import draws_cut
+
+    from jident_ros.stream import flank_refine, flank_window
+    monkeypatch.setattr(flank_window, "WINDOW_FITS_CAPTURE", on)
+    monkeypatch.setattr(flank_refine.EntryRefineMixin, "_zone_move",         # 5 rows past the capture's last window
+                        lambda self, data, dep, entry, cap, rc: data.shape[0] - self.window_length + self.samples_before_entry + 5)
+    data, ch, _ = draws_cut("dol_draws_ringing_slip_reversal.npz", "js")
+    det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16)
+    wins = [e.window for e in det.push(data, ch) + det.finish() if getattr(e, "window", None)]
+    assert wins
+    n = [len(w.column("t")) for w in wins]
+    if on:
+        assert n == [det.window_length] * len(wins)
+    else:
+        assert min(n) < det.window_length
