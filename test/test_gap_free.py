@@ -526,3 +526,18 @@ def test_a_constant_torque_beyond_the_gap_s_swing_is_undetermined_not_a_sign_err
     with pytest.raises(NoGapError) as exc:
         gap_a1.gap_only_fit(-swing, swing / 1.2 + np.random.default_rng(4).normal(0.0, 0.05, t.size), 0, t.size)
     assert "non-physical" in str(exc.value) and not resolution_limited(str(exc.value))
+
+
+def test_a_re_contact_at_or_before_the_entry_is_a_gap_too_short_not_an_error():
+    """The detector's re-contact row at or before its entry leaves no free motion to fit: "gap too short"
+    (resolution-limited, OK, nothing published); a re-contact row beyond the window is an inconsistency (not)."""
+    from jident_ros.identify.gap_interval import gap_interval
+    window = {"t": np.arange(100) * 5e-4, "alpha1": np.zeros(100)}
+    for rc in (30, 29):
+        with pytest.raises(NoGapError) as exc:
+            gap_interval(window, 30, 5e-3, 0.1, recontact_index=rc)
+        assert str(exc.value).startswith("gap too short") and resolution_limited(str(exc.value))
+    with pytest.raises(NoGapError) as exc:
+        gap_interval(window, 30, 5e-3, 0.1, recontact_index=101)
+    assert not resolution_limited(str(exc.value))
+    assert gap_interval(window, 30, 5e-3, 0.1, recontact_index=40) == (30, 40, "detector")

@@ -39,8 +39,14 @@ def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_
         raise NoGapError(f"entry_index: must be inside the window [0, {n - 2}], got {entry_index}")
     if recontact_index is not None and recontact_index >= 0:
         end = int(recontact_index)
-        if not entry_index < end <= n:
-            raise NoGapError(f"recontact_index {recontact_index}: not after the entry row {entry_index}")
+        if end <= entry_index:
+            # the detector placed its entry at or after its re-contact: no free motion between them to fit -- this
+            # window's resolution (OK, nothing published), not a fault of the drive or its configuration (ERROR
+            # until stop 42: 12 windows of healthy drives over the blind draws)
+            raise NoGapError(f"gap too short: the detector's re-contact row {end} is not after the entry row "
+                             f"{entry_index} (no free motion between them)")
+        if end > n:
+            raise NoGapError(f"recontact_index {recontact_index}: beyond the window's {n} rows")
         how = "detector"
     elif "alpha1" in window and "alpha2" in window:
         rel = np.abs(np.asarray(window["alpha1"], float) - np.asarray(window["alpha2"], float))
