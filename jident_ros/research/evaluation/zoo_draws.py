@@ -53,7 +53,7 @@ PROTOCOL_NOTE = ("A set is a blind test only until something is changed because 
                  "gap; vector sets 7 and 20 in stop 41, no constant torque beyond a tenth of M_b where the entry walks "
                  "back with an Imu; DOL set 21 in stop 42, a crossing after a ringing coupling's second dip and a count "
                  "of dither after a slow departure, and vector set 1, m_el and a1 anti-correlated only through the "
-                 "origin).")
+                 "origin and a window kept whole).")
 
 #: The torque accuracy a drive's data sheet typically states for sensored vector control, ± this of rated torque: what
 #: a user who has nothing better declares, as ``torque_accuracy`` and as ``torque_offset_rel_base``, the way
