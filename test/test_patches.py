@@ -91,9 +91,12 @@ def _reads() -> dict:
     out = {m: {n.id for n in ast.walk(t) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Load)}
            for m, t in _trees().items()}
     for m, tree in _trees().items():
-        # a name looked up at run time (globals()[...], getattr): a string constant naming it
+        # a name looked up at run time (globals()[...], getattr): a string constant naming it (not __all__'s: a
+        # re-export listed there is not a read)
+        exported = {id(c) for a in tree.body if isinstance(a, ast.Assign)
+                    and any(isinstance(t, ast.Name) and t.id == "__all__" for t in a.targets) for c in ast.walk(a)}
         out[m] |= {n.value for n in ast.walk(tree) if isinstance(n, ast.Constant) and isinstance(n.value, str)
-                   and n.value.isidentifier()}
+                   and n.value.isidentifier() and id(n) not in exported}
         mods = aliases(tree)
         for n in ast.walk(tree):
             if isinstance(n, ast.Attribute) and isinstance(n.ctx, ast.Load) and isinstance(n.value, ast.Name) \
