@@ -1827,8 +1827,12 @@ def test_an_entry_moved_forward_beyond_the_capture_keeps_a_whole_window(monkeypa
 
     from jident_ros.stream import flank_refine, flank_window
     monkeypatch.setattr(flank_window, "WINDOW_FITS_CAPTURE", on)
-    monkeypatch.setattr(flank_refine.EntryRefineMixin, "_zone_move",         # 5 rows past the capture's last window
-                        lambda self, data, dep, entry, cap, rc: data.shape[0] - self.window_length + self.samples_before_entry + 5)
+    captures = []
+
+    def past(self, data, dep, entry, cap, rc):                                # 5 rows past the capture's last window
+        captures.append(data)
+        return data.shape[0] - self.window_length + self.samples_before_entry + 5
+    monkeypatch.setattr(flank_refine.EntryRefineMixin, "_zone_move", past)
     data, ch, _ = draws_cut("dol_draws_ringing_slip_reversal.npz", "js")
     det = FlankDetector(0.1, 5e-4, channels=ch, nominal_inertia_kgm2=1.16)
     wins = [e.window for e in det.push(data, ch) + det.finish() if getattr(e, "window", None)]
@@ -1836,5 +1840,7 @@ def test_an_entry_moved_forward_beyond_the_capture_keeps_a_whole_window(monkeypa
     n = [len(w.column("t")) for w in wins]
     if on:
         assert n == [det.window_length] * len(wins)
+        # stopped at the last entry whose window the capture holds, not a row before: the window ends on its last row
+        assert [w.column("t")[-1] for w in wins] == [c[-1, 0] for c in captures]
     else:
         assert min(n) < det.window_length
