@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from jident_ros.identify.gap import NoGapError, estimate_inertia, resolution_limited
-from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, GapModel, _double_trapz_adjoint, free_angle_fit
+from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, FreeFitError, GapModel, _double_trapz_adjoint, free_angle_fit
 from jident_ros.research.evaluation.gap_stress import StressDrive, simulate
 
 TS, R = 5e-4, 0.08
@@ -509,8 +509,8 @@ def test_a_constant_torque_beyond_the_gap_s_swing_is_undetermined_not_a_sign_err
     offset: 5 N m here) exceeds the gap's own torque (2 +- 1 N m): the swing still accelerates the motor the right way,
     so it is "gap fit undetermined" (resolution-limited: no ERROR), not a non-physical J1 naming the sign of m_el
     (NONPHYSICAL_CENTRED; off: as before).  m_el with its sign flipped stays non-physical either way."""
-    from jident_ros.identify import gap_a1
-    monkeypatch.setattr(gap_a1, "NONPHYSICAL_CENTRED", centred)
+    from jident_ros.identify import gap_a1, gap_sign
+    monkeypatch.setattr(gap_sign, "NONPHYSICAL_CENTRED", centred)
     t = np.arange(400) * 5e-4
     m = 2.0 + np.sin(2 * np.pi * 7 * t)
     acc = (m - 5.0) / 1.2 + np.random.default_rng(3).normal(0.0, 0.05, t.size)
@@ -541,3 +541,78 @@ def test_a_re_contact_at_or_before_the_entry_is_a_gap_too_short_not_an_error():
         gap_interval(window, 30, 5e-3, 0.1, recontact_index=101)
     assert not resolution_limited(str(exc.value))
     assert gap_interval(window, 30, 5e-3, 0.1, recontact_index=40) == (30, 40, "detector")
+
+
+@pytest.mark.parametrize("beyond_declared", [True, False])
+def test_an_angle_curving_against_a_torque_the_declared_errors_can_turn_is_undetermined(monkeypatch, step,
+                                                                                         beyond_declared):
+    """A small gap torque (rising 0.5 -> 1 N m) read through an estimate 2 N m low (within a declared 3 N m offset):
+    the angle curves against the estimate though the drive's signs are right.  The declared errors can turn 1/J1
+    (declared_flip >= 1), so it is "gap fit undetermined" (no ERROR on a healthy drive: the vector draws' light load
+    reversals); with nothing declared, or the literal check
+    (NONPHYSICAL_BEYOND_DECLARED off), it is non-physical.  A speed step's torque with its sign flipped stays
+    non-physical under the same declaration: the declared errors cannot turn that."""
+    from jident_ros.identify import gap_sign
+    monkeypatch.setattr(gap_sign, "NONPHYSICAL_BEYOND_DECLARED", beyond_declared)
+    ts, n = 5e-4, 300
+    t = np.arange(n) * ts
+    dur = t[-1]
+    m_true = 0.5 + 0.5 * t / dur
+    m_est = m_true - 2.0
+    acc = m_true / 1.2
+    alpha = (0.3 + 80.0 * t + np.concatenate([[0.0], np.cumsum(np.cumsum(acc)[:-1] * ts * ts)])
+             + np.random.default_rng(1).normal(0.0, 1e-7, n))
+    declared = GapModel(torque_offset_nm=3.0, changepoint_search_samples=0)
+    with pytest.raises(FreeFitError) as exc:
+        free_angle_fit(alpha, m_est, ts, 0, n, declared, fixed=True)
+    text = str(exc.value)
+    if beyond_declared:
+        assert text.startswith("gap fit undetermined") and "too small against them" in text, text
+        assert resolution_limited(text)
+    else:
+        assert "non-physical 1/J1 = -" in text and not resolution_limited(text), text
+    with pytest.raises(FreeFitError) as exc:
+        free_angle_fit(alpha, m_est, ts, 0, n, GapModel(changepoint_search_samples=0), fixed=True)
+    assert "non-physical 1/J1 = -" in str(exc.value) and not resolution_limited(str(exc.value))
+    # a sign error on a speed step: the declared 3 N m cannot turn its torque
+    w = dict(step["window"])
+    w.pop("a1", None)
+    flipped = dict(w, m_el=-np.asarray(w["m_el"], float))
+    with pytest.raises(NoGapError) as exc:
+        _fit(step, window=flipped, model=declared)
+    assert "non-physical 1/J1 = -" in str(exc.value) and "sign of m_el" in str(exc.value)
+
+
+@pytest.mark.parametrize("beyond_declared", [True, False])
+def test_a1_against_a_torque_whose_declared_drift_can_turn_it_is_undetermined(monkeypatch, beyond_declared):
+    """The a1 fit's counterpart: a gap torque rising 0 -> 0.5 N m read through an estimate whose error drifts from +2 to
+    -2 N m across the gap (a declared 3 N m offset allows a drift of +-3): m_el and a1 anti-correlated about their
+    means too, yet the declared drift can turn them (gap_sign.slope_flip >= 1): "gap fit undetermined"; declared
+    nothing, or the literal check, non-physical.  A swing of +-3 N m with its sign flipped stays non-physical under the
+    same declaration (x = 0.5)."""
+    from jident_ros.identify import gap_a1, gap_sign
+    monkeypatch.setattr(gap_sign, "NONPHYSICAL_BEYOND_DECLARED", beyond_declared)
+    ts, n = 5e-4, 400
+    t = np.arange(n) * ts
+    ramp = np.linspace(-1.0, 1.0, n)
+    m_true = 0.25 + 0.25 * ramp
+    m_est = m_true - 2.0 * ramp
+    acc = m_true / 1.2 + np.random.default_rng(6).normal(0.0, 0.01, n)
+    declared = (ts, 3.0, 0.0)
+    with pytest.raises(NoGapError) as exc:
+        gap_a1.gap_only_fit(m_est, acc, 0, n, declared=declared)
+    text = str(exc.value)
+    if beyond_declared:
+        assert text.startswith("gap fit undetermined") and "too small against them" in text, text
+        assert resolution_limited(text)
+    else:
+        assert "non-physical" in text and not resolution_limited(text), text
+    with pytest.raises(NoGapError) as exc:
+        gap_a1.gap_only_fit(m_est, acc, 0, n)
+    assert "non-physical" in str(exc.value) and not resolution_limited(str(exc.value))
+    swing = 3.0 * np.sin(2 * np.pi * 7 * t)
+    assert gap_sign.slope_flip(-swing, ts, 3.0, 0.0) < 1.0
+    with pytest.raises(NoGapError) as exc:
+        gap_a1.gap_only_fit(-swing, swing / 1.2 + np.random.default_rng(4).normal(0.0, 0.05, n), 0, n,
+                            declared=declared)
+    assert "non-physical" in str(exc.value) and not resolution_limited(str(exc.value))

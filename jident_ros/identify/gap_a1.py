@@ -37,7 +37,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from jident_ros.identify import gap_free, lapack
+from jident_ros.identify import gap_sign, lapack
 from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, GapModel
 from jident_ros.identify.gap_numerics import _diff2, _median, _memoised
 from jident_ros.identify.gap_types import FitState, NoGapError, _net_torque
@@ -105,45 +105,6 @@ def _origin_slope(y: np.ndarray, x: np.ndarray, sy: float, sx: float) -> float:
     return (q + np.sqrt(q * q + 4.0 * d * sxy * sxy)) / (2.0 * sxy)
 
 
-#: A 'gap_only' J1 at or below zero from m_el and a1 anti-correlated through the origin is "non-physical" (an ERROR
-#: that names the sign of m_el, the joint names, a late torque) only when they are anti-correlated about their means
-#: too: a constant torque the fit does not hold (the motor's Coulomb friction, the estimate's offset; its size is not
-#: checked against their bands) larger than the gap's own torque turns the slope through the origin negative while the
-#: torque's swing still accelerates the motor the right way (vector draws' light load reversals, Imu, 30 dB: 44 ERROR
-#: windows over sets 1-20, "check the sign of m_el", on drives whose signs are right), whereas a sign error turns both.
-#: Then it is "gap fit undetermined" -- not tuned: NONPHYSICAL_Z about the means.  False: through the origin only
-NONPHYSICAL_CENTRED = True
-
-
-def _correlation_t(x: np.ndarray, y: np.ndarray) -> float:
-    """The t statistic of the correlation of x and y through the origin (their sums of squares and products)."""
-    n = y.size
-    sxx, syy, sxy = float(x @ x), float(y @ y), float(x @ y)
-    r = sxy / np.sqrt(sxx * syy) if sxx > 0 and syy > 0 else 0.0
-    return r * np.sqrt(max(n - 1, 1)) / np.sqrt(max(1.0 - r * r, 1e-12))
-
-
-def _nonpositive_slope(j: float, torque: np.ndarray, acc: np.ndarray) -> str:
-    """The reason of a 'gap_only' J1 at or below zero: "gap fit undetermined" (resolution-limited) when the torque
-    and the acceleration over the fitted rows are not correlated beyond NONPHYSICAL_Z (the t statistic of their
-    correlation through the origin), or not about their means (NONPHYSICAL_CENTRED: a constant torque beside the
-    gap's own), else "non-physical" with what to check."""
-    y, x = np.asarray(torque, float), np.asarray(acc, float)
-    n = y.size
-    t = _correlation_t(x, y)
-    if math.isfinite(t) and t >= -gap_free.NONPHYSICAL_Z:
-        return (f"gap fit undetermined: m_el and a1 are not correlated over the gap's {n} rows (t = {t:.2g}): the "
-                f"gap's torque does not accelerate the motor measurably")
-    tc = _correlation_t(x - x.mean(), y - y.mean()) if n > 2 else math.nan
-    if NONPHYSICAL_CENTRED and math.isfinite(tc) and tc >= -gap_free.NONPHYSICAL_Z:
-        return (f"gap fit undetermined: m_el and a1 over the gap's {n} rows are anti-correlated through the origin "
-                f"(t = {t:.2g}) but not about their means (t = {tc:.2g}): a constant torque (friction, the estimate's "
-                f"offset) beyond the gap's own swing, which does not resolve J1")
-    return (f"gap fit gave a non-physical J1 = {j:.4g} (m_el against a1 over the gap: they are anti-correlated, "
-            f"t = {t:.2g}; check the sign of m_el against a1 and the joint names, or a torque estimate smoothed or late "
-            f"beyond torque_lag_max_s)")
-
-
 def _a1_contact_rows(window: dict, start: int, end: int, wheel_radius_m: float, b1: float, model: GapModel,
                      sample_period_s: float) -> tuple:
     """(why the joint ('acceleration') fit's premise fails at the detector's rows, or "", the 'gap_only' fit that
@@ -154,7 +115,7 @@ def _a1_contact_rows(window: dict, start: int, end: int, wheel_radius_m: float, 
     interval missing the truth; `zoo.entry_shift`).  Then the 'gap_only' fit over its own rows is the a1 fit."""
     try:
         fit = gap_only_fit(_net_torque(window, b1), np.asarray(window["a1"], float) / wheel_radius_m, start, end,
-                           max_trim=gap_only_max_trim(model, sample_period_s))
+                           max_trim=gap_only_max_trim(model, sample_period_s), declared=declared_errors(model, sample_period_s))
     except NoGapError:
         return "", None
     early, late = fit["start"] - start, end - fit["end"]
@@ -163,6 +124,11 @@ def _a1_contact_rows(window: dict, start: int, end: int, wheel_radius_m: float, 
         return "", None
     return (f"the motor equation holds from row {fit['start']} to {fit['end']}, not from the detector's rows "
             f"{start}..{end} (a contact still loaded at an end): no steady entry at the detector's row"), fit
+
+
+def declared_errors(model: GapModel, sample_period_s: float) -> tuple:
+    """gap_only_fit's ``declared``: (T_s, the torque offset bound, the lag bound) of ``model``."""
+    return float(sample_period_s), float(model.torque_offset_nm), float(model.torque_lag_s)
 
 
 def gap_only_max_trim(model: GapModel, sample_period_s: float) -> tuple:
@@ -176,11 +142,12 @@ def gap_only_max_trim(model: GapModel, sample_period_s: float) -> tuple:
 
 def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
                  trim_sigma: float = GAP_ONLY_TRIM_SIGMA, trim_rel: float = GAP_ONLY_TRIM_REL,
-                 max_trim: tuple = GAP_ONLY_MAX_TRIM) -> dict:
+                 max_trim: tuple = GAP_ONLY_MAX_TRIM, declared: tuple = (0.0, 0.0, 0.0)) -> dict:
     """The 'gap_only' fit (module docstring): J1 from torque[k] = J1 acc[k] over the in-zone samples.
 
     ``torque``: m_el − b1 ω1 over the whole window, N m; ``acc``: dω1/dt (a1/r), rad/s^2; [start, end): the
-    candidate interval (the entry row to the re-contact row).  The noise levels of both come from the
+    candidate interval (the entry row to the re-contact row); ``declared``: (T_s, the torque offset bound in N m, the
+    lag bound in s) for a J1 at or below zero (gap_sign.nonpositive_slope).  The noise levels of both come from the
     second differences of the pre-entry and candidate samples; J1 is the Deming slope through the origin.
     The in-zone set: J1 fitted on the candidate's core (two samples off each end), then end samples whose load
     torque |torque − J1 acc| exceeds max(trim_sigma x its standard deviation, trim_rel x the median |torque|) are
@@ -203,7 +170,7 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
     core = (start + 2, end - 2) if end - start >= 10 else (start, end)
     j = slope(*core)
     if not math.isfinite(j) or j <= 0:
-        raise NoGapError(_nonpositive_slope(j, y_all[core[0]:core[1]], x_all[core[0]:core[1]]))
+        raise NoGapError(_nonpositive(j, y_all[core[0]:core[1]], x_all[core[0]:core[1]], declared))
     lo, hi = start, end
     level = float(_median(np.abs(y_all[start:end])))
     for it in range(4):
@@ -222,7 +189,7 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
         lo, hi = new_lo, new_hi
         j = slope(lo, hi)
         if not math.isfinite(j) or j <= 0:
-            raise NoGapError(_nonpositive_slope(j, y_all[lo:hi], x_all[lo:hi]))
+            raise NoGapError(_nonpositive(j, y_all[lo:hi], x_all[lo:hi], declared))
     n = hi - lo
     if n < 3:
         raise NoGapError(f"gap too short: {n} samples in the zone by the dynamics, need >= 3")
@@ -234,6 +201,10 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
     se = max(float(np.hypot(se_stat, model_error)), GAP_ONLY_REL_SE_FLOOR * j)
     return {"j1": float(j), "se": se, "model_error": float(model_error), "residual": res, "dof": dof,
             "start": int(lo), "end": int(hi), "noise": (sy, sx)}
+
+
+def _nonpositive(j: float, torque: np.ndarray, acc: np.ndarray, declared: tuple) -> str:
+    return gap_sign.nonpositive_slope(j, torque, acc, gap_sign.slope_flip(torque, *declared))
 
 
 def _free_level(load: np.ndarray, max_trim: tuple) -> float:
@@ -499,7 +470,7 @@ def _method_gap_only(window: dict, rows: tuple, drive: tuple, model: GapModel, m
     mf = _net_torque(window, bearing_friction_nms_per_rad)
     fit = made if made is not None else gap_only_fit(
         mf, np.asarray(window["a1"], float) / wheel_radius_m, start, end,
-        max_trim=gap_only_max_trim(model, sample_period_s))
+        max_trim=gap_only_max_trim(model, sample_period_s), declared=declared_errors(model, sample_period_s))
     return FitState(fit["j1"], fit["se"], fit["residual"], fit["dof"], fit["model_error"], (fit["start"], fit["end"]),
                     made=fit, torque=mf)
 

@@ -40,7 +40,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from jident_ros.identify import lapack
+from jident_ros.identify import gap_sign, lapack
 from jident_ros.identify.distributions import normal_isf
 from jident_ros.identify.gap_numerics import (
     _ar1_inflation,
@@ -368,6 +368,28 @@ class _SpanFits:
         return terms
 
 
+    def declared_flip(self, f: dict) -> float:
+        """How far the torque errors the drive declares can move fit ``f``'s 1/J1, as a fraction of it, at their
+        bounds and all one way: an error e(t) of the torque moves 1/J1 to 1/J1 (1 − r_κ·Φ(e)) (r_κ·Φ(m) = 1), so
+        where this reaches 1 they can turn 1/J1 through zero.  The terms of :meth:`se_terms` at their bounds (the
+        offset and its drift, the friction bands where not fitted, the lag), summed."""
+        model, m, ts, Cc, Vv, tau = self.model, self.m, self.ts, self.Cc, self.Vv, self.tau
+        i, j = f["i"], f["j"]
+        row = f["pinv"][2] / self.phi_scale
+        tt = tau[i:j]
+        out = 0.0
+        if model.torque_offset_nm:
+            t0 = tt - tt[0]
+            dur = max(float(t0[-1]), 1e-300)
+            drift = (2.0 / dur) * (t0 ** 3 / 6.0 - 0.5 * dur * t0 ** 2 / 2.0)
+            out += (abs(float(row @ (0.5 * tt * tt))) + abs(float(row @ drift))) * float(model.torque_offset_nm)
+        if f["X"].shape[1] == 3:
+            out += abs(float(row @ Cc[i:j])) * self.coulomb_mid
+            out += abs(float(row @ Vv[i:j])) * float(model.viscous_friction_band_nms_per_rad)
+        if model.torque_lag_s:
+            out += abs(float(row @ _cumtrapz(m[i:j], ts))) * float(model.torque_lag_s)
+        return out
+
     def fitted(self, s_row: int, e_row: int, with_coulomb: bool) -> tuple:
         """(fit, its standard error's terms) over [s_row, e_row), the lag term at the declared lag."""
         model = self.model
@@ -489,7 +511,8 @@ class _SpanFits:
             if other is not None and (best is None or other["se_stat"] < best["se_stat"]):
                 best, s_est, e_est = other, s_c, e_c
         if best is None:
-            raise FreeFitError(_no_positive_kappa(first, phi_scale))
+            kappa, se = _kappa_se(first, phi_scale)
+            raise FreeFitError(gap_sign.no_positive_kappa(kappa, se, first["X"].shape[0], self.declared_flip(first)))
         j1 = best["j1"]
         terms = dict(best["terms"])
         terms["torque_accuracy"] = j1 * model.torque_rel_se()
@@ -503,23 +526,9 @@ class _SpanFits:
                 "change_point_error": float(terms["change_points"])}
 
 
-#: A fit's 1/J1 at or below zero within this many of its standard errors of zero: the gap's torque does not curve the
-#: angle measurably (resolution-limited, no J1 from the window); farther below, the angle curves against the torque
-#: (a sign or configuration problem). 3, the cross-check's and the friction band's z (no model was tuned on it).
-NONPHYSICAL_Z = 3.0
-
-
-def _no_positive_kappa(f: dict, phi_scale: float) -> str:
-    """The reason of a free fit without a positive 1/J1 (``f``: the fit without a Coulomb column): "gap fit
-    undetermined" (resolution-limited) when its 1/J1 is within NONPHYSICAL_Z statistical standard errors of zero, else
-    "non-physical" with what to check."""
-    kappa, res, X = f["kappa"], f["res"], f["X"]
+def _kappa_se(f: dict, phi_scale: float) -> tuple:
+    """(1/J1, its statistical standard error) of a free fit ``f`` (column 2 of its design)."""
+    res, X = f["res"], f["X"]
     dof = X.shape[0] - X.shape[1]
     row = f["pinv"][2] / phi_scale
-    se = float(np.sqrt(float(res @ res) / max(dof, 1) * float(row @ row) * _ar1_inflation(res)))
-    if np.isfinite(kappa) and kappa >= -NONPHYSICAL_Z * se:
-        return (f"gap fit undetermined: 1/J1 = {kappa:.3g} ± {se:.2g} 1/(kg m^2) from alpha1, not distinguishable from "
-                f"0: the gap's torque does not curve the angle measurably over its {X.shape[0]} rows")
-    return (f"gap fit gave a non-physical 1/J1 = {kappa:.3g} ± {se:.2g} 1/(kg m^2) from alpha1 (the angle curves "
-            "against the torque's double integral over the gap: check the sign of m_el against alpha1, the joint "
-            "names and gear_ratio, or a torque estimate smoothed or late beyond torque_lag_max_s)")
+    return f["kappa"], float(np.sqrt(float(res @ res) / max(dof, 1) * float(row @ row) * _ar1_inflation(res)))
