@@ -143,6 +143,35 @@ def test_j1_outside_the_plausible_band_is_refused_with_the_numbers(configs, libr
     assert published == [d.inertia_kgm2] and d.status == "between_classes"  # a wider band lets it through
 
 
+@pytest.mark.parametrize("by_interval", [True, False])
+@pytest.mark.parametrize("j1,se,refused", [
+    (2.06, 0.28, False),     # 1.51..2.61: reaches into the band (up to 1.74), wider than +-10 %: undetermined
+    (0.51, 0.09, False),     # 0.33..0.69: reaches up into the band (from 0.58)
+    (2.06, 0.10, True),      # 1.86..2.26: wide (+-9.5 % is not) -- pinned outside the band: refused
+    (1.80, 0.03, True),      # 1.74..1.86, +-3.3 %: determined, outside: refused
+    (2.76, 0.29, True),      # 2.19..3.33: wide but wholly outside the band: refused
+])
+def test_j1_outside_the_band_is_a_configuration_error_only_when_its_interval_says_so(
+        configs, library, windows, monkeypatch, by_interval, j1, se, refused):
+    """BAND_BY_INTERVAL: a J1 outside the plausible band (0.58..1.74) whose 95 % interval is wider than +-10 % and
+    reaches into the band cannot tell a wrong K2, radius or torque scale from its own resolution: undetermined, its
+    level by the nominal, nothing published -- not ERROR.  Pinned outside (narrow, or wholly outside) it stays refused,
+    ERROR; off, every J1 outside the band is refused (stop 42)."""
+    import jident_ros.identify.diagnosis as diagnosis
+    from jident_ros.identify import verdict
+    monkeypatch.setattr(verdict, "BAND_BY_INTERVAL", by_interval)
+    monkeypatch.setattr(diagnosis, "estimate_inertia", lambda *a, **kw: _wide_gap(j1, se))
+    d, published = _diagnose(configs, library, windows.case(0))
+    assert d.inertia_kgm2 is None and published == [] and d.refused_reason, d.message
+    if refused or not by_interval:
+        assert d.status == "refused" and d.level_name == "ERROR", d.message
+        assert "is outside the plausible band 0.58..1.74 kg m^2" in d.message and "a wrong K2" in d.message
+    else:
+        assert d.status == "ambiguous" and d.level_name in ("OK", "WARN"), d.message
+        assert f"undetermined: J1 = {j1:.4g} kg m^2 lies outside the plausible band 0.58..1.74 kg m^2 but its 95 % " \
+               "interval" in d.message and "a wrong K2" not in d.message, d.message
+
+
 @pytest.mark.parametrize("factor", [0.5, 2.0])
 def test_a_wrong_backlash_width_publishes_nothing_and_says_so(configs, library, windows, factor):
     d, published = _diagnose(configs, library, windows.case(1), k2=0.005 * factor)
