@@ -1844,3 +1844,25 @@ def test_an_entry_moved_forward_beyond_the_capture_keeps_a_whole_window(monkeypa
         assert [w.column("t")[-1] for w in wins] == [c[-1, 0] for c in captures]
     else:
         assert min(n) < det.window_length
+
+
+def test_a_width_not_above_its_own_uncertainty_is_no_k2():
+    """Vector draw s15-11 (zoo_draws --model vector --seed 15), its light load reversal as JointState 2^16 clean (the
+    drawn 2^17 encoders), the window as the flank detector handed it to estimate_width
+    (test/data/vector_draws_light_reversal_zero_width.npz, entry row 48): the rules' re-contact 5 rows after the entry,
+    delta dithering by a count at the same level at both ends, so the traversal's width was 0.0 -- a window with
+    K2 = 0 refused as ERROR ("backlash_width_m: must be a finite number > 0") and the detector's running K2 set to 0.
+    Now no width (NaN, the window goes on without a K2); a real traversal's width is kept (test_detector_raw)."""
+    from jident_ros.stream import flank_delta
+    d = np.load(Path(__file__).parent / "data" / "vector_draws_light_reversal_zero_width.npz")
+    window = {c: d[c] for c in ("t", "alpha1", "alpha2", "omega1", "omega2", "m_el")}
+    res = flank_delta.estimate_width(window, int(d["entry_index"]), float(d["wheel_radius_m"]),
+                                     float(d["sample_period_s"]), float(d["gear_ratio"]), flank_rad=float(d["flank_rad"]),
+                                     contact_samples=int(d["contact_samples"]),
+                                     contact_tolerance_rad=float(d["contact_tolerance_rad"]))
+    assert math.isnan(res.width_m) and math.isnan(res.se_m) and res.how.startswith("no width"), res
+    assert res.recontact_index == 53
+    # the rule alone: a width at its uncertainty is none, one above it stays
+    assert math.isnan(flank_delta._positive(flank_delta.WidthResult(1e-6, 1e-6, "traversal", 60)).width_m)
+    kept = flank_delta.WidthResult(2e-6, 1e-6, "traversal", 60)
+    assert flank_delta._positive(kept) is kept

@@ -304,7 +304,7 @@ def estimate_width(window: dict, entry_index: int, wheel_radius_m: float, sample
         f_after = float(np.mean(tail))
         width = r * abs(f_after - d[e])
         se = r * math.sqrt(float(np.var(tail, ddof=1)) + step_after ** 2 / 12.0 + q2)
-        return WidthResult(width, se, "same_flank", g)
+        return _positive(WidthResult(width, se, "same_flank", g))
     if RECONTACT_FROM_DELTA and not _delta_arrived(d, e, g, q_delta := _delta_quantum(d, e, angle_quantum_rad),
                                                    sample_period_s):
         # the motor's acceleration fell while delta was still crossing the zone: delta's own stop
@@ -320,4 +320,17 @@ def estimate_width(window: dict, entry_index: int, wheel_radius_m: float, sample
     p_g, b_g = 0.5 * (d[g - 1] + d[g]), abs(d[g] - d[g - 1])
     width = 0.5 * r * abs(p_g - p_e)
     se = 0.5 * r * math.sqrt((b_e ** 2 + b_g ** 2) / 12.0 + 2 * q2)
-    return WidthResult(width, se, "traversal", g)
+    return _positive(WidthResult(width, se, "traversal", g))
+
+
+def _positive(res: WidthResult) -> WidthResult:
+    """``res``, or no width where it is not above its own standard uncertainty: delta at the same level at both ends
+    (a re-contact a few rows after the entry while delta dithers by a count, the vector drive's light load reversal on
+    a 2^17 encoder, s15-11) is no K2; such a window (K2 = 0.0) was refused, ERROR "backlash_width_m: must be a finite
+    number > 0, got 0.0", and set the detector's running K2 to 0.  A missing K2 never blocks a J1: the window goes on
+    without one (FLANK_WINDOWS_WITHOUT_K2)."""
+    se = res.se_m if math.isfinite(res.se_m) else 0.0
+    if not math.isfinite(res.width_m) or res.width_m > se:
+        return res
+    return WidthResult(math.nan, math.nan, f"no width: delta at the same level at the entry and the re-contact ({res.how})",
+                       res.recontact_index)
