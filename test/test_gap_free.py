@@ -543,6 +543,25 @@ def test_a_re_contact_at_or_before_the_entry_is_a_gap_too_short_not_an_error():
     assert gap_interval(window, 30, 5e-3, 0.1, recontact_index=40) == (30, 40, "detector")
 
 
+def test_an_encoder_acceleration_of_exactly_zero_at_the_entry_is_the_encoder_s_resolution():
+    """No re-contact row from the detector and no load angle: the gap is read from the motor's acceleration.  Where
+    that comes from the encoder's counts and is exactly 0 at the entry (a slow turn below one count's curvature: DOL
+    d1-04's light load reversal at 2^16 and 2^13 counts) it is the encoder's resolution, "gap fit undetermined" (OK,
+    nothing published), not ERROR; an accelerometer reading exactly 0 there stays an error."""
+    from jident_ros.identify.gap_interval import gap_interval
+    n = 100
+    steady = {"t": np.arange(n) * 5e-4, "alpha1": np.zeros(n)}     # one count throughout: the smoothed curvature is 0
+    with pytest.raises(NoGapError) as exc:
+        gap_interval(steady, 30, 5e-3, 0.1)
+    assert str(exc.value).startswith("gap fit undetermined") and resolution_limited(str(exc.value)), str(exc.value)
+    with pytest.raises(NoGapError) as exc:
+        gap_interval(dict(steady, a1=np.zeros(n)), 30, 5e-3, 0.1)
+    assert "does not accelerate at the entry sample" in str(exc.value) and not resolution_limited(str(exc.value))
+    rows = np.arange(n) - 30.0
+    accelerating = dict(steady, alpha1=np.where(rows > 0, 1e-4 * rows ** 2, 0.0) - np.where(rows > 12, 1e-4 * (rows - 12) ** 2, 0.0))
+    assert gap_interval(accelerating, 30, 5e-3, 0.1)[2] == "signature"
+
+
 @pytest.mark.parametrize("beyond_declared", [True, False])
 def test_an_angle_curving_against_a_torque_the_declared_errors_can_turn_is_undetermined(monkeypatch, step,
                                                                                          beyond_declared):
