@@ -340,7 +340,7 @@ def test_more_torque_on_the_same_flank_and_back_is_not_an_entry_with_m_el():
 def test_one_count_of_a_coarse_encoder_at_the_entry_is_not_a_slip():
     """2^13 counts: around a slow departure the steps of delta are 0 and the entry's is one count; that is not
     the slip scenario's jump (the vector drive's K2 was 96 % off): the traversal's K2 is measured."""
-    from jident_ros.stream.flank import estimate_width
+    from jident_ros.stream.flank_delta import estimate_width
     q = 2 * math.pi / 8192
     n, e, g, theta, r = 400, 48, 148, 0.05, 0.1
     k = np.arange(n) - e

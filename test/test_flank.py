@@ -229,7 +229,7 @@ def test_with_an_accelerometer_a_noisy_load_ramp_is_entered_at_its_end():
     """With a1 at 20 dB, single_mass_run's 4-sigma tolerance starts the gap 3 samples before the load ramp ends
     (the vector drive's heavy load reversals at 30 dB: -4) and back_to_load moves only back; the load torque's hinge
     (load_hinge: a ramp to zero, then the gap's level) moves it forward to the ramp's end."""
-    from jident_ros.stream.flank import LOAD_HINGE_MIN_GAIN, LOAD_HINGE_SEARCH, load_hinge
+    from jident_ros.stream.flank_free import LOAD_HINGE_MIN_GAIN, LOAD_HINGE_SEARCH, load_hinge
     data, ch = _late_departure(snr=20.0)
     wins, _ = _windows(data, ch, nominal_inertia_kgm2=1.16)
     assert len(wins) == 1
@@ -341,7 +341,7 @@ def test_without_a1_a_late_departure_of_an_untwisting_coupling_moves_back_to_its
     """Without a1 the entry of a light load reversal moves back from the late departure to where delta's free
     curvature starts (free_departure); a flank left from rest (no drift before: the speed steps) and a jump of
     delta (our simulator's slip) keep their departure."""
-    from jident_ros.stream.flank import DRIFT_BACK_SAMPLES, free_departure
+    from jident_ros.stream.flank_free import DRIFT_BACK_SAMPLES, free_departure
     data, ch = _untwisting(seed=seed)
     wins, _ = _windows(data, ch)
     assert len(wins) == 1
@@ -415,7 +415,7 @@ def test_free_motion_start_finds_where_the_motor_ran_free(noise_nm, late):
     back to where the motor equation in angle form starts to hold: alpha1 = a + v k + Phi / J + c k^2 / 2 free from
     the true entry on, a contact's load before it (issue 20: the vector drive's traversals back were 26-54 samples
     late, the walk + hinge put them at -6 .. +1)."""
-    from jident_ros.stream.flank import free_motion_start
+    from jident_ros.stream.flank_free import free_motion_start
     alpha1, m_el, q = _free_motor(noise_nm=noise_nm)
     assert abs(free_motion_start(alpha1, m_el, 200 + late, 48, 5e-4, q) - 200) <= 2
 
@@ -423,14 +423,14 @@ def test_free_motion_start_finds_where_the_motor_ran_free(noise_nm, late):
 def test_free_motion_start_keeps_the_departure_of_a_coarse_encoder():
     """A coarse encoder (2^13: a light contact's load is below its resolution, FREE_WALK_MAX_NOISE_RAD; its walk ran 51
     samples back on the vector drive, a false entry): the departure is kept."""
-    from jident_ros.stream import flank, flank_free
+    from jident_ros.stream import flank_free
     alpha1, m_el, q = _free_motor(counts=8192, load_nm=20.0, ramp=60)
-    assert flank.free_motion_start(alpha1, m_el, 240, 48, 5e-4, q) == 240
+    assert flank_free.free_motion_start(alpha1, m_el, 240, 48, 5e-4, q) == 240
     # the guard is what keeps it: without it the coarse encoder's walk moves the entry
     saved = flank_free.FREE_WALK_MAX_NOISE_RAD
     try:
         flank_free.FREE_WALK_MAX_NOISE_RAD = 1.0
-        assert flank.free_motion_start(alpha1, m_el, 240, 48, 5e-4, q) < 200 - 20
+        assert flank_free.free_motion_start(alpha1, m_el, 240, 48, 5e-4, q) < 200 - 20
     finally:
         flank_free.FREE_WALK_MAX_NOISE_RAD = saved
 
@@ -488,7 +488,7 @@ def test_coupling_entry_puts_an_untwisting_departure_at_the_contact_loss():
     """Without a1, delta crosses the departure threshold while the coupling still untwists (7 samples early here; the
     vector drive's heavy load reversals 8-9, the second drive's speed steps 3-4): the coupling model's contact loss
     is the entry, accepted as a forward move; from the true entry it stays."""
-    from jident_ros.stream.flank import COUPLING_MIN_GAIN, coupling_entry
+    from jident_ros.stream.flank_coupling import COUPLING_MIN_GAIN, coupling_entry
     data, entry = _untwisting_two_mass()
     d = data[:, 1] - data[:, 2]
     flank = float(np.median(d[100:150]))
@@ -515,14 +515,14 @@ def test_a_soft_coupling_untwisting_beyond_the_search_is_entered_at_its_contact_
     the search's forward edge, the entry kept); searching on from that edge (COUPLING_FORWARD_ROUNDS) finds the
     contact loss (the vector drive with k x 0.3, heavy load reversal: -22 -> -1).  With one search the detector's
     window stays early."""
-    from jident_ros.stream import flank, flank_coupling
+    from jident_ros.stream import flank_coupling
     data, entry = _untwisting_two_mass(k=1.5e4, c=10.0)
     d = data[:, 1] - data[:, 2]
     level = float(np.median(d[120:190]))
     dep = 150 + int(np.argmax(np.abs(d[150:] - level) > 1.5e-3))
-    assert entry - dep > flank.COUPLING_SEARCH           # beyond one search: the further searches are what move it
-    assert flank.coupling_entry(data[:, 1], d, data[:, 3], dep, -1.0, 5e-4)[:2] == (dep, 1.0)
-    e, gain, rms = flank.coupling_entry(data[:, 1], d, data[:, 3], dep, -1.0, 5e-4, rounds=flank.COUPLING_FORWARD_ROUNDS)
+    assert entry - dep > flank_coupling.COUPLING_SEARCH           # beyond one search: the further searches are what move it
+    assert flank_coupling.coupling_entry(data[:, 1], d, data[:, 3], dep, -1.0, 5e-4)[:2] == (dep, 1.0)
+    e, gain, rms = flank_coupling.coupling_entry(data[:, 1], d, data[:, 3], dep, -1.0, 5e-4, rounds=flank_coupling.COUPLING_FORWARD_ROUNDS)
     assert abs(e - entry) <= 2 and gain > 1.0 and rms < 1e-4
     data, entry = _untwisting_two_mass(n=2300, k=1.5e4, c=10.0, load0=300.0)   # 20 mrad: 19 samples forward
     ch = ("t", "alpha1", "alpha2", "m_el")
@@ -599,7 +599,7 @@ def test_back_to_load_keeps_the_seed_j1_where_the_gap_does_not_resolve_it():
     the entry within 2 samples for a seed 8 % below the drive's J1 up to 8 % above it."""
     from pathlib import Path
 
-    from jident_ros.stream.flank import back_to_load
+    from jident_ros.stream.flank_free import back_to_load
     d = np.load(Path(__file__).parent / "data" / "vd_light_load_reversal_30dB.npz")
     m_el, acc = d["m_el"].astype(float), d["acc"].astype(float)
     for seed in (1.073, 1.16, 1.25):
@@ -615,7 +615,7 @@ def test_without_a1_a_late_departure_moves_to_the_spring_s_contact_loss():
     move only at SPRING_MIN_GAIN with a plausible J."""
     from pathlib import Path
 
-    from jident_ros.stream.flank import SPRING_MAX_J_DEVIATION, SPRING_MIN_GAIN, SPRING_MIN_MOVE, spring_entry
+    from jident_ros.stream.flank_coupling import SPRING_MAX_J_DEVIATION, SPRING_MIN_GAIN, SPRING_MIN_MOVE, spring_entry
     d = np.load(Path(__file__).parent / "data" / "vd_speed_reversal_jointstate_30dB.npz")
     for key in ("fwd", "rev"):
         a1, a2, m_el = d[f"{key}_alpha1"], d[f"{key}_alpha2"], d[f"{key}_m_el"].astype(float)
@@ -696,7 +696,7 @@ def test_without_an_accelerometer_a_slip_drop_enters_at_the_damped_spring_s_cont
     fit, moved the entry to +7..+8 (clean) and +12 (30 dB); the damped spring with that re-contact puts it on the
     true first sample in the zone, at a gain >= DAMPED_MIN_GAIN and a torque scale within
     DAMPED_MAX_SCALE_DEVIATION of the steady m_el (old code: +8 and +12)."""
-    from jident_ros.stream.flank import DAMPED_MAX_SCALE_DEVIATION, DAMPED_MIN_GAIN, damped_spring_entry
+    from jident_ros.stream.flank_coupling import DAMPED_MAX_SCALE_DEVIATION, DAMPED_MIN_GAIN, damped_spring_entry
     data, dep, true, flank = _dol_slip_drop(key)
     delta = data[:, 1] - data[:, 2]
     assert dep - true == -3
@@ -834,7 +834,7 @@ def test_on_a_coarse_encoder_the_entry_is_at_the_end_of_the_untwist(key, old):
     the free relative acceleration from the contact loss) puts both within 2 samples, at a gain >= UNTWIST_MIN_GAIN;
     the speed step (one kink: its untwist starts at the contact loss's neighbour) stays below the gain and keeps its
     entry (old code, or the rule off: +6, -3, +1)."""
-    from jident_ros.stream.flank import UNTWIST_MIN_GAIN, untwist_entry
+    from jident_ros.stream.flank_zone import UNTWIST_MIN_GAIN, untwist_entry
     data, dep, true, level, thr = _vd_untwist_8192c(key)
     assert dep - true == old
     e, gain = untwist_entry(data[:, 1] - data[:, 2], dep)
@@ -886,13 +886,12 @@ def test_a_shallow_bounce_on_a_coarse_encoder_is_a_bounce(monkeypatch):
     turn) is a bounce: the traversal back enters at 2196, not at the bounce's start (2125, matched to the bounce's gap:
     the traversal had no window); with the old depth (2 x RETURN_TURN_SHARE) or the old rest (RETURN_REST_DEPARTURES
     after it, +6) it fails."""
-    import jident_ros.stream.flank as fl
     from jident_ros.stream import flank_scan
     entries = _second_drive_turn_scan("bounce")
     assert len(entries) == 1 and abs(entries[0] - 2196) <= 2, entries
-    monkeypatch.setattr(flank_scan, "RETURN_SHALLOW_REST_DEPARTURES", fl.RETURN_REST_DEPARTURES)
+    monkeypatch.setattr(flank_scan, "RETURN_SHALLOW_REST_DEPARTURES", flank_scan.RETURN_REST_DEPARTURES)
     assert abs(_second_drive_turn_scan("bounce")[0] - 2196) > 2
-    monkeypatch.setattr(flank_scan, "RETURN_SHALLOW_TURN_SHARE", 2.0 * fl.RETURN_TURN_SHARE)
+    monkeypatch.setattr(flank_scan, "RETURN_SHALLOW_TURN_SHARE", 2.0 * flank_scan.RETURN_TURN_SHARE)
     assert abs(_second_drive_turn_scan("bounce")[0] - 2196) > 2
 
 
@@ -977,7 +976,7 @@ def test_without_a1_a_light_load_reversal_enters_where_the_coupling_torque_has_r
     loop's at +20.  The motor equation with the coupling torque constant, then ramping linearly to zero at e
     (ramp_entry) puts both within 2 samples at a gain >= RAMP_MIN_GAIN and T0 within RAMP_MAX_SCALE_DEVIATION of the
     steady m_el; the detector takes it (old code: +36, +20)."""
-    from jident_ros.stream.flank import RAMP_MAX_SCALE_DEVIATION, RAMP_MIN_GAIN, ramp_entry
+    from jident_ros.stream.flank_zone import RAMP_MAX_SCALE_DEVIATION, RAMP_MIN_GAIN, ramp_entry
     data, dep, true, flank, thr, sigma = _vd_variant_cut(key)
     assert dep - true > 30
     e, gain, scale = ramp_entry(data[:, 1], data[:, 3], dep, 1.16, 5e-4)
@@ -993,7 +992,7 @@ def test_the_ramp_model_leaves_a_speed_reversal_s_departure():
     than a kink at the departure (gains 1.0-1.1 < RAMP_MIN_GAIN); the spring model decides those."""
     from pathlib import Path
 
-    from jident_ros.stream.flank import RAMP_MIN_GAIN, ramp_entry
+    from jident_ros.stream.flank_zone import RAMP_MIN_GAIN, ramp_entry
     d = np.load(Path(__file__).parent / "data" / "vd_speed_reversal_jointstate_30dB.npz")
     for key in ("fwd", "rev"):
         e, gain, scale = ramp_entry(d[f"{key}_alpha1"], d[f"{key}_m_el"].astype(float), 123, 1.16, 5e-4)
@@ -1028,17 +1027,16 @@ def test_without_a1_the_ramp_model_s_ties_are_broken_by_delta_s_untwist(key, old
     candidates alpha1 cannot tell apart (RAMP_TIE_VARIANCES) the one whose untwist model (a hinge at s, the free
     parabola from e) explains delta best; a gain >= RAMP_TIED_MIN_GAIN on alpha1 with a joint gain >= RAMP_MIN_GAIN
     (5.6-5.8 here) is taken: both within 1 sample (old code: +13, +14)."""
-    import jident_ros.stream.flank as flank
     from jident_ros.stream import flank_zone
     data, dep, true, level, thr, sigma = _dol_cut(key)
     a1, a2 = data[:, 1], data[:, 2]
-    e, gain, scale, both = flank.ramp_entry(a1, data[:, 3], dep, 1.16, 5e-4, a1 - a2, True)
-    assert abs(e - true) <= 1 and flank.RAMP_TIED_MIN_GAIN <= gain < flank.RAMP_MIN_GAIN <= both, (e - true, gain)
-    assert abs(scale - 1) <= flank.RAMP_MAX_SCALE_DEVIATION
+    e, gain, scale, both = flank_zone.ramp_entry(a1, data[:, 3], dep, 1.16, 5e-4, a1 - a2, True)
+    assert abs(e - true) <= 1 and flank_zone.RAMP_TIED_MIN_GAIN <= gain < flank_zone.RAMP_MIN_GAIN <= both, (e - true, gain)
+    assert abs(scale - 1) <= flank_zone.RAMP_MAX_SCALE_DEVIATION
     det = _variant_detector(level, thr, sigma, False, 65536)
     shift, _ = det._refine(data, dep)
     assert abs(dep + shift - true) <= 1, (dep + shift - true, old)
-    monkeypatch.setattr(flank_zone, "RAMP_TIED_MIN_GAIN", flank.RAMP_MIN_GAIN)     # the old gate: the departure stays
+    monkeypatch.setattr(flank_zone, "RAMP_TIED_MIN_GAIN", flank_zone.RAMP_MIN_GAIN)     # the old gate: the departure stays
     assert det._refine(data, dep)[0] + dep - true == old
 
 
@@ -1073,15 +1071,14 @@ def test_a_ramp_alpha1_alone_explains_below_the_old_gate_needs_delta_s_agreement
     the departure lies 1 sample after it.  The ramp model's best, 5 samples before the departure, explains alpha1
     1.77 times better (above RAMP_TIED_MIN_GAIN) but delta's untwist does not support it (joint gain 1.30 <
     RAMP_MIN_GAIN): not taken (with the gate at 1.5 on alpha1 alone: -4)."""
-    import jident_ros.stream.flank as flank
     from jident_ros.stream import flank_zone
     data, dep, true, level, thr, sigma = _dol_cut("slip")
-    e, gain, scale, both = flank.ramp_entry(data[:, 1], data[:, 3], dep, 1.16, 5e-4, data[:, 1] - data[:, 2], True)
-    assert flank.RAMP_TIED_MIN_GAIN <= gain < flank.RAMP_MIN_GAIN and both < flank.RAMP_MIN_GAIN, (gain, both)
+    e, gain, scale, both = flank_zone.ramp_entry(data[:, 1], data[:, 3], dep, 1.16, 5e-4, data[:, 1] - data[:, 2], True)
+    assert flank_zone.RAMP_TIED_MIN_GAIN <= gain < flank_zone.RAMP_MIN_GAIN and both < flank_zone.RAMP_MIN_GAIN, (gain, both)
     det = _variant_detector(level, thr, sigma, False, 65536)
     shift, _ = det._refine(data, dep)
     assert abs(dep + shift - true) <= 2, dep + shift - true
-    monkeypatch.setattr(flank_zone, "RAMP_MIN_GAIN", flank.RAMP_TIED_MIN_GAIN)
+    monkeypatch.setattr(flank_zone, "RAMP_MIN_GAIN", flank_zone.RAMP_TIED_MIN_GAIN)
     assert det._refine(data, dep)[0] + dep - true == e - true == -4
 
 
@@ -1091,7 +1088,7 @@ def test_the_travel_s_direction_is_delta_s_first_move_when_it_has_not_moved_over
     direction read RECONTACT_SPAN rows on saw no move (a 1e-14 rad rounding) and took the wrong side; the travel came
     out negative, and the acceleration's re-contact row 5 samples after the entry stood (K2 1.9e-5 m for 5 mm).  The
     first move decides then."""
-    from jident_ros.stream.flank import RECONTACT_MIN_TRAVEL_QUANTA, _delta_arrived, _travel
+    from jident_ros.stream.flank_delta import RECONTACT_MIN_TRAVEL_QUANTA, _delta_arrived, _travel
     q = 2 * np.pi / 8192
     d = np.concatenate([np.zeros(10), [0.0, -q, 0.0, -q, 1e-14, -q, 0.0], -q * np.arange(1, 200) ** 1.5 / 20])
     e = 10
@@ -1114,9 +1111,9 @@ def test_a_2e14_encoder_s_traversal_back_is_walked(monkeypatch, gate):
     one departure to the next: against FREE_MAX_NOISE_RAD (1.0e-4) the walk was refused for one capture of a traversal
     back (+56, the report's window) and taken for the other (+1).  The walk's own gate, FREE_WALK_MAX_NOISE_RAD, lies
     between 2^14's and 2^13's quantisation ('old': the gate at FREE_MAX_NOISE_RAD, the departure stays)."""
-    from jident_ros.stream import flank, flank_free
+    from jident_ros.stream import flank_free
     if gate == "old":
-        monkeypatch.setattr(flank_free, "FREE_WALK_MAX_NOISE_RAD", flank.FREE_MAX_NOISE_RAD)
+        monkeypatch.setattr(flank_free, "FREE_WALK_MAX_NOISE_RAD", flank_free.FREE_MAX_NOISE_RAD)
     data, dep, true, level, sigma = _vd_2e14_return()
     det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
     det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), True, sigma
@@ -1124,7 +1121,7 @@ def test_a_2e14_encoder_s_traversal_back_is_walked(monkeypatch, gate):
     if gate == "walk":
         assert abs(dep + shift - true) <= 2, dep + shift - true
         # a 2^13 encoder's walk stays refused (test_free_motion_start_keeps_the_departure_of_a_coarse_encoder)
-        assert 2 * math.pi / 8192 / math.sqrt(12.0) > flank.FREE_WALK_MAX_NOISE_RAD > 2 * math.pi / 16384 / math.sqrt(12.0)
+        assert 2 * math.pi / 8192 / math.sqrt(12.0) > flank_free.FREE_WALK_MAX_NOISE_RAD > 2 * math.pi / 16384 / math.sqrt(12.0)
     else:
         assert dep + shift - true >= 50, dep + shift - true
 
@@ -1149,13 +1146,13 @@ def test_at_30_db_the_walk_counts_the_torque_noise_its_longer_fits_carry(monkeyp
     grows as its length cubed, so a fit twice the departure's length read 1.3 x its rms with no contact in it and the
     walk stopped in the gap (+7; the entry +23).  Its limit counts that growth ('ignored': the noise read as 0, the
     rule before)."""
-    from jident_ros.stream import flank, flank_free
+    from jident_ros.stream import flank_free
     if torque_noise == "ignored":
         monkeypatch.setattr(flank_free, "_noise", lambda x, lag=1: 0.0)
     data, dep, true, level, sigma = _vd_return_cut("vd_stiff_return_traversal_jointstate_30db.npz", 65536)
     det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
     det._cap_flank, det._cap_returning, det._cap_sigma = (level, det.k_sigma * sigma), True, sigma
-    walk, _ = flank.free_motion_walk(data[:, 1], data[:, 3], dep, 48, 5e-4)
+    walk, _ = flank_free.free_motion_walk(data[:, 1], data[:, 3], dep, 48, 5e-4)
     shift, _ = det._refine(data, dep)
     if torque_noise == "counted":
         assert walk < true and abs(dep + shift - true) <= 2, (walk - true, dep + shift - true)
@@ -1167,7 +1164,7 @@ def test_double_integrated_white_noise_detrended_by_a_quadratic_has_mean_square_
     """The walk's torque-noise term: white noise of variance 1, summed twice (T_s = 1) over L rows, its least-squares
     quadratic removed, leaves a mean square of L^3 / 2520 (an integrated random walk's; the discrete sums' 11 % above it
     at L = 48, 4 % at 192)."""
-    from jident_ros.stream.flank import _double_integral
+    from jident_ros.stream.flank_free import _double_integral
     rng = np.random.default_rng(3)
     for L in (48, 96, 192):
         k = np.arange(L, dtype=float)
@@ -1222,7 +1219,7 @@ def test_a_torque_estimate_a_sample_late_is_advanced_before_the_rules(monkeypatc
     later than the vector drive's own lag (TORQUE_LAG_REF), so m_el is advanced by a sample and the rules place the
     entry as on the base drive (-1); not aligned, the coupling model's forward move took it to +6.  The same capture with
     m_el read on time (advanced by hand) is not moved again."""
-    from jident_ros.stream import flank, flank_coupling
+    from jident_ros.stream import flank_coupling
     if not aligned:
         monkeypatch.setattr(flank_coupling, "TORQUE_LATE_MIN_GAIN", 0.0)
     data, dep, true, level, sigma = _vd_own_cut("vd_torque_late_speed_reversal_jointstate.npz")
@@ -1230,7 +1227,7 @@ def test_a_torque_estimate_a_sample_late_is_advanced_before_the_rules(monkeypatc
     if aligned:
         assert abs(entry - true) <= 2, entry - true
         on_time = data.copy()
-        on_time[:, 3] = flank.shifted(data[:, 3], 1.0)
+        on_time[:, 3] = flank_coupling.shifted(data[:, 3], 1.0)
         assert det._torque_aligned(data, dep) is not data and det._torque_aligned(on_time, dep) is on_time
     else:
         assert entry - true >= 5, entry - true
@@ -1242,7 +1239,7 @@ def test_an_encoder_s_disc_errors_are_fitted_after_the_event_and_removed_before_
     jointstate.npz, the whole capture): both encoders carry 0.2 mrad once and 0.1 mrad twice per revolution; fitted over
     the capture's last 1000 rows (7.9 revolutions) they come out at their size, and with them removed the entry lies on
     the contact loss; left in, the ramp model fitted their curvature (a gain of 19) and put it 11 samples early."""
-    from jident_ros.stream import flank, flank_disc
+    from jident_ros.stream import flank_disc
     if not corrected:
         monkeypatch.setattr(flank_disc, "DISC_MIN_GAIN", 0.0)
     data, dep, true, level, sigma = _vd_own_cut("vd_disc_errors_light_reversal_jointstate.npz")
@@ -1250,7 +1247,7 @@ def test_an_encoder_s_disc_errors_are_fitted_after_the_event_and_removed_before_
     if corrected:
         assert abs(entry - true) <= 2, entry - true
         for j in (1, 2):
-            coef = flank.disc_error(data[:, j], data.shape[0] - 1000, data.shape[0])
+            coef = flank_disc.disc_error(data[:, j], data.shape[0] - 1000, data.shape[0])
             assert np.hypot(coef[0], coef[1]) == pytest.approx(2e-4, rel=0.05)
             assert np.hypot(coef[2], coef[3]) == pytest.approx(1e-4, rel=0.05)
     else:
@@ -1261,7 +1258,7 @@ def test_disc_error_needs_three_revolutions_one_way_and_the_encoder_s_own_noise_
     """disc_error on a 2^16 encoder turning steadily (a cubic in time): 0.2 / 0.1 mrad harmonics over 4 revolutions are
     found; none without them; none over 2 revolutions (a cubic and a sine are too alike there), nor back and forth, nor
     where a transient that is no function of the angle is left in the rows (the rms gate)."""
-    from jident_ros.stream.flank import disc_error
+    from jident_ros.stream.flank_disc import disc_error
     q = 2.0 * math.pi / 65536
     t = np.linspace(0.0, 0.5, 1000)
 
@@ -1299,15 +1296,15 @@ def test_a_damped_coupling_s_entry_moves_from_its_separation_to_the_zone_edge(ga
     coupling separates at 98, delta departs at 100 (the rules' entry), the zone is entered at 102.  The re-contact on the
     far flank gives c/k 5.4 samples within 1 % and k within 15 %; delta crosses F + |T0| / k at 102.  With the c/k gate
     at 0 nothing moves."""
-    from jident_ros.stream import flank, flank_zone
+    from jident_ros.stream import flank_zone
     d, rows, delta, side = _zone_cut("vd_soft_speed_reversal_zone_30db.npz")
-    kj, ck, rse, _ = flank.far_contact_model(rows[:, 1], delta, rows[:, 3], int(d["recontact"]), 5e-4)
+    kj, ck, rse, _ = flank_zone.far_contact_model(rows[:, 1], delta, rows[:, 3], int(d["recontact"]), 5e-4)
     assert ck / 5e-4 == pytest.approx(40.0 / 15000.0 / 5e-4, rel=0.05) and rse < 0.02
     assert kj * float(d["J"]) == pytest.approx(15000.0, rel=0.15)
     if gate == "off":
         monkeypatch.setattr(flank_zone, "ZONE_MAX_CK_REL_SE", 0.0)
-    entry, _ = flank.zone_edge_entry(rows[:, 1], delta, rows[:, 3], (int(d["entry"]), int(d["departure"]),
-                                     int(d["recontact"])), side, float(d["J"]), 5e-4)
+    entry, _ = flank_zone.zone_edge_entry(rows[:, 1], delta, rows[:, 3], (int(d["entry"]), int(d["departure"]),
+                                          int(d["recontact"])), side, float(d["J"]), 5e-4)
     assert entry - int(d["true_entry"]) == (0 if gate == "on" else -2)
 
 
@@ -1315,12 +1312,12 @@ def test_a_ringing_re_contact_does_not_move_the_entry():
     """The base drive's clean speed step down (test/data/vd_speed_step_ringing_recontact_clean.npz): the re-contact's fit
     gives c/k 12 samples with a relative standard error above 1 (ZONE_MAX_CK_REL_SE 0.1: the move would be +12, the true
     c/k is 1.6), so the entry stays at the departure (-2 against the zone, 0 against the separation)."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank_zone
     d, rows, delta, side = _zone_cut("vd_speed_step_ringing_recontact_clean.npz")
-    _, _, rse, _ = flank.far_contact_model(rows[:, 1], delta, rows[:, 3], int(d["recontact"]), 5e-4)
+    _, _, rse, _ = flank_zone.far_contact_model(rows[:, 1], delta, rows[:, 3], int(d["recontact"]), 5e-4)
     assert rse > 1.0
-    entry, _ = flank.zone_edge_entry(rows[:, 1], delta, rows[:, 3], (int(d["entry"]), int(d["departure"]),
-                                     int(d["recontact"])), side, float(d["J"]), 5e-4)
+    entry, _ = flank_zone.zone_edge_entry(rows[:, 1], delta, rows[:, 3], (int(d["entry"]), int(d["departure"]),
+                                          int(d["recontact"])), side, float(d["J"]), 5e-4)
     assert entry == int(d["entry"])
 
 
@@ -1354,15 +1351,15 @@ def test_with_a1_the_coupling_at_the_re_contact_is_read_from_the_torque_balance(
     5.3 samples): J1_nom a1 - m_el = -(k pen + c pen') after the re-contact gives k within 5 % and c/k within 5 %, and
     the entry moves from the separation (-6) to the zone (0).  The angle form's k is 52 % high (K/J 19674): its edge lies
     before the entry and nothing moves (ZONE_A1_FIT off: -6)."""
-    from jident_ros.stream import flank, flank_zone
+    from jident_ros.stream import flank_zone
     if not a1_fit:
         monkeypatch.setattr(flank_zone, "ZONE_A1_FIT", False)
     d, rows, delta, side = _zone_cut("vd_soft_heavy_reversal_zone_imu_30db.npz")
     acc = rows[:, 4] / float(d["radius"])
-    kj, ck, rse, _ = flank.far_contact_model_a1(acc, delta, rows[:, 3], int(d["recontact"]), 1.16, 5e-4)
+    kj, ck, rse, _ = flank_zone.far_contact_model_a1(acc, delta, rows[:, 3], int(d["recontact"]), 1.16, 5e-4)
     assert kj * 1.16 == pytest.approx(15000.0, rel=0.05) and ck / 5e-4 == pytest.approx(5.3, rel=0.05) and rse < 0.05
-    entry, _ = flank.zone_edge_entry((rows[:, 1], acc), delta, rows[:, 3], (int(d["entry"]), int(d["departure"]),
-                                     int(d["recontact"])), side, 1.16, 5e-4, 2.0 * math.pi / 65536)
+    entry, _ = flank_zone.zone_edge_entry((rows[:, 1], acc), delta, rows[:, 3], (int(d["entry"]), int(d["departure"]),
+                                          int(d["recontact"])), side, 1.16, 5e-4, 2.0 * math.pi / 65536)
     assert entry - int(d["true_entry"]) == (0 if a1_fit else -6)
 
 
@@ -1374,13 +1371,13 @@ def test_with_a1_the_gap_s_friction_comes_off_the_steady_torque(monkeypatch, fri
     (m_el - J1 a1 there); with it taken off, the edge is crossed at the zone entry (0), left in at +3."""
     from pathlib import Path
 
-    from jident_ros.stream import flank, flank_zone
+    from jident_ros.stream import flank_zone
     if not friction:
         monkeypatch.setattr(flank_zone, "ZONE_A1_FRICTION", False)
     d = np.load(Path(__file__).parent / "data" / "vd_jitter50_light_reversal_zone_imu_30db.npz")
-    entry, ck = flank.zone_edge_entry((d["alpha1"], d["acc"]), d["delta"], d["m_el"],
-                                      (int(d["entry"]), int(d["departure"]), int(d["recontact"])), float(d["side"]),
-                                      1.16, 5e-4, float(d["quantum"]))
+    entry, ck = flank_zone.zone_edge_entry((d["alpha1"], d["acc"]), d["delta"], d["m_el"],
+                                           (int(d["entry"]), int(d["departure"]), int(d["recontact"])), float(d["side"]),
+                                           1.16, 5e-4, float(d["quantum"]))
     assert ck == pytest.approx(1.57, abs=0.05)
     assert entry - int(d["true_entry"]) == (0 if friction else 3)
 
@@ -1575,10 +1572,10 @@ def test_a_traversal_and_its_traversal_back_in_one_window_read_the_re_contact_fr
     the same as before."""
     from draws_cuts import draws_cut
 
-    from jident_ros.stream import flank, flank_delta
+    from jident_ros.stream import flank_delta
     if rule == "off":
         monkeypatch.setattr(flank_delta, "_before_return",
-                            lambda D, q: D[:0] if flank._first_return(D, q) is not None else D)
+                            lambda D, q: D[:0] if flank_delta._first_return(D, q) is not None else D)
     data, ch, d = draws_cut("vector_draws_step_down_return.npz", key)
     got = [[(round(w.entry_time_s / 5e-4), w.recontact_index - w.entry_index, w.backlash_width_estimate_m)
             for w in _cut_windows(data, ch)]]
@@ -1727,7 +1724,7 @@ def test_back_to_load_takes_no_constant_torque_beyond_a_tenth_of_the_base_torque
     constant beyond BACK_CONSTANT_MAX_REL_BASE x M_b is no friction: J at the seed (s7-10: one row back), or, where the
     seed's constant is beyond it too (s20-08), the entry not moved.  The windows' m_el and Imu acceleration as
     back_to_load got them (test/data)."""
-    from jident_ros.stream.flank import BACK_CONSTANT_MAX_REL_BASE, back_to_load
+    from jident_ros.stream.flank_free import BACK_CONSTANT_MAX_REL_BASE, back_to_load
     d = np.load(Path(__file__).parent / "data" / "vd_draws_imu_30db_speed_reversal_back.npz")
     bound = BACK_CONSTANT_MAX_REL_BASE * 211.87485338163722           # the default drive's M_b, as make_detector's
     for key, moved in (("s7_10", 1), ("s20_8", 0)):
@@ -1744,7 +1741,7 @@ def test_back_to_load_takes_no_constant_torque_beyond_a_tenth_of_the_base_torque
 def test_the_flank_detector_bounds_the_constant_by_the_motors_base_torque():
     from jident_ros.config import load_system_config
     from jident_ros.identify.monitor import DetectorConfig, make_detector
-    from jident_ros.stream.flank import BACK_CONSTANT_MAX_REL_BASE
+    from jident_ros.stream.flank_free import BACK_CONSTANT_MAX_REL_BASE
     system = load_system_config()
     det = make_detector(system, DetectorConfig("flank", channels=("t", "alpha1", "alpha2", "m_el", "a1")))
     assert det.back_constant_max_nm == pytest.approx(BACK_CONSTANT_MAX_REL_BASE * system.motor.base.torque_nm)
@@ -1757,7 +1754,7 @@ def test_back_to_load_leaves_a_constant_torque_friction_and_offset_can_make_to_t
     """The bound is not tighter than friction and an offset can be: vector draw s1-09's speed reversal (JointState+Imu
     at 30 dB) fits a constant between 6 and 7 % of M_b, and its entry walks back 6 rows as without the bound (a bound
     of 5 % of M_b would keep it at the dynamics' entry)."""
-    from jident_ros.stream.flank import BACK_CONSTANT_MAX_REL_BASE, back_to_load
+    from jident_ros.stream.flank_free import BACK_CONSTANT_MAX_REL_BASE, back_to_load
     d = np.load(Path(__file__).parent / "data" / "vd_draws_imu_30db_speed_reversal_back.npz")
     m, acc = d["s1_9_m_el"], d["s1_9_acc"]
     entry, first, end = (int(v) for v in d["s1_9_rows"])

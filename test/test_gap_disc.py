@@ -1,5 +1,5 @@
 """The motor encoder's disc error taken off alpha1 before the gap fits (gap._disc_taken_off with
-jident_ros.stream.flank.disc_corrected): a resolver-grade angle error its user did not declare."""
+jident_ros.stream.flank_disc.disc_corrected): a resolver-grade angle error its user did not declare."""
 import numpy as np
 import pytest
 
@@ -69,16 +69,16 @@ def test_a_swinging_tail_leaves_the_disc_error_to_the_last_rows_that_turn_steadi
     """The last 1000 rows still swing (the cubic cannot follow them: refused); the last 600 or 400 turn steadily and
     give the disc's 200 / 100 µrad (DOL set 10's d10-04, whose J1 went out 11 % off with the error left on alpha1).
     Without the shorter tails nothing is fitted; without a disc error the swing invents none."""
-    from jident_ros.stream import flank, flank_disc
+    from jident_ros.stream import flank_disc
     x = _swinging_tail(2e-4)
-    _, coef = flank.disc_corrected(x, TS)
+    _, coef = flank_disc.disc_corrected(x, TS)
     assert coef is not None
     assert np.hypot(coef[0], coef[1]) == pytest.approx(2e-4, rel=0.05)
     assert np.hypot(coef[2], coef[3]) == pytest.approx(1e-4, rel=0.1)
-    assert flank.disc_error(x, x.size - 1000, x.size) is None
-    assert flank.disc_corrected(_swinging_tail(0.0), TS)[1] is None
+    assert flank_disc.disc_error(x, x.size - 1000, x.size) is None
+    assert flank_disc.disc_corrected(_swinging_tail(0.0), TS)[1] is None
     monkeypatch.setattr(flank_disc, "DISC_SHORTER_TAILS", ())
-    assert flank.disc_corrected(x, TS)[1] is None
+    assert flank_disc.disc_corrected(x, TS)[1] is None
 
 
 def test_the_gap_fit_takes_off_a_disc_error_behind_a_swinging_tail(monkeypatch):

@@ -337,23 +337,23 @@ def test_einsum_without_its_wrapper_and_the_prebuilt_error_state():
 
 
 def _plain_disc_error(angle, first, end):
-    """stream.flank.disc_error as fe4eda0 computed it (every sine from the angle itself)."""
+    """stream.flank_disc.disc_error as fe4eda0 computed it (every sine from the angle itself)."""
     import math
 
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank_disc, flank_free
     x = np.asarray(angle, float)
     first, end = max(int(first), 0), min(int(end), x.size)
-    if end - first < 4 * (flank.DISC_DEGREE + 5):
+    if end - first < 4 * (flank_disc.DISC_DEGREE + 5):
         return None
     path = float(np.sum(np.abs(np.diff(x[first:end])))) / (2.0 * math.pi)
     net = abs(float(x[end - 1] - x[first])) / (2.0 * math.pi)
-    if not (net >= flank.DISC_MIN_REVOLUTIONS and net >= flank.DISC_MIN_NET_SHARE * path):
+    if not (net >= flank_disc.DISC_MIN_REVOLUTIONS and net >= flank_disc.DISC_MIN_NET_SHARE * path):
         return None
     seg = x[first:end]
-    Q = flank._poly_basis(seg.size)
+    Q = flank_disc._poly_basis(seg.size)
     r = seg - Q @ (Q.T @ seg)
     rss_poly = float(r @ r)
-    D = flank._disc_columns(seg)
+    D = flank_disc._disc_columns(seg)
     D -= Q @ (Q.T @ D)
     try:
         coef = np.linalg.solve(D.T @ D, D.T @ r)
@@ -363,18 +363,18 @@ def _plain_disc_error(angle, first, end):
     rss = float(res @ res)
     steps = np.abs(np.diff(seg, 2))
     steps = steps[steps > 1e-9]
-    floor = max(float(steps.min()) / math.sqrt(12.0) if steps.size else 0.0, flank.ANGLE_MODEL_FLOOR_RAD)
-    if not rss > 0 or not rss_poly >= flank.DISC_MIN_GAIN ** 2 * rss \
-            or not math.sqrt(rss / seg.size) <= flank.DISC_MAX_RMS_FLOORS * floor:
+    floor = max(float(steps.min()) / math.sqrt(12.0) if steps.size else 0.0, flank_free.ANGLE_MODEL_FLOOR_RAD)
+    if not rss > 0 or not rss_poly >= flank_disc.DISC_MIN_GAIN ** 2 * rss \
+            or not math.sqrt(rss / seg.size) <= flank_disc.DISC_MAX_RMS_FLOORS * floor:
         return None
     return coef
 
 
 def test_the_disc_error_decided_on_double_angle_columns_is_the_plain_fits():
-    """stream.flank.disc_error refuses on the double-angle columns only beyond rounding and fits on the sines: the
+    """stream.flank_disc.disc_error refuses on the double-angle columns only beyond rounding and fits on the sines: the
     plain computation's answer bit for bit (None, or the same coefficients), on angles with disc errors of 0 to 1 mrad
     (quantised at 2^13-2^20 counts, with noise), turning 2-9 revolutions over the rows, and at the gates' edges."""
-    from jident_ros.stream import flank
+    from jident_ros.stream import flank_disc
     rng = np.random.default_rng(3)
     seen = {True: 0, False: 0}
     for trial in range(300):
@@ -387,7 +387,7 @@ def test_the_disc_error_decided_on_double_angle_columns_is_the_plain_fits():
         meas = meas + float(rng.choice([0.0, 1e-6, 1e-5])) * rng.standard_normal(n)
         q = 2 * np.pi / 2 ** int(rng.integers(13, 21))
         meas = np.round(meas / q) * q
-        got, plain = flank.disc_error(meas, 0, n), _plain_disc_error(meas, 0, n)
+        got, plain = flank_disc.disc_error(meas, 0, n), _plain_disc_error(meas, 0, n)
         assert (got is None) == (plain is None), trial
         if got is not None:
             assert np.array_equal(got, plain)

@@ -4,9 +4,9 @@
 It reaches the code that looks NAME up in that module: the module's own functions (reading NAME as a global) and other
 modules reading ``module.NAME``.  It does not reach a module that did ``from module import NAME`` (a copy bound at
 import), nor code that moved to another module and reads NAME there -- after stream/flank.py and identify/gap.py were
-split into modules (stop 42), a patch left on the old module would still succeed (flank.py finds its old names for
-reading; gap.py re-exports some) and change nothing, and the test of a rule turned off would pass without turning it
-off.  Two checks over every test file:
+split into modules (stop 42), a patch left on the old module would still succeed (flank.py found its old names for
+reading until stop 43; gap.py re-exports some) and change nothing, and the test of a rule turned off would pass
+without turning it off.  Two checks over every test file:
 
 * every patched (module, NAME) of jident_ros is read through that module: NAME is loaded by the module's own code, or
   some module of jident_ros reads it as ``module.NAME``;

@@ -117,7 +117,7 @@ def _two_mass(ts, length_s=0.21, step_s=2.5e-5):
 def test_the_coupling_model_searches_as_far_in_time_at_4_khz():
     """coupling_entry's fit and search (COUPLING_*: 26 ms before, 16 ms after, +-6 ms) at 4 kHz: the departure 3.5 ms
     (14 samples) before the contact loss is beyond a 12-sample search; converted, the model finds the loss."""
-    from jident_ros.stream.flank import coupling_entry
+    from jident_ros.stream.flank_coupling import coupling_entry
     data, entry = _two_mass(2.5e-4)
     d = data[:, 1] - data[:, 2]
     flank = float(np.median(d[200:300]))
@@ -131,7 +131,7 @@ def test_the_untwist_model_keeps_its_one_kink_fits_at_8_khz():
     """untwist_entry (a coarse encoder's untwist: delta at rest, untwisting at a constant rate, then free) at 8 kHz:
     its change-point sums are taken in samples at 2 kHz; in 8 kHz samples the 4th powers over 4 x the rows failed the
     determinant test on every one-kink fit (a gain of inf, the entry 12-17 samples late on the second drive's 2^13)."""
-    from jident_ros.stream.flank import untwist_entry
+    from jident_ros.stream.flank_zone import untwist_entry
     for ts in (5e-4, 1.25e-4):
         data, ch, x = _untwisting(ts, counts=8192, loss_s=0.3, ramp_s=0.004, drift_rad_s=-0.5, acc_rel=-60.0)
         d = data[:, 1] - data[:, 2]
@@ -145,7 +145,7 @@ def test_a_short_excursion_of_the_acceleration_does_not_end_the_gap_at_4_khz():
     """single_mass_run's gap run ends at 2 samples outside its tolerance at 2 kHz (1 ms): at 4 kHz the same 0.5 ms
     excursion of a filtered acceleration is 2 samples and ended the run there (the second drive's 2^13 re-contact
     1.75 ms early); converted, the run ends at the re-contact, at 2 kHz as at 4 kHz."""
-    from jident_ros.stream.flank import single_mass_run
+    from jident_ros.stream.flank_free import single_mass_run
     for ts in (5e-4, 2.5e-4):
         f = int(round(5e-4 / ts))
         n, dep, end = 400 * f, 100 * f, 160 * f              # a gap of 30 ms from the departure

@@ -5,7 +5,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import jident_ros.stream.flank as flank
 from jident_ros.stream import flank_delta
 
 DATA = Path(__file__).parent / "data" / "dol_light_reversal_recontact.npz"
@@ -18,8 +17,8 @@ def _cut():
 
 
 def _width(window, z):
-    return flank.estimate_width(window, int(z["entry_index"]), float(z["wheel_radius_m"]), float(z["sample_period_s"]),
-                                flank_rad=float(z["flank_rad"]), angle_quantum_rad=float(z["quantum"]))
+    return flank_delta.estimate_width(window, int(z["entry_index"]), float(z["wheel_radius_m"]), float(z["sample_period_s"]),
+                                      flank_rad=float(z["flank_rad"]), angle_quantum_rad=float(z["quantum"]))
 
 
 def test_dol_light_reversal_k2_from_delta():
@@ -76,7 +75,7 @@ def test_delta_recontact_synthetic(untwist, q):
     """Within 2 rows of the contact with and without the untwist's rest (which holds still for 15 rows: not a
     contact, its travel is 4 % of the zone), at ideal angles and a 2^13 encoder's quantum."""
     d, e, contact = _traversal(untwist, q=q)
-    g = flank.delta_recontact(d, e, q)
+    g = flank_delta.delta_recontact(d, e, q)
     assert abs(g - contact) <= 2
 
 
@@ -84,14 +83,14 @@ def test_delta_recontact_travel_share_guards_the_untwist(monkeypatch):
     """Without the travel-share guard the untwist's rest is read as the contact."""
     monkeypatch.setattr(flank_delta, "RECONTACT_MIN_TRAVEL_SHARE", 0.0)
     d, e, contact = _traversal(15)
-    assert flank.delta_recontact(d, e, 0.0) < contact - 50
+    assert flank_delta.delta_recontact(d, e, 0.0) < contact - 50
 
 
 def test_delta_arrived():
     d, e, contact = _traversal()
-    assert flank._delta_arrived(d, e, contact, 0.0)
-    assert not flank._delta_arrived(d, e, e + (contact - e) // 2, 0.0)
-    assert flank._delta_arrived(d, e, -1, 0.0)          # no row to check: the caller's stands
+    assert flank_delta._delta_arrived(d, e, contact, 0.0)
+    assert not flank_delta._delta_arrived(d, e, e + (contact - e) // 2, 0.0)
+    assert flank_delta._delta_arrived(d, e, -1, 0.0)          # no row to check: the caller's stands
 
 
 def test_bounce_then_traversal_back_is_not_the_contact():
@@ -101,8 +100,8 @@ def test_bounce_then_traversal_back_is_not_the_contact():
     d, e, contact = _traversal()
     bounce = np.concatenate([np.zeros(60), 0.02 * np.sin(np.linspace(0, np.pi, 40)), np.zeros(20)])
     d2 = np.concatenate([bounce, d[e:] + 0.0])
-    assert flank.delta_recontact(d2, 60, 0.0) == -1
-    assert flank._delta_arrived(d2, 60, 101, 0.0)
+    assert flank_delta.delta_recontact(d2, 60, 0.0) == -1
+    assert flank_delta._delta_arrived(d2, 60, 101, 0.0)
 
 
 def test_return_guard_matters(monkeypatch):
@@ -110,7 +109,7 @@ def test_return_guard_matters(monkeypatch):
     d, e, contact = _traversal()
     bounce = np.concatenate([np.zeros(60), 0.02 * np.sin(np.linspace(0, np.pi, 40)), np.zeros(20)])
     d2 = np.concatenate([bounce, d[e:] + 0.0])
-    assert flank.delta_recontact(d2, 60, 0.0) > 200
+    assert flank_delta.delta_recontact(d2, 60, 0.0) > 200
 
 
 def test_travel_of_a_few_quanta_is_not_read():
@@ -119,9 +118,9 @@ def test_travel_of_a_few_quanta_is_not_read():
     q = 2 * np.pi / 2 ** 13
     d, e, contact = _traversal(q=q)
     small = np.floor((d - d[0]) * (20 * q / 0.1) / q) * q        # the same motion scaled to a 20-count zone
-    assert flank.delta_recontact(small, e, q) == -1
-    assert flank._delta_arrived(small, e, e + 5, q)
-    assert abs(flank.delta_recontact(d, e, q) - contact) <= 2
+    assert flank_delta.delta_recontact(small, e, q) == -1
+    assert flank_delta._delta_arrived(small, e, e + 5, q)
+    assert abs(flank_delta.delta_recontact(d, e, q) - contact) <= 2
 
 
 def _there_and_back():
@@ -137,12 +136,12 @@ def test_a_traversal_and_its_traversal_back_are_read_up_to_the_return(monkeypatc
     the rows before the return (the re-contact at the far flank, not the acceleration's early row); with
     RECONTACT_RETURN_TRAVERSAL_SHARE above 1 (no such window read, the rule before stop 37) it gives none."""
     d, e, contact = _there_and_back()
-    assert flank._first_return(flank._travel(d, e), 0.0) is not None
-    assert abs(flank.delta_recontact(d, e, 0.0) - contact) <= 2
-    assert not flank._delta_arrived(d, e, e + 8, 0.0)
+    assert flank_delta._first_return(flank_delta._travel(d, e), 0.0) is not None
+    assert abs(flank_delta.delta_recontact(d, e, 0.0) - contact) <= 2
+    assert not flank_delta._delta_arrived(d, e, e + 8, 0.0)
     monkeypatch.setattr(flank_delta, "RECONTACT_RETURN_TRAVERSAL_SHARE", 1.01)
-    assert flank.delta_recontact(d, e, 0.0) == -1
-    assert flank._delta_arrived(d, e, e + 8, 0.0)
+    assert flank_delta.delta_recontact(d, e, 0.0) == -1
+    assert flank_delta._delta_arrived(d, e, e + 8, 0.0)
 
 
 def test_a_bounce_before_a_crossing_is_not_read_at_any_share_below_its_own(monkeypatch):
@@ -153,6 +152,6 @@ def test_a_bounce_before_a_crossing_is_not_read_at_any_share_below_its_own(monke
     d, e, contact = _traversal()
     bounce = np.concatenate([np.zeros(60), 0.02 * np.sin(np.linspace(0, np.pi, 40)), np.zeros(20)])
     d2 = np.concatenate([bounce, d[e:] + 0.0])
-    assert flank.delta_recontact(d2, 60, 0.0) == -1
+    assert flank_delta.delta_recontact(d2, 60, 0.0) == -1
     monkeypatch.setattr(flank_delta, "RECONTACT_RETURN_TRAVERSAL_SHARE", 0.0)
-    assert 60 < flank.delta_recontact(d2, 60, 0.0) < 100                # inside the bounce, 20 rows long
+    assert 60 < flank_delta.delta_recontact(d2, 60, 0.0) < 100                # inside the bounce, 20 rows long

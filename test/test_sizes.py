@@ -119,7 +119,7 @@ def _family_imports(tree: ast.Module, modules) -> list:
 
 
 def test_each_flank_constant_has_one_home_that_every_reader_looks_up():
-    """stream/flank.py was split (its models and rules into flank_*.py; flank.py finds their names for ``flank.X``):
+    """stream/flank.py was split (its models and rules into flank_*.py; since stop 43 flank.py no longer finds their names):
     a constant patched where it is not read changes nothing, silently.  So each UPPER_CASE constant is defined in one
     flank module only, no flank module imports another's constant by name (a reader elsewhere looks it up as
     ``module.NAME``, where a patch reaches it), and none imports flank.py (no cycle)."""

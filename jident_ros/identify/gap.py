@@ -188,7 +188,7 @@ def _delay_taken_off(window: dict, delay_s: float, filter_s: float, sample_perio
 
 def _disc_taken_off(window: dict, sample_period_s: float) -> tuple:
     """(the window with the motor encoder's disc error taken off alpha1, a phrase saying so), or (window, '') where
-    alpha1 shows none: jident_ros.stream.flank.disc_corrected, once and twice per revolution, fitted over the
+    alpha1 shows none: jident_ros.stream.flank_disc.disc_corrected, once and twice per revolution, fitted over the
     window's last rows where the drive turns steadily (the contact after the event: several revolutions).  A
     resolver-grade angle error (1 and 0.5 mrad) left undeclared bent the gap's angle: J1 5.9-6.5 % off with
     intervals that covered 2 of 4 (zoo_variants, stop 27); the declared encoder_accuracy_rad term stays."""

@@ -205,7 +205,7 @@ class DynamicsDetector(FlankDetector):
 
     def _refine(self, data: np.ndarray, dep: int):
         """(samples from the departure to the entry sample, re-contact row or None): the flank detector's
-        refinement from the dynamics (the 7-sample acceleration of :func:`~jident_ros.stream.flank.motor_acceleration`),
+        refinement from the dynamics (the 7-sample acceleration of :func:`~jident_ros.stream.flank_delta.motor_acceleration`),
         starting ``lookahead`` samples before the departure (the smoothed derivative spreads the step over its
         window)."""
         wd = {c: data[:, j] for j, c in enumerate(self.channels)}

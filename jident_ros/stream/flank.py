@@ -96,9 +96,10 @@ what it holds): :mod:`~jident_ros.stream.flank_free` (free motion, walking back 
 the detector's method groups :mod:`~jident_ros.stream.flank_window` (captures into windows),
 :mod:`~jident_ros.stream.flank_scan` (traversals back found by a window's scans) and
 :mod:`~jident_ros.stream.flank_refine` (the entry sample's rules).  This module keeps the state machine
-(:class:`FlankDetector`: the contact tracker) and finds every name those modules define (``flank.X``, ``from
-jident_ros.stream.flank import X``).  Each constant is defined in one of them and looked up there by every reader
-(``module.NAME`` elsewhere): a test patches it in that module (test_sizes.py checks both).
+(:class:`FlankDetector`: the contact tracker); a name those modules define is imported from its own module, not from
+this one (stop 43 removed the PEP 562 lookup that found the moved names here).  Each constant is defined in one of
+them and looked up there by every reader (``module.NAME`` elsewhere): a test patches it in that module (test_sizes.py
+checks both).
 """
 from __future__ import annotations
 
@@ -108,17 +109,7 @@ from typing import NamedTuple, Optional, Sequence
 
 import numpy as np
 
-from jident_ros.stream import (
-    flank_capture,
-    flank_coupling,
-    flank_delta,
-    flank_disc,
-    flank_free,
-    flank_refine,
-    flank_scan,
-    flank_window,
-    flank_zone,
-)
+from jident_ros.stream import flank_coupling, flank_free, flank_window
 from jident_ros.stream.detector import BacklashDetector, _positive
 from jident_ros.stream.filters import first_order_lowpass
 from jident_ros.stream.flank_capture import _FlankCapture
@@ -574,17 +565,3 @@ class FlankDetector(CaptureMixin, ReturnScanMixin, EntryRefineMixin, BacklashDet
     def threshold_for(self, cap: _FlankCapture) -> float:
         """The departure threshold of the contact a capture's entry left."""
         return max(self.k_sigma * cap.flank_sigma_rad, self.min_departure_rad)
-
-
-#: The modules the detector's models and rules moved to: ``flank.X`` and ``from jident_ros.stream.flank import X`` find
-#: every name they define (PEP 562).  A patch must go to the module that defines the name: every reader looks it up
-#: there, not here (test_sizes.py checks the tests' patches).
-_HOMES = (flank_free, flank_delta, flank_disc, flank_coupling, flank_zone, flank_capture, flank_window, flank_scan,
-          flank_refine)
-
-
-def __getattr__(name: str):
-    for module in _HOMES:
-        if not name.startswith("__") and name in vars(module):
-            return vars(module)[name]
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

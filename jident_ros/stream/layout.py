@@ -63,7 +63,7 @@ RAW_ANGLE_DETECTORS = ("flank", "dynamics")
 FLAG_SECOND_ENTRY = 1
 #: ... the data ended before the window was complete (a partial window, reported, never published).
 FLAG_CUT_OFF = 2
-#: ... the flank detector's shallow gap (flank.SHALLOW_*: a slip drop's few samples past the coupling's zero twist):
+#: ... the flank detector's shallow gap (flank_window.SHALLOW_*: a slip drop's few samples past the coupling's zero twist):
 #: its entry and K2 count, its J1 is not fitted (identify.diagnosis.SHALLOW_GAP_REASON)
 FLAG_SHALLOW_GAP = 4
 #: ... the flank detector's excursion came back to the flank it left (a bounce, no traversal: K2 not observable);
