@@ -511,6 +511,7 @@ def test_a_constant_torque_beyond_the_gap_s_swing_is_undetermined_not_a_sign_err
     (NONPHYSICAL_CENTRED; off: as before).  m_el with its sign flipped stays non-physical either way."""
     from jident_ros.identify import gap_a1, gap_sign
     monkeypatch.setattr(gap_sign, "NONPHYSICAL_CENTRED", centred)
+    monkeypatch.setattr(gap_sign, "NONPHYSICAL_MIDDLE", centred)     # the middle half's check finds the same swing
     t = np.arange(400) * 5e-4
     m = 2.0 + np.sin(2 * np.pi * 7 * t)
     acc = (m - 5.0) / 1.2 + np.random.default_rng(3).normal(0.0, 0.05, t.size)
@@ -634,4 +635,36 @@ def test_a1_against_a_torque_whose_declared_drift_can_turn_it_is_undetermined(mo
     with pytest.raises(NoGapError) as exc:
         gap_a1.gap_only_fit(-swing, swing / 1.2 + np.random.default_rng(4).normal(0.0, 0.05, n), 0, n,
                             declared=declared)
+    assert "non-physical" in str(exc.value) and not resolution_limited(str(exc.value))
+
+
+@pytest.mark.parametrize("middle", [True, False])
+def test_a1_anti_correlated_only_at_the_ends_of_its_rows_is_undetermined(monkeypatch, middle):
+    """The vector draws' load reversals with an Imu at 30 dB: the a1 fit's rows reach into contact at both ends, where
+    the speed controller's torque (hundreds of N m) pushes against the load and a1 moves the other way; m_el and a1
+    come out anti-correlated about their means over all the rows (ERROR, "check the sign of m_el") while the gap's own
+    rows, the middle half, hold the right sign.  NONPHYSICAL_MIDDLE: "gap fit undetermined" (off: non-physical).  A sign
+    error over the whole gap stays non-physical (the swing below, and the other tests here)."""
+    from jident_ros.identify import gap_a1, gap_sign
+    monkeypatch.setattr(gap_sign, "NONPHYSICAL_MIDDLE", middle)
+    n = 200
+    rng = np.random.default_rng(8)
+    t = np.arange(n) * 5e-4
+    m = 3.0 * np.sin(2 * np.pi * 5 * t)                 # the gap's own torque, free: a1 = m / J1
+    acc = m / 1.2
+    ends = np.r_[0:30, n - 30:n]
+    m[ends] = np.r_[np.linspace(300.0, 40.0, 30), np.linspace(-40.0, -300.0, 30)]   # contact: the controller pushes
+    acc[ends] = np.r_[np.linspace(-30.0, -5.0, 30), np.linspace(5.0, 30.0, 30)]      # ... against the load's push
+    acc = acc + rng.normal(0.0, 0.05, n)
+    with pytest.raises(NoGapError) as exc:
+        gap_a1.gap_only_fit(m, acc, 0, n)
+    text = str(exc.value)
+    if middle:
+        assert text.startswith("gap fit undetermined") and "not over its middle half" in text, text
+        assert resolution_limited(text)
+    else:
+        assert "non-physical" in text and not resolution_limited(text), text
+    swing = 3.0 * np.sin(2 * np.pi * 7 * t)
+    with pytest.raises(NoGapError) as exc:
+        gap_a1.gap_only_fit(-swing, swing / 1.2 + rng.normal(0.0, 0.05, n), 0, n)
     assert "non-physical" in str(exc.value) and not resolution_limited(str(exc.value))
