@@ -53,7 +53,10 @@ PROTOCOL_NOTE = ("A set is a blind test only until something is changed because 
                  "gap; vector sets 7 and 20 in stop 41, no constant torque beyond a tenth of M_b where the entry walks "
                  "back with an Imu; DOL set 21 in stop 42, a crossing after a ringing coupling's second dip and a count "
                  "of dither after a slow departure, and vector set 1, m_el and a1 anti-correlated only through the "
-                 "origin and a window kept whole).")
+                 "origin and a window kept whole; in stop 43 the ERROR windows of vector sets 1–22 and DOL sets 1 and 22, "
+                 "each set that had one: a negative J1 the declared torque errors can turn, an a1 anti-correlation only "
+                 "at the ends of its rows, a wide interval outside the band, a width of zero, an encoder's acceleration "
+                 "of exactly zero).")
 
 #: The torque accuracy a drive's data sheet typically states for sensored vector control, ± this of rated torque: what
 #: a user who has nothing better declares, as ``torque_accuracy`` and as ``torque_offset_rel_base``, the way
