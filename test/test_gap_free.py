@@ -563,6 +563,16 @@ def test_an_encoder_acceleration_of_exactly_zero_at_the_entry_is_the_encoder_s_r
     assert gap_interval(accelerating, 30, 5e-3, 0.1)[2] == "signature"
 
 
+def _undetermined_or_sign_error(text: str, undetermined: bool, why: str):
+    """A gap_sign verdict: "gap fit undetermined" saying ``why`` (resolution-limited: OK, no ERROR), or a sign error
+    (non-physical, not resolution-limited: ERROR)."""
+    if undetermined:
+        assert text.startswith("gap fit undetermined") and why in text, text
+        assert resolution_limited(text)
+    else:
+        assert "non-physical" in text and not resolution_limited(text), text
+
+
 @pytest.mark.parametrize("beyond_declared", [True, False])
 def test_an_angle_curving_against_a_torque_the_declared_errors_can_turn_is_undetermined(monkeypatch, step,
                                                                                          beyond_declared):
@@ -585,12 +595,7 @@ def test_an_angle_curving_against_a_torque_the_declared_errors_can_turn_is_undet
     declared = GapModel(torque_offset_nm=3.0, changepoint_search_samples=0)
     with pytest.raises(FreeFitError) as exc:
         free_angle_fit(alpha, m_est, ts, 0, n, declared, fixed=True)
-    text = str(exc.value)
-    if beyond_declared:
-        assert text.startswith("gap fit undetermined") and "too small against them" in text, text
-        assert resolution_limited(text)
-    else:
-        assert "non-physical 1/J1 = -" in text and not resolution_limited(text), text
+    _undetermined_or_sign_error(str(exc.value), beyond_declared, "too small against them")
     with pytest.raises(FreeFitError) as exc:
         free_angle_fit(alpha, m_est, ts, 0, n, GapModel(changepoint_search_samples=0), fixed=True)
     assert "non-physical 1/J1 = -" in str(exc.value) and not resolution_limited(str(exc.value))
@@ -621,12 +626,7 @@ def test_a1_against_a_torque_whose_declared_drift_can_turn_it_is_undetermined(mo
     declared = (ts, 3.0, 0.0)
     with pytest.raises(NoGapError) as exc:
         gap_a1.gap_only_fit(m_est, acc, 0, n, declared=declared)
-    text = str(exc.value)
-    if beyond_declared:
-        assert text.startswith("gap fit undetermined") and "too small against them" in text, text
-        assert resolution_limited(text)
-    else:
-        assert "non-physical" in text and not resolution_limited(text), text
+    _undetermined_or_sign_error(str(exc.value), beyond_declared, "too small against them")
     with pytest.raises(NoGapError) as exc:
         gap_a1.gap_only_fit(m_est, acc, 0, n)
     assert "non-physical" in str(exc.value) and not resolution_limited(str(exc.value))
@@ -658,12 +658,7 @@ def test_a1_anti_correlated_only_at_the_ends_of_its_rows_is_undetermined(monkeyp
     acc = acc + rng.normal(0.0, 0.05, n)
     with pytest.raises(NoGapError) as exc:
         gap_a1.gap_only_fit(m, acc, 0, n)
-    text = str(exc.value)
-    if middle:
-        assert text.startswith("gap fit undetermined") and "not over its middle half" in text, text
-        assert resolution_limited(text)
-    else:
-        assert "non-physical" in text and not resolution_limited(text), text
+    _undetermined_or_sign_error(str(exc.value), middle, "not over its middle half")
     swing = 3.0 * np.sin(2 * np.pi * 7 * t)
     with pytest.raises(NoGapError) as exc:
         gap_a1.gap_only_fit(-swing, swing / 1.2 + rng.normal(0.0, 0.05, n), 0, n)
