@@ -1819,7 +1819,7 @@ def test_an_entry_moved_forward_beyond_the_capture_keeps_a_whole_window(monkeypa
     capture's forward room (refine_samples): vector draw s1-07's load reversal with an Imu had its window 3 rows short,
     refused as ERROR ("samples: 2045 in the window, need >= 2048"); 19 such drives over the sets.  Here the zone move
     is made to go 5 rows past the capture on DOL d21-04's cut (test/data): with WINDOW_FITS_CAPTURE the entry stops where the
-    capture still holds its whole window; off, the window comes out short."""
+    capture still holds its whole window, counted as entry_held; off, the window comes out short."""
     from draws_cuts import draws_cut
 
     from jident_ros.stream import flank_refine, flank_window
@@ -1839,8 +1839,10 @@ def test_an_entry_moved_forward_beyond_the_capture_keeps_a_whole_window(monkeypa
         assert n == [det.window_length] * len(wins)
         # stopped at the last entry whose window the capture holds, not a row before: the window ends on its last row
         assert [w.column("t")[-1] for w in wins] == [c[-1, 0] for c in captures]
+        # ... and said: one entry_held per window that went out with its entry held (nothing lost, not silent)
+        assert det.counts["entry_held"] == len(wins)
     else:
-        assert min(n) < det.window_length
+        assert min(n) < det.window_length and det.counts["entry_held"] == 0
 
 
 def test_a_width_not_above_its_own_uncertainty_is_no_k2():

@@ -52,6 +52,9 @@ REASONS = {
                        "goes out, flagged; the entry inside it gets no window of its own",
     "duplicate_entry": "a traversal's entry found twice, by the contact rule and by a window's edge scan (flank "
                        "detector): one window goes out (reported only: nothing lost)",
+    "entry_held": "an entry the zone model moved forward beyond the rows captured for its window, held at the last row "
+                  "whose whole window the capture holds (flank detector): the window goes out, its entry up to a few "
+                  "rows before the zone model's (reported only: nothing lost)",
 }
 
 

@@ -273,10 +273,14 @@ class CaptureMixin:
         shift, recontact = self._refine(data, dep)
         shift = self._zone_move(self._prepared if self._prepared is not None else data, dep, dep + shift, cap,
                                 recontact) - dep
+        held = None
         if WINDOW_FITS_CAPTURE:
             # no entry moved forward beyond the rows captured for its window (the zone model's move adds up to c/k
-            # + ZONE_MOVE_SLACK to the rules' forward room: a window 3 rows short was refused, ERROR)
-            shift = min(shift, data.shape[0] - self.window_length + self.samples_before_entry - dep)
+            # + ZONE_MOVE_SLACK to the rules' forward room: a window 3 rows short was refused, ERROR); counted
+            # (entry_held) when the window goes out with the entry held there
+            room = data.shape[0] - self.window_length + self.samples_before_entry - dep
+            held = room if shift > room else None
+            shift = min(shift, room)
         shallow_rc = shallow is not None and SHALLOW_AT_ZERO_TWIST
         if shallow_rc:
             shift = shallow[0] - dep               # the contact lost where the coupling's twist is zero (SHALLOW_*)
@@ -287,6 +291,8 @@ class CaptureMixin:
             entry_row = cap.level_row
         if self._repeated(entry_row, cap):
             return None
+        if held is not None and shift == held:
+            self.counts["entry_held"] += 1
         self._emitted_entry_rows.append(entry_row)
         e0, win, rc, res = self._width(data, dep + shift, cap, recontact)
         back = None if not shallow_rc or shallow[1] is None else shallow[1] - e0
