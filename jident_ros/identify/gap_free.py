@@ -56,7 +56,7 @@ from jident_ros.identify.gap_numerics import (
     memo_put,
 )
 from jident_ros.identify.gap_scan import IntervalScan, ScanRules
-from jident_ros.identify.gap_terms import drift_term, encoder_error_term
+from jident_ros.identify.gap_terms import drift_column, drift_term, encoder_error_term
 from jident_ros.stream.rate import samples as rate_samples
 
 #: Change-point search: rows around the detector's entry and re-contact rows that may be the gap's ends (counted at
@@ -379,10 +379,8 @@ class _SpanFits:
         tt = tau[i:j]
         out = 0.0
         if model.torque_offset_nm:
-            t0 = tt - tt[0]
-            dur = max(float(t0[-1]), 1e-300)
-            drift = (2.0 / dur) * (t0 ** 3 / 6.0 - 0.5 * dur * t0 ** 2 / 2.0)
-            out += (abs(float(row @ (0.5 * tt * tt))) + abs(float(row @ drift))) * float(model.torque_offset_nm)
+            out += ((abs(float(row @ (0.5 * tt * tt))) + abs(float(row @ drift_column(tt))))
+                    * float(model.torque_offset_nm))
         if f["X"].shape[1] == 3:
             out += abs(float(row @ Cc[i:j])) * self.coulomb_mid
             out += abs(float(row @ Vv[i:j])) * float(model.viscous_friction_band_nms_per_rad)

@@ -71,7 +71,7 @@ def gap_interval(window: dict, entry_index: int, backlash_width_m: float, wheel_
         else:
             raise NoGapError("no gap signal: the window needs alpha1+alpha2, a1, alpha1 or omega1")
         a0 = acc[entry_index]
-        if not abs(a0) > 0 and "a1" not in window and a0 == 0:
+        if a0 == 0 and "a1" not in window:
             # an acceleration from the encoder's counts that is exactly 0: below what the encoder resolves at this
             # row (a light load reversal's slow turn, DOL d1-04 at 2^16 and 2^13 counts, ERROR until stop 43), the
             # window's resolution; an accelerometer reading 0 or a NaN stays an error

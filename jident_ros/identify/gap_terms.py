@@ -60,7 +60,12 @@ def drift_term(row: np.ndarray, tt: np.ndarray, j1: float, offset_nm: float) -> 
     absorb nothing of it; J1 moves by J1 (r_κ · that)."""
     if not offset_nm or tt.size < 2:
         return 0.0
+    return float(j1 * abs(float(row @ drift_column(tt))) * offset_nm / np.sqrt(3.0))
+
+
+def drift_column(tt: np.ndarray) -> np.ndarray:
+    """The double integral from the gap's first row of a torque error drifting linearly from −1 to +1 across the
+    rows' times ``tt`` (s): (2/D)(t³/6 − t_mid t²/2), t from the first row, D the span (:func:`drift_term`)."""
     t0 = tt - tt[0]
     dur = max(float(t0[-1]), 1e-300)
-    col = (2.0 / dur) * (t0 ** 3 / 6.0 - 0.5 * dur * t0 ** 2 / 2.0)
-    return float(j1 * abs(float(row @ col)) * offset_nm / np.sqrt(3.0))
+    return (2.0 / dur) * (t0 ** 3 / 6.0 - 0.5 * dur * t0 ** 2 / 2.0)
