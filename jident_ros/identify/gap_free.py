@@ -336,7 +336,7 @@ class _SpanFits:
         if dof < 1 or not kappa > 0:
             return {}
         row = f["pinv"][2] / phi_scale                 # 1/J1 = row · y
-        var_stat = float(res @ res) / dof * float(row @ row) * _ar1_inflation(res)
+        var_stat = _kappa_var(res, dof, row)
         # torque noise through Φ: δκ = −κ row·(W n_m), W the double trapezoid from the interval's first row
         key = (f["i"], f["j"])
         if key not in self.torque_noise:                   # both fits (with and without a Coulomb column) share it
@@ -524,9 +524,13 @@ class _SpanFits:
                 "change_point_error": float(terms["change_points"])}
 
 
+def _kappa_var(res: np.ndarray, dof: int, row: np.ndarray) -> float:
+    """The statistical variance of a free fit's 1/J1 = ``row`` · α1 (its residual ``res`` over ``dof`` degrees of
+    freedom, AR(1)-inflated): the one formula of :meth:`_SpanFits.se_terms` and :func:`_kappa_se`."""
+    return float(res @ res) / max(dof, 1) * float(row @ row) * _ar1_inflation(res)
+
+
 def _kappa_se(f: dict, phi_scale: float) -> tuple:
     """(1/J1, its statistical standard error) of a free fit ``f`` (column 2 of its design)."""
-    res, X = f["res"], f["X"]
-    dof = X.shape[0] - X.shape[1]
-    row = f["pinv"][2] / phi_scale
-    return f["kappa"], float(np.sqrt(float(res @ res) / max(dof, 1) * float(row @ row) * _ar1_inflation(res)))
+    X = f["X"]
+    return f["kappa"], float(np.sqrt(_kappa_var(f["res"], X.shape[0] - X.shape[1], f["pinv"][2] / phi_scale)))
