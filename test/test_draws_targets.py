@@ -99,23 +99,25 @@ def test_event_rows_say_where_targets_are_missed():
     speed = draws_targets.SPEED_EVENTS["dol"][0]
     groups = {
         f"JointState 2^16 clean|{speed}": _summary(traversals=4, found=2, trav_published=1, offsets=[0, 9],
-                                                   missed_gap_rows=[2, 12],
+                                                   missed_gap_rows=[2, 12], missed_kinds=["none", "located"],
                                                    reasons={"gap: gap too short: a shallow gap": 1}),
         f"JointState+Imu 2^16 30 dB|{speed}": _summary(traversals=4, found=3, trav_published=3, offsets=[1, -1, 5],
-                                                       missed_gap_rows=[-1], reasons={"other": 5}),
+                                                       missed_gap_rows=[-1], missed_kinds=["spanned"],
+                                                       reasons={"other": 5}),
     }
     res = {"model": "dol", "seed": 9, "rows": {}, "groups": groups}
     (line,) = draws_targets.event_rows([res, res])          # two sets of one model: one row per event
     cells = [c.strip() for c in line.strip("|").split("|")]
     assert cells[:3] == ["DOL", speed, "10/16 (62 %)"]
     assert cells[3] == "2/6"                  # the 2-sample gap of each set; 12 samples and unknown are not short
-    assert cells[4] == "50 % / 67 %"          # within ±2 without an Imu (0 of 0, 9) and with one (1, -1 of 1, -1, 5)
-    assert cells[5] == "20 %"                 # 9 twice of the 10 entries: 8 or more samples late
-    assert cells[6] == "2/8 (25 %)"           # J1 published on the traversals without an Imu only
-    assert cells[7] == "2/2: gap too short: a shallow gap"     # the Imu input's refusals not counted
+    assert cells[4] == "2 / 2"                # located / spanned by a window entered elsewhere, over both sets
+    assert cells[5] == "50 % / 67 %"          # within ±2 without an Imu (0 of 0, 9) and with one (1, -1 of 1, -1, 5)
+    assert cells[6] == "20 %"                 # 9 twice of the 10 entries: 8 or more samples late
+    assert cells[7] == "2/8 (25 %)"           # J1 published on the traversals without an Imu only
+    assert cells[8] == "2/2: gap too short: a shallow gap"     # the Imu input's refusals not counted
 
 
 def test_event_rows_old_files_show_no_gap_lengths():
     res = _res()
     (line, *_) = draws_targets.event_rows([res])
-    assert "| – |" in line                    # files written before missed_gap_rows was counted
+    assert "| – | – |" in line                # files written before missed_gap_rows and missed_kinds were counted

@@ -54,6 +54,21 @@ def test_summarise_gives_each_missed_traversal_its_gap_length():
     r = _rec(GAPS)
     s = summarise([(r, {"windows": [_win(301, 1)], "cut_off": []})])        # only the bounce (no traversal) found
     assert s["found"] == 0 and s["missed_gap_rows"] == [50, -1]            # 250 - 200; the re-contact unknown
+    assert s["missed_kinds"] == ["none", "none"]
+
+
+@pytest.mark.parametrize("win, kind", [
+    (dict(index=150, gap=None, gap_entry=205, recontact=250), "located"),    # entered 50 early, its fit in the gap
+    (dict(index=150, gap=None, gap_entry=150, recontact=249), "spanned"),    # its re-contact at the gap's end - 1
+    (dict(index=150, gap=None, gap_entry=150, recontact=240), "none"),       # ... 10 rows before it: not through it
+    (dict(index=260, gap=None, gap_entry=None, recontact=300), "none"),      # entered after it (no fit start)
+])
+def test_missed_kind_says_what_a_window_entered_elsewhere_did(win, kind):
+    r = _rec(GAPS[:1])
+    w = {**_win(win["index"], win["gap"], published=False), "gap_entry": win["gap_entry"], "recontact": win["recontact"]}
+    assert zoo.missed_kind(r, [w], 0) == kind
+    s = summarise([(r, {"windows": [w], "cut_off": []})])
+    assert s["found"] == 0 and s["missed_kinds"] == [kind]
 
 
 def test_false_entry_after_a_same_flank_event():

@@ -29,6 +29,18 @@ def test_the_slip_gap_counts_as_a_traversal_and_bounces_do_not(tmp_path, monkeyp
     assert not steady.traversing_event
 
 
+def test_a_same_flank_gap_before_a_slip_reversals_crossing_is_a_bounce(tmp_path, monkeypatch):
+    """A slip reversal's soft coupling that unloads past the zone's edge and springs back before the crossing: its
+    first gap (the truth's event_gap) returns to the flank it left, a bounce; only the slip drop's is a traversal."""
+    monkeypatch.setattr(zoo_dol.vd_record, "write", lambda out, r, f: f"{r.name}.{f}")
+    gaps = [{"entry_index": 1214, "recontact_index": 1229, "traversal": False, "event_gap": True},   # 0.8 mrad deep
+            {"entry_index": 1248, "recontact_index": 1333, "traversal": True, "event_gap": False}]   # the crossing
+    zr = zoo_dol._recording(_truth_recording(gaps), "slip_reversal", "forward", 1.16, 65536, None, tmp_path, ("csv",))
+    assert [g["traversal"] for g in zr.gaps] == [False, True]
+    drop = zoo_dol._recording(_truth_recording(gaps), "slip_drop", "forward", 1.16, 65536, None, tmp_path, ("csv",))
+    assert [g["traversal"] for g in drop.gaps] == [True, True]
+
+
 def _win(idx, gap, published=True, j1=1.16, ci=(1.1, 1.2), reason=None):
     return {"index": idx, "gap": gap, "published": published, "j1": j1 if published else None, "source": "gap",
             "ci95": list(ci) if published else None, "reason": reason, "status": "", "k2": 0.005, "gap_entry": idx}
@@ -36,7 +48,7 @@ def _win(idx, gap, published=True, j1=1.16, ci=(1.1, 1.2), reason=None):
 
 def _zr(gaps=GAPS, event="slip drop", traversing=True, j1=1.073):
     gl = [{"entry_index": g["entry_index"], "recontact_index": g["recontact_index"],
-           "traversal": g["traversal"] or g["event_gap"]} for g in gaps]
+           "traversal": zoo_dol.traversal(g, event.replace(" ", "_"))} for g in gaps]
     return zoo.ZooRecording(zoo_dol.MODEL, "dol_slip_drop_fwd", event, traversing, "forward", j1, 0.005, 0.1, 1.0,
                             65536, None, 5e-4, 1200, gl)
 

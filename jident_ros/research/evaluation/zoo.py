@@ -438,6 +438,23 @@ def _first_time(zr: ZooRecording, fmt: str) -> float:
 
 
 # ------------------------------------------------------------------------------------------ statistics
+def missed_kind(zr: ZooRecording, windows: list, k: int) -> str:
+    """What the windows did at traversal ``k``, which none of them matched (:func:`summarise` counts it missed):
+    'located', a window entered elsewhere (more than EARLY samples before it) but its gap fit starts in it (the J1 is
+    that traversal's: summarise judges it so); 'spanned', a window entered before it and its re-contact lies at the
+    traversal's end or later (the contact between an earlier gap and this one, unresolved: one window over both);
+    else 'none'."""
+    g = zr.gaps[k]
+    for w in windows:
+        if w.get("gap_entry") is not None and match(zr.gaps, w["gap_entry"]) == k:
+            return "located"
+    rc = g["recontact_index"]
+    if rc is not None and any(w["index"] < g["entry_index"] and w.get("recontact") is not None
+                              and w["recontact"] >= rc - 2 for w in windows):
+        return "spanned"
+    return "none"
+
+
 def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
     """Counts over (ZooRecording, diagnose_one result) pairs of one group (``nominal_kgm2``: the nominal J1 they
     were diagnosed with; default config/system.yaml's)."""
@@ -453,6 +470,7 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
     false_in_gap = []       # ... on a false entry whose gap fit lies in a true traversal's rows
     repeat_errs = []        # J1 published by a second window of a gap, relative to the drive's J1
     missed_rows = []        # the true gap's length (samples, entry to re-contact; -1: unknown) of each traversal missed
+    missed_kinds = []       # ... and what the windows did there (missed_kind)
     for zr, res in items:
         s["recordings"] += 1
         if res.get("error"):
@@ -466,6 +484,7 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
         s["found"] += sum(1 for k in trav if k in hits)
         missed_rows += [-1 if zr.gaps[k]["recontact_index"] is None
                         else zr.gaps[k]["recontact_index"] - zr.gaps[k]["entry_index"] for k in trav if k not in hits]
+        missed_kinds += [missed_kind(zr, res["windows"], k) for k in trav if k not in hits]
         first = {}
         for w in res["windows"] + res["cut_off"]:
             if w["gap"] is not None and w["gap"] not in first:
@@ -562,6 +581,7 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
     out["repeat_errors"] = repeat_errs
     out["sep_offsets"] = sep_offsets
     out["missed_gap_rows"] = missed_rows
+    out["missed_kinds"] = missed_kinds
     out["within2"] = sum(1 for o in offsets if abs(o) <= 2)
     out["err_median"] = float(np.median(errs)) if errs else None
     out["err_max"] = float(np.max(errs)) if errs else None
