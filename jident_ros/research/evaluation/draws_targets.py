@@ -7,8 +7,10 @@ writing docs/results.md's section "Blind draws against issue 20's targets"), rea
 Each row is one set of twelve drawn drives (vector or DOL), counted as the zoo counts (:func:`zoo.summarise`); the
 columns are issue 20's targets:
 
-* every traversal found; 0 false entries in steady running and at same-flank torque changes (the other false
-  entries: windows whose entry matches no gap, mostly entries more than 20 samples before a traversal's);
+* every traversal found (a traversal: a gap from flank to flank, and a DOL slip drop's own gap, which returns to the
+  flank it left: zoo_dol.SAME_FLANK_EVENT_GAPS); 0 false entries in steady running and at same-flank torque changes
+  (the other false entries: windows whose entry matches no gap, mostly entries more than 20 samples before a
+  traversal's);
 * the entry within ±2 samples of the true contact loss (the zone entry) in >= 90 % of the traversals found;
 * JointState without an accelerometer at the drawn encoder (the "2^16" inputs): J1 published for >= 80 % of the
   speed-event traversals clean, >= 50 % at 30 dB, >= 50 % of all its traversals; the speed events are the speed step

@@ -173,8 +173,9 @@ def run_sweep(out: Path, log=print, undeclared: bool = False) -> dict:
 #: returns to the flank it left: the paper's slip, where the line slips off the wheel and the motor runs into the zone
 #: and meets the same flank again.  Every other gap is a traversal only from flank to flank (as on every other model):
 #: a slip reversal whose soft coupling unloads a little past the zone's edge and springs back before the crossing
-#: (DOL draws: 178 of 600 slip reversals' truths, 0.3-3 mrad deep) has a bounce first and its traversal after it; until
-#: stop 44 that bounce was counted as a second traversal of the one event (zoo_dol's fixed drive has none).
+#: (DOL draws, sets 1-25: 89 of the 300 slip reversals, at most 0.5 mrad into the zone, median 0.03 mrad, 19 rows,
+#: at most 48, read from the clean recordings) has a bounce first and its traversal after it; until stop 44 that bounce
+#: was counted as a second traversal of the one event (zoo_dol's fixed drive has none).
 SAME_FLANK_EVENT_GAPS = ("slip_drop",)
 
 
