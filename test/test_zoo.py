@@ -324,6 +324,17 @@ def test_a_j1_from_an_early_entry_whose_gap_fit_found_the_true_gap_is_told_apart
     assert "**1 of them published a J1**" in md and "1 J1 published on an early entry whose gap fit" in md
 
 
+def test_a_j1_from_an_early_entry_whose_gap_fit_lies_in_a_bounce_is_from_free_motion():
+    """A DOL slip reversal's same-flank excursion before its crossing is a bounce (zoo_dol.SAME_FLANK_EVENT_GAPS): a
+    window entered before it whose gap fit starts in it has a J1 of real free motion (blind DOL d6-01, +4.9 %), not one
+    where the truth has no gap."""
+    gaps = [{"entry_index": 200, "recontact_index": 230, "traversal": False},
+            {"entry_index": 260, "recontact_index": 340, "traversal": True}]
+    early = dict(_win(150, None, published=True, j1=1.16 * 1.049), gap_entry=204)
+    s = summarise([(_rec(gaps, event_index=100), {"windows": [early, _win(261, 1)], "cut_off": []})])
+    assert s.get("published_on_false", 0) == 0 and s["false_in_gap_errors"] == [pytest.approx(0.049)]
+
+
 def test_a_second_window_of_a_gap_has_its_j1_judged_and_shown():
     """A rule that opens one more capture inside a gap that has a window (a turn inside the zone taken for a bounce's
     re-contact: blind DOL d3-06) gives the traversal a second window.  Its J1 was skipped by the counts; it is judged

@@ -467,7 +467,7 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
     covered = []
     torque_pub, torque_unpub = [], []     # truth_gap_torque of the traversals' first windows, published or not
     false_errs = []         # J1 published on a false entry, relative to the drive's J1
-    false_in_gap = []       # ... on a false entry whose gap fit lies in a true traversal's rows
+    false_in_gap = []       # ... on a false entry whose gap fit lies in a true gap's rows (a traversal's or a bounce's)
     repeat_errs = []        # J1 published by a second window of a gap, relative to the drive's J1
     missed_rows = []        # the true gap's length (samples, entry to re-contact; -1: unknown) of each traversal missed
     missed_kinds = []       # ... and what the windows did there (missed_kind)
@@ -512,9 +512,10 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
                     s["false_other"] += 1
                 if w["published"]:
                     fit_gap = None if w.get("gap_entry") is None else match(zr.gaps, w["gap_entry"])
-                    if fit_gap is not None and zr.gaps[fit_gap]["traversal"]:
+                    if fit_gap is not None:
                         # the detector entered early, but the gap stage's change points found the true gap's rows:
-                        # its J1 is that traversal's (judged by its error, not as a J1 where the truth has no gap)
+                        # its J1 is that gap's, free motion of a traversal or a bounce (judged by its error, not as a J1
+                        # where the truth has no gap)
                         false_in_gap.append(w["j1"] / zr.inertia_kgm2 - 1)
                         ci = w.get("ci95")
                         s["false_in_gap_covered"] += bool(ci and ci[0] <= zr.inertia_kgm2 <= ci[1])

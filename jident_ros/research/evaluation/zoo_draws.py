@@ -330,7 +330,7 @@ def markdown(res: dict, command: str, commit: str) -> str:
               f"{tot['between']}; false entries {tot['false']}"
               + (f", **{tot['false_published']} of them published a J1** (a J1 where the truth has no gap misleads "
                  "whatever its value)" if tot["false_published"] else "")
-              + (f"; {tot['false_in_gap']} J1 published on an early entry whose gap fit lies in a true traversal's rows "
+              + (f"; {tot['false_in_gap']} J1 published on an early entry whose gap fit lies in a true gap's rows "
                  f"({tot['false_in_gap_off']} of them more than 10 % off)" if tot["false_in_gap"] else "")
               + _repeat_text(res["rows"].values()) + "."]
     if res["failed"]:
