@@ -57,6 +57,48 @@ def test_jointstate_per_sample_gives_the_batched_paths_windows(recording):
     assert ad.counts["imu_unmatched"] == 0
 
 
+def _chunked(ad, n, first="joint", t0=1.0, ts=5e-4):
+    """n JointStates and n Imu messages, one topic's whole backlog before the other's (a node started behind a
+    running drive, or stalled); returns the rows handed out."""
+    js = [(t0 + k * ts, ["motor", "load"], [0.01 * k, 0.0], [1.0, 1.0], [2.0, 0.0]) for k in range(n)]
+    imu = [(t0 + k * ts + 1e-6, (0.1 * k, 0.0, 9.81)) for k in range(n)]
+    out = []
+    pushes = [lambda m=m: ad.push(*m) for m in js]
+    pushes_imu = [lambda m=m: ad.push_imu(*m) for m in imu]
+    for f in (pushes + pushes_imu) if first == "joint" else (pushes_imu + pushes):
+        out += f()
+    return np.vstack([b for b, _ in out + ad.flush()]) if out or ad.waiting_for_imu else np.empty((0, 6))
+
+
+@pytest.mark.parametrize("first", ["joint", "imu"])
+def test_one_topics_backlog_before_the_others_loses_no_sample(first):
+    """A JointState waits for its Imu message while the Imu stream has not reached its stamp (and an Imu message for
+    its JointState): 1500 of each, one topic's backlog delivered whole before the other's.  With stop 43's bound of
+    20 samples, 1480 JointStates were dropped (imu_unmatched) when the JointStates came first."""
+    ad = JointStateAdapter(5e-4, batch_size=50, use_imu=True, channels=("alpha1", "omega1", "m_el"))
+    rows = _chunked(ad, 1500, first)
+    assert ad.imu_wait_samples == 4000                     # IMU_WAIT_S (2 s) at 2 kHz
+    assert rows.shape[0] == 1500 and ad.counts["imu_unmatched"] == 0 and ad.counts["imu_unused"] == 0
+    np.testing.assert_allclose(rows[:, -1], 0.1 * np.arange(1500))      # each sample got its own a1
+
+
+def test_a_silent_imu_drops_samples_after_the_bound_and_counts_them():
+    """No Imu at all: a sample waits imu_wait_samples samples, then is dropped and counted (never silently), and the
+    rest at the end of the input; Imu messages no JointState takes (the joint states stopped) are counted too."""
+    ad = JointStateAdapter(5e-4, batch_size=50, use_imu=True, imu_wait_samples=100, channels=("alpha1",))
+    for k in range(250):
+        assert ad.push(1.0 + k * 5e-4, ["motor", "load"], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]) == []
+    assert ad.counts["imu_unmatched"] == 150 and ad.waiting_for_imu == 100
+    assert "no Imu message for 100 samples (0.05 s of drive time)" in ad.last_problem
+    assert ad.flush() == [] and ad.counts["imu_unmatched"] == 250 and ad.waiting_for_imu == 0
+    ad2 = JointStateAdapter(5e-4, use_imu=True, imu_wait_samples=100, channels=("alpha1",))
+    for k in range(250):
+        ad2.push_imu(1.0 + k * 5e-4, (0.0, 0.0, 9.81))
+    assert ad2.counts["imu_unused"] == 150
+    with pytest.raises(ValueError, match="imu_wait_samples"):
+        JointStateAdapter(5e-4, use_imu=True, imu_wait_samples=0)
+
+
 def test_channels_from_the_configuration_bad_messages_dropped_missing_joint_named(recording):
     system, rec = recording
     ad = JointStateAdapter(5e-4, motor_joint="m", load_joint="l", batch_size=2,

@@ -690,11 +690,12 @@ def test_a_skewed_imu_live_no_wrong_j1(node_env, ros, tmp_path, three_entries):
                 "-p", "stale_after_s:=0.0", "-p", "assume_typical_drive:=false")
     win = Proc(node_env, tmp_path, "windowing", *ns, "-p", "input:=joint_states", "-p", "use_imu:=true",
                "-p", "signals_queue_depth:=20000", "-p", "progress_every_batches:=1")
-    # A JointState waits at most 20 samples for its Imu (JointStateAdapter.imu_wait_samples), but a backlog of both
-    # topics reaches the node one topic at a time (what waited when its executor began to spin comes in one callback
-    # run; so after a stall of the node mid-burst): JointStates that came first were dropped (imu_unmatched), every
-    # window with them, on a loaded machine.  So the burst begins once the node spins (its first rate status) and
-    # keeps at most 0.05 s of drive time ahead of what the node has read (drive/progress, as the simulator is paced).
+    # A backlog of both topics reaches the node one topic at a time (what waited when its executor began to spin
+    # comes in one callback run; so after a stall of the node mid-burst): until stop 44 a JointState waited at most 20
+    # samples for its Imu and those that came first were dropped (imu_unmatched), every window with them, on a loaded
+    # machine (the product's side: inputs.IMU_WAIT_S, test_a_backlog_of_one_topic_before_the_other_loses_no_sample).
+    # The burst begins once the node spins (its first rate status) and keeps at most 0.05 s of drive time ahead of
+    # what the node has read (drive/progress, as the simulator is paced): 16,000 messages within the queue's depth.
 
     def read():
         return progress[-1].data if progress else float(sig["t"][0])
@@ -728,6 +729,64 @@ def test_a_skewed_imu_live_no_wrong_j1(node_env, ros, tmp_path, three_entries):
     finally:
         win.stop()
         diag.stop()
+
+
+@pytest.mark.ros
+def test_a_backlog_of_one_topic_before_the_other_loses_no_sample(node_env, ros, tmp_path):
+    """A windowing node behind a running drive gets one topic's backlog before the other's: 1000 JointStates, then
+    their 1000 Imu messages.  While the Imu is behind, the rate status says the samples wait for it (WARN, not 'no
+    joint_states received yet' nor 'no drops'); then every sample goes on with its a1 (imu_unmatched 0: stop 43's
+    20-sample bound dropped 980 of them)."""
+    import time
+
+    from builtin_interfaces.msg import Time
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import Vector3
+    from sensor_msgs.msg import Imu, JointState
+    from test_nodes import Proc, logs, statuses
+
+    from jident_ros.nodes.ros_io import WARN, qos_diagnostics, qos_signals, status_level, status_values
+    diags = ros.collect(DiagnosticArray, "/diagnostics", qos_diagnostics())
+    pub = ros.node.create_publisher(JointState, "/chunk/joint_states", qos_signals(2000))
+    pub_imu = ros.node.create_publisher(Imu, "/chunk/imu", qos_signals(2000))
+    win = Proc(node_env, tmp_path, "windowing", "-r", "__ns:=/chunk", "-p", "input:=joint_states", "-p", "use_imu:=true",
+               "-p", "signals_queue_depth:=2000", "-p", "diagnostics_period_s:=0.5")
+
+    def rate():
+        return statuses(diags, "jident_windowing: rate", "/chunk/drive")
+
+    def stamp(k):
+        t = 1.0 + k * 5e-4
+        return Time(sec=int(t), nanosec=int(round((t - int(t)) * 1e9)))
+    try:
+        assert ros.spin_until(lambda: pub.get_subscription_count() >= 1 and pub_imu.get_subscription_count() >= 1
+                              and rate(), 60), logs(win)
+        for k in range(1000):
+            m = JointState(name=["motor", "load"], position=[1e-3 * k, 1e-3 * k], velocity=[2.0, 2.0],
+                           effort=[5.0, math.nan])
+            m.header.stamp = stamp(k)
+            pub.publish(m)
+        n0 = len(rate())
+
+        def waiting():
+            return [s for s in rate()[n0:] if status_level(s) == WARN and "waiting for their Imu message" in s.message]
+        assert ros.spin_until(waiting, 30), ([s.message for s in rate()[-3:]], logs(win))
+        for k in range(1000):
+            i = Imu(linear_acceleration=Vector3(x=0.01 * k, y=0.0, z=9.81))
+            i.header.stamp = stamp(k)
+            pub_imu.publish(i)
+        end = time.monotonic() + 30
+
+        def through():
+            v = status_values(rate()[-1])
+            return int(v["samples_seen"]) >= 950 and int(v["jointstate.imu_unmatched"]) == 0
+        while time.monotonic() < end and not through():
+            ros.spin_until(lambda: False, 0.5)
+        v = status_values(rate()[-1])
+        assert through(), (v, logs(win))
+        assert int(v["jointstate.samples"]) == 1000 and win.alive()
+    finally:
+        win.stop()
 
 
 def test_a_window_lost_to_a_drop_is_said_not_taken_for_no_entry(tmp_path, three_entries):

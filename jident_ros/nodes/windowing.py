@@ -44,7 +44,7 @@ from jident_ros.nodes.runtime import main as run_main
 from jident_ros.parameters import WINDOWING, WINDOWING_PARAMS
 from jident_ros.stream.detector import REASONS
 from jident_ros.stream.imu_skew import IMU_SKEW_TOLERANCE_SAMPLES, ImuSkewGuard
-from jident_ros.stream.inputs import JointStateAdapter
+from jident_ros.stream.inputs import IMU_WAIT_S, JointStateAdapter
 from jident_ros.stream.layout import KNOWN_CHANNELS
 from jident_ros.stream.text import plain_numbers
 
@@ -127,8 +127,12 @@ class WindowingNode(RunnableNode, Node):
         if c["input"] == "joint_states":
             from sensor_msgs.msg import Imu, JointState  # only this input needs sensor_msgs (ros-sensor-msgs)
             # the channel set from the configuration (channels, use_imu), never from the first message
+            # a sample waits for its Imu message (and an Imu message for its sample) at least as long as a queue's
+            # backlog: one topic's backlog can come before the other's (inputs.IMU_WAIT_S)
+            wait = max(int(c["signals_queue_depth"]), math.ceil(IMU_WAIT_S / s.sampling.sample_period_s))
             self.adapter = JointStateAdapter(s.sampling.sample_period_s, c["motor_joint"], c["load_joint"],
-                                             c["batch_size"], c["use_imu"], c["imu_axis"], channels=chans)
+                                             c["batch_size"], c["use_imu"], c["imu_axis"], imu_wait_samples=wait,
+                                             channels=chans)
             # raw subscriptions, decoded by rosbags' CDR deserialiser: half the CPU of rclpy's message conversion
             # (JointState 8 vs 14 us, Imu 8 vs 23 us; bench/bench_jointstate.py, docs/results.md)
             self._cdr = get_typestore(Stores.ROS2_HUMBLE).deserialize_cdr
@@ -154,7 +158,7 @@ class WindowingNode(RunnableNode, Node):
         self.skew = (ImuSkewGuard(self.adapter, lambda chans: self._make_detector(
             tuple(ch for ch in self.detector.channels if ch != "a1")), self._imu_skew_found)
             if self.adapter is not None and c["use_imu"] else None)
-        self._input_mark = (0, 0)         # adapter messages, samples at the last rate status
+        self._input_mark = (0, 0, 0)      # adapter messages, samples, samples without their Imu at the last rate status
         self._rate_mark = (time.monotonic(), 0, 0, 0)
         self._last_batch_wall = time.monotonic()   # steady time, samples, batches, windows at last status
         self.updater = make_updater(self, c["diagnostics_period_s"], self.diag)
@@ -367,25 +371,34 @@ class WindowingNode(RunnableNode, Node):
         for k, v in self._values():
             stat.add(k, v)
         ad = self.adapter
-        msgs = samples = 0
+        msgs = samples = unmatched = 0
         if ad is not None:
-            msgs, samples = ad.counts["messages"] - self._input_mark[0], ad.counts["samples"] - self._input_mark[1]
-            self._input_mark = (ad.counts["messages"], ad.counts["samples"])
+            mark = (ad.counts["messages"], ad.counts["samples"], ad.counts["imu_unmatched"])
+            msgs, samples, unmatched = (a - b for a, b in zip(mark, self._input_mark))
+            self._input_mark = mark
         if ad is not None and msgs > 0 and samples == 0:
             # JointStates arrive but none is usable (a renamed joint, an empty field): say which, by name
             top = ad.problems()[:2]
             why = "; ".join(f"{text} ({n}x)" for text, n in top) or ad.last_problem or "no usable sample"
             stat.summary(ERROR, f"{msgs} JointState message(s) in the last {dt:.1f} s, none usable: {why}")
+        elif batches == 0 and ad is not None and samples > 0 and (ad.waiting_for_imu or unmatched):
+            # usable JointStates but no batch: held for their Imu messages, or dropped without one
+            stat.summary(WARN, f"{samples} JointState sample(s) in the last {dt:.1f} s but no batch: "
+                               f"{ad.waiting_for_imu} waiting for their Imu message, {unmatched} dropped without one "
+                               f"(imu_unmatched; {ad.counts['imu_messages']} Imu message(s) since start)")
         elif batches == 0:
             what = "joint_states" if ad is not None else "drive/signals"
-            stat.summary(STALE, f"no {what} received yet" if d.batches_seen == 0 and msgs == 0
+            never = d.batches_seen == 0 and (ad is None or ad.counts["messages"] == 0)
+            stat.summary(STALE, f"no {what} received yet" if never
                          else f"no {what} for {now - self._last_batch_wall:.1f} s")
-        elif self.drops_since_summary or msgs > samples:
+        elif self.drops_since_summary or msgs > samples or unmatched:
             parts = []
             if self.drops_since_summary:
                 parts.append(f"{self.drops_since_summary} window(s)/batch(es) dropped")
             if msgs > samples:
                 parts.append(f"{msgs - samples} JointState message(s) dropped (last: {ad.last_problem})")
+            if unmatched:
+                parts.append(f"{unmatched} JointState sample(s) dropped without their Imu message (imu_unmatched)")
             stat.summary(WARN, f"{'; '.join(parts)} in the last {dt:.1f} s")
         else:
             stat.summary(OK, f"{(d.samples_seen - s0) / dt:.0f} samples/s, {d.windows_captured} window(s) "

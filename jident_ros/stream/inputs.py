@@ -16,8 +16,12 @@ JointState (:class:`JointStateAdapter`)
   names the message has (a renamed joint); :meth:`JointStateAdapter.problems` lists every kind of problem with
   its count, most frequent first;
 * optional a1 from sensor_msgs/Imu ``linear_acceleration.<imu_axis>`` (default x), matched to a sample by
-  stamp (nearest within T_s/2); a sample waits for its IMU message (at most ``imu_wait_samples`` samples),
-  else it is dropped (``imu_unmatched``); an Imu message with a NaN/Inf value is dropped (``imu_nonfinite``);
+  stamp (within T_s/2); a sample waits for its IMU message while the Imu stream has not passed its stamp (two topics
+  delivered in chunks: a node that starts behind a running drive, or stalls, gets one topic's backlog before the
+  other's), at most ``imu_wait_samples`` samples (default :data:`IMU_WAIT_S` of drive time); a sample the Imu stream
+  passed without a match, or beyond that bound, is dropped (``imu_unmatched``); Imu messages wait for their samples
+  as long, and those no sample took are counted (``imu_unused``: an Imu faster than the joint states, or one running
+  ahead of a stalled JointState stream); an Imu message with a NaN/Inf value is dropped (``imu_nonfinite``);
 * the stamps of the two clocks can agree while the data do not (an IMU whose stamp is taken late):
   :mod:`jident_ros.stream.imu_skew` estimates a window's skew of a1 against the motor encoder; beyond half a
   sample the window is not diagnosed and the input goes on without a1 (:meth:`JointStateAdapter.drop_a1`), so
@@ -65,6 +69,13 @@ JOINTSTATE_CHANNELS = tuple(c for c, _, _ in JOINT_CHANNELS)
 PROBE_MESSAGES = 200
 #: How many problem kinds :meth:`JointStateAdapter.problems` keeps (the first ones; the rest are counted).
 MAX_PROBLEM_KINDS = 32
+#: Drive time (s) a JointState sample waits for its Imu message, and an Imu message for its sample, by default
+#: (``imu_wait_samples``: this over T_s).  One topic's backlog can come before the other's (a node started behind a
+#: running drive, or stalled: rclpy's executor takes a subscription's waiting messages in one run); with 20 samples
+#: (stop 43's bound) a loaded machine lost every window of test_reliability's live skewed-Imu test, 2,100-7,900
+#: JointStates each time.  2 s covers the nodes' default queue depth (1000) at 2 kHz twice; the memory is a few
+#: floats per sample.
+IMU_WAIT_S = 2.0
 
 
 class JointStateAdapter:
@@ -77,14 +88,15 @@ class JointStateAdapter:
     batch_size : samples per batch handed out (>= 1)
     use_imu : expect sensor_msgs/Imu for a1
     imu_axis : "x" | "y" | "z"
-    imu_wait_samples : how many samples a sample waits for its IMU message
+    imu_wait_samples : how many samples a sample waits for its IMU message (and an Imu message for its sample);
+        None: :data:`IMU_WAIT_S` over ``sample_period_s``
     channels : the JointState channels to take (of alpha1, omega1, m_el, alpha2, omega2; default all five);
         ``t`` first and ``a1`` last (with ``use_imu``) are added.  ``"auto"`` (offline, a recording of an
         unknown drive): the channels finite in most of the first :data:`PROBE_MESSAGES` messages
     """
 
     def __init__(self, sample_period_s: float, motor_joint: str = "motor", load_joint: str = "load",
-                 batch_size: int = 50, use_imu: bool = False, imu_axis: str = "x", imu_wait_samples: int = 20,
+                 batch_size: int = 50, use_imu: bool = False, imu_axis: str = "x", imu_wait_samples: Optional[int] = None,
                  channels: Optional[Sequence[str]] = None):
         if not (isinstance(sample_period_s, (int, float)) and math.isfinite(sample_period_s) and sample_period_s > 0):
             raise ValueError(f"sample_period_s: must be a finite number > 0, got {sample_period_s!r}")
@@ -107,6 +119,10 @@ class JointStateAdapter:
         self.batch_size = int(batch_size)
         self.use_imu = bool(use_imu)
         self.imu_axis = imu_axis
+        if imu_wait_samples is None:
+            imu_wait_samples = max(int(math.ceil(IMU_WAIT_S / float(sample_period_s))), 1)
+        if isinstance(imu_wait_samples, bool) or int(imu_wait_samples) != imu_wait_samples or imu_wait_samples < 1:
+            raise ValueError(f"imu_wait_samples: must be an integer >= 1, got {imu_wait_samples!r}")
         self.imu_wait_samples = int(imu_wait_samples)
         self._sources = [(c, role, fld) for c, role, fld in JOINT_CHANNELS if c in wanted]
         self.channels: tuple = ("t",) + tuple(c for c, _, _ in self._sources) + (("a1",) if self.use_imu else ())
@@ -117,7 +133,7 @@ class JointStateAdapter:
         self._last_stamp: Optional[float] = None
         self._periods: list = []
         self.counts = {"messages": 0, "samples": 0, "missing_joint": 0, "empty_field": 0, "nonfinite": 0,
-                       "imu_messages": 0, "imu_nonfinite": 0, "imu_unmatched": 0, "imu_ignored": 0}
+                       "imu_messages": 0, "imu_nonfinite": 0, "imu_unmatched": 0, "imu_ignored": 0, "imu_unused": 0}
         self.a1_dropped = False
         self.grid: Optional[StampGrid] = None      # the time base (stream/stamps.py), made with the first batch
         self._problems: dict = {}                  # one line -> count
@@ -226,7 +242,15 @@ class JointStateAdapter:
         self._imu.append((float(stamp_s), a))
         self._imu_last = max(self._imu_last, float(stamp_s))
         self._match()
+        while len(self._imu) > self.imu_wait_samples:            # no sample came for them (the JointStates stopped)
+            self._imu.popleft()
+            self.counts["imu_unused"] += 1
         return self._ready()
+
+    @property
+    def waiting_for_imu(self) -> int:
+        """Samples waiting for their Imu message now."""
+        return len(self._pending)
 
     def _match(self):
         tol = 0.5 * self.sample_period_s
@@ -235,12 +259,18 @@ class JointStateAdapter:
             t = row[0]
             while self._imu and self._imu[0][0] < t - tol:       # IMU samples too old for any pending row
                 self._imu.popleft()
+                self.counts["imu_unused"] += 1
             if self._imu and abs(self._imu[0][0] - t) <= tol:
                 row[-1] = self._imu.popleft()[1]
                 self._rows.append(self._pending.popleft())
-            elif self._imu_last > t + tol or len(self._pending) > self.imu_wait_samples:
-                self._pending.popleft()                           # no a1 for this sample: dropped, counted
+            elif self._imu_last > t + tol:
+                self._pending.popleft()                           # the Imu stream passed it: no a1, dropped, counted
                 self._problem("imu_unmatched", f"no Imu message within {tol:g} s of the JointState stamp")
+            elif len(self._pending) > self.imu_wait_samples:
+                self._pending.popleft()                           # waited its bound: dropped, counted
+                self._problem("imu_unmatched", f"no Imu message for {self.imu_wait_samples} samples "
+                                               f"({self.imu_wait_samples * self.sample_period_s:g} s of drive time) "
+                                               f"after the JointState stamp")
             else:
                 return
 
