@@ -153,3 +153,24 @@ def test_csv_with_and_without_map(tmp_path, recording):
     ref = [e.window for e in run_detector(flank_detector(system, channels=CH), rec) if e.kind == "window"]
     got = [e.window for e in evs if e.kind == "window"]
     np.testing.assert_array_equal(got[0].data, ref[0].data)
+
+
+def test_an_imu_faster_than_the_joint_states_is_no_drop_offline():
+    """An Imu at twice the JointState rate: every sample gets its a1, the other Imu messages are counted
+    (jointstate.imu_unused) and said, but not among the drops of `jident diagnose`'s summary (no drive sample lost)."""
+    from types import SimpleNamespace
+
+    from jident_ros.cli.offline import _input_counts
+    ad = JointStateAdapter(5e-4, batch_size=10, use_imu=True, channels=("alpha1",))
+    out = []
+    for k in range(40):
+        out += ad.push_imu(1.0 + k * 2.5e-4, (0.0, 0.0, 9.81))
+        if k % 2 == 0:
+            out += ad.push(1.0 + k * 2.5e-4, ["motor", "load"], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0])
+    out += ad.flush()
+    assert sum(b.shape[0] for b, _ in out) == 20 and ad.counts["imu_unmatched"] == 0
+    assert ad.counts["imu_unused"] >= 19
+    lines, result = [], SimpleNamespace(dropped={}, jitter=None)
+    _input_counts(result, ad, "x.mcap", 5e-4, lines.append)
+    assert not any(k.startswith("jointstate.imu_unused") for k in result.dropped) and result.dropped == {}
+    assert any("Imu message(s) matched no JointState sample" in line for line in lines)

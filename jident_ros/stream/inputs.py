@@ -260,7 +260,11 @@ class JointStateAdapter:
             while self._imu and self._imu[0][0] < t - tol:       # IMU samples too old for any pending row
                 self._imu.popleft()
                 self.counts["imu_unused"] += 1
-            if self._imu and abs(self._imu[0][0] - t) <= tol:
+            near = self._nearest_imu(t, tol)
+            if near is not None:
+                for _ in range(near):                             # nearer ones follow: those before are unused
+                    self._imu.popleft()
+                    self.counts["imu_unused"] += 1
                 row[-1] = self._imu.popleft()[1]
                 self._rows.append(self._pending.popleft())
             elif self._imu_last > t + tol:
@@ -273,6 +277,19 @@ class JointStateAdapter:
                                                f"after the JointState stamp")
             else:
                 return
+
+    def _nearest_imu(self, t: float, tol: float) -> Optional[int]:
+        """Index of the waiting Imu message nearest to stamp ``t`` within ``tol`` (the first of equally near ones),
+        None when none is (an Imu faster than the joint states has several within T_s/2: the first one is not the
+        nearest)."""
+        best, best_dt = None, math.inf
+        for i, (stamp, _) in enumerate(self._imu):
+            if stamp > t + tol:
+                break
+            dt = abs(stamp - t)
+            if dt <= tol and dt < best_dt:
+                best, best_dt = i, dt
+        return best
 
     def _ready(self) -> list:
         out = []
