@@ -16,7 +16,7 @@ JointState (:class:`JointStateAdapter`)
   names the message has (a renamed joint); :meth:`JointStateAdapter.problems` lists every kind of problem with
   its count, most frequent first;
 * optional a1 from sensor_msgs/Imu ``linear_acceleration.<imu_axis>`` (default x), matched to a sample by
-  stamp (within T_s/2); a sample waits for its IMU message while the Imu stream has not passed its stamp (two topics
+  stamp (the nearest within T_s/2); a sample waits for its IMU message while the Imu stream has not passed its stamp (two topics
   delivered in chunks: a node that starts behind a running drive, or stalls, gets one topic's backlog before the
   other's), at most ``imu_wait_samples`` samples (default :data:`IMU_WAIT_S` of drive time); a sample the Imu stream
   passed without a match, or beyond that bound, is dropped (``imu_unmatched``); Imu messages wait for their samples
