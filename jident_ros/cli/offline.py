@@ -536,16 +536,14 @@ def _input_counts(result, adapter, source, ts, log) -> None:
     result.jitter = adapter.jitter()
     if isinstance(adapter, CsvStream):
         return
-    result.dropped.update({f"jointstate.{k}": v for k, v in adapter.counts.items()
+    result.dropped.update({f"jointstate.{k}": v for k, v in adapter.counts.items()      # counts, not drops, left out
                            if v and k not in ("messages", "samples", "imu_messages", "imu_unused")})
     for text, n in adapter.problems()[:3]:
         log(f"{source}: {n} message(s) dropped: {text}")
-    if adapter.counts.get("imu_unused"):
-        # not a drive sample lost: Imu messages no JointState sample took (an Imu faster than the joint states)
+    if adapter.counts.get("imu_unused"):    # no drive sample lost (an Imu faster than the joint states)
         log(f"{source}: {adapter.counts['imu_unused']} Imu message(s) matched no JointState sample")
     if result.jitter.get("periods") and not result.jitter["period_matches"]:
-        log(f"{source}: stamp period {result.jitter['median_period_s']:.6g} s (median) does not match "
-            f"sampling.sample_period_s {ts:g} s")
+        log(f"{source}: stamp period {result.jitter['median_period_s']:.6g} s (median) does not match sampling.sample_period_s {ts:g} s")
 
 
 # --------------------------------------------------------------------------- output
