@@ -278,7 +278,7 @@ class EntryRefineMixin:
             # not moved forward: back to the edge's crossing when the rules' entry lies beyond it (ZONE_BACK_*: a fast
             # departure crosses the threshold after the zone entry)
             z = zone_edge_back(data[:, self._i_a1], delta, data[:, self.channels.index("m_el")], (entry, dep, recontact),
-                               side, self.nominal_inertia_kgm2, self.sample_period_s, quantum)
+                               side, self.nominal_inertia_kgm2, self.sample_period_s, (quantum, self.threshold_for(cap)))
         return z
 
     def _untwist_move(self, data: np.ndarray, departure: int) -> Optional[int]:

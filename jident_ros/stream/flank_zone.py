@@ -200,27 +200,41 @@ def zone_edge_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, row
 #: the gap's m_el - J1_nom a1 for friction, which a J1 off J1_nom by its class makes tens of N m in a speed reversal's
 #: gap), the crossing searched within this many samples before the entry (0: off; samples at 2 kHz) -- 8 / 12 / 16 / 24
 #: on vector sets 1-12 (the detector replayed on their captures; entries within +-2 of the zone over every event and
-#: input, 1292 before): +113 / +139 / +147 / +151, 5 of them out of +-2 each; 24 also took light load reversals 18-24
-#: samples late to +2..+5: 16 kept, the speed reversals' lateness (docs/results.md, "A fast departure's zone edge") ...
+#: input, 1292 before; without the twist gate below): +113 / +139 / +147 / +151, 5 out of +-2 each; 24 also took light
+#: load reversals 18-24 samples late to +2..+5: 16 kept, the speed reversals' lateness (docs/results.md, "A fast
+#: departure's zone edge") ...
 ZONE_BACK_MAX_MOVE = 16
 #: ... when k is determined within this relative standard error (c/k need not be: the stiff couplings' c/k is below a
 #: sample, its relative standard error 0.1-5 on most clean speed reversals: with the c/k gate (ZONE_MAX_CK_REL_SE) at
 #: a reach of 12, vector sets 1-12's clean speed reversals 76 -> 89 of 144 within +-2 instead of 76 -> 106) -- 0.05 /
 #: 0.1 / 0.2 tried there at a reach of 12: +135 / +139 / +142 within +-2 (4 / 5 / 5 out); 0.1, ZONE_MAX_CK_REL_SE's
-#: value, kept.  The crossing must be resolved as the forward move's (ZONE_K_SIGMAS)
+#: value, kept.  The crossing must be resolved as the forward move's (ZONE_K_SIGMAS) ...
 ZONE_BACK_MAX_K_REL_SE = 0.1
+#: ... and the twist |T0| / k at most this share of the window's departure threshold (the rule's premise: the edge lies
+#: well inside the threshold, so the departure came after the zone entry).  Where the twist reaches the threshold the
+#: edge tells nothing the rules did not: the zoo's second drive (a Hertz contact, whose twist under T0 a linear k from
+#: the re-contact puts at 1.4-1.5 mrad, the threshold 1.5) had its speed steps' entries, which the coupling model moved
+#: 3-5 samples forward to 0/+1, taken back to the departure (-3/-4: test_detector_zoo, the golden second-drive files);
+#: the DOL drive's slip reversals and heavy load reversals (twist 3-7 mrad, a J1 below J1_nom's class making k high
+#: and the edge early) went -2/-1 -> -5/-4.  With no share: vector sets 1-12 +147 within +-2, 5 out; 0.67 (1 mrad at
+#: the 1.5 mrad threshold): +111, 1 out; 0.5: +102, none out (the heavy load reversals, twist 1.3-8.6 mrad, no longer
+#: move; the speed reversals 235 -> 329 of 432) -- 0.5 kept (chosen on vector sets 1-12 and the second drive; 0: no
+#: move, as ZONE_BACK_MAX_MOVE 0)
+ZONE_BACK_MAX_TWIST_SHARE = 0.5
 
 
 def zone_edge_back(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, rows: tuple, side: float,
                    inertia_kgm2: float, sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S,
-                   quantum_rad: float = 0.0) -> int:
+                   levels: tuple = (0.0, math.inf)) -> int:
     """The entry row of a traversal, ``rows`` = (the rules' entry, the departure, the re-contact row), moved back to the
     first row of the run of rows up to the entry where delta lies beyond the zone's edge F + side |T0| / k (ZONE_BACK_*:
-    k from :func:`far_contact_model` within ZONE_BACK_MAX_K_REL_SE, the crossing within ZONE_BACK_MAX_MOVE samples and
-    resolved as :func:`zone_edge_entry`'s); the entry itself when it lies before the departure (a rule moved it back),
-    is not beyond the edge, or the crossing is not found or not resolved."""
+    k from :func:`far_contact_model` within ZONE_BACK_MAX_K_REL_SE, the twist |T0| / k within ZONE_BACK_MAX_TWIST_SHARE
+    of the departure threshold, the crossing within ZONE_BACK_MAX_MOVE samples and resolved as :func:`zone_edge_entry`'s;
+    ``levels`` = (delta's quantum, the departure threshold) in rad); the entry itself when it lies before the departure
+    (a rule moved it back), is not beyond the edge, or the crossing is not found or not resolved."""
     ts = sample_period_s
     entry, departure, recontact = (int(r) for r in rows)
+    quantum_rad, threshold_rad = levels
     reach = samples(ZONE_BACK_MAX_MOVE, ts)
     if not reach or entry < departure or recontact <= entry:
         return entry
@@ -231,7 +245,7 @@ def zone_edge_back(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, rows
     d = np.asarray(delta, float)
     twist = abs(float(np.mean(np.asarray(m_el, float)[a:b]))) / (got[0] * inertia_kgm2)
     edge = float(np.mean(d[a:b])) + side * twist
-    if entry >= d.size or not side * (d[entry] - edge) > 0:
+    if entry >= d.size or not side * (d[entry] - edge) > 0 or not twist <= ZONE_BACK_MAX_TWIST_SHARE * threshold_rad:
         return entry
     i = entry
     while i - 1 >= max(entry - reach, 0) and side * (d[i - 1] - edge) > 0:
