@@ -1382,6 +1382,31 @@ def test_with_a1_the_gap_s_friction_comes_off_the_steady_torque(monkeypatch, fri
     assert entry - int(d["true_entry"]) == (0 if friction else 3)
 
 
+
+@pytest.mark.parametrize("back", ["on", "off", "twist"])
+def test_a_fast_departure_s_entry_moves_back_to_the_zone_edge(monkeypatch, back):
+    """Vector set 1's s1-04 (J1 0.957 kg m^2, k 1.79e5 N m/rad, the torque a sample late), its clean speed reversal
+    (test/data/vector_draws_speed_reversal_fast_departure.npz: the detector's capture, t alpha1 alpha2 m_el, its
+    departure row, flank level and contact sigma, the truth's first row in the zone): m_el reverses from +40 to -92 N m
+    over 6 samples, the coupling's 0.23 mrad twist is gone by the zone entry (170) and delta crosses the 1.5 mrad
+    departure threshold at 176, where no rule moves it (+6).  The re-contact on the far flank gives K/J within 4 % (its
+    k at J1_nom 17 % high: the twist 0.20 mrad, true 0.23); delta crossed F + |T0| / k at 169 (-1, ZONE_BACK_*); with
+    ZONE_BACK_MAX_MOVE 0 the entry stays at +6, and so it does when the twist must be within a tenth of the 1.5 mrad
+    threshold (ZONE_BACK_MAX_TWIST_SHARE 0.1: where the edge lies near the threshold it tells nothing)."""
+    from jident_ros.stream import flank_zone
+    from jident_ros.stream.flank_capture import _FlankCapture
+    if back == "off":
+        monkeypatch.setattr(flank_zone, "ZONE_BACK_MAX_MOVE", 0)
+    elif back == "twist":
+        monkeypatch.setattr(flank_zone, "ZONE_BACK_MAX_TWIST_SHARE", 0.1)
+    d = np.load(Path(__file__).parent / "data" / "vector_draws_speed_reversal_fast_departure.npz")
+    rows = d["rows"]
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
+    cap = _FlankCapture(rows=[rows], count=rows.shape[0], departure_row=int(d["departure"]), flank_rad=float(d["flank"]),
+                        flank_sigma_rad=float(d["sigma"]))
+    assert det._finish_flank(cap) is not None
+    assert det._emitted_entry_rows[-1] - int(d["true_entry"]) == (-1 if back == "on" else 6)
+
 def _return_refined(name: str, counts: int) -> tuple:
     """(departure, the refine's shift, the true entry) of a traversal back's capture cut (:func:`_vd_return_cut`) through
     a JointState flank detector at the vector drive's J1_nom."""

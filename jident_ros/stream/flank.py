@@ -56,7 +56,9 @@ and on what the clutch does, not on inequality (1):
   them a window's own traversal moves forward from a damped coupling's separation (its torque k x + c x' at zero, about
   c/k before the zone) to where delta crosses the zone's edge, the steady twist |T0| / k from the flank level, k and c/k
   from the re-contact on the far flank (:func:`zone_edge_entry`; with a1 from its torque balance there,
-  :func:`far_contact_model_a1`, and T0 less J1_nom a1).
+  :func:`far_contact_model_a1`, and T0 less J1_nom a1); one the rules left at or after the departure and beyond that
+  edge moves back to where delta crossed it (:func:`zone_edge_back`, ZONE_BACK_*: a fast departure, a speed reversal's,
+  crosses the departure threshold 3-12 samples after the zone entry).
 * **Window**: ``samples_before_entry`` samples before the entry sample, the entry sample and
   ``samples_from_entry - 1`` after it, exactly as :class:`~jident_ros.stream.detector.BacklashDetector`'s
   (the entry at row 48 of 48 + 2000).  While a window is captured no new window starts; another entry

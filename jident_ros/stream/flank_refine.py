@@ -26,7 +26,7 @@ from jident_ros.stream.flank_coupling import (
 from jident_ros.stream.flank_delta import _delta_quantum, motor_acceleration
 from jident_ros.stream.flank_disc import disc_corrected
 from jident_ros.stream.flank_free import back_to_load, free_departure, free_motion_walk, load_hinge, single_mass_run
-from jident_ros.stream.flank_zone import ramp_entry, untwist_entry, zone_edge_entry
+from jident_ros.stream.flank_zone import ramp_entry, untwist_entry, zone_edge_back, zone_edge_entry
 
 #: On a coarse encoder (delta's smallest step / sqrt 12 beyond FREE_MAX_NOISE_RAD: 2^13), a window's own departure
 #: counts from where delta left its flank by this many counts (:meth:`FlankDetector._coarse_departure`): a contact on
@@ -252,7 +252,8 @@ class EntryRefineMixin:
         return entry
 
     def _zone_move(self, data: np.ndarray, dep: int, entry: int, cap: _FlankCapture, recontact: Optional[int]) -> int:
-        """``entry`` moved forward to the zone's edge (:func:`zone_edge_entry`, ZONE_*) for a window's own traversal
+        """``entry`` moved forward to the zone's edge (:func:`zone_edge_entry`, ZONE_*), else back to it
+        (:func:`zone_edge_back`, ZONE_BACK_*), for a window's own traversal
         (its re-contact the window's, :func:`estimate_width`'s, from the rules' ``recontact`` or delta) with m_el and
         J1_nom on a fine encoder (FREE_MAX_NOISE_RAD, as :meth:`_spring_move`), not after a jump of delta (a slip: the
         contact is lost at the jump); else ``entry``."""
@@ -273,6 +274,11 @@ class EntryRefineMixin:
         motor = (data[:, self._i_a1], acc) if acc is not None else data[:, self._i_a1]
         z, _ = zone_edge_entry(motor, delta, data[:, self.channels.index("m_el")], (entry, dep, recontact),
                                side, self.nominal_inertia_kgm2, self.sample_period_s, quantum)
+        if z == entry:
+            # not moved forward: back to the edge's crossing when the rules' entry lies beyond it (ZONE_BACK_*: a fast
+            # departure crosses the threshold after the zone entry)
+            z = zone_edge_back(data[:, self._i_a1], delta, data[:, self.channels.index("m_el")], (entry, dep, recontact),
+                               side, self.nominal_inertia_kgm2, self.sample_period_s, (quantum, self.threshold_for(cap)))
         return z
 
     def _untwist_move(self, data: np.ndarray, departure: int) -> Optional[int]:

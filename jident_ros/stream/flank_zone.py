@@ -189,6 +189,72 @@ def zone_edge_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, row
     return z, ck_samples
 
 
+
+#: A fast departure crosses the departure threshold (1.5 mrad) well after the zone entry: the vector drives' speed
+#: reversals, whose torque reverses within a few samples, leave a stiff coupling's 0.2-1 mrad twist in 1-2 samples and
+#: run 3-12 samples on to the threshold, where no motor-equation rule moves them (the spring fit's gain there 1.1-1.2,
+#: its J off J1_nom by the drawn class; vector set 1's s1-04: separation 1207, zone 1208, departure and entry 1214).  So
+#: a window's own entry that the rules left at or after the departure and that lies beyond the zone's edge already
+#: moves back to where delta last crossed that edge (:func:`zone_edge_back`): the edge as :func:`zone_edge_entry`'s, the
+#: steady m_el over |k| from the re-contact on the far flank in angle form (with a1 too: the torque balance's edge takes
+#: the gap's m_el - J1_nom a1 for friction, which a J1 off J1_nom by its class makes tens of N m in a speed reversal's
+#: gap), the crossing searched within this many samples before the entry (0: off; samples at 2 kHz) -- 8 / 12 / 16 / 24
+#: on vector sets 1-12 (the detector replayed on their captures; entries within +-2 of the zone over every event and
+#: input, 1292 before; without the twist gate below): +113 / +139 / +147 / +151, 5 out of +-2 each; 24 also took light
+#: load reversals 18-24 samples late to +2..+5: 16 kept, the speed reversals' lateness (docs/results.md, "A fast
+#: departure's zone edge") ...
+ZONE_BACK_MAX_MOVE = 16
+#: ... when k is determined within this relative standard error (c/k need not be: the stiff couplings' c/k is below a
+#: sample, its relative standard error 0.1-5 on most clean speed reversals: with the c/k gate (ZONE_MAX_CK_REL_SE) at
+#: a reach of 12, vector sets 1-12's clean speed reversals 76 -> 89 of 144 within +-2 instead of 76 -> 106) -- 0.05 /
+#: 0.1 / 0.2 tried there at a reach of 12: +135 / +139 / +142 within +-2 (4 / 5 / 5 out); 0.1, ZONE_MAX_CK_REL_SE's
+#: value, kept.  The crossing must be resolved as the forward move's (ZONE_K_SIGMAS) ...
+ZONE_BACK_MAX_K_REL_SE = 0.1
+#: ... and the twist |T0| / k at most this share of the window's departure threshold (the rule's premise: the edge lies
+#: well inside the threshold, so the departure came after the zone entry).  Where the twist reaches the threshold the
+#: edge tells nothing the rules did not: the zoo's second drive (a Hertz contact, whose twist under T0 a linear k from
+#: the re-contact puts at 1.4-1.5 mrad, the threshold 1.5) had its speed steps' entries, which the coupling model moved
+#: 3-5 samples forward to 0/+1, taken back to the departure (-3/-4: test_detector_zoo, the golden second-drive files);
+#: the DOL drive's slip reversals and heavy load reversals (twist 3-7 mrad, a J1 below J1_nom's class making k high
+#: and the edge early) went -2/-1 -> -5/-4.  With no share: vector sets 1-12 +147 within +-2, 5 out; 0.67 (1 mrad at
+#: the 1.5 mrad threshold): +111, 1 out; 0.5: +102, none out (the heavy load reversals, twist 1.3-8.6 mrad, no longer
+#: move; the speed reversals 235 -> 329 of 432) -- 0.5 kept (chosen on vector sets 1-12 and the second drive; 0: no
+#: move, as ZONE_BACK_MAX_MOVE 0)
+ZONE_BACK_MAX_TWIST_SHARE = 0.5
+
+
+def zone_edge_back(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, rows: tuple, side: float,
+                   inertia_kgm2: float, sample_period_s: float = REFERENCE_SAMPLE_PERIOD_S,
+                   levels: tuple = (0.0, math.inf)) -> int:
+    """The entry row of a traversal, ``rows`` = (the rules' entry, the departure, the re-contact row), moved back to the
+    first row of the run of rows up to the entry where delta lies beyond the zone's edge F + side |T0| / k (ZONE_BACK_*:
+    k from :func:`far_contact_model` within ZONE_BACK_MAX_K_REL_SE, the twist |T0| / k within ZONE_BACK_MAX_TWIST_SHARE
+    of the departure threshold, the crossing within ZONE_BACK_MAX_MOVE samples and resolved as :func:`zone_edge_entry`'s;
+    ``levels`` = (delta's quantum, the departure threshold) in rad); the entry itself when it lies before the departure
+    (a rule moved it back), is not beyond the edge, or the crossing is not found or not resolved."""
+    ts = sample_period_s
+    entry, departure, recontact = (int(r) for r in rows)
+    quantum_rad, threshold_rad = levels
+    reach = samples(ZONE_BACK_MAX_MOVE, ts)
+    if not reach or entry < departure or recontact <= entry:
+        return entry
+    got = far_contact_model(alpha1, delta, m_el, recontact, ts)
+    a, b = departure - samples(ZONE_STEADY_ROWS[0], ts), departure - samples(ZONE_STEADY_ROWS[1], ts)
+    if got is None or not (got[0] > 0 and got[3] <= ZONE_BACK_MAX_K_REL_SE) or a < 0:
+        return entry
+    d = np.asarray(delta, float)
+    twist = abs(float(np.mean(np.asarray(m_el, float)[a:b]))) / (got[0] * inertia_kgm2)
+    edge = float(np.mean(d[a:b])) + side * twist
+    if entry >= d.size or not side * (d[entry] - edge) > 0 or not twist <= ZONE_BACK_MAX_TWIST_SHARE * threshold_rad:
+        return entry
+    i = entry
+    while i - 1 >= max(entry - reach, 0) and side * (d[i - 1] - edge) > 0:
+        i -= 1
+    if i == entry or i <= entry - reach or i < 2 or i + 1 >= d.size \
+            or abs(d[i + 1] - d[i - 2]) / 3.0 < ZONE_K_SIGMAS * got[3] * twist + quantum_rad:
+        return entry        # no crossing within the search, or one delta does not resolve
+    return i
+
 #: On a coarse encoder (delta's quantum / sqrt 12 beyond FREE_MAX_NOISE_RAD: 2^13, where the coupling, spring and
 #: damped spring models are off) a window's own entry without a1 goes to the end of the coupling's untwist
 #: (:func:`untwist_entry`): delta = F + v (k - s)_+ + c (k - e)_+^2 -- at rest on its flank, then untwisting at a
