@@ -49,15 +49,37 @@ ZONE_MOVE_SLACK = 3
 ZONE_K_SIGMAS = 2.0
 
 
+#: The last :func:`far_contact_model` fit, (key, result): a window's forward and back zone moves (zone_edge_entry,
+#: zone_edge_back) fit the same re-contact rows one after the other (0.5 ms each); the key holds every row the fit
+#: reads, so a hit is the same fit.  Rebound whole (one assignment), never mutated.
+_LAST_FAR_FIT: tuple = (None, None)
+
+
 def far_contact_model(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, recontact: int,
                       sample_period_s: float) -> Optional[tuple]:
     """(K/J in 1/s^2 per rad of delta, c/k in s, the relative standard errors of c/k and of K) of the coupling over the
     re-contact on the far flank near row ``recontact`` (ZONE_* constants, see ZONE_FIT_BEFORE); None when the rows are
     not there."""
+    global _LAST_FAR_FIT
     ts = sample_period_s
     pre, post = samples(ZONE_FIT_BEFORE, ts), samples(ZONE_FIT_AFTER, ts)
     search = samples(ZONE_RECONTACT_SEARCH, ts)
     a1, d_all, m = (np.asarray(x, float) for x in (alpha1, delta, m_el))
+    rows = slice(max(int(recontact) - search - pre, 0), max(int(recontact) + search + post, 0))
+    key = (int(recontact), float(ts), a1.size, d_all.size, m.size,
+           a1[rows].tobytes(), d_all[rows].tobytes(), m[rows].tobytes())
+    last = _LAST_FAR_FIT
+    if last[0] == key:
+        return last[1]
+    got = _far_contact_fit(a1, d_all, m, int(recontact), (pre, post, search, ts))
+    _LAST_FAR_FIT = (key, got)
+    return got
+
+
+def _far_contact_fit(a1: np.ndarray, d_all: np.ndarray, m: np.ndarray, recontact: int, spans: tuple) -> Optional[tuple]:
+    """:func:`far_contact_model`'s fit (``spans`` = (ZONE_FIT_BEFORE, ZONE_FIT_AFTER, ZONE_RECONTACT_SEARCH) in rows,
+    the sample period)."""
+    pre, post, search, ts = spans
     best = None
     for r in range(int(recontact) - search, int(recontact) + search + 1):
         lo, hi = r - pre, r + post
@@ -189,7 +211,6 @@ def zone_edge_entry(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, row
     return z, ck_samples
 
 
-
 #: A fast departure crosses the departure threshold (1.5 mrad) well after the zone entry: the vector drives' speed
 #: reversals, whose torque reverses within a few samples, leave a stiff coupling's 0.2-1 mrad twist in 1-2 samples and
 #: run 3-12 samples on to the threshold, where no motor-equation rule moves them (the spring fit's gain there 1.1-1.2,
@@ -254,6 +275,7 @@ def zone_edge_back(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, rows
             or abs(d[i + 1] - d[i - 2]) / 3.0 < ZONE_K_SIGMAS * got[3] * twist + quantum_rad:
         return entry        # no crossing within the search, or one delta does not resolve
     return i
+
 
 #: On a coarse encoder (delta's quantum / sqrt 12 beyond FREE_MAX_NOISE_RAD: 2^13, where the coupling, spring and
 #: damped spring models are off) a window's own entry without a1 goes to the end of the coupling's untwist
