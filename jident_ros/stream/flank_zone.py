@@ -242,6 +242,56 @@ ZONE_BACK_MAX_K_REL_SE = 0.1
 #: move; the speed reversals 235 -> 329 of 432) -- 0.5 kept (chosen on vector sets 1-12 and the second drive; 0: no
 #: move, as ZONE_BACK_MAX_MOVE 0)
 ZONE_BACK_MAX_TWIST_SHARE = 0.5
+#: A slow departure -- a light load reversal: the load torque ramps through zero, the coupling lets go while m_el is
+#: still 10-15 N m, and the motor then runs free under a few N m -- crosses the 1.5 mrad departure threshold 10-50
+#: samples after the zone entry (vector set 1's s1-12, 2^20 counts: zone 1219, departure and entry 1257).  Two things
+#: kept :func:`zone_edge_back` from its crossing there: the steady rows before the departure (ZONE_STEADY_ROWS) overlap
+#: the coupling's unloading, and T0 = the steady m_el holds the motor's friction (s1-12: 4 N m of 18), so the twist
+#: |T0| / k came out 15-40 % high and the edge's crossing 3-7 samples late, beyond ZONE_BACK_MAX_MOVE.  So where the gap
+#: after the rules' entry is slow -- its free torque |m_el - c| at most ZONE_BACK_SLOW_SHARE of the steady |T0 - c|, c
+#: the constant torque of the motor equation with J1_nom over up to 40 gap rows (:func:`gap_constant_torque`: the
+#: friction and the estimate's offset, alpha1 running the same way as over the steady rows) -- T0 less c makes the
+#: twist, the crossing is searched within ZONE_BACK_SLOW_MAX_MOVE samples, and the steady rows move to end
+#: ZONE_STEADY_ROWS[1] before the crossing found, up to ZONE_BACK_SLOW_ROUNDS times.  A speed reversal's or a speed
+#: step's gap runs under tens of N m (c from a J1_nom 10-20 % off the drive's J1 would be off by as much): the gate
+#: keeps them out.  Chosen on vector sets 1-12 (JointState light load reversals): the friction alone at a reach of 16
+#: +0 within +-2, 48 without the gate +22 but the speed reversals -27 (329 -> 302) and the speed steps -8; with the gate
+#: 0.5 / 0.25 +22 / +23, nothing else moved but 3 speed reversals (the steady rows moved for every traversal: now for
+#: the slow ones only) -- 0.25 kept (a J1_nom 15 % off moves c by at most 4 % of T0), 48 and 3 not tuned
+ZONE_BACK_SLOW_SHARE = 0.25
+ZONE_BACK_SLOW_MAX_MOVE = 48
+ZONE_BACK_SLOW_ROUNDS = 3
+
+
+def gap_constant_torque(alpha1: np.ndarray, m_el: np.ndarray, inertia_kgm2: float, sample_period_s: float) -> float:
+    """The constant torque c (N m, signed as m_el: the motor's friction and the torque estimate's offset) of a free
+    motor over the rows given: alpha1 = a + v k + (Phi(m_el) - c Phi(1)) / J, a, v and c by least squares, J =
+    ``inertia_kgm2`` (:func:`flank_free._double_integral`'s Phi)."""
+    n = alpha1.size
+    one = _double_integral(np.ones(n), sample_period_s) / inertia_kgm2
+    scale = max(float(one.max()), 1e-300)
+    y = np.asarray(alpha1, float) - _double_integral(m_el, sample_period_s) / inertia_kgm2
+    X = np.column_stack([np.ones(n), np.arange(n, dtype=float) / max(n - 1, 1), -one / scale])
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    return float(coef[2] / scale)
+
+
+def _slow_departure(alpha1: np.ndarray, m_el: np.ndarray, rows: tuple, steady: tuple, inertia_kgm2: float,
+                    sample_period_s: float) -> Optional[float]:
+    """:data:`ZONE_BACK_SLOW_SHARE`'s constant torque c of the gap after the rules' entry, ``rows`` = (the entry, the
+    departure, the re-contact row), ``steady`` = the steady rows (first, end); None where the gap is not slow."""
+    ts = sample_period_s
+    entry, _, recontact = rows
+    a, b = steady
+    g0 = entry + samples(2, ts)
+    g1 = min(g0 + samples(40, ts), recontact - samples(2, ts))
+    x1, m = np.asarray(alpha1, float), np.asarray(m_el, float)
+    if not ZONE_BACK_SLOW_MAX_MOVE or g1 - g0 < samples(8, ts) or g1 >= x1.size \
+            or not (x1[b] - x1[a]) * (x1[g1] - x1[g0]) > 0:
+        return None
+    c = gap_constant_torque(x1[g0:g1], m[g0:g1], inertia_kgm2, ts)
+    slow = abs(float(np.mean(m[g0:g1])) - c) <= ZONE_BACK_SLOW_SHARE * abs(float(np.mean(m[a:b])) - c)
+    return c if slow else None
 
 
 def zone_edge_back(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, rows: tuple, side: float,
@@ -251,8 +301,10 @@ def zone_edge_back(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, rows
     first row of the run of rows up to the entry where delta lies beyond the zone's edge F + side |T0| / k (ZONE_BACK_*:
     k from :func:`far_contact_model` within ZONE_BACK_MAX_K_REL_SE, the twist |T0| / k within ZONE_BACK_MAX_TWIST_SHARE
     of the departure threshold, the crossing within ZONE_BACK_MAX_MOVE samples and resolved as :func:`zone_edge_entry`'s;
-    ``levels`` = (delta's quantum, the departure threshold) in rad); the entry itself when it lies before the departure
-    (a rule moved it back), is not beyond the edge, or the crossing is not found or not resolved."""
+    ``levels`` = (delta's quantum, the departure threshold) in rad; a slow departure's twist less the gap's friction,
+    its crossing searched further, its steady rows before the crossing: ZONE_BACK_SLOW_*); the entry itself when it
+    lies before the departure (a rule moved it back), is not beyond the edge, or the crossing is not found or not
+    resolved."""
     ts = sample_period_s
     entry, departure, recontact = (int(r) for r in rows)
     quantum_rad, threshold_rad = levels
@@ -264,13 +316,26 @@ def zone_edge_back(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, rows
     if got is None or not (got[0] > 0 and got[3] <= ZONE_BACK_MAX_K_REL_SE) or a < 0:
         return entry
     d = np.asarray(delta, float)
-    twist = abs(float(np.mean(np.asarray(m_el, float)[a:b]))) / (got[0] * inertia_kgm2)
-    edge = float(np.mean(d[a:b])) + side * twist
-    if entry >= d.size or not side * (d[entry] - edge) > 0 or not twist <= ZONE_BACK_MAX_TWIST_SHARE * threshold_rad:
+    if entry >= d.size:
         return entry
-    i = entry
-    while i - 1 >= max(entry - reach, 0) and side * (d[i - 1] - edge) > 0:
-        i -= 1
+    slow = _slow_departure(alpha1, m_el, (entry, departure, recontact), (a, b), inertia_kgm2, ts)
+    offset, rounds = (0.0, 0) if slow is None else (slow, ZONE_BACK_SLOW_ROUNDS)
+    reach = reach if slow is None else samples(ZONE_BACK_SLOW_MAX_MOVE, ts)
+    anchor = departure
+    for rnd in range(rounds + 1):
+        twist = abs(float(np.mean(np.asarray(m_el, float)[a:b])) - offset) / (got[0] * inertia_kgm2)
+        edge = float(np.mean(d[a:b])) + side * twist
+        if not side * (d[entry] - edge) > 0 or not twist <= ZONE_BACK_MAX_TWIST_SHARE * threshold_rad:
+            return entry
+        i = entry
+        while i - 1 >= max(entry - reach, 0) and side * (d[i - 1] - edge) > 0:
+            i -= 1
+        if i >= anchor or rnd == rounds:
+            break
+        anchor = i          # a slow departure: the steady rows end before the crossing (ZONE_BACK_SLOW_*)
+        a, b = anchor - samples(ZONE_STEADY_ROWS[0], ts), anchor - samples(ZONE_STEADY_ROWS[1], ts)
+        if a < 0:
+            return entry
     if i == entry or i <= entry - reach or i < 2 or i + 1 >= d.size \
             or abs(d[i + 1] - d[i - 2]) / 3.0 < ZONE_K_SIGMAS * got[3] * twist + quantum_rad:
         return entry        # no crossing within the search, or one delta does not resolve
