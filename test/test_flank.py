@@ -1407,6 +1407,53 @@ def test_a_fast_departure_s_entry_moves_back_to_the_zone_edge(monkeypatch, back)
     assert det._finish_flank(cap) is not None
     assert det._emitted_entry_rows[-1] - int(d["true_entry"]) == (-1 if back == "on" else 6)
 
+@pytest.mark.parametrize("slow", ["on", "off", "no_friction", "no_rounds", "fast_gate"])
+def test_a_slow_departure_s_entry_moves_back_to_the_zone_edge(monkeypatch, slow):
+    """Vector set 1's s1-12 (J1 1.218 kg m^2, k 1.70e5 N m/rad, 2^20 counts, Coulomb 2.46 N m + b1 w 1.5 N m), its
+    clean light load reversal (test/data/vector_draws_light_load_reversal_slow_departure.npz: the detector's capture, t
+    alpha1 alpha2 m_el, its departure row, flank level and contact sigma, the truth's first row in the zone): the load
+    torque ramps through zero, the coupling lets go while m_el is still 13 N m, the motor then runs free under 2-3 N m
+    and delta crosses the 1.5 mrad departure threshold 38 samples after the zone entry.  ZONE_BACK_SLOW_*: the gap is
+    slow (its free torque within a quarter of the steady one), the edge's twist takes the gap's constant torque off T0
+    and the steady rows end before the crossing: the entry at the zone entry (0).  Without the friction or without the
+    steady rows moved the twist is high and the crossing +3; with the search at 0, or the gate so tight that no gap is
+    slow, the entry stays at +38 (ZONE_BACK_MAX_MOVE's 16 does not reach the crossing)."""
+    from jident_ros.stream import flank_zone
+    from jident_ros.stream.flank_capture import _FlankCapture
+    if slow == "off":
+        monkeypatch.setattr(flank_zone, "ZONE_BACK_SLOW_MAX_MOVE", 0)
+    elif slow == "no_friction":
+        monkeypatch.setattr(flank_zone, "gap_constant_torque", lambda *a: 0.0)
+    elif slow == "no_rounds":
+        monkeypatch.setattr(flank_zone, "ZONE_BACK_SLOW_ROUNDS", 0)
+    elif slow == "fast_gate":
+        monkeypatch.setattr(flank_zone, "ZONE_BACK_SLOW_SHARE", 0.05)
+    d = np.load(Path(__file__).parent / "data" / "vector_draws_light_load_reversal_slow_departure.npz")
+    rows = d["rows"]
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
+    cap = _FlankCapture(rows=[rows], count=rows.shape[0], departure_row=int(d["departure"]), flank_rad=float(d["flank"]),
+                        flank_sigma_rad=float(d["sigma"]))
+    assert det._finish_flank(cap) is not None
+    want = {"on": 0, "off": 38, "no_friction": 3, "no_rounds": 3, "fast_gate": 38}[slow]
+    assert det._emitted_entry_rows[-1] - int(d["true_entry"]) == want
+
+
+@pytest.mark.parametrize("constant", [0.0, 2.5, -4.0])
+def test_the_gap_s_constant_torque_is_read_from_a_free_motor(constant):
+    """gap_constant_torque: a free motor (J 1.2 kg m^2) under a varying m_el less a constant torque c, sampled at 2 kHz
+    from an arbitrary angle and speed: c comes back to 1e-6 N m; with J taken 10 % high, off by 10 % of the mean free
+    torque (the share ZONE_BACK_SLOW_SHARE bounds)."""
+    from jident_ros.stream import flank_zone
+    from jident_ros.stream.flank_free import _double_integral
+    ts, j = 5e-4, 1.2
+    k = np.arange(60, dtype=float)
+    m = 6.0 + 2.0 * np.sin(k / 9.0)
+    alpha1 = 3.1 + 0.4 * k * ts + (_double_integral(m, ts) - constant * _double_integral(np.ones(k.size), ts)) / j
+    assert flank_zone.gap_constant_torque(alpha1, m, j, ts) == pytest.approx(constant, abs=1e-6)
+    off = flank_zone.gap_constant_torque(alpha1, m, 1.1 * j, ts) - constant
+    assert abs(off) == pytest.approx(0.1 * abs(float(np.mean(m)) - constant), rel=0.2)
+
+
 def _return_refined(name: str, counts: int) -> tuple:
     """(departure, the refine's shift, the true entry) of a traversal back's capture cut (:func:`_vd_return_cut`) through
     a JointState flank detector at the vector drive's J1_nom."""
