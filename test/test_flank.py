@@ -1577,8 +1577,9 @@ def test_a_slip_reversal_s_crossing_after_a_short_re_contact_gets_its_own_window
     samples (the coupling carries 50 N m again), then crosses the 152 mrad zone (gap 1, rows 245-376).  The contact
     between is shorter than contact_samples: one capture, departing at 271 (the flank's threshold is 4 mrad), whose
     entry the rules put in gap 0 (223) without a1.  With REBOUND_* the crossing gets its own window (244, -1); off: one
-    window.  With a1 the capture's entry lies in the crossing (259): the rule opens nothing (gap 0 stays without a
-    window, docs/results.md's seventeenth round)."""
+    window.  With a1 the capture's entry lies in the crossing: the rule opens nothing (gap 0 stays without a window,
+    docs/results.md's seventeenth round); the rules put it at 259 (+14), and the slow departure's move back to the
+    zone's edge (ZONE_BACK_SLOW_*: the motor runs free under a few N m there) at 247, within +-2 of the crossing."""
     from draws_cuts import draws_cut
 
     from jident_ros.stream import flank_scan
@@ -1588,7 +1589,7 @@ def test_a_slip_reversal_s_crossing_after_a_short_re_contact_gets_its_own_window
     got = [[round(w.entry_time_s / 5e-4) for w in _cut_windows(data, ch)]]
     g0, g1 = (int(x) for x in d["gap_entries"])
     if key == "imu":
-        assert got[0] == [259] and 0 < 259 - g1 <= 20
+        assert got[0] == [247] and abs(247 - g1) <= 2
     elif on:
         assert got[0] == [223, 244] and g0 <= 223 < g1 and abs(244 - g1) <= 2
     else:

@@ -257,7 +257,10 @@ ZONE_BACK_MAX_TWIST_SHARE = 0.5
 #: keeps them out.  Chosen on vector sets 1-12 (JointState light load reversals): the friction alone at a reach of 16
 #: +0 within +-2, 48 without the gate +22 but the speed reversals -27 (329 -> 302) and the speed steps -8; with the gate
 #: 0.5 / 0.25 +22 / +23, nothing else moved but 3 speed reversals (the steady rows moved for every traversal: now for
-#: the slow ones only) -- 0.25 kept (a J1_nom 15 % off moves c by at most 4 % of T0), 48 and 3 not tuned
+#: the slow ones only) -- 0.25 kept (a J1_nom 15 % off moves c by at most 4 % of T0), 48 and 3 not tuned.  A slow
+#: departure's entry that a rule already moved back short of the crossing (before the departure) moves on to it too:
+#: vector sets 1-12 +11 more within +-2, none out (the twist gate lifted for slow departures as well: +9 more on 11 of
+#: them, a heavy load reversal taken for slow among them, 1 out: not done)
 ZONE_BACK_SLOW_SHARE = 0.25
 ZONE_BACK_SLOW_MAX_MOVE = 48
 ZONE_BACK_SLOW_ROUNDS = 3
@@ -303,22 +306,22 @@ def zone_edge_back(alpha1: np.ndarray, delta: np.ndarray, m_el: np.ndarray, rows
     of the departure threshold, the crossing within ZONE_BACK_MAX_MOVE samples and resolved as :func:`zone_edge_entry`'s;
     ``levels`` = (delta's quantum, the departure threshold) in rad; a slow departure's twist less the gap's friction,
     its crossing searched further, its steady rows before the crossing: ZONE_BACK_SLOW_*); the entry itself when it
-    lies before the departure (a rule moved it back), is not beyond the edge, or the crossing is not found or not
-    resolved."""
+    lies before the departure (a rule moved it back) and the departure is not slow, is not beyond the edge, or the
+    crossing is not found or not resolved."""
     ts = sample_period_s
     entry, departure, recontact = (int(r) for r in rows)
     quantum_rad, threshold_rad = levels
     reach = samples(ZONE_BACK_MAX_MOVE, ts)
-    if not reach or entry < departure or recontact <= entry:
-        return entry
-    got = far_contact_model(alpha1, delta, m_el, recontact, ts)
     a, b = departure - samples(ZONE_STEADY_ROWS[0], ts), departure - samples(ZONE_STEADY_ROWS[1], ts)
-    if got is None or not (got[0] > 0 and got[3] <= ZONE_BACK_MAX_K_REL_SE) or a < 0:
-        return entry
     d = np.asarray(delta, float)
-    if entry >= d.size:
+    if not reach or recontact <= entry or a < 0 or entry >= d.size:
         return entry
     slow = _slow_departure(alpha1, m_el, (entry, departure, recontact), (a, b), inertia_kgm2, ts)
+    if entry < departure and slow is None:
+        return entry        # a rule moved it back (a fast departure's entry lies at the departure or after it)
+    got = far_contact_model(alpha1, delta, m_el, recontact, ts)
+    if got is None or not (got[0] > 0 and got[3] <= ZONE_BACK_MAX_K_REL_SE):
+        return entry
     offset, rounds = (0.0, 0) if slow is None else (slow, ZONE_BACK_SLOW_ROUNDS)
     reach = reach if slow is None else samples(ZONE_BACK_SLOW_MAX_MOVE, ts)
     anchor = departure

@@ -57,7 +57,9 @@ PROTOCOL_NOTE = ("A set is a blind test only until something is changed because 
                  "each set that had one: a negative J1 the declared torque errors can turn, an a1 anti-correlation only "
                  "at the ends of its rows, a wide interval outside the band, a width of zero, an encoder's acceleration "
                  "of exactly zero; in stop 44 vector sets 1–12, a fast departure's entry moved back to the zone's "
-                 "edge, ZONE_BACK_*, tested on vector sets 13–25 and DOL sets 1–7).")
+                 "edge, ZONE_BACK_*, tested on vector sets 13–25 and DOL sets 1–7; in stop 45 vector sets 1–12 again, "
+                 "a slow departure's entry moved back to the zone's edge, ZONE_BACK_SLOW_*, tested on vector sets "
+                 "13–26 and DOL sets 1–26).")
 
 #: The torque accuracy a drive's data sheet typically states for sensored vector control, ± this of rated torque: what
 #: a user who has nothing better declares, as ``torque_accuracy`` and as ``torque_offset_rel_base``, the way
