@@ -1383,6 +1383,20 @@ def test_with_a1_the_gap_s_friction_comes_off_the_steady_torque(monkeypatch, fri
 
 
 
+def _capture_entry_offset(name: str) -> int:
+    """The entry a JointState flank detector at the vector drive's J1_nom emits for a saved capture (test/data/NAME:
+    its rows t alpha1 alpha2 m_el, departure row, flank level and contact sigma), less the truth's first row in the
+    zone."""
+    from jident_ros.stream.flank_capture import _FlankCapture
+    d = np.load(Path(__file__).parent / "data" / name)
+    rows = d["rows"]
+    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
+    cap = _FlankCapture(rows=[rows], count=rows.shape[0], departure_row=int(d["departure"]), flank_rad=float(d["flank"]),
+                        flank_sigma_rad=float(d["sigma"]))
+    assert det._finish_flank(cap) is not None
+    return det._emitted_entry_rows[-1] - int(d["true_entry"])
+
+
 @pytest.mark.parametrize("back", ["on", "off", "twist"])
 def test_a_fast_departure_s_entry_moves_back_to_the_zone_edge(monkeypatch, back):
     """Vector set 1's s1-04 (J1 0.957 kg m^2, k 1.79e5 N m/rad, the torque a sample late), its clean speed reversal
@@ -1394,18 +1408,11 @@ def test_a_fast_departure_s_entry_moves_back_to_the_zone_edge(monkeypatch, back)
     ZONE_BACK_MAX_MOVE 0 the entry stays at +6, and so it does when the twist must be within a tenth of the 1.5 mrad
     threshold (ZONE_BACK_MAX_TWIST_SHARE 0.1: where the edge lies near the threshold it tells nothing)."""
     from jident_ros.stream import flank_zone
-    from jident_ros.stream.flank_capture import _FlankCapture
     if back == "off":
         monkeypatch.setattr(flank_zone, "ZONE_BACK_MAX_MOVE", 0)
     elif back == "twist":
         monkeypatch.setattr(flank_zone, "ZONE_BACK_MAX_TWIST_SHARE", 0.1)
-    d = np.load(Path(__file__).parent / "data" / "vector_draws_speed_reversal_fast_departure.npz")
-    rows = d["rows"]
-    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
-    cap = _FlankCapture(rows=[rows], count=rows.shape[0], departure_row=int(d["departure"]), flank_rad=float(d["flank"]),
-                        flank_sigma_rad=float(d["sigma"]))
-    assert det._finish_flank(cap) is not None
-    assert det._emitted_entry_rows[-1] - int(d["true_entry"]) == (-1 if back == "on" else 6)
+    assert _capture_entry_offset("vector_draws_speed_reversal_fast_departure.npz") == (-1 if back == "on" else 6)
 
 @pytest.mark.parametrize("slow", ["on", "off", "no_friction", "no_rounds", "fast_gate"])
 def test_a_slow_departure_s_entry_moves_back_to_the_zone_edge(monkeypatch, slow):
@@ -1419,7 +1426,6 @@ def test_a_slow_departure_s_entry_moves_back_to_the_zone_edge(monkeypatch, slow)
     steady rows moved the twist is high and the crossing +3; with the search at 0, or the gate so tight that no gap is
     slow, the entry stays at +38 (ZONE_BACK_MAX_MOVE's 16 does not reach the crossing)."""
     from jident_ros.stream import flank_zone
-    from jident_ros.stream.flank_capture import _FlankCapture
     if slow == "off":
         monkeypatch.setattr(flank_zone, "ZONE_BACK_SLOW_MAX_MOVE", 0)
     elif slow == "no_friction":
@@ -1428,14 +1434,8 @@ def test_a_slow_departure_s_entry_moves_back_to_the_zone_edge(monkeypatch, slow)
         monkeypatch.setattr(flank_zone, "ZONE_BACK_SLOW_ROUNDS", 0)
     elif slow == "fast_gate":
         monkeypatch.setattr(flank_zone, "ZONE_BACK_SLOW_SHARE", 0.05)
-    d = np.load(Path(__file__).parent / "data" / "vector_draws_light_load_reversal_slow_departure.npz")
-    rows = d["rows"]
-    det = FlankDetector(0.1, 5e-4, channels=("t", "alpha1", "alpha2", "m_el"), nominal_inertia_kgm2=1.16)
-    cap = _FlankCapture(rows=[rows], count=rows.shape[0], departure_row=int(d["departure"]), flank_rad=float(d["flank"]),
-                        flank_sigma_rad=float(d["sigma"]))
-    assert det._finish_flank(cap) is not None
     want = {"on": 0, "off": 38, "no_friction": 3, "no_rounds": 3, "fast_gate": 38}[slow]
-    assert det._emitted_entry_rows[-1] - int(d["true_entry"]) == want
+    assert _capture_entry_offset("vector_draws_light_load_reversal_slow_departure.npz") == want
 
 
 @pytest.mark.parametrize("constant", [0.0, 2.5, -4.0])
