@@ -368,10 +368,18 @@ def test_gap_only_model_error_is_the_change_with_one_more_sample_off_each_end():
     sy, sx = g["noise"]
     inner = _origin_slope(torque[lo + 1:hi - 1], acc[lo + 1:hi - 1], sy, sx)
     assert g["model_error"] == pytest.approx(abs(inner - g["j1"]), rel=1e-12)
-    res = torque[lo:hi] - g["j1"] * acc[lo:hi]
-    se_stat = np.sqrt(float(res @ res) / (hi - lo - 1) / float(acc[lo:hi] @ acc[lo:hi]))
-    assert g["se"] == pytest.approx(max(np.hypot(se_stat, g["model_error"]), GAP_ONLY_REL_SE_FLOOR * g["j1"]),
-                                    rel=1e-12)
+    # the slope's own part: Fuller's errors-in-variables variance (stop 46) -- here, the acceleration well above its
+    # noise, within 1e-5 of the least-squares formula -- and the noise ratio's term, both in quadrature with it
+    from jident_ros.identify.gap_eiv import _deming_se, _noise_ratio_term
+    y, x = torque[lo:hi], acc[lo:hi]
+    res = y - g["j1"] * x
+    se_ls = np.sqrt(float(res @ res) / (hi - lo - 1) / float(x @ x))
+    se_stat = _deming_se(y, x, g["j1"], sy, sx, centred=False)
+    assert se_stat == pytest.approx(se_ls, rel=1e-4) and se_stat > se_ls
+    ratio = _noise_ratio_term(y, x, g["j1"], sy, sx)
+    assert g["noise_ratio"] == ratio and 0.0 < ratio < 0.1 * se_stat
+    assert g["se"] == pytest.approx(max(np.sqrt(se_stat ** 2 + ratio ** 2 + g["model_error"] ** 2),
+                                        GAP_ONLY_REL_SE_FLOOR * g["j1"]), rel=1e-12)
 
 
 def test_gap_only_with_an_exact_torque_regresses_the_acceleration_on_it():

@@ -350,7 +350,7 @@ def _method_fit(window: dict, method: str, rows: tuple, drive: tuple, model: Gap
     if method == "gap_only":
         return _method_gap_only(window, rows, drive, model, gap_only)
     if method == "acceleration":
-        return _method_acceleration(window, rows, drive)
+        return _method_acceleration(window, rows, drive, model)
     if method == "anchored":
         return _method_anchored(window, rows, drive)
     if method == "angle":
@@ -374,7 +374,10 @@ def _own_terms(f: FitState, method: str) -> None:
     else:
         # the a1, anchored and speed fits: their own standard error as parts too, so that the parts account for
         # se in quadrature on every path (verdict.widest_term names the largest; test_gap_bands checks the sum)
-        own = {"statistical": float(np.sqrt(max(float(se) ** 2 - float(model_error) ** 2, 0.0)))}
+        ratio = float((f.made or {}).get("noise_ratio", 0.0)) if method == "gap_only" else 0.0
+        own = {"statistical": float(np.sqrt(max(float(se) ** 2 - float(model_error) ** 2 - ratio ** 2, 0.0)))}
+        if ratio:
+            own["noise_ratio"] = ratio
         if model_error:
             own["change_points" if method == "gap_only" else "model_form"] = float(model_error)
         free_extra["std_error_terms"] = tuple(own.items())

@@ -38,8 +38,9 @@ from functools import lru_cache
 import numpy as np
 
 from jident_ros.identify import gap_sign, lapack
+from jident_ros.identify.gap_eiv import _deming_se, _noise_ratio_term, _origin_slope, _robust_noise
 from jident_ros.identify.gap_free import FREE_REL_SE_FLOOR, GapModel
-from jident_ros.identify.gap_numerics import _diff2, _median, _memoised
+from jident_ros.identify.gap_numerics import _median, _memoised
 from jident_ros.identify.gap_types import FitState, NoGapError, _net_torque
 from jident_ros.stream.rate import samples as rate_samples
 
@@ -77,32 +78,6 @@ GAP_ONLY_MAX_TRIM = (4, 3)
 TRIM_PERSIST = 2
 #: 'gap_only' fit: relative floor of the standard error (noise-free: the samples' own rounding).
 GAP_ONLY_REL_SE_FLOOR = 2e-4
-
-
-def _robust_noise(*segments) -> float:
-    """White-noise standard deviation from the second differences of the segments (1.4826 MAD / sqrt 6):
-    blind to a smooth signal and to a few samples of a transient."""
-    d2 = np.concatenate([_diff2(np.asarray(x, float)) for x in segments if len(x) >= 3] or [np.zeros(0)])
-    if d2.size < 3:
-        return 0.0
-    return float(1.4826 * _median(np.abs(d2 - _median(d2))) / np.sqrt(6.0))
-
-
-def _origin_slope(y: np.ndarray, x: np.ndarray, sy: float, sx: float) -> float:
-    """Slope J of y = J x through the origin with errors in both variables (Deming regression with the
-    error-variance ratio (sy/sx)^2); ordinary least squares of y on x when x is exact (sx = 0)."""
-    sxx, syy, sxy = float(x @ x), float(y @ y), float(x @ y)
-    if not sxy:
-        return np.nan
-    if not sx > 0:
-        return sxy / sxx
-    if not sy > 0:
-        return syy / sxy
-    d = (sy / sx) ** 2
-    q = syy - d * sxx
-    # The maximum-likelihood root: the numerator is positive, so the slope has the sign of x . y (an
-    # anti-correlated gap gives a negative J1, which gap_only_fit refuses as non-physical).
-    return (q + np.sqrt(q * q + 4.0 * d * sxy * sxy)) / (2.0 * sxy)
 
 
 def _a1_contact_rows(window: dict, start: int, end: int, wheel_radius_m: float, b1: float, model: GapModel,
@@ -196,11 +171,12 @@ def gap_only_fit(torque: np.ndarray, acc: np.ndarray, start: int, end: int,
     x, y = x_all[lo:hi], y_all[lo:hi]
     res = y - j * x
     dof = n - 1
-    se_stat = float(np.sqrt(float(res @ res) / dof / float(x @ x)))
+    se_stat = _deming_se(y, x, j, sy, sx, centred=False)
+    ratio = _noise_ratio_term(y, x, j, sy, sx)
     model_error = abs(slope(lo + 1, hi - 1) - j) if n >= 6 else 0.0
-    se = max(float(np.hypot(se_stat, model_error)), GAP_ONLY_REL_SE_FLOOR * j)
+    se = max(float(np.sqrt(se_stat ** 2 + ratio ** 2 + model_error ** 2)), GAP_ONLY_REL_SE_FLOOR * j)
     return {"j1": float(j), "se": se, "model_error": float(model_error), "residual": res, "dof": dof,
-            "start": int(lo), "end": int(hi), "noise": (sy, sx)}
+            "start": int(lo), "end": int(hi), "noise": (sy, sx), "noise_ratio": ratio}
 
 
 def _nonpositive(j: float, torque: np.ndarray, acc: np.ndarray, declared: tuple) -> str:
@@ -232,10 +208,13 @@ def _constant_fit(y_all: np.ndarray, x_all: np.ndarray, lo: int, hi: int, sy: fl
     if not (math.isfinite(j) and j > 0 and sxx > 0):
         return None
     j_in = fit(lo + 1, hi - 1)[0]
-    se_stat = float(np.sqrt(float(res @ res) / (hi - lo - 2) / sxx))
+    x, y = x_all[lo:hi], y_all[lo:hi]
+    se_stat = _deming_se(y - y.mean(), x - x.mean(), j, sy, sx, centred=True)
+    ratio = _noise_ratio_term(y - y.mean(), x - x.mean(), j, sy, sx)
     model_error = abs(j_in - j) if math.isfinite(j_in) else np.inf
-    return {"j1": float(j), "constant_nm": f, "se": float(np.hypot(se_stat, model_error)), "se_stat": se_stat,
-            "model_error": float(model_error), "residual": res, "dof": hi - lo - 2}
+    return {"j1": float(j), "constant_nm": f, "se": float(np.sqrt(se_stat ** 2 + ratio ** 2 + model_error ** 2)),
+            "se_stat": se_stat, "noise_ratio": ratio, "model_error": float(model_error), "residual": res,
+            "dof": hi - lo - 2}
 
 
 def _torque_powers(n_gap: int, linear_term: bool = False) -> tuple:
@@ -434,9 +413,11 @@ def _gap_only_constant(fit: dict, torque: np.ndarray, xm: tuple, model: GapModel
         change = float(np.hypot(free["model_error"], entry_error))
         stat = max(free["se_stat"], GAP_ONLY_REL_SE_FLOOR * free["j1"])
         shape = _shape_terms(x - x.mean(), mt, model)
+        if free["noise_ratio"]:
+            shape["noise_ratio"] = free["noise_ratio"]
         se_free = float(np.sqrt(stat ** 2 + change ** 2 + sum(v ** 2 for v in shape.values())))
         if se_free < se_bounded:
-            out = {k: v for k, v in terms.items() if k not in ("statistical", "change_points")}
+            out = {k: v for k, v in terms.items() if k not in ("statistical", "change_points", "noise_ratio")}
             out["statistical"] = stat
             if change:
                 out["change_points"] = change
@@ -475,10 +456,11 @@ def _method_gap_only(window: dict, rows: tuple, drive: tuple, model: GapModel, m
                     made=fit, torque=mf)
 
 
-def _method_acceleration(window: dict, rows: tuple, drive: tuple) -> FitState:
+def _method_acceleration(window: dict, rows: tuple, drive: tuple, model: GapModel | None = None) -> FitState:
     """gap._estimate_inertia's 'acceleration' fit over ``rows`` (start, end): the joint fit (:func:`_joint_fit`), its
-    model error the change of J1 with a linear torque term.  ``drive``: (r, b1, T_s)."""
-    (start, end), (wheel_radius_m, bearing_friction_nms_per_rad, _) = rows, drive
+    model error the change of J1 with a linear torque term; a ratio at or below zero is told from a sign error as the
+    other fits' (gap_sign.no_positive_ratio, the declared errors of ``model``).  ``drive``: (r, b1, T_s)."""
+    (start, end), (wheel_radius_m, bearing_friction_nms_per_rad, sample_period_s) = rows, drive
     if "a1" not in window:
         raise NoGapError("method 'acceleration' needs a1 (use 'speed' with omega1)")
     friction = None
@@ -487,7 +469,9 @@ def _method_acceleration(window: dict, rows: tuple, drive: tuple) -> FitState:
     fit = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction)
     kappa = fit["kappa"]
     if not kappa > 0:
-        raise NoGapError(f"gap fit gave a non-physical a1/m_el ratio {kappa:.4g}")
+        flip = 0.0 if model is None else gap_sign.slope_flip(
+            _net_torque(window, bearing_friction_nms_per_rad)[start:end], *declared_errors(model, sample_period_s))
+        raise NoGapError(gap_sign.no_positive_ratio(kappa, fit["kappa_se"], end - start, flip))
     j = wheel_radius_m / kappa
     alt = _joint_fit(np.asarray(window["m_el"], float), np.asarray(window["a1"], float), start, end, friction,
                      linear_term=True, warm=fit, kappa_only=True)

@@ -80,6 +80,21 @@ def no_positive_kappa(kappa: float, se: float, n: int, flip: float = 0.0) -> str
             f"{_LATE})")
 
 
+def no_positive_ratio(kappa: float, se: float, n: int, flip: float = 0.0) -> str:
+    """The reason of a joint a1 fit ('acceleration', gap_a1._joint_fit) without a positive ratio ``kappa`` = a1/m_el
+    (± ``se``, its standard error, over the gap's ``n`` rows; ``flip``: :func:`slope_flip` of the gap's torque): as
+    :func:`no_positive_kappa` -- within NONPHYSICAL_Z standard errors of zero, or turned by the declared errors, the
+    window does not resolve J1 (vector set 22's s22-11, a light load reversal with an Imu at 30 dB: a1/m_el -0.009,
+    an ERROR naming the signs on a healthy drive before stop 46); beyond, the signs are to check."""
+    if np.isfinite(kappa) and np.isfinite(se) and kappa >= -NONPHYSICAL_Z * se:
+        return (f"gap fit undetermined: a1/m_el = {kappa:.3g} ± {se:.2g} from the joint fit, not distinguishable from "
+                f"0: the gap's torque does not accelerate the motor measurably over its {n} rows")
+    if NONPHYSICAL_BEYOND_DECLARED and flip >= 1.0:
+        return _turned(flip, n, f"a1/m_el = {kappa:.3g} ± {se:.2g} from the joint fit")
+    return (f"gap fit gave a non-physical a1/m_el ratio {kappa:.4g} ± {se:.2g} (the motor accelerates against the "
+            f"torque over the gap: {_SIGN_CHECK} a1 and the joint names, {_LATE})")
+
+
 def correlation_t(x: np.ndarray, y: np.ndarray) -> float:
     """The t statistic of the correlation of x and y through the origin (their sums of squares and products)."""
     n = y.size

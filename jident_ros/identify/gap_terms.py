@@ -14,6 +14,7 @@ import numpy as np
 STD_ERROR_TERM_SOURCES = {
     "statistical": ("the samples themselves (encoder quantisation and noise through the fit)", None),
     "torque_noise": ("the noise on the torque estimate m_el", None),
+    "noise_ratio": ("the ratio of the torque's noise to the acceleration's, which the samples show only roughly", None),
     "coulomb_band": ("the motor's Coulomb friction band", "coulomb_friction_max_nm"),
     "viscous_band": ("the viscous friction band", "viscous_friction_band_nms_per_rad"),
     "torque_offset": ("an unknown constant torque in the gap (the torque estimate's offset)", "torque_offset_rel_base"),
