@@ -162,6 +162,25 @@ def test_a1_and_angle_fits_that_disagree_are_refused(step):
     assert "cross-checked" in g.model_choice and abs(g.inertia_kgm2 / 1.16 - 1) < 0.01
 
 
+def test_fits_that_disagree_where_neither_could_be_published_are_the_window_s_resolution(step, monkeypatch):
+    """A disagreement is a refusal to check (friction, the gap interval, a lagging signal: not resolution-limited,
+    an ERROR) only where the better fit could have been published; where its 95 % interval is wider than a
+    published one may be (gap_terms.MAX_CI95_HALF_WIDTH_REL) nothing would go out either way, and it is "gap fit
+    undetermined" (DOL set 24's d24-06, a light load reversal with an Imu at 30 dB: 1.24 ± 0.10 against 0.80 ±
+    0.12, an ERROR on a healthy drive before stop 46)."""
+    from jident_ros.identify import gap_terms
+    w = dict(step["window"])
+    w["a1"] = w["a1"] * 1.1
+    kw = dict(recontact_index=step["recontact"], model=GapModel(coulomb_friction_max_nm=1.5))
+    with pytest.raises(NoGapError) as exc:
+        estimate_inertia(w, step["entry"], 0.005, R, TS, **kw)
+    assert not resolution_limited(str(exc.value)) and "lagging signal" in str(exc.value)
+    monkeypatch.setattr(gap_terms, "MAX_CI95_HALF_WIDTH_REL", 1e-4)      # no interval narrow enough to publish
+    with pytest.raises(NoGapError) as exc:
+        estimate_inertia(w, step["entry"], 0.005, R, TS, **kw)
+    assert resolution_limited(str(exc.value)) and "could not be published either" in str(exc.value)
+
+
 def test_speed_fit_models_the_feedback_lag(step):
     """The speed feedback lags 0.4 ms: the speed fit with the lag as a regressor is within 1 % and covers."""
     w = {k: step["window"][k] for k in ("t", "omega1", "m_el")}

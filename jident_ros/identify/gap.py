@@ -47,7 +47,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from jident_ros.identify import gap_cross
+from jident_ros.identify import gap_cross, gap_terms
 from jident_ros.identify.distributions import t_quantile
 from jident_ros.identify.gap_a1 import (  # noqa: F401  (re-exported: the a1 fits' names the tests and research import)
     GAP_ONLY_MAX_TRIM,
@@ -456,10 +456,17 @@ def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_sa
     a, b = fits["a1"], fits["angle"]
     z = abs(a.inertia_kgm2 - b.inertia_kgm2) / max(_difference_se(a, b, model), 1e-300)
     if z > gap_cross.CROSS_CHECK_Z:
-        raise NoGapError(f"the a1 fit ({a.method}: J1 = {a.inertia_kgm2:.4g} ± {a.std_error_kgm2:.2g} kg m^2) and "
-                         f"the angle fit (J1 = {b.inertia_kgm2:.4g} ± {b.std_error_kgm2:.2g} kg m^2) disagree by "
-                         f"{z:.1f} standard errors (> {gap_cross.CROSS_CHECK_Z:g}): friction, a wrong gap interval or a "
-                         f"lagging signal")
+        text = (f"the a1 fit ({a.method}: J1 = {a.inertia_kgm2:.4g} ± {a.std_error_kgm2:.2g} kg m^2) and the angle fit "
+                f"(J1 = {b.inertia_kgm2:.4g} ± {b.std_error_kgm2:.2g} kg m^2) disagree by {z:.1f} standard errors (> "
+                f"{gap_cross.CROSS_CHECK_Z:g})")
+        best = a if a.std_error_kgm2 <= b.std_error_kgm2 else b
+        half = 0.5 * (best.ci95_kgm2[1] - best.ci95_kgm2[0]) / best.inertia_kgm2
+        if not half <= gap_terms.MAX_CI95_HALF_WIDTH_REL:
+            # the fit that would go out had they agreed is wider than a published interval may be: nothing would be
+            # published either way, so the disagreement is this window's resolution, not a configuration to check
+            raise NoGapError(f"gap fit undetermined: {text}, and the better of them (± {100 * half:.3g} %) could not "
+                             f"be published either (± {100 * gap_terms.MAX_CI95_HALF_WIDTH_REL:g} % at most)")
+        raise NoGapError(f"{text}: friction, a wrong gap interval or a lagging signal")
     best = a if a.std_error_kgm2 <= b.std_error_kgm2 else b
     other = b if best is a else a
     best = _trend_choice(best, other)

@@ -29,6 +29,17 @@ STD_ERROR_TERM_SOURCES = {
 }
 
 
+#: A gap J1 is published only with a 95 % interval within ± this fraction of it: a wider one could hold a J1 this
+#: far off (issue 20's target: no published J1 more than 10 % off); it is not published, as undetermined, whatever
+#: classes it holds (the vector drive's heavy load reversal: ± 14 % around −30 %, one class inside, was published).
+#: Such a window is 'ambiguous' (like an interval over two classes): a fact about this window's resolution, not
+#: the monitor's configuration, so its level follows the nominal (OK when the interval is consistent with it, WARN
+#: when it excludes it), and the trend takes its J1 with its standard error (issue 21).  The gap stage's cross-check
+#: reads it too (gap._cross_checked: a disagreement where the better fit could not publish either is the window's
+#: resolution).  Moved here from verdict.py in stop 46 (verdict imports gap; it re-exports the name).
+MAX_CI95_HALF_WIDTH_REL = 0.10
+
+
 def largest_term(std_error_terms) -> tuple | None:
     """(name, standard error) of the largest finite part of a gap J1's standard error, None when there is none."""
     best = None

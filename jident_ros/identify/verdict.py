@@ -33,9 +33,10 @@ from typing import Mapping, Optional
 
 import numpy as np
 
+from jident_ros.identify import gap_terms
 from jident_ros.identify.gap import GapEstimate, NoGapError, gap_interval
 from jident_ros.identify.gap_free import GapModel
-from jident_ros.identify.gap_terms import STD_ERROR_TERM_SOURCES, largest_term
+from jident_ros.identify.gap_terms import MAX_CI95_HALF_WIDTH_REL, STD_ERROR_TERM_SOURCES, largest_term  # noqa: F401  (re-exported)
 
 #: Window channels whose magnitude is bounded (see :func:`input_bounds`).
 BOUNDED = ("m_el", "omega1", "omega2", "a1", "a2", "v2")
@@ -394,14 +395,6 @@ class GapDecision:
     publish: bool = False
 
 
-#: A gap J1 is published only with a 95 % interval within ± this fraction of it: a wider one could hold a J1 this
-#: far off (issue 20's target: no published J1 more than 10 % off); it is not published, as undetermined, whatever
-#: classes it holds (the vector drive's heavy load reversal: ± 14 % around −30 %, one class inside, was published).
-#: Such a window is 'ambiguous' (like an interval over two classes): a fact about this window's resolution, not
-#: the monitor's configuration, so its level follows the nominal (OK when the interval is consistent with it, WARN
-#: when it excludes it), and the trend takes its J1 with its standard error (issue 21).
-MAX_CI95_HALF_WIDTH_REL = 0.10
-
 #: A gap J1 outside the plausible band is refused as a configuration problem ("a wrong K2, radius or torque
 #: scale?", ERROR) only when its interval says so: where the interval is wider than MAX_CI95_HALF_WIDTH_REL and reaches
 #: into the band, the window cannot tell a wrong configuration from its own resolution, and it is undetermined like
@@ -422,7 +415,7 @@ def decide_gap(gap: GapEstimate, classes, nominal_kgm2: float, policy: VerdictPo
     half = 0.5 * (gap.ci95_kgm2[1] - gap.ci95_kgm2[0])
     if not lo <= j1 <= hi:
         a, b = gap.ci95_kgm2
-        if BAND_BY_INTERVAL and not half <= MAX_CI95_HALF_WIDTH_REL * j1 and a <= hi and b >= lo:
+        if BAND_BY_INTERVAL and not half <= gap_terms.MAX_CI95_HALF_WIDTH_REL * j1 and a <= hi and b >= lo:
             return GapDecision("ambiguous", f"undetermined: J1 = {j1:.4g} kg m^2 lies outside the plausible band "
                                             f"{lo:.4g}..{hi:.4g} kg m^2 but its 95 % interval {a:.4g}..{b:.4g} (± "
                                             f"{100 * half / j1:.3g} %) reaches into it: it cannot tell a wrong "
@@ -432,11 +425,11 @@ def decide_gap(gap: GapEstimate, classes, nominal_kgm2: float, policy: VerdictPo
                                       f"the nominal {nominal_kgm2:g}); a wrong K2, radius or torque scale?", held)
     if recontact is not None and not recontact.consistent:
         return GapDecision("refused", width_disagreement(recontact, backlash_width_m), held)
-    if not half <= MAX_CI95_HALF_WIDTH_REL * j1:
+    if not half <= gap_terms.MAX_CI95_HALF_WIDTH_REL * j1:
         a, b = gap.ci95_kgm2
         return GapDecision("ambiguous", f"undetermined: 95 % interval {a:.4g}..{b:.4g} kg m^2 is ± "
-                                      f"{100 * half / j1:.3g} % of J1 (> ± {100 * MAX_CI95_HALF_WIDTH_REL:g} %): it cannot tell "
-                                      f"a {100 * MAX_CI95_HALF_WIDTH_REL:g} % change{widest_term(gap)}", held)
+                                      f"{100 * half / j1:.3g} % of J1 (> ± {100 * gap_terms.MAX_CI95_HALF_WIDTH_REL:g} %): it cannot tell "
+                                      f"a {100 * gap_terms.MAX_CI95_HALF_WIDTH_REL:g} % change{widest_term(gap)}", held)
     if len(held) >= 2:
         a, b = gap.ci95_kgm2
         return GapDecision("ambiguous", f"ambiguous: 95 % interval {a:.4g}..{b:.4g} kg m^2 holds classes "

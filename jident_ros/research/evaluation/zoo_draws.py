@@ -59,7 +59,9 @@ PROTOCOL_NOTE = ("A set is a blind test only until something is changed because 
                  "of exactly zero; in stop 44 vector sets 1–12, a fast departure's entry moved back to the zone's "
                  "edge, ZONE_BACK_*, tested on vector sets 13–25 and DOL sets 1–7; in stop 45 vector sets 1–12 again, "
                  "a slow departure's entry moved back to the zone's edge, ZONE_BACK_SLOW_*, tested on vector sets "
-                 "13–26 and DOL sets 1–26).")
+                 "13–26 and DOL sets 1–26; in stop 46 the ERROR windows of vector sets 22 and 27 and DOL set 24: the a1 "
+                 "fits' errors-in-variables standard error, the joint a1 fit's ratio within its noise, a disagreement "
+                 "where neither fit could be published).")
 
 #: The torque accuracy a drive's data sheet typically states for sensored vector control, ± this of rated torque: what
 #: a user who has nothing better declares, as ``torque_accuracy`` and as ``torque_offset_rel_base``, the way
