@@ -364,3 +364,15 @@ def test_the_joint_a1_fit_tells_a_ratio_within_its_noise_from_a_sign_error(rever
                 break
     else:
         pytest.fail("no negative ratio drawn")
+
+
+def test_the_a1_fits_standard_error_never_falls_below_its_first_term():
+    """Fuller's variance less a term that the sample's residual can make exceed the rest (σ_vv below J² σ_uu):
+    _deming_se keeps the first term, σ_vv / (n m_ξξ), rather than a zero or an imaginary standard error."""
+    x = np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0])
+    y = 2.0 * x + np.array([0.01, -0.01, 0.01, -0.01, 0.01, -0.01])      # residual far below J² sx²
+    j = float(x @ y / (x @ x))
+    se = gap_a1._deming_se(y, x, j, 0.01, 1.0, centred=False)
+    res = y - j * x
+    first = np.sqrt(float(res @ res) / 5 / 6 / (float(x @ y) / 6 / j))
+    assert se == pytest.approx(first, rel=1e-12) and se > 0

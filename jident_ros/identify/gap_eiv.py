@@ -62,7 +62,7 @@ def _deming_se(y: np.ndarray, x: np.ndarray, j: float, sy: float, sx: float, cen
     wider than that, as it must be: the slope then rests on the noise ratio (sy/sx)² read off the samples (vector set
     27's s27-10 with an Imu at 30 dB: the speed step's traversal back, the motor held at speed, m_ξξ 28 % of m_xx;
     J1 2.32 against 1.19 with the least-squares 0.15, Fuller's 0.37, the jackknife's 0.35).  inf where m_ξξ is not
-    positive."""
+    positive; at least σ_vv / (n' m_ξξ)."""
     n = x.size
     n_m = n - 1 if centred else n
     dof = n - 2 if centred else n - 1
@@ -74,8 +74,10 @@ def _deming_se(y: np.ndarray, x: np.ndarray, j: float, sy: float, sx: float, cen
     res = y - j * x
     s_vv = float(res @ res) / dof
     s_uu = sx * sx
-    v = (m_xi * s_vv + s_uu * s_vv - j * j * s_uu * s_uu) / (n_m * m_xi * m_xi)
-    return float(np.sqrt(v)) if v > 0 else 0.0
+    # σ_vv = σ_ee + J² σ_uu in expectation, so the last two terms add σ_uu σ_ee >= 0; where the sample's residual
+    # variance falls short of J² σ_uu they would subtract: the first term alone then (never below least squares' form)
+    v = max((m_xi * s_vv + s_uu * s_vv - j * j * s_uu * s_uu) / (n_m * m_xi * m_xi), s_vv / (n_m * m_xi))
+    return float(np.sqrt(v))
 
 
 def _noise_ratio_term(y: np.ndarray, x: np.ndarray, j: float, sy: float, sx: float) -> float:
