@@ -455,11 +455,11 @@ def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_sa
                                        f"({why[other]})")
     a, b = fits["a1"], fits["angle"]
     z = abs(a.inertia_kgm2 - b.inertia_kgm2) / max(_difference_se(a, b, model), 1e-300)
+    best = a if a.std_error_kgm2 <= b.std_error_kgm2 else b       # the one published when they agree
     if z > gap_cross.CROSS_CHECK_Z:
         text = (f"the a1 fit ({a.method}: J1 = {a.inertia_kgm2:.4g} ± {a.std_error_kgm2:.2g} kg m^2) and the angle fit "
                 f"(J1 = {b.inertia_kgm2:.4g} ± {b.std_error_kgm2:.2g} kg m^2) disagree by {z:.1f} standard errors (> "
                 f"{gap_cross.CROSS_CHECK_Z:g})")
-        best = a if a.std_error_kgm2 <= b.std_error_kgm2 else b
         half = 0.5 * (best.ci95_kgm2[1] - best.ci95_kgm2[0]) / best.inertia_kgm2
         if not half <= gap_terms.MAX_CI95_HALF_WIDTH_REL:
             # the fit that would go out had they agreed is wider than a published interval may be: nothing would be
@@ -467,7 +467,6 @@ def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_sa
             raise NoGapError(f"gap fit undetermined: {text}, and the better of them (± {100 * half:.3g} %) could not "
                              f"be published either (± {100 * gap_terms.MAX_CI95_HALF_WIDTH_REL:g} % at most)")
         raise NoGapError(f"{text}: friction, a wrong gap interval or a lagging signal")
-    best = a if a.std_error_kgm2 <= b.std_error_kgm2 else b
     other = b if best is a else a
     best = _trend_choice(best, other)
     # the a1 fit made again from the angle fit's entry says so where the angle fit is the one published, too
