@@ -48,7 +48,7 @@ def test_within_reach(row, reach):
 
 
 def test_seed_lists():
-    assert O._seeds("1-3,7") == [1, 2, 3, 7]
+    assert O.parse_seeds("1-3,7") == [1, 2, 3, 7]
     assert O.main(["--seeds", "x"]) == 2
 
 

@@ -131,3 +131,34 @@ def test_the_user_declares_the_known_delay_and_smoothing(model):
         assert dec["torque_filter_s"] == d.values["torque_filter_s"]
         seen.add((dec["torque_delay_s"] > 0, dec["torque_filter_s"] > 0))
     assert seen == {(False, False), (False, True), (True, False), (True, True)}
+
+
+def test_run_records_each_traversals_first_entry_per_input(monkeypatch, tmp_path):
+    """zoo_draws --json's ``entries``: per sensor label, drive, event and true entry row, the first matching window's
+    entry row (None where the traversal was missed); bounces are not listed (entry_oracle reads them)."""
+    def recs(d, out, log=print):
+        gaps = [{"entry_index": 100, "recontact_index": 140, "traversal": True},
+                {"entry_index": 150, "recontact_index": 160, "traversal": False},
+                {"entry_index": 300, "recontact_index": 330, "traversal": True}]
+        out = []
+        for label in ("JointState 2^16 clean", "JointState+Imu 2^16 30 dB"):
+            zr = zoo.ZooRecording("dol", f"rec_{label.split()[0]}", "slip reversal", True, "forward", 1.1, 0.005, 0.1, 1.0,
+                                  65536, None, 5e-4, 90, [dict(g) for g in gaps])
+            zr.files = {"jointstate": str(tmp_path / zr.name)}
+            out.append((label, zr))
+        return out
+
+    def diag(zr, fmt, system, declare=True, extra=None):
+        first = 103 if "Imu" in zr.name else 99
+        return {"windows": [{"index": first, "gap": 0, "published": False, "reason": "x", "level": "OK", "k2": None},
+                            {"index": first + 5, "gap": 0, "published": False, "reason": "x", "level": "OK", "k2": None}],
+                "cut_off": []}
+
+    monkeypatch.setattr(zd, "recordings", recs)
+    monkeypatch.setattr(zoo, "diagnose_one", diag)
+    res = zd.run(tmp_path, 1, 1, log=lambda *a: None, model="dol")
+    assert sorted(map(tuple, res["entries"])) == [
+        ("JointState 2^16 clean", "d1-01", "slip reversal", 100, 99),
+        ("JointState 2^16 clean", "d1-01", "slip reversal", 300, None),
+        ("JointState+Imu 2^16 30 dB", "d1-01", "slip reversal", 100, 103),
+        ("JointState+Imu 2^16 30 dB", "d1-01", "slip reversal", 300, None)]

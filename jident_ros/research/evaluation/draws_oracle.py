@@ -191,7 +191,8 @@ def markdown(rows: list, model: str, seeds: list, published: dict, command: str,
     return "\n".join(lines + [""])
 
 
-def _seeds(text: str) -> list:
+def parse_seeds(text: str) -> list:
+    """The sets of ``text`` ('1-18', '1,3,5')."""
     out = []
     for part in text.split(","):
         a, _, b = part.partition("-")
@@ -210,7 +211,7 @@ def main(argv=None) -> int:
     p.add_argument("--results", default="docs/results.md", help="results file to update ('-' prints)")
     a = p.parse_args(argv)
     try:
-        seeds = _seeds(a.seeds)
+        seeds = parse_seeds(a.seeds)
     except ValueError:
         sys.stderr.write(f"draws_oracle: error: argument --seeds: a list like 1-18 or 1,3,5, got {a.seeds!r}\n")
         return 2

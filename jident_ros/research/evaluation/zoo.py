@@ -455,6 +455,16 @@ def missed_kind(zr: ZooRecording, windows: list, k: int) -> str:
     return "none"
 
 
+def first_entries(res: dict) -> dict:
+    """{true gap index: the entry row of the first window or cut-off window matched to it} of one
+    :func:`diagnose_one` result (the entry counted against the truth's)."""
+    first = {}
+    for w in res["windows"] + res["cut_off"]:
+        if w["gap"] is not None and w["gap"] not in first:
+            first[w["gap"]] = w["index"]
+    return first
+
+
 def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
     """Counts over (ZooRecording, diagnose_one result) pairs of one group (``nominal_kgm2``: the nominal J1 they
     were diagnosed with; default config/system.yaml's)."""
@@ -485,10 +495,7 @@ def summarise(items: list, nominal_kgm2: Optional[float] = None) -> dict:
         missed_rows += [-1 if zr.gaps[k]["recontact_index"] is None
                         else zr.gaps[k]["recontact_index"] - zr.gaps[k]["entry_index"] for k in trav if k not in hits]
         missed_kinds += [missed_kind(zr, res["windows"], k) for k in trav if k not in hits]
-        first = {}
-        for w in res["windows"] + res["cut_off"]:
-            if w["gap"] is not None and w["gap"] not in first:
-                first[w["gap"]] = w["index"]
+        first = first_entries(res)
         for k in trav:
             if k in first:
                 offsets.append(first[k] - zr.gaps[k]["entry_index"])

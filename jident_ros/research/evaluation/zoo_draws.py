@@ -273,6 +273,7 @@ def run(out: Path, seed: int, count: int, log=print, undeclared: bool = False, m
     t0 = time.perf_counter()
     system = load_system_config()
     rows, what, failed, groups = {}, {}, {}, {}
+    entries = []        # [sensor label, drive, event, true entry row, the first matching window's entry row or None]
     for i in range(1, count + 1):
         d = draw(seed, i, model)
         try:
@@ -290,10 +291,13 @@ def run(out: Path, seed: int, count: int, log=print, undeclared: bool = False, m
         rows[d.name] = zoo.summarise(items, nominal_kgm2=system.motor.nominal_inertia_kgm2)
         for (label, zr), item in zip(zrs, items):
             groups.setdefault(f"{label}|{zr.event}", []).append(item)
+            first = zoo.first_entries(item[1])
+            entries += [[label, d.name, zr.event, g["entry_index"], first.get(k)]
+                        for k, g in enumerate(zr.gaps) if g["traversal"]]
         what[d.name] = describe(d) + f"; torque estimate off ≤ {torque_error(zrs)}"
         log(f"{d.name}: diagnosed {len(items)} files ({time.perf_counter() - t0:.0f} s)")
     return {"rows": rows, "what": what, "failed": failed, "seed": seed, "count": count, "model": model,
-            "elapsed_s": time.perf_counter() - t0, "undeclared": undeclared,
+            "elapsed_s": time.perf_counter() - t0, "undeclared": undeclared, "entries": entries,
             # 'sensor label|event' -> the counts over every drive's recording of that input and event (draws_targets)
             "groups": {k: zoo.summarise(v, nominal_kgm2=system.motor.nominal_inertia_kgm2) for k, v in groups.items()}}
 

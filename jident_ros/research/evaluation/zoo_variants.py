@@ -47,6 +47,8 @@ EVENTS = ("speed_step_down", "speed_reversal", "load_reversal_light", "load_reve
 SENSORS = (("JointState 2^16 clean", "jointstate", 65536, None), ("JointState 2^16 30 dB", "jointstate", 65536, 30.0),
            ("JointState+Imu 2^16 30 dB", "jointstate_imu", 65536, 30.0))
 GENERATION = 1
+#: The seed of the recordings' sensors (encoder offsets, noise): every variant's and zoo_draws' vector drive's.
+SEED = 23
 
 
 #: Variants diagnosed with a drive file of their own (its system configuration: nominal J1, classes, radius; and
@@ -200,7 +202,7 @@ def variants() -> list:
 
 
 def recordings(name: str, p: DriveParams, sensor_fields: dict, out: Path, log=print, direction: str = "forward",
-               seed: int = 23) -> list:
+               seed: int = SEED) -> list:
     """[(sensor label, ZooRecording)] of one drive ``p`` over :data:`EVENTS` x :data:`SENSORS` in ``direction``, the
     sensors changed by ``sensor_fields`` (record.Sensors fields), written under ``out``/<name> (the simulations
     cached under ``out``/cache); zoo_draws' drives too."""

@@ -90,6 +90,9 @@ class Recording:
     name: str
     signals: dict
     truth: dict
+    #: the true relative angle theta_M - N theta_L at the recorded instants (rad; the truth's gaps are read from it;
+    #: not written with the recording: entry_oracle reads it)
+    delta_rad: Optional[np.ndarray] = None
 
 
 def _wrap_pi(x):
@@ -288,7 +291,7 @@ def build(p: DriveParams, event: str, direction: str, sensors: Sensors, seed: in
         "sample_period_s": ts, "n_samples": int(n), "t0_s": 0.0,
         "motulator_version": st.get("motulator_version", "?"),
     }
-    return Recording(name, sig, truth)
+    return Recording(name, sig, truth, delta)
 
 
 def write(out_dir: Path, rec: Recording, fmt: str) -> str:
@@ -407,4 +410,4 @@ def build_dol(p, event: str, direction: str, sensors: Sensors, seed: int = 0, du
         "sample_period_s": ts, "n_samples": int(n), "t0_s": 0.0,
         "motulator_version": st.get("motulator_version", "?"),
     }
-    return Recording(name, sig, truth)
+    return Recording(name, sig, truth, delta)
