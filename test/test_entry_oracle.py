@@ -65,7 +65,7 @@ def test_the_table_splits_the_detector_by_what_the_angles_show():
                (lab, "d1-03", "slip drop", 100): None, (lab, "d1-01", "light", 300): -3}
     md = E.markdown(rows, "dol", [1], entries, "cmd", "abc", 1.0)
     line = {ln.split(" | ")[0].lstrip("| "): ln for ln in md.splitlines() if ln.startswith("| ")}
-    assert line["slip drop"].startswith("| slip drop | 3 | 1/3 (33 %) | 2 | 0 / 1 | 1/1 (100 %) | 0/1 (0 %) | – | – |")
+    assert line["slip drop"].startswith("| slip drop | 3 | 1/3 (33 %) | 2 | 0 / 1 | 1/1 (100 %) | 0/1 (0 %) | – | – | 1 / 0 |")
     assert "| all | 4 | 2/4 (50 %) |" in line["all"] and "| 1/2 (50 %) | 0/1 (0 %) |" in line["all"]
     heads = {E.markdown([], m, [1], {}, "cmd", "abc", 1.0).splitlines()[0].split("(")[0] for m in ("vector", "dol")}
     assert len(heads) == 2

@@ -123,6 +123,13 @@ def _detector_cells(sel: list, entries: dict, label: str) -> str:
     return " | ".join(cells)
 
 
+def _missed_cell(sel: list, entries: dict, label: str) -> str:
+    """'never a quantum deep / shown' over the traversals of ``sel`` the detector missed on ``label``."""
+    missed = [s for ev, drive, b, s in sel if (label, drive, ev, b) in entries and entries[(label, drive, ev, b)] is None]
+    return "–" if not any((label, d, e, b) in entries for e, d, b, _ in sel) else \
+        f"{sum(1 for s in missed if s is None)} / {sum(1 for s in missed if s is not None)}"
+
+
 def markdown(rows: list, model: str, seeds: list, entries: dict, command: str, commit: str, elapsed: float) -> str:
     name = "vector" if model == "vector" else "DOL"
     events = sorted({r[0] for r in rows})
@@ -137,11 +144,12 @@ def markdown(rows: list, model: str, seeds: list, entries: dict, command: str, c
              "by chance or from the motor's acceleration (an Imu's). Beside it, the flank detector's entries "
              "(zoo_draws --json files' per-traversal entries: the first matching window, as 'entry within ±2' counts "
              "them) within ±2 on the traversals found, where the angles show the gap within 2 samples and where "
-             "they do not.", "",
+             "they do not; and the traversals it missed, by whether the angles ever show their gap.", "",
              f"| event | traversals | shown within {WITHIN} samples | shown after, median | shown {LATE} or more late / "
              f"never | detector within ±{WITHIN}, {LABELS[0]}: where shown within {WITHIN} | ... where not | "
-             f"{LABELS[1]}: where shown within {WITHIN} | ... where not |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             f"{LABELS[1]}: where shown within {WITHIN} | ... where not | missed by the detector, {LABELS[0]}: never a "
+             "quantum deep / shown |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for ev in events + ["all"]:
         sel = [r for r in rows if ev in ("all", r[0])]
         shown = [r[3] for r in sel]
@@ -151,7 +159,8 @@ def markdown(rows: list, model: str, seeds: list, entries: dict, command: str, c
         never = sum(1 for s in shown if s is None)
         med = "–" if not finite else f"{float(np.median(finite)):.0f}"
         lines.append(f"| {ev} | {len(sel)} | {_pct(ok, len(sel))} | {med} | {late} / {never} | "
-                     f"{_detector_cells(sel, entries, LABELS[0])} | {_detector_cells(sel, entries, LABELS[1])} |")
+                     f"{_detector_cells(sel, entries, LABELS[0])} | {_detector_cells(sel, entries, LABELS[1])} | "
+                     f"{_missed_cell(sel, entries, LABELS[0])} |")
     return "\n".join(lines + [""])
 
 
