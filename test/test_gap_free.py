@@ -181,6 +181,44 @@ def test_fits_that_disagree_where_neither_could_be_published_are_the_window_s_re
     assert resolution_limited(str(exc.value)) and "could not be published either" in str(exc.value)
 
 
+def _angle_fit_grown(monkeypatch, rows_before: int, j_factor: float):
+    """The cross-check's angle fit made to disagree as a short gap's does when its change points grow into contact
+    (DOL sets 6, 20, 26: an angle fit over 10-43 rows around a 6-15-row gap): its J1 scaled, its rows moved early."""
+    from dataclasses import replace
+
+    from jident_ros.identify import gap
+    real = gap._estimate_inertia
+
+    def grown(*a, **k):
+        g = real(*a, **k)
+        if k.get("method") == "angle" and k.get("cross_check") is False:
+            return replace(g, inertia_kgm2=g.inertia_kgm2 * j_factor, fit_start=g.fit_start - rows_before)
+        return g
+    monkeypatch.setattr(gap, "_estimate_inertia", grown)
+
+
+def test_a_disagreement_the_gap_intervals_make_is_not_an_error(step, monkeypatch):
+    """A disagreement stays an ERROR-level refusal (friction, a lagging signal, a wrong radius) only where the angle
+    fit over the a1 fit's own rows disagrees too: an angle fit whose interval grew into contact (it alone off) is
+    'gap fit undetermined'; a1 10 % high (a wrong radius) disagrees over the same rows and stays."""
+    kw = dict(recontact_index=step["recontact"], model=GapModel(coulomb_friction_max_nm=1.5))
+    _angle_fit_grown(monkeypatch, rows_before=10, j_factor=1.2)
+    with pytest.raises(NoGapError) as exc:
+        estimate_inertia(dict(step["window"]), step["entry"], 0.005, R, TS, **kw)
+    text = str(exc.value)
+    assert resolution_limited(text) and "gap intervals differ, not their signals" in text, text
+    w = dict(step["window"])
+    w["a1"] = w["a1"] * 1.1
+    with pytest.raises(NoGapError) as exc:
+        estimate_inertia(w, step["entry"], 0.005, R, TS, **kw)
+    assert not resolution_limited(str(exc.value)) and "lagging signal" in str(exc.value), str(exc.value)
+    from jident_ros.identify import gap
+    monkeypatch.setattr(gap, "angle_over_rows", lambda *a, **k: None)       # rows too few for an angle fit
+    with pytest.raises(NoGapError) as exc:
+        estimate_inertia(w, step["entry"], 0.005, R, TS, **kw)
+    assert resolution_limited(str(exc.value)) and "too few for the angle fit" in str(exc.value), str(exc.value)
+
+
 def test_speed_fit_models_the_feedback_lag(step):
     """The speed feedback lags 0.4 ms: the speed fit with the lag as a regressor is within 1 % and covers."""
     w = {k: step["window"][k] for k in ("t", "omega1", "m_el")}

@@ -76,6 +76,7 @@ from jident_ros.identify.gap_angle import (  # noqa: F401  (re-exported: the ang
     _anchored_angle,
     _method_angle,
     a1_rows_contact,
+    angle_over_rows,
     encoder_resolved,
     steady_entry_contact,
 )
@@ -466,6 +467,11 @@ def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_sa
             # published either way, so the disagreement is this window's resolution, not a configuration to check
             raise NoGapError(f"gap fit undetermined: {text}, and the better of them (± {100 * half:.3g} %) could not "
                              f"be published either (± {100 * gap_terms.MAX_CI95_HALF_WIDTH_REL:g} % at most)")
+        same = _same_rows(args, b1, a, b, model)
+        if same:
+            # over the same rows the signals do not disagree: the fits' gap intervals do (a short gap the angle fit's
+            # change points grew into contact), this window's resolution, not a configuration to check
+            raise NoGapError(f"gap fit undetermined: {text}; {same}")
         raise NoGapError(f"{text}: friction, a wrong gap interval or a lagging signal")
     other = b if best is a else a
     best = _trend_choice(best, other)
@@ -474,6 +480,31 @@ def _cross_checked(args: tuple, b1: float, recontact_index, entry_uncertainty_sa
     return replace(best, model_choice=f"{best.model_choice or best.method}; cross-checked with the "
                                       f"{other.method} fit (J1 = {other.inertia_kgm2:.4g}, {z:.1f} standard errors"
                                       f"{refit})")
+
+
+def _same_rows(args: tuple, b1: float, a: GapEstimate, b: GapEstimate, model: GapModel) -> str:
+    """Why a disagreement of the a1 fit ``a`` and the angle fit ``b`` lies in their gap intervals, not their signals:
+    the angle fit over the a1 fit's own rows (:func:`angle_over_rows`) agrees with it within CROSS_CHECK_Z combined
+    standard errors, or those rows cannot hold an angle fit (the angle fit's disagreement then came from rows the a1
+    fit does not hold); '' where the angle fit used the same rows, or disagrees over them too (friction, a lagging
+    signal, a wrong radius: the refusal names them)."""
+    rows = (int(a.fit_start), int(a.fit_end)) if a.fit_start >= 0 else (int(a.gap_start), int(a.gap_end))
+    if rows == ((int(b.fit_start), int(b.fit_end)) if b.fit_start >= 0 else (int(b.gap_start), int(b.gap_end))):
+        return ""
+    got = angle_over_rows(args[0], rows, b1, args[4], model)
+    if got is None:
+        return (f"the a1 fit's rows {rows[0]}..{rows[1]} are too few for the angle fit, whose rows "
+                f"{b.fit_start}..{b.fit_end} reach beyond them")
+    # the refit as the angle fit's estimate over those rows: the difference's standard error as the check's own
+    # (_difference_se: the torque terms both fits share as their difference; in quadrature the second drive's a1
+    # fit 25 % off under a wrong radius passed at 2.9, scripts/golden.py's second_drive_signals)
+    refit = replace(b, inertia_kgm2=got[0], std_error_kgm2=got[1], std_error_terms=tuple(got[2].items()),
+                    fit_start=rows[0], fit_end=rows[1])
+    z = abs(got[0] - a.inertia_kgm2) / max(_difference_se(a, refit, model), 1e-300)
+    if z > gap_cross.CROSS_CHECK_Z:
+        return ""
+    return (f"over the a1 fit's rows {rows[0]}..{rows[1]} the angle fit gives J1 = {got[0]:.4g} ± {got[1]:.2g} kg m^2, "
+            f"within {z:.1f} standard errors of it: the fits' gap intervals differ, not their signals")
 
 
 @lru_cache(maxsize=256)

@@ -407,6 +407,22 @@ def _angle_fit(alpha1: np.ndarray, m_el: np.ndarray, start: int, end: int, sampl
     return j, max(se, ANGLE_REL_SE_FLOOR * j), res, max(dof_m - 3, 1), model_error
 
 
+def angle_over_rows(window: dict, rows: tuple, bearing_friction_nms_per_rad: float, sample_period_s: float,
+                    model: GapModel):
+    """(J1, its standard error (every term), its terms {name: kg m^2}), kg m^2, of the free angle fit over exactly
+    ``rows`` (start, end exclusive; no change-point search, no steady-entry fit), or None where the rows cannot hold
+    one (too few): gap._cross_checked's check of a disagreement over the a1 fit's own rows."""
+    if "alpha1" not in window or rows[1] - rows[0] < 1:
+        return None
+    try:
+        ff = free_angle_fit(np.asarray(window["alpha1"], float), _net_torque(window, bearing_friction_nms_per_rad),
+                            sample_period_s, int(rows[0]), int(rows[1]), model, fixed=True)
+    except (FreeFitError, np.linalg.LinAlgError):
+        return None
+    j = float(ff["j1"])
+    return (j, float(ff["se"]), dict(ff["terms"])) if np.isfinite(j) and j > 0 else None
+
+
 def _method_angle(window: dict, rows: tuple, drive: tuple, model: GapModel) -> FitState:
     """gap._estimate_inertia's 'angle' fit around ``rows`` (start, end: its change points are searched around them):
     the free angle fit, or the steady-entry fit where :func:`_anchored_angle` takes it, inside the load side's free
