@@ -494,7 +494,7 @@ def _same_rows(args: tuple, b1: float, a: GapEstimate, b: GapEstimate, model: Ga
     got = angle_over_rows(args[0], rows, b1, args[4], model)
     if got is None:
         return (f"the a1 fit's rows {rows[0]}..{rows[1]} are too few for the angle fit, whose rows "
-                f"{b.fit_start}..{b.fit_end} reach beyond them")
+                f"{b.fit_start}..{b.fit_end} are others")
     # the refit as the angle fit's estimate over those rows: the difference's standard error as the check's own
     # (_difference_se: the torque terms both fits share as their difference; in quadrature the second drive's a1
     # fit 25 % off under a wrong radius passed at 2.9, scripts/golden.py's second_drive_signals)
