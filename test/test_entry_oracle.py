@@ -75,3 +75,9 @@ def test_first_entries_take_the_first_window_of_each_gap_and_cut_off_ones():
     res = {"windows": [{"index": 7, "gap": 0}, {"index": 9, "gap": 0}, {"index": 30, "gap": None}],
            "cut_off": [{"index": 50, "gap": 1}]}
     assert zoo.first_entries(res) == {0: 7, 1: 50}
+
+
+def test_a_bad_seed_list_gets_one_line(capsys):
+    assert E.main(["--seeds", "1-x"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "entry_oracle: error: argument --seeds" in err

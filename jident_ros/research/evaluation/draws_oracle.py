@@ -200,20 +200,30 @@ def parse_seeds(text: str) -> list:
     return out
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m jident_ros.research.evaluation.draws_oracle",
-                                description=__doc__.split("\n\n")[0])
+def draws_arguments(name: str, description: str, default_seeds: str, json_help: str, argv=None):
+    """(parsed arguments, the sets) of a report over the blind draws (``name``: its module under
+    jident_ros.research.evaluation): --model, --seeds, --draws, --out, --json, --results; the sets None after one line
+    naming a bad --seeds (draws_oracle's and entry_oracle's command lines)."""
+    p = argparse.ArgumentParser(prog=f"python -m jident_ros.research.evaluation.{name}", description=description)
     p.add_argument("--model", choices=sorted(zoo_draws.MODELS), default="vector", help="the drive model drawn")
-    p.add_argument("--seeds", default="1-18", help="sets of draws, e.g. 1-18 or 1,3,5 (default 1-18)")
+    p.add_argument("--seeds", default=default_seeds, help=f"sets of draws, e.g. {default_seeds} or 1,3,5 (default "
+                                                          f"{default_seeds})")
     p.add_argument("--draws", type=int, default=12, help="drives drawn per set (default 12)")
     p.add_argument("--out", default="out/zoo_draws", help="recordings and the simulation cache")
-    p.add_argument("--json", nargs="*", default=[], help="zoo_draws --json files: the estimator's published share")
+    p.add_argument("--json", nargs="*", default=[], help=json_help)
     p.add_argument("--results", default="docs/results.md", help="results file to update ('-' prints)")
     a = p.parse_args(argv)
     try:
-        seeds = parse_seeds(a.seeds)
+        return a, parse_seeds(a.seeds)
     except ValueError:
-        sys.stderr.write(f"draws_oracle: error: argument --seeds: a list like 1-18 or 1,3,5, got {a.seeds!r}\n")
+        sys.stderr.write(f"{name}: error: argument --seeds: a list like {default_seeds} or 1,3,5, got {a.seeds!r}\n")
+        return a, None
+
+
+def main(argv=None) -> int:
+    a, seeds = draws_arguments("draws_oracle", __doc__.split("\n\n")[0], "1-18",
+                               "zoo_draws --json files: the estimator's published share", argv)
+    if seeds is None:
         return 2
     t0 = time.perf_counter()
     rows, system = [], load_system_config()

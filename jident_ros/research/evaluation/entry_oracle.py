@@ -25,7 +25,6 @@ detector's.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
@@ -35,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from jident_ros.research.evaluation import zoo, zoo_dol, zoo_draws, zoo_variants
-from jident_ros.research.evaluation.draws_oracle import parse_seeds
+from jident_ros.research.evaluation.draws_oracle import draws_arguments
 from jident_ros.research.vector_drive import record as vd_record
 
 #: The ±2 samples of issue 20's entry target.
@@ -165,19 +164,9 @@ def markdown(rows: list, model: str, seeds: list, entries: dict, command: str, c
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m jident_ros.research.evaluation.entry_oracle",
-                                description=__doc__.split("\n\n")[0])
-    p.add_argument("--model", choices=sorted(zoo_draws.MODELS), default="vector", help="the drive model drawn")
-    p.add_argument("--seeds", default="1-28", help="sets of draws, e.g. 1-28 or 1,3,5 (default 1-28)")
-    p.add_argument("--draws", type=int, default=12, help="drives drawn per set (default 12)")
-    p.add_argument("--out", default="out/zoo_draws", help="recordings and the simulation cache")
-    p.add_argument("--json", nargs="*", default=[], help="zoo_draws --json files: the detector's entries")
-    p.add_argument("--results", default="docs/results.md", help="results file to update ('-' prints)")
-    a = p.parse_args(argv)
-    try:
-        seeds = parse_seeds(a.seeds)
-    except ValueError:
-        sys.stderr.write(f"entry_oracle: error: argument --seeds: a list like 1-28 or 1,3,5, got {a.seeds!r}\n")
+    a, seeds = draws_arguments("entry_oracle", __doc__.split("\n\n")[0], "1-28",
+                               "zoo_draws --json files: the detector's entries", argv)
+    if seeds is None:
         return 2
     t0 = time.perf_counter()
     rows = []
