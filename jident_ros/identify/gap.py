@@ -488,8 +488,8 @@ def _same_rows(args: tuple, b1: float, a: GapEstimate, b: GapEstimate, model: Ga
     standard errors, or those rows cannot hold an angle fit (the angle fit's disagreement then came from rows the a1
     fit does not hold); '' where the angle fit used the same rows, or disagrees over them too (friction, a lagging
     signal, a wrong radius: the refusal names them)."""
-    rows = (int(a.fit_start), int(a.fit_end)) if a.fit_start >= 0 else (int(a.gap_start), int(a.gap_end))
-    if rows == ((int(b.fit_start), int(b.fit_end)) if b.fit_start >= 0 else (int(b.gap_start), int(b.gap_end))):
+    rows = a.fitted_rows
+    if rows == b.fitted_rows:
         return ""
     got = angle_over_rows(args[0], rows, b1, args[4], model)
     if got is None:

@@ -67,17 +67,26 @@ def _turned(flip: float, n: int, what: str) -> str:
             "its value: the gap's torque is too small against them to tell a sign")
 
 
+def _within_resolution(kappa: float, se: float, n: int, flip: float, what: str, effect: str) -> str | None:
+    """The reason where a fit's non-positive ``kappa`` (``what``: its phrase, ``effect``: what the torque does not do
+    measurably) is this window's resolution -- within NONPHYSICAL_Z standard errors ``se`` of zero, or turned by the
+    declared errors (``flip`` >= 1) -- else None (a sign to check)."""
+    if np.isfinite(kappa) and kappa >= -NONPHYSICAL_Z * se:
+        return (f"gap fit undetermined: {what}, not distinguishable from 0: the gap's torque does not {effect} "
+                f"measurably over its {n} rows")
+    if NONPHYSICAL_BEYOND_DECLARED and flip >= 1.0:
+        return _turned(flip, n, what)
+    return None
+
+
 def no_positive_kappa(kappa: float, se: float, n: int, flip: float = 0.0) -> str:
     """The reason of a free angle fit without a positive 1/J1 ``kappa`` (± ``se``, its statistical standard error,
     over ``n`` rows; ``flip``: x of the declared errors at their bounds, gap_free's ``_SpanFits.declared_flip``)."""
-    if np.isfinite(kappa) and kappa >= -NONPHYSICAL_Z * se:
-        return (f"gap fit undetermined: 1/J1 = {kappa:.3g} ± {se:.2g} 1/(kg m^2) from alpha1, not distinguishable from "
-                f"0: the gap's torque does not curve the angle measurably over its {n} rows")
-    if NONPHYSICAL_BEYOND_DECLARED and flip >= 1.0:
-        return _turned(flip, n, f"1/J1 = {kappa:.3g} ± {se:.2g} 1/(kg m^2) from alpha1")
-    return (f"gap fit gave a non-physical 1/J1 = {kappa:.3g} ± {se:.2g} 1/(kg m^2) from alpha1 (the angle curves "
-            f"against the torque's double integral over the gap: {_SIGN_CHECK} alpha1, the joint names and gear_ratio, "
-            f"{_LATE})")
+    what = f"1/J1 = {kappa:.3g} ± {se:.2g} 1/(kg m^2) from alpha1"
+    return _within_resolution(kappa, se, n, flip, what, "curve the angle") or (
+        f"gap fit gave a non-physical 1/J1 = {kappa:.3g} ± {se:.2g} 1/(kg m^2) from alpha1 (the angle curves "
+        f"against the torque's double integral over the gap: {_SIGN_CHECK} alpha1, the joint names and gear_ratio, "
+        f"{_LATE})")
 
 
 def no_positive_ratio(kappa: float, se: float, n: int, flip: float = 0.0) -> str:
@@ -86,13 +95,11 @@ def no_positive_ratio(kappa: float, se: float, n: int, flip: float = 0.0) -> str
     :func:`no_positive_kappa` -- within NONPHYSICAL_Z standard errors of zero, or turned by the declared errors, the
     window does not resolve J1 (vector set 22's s22-11, a light load reversal with an Imu at 30 dB: a1/m_el -0.009,
     an ERROR naming the signs on a healthy drive before stop 46); beyond, the signs are to check."""
-    if np.isfinite(kappa) and np.isfinite(se) and kappa >= -NONPHYSICAL_Z * se:
-        return (f"gap fit undetermined: a1/m_el = {kappa:.3g} ± {se:.2g} from the joint fit, not distinguishable from "
-                f"0: the gap's torque does not accelerate the motor measurably over its {n} rows")
-    if NONPHYSICAL_BEYOND_DECLARED and flip >= 1.0:
-        return _turned(flip, n, f"a1/m_el = {kappa:.3g} ± {se:.2g} from the joint fit")
-    return (f"gap fit gave a non-physical a1/m_el ratio {kappa:.4g} ± {se:.2g} (the motor accelerates against the "
-            f"torque over the gap: {_SIGN_CHECK} a1 and the joint names, {_LATE})")
+    what = f"a1/m_el = {kappa:.3g} ± {se:.2g} from the joint fit"
+    # an infinite standard error tells nothing here (as before the helper: only a finite one makes it undetermined)
+    return _within_resolution(kappa, se if np.isfinite(se) else np.nan, n, flip, what, "accelerate the motor") or (
+        f"gap fit gave a non-physical a1/m_el ratio {kappa:.4g} ± {se:.2g} (the motor accelerates against the "
+        f"torque over the gap: {_SIGN_CHECK} a1 and the joint names, {_LATE})")
 
 
 def correlation_t(x: np.ndarray, y: np.ndarray) -> float:

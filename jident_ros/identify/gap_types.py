@@ -76,6 +76,12 @@ class GapEstimate:
     def n_samples(self) -> int:
         return self.gap_end - self.gap_start
 
+    @property
+    def fitted_rows(self) -> tuple:
+        """(first, end exclusive) of the rows the fit used: fit_start..fit_end, the gap interval where they are -1."""
+        return (int(self.fit_start), int(self.fit_end)) if self.fit_start >= 0 else (int(self.gap_start),
+                                                                                     int(self.gap_end))
+
 
 def _net_torque(window: dict, bearing_friction_nms_per_rad: float) -> np.ndarray:
     """m_el − b1·ω1 over the whole window: the torque that accelerates J1 (m_el alone without b1 or ω1)."""

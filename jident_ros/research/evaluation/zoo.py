@@ -303,7 +303,7 @@ def diagnose_one(zr: ZooRecording, fmt: str, system, declare: bool = True, extra
         idx = int(round((w.entry_time_s - t_first) / ts))
         d = w.diagnosis
         gap = d.gap
-        start = None if gap is None else (gap.fit_start if gap.fit_start >= 0 else gap.gap_start)
+        start = None if gap is None else gap.fitted_rows[0]
         wins.append({"index": idx, "gap": match(zr.gaps, idx), "published": d.inertia_kgm2 is not None,
                      "gap_entry": None if start is None else idx + int(start) - entry_row,
                      "j1": d.inertia_kgm2, "source": d.source,
