@@ -121,3 +121,17 @@ def test_event_rows_old_files_show_no_gap_lengths():
     res = _res()
     (line, *_) = draws_targets.event_rows([res])
     assert "| – | – |" in line                # files written before missed_gap_rows and missed_kinds were counted
+
+
+def test_every_published_window_is_judged_for_off_and_coverage():
+    """Stop 48: a J1 from an early entry whose fit lies in a true gap, and one from a second window of a gap, count in
+    'off' by their error and in the coverage (until stop 47 the coverage was over the first windows alone and an
+    early entry's J1 more than 10 % off was not counted)."""
+    res = _res()
+    row = res["rows"]["s9-01"]
+    row["false_in_gap_errors"] = [0.12, -0.02]
+    row["false_in_gap_covered"] = 1
+    row["repeat_published"], row["repeat_covered"] = 2, 1
+    cells = draws_targets.row(res)
+    assert cells["off"] == "**1**"
+    assert cells["covers"] == "**11/14 (79 %)**"       # below 85 %: bold

@@ -96,3 +96,47 @@ def test_the_gap_fit_takes_off_a_disc_error_behind_a_swinging_tail(monkeypatch):
     left = fit(2e-4)
     assert "disc error" not in left.model_choice
     assert abs(left.inertia_kgm2 / exact.inertia_kgm2 - 1) > 0.01
+
+
+def _resampled(theta_fine: np.ndarray, counts: int, jitter_s: float, fine: int, seed: int = 3) -> np.ndarray:
+    """A ``counts`` encoder read at jittered instants (rms ``jitter_s``) and moved onto the uniform grid by linear
+    interpolation (what stream/stamps.py does with stamps that are the sampling instants): readings off the counts'
+    grid."""
+    rng = np.random.default_rng(seed)
+    n = theta_fine.size // fine
+    tf = np.arange(theta_fine.size) * TS / fine
+    t_read = np.arange(n) * TS + rng.normal(0.0, jitter_s, n)
+    q = 2 * np.pi / counts
+    read = np.floor(np.interp(t_read, tf, theta_fine) / q) * q
+    return np.interp(np.arange(n) * TS, t_read, read)
+
+
+def test_angle_noise_on_and_off_a_grid_of_counts():
+    """On a grid of counts: the quantum / sqrt 12 exactly; off it (resampled from jittered instants) the noise the
+    third differences show, within 10 % of the quantisation's q / sqrt 12 (the smallest second difference there is a
+    fraction of a count: the floor it gave, stop 47, was the 25 µrad model floor for a 2^14 encoder's 111 µrad)."""
+    from jident_ros.stream.flank_disc import angle_noise_rad
+    fine, n = 20, 1000
+    theta = 150.0 * np.arange(n * fine) * TS / fine + 0.3
+    q = 2 * np.pi / 2 ** 14
+    on_grid = np.floor(theta[::fine] / q) * q
+    assert angle_noise_rad(on_grid) == pytest.approx(q / np.sqrt(12), rel=1e-9)
+    off = _resampled(theta, 2 ** 14, 1e-5, fine)
+    assert angle_noise_rad(off) == pytest.approx(q / np.sqrt(12), rel=0.1)
+
+
+def test_a_coarse_resampled_encoders_disc_error_is_taken_off():
+    """A 2^14 encoder (111 µrad of quantisation noise) with a 200 / 100 µrad disc error, its readings resampled from
+    jittered instants (DOL draw d4-05): the disc error is fitted to 15 % of its amplitude (stop 47: refused, the rms
+    gate counting from the 25 µrad model floor)."""
+    from jident_ros.stream.flank_disc import disc_corrected
+    fine, n = 20, 1400
+    theta = 150.0 * np.arange(n * fine) * TS / fine + 0.3
+    theta = theta + 2e-4 * (np.sin(theta + 0.3) + 0.5 * np.sin(2 * theta + 1.0))
+    alpha, coef = disc_corrected(_resampled(theta, 2 ** 14, 1e-5, fine), TS)
+    assert coef is not None
+    assert np.hypot(coef[0], coef[1]) == pytest.approx(2e-4, rel=0.15)
+    assert np.hypot(coef[2], coef[3]) == pytest.approx(1e-4, rel=0.3)
+    # no disc error: nothing fitted off the grid either
+    clean = 150.0 * np.arange(n * fine) * TS / fine + 0.3
+    assert disc_corrected(_resampled(clean, 2 ** 14, 1e-5, fine), TS)[1] is None

@@ -354,3 +354,30 @@ def test_a_second_window_of_a_gap_has_its_j1_judged_and_shown():
     cells = draws_targets.row({"model": "dol", "seed": 9, "rows": {"d": s}, "commit": "abc",
                                "groups": {"JointState 2^16 clean|slip drop": s}})
     assert cells["off"] == "**1**" and cells["false"] == "0 (0; 2 second windows of a gap)"
+
+
+@pytest.mark.parametrize("start,end,want", [
+    (190, 260, 0),        # starts within EARLY of the entry (zoo.match)
+    (170, 298, 0),        # 30 early, 98 of its 128 rows in the gap (DOL draw d4-05's first window, stop 48)
+    (170, 230, 0),        # 30 early, 30 of 60 rows in the gap: half
+    (150, 230, None),     # 50 early, 30 of 80: mostly contact
+    (170, None, None),    # no fit end, not within EARLY: the first row alone decides
+    (None, 260, None),    # no fit
+])
+def test_fit_gap_a_fit_lies_in_the_gap_that_holds_half_its_rows(start, end, want):
+    from jident_ros.research.evaluation.zoo import fit_gap
+    gaps = [{"entry_index": 200, "recontact_index": 300, "traversal": True}]
+    assert fit_gap(gaps, start, end) == want
+
+
+def test_an_early_entry_whose_fit_runs_through_the_gap_is_judged_by_its_error():
+    """A damped coupling lets go before the zone entry: the detector enters 40 samples early and the fit starts 30
+    before the gap, running through it to its re-contact.  Its first row alone called it a J1 where the truth has no
+    gap (stop 47); judged by its error now, and one more than 10 % off counts as off in the targets table."""
+    gaps = [{"entry_index": 200, "recontact_index": 300, "traversal": True}]
+    good = dict(_win(160, None, published=True, j1=1.16 * 0.998), gap_entry=170, gap_end=298)
+    s = summarise([(_rec(gaps, event_index=100), {"windows": [good], "cut_off": []})])
+    assert s.get("published_on_false", 0) == 0 and s["false_in_gap_errors"] == [pytest.approx(-0.002)]
+    head = dict(good, gap_end=None)                 # a file without the fit's end: as before
+    s = summarise([(_rec(gaps, event_index=100), {"windows": [head], "cut_off": []})])
+    assert s["published_on_false"] == 1
