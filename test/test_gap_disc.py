@@ -140,3 +140,25 @@ def test_a_coarse_resampled_encoders_disc_error_is_taken_off():
     # no disc error: nothing fitted off the grid either
     clean = 150.0 * np.arange(n * fine) * TS / fine + 0.3
     assert disc_corrected(_resampled(clean, 2 ** 14, 1e-5, fine), TS)[1] is None
+
+
+def test_the_detector_keeps_the_grid_floor_the_gap_stage_does_not(monkeypatch):
+    """DISC_DETECTOR_OFF_GRID False (stop 48): the flank detector's disc correction keeps stop 47's floor, so a coarse
+    resampled encoder's disc error stays on its angles there (its rules were chosen so); the gap stage's takes it off.
+    Set True, the detector takes it off too."""
+    from jident_ros.stream import flank_disc
+    from jident_ros.stream.flank_refine import EntryRefineMixin
+    fine, n = 20, 1400
+    theta = 150.0 * np.arange(n * fine) * TS / fine + 0.3
+    theta = theta + 2e-4 * (np.sin(theta + 0.3) + 0.5 * np.sin(2 * theta + 1.0))
+    x = _resampled(theta, 2 ** 14, 1e-5, fine)
+    assert flank_disc.disc_corrected(x, TS, off_grid=False)[1] is None
+    assert flank_disc.disc_corrected(x, TS)[1] is not None
+
+    class _Det(EntryRefineMixin):
+        detector_name, sample_period_s, _i_a1, _i_a2 = "flank", TS, 0, -1
+
+    data = x[:, None]
+    assert _Det()._disc_corrected(data) is data
+    monkeypatch.setattr(flank_disc, "DISC_DETECTOR_OFF_GRID", True)
+    assert _Det()._disc_corrected(data) is not data
