@@ -62,7 +62,9 @@ PROTOCOL_NOTE = ("A set is a blind test only until something is changed because 
                  "13–26 and DOL sets 1–26; in stop 46 the ERROR windows of vector sets 22 and 27 and DOL set 24: the a1 "
                  "fits' errors-in-variables standard error, the joint a1 fit's ratio within its noise, a disagreement "
                  "where neither fit could be published; in stop 47 the ERROR windows of DOL sets 4, 6, 20 and 26: a "
-                 "disagreement the fits' gap intervals make, the angle fit over the a1 fit's rows agreeing with it).")
+                 "disagreement the fits' gap intervals make, the angle fit over the a1 fit's rows agreeing with it; "
+                 "in stop 48 DOL set 4's d4-05: the disc-error gate's noise off a grid of counts in the gap stage, and "
+                 "all 56 sets: the flank detector kept on the old floor, DISC_DETECTOR_OFF_GRID).")
 
 #: The torque accuracy a drive's data sheet typically states for sensored vector control, ± this of rated torque: what
 #: a user who has nothing better declares, as ``torque_accuracy`` and as ``torque_offset_rel_base``, the way
