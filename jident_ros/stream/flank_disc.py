@@ -23,8 +23,9 @@ from jident_ros.stream.rate import samples
 #: of twice the angle (:func:`disc_error`), when those rows turn DISC_MIN_REVOLUTIONS or more one way (the net turn at
 #: least DISC_MIN_NET_SHARE of the path: a cubic cannot bend like three periods of a sine), and the harmonics are
 #: subtracted over the whole capture where they explain those rows DISC_MIN_GAIN times better (rms without / with
-#: them) and leave no more than DISC_MAX_RMS_FLOORS x the encoder's own noise (its quantum / sqrt 12, the quantum the
-#: smallest step of the angle's second difference, at least ANGLE_MODEL_FLOOR_RAD): smooth motion plus the disc error,
+#: them) and leave no more than DISC_MAX_RMS_FLOORS x the encoder's own noise (:func:`angle_noise_rad`: on a grid of
+#: counts its quantum / sqrt 12, off a grid what the third differences show; at least ANGLE_MODEL_FLOOR_RAD; the flank
+#: detector's the smallest second difference / sqrt 12, DISC_DETECTOR_OFF_GRID): smooth motion plus the disc error,
 #: not a transient the harmonics absorb.  With 1.3-2 revolutions they absorbed transients: the rows before the
 #: departure of every light load reversal of the vector drive and its variants (1.3-1.4 revolutions, the load torque
 #: ramping: 220-400 urad at the noise floor with no disc error), the small drive's speed reversal's last 1000 rows (its
