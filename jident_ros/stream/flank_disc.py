@@ -112,8 +112,7 @@ def angle_noise_rad(angle: np.ndarray) -> float:
     outside its interval)."""
     x = np.asarray(angle, float)
     d2 = np.diff(x, 2)
-    steps = np.abs(d2)
-    steps = steps[steps > 1e-9]
+    steps = _nonzero_steps(d2)
     if steps.size:
         k = steps / float(steps.min())
         if float(np.abs(k - np.rint(k)).max()) < 0.01:
@@ -124,10 +123,15 @@ def angle_noise_rad(angle: np.ndarray) -> float:
     return math.sqrt(float(d3 @ d3) / (20.0 * d3.size))
 
 
+def _nonzero_steps(d2: np.ndarray) -> np.ndarray:
+    """|second differences| of an angle beyond float rounding (1e-9 rad)."""
+    steps = np.abs(d2)
+    return steps[steps > 1e-9]
+
+
 def _smallest_step_noise(angle: np.ndarray) -> float:
     """Stop 47's noise floor: the smallest non-zero second difference / sqrt 12 (a count only on a grid of counts)."""
-    steps = np.abs(np.diff(np.asarray(angle, float), 2))
-    steps = steps[steps > 1e-9]
+    steps = _nonzero_steps(np.diff(np.asarray(angle, float), 2))
     return float(steps.min()) / math.sqrt(12.0) if steps.size else 0.0
 
 
