@@ -1662,6 +1662,43 @@ def test_a_traversal_and_its_traversal_back_in_one_window_read_the_re_contact_fr
         assert len(rest) == 1 and abs(rest[0][0] - g1) <= 5
 
 
+@pytest.mark.parametrize("key, rule", [("js", "on"), ("imu", "on"), ("js", "old share"), ("imu", "old share")])
+def test_a_rebound_whose_free_run_turns_near_the_zone_s_middle_is_a_traversal_back(monkeypatch, key, rule):
+    """Vector set 1's s1-06 (zoo_draws --model vector --seed 1), its speed step down as JointState 2^16 clean ('js')
+    and JointState+Imu 2^16 30 dB ('imu') (test/data/vector_draws_step_down_rebound.npz, rows 1000-3599 as fed to the
+    detector, its 2^20 encoders): delta crosses the 158 mrad zone at 4 mrad a sample (gap 0, rows 211-273), runs 31 mrad
+    into the soft far flank, rebounds (gap 1 from 301), turns near the zone's middle (rows 340-420, delta nearly still)
+    and crosses to the flank it first left (526).  The first window's return scan took the still turn for a contact on
+    the re-contact edge, a bounce (it lay within half the span of it), and the traversal back entered where delta left
+    the turn (355 without a1, 354 with it: 54 samples late).  Within RETURN_STILL_SHARE of the span only, the turn is
+    the free run's and the traversal back enters at the re-contact edge (302).  Without a1 the first window's re-contact
+    row stays 8 samples early (265: the motor's acceleration; delta still runs at full speed there), so its K2 is 22 %
+    low and the traversal back's own re-contact is read inside the zone: stop 49's tried and left."""
+    from draws_cuts import draws_cut
+
+    from jident_ros.stream import flank_scan
+    if rule == "old share":
+        monkeypatch.setattr(flank_scan, "RETURN_STILL_SHARE", 0.5)
+    data, ch, d = draws_cut("vector_draws_step_down_rebound.npz", key)
+    got = [(round(w.entry_time_s / 5e-4), w.recontact_index - w.entry_index, w.backlash_width_estimate_m)
+           for w in _cut_windows(data, ch)]
+    (g0, g1, _), (r0, r1, _) = d["gap_entries"], d["gap_recontacts"]
+    assert (g0, r0, g1, r1) == (211, 273, 301, 526)
+    (e0, rc0, k20), *rest = got
+    assert abs(e0 - g0) <= 2 and len(rest) == 1
+    if key == "js":
+        assert e0 + rc0 == r0 - 8 and abs(k20 / 7.9e-3 - 1) > 0.2
+    else:
+        assert abs(e0 + rc0 - r0) <= 1 and abs(k20 / 7.9e-3 - 1) < 0.02
+    e1, rc1, k21 = rest[0]
+    if rule == "old share":
+        assert e1 - g1 > 50
+    else:
+        assert abs(e1 - g1) <= 2
+    if rule == "on" and key == "imu":
+        assert abs(e1 + rc1 - r1) <= 3 and abs(k21 / 7.9e-3 - 1) < 0.02
+
+
 @pytest.mark.parametrize("share, after", [(True, True), (False, True), (True, False), (False, False)])
 def test_a_turn_inside_the_zone_after_a_window_s_entry_is_no_crossing_of_its_own(monkeypatch, share, after):
     """Vector set 1's s1-02 (zoo_draws --model vector --seed 1), its light load reversal as JointState 2^16 clean

@@ -28,6 +28,16 @@ RETURN_SAME_EXCURSION = True
 #: re-contact (a contact there; our simulator's slip excursion with a skewed Imu read as a 'traversal' rang around
 #: the edge and gave two false windows)
 RETURN_REST_SAMPLES = 8
+#: ... and takes delta resting still inside the zone (contact_samples within contact_tolerance_rad) for a contact on
+#: the re-contact edge, a bounce, only within this share of the zone's span of that edge (the edge from the window's
+#: re-contact row may be a few mrad off: 5 mrad on the vector drive's 2^13 JointState recordings).  Half the span
+#: before stop 49: a soft far flank's rebound whose free run turns near the zone's middle and crosses back (vector set
+#: 1's s1-06: 31 mrad into the flank, its turn 0.46 of the 158 mrad span from the edge, 0.33 from the window's re-contact
+#: row 8 samples early) was read as a bounce, and the traversal back entered where delta left the turn (54 samples late;
+#: in the 28 vector sets' clean JointState, 31 of the 151 traversals back that start within 40 samples of a re-contact
+#: were entered 9 or more samples late).  0.25, the one value tried, chosen on s1-06 and measured on the 56 sets and
+#: the fresh sets 29 (docs/results.md, stop 49)
+RETURN_STILL_SHARE = 0.25
 
 #: On a coarse encoder (2^13), a window's edge scan (:meth:`FlankDetector._scan_returns`) takes an excursion from the
 #: re-contact edge that went into the zone, came back within this share of the zone's span of that edge and turns
@@ -138,10 +148,8 @@ class ReturnScanMixin:
                     and self._turned_free(data, e0 + k - L // 2, quantum):
                 # the motor ran free through delta's still run (RETURN_FREE_TURN_*): a turn inside the zone, no contact
                 free_until = k + L
-            if depth[k] < -unsure or (steady[k] and depth[k] < 0.5 * abs(span) and k >= free_until):
-                # back beyond the re-contact edge, or a contact nearer to it than to the entry edge (the edge from
-                # the window's re-contact row may be a few mrad off: 5 mrad on the vector drive's 2^13 JointState
-                # recordings): a bounce
+            if depth[k] < -unsure or (steady[k] and depth[k] < RETURN_STILL_SHARE * abs(span) and k >= free_until):
+                # back beyond the re-contact edge, or a contact within RETURN_STILL_SHARE of the span of it: a bounce
                 at_out, last_out, rest = True, k, 0.0
                 k += 1
                 continue
