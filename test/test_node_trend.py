@@ -128,6 +128,6 @@ def test_trend_parameters_set_at_run_time_and_the_flank_width(node_env, ros, pro
     assert v["commissioning"] == "false", v           # 2 windows commissioned: the run-time value took effect
     assert v["width_source"] == "flank" and v["width_from_flank_detector"] == "2" and \
         v["width_from_gap_estimator"] == "0", v
-    assert ros.spin_until(lambda: len(w_trend) >= 2, 10), logs(p)
+    assert ros.spin_until(lambda: len(w_trend) >= 2, TIMEOUT), logs(p)
     assert abs(w_trend[-1].data - 0.00412) < 2e-6, w_trend[-1].data     # the flank estimate, not the window's 5 mm
     assert "parameters changed: trend_commissioning_windows = 2" in p.text(), logs(p)
