@@ -35,8 +35,9 @@ RETURN_REST_SAMPLES = 8
 #: 1's s1-06: 31 mrad into the flank, its turn 0.46 of the 158 mrad span from the edge, 0.33 from the window's re-contact
 #: row 8 samples early) was read as a bounce, and the traversal back entered where delta left the turn (54 samples late;
 #: in the 28 vector sets' clean JointState, 31 of the 151 traversals back that start within 40 samples of a re-contact
-#: were entered 9 or more samples late).  0.25, the one value tried, chosen on s1-06 and measured on the 56 sets and
-#: the fresh sets 29 (docs/results.md, stop 49)
+#: were entered 9 or more samples late).  0.25 chosen on s1-06 and measured on the 56 sets and the fresh sets 29;
+#: 0.15 (after the choice, vector sets 1-29): found -3 (s23-05's traversal back), within +-2 +0, false entries +3
+#: (docs/results.md, stop 49)
 RETURN_STILL_SHARE = 0.25
 
 #: On a coarse encoder (2^13), a window's edge scan (:meth:`FlankDetector._scan_returns`) takes an excursion from the
